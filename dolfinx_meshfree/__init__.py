@@ -1,0 +1,1 @@
+"""Mesh-free particle methods coupled with DOLFINx finite elements."""

@@ -1,0 +1,70 @@
+#!/usr/bin/env bash
+# .ci/test.sh [--lane a|b] [--serial|--parallel] [extra pytest args...]
+#
+# Runs the test suite in one lane (see .ci/lane.sh): first serially, then as
+# one MPI job of 2 ranks under the lane's own launcher. Default: lane a, both.
+# Anything not recognised (or everything after `--`) is passed to pytest,
+# after the `tests` directory.
+#
+# Exit status is non-zero if any run fails. pytest's exit code 5 ("no tests
+# collected") counts as a failure, like any other non-zero code.
+#
+# Environment: TEST_TIMEOUT (seconds per pytest run, default 900) so that a
+# deadlocked MPI test cannot eat the whole CI budget.
+set -euo pipefail
+
+# shellcheck source=lane.sh
+source "$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)/lane.sh"
+
+usage() { sed -n '2,13p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; }
+
+lane=a
+serial=1
+parallel=1
+extra=()
+while (($#)); do
+    case "$1" in
+        --lane) [[ $# -ge 2 ]] || { usage >&2; exit 2; }; lane=$2; shift 2 ;;
+        --lane=*) lane=${1#--lane=}; shift ;;
+        --serial) serial=1; parallel=0; shift ;;
+        --parallel) serial=0; parallel=1; shift ;;
+        -h|--help) usage; exit 0 ;;
+        --) shift; extra+=("$@"); break ;;
+        *) extra+=("$1"); shift ;;
+    esac
+done
+
+lane_setup "$lane" # sets PY, LAUNCHER, PYMPI; exports OMP_NUM_THREADS=1
+cd "$REPO_ROOT"
+timeout_s=${TEST_TIMEOUT:-900}
+
+failed=()
+# run_pytest LABEL CMD... : run one pytest invocation under a timeout and
+# record a failure (any non-zero exit, including 5 = no tests collected).
+run_pytest() {
+    local label=$1 rc=0 t0=$SECONDS
+    shift
+    echo "---- lane $lane, $label: $*"
+    timeout --kill-after=30 "$timeout_s" "$@" || rc=$?
+    case $rc in
+        0) echo "---- lane $lane, $label: OK ($((SECONDS - t0))s)" ;;
+        5) echo "---- lane $lane, $label: FAILED: pytest collected no tests (exit 5)" ;;
+        124|137) echo "---- lane $lane, $label: FAILED: timed out after ${timeout_s}s" ;;
+        *) echo "---- lane $lane, $label: FAILED (exit $rc)" ;;
+    esac
+    ((rc == 0)) || failed+=("$label")
+}
+
+if ((serial)); then
+    run_pytest "serial" "$PY" -m pytest -q tests "${extra[@]}"
+fi
+if ((parallel)); then
+    # --color=no: OpenMPI gives ranks a pty, so pytest would emit ANSI colour
+    # codes into the CI log (a later --color in the extra args still wins).
+    run_pytest "2 ranks" "${LAUNCHER[@]}" -n 2 "$PY" "${PYMPI[@]}" -m pytest -q --color=no tests "${extra[@]}"
+fi
+
+if ((${#failed[@]})); then
+    echo "lane $lane: FAILED runs: ${failed[*]}" >&2
+    exit 1
+fi

@@ -10,7 +10,7 @@
 # last occurrence). Everything after `--` is passed through unparsed.
 set -euo pipefail
 
-# shellcheck source=lane.sh
+# shellcheck source-path=SCRIPTDIR source=lane.sh
 source "$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)/lane.sh"
 
 usage() { sed -n '2,10p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; }

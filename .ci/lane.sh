@@ -150,7 +150,7 @@ if spec is None or spec.origin is None:
 got = os.path.realpath(spec.origin)
 want = os.path.realpath(os.path.join(root, "dolfinx_meshfree", "__init__.py"))
 if got != want:
-    sys.exit(f"dolfinx_meshfree is imported from {got}, not from this checkout ({want})")
+    sys.exit(f"dolfinx_meshfree is installed from {got}, not from this checkout ({want})")
 PYEOF
     )" || { echo "$out" | tail -n 3; return 1; }
     "$py" -m ruff --version >/dev/null 2>&1 || { echo "ruff is not installed"; return 1; }
@@ -260,6 +260,7 @@ lane_setup() {
     # MPI_Abort instead of a hang. It imports mpi4py.MPI first, which is
     # exactly the order dolfinx_solver itself enforces, so it is fine for
     # lane b too.
+    # shellcheck disable=SC2034  # used by the scripts that source this file
     PYMPI=(-m mpi4py)
     export OMP_NUM_THREADS=1
     export PY

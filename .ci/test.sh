@@ -13,7 +13,7 @@
 # deadlocked MPI test cannot eat the whole CI budget.
 set -euo pipefail
 
-# shellcheck source=lane.sh
+# shellcheck source-path=SCRIPTDIR source=lane.sh
 source "$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)/lane.sh"
 
 usage() { sed -n '2,13p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; }

@@ -1,1 +1,62 @@
-"""Mesh-free particle methods coupled with DOLFINx finite elements."""
+"""dolfinx_meshfree: mesh-free particle methods (EFG, SPH) coupled with DOLFINx finite elements.
+
+Public API (stable names):
+
+* approximations: :class:`MLS` (EFG shape functions), :class:`SPH`, tabulated into a
+  :class:`ShapeTable`; weight functions in :mod:`dolfinx_meshfree.kernels`;
+* FE basis at arbitrary points: :func:`tabulate_fe_basis`, :func:`evaluate_fe_function`;
+* particles: :class:`ParticleSet`;
+* solvers: :class:`EFGElasticity` (pure EFG), :func:`solve_fe_elasticity` (pure FE);
+* material and exact solutions: :class:`LinearElastic`, :class:`TimoshenkoBeam`.
+
+Importing this package first loads the ``dolfinx_solver`` wheel's MPI when that lane is in use.
+"""
+
+from . import _compat  # noqa: F401  (must come first: loads dolfinx_solver's MPI in lane B)
+from ._compat import DOLFINX_VERSION
+from .analytic import LinearField, TimoshenkoBeam
+from .efg import EFGElasticity, EFGSolution
+from .errors import error_norms
+from .fe import FESolution, solve_fe_elasticity
+from .fe_points import (
+    PointsOutsideMeshError,
+    evaluate_fe_function,
+    tabulate_fe_basis,
+    tabulate_in_cells,
+)
+from .kernels import cubic_spline, gaussian, quartic, sph_cubic_spline
+from .materials import LinearElastic
+from .mls import MLS, MomentMatrixError
+from .particles import ParticleSet
+from .quadrature import boundary_facets, cell_quadrature, facet_quadrature
+from .sph import SPH
+from .tables import ShapeTable
+
+__all__ = [
+    "DOLFINX_VERSION",
+    "MLS",
+    "SPH",
+    "EFGElasticity",
+    "EFGSolution",
+    "FESolution",
+    "LinearElastic",
+    "LinearField",
+    "MomentMatrixError",
+    "ParticleSet",
+    "PointsOutsideMeshError",
+    "ShapeTable",
+    "TimoshenkoBeam",
+    "boundary_facets",
+    "cell_quadrature",
+    "cubic_spline",
+    "error_norms",
+    "evaluate_fe_function",
+    "facet_quadrature",
+    "gaussian",
+    "quartic",
+    "solve_fe_elasticity",
+    "sph_cubic_spline",
+    "tabulate_fe_basis",
+    "tabulate_in_cells",
+]
+__version__ = "0.1.0"

@@ -1,0 +1,167 @@
+"""The only module that knows DOLFINx versions.
+
+Two lanes are supported (see ``README.md``):
+
+* lane A: Debian 12's DOLFINx 0.5.2 with PETSc 3.18 and OpenMPI;
+* lane B: current DOLFINx (0.10/0.11) from the ``dolfinx-solver-real`` wheel, which must be imported
+  before ``dolfinx``, ``petsc4py`` or ``mpi4py`` so that its bundled MPICH is loaded.
+
+Every call whose spelling differs between the lanes lives here, behind one explicit version check
+(:data:`MODERN`). Nothing else in the package inspects versions.
+"""
+
+from __future__ import annotations
+
+import importlib.util as _importlib_util
+
+if _importlib_util.find_spec("dolfinx_solver") is not None:  # lane B: load bundled MPICH first
+    import dolfinx_solver as _dolfinx_solver  # noqa: F401
+
+import typing as _typing
+
+import basix as _basix
+import dolfinx as _dolfinx
+import dolfinx.fem as _fem
+import dolfinx.fem.petsc as _fem_petsc
+import dolfinx.geometry as _geometry
+import dolfinx.mesh as _mesh
+import numpy as _np
+
+__all__ = [
+    "DOLFINX_VERSION",
+    "MODERN",
+    "apply_lifting",
+    "assemble_matrix",
+    "assemble_vector",
+    "basix_lagrange_p1",
+    "bb_tree",
+    "colliding_cells",
+    "create_form",
+    "dofmap_array",
+    "entities_to_geometry",
+    "function_petsc_vec",
+    "geometry_dofmap",
+    "quadrature_rule",
+    "set_bc",
+    "vector_function_space",
+]
+
+DOLFINX_VERSION: str = _dolfinx.__version__
+_major_minor = tuple(int(p) for p in DOLFINX_VERSION.split(".")[:2])
+#: True for DOLFINx >= 0.10 (lane B), False for 0.5.x (lane A).
+MODERN: bool = _major_minor >= (0, 10)
+if not MODERN and _major_minor[:2] != (0, 5):
+    raise ImportError(
+        f"dolfinx_meshfree supports DOLFINx 0.5.x (Debian 12) and >= 0.10; found {DOLFINX_VERSION}"
+    )
+
+
+def vector_function_space(msh: _mesh.Mesh, degree: int = 1) -> _fem.FunctionSpace:
+    """Continuous Lagrange vector space of the given degree with ``gdim`` components."""
+    gdim = msh.geometry.dim
+    if MODERN:
+        return _fem.functionspace(msh, ("Lagrange", degree, (gdim,)))
+    return _fem.VectorFunctionSpace(msh, ("Lagrange", degree))
+
+
+def geometry_dofmap(msh: _mesh.Mesh) -> _np.ndarray:
+    """Geometry node indices of every local cell, shape (num_cells, num_nodes_per_cell)."""
+    if MODERN:
+        return _np.asarray(
+            msh.geometry.dofmaps(0) if callable(msh.geometry.dofmaps) else msh.geometry.dofmaps[0]
+        )
+    dm = msh.geometry.dofmap
+    nc = msh.topology.index_map(msh.topology.dim).size_local + len(
+        msh.topology.index_map(msh.topology.dim).ghosts
+    )
+    return dm.array.reshape(nc, -1)
+
+
+def dofmap_array(V: _fem.FunctionSpace) -> _np.ndarray:
+    """Block (node) indices of every local cell of ``V``, shape (num_cells, num_nodes_per_cell)."""
+    if MODERN:
+        return _np.asarray(V.dofmap.list)
+    nd = V.dofmap.dof_layout.num_dofs
+    return V.dofmap.list.array.reshape(-1, nd)
+
+
+def basix_lagrange_p1(cell_name: str) -> _basix.finite_element.FiniteElement:
+    """The degree-1 Lagrange basix element on ``cell_name`` ("triangle", "quadrilateral", ...)."""
+    cell = getattr(_basix.CellType, cell_name)
+    return _basix.create_element(_basix.ElementFamily.P, cell, 1, _basix.LagrangeVariant.equispaced)
+
+
+def quadrature_rule(cell_name: str, degree: int) -> tuple[_np.ndarray, _np.ndarray]:
+    """Default (Gauss–Jacobi) basix quadrature rule on the reference cell: points, weights."""
+    cell = getattr(_basix.CellType, cell_name)
+    pts, wts = _basix.make_quadrature(cell, degree)
+    return _np.asarray(pts, dtype=float), _np.asarray(wts, dtype=float)
+
+
+def bb_tree(msh: _mesh.Mesh, dim: int):
+    """Bounding-box tree of the local entities of dimension ``dim``."""
+    if MODERN:
+        return _geometry.bb_tree(msh, dim)
+    return _geometry.BoundingBoxTree(msh, dim)
+
+
+def colliding_cells(msh: _mesh.Mesh, tree, points3: _np.ndarray) -> tuple[_np.ndarray, _np.ndarray]:
+    """Local cells that contain each point, as CSR (offsets, cells); ``points3`` is (m, 3)."""
+    if MODERN:
+        cand = _geometry.compute_collisions_points(tree, points3)
+    else:
+        cand = _geometry.compute_collisions(tree, points3)
+    adj = _geometry.compute_colliding_cells(msh, cand, points3)
+    return _np.asarray(adj.offsets), _np.asarray(adj.array)
+
+
+def entities_to_geometry(msh: _mesh.Mesh, dim: int, entities: _np.ndarray) -> _np.ndarray:
+    """Geometry node indices of entities of dimension ``dim``, shape (num_entities, nodes)."""
+    entities = _np.asarray(entities, dtype=_np.int32)
+    if MODERN:
+        return _np.asarray(_mesh.entities_to_geometry(msh, dim, entities, False))
+    import dolfinx.cpp.mesh as _cppmesh
+
+    # Debian's 0.5.2 Python Mesh wraps the C++ mesh in ``_mesh``
+    cpp_mesh = getattr(msh, "_mesh", msh)
+    return _np.asarray(_cppmesh.entities_to_geometry(cpp_mesh, dim, entities, False))
+
+
+def create_form(form, jit_options: dict | None = None):
+    """JIT-compile a UFL form (collective)."""
+    if MODERN:
+        return _fem.form(form, jit_options=jit_options)
+    return _fem.form(form, jit_params=jit_options)
+
+
+def assemble_matrix(a, bcs: _typing.Sequence = (), diagonal: float = 1.0):
+    """Assemble a bilinear form into an assembled PETSc matrix with ``diagonal`` on bc rows."""
+    if MODERN:
+        A = _fem_petsc.assemble_matrix(a, bcs=list(bcs), diag=diagonal)
+    else:
+        A = _fem_petsc.assemble_matrix(a, bcs=list(bcs), diagonal=diagonal)
+    A.assemble()
+    return A
+
+
+def assemble_vector(L):
+    """Assemble a linear form into a new PETSc vector (ghosted, not yet accumulated)."""
+    return _fem_petsc.assemble_vector(L)
+
+
+def apply_lifting(b, a, bcs) -> None:
+    """Lift the Dirichlet values of ``bcs`` through ``a`` into ``b`` (DOLFINx ``apply_lifting``)."""
+    _fem_petsc.apply_lifting(b, [a], bcs=[list(bcs)])
+
+
+def set_bc(b, bcs, x0=None, scale: float = 1.0) -> None:
+    """Set Dirichlet values in ``b`` (DOLFINx ``set_bc``)."""
+    if MODERN:
+        _fem_petsc.set_bc(b, list(bcs), x0, alpha=scale)
+    else:
+        _fem_petsc.set_bc(b, list(bcs), x0, scale=scale)
+
+
+def function_petsc_vec(u: _fem.Function):
+    """The PETSc vector that wraps the owned and ghost values of ``u``."""
+    return u.x.petsc_vec if MODERN else u.vector

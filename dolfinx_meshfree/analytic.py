@@ -1,0 +1,100 @@
+"""Exact solutions used by the demos and the tests."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .materials import LinearElastic
+
+__all__ = ["LinearField", "TimoshenkoBeam"]
+
+
+@dataclass(frozen=True)
+class TimoshenkoBeam:
+    """Cantilever under a parabolic end shear (Timoshenko & Goodier), Belytschko et al. 1995,
+    eq. (5.2)–(5.3); Rabczuk et al. 2006, sec. 6.1.1.
+
+    The beam occupies ``[0, L] x [-D/2, D/2]``; the exact displacement is prescribed at ``x = 0``
+    and the shear traction ``t_y = P/(2I) (D^2/4 - y^2)`` acts on ``x = L``. Rabczuk's typeset
+    ``u_y`` has a misprint (``D x^2/4``); eq. (5.2b) of Belytschko et al. is used. Plane strain
+    uses ``E' = E/(1 - nu^2)``, ``nu' = nu/(1 - nu)`` in the plane-stress formulas.
+    """
+
+    material: LinearElastic
+    L: float = 48.0
+    D: float = 12.0
+    P: float = 1000.0
+
+    def __post_init__(self):
+        for name in ("L", "D"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"{name}={v} must be a positive length")
+        if not np.isfinite(self.P):
+            raise ValueError(f"P={self.P} must be finite")
+
+    @property
+    def inertia(self) -> float:
+        return self.D**3 / 12.0
+
+    def _moduli(self) -> tuple[float, float]:
+        E, nu = self.material.E, self.material.nu
+        if self.material.plane == "strain":
+            return E / (1.0 - nu**2), nu / (1.0 - nu)
+        return E, nu
+
+    def displacement(self, x: np.ndarray) -> np.ndarray:
+        """Exact displacement (m, 2) at points (m, 2)."""
+        E, nu = self._moduli()
+        P, L, D, inertia = self.P, self.L, self.D, self.inertia
+        X, Y = x[:, 0], x[:, 1]
+        ux = -P * Y / (6 * E * inertia) * ((6 * L - 3 * X) * X + (2 + nu) * (Y**2 - D**2 / 4))
+        uy = (
+            P
+            / (6 * E * inertia)
+            * (3 * nu * Y**2 * (L - X) + (4 + 5 * nu) * D**2 * X / 4 + (3 * L - X) * X**2)
+        )
+        return np.stack([ux, uy], axis=1)
+
+    def displacement_gradient(self, x: np.ndarray) -> np.ndarray:
+        """Exact gradient ``du_i/dx_j`` (m, 2, 2)."""
+        E, nu = self._moduli()
+        P, L, D, inertia = self.P, self.L, self.D, self.inertia
+        X, Y = x[:, 0], x[:, 1]
+        c = P / (6 * E * inertia)
+        g = np.empty((x.shape[0], 2, 2))
+        g[:, 0, 0] = -c * Y * (6 * L - 6 * X)
+        g[:, 0, 1] = -c * ((6 * L - 3 * X) * X + (2 + nu) * (3 * Y**2 - D**2 / 4))
+        g[:, 1, 0] = c * (-3 * nu * Y**2 + (4 + 5 * nu) * D**2 / 4 + 6 * L * X - 3 * X**2)
+        g[:, 1, 1] = c * 6 * nu * Y * (L - X)
+        return g
+
+    def stress(self, x: np.ndarray) -> np.ndarray:
+        """Exact stress (m, 2, 2), eq. (5.3a–c)."""
+        P, L, D, inertia = self.P, self.L, self.D, self.inertia
+        X, Y = x[:, 0], x[:, 1]
+        s = np.zeros((x.shape[0], 2, 2))
+        s[:, 0, 0] = -P * (L - X) * Y / inertia
+        s[:, 0, 1] = s[:, 1, 0] = P / (2 * inertia) * (D**2 / 4 - Y**2)
+        return s
+
+    def traction(self, x: np.ndarray, normals: np.ndarray) -> np.ndarray:
+        """Traction ``sigma n`` (m, 2) at boundary points with outward normals (m, 2)."""
+        return np.einsum("mij,mj->mi", self.stress(x), normals)
+
+
+@dataclass(frozen=True)
+class LinearField:
+    """Affine displacement ``u = c + G x``: the patch-test solution (Belytschko et al. 1995,
+    eq. 5.1, is ``c = 0``, ``G = I``)."""
+
+    G: tuple = ((1.0, 0.0), (0.0, 1.0))
+    c: tuple = (0.0, 0.0)
+
+    def displacement(self, x: np.ndarray) -> np.ndarray:
+        return x @ np.asarray(self.G).T + np.asarray(self.c)
+
+    def displacement_gradient(self, x: np.ndarray) -> np.ndarray:
+        return np.broadcast_to(np.asarray(self.G, dtype=float), (x.shape[0], 2, 2)).copy()

@@ -1,0 +1,62 @@
+"""MPI helpers: agree on errors before collective calls, lay out distributed index ranges."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TypeVar
+
+import numpy as np
+
+__all__ = ["Layout", "raise_on_all_ranks"]
+
+T = TypeVar("T")
+
+
+class _RemoteError(ValueError):
+    """Raised on the ranks where a check passed because it failed on another rank."""
+
+
+def raise_on_all_ranks(comm, fn: Callable[[], T]) -> T:
+    """Run ``fn`` on every rank; if it raises on any rank, raise on every rank (collective).
+
+    The rank that failed re-raises its own exception; the others raise a ``ValueError`` with the
+    failing rank's message, so no rank goes on into a collective call that would hang.
+    """
+    err: BaseException | None = None
+    result = None
+    try:
+        result = fn()
+    except (ValueError, TypeError, ArithmeticError) as e:  # user-input errors only
+        err = e
+    messages = comm.allgather(None if err is None else f"{type(err).__name__}: {err}")
+    if err is not None:
+        raise err
+    failed = [(r, msg) for r, msg in enumerate(messages) if msg is not None]
+    if failed:
+        r, msg = failed[0]
+        raise _RemoteError(f"on rank {r}: {msg}")
+    return result  # type: ignore[return-value]
+
+
+@dataclass(frozen=True)
+class Layout:
+    """A contiguous distributed index range: this rank owns ``[start, start + size_local)``."""
+
+    size_local: int
+    size_global: int
+    start: int
+
+    @classmethod
+    def from_local(cls, comm, size_local: int) -> Layout:
+        """Layout with ``size_local`` entries on this rank, ranks in order (collective)."""
+        sizes = np.array(comm.allgather(int(size_local)), dtype=np.int64)
+        start = int(sizes[: comm.rank].sum())
+        return cls(int(size_local), int(sizes.sum()), start)
+
+    @property
+    def end(self) -> int:
+        return self.start + self.size_local
+
+    def petsc_sizes(self) -> tuple[int, int]:
+        return (self.size_local, self.size_global)

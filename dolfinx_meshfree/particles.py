@@ -1,0 +1,185 @@
+"""Particle sets: positions, volumes, ownership under MPI and particle generation in mesh cells.
+
+Parallel model: a particle patch is small next to the FE mesh, so every rank holds every particle's
+position (``positions`` is replicated and identical on all ranks). Each particle is *owned* by the
+rank that owns the mesh cell containing it (the lowest such rank on shared boundaries); PETSc
+numbers particles owner by owner, so each rank's particle dofs form one contiguous range
+(:attr:`ParticleSet.layout`), with vector components interleaved like a DOLFINx block size 2.
+Gathering positions sits behind :meth:`ParticleSet.from_cells` so that it can become a halo
+exchange later.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+from scipy.spatial import cKDTree
+
+from . import _compat
+from .neighbours import check_points
+from .parallel import Layout, raise_on_all_ranks
+from .quadrature import cell_quadrature
+
+__all__ = ["ParticleSet"]
+
+
+def _points_in_cells(msh, points: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """Whether each point lies in one of the given local cells (local, no communication)."""
+    m = points.shape[0]
+    inside = np.zeros(m, dtype=bool)
+    if m == 0 or cells.size == 0:
+        return inside
+    p3 = np.zeros((m, 3))
+    p3[:, : points.shape[1]] = points
+    offsets, arr = _compat.colliding_cells(msh, _compat.bb_tree(msh, msh.topology.dim), p3)
+    hit = np.isin(arr, cells)
+    pt = np.repeat(np.arange(m), np.diff(offsets))
+    inside[pt[hit]] = True
+    return inside
+
+
+class ParticleSet:
+    """Particles with positions, volumes and MPI ownership.
+
+    Args:
+        positions: (n, gdim) coordinates, identical on every rank.
+        comm: Communicator (defaults to the mesh's).
+        mesh: Background mesh; particles are owned by the rank owning their cell, and volumes are
+            computed from its quadrature when ``volumes`` is not given. Without a mesh particles
+            are distributed in contiguous blocks and ``volumes`` stays ``None`` unless given.
+        cells: Local cells that the particles fill (the patch); default every owned cell.
+        volumes: (n,) particle volumes.
+    """
+
+    def __init__(
+        self,
+        positions: npt.ArrayLike,
+        comm: MPI.Comm | None = None,
+        mesh=None,
+        cells: npt.ArrayLike | None = None,
+        volumes: npt.ArrayLike | None = None,
+    ):
+        if comm is None:
+            if mesh is None:
+                raise ValueError("ParticleSet needs comm= or mesh=")
+            comm = mesh.comm
+        self.comm = comm
+        gdim = mesh.geometry.dim if mesh is not None else np.asarray(positions).shape[-1]
+        x = raise_on_all_ranks(comm, lambda: check_points(positions, gdim, "positions"))
+        sums = comm.allgather((x.shape[0], float(np.sum(x))))
+        if len(set(sums)) != 1:
+            raise ValueError(
+                "positions must be identical on every rank (particle positions are replicated); "
+                f"got (count, sum) per rank {sums}"
+            )
+        if x.shape[0] == 0:
+            raise ValueError("the particle set is empty; give at least one particle")
+        self.positions = x
+        self.mesh = mesh
+        n = x.shape[0]
+        size = comm.size
+        if mesh is not None:
+            from .fe_points import locate_points
+
+            cl = locate_points(mesh, x)
+            claim = np.where(cl >= 0, comm.rank, size).astype(np.int32)
+            owner = np.empty_like(claim)
+            comm.Allreduce(claim, owner, op=MPI.MIN)
+            outside = np.flatnonzero(owner == size)
+            if outside.size:
+                raise ValueError(
+                    f"{outside.size} particle(s) lie outside the mesh, first {x[outside[0]]}; "
+                    "particles must lie in the background cells"
+                )
+        else:
+            owner = np.minimum((np.arange(n) * size) // n, size - 1).astype(np.int32)
+        self.owner = owner
+        order = np.argsort(owner, kind="stable")
+        #: PETSc (global) particle number of each particle, owner by owner.
+        self.petsc_index = np.empty(n, dtype=np.int64)
+        self.petsc_index[order] = np.arange(n)
+        self.owned = np.flatnonzero(owner == comm.rank)
+        self.layout = Layout(self.owned.size, n, int(np.sum(owner < comm.rank)))
+        self.cells = None if cells is None else np.asarray(cells, dtype=np.int64)
+        if volumes is not None:
+            v = np.asarray(volumes, dtype=float)
+            if v.shape != (n,) or not np.all(v > 0):
+                raise ValueError(f"volumes should be positive with shape ({n},), got {v.shape}")
+            self.volumes = v
+        elif mesh is not None:
+            self.volumes = self._voronoi_volumes(mesh, self.cells)
+        else:
+            self.volumes = None
+
+    @property
+    def num_particles(self) -> int:
+        return self.positions.shape[0]
+
+    @property
+    def gdim(self) -> int:
+        return self.positions.shape[1]
+
+    def _voronoi_volumes(self, msh, cells: np.ndarray | None) -> np.ndarray:
+        """Voronoi volumes by quadrature: every quadrature point of the background cells gives its
+        weight to the nearest particle (collective). Their sum is the area of the cells."""
+        q = cell_quadrature(msh, 4, cells)
+        _, nearest = cKDTree(self.positions).query(q.points)
+        v = np.bincount(nearest, weights=q.weights, minlength=self.num_particles)
+        v = self.comm.allreduce(v, op=MPI.SUM)
+        return np.maximum(v, 1e-300)
+
+    @classmethod
+    def from_cells(
+        cls,
+        mesh,
+        spacing: float,
+        cells: npt.ArrayLike | None = None,
+        jitter: float = 0.0,
+        seed: int = 0,
+    ) -> ParticleSet:
+        """A regular grid of particles with the given spacing filling the given cells.
+
+        The grid spans the bounding box of the cells with ``round(extent / spacing)`` intervals
+        per direction (so its corners are the box's corners) and keeps the points that lie in
+        the cells. ``jitter`` moves each interior point by up to ``jitter * spacing`` at random
+        (an irregular particle set; boundary points stay on the boundary). Collective.
+        """
+        comm = mesh.comm
+        tdim, gdim = mesh.topology.dim, mesh.geometry.dim
+        num_owned = mesh.topology.index_map(tdim).size_local
+
+        def check():
+            if not (isinstance(spacing, int | float) and np.isfinite(spacing) and spacing > 0):
+                raise ValueError(f"spacing={spacing!r} must be a positive number")
+            if not (0.0 <= jitter < 0.5):
+                raise ValueError(f"jitter={jitter} must lie in [0, 0.5)")
+            c = np.arange(num_owned) if cells is None else np.asarray(cells, dtype=np.int64)
+            if c.ndim != 1 or (c.size and (c.min() < 0 or c.max() >= num_owned)):
+                raise ValueError(
+                    f"cells must be owned local cell indices in [0, {num_owned}); got "
+                    f"{c.min() if c.size else ''}..{c.max() if c.size else ''}"
+                )
+            return c
+
+        c = raise_on_all_ranks(comm, check)
+        if comm.allreduce(c.size) == 0:
+            raise ValueError("cells is empty on every rank: the patch has no cells")
+        nodes = mesh.geometry.x[_compat.geometry_dofmap(mesh)[c], :gdim].reshape(-1, gdim)
+        lo = comm.allreduce(nodes.min(axis=0) if nodes.size else np.full(gdim, np.inf), op=MPI.MIN)
+        hi = comm.allreduce(nodes.max(axis=0) if nodes.size else np.full(gdim, -np.inf), op=MPI.MAX)
+        counts = [max(1, round((hi[k] - lo[k]) / spacing)) for k in range(gdim)]
+        axes = [np.linspace(lo[k], hi[k], counts[k] + 1) for k in range(gdim)]
+        grid = np.stack(np.meshgrid(*axes, indexing="xy"), axis=-1).reshape(-1, gdim)
+        if jitter > 0.0:
+            rng = np.random.default_rng(seed)
+            step = (hi - lo) / np.asarray(counts)
+            interior = np.all((grid > lo + 1e-9 * step) & (grid < hi - 1e-9 * step), axis=1)
+            grid[interior] += rng.uniform(-jitter, jitter, (interior.sum(), gdim)) * step
+        inside = _points_in_cells(mesh, grid, c).astype(np.int8)
+        comm.Allreduce(MPI.IN_PLACE, inside, op=MPI.MAX)
+        return cls(grid[inside.astype(bool)], comm=comm, mesh=mesh, cells=c)
+
+    def petsc_dofs(self, bs: int = 2) -> np.ndarray:
+        """PETSc dof numbers (n, bs) of each particle's components."""
+        return bs * self.petsc_index[:, None] + np.arange(bs)[None, :]

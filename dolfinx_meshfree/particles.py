@@ -166,8 +166,10 @@ class ParticleSet:
         if comm.allreduce(c.size) == 0:
             raise ValueError("cells is empty on every rank: the patch has no cells")
         nodes = mesh.geometry.x[_compat.geometry_dofmap(mesh)[c], :gdim].reshape(-1, gdim)
-        lo = comm.allreduce(nodes.min(axis=0) if nodes.size else np.full(gdim, np.inf), op=MPI.MIN)
-        hi = comm.allreduce(nodes.max(axis=0) if nodes.size else np.full(gdim, -np.inf), op=MPI.MAX)
+        lo = nodes.min(axis=0) if nodes.size else np.full(gdim, np.inf)
+        hi = nodes.max(axis=0) if nodes.size else np.full(gdim, -np.inf)
+        comm.Allreduce(MPI.IN_PLACE, lo, op=MPI.MIN)
+        comm.Allreduce(MPI.IN_PLACE, hi, op=MPI.MAX)
         counts = [max(1, round((hi[k] - lo[k]) / spacing)) for k in range(gdim)]
         axes = [np.linspace(lo[k], hi[k], counts[k] + 1) for k in range(gdim)]
         grid = np.stack(np.meshgrid(*axes, indexing="xy"), axis=-1).reshape(-1, gdim)

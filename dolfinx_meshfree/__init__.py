@@ -20,6 +20,7 @@ from .errors import error_norms
 from .fe import FESolution, solve_fe_elasticity
 from .fe_points import (
     PointsOutsideMeshError,
+    ensure_points_in_mesh,
     evaluate_fe_function,
     tabulate_fe_basis,
     tabulate_in_cells,
@@ -49,6 +50,7 @@ __all__ = [
     "boundary_facets",
     "cell_quadrature",
     "cubic_spline",
+    "ensure_points_in_mesh",
     "error_norms",
     "evaluate_fe_function",
     "facet_quadrature",

@@ -28,6 +28,7 @@ from .tables import ShapeTable
 
 __all__ = [
     "PointsOutsideMeshError",
+    "ensure_points_in_mesh",
     "evaluate_fe_function",
     "locate_points",
     "tabulate_fe_basis",
@@ -127,6 +128,49 @@ def locate_points(msh, points: np.ndarray) -> np.ndarray:
     return cells
 
 
+def _owners(msh, everything: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Owning rank and owned local cell of every gathered point; raises on every rank if any
+    point lies outside the mesh. Collective."""
+    from mpi4py import MPI
+
+    comm = msh.comm
+    cells = locate_points(msh, everything)
+    claim = np.where(cells >= 0, comm.rank, comm.size).astype(np.int32)
+    owner = np.empty_like(claim)
+    comm.Allreduce(claim, owner, op=MPI.MIN)
+    missing = np.flatnonzero(owner == comm.size)
+    if missing.size:
+        starts = np.concatenate([[0], np.cumsum(counts)])
+        src = np.searchsorted(starts, missing, side="right") - 1
+        which = [
+            f"rank {int(r)} point {int(k - starts[r])} "
+            f"{np.array2string(everything[k], precision=6)}"
+            for k, r in zip(missing[:10], src[:10], strict=True)
+        ]
+        raise PointsOutsideMeshError(
+            f"{missing.size} point(s) lie outside the mesh: {'; '.join(which)}"
+            + (" ..." if missing.size > 10 else "")
+            + ". Move them into the domain."
+        )
+    return owner, cells
+
+
+def _gather(comm, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    counts = np.array(comm.allgather(points.shape[0]))
+    everything = np.vstack(comm.allgather(points)) if counts.sum() else points
+    return everything, counts
+
+
+def ensure_points_in_mesh(msh, points: npt.ArrayLike) -> np.ndarray:
+    """Validate this rank's points and check that every rank's points lie in the mesh.
+
+    Raises :class:`PointsOutsideMeshError` on every rank otherwise (collective).
+    """
+    x = raise_on_all_ranks(msh.comm, lambda: check_points(points, msh.geometry.dim, "points"))
+    _owners(msh, *_gather(msh.comm, x))
+    return x
+
+
 def _route(msh, points: np.ndarray, compute: Callable[[np.ndarray, np.ndarray], list]) -> list:
     """Locate every rank's points, let the owning ranks ``compute`` on them, send results back.
 
@@ -135,28 +179,8 @@ def _route(msh, points: np.ndarray, compute: Callable[[np.ndarray, np.ndarray], 
     """
     comm = msh.comm
     rank, size = comm.rank, comm.size
-    counts = np.array(comm.allgather(points.shape[0]))
-    everything = np.vstack(comm.allgather(points)) if counts.sum() else points
-    cells = locate_points(msh, everything)
-    claim = np.where(cells >= 0, rank, size).astype(np.int32)
-    owner = np.empty_like(claim)
-    from mpi4py import MPI
-
-    comm.Allreduce(claim, owner, op=MPI.MIN)
-    missing = np.flatnonzero(owner == size)
-    if missing.size:
-        starts = np.concatenate([[0], np.cumsum(counts)])
-        which = [
-            f"rank {int(np.searchsorted(starts, k, side='right') - 1)} point "
-            f"{int(k - starts[np.searchsorted(starts, k, side='right') - 1])} "
-            f"{np.array2string(everything[k], precision=6)}"
-            for k in missing[:10]
-        ]
-        raise PointsOutsideMeshError(
-            f"{missing.size} point(s) lie outside the mesh: {'; '.join(which)}"
-            + (" ..." if missing.size > 10 else "")
-            + ". Move them into the domain."
-        )
+    everything, counts = _gather(comm, points)
+    owner, cells = _owners(msh, everything, counts)
     mine = np.flatnonzero(owner == rank)
     results = compute(everything[mine], cells[mine]) if mine.size else []
     starts = np.concatenate([[0], np.cumsum(counts)])

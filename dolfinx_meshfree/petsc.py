@@ -51,11 +51,11 @@ def create_aij(comm, local: sp.spmatrix, row_layout: Layout, col_layout: Layout)
     d_nnz = np.bincount(row_of[in_diag], minlength=re - rs).astype(PETSc.IntType)
     o_nnz = np.bincount(row_of[~in_diag], minlength=re - rs).astype(PETSc.IntType)
     M = PETSc.Mat().createAIJ(size=(row_layout.petsc_sizes(), col_layout.petsc_sizes()), comm=comm)
-    # extra room for entries other ranks add to our rows (interface rows only)
-    ncols_local = max(col_layout.size_local, 1)
-    M.setPreallocationNNZ(
-        (np.minimum(d_nnz + 8, ncols_local), np.minimum(o_nnz + 8, col_layout.size_global))
-    )
+    # extra room for entries other ranks add to our rows (interface rows only); PETSc rejects
+    # counts above the number of diagonal-block / off-diagonal-block columns
+    nd = col_layout.size_local
+    no = col_layout.size_global - nd
+    M.setPreallocationNNZ((np.minimum(d_nnz + 8, nd), np.minimum(o_nnz + 8, no)))
     M.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
     if re > rs:
         M.setValuesCSR(indptr, indices, own.data, addv=PETSc.InsertMode.ADD_VALUES)

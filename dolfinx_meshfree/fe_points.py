@@ -21,7 +21,7 @@ import numpy as np
 import numpy.typing as npt
 import scipy.sparse as sp
 
-from . import _compat
+from . import _compat, batched
 from .neighbours import check_points
 from .parallel import raise_on_all_ranks
 from .tables import ShapeTable
@@ -72,7 +72,7 @@ def reference_coordinates(msh, points: np.ndarray, cells: np.ndarray) -> np.ndar
         res = points - x
         if m == 0 or np.all(np.linalg.norm(res, axis=1) <= 1e-13 * diam):
             break
-        X = X + np.linalg.solve(J, res[:, :, None])[:, :, 0]
+        X = X + np.einsum("qij,qj->qi", batched.inv(J), res)
     return X
 
 
@@ -104,7 +104,7 @@ def tabulate_in_cells(V, points: npt.ArrayLike, cells: npt.ArrayLike, derivative
     if derivatives:
         nodes = msh.geometry.x[_compat.geometry_dofmap(msh)[cells], :gdim]
         J = np.einsum("dqv,qvg->qgd", tab[1:, :, :, 0], nodes)
-        dphi = np.einsum("qdg,dqv->qvg", np.linalg.inv(J), tab[1:, :, :, 0])  # J^-T dphi/dX
+        dphi = np.einsum("qdg,dqv->qvg", batched.inv(J), tab[1:, :, :, 0])  # J^-T dphi/dX
         for k in range(gdim):
             grads.append(sp.csr_matrix((dphi[:, :, k].ravel(), (rows, dofs.ravel())), shape=(m, n)))
     return ShapeTable(points=x, values=values, gradients=grads)

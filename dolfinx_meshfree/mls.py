@@ -22,6 +22,7 @@ import numpy.typing as npt
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from . import batched
 from .kernels import get_weight
 from .neighbours import check_points, pairs_within_support, support_radii
 from .tables import ShapeTable
@@ -159,7 +160,7 @@ class MLS:
         # moment matrix, eq. (3.7a), summed per point with bincount (vectorised)
         A = self._sum_outer(i, w, p, p, m)
         self._check_conditioning(A, counts, x)
-        Ainv = np.linalg.inv(A)
+        Ainv = batched.inv(A)
         gamma = Ainv[:, :, 0]  # A^-1 e_1 (A symmetric)
         g_pair = gamma[i]
         phi = w * np.einsum("pa,pa->p", p, g_pair)  # eq. (3.9)

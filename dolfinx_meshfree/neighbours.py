@@ -57,7 +57,7 @@ def support_radii(points: np.ndarray, dilation: float, num_neighbours: int) -> n
 def pairs_within_support(
     x: np.ndarray, particles: np.ndarray, radii: np.ndarray, tree: cKDTree | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """All (point, particle) pairs with ``|x - x_I| < d_I``, sorted by point.
+    """All (point, particle) pairs with ``|x - x_I| < d_I`` (in no particular order).
 
     Returns:
         ``(i, j, dx)``: point indices, particle indices and ``x_i - x_j`` (npairs, gdim).
@@ -72,6 +72,4 @@ def pairs_within_support(
     j = sdm["j"].astype(np.int64)
     keep = sdm["v"] < radii[j]
     i, j = i[keep], j[keep]
-    order = np.lexsort((j, i))
-    i, j = i[order], j[order]
     return i, j, x[i] - particles[j]

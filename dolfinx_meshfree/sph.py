@@ -21,6 +21,7 @@ import numpy.typing as npt
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from . import batched
 from .kernels import sph_cubic_spline
 from .neighbours import check_points, pairs_within_support
 from .tables import ShapeTable
@@ -137,5 +138,5 @@ class SPH:
                 f"SPH gradient correction is singular at {bad.size} point(s); first: point {q} at "
                 f"{x[q]}, whose neighbours are collinear or too few: increase smoothing_length"
             )
-        Minv = np.linalg.inv(M)
+        Minv = batched.inv(M)
         return np.einsum("pab,pb->pa", Minv[i], dN - S[i] * Nhat[:, None])

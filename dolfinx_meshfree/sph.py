@@ -56,7 +56,8 @@ class SPH:
         if volumes is None:
             raise ValueError("volumes are required for SPH (dV_I of Rabczuk et al. 2006, eq. 10)")
         x = np.asarray(positions, dtype=float)
-        self.points = check_points(x, x.shape[1] if x.ndim == 2 else 2, "points")
+        gdim = x.shape[1] if x.ndim == 2 else 0
+        self.points = check_points(x, gdim if gdim in (1, 2, 3) else 2, "points")
         self.gdim = self.points.shape[1]
         v = np.asarray(volumes, dtype=float)
         if v.shape != (self.points.shape[0],) or not np.all(v > 0):

@@ -122,10 +122,18 @@ class ParticleSet:
 
     def _voronoi_volumes(self, msh, cells: np.ndarray | None) -> np.ndarray:
         """Voronoi volumes by quadrature: every quadrature point of the background cells gives its
-        weight to the nearest particle (collective). Their sum is the area of the cells."""
+        weight to the nearest particle (collective). Their sum is the area of the cells.
+
+        A point equidistant from several particles (on a Voronoi edge: the Gauss points on the
+        midlines of a cell whose corners are particles) shares its weight equally among them;
+        giving it to whichever the k-d tree returns first made regular-grid volumes uneven."""
         q = cell_quadrature(msh, 4, cells)
-        _, nearest = cKDTree(self.positions).query(q.points)
-        v = np.bincount(nearest, weights=q.weights, minlength=self.num_particles)
+        k = min(8, self.num_particles)
+        dist, idx = cKDTree(self.positions).query(q.points, k=k)
+        dist, idx = dist.reshape(len(q), k), idx.reshape(len(q), k)
+        tied = dist <= dist[:, :1] * (1.0 + 1e-10)
+        share = q.weights[:, None] * tied / tied.sum(axis=1, keepdims=True)
+        v = np.bincount(idx.ravel(), weights=share.ravel(), minlength=self.num_particles)
         v = self.comm.allreduce(v, op=MPI.SUM)
         return np.maximum(v, 1e-300)
 

@@ -42,6 +42,7 @@ __all__ = [
     "function_petsc_vec",
     "geometry_dofmap",
     "quadrature_rule",
+    "scalar_function_space",
     "set_bc",
     "vector_function_space",
 ]
@@ -62,6 +63,13 @@ def vector_function_space(msh: _mesh.Mesh, degree: int = 1) -> _fem.FunctionSpac
     if MODERN:
         return _fem.functionspace(msh, ("Lagrange", degree, (gdim,)))
     return _fem.VectorFunctionSpace(msh, ("Lagrange", degree))
+
+
+def scalar_function_space(msh: _mesh.Mesh, family: str, degree: int) -> _fem.FunctionSpace:
+    """Scalar function space of the given family and degree."""
+    if MODERN:
+        return _fem.functionspace(msh, (family, degree))
+    return _fem.FunctionSpace(msh, (family, degree))
 
 
 def geometry_dofmap(msh: _mesh.Mesh) -> _np.ndarray:

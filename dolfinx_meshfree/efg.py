@@ -35,9 +35,10 @@ from .operators import consistent_gradients, load_vector, stiffness_matrix
 from .parallel import Layout, raise_on_all_ranks
 from .particles import ParticleSet
 from .petsc import BlockSystem, create_aij, create_vector
-from .quadrature import boundary_facets, cell_quadrature, facet_quadrature
+from .quadrature import QuadraturePoints, boundary_facets, cell_quadrature, facet_quadrature
+from .tables import ShapeTable
 
-__all__ = ["EFGElasticity", "EFGSolution"]
+__all__ = ["EFGElasticity", "EFGSolution", "particle_stiffness"]
 
 VectorFunction = Callable[[np.ndarray], np.ndarray]
 TractionFunction = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -79,6 +80,49 @@ class EFGSolution:
         """Displacement (m, 2) and its gradient (m, 2, 2), ``g[:, i, j] = du_i/dx_j``."""
         t = self.mls.tabulate(points)
         return t.values @ self.coefficients, t.gradient(self.coefficients)
+
+
+def particle_stiffness(
+    particles: ParticleSet,
+    mls: MLS,
+    material: LinearElastic,
+    quadrature_degree: int,
+    consistent_boundary: tuple[np.ndarray, np.ndarray | None] | None = None,
+) -> tuple[sp.csr_matrix, QuadraturePoints, ShapeTable, dict]:
+    """EFG stiffness from this rank's integration cells (``particles.cells``), in PETSc numbering.
+
+    Belytschko et al. 1995, eq. (4.3) with Gauss quadrature on the background cells. With
+    ``consistent_boundary = (facets, cells)`` — the whole boundary of the integration domain and
+    the domain cell beside each facet (``None``: exterior facets) — the test-function gradients
+    get the VCI correction. Collective (errors are raised on every rank).
+
+    Returns:
+        ``(K, q, table, timings)``: K as a (2n x 2n) CSR of this rank's contributions with PETSc
+        rows and columns, the cell quadrature, the MLS table at its points, and the seconds spent
+        tabulating (``setup``) and forming K (``assemble``).
+    """
+    t0 = time.perf_counter()
+    comm = particles.comm
+    n = particles.num_particles
+    dof_map = particles.petsc_dofs(2).ravel()
+    q = cell_quadrature(particles.mesh, quadrature_degree, particles.cells)
+    tq = raise_on_all_ranks(comm, lambda: mls.tabulate(q.points))
+    test_grads = tq.gradients
+    if consistent_boundary is not None:
+        facets, cells = consistent_boundary
+        bq = facet_quadrature(particles.mesh, facets, quadrature_degree, cells)
+        tb = raise_on_all_ranks(comm, lambda: mls.tabulate(bq.points, derivatives=0))
+        test_grads = raise_on_all_ranks(
+            comm,
+            lambda: consistent_gradients(
+                tq.values, tq.gradients, q.weights, tb.values, bq.weights, bq.normals, comm
+            ),
+        )
+    t1 = time.perf_counter()
+    K = stiffness_matrix(test_grads, q.weights, material, tq.gradients).tocoo()
+    Kg = sp.csr_matrix((K.data, (dof_map[K.row], dof_map[K.col])), shape=(2 * n, 2 * n))
+    timings = {"setup": t1 - t0, "assemble": time.perf_counter() - t1}
+    return Kg, q, tq, timings
 
 
 class EFGElasticity:
@@ -149,18 +193,10 @@ class EFGElasticity:
         n = P.num_particles
         dof_map = P.petsc_dofs(2).ravel()  # original interleaved dof -> PETSc dof
         t0 = time.perf_counter()
-        q = cell_quadrature(self.mesh, self.quadrature_degree, P.cells)
-        tq = raise_on_all_ranks(comm, lambda: self.mls.tabulate(q.points))
-        test_grads = tq.gradients
-        if self.consistent:
-            bq = facet_quadrature(self.mesh, boundary_facets(self.mesh), self.quadrature_degree)
-            tb = raise_on_all_ranks(comm, lambda: self.mls.tabulate(bq.points, derivatives=0))
-            test_grads = raise_on_all_ranks(
-                comm,
-                lambda: consistent_gradients(
-                    tq.values, tq.gradients, q.weights, tb.values, bq.weights, bq.normals, comm
-                ),
-            )
+        boundary = (boundary_facets(self.mesh), None) if self.consistent else None
+        Kg, q, tq, kt = particle_stiffness(
+            P, self.mls, self.material, self.quadrature_degree, boundary
+        )
         dq = [facet_quadrature(self.mesh, f, self.quadrature_degree) for f, _ in self._dirichlet]
         dtabs = [raise_on_all_ranks(comm, lambda d=d: self.mls.tabulate(d.points, 0)) for d in dq]
         tq_loads = [
@@ -169,14 +205,10 @@ class EFGElasticity:
         ttabs = [
             raise_on_all_ranks(comm, lambda d=d: self.mls.tabulate(d.points, 0)) for d in tq_loads
         ]
-        setup = self._setup_time + time.perf_counter() - t0
+        setup = self._setup_time + time.perf_counter() - t0 - kt["assemble"]
 
         t1 = time.perf_counter()
-        K_loc = stiffness_matrix(test_grads, q.weights, self.material, tq.gradients).tocoo()
         udofs = Layout(2 * P.layout.size_local, 2 * n, 2 * P.layout.start)
-        Kg = sp.csr_matrix(
-            (K_loc.data, (dof_map[K_loc.row], dof_map[K_loc.col])), shape=(2 * n, 2 * n)
-        )
         K = create_aij(comm, Kg, udofs, udofs)
 
         f_loc = np.zeros(2 * n)
@@ -225,7 +257,7 @@ class EFGElasticity:
             system = BlockSystem([[K, GT], [G, None]], [f, g])
         else:
             system = BlockSystem([[K]], [f])
-        assemble = time.perf_counter() - t1
+        assemble = time.perf_counter() - t1 + kt["assemble"]
 
         t2 = time.perf_counter()
         parts = system.solve()

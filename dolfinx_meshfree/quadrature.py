@@ -86,8 +86,18 @@ def boundary_facets(msh, marker=None) -> np.ndarray:
     return np.asarray(facets, dtype=np.int32)
 
 
-def facet_quadrature(msh, facets: npt.ArrayLike, degree: int) -> QuadraturePoints:
-    """Gauss–Legendre points on straight exterior facets (2D meshes), with outward normals."""
+def facet_quadrature(
+    msh, facets: npt.ArrayLike, degree: int, cells: npt.ArrayLike | None = None
+) -> QuadraturePoints:
+    """Gauss–Legendre points on straight facets (2D meshes), with unit normals.
+
+    Args:
+        facets: Local facet indices.
+        degree: Exactness degree of the rule.
+        cells: The local cell beside each facet that the normal points out of (needed on interior
+            facets, e.g. a patch interface); default: the facet's first cell, which on exterior
+            facets gives the outward normal.
+    """
     tdim, gdim = msh.topology.dim, msh.geometry.dim
     if tdim != 2:
         raise ValueError(f"facet quadrature is implemented for 2D meshes; got tdim={tdim}")
@@ -101,7 +111,13 @@ def facet_quadrature(msh, facets: npt.ArrayLike, degree: int) -> QuadraturePoint
         z = np.zeros((0, gdim))
         return QuadraturePoints(z, np.zeros(0), np.zeros(0, np.int64), z.copy(), np.zeros(0, int))
     ends = msh.geometry.x[_compat.entities_to_geometry(msh, tdim - 1, facets), :gdim]  # (nf, 2, 2)
-    cells = np.array([f2c.links(f)[0] for f in facets], dtype=np.int64)
+    if cells is None:
+        offsets = np.asarray(f2c.offsets)
+        cells = np.asarray(f2c.array)[offsets[facets]].astype(np.int64)
+    else:
+        cells = np.asarray(cells, dtype=np.int64)
+        if cells.shape != facets.shape:
+            raise ValueError(f"cells should have shape {facets.shape}, got {cells.shape}")
     a, b = ends[:, 0], ends[:, 1]
     t = b - a
     length = np.linalg.norm(t, axis=1)

@@ -1,0 +1,131 @@
+"""A particle patch: cells of an existing DOLFINx mesh whose displacement is carried by particles.
+
+The patch cells become EFG integration cells filled with particles; the other cells stay finite
+elements. The patch knows the facets that separate the two (the interface, Rabczuk et al. 2006,
+sec. 5.4) and its exterior facets, and tags cells 1 (FE) and 2 (particles) for restricting the
+user's forms. Requires a mesh whose ranks share ghost cells across facets (DOLFINx's default
+``GhostMode.shared_facet``) so that interface facets on partition boundaries see both sides.
+"""
+
+from __future__ import annotations
+
+import dolfinx
+import numpy as np
+import numpy.typing as npt
+
+from . import _compat
+from .parallel import raise_on_all_ranks
+from .particles import ParticleSet
+
+__all__ = ["FE_TAG", "PATCH_TAG", "ParticlePatch"]
+
+FE_TAG = 1
+PATCH_TAG = 2
+
+
+class ParticlePatch:
+    """Cells of ``mesh`` to be modelled with particles.
+
+    Args:
+        mesh: The user's mesh (2D, degree-1 geometry, ghosted across facets in parallel).
+        cells: Owned local indices of the cells to replace (each rank its own).
+        spacing: Particle spacing; particles fill the cells on a regular grid (see
+            :meth:`ParticleSet.from_cells`), including the interface, where they meet the FE nodes.
+        jitter: Random displacement of interior particles, as a fraction of the spacing.
+
+    Attributes:
+        particles: The :class:`ParticleSet`.
+        in_patch: bool per local cell (owned and ghost).
+        interface_facets: Owned facets between a patch cell and an FE cell; with
+            ``interface_patch_cells`` and ``interface_fe_cells`` the local cell on each side.
+        exterior_facets: Owned exterior facets of patch cells.
+        cell_tags: ``MeshTags`` of the owned cells: ``FE_TAG`` or ``PATCH_TAG``.
+    """
+
+    def __init__(
+        self,
+        mesh,
+        cells: npt.ArrayLike,
+        spacing: float,
+        jitter: float = 0.0,
+        seed: int = 0,
+    ):
+        comm = mesh.comm
+        tdim = mesh.topology.dim
+        cmap = mesh.topology.index_map(tdim)
+        num_owned = cmap.size_local
+        num_local = num_owned + cmap.num_ghosts
+
+        def check() -> np.ndarray:
+            c = np.asarray(cells)
+            if c.ndim != 1 or (c.size and not np.issubdtype(c.dtype, np.integer)):
+                raise ValueError(f"cells should be a 1D array of cell indices, got {c!r:.80}")
+            c = c.astype(np.int64)
+            if c.size and (c.min() < 0 or c.max() >= num_owned):
+                bad = c[(c < 0) | (c >= num_owned)]
+                raise ValueError(
+                    f"cells has {bad.size} index(es) that are not owned cells of the mesh "
+                    f"(valid: 0..{num_owned - 1} on this rank), e.g. {bad[:5].tolist()}"
+                )
+            return np.unique(c)
+
+        c = raise_on_all_ranks(comm, check)
+        if comm.allreduce(c.size) == 0:
+            raise ValueError("the patch is empty: cells names no cell on any rank")
+        self.mesh = mesh
+        self.cells = c
+        # patch membership of ghost cells, through a DG0 function
+        Q = _compat.scalar_function_space(mesh, "DG", 0)
+        marker = dolfinx.fem.Function(Q)
+        dof_of_cell = _compat.dofmap_array(Q)[:, 0]
+        marker.x.array[:] = 0.0
+        marker.x.array[dof_of_cell[c]] = 1.0
+        marker.x.scatter_forward()
+        self.in_patch = marker.x.array[dof_of_cell[:num_local]] > 0.5
+        self.fe_cells = np.flatnonzero(~self.in_patch[:num_owned]).astype(np.int32)
+
+        mesh.topology.create_connectivity(tdim - 1, tdim)
+        f2c = mesh.topology.connectivity(tdim - 1, tdim)
+        fmap = mesh.topology.index_map(tdim - 1)
+        nf = fmap.size_local
+        offsets = np.asarray(f2c.offsets)[: nf + 1]
+        adj = np.asarray(f2c.array)
+        count = np.diff(offsets)
+        first = adj[offsets[:-1]]
+        second = np.where(count > 1, adj[np.minimum(offsets[:-1] + 1, adj.size - 1)], -1)
+        exterior = np.zeros(nf, dtype=bool)
+        ext = dolfinx.mesh.exterior_facet_indices(mesh.topology)
+        exterior[ext[ext < nf]] = True
+        if np.any((count == 1) & ~exterior):
+            raise ValueError(
+                "the mesh has no ghost cells across partition boundaries; create it with "
+                "ghost_mode=dolfinx.mesh.GhostMode.shared_facet (the default) for a patch"
+            )
+        two = count == 2
+        p1 = np.where(two, self.in_patch[first], False)
+        p2 = np.where(two, self.in_patch[np.maximum(second, 0)], False)
+        iface = two & (p1 != p2)
+        self.interface_facets = np.flatnonzero(iface).astype(np.int32)
+        f, s = first[iface], second[iface]
+        self.interface_patch_cells = np.where(self.in_patch[f], f, s).astype(np.int64)
+        self.interface_fe_cells = np.where(self.in_patch[f], s, f).astype(np.int64)
+        ext_patch = exterior & self.in_patch[first]
+        self.exterior_facets = np.flatnonzero(ext_patch).astype(np.int32)
+        self.exterior_cells = first[ext_patch].astype(np.int64)
+
+        owned = np.arange(num_owned, dtype=np.int32)
+        values = np.where(self.in_patch[:num_owned], PATCH_TAG, FE_TAG).astype(np.int32)
+        self.cell_tags = dolfinx.mesh.meshtags(mesh, tdim, owned, values)
+        self.particles = ParticleSet.from_cells(mesh, spacing, c, jitter=jitter, seed=seed)
+
+    @property
+    def comm(self):
+        return self.mesh.comm
+
+    def boundary(self) -> tuple[np.ndarray, np.ndarray]:
+        """The whole boundary of the patch: (facets, the patch cell beside each); outward normals
+        of :func:`~dolfinx_meshfree.facet_quadrature` with these cells point out of the patch."""
+        return (
+            np.concatenate([self.exterior_facets, self.interface_facets]),
+            np.concatenate([self.exterior_cells, self.interface_patch_cells]),
+        )

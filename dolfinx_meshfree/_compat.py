@@ -43,6 +43,7 @@ __all__ = [
     "geometry_dofmap",
     "quadrature_rule",
     "scalar_function_space",
+    "scatter_reverse_add",
     "set_bc",
     "vector_function_space",
 ]
@@ -168,6 +169,16 @@ def set_bc(b, bcs, x0=None, scale: float = 1.0) -> None:
         _fem_petsc.set_bc(b, list(bcs), x0, alpha=scale)
     else:
         _fem_petsc.set_bc(b, list(bcs), x0, scale=scale)
+
+
+def scatter_reverse_add(u: _fem.Function) -> None:
+    """Add the ghost values of ``u`` into their owners' values (then ``scatter_forward``)."""
+    import dolfinx.la as _la
+
+    if MODERN:
+        u.x.scatter_reverse(_la.InsertMode.add)
+    else:
+        u.x.scatter_reverse(_la.ScatterMode.add)
 
 
 def function_petsc_vec(u: _fem.Function):

@@ -38,7 +38,7 @@ from .petsc import BlockSystem, create_aij, create_vector
 from .quadrature import QuadraturePoints, boundary_facets, cell_quadrature, facet_quadrature
 from .tables import ShapeTable
 
-__all__ = ["EFGElasticity", "EFGSolution", "particle_stiffness"]
+__all__ = ["EFGElasticity", "EFGSolution", "facet_multipliers", "particle_stiffness"]
 
 VectorFunction = Callable[[np.ndarray], np.ndarray]
 TractionFunction = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -123,6 +123,52 @@ def particle_stiffness(
     Kg = sp.csr_matrix((K.data, (dof_map[K.row], dof_map[K.col])), shape=(2 * n, 2 * n))
     timings = {"setup": t1 - t0, "assemble": time.perf_counter() - t1}
     return Kg, q, tq, timings
+
+
+def facet_multipliers(
+    particles: ParticleSet,
+    conditions: list[tuple[np.ndarray, VectorFunction]],
+    quadratures: list[QuadraturePoints],
+    tables: list[ShapeTable],
+    scale: float,
+) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray, Layout]:
+    """Constraint block of ``u = ubar`` on facets, one multiplier per facet and component.
+
+    ``G_{(f,i),(J,i)} = s int_f phi_J`` and ``g_(f,i) = s int_f ubar_i`` (Belytschko, Lu & Gu 1994
+    with piecewise-constant multipliers), assembled from this rank's owned facets (collective).
+
+    Args:
+        conditions: ``(facets, ubar)`` pairs; ``quadratures``/``tables``: their facet quadrature
+            and the particle shape functions there; ``scale``: ``s``.
+
+    Returns:
+        ``(G, rows, values, layout)``: G as (M x 2n) CSR with PETSc particle columns, the rhs
+        entries (global rows and values) and the multipliers' layout.
+    """
+    comm = particles.comm
+    dof_map = particles.petsc_dofs(2).ravel()
+    nfac = [np.unique(d.entities).size for d in quadratures]
+    mlayout = Layout.from_local(comm, 2 * int(sum(nfac)))
+    g_rows, g_cols, g_vals, r_rows, r_vals = [], [], [], [], []
+    offset = mlayout.start // 2
+    for (_, fn), d, tab in zip(conditions, quadratures, tables, strict=True):
+        _, facet_id = np.unique(d.entities, return_inverse=True)
+        ubar = raise_on_all_ranks(
+            comm, lambda fn=fn, d=d: _vector_values(fn, (d.points,), len(d), "dirichlet")
+        )
+        coo = tab.values.tocoo()
+        for c in range(2):
+            g_rows.append(2 * (offset + facet_id[coo.row]) + c)
+            g_cols.append(dof_map[2 * coo.col + c])
+            g_vals.append(scale * d.weights[coo.row] * coo.data)
+            r_rows.append(2 * (offset + facet_id) + c)
+            r_vals.append(scale * d.weights * ubar[:, c])
+        offset += int(facet_id.max()) + 1 if facet_id.size else 0
+    G = sp.csr_matrix(
+        (_cat(g_vals, float), (_cat(g_rows, np.int64), _cat(g_cols, np.int64))),
+        shape=(mlayout.size_global, 2 * particles.num_particles),
+    )
+    return G, _cat(r_rows, np.int64), _cat(r_vals, float), mlayout
 
 
 class EFGElasticity:
@@ -227,32 +273,11 @@ class EFGElasticity:
             f_loc += load_vector(tq.values, q.weights, b)
         f = create_vector(comm, udofs, dof_map, f_loc)
 
-        # multipliers: one per owned Dirichlet facet and component
-        nfac = [np.unique(d.entities).size for d in dq]
-        mlayout = Layout.from_local(comm, 2 * int(sum(nfac)))
         s = self.material.E
-        g_rows, g_cols, g_vals, r_rows, r_vals = [], [], [], [], []
-        offset = mlayout.start // 2
-        for (_, fn), d, tab in zip(self._dirichlet, dq, dtabs, strict=True):
-            _, facet_id = np.unique(d.entities, return_inverse=True)
-            ubar = raise_on_all_ranks(
-                comm, lambda fn=fn, d=d: _vector_values(fn, (d.points,), len(d), "dirichlet")
-            )
-            coo = tab.values.tocoo()
-            for c in range(2):
-                g_rows.append(2 * (offset + facet_id[coo.row]) + c)
-                g_cols.append(dof_map[2 * coo.col + c])
-                g_vals.append(s * d.weights[coo.row] * coo.data)
-                r_rows.append(2 * (offset + facet_id) + c)
-                r_vals.append(s * d.weights * ubar[:, c])
-            offset += int(facet_id.max()) + 1 if facet_id.size else 0
-        Gg = sp.csr_matrix(
-            (_cat(g_vals, float), (_cat(g_rows, np.int64), _cat(g_cols, np.int64))),
-            shape=(mlayout.size_global, 2 * n),
-        )
+        Gg, g_rows, g_vals, mlayout = facet_multipliers(P, self._dirichlet, dq, dtabs, s)
         G = create_aij(comm, Gg, mlayout, udofs)
         GT = create_aij(comm, Gg.T.tocsr(), udofs, mlayout)
-        g = create_vector(comm, mlayout, _cat(r_rows, np.int64), _cat(r_vals, float))
+        g = create_vector(comm, mlayout, g_rows, g_vals)
         if mlayout.size_global:
             system = BlockSystem([[K, GT], [G, None]], [f, g])
         else:

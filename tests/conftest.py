@@ -1,0 +1,119 @@
+"""Shared fixtures of the dolfinx_meshfree test suite.
+
+``dolfinx_meshfree`` is imported first: in lane B it loads the MPI bundled with the
+``dolfinx_solver`` wheel, which must happen before ``dolfinx``, ``petsc4py`` or ``mpi4py`` load
+theirs. Every test runs serially and under ``mpirun -n 2 python -m mpi4py -m pytest``; the
+autouse fixture below destroys PETSc objects deterministically and re-synchronises the ranks after
+each test (as DOLFINx's own ``python/test/conftest.py`` does).
+"""
+
+import dolfinx_meshfree  # noqa: I001  (must come first: loads lane B's MPI)
+
+import gc
+
+import dolfinx
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+#: Machine epsilon and its square root: the tolerances of exact properties are built from these.
+EPS = float(np.finfo(float).eps)
+SQRT_EPS = float(np.sqrt(EPS))
+
+
+@pytest.fixture(autouse=True)
+def _collect_and_synchronise():
+    yield
+    gc.collect()
+    MPI.COMM_WORLD.Barrier()
+
+
+@pytest.fixture
+def rank_rng():
+    """A random generator seeded by the rank, so that each rank draws different points."""
+    return np.random.default_rng(1234 + MPI.COMM_WORLD.rank)
+
+
+def rectangle(comm, p0, p1, n, cell_type):
+    """``dolfinx.mesh.create_rectangle`` with the same call in both lanes."""
+    return dolfinx.mesh.create_rectangle(
+        comm, [np.asarray(p0, dtype=float), np.asarray(p1, dtype=float)], list(n), cell_type
+    )
+
+
+CELL_TYPES = {
+    "triangle": dolfinx.mesh.CellType.triangle,
+    "quadrilateral": dolfinx.mesh.CellType.quadrilateral,
+}
+
+__all__ = ["CELL_TYPES", "EPS", "SQRT_EPS", "dolfinx_meshfree", "rectangle"]
+
+
+# --- the Timoshenko cantilever (Belytschko et al. 1995, sec. 5.1.2) ----------------------------
+
+BEAM_L, BEAM_D = 48.0, 12.0
+
+
+def beam_mesh(comm, h, cell_name="quadrilateral"):
+    """[0, L] x [-D/2, D/2] with square (or halved square) cells of size h."""
+    return rectangle(
+        comm,
+        [0.0, -BEAM_D / 2],
+        [BEAM_L, BEAM_D / 2],
+        [round(BEAM_L / h), round(BEAM_D / h)],
+        CELL_TYPES[cell_name],
+    )
+
+
+def beam_ends(msh):
+    """Owned exterior facets on x = 0 (clamped, exact displacement) and x = L (loaded)."""
+    left = dolfinx_meshfree.boundary_facets(msh, lambda x: np.isclose(x[0], 0.0))
+    right = dolfinx_meshfree.boundary_facets(msh, lambda x: np.isclose(x[0], BEAM_L))
+    return left, right
+
+
+def solve_beam_fe(msh, beam):
+    """P1/Q1 solution of the cantilever; returns the FESolution."""
+    import ufl
+
+    left, right = beam_ends(msh)
+    V = dolfinx_meshfree._compat.vector_function_space(msh)
+    P, inertia, D = beam.P, beam.inertia, beam.D
+    return dolfinx_meshfree.solve_fe_elasticity(
+        V,
+        beam.material,
+        dirichlet=[(left, lambda x: beam.displacement(x[:2].T).T)],
+        tractions=[
+            (right, lambda x: ufl.as_vector((0.0, P / (2 * inertia) * (D**2 / 4 - x[1] ** 2))))
+        ],
+    )
+
+
+def fe_errors(msh, sol, beam):
+    V = sol.u.function_space
+    local = sol.u.x.array.reshape(-1, V.dofmap.index_map_bs)
+
+    def evaluate(q):
+        t = dolfinx_meshfree.tabulate_in_cells(V, q.points, q.cells)
+        return t.values @ local, t.gradient(local)
+
+    return dolfinx_meshfree.error_norms(msh, evaluate, beam, beam.material)
+
+
+def solve_beam_efg(msh, beam, spacing, **options):
+    """EFG solution of the cantilever on a regular particle grid of the given spacing."""
+    left, right = beam_ends(msh)
+    particles = dolfinx_meshfree.ParticleSet.from_cells(msh, spacing)
+    problem = dolfinx_meshfree.EFGElasticity(particles, beam.material, **options)
+    problem.add_dirichlet(left, beam.displacement)
+    problem.add_traction(right, beam.traction)
+    return problem.solve()
+
+
+def efg_errors(msh, sol, beam):
+    return dolfinx_meshfree.error_norms(msh, lambda q: sol.evaluate(q.points), beam, beam.material)
+
+
+def fitted_rate(h, errors):
+    """Slope of log(error) against log(h) by least squares (np.polyfit)."""
+    return float(np.polyfit(np.log(h), np.log(errors), 1)[0])

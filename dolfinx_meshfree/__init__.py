@@ -15,6 +15,7 @@ Importing this package first loads the ``dolfinx_solver`` wheel's MPI when that 
 from . import _compat  # noqa: F401  (must come first: loads dolfinx_solver's MPI in lane B)
 from ._compat import DOLFINX_VERSION
 from .analytic import LinearField, TimoshenkoBeam
+from .coupled import COUPLINGS, CoupledElasticity, CoupledSolution
 from .efg import EFGElasticity, EFGSolution
 from .errors import error_norms
 from .fe import FESolution, solve_fe_elasticity
@@ -29,20 +30,25 @@ from .kernels import cubic_spline, gaussian, quartic, sph_cubic_spline
 from .materials import LinearElastic
 from .mls import MLS, MomentMatrixError
 from .particles import ParticleSet
+from .patch import ParticlePatch
 from .quadrature import boundary_facets, cell_quadrature, facet_quadrature
 from .sph import SPH
 from .tables import ShapeTable
 
 __all__ = [
+    "COUPLINGS",
     "DOLFINX_VERSION",
     "MLS",
     "SPH",
+    "CoupledElasticity",
+    "CoupledSolution",
     "EFGElasticity",
     "EFGSolution",
     "FESolution",
     "LinearElastic",
     "LinearField",
     "MomentMatrixError",
+    "ParticlePatch",
     "ParticleSet",
     "PointsOutsideMeshError",
     "ShapeTable",

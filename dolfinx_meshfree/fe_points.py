@@ -91,12 +91,15 @@ def tabulate_in_cells(V, points: npt.ArrayLike, cells: npt.ArrayLike, derivative
     gdim = msh.geometry.dim
     x = check_points(points, gdim, "points")
     cells = np.asarray(cells, dtype=np.int64)
+    imap = V.dofmap.index_map
+    n = imap.size_local + imap.num_ghosts
+    if x.shape[0] == 0:  # basix cannot tabulate at no points
+        empty = sp.csr_matrix((0, n))
+        return ShapeTable(points=x, values=empty, gradients=[empty.copy()] * (gdim * derivatives))
     element = _compat.basix_lagrange_p1(msh.topology.cell_type.name)
     X = reference_coordinates(msh, x, cells)
     tab = element.tabulate(1, X)
     dofs = _compat.dofmap_array(V)[cells]  # (m, nv)
-    imap = V.dofmap.index_map
-    n = imap.size_local + imap.num_ghosts
     m, nv = dofs.shape
     rows = np.repeat(np.arange(m), nv)
     values = sp.csr_matrix((tab[0, :, :, 0].ravel(), (rows, dofs.ravel())), shape=(m, n))

@@ -1,0 +1,375 @@
+"""FE–EFG elastostatics on a mesh with a particle patch, coupled by Lagrange multipliers.
+
+Compatibility coupling (Rabczuk et al. 2006, sec. 5.4, eq. 98–110; Hegen 1996): the FE cells and
+the patch cells do not overlap and meet on the interface Gamma_I. Displacement continuity is
+imposed weakly by a multiplier field discretised with the FE trace functions of the interface
+nodes, Lambda_k = N_k on Gamma_I:
+
+.. math::
+    G_{FE} = \\int_{\\Gamma_I} \\Lambda^T N_{FE}, \\qquad G_P = -\\int_{\\Gamma_I} \\Lambda^T \\phi,
+
+and the block system (a PETSc MatNest, fields FE, particles, interface multipliers, and patch
+Dirichlet multipliers when essential conditions act on patch facets)
+
+.. math::
+    \\begin{bmatrix} K_{FE} & 0 & s G_{FE}^T \\\\ 0 & K_P & s G_P^T \\\\
+    s G_{FE} & s G_P & 0 \\end{bmatrix}.
+
+``K_FE`` is DOLFINx's assembly of the elasticity form restricted to the FE cells (``dx`` with the
+patch's cell tags); FE dofs that no FE cell supports become identity rows. Essential conditions on
+FE facets are applied to ``K_FE`` by ``MatZeroRowsColumns`` (which lifts them into the
+right-hand side) and removed from the coupling columns; on patch facets they are multiplier
+constraints as in :mod:`~dolfinx_meshfree.efg`. ``s = E`` scales the constraint rows.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import dolfinx
+import numpy as np
+import scipy.sparse as sp
+import ufl
+from petsc4py import PETSc
+
+from . import _compat
+from .efg import _vector_values, facet_multipliers, particle_stiffness
+from .fe_points import _route, tabulate_in_cells
+from .materials import LinearElastic
+from .mls import MLS
+from .operators import load_vector
+from .parallel import Layout, raise_on_all_ranks
+from .patch import FE_TAG, ParticlePatch
+from .petsc import BlockSystem, create_aij, create_vector
+from .quadrature import QuadraturePoints, facet_quadrature
+
+__all__ = ["COUPLINGS", "CoupledElasticity", "CoupledSolution"]
+
+#: Couplings available in this release.
+COUPLINGS = ("lagrange",)
+
+VectorFunction = Callable[[np.ndarray], np.ndarray]
+
+
+@dataclass
+class CoupledSolution:
+    """FE displacement, particle coefficients, and the means to evaluate the coupled field."""
+
+    u: dolfinx.fem.Function
+    coefficients: np.ndarray
+    mls: MLS
+    patch: ParticlePatch
+    timings: dict = field(default_factory=dict)
+    sizes: dict = field(default_factory=dict)
+
+    def evaluate_at_quadrature(self, q: QuadraturePoints) -> tuple[np.ndarray, np.ndarray]:
+        """Displacement (m, 2) and gradient (m, 2, 2) at quadrature points of local cells: FE in
+        FE cells, particles in patch cells (local)."""
+        V = self.u.function_space
+        local = self.u.x.array.reshape(-1, 2)
+        inside = self.patch.in_patch[q.cells]
+        u = np.empty((len(q), 2))
+        g = np.empty((len(q), 2, 2))
+        if np.any(~inside):
+            t = tabulate_in_cells(V, q.points[~inside], q.cells[~inside])
+            u[~inside], g[~inside] = t.values @ local, t.gradient(local)
+        if np.any(inside):
+            t = self.mls.tabulate(q.points[inside])
+            u[inside], g[inside] = t.values @ self.coefficients, t.gradient(self.coefficients)
+        return u, g
+
+    def displacement(self, points: np.ndarray) -> np.ndarray:
+        """Displacement (m, 2) at any points of the mesh, on every rank (collective)."""
+        from .neighbours import check_points
+
+        msh = self.patch.mesh
+        x = raise_on_all_ranks(msh.comm, lambda: check_points(points, 2, "points"))
+
+        def compute(pts: np.ndarray, cells: np.ndarray) -> list:
+            q = QuadraturePoints(pts, np.zeros(len(pts)), cells)
+            return list(self.evaluate_at_quadrature(q)[0])
+
+        return np.array(_route(msh, x, compute), dtype=float).reshape(-1, 2)
+
+
+class CoupledElasticity:
+    """Linear elastostatics with FE cells and a particle patch, coupled by Lagrange multipliers.
+
+    Args:
+        V: Vector P1/Q1 space on the whole mesh (the FE side lives on its non-patch cells).
+        patch: :class:`~dolfinx_meshfree.ParticlePatch` on the same mesh.
+        material: :class:`~dolfinx_meshfree.LinearElastic`, used on both sides.
+        coupling: ``"lagrange"`` (compatibility coupling, Rabczuk et al. 2006, sec. 5.4).
+        weight, dilation, basis: MLS options of the particle side.
+        quadrature_degree: Gauss degree on cells and facets.
+        consistent: Variationally consistent integration on the patch (VCI over the patch
+            boundary, interface included).
+    """
+
+    def __init__(
+        self,
+        V,
+        patch: ParticlePatch,
+        material: LinearElastic,
+        coupling: str = "lagrange",
+        weight: str = "quartic",
+        dilation: float = 2.0,
+        basis: str = "linear",
+        quadrature_degree: int = 7,
+        consistent: bool = False,
+    ):
+        if coupling not in COUPLINGS:
+            raise ValueError(
+                f"coupling={coupling!r} is not available; choose one of {list(COUPLINGS)}"
+            )
+        if not isinstance(material, LinearElastic):
+            raise TypeError(f"material must be a LinearElastic, got {type(material).__name__}")
+        if V.mesh is not patch.mesh:
+            raise ValueError("V and patch must live on the same mesh object")
+        t0 = time.perf_counter()
+        self.V, self.patch, self.material, self.coupling = V, patch, material, coupling
+        self.quadrature_degree = quadrature_degree
+        self.consistent = bool(consistent)
+        self.mls = raise_on_all_ranks(
+            patch.comm,
+            lambda: MLS(patch.particles, weight=weight, dilation=dilation, basis=basis),
+        )
+        self._dirichlet: list[tuple[np.ndarray, VectorFunction]] = []
+        self._tractions: list[tuple[np.ndarray, Callable]] = []
+        self._setup = time.perf_counter() - t0
+
+    def add_dirichlet(self, facets: np.ndarray, value: VectorFunction) -> None:
+        """``u = value(x)`` on owned exterior facets (FE side: strongly; patch side: multipliers).
+        ``value`` maps points (m, 2) to (m, 2)."""
+        self._dirichlet.append((np.asarray(facets, dtype=np.int32), value))
+
+    def add_traction(self, facets: np.ndarray, traction: Callable) -> None:
+        """Traction ``traction(x, n)`` (m, 2) on owned exterior facets, on either side."""
+        self._tractions.append((np.asarray(facets, dtype=np.int32), traction))
+
+    # -- pieces ---------------------------------------------------------------------------------
+
+    def _split(self, facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Exterior facets beside FE cells and beside patch cells."""
+        msh = self.patch.mesh
+        f2c = msh.topology.connectivity(msh.topology.dim - 1, msh.topology.dim)
+        first = np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]]
+        in_patch = self.patch.in_patch[first]
+        return facets[~in_patch], facets[in_patch]
+
+    def _fe_layout(self) -> tuple[Layout, np.ndarray]:
+        imap = self.V.dofmap.index_map
+        l2g = np.asarray(
+            imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
+        )
+        return Layout(2 * imap.size_local, 2 * imap.size_global, 2 * imap.local_range[0]), l2g
+
+    def _fe_stiffness(self) -> PETSc.Mat:
+        V = self.V
+        u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+        dx = ufl.Measure("dx", domain=V.mesh, subdomain_data=self.patch.cell_tags)
+        a = ufl.inner(self.material.ufl_stress(u), ufl.sym(ufl.grad(v))) * dx(FE_TAG)
+        return _compat.assemble_matrix(_compat.create_form(a))
+
+    def _node_flags(self, local_nodes: np.ndarray) -> np.ndarray:
+        """Flag nodes (local block indices) on every rank that has them (collective)."""
+        f = dolfinx.fem.Function(self.V)
+        f.x.array[:] = 0.0
+        f.x.array[2 * np.asarray(local_nodes, dtype=np.int64)] = 1.0
+        _compat.scatter_reverse_add(f)
+        f.x.scatter_forward()
+        return f.x.array[0::2] > 0.5
+
+    def _interface_numbering(self) -> tuple[np.ndarray, Layout]:
+        """Global multiplier number of each local node on the interface (-1 elsewhere)."""
+        V, patch = self.V, self.patch
+        fdim = V.mesh.topology.dim - 1
+        nodes = dolfinx.fem.locate_dofs_topological(V, fdim, patch.interface_facets)
+        on = self._node_flags(nodes)
+        n_owned = V.dofmap.index_map.size_local
+        mine = np.flatnonzero(on[:n_owned])
+        layout = Layout.from_local(patch.comm, mine.size)
+        num = dolfinx.fem.Function(V)
+        num.x.array[:] = 0.0
+        num.x.array[2 * mine] = layout.start + np.arange(mine.size) + 1
+        num.x.scatter_forward()
+        ids = np.rint(num.x.array[0::2]).astype(np.int64) - 1
+        return ids, Layout(2 * layout.size_local, 2 * layout.size_global, 2 * layout.start)
+
+    # -- solve ----------------------------------------------------------------------------------
+
+    def solve(self) -> CoupledSolution:
+        """Assemble the nest block system and solve it with MUMPS (collective)."""
+        V, patch, P = self.V, self.patch, self.patch.particles
+        comm = patch.comm
+        msh = V.mesh
+        deg = self.quadrature_degree
+        n = P.num_particles
+        s = self.material.E
+        pdofs = P.petsc_dofs(2)
+        fe_layout, l2g = self._fe_layout()
+        pl = Layout(2 * P.layout.size_local, 2 * n, 2 * P.layout.start)
+        t0 = time.perf_counter()
+
+        # particle side
+        boundary = patch.boundary() if self.consistent else None
+        Kp_loc, _, _, kt = particle_stiffness(P, self.mls, self.material, deg, boundary)
+
+        # essential conditions: FE side strongly, patch side by multipliers
+        fe_bc, patch_bc = [], []
+        for facets, fn in self._dirichlet:
+            f_fe, f_p = self._split(facets)
+            fe_bc.append((f_fe, fn))
+            patch_bc.append((f_p, fn))
+        dq = [facet_quadrature(msh, f, deg) for f, _ in patch_bc]
+        dtabs = [raise_on_all_ranks(comm, lambda d=d: self.mls.tabulate(d.points, 0)) for d in dq]
+        ubc = dolfinx.fem.Function(V)
+        is_bc = np.zeros(ubc.x.array.size // 2, dtype=bool)
+        coords = V.tabulate_dof_coordinates()[:, :2]
+        for f, fn in fe_bc:
+            flags = self._node_flags(
+                dolfinx.fem.locate_dofs_topological(V, msh.topology.dim - 1, f)
+            )
+            xn = coords[flags]
+            vals = raise_on_all_ranks(
+                comm, lambda fn=fn, xn=xn: _vector_values(fn, (xn,), len(xn), "dirichlet")
+            )
+            ubc.x.array.reshape(-1, 2)[flags] = vals
+            is_bc |= flags
+        # FE nodes that no FE cell supports
+        fe_nodes = _compat.dofmap_array(V)[patch.fe_cells].ravel()
+        active = self._node_flags(fe_nodes)
+
+        # interface multipliers
+        ids, ml = self._interface_numbering()
+        iq = facet_quadrature(msh, patch.interface_facets, deg, patch.interface_fe_cells)
+        t_fe = tabulate_in_cells(V, iq.points, iq.cells, derivatives=0).values
+        t_p = raise_on_all_ranks(comm, lambda: self.mls.tabulate(iq.points, 0)).values
+        W = sp.diags(iq.weights)
+        M_fe = (t_fe.T @ W @ t_fe).tocoo()  # (local nodes x local nodes)
+        M_p = (t_fe.T @ W @ t_p).tocoo()  # (local nodes x particles)
+        setup = self._setup + time.perf_counter() - t0 - kt["assemble"]
+
+        t1 = time.perf_counter()
+        K_fe = self._fe_stiffness()
+        tiny = 1e-14 * (np.abs(M_fe.data).max() if M_fe.nnz else 1.0)
+        keep = (ids[M_fe.row] >= 0) & (np.abs(M_fe.data) > tiny)
+        r, c, v = M_fe.row[keep], M_fe.col[keep], M_fe.data[keep]
+        bc_col = is_bc[c]
+        g_rows, g_vals = [], []
+        gfe = ([], [], [])
+        for comp in range(2):
+            rows = 2 * ids[r] + comp
+            cols = 2 * l2g[c] + comp
+            # known FE values on the interface move to the right-hand side
+            g_rows.append(rows[bc_col])
+            g_vals.append(-s * v[bc_col] * ubc.x.array[2 * c[bc_col] + comp])
+            gfe[0].append(rows[~bc_col])
+            gfe[1].append(cols[~bc_col])
+            gfe[2].append(s * v[~bc_col])
+        G_fe = sp.csr_matrix(
+            (np.concatenate(gfe[2]), (np.concatenate(gfe[0]), np.concatenate(gfe[1]))),
+            shape=(ml.size_global, fe_layout.size_global),
+        )
+        keep = (ids[M_p.row] >= 0) & (np.abs(M_p.data) > tiny)
+        r, c, v = M_p.row[keep], M_p.col[keep], M_p.data[keep]
+        G_p = sp.csr_matrix(
+            (
+                np.concatenate([-s * v, -s * v]),
+                (
+                    np.concatenate([2 * ids[r], 2 * ids[r] + 1]),
+                    np.concatenate([pdofs[c, 0], pdofs[c, 1]]),
+                ),
+            ),
+            shape=(ml.size_global, 2 * n),
+        )
+
+        # loads
+        f_fe_rows, f_fe_vals = [], []
+        f_p = np.zeros(2 * n)
+        for facets, fn in self._tractions:
+            f_fe_facets, f_p_facets = self._split(facets)
+            q = facet_quadrature(msh, f_fe_facets, deg)
+            t = raise_on_all_ranks(
+                comm, lambda fn=fn, q=q: _vector_values(fn, (q.points, q.normals), len(q), "t")
+            )
+            tab = tabulate_in_cells(V, q.points, q.cells, derivatives=0).values
+            fl = load_vector(tab, q.weights, t).reshape(-1, 2)
+            for comp in range(2):
+                f_fe_rows.append(2 * l2g[: fl.shape[0]] + comp)
+                f_fe_vals.append(fl[:, comp])
+            q = facet_quadrature(msh, f_p_facets, deg)
+            t = raise_on_all_ranks(
+                comm, lambda fn=fn, q=q: _vector_values(fn, (q.points, q.normals), len(q), "t")
+            )
+            tab = raise_on_all_ranks(comm, lambda q=q: self.mls.tabulate(q.points, 0)).values
+            f_p += load_vector(tab, q.weights, t)
+        cat = np.concatenate
+        b_fe = create_vector(
+            comm, fe_layout, cat([*f_fe_rows, np.zeros(0, np.int64)]), cat([*f_fe_vals, []])
+        )
+        # strong conditions and inactive dofs on K_FE: zero rows and columns, lift into b_fe
+        n_owned = V.dofmap.index_map.size_local
+        fixed = np.flatnonzero(is_bc[:n_owned] | ~active[:n_owned])
+        rows = (2 * l2g[fixed][:, None] + np.arange(2)).ravel().astype(PETSc.IntType)
+        x_bc = create_vector(
+            comm,
+            fe_layout,
+            rows,
+            np.where(np.repeat(is_bc[fixed], 2), ubc.x.array.reshape(-1, 2)[fixed].ravel(), 0.0),
+        )
+        # rows of dofs that no FE cell supports are empty, diagonal included: add it
+        K_fe.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        zero = K_fe.createVecLeft()
+        zero.set(0.0)
+        K_fe.setDiagonal(zero, addv=PETSc.InsertMode.ADD_VALUES)
+        zero.destroy()
+        K_fe.zeroRowsColumns(rows, diag=1.0, x=x_bc, b=b_fe)
+        Kp = create_aij(comm, Kp_loc, pl, pl)
+        b_p = create_vector(comm, pl, pdofs.ravel(), f_p)
+        Gfe = create_aij(comm, G_fe, ml, fe_layout)
+        GfeT = create_aij(comm, G_fe.T.tocsr(), fe_layout, ml)
+        Gp = create_aij(comm, G_p, ml, pl)
+        GpT = create_aij(comm, G_p.T.tocsr(), pl, ml)
+        g = create_vector(comm, ml, cat([*g_rows, np.zeros(0, np.int64)]), cat([*g_vals, []]))
+        blocks = [[K_fe, None, GfeT], [None, Kp, GpT], [Gfe, Gp, None]]
+        rhs = [b_fe, b_p, g]
+        mats = [K_fe, Kp, Gfe, GfeT, Gp, GpT]
+        Gd, d_rows, d_vals, dl = facet_multipliers(P, patch_bc, dq, dtabs, s)
+        if dl.size_global:
+            D = create_aij(comm, Gd, dl, pl)
+            DT = create_aij(comm, Gd.T.tocsr(), pl, dl)
+            for row in blocks:
+                row.append(None)
+            blocks[1][3] = DT
+            blocks.append([None, D, None, None])
+            rhs.append(create_vector(comm, dl, d_rows, d_vals))
+            mats += [D, DT]
+        system = BlockSystem(blocks, rhs)
+        assemble = time.perf_counter() - t1 + kt["assemble"]
+
+        t2 = time.perf_counter()
+        parts = system.solve()
+        solve = time.perf_counter() - t2
+        system.destroy()
+        for obj in [*mats, *rhs, x_bc]:
+            obj.destroy()
+        uh = dolfinx.fem.Function(V)
+        uh.x.array[: 2 * n_owned] = parts[0]
+        uh.x.scatter_forward()
+        owned = np.concatenate(comm.allgather(parts[1]))
+        coeffs = owned.reshape(-1, 2)[P.petsc_index]
+        return CoupledSolution(
+            u=uh,
+            coefficients=coeffs,
+            mls=self.mls,
+            patch=patch,
+            timings={"setup": setup, "assemble": assemble, "solve": solve},
+            sizes={
+                "fe_dofs": fe_layout.size_global,
+                "particle_dofs": 2 * n,
+                "multiplier_dofs": ml.size_global + dl.size_global,
+            },
+        )

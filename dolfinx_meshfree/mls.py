@@ -111,6 +111,7 @@ class MLS:
         self.basis = basis
         self.num_basis = polynomial_basis(np.zeros((1, self.gdim)), self.order)[0].shape[1]
         self.dilation = float(dilation)
+        self._fix = f"increase dilation (now {self.dilation})"
         if radii is None:
             self.radii = support_radii(self.points, self.dilation, self.num_basis)
         else:
@@ -120,6 +121,7 @@ class MLS:
                     f"radii should be positive with shape ({self.points.shape[0]},), got {r.shape}"
                 )
             self.radii = r
+            self._fix = "increase radii (given explicitly; dilation is not used)"
         self.rcond = float(rcond)
         self._scale = float(np.median(self.radii))
         self._tree = cKDTree(self.points)
@@ -149,7 +151,7 @@ class MLS:
             raise MomentMatrixError(
                 f"MLS moment matrix is singular at {too_few.size} point(s); first: point {q} at "
                 f"{x[q]} has {counts[q]} particle(s) in support but the {self.basis} basis needs "
-                f"at least {nb}: increase dilation (now {self.dilation}) or add particles"
+                f"at least {nb}: {self._fix} or add particles"
             )
         s = self._scale
         dist = np.linalg.norm(dx, axis=1)
@@ -206,5 +208,5 @@ class MLS:
                 f"MLS moment matrix is ill-conditioned at {bad.size} point(s) (eigenvalue ratio "
                 f"{ratio[q]:.2e} < rcond={self.rcond:.0e}); first: point {q} at {x[q]} with "
                 f"{counts[q]} particle(s) in support, which are (nearly) collinear or too few: "
-                f"increase dilation (now {self.dilation}) or add particles off the line"
+                f"{self._fix} or add particles off the line"
             )

@@ -30,7 +30,7 @@ def grid(n=6, spacing=1.0):
 def test_tiny_explicit_radii_leave_points_without_support():
     P = grid()
     mls = mf.MLS(P, radii=np.full(P.shape[0], 0.3))
-    with pytest.raises(mf.MomentMatrixError, match=r"particle\(s\) in support.*dilation"):
+    with pytest.raises(mf.MomentMatrixError, match=r"particle\(s\) in support.*increase radii"):
         mls.tabulate(np.array([[2.5, 2.5]]))
 
 

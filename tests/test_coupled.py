@@ -1,0 +1,172 @@
+"""Compatibility (Lagrange-multiplier) FE–EFG coupling: ParticlePatch and CoupledElasticity.
+
+Oracles: the linear patch test (exact with consistent integration), the Timoshenko solution
+(rates and the pure-FE error at the same h, computed here), the interface constraint itself
+(continuity tested against the multiplier space), and the same problem solved on COMM_SELF.
+"""
+
+from __future__ import annotations
+
+import dolfinx_meshfree as mf
+from dolfinx_meshfree import _compat
+
+import dolfinx
+import numpy as np
+import pytest
+import ufl
+from mpi4py import MPI
+
+
+def square(comm, cell="quadrilateral", n=6):
+    return dolfinx.mesh.create_rectangle(
+        comm, [np.zeros(2), np.full(2, 2.0)], [n, n], getattr(dolfinx.mesh.CellType, cell)
+    )
+
+
+def cells_right_of(msh, x0):
+    n = msh.topology.index_map(2).size_local
+    nodes = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], :2]
+    return np.flatnonzero(nodes[:, :, 0].mean(axis=1) > x0)
+
+
+def beam_mesh(comm, h):
+    return dolfinx.mesh.create_rectangle(
+        comm,
+        [np.array([0.0, -6.0]), np.array([48.0, 6.0])],
+        [round(48 / h), round(12 / h)],
+        dolfinx.mesh.CellType.quadrilateral,
+    )
+
+
+def solve_beam(comm, h, consistent=False):
+    mat = mf.LinearElastic(3e7, 0.3)
+    beam = mf.TimoshenkoBeam(mat)
+    msh = beam_mesh(comm, h)
+    patch = mf.ParticlePatch(msh, cells_right_of(msh, 24.0), h)
+    problem = mf.CoupledElasticity(
+        _compat.vector_function_space(msh), patch, mat, consistent=consistent
+    )
+    problem.add_dirichlet(mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0)), beam.displacement)
+    problem.add_traction(mf.boundary_facets(msh, lambda x: np.isclose(x[0], 48)), beam.traction)
+    sol = problem.solve()
+    return msh, sol, mf.error_norms(msh, sol.evaluate_at_quadrature, beam, mat)
+
+
+def fe_beam_error(h):
+    mat = mf.LinearElastic(3e7, 0.3)
+    beam = mf.TimoshenkoBeam(mat)
+    msh = beam_mesh(MPI.COMM_WORLD, h)
+    V = _compat.vector_function_space(msh)
+    inertia = beam.inertia
+
+    def t(x):
+        return ufl.as_vector((0.0, beam.P / (2 * inertia) * (beam.D**2 / 4 - x[1] ** 2)))
+
+    sol = mf.solve_fe_elasticity(
+        V,
+        mat,
+        [(mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0)),
+          lambda x: beam.displacement(x[:2].T).T)],
+        [(mf.boundary_facets(msh, lambda x: np.isclose(x[0], 48)), t)],
+    )  # fmt: skip
+    local = sol.u.x.array.reshape(-1, 2)
+
+    def evaluate(q):
+        tab = mf.tabulate_in_cells(V, q.points, q.cells)
+        return tab.values @ local, tab.gradient(local)
+
+    return mf.error_norms(msh, evaluate, beam, mat)["l2"]
+
+
+def test_patch_interface_and_boundary_facets():
+    msh = beam_mesh(MPI.COMM_WORLD, 1.0)
+    patch = mf.ParticlePatch(msh, cells_right_of(msh, 24.0), 1.0)
+    comm = msh.comm
+    assert comm.allreduce(len(patch.interface_facets)) == 12
+    assert comm.allreduce(len(patch.exterior_facets)) == 24 + 24 + 12
+    assert patch.particles.num_particles == 25 * 13
+    q = mf.facet_quadrature(msh, patch.interface_facets, 3, patch.interface_patch_cells)
+    # the interface is x = 24 and normals point out of the patch
+    assert np.allclose(q.points[:, 0], 24.0)
+    assert np.allclose(q.normals, [-1.0, 0.0])
+
+
+@pytest.mark.parametrize("cell", ["quadrilateral", "triangle"])
+def test_patch_test_exact_with_consistent_integration(cell, rank_rng):
+    comm = MPI.COMM_WORLD
+    msh = square(comm, cell)
+    patch = mf.ParticlePatch(msh, cells_right_of(msh, 1.0), 1 / 3)
+    V = _compat.vector_function_space(msh)
+    exact = mf.LinearField(G=((0.3, -0.2), (0.5, 0.1)), c=(0.1, -0.4))
+    errors = {}
+    for consistent in (False, True):
+        problem = mf.CoupledElasticity(V, patch, mf.LinearElastic(1000, 0.3), consistent=consistent)
+        problem.add_dirichlet(mf.boundary_facets(msh), exact.displacement)
+        sol = problem.solve()
+        x = rank_rng.uniform(0, 2, (200, 2))
+        err = np.abs(sol.displacement(x) - exact.displacement(x)).max(initial=0.0)
+        errors[consistent] = comm.allreduce(err, op=MPI.MAX)
+    assert errors[True] <= 1e-10
+    # Gauss quadrature alone leaves an integration error: the check above can fail
+    assert errors[False] > 1e-8
+
+
+def test_cantilever_rate_and_error_against_pure_fe():
+    hs = [3.0, 1.5, 1.0]
+    errs = [solve_beam(MPI.COMM_WORLD, h)[2]["l2"] for h in hs]
+    slope = np.polyfit(np.log(hs), np.log(errs), 1)[0]
+    assert slope >= 1.8
+    for h, e in zip(hs, errs, strict=True):
+        assert e <= 1.5 * fe_beam_error(h)
+
+
+def test_interface_continuity_in_the_multiplier_space():
+    """The constraint G_FE u_FE + G_P u_P = 0: int_Gamma N_k (u_FE - u_P) vanishes for every
+    interface node k (tested here node by node with the FE trace functions)."""
+    msh, sol, _ = solve_beam(MPI.COMM_WORLD, 1.5)
+    patch = sol.patch
+    V = sol.u.function_space
+    q = mf.facet_quadrature(msh, patch.interface_facets, 7, patch.interface_fe_cells)
+    tab = mf.tabulate_in_cells(V, q.points, q.cells, derivatives=0).values
+    jump = tab @ sol.u.x.array.reshape(-1, 2) - sol.mls.tabulate(q.points, 0).values @ (
+        sol.coefficients
+    )
+    local = tab.T @ (q.weights[:, None] * jump)  # (local nodes, 2)
+    f = dolfinx.fem.Function(V)
+    f.x.array[:] = local.ravel()
+    _compat.scatter_reverse_add(f)
+    n_owned = V.dofmap.index_map.size_local
+    residual = MPI.COMM_WORLD.allreduce(np.abs(f.x.array[: 2 * n_owned]).max(initial=0), MPI.MAX)
+    scale = MPI.COMM_WORLD.allreduce(np.abs(sol.u.x.array).max(), op=MPI.MAX)
+    assert residual <= 1e-10 * scale
+
+
+def test_parallel_equals_serial(rank_rng):
+    pts = rank_rng.uniform([0.5, -5.5], [47.5, 5.5], (20, 2))
+    _, world, _ = solve_beam(MPI.COMM_WORLD, 1.5, consistent=True)
+    _, alone, _ = solve_beam(MPI.COMM_SELF, 1.5, consistent=True)
+    a = world.displacement(pts)
+    b = alone.displacement(pts)
+    assert np.abs(a - b).max() <= 1e-10 * np.abs(b).max()
+
+
+def test_bad_input_on_every_rank():
+    comm = MPI.COMM_WORLD
+    msh = square(comm)
+    n = msh.topology.index_map(2).size_local
+    with pytest.raises(ValueError, match="not owned cells"):
+        mf.ParticlePatch(msh, np.array([n + 5]) if comm.rank == 0 else np.zeros(0, int), 0.3)
+    with pytest.raises(ValueError, match="patch is empty"):
+        mf.ParticlePatch(msh, np.zeros(0, dtype=np.int64), 0.3)
+    with pytest.raises(ValueError, match="spacing"):
+        mf.ParticlePatch(msh, cells_right_of(msh, 1.0), -1.0)
+    patch = mf.ParticlePatch(msh, cells_right_of(msh, 1.0), 1 / 3)
+    V = _compat.vector_function_space(msh)
+    with pytest.raises(ValueError, match="coupling='bridge' is not available"):
+        mf.CoupledElasticity(V, patch, mf.LinearElastic(1.0, 0.3), coupling="bridge")
+    # particles too sparse for the support: one particle per patch cell row is not enough
+    sparse = mf.ParticlePatch(msh, cells_right_of(msh, 1.0), 1.0)
+    problem = mf.CoupledElasticity(V, sparse, mf.LinearElastic(1.0, 0.3), dilation=1.05)
+    problem.add_dirichlet(mf.boundary_facets(msh), mf.LinearField().displacement)
+    with pytest.raises(ValueError, match="dilation"):
+        problem.solve()

@@ -20,6 +20,13 @@ patch's cell tags); FE dofs that no FE cell supports become identity rows. Essen
 FE facets are applied to ``K_FE`` by ``MatZeroRowsColumns`` (which lifts them into the
 right-hand side) and removed from the coupling columns; on patch facets they are multiplier
 constraints as in :mod:`~dolfinx_meshfree.efg`. ``s = E`` scales the constraint rows.
+
+Edge-to-edge variant (``coupling="edge-to-edge"``, Rabczuk et al. 2006, sec. 5.4): the multipliers
+are collocated at the particles ``x_I`` on the interface, one per particle and component, so that
+``G_FE[I, a] = N_a(x_I)`` and ``G_P[I, J] = -phi_J(x_I)``: continuity holds exactly at the
+interface particles. It does not integrate the interface traction consistently (the particle
+forces become the integral of the linear interpolant of ``phi_J``), so the linear patch test is
+passed only to first order in h, not exactly.
 """
 
 from __future__ import annotations
@@ -33,10 +40,11 @@ import numpy as np
 import scipy.sparse as sp
 import ufl
 from petsc4py import PETSc
+from scipy.spatial import cKDTree
 
 from . import _compat
 from .efg import _vector_values, facet_multipliers, particle_stiffness
-from .fe_points import _route, tabulate_in_cells
+from .fe_points import _route, tabulate_fe_basis, tabulate_in_cells
 from .materials import LinearElastic
 from .mls import MLS
 from .operators import load_vector
@@ -48,7 +56,7 @@ from .quadrature import QuadraturePoints, facet_quadrature
 __all__ = ["COUPLINGS", "CoupledElasticity", "CoupledSolution"]
 
 #: Couplings available in this release.
-COUPLINGS = ("lagrange",)
+COUPLINGS = ("lagrange", "edge-to-edge")
 
 VectorFunction = Callable[[np.ndarray], np.ndarray]
 
@@ -101,7 +109,9 @@ class CoupledElasticity:
         V: Vector P1/Q1 space on the whole mesh (the FE side lives on its non-patch cells).
         patch: :class:`~dolfinx_meshfree.ParticlePatch` on the same mesh.
         material: :class:`~dolfinx_meshfree.LinearElastic`, used on both sides.
-        coupling: ``"lagrange"`` (compatibility coupling, Rabczuk et al. 2006, sec. 5.4).
+        coupling: ``"lagrange"`` (compatibility coupling with FE trace multipliers, Rabczuk et
+            al. 2006, sec. 5.4) or ``"edge-to-edge"`` (multipliers collocated at the interface
+            particles, see :meth:`interface_particles`).
         weight, dilation, basis: MLS options of the particle side.
         quadrature_degree: Gauss degree on cells and facets.
         consistent: Variationally consistent integration on the patch (VCI over the patch
@@ -198,6 +208,61 @@ class CoupledElasticity:
         ids = np.rint(num.x.array[0::2]).astype(np.int64) - 1
         return ids, Layout(2 * layout.size_local, 2 * layout.size_global, 2 * layout.start)
 
+    def interface_particles(self) -> np.ndarray:
+        """Indices of the particles on the interface facets, the same on every rank (collective).
+
+        A particle is on the interface when its distance to one of the interface facets is below
+        ``1e-10`` times that facet's length. Each rank tests its owned interface facets; the flags
+        are combined by an MPI MAX reduction.
+        """
+        from mpi4py import MPI
+
+        patch = self.patch
+        msh, x = patch.mesh, patch.particles.positions
+        flags = np.zeros(len(x), dtype=np.int8)
+        facets = patch.interface_facets
+        if facets.size:
+            fdim = msh.topology.dim - 1
+            ends = msh.geometry.x[_compat.entities_to_geometry(msh, fdim, facets), :2]
+            a, t = ends[:, 0], ends[:, 1] - ends[:, 0]
+            length = np.linalg.norm(t, axis=1)
+            tol = 1e-10 * length
+            near = cKDTree(x).query_ball_point(a + 0.5 * t, 0.5 * length + 2.0 * tol)
+            for f, cand in enumerate(near):
+                cand = np.asarray(cand, dtype=np.int64)
+                # distance to the segment a + [0, 1] t
+                r = x[cand] - a[f]
+                xi = np.clip(r @ t[f] / length[f] ** 2, 0.0, 1.0)
+                d = np.linalg.norm(r - xi[:, None] * t[f], axis=1)
+                flags[cand[d <= tol[f]]] = 1
+        patch.comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.MAX)
+        return np.flatnonzero(flags)
+
+    def _collocation_rows(self) -> tuple[tuple, Layout]:
+        """Edge-to-edge coupling: one multiplier per interface particle and component, owned by
+        the particle's owner, rows ``u_FE(x_I) - u_P(x_I)`` (collective).
+
+        Returns:
+            ``((block rows, global FE nodes, N values, True), (block rows, particles, phi
+            values))`` of this rank's owned interface particles, and the multipliers' layout.
+        """
+        P, comm = self.patch.particles, self.patch.comm
+        iface = self.interface_particles()
+        # multiplier blocks in PETSc particle order, hence owner by owner and contiguous per rank
+        iface = iface[np.argsort(P.petsc_index[iface], kind="stable")]
+        layout = Layout.from_local(comm, int(np.sum(P.owner[iface] == comm.rank)))
+        mine = iface[P.owner[iface] == comm.rank]
+        block = layout.start + np.arange(mine.size, dtype=np.int64)
+        xs = P.positions[mine]
+        n_fe = tabulate_fe_basis(self.V, xs, derivatives=0).values.tocoo()
+        keep = np.abs(n_fe.data) > 1e-13  # nodes off the particle's facet: round-off
+        phi = raise_on_all_ranks(comm, lambda: self.mls.tabulate(xs, 0)).values.tocoo()
+        phi_keep = phi.data != 0.0
+        fe_rows = (block[n_fe.row[keep]], n_fe.col[keep], n_fe.data[keep], True)
+        p_rows = (block[phi.row[phi_keep]], phi.col[phi_keep], phi.data[phi_keep])
+        ml = Layout(2 * layout.size_local, 2 * layout.size_global, 2 * layout.start)
+        return (fe_rows, p_rows), ml
+
     # -- solve ----------------------------------------------------------------------------------
 
     def solve(self) -> CoupledSolution:
@@ -243,48 +308,32 @@ class CoupledElasticity:
         active = self._node_flags(fe_nodes)
 
         # interface multipliers
-        ids, ml = self._interface_numbering()
-        iq = facet_quadrature(msh, patch.interface_facets, deg, patch.interface_fe_cells)
-        t_fe = tabulate_in_cells(V, iq.points, iq.cells, derivatives=0).values
-        t_p = raise_on_all_ranks(comm, lambda: self.mls.tabulate(iq.points, 0)).values
-        W = sp.diags(iq.weights)
-        M_fe = (t_fe.T @ W @ t_fe).tocoo()  # (local nodes x local nodes)
-        M_p = (t_fe.T @ W @ t_p).tocoo()  # (local nodes x particles)
+        if self.coupling == "lagrange":
+            ids, ml = self._interface_numbering()
+            iq = facet_quadrature(msh, patch.interface_facets, deg, patch.interface_fe_cells)
+            t_fe = tabulate_in_cells(V, iq.points, iq.cells, derivatives=0).values
+            t_p = raise_on_all_ranks(comm, lambda: self.mls.tabulate(iq.points, 0)).values
+            W = sp.diags(iq.weights)
+            M_fe = (t_fe.T @ W @ t_fe).tocoo()  # (local nodes x local nodes)
+            M_p = (t_fe.T @ W @ t_p).tocoo()  # (local nodes x particles)
+        else:
+            e2e_rows, ml = self._collocation_rows()
         setup = self._setup + time.perf_counter() - t0 - kt["assemble"]
 
         t1 = time.perf_counter()
         K_fe = self._fe_stiffness()
-        tiny = 1e-14 * (np.abs(M_fe.data).max() if M_fe.nnz else 1.0)
-        keep = (ids[M_fe.row] >= 0) & (np.abs(M_fe.data) > tiny)
-        r, c, v = M_fe.row[keep], M_fe.col[keep], M_fe.data[keep]
-        bc_col = is_bc[c]
-        g_rows, g_vals = [], []
-        gfe = ([], [], [])
-        for comp in range(2):
-            rows = 2 * ids[r] + comp
-            cols = 2 * l2g[c] + comp
-            # known FE values on the interface move to the right-hand side
-            g_rows.append(rows[bc_col])
-            g_vals.append(-s * v[bc_col] * ubc.x.array[2 * c[bc_col] + comp])
-            gfe[0].append(rows[~bc_col])
-            gfe[1].append(cols[~bc_col])
-            gfe[2].append(s * v[~bc_col])
-        G_fe = sp.csr_matrix(
-            (np.concatenate(gfe[2]), (np.concatenate(gfe[0]), np.concatenate(gfe[1]))),
-            shape=(ml.size_global, fe_layout.size_global),
+        if self.coupling == "lagrange":
+            tiny = 1e-14 * (np.abs(M_fe.data).max() if M_fe.nnz else 1.0)
+            keep = (ids[M_fe.row] >= 0) & (np.abs(M_fe.data) > tiny)
+            fe_rows = (ids[M_fe.row[keep]], M_fe.col[keep], M_fe.data[keep], False)
+            keep = (ids[M_p.row] >= 0) & (np.abs(M_p.data) > tiny)
+            p_rows = (ids[M_p.row[keep]], M_p.col[keep], M_p.data[keep])
+        else:
+            fe_rows, p_rows = e2e_rows
+        G_fe, g_rows, g_vals = _fe_constraint_block(
+            *fe_rows[:3], fe_rows[3], s, is_bc, ubc, l2g, (ml.size_global, fe_layout.size_global)
         )
-        keep = (ids[M_p.row] >= 0) & (np.abs(M_p.data) > tiny)
-        r, c, v = M_p.row[keep], M_p.col[keep], M_p.data[keep]
-        G_p = sp.csr_matrix(
-            (
-                np.concatenate([-s * v, -s * v]),
-                (
-                    np.concatenate([2 * ids[r], 2 * ids[r] + 1]),
-                    np.concatenate([pdofs[c, 0], pdofs[c, 1]]),
-                ),
-            ),
-            shape=(ml.size_global, 2 * n),
-        )
+        G_p = _particle_constraint_block(*p_rows, s, pdofs, (ml.size_global, 2 * n))
 
         # loads
         f_fe_rows, f_fe_vals = [], []
@@ -373,3 +422,78 @@ class CoupledElasticity:
                 "multiplier_dofs": ml.size_global + dl.size_global,
             },
         )
+
+
+def _fe_constraint_block(
+    rows: np.ndarray,
+    nodes: np.ndarray,
+    values: np.ndarray,
+    global_nodes: bool,
+    s: float,
+    is_bc: np.ndarray,
+    ubc: dolfinx.fem.Function,
+    l2g: np.ndarray,
+    shape: tuple[int, int],
+) -> tuple[sp.csr_matrix, list, list]:
+    """FE columns ``s G_FE`` of multiplier rows, with strong Dirichlet dofs moved to the rhs.
+
+    Entry ``k`` contributes ``s values[k]`` at ``(2 rows[k] + i, 2 node + i)`` for each component
+    ``i``; a column that is a strong Dirichlet dof (``is_bc``, value in ``ubc``) is dropped and
+    ``-s values[k] ubc`` is added to the constraint's right-hand side instead.
+
+    Args:
+        rows: (k,) global multiplier block (node) numbers.
+        nodes: (k,) FE node columns: local nodes of ``V`` or, with ``global_nodes``, global nodes
+            (which must be local, owned or ghost, on this rank).
+        values: (k,) unscaled entries; ``s``: the scaling of the constraint rows.
+        is_bc, ubc: Strong-condition flags (per local node) and values; ``l2g``: local to global
+            node numbers.
+
+    Returns:
+        ``(G_FE, rhs rows, rhs values)``; the rhs as lists of arrays per component.
+    """
+    c = nodes
+    if global_nodes:
+        order = np.argsort(l2g, kind="stable")
+        pos = np.searchsorted(l2g[order], nodes)
+        c = order[np.minimum(pos, order.size - 1)] if order.size else pos
+        if c.size and not np.array_equal(l2g[c], nodes):
+            raise RuntimeError("FE constraint columns name nodes that are not local to this rank")
+    r, v = rows, values
+    bc_col = is_bc[c]
+    g_rows, g_vals = [], []
+    gfe: tuple[list, list, list] = ([], [], [])
+    for comp in range(2):
+        rr = 2 * r + comp
+        cols = 2 * l2g[c] + comp
+        # known FE values move to the right-hand side
+        g_rows.append(rr[bc_col])
+        g_vals.append(-s * v[bc_col] * ubc.x.array[2 * c[bc_col] + comp])
+        gfe[0].append(rr[~bc_col])
+        gfe[1].append(cols[~bc_col])
+        gfe[2].append(s * v[~bc_col])
+    G = sp.csr_matrix(
+        (np.concatenate(gfe[2]), (np.concatenate(gfe[0]), np.concatenate(gfe[1]))), shape=shape
+    )
+    return G, g_rows, g_vals
+
+
+def _particle_constraint_block(
+    rows: np.ndarray,
+    particles: np.ndarray,
+    values: np.ndarray,
+    s: float,
+    pdofs: np.ndarray,
+    shape: tuple[int, int],
+) -> sp.csr_matrix:
+    """Particle columns ``s G_P``: ``-s values[k]`` at ``(2 rows[k] + i, pdofs[particle, i])``."""
+    return sp.csr_matrix(
+        (
+            np.concatenate([-s * values, -s * values]),
+            (
+                np.concatenate([2 * rows, 2 * rows + 1]),
+                np.concatenate([pdofs[particles, 0], pdofs[particles, 1]]),
+            ),
+        ),
+        shape=shape,
+    )

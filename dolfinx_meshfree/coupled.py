@@ -236,7 +236,14 @@ class CoupledElasticity:
                 d = np.linalg.norm(r - xi[:, None] * t[f], axis=1)
                 flags[cand[d <= tol[f]]] = 1
         patch.comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.MAX)
-        return np.flatnonzero(flags)
+        found = np.flatnonzero(flags)
+        if found.size == 0 and patch.comm.allreduce(len(patch.interface_facets)) > 0:
+            raise ValueError(
+                "edge-to-edge coupling found no particle on the interface, so the FE and particle "
+                "sides would not be coupled; use a particle spacing that puts particles on the "
+                "interface (e.g. spacing = h) or coupling='lagrange'"
+            )
+        return found
 
     def _collocation_rows(self) -> tuple[tuple, Layout]:
         """Edge-to-edge coupling: one multiplier per interface particle and component, owned by
@@ -417,7 +424,7 @@ class CoupledElasticity:
             patch=patch,
             timings={"setup": setup, "assemble": assemble, "solve": solve},
             sizes={
-                "fe_dofs": fe_layout.size_global,
+                "fe_dofs": 2 * comm.allreduce(int(np.sum(active[:n_owned]))),
                 "particle_dofs": 2 * n,
                 "multiplier_dofs": ml.size_global + dl.size_global,
             },

@@ -170,3 +170,21 @@ def test_bad_input_on_every_rank():
     problem.add_dirichlet(mf.boundary_facets(msh), mf.LinearField().displacement)
     with pytest.raises(ValueError, match="dilation"):
         problem.solve()
+
+
+def test_edge_to_edge_without_interface_particles_is_refused():
+    """An FE hole inside a jittered patch: no particle lies on the interface, so edge-to-edge
+    would leave the two sides uncoupled; it must say so on every rank."""
+    comm = MPI.COMM_WORLD
+    msh = square(comm)
+    n = msh.topology.index_map(2).size_local
+    nodes = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], :2]
+    centre = nodes.mean(axis=1)
+    hole = np.all(np.abs(centre - 1.0) < 1 / 3, axis=1)  # the 2 x 2 cells around (1, 1)
+    patch = mf.ParticlePatch(msh, np.flatnonzero(~hole), 1 / 3, jitter=0.3)
+    assert comm.allreduce(len(patch.interface_facets)) == 8
+    V = _compat.vector_function_space(msh)
+    problem = mf.CoupledElasticity(V, patch, mf.LinearElastic(1.0, 0.3), coupling="edge-to-edge")
+    problem.add_dirichlet(mf.boundary_facets(msh), mf.LinearField().displacement)
+    with pytest.raises(ValueError, match="no particle on the interface"):
+        problem.solve()

@@ -153,18 +153,21 @@ def run_fe(msh, args, beam, material):
     return errors, sizes, sol.timings, lambda pts: mf.evaluate_fe_function(sol.u, pts)
 
 
+def particle_options(args) -> dict:
+    """The particle-side options shared by every meshfree method."""
+    return {
+        "weight": args.weight,
+        "dilation": args.dilation,
+        "quadrature_degree": args.quadrature_degree,
+        "consistent": args.consistent,
+    }
+
+
 def run_efg(msh, args, beam, material, h):
     t0 = time.perf_counter()
     left, right = boundaries(msh, args)
     particles = mf.ParticleSet.from_cells(msh, args.particle_spacing or h)
-    problem = mf.EFGElasticity(
-        particles,
-        material,
-        weight=args.weight,
-        dilation=args.dilation,
-        quadrature_degree=args.quadrature_degree,
-        consistent=args.consistent,
-    )
+    problem = mf.EFGElasticity(particles, material, **particle_options(args))
     problem.add_dirichlet(left, beam.displacement)
     problem.add_traction(right, beam.traction)
     particle_time = time.perf_counter() - t0
@@ -197,10 +200,7 @@ def run_coupled(msh, args, beam, material, h, coupling):
         patch,
         material,
         coupling=coupling,
-        weight=args.weight,
-        dilation=args.dilation,
-        quadrature_degree=args.quadrature_degree,
-        consistent=args.consistent,
+        **particle_options(args),
     )
     problem.add_dirichlet(left, beam.displacement)
     problem.add_traction(right, beam.traction)

@@ -232,8 +232,15 @@ class EFGElasticity:
         """Body force per unit volume ``b(x)`` (m, 2)."""
         self._body = force
 
-    def solve(self) -> EFGSolution:
-        """Assemble the block system and solve it with MUMPS (collective)."""
+    def solve(self, solver: str = "mumps") -> EFGSolution:
+        """Assemble the block system and solve it (collective).
+
+        Args:
+            solver: ``"mumps"`` (direct) or ``"fieldsplit"`` (Schur complement on the augmented
+                saddle point, see :class:`~dolfinx_meshfree.petsc.BlockSystem`).
+        """
+        if solver not in ("mumps", "fieldsplit"):
+            raise ValueError(f"solver={solver!r} is not known; use 'mumps' or 'fieldsplit'")
         comm = self.comm
         P = self.particles
         n = P.num_particles
@@ -285,7 +292,7 @@ class EFGElasticity:
         assemble = time.perf_counter() - t1 + kt["assemble"]
 
         t2 = time.perf_counter()
-        parts = system.solve()
+        parts = system.solve(solver)
         solve = time.perf_counter() - t2
         for obj in (system, K, G, GT, f, g):
             obj.destroy()

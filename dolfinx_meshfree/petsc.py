@@ -123,35 +123,178 @@ def solve_lu(A: PETSc.Mat, b: PETSc.Vec, solver: str = "mumps") -> PETSc.Vec:
 
 
 class BlockSystem:
-    """A square block system as a PETSc MatNest, solved by MUMPS on its AIJ conversion.
+    """A square block system as a PETSc MatNest.
 
     Args:
         blocks: 2D list of PETSc matrices or ``None`` (a zero block), e.g. the Lagrange-multiplier
             saddle point ``[[K, G^T], [G, None]]``.
         rhs: One PETSc vector per block row.
+        num_primal: How many leading fields are primal (displacements); the rest are Lagrange
+            multipliers with zero diagonal blocks. Default: every field but the last when the
+            last diagonal block is ``None``, else all.
+
+    Two solvers (:meth:`solve`):
+
+    * ``"mumps"``: the nest converted to AIJ and factorised by MUMPS (:func:`solve_lu`);
+    * ``"fieldsplit"``: a Schur-complement fieldsplit on the same AIJ, primal fields against
+      multipliers (FGMRES outside; primal block by MUMPS LU or, with ``inner="gamg"``, CG +
+      GAMG; Schur complement by GMRES preconditioned with Jacobi on ``A11 - A10 diag(A00)^-1
+      A01``). The primal block alone is singular when the multipliers hold the rigid modes (a
+      floating particle patch, pure EFG), so the system is first augmented (augmented
+      Lagrangian): ``A_ij += gamma G_ki^T G_kj`` and ``f_i += gamma G_ki^T g_k``, which leaves
+      the solution unchanged because ``G u = g`` holds at it. ``gamma`` balances the norms of
+      the primal blocks and of ``G^T G``.
     """
 
-    def __init__(self, blocks: Sequence[Sequence[PETSc.Mat | None]], rhs: Sequence[PETSc.Vec]):
+    def __init__(
+        self,
+        blocks: Sequence[Sequence[PETSc.Mat | None]],
+        rhs: Sequence[PETSc.Vec],
+        num_primal: int | None = None,
+    ):
         self.blocks = [list(r) for r in blocks]
         self.rhs = list(rhs)
         n = len(self.blocks)
         if any(len(r) != n for r in self.blocks) or len(self.rhs) != n:
             raise ValueError(f"blocks must be square with one rhs per row; got {n} rows")
-        self.nest = PETSc.Mat().createNest(self.blocks, comm=self.rhs[0].getComm())
+        if num_primal is None:
+            num_primal = n - 1 if n > 1 and self.blocks[-1][-1] is None else n
+        if not 1 <= num_primal <= n:
+            raise ValueError(f"num_primal={num_primal} must lie in [1, {n}]")
+        self.num_primal = num_primal
+        self.comm = self.rhs[0].getComm()
+        self.nest = PETSc.Mat().createNest(self.blocks, comm=self.comm)
+        self.iterations: dict[str, int] = {}
 
-    def solve(self, solver: str = "mumps") -> list[np.ndarray]:
-        """Solve and return the owned part of each block of the solution (collective)."""
+    def solve(
+        self, solver: str = "mumps", inner: str = "lu", rtol: float = 1e-12
+    ) -> list[np.ndarray]:
+        """Solve and return the owned part of each block of the solution (collective).
+
+        Args:
+            solver: ``"mumps"`` or ``"fieldsplit"``.
+            inner: Primal-block solver of the fieldsplit: ``"lu"`` (MUMPS) or ``"gamg"``.
+            rtol: Relative tolerance of the fieldsplit's outer FGMRES.
+        """
+        if solver not in ("mumps", "fieldsplit"):
+            raise ValueError(f"solver={solver!r} is not known; use 'mumps' or 'fieldsplit'")
+        if inner not in ("lu", "gamg"):
+            raise ValueError(f"inner={inner!r} is not known; use 'lu' or 'gamg'")
+        if solver == "fieldsplit" and self.num_primal < len(self.blocks):
+            nest, rhs, owned = self._augmented()
+        else:
+            nest, rhs, owned = self.nest, self.rhs, []
         aij = PETSc.Mat()
-        self.nest.convert("aij", aij)
+        nest.convert("aij", aij)
         b = aij.createVecLeft()
-        b.setArray(np.concatenate([v.getArray(readonly=True) for v in self.rhs]))
-        x = solve_lu(aij, b, solver)
+        b.setArray(np.concatenate([v.getArray(readonly=True) for v in rhs]))
+        if solver == "mumps" or self.num_primal == len(self.blocks):
+            x = solve_lu(aij, b)
+        else:
+            x = self._fieldsplit(aij, b, rhs, inner, rtol)
         arr = x.getArray(readonly=True).copy()
         sizes = np.cumsum([v.getLocalSize() for v in self.rhs])[:-1]
-        aij.destroy()
-        b.destroy()
-        x.destroy()
+        for obj in [aij, b, x, *owned]:
+            obj.destroy()
         return np.split(arr, sizes)
+
+    def _augmented(self) -> tuple[PETSc.Mat, list[PETSc.Vec], list]:
+        """The augmented-Lagrangian nest and right-hand side (new objects, listed for cleanup)."""
+        p, n = self.num_primal, len(self.blocks)
+        blocks = [list(r) for r in self.blocks]
+        rhs = list(self.rhs)
+        owned: list = []
+        products = {}
+        for k in range(p, n):
+            for i in range(p):
+                for j in range(p):
+                    Gki, Gkj = self.blocks[k][i], self.blocks[k][j]
+                    if Gki is not None and Gkj is not None:
+                        products.setdefault((i, j), []).append(Gki.transposeMatMult(Gkj))
+        scale_a = max(
+            (
+                self.blocks[i][i].norm(PETSc.NormType.INFINITY)
+                for i in range(p)
+                if self.blocks[i][i] is not None
+            ),
+            default=1.0,
+        )
+        scale_g = max(
+            (M.norm(PETSc.NormType.INFINITY) for ms in products.values() for M in ms), default=1.0
+        )
+        gamma = scale_a / scale_g if scale_g > 0 else 1.0
+        for (i, j), ms in products.items():
+            if blocks[i][j] is None:
+                A = ms[0].duplicate(copy=True)
+                A.zeroEntries()
+            else:
+                A = blocks[i][j].copy()
+            for M in ms:
+                A.axpy(gamma, M, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+                M.destroy()
+            blocks[i][j] = A
+            owned.append(A)
+        for i in range(p):
+            f = self.rhs[i].copy()
+            owned.append(f)
+            for k in range(p, n):
+                if self.blocks[k][i] is not None:
+                    g = self.rhs[k].copy()
+                    g.scale(gamma)
+                    self.blocks[k][i].multTransposeAdd(g, f, f)
+                    g.destroy()
+            rhs[i] = f
+        nest = PETSc.Mat().createNest(blocks, comm=self.comm)
+        owned.append(nest)
+        return nest, rhs, owned
+
+    def _fieldsplit(self, aij, b, rhs, inner: str, rtol: float) -> PETSc.Vec:
+        p = self.num_primal
+        sizes = [v.getLocalSize() for v in rhs]
+        start = aij.getOwnershipRange()[0]
+        n_primal = int(sum(sizes[:p]))
+        n_all = int(sum(sizes))
+        idx = np.arange(start, start + n_all, dtype=PETSc.IntType)
+        is_u = PETSc.IS().createGeneral(idx[:n_primal], comm=self.comm)
+        is_l = PETSc.IS().createGeneral(idx[n_primal:], comm=self.comm)
+        ksp = PETSc.KSP().create(self.comm)
+        ksp.setOptionsPrefix(f"dolfinx_meshfree_fs_{next(_prefix_counter)}_")
+        ksp.setOperators(aij)
+        ksp.setType(PETSc.KSP.Type.FGMRES)
+        ksp.setTolerances(rtol=rtol, atol=0.0, max_it=200)
+        pc = ksp.getPC()
+        pc.setType(PETSc.PC.Type.FIELDSPLIT)
+        pc.setFieldSplitIS(("u", is_u), ("lambda", is_l))
+        pc.setFieldSplitType(PETSc.PC.CompositeType.SCHUR)
+        pc.setFieldSplitSchurFactType(PETSc.PC.SchurFactType.FULL)
+        pc.setFieldSplitSchurPreType(PETSc.PC.SchurPreType.SELFP)
+        ksp.setUp()
+        k_u, k_s = pc.getFieldSplitSubKSP()
+        if inner == "lu":
+            k_u.setType(PETSc.KSP.Type.PREONLY)
+            k_u.getPC().setType(PETSc.PC.Type.LU)
+            k_u.getPC().setFactorSolverType("mumps")
+        else:
+            k_u.setType(PETSc.KSP.Type.CG)
+            k_u.setTolerances(rtol=1e-12)
+            k_u.getPC().setType(PETSc.PC.Type.GAMG)
+        k_u.getPC().setUp()
+        k_s.setType(PETSc.KSP.Type.GMRES)
+        k_s.setTolerances(rtol=1e-12)
+        k_s.getPC().setType(PETSc.PC.Type.JACOBI)
+        x = aij.createVecRight()
+        ksp.solve(b, x)
+        reason = ksp.getConvergedReason()
+        self.iterations = {"outer": ksp.getIterationNumber(), "schur": k_s.getIterationNumber()}
+        ksp.destroy()
+        is_u.destroy()
+        is_l.destroy()
+        if reason < 0:
+            raise RuntimeError(
+                f"the fieldsplit solve did not converge (KSP reason {reason}, "
+                f"{self.iterations['outer']} iterations); use solver='mumps'"
+            )
+        return x
 
     def destroy(self) -> None:
         self.nest.destroy()

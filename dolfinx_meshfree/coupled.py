@@ -56,7 +56,7 @@ from .quadrature import QuadraturePoints, facet_quadrature
 __all__ = ["COUPLINGS", "CoupledElasticity", "CoupledSolution"]
 
 #: Couplings available in this release.
-COUPLINGS = ("lagrange", "edge-to-edge")
+COUPLINGS = ("lagrange", "edge-to-edge", "ramp", "ramp-cubic")
 
 VectorFunction = Callable[[np.ndarray], np.ndarray]
 
@@ -71,18 +71,28 @@ class CoupledSolution:
     patch: ParticlePatch
     timings: dict = field(default_factory=dict)
     sizes: dict = field(default_factory=dict)
+    #: Ramp couplings: the :class:`~dolfinx_meshfree.ramp.RampInterface` (blended interface cells).
+    interface: object | None = None
 
     def evaluate_at_quadrature(self, q: QuadraturePoints) -> tuple[np.ndarray, np.ndarray]:
         """Displacement (m, 2) and gradient (m, 2, 2) at quadrature points of local cells: FE in
-        FE cells, particles in patch cells (local)."""
+        FE cells, particles in patch cells, blended in a ramp coupling's interface cells (local)."""
         V = self.u.function_space
         local = self.u.x.array.reshape(-1, 2)
         inside = self.patch.in_patch[q.cells]
         u = np.empty((len(q), 2))
         g = np.empty((len(q), 2, 2))
-        if np.any(~inside):
-            t = tabulate_in_cells(V, q.points[~inside], q.cells[~inside])
-            u[~inside], g[~inside] = t.values @ local, t.gradient(local)
+        fe = ~inside
+        if self.interface is not None:
+            blended = self.interface.in_interface[q.cells]
+            fe &= ~blended
+            if np.any(blended):
+                u[blended], g[blended] = self.interface.evaluate(
+                    q.points[blended], q.cells[blended], local, self.coefficients
+                )
+        if np.any(fe):
+            t = tabulate_in_cells(V, q.points[fe], q.cells[fe])
+            u[fe], g[fe] = t.values @ local, t.gradient(local)
         if np.any(inside):
             t = self.mls.tabulate(q.points[inside])
             u[inside], g[inside] = t.values @ self.coefficients, t.gradient(self.coefficients)
@@ -111,7 +121,9 @@ class CoupledElasticity:
         material: :class:`~dolfinx_meshfree.LinearElastic`, used on both sides.
         coupling: ``"lagrange"`` (compatibility coupling with FE trace multipliers, Rabczuk et
             al. 2006, sec. 5.4) or ``"edge-to-edge"`` (multipliers collocated at the interface
-            particles, see :meth:`interface_particles`).
+            particles, see :meth:`interface_particles`), ``"ramp"`` or ``"ramp-cubic"``
+            (interface elements blending FE and particles with a ramp function, Belytschko et al.
+            1995, sec. 3.2; see :mod:`~dolfinx_meshfree.ramp`).
         weight, dilation, basis: MLS options of the particle side.
         quadrature_degree: Gauss degree on cells and facets.
         consistent: Variationally consistent integration on the patch (VCI over the patch
@@ -274,6 +286,10 @@ class CoupledElasticity:
 
     def solve(self) -> CoupledSolution:
         """Assemble the nest block system and solve it with MUMPS (collective)."""
+        if self.coupling in ("ramp", "ramp-cubic"):
+            from .ramp import solve_ramp
+
+            return solve_ramp(self)
         V, patch, P = self.V, self.patch, self.patch.particles
         comm = patch.comm
         msh = V.mesh

@@ -1,0 +1,450 @@
+"""FE–EFG coupling by interface elements with a ramp function (Belytschko et al. 1995, sec. 3.2).
+
+The patch cells are the EFG domain Omega_E. Gamma_E is the set of FE nodes on the patch
+interface; the interface elements Omega_I are the FE cells (outside the patch) with at least one
+node on Gamma_E. In an interface cell the displacement blends the two approximations (eq. 3.12)
+
+.. math::
+    u^h = (1 - R) \\sum_a N_a u_a + R \\sum_J \\phi_J u_J, \\qquad
+    R = \\sum_{a \\in \\Gamma_E} N_a \\quad (3.13),
+
+with gradients by the product rule (eq. 3.16). ``coupling="ramp-cubic"`` replaces ``R`` by the
+smoothed ramp ``3R^2 - 2R^3`` (Rabczuk, Xiao & Sauer 2006, eq. 38–42). The nodes on Gamma_E are
+particles: the shape function ``(1 - R) N_a`` of a Gamma_E node belongs to the dof of the
+particle at the node's position (a :class:`~dolfinx_meshfree.ParticlePatch` whose spacing divides
+the element size puts particles there), so the FE dofs of Gamma_E are inactive like those inside
+the patch. The blended shape functions are a partition of unity and reproduce linear fields
+(eq. 3.17), so the coupling needs no interface multipliers.
+
+Assembly, in a PETSc nest ``[[K_FE, K_FP], [K_PF, K_P]]`` (plus patch-side Dirichlet
+multipliers):
+
+* pure FE cells: DOLFINx's assembly of the elasticity form restricted to them (a cell tag
+  :data:`INTERFACE_TAG` marks the interface cells);
+* interface cells: Gauss points, the blended table with columns ``[local FE nodes | particles]``
+  and ``K = B^T D B``; its FE–FE part is a PETSc AIJ matrix added to DOLFINx's matrix with
+  ``MatAXPY`` (``DIFFERENT_NONZERO_PATTERN``: DOLFINx's sparsity has no room for interface
+  cells), the particle–particle part joins the EFG stiffness, the FE–particle parts are the
+  off-diagonal blocks;
+* patch cells: EFG as in :func:`~dolfinx_meshfree.efg.particle_stiffness`.
+
+Essential conditions act strongly on FE nodes. Where the particle part of an interface cell
+reaches a Dirichlet facet (an exterior facet of an interface cell), it is constrained like the
+patch facets, by piecewise-constant multipliers on ``u^h - ubar`` with the known FE part moved
+to the right-hand side.
+"""
+
+from __future__ import annotations
+
+import time
+
+import dolfinx
+import numpy as np
+import scipy.sparse as sp
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+from scipy.spatial import cKDTree
+
+from . import _compat
+from .efg import _vector_values, facet_multipliers, particle_stiffness
+from .fe_points import tabulate_in_cells
+from .mls import MLS
+from .operators import load_vector, stiffness_matrix
+from .parallel import Layout, raise_on_all_ranks
+from .patch import FE_TAG, PATCH_TAG
+from .petsc import BlockSystem, create_aij, create_vector
+from .quadrature import cell_quadrature, facet_quadrature
+from .tables import ShapeTable
+
+__all__ = ["INTERFACE_TAG", "RAMPS", "RampInterface"]
+
+#: Cell tag of the interface elements (FE cells with a node on the patch interface).
+INTERFACE_TAG = 3
+
+#: The ramp couplings and whether each smooths the ramp (3R^2 - 2R^3).
+RAMPS = {"ramp": False, "ramp-cubic": True}
+
+
+class RampInterface:
+    """Interface elements of a :class:`~dolfinx_meshfree.CoupledElasticity` with a ramp coupling.
+
+    Collective to construct. Raises ``ValueError`` (on every rank) when an FE node on the patch
+    interface has no particle at its position.
+
+    Attributes:
+        on_gamma: bool per local node of ``V``: the node lies on Gamma_E (the patch interface).
+        particle_of_node: per local node, the particle at its position (-1 off Gamma_E).
+        in_interface: bool per local cell (owned and ghost): an interface element.
+        cells: Owned interface cells (local indices).
+        cubic: Whether the smoothed ramp ``3R^2 - 2R^3`` is used.
+    """
+
+    def __init__(self, problem, cubic: bool = False):
+        V, patch = problem.V, problem.patch
+        msh = V.mesh
+        comm = patch.comm
+        self.V, self.mls, self.cubic = V, problem.mls, bool(cubic)
+        # The same MLS functions, accepting ill-conditioned moment matrices: towards the FE side
+        # of an interface cell the particles in support approach a line (with the default
+        # dilation 2 they are the interface particles alone on the far edge, where R = 0 and the
+        # particle part vanishes); there phi is multiplied by a vanishing ramp.
+        m = problem.mls
+        self._mls = MLS(m.points, m.weight_name, m.dilation, m.basis, rcond=0.0)
+        self.num_particles = patch.particles.num_particles
+        fdim = msh.topology.dim - 1
+        nodes = dolfinx.fem.locate_dofs_topological(V, fdim, patch.interface_facets)
+        self.on_gamma = problem._node_flags(nodes)
+        self.coordinates = V.tabulate_dof_coordinates()[:, :2]
+        dofs = _compat.dofmap_array(V)
+        self.in_interface = ~patch.in_patch & self.on_gamma[dofs[: patch.in_patch.size]].any(axis=1)
+        n_owned = msh.topology.index_map(msh.topology.dim).size_local
+        self.cells = np.flatnonzero(self.in_interface[:n_owned]).astype(np.int32)
+
+        # the element size: the longest interface facet (on any rank)
+        h = 0.0
+        if patch.interface_facets.size:
+            ends = msh.geometry.x[
+                _compat.entities_to_geometry(msh, fdim, patch.interface_facets), :2
+            ]
+            h = float(np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1).max())
+        h = comm.allreduce(h, op=MPI.MAX)
+        self.tolerance = 1e-10 * h
+        positions = patch.particles.positions
+
+        def match() -> np.ndarray:
+            g = np.flatnonzero(self.on_gamma)
+            owner = np.full(self.on_gamma.size, -1, dtype=np.int64)
+            if g.size == 0:
+                return owner
+            dist, idx = cKDTree(positions).query(self.coordinates[g])
+            bad = np.flatnonzero(dist > self.tolerance)
+            if bad.size:
+                k = g[bad[0]]
+                raise ValueError(
+                    f"{bad.size} FE node(s) on the patch interface have no particle at their "
+                    f"position (within {self.tolerance:.1e}); first: local node {int(k)} at "
+                    f"{np.array2string(self.coordinates[k], precision=6)}, nearest particle "
+                    f"{dist[bad[0]]:.3e} away. The ramp couplings need particles on the "
+                    "interface nodes: choose a patch spacing that divides the element size"
+                )
+            owner[g] = idx
+            return owner
+
+        self.particle_of_node = raise_on_all_ranks(comm, match)
+
+        # the particle supports must cover the interface cells up to their FE side: check the
+        # MLS (strictly conditioned) near every vertex of every interface cell
+        nodes = msh.geometry.x[_compat.geometry_dofmap(msh)[self.cells], :2]
+        near = nodes + 1e-3 * (nodes.mean(axis=1, keepdims=True) - nodes)
+        raise_on_all_ranks(comm, lambda: self._check_supports(near.reshape(-1, 2)))
+        n_loc = self.on_gamma.size
+        # columns of the FE part: a node off Gamma_E keeps its own column, a node on Gamma_E goes
+        # to its particle's column (after the n_loc FE columns)
+        col = np.where(self.on_gamma, n_loc + self.particle_of_node, np.arange(n_loc))
+        self._route = sp.csr_matrix(
+            (np.ones(n_loc), (np.arange(n_loc), col)), shape=(n_loc, n_loc + self.num_particles)
+        )
+
+    def _check_supports(self, points: np.ndarray) -> None:
+        try:
+            self.mls.tabulate(points, 0)
+        except ValueError as e:
+            raise type(e)(
+                "the particle supports do not cover the ramp's interface cells (the FE cells "
+                f"beside the patch): {e}"
+            ) from e
+
+    @property
+    def num_fe_columns(self) -> int:
+        """Number of FE columns of :meth:`table` (local nodes of ``V``); particles follow."""
+        return self.on_gamma.size
+
+    def column_positions(self) -> np.ndarray:
+        """Positions (n_loc + n, 2) of the columns of :meth:`table`: FE nodes, then particles."""
+        return np.vstack([self.coordinates, self.mls.points])
+
+    def ramp(self, points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The ramp ``R`` (m,) and its gradient (m, 2) at points of the given local cells (the
+        smoothed ramp with ``cubic``)."""
+        t = tabulate_in_cells(self.V, points, cells)
+        return self._ramp(t)
+
+    def _ramp(self, t: ShapeTable) -> tuple[np.ndarray, np.ndarray]:
+        return self._ramps(t)[:2]
+
+    def _ramps(self, t: ShapeTable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(R, dR, linear ramp): the (smoothed) ramp, its gradient and eq. 3.13's ramp."""
+        g = self.on_gamma.astype(float)
+        r = t.values @ g
+        dr = np.stack([d @ g for d in t.gradients], axis=1) if t.gradients else None
+        if not self.cubic:
+            return r, dr, r
+        if dr is not None:
+            dr = (6.0 * r - 6.0 * r**2)[:, None] * dr
+        return 3.0 * r**2 - 2.0 * r**3, dr, r
+
+    def table(self, points: np.ndarray, cells: np.ndarray, derivatives: int = 1) -> ShapeTable:
+        """Blended shape functions (eq. 3.15–3.16) at points of local interface cells.
+
+        Columns: the ``n_loc`` local FE nodes of ``V`` (nodes on Gamma_E have empty columns),
+        then the particles. Local (MLS is evaluated on this rank).
+        """
+        points = np.asarray(points, dtype=float).reshape(-1, 2)
+        n_loc = self.num_fe_columns
+        if points.shape[0] == 0:
+            empty = sp.csr_matrix((0, n_loc + self.num_particles))
+            return ShapeTable(points, empty, [empty.copy() for _ in range(2 * derivatives)])
+        t_fe = tabulate_in_cells(self.V, points, cells, derivatives=1)
+        r, dr, linear = self._ramps(t_fe)
+        # particles only where the ramp is positive: on the FE side (R = 0) the particles in
+        # support may be collinear, and the particle part vanishes (its gradient dR phi is
+        # dropped on that edge only, a set of measure zero)
+        where = np.flatnonzero(linear > 1e-12)
+        pick = sp.csr_matrix(
+            (np.ones(where.size), (where, np.arange(where.size))), shape=(len(points), where.size)
+        )
+        t_p = self._mls.tabulate(points[where], derivatives)
+        t_p = ShapeTable(points, pick @ t_p.values, [pick @ d for d in t_p.gradients])
+        pad = sp.csr_matrix((len(points), n_loc))
+
+        def blend(fe: sp.csr_matrix, p: sp.csr_matrix) -> sp.csr_matrix:
+            return (fe @ self._route + sp.hstack([pad, p])).tocsr()
+
+        values = blend(sp.diags(1.0 - r) @ t_fe.values, sp.diags(r) @ t_p.values)
+        grads = []
+        if derivatives:
+            for k in range(2):
+                d = sp.diags(dr[:, k])
+                fe = sp.diags(1.0 - r) @ t_fe.gradients[k] - d @ t_fe.values
+                grads.append(blend(fe, d @ t_p.values + sp.diags(r) @ t_p.gradients[k]))
+        return ShapeTable(points=points, values=values, gradients=grads)
+
+    def evaluate(
+        self, points: np.ndarray, cells: np.ndarray, fe_values: np.ndarray, coefficients
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Displacement (m, 2) and gradient (m, 2, 2) of the blended field in interface cells."""
+        c = np.vstack([fe_values, coefficients])
+        t = self.table(points, cells)
+        return t.values @ c, t.gradient(c)
+
+
+def _fe_stiffness(problem, interface: RampInterface) -> PETSc.Mat:
+    """DOLFINx assembly of the elasticity form on the pure FE cells (not interface, not patch)."""
+    V, patch = problem.V, problem.patch
+    msh = V.mesh
+    tdim = msh.topology.dim
+    n_owned = msh.topology.index_map(tdim).size_local
+    values = np.where(
+        patch.in_patch[:n_owned],
+        PATCH_TAG,
+        np.where(interface.in_interface[:n_owned], INTERFACE_TAG, FE_TAG),
+    ).astype(np.int32)
+    tags = dolfinx.mesh.meshtags(msh, tdim, np.arange(n_owned, dtype=np.int32), values)
+    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+    dx = ufl.Measure("dx", domain=msh, subdomain_data=tags)
+    a = ufl.inner(problem.material.ufl_stress(u), ufl.sym(ufl.grad(v))) * dx(FE_TAG)
+    return _compat.assemble_matrix(_compat.create_form(a))
+
+
+def solve_ramp(problem):
+    """Assemble and solve the ramp-coupled system of ``problem`` (collective)."""
+    from .coupled import CoupledSolution
+
+    if problem.consistent:
+        raise ValueError(
+            "consistent=True is not available with the ramp couplings: the particle shape "
+            "functions extend into the interface cells, which the patch's VCI does not see"
+        )
+    V, patch, P = problem.V, problem.patch, problem.patch.particles
+    comm = patch.comm
+    msh = V.mesh
+    deg = problem.quadrature_degree
+    n = P.num_particles
+    s = problem.material.E
+    pdofs = P.petsc_dofs(2)
+    fe_layout, l2g = problem._fe_layout()
+    pl = Layout(2 * P.layout.size_local, 2 * n, 2 * P.layout.start)
+    t0 = time.perf_counter()
+
+    blend = RampInterface(problem, cubic=RAMPS[problem.coupling])
+    n_loc = blend.num_fe_columns
+    boundary = patch.boundary() if problem.consistent else None
+    Kp_loc, _, _, kt = particle_stiffness(P, problem.mls, problem.material, deg, boundary)
+
+    # essential conditions: FE nodes strongly; patch facets and the particle part of interface
+    # cells' facets by multipliers
+    fe_bc, patch_bc = [], []
+    for facets, fn in problem._dirichlet:
+        f_fe, f_p = problem._split(facets)
+        fe_bc.append((f_fe, fn))
+        patch_bc.append((f_p, fn))
+    dq = [facet_quadrature(msh, f, deg) for f, _ in patch_bc]
+    dtabs = [raise_on_all_ranks(comm, lambda d=d: problem.mls.tabulate(d.points, 0)) for d in dq]
+    ubc = dolfinx.fem.Function(V)
+    is_bc = np.zeros(ubc.x.array.size // 2, dtype=bool)
+    coords = V.tabulate_dof_coordinates()[:, :2]
+    for f, fn in fe_bc:
+        flags = problem._node_flags(dolfinx.fem.locate_dofs_topological(V, msh.topology.dim - 1, f))
+        xn = coords[flags]
+        vals = raise_on_all_ranks(
+            comm, lambda fn=fn, xn=xn: _vector_values(fn, (xn,), len(xn), "dirichlet")
+        )
+        ubc.x.array.reshape(-1, 2)[flags] = vals
+        is_bc |= flags
+    u_bc = ubc.x.array.reshape(-1, 2)
+    for f, fn in fe_bc:
+        f_i = f[blend.in_interface[_first_cells(msh, f)]]
+        iq = facet_quadrature(msh, f_i, deg)
+        tab = raise_on_all_ranks(comm, lambda iq=iq: blend.table(iq.points, iq.cells, 0))
+        ubar = raise_on_all_ranks(
+            comm, lambda fn=fn, iq=iq: _vector_values(fn, (iq.points,), len(iq), "dirichlet")
+        )
+        # the FE part is known (strong values): constrain the particle part to the rest
+        rest = ubar - tab.values[:, :n_loc] @ np.where(is_bc[:, None], u_bc, 0.0)
+        patch_bc.append((f_i, lambda x, rest=rest: rest))
+        dq.append(iq)
+        dtabs.append(ShapeTable(iq.points, tab.values[:, n_loc:].tocsr(), []))
+    # active FE nodes: nodes of FE cells (interface cells included) that are not on Gamma_E
+    fe_nodes = _compat.dofmap_array(V)[patch.fe_cells].ravel()
+    active = problem._node_flags(fe_nodes) & ~blend.on_gamma
+    fixed_local = is_bc | ~active
+
+    # interface cells: blended stiffness split into FE/particle blocks
+    q = cell_quadrature(msh, deg, blend.cells)
+    tab = raise_on_all_ranks(comm, lambda: blend.table(q.points, q.cells))
+    setup = problem._setup + time.perf_counter() - t0 - kt["assemble"]
+
+    t1 = time.perf_counter()
+    Ki = stiffness_matrix(tab.gradients, q.weights, problem.material).tocoo()
+    # dof map of the blended columns: FE (2 a + i) -> 2 l2g[a] + i; particles -> PETSc dofs
+    nf = 2 * n_loc
+    fe_dof = (2 * l2g[:, None] + np.arange(2)).ravel()
+    is_fe_r, is_fe_c = Ki.row < nf, Ki.col < nf
+    pr = Ki.row[~is_fe_r] - nf
+    pc = Ki.col[~is_fe_c] - nf
+    prow = np.zeros(Ki.row.size, dtype=np.int64)
+    pcol = np.zeros(Ki.col.size, dtype=np.int64)
+    prow[~is_fe_r] = pdofs[pr // 2, pr % 2]
+    pcol[~is_fe_c] = pdofs[pc // 2, pc % 2]
+    fixed_dof = np.repeat(fixed_local, 2)
+    x_fix = np.where(np.repeat(is_bc, 2), ubc.x.array, 0.0)
+    ff = is_fe_r & is_fe_c
+    K_ff = sp.csr_matrix(
+        (Ki.data[ff], (fe_dof[Ki.row[ff]], fe_dof[Ki.col[ff]])), shape=(fe_layout.size_global,) * 2
+    )
+    pp = ~is_fe_r & ~is_fe_c
+    Kp_loc = Kp_loc + sp.csr_matrix((Ki.data[pp], (prow[pp], pcol[pp])), shape=(2 * n, 2 * n))
+    # FE rows of fixed dofs vanish; FE columns of fixed dofs move their known values to b_p
+    fp = is_fe_r & ~is_fe_c & ~fixed_dof[np.minimum(Ki.row, nf - 1)]
+    K_fp = sp.csr_matrix(
+        (Ki.data[fp], (fe_dof[Ki.row[fp]], pcol[fp])), shape=(fe_layout.size_global, 2 * n)
+    )
+    pf = ~is_fe_r & is_fe_c
+    col_fixed = fixed_dof[np.minimum(Ki.col, nf - 1)]
+    keep = pf & ~col_fixed
+    K_pf = sp.csr_matrix(
+        (Ki.data[keep], (prow[keep], fe_dof[Ki.col[keep]])), shape=(2 * n, fe_layout.size_global)
+    )
+    lift = pf & col_fixed
+    f_p = np.zeros(2 * n)
+    # f_p is in interleaved particle order (2 J + i), like the EFG loads
+    inv = np.empty(2 * n, dtype=np.int64)
+    inv[pdofs.ravel()] = np.arange(2 * n)
+    np.add.at(f_p, inv[prow[lift]], -Ki.data[lift] * x_fix[Ki.col[lift]])
+
+    # loads: FE facets of pure FE cells with the FE basis, of interface cells blended
+    f_fe_rows, f_fe_vals = [], []
+    for facets, fn in problem._tractions:
+        f_fe_facets, f_p_facets = problem._split(facets)
+        inter = blend.in_interface[_first_cells(msh, f_fe_facets)]
+        for part, use_blend in ((f_fe_facets[~inter], False), (f_fe_facets[inter], True)):
+            fq = facet_quadrature(msh, part, deg)
+            t = raise_on_all_ranks(
+                comm, lambda fn=fn, fq=fq: _vector_values(fn, (fq.points, fq.normals), len(fq), "t")
+            )
+            if use_blend:
+                bt = raise_on_all_ranks(comm, lambda fq=fq: blend.table(fq.points, fq.cells, 0))
+                fl = load_vector(bt.values, fq.weights, t)
+                f_p += fl[nf:]
+                fl = fl[:nf].reshape(-1, 2)
+            else:
+                bt = tabulate_in_cells(V, fq.points, fq.cells, derivatives=0)
+                fl = load_vector(bt.values, fq.weights, t).reshape(-1, 2)
+            for comp in range(2):
+                f_fe_rows.append(2 * l2g[: fl.shape[0]] + comp)
+                f_fe_vals.append(fl[:, comp])
+        fq = facet_quadrature(msh, f_p_facets, deg)
+        t = raise_on_all_ranks(
+            comm, lambda fn=fn, fq=fq: _vector_values(fn, (fq.points, fq.normals), len(fq), "t")
+        )
+        bt = raise_on_all_ranks(comm, lambda fq=fq: problem.mls.tabulate(fq.points, 0))
+        f_p += load_vector(bt.values, fq.weights, t)
+    cat = np.concatenate
+    b_fe = create_vector(
+        comm, fe_layout, cat([*f_fe_rows, np.zeros(0, np.int64)]), cat([*f_fe_vals, []])
+    )
+
+    # K_FE = DOLFINx (pure FE cells) + interface FE-FE block, then strong conditions
+    K_fe = _fe_stiffness(problem, blend)
+    K_int = create_aij(comm, K_ff, fe_layout, fe_layout)
+    K_fe.axpy(1.0, K_int, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+    n_owned = V.dofmap.index_map.size_local
+    fixed = np.flatnonzero(fixed_local[:n_owned])
+    rows = (2 * l2g[fixed][:, None] + np.arange(2)).ravel().astype(PETSc.IntType)
+    x_bc = create_vector(comm, fe_layout, rows, x_fix.reshape(-1, 2)[fixed].ravel())
+    K_fe.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+    zero = K_fe.createVecLeft()
+    zero.set(0.0)
+    K_fe.setDiagonal(zero, addv=PETSc.InsertMode.ADD_VALUES)
+    zero.destroy()
+    K_fe.zeroRowsColumns(rows, diag=1.0, x=x_bc, b=b_fe)
+    Kp = create_aij(comm, Kp_loc, pl, pl)
+    b_p = create_vector(comm, pl, pdofs.ravel(), f_p)
+    Kfp = create_aij(comm, K_fp, fe_layout, pl)
+    Kpf = create_aij(comm, K_pf, pl, fe_layout)
+    blocks = [[K_fe, Kfp], [Kpf, Kp]]
+    rhs = [b_fe, b_p]
+    mats = [K_fe, K_int, Kp, Kfp, Kpf]
+    Gd, d_rows, d_vals, dl = facet_multipliers(P, patch_bc, dq, dtabs, s)
+    if dl.size_global:
+        D = create_aij(comm, Gd, dl, pl)
+        DT = create_aij(comm, Gd.T.tocsr(), pl, dl)
+        blocks = [[K_fe, Kfp, None], [Kpf, Kp, DT], [None, D, None]]
+        rhs.append(create_vector(comm, dl, d_rows, d_vals))
+        mats += [D, DT]
+    system = BlockSystem(blocks, rhs)
+    assemble = time.perf_counter() - t1 + kt["assemble"]
+
+    t2 = time.perf_counter()
+    parts = system.solve()
+    solve = time.perf_counter() - t2
+    system.destroy()
+    for obj in [*mats, *rhs, x_bc]:
+        obj.destroy()
+    uh = dolfinx.fem.Function(V)
+    uh.x.array[: 2 * n_owned] = parts[0]
+    uh.x.scatter_forward()
+    owned = np.concatenate(comm.allgather(parts[1]))
+    coeffs = owned.reshape(-1, 2)[P.petsc_index]
+    return CoupledSolution(
+        u=uh,
+        coefficients=coeffs,
+        mls=problem.mls,
+        patch=patch,
+        timings={"setup": setup, "assemble": assemble, "solve": solve},
+        sizes={
+            "fe_dofs": 2 * comm.allreduce(int(np.sum(active[:n_owned]))),
+            "particle_dofs": 2 * n,
+            "multiplier_dofs": dl.size_global,
+        },
+        interface=blend,
+    )
+
+
+def _first_cells(msh, facets: np.ndarray) -> np.ndarray:
+    """The first local cell of each facet (the only one on exterior facets)."""
+    tdim = msh.topology.dim
+    msh.topology.create_connectivity(tdim - 1, tdim)
+    f2c = msh.topology.connectivity(tdim - 1, tdim)
+    return np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]]

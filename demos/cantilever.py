@@ -69,7 +69,12 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
         "(efg models all of it)",
     )
     p.add_argument("--weight", choices=("quartic", "cubic", "gaussian"), default="quartic")
-    p.add_argument("--dilation", type=float, default=2.0)
+    p.add_argument(
+        "--dilation",
+        type=float,
+        default=None,
+        help="MLS d_max (default: 2.0; 2.5 for the ramp couplings, see mf.DEFAULT_DILATION)",
+    )
     p.add_argument("--quadrature-degree", type=int, default=7, help="7: 4 x 4 Gauss on quads")
     p.add_argument("--consistent", action="store_true", help="variationally consistent integration")
     p.add_argument("--cell", choices=("quadrilateral", "triangle"), default="quadrilateral")
@@ -79,6 +84,8 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--no-check", action="store_true", help="skip the demo's self-checks")
     args = p.parse_args(argv)
     for name in ("h", "E", "L", "D", "dilation"):
+        if getattr(args, name) is None:
+            continue
         vals = np.atleast_1d(getattr(args, name))
         if not np.all(np.isfinite(vals) & (vals > 0)):
             p.error(f"--{name} must be positive, got {getattr(args, name)}")
@@ -153,11 +160,18 @@ def run_fe(msh, args, beam, material):
     return errors, sizes, sol.timings, lambda pts: mf.evaluate_fe_function(sol.u, pts)
 
 
-def particle_options(args) -> dict:
+def dilation(args, method: str) -> float:
+    """The dilation a method runs with: ``--dilation`` or the method's default."""
+    if args.dilation is not None:
+        return args.dilation
+    return mf.DEFAULT_DILATION.get(method, 2.0)
+
+
+def particle_options(args, method: str) -> dict:
     """The particle-side options shared by every meshfree method."""
     return {
         "weight": args.weight,
-        "dilation": args.dilation,
+        "dilation": dilation(args, method),
         "quadrature_degree": args.quadrature_degree,
         "consistent": args.consistent,
     }
@@ -167,7 +181,7 @@ def run_efg(msh, args, beam, material, h):
     t0 = time.perf_counter()
     left, right = boundaries(msh, args)
     particles = mf.ParticleSet.from_cells(msh, args.particle_spacing or h)
-    problem = mf.EFGElasticity(particles, material, **particle_options(args))
+    problem = mf.EFGElasticity(particles, material, **particle_options(args, "efg"))
     problem.add_dirichlet(left, beam.displacement)
     problem.add_traction(right, beam.traction)
     particle_time = time.perf_counter() - t0
@@ -200,7 +214,7 @@ def run_coupled(msh, args, beam, material, h, coupling):
         patch,
         material,
         coupling=coupling,
-        **particle_options(args),
+        **particle_options(args, coupling),
     )
     problem.add_dirichlet(left, beam.displacement)
     problem.add_traction(right, beam.traction)
@@ -270,7 +284,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
                 "dolfinx_version": mf.DOLFINX_VERSION,
                 "plane": args.plane,
                 "weight": args.weight if method != "fe" else None,
-                "dilation": args.dilation if method != "fe" else None,
+                "dilation": dilation(args, method) if method != "fe" else None,
                 "consistent": args.consistent if method != "fe" else None,
             }
             records.append(rec)

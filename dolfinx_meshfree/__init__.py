@@ -15,7 +15,7 @@ Importing this package first loads the ``dolfinx_solver`` wheel's MPI when that 
 from . import _compat  # noqa: F401  (must come first: loads dolfinx_solver's MPI in lane B)
 from ._compat import DOLFINX_VERSION
 from .analytic import LinearField, TimoshenkoBeam
-from .coupled import COUPLINGS, CoupledElasticity, CoupledSolution
+from .coupled import COUPLINGS, DEFAULT_DILATION, CoupledElasticity, CoupledSolution
 from .efg import EFGElasticity, EFGSolution
 from .errors import error_norms
 from .fe import FESolution, solve_fe_elasticity
@@ -37,6 +37,7 @@ from .tables import ShapeTable
 
 __all__ = [
     "COUPLINGS",
+    "DEFAULT_DILATION",
     "DOLFINX_VERSION",
     "MLS",
     "SPH",

@@ -53,7 +53,15 @@ from .patch import FE_TAG, ParticlePatch
 from .petsc import BlockSystem, create_aij, create_vector
 from .quadrature import QuadraturePoints, facet_quadrature
 
-__all__ = ["COUPLINGS", "CoupledElasticity", "CoupledSolution"]
+__all__ = ["COUPLINGS", "DEFAULT_DILATION", "CoupledElasticity", "CoupledSolution"]
+
+#: Default MLS dilation ``d_max`` of each coupling (see :class:`CoupledElasticity`).
+DEFAULT_DILATION = {
+    "lagrange": 2.0,
+    "edge-to-edge": 2.0,
+    "ramp": 2.5,
+    "ramp-cubic": 2.5,
+}
 
 #: Couplings available in this release.
 COUPLINGS = ("lagrange", "edge-to-edge", "ramp", "ramp-cubic")
@@ -124,7 +132,10 @@ class CoupledElasticity:
             particles, see :meth:`interface_particles`), ``"ramp"`` or ``"ramp-cubic"``
             (interface elements blending FE and particles with a ramp function, Belytschko et al.
             1995, sec. 3.2; see :mod:`~dolfinx_meshfree.ramp`).
-        weight, dilation, basis: MLS options of the particle side.
+        weight, dilation, basis: MLS options of the particle side. The default dilation is
+            ``DEFAULT_DILATION[coupling]``: 2.0 (Belytschko et al. 1995), but 2.5 for the ramp
+            couplings, whose particle functions must also cover the interface cells up to their
+            FE-side edge, which d_max = 2 leaves to collinear particles only.
         quadrature_degree: Gauss degree on cells and facets.
         consistent: Variationally consistent integration on the patch (VCI over the patch
             boundary, interface included).
@@ -137,7 +148,7 @@ class CoupledElasticity:
         material: LinearElastic,
         coupling: str = "lagrange",
         weight: str = "quartic",
-        dilation: float = 2.0,
+        dilation: float | None = None,
         basis: str = "linear",
         quadrature_degree: int = 7,
         consistent: bool = False,
@@ -156,7 +167,12 @@ class CoupledElasticity:
         self.consistent = bool(consistent)
         self.mls = raise_on_all_ranks(
             patch.comm,
-            lambda: MLS(patch.particles, weight=weight, dilation=dilation, basis=basis),
+            lambda: MLS(
+                patch.particles,
+                weight=weight,
+                dilation=DEFAULT_DILATION[coupling] if dilation is None else dilation,
+                basis=basis,
+            ),
         )
         self._dirichlet: list[tuple[np.ndarray, VectorFunction]] = []
         self._tractions: list[tuple[np.ndarray, Callable]] = []
@@ -284,12 +300,20 @@ class CoupledElasticity:
 
     # -- solve ----------------------------------------------------------------------------------
 
-    def solve(self) -> CoupledSolution:
-        """Assemble the nest block system and solve it with MUMPS (collective)."""
+    def solve(self, solver: str = "mumps") -> CoupledSolution:
+        """Assemble the nest block system and solve it (collective).
+
+        Args:
+            solver: ``"mumps"`` (direct) or ``"fieldsplit"`` (Schur complement, displacements
+                against multipliers, on the augmented Lagrangian; see
+                :class:`~dolfinx_meshfree.petsc.BlockSystem`).
+        """
+        if solver not in ("mumps", "fieldsplit"):
+            raise ValueError(f"solver={solver!r} is not known; use 'mumps' or 'fieldsplit'")
         if self.coupling in ("ramp", "ramp-cubic"):
             from .ramp import solve_ramp
 
-            return solve_ramp(self)
+            return solve_ramp(self, solver)
         V, patch, P = self.V, self.patch, self.patch.particles
         comm = patch.comm
         msh = V.mesh
@@ -419,11 +443,11 @@ class CoupledElasticity:
             blocks.append([None, D, None, None])
             rhs.append(create_vector(comm, dl, d_rows, d_vals))
             mats += [D, DT]
-        system = BlockSystem(blocks, rhs)
+        system = BlockSystem(blocks, rhs, num_primal=2)
         assemble = time.perf_counter() - t1 + kt["assemble"]
 
         t2 = time.perf_counter()
-        parts = system.solve()
+        parts = system.solve(solver)
         solve = time.perf_counter() - t2
         system.destroy()
         for obj in [*mats, *rhs, x_bc]:

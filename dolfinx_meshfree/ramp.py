@@ -247,7 +247,7 @@ def _fe_stiffness(problem, interface: RampInterface) -> PETSc.Mat:
     return _compat.assemble_matrix(_compat.create_form(a))
 
 
-def solve_ramp(problem):
+def solve_ramp(problem, solver: str = "mumps"):
     """Assemble and solve the ramp-coupled system of ``problem`` (collective)."""
     from .coupled import CoupledSolution
 
@@ -413,11 +413,11 @@ def solve_ramp(problem):
         blocks = [[K_fe, Kfp, None], [Kpf, Kp, DT], [None, D, None]]
         rhs.append(create_vector(comm, dl, d_rows, d_vals))
         mats += [D, DT]
-    system = BlockSystem(blocks, rhs)
+    system = BlockSystem(blocks, rhs, num_primal=2)
     assemble = time.perf_counter() - t1 + kt["assemble"]
 
     t2 = time.perf_counter()
-    parts = system.solve()
+    parts = system.solve(solver)
     solve = time.perf_counter() - t2
     system.destroy()
     for obj in [*mats, *rhs, x_bc]:

@@ -67,3 +67,28 @@ def test_unknown_solver_names():
     problem = cantilever(MPI.COMM_WORLD)
     with pytest.raises(ValueError, match="solver='cg' is not known"):
         problem.solve("cg")
+
+
+@pytest.mark.parametrize("coupling", ["lagrange", "ramp"])
+def test_fieldsplit_equals_mumps_for_couplings(coupling):
+    """Four fields for Lagrange (FE, particles, interface and patch-boundary multipliers) with
+    the patch floating on its multipliers; ramp has only the patch-boundary multipliers."""
+    comm = MPI.COMM_WORLD
+    msh = dolfinx.mesh.create_rectangle(
+        comm, [np.zeros(2), np.full(2, 2.0)], [6, 6], dolfinx.mesh.CellType.quadrilateral
+    )
+    n = msh.topology.index_map(2).size_local
+    nodes = msh.geometry.x[mf._compat.geometry_dofmap(msh)[:n], :2]
+    patch = mf.ParticlePatch(msh, np.flatnonzero(nodes[:, :, 0].mean(axis=1) > 1.0), 1 / 3)
+    V = mf._compat.vector_function_space(msh)
+    field = mf.LinearField(G=((0.1, 0.3), (-0.2, 0.05)))
+
+    def solve(solver):
+        problem = mf.CoupledElasticity(V, patch, mf.LinearElastic(1000.0, 0.3), coupling=coupling)
+        problem.add_dirichlet(mf.boundary_facets(msh), field.displacement)
+        return problem.solve(solver)
+
+    direct, split = solve("mumps"), solve("fieldsplit")
+    scale = np.abs(direct.coefficients).max()
+    assert np.abs(split.coefficients - direct.coefficients).max() <= 1e-9 * scale
+    assert np.abs(split.u.x.array - direct.u.x.array).max() <= 1e-9 * scale

@@ -14,7 +14,9 @@
 #   of the beam (default 0.5, as in the paper), joined by the compatibility coupling with Lagrange
 #   multipliers on the interface (Rabczuk et al. 2006, sec. 5.4);
 # * ``edge-to-edge``: the same split, with the multipliers collocated at the interface particles
-#   (continuity exactly at those particles; Rabczuk et al. 2006, sec. 5.4).
+#   (continuity exactly at those particles; Rabczuk et al. 2006, sec. 5.4);
+# * ``master-slave``: the same split, the first particle layer rigidly linked to the interface
+#   edges (Rabczuk et al. 2006, sec. 5.1.2); first order, see the self-check.
 #
 # For each run the demo prints the relative L2 error (Rabczuk eq. 136) and the relative energy
 # error (Belytschko eq. 5.5) beside the cost split into setup, assembly and solve. JIT
@@ -340,14 +342,23 @@ def check(records: list[dict], comm) -> None:
     * every run: a relative L2 error below 5 % (the coarsest mesh, h = 3, gives 2.8 % with FE);
     * couplings: L2 error within 1.5x pure FE at the same h when both ran;
     * a refinement series of 3 or more sizes: fitted L2 rate >= 1.8 and energy rate >= 0.9
-      (optimal rates 2 and 1 for bilinear FE and linear-basis EFG).
+      (optimal rates 2 and 1 for bilinear FE and linear-basis EFG);
+    * master-slave, first order by construction: fitted L2 rate >= 1.1 instead of the two above.
     """
     failures = []
     for r in records:
         if not r["error_l2"] < 0.05:
             failures.append(f"{r['method']} h={r['h']}: L2 error {r['error_l2']:.3e} >= 0.05")
     fe = {r["h"]: r["error_l2"] for r in records if r["method"] == "fe"}
+    # Master-slave is first order by construction (issue: "Master-slave measured and explained";
+    # see dolfinx_meshfree.master_slave): the slave layer moves rigidly with the interface edges,
+    # dropping the strain across a band of width h. Measured L2 rates 1.36/1.21/1.14/1.10 for
+    # h = 3..0.5 (Rabczuk et al. 2006, Table II: 1.23/1.23/1.13), energy 0.56-0.66, so it is
+    # checked against the paper's rate 1.1 instead of pure FE and the optimal rates.
+    first_order = {"master-slave"}
     for r in records:
+        if r["method"] in first_order:
+            continue
         if r["method"] in mf.COUPLINGS and r["h"] in fe and not r["error_l2"] <= 1.5 * fe[r["h"]]:
             failures.append(
                 f"{r['method']} h={r['h']}: L2 error {r['error_l2']:.3e} > 1.5 x FE "
@@ -362,6 +373,10 @@ def check(records: list[dict], comm) -> None:
             sen = np.polyfit(lh, np.log([r["error_energy"] for r in runs]), 1)[0]
             if comm.rank == 0:
                 print(f"{method}: fitted rates L2 {sl2:.2f}, energy {sen:.2f}")
+            if method in first_order:
+                if sl2 < 1.1:
+                    failures.append(f"{method}: fitted L2 rate {sl2:.2f} < 1.1 (the paper's)")
+                continue
             if sl2 < 1.8:
                 failures.append(f"{method}: fitted L2 rate {sl2:.2f} < 1.8")
             if sen < 0.9:

@@ -61,10 +61,11 @@ DEFAULT_DILATION = {
     "edge-to-edge": 2.0,
     "ramp": 2.5,
     "ramp-cubic": 2.5,
+    "master-slave": 2.0,
 }
 
 #: Couplings available in this release.
-COUPLINGS = ("lagrange", "edge-to-edge", "ramp", "ramp-cubic")
+COUPLINGS = ("lagrange", "edge-to-edge", "ramp", "ramp-cubic", "master-slave")
 
 VectorFunction = Callable[[np.ndarray], np.ndarray]
 
@@ -310,6 +311,10 @@ class CoupledElasticity:
         """
         if solver not in ("mumps", "fieldsplit"):
             raise ValueError(f"solver={solver!r} is not known; use 'mumps' or 'fieldsplit'")
+        if self.coupling == "master-slave":
+            from .master_slave import solve_master_slave
+
+            return solve_master_slave(self, solver)
         if self.coupling in ("ramp", "ramp-cubic"):
             from .ramp import solve_ramp
 

@@ -1,0 +1,371 @@
+"""Master–slave FE–EFG coupling (Rabczuk, Xiao & Sauer 2006, sec. 5.1.2, eq. 17–28).
+
+The particles next to the interface are slaves of the FE boundary: each is rigidly linked to the
+closest-point projection ``C`` of its position ``P`` on the interface Gamma_I (eq. 17), and moves
+with the FE edge through ``C`` (eq. 19–27, in 2D):
+
+.. math::
+    u_P = u_C + \\theta \\, e_z \\times (x_P - x_C), \\qquad
+    u_C = (1 - \\xi) u_a + \\xi u_b, \\qquad
+    \\theta = \\frac{t \\times (u_b - u_a)}{|t|^2},
+
+where ``a, b`` are the end nodes of the edge, ``t = x_b - x_a`` and ``xi`` the edge coordinate
+of ``C``. ``theta`` is the (small) rotation of the edge: eq. 29–31 take the angular velocity
+from the rate of the surface normal, which for a straight edge is this rotation. Both ``u_C``
+and ``theta`` are linear in the edge's nodal displacements, so ``u_P = T_I u_master`` (eq. 27)
+and the forces on a slave go to its masters with ``T_I^T`` (eq. 28, work conjugacy). When
+several edges are equally close (``C`` at a vertex, where the normal is undefined, or at equal
+distance from two edges) the row of ``T`` is the mean of their rows: each reproduces rigid
+motions, so the mean does too, and the choice does not depend on the partition.
+
+The slaves are the particles of the first layer: those whose distance to Gamma_I is at most
+``1.01 s`` (``s``: the median nearest-neighbour distance of the particles, the spacing of a
+regular grid), including the particles on Gamma_I, whose link has length zero. ``u_P`` is the
+particle's dof (nodal parameter) of the EFG approximation, as in the paper's particle methods.
+
+With ``u = T u_m + g`` (rows: every dof, FE then particles; columns: the master dofs, the free
+FE dofs and the free particles; ``g``: the known strong FE values carried to the slaves), the
+reduced system is ``T^T K T u_m = T^T (f - K g)`` with ``K = blockdiag(K_FE, K_P)``. ``T`` has
+the blocks ``[[I, 0], [T_PF, S]]`` (``S`` selects the free particles), so the reduced matrix is
+assembled block by block with PETSc's products,
+
+.. math::
+    A_{FF} = K_{FE} + T_{PF}^T K_P T_{PF}\\;(\\mathrm{PtAP}), \\quad
+    A_{FM} = T_{PF}^T K_P S, \\quad A_{MM} = S^T K_P S\\;(\\mathrm{PtAP}),
+
+rather than as one ``PtAP`` on an AIJ conversion of the whole ``K``: ``K`` is block diagonal, so
+three products give the same matrix; the system stays a MatNest with the fields FE, free
+particles and (patch-side) Dirichlet multipliers, which :class:`~dolfinx_meshfree.petsc.BlockSystem`
+solves with MUMPS or its fieldsplit; and ``T`` keeps the natural FE and particle numberings
+instead of the rank-interleaved row order of a converted nest. Strong FE conditions are applied
+to ``K_FE`` as in :mod:`~dolfinx_meshfree.coupled` (``MatZeroRowsColumns``) and their columns
+are removed from ``T_PF`` (their values go to ``g``); patch-side Dirichlet facets are multiplier
+rows ``D`` of :func:`~dolfinx_meshfree.efg.facet_multipliers` mapped through ``T``: ``D T``,
+right-hand side ``d - D g``.
+
+Master–slave reproduces rigid motions exactly but not linear fields: a slave off Gamma_I moves
+with the rotation of its edge, not with the strain of the field, so the linear patch test fails
+by about ``|strain| x spacing`` at the slaves, and the coupled error converges at first order
+near the interface (the paper's rates 1.23/1.23/1.13 for the cantilever).
+"""
+
+from __future__ import annotations
+
+import time
+
+import dolfinx
+import numpy as np
+import scipy.sparse as sp
+from petsc4py import PETSc
+from scipy.spatial import cKDTree
+
+from . import _compat
+from .efg import _vector_values, facet_multipliers, particle_stiffness
+from .fe_points import tabulate_in_cells
+from .operators import load_vector
+from .parallel import Layout, raise_on_all_ranks
+from .petsc import BlockSystem, create_aij, create_vector
+from .quadrature import facet_quadrature
+
+__all__ = ["SLAVE_LAYER", "MasterSlaveLinks", "solve_master_slave"]
+
+#: Slaves: particles within ``SLAVE_LAYER`` times the particle spacing of the interface.
+SLAVE_LAYER = 1.01
+
+
+class MasterSlaveLinks:
+    """The rigid links of the slave particles to the interface edges (collective to construct).
+
+    Every rank gathers the interface edges (end points, global FE nodes, strong-condition values)
+    and computes the links of all particles, so the result is the same on every rank.
+
+    Attributes:
+        spacing: The particle spacing ``s`` (median nearest-neighbour distance).
+        slaves: Indices of the slave particles (sorted).
+        distance: Distance of each particle to the interface.
+        edges: (m, 2, 2) end points of the interface edges, ``nodes`` (m, 2) their global FE
+            nodes, ``fixed`` (m, 2) whether a node carries a strong condition and ``values``
+            (m, 2, 2) the strong values.
+        rows: Per slave, ``(global FE nodes (k,), weights (k, 2, 2))``: ``u_P = sum_k
+            weights[k] @ u[nodes[k]]``.
+    """
+
+    def __init__(self, problem, is_bc: np.ndarray, ubc: np.ndarray):
+        V, patch = problem.V, problem.patch
+        msh = V.mesh
+        comm = patch.comm
+        P = patch.particles
+        x = P.positions
+        fdim = msh.topology.dim - 1
+        imap = V.dofmap.index_map
+        l2g = np.asarray(
+            imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
+        )
+        facets = patch.interface_facets
+        coords = V.tabulate_dof_coordinates()[:, :2]
+        ends = np.zeros((facets.size, 2, 2))
+        nodes = np.zeros((facets.size, 2), dtype=np.int64)
+        fixed = np.zeros((facets.size, 2), dtype=bool)
+        values = np.zeros((facets.size, 2, 2))
+        if facets.size:
+            ends = msh.geometry.x[_compat.entities_to_geometry(msh, fdim, facets), :2]
+            dofs = _compat.dofmap_array(V)[patch.interface_fe_cells]
+            for k in range(2):
+                # the FE cell's node at each end point of the facet
+                d = np.linalg.norm(coords[dofs] - ends[:, k][:, None, :], axis=2)
+                local = dofs[np.arange(facets.size), np.argmin(d, axis=1)]
+                nodes[:, k] = l2g[local]
+                fixed[:, k] = is_bc[local]
+                values[:, k] = ubc[local]
+        gathered = comm.allgather((ends, nodes, fixed, values))
+        self.edges = np.concatenate([g[0] for g in gathered]).reshape(-1, 2, 2)
+        self.nodes = np.concatenate([g[1] for g in gathered]).reshape(-1, 2)
+        self.fixed = np.concatenate([g[2] for g in gathered]).reshape(-1, 2)
+        self.values = np.concatenate([g[3] for g in gathered]).reshape(-1, 2, 2)
+        if self.edges.shape[0] == 0:
+            raise ValueError("master-slave coupling: the patch has no interface with the FE cells")
+
+        if x.shape[0] > 1:
+            dist, _ = cKDTree(x).query(x, k=2)
+            self.spacing = float(np.median(dist[:, 1]))
+        else:
+            self.spacing = float(np.linalg.norm(self.edges[:, 1] - self.edges[:, 0], axis=1).max())
+        a = self.edges[:, 0]
+        t = self.edges[:, 1] - self.edges[:, 0]
+        length2 = np.einsum("ij,ij->i", t, t)
+        # distances of every particle to every edge (n x m), in chunks of particles
+        n, m = x.shape[0], a.shape[0]
+        xi = np.empty((n, m))
+        dist = np.empty((n, m))
+        step = max(1, 2_000_000 // max(m, 1))
+        for lo in range(0, n, step):
+            r = x[lo : lo + step, None, :] - a[None, :, :]
+            s = np.clip(np.einsum("pmj,mj->pm", r, t) / length2, 0.0, 1.0)
+            xi[lo : lo + step] = s
+            dist[lo : lo + step] = np.linalg.norm(r - s[..., None] * t[None], axis=2)
+        self.distance = dist.min(axis=1)
+        self.slaves = np.flatnonzero(self.distance <= SLAVE_LAYER * self.spacing)
+        if self.slaves.size == x.shape[0]:
+            raise ValueError(
+                "master-slave coupling: every particle is a slave (the patch is one particle "
+                "layer thick); use a larger patch or a finer particle spacing"
+            )
+        tol = 1e-9 * np.sqrt(length2.max())
+        self.rows = []
+        for p in self.slaves:
+            tied = np.flatnonzero(dist[p] <= self.distance[p] + tol)
+            cols, weights = [], []
+            for e in tied:
+                s = xi[p, e]
+                rr = x[p] - (a[e] + s * t[e])  # the link C -> P
+                # theta = (t x (u_b - u_a)) / |t|^2: d theta / d(u_a, u_b)
+                dth = np.array([[t[e, 1], -t[e, 0]], [-t[e, 1], t[e, 0]]]) / length2[e]
+                for k, nk in enumerate((1.0 - s, s)):
+                    w = nk * np.eye(2)
+                    # u_P += theta (-r_y, r_x)
+                    w = w + np.outer([-rr[1], rr[0]], dth[k])
+                    cols.append(self.nodes[e, k])
+                    weights.append(w / tied.size)
+            self.rows.append((np.asarray(cols, dtype=np.int64), np.asarray(weights)))
+
+    def is_fixed(self) -> dict[int, np.ndarray]:
+        """Strong values of the interface nodes that carry one, by global node."""
+        out = {}
+        for e in range(self.nodes.shape[0]):
+            for k in range(2):
+                if self.fixed[e, k]:
+                    out[int(self.nodes[e, k])] = self.values[e, k]
+        return out
+
+
+def solve_master_slave(problem, solver: str = "mumps"):
+    """Assemble and solve the master–slave coupled system of ``problem`` (collective)."""
+    from .coupled import CoupledSolution
+
+    V, patch, P = problem.V, problem.patch, problem.patch.particles
+    comm = patch.comm
+    msh = V.mesh
+    deg = problem.quadrature_degree
+    n = P.num_particles
+    s = problem.material.E
+    pdofs = P.petsc_dofs(2)
+    fe_layout, l2g = problem._fe_layout()
+    pl = Layout(2 * P.layout.size_local, 2 * n, 2 * P.layout.start)
+    t0 = time.perf_counter()
+
+    boundary = patch.boundary() if problem.consistent else None
+    Kp_loc, _, _, kt = particle_stiffness(P, problem.mls, problem.material, deg, boundary)
+
+    # essential conditions: FE side strongly, patch side by multipliers
+    fe_bc, patch_bc = [], []
+    for facets, fn in problem._dirichlet:
+        f_fe, f_p = problem._split(facets)
+        fe_bc.append((f_fe, fn))
+        patch_bc.append((f_p, fn))
+    dq = [facet_quadrature(msh, f, deg) for f, _ in patch_bc]
+    dtabs = [raise_on_all_ranks(comm, lambda d=d: problem.mls.tabulate(d.points, 0)) for d in dq]
+    ubc = dolfinx.fem.Function(V)
+    is_bc = np.zeros(ubc.x.array.size // 2, dtype=bool)
+    coords = V.tabulate_dof_coordinates()[:, :2]
+    for f, fn in fe_bc:
+        flags = problem._node_flags(dolfinx.fem.locate_dofs_topological(V, msh.topology.dim - 1, f))
+        xn = coords[flags]
+        vals = raise_on_all_ranks(
+            comm, lambda fn=fn, xn=xn: _vector_values(fn, (xn,), len(xn), "dirichlet")
+        )
+        ubc.x.array.reshape(-1, 2)[flags] = vals
+        is_bc |= flags
+    fe_nodes = _compat.dofmap_array(V)[patch.fe_cells].ravel()
+    active = problem._node_flags(fe_nodes)
+
+    links = raise_on_all_ranks(
+        comm, lambda: MasterSlaveLinks(problem, is_bc, ubc.x.array.reshape(-1, 2))
+    )
+    known = links.is_fixed()
+    is_slave = np.zeros(n, dtype=bool)
+    is_slave[links.slaves] = True
+    # master particle numbering: the owned free particles in PETSc order
+    mine = P.owned[np.argsort(P.petsc_index[P.owned], kind="stable")]
+    free_mine = mine[~is_slave[mine]]
+    mlay = Layout.from_local(comm, free_mine.size)
+    ml = Layout(2 * mlay.size_local, 2 * mlay.size_global, 2 * mlay.start)
+    # T_PF (particle dofs x FE dofs), S (particle dofs x master particle dofs), g_P
+    tr, tc, tv, g_rows, g_vals = [], [], [], [], []
+    owner = P.owner
+    for p, (nodes, weights) in zip(links.slaves, links.rows, strict=True):
+        if owner[p] != comm.rank:
+            continue
+        for node, w in zip(nodes, weights, strict=True):
+            u = known.get(int(node))
+            for i in range(2):
+                if u is not None:
+                    g_rows.append(pdofs[p, i])
+                    g_vals.append(w[i] @ u)
+                    continue
+                for j in range(2):
+                    if w[i, j] != 0.0:
+                        tr.append(pdofs[p, i])
+                        tc.append(2 * node + j)
+                        tv.append(w[i, j])
+    T_pf = sp.csr_matrix((tv, (tr, tc)), shape=(2 * n, fe_layout.size_global))
+    srow = pdofs[free_mine].ravel()
+    scol = ml.start + np.arange(ml.size_local)
+    S_loc = sp.csr_matrix((np.ones(srow.size), (srow, scol)), shape=(2 * n, ml.size_global))
+    setup = problem._setup + time.perf_counter() - t0 - kt["assemble"]
+
+    t1 = time.perf_counter()
+    # loads (as in the compatibility coupling)
+    f_fe_rows, f_fe_vals = [], []
+    f_p = np.zeros(2 * n)
+    for facets, fn in problem._tractions:
+        f_fe_facets, f_p_facets = problem._split(facets)
+        q = facet_quadrature(msh, f_fe_facets, deg)
+        t = raise_on_all_ranks(
+            comm, lambda fn=fn, q=q: _vector_values(fn, (q.points, q.normals), len(q), "t")
+        )
+        tab = tabulate_in_cells(V, q.points, q.cells, derivatives=0).values
+        fl = load_vector(tab, q.weights, t).reshape(-1, 2)
+        for comp in range(2):
+            f_fe_rows.append(2 * l2g[: fl.shape[0]] + comp)
+            f_fe_vals.append(fl[:, comp])
+        q = facet_quadrature(msh, f_p_facets, deg)
+        t = raise_on_all_ranks(
+            comm, lambda fn=fn, q=q: _vector_values(fn, (q.points, q.normals), len(q), "t")
+        )
+        tab = raise_on_all_ranks(comm, lambda q=q: problem.mls.tabulate(q.points, 0)).values
+        f_p += load_vector(tab, q.weights, t)
+    cat = np.concatenate
+    b_fe = create_vector(
+        comm, fe_layout, cat([*f_fe_rows, np.zeros(0, np.int64)]), cat([*f_fe_vals, []])
+    )
+    # K_FE with strong conditions and inactive dofs (zero rows and columns, lifted into b_fe)
+    K_fe = problem._fe_stiffness()
+    n_owned = V.dofmap.index_map.size_local
+    fixed = np.flatnonzero(is_bc[:n_owned] | ~active[:n_owned])
+    rows = (2 * l2g[fixed][:, None] + np.arange(2)).ravel().astype(PETSc.IntType)
+    x_bc = create_vector(
+        comm,
+        fe_layout,
+        rows,
+        np.where(np.repeat(is_bc[fixed], 2), ubc.x.array.reshape(-1, 2)[fixed].ravel(), 0.0),
+    )
+    K_fe.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+    zero = K_fe.createVecLeft()
+    zero.set(0.0)
+    K_fe.setDiagonal(zero, addv=PETSc.InsertMode.ADD_VALUES)
+    zero.destroy()
+    K_fe.zeroRowsColumns(rows, diag=1.0, x=x_bc, b=b_fe)
+
+    Kp = create_aij(comm, Kp_loc, pl, pl)
+    Tpf = create_aij(comm, T_pf, pl, fe_layout)
+    S = create_aij(comm, S_loc, pl, ml)
+    g_p = create_vector(comm, pl, np.asarray(g_rows, dtype=np.int64), np.asarray(g_vals))
+    # reduced blocks: T^T K T
+    A_pp = Kp.PtAP(Tpf)
+    A_ff = K_fe
+    A_ff.axpy(1.0, A_pp, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+    KpS = Kp.matMult(S)
+    A_fm = Tpf.transposeMatMult(KpS)
+    A_mf = KpS.transposeMatMult(Tpf)
+    A_mm = Kp.PtAP(S)
+    # right-hand side: T^T (f - K g); g's FE part is already lifted into b_fe
+    r = create_vector(comm, pl, pdofs.ravel(), f_p)
+    Kg = Kp.createVecLeft()
+    Kp.mult(g_p, Kg)
+    r.axpy(-1.0, Kg)
+    Tpf.multTransposeAdd(r, b_fe, b_fe)
+    b_m = S.createVecRight()
+    S.multTranspose(r, b_m)
+    blocks = [[A_ff, A_fm], [A_mf, A_mm]]
+    rhs = [b_fe, b_m]
+    mats = [A_ff, A_pp, KpS, A_fm, A_mf, A_mm]
+    Gd, d_rows, d_vals, dl = facet_multipliers(P, patch_bc, dq, dtabs, s)
+    if dl.size_global:
+        D = create_aij(comm, Gd, dl, pl)
+        d = create_vector(comm, dl, d_rows, d_vals)
+        Dg = D.createVecLeft()
+        D.mult(g_p, Dg)
+        d.axpy(-1.0, Dg)
+        D_f, D_m = D.matMult(Tpf), D.matMult(S)
+        D_fT, D_mT = D_f.transpose(PETSc.Mat()), D_m.transpose(PETSc.Mat())
+        blocks = [[A_ff, A_fm, D_fT], [A_mf, A_mm, D_mT], [D_f, D_m, None]]
+        rhs.append(d)
+        mats += [D, Dg, D_f, D_m, D_fT, D_mT]
+    system = BlockSystem(blocks, rhs, num_primal=2)
+    assemble = time.perf_counter() - t1 + kt["assemble"]
+
+    t2 = time.perf_counter()
+    parts = system.solve(solver)
+    solve = time.perf_counter() - t2
+    system.destroy()
+
+    # expand u = T u_m + g
+    x_f = Tpf.createVecRight()
+    x_f.setArray(parts[0])
+    x_m = S.createVecRight()
+    x_m.setArray(parts[1])
+    u_p = g_p.copy()
+    Tpf.multAdd(x_f, u_p, u_p)
+    S.multAdd(x_m, u_p, u_p)
+    owned = np.concatenate(comm.allgather(u_p.getArray(readonly=True).copy()))
+    for obj in [*mats, *rhs, x_bc, Kp, Tpf, S, g_p, r, Kg, x_f, x_m, u_p]:
+        obj.destroy()
+    uh = dolfinx.fem.Function(V)
+    uh.x.array[: 2 * n_owned] = parts[0]
+    uh.x.scatter_forward()
+    coeffs = owned.reshape(-1, 2)[P.petsc_index]
+    sol = CoupledSolution(
+        u=uh,
+        coefficients=coeffs,
+        mls=problem.mls,
+        patch=patch,
+        timings={"setup": setup, "assemble": assemble, "solve": solve},
+        sizes={
+            "fe_dofs": 2 * comm.allreduce(int(np.sum(active[:n_owned]))),
+            "particle_dofs": ml.size_global,
+            "multiplier_dofs": dl.size_global,
+            "slave_dofs": 2 * links.slaves.size,
+        },
+    )
+    sol.links = links
+    return sol

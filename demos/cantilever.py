@@ -79,6 +79,7 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     )
     p.add_argument("--quadrature-degree", type=int, default=7, help="7: 4 x 4 Gauss on quads")
     p.add_argument("--consistent", action="store_true", help="variationally consistent integration")
+    p.add_argument("--overlap", type=int, default=2, help="bridging: band width in cells")
     p.add_argument("--cell", choices=("quadrilateral", "triangle"), default="quadrilateral")
     p.add_argument("--json", default=None, help="write the results as JSON")
     p.add_argument("--probe-in", default=None, help="(m, 2) .npy points to evaluate u at")
@@ -203,7 +204,7 @@ def run_efg(msh, args, beam, material, h):
     return errors, sizes, sol.timings, probe
 
 
-def run_coupled(msh, args, beam, material, h, coupling):
+def run_coupled(msh, args, beam, material, h, coupling, overlap=None):
     t0 = time.perf_counter()
     left, right = boundaries(msh, args)
     n = msh.topology.index_map(2).size_local
@@ -217,6 +218,7 @@ def run_coupled(msh, args, beam, material, h, coupling):
         material,
         coupling=coupling,
         **particle_options(args, coupling),
+        **({"overlap": overlap or args.overlap} if coupling == "bridging" else {}),
     )
     problem.add_dirichlet(left, beam.displacement)
     problem.add_traction(right, beam.traction)
@@ -232,7 +234,8 @@ def warm_jit(args, material, beam):
     msh = make_mesh(MPI.COMM_SELF, args, max(args.L, args.D) / 2)
     run_fe(msh, args, beam, material)
     for coupling in set(args.method) & set(mf.COUPLINGS):
-        run_coupled(msh, args, beam, material, max(args.L, args.D) / 2, coupling)
+        # (one patch cell on this mesh: a one-cell bridging band)
+        run_coupled(msh, args, beam, material, max(args.L, args.D) / 2, coupling, overlap=1)
 
 
 # -

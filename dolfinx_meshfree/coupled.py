@@ -61,11 +61,12 @@ DEFAULT_DILATION = {
     "edge-to-edge": 2.0,
     "ramp": 2.5,
     "ramp-cubic": 2.5,
+    "bridging": 2.0,
     "master-slave": 2.0,
 }
 
 #: Couplings available in this release.
-COUPLINGS = ("lagrange", "edge-to-edge", "ramp", "ramp-cubic", "master-slave")
+COUPLINGS = ("lagrange", "edge-to-edge", "ramp", "ramp-cubic", "bridging", "master-slave")
 
 VectorFunction = Callable[[np.ndarray], np.ndarray]
 
@@ -140,6 +141,9 @@ class CoupledElasticity:
         quadrature_degree: Gauss degree on cells and facets.
         consistent: Variationally consistent integration on the patch (VCI over the patch
             boundary, interface included).
+        overlap, penalty: ``coupling="bridging"`` (bridging domain, Rabczuk et al. 2006, sec.
+            5.3, see :mod:`~dolfinx_meshfree.bridging`): band width in cell layers (>= 1) and
+            the augmented-Lagrangian penalty ``p >= 0``.
     """
 
     def __init__(
@@ -153,6 +157,8 @@ class CoupledElasticity:
         basis: str = "linear",
         quadrature_degree: int = 7,
         consistent: bool = False,
+        overlap: int = 2,
+        penalty: float = 0.0,
     ):
         if coupling not in COUPLINGS:
             raise ValueError(
@@ -166,6 +172,9 @@ class CoupledElasticity:
         self.V, self.patch, self.material, self.coupling = V, patch, material, coupling
         self.quadrature_degree = quadrature_degree
         self.consistent = bool(consistent)
+        from .bridging import check_options
+
+        self.overlap, self.penalty = check_options(overlap, penalty)
         self.mls = raise_on_all_ranks(
             patch.comm,
             lambda: MLS(
@@ -311,6 +320,10 @@ class CoupledElasticity:
         """
         if solver not in ("mumps", "fieldsplit"):
             raise ValueError(f"solver={solver!r} is not known; use 'mumps' or 'fieldsplit'")
+        if self.coupling == "bridging":
+            from .bridging import solve_bridging
+
+            return solve_bridging(self, solver)
         if self.coupling == "master-slave":
             from .master_slave import solve_master_slave
 

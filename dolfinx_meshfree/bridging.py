@@ -1,0 +1,442 @@
+"""FE–EFG bridging domain coupling (Belytschko & Xiao 2004; Rabczuk et al. 2006, sec. 5.3).
+
+The FE discretisation lives on the FE cells and on a band of ``overlap`` layers of patch cells
+beside the interface (the overlapping subdomain Omega_int); the particles fill the whole patch,
+band included. In the band both energies are weighted (eq. 46–48)
+
+.. math::
+    \\beta^{FE} = 1 - \\alpha, \\qquad \\beta^{P} = \\alpha,
+
+with ``alpha`` linear across the band: 0 on its FE-side edge (the interface of the
+:class:`~dolfinx_meshfree.ParticlePatch`), 1 on its particle-side edge. ``alpha`` is the FE
+interpolant of the node layer index: the interface nodes are layer 0, the nodes of patch cells
+touching layer ``k - 1`` are layer ``k``; ``alpha = layer / overlap`` (for a straight interface
+and uniform cells, the distance to the interface over the band width). The band cells are the
+patch cells whose nodes all lie in layers ``0..overlap``.
+
+Displacements are tied at the particles ``x_L`` of the band (closed band cells) with a multiplier
+field ``lambda = sum_k N_k lambda_k`` on the FE nodes of the band (eq. 52–53, 57, 79–80):
+
+.. math::
+    L^{FE}_{k a} = \\sum_L N_k(x_L) N_a(x_L), \\qquad L^{P}_{k J} = -\\sum_L N_k(x_L) \\phi_J(x_L),
+
+i.e. ``sum_L lambda(x_L) (u_FE(x_L) - u_P(x_L)) = 0`` for every multiplier field. The optional
+augmented-Lagrangian penalty ``p`` (eq. 54, 72–75) adds ``p G^T G`` to the displacement blocks,
+with the pointwise constraint gradients ``G^FE = [N_a(x_L)]``, ``G^P = [-phi_J(x_L)]`` (eq. 81).
+
+Assembly: ``K_FE`` is DOLFINx's assembly of ``beta_FE inner(sigma(u), eps(v))``, ``dx`` restricted
+by cell tags (FE cells weight 1, band cells :data:`BAND_TAG` weight ``1 - alpha`` with ``alpha`` a
+P1 function); ``K_P`` is the EFG stiffness by Gauss quadrature on all patch cells with the
+weights multiplied by ``alpha`` in the band. Tractions are weighted the same way (eq. 49).
+Essential conditions: strongly on FE nodes of Dirichlet facets of FE and band cells, by
+piecewise-constant facet multipliers on the particles of Dirichlet facets of patch cells (band
+included: both discretisations live there). Constraint rows are scaled by ``s = E``.
+
+Not implemented: variationally consistent integration (``consistent=True`` is refused).
+"""
+
+from __future__ import annotations
+
+import numbers
+import time
+
+import dolfinx
+import numpy as np
+import scipy.sparse as sp
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from . import _compat
+from .coupled import CoupledSolution, _fe_constraint_block, _particle_constraint_block
+from .efg import _vector_values, facet_multipliers
+from .fe_points import locate_points, tabulate_in_cells
+from .operators import load_vector, stiffness_matrix
+from .parallel import Layout, raise_on_all_ranks
+from .patch import FE_TAG, PATCH_TAG
+from .petsc import BlockSystem, create_aij, create_vector
+from .quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
+
+__all__ = ["BAND_TAG", "BridgingBand", "BridgingSolution", "check_options"]
+
+#: Cell tag of the band (overlap) cells in the FE form.
+BAND_TAG = 4
+
+
+def check_options(overlap, penalty) -> tuple[int, float]:
+    """Validate the ``overlap`` (positive integer) and ``penalty`` (finite, >= 0) options."""
+    if isinstance(overlap, bool) or not isinstance(overlap, numbers.Integral) or overlap < 1:
+        raise ValueError(f"overlap must be a positive integer (cell layers), got {overlap!r}")
+    if isinstance(penalty, bool) or not isinstance(penalty, numbers.Real):
+        raise ValueError(f"penalty must be a real number >= 0, got {penalty!r}")
+    if not (np.isfinite(penalty) and penalty >= 0.0):
+        raise ValueError(f"penalty must be finite and >= 0, got {penalty!r}")
+    return int(overlap), float(penalty)
+
+
+class BridgingBand:
+    """The overlap band of a :class:`~dolfinx_meshfree.CoupledElasticity` (collective).
+
+    Raises ``ValueError`` on every rank when the patch has no interface or when the band is
+    wider than the patch (fewer than ``overlap`` layers of patch cells beside the interface).
+
+    Attributes:
+        layer: Node layer index per local node (``overlap + 1`` beyond the band or off it).
+        in_band_node: bool per local node: a node of the band (layers ``0..overlap``).
+        alpha: ``alpha`` per local node (``layer / overlap`` on band nodes, 1 elsewhere).
+        in_band: bool per local cell (owned and ghost): a band cell.
+        cells: Owned band cells (local indices).
+        particles: Indices of the band particles (in closed band cells), on every rank.
+        local_particles: The band particles this rank handles, with ``local_cells``, the owned
+            cell each lies in (each band particle is handled by exactly one rank).
+    """
+
+    def __init__(self, problem, overlap: int):
+        V, patch = problem.V, problem.patch
+        msh, comm = V.mesh, patch.comm
+        self.V, self.mls, self.overlap = V, problem.mls, overlap
+        tdim = msh.topology.dim
+        if comm.allreduce(len(patch.interface_facets)) == 0:
+            raise ValueError(
+                "the bridging coupling needs an interface between FE and patch cells; the patch "
+                "has none"
+            )
+        dofs = _compat.dofmap_array(V)
+        n_loc = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
+        n_own = V.dofmap.index_map.size_local
+        far = overlap + 1
+        layer = np.full(n_loc, far, dtype=np.int64)
+        iface = dolfinx.fem.locate_dofs_topological(V, tdim - 1, patch.interface_facets)
+        layer[problem._node_flags(iface)] = 0
+        owned_patch = dofs[patch.cells]
+        depth = 0
+        for k in range(1, overlap + 1):
+            touch = (layer[owned_patch] == k - 1).any(axis=1)
+            flags = problem._node_flags(owned_patch[touch].ravel())
+            new = flags & (layer == far)
+            layer[new] = k
+            if not comm.allreduce(bool(np.any(new[:n_own])), op=MPI.LOR):
+                break
+            depth = k
+        if depth < overlap:
+            raise ValueError(
+                f"overlap={overlap} cell layers is wider than the patch: only {depth} layer(s) of "
+                "patch cells lie beside the interface; choose a smaller overlap or a larger patch"
+            )
+        self.layer = layer
+        self.in_band_node = layer <= overlap
+        self.alpha = np.where(self.in_band_node, layer / overlap, 1.0)
+        ncl = patch.in_patch.size
+        self.in_band = patch.in_patch & self.in_band_node[dofs[:ncl]].all(axis=1)
+        n_cells = msh.topology.index_map(tdim).size_local
+        self.cells = np.flatnonzero(self.in_band[:n_cells]).astype(np.int32)
+        self.coordinates = V.tabulate_dof_coordinates()[:, :2]
+
+        # band particles: those where the band indicator (P1 interpolant of in_band_node) is 1,
+        # each handled by the lowest rank that owns a cell containing it
+        x = patch.particles.positions
+        cells = locate_points(msh, x)
+        claim = np.where(cells >= 0, comm.rank, comm.size).astype(np.int32)
+        owner = np.empty_like(claim)
+        comm.Allreduce(claim, owner, op=MPI.MIN)
+        mine = np.flatnonzero(owner == comm.rank)
+        t = tabulate_in_cells(V, x[mine], cells[mine], derivatives=0).values
+        indicator = t @ self.in_band_node.astype(float)
+        keep = indicator >= 1.0 - 1e-10
+        self.local_particles = mine[keep]
+        self.local_cells = cells[mine][keep]
+        self.particles = np.sort(np.concatenate(comm.allgather(self.local_particles)))
+
+    def alpha_at(self, points: np.ndarray, cells: np.ndarray, derivatives: int = 0):
+        """``alpha`` (m,) at points of local cells, and with ``derivatives`` its gradient."""
+        t = tabulate_in_cells(self.V, points, cells, derivatives=derivatives)
+        a = t.values @ self.alpha
+        if not derivatives:
+            return a
+        return a, np.stack([g @ self.alpha for g in t.gradients], axis=1)
+
+    def numbering(self, problem) -> tuple[np.ndarray, Layout]:
+        """Global multiplier (block) number of each local band node (-1 elsewhere); collective."""
+        V, comm = self.V, problem.patch.comm
+        n_owned = V.dofmap.index_map.size_local
+        mine = np.flatnonzero(self.in_band_node[:n_owned])
+        layout = Layout.from_local(comm, mine.size)
+        num = dolfinx.fem.Function(V)
+        num.x.array[:] = 0.0
+        num.x.array[2 * mine] = layout.start + np.arange(mine.size) + 1
+        num.x.scatter_forward()
+        ids = np.rint(num.x.array[0::2]).astype(np.int64) - 1
+        return ids, Layout(2 * layout.size_local, 2 * layout.size_global, 2 * layout.start)
+
+
+class BridgingSolution(CoupledSolution):
+    """:class:`~dolfinx_meshfree.CoupledSolution` of the bridging coupling: in band cells the
+    field is the energy-weighted blend ``(1 - alpha) u_FE + alpha u_P`` (gradient by the product
+    rule). ``band`` is the :class:`BridgingBand`."""
+
+    band: BridgingBand | None = None
+
+    def evaluate_at_quadrature(self, q: QuadraturePoints) -> tuple[np.ndarray, np.ndarray]:
+        V = self.u.function_space
+        local = self.u.x.array.reshape(-1, 2)
+        in_band = self.band.in_band[q.cells]
+        inside = self.patch.in_patch[q.cells] & ~in_band
+        fe = ~inside & ~in_band
+        u = np.empty((len(q), 2))
+        g = np.empty((len(q), 2, 2))
+        if np.any(fe):
+            t = tabulate_in_cells(V, q.points[fe], q.cells[fe])
+            u[fe], g[fe] = t.values @ local, t.gradient(local)
+        if np.any(inside):
+            t = self.mls.tabulate(q.points[inside])
+            u[inside], g[inside] = t.values @ self.coefficients, t.gradient(self.coefficients)
+        if np.any(in_band):
+            pts, cells = q.points[in_band], q.cells[in_band]
+            t = tabulate_in_cells(V, pts, cells)
+            uf, gf = t.values @ local, t.gradient(local)
+            t = self.mls.tabulate(pts)
+            up, gp = t.values @ self.coefficients, t.gradient(self.coefficients)
+            a, da = self.band.alpha_at(pts, cells, derivatives=1)
+            u[in_band] = (1 - a)[:, None] * uf + a[:, None] * up
+            g[in_band] = (
+                (1 - a)[:, None, None] * gf
+                + a[:, None, None] * gp
+                + np.einsum("qi,qj->qij", up - uf, da)
+            )
+        return u, g
+
+
+def _first_cells(msh, facets: np.ndarray) -> np.ndarray:
+    tdim = msh.topology.dim
+    msh.topology.create_connectivity(tdim - 1, tdim)
+    f2c = msh.topology.connectivity(tdim - 1, tdim)
+    return np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]]
+
+
+def _fe_stiffness(problem, band: BridgingBand) -> PETSc.Mat:
+    """DOLFINx assembly of ``beta_FE inner(sigma(u), eps(v))`` on FE cells (1) and band cells
+    (``1 - alpha``, alpha a P1 function)."""
+    V, patch = problem.V, problem.patch
+    msh = V.mesh
+    tdim = msh.topology.dim
+    n_owned = msh.topology.index_map(tdim).size_local
+    values = np.where(
+        band.in_band[:n_owned], BAND_TAG, np.where(patch.in_patch[:n_owned], PATCH_TAG, FE_TAG)
+    ).astype(np.int32)
+    tags = dolfinx.mesh.meshtags(msh, tdim, np.arange(n_owned, dtype=np.int32), values)
+    alpha = dolfinx.fem.Function(V)
+    alpha.x.array[:] = 0.0
+    alpha.x.array[0::2] = band.alpha
+    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+    dx = ufl.Measure("dx", domain=msh, subdomain_data=tags)
+    energy = ufl.inner(problem.material.ufl_stress(u), ufl.sym(ufl.grad(v)))
+    a = energy * dx(FE_TAG) + (1.0 - alpha[0]) * energy * dx(BAND_TAG)
+    return _compat.assemble_matrix(_compat.create_form(a))
+
+
+def solve_bridging(problem, solver: str = "mumps"):
+    """Assemble and solve the bridging-domain coupled system of ``problem`` (collective)."""
+    if problem.consistent:
+        raise ValueError(
+            "consistent=True is not available with coupling='bridging': the energy weights of "
+            "the band are not part of the patch's variationally consistent integration"
+        )
+    V, patch, P = problem.V, problem.patch, problem.patch.particles
+    comm = patch.comm
+    msh = V.mesh
+    deg = problem.quadrature_degree
+    n = P.num_particles
+    s = problem.material.E
+    p = problem.penalty
+    pdofs = P.petsc_dofs(2)
+    fe_layout, l2g = problem._fe_layout()
+    pl = Layout(2 * P.layout.size_local, 2 * n, 2 * P.layout.start)
+    t0 = time.perf_counter()
+
+    band = BridgingBand(problem, problem.overlap)
+    dofs = _compat.dofmap_array(V)
+
+    # particle side: Gauss quadrature on the patch cells, weights times alpha in the band
+    q = cell_quadrature(msh, deg, P.cells)
+    w = q.weights.copy()
+    b = band.in_band[q.cells]
+    w[b] *= band.alpha_at(q.points[b], q.cells[b])
+    tq = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(q.points))
+
+    # essential conditions: strongly on FE nodes of FE and band facets, multipliers on patch facets
+    fe_bc, patch_bc = [], []
+    for facets, fn in problem._dirichlet:
+        f_fe, f_p = problem._split(facets)
+        f_fe = np.concatenate([f_fe, f_p[band.in_band[_first_cells(msh, f_p)]]])
+        fe_bc.append((f_fe, fn))
+        patch_bc.append((f_p, fn))
+    dq = [facet_quadrature(msh, f, deg) for f, _ in patch_bc]
+    dtabs = [raise_on_all_ranks(comm, lambda d=d: problem.mls.tabulate(d.points, 0)) for d in dq]
+    ubc = dolfinx.fem.Function(V)
+    ubc.x.array[:] = 0.0
+    is_bc = np.zeros(ubc.x.array.size // 2, dtype=bool)
+    coords = band.coordinates
+    for f, fn in fe_bc:
+        flags = problem._node_flags(dolfinx.fem.locate_dofs_topological(V, msh.topology.dim - 1, f))
+        xn = coords[flags]
+        vals = raise_on_all_ranks(
+            comm, lambda fn=fn, xn=xn: _vector_values(fn, (xn,), len(xn), "dirichlet")
+        )
+        ubc.x.array.reshape(-1, 2)[flags] = vals
+        is_bc |= flags
+    # active FE nodes: nodes of FE cells and band cells
+    fe_nodes = dofs[np.concatenate([patch.fe_cells, band.cells])].ravel()
+    active = problem._node_flags(fe_nodes)
+    fixed_local = is_bc | ~active
+    x_fix = np.where(np.repeat(is_bc, 2), ubc.x.array, 0.0)
+
+    # constraints at the band particles
+    ids, ml = band.numbering(problem)
+    xb = P.positions[band.local_particles]
+    t_fe = tabulate_in_cells(V, xb, band.local_cells, derivatives=0).values
+    t_fe = t_fe.tocsr()
+    t_fe.data[np.abs(t_fe.data) <= 1e-13] = 0.0  # nodes off the particle's edge: round-off
+    t_fe.eliminate_zeros()
+    t_p = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(xb, 0)).values.tocsr()
+    M_fe = (t_fe.T @ t_fe).tocoo()
+    M_p = (t_fe.T @ t_p).tocoo()
+    setup = problem._setup + time.perf_counter() - t0
+
+    t1 = time.perf_counter()
+    Kq = stiffness_matrix(tq.gradients, w, problem.material).tocoo()
+    dof_map = pdofs.ravel()
+    Kp_loc = sp.csr_matrix((Kq.data, (dof_map[Kq.row], dof_map[Kq.col])), shape=(2 * n, 2 * n))
+    keep = ids[M_fe.row] >= 0
+    fe_rows = (ids[M_fe.row[keep]], M_fe.col[keep], M_fe.data[keep])
+    keep = ids[M_p.row] >= 0
+    p_rows = (ids[M_p.row[keep]], M_p.col[keep], M_p.data[keep])
+    G_fe, g_rows, g_vals = _fe_constraint_block(
+        *fe_rows, False, s, fixed_local, ubc, l2g, (ml.size_global, fe_layout.size_global)
+    )
+    G_p = _particle_constraint_block(*p_rows, s, pdofs, (ml.size_global, 2 * n))
+
+    # loads: tractions weighted by beta_FE and beta_P (eq. 49)
+    f_fe_rows, f_fe_vals = [], []
+    f_p = np.zeros(2 * n)
+    for facets, fn in problem._tractions:
+        f_fe_facets, f_p_facets = problem._split(facets)
+        f_fe_facets = np.concatenate(
+            [f_fe_facets, f_p_facets[band.in_band[_first_cells(msh, f_p_facets)]]]
+        )
+        fq = facet_quadrature(msh, f_fe_facets, deg)
+        t = raise_on_all_ranks(
+            comm, lambda fn=fn, fq=fq: _vector_values(fn, (fq.points, fq.normals), len(fq), "t")
+        )
+        beta = np.where(band.in_band[fq.cells], 1.0 - band.alpha_at(fq.points, fq.cells), 1.0)
+        tab = tabulate_in_cells(V, fq.points, fq.cells, derivatives=0).values
+        fl = load_vector(tab, fq.weights * beta, t).reshape(-1, 2)
+        for comp in range(2):
+            f_fe_rows.append(2 * l2g[: fl.shape[0]] + comp)
+            f_fe_vals.append(fl[:, comp])
+        fq = facet_quadrature(msh, f_p_facets, deg)
+        t = raise_on_all_ranks(
+            comm, lambda fn=fn, fq=fq: _vector_values(fn, (fq.points, fq.normals), len(fq), "t")
+        )
+        beta = np.where(band.in_band[fq.cells], band.alpha_at(fq.points, fq.cells), 1.0)
+        tab = raise_on_all_ranks(comm, lambda fq=fq: problem.mls.tabulate(fq.points, 0)).values
+        f_p += load_vector(tab, fq.weights * beta, t)
+    cat = np.concatenate
+
+    # augmented Lagrangian: p G^T G with the pointwise gradients G^FE = N, G^P = -phi (eq. 72-75)
+    fe_dof = (2 * l2g[:, None] + np.arange(2)).ravel()
+    fixed_dof = np.repeat(fixed_local, 2)
+    K_ff = K_fp = K_pf = None
+    if p > 0.0:
+        e2 = sp.identity(2, format="csr")
+        Nf, Np = sp.kron(t_fe, e2).tocsr(), sp.kron(t_p, e2).tocsr()
+        A11 = (p * (Nf.T @ Nf)).tocoo()
+        A12 = (-p * (Nf.T @ Np)).tocoo()
+        A22 = (p * (Np.T @ Np)).tocoo()
+        K_ff = sp.csr_matrix(
+            (A11.data, (fe_dof[A11.row], fe_dof[A11.col])), shape=(fe_layout.size_global,) * 2
+        )
+        Kp_loc = Kp_loc + sp.csr_matrix(
+            (A22.data, (dof_map[A22.row], dof_map[A22.col])), shape=(2 * n, 2 * n)
+        )
+        # FE rows of fixed dofs vanish; their columns move the known values to the particles' rhs
+        keep = ~fixed_dof[A12.row]
+        K_fp = sp.csr_matrix(
+            (A12.data[keep], (fe_dof[A12.row[keep]], dof_map[A12.col[keep]])),
+            shape=(fe_layout.size_global, 2 * n),
+        )
+        K_pf = K_fp.T.tocsr()
+        lift = fixed_dof[A12.row]
+        np.add.at(f_p, A12.col[lift], -A12.data[lift] * x_fix[A12.row[lift]])
+    b_fe = create_vector(
+        comm, fe_layout, cat([*f_fe_rows, np.zeros(0, np.int64)]), cat([*f_fe_vals, []])
+    )
+
+    K_fe = _fe_stiffness(problem, band)
+    mats = [K_fe]
+    if K_ff is not None:
+        K_pen = create_aij(comm, K_ff, fe_layout, fe_layout)
+        K_fe.axpy(1.0, K_pen, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+        mats.append(K_pen)
+    n_owned = V.dofmap.index_map.size_local
+    fixed = np.flatnonzero(fixed_local[:n_owned])
+    rows = (2 * l2g[fixed][:, None] + np.arange(2)).ravel().astype(PETSc.IntType)
+    x_bc = create_vector(comm, fe_layout, rows, x_fix.reshape(-1, 2)[fixed].ravel())
+    K_fe.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+    zero = K_fe.createVecLeft()
+    zero.set(0.0)
+    K_fe.setDiagonal(zero, addv=PETSc.InsertMode.ADD_VALUES)
+    zero.destroy()
+    K_fe.zeroRowsColumns(rows, diag=1.0, x=x_bc, b=b_fe)
+    Kp = create_aij(comm, Kp_loc, pl, pl)
+    b_p = create_vector(comm, pl, pdofs.ravel(), f_p)
+    Gfe = create_aij(comm, G_fe, ml, fe_layout)
+    GfeT = create_aij(comm, G_fe.T.tocsr(), fe_layout, ml)
+    Gp = create_aij(comm, G_p, ml, pl)
+    GpT = create_aij(comm, G_p.T.tocsr(), pl, ml)
+    g = create_vector(comm, ml, cat([*g_rows, np.zeros(0, np.int64)]), cat([*g_vals, []]))
+    Kfp = Kpf = None
+    if K_fp is not None:
+        Kfp = create_aij(comm, K_fp, fe_layout, pl)
+        Kpf = create_aij(comm, K_pf, pl, fe_layout)
+        mats += [Kfp, Kpf]
+    blocks = [[K_fe, Kfp, GfeT], [Kpf, Kp, GpT], [Gfe, Gp, None]]
+    rhs = [b_fe, b_p, g]
+    mats += [Kp, Gfe, GfeT, Gp, GpT]
+    Gd, d_rows, d_vals, dl = facet_multipliers(P, patch_bc, dq, dtabs, s)
+    if dl.size_global:
+        D = create_aij(comm, Gd, dl, pl)
+        DT = create_aij(comm, Gd.T.tocsr(), pl, dl)
+        for row in blocks:
+            row.append(None)
+        blocks[1][3] = DT
+        blocks.append([None, D, None, None])
+        rhs.append(create_vector(comm, dl, d_rows, d_vals))
+        mats += [D, DT]
+    system = BlockSystem(blocks, rhs, num_primal=2)
+    assemble = time.perf_counter() - t1
+
+    t2 = time.perf_counter()
+    parts = system.solve(solver)
+    solve = time.perf_counter() - t2
+    system.destroy()
+    for obj in [*mats, *rhs, x_bc]:
+        obj.destroy()
+    uh = dolfinx.fem.Function(V)
+    uh.x.array[: 2 * n_owned] = parts[0]
+    uh.x.scatter_forward()
+    owned = np.concatenate(comm.allgather(parts[1]))
+    coeffs = owned.reshape(-1, 2)[P.petsc_index]
+    sol = BridgingSolution(
+        u=uh,
+        coefficients=coeffs,
+        mls=problem.mls,
+        patch=patch,
+        timings={"setup": setup, "assemble": assemble, "solve": solve},
+        sizes={
+            "fe_dofs": 2 * comm.allreduce(int(np.sum(active[:n_owned]))),
+            "particle_dofs": 2 * n,
+            "multiplier_dofs": ml.size_global + dl.size_global,
+        },
+    )
+    sol.band = band
+    return sol

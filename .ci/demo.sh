@@ -2,7 +2,7 @@
 # .ci/demo.sh [--lane a|b] [--np N] [extra demo args...]
 #
 # Runs the cantilever demo in one lane (see .ci/lane.sh):
-#   demos/cantilever.py --method fe efg --h 3 1.5 1 0.75 0.5 \
+#   demos/cantilever.py --h 3 1.5 1 0.75 0.5 \
 #       --json out/cantilever.json [extra demo args...]
 # from the repository root, serially, or with --np N > 1 as one MPI job of N
 # ranks under the lane's own launcher. Extra args come after the defaults,
@@ -36,7 +36,7 @@ cd "$REPO_ROOT"
 [[ -f demos/cantilever.py ]] || lane_die "demos/cantilever.py does not exist in $REPO_ROOT"
 mkdir -p out
 
-args=(demos/cantilever.py --method fe efg --h 3 1.5 1 0.75 0.5
+args=(demos/cantilever.py --h 3 1.5 1 0.75 0.5
       --json out/cantilever.json "${extra[@]}")
 if ((np > 1)); then
     set -x

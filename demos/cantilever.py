@@ -5,7 +5,7 @@
 # ``x = 0`` and the parabolic shear traction ``t_y = P/(2I) (D^2/4 - y^2)`` on ``x = L``.
 # Defaults: E = 3e7, nu = 0.3, L = 48, D = 12, P = 1000, plane stress, unit thickness.
 #
-# Methods (the remaining couplings join this demo as they are built):
+# Methods (default: all of them; ``mf.COUPLINGS`` lists the couplings):
 #
 # * ``fe``: Q1 finite elements through DOLFINx, Dirichlet values interpolated at x = 0;
 # * ``efg``: EFG on a particle grid of spacing ``--particle-spacing`` (default ``h``), integrated
@@ -16,7 +16,12 @@
 # * ``edge-to-edge``: the same split, with the multipliers collocated at the interface particles
 #   (continuity exactly at those particles; Rabczuk et al. 2006, sec. 5.4);
 # * ``master-slave``: the same split, the first particle layer rigidly linked to the interface
-#   edges (Rabczuk et al. 2006, sec. 5.1.2); first order, see the self-check.
+#   edges (Rabczuk et al. 2006, sec. 5.1.2); first order, see the self-check;
+# * ``ramp`` / ``ramp-cubic``: interface elements on the FE side with shape functions
+#   (1 - R) N + R phi (Belytschko et al. 1995, sec. 3.2; smoothed ramp of Rabczuk eq. 38–42);
+# * ``bridging``: the patch's first ``--overlap`` cell layers form a band where both
+#   discretisations live with energy weights 1 - alpha and alpha, tied by multipliers on the FE
+#   nodes at the band's particles (Rabczuk et al. 2006, sec. 5.3).
 #
 # For each run the demo prints the relative L2 error (Rabczuk eq. 136) and the relative energy
 # error (Belytschko eq. 5.5) beside the cost split into setup, assembly and solve. JIT
@@ -54,7 +59,7 @@ METHODS = ("fe", "efg", *mf.COUPLINGS)
 # +
 def parse(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__ or "Timoshenko cantilever")
-    p.add_argument("--method", nargs="+", default=["fe", "efg"], choices=METHODS)
+    p.add_argument("--method", nargs="+", default=list(METHODS), choices=METHODS)
     p.add_argument("--h", nargs="+", type=float, default=[1.0], help="FE element size(s)")
     p.add_argument("--particle-spacing", type=float, default=None, help="default: h")
     p.add_argument("--E", type=float, default=3e7)

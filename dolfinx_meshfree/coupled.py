@@ -133,7 +133,11 @@ class CoupledElasticity:
             al. 2006, sec. 5.4) or ``"edge-to-edge"`` (multipliers collocated at the interface
             particles, see :meth:`interface_particles`), ``"ramp"`` or ``"ramp-cubic"``
             (interface elements blending FE and particles with a ramp function, Belytschko et al.
-            1995, sec. 3.2; see :mod:`~dolfinx_meshfree.ramp`).
+            1995, sec. 3.2; see :mod:`~dolfinx_meshfree.ramp`), ``"bridging"`` (overlap band
+            with energy weights and multipliers on the band's FE nodes, Rabczuk et al. 2006,
+            sec. 5.3; see :mod:`~dolfinx_meshfree.bridging`) or ``"master-slave"`` (particles
+            rigidly linked to the FE boundary, Rabczuk et al. 2006, sec. 5.1.2; see
+            :mod:`~dolfinx_meshfree.master_slave`).
         weight, dilation, basis: MLS options of the particle side. The default dilation is
             ``DEFAULT_DILATION[coupling]``: 2.0 (Belytschko et al. 1995), but 2.5 for the ramp
             couplings, whose particle functions must also cover the interface cells up to their

@@ -264,26 +264,9 @@ def solve_bridging(problem, solver: str = "mumps"):
     tq = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(q.points))
 
     # essential conditions: strongly on FE nodes of FE and band facets, multipliers on patch facets
-    fe_bc, patch_bc = [], []
-    for facets, fn in problem._dirichlet:
-        f_fe, f_p = problem._split(facets)
-        f_fe = np.concatenate([f_fe, f_p[band.in_band[_first_cells(msh, f_p)]]])
-        fe_bc.append((f_fe, fn))
-        patch_bc.append((f_p, fn))
-    dq = [facet_quadrature(msh, f, deg) for f, _ in patch_bc]
-    dtabs = [raise_on_all_ranks(comm, lambda d=d: problem.mls.tabulate(d.points, 0)) for d in dq]
-    ubc = dolfinx.fem.Function(V)
-    ubc.x.array[:] = 0.0
-    is_bc = np.zeros(ubc.x.array.size // 2, dtype=bool)
-    coords = band.coordinates
-    for f, fn in fe_bc:
-        flags = problem._node_flags(dolfinx.fem.locate_dofs_topological(V, msh.topology.dim - 1, f))
-        xn = coords[flags]
-        vals = raise_on_all_ranks(
-            comm, lambda fn=fn, xn=xn: _vector_values(fn, (xn,), len(xn), "dirichlet")
-        )
-        ubc.x.array.reshape(-1, 2)[flags] = vals
-        is_bc |= flags
+    _, patch_bc, dq, dtabs, ubc, is_bc = problem._essential_conditions(
+        lambda f_p: f_p[band.in_band[_first_cells(msh, f_p)]]
+    )
     # active FE nodes: nodes of FE cells and band cells
     fe_nodes = dofs[np.concatenate([patch.fe_cells, band.cells])].ravel()
     active = problem._node_flags(fe_nodes)

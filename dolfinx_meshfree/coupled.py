@@ -312,6 +312,47 @@ class CoupledElasticity:
         ml = Layout(2 * layout.size_local, 2 * layout.size_global, 2 * layout.start)
         return (fe_rows, p_rows), ml
 
+    def _essential_conditions(self, also_strong=None) -> tuple:
+        """Split the essential conditions: strong on FE facets, multipliers on patch facets.
+
+        Args:
+            also_strong: Optional ``also_strong(patch_facets) -> facets`` naming patch facets whose
+                FE nodes are fixed strongly as well (the bridging band, where FE also lives).
+
+        Returns:
+            ``(fe_bc, patch_bc, quadratures, tables, ubc, is_bc)``: the ``(facets, value)`` pairs
+            on FE facets (strong) and on patch facets, the patch facets' quadratures and particle
+            tables (for :func:`~dolfinx_meshfree.efg.facet_multipliers`), the FE values as a
+            Function and the flag of every local FE node fixed strongly (collective).
+        """
+        V, comm = self.V, self.patch.comm
+        msh = V.mesh
+        deg = self.quadrature_degree
+        fe_bc, patch_bc = [], []
+        for facets, fn in self._dirichlet:
+            f_fe, f_p = self._split(facets)
+            if also_strong is not None:
+                f_fe = np.concatenate([f_fe, also_strong(f_p)])
+            fe_bc.append((f_fe, fn))
+            patch_bc.append((f_p, fn))
+        dq = [facet_quadrature(msh, f, deg) for f, _ in patch_bc]
+        dtabs = [raise_on_all_ranks(comm, lambda d=d: self.mls.tabulate(d.points, 0)) for d in dq]
+        ubc = dolfinx.fem.Function(V)
+        ubc.x.array[:] = 0.0
+        is_bc = np.zeros(ubc.x.array.size // 2, dtype=bool)
+        coords = V.tabulate_dof_coordinates()[:, :2]
+        for f, fn in fe_bc:
+            flags = self._node_flags(
+                dolfinx.fem.locate_dofs_topological(V, msh.topology.dim - 1, f)
+            )
+            xn = coords[flags]
+            vals = raise_on_all_ranks(
+                comm, lambda fn=fn, xn=xn: _vector_values(fn, (xn,), len(xn), "dirichlet")
+            )
+            ubc.x.array.reshape(-1, 2)[flags] = vals
+            is_bc |= flags
+        return fe_bc, patch_bc, dq, dtabs, ubc, is_bc
+
     # -- solve ----------------------------------------------------------------------------------
 
     def solve(self, solver: str = "mumps") -> CoupledSolution:
@@ -352,26 +393,7 @@ class CoupledElasticity:
         Kp_loc, _, _, kt = particle_stiffness(P, self.mls, self.material, deg, boundary)
 
         # essential conditions: FE side strongly, patch side by multipliers
-        fe_bc, patch_bc = [], []
-        for facets, fn in self._dirichlet:
-            f_fe, f_p = self._split(facets)
-            fe_bc.append((f_fe, fn))
-            patch_bc.append((f_p, fn))
-        dq = [facet_quadrature(msh, f, deg) for f, _ in patch_bc]
-        dtabs = [raise_on_all_ranks(comm, lambda d=d: self.mls.tabulate(d.points, 0)) for d in dq]
-        ubc = dolfinx.fem.Function(V)
-        is_bc = np.zeros(ubc.x.array.size // 2, dtype=bool)
-        coords = V.tabulate_dof_coordinates()[:, :2]
-        for f, fn in fe_bc:
-            flags = self._node_flags(
-                dolfinx.fem.locate_dofs_topological(V, msh.topology.dim - 1, f)
-            )
-            xn = coords[flags]
-            vals = raise_on_all_ranks(
-                comm, lambda fn=fn, xn=xn: _vector_values(fn, (xn,), len(xn), "dirichlet")
-            )
-            ubc.x.array.reshape(-1, 2)[flags] = vals
-            is_bc |= flags
+        _, patch_bc, dq, dtabs, ubc, is_bc = self._essential_conditions()
         # FE nodes that no FE cell supports
         fe_nodes = _compat.dofmap_array(V)[patch.fe_cells].ravel()
         active = self._node_flags(fe_nodes)

@@ -274,24 +274,7 @@ def solve_ramp(problem, solver: str = "mumps"):
 
     # essential conditions: FE nodes strongly; patch facets and the particle part of interface
     # cells' facets by multipliers
-    fe_bc, patch_bc = [], []
-    for facets, fn in problem._dirichlet:
-        f_fe, f_p = problem._split(facets)
-        fe_bc.append((f_fe, fn))
-        patch_bc.append((f_p, fn))
-    dq = [facet_quadrature(msh, f, deg) for f, _ in patch_bc]
-    dtabs = [raise_on_all_ranks(comm, lambda d=d: problem.mls.tabulate(d.points, 0)) for d in dq]
-    ubc = dolfinx.fem.Function(V)
-    is_bc = np.zeros(ubc.x.array.size // 2, dtype=bool)
-    coords = V.tabulate_dof_coordinates()[:, :2]
-    for f, fn in fe_bc:
-        flags = problem._node_flags(dolfinx.fem.locate_dofs_topological(V, msh.topology.dim - 1, f))
-        xn = coords[flags]
-        vals = raise_on_all_ranks(
-            comm, lambda fn=fn, xn=xn: _vector_values(fn, (xn,), len(xn), "dirichlet")
-        )
-        ubc.x.array.reshape(-1, 2)[flags] = vals
-        is_bc |= flags
+    fe_bc, patch_bc, dq, dtabs, ubc, is_bc = problem._essential_conditions()
     u_bc = ubc.x.array.reshape(-1, 2)
     for f, fn in fe_bc:
         f_i = f[blend.in_interface[_first_cells(msh, f)]]

@@ -353,6 +353,61 @@ class CoupledElasticity:
             is_bc |= flags
         return fe_bc, patch_bc, dq, dtabs, ubc, is_bc
 
+    def _fix_fe_rows(self, K_fe, b_fe, fixed_local: np.ndarray, values: np.ndarray):
+        """Fix FE dofs: zero their rows and columns of ``K_fe`` with 1 on the diagonal and lift the
+        values into ``b_fe`` (``MatZeroRowsColumns``). Collective.
+
+        Args:
+            fixed_local: bool per local node (owned and ghost) to fix.
+            values: (num local nodes, 2) values of the fixed nodes (others ignored).
+
+        Returns:
+            The PETSc vector of fixed values (the caller destroys it).
+        """
+        fe_layout, l2g = self._fe_layout()
+        n_owned = self.V.dofmap.index_map.size_local
+        fixed = np.flatnonzero(fixed_local[:n_owned])
+        rows = (2 * l2g[fixed][:, None] + np.arange(2)).ravel().astype(PETSc.IntType)
+        x_bc = create_vector(
+            self.patch.comm, fe_layout, rows, np.asarray(values).reshape(-1, 2)[fixed].ravel()
+        )
+        # rows of dofs that no FE cell supports are empty, diagonal included: add it
+        K_fe.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        zero = K_fe.createVecLeft()
+        zero.set(0.0)
+        K_fe.setDiagonal(zero, addv=PETSc.InsertMode.ADD_VALUES)
+        zero.destroy()
+        K_fe.zeroRowsColumns(rows, diag=1.0, x=x_bc, b=b_fe)
+        return x_bc
+
+    def _traction_loads(self) -> tuple[PETSc.Vec, np.ndarray]:
+        """Tractions on FE facets (FE load vector, PETSc) and on patch facets (particle loads in
+        original particle order, local contributions). Collective."""
+        V, comm = self.V, self.patch.comm
+        msh, deg = V.mesh, self.quadrature_degree
+        fe_layout, l2g = self._fe_layout()
+        f_fe_rows, f_fe_vals = [np.zeros(0, np.int64)], [np.zeros(0)]
+        f_p = np.zeros(2 * self.patch.particles.num_particles)
+        for facets, fn in self._tractions:
+            f_fe_facets, f_p_facets = self._split(facets)
+            q = facet_quadrature(msh, f_fe_facets, deg)
+            t = raise_on_all_ranks(
+                comm, lambda fn=fn, q=q: _vector_values(fn, (q.points, q.normals), len(q), "t")
+            )
+            tab = tabulate_in_cells(V, q.points, q.cells, derivatives=0).values
+            fl = load_vector(tab, q.weights, t).reshape(-1, 2)
+            for comp in range(2):
+                f_fe_rows.append(2 * l2g[: fl.shape[0]] + comp)
+                f_fe_vals.append(fl[:, comp])
+            q = facet_quadrature(msh, f_p_facets, deg)
+            t = raise_on_all_ranks(
+                comm, lambda fn=fn, q=q: _vector_values(fn, (q.points, q.normals), len(q), "t")
+            )
+            tab = raise_on_all_ranks(comm, lambda q=q: self.mls.tabulate(q.points, 0)).values
+            f_p += load_vector(tab, q.weights, t)
+        b_fe = create_vector(comm, fe_layout, np.concatenate(f_fe_rows), np.concatenate(f_fe_vals))
+        return b_fe, f_p
+
     # -- solve ----------------------------------------------------------------------------------
 
     def solve(self, solver: str = "mumps") -> CoupledSolution:
@@ -426,47 +481,13 @@ class CoupledElasticity:
         )
         G_p = _particle_constraint_block(*p_rows, s, pdofs, (ml.size_global, 2 * n))
 
-        # loads
-        f_fe_rows, f_fe_vals = [], []
-        f_p = np.zeros(2 * n)
-        for facets, fn in self._tractions:
-            f_fe_facets, f_p_facets = self._split(facets)
-            q = facet_quadrature(msh, f_fe_facets, deg)
-            t = raise_on_all_ranks(
-                comm, lambda fn=fn, q=q: _vector_values(fn, (q.points, q.normals), len(q), "t")
-            )
-            tab = tabulate_in_cells(V, q.points, q.cells, derivatives=0).values
-            fl = load_vector(tab, q.weights, t).reshape(-1, 2)
-            for comp in range(2):
-                f_fe_rows.append(2 * l2g[: fl.shape[0]] + comp)
-                f_fe_vals.append(fl[:, comp])
-            q = facet_quadrature(msh, f_p_facets, deg)
-            t = raise_on_all_ranks(
-                comm, lambda fn=fn, q=q: _vector_values(fn, (q.points, q.normals), len(q), "t")
-            )
-            tab = raise_on_all_ranks(comm, lambda q=q: self.mls.tabulate(q.points, 0)).values
-            f_p += load_vector(tab, q.weights, t)
+        b_fe, f_p = self._traction_loads()
         cat = np.concatenate
-        b_fe = create_vector(
-            comm, fe_layout, cat([*f_fe_rows, np.zeros(0, np.int64)]), cat([*f_fe_vals, []])
-        )
         # strong conditions and inactive dofs on K_FE: zero rows and columns, lift into b_fe
         n_owned = V.dofmap.index_map.size_local
-        fixed = np.flatnonzero(is_bc[:n_owned] | ~active[:n_owned])
-        rows = (2 * l2g[fixed][:, None] + np.arange(2)).ravel().astype(PETSc.IntType)
-        x_bc = create_vector(
-            comm,
-            fe_layout,
-            rows,
-            np.where(np.repeat(is_bc[fixed], 2), ubc.x.array.reshape(-1, 2)[fixed].ravel(), 0.0),
+        x_bc = self._fix_fe_rows(
+            K_fe, b_fe, is_bc | ~active, np.where(is_bc[:, None], ubc.x.array.reshape(-1, 2), 0.0)
         )
-        # rows of dofs that no FE cell supports are empty, diagonal included: add it
-        K_fe.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
-        zero = K_fe.createVecLeft()
-        zero.set(0.0)
-        K_fe.setDiagonal(zero, addv=PETSc.InsertMode.ADD_VALUES)
-        zero.destroy()
-        K_fe.zeroRowsColumns(rows, diag=1.0, x=x_bc, b=b_fe)
         Kp = create_aij(comm, Kp_loc, pl, pl)
         b_p = create_vector(comm, pl, pdofs.ravel(), f_p)
         Gfe = create_aij(comm, G_fe, ml, fe_layout)

@@ -60,12 +60,9 @@ from petsc4py import PETSc
 from scipy.spatial import cKDTree
 
 from . import _compat
-from .efg import _vector_values, facet_multipliers, particle_stiffness
-from .fe_points import tabulate_in_cells
-from .operators import load_vector
+from .efg import facet_multipliers, particle_stiffness
 from .parallel import Layout, raise_on_all_ranks
 from .petsc import BlockSystem, create_aij, create_vector
-from .quadrature import facet_quadrature
 
 __all__ = ["SLAVE_LAYER", "MasterSlaveLinks", "solve_master_slave"]
 
@@ -184,12 +181,11 @@ def solve_master_slave(problem, solver: str = "mumps"):
 
     V, patch, P = problem.V, problem.patch, problem.patch.particles
     comm = patch.comm
-    msh = V.mesh
     deg = problem.quadrature_degree
     n = P.num_particles
     s = problem.material.E
     pdofs = P.petsc_dofs(2)
-    fe_layout, l2g = problem._fe_layout()
+    fe_layout, _ = problem._fe_layout()
     pl = Layout(2 * P.layout.size_local, 2 * n, 2 * P.layout.start)
     t0 = time.perf_counter()
 
@@ -237,47 +233,13 @@ def solve_master_slave(problem, solver: str = "mumps"):
     setup = problem._setup + time.perf_counter() - t0 - kt["assemble"]
 
     t1 = time.perf_counter()
-    # loads (as in the compatibility coupling)
-    f_fe_rows, f_fe_vals = [], []
-    f_p = np.zeros(2 * n)
-    for facets, fn in problem._tractions:
-        f_fe_facets, f_p_facets = problem._split(facets)
-        q = facet_quadrature(msh, f_fe_facets, deg)
-        t = raise_on_all_ranks(
-            comm, lambda fn=fn, q=q: _vector_values(fn, (q.points, q.normals), len(q), "t")
-        )
-        tab = tabulate_in_cells(V, q.points, q.cells, derivatives=0).values
-        fl = load_vector(tab, q.weights, t).reshape(-1, 2)
-        for comp in range(2):
-            f_fe_rows.append(2 * l2g[: fl.shape[0]] + comp)
-            f_fe_vals.append(fl[:, comp])
-        q = facet_quadrature(msh, f_p_facets, deg)
-        t = raise_on_all_ranks(
-            comm, lambda fn=fn, q=q: _vector_values(fn, (q.points, q.normals), len(q), "t")
-        )
-        tab = raise_on_all_ranks(comm, lambda q=q: problem.mls.tabulate(q.points, 0)).values
-        f_p += load_vector(tab, q.weights, t)
-    cat = np.concatenate
-    b_fe = create_vector(
-        comm, fe_layout, cat([*f_fe_rows, np.zeros(0, np.int64)]), cat([*f_fe_vals, []])
-    )
+    b_fe, f_p = problem._traction_loads()
     # K_FE with strong conditions and inactive dofs (zero rows and columns, lifted into b_fe)
     K_fe = problem._fe_stiffness()
     n_owned = V.dofmap.index_map.size_local
-    fixed = np.flatnonzero(is_bc[:n_owned] | ~active[:n_owned])
-    rows = (2 * l2g[fixed][:, None] + np.arange(2)).ravel().astype(PETSc.IntType)
-    x_bc = create_vector(
-        comm,
-        fe_layout,
-        rows,
-        np.where(np.repeat(is_bc[fixed], 2), ubc.x.array.reshape(-1, 2)[fixed].ravel(), 0.0),
+    x_bc = problem._fix_fe_rows(
+        K_fe, b_fe, is_bc | ~active, np.where(is_bc[:, None], ubc.x.array.reshape(-1, 2), 0.0)
     )
-    K_fe.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
-    zero = K_fe.createVecLeft()
-    zero.set(0.0)
-    K_fe.setDiagonal(zero, addv=PETSc.InsertMode.ADD_VALUES)
-    zero.destroy()
-    K_fe.zeroRowsColumns(rows, diag=1.0, x=x_bc, b=b_fe)
 
     Kp = create_aij(comm, Kp_loc, pl, pl)
     Tpf = create_aij(comm, T_pf, pl, fe_layout)

@@ -49,12 +49,12 @@ from petsc4py import PETSc
 
 from . import _compat
 from .coupled import CoupledSolution, _fe_constraint_block, _particle_constraint_block
-from .efg import _vector_values, facet_multipliers
+from .efg import _vector_values
 from .fe_points import locate_points, tabulate_in_cells
 from .operators import load_vector, stiffness_matrix
 from .parallel import Layout, raise_on_all_ranks
 from .patch import FE_TAG, PATCH_TAG
-from .petsc import BlockSystem, create_aij, create_vector
+from .petsc import create_aij, create_vector
 from .quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
 
 __all__ = ["BAND_TAG", "BridgingBand", "BridgingSolution", "check_options"]
@@ -377,30 +377,9 @@ def solve_bridging(problem, solver: str = "mumps"):
     blocks = [[K_fe, Kfp, GfeT], [Kpf, Kp, GpT], [Gfe, Gp, None]]
     rhs = [b_fe, b_p, g]
     mats += [Kp, Gfe, GfeT, Gp, GpT]
-    Gd, d_rows, d_vals, dl = facet_multipliers(P, patch_bc, dq, dtabs, s)
-    if dl.size_global:
-        D = create_aij(comm, Gd, dl, pl)
-        DT = create_aij(comm, Gd.T.tocsr(), pl, dl)
-        for row in blocks:
-            row.append(None)
-        blocks[1][3] = DT
-        blocks.append([None, D, None, None])
-        rhs.append(create_vector(comm, dl, d_rows, d_vals))
-        mats += [D, DT]
-    system = BlockSystem(blocks, rhs, num_primal=2)
+    dl = problem._append_patch_conditions(blocks, rhs, mats, patch_bc, dq, dtabs)
     assemble = time.perf_counter() - t1
-
-    t2 = time.perf_counter()
-    parts = system.solve(solver)
-    solve = time.perf_counter() - t2
-    system.destroy()
-    for obj in [*mats, *rhs, x_bc]:
-        obj.destroy()
-    uh = dolfinx.fem.Function(V)
-    uh.x.array[: 2 * n_owned] = parts[0]
-    uh.x.scatter_forward()
-    owned = np.concatenate(comm.allgather(parts[1]))
-    coeffs = owned.reshape(-1, 2)[P.petsc_index]
+    uh, coeffs, solve = problem._solve_and_gather(blocks, rhs, [*mats, x_bc], solver)
     sol = BridgingSolution(
         u=uh,
         coefficients=coeffs,

@@ -408,6 +408,41 @@ class CoupledElasticity:
         b_fe = create_vector(comm, fe_layout, np.concatenate(f_fe_rows), np.concatenate(f_fe_vals))
         return b_fe, f_p
 
+    def _append_patch_conditions(self, blocks, rhs, mats, patch_bc, dq, dtabs) -> Layout:
+        """Append the multiplier field of essential conditions on patch facets (it couples to
+        field 1, the particles) to ``blocks``/``rhs``; new PETSc objects go to ``mats``."""
+        P, comm = self.patch.particles, self.patch.comm
+        pl = Layout(2 * P.layout.size_local, 2 * P.num_particles, 2 * P.layout.start)
+        Gd, d_rows, d_vals, dl = facet_multipliers(P, patch_bc, dq, dtabs, self.material.E)
+        if dl.size_global:
+            D = create_aij(comm, Gd, dl, pl)
+            DT = create_aij(comm, Gd.T.tocsr(), pl, dl)
+            for row in blocks:
+                row.append(None)
+            blocks[1][-1] = DT
+            blocks.append([None, D] + [None] * (len(blocks) - 1))
+            rhs.append(create_vector(comm, dl, d_rows, d_vals))
+            mats += [D, DT]
+        return dl
+
+    def _solve_and_gather(self, blocks, rhs, objects, solver: str):
+        """Solve the nest (fields FE, particles, multipliers...), destroy ``objects`` and ``rhs``,
+        and return the FE Function, the particle coefficients (n, 2) in original order and the
+        solve time. Collective."""
+        V, P, comm = self.V, self.patch.particles, self.patch.comm
+        system = BlockSystem(blocks, rhs, num_primal=2)
+        t0 = time.perf_counter()
+        parts = system.solve(solver)
+        seconds = time.perf_counter() - t0
+        system.destroy()
+        for obj in [*objects, *rhs]:
+            obj.destroy()
+        uh = dolfinx.fem.Function(V)
+        uh.x.array[: 2 * V.dofmap.index_map.size_local] = parts[0]
+        uh.x.scatter_forward()
+        owned = np.concatenate(comm.allgather(parts[1]))
+        return uh, owned.reshape(-1, 2)[P.petsc_index], seconds
+
     # -- solve ----------------------------------------------------------------------------------
 
     def solve(self, solver: str = "mumps") -> CoupledSolution:
@@ -498,30 +533,9 @@ class CoupledElasticity:
         blocks = [[K_fe, None, GfeT], [None, Kp, GpT], [Gfe, Gp, None]]
         rhs = [b_fe, b_p, g]
         mats = [K_fe, Kp, Gfe, GfeT, Gp, GpT]
-        Gd, d_rows, d_vals, dl = facet_multipliers(P, patch_bc, dq, dtabs, s)
-        if dl.size_global:
-            D = create_aij(comm, Gd, dl, pl)
-            DT = create_aij(comm, Gd.T.tocsr(), pl, dl)
-            for row in blocks:
-                row.append(None)
-            blocks[1][3] = DT
-            blocks.append([None, D, None, None])
-            rhs.append(create_vector(comm, dl, d_rows, d_vals))
-            mats += [D, DT]
-        system = BlockSystem(blocks, rhs, num_primal=2)
+        dl = self._append_patch_conditions(blocks, rhs, mats, patch_bc, dq, dtabs)
         assemble = time.perf_counter() - t1 + kt["assemble"]
-
-        t2 = time.perf_counter()
-        parts = system.solve(solver)
-        solve = time.perf_counter() - t2
-        system.destroy()
-        for obj in [*mats, *rhs, x_bc]:
-            obj.destroy()
-        uh = dolfinx.fem.Function(V)
-        uh.x.array[: 2 * n_owned] = parts[0]
-        uh.x.scatter_forward()
-        owned = np.concatenate(comm.allgather(parts[1]))
-        coeffs = owned.reshape(-1, 2)[P.petsc_index]
+        uh, coeffs, solve = self._solve_and_gather(blocks, rhs, [*mats, x_bc], solver)
         return CoupledSolution(
             u=uh,
             coefficients=coeffs,

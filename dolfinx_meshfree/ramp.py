@@ -47,13 +47,13 @@ from petsc4py import PETSc
 from scipy.spatial import cKDTree
 
 from . import _compat
-from .efg import _vector_values, facet_multipliers, particle_stiffness
+from .efg import _vector_values, particle_stiffness
 from .fe_points import tabulate_in_cells
 from .mls import MLS
 from .operators import load_vector, stiffness_matrix
 from .parallel import Layout, raise_on_all_ranks
 from .patch import FE_TAG, PATCH_TAG
-from .petsc import BlockSystem, create_aij, create_vector
+from .petsc import create_aij, create_vector
 from .quadrature import cell_quadrature, facet_quadrature
 from .tables import ShapeTable
 
@@ -261,7 +261,6 @@ def solve_ramp(problem, solver: str = "mumps"):
     msh = V.mesh
     deg = problem.quadrature_degree
     n = P.num_particles
-    s = problem.material.E
     pdofs = P.petsc_dofs(2)
     fe_layout, l2g = problem._fe_layout()
     pl = Layout(2 * P.layout.size_local, 2 * n, 2 * P.layout.start)
@@ -381,27 +380,9 @@ def solve_ramp(problem, solver: str = "mumps"):
     blocks = [[K_fe, Kfp], [Kpf, Kp]]
     rhs = [b_fe, b_p]
     mats = [K_fe, K_int, Kp, Kfp, Kpf]
-    Gd, d_rows, d_vals, dl = facet_multipliers(P, patch_bc, dq, dtabs, s)
-    if dl.size_global:
-        D = create_aij(comm, Gd, dl, pl)
-        DT = create_aij(comm, Gd.T.tocsr(), pl, dl)
-        blocks = [[K_fe, Kfp, None], [Kpf, Kp, DT], [None, D, None]]
-        rhs.append(create_vector(comm, dl, d_rows, d_vals))
-        mats += [D, DT]
-    system = BlockSystem(blocks, rhs, num_primal=2)
+    dl = problem._append_patch_conditions(blocks, rhs, mats, patch_bc, dq, dtabs)
     assemble = time.perf_counter() - t1 + kt["assemble"]
-
-    t2 = time.perf_counter()
-    parts = system.solve(solver)
-    solve = time.perf_counter() - t2
-    system.destroy()
-    for obj in [*mats, *rhs, x_bc]:
-        obj.destroy()
-    uh = dolfinx.fem.Function(V)
-    uh.x.array[: 2 * n_owned] = parts[0]
-    uh.x.scatter_forward()
-    owned = np.concatenate(comm.allgather(parts[1]))
-    coeffs = owned.reshape(-1, 2)[P.petsc_index]
+    uh, coeffs, solve = problem._solve_and_gather(blocks, rhs, [*mats, x_bc], solver)
     return CoupledSolution(
         u=uh,
         coefficients=coeffs,

@@ -36,7 +36,10 @@ __all__ = [
     "basix_lagrange_p1",
     "bb_tree",
     "colliding_cells",
+    "create_expression",
     "create_form",
+    "dirichlet_values",
+    "eval_expression",
     "dofmap_array",
     "entities_to_geometry",
     "function_petsc_vec",
@@ -184,3 +187,31 @@ def scatter_reverse_add(u: _fem.Function) -> None:
 def function_petsc_vec(u: _fem.Function):
     """The PETSc vector that wraps the owned and ghost values of ``u``."""
     return u.x.petsc_vec if MODERN else u.vector
+
+
+def create_expression(expr, points: _np.ndarray):
+    """JIT-compile a UFL expression at reference points ``points`` (k, tdim) (collective)."""
+    return _fem.Expression(expr, _np.ascontiguousarray(points, dtype=_np.float64))
+
+
+def eval_expression(expr, msh: _mesh.Mesh, cells: _np.ndarray, value_size: int) -> _np.ndarray:
+    """Values of a compiled expression on local ``cells``, shape (num_cells, k, value_size)."""
+    cells = _np.ascontiguousarray(cells, dtype=_np.int32)
+    if cells.size == 0:
+        return _np.zeros((0, _np.asarray(expr.X()).shape[0], value_size))
+    values = expr.eval(msh, cells) if MODERN else expr.eval(cells)
+    return _np.asarray(values).reshape(cells.size, -1, value_size)
+
+
+def dirichlet_values(bc) -> tuple[_np.ndarray, _np.ndarray]:
+    """Local dofs (owned and ghost, unrolled by block) of a DirichletBC and its values there.
+
+    The value is the bc's ``Function`` (read at those dofs of its own space) or ``Constant``
+    (broadcast by component: dof ``d`` gets ``value[d % value_size]``).
+    """
+    dofs = _np.asarray(bc.dof_indices()[0], dtype=_np.int64)
+    g = bc.g
+    if hasattr(g, "x"):
+        return dofs, _np.asarray(g.x.array)[dofs]
+    value = _np.atleast_1d(_np.asarray(g.value, dtype=float)).ravel()
+    return dofs, value[dofs % value.size]

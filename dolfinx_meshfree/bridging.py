@@ -24,9 +24,10 @@ i.e. ``sum_L lambda(x_L) (u_FE(x_L) - u_P(x_L)) = 0`` for every multiplier field
 augmented-Lagrangian penalty ``p`` (eq. 54, 72–75) adds ``p G^T G`` to the displacement blocks,
 with the pointwise constraint gradients ``G^FE = [N_a(x_L)]``, ``G^P = [-phi_J(x_L)]`` (eq. 81).
 
-Assembly: ``K_FE`` is DOLFINx's assembly of ``beta_FE inner(sigma(u), eps(v))``, ``dx`` restricted
-by cell tags (FE cells weight 1, band cells :data:`BAND_TAG` weight ``1 - alpha`` with ``alpha`` a
-P1 function); ``K_P`` is the EFG stiffness by Gauss quadrature on all patch cells with the
+Assembly: ``K_FE`` is DOLFINx's assembly of the FE form (the material's, or the user's form of a
+:class:`~dolfinx_meshfree.CoupledLinearProblem`) weighted by ``beta_FE``: 1 on FE cells,
+``1 - alpha`` on band cells with ``alpha`` a P1 function (DG0 indicators select the cells);
+``K_P`` is the EFG stiffness by Gauss quadrature on all patch cells with the
 weights multiplied by ``alpha`` in the band. Tractions are weighted the same way (eq. 49).
 Essential conditions: strongly on FE nodes of Dirichlet facets of FE and band cells, by
 piecewise-constant facet multipliers on the particles of Dirichlet facets of patch cells (band
@@ -43,7 +44,6 @@ import time
 import dolfinx
 import numpy as np
 import scipy.sparse as sp
-import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -53,14 +53,10 @@ from .efg import _vector_values
 from .fe_points import locate_points, tabulate_in_cells
 from .operators import load_vector, stiffness_matrix
 from .parallel import Layout, raise_on_all_ranks
-from .patch import FE_TAG, PATCH_TAG
 from .petsc import create_aij, create_vector
 from .quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
 
-__all__ = ["BAND_TAG", "BridgingBand", "BridgingSolution", "check_options"]
-
-#: Cell tag of the band (overlap) cells in the FE form.
-BAND_TAG = 4
+__all__ = ["BridgingBand", "BridgingSolution", "check_options"]
 
 
 def check_options(overlap, penalty) -> tuple[int, float]:
@@ -214,24 +210,15 @@ def _first_cells(msh, facets: np.ndarray) -> np.ndarray:
 
 
 def _fe_stiffness(problem, band: BridgingBand) -> PETSc.Mat:
-    """DOLFINx assembly of ``beta_FE inner(sigma(u), eps(v))`` on FE cells (1) and band cells
-    (``1 - alpha``, alpha a P1 function)."""
+    """DOLFINx assembly of the FE form weighted by ``beta_FE`` (eq. 47-48): 1 on FE cells,
+    ``1 - alpha`` on band cells (alpha a P1 function), 0 on the rest of the patch."""
     V, patch = problem.V, problem.patch
-    msh = V.mesh
-    tdim = msh.topology.dim
-    n_owned = msh.topology.index_map(tdim).size_local
-    values = np.where(
-        band.in_band[:n_owned], BAND_TAG, np.where(patch.in_patch[:n_owned], PATCH_TAG, FE_TAG)
-    ).astype(np.int32)
-    tags = dolfinx.mesh.meshtags(msh, tdim, np.arange(n_owned, dtype=np.int32), values)
+    fe = problem.cell_indicator(~patch.in_patch & ~band.in_band)
+    in_band = problem.cell_indicator(band.in_band)
     alpha = dolfinx.fem.Function(V)
     alpha.x.array[:] = 0.0
     alpha.x.array[0::2] = band.alpha
-    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
-    dx = ufl.Measure("dx", domain=msh, subdomain_data=tags)
-    energy = ufl.inner(problem.material.ufl_stress(u), ufl.sym(ufl.grad(v)))
-    a = energy * dx(FE_TAG) + (1.0 - alpha[0]) * energy * dx(BAND_TAG)
-    return _compat.assemble_matrix(_compat.create_form(a))
+    return problem._fe_stiffness(fe + in_band * (1.0 - alpha[0]))
 
 
 def solve_bridging(problem, solver: str = "mumps"):

@@ -49,7 +49,7 @@ from .materials import LinearElastic
 from .mls import MLS
 from .operators import load_vector
 from .parallel import Layout, raise_on_all_ranks
-from .patch import FE_TAG, ParticlePatch
+from .patch import ParticlePatch
 from .petsc import BlockSystem, create_aij, create_vector
 from .quadrature import QuadraturePoints, facet_quadrature
 
@@ -190,6 +190,14 @@ class CoupledElasticity:
         )
         self._dirichlet: list[tuple[np.ndarray, VectorFunction]] = []
         self._tractions: list[tuple[np.ndarray, Callable]] = []
+        #: The user's bilinear form (set by :class:`~dolfinx_meshfree.CoupledLinearProblem`);
+        #: ``None``: the elasticity form of :attr:`material`.
+        self.form: ufl.Form | None = None
+        # set by CoupledLinearProblem: strong conditions by node (flags, values), an FE load form
+        # (already weighted to the FE cells) and particle loads (original order)
+        self._strong: list[tuple[np.ndarray, np.ndarray]] = []
+        self._fe_load_form = None
+        self._particle_loads: np.ndarray | None = None
         self._setup = time.perf_counter() - t0
 
     def add_dirichlet(self, facets: np.ndarray, value: VectorFunction) -> None:
@@ -218,12 +226,43 @@ class CoupledElasticity:
         )
         return Layout(2 * imap.size_local, 2 * imap.size_global, 2 * imap.local_range[0]), l2g
 
-    def _fe_stiffness(self) -> PETSc.Mat:
-        V = self.V
-        u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
-        dx = ufl.Measure("dx", domain=V.mesh, subdomain_data=self.patch.cell_tags)
-        a = ufl.inner(self.material.ufl_stress(u), ufl.sym(ufl.grad(v))) * dx(FE_TAG)
-        return _compat.assemble_matrix(_compat.create_form(a))
+    def cell_indicator(self, owned_flags: np.ndarray) -> dolfinx.fem.Function:
+        """DG0 Function equal to 1 on the owned cells flagged in ``owned_flags`` (and on their
+        ghost copies), 0 elsewhere (collective)."""
+        msh = self.V.mesh
+        Q = _compat.scalar_function_space(msh, "DG", 0)
+        chi = dolfinx.fem.Function(Q)
+        dof_of_cell = _compat.dofmap_array(Q)[:, 0]
+        n_owned = msh.topology.index_map(msh.topology.dim).size_local
+        chi.x.array[:] = 0.0
+        chi.x.array[dof_of_cell[:n_owned]] = np.asarray(owned_flags[:n_owned], dtype=float)
+        chi.x.scatter_forward()
+        return chi
+
+    def fe_form(self, weight) -> ufl.Form:
+        """The FE bilinear form weighted by ``weight`` (a scalar UFL expression: a cell indicator,
+        or the bridging energy weight ``1 - alpha``).
+
+        Without a user form (:class:`~dolfinx_meshfree.CoupledLinearProblem` sets
+        :attr:`form`), it is ``weight inner(sigma(u), eps(v)) dx`` of :attr:`material`;
+        with one, every cell integral of the user's form is multiplied by ``weight``, so that the
+        user's own measures, subdomain data and metadata are kept.
+        """
+        if self.form is None:
+            V = self.V
+            u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+            dx = ufl.Measure("dx", domain=V.mesh)
+            return weight * ufl.inner(self.material.ufl_stress(u), ufl.sym(ufl.grad(v))) * dx
+        return ufl.Form(
+            [itg.reconstruct(integrand=weight * itg.integrand()) for itg in self.form.integrals()]
+        )
+
+    def _fe_stiffness(self, weight=None) -> PETSc.Mat:
+        """DOLFINx assembly of :meth:`fe_form` with ``weight`` (default: 1 on the FE cells, 0 on
+        the patch)."""
+        if weight is None:
+            weight = self.cell_indicator(~self.patch.in_patch)
+        return _compat.assemble_matrix(_compat.create_form(self.fe_form(weight)))
 
     def _node_flags(self, local_nodes: np.ndarray) -> np.ndarray:
         """Flag nodes (local block indices) on every rank that has them (collective)."""
@@ -351,6 +390,9 @@ class CoupledElasticity:
             )
             ubc.x.array.reshape(-1, 2)[flags] = vals
             is_bc |= flags
+        for flags, vals in self._strong:  # by node (CoupledLinearProblem's DirichletBCs)
+            ubc.x.array.reshape(-1, 2)[flags] = vals[flags]
+            is_bc |= flags
         return fe_bc, patch_bc, dq, dtabs, ubc, is_bc
 
     def _fix_fe_rows(self, K_fe, b_fe, fixed_local: np.ndarray, values: np.ndarray):
@@ -406,6 +448,13 @@ class CoupledElasticity:
             tab = raise_on_all_ranks(comm, lambda q=q: self.mls.tabulate(q.points, 0)).values
             f_p += load_vector(tab, q.weights, t)
         b_fe = create_vector(comm, fe_layout, np.concatenate(f_fe_rows), np.concatenate(f_fe_vals))
+        if self._fe_load_form is not None:  # the FE cells' share of a user's body loads
+            b = _compat.assemble_vector(self._fe_load_form)
+            b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+            b_fe.axpy(1.0, b)
+            b.destroy()
+        if self._particle_loads is not None:
+            f_p += self._particle_loads
         return b_fe, f_p
 
     def _append_patch_conditions(self, blocks, rhs, mats, patch_bc, dq, dtabs) -> Layout:

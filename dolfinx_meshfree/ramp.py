@@ -19,8 +19,8 @@ the patch. The blended shape functions are a partition of unity and reproduce li
 Assembly, in a PETSc nest ``[[K_FE, K_FP], [K_PF, K_P]]`` (plus patch-side Dirichlet
 multipliers):
 
-* pure FE cells: DOLFINx's assembly of the elasticity form restricted to them (a cell tag
-  :data:`INTERFACE_TAG` marks the interface cells);
+* pure FE cells: DOLFINx's assembly of the FE form (the material's, or the user's form of a
+  :class:`~dolfinx_meshfree.CoupledLinearProblem`) weighted by the DG0 indicator of these cells;
 * interface cells: Gauss points, the blended table with columns ``[local FE nodes | particles]``
   and ``K = B^T D B``; its FE–FE part is a PETSc AIJ matrix added to DOLFINx's matrix with
   ``MatAXPY`` (``DIFFERENT_NONZERO_PATTERN``: DOLFINx's sparsity has no room for interface
@@ -41,7 +41,6 @@ import time
 import dolfinx
 import numpy as np
 import scipy.sparse as sp
-import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 from scipy.spatial import cKDTree
@@ -52,15 +51,12 @@ from .fe_points import tabulate_in_cells
 from .mls import MLS
 from .operators import load_vector, stiffness_matrix
 from .parallel import Layout, raise_on_all_ranks
-from .patch import FE_TAG, PATCH_TAG
 from .petsc import create_aij, create_vector
 from .quadrature import cell_quadrature, facet_quadrature
 from .tables import ShapeTable
 
-__all__ = ["INTERFACE_TAG", "RAMPS", "RampInterface"]
+__all__ = ["RAMPS", "RampInterface"]
 
-#: Cell tag of the interface elements (FE cells with a node on the patch interface).
-INTERFACE_TAG = 3
 
 #: The ramp couplings and whether each smooths the ramp (3R^2 - 2R^3).
 RAMPS = {"ramp": False, "ramp-cubic": True}
@@ -230,21 +226,9 @@ class RampInterface:
 
 
 def _fe_stiffness(problem, interface: RampInterface) -> PETSc.Mat:
-    """DOLFINx assembly of the elasticity form on the pure FE cells (not interface, not patch)."""
-    V, patch = problem.V, problem.patch
-    msh = V.mesh
-    tdim = msh.topology.dim
-    n_owned = msh.topology.index_map(tdim).size_local
-    values = np.where(
-        patch.in_patch[:n_owned],
-        PATCH_TAG,
-        np.where(interface.in_interface[:n_owned], INTERFACE_TAG, FE_TAG),
-    ).astype(np.int32)
-    tags = dolfinx.mesh.meshtags(msh, tdim, np.arange(n_owned, dtype=np.int32), values)
-    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
-    dx = ufl.Measure("dx", domain=msh, subdomain_data=tags)
-    a = ufl.inner(problem.material.ufl_stress(u), ufl.sym(ufl.grad(v))) * dx(FE_TAG)
-    return _compat.assemble_matrix(_compat.create_form(a))
+    """DOLFINx assembly of the FE form on the pure FE cells (not interface, not patch)."""
+    pure = ~problem.patch.in_patch & ~interface.in_interface
+    return problem._fe_stiffness(problem.cell_indicator(pure))
 
 
 def solve_ramp(problem, solver: str = "mumps"):

@@ -1,0 +1,465 @@
+"""A particle patch in an existing DOLFINx model: :class:`CoupledLinearProblem`.
+
+The user keeps the UFL forms ``a`` and ``L``, the ``DirichletBC`` list and the mesh tags of a model
+written for ``dolfinx.fem.petsc.LinearProblem``, names cells to replace by particles
+(:class:`~dolfinx_meshfree.ParticlePatch`), gives the particle side's constitutive law
+(:class:`~dolfinx_meshfree.LinearElastic`) and picks a coupling. How each piece reaches the
+coupled system (:class:`~dolfinx_meshfree.CoupledElasticity`):
+
+* ``a``: every cell integral is multiplied by the coupling's FE weight (a DG0 indicator of the FE
+  cells, ``1 - alpha`` in a bridging band: Rabczuk et al. 2006, eq. 47-48) and assembled by
+  DOLFINx, so the user's measures, tags, coefficients and quadrature metadata are kept on the FE
+  side. On the patch cells, ``a`` must equal the material's elasticity form; they are compared
+  by assembling both there (relative Frobenius difference below 1e-8), and a disagreement is
+  reported with the likely cause (plane stress against plane strain, or a scaled modulus).
+* ``L``: cell integrals (body loads) are weighted like ``a`` on the FE side and integrated against
+  the particle shape functions on the patch cells; exterior-facet integrals (tractions, pressures
+  with ``FacetNormal``) become tractions ``t(x, n)`` evaluated from the UFL integrand with a
+  DOLFINx ``Expression`` at the facet Gauss points, so they reach the FE nodes or the particles
+  of whichever side the facet belongs to. The test function may appear only undifferentiated.
+* ``bcs``: dofs of FE cells are fixed strongly (``MatZeroRowsColumns``), with the bc's values;
+  exterior facets of patch cells whose nodes are all constrained become particle constraints
+  with the bc's P1 interpolant as the prescribed value (Lagrange multipliers, as in
+  :func:`~dolfinx_meshfree.efg.facet_multipliers`).
+
+Not supported (each raises a ``ValueError`` naming the fix): non-cell integrals in ``a``, interior
+facet integrals in ``L``, derivatives of the test function in ``L``, conditions on a single
+component (``V.sub(i)``), constrained nodes strictly inside the patch, and cell loads with the
+``ramp``/``bridging`` couplings (their blended interface cells have no body-load path yet).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import basix
+import dolfinx
+import numpy as np
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+from scipy.spatial import cKDTree
+from ufl.corealg.traversal import unique_pre_traversal
+
+from . import _compat
+from .coupled import COUPLINGS, CoupledElasticity, CoupledSolution
+from .fe_points import evaluate_fe_function
+from .materials import LinearElastic
+from .operators import load_vector
+from .parallel import raise_on_all_ranks
+from .patch import ParticlePatch
+from .quadrature import boundary_facets, cell_quadrature
+
+__all__ = ["CoupledLinearProblem"]
+
+#: Relative Frobenius difference above which the form and the material disagree on the patch.
+MATERIAL_TOLERANCE = 1e-8
+
+
+class CoupledLinearProblem:
+    """``a(u, v) = L(v)`` with ``bcs`` on a mesh whose ``patch`` cells are particles.
+
+    Mirrors ``dolfinx.fem.petsc.LinearProblem`` (``problem.solve()``), for linear elasticity on a
+    vector P1/Q1 space in 2D.
+
+    Args:
+        a: Bilinear UFL form on the vector P1/Q1 space ``V`` (cell integrals only).
+        L: Linear UFL form on ``V`` (cell and exterior-facet integrals).
+        bcs: ``DirichletBC`` objects on ``V`` (all components).
+        patch: :class:`~dolfinx_meshfree.ParticlePatch` on ``V``'s mesh.
+        material: :class:`~dolfinx_meshfree.LinearElastic` of the particle side; must agree with
+            ``a`` on the patch cells.
+        coupling: One of :data:`~dolfinx_meshfree.COUPLINGS`.
+        **options: Passed to :class:`~dolfinx_meshfree.CoupledElasticity` (``weight``,
+            ``dilation``, ``basis``, ``quadrature_degree``, ``consistent``, ``overlap``,
+            ``penalty``).
+
+    Example::
+
+        problem = mf.CoupledLinearProblem(a, L, bcs, mf.ParticlePatch(mesh, cells, spacing=h),
+                                          material=mf.LinearElastic(E=E, nu=nu, plane="strain"),
+                                          coupling="lagrange")
+        solution = problem.solve()
+        u = solution.displacement(points)  # (m, 2), on every rank
+    """
+
+    def __init__(
+        self,
+        a: ufl.Form,
+        L: ufl.Form,
+        bcs: Sequence | None,
+        patch: ParticlePatch,
+        material: LinearElastic,
+        coupling: str = "lagrange",
+        **options,
+    ):
+        comm = patch.comm if isinstance(patch, ParticlePatch) else MPI.COMM_WORLD
+        bcs = [] if bcs is None else list(bcs)
+        V = raise_on_all_ranks(
+            comm, lambda: _check_arguments(a, L, bcs, patch, material, coupling, options)
+        )
+        self.a, self.L, self.bcs = a, L, bcs
+        self.problem = CoupledElasticity(V, patch, material, coupling, **options)
+        self.problem.form = a
+        self.V, self.patch, self.material = V, patch, material
+        _check_material(self.problem)
+        self._apply_bcs()
+        self._apply_loads()
+
+    # -- essential conditions -----------------------------------------------------------------
+
+    def _apply_bcs(self) -> None:
+        """Strong FE conditions by node; particle constraints on fully constrained patch facets."""
+        problem, V, patch = self.problem, self.V, self.patch
+        n_local = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
+        count = np.zeros((n_local, 2), dtype=int)
+        values = np.zeros((n_local, 2))
+        for bc in self.bcs:
+            dofs, vals = _compat.dirichlet_values(bc)
+            count.ravel()[dofs] += 1
+            values.ravel()[dofs] = vals
+        fixed = count.all(axis=1)
+        half = np.flatnonzero((count.any(axis=1) & ~fixed)[: V.dofmap.index_map.size_local])
+
+        def check_components() -> None:
+            if half.size:
+                raise ValueError(
+                    f"bcs constrain only one component at {half.size} node(s); "
+                    "CoupledLinearProblem supports conditions on both components of a node"
+                )
+
+        raise_on_all_ranks(patch.comm, check_components)
+        problem._strong.append((fixed, values))
+        # patch facets whose nodes are all constrained
+        facets = patch.exterior_facets
+        nodes = _facet_nodes(V, facets)
+        on = fixed[nodes].all(axis=1) if facets.size else np.zeros(0, dtype=bool)
+        bc_facets = facets[on]
+        g = dolfinx.fem.Function(V)
+        g.x.array[:] = values.ravel()
+        g.x.scatter_forward()
+        if patch.comm.allreduce(bc_facets.size):
+            problem.add_dirichlet(bc_facets, lambda x, g=g: evaluate_fe_function(g, x))
+        # constrained nodes that neither an FE cell nor a constrained patch facet carries
+        active = problem._node_flags(_compat.dofmap_array(V)[patch.fe_cells].ravel())
+        on_facet = problem._node_flags(nodes[on].ravel())
+        n_owned = V.dofmap.index_map.size_local
+        lone = np.flatnonzero((fixed & ~active & ~on_facet)[:n_owned])
+        xy = V.tabulate_dof_coordinates()[lone, :2]
+
+        def check() -> None:
+            if lone.size:
+                raise ValueError(
+                    f"bcs constrain {lone.size} node(s) inside the particle patch, e.g. at "
+                    f"{xy[:3].round(6).tolist()}: particles can only be constrained on exterior "
+                    "facets of the patch; leave these cells out of the patch or constrain a whole "
+                    "boundary facet"
+                )
+
+        raise_on_all_ranks(patch.comm, check)
+
+    # -- loads ----------------------------------------------------------------------------------
+
+    def _apply_loads(self) -> None:
+        problem, V, patch = self.problem, self.V, self.patch
+        msh = V.mesh
+        v = self.L.arguments()[0]
+        deg = problem.quadrature_degree
+        cell_integrals, fe_cell_integrals = [], []
+        chi_fe = None
+        for itg in self.L.integrals():
+            if itg.integral_type() == "cell":
+                if chi_fe is None:
+                    chi_fe = problem.cell_indicator(~patch.in_patch)
+                fe_cell_integrals.append(itg.reconstruct(integrand=chi_fe * itg.integrand()))
+                cell_integrals.append(itg)
+            else:
+                facets = np.intersect1d(_integral_entities(itg, msh), boundary_facets(msh))
+                problem.add_traction(facets.astype(np.int32), _FacetLoad(itg, v, facets, deg))
+        if cell_integrals:
+            problem._fe_load_form = _compat.create_form(ufl.Form(fe_cell_integrals))
+            loads = np.zeros(2 * patch.particles.num_particles)
+            cname = msh.topology.cell_type.name
+            X, _ = _compat.quadrature_rule(cname, deg)
+            for itg in cell_integrals:
+                values = _replace_test_function(itg.integrand(), v, msh)
+                expr = _compat.create_expression(values, X)  # collective
+                cells = np.intersect1d(_integral_entities(itg, msh), patch.cells)
+                q = cell_quadrature(msh, deg, cells)
+                b = _compat.eval_expression(expr, msh, cells, 2).reshape(-1, 2)
+                tab = raise_on_all_ranks(patch.comm, lambda q=q: problem.mls.tabulate(q.points, 0))
+                loads += load_vector(tab.values, q.weights, b)
+            problem._particle_loads = loads
+
+    # -- solve ----------------------------------------------------------------------------------
+
+    def solve(self, solver: str = "mumps") -> CoupledSolution:
+        """Assemble and solve the coupled system (collective); see
+        :meth:`~dolfinx_meshfree.CoupledElasticity.solve`."""
+        return self.problem.solve(solver)
+
+
+# -- checks -------------------------------------------------------------------------------------
+
+
+def _check_arguments(a, L, bcs, patch, material, coupling, options):
+    """Validate the inputs (local; no collective call). Returns ``V``."""
+    if not isinstance(patch, ParticlePatch):
+        raise TypeError(f"patch must be a ParticlePatch, got {type(patch).__name__}")
+    if not isinstance(material, LinearElastic):
+        raise TypeError(
+            f"material must be a LinearElastic (the particle side's law), got "
+            f"{type(material).__name__}"
+        )
+    if coupling not in COUPLINGS:
+        raise ValueError(f"coupling={coupling!r} is not available; choose one of {list(COUPLINGS)}")
+    for name, form, rank in (("a", a, 2), ("L", L, 1)):
+        if not isinstance(form, ufl.Form):
+            raise TypeError(f"{name} must be a UFL form, got {type(form).__name__}")
+        if len(form.arguments()) != rank:
+            raise ValueError(
+                f"{name} must be a {'bilinear' if rank == 2 else 'linear'} form "
+                f"(found {len(form.arguments())} argument(s))"
+            )
+    spaces = [arg.ufl_function_space() for arg in (*a.arguments(), *L.arguments())]
+    V = spaces[0]
+    if any(S is not V for S in spaces[1:]):
+        raise ValueError("the test and trial functions of a and L must live on one space V")
+    msh = V.mesh
+    if msh is not patch.mesh:
+        raise ValueError("the forms' space and the patch must live on the same mesh object")
+    nv = _compat.geometry_dofmap(msh).shape[1]
+    if (
+        msh.topology.dim != 2
+        or V.dofmap.index_map_bs != 2
+        or _compat.dofmap_array(V).shape[1] != nv
+    ):
+        raise ValueError(
+            "V must be the vector P1/Q1 space of a 2D mesh (e.g. "
+            "functionspace(mesh, ('Lagrange', 1, (2,)))), got another space"
+        )
+    for itg in a.integrals():
+        if itg.integral_type() != "cell":
+            raise ValueError(
+                f"a has a {itg.integral_type()} integral; only cell integrals (dx) are supported "
+                "in the bilinear form of a coupled problem"
+            )
+    for itg in L.integrals():
+        if itg.integral_type() not in ("cell", "exterior_facet"):
+            raise ValueError(
+                f"L has a {itg.integral_type()} integral; only dx and ds integrals are supported"
+            )
+        if _differentiates(itg.integrand(), L.arguments()[0]):
+            raise ValueError(
+                f"L's {itg.integral_type()} integral differentiates the test function; write the "
+                "load as a body force dot(f, v) dx or a traction dot(t, v) ds"
+            )
+        if itg.integral_type() == "cell" and coupling in ("ramp", "ramp-cubic", "bridging"):
+            raise ValueError(
+                f"L has a cell integral (a body load), which coupling={coupling!r} does not "
+                "support yet; use coupling='lagrange', 'edge-to-edge' or 'master-slave'"
+            )
+        if itg.subdomain_id() == "otherwise":
+            raise ValueError("L uses an 'otherwise' subdomain; name the subdomain ids instead")
+    for i, bc in enumerate(bcs):
+        if not hasattr(bc, "dof_indices") or not hasattr(bc, "g"):
+            raise TypeError(f"bcs[{i}] must be a dolfinx.fem.DirichletBC, got {type(bc).__name__}")
+        if list(bc.function_space.component()):
+            raise ValueError(
+                f"bcs[{i}] constrains component {list(bc.function_space.component())} of V (a "
+                "subspace); CoupledLinearProblem supports conditions on all components of V: "
+                "constrain both components with dirichletbc(value, dofs, V)"
+            )
+    return V
+
+
+def _check_material(problem: CoupledElasticity) -> None:
+    """Compare the user's form with the material's on the patch cells (collective)."""
+    chi = problem.cell_indicator(problem.patch.in_patch)
+    material = problem.material
+
+    def stiffness(form: ufl.Form) -> PETSc.Mat:
+        return _compat.assemble_matrix(_compat.create_form(form))
+
+    def material_form(m: LinearElastic) -> ufl.Form:
+        V = problem.V
+        u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+        return chi * ufl.inner(m.ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx(domain=V.mesh)
+
+    A = stiffness(problem.fe_form(chi))
+    B = stiffness(material_form(material))
+    nb = B.norm(PETSc.NormType.FROBENIUS)
+
+    def difference(M: PETSc.Mat, scale: float = 1.0) -> float:
+        D = A.duplicate(copy=True)
+        D.axpy(-scale, M, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+        d = D.norm(PETSc.NormType.FROBENIUS)
+        D.destroy()
+        return d / max(M.norm(PETSc.NormType.FROBENIUS) * scale, 1e-300)
+
+    rel = difference(B)
+    if rel > MATERIAL_TOLERANCE:
+        other = "strain" if material.plane == "stress" else "stress"
+        C = stiffness(material_form(LinearElastic(E=material.E, nu=material.nu, plane=other)))
+        hint = ""
+        if difference(C) <= MATERIAL_TOLERANCE:
+            hint = f"; the form is the plane-{other} law: pass plane={other!r}"
+        else:
+            ratio = A.norm(PETSc.NormType.FROBENIUS) / nb
+            if difference(B, ratio) <= MATERIAL_TOLERANCE:
+                hint = (
+                    f"; the form's stiffness is {ratio:.6g} times the material's: "
+                    f"E={ratio * material.E:.6g}?"
+                )
+        C.destroy()
+        A.destroy()
+        B.destroy()
+        raise ValueError(
+            f"material={material} disagrees with the bilinear form a on the patch cells (relative "
+            f"difference {rel:.3g} > {MATERIAL_TOLERANCE:g}){hint}; the particle side uses the "
+            "material, so pass the law that a encodes there"
+        )
+    A.destroy()
+    B.destroy()
+
+
+def _differentiates(expr, v) -> bool:
+    """Whether ``expr`` contains a derivative of the argument ``v``."""
+    from ufl.algorithms import expand_derivatives
+
+    for node in unique_pre_traversal(expand_derivatives(expr)):
+        if isinstance(node, ufl.classes.Derivative) and any(
+            sub == v for sub in unique_pre_traversal(node)
+        ):
+            return True
+    return False
+
+
+# -- helpers ------------------------------------------------------------------------------------
+
+
+def _integral_entities(itg, msh) -> np.ndarray:
+    """Local entities (cells or facets) an integral runs over."""
+    tdim = msh.topology.dim
+    dim = tdim if itg.integral_type() == "cell" else tdim - 1
+    imap = msh.topology.index_map(dim)
+    sid = itg.subdomain_id()
+    if sid == "everywhere":
+        return np.arange(imap.size_local + imap.num_ghosts, dtype=np.int64)
+    ids = np.atleast_1d(np.asarray(sid, dtype=np.int64))
+    tags = itg.subdomain_data()
+    if tags is None:
+        raise ValueError(f"an integral of L uses subdomain {sid!r} without subdomain_data")
+    tags = getattr(tags, "_cpp_object", tags)
+    mask = np.isin(np.asarray(tags.values), ids)
+    return np.asarray(tags.indices, dtype=np.int64)[mask]
+
+
+def _facet_nodes(V, facets: np.ndarray) -> np.ndarray:
+    """Local P1/Q1 nodes of each facet, shape (num_facets, 2)."""
+    msh = V.mesh
+    tdim = msh.topology.dim
+    msh.topology.create_connectivity(tdim, 0)
+    msh.topology.create_connectivity(tdim - 1, 0)
+    c2v = msh.topology.connectivity(tdim, 0)
+    f2v = msh.topology.connectivity(tdim - 1, 0)
+    dofs = _compat.dofmap_array(V)
+    vmap = msh.topology.index_map(0)
+    node_of_vertex = np.empty(vmap.size_local + vmap.num_ghosts, dtype=np.int64)
+    node_of_vertex[np.asarray(c2v.array)] = dofs.ravel()
+    fv = np.asarray(f2v.array).reshape(-1, 2)[np.asarray(facets, dtype=np.int64)]
+    return node_of_vertex[fv]
+
+
+def _replace_test_function(integrand, v, msh, normal=None):
+    """The vector ``(I(e_0), I(e_1))`` of a linear integrand ``I(v)``, FacetNormal -> ``normal``."""
+    mapping = {}
+    if normal is not None:
+        for node in unique_pre_traversal(integrand):
+            if isinstance(node, ufl.classes.FacetNormal):
+                mapping[node] = normal
+    comps = []
+    for e in (ufl.as_vector([1.0, 0.0]), ufl.as_vector([0.0, 1.0])):
+        comps.append(ufl.replace(integrand, {**mapping, v: e}))
+    return ufl.as_vector(comps)
+
+
+class _FacetLoad:
+    """Traction ``t(x, n)`` of an exterior-facet integral of ``L``, tabulated at the facet Gauss
+    points of :func:`~dolfinx_meshfree.facet_quadrature` (collective construction).
+
+    ``t(x, n) = A(x) + B(x) n``: the integrand is evaluated with ``FacetNormal`` replaced by a
+    Constant set to 0, e_0 and e_1 (and checked to be affine in n at a fourth value).
+    """
+
+    def __init__(self, itg, v, facets: np.ndarray, degree: int):
+        msh = v.ufl_function_space().mesh
+        tdim = msh.topology.dim
+        cname = msh.topology.cell_type.name
+        cell = getattr(basix.CellType, cname)
+        ref = np.asarray(basix.geometry(cell))
+        ref_facets = basix.topology(cell)[tdim - 1]
+        npts = max(1, (degree + 2) // 2)
+        s = 0.5 * (np.polynomial.legendre.leggauss(npts)[0] + 1.0)
+        X = np.concatenate([ref[f[0]] + s[:, None] * (ref[f[1]] - ref[f[0]]) for f in ref_facets])
+        nc = dolfinx.fem.Constant(msh, np.zeros(2))
+        integrand = itg.integrand()
+        has_normal = any(
+            isinstance(o, ufl.classes.FacetNormal) for o in unique_pre_traversal(integrand)
+        )
+        x = ufl.SpatialCoordinate(msh)
+        values = _replace_test_function(integrand, v, msh, nc)
+        expr = _compat.create_expression(ufl.as_vector([values[0], values[1], x[0], x[1]]), X)
+        # (cell, local facet) of each facet
+        msh.topology.create_connectivity(tdim - 1, tdim)
+        msh.topology.create_connectivity(tdim, tdim - 1)
+        f2c = msh.topology.connectivity(tdim - 1, tdim)
+        c2f = np.asarray(msh.topology.connectivity(tdim, tdim - 1).array).reshape(
+            -1, len(ref_facets)
+        )
+        facets = np.asarray(facets, dtype=np.int64)
+        cells = np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]]
+        local = np.argmax(c2f[cells] == facets[:, None], axis=1)
+        ucells, pos = np.unique(cells, return_inverse=True)
+        cols = (local[:, None] * npts + np.arange(npts)).ravel()
+        rows = np.repeat(pos, npts)
+
+        def evaluate(n: tuple[float, float]) -> np.ndarray:
+            nc.value[:] = n
+            vals = _compat.eval_expression(expr, msh, ucells, 4)
+            return vals[rows, cols] if facets.size else np.zeros((0, 4))
+
+        def tabulate() -> int:
+            base = evaluate((0.0, 0.0))
+            self.points, self.A = base[:, 2:], base[:, :2]
+            self.B = np.zeros((len(self.A), 2, 2))
+            if not has_normal:
+                return 0
+            self.B[:] = np.stack([evaluate((1.0, 0.0))[:, :2], evaluate((0.0, 1.0))[:, :2]], -1)
+            self.B -= self.A[:, :, None]
+            probe = evaluate((0.6, 0.8))[:, :2]
+            affine = self.A + self.B @ np.array([0.6, 0.8])
+            scale = np.abs(self.A).max(initial=0.0) + np.abs(self.B).max(initial=0.0) + 1e-300
+            return int(np.abs(probe - affine).max(initial=0.0) > 1e-10 * scale)
+
+        bad = raise_on_all_ranks(msh.comm, tabulate)
+        if msh.comm.allreduce(bad, op=MPI.MAX):
+            raise ValueError(
+                "an exterior-facet integral of L is not affine in the FacetNormal n; write the "
+                "load as dot(t0 + T n, v) ds with t0, T independent of n"
+            )
+        self.tree = cKDTree(self.points) if len(self.points) else None
+        self.tol = 1e-9 * (np.ptp(msh.geometry.x[:, :2], axis=0).max() + 1.0)
+
+    def __call__(self, x: np.ndarray, n: np.ndarray) -> np.ndarray:
+        if len(x) == 0:
+            return np.zeros((0, 2))
+        if self.tree is None:
+            raise RuntimeError("a traction was requested at points of no facet of its integral")
+        d, idx = self.tree.query(x)
+        if np.any(d > self.tol):
+            raise RuntimeError(
+                f"a traction was requested at {int(np.sum(d > self.tol))} point(s) that are not "
+                "facet Gauss points of its integral (internal error: quadrature degree mismatch)"
+            )
+        return self.A[idx] + np.einsum("mij,mj->mi", self.B[idx], n)

@@ -16,6 +16,7 @@ from . import _compat  # noqa: F401  (must come first: loads dolfinx_solver's MP
 from ._compat import DOLFINX_VERSION
 from .analytic import LinearField, TimoshenkoBeam
 from .coupled import COUPLINGS, DEFAULT_DILATION, CoupledElasticity, CoupledSolution
+from .dynamics import DYNAMICS_METHODS, DynamicsResult, EnergyRecord, ExplicitDynamics
 from .efg import EFGElasticity, EFGSolution
 from .errors import error_norms
 from .fe import FESolution, solve_fe_elasticity
@@ -31,21 +32,29 @@ from .materials import LinearElastic
 from .mls import MLS, MomentMatrixError
 from .particles import ParticleSet
 from .patch import ParticlePatch
+from .problem import CoupledLinearProblem
 from .quadrature import boundary_facets, cell_quadrature, facet_quadrature
 from .sph import SPH
 from .tables import ShapeTable
+from .waves import GaussianPulseRod
 
 __all__ = [
     "COUPLINGS",
     "DEFAULT_DILATION",
     "DOLFINX_VERSION",
+    "DYNAMICS_METHODS",
     "MLS",
     "SPH",
     "CoupledElasticity",
+    "CoupledLinearProblem",
     "CoupledSolution",
+    "DynamicsResult",
     "EFGElasticity",
     "EFGSolution",
+    "EnergyRecord",
+    "ExplicitDynamics",
     "FESolution",
+    "GaussianPulseRod",
     "LinearElastic",
     "LinearField",
     "MomentMatrixError",

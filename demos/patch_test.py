@@ -1,41 +1,147 @@
 # # Linear patch test
 #
 # Belytschko et al. 1995, sec. 5.1.1: the displacement ``u = (x, y)`` (eq. 5.1) is prescribed on
-# the whole boundary of a square patch with no body force; the exact solution is that linear
-# field, and a consistent method reproduces it to round-off. With EFG the error that remains
-# comes from quadrature: the paper reports 1e-6 with Gauss cells. Variationally consistent
-# integration (VCI, Chen, Hillman & Rüter 2013; ``--consistent``) removes it.
+# the whole boundary of the square ``[0, 2] x [0, 2]`` with no body force; the exact solution is
+# that linear field, and a consistent method reproduces it to round-off. With EFG the error that
+# remains comes from quadrature: the paper reports 1e-6 with Gauss cells. Variationally
+# consistent integration (VCI, Chen, Hillman & Rüter 2013; ``--consistent``) removes it.
+# ``--field general`` prescribes ``u = c + G x`` with a shear and a rotation in ``G`` instead
+# (the field of the coupling tests in ``tests/``).
 #
-# Meshes: ``regular`` (an n x n grid of cells, particles on a regular grid) or ``irregular``
-# (interior mesh vertices moved by up to 30 % of a cell, particles jittered by up to 30 % of their
-# spacing). The demo prints the maximum displacement error over the particles and 1000 random
-# points, and checks it: at most 1e-10 with consistent integration (or for FE), and reported as
-# measured otherwise.
+# Methods: ``fe`` (Q1/P1 through DOLFINx), ``efg`` (particles everywhere, essential conditions by
+# multipliers), and every coupling of ``mf.COUPLINGS``, whose particle patch is the right half
+# of the square (the cells with centroid x > 1, particle spacing = the nominal cell size 2/n),
+# the left half staying finite elements, as in the coupling tests (``tests/test_coupled.py``,
+# ``test_ramp.py``, ``test_bridging.py``, ``test_edge_to_edge.py``). ``--method all`` runs them
+# all and prints one table.
+#
+# Meshes (``--cells n`` per side, default 6):
+#
+# * ``regular``: DOLFINx's n x n grid of cells; particles on the regular grid;
+# * ``irregular``: an unstructured gmsh mesh of the square, committed under ``meshes/`` as XDMF
+#   (no gmsh needed to run; ``meshes/make_meshes.py`` regenerates it). Its two halves share the
+#   line x = 1 with n uniform segments, so that the couplings' interface is straight and its
+#   nodes sit on the particle grid; particles jittered by up to 30 % of their spacing;
+# * ``perturbed``: the regular grid with interior vertices moved by up to 30 % of a cell (except
+#   those on the line x = 1, the couplings' interface); particles jittered as on ``irregular``.
+#
+# The demo prints the maximum displacement error over the particles, the mesh vertices and a
+# 41 x 41 grid of probe points, beside the target of the issue, and checks it:
+#
+# * targets: 1e-10 for FE and for every method with ``--consistent``; 1e-6 with Gauss
+#   quadrature; none for master–slave (first order by construction, exempt);
+# * a method that meets its target today and is expected to (``EXPECTED_TO_PASS``: FE, EFG and
+#   Lagrange with consistent integration) fails the run (exit code 1) when it misses;
+# * the methods that are known to miss are reported as MISSED with the measured figure (reasons
+#   in ``KNOWN_MISSES``) and do not change the exit code.
 #
 #     python demos/patch_test.py --method efg --mesh irregular --consistent [--json out.json]
+#     python demos/patch_test.py --method all --mesh irregular --cell triangle
 
 # +
 from __future__ import annotations
 
 import argparse
 import json
+import pathlib
 import sys
 
-import dolfinx_meshfree as mf
+import dolfinx_meshfree as mf  # first: it loads the right MPI for the dolfinx_solver lane
 from dolfinx_meshfree import _compat
 
 import dolfinx
+import dolfinx.io
 import numpy as np
 from mpi4py import MPI
+
+METHODS = ("fe", "efg", *mf.COUPLINGS)
+MESHES = ("regular", "irregular", "perturbed")
+MESH_DIR = pathlib.Path(__file__).resolve().parents[1] / "meshes"
+SIZE = 2.0
+
+#: Issue targets on the maximum error: exact methods and consistent integration, Gauss quadrature.
+TARGET_EXACT, TARGET_GAUSS = 1e-10, 1e-6
+#: (method, consistent) pairs that meet their target today: missing it fails the demo.
+EXPECTED_TO_PASS = {("fe", False), ("fe", True), ("efg", True), ("lagrange", True)}
+#: Why the others miss (measured figures: README and the coupling tests).
+KNOWN_MISSES = {
+    "efg": "Gauss quadrature error of the non-polynomial MLS functions; --consistent removes it",
+    "lagrange": "Gauss quadrature error on the patch (2e-4 in tests/test_coupled.py); "
+    "--consistent removes it",
+    "edge-to-edge": "collocated multipliers do not integrate the interface traction "
+    "consistently: a first-order error, VCI does not remove it (1.1e-2 in "
+    "tests/test_edge_to_edge.py)",
+    "ramp": "blended interface functions are not polynomials: Gauss error; with --dilation 3 "
+    "--quadrature-degree 14 on the regular mesh 4.1e-7 (--field general), 1.6e-6 (u = (x, y)); "
+    "VCI not available",
+    "ramp-cubic": "as ramp; with --dilation 3 --quadrature-degree 14 on the regular mesh 3.2e-7 "
+    "(--field general), 1.1e-6 (u = (x, y)); VCI not available",
+    "bridging": "the point constraints do not transmit the band's force consistently "
+    "(1.1e-2 in tests/test_bridging.py); VCI not available",
+    "master-slave": "exempt: rigid links drop the strain across the first particle layer",
+}
+# -
+
+
+# ## Command line
+
+
+# +
+def parse(argv: list[str] | None = None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description="Linear patch test (Belytschko et al. 1995, 5.1.1)")
+    p.add_argument("--method", choices=(*METHODS, "all"), default="efg")
+    p.add_argument("--mesh", choices=MESHES, default="regular")
+    p.add_argument("--cell", choices=("quadrilateral", "triangle"), default="quadrilateral")
+    p.add_argument("--cells", type=int, default=6, help="cells per side (nominal for irregular)")
+    p.add_argument("--consistent", action="store_true", help="variationally consistent integration")
+    p.add_argument("--quadrature-degree", type=int, default=7, help="7: 4 x 4 Gauss on quads")
+    p.add_argument("--weight", choices=("quartic", "cubic", "gaussian"), default="quartic")
+    p.add_argument(
+        "--dilation",
+        type=float,
+        default=None,
+        help="MLS d_max (default: 2.0; each coupling's mf.DEFAULT_DILATION, 2.5 for the ramps)",
+    )
+    p.add_argument("--overlap", type=int, default=2, help="bridging: band width in cells")
+    p.add_argument(
+        "--field",
+        choices=("identity", "general"),
+        default="identity",
+        help="identity: u = (x, y) (Belytschko eq. 5.1); general: u = c + G x of the tests",
+    )
+    p.add_argument("--json", default=None, help="write the record(s) as JSON")
+    args = p.parse_args(argv)
+    if args.cells < 2:
+        p.error(f"--cells must be at least 2, got {args.cells}")
+    if args.dilation is not None and not (np.isfinite(args.dilation) and args.dilation > 0):
+        p.error(f"--dilation must be positive, got {args.dilation}")
+    if args.mesh == "irregular" and not mesh_file(args.cell, args.cells).exists():
+        p.error(
+            f"no irregular mesh {mesh_file(args.cell, args.cells)}; generate it with "
+            f"'python3 meshes/make_meshes.py --cells {args.cells}' (needs gmsh)"
+        )
+    return args
+
 
 # -
 
 
+# ## Meshes
+
+
+# +
+def mesh_file(cell: str, n: int) -> pathlib.Path:
+    """The committed gmsh mesh (see ``meshes/make_meshes.py``, which names it)."""
+    return MESH_DIR / f"patch_irregular_{cell}_{n}.xdmf"
+
+
 def perturb_interior(msh, amount: float, size: float) -> None:
     """Move interior vertices by up to ``amount`` (deterministic in the coordinates, so every
-    rank moves its copies of a shared vertex alike)."""
+    rank moves its copies of a shared vertex alike). Vertices on the line ``x = size / 2`` (the
+    couplings' interface) stay where they are, on the particle grid."""
     x = msh.geometry.x
     interior = np.all((x[:, :2] > 1e-9) & (x[:, :2] < size - 1e-9), axis=1)
+    interior &= ~np.isclose(x[:, 0], size / 2)
     phase = np.sin(12.9898 * x[:, 0] + 78.233 * x[:, 1]) * 43758.5453
     u = phase - np.floor(phase)
     phase2 = np.sin(39.3468 * x[:, 0] + 11.135 * x[:, 1]) * 24634.6345
@@ -44,86 +150,232 @@ def perturb_interior(msh, amount: float, size: float) -> None:
     x[interior, 1] += amount * (2 * v[interior] - 1)
 
 
-def main(argv: list[str] | None = None) -> dict:
-    p = argparse.ArgumentParser(description="Linear patch test (Belytschko et al. 1995, 5.1.1)")
-    p.add_argument("--method", choices=("fe", "efg"), default="efg")
-    p.add_argument("--mesh", choices=("regular", "irregular"), default="regular")
-    p.add_argument("--cell", choices=("quadrilateral", "triangle"), default="quadrilateral")
-    p.add_argument("--cells", type=int, default=6, help="cells per side")
-    p.add_argument("--consistent", action="store_true", help="variationally consistent integration")
-    p.add_argument("--quadrature-degree", type=int, default=7)
-    p.add_argument("--weight", choices=("quartic", "cubic", "gaussian"), default="quartic")
-    p.add_argument("--dilation", type=float, default=2.0)
-    p.add_argument("--json", default=None)
-    args = p.parse_args(argv)
-    if args.cells < 2:
-        p.error(f"--cells must be at least 2, got {args.cells}")
-
-    comm = MPI.COMM_WORLD
-    size = 2.0
+def make_mesh(comm, args):
+    """The patch-test mesh of ``--mesh`` and ``--cell``, and the particle jitter that goes
+    with it."""
     n = args.cells
-    cell = getattr(dolfinx.mesh.CellType, args.cell)
-    msh = dolfinx.mesh.create_rectangle(comm, [np.zeros(2), np.full(2, size)], [n, n], cell)
     if args.mesh == "irregular":
-        perturb_interior(msh, 0.3 * size / n, size)
-    exact = mf.LinearField()
+        encoding = dolfinx.io.XDMFFile.Encoding.ASCII
+        with dolfinx.io.XDMFFile(comm, str(mesh_file(args.cell, n)), "r", encoding=encoding) as f:
+            msh = f.read_mesh(name="mesh")
+        return msh, 0.3
+    cell = getattr(dolfinx.mesh.CellType, args.cell)
+    msh = dolfinx.mesh.create_rectangle(comm, [np.zeros(2), np.full(2, SIZE)], [n, n], cell)
+    if args.mesh == "perturbed":
+        perturb_interior(msh, 0.3 * SIZE / n, SIZE)
+        return msh, 0.3
+    return msh, 0.0
+
+
+def probe_points(msh, n: int, comm) -> np.ndarray:
+    """This rank's share of the mesh vertices and of a 41 x 41 grid on the square."""
+    s = np.linspace(0.0, SIZE, 41)
+    grid = np.stack(np.meshgrid(s, s), axis=-1).reshape(-1, 2)
+    vertices = msh.geometry.x[:, :2]
+    return np.vstack([vertices, grid[comm.rank :: comm.size]])
+
+
+def cells_right_of(msh, x0: float) -> np.ndarray:
+    """Owned cells whose centroid lies right of ``x0`` (the coupling tests' patch)."""
+    n = msh.topology.index_map(msh.topology.dim).size_local
+    nodes = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], :2]
+    return np.flatnonzero(nodes[:, :, 0].mean(axis=1) > x0)
+
+
+# -
+
+
+# ## The methods
+#
+# Each returns the maximum error on this rank and the number of particles.
+
+
+# +
+def dilation(args, method: str) -> float:
+    if args.dilation is not None:
+        return args.dilation
+    return mf.DEFAULT_DILATION.get(method, 2.0)
+
+
+def run_fe(msh, args, exact, material, points):
+    V = _compat.vector_function_space(msh)
+    sol = mf.solve_fe_elasticity(
+        V, material, dirichlet=[(mf.boundary_facets(msh), lambda x: exact.displacement(x[:2].T).T)]
+    )
+    u = mf.evaluate_fe_function(sol.u, points)
+    return float(np.abs(u - exact.displacement(points)).max(initial=0.0)), 0
+
+
+def run_efg(msh, args, exact, material, points, jitter):
+    particles = mf.ParticleSet.from_cells(msh, SIZE / args.cells, jitter=jitter)
+    problem = mf.EFGElasticity(
+        particles,
+        material,
+        weight=args.weight,
+        dilation=dilation(args, "efg"),
+        quadrature_degree=args.quadrature_degree,
+        consistent=args.consistent,
+    )
+    problem.add_dirichlet(mf.boundary_facets(msh), exact.displacement)
+    sol = problem.solve()
+    # (EFG evaluation is local: the particles are replicated, each rank takes a share of them)
+    comm = msh.comm
+    pts = np.vstack([particles.positions[comm.rank :: comm.size], points])
+    err = np.abs(sol.displacement(pts) - exact.displacement(pts)).max(initial=0.0)
+    return float(err), particles.num_particles
+
+
+def run_coupled(msh, args, exact, material, points, jitter, coupling):
+    patch = mf.ParticlePatch(msh, cells_right_of(msh, SIZE / 2), SIZE / args.cells, jitter=jitter)
+    problem = mf.CoupledElasticity(
+        _compat.vector_function_space(msh),
+        patch,
+        material,
+        coupling=coupling,
+        weight=args.weight,
+        dilation=dilation(args, coupling),
+        quadrature_degree=args.quadrature_degree,
+        consistent=args.consistent,
+        **({"overlap": args.overlap} if coupling == "bridging" else {}),
+    )
+    problem.add_dirichlet(mf.boundary_facets(msh), exact.displacement)
+    sol = problem.solve()
+    comm = msh.comm
+    pts = np.vstack([patch.particles.positions[comm.rank :: comm.size], points])
+    err = np.abs(sol.displacement(pts) - exact.displacement(pts)).max(initial=0.0)
+    return float(err), patch.particles.num_particles
+
+
+# -
+
+
+# ## Driver: run, tabulate, check
+
+
+# +
+def target(method: str, consistent: bool) -> float | None:
+    """The issue's target for a method, None for master–slave (exempt)."""
+    if method == "master-slave":
+        return None
+    if method == "fe" or consistent:
+        return TARGET_EXACT
+    return TARGET_GAUSS
+
+
+def run(args, method: str, comm) -> dict:
+    msh, jitter = make_mesh(comm, args)
+    exact = (
+        mf.LinearField(G=((0.3, -0.2), (0.5, 0.1)), c=(0.1, -0.4))
+        if args.field == "general"
+        else mf.LinearField()
+    )
     material = mf.LinearElastic(1000.0, 0.3)
-    boundary = mf.boundary_facets(msh)
-    rng = np.random.default_rng(0)
-    samples = rng.uniform(0, size, (1000, 2)) if comm.rank == 0 else np.zeros((0, 2))
-
-    if args.method == "fe":
-        V = _compat.vector_function_space(msh)
-        sol = mf.solve_fe_elasticity(
-            V, material, dirichlet=[(boundary, lambda x: exact.displacement(x[:2].T).T)]
-        )
-        u = mf.evaluate_fe_function(sol.u, samples)
-        err = float(np.abs(u - exact.displacement(samples)).max(initial=0.0))
+    points = probe_points(msh, args.cells, comm)
+    consistent = bool(args.consistent) if method != "fe" else False
+    note = ""
+    try:
+        if method == "fe":
+            err, particles = run_fe(msh, args, exact, material, points)
+        elif method == "efg":
+            err, particles = run_efg(msh, args, exact, material, points, jitter)
+        else:
+            err, particles = run_coupled(msh, args, exact, material, points, jitter, method)
+        err = comm.allreduce(err, op=MPI.MAX)
+    except (ValueError, RuntimeError) as e:
+        # The library raises these alike on every rank: a coupling that refuses consistent
+        # integration, or a solve that fails (reported, so that one method cannot hide the table)
+        refused = consistent and "consistent=True is not available" in str(e)
+        err, particles = None, 0
+        note = f"{'refused by the library' if refused else 'ERROR'}: {e}"
+    goal = target(method, consistent)
+    expected = (method, consistent) in EXPECTED_TO_PASS
+    if err is None and not note.startswith("refused"):
+        status = "FAILED" if expected else "ERROR"
+    elif goal is None:
+        status = "exempt"
+    elif err is not None and err <= goal:
+        status = "PASS"
     else:
-        jitter = 0.3 if args.mesh == "irregular" else 0.0
-        particles = mf.ParticleSet.from_cells(msh, size / n, jitter=jitter)
-        problem = mf.EFGElasticity(
-            particles,
-            material,
-            weight=args.weight,
-            dilation=args.dilation,
-            quadrature_degree=args.quadrature_degree,
-            consistent=args.consistent,
-        )
-        problem.add_dirichlet(boundary, exact.displacement)
-        sol = problem.solve()
-        pts = np.vstack([particles.positions, samples])
-        err = float(np.abs(sol.displacement(pts) - exact.displacement(pts)).max())
-    err = comm.allreduce(err, op=MPI.MAX)
-
-    rec = {
-        "method": args.method,
+        status = "FAILED" if expected else "MISSED"
+    if status in ("MISSED", "exempt") and not note:
+        note = KNOWN_MISSES.get(method, "")
+    return {
+        "method": method,
         "mesh": args.mesh,
         "cell": args.cell,
-        "consistent": bool(args.consistent) if args.method == "efg" else None,
+        "cells": msh.topology.index_map(msh.topology.dim).size_global,
+        "particles": particles,
+        "consistent": consistent if method != "fe" else None,
         "quadrature_degree": args.quadrature_degree,
+        "dilation": dilation(args, method) if method != "fe" else None,
+        "weight": args.weight if method != "fe" else None,
+        "field": args.field,
         "max_error": err,
+        "target": goal,
+        "expected_to_pass": expected,
+        "status": status,
+        "note": note,
         "ranks": comm.size,
         "dolfinx_version": mf.DOLFINX_VERSION,
     }
-    exact_expected = args.method == "fe" or args.consistent
-    if comm.rank == 0:
-        label = "consistent (VCI)" if args.consistent else f"Gauss degree {args.quadrature_degree}"
-        label = "FE" if args.method == "fe" else label
+
+
+def report(records: list[dict], comm) -> None:
+    if comm.rank != 0:
+        return
+    field = "u = (x, y)" if records[0]["field"] == "identity" else "u = c + G x"
+    print(
+        f"Linear patch test (Belytschko et al. 1995, sec. 5.1.1), {field}, "
+        f"{comm.size} rank(s), DOLFINx {mf.DOLFINX_VERSION}"
+    )
+    head = (
+        f"{'method':12} {'mesh':9} {'cells':17} {'part.':>5} {'consistent':>10} "
+        f"{'max error':>9} {'target':>7}  status"
+    )
+    print(head)
+    print("-" * len(head))
+    for r in records:
+        cells = f"{r['cell']} {r['cells']}"
+        cons = "-" if r["consistent"] is None else ("VCI" if r["consistent"] else "Gauss")
+        err = "n/a" if r["max_error"] is None else f"{r['max_error']:.2e}"
+        goal = "-" if r["target"] is None else f"{r['target']:.0e}"
+        part = str(r["particles"]) if r["max_error"] is not None else "-"
         print(
-            f"patch test {args.method:4} {args.mesh:9} {args.cell:13} {label:18} "
-            f"max |u - u_exact| = {err:.2e}"
+            f"{r['method']:12} {r['mesh']:9} {cells:17} {part:>5} {cons:>10} "
+            f"{err:>9} {goal:>7}  {r['status']}"
         )
-        if args.json:
-            with open(args.json, "w") as f:
-                json.dump(rec, f, indent=1)
-    # The check: exact methods pass to round-off. Plain Gauss quadrature is reported, not judged.
-    if exact_expected and not err <= 1e-10:
+    notes = [r for r in records if r["note"]]
+    for r in notes:
+        print(f"  {r['method']}: {r['note']}")
+
+
+def main(argv: list[str] | None = None) -> dict | list[dict]:
+    """Run the patch test; returns the record of ``--method M`` or the list of ``all``."""
+    args = parse(argv)
+    comm = MPI.COMM_WORLD
+    methods = METHODS if args.method == "all" else (args.method,)
+    records = [run(args, method, comm) for method in methods]
+    report(records, comm)
+    result = records if args.method == "all" else records[0]
+    if args.json and comm.rank == 0:
+        with open(args.json, "w") as f:
+            json.dump(result, f, indent=1)
+    # The check: the methods expected to pass must pass; the others are reported as measured.
+    failed = [r for r in records if r["status"] == "FAILED"]
+    if failed:
         if comm.rank == 0:
-            print(f"CHECK FAILED: patch test error {err:.2e} > 1e-10", file=sys.stderr)
+            lines = [
+                f"{r['method']} ({r['mesh']}, {r['cell']}, consistent={r['consistent']}): "
+                f"max error {r['max_error']} > target {r['target']:.0e}"
+                for r in failed
+            ]
+            print("CHECK FAILED:\n  " + "\n  ".join(lines), file=sys.stderr)
         sys.exit(1)
-    return rec
+    if comm.rank == 0:
+        print("checks passed (every method expected to pass did)")
+    return result
 
 
 if __name__ == "__main__":
     main()
+# -

@@ -14,7 +14,7 @@ Importing this package first loads the ``dolfinx_solver`` wheel's MPI when that 
 
 from . import _compat  # noqa: F401  (must come first: loads dolfinx_solver's MPI in lane B)
 from ._compat import DOLFINX_VERSION
-from .analytic import LinearField, TimoshenkoBeam
+from .analytic import LinearField, PressurizedBushing, TimoshenkoBeam
 from .coupled import COUPLINGS, DEFAULT_DILATION, CoupledElasticity, CoupledSolution
 from .dynamics import DYNAMICS_METHODS, DynamicsResult, EnergyRecord, ExplicitDynamics
 from .efg import EFGElasticity, EFGSolution
@@ -61,6 +61,7 @@ __all__ = [
     "ParticlePatch",
     "ParticleSet",
     "PointsOutsideMeshError",
+    "PressurizedBushing",
     "ShapeTable",
     "TimoshenkoBeam",
     "boundary_facets",

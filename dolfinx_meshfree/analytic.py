@@ -8,7 +8,7 @@ import numpy as np
 
 from .materials import LinearElastic
 
-__all__ = ["LinearField", "TimoshenkoBeam"]
+__all__ = ["LinearField", "PressurizedBushing", "TimoshenkoBeam"]
 
 
 @dataclass(frozen=True)
@@ -98,3 +98,54 @@ class LinearField:
 
     def displacement_gradient(self, x: np.ndarray) -> np.ndarray:
         return np.broadcast_to(np.asarray(self.G, dtype=float), (x.shape[0], 2, 2)).copy()
+
+
+@dataclass(frozen=True)
+class PressurizedBushing:
+    """Lamé's thick-walled cylinder: the annulus ``a <= r <= b`` under an internal pressure ``p``
+    with its outer surface held fixed (a bushing in a rigid housing); 2D linear elasticity with the
+    material's (plane stress or plane strain) Lamé constants.
+
+    ``u = u_r(r) x / r`` with ``u_r = C1 r + C2 / r``, ``u_r(b) = 0`` and ``sigma_rr(a) = -p``:
+    ``C2 = p / (2 (lambda + mu) / b^2 + 2 mu / a^2)``, ``C1 = -C2 / b^2``. The hoop stress
+    ``sigma_tt = 2 (lambda + mu) C1 + 2 mu C2 / r^2`` peaks at the inner surface.
+    """
+
+    material: LinearElastic
+    a: float = 1.0
+    b: float = 2.0
+    p: float = 1.0
+
+    def __post_init__(self):
+        if not (0 < self.a < self.b):
+            raise ValueError(f"radii a={self.a}, b={self.b} must satisfy 0 < a < b")
+
+    @property
+    def constants(self) -> tuple[float, float]:
+        lam, mu = self.material.lmbda, self.material.mu
+        c2 = self.p / (2 * (lam + mu) / self.b**2 + 2 * mu / self.a**2)
+        return -c2 / self.b**2, c2
+
+    def radial(self, r: np.ndarray) -> np.ndarray:
+        c1, c2 = self.constants
+        return c1 * r + c2 / r
+
+    def displacement(self, x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, dtype=float)[:, :2]
+        r = np.linalg.norm(x, axis=1)
+        return (self.radial(r) / r)[:, None] * x
+
+    def displacement_gradient(self, x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, dtype=float)[:, :2]
+        r = np.linalg.norm(x, axis=1)
+        c1, c2 = self.constants
+        ur, dur = c1 * r + c2 / r, c1 - c2 / r**2
+        e = x / r[:, None]
+        return (ur / r)[:, None, None] * np.eye(2) + (dur - ur / r)[:, None, None] * np.einsum(
+            "qi,qj->qij", e, e
+        )
+
+    def hoop_stress(self, r: np.ndarray) -> np.ndarray:
+        c1, c2 = self.constants
+        lam, mu = self.material.lmbda, self.material.mu
+        return 2 * (lam + mu) * c1 + 2 * mu * c2 / np.asarray(r, dtype=float) ** 2

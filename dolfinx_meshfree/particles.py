@@ -190,6 +190,38 @@ class ParticleSet:
         comm.Allreduce(MPI.IN_PLACE, inside, op=MPI.MAX)
         return cls(grid[inside.astype(bool)], comm=comm, mesh=mesh, cells=c)
 
+    @classmethod
+    def from_vertices(cls, mesh, cells: npt.ArrayLike | None = None) -> ParticleSet:
+        """One particle at every vertex of the given cells (collective).
+
+        The natural particle set of an unstructured (e.g. gmsh) patch: particles sit on the FE
+        nodes, also on a curved boundary or interface, as the ramp interface elements need
+        (Belytschko et al. 1995, sec. 3.2). Positions are gathered from every rank and sorted, so
+        they are identical on every rank.
+        """
+        comm = mesh.comm
+        tdim, gdim = mesh.topology.dim, mesh.geometry.dim
+        num_owned = mesh.topology.index_map(tdim).size_local
+
+        def check():
+            c = np.arange(num_owned) if cells is None else np.asarray(cells, dtype=np.int64)
+            if c.ndim != 1 or (c.size and (c.min() < 0 or c.max() >= num_owned)):
+                raise ValueError(
+                    f"cells must be owned local cell indices in [0, {num_owned}); got "
+                    f"{c.min() if c.size else ''}..{c.max() if c.size else ''}"
+                )
+            return c
+
+        c = raise_on_all_ranks(comm, check)
+        if comm.allreduce(c.size) == 0:
+            raise ValueError("cells is empty on every rank: the patch has no cells")
+        nodes = np.unique(_compat.geometry_dofmap(mesh)[c].ravel())
+        x = np.concatenate(comm.allgather(mesh.geometry.x[nodes, :gdim]))
+        scale = np.abs(x).max() + 1.0
+        key = np.round(x / (1e-10 * scale)).astype(np.int64)
+        _, first = np.unique(key, axis=0, return_index=True)
+        return cls(x[first], comm=comm, mesh=mesh, cells=c)
+
     def petsc_dofs(self, bs: int = 2) -> np.ndarray:
         """PETSc dof numbers (n, bs) of each particle's components."""
         return bs * self.petsc_index[:, None] + np.arange(bs)[None, :]

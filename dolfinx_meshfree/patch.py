@@ -31,7 +31,11 @@ class ParticlePatch:
         cells: Owned local indices of the cells to replace (each rank its own).
         spacing: Particle spacing; particles fill the cells on a regular grid (see
             :meth:`ParticleSet.from_cells`), including the interface, where they meet the FE nodes.
+            Must be ``None`` with ``placement="vertices"``.
         jitter: Random displacement of interior particles, as a fraction of the spacing.
+        placement: ``"grid"`` (default, the grid above) or ``"vertices"``: one particle at every
+            vertex of the patch cells (:meth:`ParticleSet.from_vertices`), the choice for an
+            unstructured mesh or a curved interface.
 
     Attributes:
         particles: The :class:`ParticleSet`.
@@ -46,11 +50,21 @@ class ParticlePatch:
         self,
         mesh,
         cells: npt.ArrayLike,
-        spacing: float,
+        spacing: float | None = None,
         jitter: float = 0.0,
         seed: int = 0,
+        placement: str = "grid",
     ):
         comm = mesh.comm
+        if placement not in ("grid", "vertices"):
+            raise ValueError(f"placement={placement!r} is not known; use 'grid' or 'vertices'")
+        if placement == "grid" and spacing is None:
+            raise ValueError("spacing=None: give the particle spacing, or placement='vertices'")
+        if placement == "vertices" and (spacing is not None or jitter):
+            raise ValueError(
+                f"placement='vertices' puts the particles on the cells' vertices; spacing="
+                f"{spacing!r} and jitter={jitter!r} must be left out"
+            )
         tdim = mesh.topology.dim
         cmap = mesh.topology.index_map(tdim)
         num_owned = cmap.size_local
@@ -116,7 +130,10 @@ class ParticlePatch:
         owned = np.arange(num_owned, dtype=np.int32)
         values = np.where(self.in_patch[:num_owned], PATCH_TAG, FE_TAG).astype(np.int32)
         self.cell_tags = dolfinx.mesh.meshtags(mesh, tdim, owned, values)
-        self.particles = ParticleSet.from_cells(mesh, spacing, c, jitter=jitter, seed=seed)
+        if placement == "vertices":
+            self.particles = ParticleSet.from_vertices(mesh, c)
+        else:
+            self.particles = ParticleSet.from_cells(mesh, spacing, c, jitter=jitter, seed=seed)
 
     @property
     def comm(self):

@@ -85,3 +85,22 @@ def test_patch_test_demo_consistent(mesh, shared_dir):
     assert rec["max_error"] <= 1e-10
     rec = demo.main(["--method", "fe", "--mesh", mesh])
     assert rec["max_error"] <= 1e-10
+
+
+def test_plug_into_existing_model_demo(shared_dir):
+    """The bushing model with a particle patch: the demo's checks (within 1.5x plain FE, rates)
+    pass, and against Lamé the patch's hoop stress at the inner surface beats plain P1."""
+    comm = MPI.COMM_WORLD
+    out = shared_dir / "plug.json"
+    demo = load("plug_into_existing_model")
+    records = demo.main(["--h", "0.2", "0.1", "--coupling", "lagrange", "ramp", "--json", str(out)])
+    for h in (0.2, 0.1):
+        fe = next(r for r in records if r["method"] == "plain FE" and r["h"] == h)
+        for method in ("lagrange", "ramp"):
+            r = next(r for r in records if r["method"] == method and r["h"] == h)
+            assert r["l2"] <= 1.5 * fe["l2"] and r["energy"] <= 1.5 * fe["energy"]
+            assert r["hoop"] < 0.5 * fe["hoop"]
+    comm.Barrier()
+    if comm.rank == 0:
+        data = json.loads(out.read_text())
+        assert data["ranks"] == comm.size and data["rates_l2"]["lagrange"] > 1.8

@@ -35,8 +35,23 @@
 # * the methods that are known to miss are reported as MISSED with the measured figure (reasons
 #   in ``KNOWN_MISSES``) and do not change the exit code.
 #
+# Gauss quadrature alone reaches 1e-6 only with many more points than the 4 x 4 rule of the
+# paper: the MLS functions are rational and only C2 across the edges of the supports, which
+# cross the cells, so the Gauss error falls algebraically (about as n^-4 in the n points per
+# direction: EFG 1.2e-4, 2.2e-6, 9.5e-8 for n = 4, 10, 25 on the regular quadrilaterals), not
+# exponentially. ``--preset dense-gauss`` is the cheapest setting measured to reach 1e-6 for
+# EFG, Lagrange and both ramps on the regular and the gmsh meshes, quadrilaterals and
+# triangles: quartic weight, d_max = 3, Gauss degree 49 (25 x 25 points per quadrilateral, 39
+# times the 4 x 4 rule; 0.5 to 5 s per method here). Under it those methods are expected to
+# pass on those meshes (``PRESET_EXPECTED``); elsewhere (the perturbed mesh needs degree 59 for
+# EFG) they are reported as measured. With the paper's own parameters (quartic, d_max = 2, 4 x 4
+# Gauss; the defaults) the error is 1e-4 to 6e-4, not the 1e-6 of sec. 5.1.1, and the Gaussian
+# weight (3.10a) as written is not zero at r = 1 (exp(-6.25) = 2e-3): its functions jump at the
+# support edges and the error stays at 1e-3 to 2e-2 whatever the quadrature.
+#
 #     python demos/patch_test.py --method efg --mesh irregular --consistent [--json out.json]
 #     python demos/patch_test.py --method all --mesh irregular --cell triangle
+#     python demos/patch_test.py --method all --mesh irregular --preset dense-gauss
 
 # +
 from __future__ import annotations
@@ -63,19 +78,35 @@ SIZE = 2.0
 TARGET_EXACT, TARGET_GAUSS = 1e-10, 1e-6
 #: (method, consistent) pairs that meet their target today: missing it fails the demo.
 EXPECTED_TO_PASS = {("fe", False), ("fe", True), ("efg", True), ("lagrange", True)}
+#: Settings (weight, d_max, Gauss degree) that trade cost for a smaller quadrature error; an
+#: explicit --weight / --dilation / --quadrature-degree overrides the preset's value. The preset's
+#: d_max applies to PRESET_METHODS only; the other methods keep their own.
+PRESETS = {
+    "dense-gauss": {"weight": "quartic", "dilation": 3.0, "quadrature_degree": 49},
+}
+PRESET_METHODS = ("efg", "lagrange", "ramp", "ramp-cubic")
+#: (method, mesh) pairs expected to meet the Gauss target under a preset's exact settings, as
+#: measured (6 x 6 cells; worst 6.2e-7, EFG on the gmsh quadrilaterals). Missing it fails the demo.
+PRESET_EXPECTED = {
+    "dense-gauss": {(m, mesh) for m in PRESET_METHODS for mesh in ("regular", "irregular")},
+}
+#: Defaults without a preset: 4 x 4 Gauss and the quartic weight of Belytschko et al. 1995.
+DEFAULT_WEIGHT, DEFAULT_DEGREE = "quartic", 7
 #: Why the others miss (measured figures: README and the coupling tests).
 KNOWN_MISSES = {
-    "efg": "Gauss quadrature error of the non-polynomial MLS functions; --consistent removes it",
-    "lagrange": "Gauss quadrature error on the patch (2e-4 in tests/test_coupled.py); "
+    "efg": "Gauss quadrature error of the non-polynomial MLS functions (1e-4 to 6e-4 at the "
+    "defaults); --preset dense-gauss brings it below 1e-6 on the regular and gmsh meshes, "
     "--consistent removes it",
+    "lagrange": "Gauss quadrature error on the patch (2e-4 in tests/test_coupled.py); "
+    "--preset dense-gauss brings it below 1e-6, --consistent removes it",
     "edge-to-edge": "collocated multipliers do not integrate the interface traction "
     "consistently: a first-order error, VCI does not remove it (1.1e-2 in "
     "tests/test_edge_to_edge.py)",
-    "ramp": "blended interface functions are not polynomials: Gauss error; with --dilation 3 "
-    "--quadrature-degree 14 on the regular mesh 4.1e-7 (--field general), 1.6e-6 (u = (x, y)); "
+    "ramp": "blended interface functions are not polynomials: Gauss error (1.5e-4 to 5.6e-4 at "
+    "the defaults); --preset dense-gauss brings it below 1e-6 on the regular and gmsh meshes; "
     "VCI not available",
-    "ramp-cubic": "as ramp; with --dilation 3 --quadrature-degree 14 on the regular mesh 3.2e-7 "
-    "(--field general), 1.1e-6 (u = (x, y)); VCI not available",
+    "ramp-cubic": "as ramp (1.9e-4 to 5e-4 at the defaults); --preset dense-gauss brings it "
+    "below 1e-6 on the regular and gmsh meshes; VCI not available",
     "bridging": "the point constraints do not transmit the band's force consistently "
     "(1.1e-2 in tests/test_bridging.py); VCI not available",
     "master-slave": "exempt: rigid links drop the strain across the first particle layer",
@@ -94,8 +125,25 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--cell", choices=("quadrilateral", "triangle"), default="quadrilateral")
     p.add_argument("--cells", type=int, default=6, help="cells per side (nominal for irregular)")
     p.add_argument("--consistent", action="store_true", help="variationally consistent integration")
-    p.add_argument("--quadrature-degree", type=int, default=7, help="7: 4 x 4 Gauss on quads")
-    p.add_argument("--weight", choices=("quartic", "cubic", "gaussian"), default="quartic")
+    p.add_argument(
+        "--preset",
+        choices=sorted(PRESETS),
+        default=None,
+        help="dense-gauss: quartic weight, d_max 3, Gauss degree 49 (below 1e-6 without VCI "
+        "for efg, lagrange, ramp, ramp-cubic on the regular and gmsh meshes; 39 x the points)",
+    )
+    p.add_argument(
+        "--quadrature-degree",
+        type=int,
+        default=None,
+        help=f"Gauss degree (default {DEFAULT_DEGREE}: 4 x 4 points on quadrilaterals)",
+    )
+    p.add_argument(
+        "--weight",
+        choices=("quartic", "cubic", "gaussian"),
+        default=None,
+        help=f"MLS weight (default {DEFAULT_WEIGHT})",
+    )
     p.add_argument(
         "--dilation",
         type=float,
@@ -111,6 +159,15 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     )
     p.add_argument("--json", default=None, help="write the record(s) as JSON")
     args = p.parse_args(argv)
+    preset = PRESETS.get(args.preset, {})
+    args.preset_overridden = [
+        k for k in preset if getattr(args, k) is not None and getattr(args, k) != preset[k]
+    ]
+    for key, default in (("weight", DEFAULT_WEIGHT), ("quadrature_degree", DEFAULT_DEGREE)):
+        if getattr(args, key) is None:
+            setattr(args, key, preset.get(key, default))
+    if args.quadrature_degree < 1:
+        p.error(f"--quadrature-degree must be at least 1, got {args.quadrature_degree}")
     if args.cells < 2:
         p.error(f"--cells must be at least 2, got {args.cells}")
     if args.dilation is not None and not (np.isfinite(args.dilation) and args.dilation > 0):
@@ -194,6 +251,8 @@ def cells_right_of(msh, x0: float) -> np.ndarray:
 def dilation(args, method: str) -> float:
     if args.dilation is not None:
         return args.dilation
+    if args.preset is not None and method in PRESET_METHODS:
+        return PRESETS[args.preset]["dilation"]
     return mf.DEFAULT_DILATION.get(method, 2.0)
 
 
@@ -262,6 +321,17 @@ def target(method: str, consistent: bool) -> float | None:
     return TARGET_GAUSS
 
 
+def preset_expects(args, method: str, consistent: bool) -> bool:
+    """Whether ``--preset`` expects ``method`` to meet the Gauss target here: its measured
+    (method, mesh) pairs, at the preset's own settings (not overridden by a flag)."""
+    return (
+        args.preset is not None
+        and not consistent
+        and not args.preset_overridden
+        and (method, args.mesh) in PRESET_EXPECTED[args.preset]
+    )
+
+
 def run(args, method: str, comm) -> dict:
     msh, jitter = make_mesh(comm, args)
     exact = (
@@ -288,7 +358,7 @@ def run(args, method: str, comm) -> dict:
         err, particles = None, 0
         note = f"{'refused by the library' if refused else 'ERROR'}: {e}"
     goal = target(method, consistent)
-    expected = (method, consistent) in EXPECTED_TO_PASS
+    expected = (method, consistent) in EXPECTED_TO_PASS or preset_expects(args, method, consistent)
     if err is None and not note.startswith("refused"):
         status = "FAILED" if expected else "ERROR"
     elif goal is None:
@@ -309,6 +379,7 @@ def run(args, method: str, comm) -> dict:
         "quadrature_degree": args.quadrature_degree,
         "dilation": dilation(args, method) if method != "fe" else None,
         "weight": args.weight if method != "fe" else None,
+        "preset": args.preset,
         "field": args.field,
         "max_error": err,
         "target": goal,
@@ -328,8 +399,11 @@ def report(records: list[dict], comm) -> None:
         f"Linear patch test (Belytschko et al. 1995, sec. 5.1.1), {field}, "
         f"{comm.size} rank(s), DOLFINx {mf.DOLFINX_VERSION}"
     )
+    r0 = next((r for r in records if r["weight"]), records[0])
+    preset = f", preset {r0['preset']}" if r0["preset"] else ""
+    print(f"weight {r0['weight'] or '-'}, Gauss degree {r0['quadrature_degree']}{preset}")
     head = (
-        f"{'method':12} {'mesh':9} {'cells':17} {'part.':>5} {'consistent':>10} "
+        f"{'method':12} {'mesh':9} {'cells':17} {'part.':>5} {'d_max':>5} {'consistent':>10} "
         f"{'max error':>9} {'target':>7}  status"
     )
     print(head)
@@ -340,8 +414,9 @@ def report(records: list[dict], comm) -> None:
         err = "n/a" if r["max_error"] is None else f"{r['max_error']:.2e}"
         goal = "-" if r["target"] is None else f"{r['target']:.0e}"
         part = str(r["particles"]) if r["max_error"] is not None else "-"
+        dmax = "-" if r["dilation"] is None else f"{r['dilation']:g}"
         print(
-            f"{r['method']:12} {r['mesh']:9} {cells:17} {part:>5} {cons:>10} "
+            f"{r['method']:12} {r['mesh']:9} {cells:17} {part:>5} {dmax:>5} {cons:>10} "
             f"{err:>9} {goal:>7}  {r['status']}"
         )
     notes = [r for r in records if r["note"]]

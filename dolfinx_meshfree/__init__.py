@@ -36,7 +36,7 @@ from .problem import CoupledLinearProblem
 from .quadrature import boundary_facets, cell_quadrature, facet_quadrature
 from .sph import SPH
 from .tables import ShapeTable
-from .waves import GaussianPulseRod
+from .waves import GaussianPulseRod, StepLoadedRod
 
 __all__ = [
     "COUPLINGS",
@@ -63,6 +63,7 @@ __all__ = [
     "PointsOutsideMeshError",
     "PressurizedBushing",
     "ShapeTable",
+    "StepLoadedRod",
     "TimoshenkoBeam",
     "boundary_facets",
     "cell_quadrature",

@@ -56,7 +56,7 @@ from .parallel import Layout, raise_on_all_ranks
 from .petsc import create_aij, create_vector
 from .quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
 
-__all__ = ["BridgingBand", "BridgingSolution", "check_options"]
+__all__ = ["BridgingBand", "BridgingSolution", "bridging_operators", "check_options"]
 
 
 def check_options(overlap, penalty) -> tuple[int, float]:
@@ -381,3 +381,115 @@ def solve_bridging(problem, solver: str = "mumps"):
     )
     sol.band = band
     return sol
+
+
+def bridging_operators(problem):
+    """The bridging coupling's operators without essential conditions (collective).
+
+    ``K_FE`` weighted by ``beta_FE`` (eq. 47–48) plus the penalty's FE block, ``K_P`` with the
+    quadrature weights times ``alpha`` (eq. 46) plus its particle block, the penalty's
+    off-diagonal blocks (eq. 72–75), and the point constraints at the band particles with
+    multipliers on the band's FE nodes (eq. 57, 79–80) with unit scaling. The particle
+    quadrature's weights include ``alpha``, so its row sums give the weighted masses of eq. 89;
+    ``fe_weight`` is ``beta_FE`` for eq. 88. See
+    :class:`~dolfinx_meshfree.coupled.CouplingOperators`.
+    """
+    from .coupled import CouplingOperators
+
+    if problem.consistent:
+        raise ValueError(
+            "consistent=True is not available with coupling='bridging': the energy weights of "
+            "the band are not part of the patch's variationally consistent integration"
+        )
+    t0 = time.perf_counter()
+    V, patch, P = problem.V, problem.patch, problem.patch.particles
+    comm, msh = patch.comm, V.mesh
+    n, p = P.num_particles, problem.penalty
+    pdofs = P.petsc_dofs(2)
+    dof_map = pdofs.ravel()
+    fe_layout, l2g = problem._fe_layout()
+    pl = problem._particle_layout()
+    band = BridgingBand(problem, problem.overlap)
+    q = cell_quadrature(msh, problem.quadrature_degree, P.cells)
+    w = q.weights.copy()
+    b = band.in_band[q.cells]
+    w[b] *= band.alpha_at(q.points[b], q.cells[b])
+    qa = QuadraturePoints(q.points, w, q.cells)
+    tq = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(q.points))
+    Kq = stiffness_matrix(tq.gradients, w, problem.material).tocoo()
+    Kp_loc = sp.csr_matrix((Kq.data, (dof_map[Kq.row], dof_map[Kq.col])), shape=(2 * n, 2 * n))
+    active = problem._fe_active(np.concatenate([patch.fe_cells, band.cells]))
+
+    ids, ml = band.numbering(problem)
+    xb = P.positions[band.local_particles]
+    t_fe = tabulate_in_cells(V, xb, band.local_cells, derivatives=0).values.tocsr()
+    t_fe.data[np.abs(t_fe.data) <= 1e-13] = 0.0
+    t_fe.eliminate_zeros()
+    t_p = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(xb, 0)).values.tocsr()
+    M_fe = (t_fe.T @ t_fe).tocoo()
+    M_p = (t_fe.T @ t_p).tocoo()
+    keep = ids[M_fe.row] >= 0
+    zero = dolfinx.fem.Function(V)
+    zero.x.array[:] = 0.0
+    G_fe, _, _ = _fe_constraint_block(
+        ids[M_fe.row[keep]],
+        M_fe.col[keep],
+        M_fe.data[keep],
+        False,
+        1.0,
+        np.zeros(l2g.size, dtype=bool),
+        zero,
+        l2g,
+        (ml.size_global, fe_layout.size_global),
+    )
+    keep = ids[M_p.row] >= 0
+    G_p = _particle_constraint_block(
+        ids[M_p.row[keep]], M_p.col[keep], M_p.data[keep], 1.0, pdofs, (ml.size_global, 2 * n)
+    )
+
+    K_fe = _fe_stiffness(problem, band)
+    K_fp = K_pf = None
+    if p > 0.0:
+        fe_dof = (2 * l2g[:, None] + np.arange(2)).ravel()
+        e2 = sp.identity(2, format="csr")
+        Nf, Np = sp.kron(t_fe, e2).tocsr(), sp.kron(t_p, e2).tocsr()
+        A11 = (p * (Nf.T @ Nf)).tocoo()
+        A12 = (-p * (Nf.T @ Np)).tocoo()
+        A22 = (p * (Np.T @ Np)).tocoo()
+        K_ff = sp.csr_matrix(
+            (A11.data, (fe_dof[A11.row], fe_dof[A11.col])), shape=(fe_layout.size_global,) * 2
+        )
+        K_pen = create_aij(comm, K_ff, fe_layout, fe_layout)
+        K_fe.axpy(1.0, K_pen, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+        K_pen.destroy()
+        Kp_loc = Kp_loc + sp.csr_matrix(
+            (A22.data, (dof_map[A22.row], dof_map[A22.col])), shape=(2 * n, 2 * n)
+        )
+        fp = sp.csr_matrix(
+            (A12.data, (fe_dof[A12.row], dof_map[A12.col])), shape=(fe_layout.size_global, 2 * n)
+        )
+        K_fp = create_aij(comm, fp, fe_layout, pl)
+        K_pf = create_aij(comm, fp.T.tocsr(), pl, fe_layout)
+    fe_cells = problem.cell_indicator(~patch.in_patch & ~band.in_band)
+    in_band = problem.cell_indicator(band.in_band)
+    alpha = dolfinx.fem.Function(V)
+    alpha.x.array[:] = 0.0
+    alpha.x.array[0::2] = band.alpha
+    return CouplingOperators(
+        coupling=problem.coupling,
+        K_fe=K_fe,
+        K_p=create_aij(comm, Kp_loc, pl, pl),
+        fe_weight=fe_cells + in_band * (1.0 - alpha[0]),
+        fe_active=active,
+        particle_quadrature=qa,
+        particle_table=tq.values.tocsr(),
+        fe_layout=fe_layout,
+        particle_layout=pl,
+        K_fp=K_fp,
+        K_pf=K_pf,
+        G_fe=create_aij(comm, G_fe, ml, fe_layout),
+        G_p=create_aij(comm, G_p, ml, pl),
+        multiplier_layout=ml,
+        interface=band,
+        timings={"operators": time.perf_counter() - t0},
+    )

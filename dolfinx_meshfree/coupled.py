@@ -53,7 +53,13 @@ from .patch import ParticlePatch
 from .petsc import BlockSystem, create_aij, create_vector
 from .quadrature import QuadraturePoints, facet_quadrature
 
-__all__ = ["COUPLINGS", "DEFAULT_DILATION", "CoupledElasticity", "CoupledSolution"]
+__all__ = [
+    "COUPLINGS",
+    "DEFAULT_DILATION",
+    "CoupledElasticity",
+    "CoupledSolution",
+    "CouplingOperators",
+]
 
 #: Default MLS dilation ``d_max`` of each coupling (see :class:`CoupledElasticity`).
 DEFAULT_DILATION = {
@@ -120,6 +126,81 @@ class CoupledSolution:
             return list(self.evaluate_at_quadrature(q)[0])
 
         return np.array(_route(msh, x, compute), dtype=float).reshape(-1, 2)
+
+
+@dataclass
+class CouplingOperators:
+    """The assembled operators of a coupling, without essential conditions and unscaled.
+
+    What :meth:`CoupledElasticity.operators` returns, for explicit dynamics (Rabczuk et al.
+    2006, Table I) and for users who assemble their own systems. Two fields: the FE dofs of
+    ``V`` (two per node, PETSc global numbering, layout :attr:`fe_layout`) and the particle dofs
+    (:meth:`~dolfinx_meshfree.ParticleSet.petsc_dofs`, layout :attr:`particle_layout`). The
+    caller owns the PETSc objects (:meth:`destroy`).
+
+    Attributes:
+        coupling: The coupling's name.
+        K_fe: FE stiffness: the FE form weighted by :attr:`fe_weight`, plus the coupling's FE-FE
+            terms (ramp interface cells, bridging penalty). Rows of inactive dofs are empty.
+        K_p: Particle stiffness (EFG on the patch cells, bridging: weighted by ``alpha``, ramp:
+            plus the interface cells' particle-particle block).
+        K_fp, K_pf: Off-diagonal stiffness blocks (FE rows x particle columns and back; ramp
+            interface cells, bridging penalty), or ``None``.
+        G_fe, G_p: Constraint blocks (multipliers x FE dofs, multipliers x particle dofs) of the
+            multiplier couplings, ``G_FE u_FE + G_P u_P = 0`` with unit scaling (the static
+            system scales them by ``E``) and no column removed for essential conditions; ``None``
+            for the couplings without multipliers.
+        fe_weight: Scalar UFL expression, the weight of the FE energy on each cell (the DG0
+            indicator of the FE cells; bridging: ``beta_FE``, eq. 47–48). The FE masses are
+            ``rho fe_weight`` integrated against the FE basis (eq. 88).
+        fe_active: bool per local FE node (owned and ghost): the node carries FE dofs.
+        particle_quadrature: This rank's quadrature of the particle cells (bridging: weights
+            times ``alpha``, eq. 89); ``particle_table``: (nq x n) CSR of the MLS values there
+            (columns in original particle order). The row-sum particle masses are
+            ``rho particle_table^T w``.
+        interface_quadrature, interface_table: Ramp couplings: the interface cells' quadrature
+            and the blended shape functions there, (nq x (n_loc + n)) CSR with columns ``[local
+            FE nodes | particles]`` (Belytschko et al. 1995, eq. 3.15); ``None`` otherwise.
+        reduction: Master–slave: ``(T_PF, S)``, PETSc matrices with ``u_P = T_PF u_FE + S u_M``
+            (slaves follow the FE interface, eq. 27; ``S`` selects the free particles, whose
+            master layout is :attr:`master_layout`); ``None`` otherwise.
+        interface: The coupling's interface object for evaluation (``RampInterface``,
+            ``BridgingBand``, ``MasterSlaveLinks``) or ``None``.
+        fe_layout, particle_layout, multiplier_layout, master_layout: Layouts (dofs).
+        timings: Seconds spent.
+    """
+
+    coupling: str
+    K_fe: PETSc.Mat
+    K_p: PETSc.Mat
+    fe_weight: object
+    fe_active: np.ndarray
+    particle_quadrature: QuadraturePoints
+    particle_table: sp.csr_matrix
+    fe_layout: Layout
+    particle_layout: Layout
+    K_fp: PETSc.Mat | None = None
+    K_pf: PETSc.Mat | None = None
+    G_fe: PETSc.Mat | None = None
+    G_p: PETSc.Mat | None = None
+    multiplier_layout: Layout | None = None
+    interface_quadrature: QuadraturePoints | None = None
+    interface_table: sp.csr_matrix | None = None
+    reduction: tuple[PETSc.Mat, PETSc.Mat] | None = None
+    master_layout: Layout | None = None
+    interface: object | None = None
+    timings: dict = field(default_factory=dict)
+
+    def matrices(self) -> list[PETSc.Mat]:
+        """The PETSc matrices held (for destruction or transfer of ownership)."""
+        mats = [self.K_fe, self.K_p, self.K_fp, self.K_pf, self.G_fe, self.G_p]
+        mats += list(self.reduction or ())
+        return [m for m in mats if m is not None]
+
+    def destroy(self) -> None:
+        """Destroy the PETSc matrices (collective)."""
+        for m in self.matrices():
+            m.destroy()
 
 
 class CoupledElasticity:
@@ -491,6 +572,90 @@ class CoupledElasticity:
         uh.x.scatter_forward()
         owned = np.concatenate(comm.allgather(parts[1]))
         return uh, owned.reshape(-1, 2)[P.petsc_index], seconds
+
+    # -- operators (explicit dynamics) ----------------------------------------------------------
+
+    def operators(self) -> CouplingOperators:
+        """The coupling's assembled operators without essential conditions (collective).
+
+        Stiffness blocks, constraint blocks with unit scaling, the weights of the FE energy and
+        the particle quadrature with its MLS table (for lumped masses), and the coupling's
+        interface object; see :class:`CouplingOperators`. Tractions and Dirichlet conditions
+        given to this object are not used. Every coupling of :data:`COUPLINGS` is available.
+        """
+        if self.coupling == "bridging":
+            from .bridging import bridging_operators
+
+            return bridging_operators(self)
+        if self.coupling in ("ramp", "ramp-cubic"):
+            from .ramp import ramp_operators
+
+            return ramp_operators(self)
+        if self.coupling == "master-slave":
+            from .master_slave import master_slave_operators
+
+            return master_slave_operators(self)
+        return self._interface_operators()
+
+    def _particle_layout(self) -> Layout:
+        P = self.patch.particles
+        return Layout(2 * P.layout.size_local, 2 * P.num_particles, 2 * P.layout.start)
+
+    def _fe_active(self, cells: np.ndarray | None = None) -> np.ndarray:
+        """Flag of every local FE node of the given owned cells (default: the FE cells)."""
+        cells = self.patch.fe_cells if cells is None else cells
+        return self._node_flags(_compat.dofmap_array(self.V)[cells].ravel())
+
+    def _interface_operators(self) -> CouplingOperators:
+        """Lagrange (FE trace multipliers, eq. 109) and edge-to-edge (collocation) operators."""
+        t0 = time.perf_counter()
+        V, patch, P = self.V, self.patch, self.patch.particles
+        comm, n = patch.comm, patch.particles.num_particles
+        fe_layout, l2g = self._fe_layout()
+        pl = self._particle_layout()
+        boundary = patch.boundary() if self.consistent else None
+        Kp_loc, q, tq, _ = particle_stiffness(
+            P, self.mls, self.material, self.quadrature_degree, boundary
+        )
+        if self.coupling == "lagrange":
+            ids, ml = self._interface_numbering()
+            iq = facet_quadrature(
+                V.mesh, patch.interface_facets, self.quadrature_degree, patch.interface_fe_cells
+            )
+            t_fe = tabulate_in_cells(V, iq.points, iq.cells, derivatives=0).values
+            t_p = raise_on_all_ranks(comm, lambda: self.mls.tabulate(iq.points, 0)).values
+            W = sp.diags(iq.weights)
+            M_fe = (t_fe.T @ W @ t_fe).tocoo()
+            M_p = (t_fe.T @ W @ t_p).tocoo()
+            tiny = 1e-14 * (np.abs(M_fe.data).max() if M_fe.nnz else 1.0)
+            keep = (ids[M_fe.row] >= 0) & (np.abs(M_fe.data) > tiny)
+            fe_rows = (ids[M_fe.row[keep]], M_fe.col[keep], M_fe.data[keep], False)
+            keep = (ids[M_p.row] >= 0) & (np.abs(M_p.data) > tiny)
+            p_rows = (ids[M_p.row[keep]], M_p.col[keep], M_p.data[keep])
+        else:
+            (fe_rows, p_rows), ml = self._collocation_rows()
+        no_bc = np.zeros(l2g.size, dtype=bool)
+        zero = dolfinx.fem.Function(V)
+        zero.x.array[:] = 0.0
+        G_fe, _, _ = _fe_constraint_block(
+            *fe_rows[:3], fe_rows[3], 1.0, no_bc, zero, l2g, (ml.size_global, fe_layout.size_global)
+        )
+        G_p = _particle_constraint_block(*p_rows, 1.0, P.petsc_dofs(2), (ml.size_global, 2 * n))
+        return CouplingOperators(
+            coupling=self.coupling,
+            K_fe=self._fe_stiffness(),
+            K_p=create_aij(comm, Kp_loc, pl, pl),
+            fe_weight=self.cell_indicator(~patch.in_patch),
+            fe_active=self._fe_active(),
+            particle_quadrature=q,
+            particle_table=tq.values.tocsr(),
+            fe_layout=fe_layout,
+            particle_layout=pl,
+            G_fe=create_aij(comm, G_fe, ml, fe_layout),
+            G_p=create_aij(comm, G_p, ml, pl),
+            multiplier_layout=ml,
+            timings={"operators": time.perf_counter() - t0},
+        )
 
     # -- solve ----------------------------------------------------------------------------------
 

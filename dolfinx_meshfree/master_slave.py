@@ -64,7 +64,7 @@ from .efg import facet_multipliers, particle_stiffness
 from .parallel import Layout, raise_on_all_ranks
 from .petsc import BlockSystem, create_aij, create_vector
 
-__all__ = ["SLAVE_LAYER", "MasterSlaveLinks", "solve_master_slave"]
+__all__ = ["SLAVE_LAYER", "MasterSlaveLinks", "master_slave_operators", "solve_master_slave"]
 
 #: Slaves: particles within ``SLAVE_LAYER`` times the particle spacing of the interface.
 SLAVE_LAYER = 1.01
@@ -314,3 +314,72 @@ def solve_master_slave(problem, solver: str = "mumps"):
     )
     sol.links = links
     return sol
+
+
+def master_slave_operators(problem):
+    """The master–slave coupling's operators without essential conditions (collective).
+
+    ``K_FE`` on the FE cells and ``K_P`` on the patch, unreduced, with the reduction
+    ``(T_PF, S)``: ``u_P = T_PF u_FE + S u_M`` where the slaves follow their edges (eq. 27) and
+    ``S`` selects the free (master) particles, numbered by :attr:`master_layout` in PETSc
+    particle order. The reduced stiffness is ``T^T K T`` and the forces on the slaves go to their
+    masters with ``T^T`` (eq. 28). See :class:`~dolfinx_meshfree.coupled.CouplingOperators`.
+    """
+    from .coupled import CouplingOperators
+
+    t0 = time.perf_counter()
+    patch, P = problem.patch, problem.patch.particles
+    comm = patch.comm
+    n = P.num_particles
+    pdofs = P.petsc_dofs(2)
+    fe_layout, l2g = problem._fe_layout()
+    pl = problem._particle_layout()
+    boundary = patch.boundary() if problem.consistent else None
+    Kp_loc, q, tq, _ = particle_stiffness(
+        P, problem.mls, problem.material, problem.quadrature_degree, boundary
+    )
+    no_bc = np.zeros(l2g.size, dtype=bool)
+    links = raise_on_all_ranks(
+        comm, lambda: MasterSlaveLinks(problem, no_bc, np.zeros((l2g.size, 2)))
+    )
+    is_slave = np.zeros(n, dtype=bool)
+    is_slave[links.slaves] = True
+    mine = P.owned[np.argsort(P.petsc_index[P.owned], kind="stable")]
+    free_mine = mine[~is_slave[mine]]
+    mlay = Layout.from_local(comm, free_mine.size)
+    ml = Layout(2 * mlay.size_local, 2 * mlay.size_global, 2 * mlay.start)
+    rows, cols, vals = [], [], []
+    for p, (nodes, weights) in zip(links.slaves, links.rows, strict=True):
+        if P.owner[p] == comm.rank:
+            # weights (k, 2, 2): u_P[i] += weights[k, i, j] u[nodes[k], j]
+            rows.append(np.broadcast_to(pdofs[p][None, :, None], weights.shape).ravel())
+            cols.append(
+                np.broadcast_to(
+                    (2 * nodes[:, None] + np.arange(2))[:, None, :], weights.shape
+                ).ravel()
+            )
+            vals.append(weights.ravel())
+    cat = np.concatenate
+    z = [np.zeros(0, np.int64)]
+    T_pf = sp.csr_matrix(
+        (cat([*vals, np.zeros(0)]), (cat([*rows, *z]), cat([*cols, *z]))),
+        shape=(2 * n, fe_layout.size_global),
+    )
+    srow = pdofs[free_mine].ravel()
+    scol = ml.start + np.arange(ml.size_local)
+    S_loc = sp.csr_matrix((np.ones(srow.size), (srow, scol)), shape=(2 * n, ml.size_global))
+    return CouplingOperators(
+        coupling=problem.coupling,
+        K_fe=problem._fe_stiffness(),
+        K_p=create_aij(comm, Kp_loc, pl, pl),
+        fe_weight=problem.cell_indicator(~patch.in_patch),
+        fe_active=problem._fe_active(),
+        particle_quadrature=q,
+        particle_table=tq.values.tocsr(),
+        fe_layout=fe_layout,
+        particle_layout=pl,
+        reduction=(create_aij(comm, T_pf, pl, fe_layout), create_aij(comm, S_loc, pl, ml)),
+        master_layout=ml,
+        interface=links,
+        timings={"operators": time.perf_counter() - t0},
+    )

@@ -55,7 +55,7 @@ from .petsc import create_aij, create_vector
 from .quadrature import cell_quadrature, facet_quadrature
 from .tables import ShapeTable
 
-__all__ = ["RAMPS", "RampInterface"]
+__all__ = ["RAMPS", "RampInterface", "ramp_operators"]
 
 
 #: The ramp couplings and whether each smooths the ramp (3R^2 - 2R^3).
@@ -388,3 +388,71 @@ def _first_cells(msh, facets: np.ndarray) -> np.ndarray:
     msh.topology.create_connectivity(tdim - 1, tdim)
     f2c = msh.topology.connectivity(tdim - 1, tdim)
     return np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]]
+
+
+def ramp_operators(problem):
+    """The ramp couplings' operators without essential conditions (collective).
+
+    ``K_FE``: DOLFINx's assembly on the pure FE cells plus the interface cells' FE–FE block;
+    ``K_P``: EFG on the patch cells plus the interface cells' particle–particle block;
+    ``K_FP``/``K_PF``: the interface cells' mixed blocks, all from the blended shape functions
+    of eq. 3.15–3.16 (Belytschko et al. 1995). The interface quadrature and its blended table
+    give the interface cells' share of the row-sum masses with the same shape functions
+    (eq. 4.5). See :class:`~dolfinx_meshfree.coupled.CouplingOperators`.
+    """
+    from .coupled import CouplingOperators
+
+    if problem.consistent:
+        raise ValueError(
+            "consistent=True is not available with the ramp couplings: the particle shape "
+            "functions extend into the interface cells, which the patch's VCI does not see"
+        )
+    t0 = time.perf_counter()
+    V, patch, P = problem.V, problem.patch, problem.patch.particles
+    comm, msh = patch.comm, V.mesh
+    n = P.num_particles
+    pdofs = P.petsc_dofs(2)
+    fe_layout, l2g = problem._fe_layout()
+    pl = problem._particle_layout()
+    blend = RampInterface(problem, cubic=RAMPS[problem.coupling])
+    n_loc = blend.num_fe_columns
+    Kp_loc, pq, ptab, _ = particle_stiffness(
+        P, problem.mls, problem.material, problem.quadrature_degree
+    )
+    active = problem._fe_active() & ~blend.on_gamma
+    q = cell_quadrature(msh, problem.quadrature_degree, blend.cells)
+    tab = raise_on_all_ranks(comm, lambda: blend.table(q.points, q.cells))
+    Ki = stiffness_matrix(tab.gradients, q.weights, problem.material).tocoo()
+    # blended columns: FE (2 a + i) -> 2 l2g[a] + i; particles (2 J + i) -> PETSc dofs
+    nf = 2 * n_loc
+    dof = np.concatenate([(2 * l2g[:, None] + np.arange(2)).ravel(), pdofs.ravel()])
+    r, c = dof[Ki.row], dof[Ki.col]
+    fr, fc = Ki.row < nf, Ki.col < nf
+    nfe = fe_layout.size_global
+
+    def block(sel, shape):
+        return sp.csr_matrix((Ki.data[sel], (r[sel], c[sel])), shape=shape)
+
+    K_int = create_aij(comm, block(fr & fc, (nfe, nfe)), fe_layout, fe_layout)
+    K_fe = _fe_stiffness(problem, blend)
+    K_fe.axpy(1.0, K_int, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+    K_int.destroy()
+    Kp_loc = Kp_loc + block(~fr & ~fc, (2 * n, 2 * n))
+    pure = ~patch.in_patch & ~blend.in_interface
+    return CouplingOperators(
+        coupling=problem.coupling,
+        K_fe=K_fe,
+        K_p=create_aij(comm, Kp_loc, pl, pl),
+        fe_weight=problem.cell_indicator(pure),
+        fe_active=active,
+        particle_quadrature=pq,
+        particle_table=ptab.values.tocsr(),
+        fe_layout=fe_layout,
+        particle_layout=pl,
+        K_fp=create_aij(comm, block(fr & ~fc, (nfe, 2 * n)), fe_layout, pl),
+        K_pf=create_aij(comm, block(~fr & fc, (2 * n, nfe)), pl, fe_layout),
+        interface_quadrature=q,
+        interface_table=tab.values.tocsr(),
+        interface=blend,
+        timings={"operators": time.perf_counter() - t0},
+    )

@@ -13,6 +13,10 @@ of the initial velocity (method of images):
     v(x, t) = \\tfrac12 [W(x - ct) + W(x + ct)], \\qquad
     u(x, t) = \\tfrac{1}{2c} [U(x + ct) - U(x - ct)], \\quad U' = W.
 
+The step-loaded rod of Belytschko et al. 1995, sec. 5.2.1 (:class:`StepLoadedRod`): a traction
+``sigma0 H(t)`` on one end, the other end fixed, a step wave reflected alternately by the fixed
+end (velocity reversed) and the loaded end.
+
 The wave returns to its initial position after ``L / c`` (the two halves meet again after one
 reflection each, Rabczuk's ``t = 0.011563`` ms) and every ``L / c`` after that.
 """
@@ -25,7 +29,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.special import erf
 
-__all__ = ["GaussianPulseRod"]
+__all__ = ["GaussianPulseRod", "StepLoadedRod"]
 
 
 @dataclass(frozen=True)
@@ -117,3 +121,67 @@ class GaussianPulseRod:
         ct = c * float(t)
         u = (self._images(x + ct, True) - self._images(x - ct, True)) / (2.0 * c)
         return np.stack([u, np.zeros_like(u)], axis=1)
+
+
+@dataclass(frozen=True)
+class StepLoadedRod:
+    """Rod ``x0 <= x <= x0 + L``, at rest, under a step traction ``sigma0 H(t)`` pushing on the end
+    ``x0`` (traction ``(sigma0, 0)``), fixed at ``x0 + L`` (Belytschko et al. 1995, sec. 5.2.1,
+    Fig. 9: ``E = rho = L = sigma0 = 1``).
+
+    The wave front carries the velocity ``v0 = sigma0 / (rho c)``; the fixed end reflects it
+    with the velocity reversed, the loaded end (constant traction) too, so with ``xi = x - x0``
+
+    .. math::
+        v(x, t) = v_0 \\sum_{k \\ge 0} (-1)^k \\left[ H\\left(t - \\frac{2kL + \\xi}{c}\\right)
+                  - H\\left(t - \\frac{2(k+1)L - \\xi}{c}\\right) \\right],
+
+    periodic with period ``4 L / c`` (d'Alembert, method of characteristics). With ``nu = 0``
+    in plane strain it is also the exact 2D solution of a strip (no lateral stress).
+
+    Args:
+        E, rho: Young's modulus and density (``c = sqrt(E/rho)``).
+        length: ``L``. sigma0: The traction. x0: The loaded end.
+    """
+
+    E: float = 1.0
+    rho: float = 1.0
+    length: float = 1.0
+    sigma0: float = 1.0
+    x0: float = 0.0
+
+    def __post_init__(self):
+        for name in ("E", "rho", "length"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"{name}={v} must be a positive number")
+        if not np.isfinite(self.sigma0):
+            raise ValueError(f"sigma0={self.sigma0} must be finite")
+
+    @property
+    def wave_speed(self) -> float:
+        """``c = sqrt(E / rho)``."""
+        return float(np.sqrt(self.E / self.rho))
+
+    @property
+    def front_velocity(self) -> float:
+        """``v0 = sigma0 / (rho c)``, the particle velocity behind the front."""
+        return self.sigma0 / (self.rho * self.wave_speed)
+
+    def arrivals(self, x: float, t_end: float) -> np.ndarray:
+        """Times ``<= t_end`` at which a front passes ``x`` (the jumps of the velocity)."""
+        c, L, xi = self.wave_speed, self.length, float(x) - self.x0
+        k = np.arange(int(np.ceil(c * t_end / (2 * L))) + 1)
+        t = np.sort(np.concatenate([(2 * k * L + xi) / c, (2 * (k + 1) * L - xi) / c]))
+        return t[t <= t_end]
+
+    def velocity(self, points: npt.ArrayLike, t: float) -> np.ndarray:
+        """Exact velocity ``(v(x, t), 0)`` at points (m, 2)."""
+        x = np.asarray(points, dtype=float).reshape(-1, np.shape(points)[-1])[:, 0] - self.x0
+        c, L = self.wave_speed, self.length
+        k = np.arange(int(np.ceil(c * float(t) / (2 * L))) + 1)[:, None]
+        sign = np.where(k % 2 == 0, 1.0, -1.0)
+        on = (float(t) > (2 * k * L + x) / c).astype(float)
+        off = (float(t) > (2 * (k + 1) * L - x) / c).astype(float)
+        v = self.front_velocity * np.sum(sign * (on - off), axis=0)
+        return np.stack([v, np.zeros_like(v)], axis=1)

@@ -100,3 +100,35 @@ def test_missing_mesh_names_the_generator(capsys):
     with pytest.raises(SystemExit):
         demo.main(["--method", "fe", "--mesh", "irregular", "--cells", "5"])
     assert "meshes/make_meshes.py --cells 5" in capsys.readouterr().err
+
+
+def test_dense_gauss_preset_reaches_the_gauss_target_without_vci():
+    """``--preset dense-gauss`` (quartic weight, d_max 3, Gauss degree 49): EFG and the Lagrange
+    coupling meet the 1e-6 Gauss target without VCI on the gmsh quadrilaterals (measured
+    6.2e-7 and 8.8e-8; 1.2e-4 to 6e-4 at the defaults), and the demo holds them to it."""
+    demo = load("patch_test")
+    for method in ("efg", "lagrange"):
+        rec = demo.main(["--method", method, "--mesh", "irregular", "--preset", "dense-gauss"])
+        assert (rec["weight"], rec["dilation"], rec["quadrature_degree"]) == ("quartic", 3.0, 49)
+        assert rec["preset"] == "dense-gauss" and rec["consistent"] is False
+        assert rec["target"] == 1e-6 and rec["expected_to_pass"]
+        assert rec["max_error"] <= 1e-6
+        assert rec["status"] == "PASS"
+
+
+def test_dense_gauss_preset_expectations():
+    """Without the preset, or with one of its settings overridden, a Gauss miss is reported
+    (MISSED, exit 0); under the preset's own settings a miss fails the demo."""
+    demo = load("patch_test")
+    rec = demo.main(["--method", "lagrange", "--mesh", "irregular"])
+    assert (rec["dilation"], rec["quadrature_degree"], rec["preset"]) == (2.0, 7, None)
+    assert rec["status"] == "MISSED" and not rec["expected_to_pass"]
+    rec = demo.main(["--method", "lagrange", "--mesh", "irregular", "--preset", "dense-gauss",
+                     "--quadrature-degree", "7"])  # fmt: skip
+    assert (rec["dilation"], rec["quadrature_degree"]) == (3.0, 7)
+    assert rec["status"] == "MISSED" and not rec["expected_to_pass"]
+    # a preset that no longer reaches the target (4 x 4 Gauss) must fail the run
+    demo.PRESETS = {"dense-gauss": {**demo.PRESETS["dense-gauss"], "quadrature_degree": 7}}
+    with pytest.raises(SystemExit) as e:
+        demo.main(["--method", "lagrange", "--mesh", "irregular", "--preset", "dense-gauss"])
+    assert e.value.code == 1

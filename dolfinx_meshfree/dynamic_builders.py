@@ -1,0 +1,405 @@
+"""Builders of :class:`~dolfinx_meshfree.integrator.ExplicitDynamics`: pure FE, pure EFG and
+every static coupling, from the same operators as the static solvers.
+
+Each coupling enters dynamics through :meth:`CoupledElasticity.operators
+<dolfinx_meshfree.CoupledElasticity.operators>` (Rabczuk et al. 2006, Table I):
+
+* ``lagrange``, ``edge-to-edge``, ``bridging``: the stiffness blocks and the constraint blocks
+  ``G_FE``, ``G_P`` of the static system act on the velocities: trial velocities, then the
+  multiplier correction of eq. 93–96. The bridging coupling weights both the stiffness and the
+  masses with ``beta_FE = 1 - alpha`` and ``beta_P = alpha`` (eq. 46–48, 88–89), and its
+  optional penalty enters as stiffness blocks (eq. 72–75, the ``p g^T G`` of eq. 93).
+* ``ramp``, ``ramp-cubic``: the interface cells' blended shape functions (Belytschko et al.
+  1995, eq. 3.15–3.16) give their stiffness (diagonal and off-diagonal blocks) and their share
+  of the row-sum masses (eq. 4.5): no constraint.
+* ``master-slave``: the slave particles follow the FE interface, ``u = T u_M`` (eq. 27): the
+  reduced stiffness ``T^T K T`` (PETSc ``PtAP``) and the row sums of ``T^T M T``, i.e. the
+  slaves' masses go to their masters; forces by ``T^T`` (eq. 28). The state holds the FE dofs
+  and the free particles; evaluation expands the slaves.
+
+Essential conditions (``fixed_facets``: the displacement held at its initial value): FE nodes
+strongly (zero velocity and acceleration), particles by one multiplier per facet and component
+(:func:`~dolfinx_meshfree.efg.facet_multipliers`) added to the velocity constraint, so that
+``int_f v^h = 0`` after every correction (Table I, step 6). On ramp interface cells the particle
+part of the blended functions is constrained in the same way.
+"""
+
+from __future__ import annotations
+
+import time
+
+import dolfinx
+import numpy as np
+import numpy.typing as npt
+import scipy.sparse as sp
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from . import _compat
+from .efg import facet_multipliers, particle_stiffness
+from .integrator import Field
+from .masses import (
+    fe_lumped_mass,
+    fe_spacing,
+    particle_lumped_mass,
+    particle_spacing,
+    table_lumped_mass,
+)
+from .materials import LinearElastic
+from .mls import MLS
+from .parallel import Layout, raise_on_all_ranks
+from .particles import ParticleSet
+from .petsc import create_aij
+from .quadrature import facet_quadrature
+from .tables import ShapeTable
+
+__all__ = ["build_coupled", "build_efg", "build_fe"]
+
+
+def _check_material(material) -> None:
+    if not isinstance(material, LinearElastic):
+        raise TypeError(f"material must be a LinearElastic, got {type(material).__name__}")
+
+
+def _facets(msh, facets: npt.ArrayLike | None) -> np.ndarray:
+    """Validated owned exterior facets (empty when ``None``), checked on every rank."""
+    tdim = msh.topology.dim
+    msh.topology.create_connectivity(tdim - 1, tdim)
+    n_own = msh.topology.index_map(tdim - 1).size_local
+
+    def check() -> np.ndarray:
+        if facets is None:
+            return np.zeros(0, dtype=np.int32)
+        f = np.asarray(facets)
+        if f.ndim != 1 or (f.size and not np.issubdtype(f.dtype, np.integer)):
+            raise ValueError(f"fixed_facets should be a 1D array of facet indices, got {f!r:.80}")
+        if f.size and (f.min() < 0 or f.max() >= n_own):
+            raise ValueError(
+                f"fixed_facets names facets that are not owned here (valid 0..{n_own - 1}); "
+                "pass owned exterior facets, e.g. from boundary_facets"
+            )
+        return f.astype(np.int32)
+
+    return raise_on_all_ranks(msh.comm, check)
+
+
+def _first_cells(msh, facets: np.ndarray) -> np.ndarray:
+    tdim = msh.topology.dim
+    f2c = msh.topology.connectivity(tdim - 1, tdim)
+    return np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]].astype(np.int64)
+
+
+def _fixed_fe_dofs(V, facets: np.ndarray) -> np.ndarray:
+    """bool per owned FE dof: a node of one of the facets (on any rank)."""
+    msh = V.mesh
+    nodes = dolfinx.fem.locate_dofs_topological(V, msh.topology.dim - 1, facets)
+    f = dolfinx.fem.Function(V)
+    f.x.array[:] = 0.0
+    f.x.array[2 * np.asarray(nodes, dtype=np.int64)] = 1.0
+    _compat.scatter_reverse_add(f)
+    f.x.scatter_forward()
+    n_owned = V.dofmap.index_map.size_local
+    return np.repeat(f.x.array[0 : 2 * n_owned : 2] > 0.5, 2)
+
+
+def _zero(x: np.ndarray) -> np.ndarray:
+    return np.zeros((x.shape[0], 2))
+
+
+def _particle_conditions(particles, facets, tables) -> tuple[sp.csr_matrix, Layout]:
+    """Facet multipliers ``int_f phi_J`` (unit scale) of facets with the given particle tables."""
+    msh = particles.mesh
+    comm = particles.comm
+    conds, quads, tabs = [], [], []
+    for f, table in zip(facets, tables, strict=True):
+        q = facet_quadrature(msh, f, 4)
+        conds.append((f, _zero))
+        quads.append(q)
+        tabs.append(raise_on_all_ranks(comm, lambda q=q, table=table: table(q)))
+    D, _, _, dl = facet_multipliers(particles, conds, quads, tabs, 1.0)
+    return D, dl
+
+
+def _stack(comm, mats: list[PETSc.Mat | None], row_layouts: list[Layout], col: Layout):
+    """Rows of several matrices with the same columns stacked (rank by rank); ``None``: zero."""
+    parts, total = [], 0
+    for A, rl in zip(mats, row_layouts, strict=True):
+        if A is None:
+            total += rl.size_local
+            continue
+        ai, aj, av = A.getValuesCSR()
+        rows = np.repeat(np.arange(rl.size_local), np.diff(ai)) + total
+        parts.append((rows, np.asarray(aj, dtype=np.int64), np.asarray(av)))
+        total += rl.size_local
+    lay = Layout.from_local(comm, total)
+    r, c, v = (np.concatenate([p[i] for p in parts] + [np.zeros(0)]) for i in range(3))
+    loc = sp.csr_matrix(
+        (v, (r.astype(np.int64) + lay.start, c.astype(np.int64))),
+        shape=(lay.size_global, col.size_global),
+    )
+    return create_aij(comm, loc, lay, col), lay
+
+
+# -- pure FE, pure EFG -------------------------------------------------------------------------
+
+
+def build_fe(cls, V, material: LinearElastic, safety: float, fixed_facets=None):
+    """Pure FE: DOLFINx's stiffness ``inner(sigma(u), eps(v)) dx``, row-sum masses, fixed
+    facets' nodes held strongly. Collective."""
+    _check_material(material)
+    t0 = time.perf_counter()
+    msh = V.mesh
+    facets = _facets(msh, fixed_facets)
+    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+    a = ufl.inner(material.ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx
+    K = _compat.assemble_matrix(_compat.create_form(a))
+    mass = fe_lumped_mass(V, material.rho)
+    n_owned = msh.topology.index_map(msh.topology.dim).size_local
+    h = fe_spacing(msh, np.arange(n_owned))
+    field = Field("fe", K, mass, h, fixed=_fixed_fe_dofs(V, facets))
+    return cls(
+        [field],
+        material,
+        safety=safety,
+        V=V,
+        mesh=msh,
+        timings={"setup": time.perf_counter() - t0},
+    )
+
+
+def build_efg(
+    cls,
+    particles: ParticleSet,
+    material: LinearElastic,
+    weight: str = "quartic",
+    dilation: float = 2.0,
+    basis: str = "linear",
+    quadrature_degree: int = 7,
+    particle_mass: str = "row-sum",
+    safety: float = 0.9,
+    fixed_facets=None,
+    multiplier_solver: str | None = None,
+):
+    """Pure EFG on the particles' background cells (Belytschko et al. 1995, sec. 5.2); fixed
+    facets by facet multipliers on the velocities. Collective."""
+    _check_material(material)
+    if particles.mesh is None:
+        raise ValueError("explicit EFG needs particles with a background mesh (mesh=...)")
+    if particle_mass not in ("row-sum", "volume"):
+        raise ValueError(f"particle_mass={particle_mass!r} is not known; use 'row-sum' or 'volume'")
+    t0 = time.perf_counter()
+    comm = particles.comm
+    facets = _facets(particles.mesh, fixed_facets)
+    mls = raise_on_all_ranks(
+        comm, lambda: MLS(particles, weight=weight, dilation=dilation, basis=basis)
+    )
+    K_loc, q, tq, _ = particle_stiffness(particles, mls, material, quadrature_degree)
+    n = particles.num_particles
+    pl = Layout(2 * particles.layout.size_local, 2 * n, 2 * particles.layout.start)
+    K = create_aij(comm, K_loc, pl, pl)
+    mass = particle_lumped_mass(particles, tq.values, q.weights, material.rho, particle_mass)
+    constraint = None
+    if comm.allreduce(facets.size):
+        D, dl = _particle_conditions(particles, [facets], [lambda q: mls.tabulate(q.points, 0)])
+        constraint = [create_aij(comm, D, dl, pl)]
+    return cls(
+        [Field("particles", K, mass, particle_spacing(particles))],
+        material,
+        constraint,
+        safety=safety,
+        mls=mls,
+        particles=particles,
+        mesh=particles.mesh,
+        timings={"setup": time.perf_counter() - t0},
+        multiplier_solver=multiplier_solver,
+    )
+
+
+# -- couplings ---------------------------------------------------------------------------------
+
+
+def build_coupled(
+    cls,
+    problem,
+    particle_mass: str = "row-sum",
+    safety: float = 0.9,
+    multiplier_solver: str | None = None,
+    fixed_facets=None,
+):
+    """Explicit dynamics of a :class:`~dolfinx_meshfree.CoupledElasticity` (any coupling),
+    from :meth:`~dolfinx_meshfree.CoupledElasticity.operators` (collective).
+
+    Args:
+        problem: The static coupling object (its MLS, quadrature degree, band, options).
+        particle_mass: ``"row-sum"`` (eq. 4.5; bridging: weighted by ``alpha``, eq. 89) or
+            ``"volume"`` (``rho V_I``; not with bridging or the ramp couplings, whose masses
+            follow their weighted/blended functions).
+        safety, multiplier_solver: See :class:`ExplicitDynamics`.
+        fixed_facets: Owned exterior facets held at rest.
+    """
+    from .coupled import CoupledElasticity
+    from .dynamics import DYNAMICS_METHODS
+
+    if not isinstance(problem, CoupledElasticity):
+        raise TypeError(f"problem must be a CoupledElasticity, got {type(problem).__name__}")
+    coupling = problem.coupling
+    if coupling not in DYNAMICS_METHODS:
+        raise ValueError(
+            f"coupling={coupling!r} is not available in explicit dynamics; available: "
+            f"{list(DYNAMICS_METHODS)}"
+        )
+    if particle_mass not in ("row-sum", "volume"):
+        raise ValueError(f"particle_mass={particle_mass!r} is not known; use 'row-sum' or 'volume'")
+    if particle_mass == "volume" and coupling in ("bridging", "ramp", "ramp-cubic"):
+        raise ValueError(
+            f"particle_mass='volume' is not available with coupling={coupling!r}: its particle "
+            "masses follow the weighted/blended shape functions; use particle_mass='row-sum'"
+        )
+    material = problem.material
+    _check_material(material)
+    t0 = time.perf_counter()
+    V, patch, mls = problem.V, problem.patch, problem.mls
+    P, comm, msh = patch.particles, patch.comm, V.mesh
+    facets = _facets(msh, fixed_facets)
+    ops = problem.operators()
+    rho = material.rho
+    pdofs = P.petsc_dofs(2)
+    fl, pl = ops.fe_layout, ops.particle_layout
+
+    # lumped masses (eq. 4.5, 88-89)
+    mass_fe = fe_lumped_mass(V, rho, weight=ops.fe_weight)
+    pq = ops.particle_quadrature
+    mass_p = particle_lumped_mass(
+        P, ops.particle_table, pq.weights, rho, particle_mass, check=ops.interface_table is None
+    )
+    if ops.interface_table is not None:  # ramp: the interface cells' share, same functions
+        imap = V.dofmap.index_map
+        l2g = np.asarray(
+            imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
+        )
+        fe_dofs = 2 * l2g[:, None] + np.arange(2)
+        m_fe, m_p = table_lumped_mass(
+            ops.interface_table,
+            ops.interface_quadrature.weights,
+            rho,
+            fe_dofs,
+            fl,
+            pdofs,
+            pl,
+            comm,
+        )
+        mass_fe.axpy(1.0, m_fe)
+        mass_p.axpy(1.0, m_p)
+        m_fe.destroy()
+        m_p.destroy()
+        lo = comm.allreduce(
+            float(mass_p.array_r.min()) if mass_p.getLocalSize() else np.inf, op=MPI.MIN
+        )
+        if not lo > 0.0:
+            raise ValueError(
+                f"a lumped particle mass is not positive (min {lo:.3e}); raise quadrature_degree "
+                "or the dilation"
+            )
+    n_owned = V.dofmap.index_map.size_local
+    active = np.repeat(ops.fe_active[:n_owned], 2)
+    mass_fe.array[:] = mass_fe.array_r * active  # inactive FE dofs: no mass, held at rest
+
+    # essential conditions: FE nodes strongly, particles by facet multipliers
+    fixed_fe = _fixed_fe_dofs(V, facets)
+    first = _first_cells(msh, facets)
+    on_p = patch.in_patch[first]
+    D = dl = None
+    if comm.allreduce(facets.size):
+        groups = [facets[on_p]]
+        tables = [lambda q: mls.tabulate(q.points, 0)]
+        blend = ops.interface if ops.interface_table is not None else None
+        if blend is not None:  # the particle part of the ramp's interface cells
+            n_loc = blend.num_fe_columns
+            groups.append(facets[~on_p & blend.in_interface[first]])
+            tables.append(
+                lambda q: ShapeTable(
+                    q.points, blend.table(q.points, q.cells, 0).values[:, n_loc:].tocsr(), []
+                )
+            )
+        D_loc, dl = _particle_conditions(P, groups, tables)
+        if dl.size_global:
+            D = create_aij(comm, D_loc, dl, pl)
+
+    # fields, blocks, constraints
+    blocks: dict = {}
+    G_fe, G_p = ops.G_fe, ops.G_p
+    if ops.reduction is None:
+        K_fe, K_p = ops.K_fe, ops.K_p
+        if ops.K_fp is not None:
+            blocks = {(0, 1): ops.K_fp, (1, 0): ops.K_pf}
+        if D is not None:
+            if G_p is None:
+                G_fe, G_p = None, D
+            else:
+                ml = ops.multiplier_layout
+                G_fe2, _ = _stack(comm, [G_fe, None], [ml, dl], fl)
+                G_p2, _ = _stack(comm, [G_p, D], [ml, dl], pl)
+                for m in (G_fe, G_p, D):
+                    m.destroy()
+                G_fe, G_p = G_fe2, G_p2
+        particle_points = None
+    else:
+        # master-slave: reduce by T = [[I, 0], [T_PF, S]] (eq. 27-28)
+        Tpf, S = ops.reduction
+        K_fe = ops.K_fe
+        A_pp = ops.K_p.PtAP(Tpf)
+        K_fe.axpy(1.0, A_pp, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+        KpS = ops.K_p.matMult(S)
+        A_fm = Tpf.transposeMatMult(KpS)
+        A_mf = KpS.transposeMatMult(Tpf)
+        K_p = ops.K_p.PtAP(S)
+        for m in (A_pp, KpS, ops.K_p):
+            m.destroy()
+        blocks = {(0, 1): A_fm, (1, 0): A_mf}
+        # row sums of T^T M T: T^T (M (T 1))
+        ones_f, ones_m = Tpf.createVecRight(), S.createVecRight()
+        ones_f.array[:] = active
+        ones_m.set(1.0)
+        e = Tpf.createVecLeft()
+        Tpf.mult(ones_f, e)
+        S.multAdd(ones_m, e, e)
+        e.pointwiseMult(e, mass_p)
+        Tpf.multTransposeAdd(e, mass_fe, mass_fe)
+        red = S.createVecRight()
+        S.multTranspose(e, red)
+        for x in (ones_f, ones_m, e, mass_p):
+            x.destroy()
+        mass_p = red
+        if D is not None:
+            G_fe, G_p = D.matMult(Tpf), D.matMult(S)
+            D.destroy()
+        own = P.owned[np.argsort(P.petsc_index[P.owned], kind="stable")]
+        is_slave = np.zeros(P.num_particles, dtype=bool)
+        is_slave[ops.interface.slaves] = True
+        particle_points = P.positions[own[~is_slave[own]]]
+    fe_cells = patch.fe_cells
+    if coupling == "bridging":
+        fe_cells = np.concatenate([fe_cells, ops.interface.cells])
+    fields = [
+        Field("fe", K_fe, mass_fe, fe_spacing(msh, fe_cells), fixed=fixed_fe),
+        Field("particles", K_p, mass_p, particle_spacing(P), points=particle_points),
+    ]
+    constraint = None if G_p is None and G_fe is None else [G_fe, G_p]
+    return cls(
+        fields,
+        material,
+        constraint,
+        safety=safety,
+        blocks=blocks,
+        V=V,
+        mls=mls,
+        particles=P,
+        mesh=msh,
+        in_patch=patch.in_patch,
+        patch=patch,
+        interface=ops.interface if ops.reduction is None else None,
+        reduction=ops.reduction,
+        timings={"setup": time.perf_counter() - t0, "operators": ops.timings["operators"]},
+        multiplier_solver=multiplier_solver,
+    )

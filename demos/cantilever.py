@@ -85,6 +85,12 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--quadrature-degree", type=int, default=7, help="7: 4 x 4 Gauss on quads")
     p.add_argument("--consistent", action="store_true", help="variationally consistent integration")
     p.add_argument("--overlap", type=int, default=2, help="bridging: band width in cells")
+    p.add_argument(
+        "--constraint",
+        choices=("points", "integral"),
+        default="points",
+        help="bridging: tie the band at its particles (eq. 79-81) or over its cells (eq. 52)",
+    )
     p.add_argument("--cell", choices=("quadrilateral", "triangle"), default="quadrilateral")
     p.add_argument("--json", default=None, help="write the results as JSON")
     p.add_argument("--probe-in", default=None, help="(m, 2) .npy points to evaluate u at")
@@ -223,7 +229,11 @@ def run_coupled(msh, args, beam, material, h, coupling, overlap=None):
         material,
         coupling=coupling,
         **particle_options(args, coupling),
-        **({"overlap": overlap or args.overlap} if coupling == "bridging" else {}),
+        **(
+            {"overlap": overlap or args.overlap, "constraint": args.constraint}
+            if coupling == "bridging"
+            else {}
+        ),
     )
     problem.add_dirichlet(left, beam.displacement)
     problem.add_traction(right, beam.traction)

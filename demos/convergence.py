@@ -12,9 +12,8 @@
 # Then a patch-size sweep at ``--sweep-h`` (0.75): each coupling with the free-end fraction
 # ``--fractions`` (0.1, 0.25, 0.5, 1.0) of the beam in particles, its error against its cost
 # and the ratio of its total time to pure FE's at the same h. Fraction 1.0 puts every cell in
-# the patch: there is no interface left, bridging and master–slave refuse such a patch and
-# lagrange and edge-to-edge reduce to pure EFG, so the row of 1.0 is pure EFG (``efg``), measured
-# once.
+# the patch: no FE cell is left to couple to (``CoupledElasticity`` refuses such a patch), so the
+# row of 1.0 is pure EFG (``efg``), measured once.
 #
 # Self-check (exit code 1 on failure; ``--no-check`` skips it): for fe, lagrange, edge-to-edge,
 # ramp, ramp-cubic and bridging, the L2 rate of each of the last two refinements is at least 1.8

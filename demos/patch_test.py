@@ -152,6 +152,12 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     )
     p.add_argument("--overlap", type=int, default=2, help="bridging: band width in cells")
     p.add_argument(
+        "--constraint",
+        choices=("points", "integral"),
+        default="points",
+        help="bridging: tie the band at its particles (eq. 79-81) or over its cells (eq. 52)",
+    )
+    p.add_argument(
         "--field",
         choices=("identity", "general"),
         default="identity",
@@ -295,7 +301,11 @@ def run_coupled(msh, args, exact, material, points, jitter, coupling):
         dilation=dilation(args, coupling),
         quadrature_degree=args.quadrature_degree,
         consistent=args.consistent,
-        **({"overlap": args.overlap} if coupling == "bridging" else {}),
+        **(
+            {"overlap": args.overlap, "constraint": args.constraint}
+            if coupling == "bridging"
+            else {}
+        ),
     )
     problem.add_dirichlet(mf.boundary_facets(msh), exact.displacement)
     sol = problem.solve()

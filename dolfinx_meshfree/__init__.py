@@ -7,7 +7,9 @@ Public API (stable names):
 * FE basis at arbitrary points: :func:`tabulate_fe_basis`, :func:`evaluate_fe_function`;
 * particles: :class:`ParticleSet`;
 * solvers: :class:`EFGElasticity` (pure EFG), :func:`solve_fe_elasticity` (pure FE);
-* material and exact solutions: :class:`LinearElastic`, :class:`TimoshenkoBeam`.
+* material and exact solutions: :class:`LinearElastic`, :class:`TimoshenkoBeam`;
+* output of explicit dynamics: :class:`DynamicsWriter` (XDMF of the FE fields and the particle
+  cloud over time), :func:`read_particles`, :class:`ProgressBar`.
 
 Importing this package first loads the ``dolfinx_solver`` wheel's MPI when that lane is in use.
 """
@@ -27,6 +29,7 @@ from .fe_points import (
     tabulate_fe_basis,
     tabulate_in_cells,
 )
+from .io import DynamicsWriter, ProgressBar, read_particles
 from .kernels import cubic_spline, gaussian, quartic, sph_cubic_spline
 from .materials import LinearElastic
 from .mls import MLS, MomentMatrixError
@@ -49,6 +52,7 @@ __all__ = [
     "CoupledLinearProblem",
     "CoupledSolution",
     "DynamicsResult",
+    "DynamicsWriter",
     "EFGElasticity",
     "EFGSolution",
     "EnergyRecord",
@@ -62,6 +66,7 @@ __all__ = [
     "ParticleSet",
     "PointsOutsideMeshError",
     "PressurizedBushing",
+    "ProgressBar",
     "ShapeTable",
     "StepLoadedRod",
     "TimoshenkoBeam",
@@ -74,6 +79,7 @@ __all__ = [
     "facet_quadrature",
     "gaussian",
     "quartic",
+    "read_particles",
     "solve_fe_elasticity",
     "sph_cubic_spline",
     "tabulate_fe_basis",

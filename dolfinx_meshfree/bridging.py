@@ -56,18 +56,32 @@ from .parallel import Layout, raise_on_all_ranks
 from .petsc import create_aij, create_vector
 from .quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
 
-__all__ = ["BridgingBand", "BridgingSolution", "bridging_operators", "check_options"]
+__all__ = [
+    "CONSTRAINTS",
+    "BridgingBand",
+    "BridgingSolution",
+    "bridging_operators",
+    "check_options",
+]
 
 
-def check_options(overlap, penalty) -> tuple[int, float]:
-    """Validate the ``overlap`` (positive integer) and ``penalty`` (finite, >= 0) options."""
+#: Where the bridging constraint is imposed: at the band particles (eq. 79-81, the default) or
+#: by Gauss quadrature over the band cells (the integral of eq. 52).
+CONSTRAINTS = ("points", "integral")
+
+
+def check_options(overlap, penalty, constraint: str = "points") -> tuple[int, float, str]:
+    """Validate the ``overlap`` (positive integer), ``penalty`` (finite, >= 0) and
+    ``constraint`` (one of :data:`CONSTRAINTS`) options."""
+    if constraint not in CONSTRAINTS:
+        raise ValueError(f"constraint={constraint!r} is not known; use one of {list(CONSTRAINTS)}")
     if isinstance(overlap, bool) or not isinstance(overlap, numbers.Integral) or overlap < 1:
         raise ValueError(f"overlap must be a positive integer (cell layers), got {overlap!r}")
     if isinstance(penalty, bool) or not isinstance(penalty, numbers.Real):
         raise ValueError(f"penalty must be a real number >= 0, got {penalty!r}")
     if not (np.isfinite(penalty) and penalty >= 0.0):
         raise ValueError(f"penalty must be finite and >= 0, got {penalty!r}")
-    return int(overlap), float(penalty)
+    return int(overlap), float(penalty), constraint
 
 
 class BridgingBand:
@@ -260,16 +274,11 @@ def solve_bridging(problem, solver: str = "mumps"):
     fixed_local = is_bc | ~active
     x_fix = np.where(np.repeat(is_bc, 2), ubc.x.array, 0.0)
 
-    # constraints at the band particles
+    # constraints at the band particles (or at the band cells' Gauss points, with weights)
     ids, ml = band.numbering(problem)
-    xb = P.positions[band.local_particles]
-    t_fe = tabulate_in_cells(V, xb, band.local_cells, derivatives=0).values
-    t_fe = t_fe.tocsr()
-    t_fe.data[np.abs(t_fe.data) <= 1e-13] = 0.0  # nodes off the particle's edge: round-off
-    t_fe.eliminate_zeros()
-    t_p = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(xb, 0)).values.tocsr()
-    M_fe = (t_fe.T @ t_fe).tocoo()
-    M_p = (t_fe.T @ t_p).tocoo()
+    t_fe, t_p, cw = _constraint_tables(problem, band)
+    M_fe = (t_fe.T @ sp.diags(cw) @ t_fe).tocoo()
+    M_p = (t_fe.T @ sp.diags(cw) @ t_p).tocoo()
     setup = problem._setup + time.perf_counter() - t0
 
     t1 = time.perf_counter()
@@ -318,7 +327,8 @@ def solve_bridging(problem, solver: str = "mumps"):
     K_ff = K_fp = K_pf = None
     if p > 0.0:
         e2 = sp.identity(2, format="csr")
-        Nf, Np = sp.kron(t_fe, e2).tocsr(), sp.kron(t_p, e2).tocsr()
+        root = sp.diags(np.sqrt(cw))
+        Nf, Np = sp.kron(root @ t_fe, e2).tocsr(), sp.kron(root @ t_p, e2).tocsr()
         A11 = (p * (Nf.T @ Nf)).tocoo()
         A12 = (-p * (Nf.T @ Np)).tocoo()
         A22 = (p * (Np.T @ Np)).tocoo()
@@ -383,13 +393,52 @@ def solve_bridging(problem, solver: str = "mumps"):
     return sol
 
 
+def _constraint_tables(
+    problem, band: BridgingBand
+) -> tuple[sp.csr_matrix, sp.csr_matrix, np.ndarray]:
+    """FE basis and particle functions where the band is tied, and the weights there: the band
+    particles with weight 1 (``constraint="points"``, eq. 79-81), or the Gauss points of the band
+    cells with their quadrature weights (``constraint="integral"``, eq. 52). Collective.
+
+    The point constraints determine the multipliers on the band nodes only if the band particles
+    do (``sum_L N_k(x_L) N_a(x_L)`` regular): a band node without a band particle in its support,
+    or fewer band particles than band nodes, raises a ValueError naming the remedies.
+    """
+    V, comm, P = problem.V, problem.patch.comm, problem.patch.particles
+    if problem.constraint == "integral":
+        q = cell_quadrature(V.mesh, problem.quadrature_degree, band.cells)
+        points, cells, weights = q.points, q.cells, q.weights
+    else:
+        points = P.positions[band.local_particles]
+        cells, weights = band.local_cells, np.ones(band.local_particles.size)
+    t_fe = tabulate_in_cells(V, points, cells, derivatives=0).values.tocsr()
+    t_fe.data[np.abs(t_fe.data) <= 1e-13] = 0.0  # nodes off the point's edge: round-off
+    t_fe.eliminate_zeros()
+    t_p = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(points, 0)).values.tocsr()
+    if problem.constraint == "points":
+        seen = problem._node_flags(np.unique(t_fe.indices))
+        n_owned = V.dofmap.index_map.size_local
+        blind = int(np.sum((band.in_band_node & ~seen)[:n_owned]))
+        blind = comm.allreduce(blind)
+        nodes = comm.allreduce(int(np.sum(band.in_band_node[:n_owned])))
+        if blind or band.particles.size < nodes:
+            raise ValueError(
+                f"the bridging band has {nodes} FE nodes but {band.particles.size} particles "
+                f"({blind} band node(s) have no band particle in their support): the point "
+                "constraints cannot determine the band multipliers; use constraint='integral', "
+                "a finer particle spacing, or ParticlePatch(..., placement='vertices')"
+            )
+    return t_fe, t_p, weights
+
+
 def bridging_operators(problem):
     """The bridging coupling's operators without essential conditions (collective).
 
     ``K_FE`` weighted by ``beta_FE`` (eq. 47–48) plus the penalty's FE block, ``K_P`` with the
     quadrature weights times ``alpha`` (eq. 46) plus its particle block, the penalty's
-    off-diagonal blocks (eq. 72–75), and the point constraints at the band particles with
-    multipliers on the band's FE nodes (eq. 57, 79–80) with unit scaling. The particle
+    off-diagonal blocks (eq. 72–75), and the constraints at the band particles (or, with
+    ``constraint="integral"``, over the band cells) with multipliers on the band's FE nodes
+    (eq. 57, 79–80) with unit scaling. The particle
     quadrature's weights include ``alpha``, so its row sums give the weighted masses of eq. 89;
     ``fe_weight`` is ``beta_FE`` for eq. 88. See
     :class:`~dolfinx_meshfree.coupled.CouplingOperators`.
@@ -421,13 +470,9 @@ def bridging_operators(problem):
     active = problem._fe_active(np.concatenate([patch.fe_cells, band.cells]))
 
     ids, ml = band.numbering(problem)
-    xb = P.positions[band.local_particles]
-    t_fe = tabulate_in_cells(V, xb, band.local_cells, derivatives=0).values.tocsr()
-    t_fe.data[np.abs(t_fe.data) <= 1e-13] = 0.0
-    t_fe.eliminate_zeros()
-    t_p = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(xb, 0)).values.tocsr()
-    M_fe = (t_fe.T @ t_fe).tocoo()
-    M_p = (t_fe.T @ t_p).tocoo()
+    t_fe, t_p, cw = _constraint_tables(problem, band)
+    M_fe = (t_fe.T @ sp.diags(cw) @ t_fe).tocoo()
+    M_p = (t_fe.T @ sp.diags(cw) @ t_p).tocoo()
     keep = ids[M_fe.row] >= 0
     zero = dolfinx.fem.Function(V)
     zero.x.array[:] = 0.0
@@ -452,7 +497,8 @@ def bridging_operators(problem):
     if p > 0.0:
         fe_dof = (2 * l2g[:, None] + np.arange(2)).ravel()
         e2 = sp.identity(2, format="csr")
-        Nf, Np = sp.kron(t_fe, e2).tocsr(), sp.kron(t_p, e2).tocsr()
+        root = sp.diags(np.sqrt(cw))
+        Nf, Np = sp.kron(root @ t_fe, e2).tocsr(), sp.kron(root @ t_p, e2).tocsr()
         A11 = (p * (Nf.T @ Nf)).tocoo()
         A12 = (-p * (Nf.T @ Np)).tocoo()
         A22 = (p * (Np.T @ Np)).tocoo()

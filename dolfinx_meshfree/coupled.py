@@ -226,9 +226,12 @@ class CoupledElasticity:
         quadrature_degree: Gauss degree on cells and facets.
         consistent: Variationally consistent integration on the patch (VCI over the patch
             boundary, interface included).
-        overlap, penalty: ``coupling="bridging"`` (bridging domain, Rabczuk et al. 2006, sec.
-            5.3, see :mod:`~dolfinx_meshfree.bridging`): band width in cell layers (>= 1) and
-            the augmented-Lagrangian penalty ``p >= 0``.
+        overlap, penalty, constraint: ``coupling="bridging"`` (bridging domain, Rabczuk et al.
+            2006, sec. 5.3, see :mod:`~dolfinx_meshfree.bridging`): band width in cell layers
+            (>= 1), the augmented-Lagrangian penalty ``p >= 0``, and where the band is tied:
+            ``"points"`` (at the band particles, eq. 79-81) or ``"integral"`` (Gauss quadrature
+            over the band cells, eq. 52; the choice when the band particles are too few to
+            determine the multipliers on the band nodes, e.g. grid particles on a gmsh mesh).
     """
 
     def __init__(
@@ -244,6 +247,7 @@ class CoupledElasticity:
         consistent: bool = False,
         overlap: int = 2,
         penalty: float = 0.0,
+        constraint: str = "points",
     ):
         if coupling not in COUPLINGS:
             raise ValueError(
@@ -253,13 +257,18 @@ class CoupledElasticity:
             raise TypeError(f"material must be a LinearElastic, got {type(material).__name__}")
         if V.mesh is not patch.mesh:
             raise ValueError("V and patch must live on the same mesh object")
+        if patch.comm.allreduce(patch.fe_cells.size) == 0:
+            raise ValueError(
+                "the patch covers the whole mesh: no FE cells are left to couple to; solve with "
+                "EFGElasticity, or leave some cells out of the patch"
+            )
         t0 = time.perf_counter()
         self.V, self.patch, self.material, self.coupling = V, patch, material, coupling
         self.quadrature_degree = quadrature_degree
         self.consistent = bool(consistent)
         from .bridging import check_options
 
-        self.overlap, self.penalty = check_options(overlap, penalty)
+        self.overlap, self.penalty, self.constraint = check_options(overlap, penalty, constraint)
         self.mls = raise_on_all_ranks(
             patch.comm,
             lambda: MLS(

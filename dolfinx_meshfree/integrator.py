@@ -34,6 +34,7 @@ masses (bridging); for EFG it is conservative.
 from __future__ import annotations
 
 import itertools
+import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -700,6 +701,8 @@ class ExplicitDynamics:
         outputs: Sequence[float] = (),
         energy_records: int = 100,
         on_output: Callable[[ExplicitDynamics, int, float], None] | None = None,
+        xdmf: str | os.PathLike | None = None,
+        progress: bool | None = None,
     ) -> DynamicsResult:
         """Integrate from the current time to ``t_end`` (Belytschko et al. 1995, sec. 5.2;
         Rabczuk et al. 2006, Table I). Collective.
@@ -713,10 +716,21 @@ class ExplicitDynamics:
             outputs: Times at which ``on_output(self, step, time)`` is called with the state at
                 the nearest step (``velocity_at``/``velocity_error`` then see ``v_n``).
             energy_records: About how many :class:`EnergyRecord` to keep (outputs added).
+            on_output: ``on_output(self, step, time)``, called at each output time, e.g. a
+                :class:`~dolfinx_meshfree.io.DynamicsWriter`.
+            xdmf: An output prefix: write the FE fields, the particle cloud and the energy
+                records at every output time through a
+                :class:`~dolfinx_meshfree.io.DynamicsWriter` made (and closed) for this run,
+                before ``on_output`` is called; without ``outputs``, at the current time and at
+                ``t_end``. A second run with the same prefix overwrites the files (pass one
+                writer as ``on_output`` to several runs to append instead).
+            progress: A progress bar on rank 0's stderr (:class:`~dolfinx_meshfree.io.ProgressBar`):
+                ``True`` on, ``False`` off, ``None`` on when stderr is a terminal.
 
         Raises:
             ValueError: ``dt`` not positive, above the stable step without ``force``, or
-                ``t_end`` not after the current time.
+                ``t_end`` not after the current time; ``progress`` not a bool or ``None``; an
+                unusable ``xdmf`` prefix (on every rank, before any file is written).
         """
         crit = self.critical_time_step()
         stable = self.safety * crit["critical"]
@@ -738,6 +752,20 @@ class ExplicitDynamics:
         dt = span / nsteps
         n0 = self.step
         t0 = self.time
+        from .io import DynamicsWriter, ProgressBar
+
+        progress_bar = ProgressBar(nsteps, self.comm, progress, label="explicit dynamics ")
+        writer = DynamicsWriter(xdmf, self) if xdmf is not None else None
+        if writer is not None and not len(outputs):
+            outputs = (t0, float(t_end))
+        callback = on_output
+        if writer is not None:
+
+            def callback(d: ExplicitDynamics, n: int, t: float) -> None:
+                writer(d, n, t)
+                if on_output is not None:
+                    on_output(d, n, t)
+
         F = len(self.fields)
         out_steps = {n0 + min(nsteps, max(0, round((t - t0) / dt))): t for t in outputs}
         every = max(1, nsteps // max(1, energy_records))
@@ -752,76 +780,84 @@ class ExplicitDynamics:
         t_out = 0.0
         outs: list[tuple[int, float]] = []
         clock = time.perf_counter()
-        for n in range(n0, n0 + nsteps + 1):
-            tn = t0 + (n - n0) * dt
-            # v_{n+1/2} = v_{n-1/2} + (dt_{n-1/2} + dt_{n+1/2}) / 2 a_n (a new run may change dt)
-            gamma = 0.5 if n == 0 else (0.5 * (1.0 + self._dt_prev / dt) if n == n0 else 1.0)
-            amps = [a(tn) for _, a in self._loads]
-            # trial velocities (eq. 93): vbar = v_{n-1/2} + gamma dt M^{-1} (f_ext - K d_n)
-            self._apply_K(self.u, ku)
-            for k in range(F):
-                ku[k].copy(self._work[k])
-                for (vecs, _), an in zip(self._loads, amps, strict=True):
-                    if vecs[k] is not None and an != 0.0:
-                        self._work[k].axpy(-an, vecs[k])
-                vnew[k].pointwiseMult(self._minv[k], self._work[k])
-                vnew[k].aypx(-gamma * dt, self.v[k])
-            # multiplier correction (eq. 94-96): G v_{n+1/2} = 0
-            if self.G is not None:
-                self._correct(vnew, imp)
-            # work of the step, f_n . (d_{n+1} - d_{n-1}) / 2 = dt f_n . (v_{n+1/2} + v_{n-1/2})/2,
-            # which balances the central-difference energy exactly (see EnergyRecord)
-            d_ext, d_c = 0.0, np.zeros(F)
-            if n > 0:
-                for (vecs, _), an in zip(self._loads, amps, strict=True):
-                    for b, v0, v1 in zip(vecs, self.v, vnew, strict=True):
-                        if b is not None and an != 0.0:
-                            d_ext += 0.5 * an * dt * (b.dot(v0) + b.dot(v1))
-                if self.G is not None:  # constraint force -G^T lambda / dt
-                    for k in range(F):
-                        if self.G[k] is not None:
-                            d_c[k] = -0.5 * (imp[k].dot(self.v[k]) + imp[k].dot(vnew[k]))
-            if n in energy_steps:
-                tic = time.perf_counter()
-                for k in range(F):  # v_n
-                    if n == 0:
-                        self.v[k].copy(vnow[k])
-                    else:
-                        vnow[k].waxpy(1.0, self.v[k], vnew[k])
-                        vnow[k].scale(0.5)
-                kin = half = internal = cross = 0.0
-                for k, f in enumerate(self.fields):
-                    kin += 0.5 * f.mass.dot(_times(vnow[k], vnow[k], self._tmp[k]))
-                    half += 0.5 * f.mass.dot(_times(vnew[k], vnew[k], self._tmp[k]))
-                    internal += 0.5 * self.u[k].dot(ku[k])
-                    cross += 0.5 * dt * ku[k].dot(vnew[k])
-                rec = EnergyRecord(
-                    step=n,
-                    time=tn,
-                    kinetic=float(kin),
-                    internal=float(internal),
-                    external=float(w_ext + d_ext),
-                    constraint=float((w_c + d_c).sum()),
-                    transfer=float((w_c + d_c)[pk[0]]) if pk and self.G is not None else 0.0,
-                    discrete=float(half + internal + cross),
-                    residual=self.constraint_residual(vnew),
-                )
-                records.append(rec)
-                if n in out_steps:
-                    self._v_now = vnow
-                    self.time, self.step = tn, n
-                    outs.append((n, tn))
-                    if on_output is not None:
-                        on_output(self, n, tn)
-                    self._v_now = None
-                t_out += time.perf_counter() - tic
-            if n == n0 + nsteps:
-                break  # v_N is known; the state stays (d_N, v_{N-1/2}) for a next run
-            w_ext += d_ext
-            w_c = w_c + d_c
-            for k in range(F):
-                self.u[k].axpy(dt, vnew[k])
-                vnew[k].copy(self.v[k])
+        try:
+            for n in range(n0, n0 + nsteps + 1):
+                tn = t0 + (n - n0) * dt
+                # v_{n+1/2} = v_{n-1/2} + (dt_{n-1/2} + dt_{n+1/2}) / 2 a_n (a new run may
+                # change dt)
+                gamma = 0.5 if n == 0 else (0.5 * (1.0 + self._dt_prev / dt) if n == n0 else 1.0)
+                amps = [a(tn) for _, a in self._loads]
+                # trial velocities (eq. 93): vbar = v_{n-1/2} + gamma dt M^{-1} (f_ext - K d_n)
+                self._apply_K(self.u, ku)
+                for k in range(F):
+                    ku[k].copy(self._work[k])
+                    for (vecs, _), an in zip(self._loads, amps, strict=True):
+                        if vecs[k] is not None and an != 0.0:
+                            self._work[k].axpy(-an, vecs[k])
+                    vnew[k].pointwiseMult(self._minv[k], self._work[k])
+                    vnew[k].aypx(-gamma * dt, self.v[k])
+                # multiplier correction (eq. 94-96): G v_{n+1/2} = 0
+                if self.G is not None:
+                    self._correct(vnew, imp)
+                # work of the step, f_n . (d_{n+1} - d_{n-1}) / 2
+                # = dt f_n . (v_{n+1/2} + v_{n-1/2}) / 2, which balances the central-difference
+                # energy exactly (see EnergyRecord)
+                d_ext, d_c = 0.0, np.zeros(F)
+                if n > 0:
+                    for (vecs, _), an in zip(self._loads, amps, strict=True):
+                        for b, v0, v1 in zip(vecs, self.v, vnew, strict=True):
+                            if b is not None and an != 0.0:
+                                d_ext += 0.5 * an * dt * (b.dot(v0) + b.dot(v1))
+                    if self.G is not None:  # constraint force -G^T lambda / dt
+                        for k in range(F):
+                            if self.G[k] is not None:
+                                d_c[k] = -0.5 * (imp[k].dot(self.v[k]) + imp[k].dot(vnew[k]))
+                if n in energy_steps:
+                    tic = time.perf_counter()
+                    for k in range(F):  # v_n
+                        if n == 0:
+                            self.v[k].copy(vnow[k])
+                        else:
+                            vnow[k].waxpy(1.0, self.v[k], vnew[k])
+                            vnow[k].scale(0.5)
+                    kin = half = internal = cross = 0.0
+                    for k, f in enumerate(self.fields):
+                        kin += 0.5 * f.mass.dot(_times(vnow[k], vnow[k], self._tmp[k]))
+                        half += 0.5 * f.mass.dot(_times(vnew[k], vnew[k], self._tmp[k]))
+                        internal += 0.5 * self.u[k].dot(ku[k])
+                        cross += 0.5 * dt * ku[k].dot(vnew[k])
+                    rec = EnergyRecord(
+                        step=n,
+                        time=tn,
+                        kinetic=float(kin),
+                        internal=float(internal),
+                        external=float(w_ext + d_ext),
+                        constraint=float((w_c + d_c).sum()),
+                        transfer=float((w_c + d_c)[pk[0]]) if pk and self.G is not None else 0.0,
+                        discrete=float(half + internal + cross),
+                        residual=self.constraint_residual(vnew),
+                    )
+                    records.append(rec)
+                    if n in out_steps:
+                        self._v_now = vnow
+                        self.time, self.step = tn, n
+                        outs.append((n, tn))
+                        if callback is not None:
+                            callback(self, n, tn)
+                        self._v_now = None
+                    t_out += time.perf_counter() - tic
+                if n == n0 + nsteps:
+                    break  # v_N is known; the state stays (d_N, v_{N-1/2}) for a next run
+                w_ext += d_ext
+                w_c = w_c + d_c
+                for k in range(F):
+                    self.u[k].axpy(dt, vnew[k])
+                    vnew[k].copy(self.v[k])
+                progress_bar.update(n + 1 - n0, t0 + (n + 1 - n0) * dt)
+        finally:
+            progress_bar.close(nsteps if n == n0 + nsteps else None, t0 + (n - n0) * dt)
+            if writer is not None:
+                writer.close()
         t_loop = time.perf_counter() - clock - t_out
         self.step, self.time = n0 + nsteps, t0 + span
         self._dt_prev = dt
@@ -858,10 +894,13 @@ class ExplicitDynamics:
                 return flags
         return None
 
-    def _local_values(self, vecs: list[PETSc.Vec]) -> tuple:
-        """(FE Function with ghosts or None, particle coefficients (n, 2) or None)."""
+    def _local_values(self, vecs: list[PETSc.Vec], particles: bool = True) -> tuple:
+        """(FE Function with ghosts or None, particle coefficients (n, 2) or None); with
+        ``particles=False`` the particle coefficients are not gathered (``None``)."""
         fe, coeffs = None, None
         for f, x in zip(self.fields, vecs, strict=True):
+            if f.name != "fe" and not particles:
+                continue
             if f.name == "fe":
                 fe = dolfinx.fem.Function(self.V)
                 fe.x.array[: x.getLocalSize()] = x.array_r
@@ -883,7 +922,37 @@ class ExplicitDynamics:
         """Velocity (m, 2) at this rank's points, which may lie anywhere in the mesh
         (collective). Raises :class:`~dolfinx_meshfree.PointsOutsideMeshError` on every rank if
         a point is outside the body."""
-        fe, coeffs = self._local_values(self._current())
+        return self._field_at(self._current(), points)
+
+    def displacement_at(self, points: npt.ArrayLike) -> np.ndarray:
+        """Displacement (m, 2) at this rank's points, like :meth:`velocity_at` (collective)."""
+        return self._field_at(self.u, points)
+
+    def fe_functions(self) -> tuple[dolfinx.fem.Function, dolfinx.fem.Function]:
+        """The FE displacement and velocity at the current time as new DOLFINx Functions named
+        ``"displacement"`` and ``"velocity"`` (ghosts updated; collective). FE nodes outside
+        the FE field (touched by patch cells only) hold zero.
+
+        Raises:
+            ValueError: the model has no FE field (pure EFG).
+        """
+        if self.V is None:
+            raise ValueError("this model has no FE field (pure EFG): no FE functions")
+        out = []
+        for name, vecs in (("displacement", self.u), ("velocity", self._current())):
+            fe, _ = self._local_values(vecs, particles=False)
+            fe.name = name
+            out.append(fe)
+        return out[0], out[1]
+
+    @property
+    def energy_record(self) -> EnergyRecord | None:
+        """The latest :class:`EnergyRecord` (at an output time: that step's), or ``None``."""
+        return self._records[-1] if self._records else None
+
+    def _field_at(self, vecs: list[PETSc.Vec], points: npt.ArrayLike) -> np.ndarray:
+        """The field with dof values ``vecs`` at this rank's points (collective)."""
+        fe, coeffs = self._local_values(vecs)
         if coeffs is None:
             return evaluate_fe_function(fe, points)
         if fe is None:

@@ -164,6 +164,10 @@ def test_bad_input_on_every_rank():
     V = _compat.vector_function_space(msh)
     with pytest.raises(ValueError, match="coupling='bridge' is not available"):
         mf.CoupledElasticity(V, patch, mf.LinearElastic(1.0, 0.3), coupling="bridge")
+    whole = mf.ParticlePatch(msh, np.arange(n), 1 / 3)
+    for coupling in mf.COUPLINGS:
+        with pytest.raises(ValueError, match="the patch covers the whole mesh"):
+            mf.CoupledElasticity(V, whole, mf.LinearElastic(1.0, 0.3), coupling=coupling)
     # particles too sparse for the support: one particle per patch cell row is not enough
     sparse = mf.ParticlePatch(msh, cells_right_of(msh, 1.0), 1.0)
     problem = mf.CoupledElasticity(V, sparse, mf.LinearElastic(1.0, 0.3), dilation=1.05)

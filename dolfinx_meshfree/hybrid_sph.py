@@ -1,0 +1,182 @@
+"""The approximation of the hybrid SPH–FE coupling: FE integration points join the particle sums.
+
+Rabczuk et al. 2006, sec. 5.5, eq. 125–130 (Sauer 2000). In the hybrid zone the FE field enters
+the SPH sums of the particle approximation as extra "particles": the integration points ``X_g``
+of the FE cells near the patch, with volume ``w_g |J_g|`` (eq. 129–130) and value
+``u^FE(X_g) = sum_a N_a(X_g) u_a`` (eq. 125–126):
+
+.. math::
+    u^h(X) = \\sum_J u_J N_J(X) + \\sum_g u^{FE}(X_g) N_g(X).
+
+Two pieces live here:
+
+* :class:`CorrectedSPH`: an SPH approximation on points with volumes that reproduces linear
+  fields, values and gradients: the Shepard values ``Nhat_J`` with a first-order correction and
+  the corrected kernel gradients ``G_J`` of :class:`~dolfinx_meshfree.SPH` (Bonet & Lok 1999),
+  ``N_J(x) = Nhat_J(x) + G_J(x) . (x - xbar(x))``, ``xbar = sum_J Nhat_J x_J``;
+* :func:`hybrid_points`: the FE integration points of the hybrid zone, replicated on every rank
+  like the particles, with the sparse map ``E`` (FE nodal values to values at the points).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+import scipy.sparse as sp
+from scipy.spatial import cKDTree
+
+from . import _compat
+from .fe_points import tabulate_in_cells
+from .neighbours import check_points
+from .quadrature import cell_quadrature
+from .sph import SPH
+from .tables import ShapeTable
+
+__all__ = ["CorrectedSPH", "HybridPoints", "hybrid_points", "particle_spacing_median"]
+
+
+class CorrectedSPH:
+    """SPH on points with volumes, corrected so that linear fields are reproduced exactly.
+
+    The Shepard values ``Nhat_J = V_J W(x - x_J, h) / sum_K V_K W(x - x_K, h)`` (Rabczuk et al.
+    2006, eq. 10, normalised) and the corrected gradients ``G_J`` of
+    :class:`~dolfinx_meshfree.SPH` (``correction="shepard"``: ``sum_J G_J = 0`` and
+    ``sum_J G_J (x) x_J = I``) give the values
+
+    .. math::
+        N_J(x) = \\hat N_J(x) + G_J(x) \\cdot (x - \\bar x(x)), \\qquad
+        \\bar x = \\sum_J \\hat N_J x_J,
+
+    which reproduce constants and linear fields (``sum_J N_J x_J = xbar + (x - xbar) = x``). The
+    gradients of the table are ``G_J``, the corrected kernel gradients (eq. 126/128 with the
+    correction), exact for linear fields; they are not the derivatives of ``N_J``.
+
+    Args:
+        points: (n, 2) positions (particles, and FE integration points in the hybrid zone).
+        volumes: (n,) positive volumes.
+        smoothing_length: ``h``; the cubic-spline kernel's support is ``2 h``.
+    """
+
+    def __init__(self, points: npt.ArrayLike, volumes: npt.ArrayLike, smoothing_length: float):
+        self._sph = SPH(points, volumes, smoothing_length=smoothing_length, correction="shepard")
+        self.points = self._sph.points
+        self.volumes = self._sph.volumes
+        self.h = self._sph.h
+        self.gdim = self._sph.gdim
+
+    @property
+    def support(self) -> float:
+        """Kernel support radius ``2 h``."""
+        return 2.0 * self.h
+
+    @property
+    def num_points(self) -> int:
+        return self.points.shape[0]
+
+    def tabulate(self, x: npt.ArrayLike, derivatives: int = 1) -> ShapeTable:
+        """Values and corrected gradients at ``x`` (m, 2); local, no communication.
+
+        Raises:
+            ValueError: a point has no point within ``2 h`` or too few, collinear neighbours
+                for the gradient correction (increase the smoothing length).
+        """
+        x = check_points(x, self.gdim, "x")
+        t = self._sph.tabulate(x, 1)
+        nhat = t.values
+        d = x - nhat @ self.points  # x - xbar, (m, gdim)
+        values = nhat.copy()
+        for k, g in enumerate(t.gradients):
+            values = values + sp.diags(d[:, k]) @ g
+        return ShapeTable(points=x, values=values.tocsr(), gradients=t.gradients if derivatives else [])
+
+
+@dataclass
+class HybridPoints:
+    """FE integration points of the hybrid zone, the same on every rank.
+
+    Attributes:
+        points: (ng, 2) positions ``X_g``. weights: (ng,) volumes ``w_g |J_g|`` (eq. 129).
+        interpolation: (ng x N) CSR ``E`` with ``E[g, a] = N_a(X_g)`` over the global FE nodes
+            (scalar; the displacement at ``X_g`` is ``E`` applied to each component).
+        cells_per_rank: How many hybrid FE cells each rank contributed.
+    """
+
+    points: np.ndarray
+    weights: np.ndarray
+    interpolation: sp.csr_matrix
+    cells_per_rank: list[int]
+
+    @property
+    def num_points(self) -> int:
+        return self.points.shape[0]
+
+
+def particle_spacing_median(positions: np.ndarray) -> float:
+    """Median distance from a particle to its nearest neighbour (local)."""
+    d, _ = cKDTree(positions).query(positions, k=2)
+    return float(np.median(d[:, 1]))
+
+
+def hybrid_points(V, fe_cells: np.ndarray, particles: np.ndarray, radius: float, degree: int):
+    """The integration points of the FE cells within ``radius`` of a particle (collective).
+
+    Each rank takes its owned FE cells ``fe_cells`` whose vertices come within ``radius`` of a
+    particle, puts a Gauss rule of ``degree`` on them (Sauer 2000: about the particles' density,
+    Rabczuk eq. 129–130), keeps the points within ``radius`` of a particle, tabulates the FE
+    basis there, and the points, volumes and interpolation rows are gathered on every rank in
+    rank order.
+
+    Args:
+        V: Vector P1/Q1 space. fe_cells: Owned FE cells (local indices).
+        particles: (n, 2) particle positions (replicated).
+        radius: The kernel support ``2 h``. degree: Gauss degree on the hybrid cells.
+
+    Returns:
+        :class:`HybridPoints`.
+    """
+    msh = V.mesh
+    comm = msh.comm
+    gdim = msh.geometry.dim
+    tree = cKDTree(particles)
+    fe_cells = np.asarray(fe_cells, dtype=np.int64)
+    nodes = msh.geometry.x[_compat.geometry_dofmap(msh)[fe_cells], :gdim]  # (nc, nv, gdim)
+    if fe_cells.size:
+        dist, _ = tree.query(nodes.reshape(-1, gdim))
+        near = dist.reshape(nodes.shape[:2]).min(axis=1) < radius
+        # a cell can reach within radius through its interior only when a vertex is within
+        # radius + the cell diameter
+        diam = np.linalg.norm(nodes.max(axis=1) - nodes.min(axis=1), axis=1)
+        near |= dist.reshape(nodes.shape[:2]).min(axis=1) < radius + diam
+        cells = fe_cells[near]
+    else:
+        cells = fe_cells
+    q = cell_quadrature(msh, degree, cells)
+    if len(q):
+        d, _ = tree.query(q.points)
+        keep = d < radius
+    else:
+        keep = np.zeros(0, dtype=bool)
+    pts, w, qc = q.points[keep], q.weights[keep], q.cells[keep]
+    tab = tabulate_in_cells(V, pts, qc, derivatives=0).values.tocoo()
+    imap = V.dofmap.index_map
+    l2g = np.asarray(
+        imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
+    )
+    parts = comm.allgather((pts, w, tab.row, l2g[tab.col], tab.data, int(cells.size)))
+    offsets = np.cumsum([0] + [p[0].shape[0] for p in parts])
+    rows = np.concatenate([p[2] + off for p, off in zip(parts, offsets[:-1], strict=True)])
+    E = sp.csr_matrix(
+        (
+            np.concatenate([p[4] for p in parts]),
+            (rows, np.concatenate([p[3] for p in parts]).astype(np.int64)),
+        ),
+        shape=(int(offsets[-1]), int(imap.size_global)),
+    )
+    return HybridPoints(
+        points=np.concatenate([p[0] for p in parts]).reshape(-1, gdim),
+        weights=np.concatenate([p[1] for p in parts]),
+        interpolation=E,
+        cells_per_rank=[p[5] for p in parts],
+    )

@@ -1,0 +1,458 @@
+"""Output of explicit dynamics: XDMF time series of the FE fields and of the particle cloud, and a
+progress bar for long runs.
+
+Files written by :class:`DynamicsWriter` for a prefix ``out/rod``:
+
+* ``out/rod_fe.xdmf`` (+ ``out/rod_fe.h5``): the mesh and the FE displacement and velocity as
+  DOLFINx :class:`~dolfinx.fem.Function` named ``"displacement"`` and ``"velocity"``, one
+  temporal collection each, written collectively by DOLFINx's ``XDMFFile`` (HDF5). In a coupled
+  model the FE nodes that only patch cells touch hold zero (they carry no mass);
+* ``out/rod_particles.xdmf`` (+ ``out/rod_particles.bin``): the particle cloud, one temporal
+  collection of ``Polyvertex`` grids; per output time the particle positions (reference
+  configuration, ``XYZ`` with ``z = 0``) and the displacement and velocity *values* at the
+  particles (``u_h(x_J)``, ``v_h(x_J)``: the MLS, blended or FE field evaluated there, not the
+  MLS coefficients), as 3-component vectors. DOLFINx has no particle writer in 0.5.2 and h5py is
+  not available in both lanes, so the heavy data go to one little-endian raw binary file that
+  the XDMF addresses with ``Format="Binary"`` and byte offsets (``Seek``), which ParaView's XDMF
+  readers (Xdmf3 and the legacy Xdmf2) read; rank 0 writes both files, with the replicated
+  positions and the values gathered from the owners of the particles. The XML is rewritten
+  (atomically) after every output, so an interrupted run leaves a readable file;
+* ``out/rod_energy.csv``: the :class:`~dolfinx_meshfree.EnergyRecord` at each output (rank 0).
+
+:func:`read_particles` reads a particle file back (tests, post-processing).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import pathlib
+import sys
+import time as _time
+import xml.etree.ElementTree as ET
+from typing import IO, TYPE_CHECKING
+
+import dolfinx.io
+import numpy as np
+from mpi4py import MPI
+
+from .parallel import raise_on_all_ranks
+
+if TYPE_CHECKING:
+    from .integrator import ExplicitDynamics
+
+__all__ = ["DynamicsWriter", "ProgressBar", "check_prefix", "read_particles"]
+
+_FLOAT = np.dtype("<f8")
+_INT = np.dtype("<i4")
+_ENERGY_KEYS = (
+    "step",
+    "time",
+    "kinetic",
+    "internal",
+    "external",
+    "constraint",
+    "transfer",
+    "discrete",
+    "residual",
+)
+
+
+# -- the output prefix -------------------------------------------------------------------------
+
+
+def check_prefix(prefix: str | os.PathLike, comm: MPI.Comm) -> pathlib.Path:
+    """Check an output prefix on every rank (collective) and return it as a path.
+
+    The prefix is a path without suffix (``"out/rod"`` gives ``out/rod_fe.xdmf``, ...): it must
+    be the same on every rank, name a file (not end in a separator), and its directory must
+    exist and be writable on every rank.
+
+    Raises:
+        ValueError: on every rank, naming the prefix and the fix.
+    """
+    names = comm.allgather(str(prefix) if isinstance(prefix, str | os.PathLike) else None)
+
+    def check() -> pathlib.Path:
+        if not isinstance(prefix, str | os.PathLike):
+            raise ValueError(
+                f"the output prefix should be a path (str or os.PathLike), got {prefix!r}"
+            )
+        if len(set(names)) != 1:
+            raise ValueError(f"the output prefix must be the same on every rank, got {names}")
+        text = str(prefix)
+        path = pathlib.Path(prefix)
+        if not text or text.endswith(("/", os.sep)) or path.name in ("", ".", ".."):
+            raise ValueError(
+                f"the output prefix {text!r} should name files, e.g. 'out/rod' (which writes "
+                "out/rod_fe.xdmf, out/rod_particles.xdmf, ...)"
+            )
+        folder = path.parent
+        if not folder.is_dir():
+            raise ValueError(
+                f"the directory {str(folder)!r} of the output prefix {text!r} does not exist; "
+                "create it first"
+            )
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise ValueError(
+                f"the directory {str(folder)!r} of the output prefix {text!r} is not writable"
+            )
+        return path
+
+    return raise_on_all_ranks(comm, check)
+
+
+# -- progress bar ------------------------------------------------------------------------------
+
+
+class ProgressBar:
+    """A dependency-free progress bar on rank 0's ``stderr`` for long runs.
+
+    On a terminal the line is redrawn in place (``\\r``) at most every ``interval`` seconds;
+    forced onto a stream that is not a terminal, one line is printed per ``step_percent`` of the
+    run. Other ranks print nothing; ``update`` never communicates, so calling it on some ranks
+    only is safe.
+
+    Args:
+        total: Number of steps of the run (> 0).
+        comm: Communicator: only its rank 0 prints (``None``: ``MPI.COMM_WORLD``).
+        enabled: ``True``: on (rank 0), even if the stream is not a terminal; ``False``: off;
+            ``None``: on when the stream is a terminal.
+        stream: Where to print (default ``sys.stderr`` at construction).
+        interval: Seconds between redraws on a terminal.
+        step_percent: Percent of the run between lines when the stream is not a terminal.
+        label: Text before the bar.
+    """
+
+    def __init__(
+        self,
+        total: int,
+        comm: MPI.Comm | None = None,
+        enabled: bool | None = None,
+        stream: IO[str] | None = None,
+        interval: float = 0.5,
+        step_percent: float = 10.0,
+        label: str = "",
+    ):
+        if enabled not in (None, True, False):
+            raise ValueError(f"progress={enabled!r} should be True, False or None (automatic)")
+        if isinstance(total, bool) or not isinstance(total, int | np.integer) or total < 1:
+            raise ValueError(f"total={total!r} should be a positive number of steps")
+        comm = MPI.COMM_WORLD if comm is None else comm
+        self.stream = sys.stderr if stream is None else stream
+        self.total = int(total)
+        self.interval = float(interval)
+        self.step_percent = float(step_percent)
+        self.label = label
+        self.tty = _isatty(self.stream)
+        on = self.tty if enabled is None else enabled
+        self.enabled = bool(on) and comm.rank == 0
+        self._start = _time.perf_counter()
+        self._last = -math.inf
+        self._next_percent = 0.0
+        self._width = 0
+        self._closed = False
+
+    def update(self, done: int, t: float | None = None) -> None:
+        """Report ``done`` steps of ``total`` (and the simulated time ``t``); cheap when not due."""
+        if not self.enabled or self._closed:
+            return
+        percent = 100.0 * done / self.total
+        if self.tty:
+            now = _time.perf_counter()
+            if now - self._last < self.interval and done < self.total:
+                return
+            self._last = now
+            self._draw(done, t, "\r")
+        elif percent + 1e-12 >= self._next_percent or done >= self.total:
+            self._next_percent = (
+                math.floor(percent / self.step_percent + 1e-12) + 1
+            ) * self.step_percent
+            self._draw(done, t, "")
+
+    def close(self, done: int | None = None, t: float | None = None) -> None:
+        """Draw the final state (if ``done`` is given) and end the line."""
+        if not self.enabled or self._closed:
+            self._closed = True
+            return
+        if done is not None:
+            self._last = -math.inf
+            if self.tty:
+                self._draw(done, t, "\r")
+            elif self._next_percent <= 100.0:
+                self._draw(done, t, "")
+        if self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
+        self._closed = True
+
+    def _draw(self, done: int, t: float | None, lead: str) -> None:
+        frac = min(1.0, max(0.0, done / self.total))
+        elapsed = _time.perf_counter() - self._start
+        bar = "#" * round(24 * frac)
+        eta = f", {elapsed * (1 - frac) / frac:.1f} s left" if 0 < frac < 1 else ""
+        tt = f"  t = {t:.6g}" if t is not None else ""
+        text = (
+            f"{self.label}[{bar:<24}] {100 * frac:5.1f}%  step {done}/{self.total}{tt}  "
+            f"{elapsed:.1f} s{eta}"
+        )
+        pad = " " * max(0, self._width - len(text)) if lead else ""
+        self._width = len(text)
+        self.stream.write(lead + text + pad + ("" if lead else "\n"))
+        self.stream.flush()
+
+
+def _isatty(stream) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError, OSError):
+        return False
+
+
+# -- XDMF writer -------------------------------------------------------------------------------
+
+
+class DynamicsWriter:
+    """XDMF time series of an :class:`~dolfinx_meshfree.ExplicitDynamics` (collective).
+
+    Use as the output callback, ``dyn.run(t_end, outputs=times, on_output=writer)``, or let
+    :meth:`ExplicitDynamics.run <dolfinx_meshfree.ExplicitDynamics.run>` make one with
+    ``xdmf=prefix``. Every rank must construct, call and close it; DOLFINx writes the FE file
+    collectively and rank 0 alone writes the particle and energy files (see the module
+    docstring for the files). A time equal to the last one written is skipped (a continued run
+    starts where the previous one ended). Also a context manager.
+
+    Args:
+        prefix: Output path without suffix (its directory must exist).
+        dynamics: The model to write.
+        fe: Write the FE fields (when the model has an FE space).
+        particles: Write the particle cloud (when the model has particles).
+        energy: Write the energy records (``{prefix}_energy.csv``).
+
+    Attributes:
+        files: The files this writer produces, by kind (``"fe"``, ``"fe_h5"``, ``"particles"``,
+            ``"particles_bin"``, ``"energy"``); the same on every rank.
+        times: Output times written so far.
+
+    Raises:
+        ValueError: on every rank for a bad prefix (:func:`check_prefix`).
+    """
+
+    def __init__(
+        self,
+        prefix: str | os.PathLike,
+        dynamics: ExplicitDynamics,
+        *,
+        fe: bool = True,
+        particles: bool = True,
+        energy: bool = True,
+    ):
+        self.dynamics = dynamics
+        self.comm = dynamics.comm
+        self.prefix = check_prefix(prefix, self.comm)
+        base = str(self.prefix)
+        self.files: dict[str, pathlib.Path] = {}
+        self.times: list[float] = []
+        self._fe_file = None
+        self._closed = False
+        self._with_fe = bool(fe) and dynamics.V is not None
+        self._with_particles = bool(particles) and dynamics.particles is not None
+        self._with_energy = bool(energy)
+        self._grids: list[tuple[float, int, int]] = []  # (time, seek u, seek v)
+        if self._with_fe:
+            self.files["fe"] = pathlib.Path(base + "_fe.xdmf")
+            self.files["fe_h5"] = pathlib.Path(base + "_fe.h5")
+        if self._with_particles:
+            self.files["particles"] = pathlib.Path(base + "_particles.xdmf")
+            self.files["particles_bin"] = pathlib.Path(base + "_particles.bin")
+            P = dynamics.particles
+            self._positions = np.zeros((P.num_particles, 3))
+            self._positions[:, : P.positions.shape[1]] = P.positions
+            self._owned = np.asarray(P.owned, dtype=np.int64)
+        if self._with_energy:
+            self.files["energy"] = pathlib.Path(base + "_energy.csv")
+        # rank 0's files first (errors are shared before DOLFINx's collective open)
+        self._rank0(self._start_rank0_files)
+        if self._with_fe:
+            self._fe_file = dolfinx.io.XDMFFile(self.comm, str(self.files["fe"]), "w")
+            self._fe_file.write_mesh(dynamics.mesh)
+
+    # -- rank 0 files --------------------------------------------------------------------------
+
+    def _rank0(self, fn) -> None:
+        """Run ``fn`` on rank 0; an ``OSError`` there is raised as a ``ValueError`` on every
+        rank (collective)."""
+        msg = None
+        if self.comm.rank == 0:
+            try:
+                fn()
+            except OSError as e:
+                msg = f"writing the output files of prefix {str(self.prefix)!r} failed: {e}"
+        msg = self.comm.bcast(msg, root=0)
+        if msg is not None:
+            raise ValueError(msg)
+
+    def _start_rank0_files(self) -> None:
+        if self._with_particles:
+            n = self._positions.shape[0]
+            with open(self.files["particles_bin"], "wb") as f:
+                f.write(np.arange(n, dtype=_INT).tobytes())
+                f.write(self._positions.astype(_FLOAT).tobytes())
+            self._size = n * _INT.itemsize + self._positions.size * _FLOAT.itemsize
+            self._write_particle_xml()
+        if self._with_energy:
+            with open(self.files["energy"], "w") as f:
+                f.write(",".join(_ENERGY_KEYS) + "\n")
+
+    def _append_particles(self, t: float, u: np.ndarray, v: np.ndarray) -> None:
+        seek_u = self._size
+        with open(self.files["particles_bin"], "ab") as f:
+            for a in (u, v):
+                f.write(np.ascontiguousarray(a, dtype=_FLOAT).tobytes())
+        seek_v = seek_u + u.size * _FLOAT.itemsize
+        self._size = seek_v + v.size * _FLOAT.itemsize
+        self._grids.append((t, seek_u, seek_v))
+        self._write_particle_xml()
+
+    def _write_particle_xml(self) -> None:
+        n = self._positions.shape[0]
+        binary = self.files["particles_bin"].name
+        root = ET.Element("Xdmf", Version="3.0")
+        domain = ET.SubElement(root, "Domain")
+        series = ET.SubElement(
+            domain, "Grid", Name="particles", GridType="Collection", CollectionType="Temporal"
+        )
+
+        def data(parent, seek: int, dims: str, number: str, precision: int) -> None:
+            item = ET.SubElement(
+                parent,
+                "DataItem",
+                Dimensions=dims,
+                NumberType=number,
+                Precision=str(precision),
+                Format="Binary",
+                Endian="Little",
+                Seek=str(seek),
+            )
+            item.text = binary
+
+        pos_seek = n * _INT.itemsize
+        for t, su, sv in self._grids:
+            grid = ET.SubElement(series, "Grid", Name="particles", GridType="Uniform")
+            ET.SubElement(grid, "Time", Value=repr(float(t)))
+            topo = ET.SubElement(
+                grid,
+                "Topology",
+                TopologyType="Polyvertex",
+                NumberOfElements=str(n),
+                NodesPerElement="1",
+            )
+            data(topo, 0, f"{n} 1", "Int", _INT.itemsize)
+            geom = ET.SubElement(grid, "Geometry", GeometryType="XYZ")
+            data(geom, pos_seek, f"{n} 3", "Float", _FLOAT.itemsize)
+            for name, seek in (("displacement", su), ("velocity", sv)):
+                att = ET.SubElement(
+                    grid, "Attribute", Name=name, AttributeType="Vector", Center="Node"
+                )
+                data(att, seek, f"{n} 3", "Float", _FLOAT.itemsize)
+        ET.indent(root)
+        path = self.files["particles"]
+        tmp = path.with_name(path.name + ".tmp")
+        with open(tmp, "w") as f:
+            f.write('<?xml version="1.0"?>\n<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>\n')
+            f.write(ET.tostring(root, encoding="unicode"))
+            f.write("\n")
+        os.replace(tmp, path)
+
+    # -- writing -------------------------------------------------------------------------------
+
+    def __call__(self, dynamics: ExplicitDynamics, step: int, time: float) -> None:
+        """The ``on_output`` callback of :meth:`ExplicitDynamics.run`: :meth:`write`."""
+        if dynamics is not self.dynamics:
+            raise ValueError("this DynamicsWriter was made for another ExplicitDynamics")
+        self.write(time)
+
+    def write(self, time: float | None = None) -> None:
+        """Write the current state (collective): at an output time of a run (in ``on_output``)
+        the state ``d_n, v_n``; after a run the final state. ``time`` defaults to the model's."""
+        if self._closed:
+            raise ValueError("this DynamicsWriter is closed")
+        dyn = self.dynamics
+        t = float(dyn.time if time is None else time)
+        if self.times and math.isclose(t, self.times[-1], rel_tol=1e-12, abs_tol=0.0):
+            return
+        self.times.append(t)
+        if self._with_fe:
+            for f in dyn.fe_functions():
+                self._fe_file.write_function(f, t)
+        values = None
+        if self._with_particles:
+            x = dyn.particles.positions[self._owned]
+            pu, pv = dyn.displacement_at(x), dyn.velocity_at(x)
+            parts = self.comm.gather((self._owned, pu, pv), root=0)
+            if self.comm.rank == 0:
+                n = self._positions.shape[0]
+                values = np.zeros((2, n, 3))
+                for idx, a, b in parts:
+                    values[0, idx, : a.shape[1]] = a
+                    values[1, idx, : b.shape[1]] = b
+        record = dyn.energy_record
+
+        def rank0() -> None:
+            if values is not None:
+                self._append_particles(t, values[0], values[1])
+            if self._with_energy and record is not None:
+                with open(self.files["energy"], "a") as f:
+                    f.write(",".join(repr(getattr(record, k)) for k in _ENERGY_KEYS) + "\n")
+
+        self._rank0(rank0)
+
+    def close(self) -> None:
+        """Close the FE file (collective); the particle files are complete after every write."""
+        if self._closed:
+            return
+        self._closed = True
+        if self._fe_file is not None:
+            self._fe_file.close()
+            self._fe_file = None
+        self.comm.Barrier()
+
+    def __enter__(self) -> DynamicsWriter:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+# -- reading back ------------------------------------------------------------------------------
+
+
+def read_particles(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """Read a particle XDMF file written by :class:`DynamicsWriter` (any process, no MPI).
+
+    Returns:
+        ``{"times": (k,), "positions": (k, n, 3), "displacement": (k, n, 3), "velocity":
+        (k, n, 3)}`` for the ``k`` output times of ``n`` particles.
+    """
+    path = pathlib.Path(path)
+    root = ET.parse(path).getroot()
+    grids = root.findall("./Domain/Grid[@CollectionType='Temporal']/Grid")
+    out: dict[str, list] = {"times": [], "positions": [], "displacement": [], "velocity": []}
+
+    def load(item) -> np.ndarray:
+        dims = tuple(int(d) for d in item.get("Dimensions").split())
+        dtype = _INT if item.get("NumberType") == "Int" else _FLOAT
+        count = int(np.prod(dims))
+        arr = np.fromfile(
+            path.parent / item.text.strip(), dtype=dtype, count=count, offset=int(item.get("Seek"))
+        )
+        if arr.size != count:
+            raise ValueError(f"{path}: the binary file holds fewer values than {dims}")
+        return arr.reshape(dims)
+
+    for g in grids:
+        out["times"].append(float(g.find("Time").get("Value")))
+        out["positions"].append(load(g.find("Geometry/DataItem")))
+        for att in g.findall("Attribute"):
+            out[att.get("Name")].append(load(att.find("DataItem")))
+    return {k: np.asarray(v) for k, v in out.items()}

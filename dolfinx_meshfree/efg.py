@@ -88,13 +88,17 @@ def particle_stiffness(
     material: LinearElastic,
     quadrature_degree: int,
     consistent_boundary: tuple[np.ndarray, np.ndarray | None] | None = None,
+    boundary_values: Callable[[QuadraturePoints, sp.csr_matrix], sp.csr_matrix] | None = None,
 ) -> tuple[sp.csr_matrix, QuadraturePoints, ShapeTable, dict]:
     """EFG stiffness from this rank's integration cells (``particles.cells``), in PETSc numbering.
 
     Belytschko et al. 1995, eq. (4.3) with Gauss quadrature on the background cells. With
     ``consistent_boundary = (facets, cells)`` — the whole boundary of the integration domain and
     the domain cell beside each facet (``None``: exterior facets) — the test-function gradients
-    get the VCI correction. Collective (errors are raised on every rank).
+    get the VCI correction; ``boundary_values(bq, values)``, if given, replaces the shape
+    function values at the boundary quadrature ``bq`` in the VCI boundary integral (the
+    edge-to-edge coupling uses their FE interpolant on the interface). Collective (errors are
+    raised on every rank).
 
     Returns:
         ``(K, q, table, timings)``: K as a (2n x 2n) CSR of this rank's contributions with PETSc
@@ -112,10 +116,11 @@ def particle_stiffness(
         facets, cells = consistent_boundary
         bq = facet_quadrature(particles.mesh, facets, quadrature_degree, cells)
         tb = raise_on_all_ranks(comm, lambda: mls.tabulate(bq.points, derivatives=0))
+        bvalues = tb.values if boundary_values is None else boundary_values(bq, tb.values)
         test_grads = raise_on_all_ranks(
             comm,
             lambda: consistent_gradients(
-                tq.values, tq.gradients, q.weights, tb.values, bq.weights, bq.normals, comm
+                tq.values, tq.gradients, q.weights, bvalues, bq.weights, bq.normals, comm
             ),
         )
     t1 = time.perf_counter()

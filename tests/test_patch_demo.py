@@ -76,7 +76,7 @@ def test_ramp_is_reported_not_judged():
 
 def test_all_methods_table_and_self_check(shared_dir):
     """``--method all``: one record per method, the expected ones pass; a method wrongly
-    expected to pass (edge-to-edge, first-order error 4e-2) makes the demo exit with 1."""
+    expected to pass (bridging with Gauss quadrature, 3.5e-2) makes the demo exit with 1."""
     comm = MPI.COMM_WORLD
     demo = load("patch_test")
     out = shared_dir / "all.json"
@@ -84,14 +84,14 @@ def test_all_methods_table_and_self_check(shared_dir):
                          "--json", str(out)])  # fmt: skip
     assert [r["method"] for r in records] == ["fe", "efg", *mf.COUPLINGS]
     status = {r["method"]: r["status"] for r in records}
-    assert status["fe"] == status["efg"] == status["lagrange"] == "PASS"
+    assert status["fe"] == status["efg"] == status["lagrange"] == status["edge-to-edge"] == "PASS"
     assert status["master-slave"] == "exempt"
     assert "FAILED" not in status.values()
     comm.Barrier()
     assert len(json.loads(out.read_text())) == len(records)
-    demo.EXPECTED_TO_PASS = {*demo.EXPECTED_TO_PASS, ("edge-to-edge", True)}
+    demo.EXPECTED_TO_PASS = {*demo.EXPECTED_TO_PASS, ("bridging", False)}
     with pytest.raises(SystemExit) as e:
-        demo.main(["--method", "edge-to-edge", "--mesh", "regular", "--consistent"])
+        demo.main(["--method", "bridging", "--mesh", "regular"])
     assert e.value.code == 1
 
 

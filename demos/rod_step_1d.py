@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 
 import dolfinx_meshfree as mf  # first: it loads the right MPI for the dolfinx_solver lane
@@ -76,6 +77,12 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--png", default="rod_step_1d.png", help="figure (Fig. 9); '' for none")
     p.add_argument("--json", default=None)
     p.add_argument("--no-check", action="store_true")
+    p.add_argument(
+        "--xdmf",
+        default=None,
+        metavar="PREFIX",
+        help="XDMF of every model at every step: PREFIX_<orientation>_<fe|efg|coupled>_*.xdmf",
+    )
     args = p.parse_args(argv)
     if args.method not in mf.COUPLINGS:
         p.error(f"--method {args.method!r} is not a coupling; choose one of {list(mf.COUPLINGS)}")
@@ -89,6 +96,8 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
         p.error(f"--fraction must lie in (0, 1], got {args.fraction}")
     if not (np.isfinite(args.dilation) and args.dilation > 1.0):
         p.error(f"--dilation must be > 1, got {args.dilation}")
+    if args.xdmf is not None and not os.path.isdir(os.path.dirname(args.xdmf) or "."):
+        p.error(f"--xdmf {args.xdmf!r}: the directory does not exist")
     return args
 
 
@@ -151,8 +160,11 @@ def build(kind: str, orientation: str, args, material, dilation: float):
     return dyn
 
 
-def histories(dyn, dt: float, steps: int) -> tuple[np.ndarray, np.ndarray, dict]:
-    """Velocity histories (steps + 1, probes) at the probes, every step (collective)."""
+def histories(
+    dyn, dt: float, steps: int, xdmf: str | None = None
+) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Velocity histories (steps + 1, probes) at the probes, every step (collective); with
+    ``xdmf`` (a prefix) also the XDMF files of the fields at every step."""
     comm = MPI.COMM_WORLD
     h = LENGTH / (dyn.mesh.topology.index_map(2).size_global)
     pts = np.array([[x, 0.5 * h] for x in PROBES]) if comm.rank == 0 else np.zeros((0, 2))
@@ -163,6 +175,7 @@ def histories(dyn, dt: float, steps: int) -> tuple[np.ndarray, np.ndarray, dict]
         dt,
         outputs=list(times),
         on_output=lambda d, n, t: out.append(d.velocity_at(pts)[:, 0].copy()),
+        xdmf=xdmf,
     )
     v = np.array(out) if comm.rank == 0 else np.zeros((steps + 1, len(PROBES)))
     info = {"energy_drift": res.energy_drift, "constraint_residual": res.max_residual}
@@ -225,7 +238,8 @@ def main(argv: list[str] | None = None) -> dict:
             dt = args.t_end / steps
         v, info = {}, {}
         for k, d in models.items():
-            times, v[k], info[k] = histories(d, dt, steps)
+            prefix = None if args.xdmf is None else f"{args.xdmf}_{orientation}_{k}"
+            times, v[k], info[k] = histories(d, dt, steps, prefix)
             d.destroy()
         loaded_side = "fe" if orientation == "fe-loaded" else "efg"
         m = measures(rod, times, v)

@@ -110,8 +110,9 @@ class ProgressBar:
 
     On a terminal the line is redrawn in place (``\\r``) at most every ``interval`` seconds;
     forced onto a stream that is not a terminal, one line is printed per ``step_percent`` of the
-    run. Other ranks print nothing; ``update`` never communicates, so calling it on some ranks
-    only is safe.
+    run. In automatic mode (``enabled=None``) nothing is drawn before ``delay`` seconds have
+    passed, so that short runs stay silent. Other ranks print nothing; ``update`` never
+    communicates, so calling it on some ranks only is safe.
 
     Args:
         total: Number of steps of the run (> 0).
@@ -122,6 +123,7 @@ class ProgressBar:
         interval: Seconds between redraws on a terminal.
         step_percent: Percent of the run between lines when the stream is not a terminal.
         label: Text before the bar.
+        delay: Seconds before the first line; default 2 in automatic mode, 0 when forced.
     """
 
     def __init__(
@@ -133,6 +135,7 @@ class ProgressBar:
         interval: float = 0.5,
         step_percent: float = 10.0,
         label: str = "",
+        delay: float | None = None,
     ):
         if enabled not in (None, True, False):
             raise ValueError(f"progress={enabled!r} should be True, False or None (automatic)")
@@ -147,19 +150,23 @@ class ProgressBar:
         self.tty = _isatty(self.stream)
         on = self.tty if enabled is None else enabled
         self.enabled = bool(on) and comm.rank == 0
+        self.delay = float(delay) if delay is not None else (2.0 if enabled is None else 0.0)
         self._start = _time.perf_counter()
         self._last = -math.inf
         self._next_percent = 0.0
         self._width = 0
         self._closed = False
+        self._drawn = False
 
     def update(self, done: int, t: float | None = None) -> None:
         """Report ``done`` steps of ``total`` (and the simulated time ``t``); cheap when not due."""
         if not self.enabled or self._closed:
             return
         percent = 100.0 * done / self.total
+        now = _time.perf_counter()
+        if now - self._start < self.delay:
+            return
         if self.tty:
-            now = _time.perf_counter()
             if now - self._last < self.interval and done < self.total:
                 return
             self._last = now
@@ -173,6 +180,9 @@ class ProgressBar:
     def close(self, done: int | None = None, t: float | None = None) -> None:
         """Draw the final state (if ``done`` is given) and end the line."""
         if not self.enabled or self._closed:
+            self._closed = True
+            return
+        if not self._drawn:  # a run shorter than the delay: stay silent
             self._closed = True
             return
         if done is not None:
@@ -196,6 +206,7 @@ class ProgressBar:
             f"{self.label}[{bar:<24}] {100 * frac:5.1f}%  step {done}/{self.total}{tt}  "
             f"{elapsed:.1f} s{eta}"
         )
+        self._drawn = True
         pad = " " * max(0, self._width - len(text)) if lead else ""
         self._width = len(text)
         self.stream.write(lead + text + pad + ("" if lead else "\n"))

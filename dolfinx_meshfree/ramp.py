@@ -49,10 +49,10 @@ from . import _compat
 from .efg import _vector_values, particle_stiffness
 from .fe_points import tabulate_in_cells
 from .mls import MLS
-from .operators import load_vector, stiffness_matrix
+from .operators import consistent_gradients, load_vector, stiffness_matrix
 from .parallel import Layout, raise_on_all_ranks
 from .petsc import create_aij, create_vector
-from .quadrature import cell_quadrature, facet_quadrature
+from .quadrature import boundary_facets, cell_quadrature, facet_quadrature
 from .tables import ShapeTable
 
 __all__ = ["RAMPS", "RampInterface", "ramp_operators"]
@@ -235,11 +235,6 @@ def solve_ramp(problem, solver: str = "mumps"):
     """Assemble and solve the ramp-coupled system of ``problem`` (collective)."""
     from .coupled import CoupledSolution
 
-    if problem.consistent:
-        raise ValueError(
-            "consistent=True is not available with the ramp couplings: the particle shape "
-            "functions extend into the interface cells, which the patch's VCI does not see"
-        )
     V, patch, P = problem.V, problem.patch, problem.patch.particles
     comm = patch.comm
     msh = V.mesh
@@ -252,8 +247,14 @@ def solve_ramp(problem, solver: str = "mumps"):
 
     blend = RampInterface(problem, cubic=RAMPS[problem.coupling])
     n_loc = blend.num_fe_columns
-    boundary = patch.boundary() if problem.consistent else None
-    Kp_loc, _, _, kt = particle_stiffness(P, problem.mls, problem.material, deg, boundary)
+    # interface cells: the blended table (columns: local FE nodes, then particles)
+    qi = cell_quadrature(msh, deg, blend.cells)
+    ti = raise_on_all_ranks(comm, lambda: blend.table(qi.points, qi.cells))
+    test = ti.gradients
+    if problem.consistent:
+        Kp_loc, kt, test = _consistent_stiffness(problem, blend, qi, ti)
+    else:
+        Kp_loc, _, _, kt = particle_stiffness(P, problem.mls, problem.material, deg)
 
     # essential conditions: FE nodes strongly; patch facets and the particle part of interface
     # cells' facets by multipliers
@@ -276,13 +277,11 @@ def solve_ramp(problem, solver: str = "mumps"):
     active = problem._node_flags(fe_nodes) & ~blend.on_gamma
     fixed_local = is_bc | ~active
 
-    # interface cells: blended stiffness split into FE/particle blocks
-    q = cell_quadrature(msh, deg, blend.cells)
-    tab = raise_on_all_ranks(comm, lambda: blend.table(q.points, q.cells))
     setup = problem._setup + time.perf_counter() - t0 - kt["assemble"]
 
+    # interface cells: blended stiffness split into FE/particle blocks
     t1 = time.perf_counter()
-    Ki = stiffness_matrix(tab.gradients, q.weights, problem.material).tocoo()
+    Ki = stiffness_matrix(test, qi.weights, problem.material, ti.gradients).tocoo()
     # dof map of the blended columns: FE (2 a + i) -> 2 l2g[a] + i; particles -> PETSc dofs
     nf = 2 * n_loc
     fe_dof = (2 * l2g[:, None] + np.arange(2)).ravel()
@@ -380,6 +379,68 @@ def solve_ramp(problem, solver: str = "mumps"):
         },
         interface=blend,
     )
+
+
+def _consistent_stiffness(problem, blend: RampInterface, q, tab: ShapeTable):
+    """Variationally consistent integration (VCI) of the particle test functions of a ramp
+    coupling (Chen, Hillman & Rüter 2013; see :func:`~dolfinx_meshfree.operators.
+    consistent_gradients`). Collective.
+
+    A particle's test function is ``phi_J`` on the patch cells and ``R phi_J`` on the interface
+    cells (eq. 3.15), so its integration domain is the patch with the interface cells, whose
+    boundary is the exterior boundary of both: on the interface cells' facets towards the pure
+    FE cells ``R = 0``. One correction vector per particle, from the quadrature of both kinds of
+    cells and of that boundary, makes ``sum_q grad psi_J w_q = sum_b psi_J n w_b`` exact. The FE
+    test functions ``(1 - R) N_a`` are polynomials, integrated exactly by the Gauss rule.
+
+    Returns:
+        ``(K_P, timings, test)``: the patch cells' particle stiffness (PETSc numbering) with the
+        corrected test gradients, and the interface table's test gradients (FE columns as they
+        are, particle columns corrected).
+    """
+    patch, P, comm = problem.patch, problem.patch.particles, problem.patch.comm
+    msh, deg, mls = problem.V.mesh, problem.quadrature_degree, problem.mls
+    n_loc = blend.num_fe_columns
+    t0 = time.perf_counter()
+    qp = cell_quadrature(msh, deg, P.cells)
+    tp = raise_on_all_ranks(comm, lambda: mls.tabulate(qp.points))
+    # the boundary: exterior facets of patch cells (phi) and of interface cells (R phi)
+    ext = boundary_facets(msh)
+    ext_i = ext[blend.in_interface[_first_cells(msh, ext)]]
+    bp = facet_quadrature(msh, patch.exterior_facets, deg, patch.exterior_cells)
+    bi = facet_quadrature(msh, ext_i, deg)
+    vp = raise_on_all_ranks(comm, lambda: mls.tabulate(bp.points, 0)).values
+    vi = raise_on_all_ranks(comm, lambda: blend.table(bi.points, bi.cells, 0)).values[:, n_loc:]
+    particle = slice(n_loc, None)
+    values = sp.vstack([tp.values, tab.values[:, particle]]).tocsr()
+    grads = [
+        sp.vstack([g, gi[:, particle]]).tocsr()
+        for g, gi in zip(tp.gradients, tab.gradients, strict=True)
+    ]
+    corrected = raise_on_all_ranks(
+        comm,
+        lambda: consistent_gradients(
+            values,
+            grads,
+            np.concatenate([qp.weights, q.weights]),
+            sp.vstack([vp, vi]).tocsr(),
+            np.concatenate([bp.weights, bi.weights]),
+            np.concatenate([bp.normals, bi.normals]),
+            comm,
+        ),
+    )
+    m = len(qp)
+    t1 = time.perf_counter()
+    K = stiffness_matrix([c[:m] for c in corrected], qp.weights, problem.material, tp.gradients)
+    K = K.tocoo()
+    dof_map = P.petsc_dofs(2).ravel()
+    n = P.num_particles
+    Kp = sp.csr_matrix((K.data, (dof_map[K.row], dof_map[K.col])), shape=(2 * n, 2 * n))
+    test = [
+        sp.hstack([gi[:, :n_loc], c[m:]]).tocsr()
+        for gi, c in zip(tab.gradients, corrected, strict=True)
+    ]
+    return Kp, {"setup": t1 - t0, "assemble": time.perf_counter() - t1}, test
 
 
 def _first_cells(msh, facets: np.ndarray) -> np.ndarray:

@@ -241,7 +241,7 @@ def test_progress_bar_is_off_by_default_when_not_a_terminal(capsys):
 def test_progress_bar_on_a_terminal_redraws_in_place_at_most_every_interval():
     comm = MPI.COMM_WORLD
     stream = _FakeTTY()
-    bar = ProgressBar(1000, comm, stream=stream, interval=3600.0, label="run ")
+    bar = ProgressBar(1000, comm, stream=stream, interval=3600.0, label="run ", delay=0.0)
     for done in range(1, 1001):
         bar.update(done, 1e-3 * done)
     bar.close(1000, 1.0)
@@ -255,5 +255,35 @@ def test_progress_bar_on_a_terminal_redraws_in_place_at_most_every_interval():
     silent = _FakeTTY()
     ProgressBar(10, comm, enabled=False, stream=silent).update(5)
     assert silent.getvalue() == ""
+    # automatic mode on a terminal: a run shorter than the delay stays silent
+    short = _FakeTTY()
+    bar = ProgressBar(10, comm, stream=short)
+    for done in range(1, 11):
+        bar.update(done)
+    bar.close(10)
+    assert short.getvalue() == ""
     with pytest.raises(ValueError, match="total="):
         ProgressBar(0, comm)
+
+
+# --- the demos' --xdmf flag ----------------------------------------------------------------------
+
+
+def test_rod_gauss_demo_writes_xdmf_per_method(shared_dir):
+    import importlib.util
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "demos" / "rod_gauss.py"
+    spec = importlib.util.spec_from_file_location("demo_rod_gauss_io", path)
+    demo = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(demo)
+    prefix = shared_dir / "gauss"
+    demo.main(["--method", "fe", "lagrange", "--nodes", "200", "--t-end", "0.002",
+               "--no-check", "--xdmf", str(prefix)])  # fmt: skip
+    for method in ("fe", "lagrange"):
+        grids = temporal_grids(shared_dir / f"gauss_{method}_fe.xdmf")
+        assert len(grids["velocity"]) == 11  # 11 frames; t1, t2 lie after t_end
+    data = read_particles(shared_dir / "gauss_lagrange_particles.xdmf")
+    assert data["times"][0] == 0.0 and data["times"][-1] == pytest.approx(0.002)
+    assert not (shared_dir / "gauss_fe_particles.xdmf").exists()
+    with pytest.raises(SystemExit):
+        demo.parse(["--xdmf", str(shared_dir / "missing" / "x")])

@@ -465,8 +465,8 @@ def ramp_operators(problem):
 
     if problem.consistent:
         raise ValueError(
-            "consistent=True is not available with the ramp couplings: the particle shape "
-            "functions extend into the interface cells, which the patch's VCI does not see"
+            "consistent=True is not available for the ramp couplings' dynamic operators (the "
+            "statics support it); use consistent=False for ExplicitDynamics"
         )
     t0 = time.perf_counter()
     V, patch, P = problem.V, problem.patch, problem.patch.particles

@@ -29,6 +29,7 @@ from .fe_points import (
     tabulate_fe_basis,
     tabulate_in_cells,
 )
+from .hybrid import HYBRID_VARIANTS, HybridElasticity
 from .io import DynamicsWriter, ProgressBar, read_particles
 from .kernels import cubic_spline, gaussian, quartic, sph_cubic_spline
 from .materials import LinearElastic
@@ -46,6 +47,7 @@ __all__ = [
     "DEFAULT_DILATION",
     "DOLFINX_VERSION",
     "DYNAMICS_METHODS",
+    "HYBRID_VARIANTS",
     "MLS",
     "SPH",
     "CoupledElasticity",
@@ -59,6 +61,7 @@ __all__ = [
     "ExplicitDynamics",
     "FESolution",
     "GaussianPulseRod",
+    "HybridElasticity",
     "LinearElastic",
     "LinearField",
     "MomentMatrixError",

@@ -71,6 +71,10 @@ DEFAULT_DILATION = {
     "master-slave": 2.0,
 }
 
+#: Interface nodes where adjacent interface facets turn by more than this (degrees) carry one
+#: Lagrange multiplier per side (see :meth:`CoupledElasticity._interface_multipliers`).
+CORNER_ANGLE = 30.0
+
 #: Couplings available in this release.
 COUPLINGS = ("lagrange", "edge-to-edge", "ramp", "ramp-cubic", "bridging", "master-slave")
 
@@ -363,21 +367,105 @@ class CoupledElasticity:
         f.x.scatter_forward()
         return f.x.array[0::2] > 0.5
 
-    def _interface_numbering(self) -> tuple[np.ndarray, Layout]:
-        """Global multiplier number of each local node on the interface (-1 elsewhere)."""
-        V, patch = self.V, self.patch
-        fdim = V.mesh.topology.dim - 1
-        nodes = dolfinx.fem.locate_dofs_topological(V, fdim, patch.interface_facets)
-        on = self._node_flags(nodes)
-        n_owned = V.dofmap.index_map.size_local
-        mine = np.flatnonzero(on[:n_owned])
-        layout = Layout.from_local(patch.comm, mine.size)
-        num = dolfinx.fem.Function(V)
-        num.x.array[:] = 0.0
-        num.x.array[2 * mine] = layout.start + np.arange(mine.size) + 1
-        num.x.scatter_forward()
-        ids = np.rint(num.x.array[0::2]).astype(np.int64) - 1
-        return ids, Layout(2 * layout.size_local, 2 * layout.size_global, 2 * layout.start)
+    def _interface_multipliers(self, iq: QuadraturePoints, t_fe: sp.csr_matrix):
+        """The multiplier basis of the compatibility coupling at the interface quadrature points
+        (collective): ``Lambda_k = N_a`` restricted to one smooth piece of the interface.
+
+        A node where the interface turns by more than :data:`CORNER_ANGLE` degrees (an L-shaped
+        patch) carries one multiplier per side: the traction ``sigma n`` jumps there, which
+        continuous trace multipliers cannot carry (a linear patch test then missed by 7e-6).
+        Elsewhere (straight or gently curved interfaces) one multiplier per node, as in Rabczuk
+        eq. 109. The interface is small, so its facets are gathered on every rank and every rank
+        numbers the multipliers the same way, owner by owner (the owner of the node).
+
+        Args:
+            iq: Quadrature points on ``patch.interface_facets`` (``entities``: the facet).
+            t_fe: FE basis there, (points x local nodes).
+
+        Returns:
+            ``(Lambda, layout)``: (points x global multipliers) CSR with the pattern of ``t_fe``
+            and the multipliers' layout (two components per multiplier).
+        """
+        V, patch, comm = self.V, self.patch, self.patch.comm
+        imap = V.dofmap.index_map
+        l2g = np.asarray(
+            imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
+        )
+        facets = patch.interface_facets
+        nodes = facet_nodes(V, facets)
+        xy = V.tabulate_dof_coordinates()[:, :2]
+        tangent = xy[nodes[:, 1]] - xy[nodes[:, 0]] if facets.size else np.zeros((0, 2))
+        tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-300)
+        parts = comm.allgather((l2g[nodes].reshape(-1, 2), tangent))
+        offset = int(sum(len(p[0]) for p in parts[: comm.rank]))
+        ends = np.concatenate([p[0] for p in parts]).reshape(-1, 2)
+        lines = np.concatenate([p[1] for p in parts]).reshape(-1, 2)
+        # group the facets at each node: joined when their lines differ by < CORNER_ANGLE
+        group: dict[tuple[int, int], int] = {}
+        at_node: dict[int, list[int]] = {}
+        for f, (a, b) in enumerate(ends.tolist()):
+            at_node.setdefault(a, []).append(f)
+            at_node.setdefault(b, []).append(f)
+        sine = np.sin(np.radians(CORNER_ANGLE))
+        for g, fs in at_node.items():
+            for f in fs:
+                joined = [
+                    group[(g, e)]
+                    for e in fs
+                    if (g, e) in group
+                    and abs(lines[f, 0] * lines[e, 1] - lines[f, 1] * lines[e, 0]) < sine
+                ]
+                group[(g, f)] = min(joined) if joined else f
+        ranges = np.asarray([*comm.allgather(imap.local_range[0]), imap.size_global])
+        keys = sorted(
+            set(
+                (int(np.searchsorted(ranges, g, side="right") - 1), g, k)
+                for (g, _), k in group.items()
+            )
+        )
+        number = {(g, k): i for i, (_, g, k) in enumerate(keys)}
+        owners = np.array([r for r, _, _ in keys], dtype=np.int64)
+        start = int(np.sum(owners < comm.rank))
+        count = int(np.sum(owners == comm.rank))
+        # Lambda: the pattern of t_fe, columns renumbered to the multiplier of (node, piece)
+        coo = t_fe.tocoo()
+        position = {int(f): offset + i for i, f in enumerate(facets)}
+        cols = np.array(
+            [
+                number[(int(l2g[a]), group[(int(l2g[a]), position[int(iq.entities[q])])])]
+                for q, a in zip(coo.row, coo.col, strict=True)
+            ],
+            dtype=np.int64,
+        )
+        lam = sp.csr_matrix((coo.data, (coo.row, cols)), shape=(len(iq), len(keys)))
+        return lam, Layout(2 * count, 2 * len(keys), 2 * start)
+
+    def _lagrange_rows(self, scale: float = 1.0) -> tuple[tuple, tuple, Layout]:
+        """Constraint entries of the compatibility coupling (Rabczuk eq. 109): ``G_FE = int
+        Lambda^T N`` and ``G_P = int Lambda^T phi`` on the interface (collective).
+
+        Returns:
+            ``(fe_rows, p_rows, layout)`` for :func:`_fe_constraint_block` (local node columns)
+            and :func:`_particle_constraint_block`, and the multipliers' layout.
+        """
+        V, patch, comm = self.V, self.patch, self.patch.comm
+        iq = facet_quadrature(
+            V.mesh, patch.interface_facets, self.quadrature_degree, patch.interface_fe_cells
+        )
+        t_fe = tabulate_in_cells(V, iq.points, iq.cells, derivatives=0).values.tocsr()
+        t_fe.data[np.abs(t_fe.data) <= 1e-13] = 0.0  # nodes off the facet: round-off
+        t_fe.eliminate_zeros()
+        t_p = raise_on_all_ranks(comm, lambda: self.mls.tabulate(iq.points, 0)).values
+        lam, ml = self._interface_multipliers(iq, t_fe)
+        W = sp.diags(iq.weights)
+        M_fe = (lam.T @ W @ t_fe).tocoo()  # (multipliers x local nodes)
+        M_p = (lam.T @ W @ t_p).tocoo()  # (multipliers x particles)
+        tiny = 1e-14 * (np.abs(M_fe.data).max() if M_fe.nnz else 1.0)
+        keep = np.abs(M_fe.data) > tiny
+        fe_rows = (M_fe.row[keep], M_fe.col[keep], M_fe.data[keep], False)
+        keep = np.abs(M_p.data) > tiny
+        p_rows = (M_p.row[keep], M_p.col[keep], M_p.data[keep])
+        return fe_rows, p_rows, ml
 
     def interface_particles(self) -> np.ndarray:
         """Indices of the particles on the interface facets, the same on every rank (collective).
@@ -654,20 +742,7 @@ class CoupledElasticity:
             P, self.mls, self.material, self.quadrature_degree, boundary
         )
         if self.coupling == "lagrange":
-            ids, ml = self._interface_numbering()
-            iq = facet_quadrature(
-                V.mesh, patch.interface_facets, self.quadrature_degree, patch.interface_fe_cells
-            )
-            t_fe = tabulate_in_cells(V, iq.points, iq.cells, derivatives=0).values
-            t_p = raise_on_all_ranks(comm, lambda: self.mls.tabulate(iq.points, 0)).values
-            W = sp.diags(iq.weights)
-            M_fe = (t_fe.T @ W @ t_fe).tocoo()
-            M_p = (t_fe.T @ W @ t_p).tocoo()
-            tiny = 1e-14 * (np.abs(M_fe.data).max() if M_fe.nnz else 1.0)
-            keep = (ids[M_fe.row] >= 0) & (np.abs(M_fe.data) > tiny)
-            fe_rows = (ids[M_fe.row[keep]], M_fe.col[keep], M_fe.data[keep], False)
-            keep = (ids[M_p.row] >= 0) & (np.abs(M_p.data) > tiny)
-            p_rows = (ids[M_p.row[keep]], M_p.col[keep], M_p.data[keep])
+            fe_rows, p_rows, ml = self._lagrange_rows()
         else:
             (fe_rows, p_rows), ml = self._collocation_rows()
         no_bc = np.zeros(l2g.size, dtype=bool)
@@ -719,7 +794,6 @@ class CoupledElasticity:
             return solve_ramp(self, solver)
         V, patch, P = self.V, self.patch, self.patch.particles
         comm = patch.comm
-        msh = V.mesh
         deg = self.quadrature_degree
         n = P.num_particles
         s = self.material.E
@@ -741,27 +815,13 @@ class CoupledElasticity:
 
         # interface multipliers
         if self.coupling == "lagrange":
-            ids, ml = self._interface_numbering()
-            iq = facet_quadrature(msh, patch.interface_facets, deg, patch.interface_fe_cells)
-            t_fe = tabulate_in_cells(V, iq.points, iq.cells, derivatives=0).values
-            t_p = raise_on_all_ranks(comm, lambda: self.mls.tabulate(iq.points, 0)).values
-            W = sp.diags(iq.weights)
-            M_fe = (t_fe.T @ W @ t_fe).tocoo()  # (local nodes x local nodes)
-            M_p = (t_fe.T @ W @ t_p).tocoo()  # (local nodes x particles)
+            fe_rows, p_rows, ml = self._lagrange_rows()
         else:
-            e2e_rows, ml = self._collocation_rows()
+            (fe_rows, p_rows), ml = self._collocation_rows()
         setup = self._setup + time.perf_counter() - t0 - kt["assemble"]
 
         t1 = time.perf_counter()
         K_fe = self._fe_stiffness()
-        if self.coupling == "lagrange":
-            tiny = 1e-14 * (np.abs(M_fe.data).max() if M_fe.nnz else 1.0)
-            keep = (ids[M_fe.row] >= 0) & (np.abs(M_fe.data) > tiny)
-            fe_rows = (ids[M_fe.row[keep]], M_fe.col[keep], M_fe.data[keep], False)
-            keep = (ids[M_p.row] >= 0) & (np.abs(M_p.data) > tiny)
-            p_rows = (ids[M_p.row[keep]], M_p.col[keep], M_p.data[keep])
-        else:
-            fe_rows, p_rows = e2e_rows
         G_fe, g_rows, g_vals = _fe_constraint_block(
             *fe_rows[:3], fe_rows[3], s, is_bc, ubc, l2g, (ml.size_global, fe_layout.size_global)
         )
@@ -874,3 +934,18 @@ def _particle_constraint_block(
         ),
         shape=shape,
     )
+
+
+def facet_nodes(V, facets: np.ndarray) -> np.ndarray:
+    """Local P1/Q1 nodes (block indices) of each facet of a 2D mesh, shape (num_facets, 2)."""
+    msh = V.mesh
+    tdim = msh.topology.dim
+    msh.topology.create_connectivity(tdim, 0)
+    msh.topology.create_connectivity(tdim - 1, 0)
+    c2v = msh.topology.connectivity(tdim, 0)
+    f2v = msh.topology.connectivity(tdim - 1, 0)
+    vmap = msh.topology.index_map(0)
+    node_of_vertex = np.empty(vmap.size_local + vmap.num_ghosts, dtype=np.int64)
+    node_of_vertex[np.asarray(c2v.array)] = _compat.dofmap_array(V).ravel()
+    fv = np.asarray(f2v.array).reshape(-1, 2)[np.asarray(facets, dtype=np.int64)]
+    return node_of_vertex[fv]

@@ -12,6 +12,9 @@ Each coupling enters dynamics through :meth:`CoupledElasticity.operators
 * ``ramp``, ``ramp-cubic``: the interface cells' blended shape functions (Belytschko et al.
   1995, eq. 3.15–3.16) give their stiffness (diagonal and off-diagonal blocks) and their share
   of the row-sum masses (eq. 4.5): no constraint.
+* ``hybrid`` (:func:`build_hybrid`): a :class:`~dolfinx_meshfree.hybrid.HybridElasticity`,
+  whose FE integration points join the particle sums (Rabczuk et al. 2006, sec. 5.5): its
+  stiffness blocks, FE masses on the FE cells and SPH particle masses; no constraint.
 * ``master-slave``: the slave particles follow the FE interface, ``u = T u_M`` (eq. 27): the
   reduced stiffness ``T^T K T`` (PETSc ``PtAP``) and the row sums of ``T^T M T``, i.e. the
   slaves' masses go to their masters; forces by ``T^T`` (eq. 28). The state holds the FE dofs
@@ -54,7 +57,7 @@ from .petsc import create_aij
 from .quadrature import facet_quadrature
 from .tables import ShapeTable
 
-__all__ = ["build_coupled", "build_efg", "build_fe"]
+__all__ = ["build_coupled", "build_efg", "build_fe", "build_hybrid"]
 
 
 def _check_material(material) -> None:
@@ -240,7 +243,10 @@ def build_coupled(
     """
     from .coupled import CoupledElasticity
     from .dynamics import DYNAMICS_METHODS
+    from .hybrid import HybridElasticity
 
+    if isinstance(problem, HybridElasticity):  # the hybrid SPH-FE coupling: its own builder
+        return build_hybrid(cls, problem, particle_mass, safety, multiplier_solver, fixed_facets)
     if not isinstance(problem, CoupledElasticity):
         raise TypeError(f"problem must be a CoupledElasticity, got {type(problem).__name__}")
     coupling = problem.coupling
@@ -400,6 +406,85 @@ def build_coupled(
         patch=patch,
         interface=ops.interface if ops.reduction is None else None,
         reduction=ops.reduction,
+        timings={"setup": time.perf_counter() - t0, "operators": ops.timings["operators"]},
+        multiplier_solver=multiplier_solver,
+    )
+
+
+# -- hybrid SPH-FE ---------------------------------------------------------------------------------
+
+
+def build_hybrid(
+    cls,
+    problem,
+    particle_mass: str = "volume",
+    safety: float = 0.9,
+    multiplier_solver: str | None = None,
+    fixed_facets=None,
+):
+    """Explicit dynamics of a :class:`~dolfinx_meshfree.hybrid.HybridElasticity` (Rabczuk et al.
+    2006, sec. 5.5, with central differences as there), from its assembled operators
+    (collective).
+
+    The internal force is ``K u`` with the blocks of
+    :meth:`~dolfinx_meshfree.hybrid.HybridElasticity.operators` (FE cells and the FE rows of
+    HA-S tractions or HA-F interpolation; particle rows of the particle energy with the FE
+    integration points in the sums). No constraint joins the two fields.
+
+    Args:
+        problem: The static hybrid object.
+        particle_mass: ``"volume"`` (``rho V_I``, the SPH mass) or ``"row-sum"``
+            (``rho sum_q N_I(x_q) w_q`` with the particles' interpolant at the stress points).
+        safety, multiplier_solver: See :class:`~dolfinx_meshfree.integrator.ExplicitDynamics`
+            (the solver is used only for the multipliers of fixed particle facets).
+        fixed_facets: Owned exterior facets held at rest (FE nodes strongly, particles by facet
+            multipliers on the velocities).
+    """
+    from .hybrid import HybridElasticity
+
+    if not isinstance(problem, HybridElasticity):
+        raise TypeError(f"problem must be a HybridElasticity, got {type(problem).__name__}")
+    if particle_mass not in ("row-sum", "volume"):
+        raise ValueError(
+            f"particle_mass={particle_mass!r} is not known; use 'volume' (rho V_I) or 'row-sum'"
+        )
+    material = problem.material
+    _check_material(material)
+    t0 = time.perf_counter()
+    V, patch = problem.V, problem.patch
+    P, comm, msh = patch.particles, patch.comm, V.mesh
+    facets = _facets(msh, fixed_facets)
+    ops = problem.operators()
+    rho = material.rho
+    mass_fe = fe_lumped_mass(V, rho, weight=ops.fe_weight)
+    pq = ops.particle_quadrature
+    mass_p = particle_lumped_mass(P, ops.particle_table, pq.weights, rho, particle_mass)
+    n_owned = V.dofmap.index_map.size_local
+    active = np.repeat(ops.fe_active[:n_owned], 2)
+    mass_fe.array[:] = mass_fe.array_r * active
+    fixed_fe = _fixed_fe_dofs(V, facets)
+    on_p = patch.in_patch[_first_cells(msh, facets)]
+    constraint = None
+    if comm.allreduce(int(np.sum(on_p))):
+        ev = problem.evaluator
+        D_loc, dl = _particle_conditions(P, [facets[on_p]], [lambda q: ev.tabulate(q.points, 0)])
+        constraint = [None, create_aij(comm, D_loc, dl, ops.particle_layout)]
+    fields = [
+        Field("fe", ops.K_fe, mass_fe, fe_spacing(msh, patch.fe_cells), fixed=fixed_fe),
+        Field("particles", ops.K_p, mass_p, particle_spacing(P)),
+    ]
+    return cls(
+        fields,
+        material,
+        constraint,
+        safety=safety,
+        blocks={(0, 1): ops.K_fp, (1, 0): ops.K_pf},
+        V=V,
+        mls=problem.evaluator,
+        particles=P,
+        mesh=msh,
+        in_patch=patch.in_patch,
+        patch=patch,
         timings={"setup": time.perf_counter() - t0, "operators": ops.timings["operators"]},
         multiplier_solver=multiplier_solver,
     )

@@ -10,7 +10,8 @@ et al. 2006, sec. 5.3.3 and Table I). The pieces live in modules of one idea eac
   and its guard, the energy records, and the evaluation of the velocity;
 * :mod:`~dolfinx_meshfree.dynamic_builders`: the builders of pure FE, pure EFG and every static
   coupling in dynamics, from :meth:`CoupledElasticity.operators
-  <dolfinx_meshfree.CoupledElasticity.operators>`;
+  <dolfinx_meshfree.CoupledElasticity.operators>`, and of the hybrid SPH–FE coupling
+  (:mod:`~dolfinx_meshfree.hybrid`);
 * :mod:`~dolfinx_meshfree.waves`: exact solutions of the rod benchmarks.
 """
 
@@ -32,8 +33,9 @@ __all__ = [
     "table_lumped_mass",
 ]
 
-#: Methods available in explicit dynamics: pure FE, pure EFG and every static coupling.
-DYNAMICS_METHODS = ("fe", "efg", *COUPLINGS)
+#: Methods available in explicit dynamics: pure FE, pure EFG, every static coupling and the
+#: hybrid SPH-FE coupling (:class:`~dolfinx_meshfree.hybrid.HybridElasticity`).
+DYNAMICS_METHODS = ("fe", "efg", *COUPLINGS, "hybrid")
 
 
 def check_method(method: str) -> str:

@@ -89,7 +89,9 @@ class CorrectedSPH:
         values = nhat.copy()
         for k, g in enumerate(t.gradients):
             values = values + sp.diags(d[:, k]) @ g
-        return ShapeTable(points=x, values=values.tocsr(), gradients=t.gradients if derivatives else [])
+        return ShapeTable(
+            points=x, values=values.tocsr(), gradients=t.gradients if derivatives else []
+        )
 
 
 @dataclass
@@ -144,12 +146,9 @@ def hybrid_points(V, fe_cells: np.ndarray, particles: np.ndarray, radius: float,
     nodes = msh.geometry.x[_compat.geometry_dofmap(msh)[fe_cells], :gdim]  # (nc, nv, gdim)
     if fe_cells.size:
         dist, _ = tree.query(nodes.reshape(-1, gdim))
-        near = dist.reshape(nodes.shape[:2]).min(axis=1) < radius
-        # a cell can reach within radius through its interior only when a vertex is within
-        # radius + the cell diameter
+        # a point of the cell within radius of a particle has a vertex within radius + diameter
         diam = np.linalg.norm(nodes.max(axis=1) - nodes.min(axis=1), axis=1)
-        near |= dist.reshape(nodes.shape[:2]).min(axis=1) < radius + diam
-        cells = fe_cells[near]
+        cells = fe_cells[dist.reshape(nodes.shape[:2]).min(axis=1) < radius + diam]
     else:
         cells = fe_cells
     q = cell_quadrature(msh, degree, cells)

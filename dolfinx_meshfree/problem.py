@@ -42,7 +42,7 @@ from scipy.spatial import cKDTree
 from ufl.corealg.traversal import unique_pre_traversal
 
 from . import _compat
-from .coupled import COUPLINGS, CoupledElasticity, CoupledSolution
+from .coupled import COUPLINGS, CoupledElasticity, CoupledSolution, facet_nodes
 from .fe_points import evaluate_fe_function
 from .materials import LinearElastic
 from .operators import load_vector
@@ -132,7 +132,7 @@ class CoupledLinearProblem:
         problem._strong.append((fixed, values))
         # patch facets whose nodes are all constrained
         facets = patch.exterior_facets
-        nodes = _facet_nodes(V, facets)
+        nodes = facet_nodes(V, facets)
         on = fixed[nodes].all(axis=1) if facets.size else np.zeros(0, dtype=bool)
         bc_facets = facets[on]
         g = dolfinx.fem.Function(V)
@@ -353,22 +353,6 @@ def _integral_entities(itg, msh) -> np.ndarray:
     tags = getattr(tags, "_cpp_object", tags)
     mask = np.isin(np.asarray(tags.values), ids)
     return np.asarray(tags.indices, dtype=np.int64)[mask]
-
-
-def _facet_nodes(V, facets: np.ndarray) -> np.ndarray:
-    """Local P1/Q1 nodes of each facet, shape (num_facets, 2)."""
-    msh = V.mesh
-    tdim = msh.topology.dim
-    msh.topology.create_connectivity(tdim, 0)
-    msh.topology.create_connectivity(tdim - 1, 0)
-    c2v = msh.topology.connectivity(tdim, 0)
-    f2v = msh.topology.connectivity(tdim - 1, 0)
-    dofs = _compat.dofmap_array(V)
-    vmap = msh.topology.index_map(0)
-    node_of_vertex = np.empty(vmap.size_local + vmap.num_ghosts, dtype=np.int64)
-    node_of_vertex[np.asarray(c2v.array)] = dofs.ravel()
-    fv = np.asarray(f2v.array).reshape(-1, 2)[np.asarray(facets, dtype=np.int64)]
-    return node_of_vertex[fv]
 
 
 def _replace_test_function(integrand, v, msh, normal=None):

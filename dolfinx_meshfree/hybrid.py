@@ -1,0 +1,638 @@
+"""Hybrid SPH–FE coupling for linear elasticity (Rabczuk et al. 2006, sec. 5.5; Sauer 2000).
+
+The patch is discretised by SPH particles, the rest by finite elements; no interface element and
+no multiplier joins them. Instead the FE integration points of the cells near the patch join the
+particle sums (eq. 125–130, :mod:`~dolfinx_meshfree.hybrid_sph`): at a stress point ``x_q`` of the
+patch the displacement gradient is
+
+.. math::
+    \\nabla u^h(x_q) = \\sum_J u_J \\otimes G_J(x_q) + \\sum_g u^{FE}(X_g) \\otimes G_g(x_q),
+    \\qquad u^{FE}(X_g) = \\sum_a N_a(X_g) u_a,
+
+with the corrected kernel gradients ``G`` (exact for linear fields) of
+:class:`~dolfinx_meshfree.hybrid_sph.CorrectedSPH`. For linear elasticity the particle forces of
+eq. 127 are then the derivatives of the particle strain energy
+``sum_q w_q 1/2 eps(x_q) : C : eps(x_q)`` (the pair form ``(P_J + P_I) . grad N`` of eq. 127 is
+that derivative for nodal integration), a linear operator assembled once:
+
+.. math::
+    f^{int} = K u, \\qquad K = K_{FE} + \\sum_q w_q B_q^T D B_q ,
+
+``B_q`` spanning particle and FE dofs. The forces reach the FE nodes in one of two ways (Sauer
+2000; ``variant``):
+
+* ``"HA-F"`` (eq. 135, Fig. 10): the integration points are particles of the sums, so the
+  reaction on each point ``X_g`` goes to the FE nodes by interpolation, ``N_a(X_g)``: the FE
+  rows of ``sum_q w_q B_q^T D B_q``. With ``consistent=False`` ``K`` is symmetric (central
+  differences conserve its energy to round-off); the pair term of
+  the point's own FE stress, ``P(X_GP)`` in eq. 135, belongs to the FE energy, which ``K_FE``
+  already holds, and is not added twice.
+* ``"HA-S"`` (eq. 131–134, Fig. 8–9): the particles' stresses load the FE interface as
+  tractions. At the end node ``k`` of an interface edge the stress is the kernel average of the
+  stresses of the particles it can see (eq. 131), ``P_k = sum_J P_J N_J / sum_J N_J``; the
+  visibility criterion keeps the particles on the patch side of that edge,
+  ``(X_J - X_k) . n >= 0`` with ``n`` the FE side's outward normal (so at a corner each edge sees
+  its own side only). The edge's traction ``t = n . P_k`` (eq. 132–133) gives the node the force
+  ``l/2 t`` per edge (eq. 134). The particles' rows stay those of their strain energy, so ``K``
+  is not symmetric: the traction is not the work conjugate of the kinematic coupling through the
+  sums.
+
+Integration of the particle energy (``integration``): ``"cells"`` (default), Gauss points of the
+patch cells as stress points (a background-cell quadrature, which keeps ``K`` free of the
+zero-energy modes of nodal integration and gives a regular static problem), or ``"particles"``:
+the particles themselves with their volumes, eq. 127–128 as written (nodal integration; its
+sawtooth modes carry no energy, so the static problem is singular: dynamics only).
+
+Integration consistency (``consistent``, default ``True``): the corrected kernel gradients are
+not derivatives of a function, so on background cells they do not satisfy the divergence theorem
+near the exterior boundary, and a linear field leaves forces of the order of the stress times the
+spacing there: the static cantilever then does not converge. The test gradients get the
+variationally consistent correction of Chen, Hillman & Rüter 2013
+(:meth:`HybridElasticity._consistent_test_gradients`): the linear patch test holds to round-off,
+the cantilever converges at about first order (as in Rabczuk's Table II), and ``K`` is no longer
+symmetric. The demos use ``True`` in statics and ``False`` (symmetric, energy conserving) in
+explicit dynamics.
+
+Essential conditions in statics: strongly on FE facets, by facet multipliers on patch facets
+(as :class:`~dolfinx_meshfree.CoupledElasticity`). The displacement in the patch cells is the
+particles' own :class:`~dolfinx_meshfree.hybrid_sph.CorrectedSPH` interpolant.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+
+import dolfinx
+import numpy as np
+import scipy.sparse as sp
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from . import _compat
+from .coupled import CoupledSolution, CouplingOperators
+from .efg import _vector_values, facet_multipliers
+from .fe_points import tabulate_in_cells
+from .hybrid_sph import CorrectedSPH, hybrid_points, particle_spacing_median
+from .kernels import sph_cubic_spline
+from .materials import LinearElastic
+from .neighbours import pairs_within_support
+from .operators import load_vector
+from .parallel import Layout, raise_on_all_ranks
+from .patch import ParticlePatch
+from .petsc import BlockSystem, create_aij, create_vector
+from .quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
+from .tables import strain_operator
+
+__all__ = ["HYBRID_INTEGRATIONS", "HYBRID_VARIANTS", "HybridElasticity"]
+
+#: How the particle forces reach the FE nodes (Rabczuk et al. 2006, sec. 5.5).
+HYBRID_VARIANTS = ("HA-S", "HA-F")
+#: Stress points of the particle energy.
+HYBRID_INTEGRATIONS = ("cells", "particles")
+
+VectorFunction = Callable[[np.ndarray], np.ndarray]
+
+
+class HybridElasticity:
+    """Linear elasticity with FE cells and an SPH particle patch, hybrid coupling.
+
+    Args:
+        V: Vector P1/Q1 space on the whole mesh (FE on the cells outside the patch).
+        patch: :class:`~dolfinx_meshfree.ParticlePatch` on the same mesh.
+        material: :class:`~dolfinx_meshfree.LinearElastic`, on both sides.
+        variant: ``"HA-S"`` (forces on the FE nodes by interface tractions, eq. 131–134, with the
+            visibility criterion) or ``"HA-F"`` (by interpolation from the integration points,
+            eq. 135).
+        smoothing: Smoothing length over the particle spacing (median nearest-neighbour
+            distance); the kernel support is twice the smoothing length. The default 1.0 (support
+            two spacings, as EFG's d_max = 2) was the most accurate of 1.0, 1.3, 1.6 on the
+            cantilever.
+        quadrature_degree: Gauss degree of the stress points on the patch cells (``"cells"``);
+            default: two points per particle spacing and direction.
+        hybrid_degree: Gauss degree of the FE integration points that join the sums (eq.
+            129–130); default: about one point per particle spacing and direction (Sauer 2000:
+            the particles' density).
+        integration: ``"cells"`` or ``"particles"`` (see the module docstring).
+        consistent: Integration-consistent test gradients (Chen, Hillman & Rüter 2013; see
+            :meth:`_consistent_test_gradients`): the linear patch test holds to round-off, at
+            the price of a ``K`` that is not symmetric. ``False``: the symmetric
+            ``sum_q w_q B_q^T D B_q``, whose background-cell integration of the corrected kernel
+            gradients leaves forces of the order of the stress times the spacing at the
+            particles near exterior boundaries (the patch test is missed).
+
+    Raises:
+        ValueError: on every rank, for an unknown ``variant`` or ``integration``, a smoothing
+            that is not positive, a mesh mismatch, or particles too sparse for the kernel.
+    """
+
+    coupling = "hybrid"
+
+    def __init__(
+        self,
+        V,
+        patch: ParticlePatch,
+        material: LinearElastic,
+        variant: str = "HA-S",
+        smoothing: float = 1.0,
+        quadrature_degree: int | None = None,
+        hybrid_degree: int | None = None,
+        integration: str = "cells",
+        consistent: bool = True,
+    ):
+        comm = patch.comm
+
+        def check() -> None:
+            if variant not in HYBRID_VARIANTS:
+                raise ValueError(
+                    f"variant={variant!r} is not known; use 'HA-S' (forces by interface "
+                    "tractions, Rabczuk et al. 2006, eq. 131-134) or 'HA-F' (by interpolation, "
+                    "eq. 135)"
+                )
+            if integration not in HYBRID_INTEGRATIONS:
+                raise ValueError(
+                    f"integration={integration!r} is not known; use 'cells' (Gauss points of "
+                    "the patch cells) or 'particles' (nodal integration, dynamics only)"
+                )
+            if not isinstance(material, LinearElastic):
+                raise TypeError(f"material must be a LinearElastic, got {type(material).__name__}")
+            if V.mesh is not patch.mesh:
+                raise ValueError("V and patch must live on the same mesh object")
+            if isinstance(smoothing, bool) or not (
+                isinstance(smoothing, int | float) and math.isfinite(smoothing) and smoothing > 0
+            ):
+                raise ValueError(
+                    f"smoothing={smoothing!r} must be a positive number (the smoothing length "
+                    "over the particle spacing; 1.3 is usual)"
+                )
+            for name, deg in (
+                ("quadrature_degree", quadrature_degree),
+                ("hybrid_degree", hybrid_degree),
+            ):
+                if deg is not None and (
+                    isinstance(deg, bool) or not isinstance(deg, int) or deg < 1
+                ):
+                    raise ValueError(f"{name}={deg!r} must be a positive integer or None")
+
+            if not isinstance(consistent, bool | np.bool_):
+                raise ValueError(f"consistent={consistent!r} must be True or False")
+
+        raise_on_all_ranks(comm, check)
+        t0 = time.perf_counter()
+        self.consistent = bool(consistent)
+        self.V, self.patch, self.material = V, patch, material
+        self.variant, self.integration = variant, integration
+        P = patch.particles
+        self.spacing = particle_spacing_median(P.positions)
+        self.smoothing_length = float(smoothing) * self.spacing
+        msh = V.mesh
+        q0 = cell_quadrature(msh, 1)
+        area = np.bincount(np.searchsorted(np.unique(q0.cells), q0.cells), weights=q0.weights)
+        s = comm.allreduce(np.array([np.sqrt(area).sum(), area.size], dtype=float), op=MPI.SUM)
+        self.cell_size = float(s[0] / s[1])
+        ratio = self.cell_size / self.spacing
+        if quadrature_degree is None:
+            quadrature_degree = 2 * max(2, math.ceil(2.0 * ratio - 1e-9)) - 1
+        if hybrid_degree is None:
+            hybrid_degree = 2 * max(1, math.ceil(ratio - 1e-9)) - 1
+        self.quadrature_degree, self.hybrid_degree = int(quadrature_degree), int(hybrid_degree)
+        radius = 2.0 * self.smoothing_length
+        self.hybrid = hybrid_points(V, patch.fe_cells, P.positions, radius, self.hybrid_degree)
+        hp = self.hybrid
+        #: The hybrid sums: particles first, then the FE integration points (eq. 125-126).
+        self.sph = raise_on_all_ranks(
+            comm,
+            lambda: CorrectedSPH(
+                np.vstack([P.positions, hp.points]),
+                np.concatenate([P.volumes, hp.weights]),
+                self.smoothing_length,
+            ),
+        )
+        #: The particles' own interpolant: displacement in the patch, loads, masses.
+        self.evaluator = raise_on_all_ranks(
+            comm, lambda: CorrectedSPH(P.positions, P.volumes, self.smoothing_length)
+        )
+        self._dirichlet: list[tuple[np.ndarray, VectorFunction]] = []
+        self._tractions: list[tuple[np.ndarray, Callable]] = []
+        self._setup = time.perf_counter() - t0
+
+    # -- user data ------------------------------------------------------------------------------
+
+    @property
+    def comm(self):
+        return self.patch.comm
+
+    def add_dirichlet(self, facets: np.ndarray, value: VectorFunction) -> None:
+        """``u = value(x)`` on owned exterior facets (FE side strongly, patch side by facet
+        multipliers); ``value`` maps points (m, 2) to (m, 2)."""
+        self._dirichlet.append((np.asarray(facets, dtype=np.int32), value))
+
+    def add_traction(self, facets: np.ndarray, traction: Callable) -> None:
+        """Traction ``traction(x, n)`` (m, 2) on owned exterior facets, on either side."""
+        self._tractions.append((np.asarray(facets, dtype=np.int32), traction))
+
+    # -- numbering ------------------------------------------------------------------------------
+
+    def _fe_layout(self) -> tuple[Layout, np.ndarray]:
+        imap = self.V.dofmap.index_map
+        l2g = np.asarray(
+            imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
+        )
+        return Layout(2 * imap.size_local, 2 * imap.size_global, 2 * imap.local_range[0]), l2g
+
+    def _particle_layout(self) -> Layout:
+        P = self.patch.particles
+        return Layout(2 * P.layout.size_local, 2 * P.num_particles, 2 * P.layout.start)
+
+    def _node_map(self) -> sp.csr_matrix:
+        """``Z = diag(I, E)``: values of the hybrid sums' points from [particles | FE nodes]."""
+        n = self.patch.particles.num_particles
+        return sp.bmat([[sp.identity(n, format="csr"), None], [None, self.hybrid.interpolation]])
+
+    def _dof_map(self) -> np.ndarray:
+        """Combined dof of each interleaved column ``2 c + i`` of [particles | FE nodes]:
+        particle PETSc dofs ``0 .. 2n-1``, then ``2n +`` the FE global dofs."""
+        P = self.patch.particles
+        n = P.num_particles
+        N = self.hybrid.interpolation.shape[1]
+        return np.concatenate([P.petsc_dofs(2).ravel(), 2 * n + np.arange(2 * N)])
+
+    def _node_flags(self, local_nodes: np.ndarray) -> np.ndarray:
+        """Flag the given local FE nodes on every rank that has them (collective)."""
+        f = dolfinx.fem.Function(self.V)
+        f.x.array[:] = 0.0
+        f.x.array[2 * np.asarray(local_nodes, dtype=np.int64)] = 1.0
+        _compat.scatter_reverse_add(f)
+        f.x.scatter_forward()
+        return f.x.array[0::2] > 0.5
+
+    def _fe_indicator(self) -> dolfinx.fem.Function:
+        """DG0 indicator of the FE cells (owned and ghost)."""
+        msh = self.V.mesh
+        Q = _compat.scalar_function_space(msh, "DG", 0)
+        chi = dolfinx.fem.Function(Q)
+        dof_of_cell = _compat.dofmap_array(Q)[:, 0]
+        n_local = self.patch.in_patch.size
+        chi.x.array[:] = 0.0
+        chi.x.array[dof_of_cell[:n_local]] = (~self.patch.in_patch).astype(float)
+        chi.x.scatter_forward()
+        return chi
+
+    def _split(self, facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Exterior facets beside FE cells and beside patch cells."""
+        msh = self.V.mesh
+        msh.topology.create_connectivity(msh.topology.dim - 1, msh.topology.dim)
+        f2c = msh.topology.connectivity(msh.topology.dim - 1, msh.topology.dim)
+        first = np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]]
+        on_p = self.patch.in_patch[first]
+        return facets[~on_p], facets[on_p]
+
+    # -- operators ------------------------------------------------------------------------------
+
+    def stress_points(self) -> QuadraturePoints:
+        """This rank's stress points of the particle energy: Gauss points of its patch cells
+        (``"cells"``) or its owned particles with their volumes (``"particles"``)."""
+        if self.integration == "cells":
+            return cell_quadrature(self.V.mesh, self.quadrature_degree, self.patch.cells)
+        P = self.patch.particles
+        own = P.owned
+        return QuadraturePoints(
+            P.positions[own], P.volumes[own], np.full(own.size, -1, dtype=np.int64)
+        )
+
+    def _strain_rows(self, points: np.ndarray) -> sp.csr_matrix:
+        """Strain operator (3m x 2(n + N)) of the hybrid sums at ``points`` over [particles |
+        FE nodes] (eq. 126/128 with the correction; collective for the error)."""
+        t = raise_on_all_ranks(self.comm, lambda: self.sph.tabulate(points))
+        Z = self._node_map()
+        return strain_operator([(g @ Z).tocsr() for g in t.gradients])
+
+    def _consistent_test_gradients(
+        self, values: sp.csr_matrix, grads: list[sp.csr_matrix], weights: np.ndarray
+    ) -> list[sp.csr_matrix]:
+        """Integration-consistent test gradients (Chen, Hillman & Rüter 2013) of the hybrid
+        sums over [particles | FE nodes] (collective).
+
+        ``Ghat_c = G_c + xi_c Nhat_c`` with one vector per column so that
+        ``sum_q Ghat_c(x_q) w_q = b_c``, the boundary term of the divergence theorem of the
+        patch: for a particle ``b_J = int N_J n`` over the patch's exterior facets (``N_J`` the
+        particles' interpolant, the functions of the traction loads); for an FE node
+        ``b_a = int N_a n_P`` over the interface (the FE trace, ``n_P`` out of the patch), which
+        cancels the FE cells' own boundary term ``int N_a n_FE``. With these, a linear field
+        leaves no force at any dof but the loaded boundary's (patch test), for either variant.
+        """
+        V, patch, comm, msh = self.V, self.patch, self.comm, self.V.mesh
+        P = patch.particles
+        n = P.num_particles
+        N = self.hybrid.interpolation.shape[1]
+        deg = max(self.quadrature_degree, 4)
+        target = np.zeros((n + N, 2))
+        eq = facet_quadrature(msh, patch.exterior_facets, deg, patch.exterior_cells)
+        et = raise_on_all_ranks(comm, lambda: self.evaluator.tabulate(eq.points, 0)).values
+        target[:n] = et.T @ (eq.weights[:, None] * eq.normals)
+        iq = facet_quadrature(msh, patch.interface_facets, deg, patch.interface_patch_cells)
+        it = tabulate_in_cells(V, iq.points, patch.interface_fe_cells[_facet_index(iq)], 0)
+        _, l2g = self._fe_layout()
+        fl = it.values.T @ (iq.weights[:, None] * iq.normals)  # (local FE nodes, 2)
+        np.add.at(target, n + l2g[: fl.shape[0]], fl)
+        integral = np.stack([g.T @ weights for g in grads], axis=1)
+        volume = values.T @ weights
+        sums = comm.allreduce(np.hstack([target, integral, volume[:, None]]), op=MPI.SUM)
+        target, integral, volume = sums[:, :2], sums[:, 2:4], sums[:, 4]
+        used = np.abs(volume) > 1e-12 * np.abs(volume).max()
+        xi = np.where(used[:, None], (target - integral) / np.where(used, volume, 1.0)[:, None], 0)
+        return [(g + values @ sp.diags(xi[:, k])).tocsr() for k, g in enumerate(grads)]
+
+    def particle_energy_matrix(self) -> sp.coo_matrix:
+        """``sum_q w_q Bhat_q^T D B_q`` of this rank's stress points in the combined numbering
+        of :meth:`_dof_map` (collective); ``Bhat = B`` unless ``consistent``."""
+        q = self.stress_points()
+        t = raise_on_all_ranks(self.comm, lambda: self.sph.tabulate(q.points))
+        Z = self._node_map()
+        grads = [(g @ Z).tocsr() for g in t.gradients]
+        B = strain_operator(grads)
+        Bt = B
+        if self.consistent:
+            shepard = (t.values @ Z).tocsr()
+            Bt = strain_operator(self._consistent_test_gradients(shepard, grads, q.weights))
+        D = sp.csr_matrix(self.material.voigt())
+        K = (Bt.T @ sp.kron(sp.diags(q.weights), D, format="csr") @ B).tocoo()
+        dof = self._dof_map()
+        return sp.coo_matrix((K.data, (dof[K.row], dof[K.col])), shape=K.shape)
+
+    def traction_matrix(self) -> sp.coo_matrix:
+        """HA-S: ``-F`` of eq. 131–134 as a matrix (FE rows, combined numbering), this rank's
+        owned interface edges (collective).
+
+        For each end node ``k`` of an interface edge (length ``l``, normal ``n`` out of the FE
+        cell), the visible particles ``(X_J - X_k) . n >= 0`` within the kernel support give the
+        stress ``P_k = sum_J N_J P_J / sum_J N_J`` (eq. 131, ``N_J = V_J W``), the traction
+        ``n . P_k`` (eq. 132–133) and the node force ``l/2 n . P_k`` (eq. 134); the internal
+        force is its negative.
+        """
+        V, patch, comm = self.V, self.patch, self.comm
+        msh = V.mesh
+        P = patch.particles
+        facets = patch.interface_facets
+        fe_cells = patch.interface_fe_cells
+        ends = msh.geometry.x[_compat.entities_to_geometry(msh, 1, facets), :2].reshape(-1, 2, 2)
+        tvec = ends[:, 1] - ends[:, 0]
+        length = np.linalg.norm(tvec, axis=1)
+        normal = np.stack([tvec[:, 1], -tvec[:, 0]], axis=1) / np.maximum(length, 1e-300)[:, None]
+        centroid = msh.geometry.x[_compat.geometry_dofmap(msh)[fe_cells], :2].mean(axis=1)
+        mid = ends.mean(axis=1)
+        flip = np.einsum("fi,fi->f", mid - centroid, normal) < 0.0
+        normal[flip] *= -1.0
+        xe = ends.reshape(-1, 2)  # the two end nodes of each edge
+        ne = np.repeat(normal, 2, axis=0)
+        half = np.repeat(0.5 * length, 2)
+        _, l2g = self._fe_layout()
+        tab = tabulate_in_cells(V, xe, np.repeat(fe_cells, 2), derivatives=0).values.tocoo()
+        at_node = tab.data > 0.5  # N_a(X_k) = 1 at the edge's own nodes
+        node = np.full(xe.shape[0], -1, dtype=np.int64)
+        node[tab.row[at_node]] = l2g[tab.col[at_node]]
+        radius = 2.0 * self.smoothing_length
+        i, j, dx = pairs_within_support(xe, P.positions, np.full(P.num_particles, radius))
+        tol = 1e-10 * self.spacing
+        visible = np.einsum("pi,pi->p", -dx, ne[i]) >= -tol  # visibility criterion
+        i, j, dx = i[visible], j[visible], dx[visible]
+        W, _ = sph_cubic_spline(
+            np.linalg.norm(dx, axis=1) / self.smoothing_length, self.smoothing_length, 2
+        )
+        w = P.volumes[j] * W
+        total = np.bincount(i, weights=w, minlength=xe.shape[0])
+
+        def check() -> None:
+            blind = np.flatnonzero(total <= 0.0)
+            if blind.size:
+                k = int(blind[0])
+                raise ValueError(
+                    f"HA-S: {blind.size} interface node(s) see no particle within the kernel "
+                    f"support {radius:.3g}; first at {xe[k]}: increase smoothing or the particle "
+                    "density near the interface"
+                )
+            if np.any(node < 0):
+                raise ValueError("HA-S: an interface edge end is not an FE node of its cell")
+
+        raise_on_all_ranks(comm, check)
+        w = w / np.where(total > 0, total, 1.0)[i]
+        # stresses of the particles in use, D B_J (eq. 131's P(X_J))
+        used, jj = np.unique(j, return_inverse=True)
+        B = self._strain_rows(P.positions[used])  # (3 nu x 2(n+N))
+        S = sp.kron(sp.identity(used.size), sp.csr_matrix(self.material.voigt()), format="csr") @ B
+        # A: Voigt stresses of the used particles -> node forces l/2 w (n . P)
+        coef = half[i] * w
+        nx, ny = ne[i, 0], ne[i, 1]
+        n = P.num_particles
+        r0 = 2 * n + 2 * node[i]
+        rows = np.concatenate([r0, r0, r0 + 1, r0 + 1])
+        cols = np.concatenate([3 * jj, 3 * jj + 2, 3 * jj + 2, 3 * jj + 1])
+        vals = np.concatenate([coef * nx, coef * ny, coef * nx, coef * ny])
+        N = self.hybrid.interpolation.shape[1]
+        A = sp.csr_matrix((vals, (rows, cols)), shape=(2 * (n + N), 3 * used.size))
+        K = (-(A @ S)).tocoo()
+        dof = self._dof_map()
+        return sp.coo_matrix((K.data, (K.row, dof[K.col])), shape=K.shape)
+
+    def operators(self) -> CouplingOperators:
+        """The assembled operators without essential conditions (collective): ``K_fe`` (FE
+        cells, plus the FE-FE hybrid block), ``K_p``, ``K_fp``, ``K_pf``; the FE weight (the FE
+        cells' indicator), the active FE nodes, the stress points and the particles' values
+        there (row-sum masses). See :class:`~dolfinx_meshfree.CouplingOperators`."""
+        t0 = time.perf_counter()
+        comm, P = self.comm, self.patch.particles
+        n = P.num_particles
+        fe_layout, _ = self._fe_layout()
+        pl = self._particle_layout()
+        K = self.particle_energy_matrix()
+        if self.variant == "HA-S":  # particle rows from the energy, FE rows from tractions
+            keep = K.row < 2 * n
+            K = sp.coo_matrix((K.data[keep], (K.row[keep], K.col[keep])), shape=K.shape)
+            T = self.traction_matrix()
+            K = sp.coo_matrix(
+                (np.r_[K.data, T.data], (np.r_[K.row, T.row], np.r_[K.col, T.col])), shape=K.shape
+            )
+        K = K.tocsr()
+        N2 = K.shape[0] - 2 * n
+
+        def block(rows: slice, cols: slice, shape) -> sp.csr_matrix:
+            return K[rows, cols].tocsr() if K.nnz else sp.csr_matrix(shape)
+
+        p, f = slice(0, 2 * n), slice(2 * n, K.shape[0])
+        K_pp = create_aij(comm, block(p, p, (2 * n, 2 * n)), pl, pl)
+        K_pf = create_aij(comm, block(p, f, (2 * n, N2)), pl, fe_layout)
+        K_fp = create_aij(comm, block(f, p, (N2, 2 * n)), fe_layout, pl)
+        K_ff = create_aij(comm, block(f, f, (N2, N2)), fe_layout, fe_layout)
+        chi = self._fe_indicator()
+        u, v = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
+        a = chi * ufl.inner(self.material.ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx
+        K_fe = _compat.assemble_matrix(_compat.create_form(a))
+        K_fe.axpy(1.0, K_ff, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+        K_ff.destroy()
+        q = self.stress_points()
+        table = raise_on_all_ranks(comm, lambda: self.evaluator.tabulate(q.points, 0))
+        fe_nodes = _compat.dofmap_array(self.V)[self.patch.fe_cells].ravel()
+        return CouplingOperators(
+            coupling="hybrid",
+            K_fe=K_fe,
+            K_p=K_pp,
+            K_fp=K_fp,
+            K_pf=K_pf,
+            fe_weight=chi,
+            fe_active=self._node_flags(fe_nodes),
+            particle_quadrature=q,
+            particle_table=table.values.tocsr(),
+            fe_layout=fe_layout,
+            particle_layout=pl,
+            timings={"operators": time.perf_counter() - t0},
+        )
+
+    # -- statics --------------------------------------------------------------------------------
+
+    def _loads(self) -> tuple[PETSc.Vec, PETSc.Vec]:
+        """Traction loads: FE basis on FE facets, the particles' interpolant on patch facets."""
+        V, comm, msh = self.V, self.comm, self.V.mesh
+        P = self.patch.particles
+        fe_layout, l2g = self._fe_layout()
+        pl = self._particle_layout()
+        deg = max(self.quadrature_degree, 4)
+        rows, vals = [np.zeros(0, np.int64)], [np.zeros(0)]
+        f_p = np.zeros(2 * P.num_particles)
+        for facets, fn in self._tractions:
+            f_fe, f_pf = self._split(facets)
+            for sel, side in ((f_fe, "fe"), (f_pf, "p")):
+                q = facet_quadrature(msh, sel, deg)
+                t = raise_on_all_ranks(
+                    comm, lambda fn=fn, q=q: _vector_values(fn, (q.points, q.normals), len(q), "t")
+                )
+                if side == "fe":
+                    tab = tabulate_in_cells(V, q.points, q.cells, derivatives=0).values
+                    fl = load_vector(tab, q.weights, t).reshape(-1, 2)
+                    rows.append((2 * l2g[: fl.shape[0], None] + np.arange(2)).ravel())
+                    vals.append(fl.ravel())
+                else:
+                    tab = raise_on_all_ranks(
+                        comm, lambda q=q: self.evaluator.tabulate(q.points, 0)
+                    ).values
+                    f_p += load_vector(tab, q.weights, t)
+        b_fe = create_vector(comm, fe_layout, np.concatenate(rows), np.concatenate(vals))
+        b_p = create_vector(comm, pl, P.petsc_dofs(2).ravel(), f_p)
+        return b_fe, b_p
+
+    def solve(self, solver: str = "mumps") -> CoupledSolution:
+        """Assemble ``K u = f`` with the essential conditions and solve it (collective).
+
+        FE facets' conditions are strong (rows and columns of the FE dofs removed, values lifted
+        into the right-hand side, also through ``K_pf``); patch facets' conditions are facet
+        multipliers (a third field of the nest). FE nodes that no FE cell holds are fixed at 0.
+
+        Args:
+            solver: ``"mumps"`` (LU of the nest as AIJ; ``K`` is not symmetric with ``HA-S``).
+
+        Returns:
+            A :class:`~dolfinx_meshfree.CoupledSolution` (FE function, particle values, the
+            particles' interpolant for the patch cells).
+        """
+        if solver not in ("mumps", "fieldsplit"):
+            raise ValueError(f"solver={solver!r} is not known; use 'mumps' or 'fieldsplit'")
+        V, comm, msh = self.V, self.comm, self.V.mesh
+        P = self.patch.particles
+        t0 = time.perf_counter()
+        ops = self.operators()
+        b_fe, b_p = self._loads()
+        assemble = time.perf_counter() - t0
+        fe_layout, l2g = self._fe_layout()
+        n_owned = V.dofmap.index_map.size_local
+        # strong conditions on FE facets, zero on inactive FE nodes
+        fixed = ~ops.fe_active.copy()
+        values = np.zeros((fixed.size, 2))
+        coords = V.tabulate_dof_coordinates()[:, :2]
+        patch_bc, dq = [], []
+        for facets, fn in self._dirichlet:
+            f_fe, f_pf = self._split(facets)
+            flags = self._node_flags(
+                dolfinx.fem.locate_dofs_topological(V, msh.topology.dim - 1, f_fe)
+            )
+            xn = coords[flags]
+            vals = raise_on_all_ranks(
+                comm, lambda fn=fn, xn=xn: _vector_values(fn, (xn,), len(xn), "dirichlet")
+            )
+            values[flags] = vals
+            fixed |= flags
+            patch_bc.append((f_pf, fn))
+            dq.append(facet_quadrature(msh, f_pf, max(self.quadrature_degree, 4)))
+        own = np.flatnonzero(fixed[:n_owned])
+        rows = (2 * l2g[own][:, None] + np.arange(2)).ravel().astype(PETSc.IntType)
+        x_bc = create_vector(comm, fe_layout, rows, values[own].ravel())
+        mask = create_vector(comm, fe_layout, np.zeros(0, np.int64), np.zeros(0))
+        mask.set(1.0)
+        mask.setValues(rows, np.zeros(rows.size), addv=PETSc.InsertMode.INSERT_VALUES)
+        mask.assemble()
+        t1 = time.perf_counter()
+        K_fe, K_p, K_fp, K_pf = ops.K_fe, ops.K_p, ops.K_fp, ops.K_pf
+        _lift(K_pf, x_bc, b_p)  # b_p -= K_pf x_bc
+        K_pf.diagonalScale(R=mask)
+        K_fp.diagonalScale(L=mask)
+        K_fe.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        zero = K_fe.createVecLeft()
+        zero.set(0.0)
+        K_fe.setDiagonal(zero, addv=PETSc.InsertMode.ADD_VALUES)
+        zero.destroy()
+        K_fe.zeroRowsColumns(rows, diag=1.0, x=x_bc, b=b_fe)
+        blocks = [[K_fe, K_fp], [K_pf, K_p]]
+        rhs = [b_fe, b_p]
+        mats = [K_fe, K_p, K_fp, K_pf]
+        dtabs = [
+            raise_on_all_ranks(comm, lambda d=d: self.evaluator.tabulate(d.points, 0)) for d in dq
+        ]
+        ml = Layout(0, 0, 0)
+        if patch_bc:
+            Gd, d_rows, d_vals, ml = facet_multipliers(P, patch_bc, dq, dtabs, self.material.E)
+            if ml.size_global:
+                pl = self._particle_layout()
+                D = create_aij(comm, Gd, ml, pl)
+                DT = create_aij(comm, Gd.T.tocsr(), pl, ml)
+                blocks = [[K_fe, K_fp, None], [K_pf, K_p, DT], [None, D, None]]
+                rhs.append(create_vector(comm, ml, d_rows, d_vals))
+                mats += [D, DT]
+        assemble += time.perf_counter() - t1
+        system = BlockSystem(blocks, rhs, num_primal=2)
+        t2 = time.perf_counter()
+        parts = system.solve(solver)
+        solve = time.perf_counter() - t2
+        system.destroy()
+        for obj in [*mats, *rhs, x_bc, mask]:
+            obj.destroy()
+        uh = dolfinx.fem.Function(V)
+        uh.x.array[: 2 * n_owned] = parts[0]
+        uh.x.scatter_forward()
+        coeffs = np.concatenate(comm.allgather(parts[1])).reshape(-1, 2)[P.petsc_index]
+        return CoupledSolution(
+            u=uh,
+            coefficients=coeffs,
+            mls=self.evaluator,
+            patch=self.patch,
+            timings={"setup": self._setup, "assemble": assemble, "solve": solve},
+            sizes={
+                "fe_dofs": 2 * comm.allreduce(int(np.sum(ops.fe_active[:n_owned]))),
+                "particle_dofs": 2 * P.num_particles,
+                "multiplier_dofs": ml.size_global,
+                "hybrid_points": self.hybrid.num_points,
+            },
+        )
+
+
+def _facet_index(q: QuadraturePoints) -> np.ndarray:
+    """Position of each facet quadrature point's facet in the facet list it was made from."""
+    _, index = np.unique(q.entities, return_inverse=True)
+    return index
+
+
+def _lift(A: PETSc.Mat, x: PETSc.Vec, b: PETSc.Vec) -> None:
+    """``b -= A x``."""
+    y = A.createVecLeft()
+    A.mult(x, y)
+    b.axpy(-1.0, y)
+    y.destroy()

@@ -1,0 +1,303 @@
+"""The hybrid SPH-FE coupling (Rabczuk et al. 2006, sec. 5.5; Sauer 2000): the corrected SPH
+sums, the linear patch test, energy, HA-S against HA-F on a smooth wave, convergence on the
+cantilever, parallel = serial, bad input."""
+
+from __future__ import annotations
+
+import dolfinx_meshfree as mf
+from dolfinx_meshfree import _compat
+from dolfinx_meshfree.dynamics import DYNAMICS_METHODS, ExplicitDynamics, check_method
+from dolfinx_meshfree.hybrid_sph import CorrectedSPH
+from dolfinx_meshfree.waves import GaussianPulseRod
+
+import numpy as np
+import pytest
+from conftest import BEAM_L, CELL_TYPES, beam_ends, beam_mesh, fitted_rate, rectangle
+from mpi4py import MPI
+from petsc4py import PETSc
+
+ROD = GaussianPulseRod()
+STEEL = mf.LinearElastic(ROD.E, 0.0, "strain", rho=ROD.rho)
+BEAM_MATERIAL = mf.LinearElastic(3e7, 0.3, "stress")
+BEAM = mf.TimoshenkoBeam(BEAM_MATERIAL, L=48.0, D=12.0, P=1000.0)
+GRAD = np.array([[1e-3, -0.5e-3], [0.7e-3, 0.2e-3]])  # a linear field's gradient
+
+
+def linear(x: np.ndarray) -> np.ndarray:
+    return np.array([0.3e-3, -0.1e-3]) + x[:, :2] @ GRAD.T
+
+
+def beam_problem(comm, h, variant="HA-F", **options) -> mf.HybridElasticity:
+    """The cantilever with the free-end half in particles (spacing h)."""
+    msh = beam_mesh(comm, h)
+    n = msh.topology.index_map(2).size_local
+    xc = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], 0].mean(axis=1)
+    patch = mf.ParticlePatch(msh, np.flatnonzero(xc > 0.5 * BEAM_L), h)
+    V = _compat.vector_function_space(msh)
+    return mf.HybridElasticity(V, patch, BEAM_MATERIAL, variant=variant, **options)
+
+
+def rod_problem(comm, h, k, variant, **options) -> mf.HybridElasticity:
+    """The rod of Rabczuk sec. 6.2.1, FE on x < 30, particles of spacing h / k on x > 30."""
+    msh = rectangle(
+        comm, [0, 0], [60, 5], [round(60 / h), round(5 / h)], CELL_TYPES["quadrilateral"]
+    )
+    n = msh.topology.index_map(2).size_local
+    xc = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], 0].mean(axis=1)
+    patch = mf.ParticlePatch(msh, np.flatnonzero(xc > 30.0), h / k)
+    V = _compat.vector_function_space(msh)
+    return mf.HybridElasticity(V, patch, STEEL, variant=variant, **options)
+
+
+# --- the approximation ---------------------------------------------------------------------------
+
+
+def test_corrected_sph_reproduces_linear_fields():
+    """Values and corrected gradients of linear fields exact near the boundary of an irregular
+    cloud (the Shepard values alone are not: their mean point xbar lags behind x)."""
+    rng = np.random.default_rng(3)
+    xs = np.linspace(0.0, 2.0, 11)
+    pts = np.stack(np.meshgrid(xs, xs, indexing="ij"), -1).reshape(-1, 2)
+    pts[(pts > 0).all(1) & (pts < 2).all(1)] += rng.uniform(-0.04, 0.04, (81, 2))
+    sph = CorrectedSPH(pts, np.full(len(pts), 0.04), 0.2)
+    x = np.vstack([rng.uniform(0, 2, (50, 2)), [[0, 0], [2, 1.3], [0.01, 2]]])
+    t = sph.tabulate(x)
+    f = linear(pts)
+    assert np.abs(t.values @ f - linear(x)).max() < 1e-12
+    assert np.abs(t.gradient(f) - GRAD).max() < 1e-12
+    assert np.abs(t.values.sum(axis=1) - 1.0).max() < 1e-12
+
+
+# --- the linear patch test -----------------------------------------------------------------------
+
+
+def _vectors(ops, problem):
+    """The linear field at the FE dofs (active) and at the particles, as PETSc vectors."""
+    V, P = problem.V, problem.patch.particles
+    n_owned = V.dofmap.index_map.size_local
+    u_fe = ops.K_fe.createVecRight()
+    u_fe.array[:] = linear(V.tabulate_dof_coordinates()[:n_owned]).ravel() * np.repeat(
+        ops.fe_active[:n_owned], 2
+    )
+    own = P.owned[np.argsort(P.petsc_index[P.owned], kind="stable")]
+    u_p = ops.K_p.createVecRight()
+    u_p.array[:] = linear(P.positions[own]).ravel()
+    return u_fe, u_p
+
+
+def patch_residual(problem) -> tuple[float, float, float]:
+    """``max |K u - f|`` over the FE and the particle dofs for the linear field, with ``f`` the
+    loads of its own traction ``sigma n`` on every exterior facet, and ``max |f|``."""
+    ops = problem.operators()
+    u_fe, u_p = _vectors(ops, problem)
+    r_fe, r_p = ops.K_fe.createVecLeft(), ops.K_p.createVecLeft()
+    ops.K_fe.mult(u_fe, r_fe)
+    ops.K_fp.multAdd(u_p, r_fe, r_fe)
+    ops.K_p.mult(u_p, r_p)
+    ops.K_pf.multAdd(u_fe, r_p, r_p)
+    sigma = problem.material.stress(GRAD)
+    problem.add_traction(mf.boundary_facets(problem.V.mesh), lambda x, n: n @ sigma.T)
+    b_fe, b_p = problem._loads()
+    n_owned = problem.V.dofmap.index_map.size_local
+    active = np.repeat(ops.fe_active[:n_owned], 2)
+    r_fe.axpy(-1.0, b_fe)
+    r_p.axpy(-1.0, b_p)
+    comm = problem.comm
+    fe = comm.allreduce(np.abs(r_fe.array_r * active).max(initial=0.0), op=MPI.MAX)
+    p = comm.allreduce(np.abs(r_p.array_r).max(initial=0.0), op=MPI.MAX)
+    scale = comm.allreduce(np.abs(b_p.array_r).max(initial=0.0), op=MPI.MAX)
+    for obj in (u_fe, u_p, r_fe, r_p, b_fe, b_p):
+        obj.destroy()
+    ops.destroy()
+    return fe, p, scale
+
+
+@pytest.mark.parametrize("variant", mf.HYBRID_VARIANTS)
+def test_linear_patch_test_with_consistent_integration(variant):
+    """A linear field leaves no force but its boundary tractions' loads, at every FE node and
+    particle, to round-off (measured 5e-15 relative, both variants, h = 3)."""
+    fe, p, scale = patch_residual(beam_problem(MPI.COMM_WORLD, 3.0, variant))
+    assert scale > 1e4
+    assert fe < 1e-12 * scale and p < 1e-12 * scale
+
+
+def test_linear_patch_test_without_consistency_is_missed_at_the_particles():
+    """With the symmetric ``K`` (``consistent=False``) the corrected kernel gradients integrated
+    on background cells leave forces near the exterior boundary: measured 0.45 (HA-F, FE and
+    particles) and 0.45 at the particles with exact FE rows (HA-S) relative to the boundary
+    loads at h = 3. HA-S's FE rows stay exact: the interface tractions of a constant stress are
+    exact (eq. 131-134) and cancel the FE cells' own boundary term."""
+    fe, p, scale = patch_residual(beam_problem(MPI.COMM_WORLD, 3.0, "HA-S", consistent=False))
+    assert fe < 1e-12 * scale
+    assert p > 0.1 * scale  # the measured miss, not a tolerance
+    fe, p, scale = patch_residual(beam_problem(MPI.COMM_WORLD, 3.0, "HA-F", consistent=False))
+    assert fe > 0.1 * scale and p > 0.1 * scale
+
+
+def test_rigid_motions_carry_no_force():
+    """K of a rigid translation vanishes (every block, both variants)."""
+    for variant in mf.HYBRID_VARIANTS:
+        problem = beam_problem(MPI.COMM_WORLD, 3.0, variant)
+        ops = problem.operators()
+        u_fe, u_p = _vectors(ops, problem)
+        n_owned = problem.V.dofmap.index_map.size_local
+        u_fe.array[:] = np.tile([1.0, -2.0], n_owned) * np.repeat(ops.fe_active[:n_owned], 2)
+        u_p.array[:] = np.tile([1.0, -2.0], u_p.getLocalSize() // 2)
+        r = ops.K_fe.createVecLeft()
+        ops.K_fe.mult(u_fe, r)
+        ops.K_fp.multAdd(u_p, r, r)
+        s = ops.K_p.createVecLeft()
+        ops.K_p.mult(u_p, s)
+        ops.K_pf.multAdd(u_fe, s, s)
+        scale = BEAM_MATERIAL.E
+        assert r.norm(PETSc.NormType.INFINITY) < 1e-9 * scale
+        assert s.norm(PETSc.NormType.INFINITY) < 1e-9 * scale
+        for obj in (u_fe, u_p, r, s):
+            obj.destroy()
+        ops.destroy()
+
+
+# --- dynamics ------------------------------------------------------------------------------------
+
+
+def run_rod(variant, consistent=False, t_end=2 * ROD.transit_time):
+    problem = rod_problem(MPI.COMM_WORLD, 1.0, 2, variant, consistent=consistent)
+    dyn = ExplicitDynamics.coupled(problem, particle_mass="volume")
+    dyn.set_initial(velocity=ROD.initial_velocity, particle_values="nodal")
+    errors = {}
+    res = dyn.run(
+        t_end,
+        outputs=[ROD.transit_time],
+        on_output=lambda d, n, t: errors.setdefault(t, d.velocity_error(ROD.velocity)),
+    )
+    return dyn, res, errors
+
+
+def test_hybrid_is_a_dynamics_method():
+    assert "hybrid" in DYNAMICS_METHODS and check_method("hybrid") == "hybrid"
+
+
+def test_energy_is_conserved_without_load_ha_f():
+    """HA-F with the symmetric K: the discrete energy of central differences is constant to
+    round-off over two transits (measured 4e-14)."""
+    dyn, res, _ = run_rod("HA-F")
+    assert res.energy_drift < 1e-10
+    assert res.energies[-1].kinetic > 0.1 * res.energies[0].kinetic
+    dyn.destroy()
+
+
+@pytest.mark.xfail(strict=True, reason="HA-S's K is not symmetric: measured drift 0.16")
+def test_energy_is_conserved_without_load_ha_s():
+    """HA-S loads the FE nodes with the particles' tractions, which are not the work conjugate
+    of the kinematic coupling through the sums: ``K`` is not symmetric, and the discrete energy
+    is not conserved (measured relative drift 0.16 over two transits, h = 1, 2 x 2 particles
+    per cell); with the consistent (Petrov-Galerkin) integration HA-F is not symmetric either
+    (0.18)."""
+    dyn, res, _ = run_rod("HA-S")
+    dyn.destroy()
+    assert res.energy_drift < 1e-10
+
+
+def velocity_difference(h: float, k: int) -> tuple[float, list[float]]:
+    """Relative L2 difference of the HA-S and HA-F velocities after one transit, and their
+    errors against the exact solution."""
+    fields, errors = [], []
+    for variant in mf.HYBRID_VARIANTS:
+        problem = rod_problem(MPI.COMM_WORLD, h, k, variant, consistent=False)
+        dyn = ExplicitDynamics.coupled(problem, particle_mass="volume")
+        dyn.set_initial(velocity=ROD.initial_velocity, particle_values="nodal")
+        dyn.run(ROD.transit_time)
+        q, v = dyn.velocity_at_quadrature(5)
+        fields.append(v)
+        errors.append(dyn.velocity_error(ROD.velocity))
+        dyn.destroy()
+    ve = ROD.velocity(q.points, ROD.transit_time)
+    sums = np.array(
+        [
+            np.sum(q.weights * np.sum((fields[0] - fields[1]) ** 2, 1)),
+            np.sum(q.weights * np.sum(ve**2, 1)),
+        ]
+    )
+    sums = MPI.COMM_WORLD.allreduce(sums, op=MPI.SUM)
+    return float(np.sqrt(sums[0] / sums[1])), errors
+
+
+def test_ha_s_and_ha_f_agree_on_a_smooth_wave():
+    """The Gaussian pulse of Rabczuk sec. 6.2.1 after one transit (2 x 2 particles per cell):
+    the HA-S and HA-F velocities approach each other under refinement, as each approaches the
+    exact solution. Measured: difference 4.0e-2 (h = 1; errors 4.8e-2 HA-S, 3.3e-2 HA-F) and
+    1.38e-2 (h = 0.5; errors 1.36e-2, 1.33e-2); at 20,000 nodes, ratio 4 (demos/rod_gauss.py)
+    the errors at t1 are 1.7e-3 and 2.3e-3."""
+    coarse, _ = velocity_difference(1.0, 2)
+    fine, errors = velocity_difference(0.5, 2)
+    assert fine < 0.4 * coarse
+    assert fine < 0.02 and max(errors) < 0.02
+
+
+# --- statics: the cantilever ---------------------------------------------------------------------
+
+
+def solve_beam(comm, h, variant, **options):
+    problem = beam_problem(comm, h, variant, **options)
+    left, right = beam_ends(problem.V.mesh)
+    problem.add_dirichlet(left, BEAM.displacement)
+    problem.add_traction(right, BEAM.traction)
+    return problem, problem.solve()
+
+
+@pytest.mark.parametrize("variant", mf.HYBRID_VARIANTS)
+def test_cantilever_converges(variant):
+    """Fitted L2 slope over h = 3, 1.5, 1 (Rabczuk et al. 2006, Table II: 1.23 / 1.23 / 1.13 for
+    the hybrid coupling); measured HA-F 1.39 (errors 7.6e-2 .. 1.7e-2), HA-S 1.55 (1.0e-1 ..
+    1.9e-2)."""
+    hs, errs = [3.0, 1.5, 1.0], []
+    for h in hs:
+        problem, sol = solve_beam(MPI.COMM_WORLD, h, variant)
+        errs.append(
+            mf.error_norms(problem.V.mesh, sol.evaluate_at_quadrature, BEAM, BEAM_MATERIAL)["l2"]
+        )
+    assert fitted_rate(hs, errs) > 1.13
+    assert errs[-1] < 0.03
+
+
+def test_two_ranks_equal_serial():
+    """The cantilever on COMM_WORLD and on COMM_SELF (every rank alone) gives the same
+    displacement at probe points (both variants)."""
+    pts = np.array([[1.0, 0.5], [23.9, -5.0], [24.0, 2.0], [30.3, 4.1], [47.9, -5.9]])
+    for variant in mf.HYBRID_VARIANTS:
+        u = []
+        for comm in (MPI.COMM_WORLD, MPI.COMM_SELF):
+            _, sol = solve_beam(comm, 3.0, variant)
+            u.append(sol.displacement(pts))
+        assert np.abs(u[0] - u[1]).max() < 1e-10 * np.abs(u[1]).max()
+
+
+# --- bad input -----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "options, match",
+    [
+        ({"variant": "HA-X"}, r"variant='HA-X' is not known; use 'HA-S'"),
+        ({"integration": "nodes"}, r"integration='nodes' is not known"),
+        ({"smoothing": -1.0}, r"smoothing=-1.0 must be a positive number"),
+        ({"quadrature_degree": 0}, r"quadrature_degree=0 must be a positive integer"),
+    ],
+)
+def test_bad_input_is_refused_on_every_rank(options, match):
+    with pytest.raises(ValueError, match=match):
+        beam_problem(MPI.COMM_WORLD, 3.0, **options)
+
+
+def test_bad_input_on_one_rank_only():
+    """A value that is bad on one rank only still raises on every rank (no hang)."""
+    comm = MPI.COMM_WORLD
+    variant = "HA-X" if comm.rank == comm.size - 1 else "HA-S"
+    with pytest.raises(ValueError, match="variant='HA-X' is not known"):
+        beam_problem(comm, 3.0, variant)
+
+
+def test_bad_particle_mass():
+    problem = rod_problem(MPI.COMM_WORLD, 2.5, 1, "HA-F")
+    with pytest.raises(ValueError, match="particle_mass='lumped' is not known"):
+        ExplicitDynamics.coupled(problem, particle_mass="lumped")

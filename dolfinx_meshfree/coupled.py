@@ -119,7 +119,8 @@ class CoupledSolution:
         return u, g
 
     def displacement(self, points: np.ndarray) -> np.ndarray:
-        """Displacement (m, 2) at any points of the mesh, on every rank (collective)."""
+        """Displacement (m, 2) at any points of the mesh, on every rank (collective). Points on
+        the interface are evaluated on the FE side, the same on any partition."""
         from .neighbours import check_points
 
         msh = self.patch.mesh
@@ -129,7 +130,10 @@ class CoupledSolution:
             q = QuadraturePoints(pts, np.zeros(len(pts)), cells)
             return list(self.evaluate_at_quadrature(q)[0])
 
-        return np.array(_route(msh, x, compute), dtype=float).reshape(-1, 2)
+        # points on the interface belong to both sides, which a weak coupling makes differ
+        # slightly: take the FE side, whatever the partition
+        fe_side = ~self.patch.in_patch
+        return np.array(_route(msh, x, compute, fe_side), dtype=float).reshape(-1, 2)
 
 
 @dataclass

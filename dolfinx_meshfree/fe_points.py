@@ -113,8 +113,12 @@ def tabulate_in_cells(V, points: npt.ArrayLike, cells: npt.ArrayLike, derivative
     return ShapeTable(points=x, values=values, gradients=grads)
 
 
-def locate_points(msh, points: np.ndarray) -> np.ndarray:
-    """Owned local cell containing each point (-1 where this rank owns none); local."""
+def locate_points(msh, points: np.ndarray, preferred: np.ndarray | None = None) -> np.ndarray:
+    """Owned local cell containing each point (-1 where this rank owns none); local.
+
+    ``preferred`` (bool per local cell): among several owned cells containing a point (points
+    on shared facets), take a preferred one if there is one.
+    """
     num_owned = msh.topology.index_map(msh.topology.dim).size_local
     m = points.shape[0]
     cells = np.full(m, -1, dtype=np.int64)
@@ -128,19 +132,35 @@ def locate_points(msh, points: np.ndarray) -> np.ndarray:
     own = arr < num_owned
     pts, first = np.unique(owner_pt[own], return_index=True)
     cells[pts] = arr[own][first]
+    if preferred is not None:
+        good = own & preferred[arr]
+        pts, first = np.unique(owner_pt[good], return_index=True)
+        cells[pts] = arr[good][first]
     return cells
 
 
-def _owners(msh, everything: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _owners(
+    msh, everything: np.ndarray, counts: np.ndarray, preferred: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Owning rank and owned local cell of every gathered point; raises on every rank if any
-    point lies outside the mesh. Collective."""
+    point lies outside the mesh. With ``preferred`` (bool per local cell), a rank owning a
+    preferred cell that contains the point wins over ranks that own only other cells, so the
+    choice does not depend on the partition. Collective."""
     from mpi4py import MPI
 
     comm = msh.comm
-    cells = locate_points(msh, everything)
-    claim = np.where(cells >= 0, comm.rank, comm.size).astype(np.int32)
-    owner = np.empty_like(claim)
-    comm.Allreduce(claim, owner, op=MPI.MIN)
+    size = comm.size
+    cells = locate_points(msh, everything, preferred)
+    good = cells >= 0
+    if preferred is not None:
+        first_class = good & preferred[np.maximum(cells, 0)]
+        claim = np.where(first_class, comm.rank, np.where(good, size + comm.rank, 2 * size))
+    else:
+        claim = np.where(good, comm.rank, 2 * size)
+    claim = claim.astype(np.int32)
+    best = np.empty_like(claim)
+    comm.Allreduce(claim, best, op=MPI.MIN)
+    owner = np.where(best < 2 * size, best % size, size)
     missing = np.flatnonzero(owner == comm.size)
     if missing.size:
         starts = np.concatenate([[0], np.cumsum(counts)])
@@ -174,16 +194,22 @@ def ensure_points_in_mesh(msh, points: npt.ArrayLike) -> np.ndarray:
     return x
 
 
-def _route(msh, points: np.ndarray, compute: Callable[[np.ndarray, np.ndarray], list]) -> list:
+def _route(
+    msh,
+    points: np.ndarray,
+    compute: Callable[[np.ndarray, np.ndarray], list],
+    preferred: np.ndarray | None = None,
+) -> list:
     """Locate every rank's points, let the owning ranks ``compute`` on them, send results back.
 
     ``compute(points, cells)`` returns a list of per-point results (rows); the return value is
-    that list in the order of this rank's ``points``. Collective.
+    that list in the order of this rank's ``points``. ``preferred`` (bool per local cell):
+    points on shared facets go to a preferred cell where there is one. Collective.
     """
     comm = msh.comm
     rank, size = comm.rank, comm.size
     everything, counts = _gather(comm, points)
-    owner, cells = _owners(msh, everything, counts)
+    owner, cells = _owners(msh, everything, counts, preferred)
     mine = np.flatnonzero(owner == rank)
     results = compute(everything[mine], cells[mine]) if mine.size else []
     starts = np.concatenate([[0], np.cumsum(counts)])

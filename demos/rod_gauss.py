@@ -25,6 +25,13 @@
 #   ``k + 1`` (the MLS must span the interface element: ``max(2.5, k + 1.5)`` by default);
 #   master–slave ties the first particle layer to the FE edges (eq. 27–28).
 #
+# ``--integration stress-points`` integrates the particle stiffness of ``efg``, ``lagrange``,
+# ``edge-to-edge`` and ``master-slave`` at the particles and the stress points between them
+# (Rabczuk, Belytschko & Xiao 2004, Lagrangian kernel) instead of the background cells;
+# ``--slaves coincident`` runs master-slave as Johnson's coupling, the particles on the interface
+# fixed to the FE nodes they sit on (Rabczuk et al. 2006, eq. 15-16; particle spacing ``h / k``
+# as for the ramps).
+#
 # ``--sweep 1 2 4 8`` runs every method at each ratio and prints the Table III-style table;
 # ``--transits N`` runs N wave transits (``N L / c``) and reports the energy drift.
 #
@@ -39,7 +46,8 @@
 #
 #     python demos/rod_gauss.py [--method fe efg lagrange ...] [--nodes 20000] [--ratio 4]
 #         [--center 30] [--t-end 0.023126] [--json out.json] [--probe-in P.npy --probe-out V.npy]
-#         [--sweep 1 2 4 8] [--transits 10]
+#         [--sweep 1 2 4 8] [--transits 10] [--integration cells|stress-points]
+#         [--slaves layer|coincident]
 #     mpirun -n 2 python demos/rod_gauss.py --nodes 2000
 
 # +
@@ -102,6 +110,20 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
         help="hybrid: forces on the FE nodes by interpolation (HA-F, default) or by tractions "
         "(HA-S: unstable in explicit dynamics, its K is not symmetric; reported, fails the check)",
     )
+    p.add_argument(
+        "--integration",
+        choices=("cells", "stress-points"),
+        default="cells",
+        help="particle stiffness of efg, lagrange, edge-to-edge, master-slave: background cells "
+        "or stress points (Lagrangian kernel)",
+    )
+    p.add_argument(
+        "--slaves",
+        choices=("layer", "coincident"),
+        default="layer",
+        help="master-slave: the first particle layer (eq. 17-28) or Johnson's particles on the "
+        "interface nodes (eq. 15-16)",
+    )
     p.add_argument("--sweep", type=float, nargs="+", default=None, help="ratios to sweep")
     p.add_argument("--transits", type=float, default=None, help="run N transits L/c")
     p.add_argument("--weight", choices=("quartic", "cubic", "gaussian"), default="quartic")
@@ -141,6 +163,12 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
             p.error(f"--method {m!r} is not available; choose from {list(DYNAMICS_METHODS)}")
     if args.sweep is not None and not all(np.isfinite(r) and r >= 1 for r in args.sweep):
         p.error(f"--sweep ratios must be >= 1, got {args.sweep}")
+    if args.integration != "cells":
+        bad = [
+            m for m in args.method if m not in ("efg", "lagrange", "edge-to-edge", "master-slave")
+        ]
+        if bad:
+            p.error(f"--integration {args.integration} is not available for {bad}")
     if args.overlap < 1:
         p.error(f"--overlap must be >= 1, got {args.overlap}")
     if (args.probe_in is None) != (args.probe_out is None):
@@ -197,10 +225,13 @@ def build(method: str, args, material, comm):
             **mopts,
             quadrature_degree=degree_for(args.quadrature_points),
             safety=args.safety,
+            integration=args.integration,
         )
         return dyn, {"h_fe": None, "h_p": h, "dilation": mopts["dilation"]}
     # the ramps need particles on the interface nodes: h / k with an integer k
-    k = max(1, round(np.sqrt(args.ratio))) if method.startswith("ramp") else np.sqrt(args.ratio)
+    # (and Johnson's master-slave: a particle on every interface node)
+    on_nodes = method.startswith("ramp") or (method == "master-slave" and johnson(args))
+    k = max(1, round(np.sqrt(args.ratio))) if on_nodes else np.sqrt(args.ratio)
     h = HEIGHT / max(1, round(HEIGHT / np.sqrt(0.5 * area * (1 + k * k) / args.nodes)))
     msh = rod_mesh(comm, h)
     hp = h / k
@@ -233,8 +264,28 @@ def build(method: str, args, material, comm):
         quadrature_degree=degree_for(per_cell),
         overlap=args.overlap,
     )
-    dyn = ExplicitDynamics.coupled(problem, safety=args.safety)
+    options = {}
+    if method in ("lagrange", "edge-to-edge", "master-slave"):
+        options["integration"] = args.integration
+    if method == "master-slave":
+        options["slaves"] = getattr(args, "slaves", "layer")
+    dyn = ExplicitDynamics.coupled(problem, safety=args.safety, **options)
     return dyn, {"h_fe": h, "h_p": hp, "dilation": dilation}
+
+
+def johnson(args) -> bool:
+    return getattr(args, "slaves", "layer") == "coincident"
+
+
+def variant_label(method: str, args) -> str | None:
+    """The options that change a method, for the table and the JSON (``None``: defaults)."""
+    parts = []
+    if method == "master-slave" and johnson(args):
+        parts.append("coincident")
+    if method in ("efg", "lagrange", "edge-to-edge", "master-slave"):
+        if getattr(args, "integration", "cells") != "cells":
+            parts.append("stress-pts")
+    return " ".join(parts) or None
 
 
 def warm_jit(args, material) -> None:
@@ -348,7 +399,9 @@ def main(argv: list[str] | None = None) -> list[dict]:
             for variant in args.hybrid_variant if m == "hybrid" else [None]:
                 a.variant = variant
                 records.append(run(m, a, material, rod, comm, probe_points))
-                records[-1]["variant"] = variant
+                records[-1]["variant"] = variant or variant_label(m, a)
+                records[-1]["integration"] = a.integration if m != "hybrid" else None
+                records[-1]["slaves"] = a.slaves if m == "master-slave" else None
     report(records, comm)
     if args.json and comm.rank == 0:
         with open(args.json, "w") as f:
@@ -370,8 +423,13 @@ def report(records: list[dict], comm) -> None:
         f"Rod with Gaussian velocity (Rabczuk et al. 2006, Table III), {comm.size} rank(s), "
         f"DOLFINx {mf.DOLFINX_VERSION} (JIT excluded)"
     )
+
+    def label_of(r: dict) -> str:
+        return r["method"] + (f" {r['variant']}" if r.get("variant") else "")
+
+    w = max(12, *(len(label_of(r)) for r in records))
     head = (
-        f"{'method':12} {'ratio':>5} {'nodes':>6} {'FE':>6} {'part.':>6} {'err t1':>9} "
+        f"{'method':{w}} {'ratio':>5} {'nodes':>6} {'FE':>6} {'part.':>6} {'err t1':>9} "
         f"{'err t2':>9} {'t2/t1':>5} {'paper t1':>8} {'paper t2':>8} {'steps':>6} {'dt':>9} "
         f"{'drift':>8} {'osc':>8} {'setup s':>8} {'steps s':>8} {'total s':>8}"
     )
@@ -379,12 +437,12 @@ def report(records: list[dict], comm) -> None:
     print("-" * len(head))
     for r in records:
         p = PAPER.get(r["method"], (None, None, None))
-        label = r["method"] + (f" {r['variant']}" if r.get("variant") else "")
+        label = label_of(r)
         growth = None
         if r["error_t1"] is not None and r["error_t2"] is not None:
             growth = r["error_t2"] / r["error_t1"]
         print(
-            f"{label:12} {_fmt(r['ratio'], '5.2f')} {r['nodes']:6d} {r['fe_nodes']:6d} "
+            f"{label:{w}} {_fmt(r['ratio'], '5.2f')} {r['nodes']:6d} {r['fe_nodes']:6d} "
             f"{r['particles']:6d} {_fmt(r['error_t1'], '9.3e')} {_fmt(r['error_t2'], '9.3e')} "
             f"{_fmt(growth, '5.2f')} {_fmt(p[0], '8.4f')} {_fmt(p[1], '8.4f')} {r['steps']:6d} "
             f"{r['dt']:9.3e} {r['energy_drift']:8.1e} {r['energy_oscillation']:8.1e} "

@@ -703,14 +703,53 @@ class CoupledElasticity:
 
     # -- operators (explicit dynamics) ----------------------------------------------------------
 
-    def operators(self) -> CouplingOperators:
+    def operators(self, integration: str = "cells", slaves: str = "layer") -> CouplingOperators:
         """The coupling's assembled operators without essential conditions (collective).
 
         Stiffness blocks, constraint blocks with unit scaling, the weights of the FE energy and
         the particle quadrature with its MLS table (for lumped masses), and the coupling's
         interface object; see :class:`CouplingOperators`. Tractions and Dirichlet conditions
         given to this object are not used. Every coupling of :data:`COUPLINGS` is available.
+
+        Args:
+            integration: ``"cells"`` (default): the particle stiffness on the patch cells' Gauss
+                rule; ``"stress-points"``: at the particles and stress points with their
+                volumes (Rabczuk, Belytschko & Xiao 2004; see
+                :mod:`~dolfinx_meshfree.stress_points`), for ``lagrange``, ``edge-to-edge``
+                and ``master-slave``; :attr:`CouplingOperators.particle_quadrature` is then that
+                rule. The ramp and bridging couplings integrate blended or weighted functions
+                on cells and refuse it.
+            slaves: ``master-slave`` only: ``"layer"`` (default, the first particle layer
+                rigidly linked to the interface, eq. 17–28) or ``"coincident"`` (Johnson's
+                particles fixed to the interface FE nodes, eq. 15–16); see
+                :class:`~dolfinx_meshfree.master_slave.MasterSlaveLinks`.
+
+        Raises:
+            ValueError: on every rank, for an unknown or unsupported option.
         """
+        from .master_slave import SLAVES
+        from .stress_points import check_integration
+
+        check_integration(integration)
+        if slaves not in SLAVES:
+            raise ValueError(f"slaves={slaves!r} is not known; use one of {list(SLAVES)}")
+        if slaves != "layer" and self.coupling != "master-slave":
+            raise ValueError(
+                f"slaves={slaves!r} is an option of coupling='master-slave', not of "
+                f"coupling={self.coupling!r}"
+            )
+        if integration != "cells" and self.coupling in ("bridging", "ramp", "ramp-cubic"):
+            raise ValueError(
+                f"integration={integration!r} is not available with coupling={self.coupling!r} "
+                "(its particle functions are blended or weighted on cells); use 'cells', or "
+                "lagrange, edge-to-edge or master-slave"
+            )
+        if self.coupling == "master-slave":
+            from .master_slave import master_slave_operators
+
+            return master_slave_operators(self, integration, slaves)
+        if self.coupling in ("lagrange", "edge-to-edge"):
+            return self._interface_operators(integration)
         if self.coupling == "bridging":
             from .bridging import bridging_operators
 
@@ -719,10 +758,6 @@ class CoupledElasticity:
             from .ramp import ramp_operators
 
             return ramp_operators(self)
-        if self.coupling == "master-slave":
-            from .master_slave import master_slave_operators
-
-            return master_slave_operators(self)
         return self._interface_operators()
 
     def _particle_layout(self) -> Layout:
@@ -734,7 +769,15 @@ class CoupledElasticity:
         cells = self.patch.fe_cells if cells is None else cells
         return self._node_flags(_compat.dofmap_array(self.V)[cells].ravel())
 
-    def _interface_operators(self) -> CouplingOperators:
+    def _particle_rule(self, integration: str) -> QuadraturePoints | None:
+        """The stress-point rule of the patch, or ``None`` for the cells' Gauss rule."""
+        if integration == "cells":
+            return None
+        from .stress_points import stress_point_quadrature
+
+        return stress_point_quadrature(self.patch.particles)
+
+    def _interface_operators(self, integration: str = "cells") -> CouplingOperators:
         """Lagrange (FE trace multipliers, eq. 109) and edge-to-edge (collocation) operators."""
         t0 = time.perf_counter()
         V, patch, P = self.V, self.patch, self.patch.particles
@@ -743,7 +786,12 @@ class CoupledElasticity:
         pl = self._particle_layout()
         boundary = patch.boundary() if self.consistent else None
         Kp_loc, q, tq, _ = particle_stiffness(
-            P, self.mls, self.material, self.quadrature_degree, boundary
+            P,
+            self.mls,
+            self.material,
+            self.quadrature_degree,
+            boundary,
+            quadrature=self._particle_rule(integration),
         )
         if self.coupling == "lagrange":
             fe_rows, p_rows, ml = self._lagrange_rows()

@@ -55,6 +55,7 @@ from .parallel import Layout, raise_on_all_ranks
 from .particles import ParticleSet
 from .petsc import create_aij
 from .quadrature import facet_quadrature
+from .stress_points import check_integration, stress_point_quadrature
 from .tables import ShapeTable
 
 __all__ = ["build_coupled", "build_efg", "build_fe", "build_hybrid"]
@@ -183,10 +184,14 @@ def build_efg(
     safety: float = 0.9,
     fixed_facets=None,
     multiplier_solver: str | None = None,
+    integration: str = "cells",
 ):
-    """Pure EFG on the particles' background cells (Belytschko et al. 1995, sec. 5.2); fixed
-    facets by facet multipliers on the velocities. Collective."""
+    """Pure EFG on the particles' background cells (Belytschko et al. 1995, sec. 5.2) or, with
+    ``integration="stress-points"``, at the particles and stress points (Rabczuk, Belytschko &
+    Xiao 2004, Lagrangian kernel: :mod:`~dolfinx_meshfree.stress_points`); fixed facets by facet
+    multipliers on the velocities. Collective."""
     _check_material(material)
+    check_integration(integration)
     if particles.mesh is None:
         raise ValueError("explicit EFG needs particles with a background mesh (mesh=...)")
     if particle_mass not in ("row-sum", "volume"):
@@ -197,7 +202,10 @@ def build_efg(
     mls = raise_on_all_ranks(
         comm, lambda: MLS(particles, weight=weight, dilation=dilation, basis=basis)
     )
-    K_loc, q, tq, _ = particle_stiffness(particles, mls, material, quadrature_degree)
+    rule = None if integration == "cells" else stress_point_quadrature(particles)
+    K_loc, q, tq, _ = particle_stiffness(
+        particles, mls, material, quadrature_degree, quadrature=rule
+    )
     n = particles.num_particles
     pl = Layout(2 * particles.layout.size_local, 2 * n, 2 * particles.layout.start)
     K = create_aij(comm, K_loc, pl, pl)
@@ -229,6 +237,8 @@ def build_coupled(
     safety: float = 0.9,
     multiplier_solver: str | None = None,
     fixed_facets=None,
+    integration: str = "cells",
+    slaves: str = "layer",
 ):
     """Explicit dynamics of a :class:`~dolfinx_meshfree.CoupledElasticity` (any coupling),
     from :meth:`~dolfinx_meshfree.CoupledElasticity.operators` (collective).
@@ -237,15 +247,28 @@ def build_coupled(
         problem: The static coupling object (its MLS, quadrature degree, band, options).
         particle_mass: ``"row-sum"`` (eq. 4.5; bridging: weighted by ``alpha``, eq. 89) or
             ``"volume"`` (``rho V_I``; not with bridging or the ramp couplings, whose masses
-            follow their weighted/blended functions).
+            follow their weighted/blended functions). Row sums are taken on the particle rule
+            in use (cells or stress points).
         safety, multiplier_solver: See :class:`ExplicitDynamics`.
         fixed_facets: Owned exterior facets held at rest.
+        integration: ``"cells"`` or ``"stress-points"`` (Rabczuk, Belytschko & Xiao 2004;
+            lagrange, edge-to-edge and master-slave), see :meth:`CoupledElasticity.operators
+            <dolfinx_meshfree.CoupledElasticity.operators>`.
+        slaves: master-slave: ``"layer"`` or ``"coincident"`` (Johnson's particles on the
+            interface nodes, Rabczuk et al. 2006, eq. 15–16: the node and its particle share
+            the acceleration ``(F_K + F_P) / (m_K + m_P)``, which the reduction ``T^T M T``,
+            ``T^T f`` below gives).
     """
     from .coupled import CoupledElasticity
     from .dynamics import DYNAMICS_METHODS
     from .hybrid import HybridElasticity
 
     if isinstance(problem, HybridElasticity):  # the hybrid SPH-FE coupling: its own builder
+        if (integration, slaves) != ("cells", "layer"):
+            raise ValueError(
+                f"integration={integration!r}, slaves={slaves!r}: the hybrid coupling has its "
+                "own SPH sums; use integration='cells', slaves='layer'"
+            )
         return build_hybrid(cls, problem, particle_mass, safety, multiplier_solver, fixed_facets)
     if not isinstance(problem, CoupledElasticity):
         raise TypeError(f"problem must be a CoupledElasticity, got {type(problem).__name__}")
@@ -268,7 +291,7 @@ def build_coupled(
     V, patch, mls = problem.V, problem.patch, problem.mls
     P, comm, msh = patch.particles, patch.comm, V.mesh
     facets = _facets(msh, fixed_facets)
-    ops = problem.operators()
+    ops = problem.operators(integration, slaves)
     rho = material.rho
     pdofs = P.petsc_dofs(2)
     fl, pl = ops.fe_layout, ops.particle_layout

@@ -89,6 +89,7 @@ def particle_stiffness(
     quadrature_degree: int,
     consistent_boundary: tuple[np.ndarray, np.ndarray | None] | None = None,
     boundary_values: Callable[[QuadraturePoints, sp.csr_matrix], sp.csr_matrix] | None = None,
+    quadrature: QuadraturePoints | None = None,
 ) -> tuple[sp.csr_matrix, QuadraturePoints, ShapeTable, dict]:
     """EFG stiffness from this rank's integration cells (``particles.cells``), in PETSc numbering.
 
@@ -97,8 +98,10 @@ def particle_stiffness(
     the domain cell beside each facet (``None``: exterior facets) — the test-function gradients
     get the VCI correction; ``boundary_values(bq, values)``, if given, replaces the shape
     function values at the boundary quadrature ``bq`` in the VCI boundary integral (the
-    edge-to-edge coupling uses their FE interpolant on the interface). Collective (errors are
-    raised on every rank).
+    edge-to-edge coupling uses their FE interpolant on the interface). ``quadrature``, if given,
+    replaces the cell Gauss rule (``quadrature_degree`` is then not used for it), e.g. the
+    particles and stress points of :func:`~dolfinx_meshfree.stress_points.stress_point_quadrature`
+    (Rabczuk, Belytschko & Xiao 2004). Collective (errors are raised on every rank).
 
     Returns:
         ``(K, q, table, timings)``: K as a (2n x 2n) CSR of this rank's contributions with PETSc
@@ -109,7 +112,10 @@ def particle_stiffness(
     comm = particles.comm
     n = particles.num_particles
     dof_map = particles.petsc_dofs(2).ravel()
-    q = cell_quadrature(particles.mesh, quadrature_degree, particles.cells)
+    if quadrature is None:
+        q = cell_quadrature(particles.mesh, quadrature_degree, particles.cells)
+    else:
+        q = quadrature
     tq = raise_on_all_ranks(comm, lambda: mls.tabulate(q.points))
     test_grads = tq.gradients
     if consistent_boundary is not None:

@@ -319,12 +319,18 @@ class ExplicitDynamics:
         safety: float = 0.9,
         fixed_facets: npt.ArrayLike | None = None,
         multiplier_solver: str | None = None,
+        integration: str = "cells",
     ) -> ExplicitDynamics:
         """Pure EFG on ``particles`` integrated on their background cells (Belytschko et al.
         1995, sec. 5.2): :func:`~dolfinx_meshfree.efg.particle_stiffness` and row-sum masses.
 
         ``fixed_facets``: owned exterior facets held at rest, by facet multipliers on the
         velocities (one per facet and component, corrected each step like eq. 94–96).
+        ``integration``: ``"cells"`` (the Gauss rule of ``quadrature_degree``) or
+        ``"stress-points"``: the particles and the stress points between them, with their
+        volumes and MLS functions of the reference configuration (Lagrangian kernel, computed
+        once at t = 0; Rabczuk, Belytschko & Xiao 2004; :mod:`~dolfinx_meshfree.stress_points`);
+        the row-sum masses are then ``rho sum_q phi_I(x_q) V_q``.
         """
         from .dynamic_builders import build_efg
 
@@ -340,6 +346,7 @@ class ExplicitDynamics:
             safety=safety,
             fixed_facets=fixed_facets,
             multiplier_solver=multiplier_solver,
+            integration=integration,
         )
 
     @classmethod
@@ -350,6 +357,8 @@ class ExplicitDynamics:
         safety: float = 0.9,
         multiplier_solver: str | None = None,
         fixed_facets: npt.ArrayLike | None = None,
+        integration: str = "cells",
+        slaves: str = "layer",
     ) -> ExplicitDynamics:
         """A :class:`~dolfinx_meshfree.CoupledElasticity` in dynamics, any coupling.
 
@@ -359,10 +368,26 @@ class ExplicitDynamics:
         ``fixed_facets``: owned exterior facets held at rest (FE nodes strongly, particles by
         facet multipliers on the velocities). The static problem's own Dirichlet conditions and
         tractions are not used (give loads with :meth:`add_traction`).
+
+        ``integration="stress-points"`` integrates the particle stiffness at the particles and
+        stress points (Rabczuk, Belytschko & Xiao 2004, Lagrangian kernel: the MLS functions
+        of the reference configuration, computed once at t = 0), for lagrange, edge-to-edge
+        and master-slave. ``slaves="coincident"`` (master-slave only) fixes the particles on
+        the interface to the FE nodes they sit on: Johnson's coupling, Rabczuk et al. 2006,
+        sec. 5.1.1, eq. 15–16 (see :mod:`~dolfinx_meshfree.master_slave`).
         """
         from .dynamic_builders import build_coupled
 
-        return build_coupled(cls, problem, particle_mass, safety, multiplier_solver, fixed_facets)
+        return build_coupled(
+            cls,
+            problem,
+            particle_mass,
+            safety,
+            multiplier_solver,
+            fixed_facets,
+            integration=integration,
+            slaves=slaves,
+        )
 
     # -- stiffness -----------------------------------------------------------------------------
 

@@ -43,6 +43,17 @@ are removed from ``T_PF`` (their values go to ``g``); patch-side Dirichlet facet
 rows ``D`` of :func:`~dolfinx_meshfree.efg.facet_multipliers` mapped through ``T``: ``D T``,
 right-hand side ``d - D g``.
 
+Johnson's coincident variant (``slaves="coincident"``, Rabczuk et al. 2006, sec. 5.1.1, eq.
+15–16; Johnson 1994): the slaves are the particles *on* Gamma_I, and every interface FE node must
+carry one. A particle on a node follows it, ``u_P = u_K`` (the row of ``T`` is the identity on
+that node: a link of length zero), and the reduced explicit system gives the node and its particle
+the common acceleration of eq. 16, ``a = (F_K + F_P) / (m_K + m_P)``: the row sums of ``T^T M T``
+add the particle's lumped mass to the node's and ``T^T`` adds the particle's force to the node's
+(eq. 15 takes both forces from the separately computed accelerations, ``F = m a``; the sum is the
+same). Particles on Gamma_I between two nodes (a particle grid finer than the FE mesh) follow the
+edge, ``u_P = (1 - xi) u_a + xi u_b`` (eq. 17–18 with ``P = C``), the extension of Johnson's
+one-to-one pairing to ratios above 1:1. ``u_P`` is the particle's nodal parameter, as above.
+
 Master–slave reproduces rigid motions exactly but not linear fields: a slave off Gamma_I moves
 with the rotation of its edge, not with the strain of the field, so the linear patch test fails
 by about ``|strain| x spacing`` at the slaves, and the coupled error converges at first order
@@ -66,10 +77,23 @@ from .parallel import Layout, raise_on_all_ranks
 from .petsc import BlockSystem, create_aij, create_vector
 from .quadrature import facet_quadrature
 
-__all__ = ["SLAVE_LAYER", "MasterSlaveLinks", "master_slave_operators", "solve_master_slave"]
+__all__ = [
+    "SLAVES",
+    "SLAVE_LAYER",
+    "MasterSlaveLinks",
+    "master_slave_operators",
+    "solve_master_slave",
+]
 
 #: Slaves: particles within ``SLAVE_LAYER`` times the particle spacing of the interface.
 SLAVE_LAYER = 1.01
+
+#: Which particles are slaves: the first layer (eq. 17–28) or those on the interface FE nodes
+#: and edges (Johnson's coincident particles, eq. 15–16).
+SLAVES = ("layer", "coincident")
+
+#: ``slaves="coincident"``: a particle is on Gamma_I (or on a node) within this times the spacing.
+COINCIDENT_TOL = 1e-8
 
 
 class MasterSlaveLinks:
@@ -77,6 +101,17 @@ class MasterSlaveLinks:
 
     Every rank gathers the interface edges (end points, global FE nodes, strong-condition values)
     and computes the links of all particles, so the result is the same on every rank.
+
+    Args:
+        problem: The :class:`~dolfinx_meshfree.CoupledElasticity`.
+        is_bc, ubc: Strong-condition flags and values per local FE node.
+        slaves: ``"layer"``: the particles within ``SLAVE_LAYER`` spacings of Gamma_I (eq.
+            17–28); ``"coincident"``: the particles on Gamma_I, one on every interface FE node
+            (Johnson's coupling, eq. 15–16; see the module docstring).
+
+    Raises:
+        ValueError: on every rank for an unknown ``slaves``, and with ``"coincident"`` when an
+            interface FE node has no particle on it.
 
     Attributes:
         spacing: The particle spacing ``s`` (median nearest-neighbour distance).
@@ -89,7 +124,9 @@ class MasterSlaveLinks:
             weights[k] @ u[nodes[k]]``.
     """
 
-    def __init__(self, problem, is_bc: np.ndarray, ubc: np.ndarray):
+    def __init__(self, problem, is_bc: np.ndarray, ubc: np.ndarray, slaves: str = "layer"):
+        if slaves not in SLAVES:
+            raise ValueError(f"slaves={slaves!r} is not known; use one of {list(SLAVES)}")
         V, patch = problem.V, problem.patch
         msh = V.mesh
         comm = patch.comm
@@ -143,7 +180,22 @@ class MasterSlaveLinks:
             xi[lo : lo + step] = s
             dist[lo : lo + step] = np.linalg.norm(r - s[..., None] * t[None], axis=2)
         self.distance = dist.min(axis=1)
-        self.slaves = np.flatnonzero(self.distance <= SLAVE_LAYER * self.spacing)
+        self.kind = slaves
+        #: Distance to Gamma_I within which a particle is a slave.
+        self.width = SLAVE_LAYER * self.spacing
+        if slaves == "coincident":
+            self.width = COINCIDENT_TOL * self.spacing
+            ends = np.unique(self.edges.reshape(-1, 2), axis=0)
+            gap, _ = cKDTree(x).query(ends)
+            if np.any(gap > self.width):
+                k = int(np.argmax(gap))
+                raise ValueError(
+                    f"slaves='coincident' (Johnson's coupling, eq. 15-16) needs a particle on "
+                    f"every interface FE node; {int(np.sum(gap > self.width))} node(s) have none, "
+                    f"first {ends[k]} (nearest particle {gap[k]:.3e} away): use a particle "
+                    "spacing that divides the FE cells' edges on the interface"
+                )
+        self.slaves = np.flatnonzero(self.distance <= self.width)
         if self.slaves.size == x.shape[0]:
             raise ValueError(
                 "master-slave coupling: every particle is a slave (the patch is one particle "
@@ -175,7 +227,7 @@ class MasterSlaveLinks:
         r = points[:, None, :] - a[None]
         s = np.clip(np.einsum("pmj,mj->pm", r, t) / np.einsum("ij,ij->i", t, t), 0.0, 1.0)
         dist = np.linalg.norm(r - s[..., None] * t[None], axis=2).min(axis=1, initial=np.inf)
-        return dist <= SLAVE_LAYER * self.spacing
+        return dist <= self.width
 
     def is_fixed(self) -> dict[int, np.ndarray]:
         """Strong values of the interface nodes that carry one, by global node."""
@@ -358,7 +410,7 @@ def _outside_slave_layer(problem, links: MasterSlaveLinks, patch_bc, dq, dtabs):
     return out_bc, out_q, out_t
 
 
-def master_slave_operators(problem):
+def master_slave_operators(problem, integration: str = "cells", slaves: str = "layer"):
     """The master–slave coupling's operators without essential conditions (collective).
 
     ``K_FE`` on the FE cells and ``K_P`` on the patch, unreduced, with the reduction
@@ -366,9 +418,17 @@ def master_slave_operators(problem):
     ``S`` selects the free (master) particles, numbered by :attr:`master_layout` in PETSc
     particle order. The reduced stiffness is ``T^T K T`` and the forces on the slaves go to their
     masters with ``T^T`` (eq. 28). See :class:`~dolfinx_meshfree.coupled.CouplingOperators`.
+
+    Args:
+        integration: ``"cells"`` or ``"stress-points"``: the rule of ``K_P`` (see
+            :meth:`CoupledElasticity.operators <dolfinx_meshfree.CoupledElasticity.operators>`).
+        slaves: ``"layer"`` or ``"coincident"`` (Johnson, eq. 15–16): see
+            :class:`MasterSlaveLinks`.
     """
     from .coupled import CouplingOperators
+    from .stress_points import check_integration
 
+    check_integration(integration)
     t0 = time.perf_counter()
     patch, P = problem.patch, problem.patch.particles
     comm = patch.comm
@@ -378,11 +438,16 @@ def master_slave_operators(problem):
     pl = problem._particle_layout()
     boundary = patch.boundary() if problem.consistent else None
     Kp_loc, q, tq, _ = particle_stiffness(
-        P, problem.mls, problem.material, problem.quadrature_degree, boundary
+        P,
+        problem.mls,
+        problem.material,
+        problem.quadrature_degree,
+        boundary,
+        quadrature=problem._particle_rule(integration),
     )
     no_bc = np.zeros(l2g.size, dtype=bool)
     links = raise_on_all_ranks(
-        comm, lambda: MasterSlaveLinks(problem, no_bc, np.zeros((l2g.size, 2)))
+        comm, lambda: MasterSlaveLinks(problem, no_bc, np.zeros((l2g.size, 2)), slaves)
     )
     is_slave = np.zeros(n, dtype=bool)
     is_slave[links.slaves] = True

@@ -395,16 +395,19 @@ def report(records: list[dict], comm) -> None:
 def check(records: list[dict], comm) -> None:
     """The demo checks its own results.
 
-    * every run: a relative L2 error below 5 % (the coarsest mesh, h = 3, gives 2.8 % with FE);
+    * every run: a relative L2 error below 5 % (the coarsest mesh, h = 3, gives 2.8 % with FE),
+      15 % for the first-order couplings (master-slave 4.5 %, hybrid 9.1 % at h = 3);
     * couplings: L2 error within 1.5x pure FE at the same h when both ran;
     * a refinement series of 3 or more sizes: fitted L2 rate >= 1.8 and energy rate >= 0.9
       (optimal rates 2 and 1 for bilinear FE and linear-basis EFG);
     * master-slave, first order by construction: fitted L2 rate >= 1.1 instead of the two above.
     """
     failures = []
+    first_order = {"master-slave", "hybrid"}
     for r in records:
-        if not r["error_l2"] < 0.05:
-            failures.append(f"{r['method']} h={r['h']}: L2 error {r['error_l2']:.3e} >= 0.05")
+        cap = 0.15 if r["method"] in first_order else 0.05
+        if not r["error_l2"] < cap:
+            failures.append(f"{r['method']} h={r['h']}: L2 error {r['error_l2']:.3e} >= {cap}")
     fe = {r["h"]: r["error_l2"] for r in records if r["method"] == "fe"}
     # Master-slave is first order by construction (issue: "Master-slave measured and explained";
     # see dolfinx_meshfree.master_slave): the slave layer moves rigidly with the interface edges,
@@ -414,7 +417,6 @@ def check(records: list[dict], comm) -> None:
     # The hybrid coupling is checked the same way: its particle side (corrected SPH gradients,
     # not derivatives of its interpolant) converges at about first order, L2 1.5/1.2/1.7 for
     # h = 3..0.75 (Table II: 1.23/1.23/1.13 for the hybrid), errors 2.5-9x pure FE.
-    first_order = {"master-slave", "hybrid"}
     for r in records:
         if r["method"] in first_order:
             continue

@@ -39,6 +39,26 @@ def _points_in_cells(msh, points: np.ndarray, cells: np.ndarray) -> np.ndarray:
     return inside
 
 
+def _owned_cells(mesh, cells: npt.ArrayLike | None) -> np.ndarray:
+    """Validated owned local cells (default: every owned cell); an error on every rank when
+    they are not owned cells or when no rank names any (collective)."""
+    num_owned = mesh.topology.index_map(mesh.topology.dim).size_local
+
+    def check() -> np.ndarray:
+        c = np.arange(num_owned) if cells is None else np.asarray(cells, dtype=np.int64)
+        if c.ndim != 1 or (c.size and (c.min() < 0 or c.max() >= num_owned)):
+            raise ValueError(
+                f"cells must be owned local cell indices in [0, {num_owned}); got "
+                f"{c.min() if c.size else ''}..{c.max() if c.size else ''}"
+            )
+        return c
+
+    c = raise_on_all_ranks(mesh.comm, check)
+    if mesh.comm.allreduce(c.size) == 0:
+        raise ValueError("cells is empty on every rank: the patch has no cells")
+    return c
+
+
 class ParticleSet:
     """Particles with positions, volumes and MPI ownership.
 
@@ -154,25 +174,16 @@ class ParticleSet:
         (an irregular particle set; boundary points stay on the boundary). Collective.
         """
         comm = mesh.comm
-        tdim, gdim = mesh.topology.dim, mesh.geometry.dim
-        num_owned = mesh.topology.index_map(tdim).size_local
+        gdim = mesh.geometry.dim
 
         def check():
             if not (isinstance(spacing, int | float) and np.isfinite(spacing) and spacing > 0):
                 raise ValueError(f"spacing={spacing!r} must be a positive number")
             if not (0.0 <= jitter < 0.5):
                 raise ValueError(f"jitter={jitter} must lie in [0, 0.5)")
-            c = np.arange(num_owned) if cells is None else np.asarray(cells, dtype=np.int64)
-            if c.ndim != 1 or (c.size and (c.min() < 0 or c.max() >= num_owned)):
-                raise ValueError(
-                    f"cells must be owned local cell indices in [0, {num_owned}); got "
-                    f"{c.min() if c.size else ''}..{c.max() if c.size else ''}"
-                )
-            return c
 
-        c = raise_on_all_ranks(comm, check)
-        if comm.allreduce(c.size) == 0:
-            raise ValueError("cells is empty on every rank: the patch has no cells")
+        raise_on_all_ranks(comm, check)
+        c = _owned_cells(mesh, cells)
         nodes = mesh.geometry.x[_compat.geometry_dofmap(mesh)[c], :gdim].reshape(-1, gdim)
         lo = nodes.min(axis=0) if nodes.size else np.full(gdim, np.inf)
         hi = nodes.max(axis=0) if nodes.size else np.full(gdim, -np.inf)
@@ -200,21 +211,8 @@ class ParticleSet:
         they are identical on every rank.
         """
         comm = mesh.comm
-        tdim, gdim = mesh.topology.dim, mesh.geometry.dim
-        num_owned = mesh.topology.index_map(tdim).size_local
-
-        def check():
-            c = np.arange(num_owned) if cells is None else np.asarray(cells, dtype=np.int64)
-            if c.ndim != 1 or (c.size and (c.min() < 0 or c.max() >= num_owned)):
-                raise ValueError(
-                    f"cells must be owned local cell indices in [0, {num_owned}); got "
-                    f"{c.min() if c.size else ''}..{c.max() if c.size else ''}"
-                )
-            return c
-
-        c = raise_on_all_ranks(comm, check)
-        if comm.allreduce(c.size) == 0:
-            raise ValueError("cells is empty on every rank: the patch has no cells")
+        gdim = mesh.geometry.dim
+        c = _owned_cells(mesh, cells)
         nodes = np.unique(_compat.geometry_dofmap(mesh)[c].ravel())
         x = np.concatenate(comm.allgather(mesh.geometry.x[nodes, :gdim]))
         scale = np.abs(x).max() + 1.0

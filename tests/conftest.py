@@ -10,6 +10,9 @@ each test (as DOLFINx's own ``python/test/conftest.py`` does).
 import dolfinx_meshfree  # noqa: I001  (must come first: loads lane B's MPI)
 
 import gc
+import importlib.util
+import pathlib
+import tempfile
 
 import dolfinx
 import numpy as np
@@ -117,3 +120,24 @@ def efg_errors(msh, sol, beam):
 def fitted_rate(h, errors):
     """Slope of log(error) against log(h) by least squares (np.polyfit)."""
     return float(np.polyfit(np.log(h), np.log(errors), 1)[0])
+
+
+DEMOS = pathlib.Path(__file__).resolve().parents[1] / "demos"
+
+
+def load_demo(name: str, alias: str | None = None):
+    """Import ``demos/<name>.py`` as a module (the demos are scripts, not a package)."""
+    spec = importlib.util.spec_from_file_location(alias or f"demo_{name}", DEMOS / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture
+def shared_dir():
+    """A temporary directory whose path is the same on every rank (rank 0 makes it)."""
+    comm = MPI.COMM_WORLD
+    path = tempfile.mkdtemp() if comm.rank == 0 else None
+    path = comm.bcast(path, root=0)
+    yield pathlib.Path(path)
+    comm.Barrier()

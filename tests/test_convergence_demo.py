@@ -3,13 +3,12 @@ fitted FE rate, the patch-size sweep (pure EFG at fraction 1.0) and the self-che
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import pathlib
-import tempfile
 
 import numpy as np
 import pytest
+from conftest import load_demo
 from mpi4py import MPI
 
 DEMOS = pathlib.Path(__file__).resolve().parents[1] / "demos"
@@ -22,28 +21,11 @@ SERIES_KEYS = {
 }  # fmt: skip
 
 
-def load(name: str):
-    spec = importlib.util.spec_from_file_location(f"demo_{name}", DEMOS / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-@pytest.fixture
-def shared_dir():
-    """A temporary directory whose path is the same on every rank (rank 0 makes it)."""
-    comm = MPI.COMM_WORLD
-    path = tempfile.mkdtemp() if comm.rank == 0 else None
-    path = comm.bcast(path, root=0)
-    yield pathlib.Path(path)
-    comm.Barrier()
-
-
 def test_series_sweep_json_and_fe_rate(shared_dir):
     comm = MPI.COMM_WORLD
     out = shared_dir / "conv.json"
     prefix = shared_dir / "plots" / "conv"
-    demo = load("convergence")
+    demo = load_demo("convergence")
     result = demo.main(
         ["--method", "fe", "lagrange", "--h", "3", "1.5", "--repeat", "2",
          "--fractions", "0.25", "1.0", "--sweep-h", "3", "--json", str(out),
@@ -88,7 +70,7 @@ def test_series_sweep_json_and_fe_rate(shared_dir):
 
 
 def test_self_check_fails_on_a_coupling_worse_than_fe():
-    demo = load("convergence")
+    demo = load_demo("convergence")
     demo.FE_FACTOR = 0.5  # the Lagrange coupling is 0.9 x FE at h = 3
     with pytest.raises(SystemExit) as e:
         demo.main(["--method", "fe", "lagrange", "--h", "3", "--repeat", "1", "--fractions"])

@@ -3,35 +3,17 @@ non-zero (SystemExit) when a check fails; here we also check what they return an
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import pathlib
-import tempfile
 
 import dolfinx_meshfree as mf
 
 import numpy as np
 import pytest
+from conftest import load_demo
 from mpi4py import MPI
 
 DEMOS = pathlib.Path(__file__).resolve().parents[1] / "demos"
-
-
-def load(name: str):
-    spec = importlib.util.spec_from_file_location(f"demo_{name}", DEMOS / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-@pytest.fixture
-def shared_dir():
-    """A temporary directory whose path is the same on every rank (rank 0 makes it)."""
-    comm = MPI.COMM_WORLD
-    path = tempfile.mkdtemp() if comm.rank == 0 else None
-    path = comm.bcast(path, root=0)
-    yield pathlib.Path(path)
-    comm.Barrier()
 
 
 def test_cantilever_demo_series_json_and_probe(shared_dir):
@@ -42,7 +24,7 @@ def test_cantilever_demo_series_json_and_probe(shared_dir):
     if comm.rank == 0:
         np.save(pts_file, pts)
     comm.Barrier()
-    demo = load("cantilever")
+    demo = load_demo("cantilever")
     records = demo.main(
         ["--method", "fe", "efg", "--h", "3", "2", "1.5", "--json", str(out),
          "--probe-in", str(pts_file), "--probe-out", str(u_file)]
@@ -71,7 +53,7 @@ def test_cantilever_demo_rejects_probe_outside(shared_dir):
     if comm.rank == 0:
         np.save(pts_file, np.array([[60.0, 0.0]]))
     comm.Barrier()
-    demo = load("cantilever")
+    demo = load_demo("cantilever")
     with pytest.raises(mf.PointsOutsideMeshError, match="outside the mesh"):
         demo.main(["--method", "efg", "--h", "3", "--probe-in", str(pts_file),
                    "--probe-out", str(shared_dir / "u.npy")])  # fmt: skip
@@ -79,7 +61,7 @@ def test_cantilever_demo_rejects_probe_outside(shared_dir):
 
 @pytest.mark.parametrize("mesh", ["regular", "irregular"])
 def test_patch_test_demo_consistent(mesh, shared_dir):
-    demo = load("patch_test")
+    demo = load_demo("patch_test")
     rec = demo.main(["--method", "efg", "--mesh", mesh, "--consistent",
                      "--json", str(shared_dir / "p.json")])  # fmt: skip
     assert rec["max_error"] <= 1e-10
@@ -92,7 +74,7 @@ def test_plug_into_existing_model_demo(shared_dir):
     pass, and against Lamé the patch's hoop stress at the inner surface beats plain P1."""
     comm = MPI.COMM_WORLD
     out = shared_dir / "plug.json"
-    demo = load("plug_into_existing_model")
+    demo = load_demo("plug_into_existing_model")
     records = demo.main(["--h", "0.2", "0.1", "--coupling", "lagrange", "ramp", "--json", str(out)])
     for h in (0.2, 0.1):
         fe = next(r for r in records if r["method"] == "plain FE" and r["h"] == h)

@@ -4,7 +4,6 @@ serial; and the step-loaded rod (exact solution, demo)."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import pathlib
 import tempfile
@@ -16,7 +15,7 @@ from dolfinx_meshfree.waves import GaussianPulseRod, StepLoadedRod
 
 import numpy as np
 import pytest
-from conftest import CELL_TYPES, fitted_rate, rectangle
+from conftest import CELL_TYPES, fitted_rate, load_demo, rectangle
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -282,13 +281,6 @@ def test_bad_fixed_facets():
 
 
 # --- the demos -----------------------------------------------------------------------------------
-
-
-def load_demo(name: str):
-    spec = importlib.util.spec_from_file_location(f"demo_{name}", DEMOS / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 @pytest.fixture

@@ -3,10 +3,8 @@ exact rod solutions; serial and on 2 ranks."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import pathlib
-import tempfile
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
@@ -16,7 +14,7 @@ from dolfinx_meshfree.waves import GaussianPulseRod
 import numpy as np
 import pytest
 import ufl
-from conftest import CELL_TYPES, fitted_rate, rectangle
+from conftest import CELL_TYPES, fitted_rate, load_demo, rectangle
 from mpi4py import MPI
 
 DEMOS = pathlib.Path(__file__).resolve().parents[1] / "demos"
@@ -284,23 +282,6 @@ def test_probe_outside_the_body():
 
 
 # --- the demo ------------------------------------------------------------------------------------
-
-
-@pytest.fixture
-def shared_dir():
-    """A temporary directory whose path is the same on every rank (rank 0 makes it)."""
-    comm = MPI.COMM_WORLD
-    path = tempfile.mkdtemp() if comm.rank == 0 else None
-    path = comm.bcast(path, root=0)
-    yield pathlib.Path(path)
-    comm.Barrier()
-
-
-def load_demo(name: str):
-    spec = importlib.util.spec_from_file_location(f"demo_{name}", DEMOS / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def test_rod_gauss_demo_json_and_probe(shared_dir):

@@ -8,7 +8,6 @@ import csv
 import io
 import os
 import pathlib
-import tempfile
 import xml.etree.ElementTree as ET
 
 import dolfinx_meshfree as mf
@@ -19,22 +18,12 @@ from dolfinx_meshfree.waves import GaussianPulseRod
 
 import numpy as np
 import pytest
-from conftest import CELL_TYPES, rectangle
+from conftest import CELL_TYPES, load_demo, rectangle
 from mpi4py import MPI
 
 ROD = GaussianPulseRod()
 STEEL = mf.LinearElastic(ROD.E, 0.0, "strain", rho=ROD.rho)
 LENGTH, HEIGHT, H = 60.0, 5.0, 2.5
-
-
-@pytest.fixture
-def shared_dir():
-    """A temporary directory whose path is the same on every rank (rank 0 makes it)."""
-    comm = MPI.COMM_WORLD
-    path = tempfile.mkdtemp() if comm.rank == 0 else None
-    path = comm.bcast(path, root=0)
-    yield pathlib.Path(path)
-    comm.Barrier()
 
 
 def build(method: str) -> ExplicitDynamics:
@@ -270,12 +259,7 @@ def test_progress_bar_on_a_terminal_redraws_in_place_at_most_every_interval():
 
 
 def test_rod_gauss_demo_writes_xdmf_per_method(shared_dir):
-    import importlib.util
-
-    path = pathlib.Path(__file__).resolve().parents[1] / "demos" / "rod_gauss.py"
-    spec = importlib.util.spec_from_file_location("demo_rod_gauss_io", path)
-    demo = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(demo)
+    demo = load_demo("rod_gauss", "demo_rod_gauss_io")
     prefix = shared_dir / "gauss"
     demo.main(["--method", "fe", "lagrange", "--nodes", "200", "--t-end", "0.002",
                "--no-check", "--xdmf", str(prefix)])  # fmt: skip

@@ -5,14 +5,13 @@ their measured error, and the demo's self-check fails when a method expected to 
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import pathlib
-import tempfile
 
 import dolfinx_meshfree as mf
 
 import pytest
+from conftest import load_demo
 from mpi4py import MPI
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -20,29 +19,12 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 GMSH_CELLS = {"quadrilateral": 55, "triangle": 106}
 
 
-def load(name: str):
-    spec = importlib.util.spec_from_file_location(f"demo_{name}", ROOT / "demos" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-@pytest.fixture
-def shared_dir():
-    """A temporary directory whose path is the same on every rank (rank 0 makes it)."""
-    comm = MPI.COMM_WORLD
-    path = tempfile.mkdtemp() if comm.rank == 0 else None
-    path = comm.bcast(path, root=0)
-    yield pathlib.Path(path)
-    comm.Barrier()
-
-
 @pytest.mark.parametrize("cell", ["quadrilateral", "triangle"])
 def test_exact_methods_on_the_gmsh_mesh(cell, shared_dir):
     """FE, and EFG and the Lagrange coupling with consistent integration: 1e-10 (measured
     1e-15 to 3e-14) on the unstructured mesh, serial and on 2 ranks."""
     comm = MPI.COMM_WORLD
-    demo = load("patch_test")
+    demo = load_demo("patch_test")
     out = shared_dir / "p.json"
     for method in ("fe", "efg", "lagrange"):
         rec = demo.main(["--method", method, "--mesh", "irregular", "--cell", cell,
@@ -62,7 +44,7 @@ def test_ramp_is_reported_not_judged():
     """The ramp coupling refuses consistent integration (reported as MISSED, error n/a) and
     misses 1e-6 with Gauss quadrature at its defaults (measured 1e-4 to 6e-4 on the gmsh
     meshes): reported as MISSED with the figure, the demo still succeeds."""
-    demo = load("patch_test")
+    demo = load_demo("patch_test")
     rec = demo.main(["--method", "ramp", "--mesh", "irregular", "--consistent"])
     if rec["max_error"] is None:
         assert rec["status"] == "MISSED" and "consistent=True is not available" in rec["note"]
@@ -78,7 +60,7 @@ def test_all_methods_table_and_self_check(shared_dir):
     """``--method all``: one record per method, the expected ones pass; a method wrongly
     expected to pass (bridging with Gauss quadrature, 3.5e-2) makes the demo exit with 1."""
     comm = MPI.COMM_WORLD
-    demo = load("patch_test")
+    demo = load_demo("patch_test")
     out = shared_dir / "all.json"
     records = demo.main(["--method", "all", "--mesh", "irregular", "--consistent",
                          "--json", str(out)])  # fmt: skip
@@ -96,7 +78,7 @@ def test_all_methods_table_and_self_check(shared_dir):
 
 
 def test_missing_mesh_names_the_generator(capsys):
-    demo = load("patch_test")
+    demo = load_demo("patch_test")
     with pytest.raises(SystemExit):
         demo.main(["--method", "fe", "--mesh", "irregular", "--cells", "5"])
     assert "meshes/make_meshes.py --cells 5" in capsys.readouterr().err
@@ -106,7 +88,7 @@ def test_dense_gauss_preset_reaches_the_gauss_target_without_vci():
     """``--preset dense-gauss`` (quartic weight, d_max 3, Gauss degree 49): EFG and the Lagrange
     coupling meet the 1e-6 Gauss target without VCI on the gmsh quadrilaterals (measured
     6.2e-7 and 8.8e-8; 1.2e-4 to 6e-4 at the defaults), and the demo holds them to it."""
-    demo = load("patch_test")
+    demo = load_demo("patch_test")
     for method in ("efg", "lagrange"):
         rec = demo.main(["--method", method, "--mesh", "irregular", "--preset", "dense-gauss"])
         assert (rec["weight"], rec["dilation"], rec["quadrature_degree"]) == ("quartic", 3.0, 49)
@@ -119,7 +101,7 @@ def test_dense_gauss_preset_reaches_the_gauss_target_without_vci():
 def test_dense_gauss_preset_expectations():
     """Without the preset, or with one of its settings overridden, a Gauss miss is reported
     (MISSED, exit 0); under the preset's own settings a miss fails the demo."""
-    demo = load("patch_test")
+    demo = load_demo("patch_test")
     rec = demo.main(["--method", "lagrange", "--mesh", "irregular"])
     assert (rec["dilation"], rec["quadrature_degree"], rec["preset"]) == (2.0, 7, None)
     assert rec["status"] == "MISSED" and not rec["expected_to_pass"]

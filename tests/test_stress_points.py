@@ -5,7 +5,6 @@ of the slave constraint, convergence, parallel = serial, bad options."""
 
 from __future__ import annotations
 
-import importlib.util
 import pathlib
 
 import dolfinx_meshfree as mf
@@ -17,7 +16,7 @@ from dolfinx_meshfree.waves import GaussianPulseRod
 
 import numpy as np
 import pytest
-from conftest import CELL_TYPES, fitted_rate, rectangle
+from conftest import CELL_TYPES, fitted_rate, load_demo, rectangle
 from mpi4py import MPI
 
 DEMOS = pathlib.Path(__file__).resolve().parents[1] / "demos"
@@ -245,9 +244,7 @@ def test_bad_options_raise_on_every_rank():
 
 
 def test_rod_gauss_demo_rows():
-    spec = importlib.util.spec_from_file_location("demo_rod_gauss_sp", DEMOS / "rod_gauss.py")
-    demo = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(demo)
+    demo = load_demo("rod_gauss", "demo_rod_gauss_sp")
     recs = demo.main(["--method", "efg", "master-slave", "--nodes", "600",
                       "--integration", "stress-points", "--slaves", "coincident"])  # fmt: skip
     assert [r["variant"] for r in recs] == ["stress-pts", "coincident stress-pts"]

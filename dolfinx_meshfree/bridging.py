@@ -246,11 +246,10 @@ def solve_bridging(problem, solver: str = "mumps"):
     p = problem.penalty
     pdofs = P.petsc_dofs(2)
     fe_layout, l2g = problem._fe_layout()
-    pl = Layout(2 * P.layout.size_local, 2 * n, 2 * P.layout.start)
+    pl = P.dof_layout()
     t0 = time.perf_counter()
 
     band = BridgingBand(problem, problem.overlap)
-    dofs = _compat.dofmap_array(V)
 
     # particle side: Gauss quadrature on the patch cells, weights times alpha in the band
     q = cell_quadrature(msh, deg, P.cells)
@@ -266,8 +265,7 @@ def solve_bridging(problem, solver: str = "mumps"):
     )
     _weight_band_facets(band, dq)
     # active FE nodes: nodes of FE cells and band cells
-    fe_nodes = dofs[np.concatenate([patch.fe_cells, band.cells])].ravel()
-    active = problem._node_flags(fe_nodes)
+    active = problem._fe_active(np.concatenate([patch.fe_cells, band.cells]))
     fixed_local = is_bc | ~active
     x_fix = np.where(np.repeat(is_bc, 2), ubc.x.array, 0.0)
 
@@ -504,7 +502,7 @@ def bridging_operators(problem):
     pdofs = P.petsc_dofs(2)
     dof_map = pdofs.ravel()
     fe_layout, l2g = problem._fe_layout()
-    pl = problem._particle_layout()
+    pl = P.dof_layout()
     band = BridgingBand(problem, problem.overlap)
     q = cell_quadrature(msh, problem.quadrature_degree, P.cells)
     w = q.weights.copy()

@@ -318,24 +318,12 @@ class CoupledElasticity:
         return facets[~in_patch], facets[in_patch]
 
     def _fe_layout(self) -> tuple[Layout, np.ndarray]:
-        imap = self.V.dofmap.index_map
-        l2g = np.asarray(
-            imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
-        )
-        return Layout(2 * imap.size_local, 2 * imap.size_global, 2 * imap.local_range[0]), l2g
+        return fe_dof_layout(self.V)
 
     def cell_indicator(self, owned_flags: np.ndarray) -> dolfinx.fem.Function:
         """DG0 Function equal to 1 on the owned cells flagged in ``owned_flags`` (and on their
         ghost copies), 0 elsewhere (collective)."""
-        msh = self.V.mesh
-        Q = _compat.scalar_function_space(msh, "DG", 0)
-        chi = dolfinx.fem.Function(Q)
-        dof_of_cell = _compat.dofmap_array(Q)[:, 0]
-        n_owned = msh.topology.index_map(msh.topology.dim).size_local
-        chi.x.array[:] = 0.0
-        chi.x.array[dof_of_cell[:n_owned]] = np.asarray(owned_flags[:n_owned], dtype=float)
-        chi.x.scatter_forward()
-        return chi
+        return cell_indicator(self.V.mesh, owned_flags)
 
     def fe_form(self, weight) -> ufl.Form:
         """The FE bilinear form weighted by ``weight`` (a scalar UFL expression: a cell indicator,
@@ -364,12 +352,7 @@ class CoupledElasticity:
 
     def _node_flags(self, local_nodes: np.ndarray) -> np.ndarray:
         """Flag nodes (local block indices) on every rank that has them (collective)."""
-        f = dolfinx.fem.Function(self.V)
-        f.x.array[:] = 0.0
-        f.x.array[2 * np.asarray(local_nodes, dtype=np.int64)] = 1.0
-        _compat.scatter_reverse_add(f)
-        f.x.scatter_forward()
-        return f.x.array[0::2] > 0.5
+        return node_flags(self.V, local_nodes)
 
     def _interface_multipliers(self, iq: QuadraturePoints, t_fe: sp.csr_matrix):
         """The multiplier basis of the compatibility coupling at the interface quadrature points
@@ -670,7 +653,7 @@ class CoupledElasticity:
         """Append the multiplier field of essential conditions on patch facets (it couples to
         field 1, the particles) to ``blocks``/``rhs``; new PETSc objects go to ``mats``."""
         P, comm = self.patch.particles, self.patch.comm
-        pl = Layout(2 * P.layout.size_local, 2 * P.num_particles, 2 * P.layout.start)
+        pl = P.dof_layout()
         Gd, d_rows, d_vals, dl = facet_multipliers(P, patch_bc, dq, dtabs, self.material.E)
         if dl.size_global:
             D = create_aij(comm, Gd, dl, pl)
@@ -760,10 +743,6 @@ class CoupledElasticity:
             return ramp_operators(self)
         return self._interface_operators()
 
-    def _particle_layout(self) -> Layout:
-        P = self.patch.particles
-        return Layout(2 * P.layout.size_local, 2 * P.num_particles, 2 * P.layout.start)
-
     def _fe_active(self, cells: np.ndarray | None = None) -> np.ndarray:
         """Flag of every local FE node of the given owned cells (default: the FE cells)."""
         cells = self.patch.fe_cells if cells is None else cells
@@ -783,7 +762,7 @@ class CoupledElasticity:
         V, patch, P = self.V, self.patch, self.patch.particles
         comm, n = patch.comm, patch.particles.num_particles
         fe_layout, l2g = self._fe_layout()
-        pl = self._particle_layout()
+        pl = self.patch.particles.dof_layout()
         boundary = patch.boundary() if self.consistent else None
         Kp_loc, q, tq, _ = particle_stiffness(
             P,
@@ -851,7 +830,7 @@ class CoupledElasticity:
         s = self.material.E
         pdofs = P.petsc_dofs(2)
         fe_layout, l2g = self._fe_layout()
-        pl = Layout(2 * P.layout.size_local, 2 * n, 2 * P.layout.start)
+        pl = P.dof_layout()
         t0 = time.perf_counter()
 
         # particle side
@@ -862,8 +841,7 @@ class CoupledElasticity:
         # essential conditions: FE side strongly, patch side by multipliers
         _, patch_bc, dq, dtabs, ubc, is_bc = self._essential_conditions()
         # FE nodes that no FE cell supports
-        fe_nodes = _compat.dofmap_array(V)[patch.fe_cells].ravel()
-        active = self._node_flags(fe_nodes)
+        active = self._fe_active()
 
         # interface multipliers
         if self.coupling == "lagrange":
@@ -1001,3 +979,37 @@ def facet_nodes(V, facets: np.ndarray) -> np.ndarray:
     node_of_vertex[np.asarray(c2v.array)] = _compat.dofmap_array(V).ravel()
     fv = np.asarray(f2v.array).reshape(-1, 2)[np.asarray(facets, dtype=np.int64)]
     return node_of_vertex[fv]
+
+
+def fe_dof_layout(V) -> tuple[Layout, np.ndarray]:
+    """PETSc layout of the interleaved dofs of a vector P1/Q1 space (DOLFINx's numbering), and
+    the global node number of every local node."""
+    imap = V.dofmap.index_map
+    l2g = np.asarray(
+        imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
+    )
+    return Layout(2 * imap.size_local, 2 * imap.size_global, 2 * imap.local_range[0]), l2g
+
+
+def node_flags(V, local_nodes: np.ndarray) -> np.ndarray:
+    """Flag nodes (local block indices) of ``V`` on every rank that has them, owned or ghost
+    (collective)."""
+    f = dolfinx.fem.Function(V)
+    f.x.array[:] = 0.0
+    f.x.array[2 * np.asarray(local_nodes, dtype=np.int64)] = 1.0
+    _compat.scatter_reverse_add(f)
+    f.x.scatter_forward()
+    return f.x.array[0::2] > 0.5
+
+
+def cell_indicator(msh, owned_flags: np.ndarray) -> dolfinx.fem.Function:
+    """DG0 Function equal to 1 on the owned cells flagged in ``owned_flags`` (and on their ghost
+    copies), 0 elsewhere (collective)."""
+    Q = _compat.scalar_function_space(msh, "DG", 0)
+    chi = dolfinx.fem.Function(Q)
+    dof_of_cell = _compat.dofmap_array(Q)[:, 0]
+    n_owned = msh.topology.index_map(msh.topology.dim).size_local
+    chi.x.array[:] = 0.0
+    chi.x.array[dof_of_cell[:n_owned]] = np.asarray(owned_flags[:n_owned], dtype=float)
+    chi.x.scatter_forward()
+    return chi

@@ -272,7 +272,7 @@ class EFGElasticity:
         setup = self._setup_time + time.perf_counter() - t0 - kt["assemble"]
 
         t1 = time.perf_counter()
-        udofs = Layout(2 * P.layout.size_local, 2 * n, 2 * P.layout.start)
+        udofs = P.dof_layout()
         K = create_aij(comm, Kg, udofs, udofs)
 
         f_loc = np.zeros(2 * n)

@@ -72,7 +72,13 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from . import _compat
-from .coupled import CoupledSolution, CouplingOperators
+from .coupled import (
+    CoupledSolution,
+    CouplingOperators,
+    cell_indicator,
+    fe_dof_layout,
+    node_flags,
+)
 from .efg import _vector_values, facet_multipliers
 from .fe_points import tabulate_in_cells
 from .hybrid_sph import CorrectedSPH, hybrid_points, particle_spacing_median
@@ -235,17 +241,6 @@ class HybridElasticity:
 
     # -- numbering ------------------------------------------------------------------------------
 
-    def _fe_layout(self) -> tuple[Layout, np.ndarray]:
-        imap = self.V.dofmap.index_map
-        l2g = np.asarray(
-            imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
-        )
-        return Layout(2 * imap.size_local, 2 * imap.size_global, 2 * imap.local_range[0]), l2g
-
-    def _particle_layout(self) -> Layout:
-        P = self.patch.particles
-        return Layout(2 * P.layout.size_local, 2 * P.num_particles, 2 * P.layout.start)
-
     def _node_map(self) -> sp.csr_matrix:
         """``Z = diag(I, E)``: values of the hybrid sums' points from [particles | FE nodes]."""
         n = self.patch.particles.num_particles
@@ -258,27 +253,6 @@ class HybridElasticity:
         n = P.num_particles
         N = self.hybrid.interpolation.shape[1]
         return np.concatenate([P.petsc_dofs(2).ravel(), 2 * n + np.arange(2 * N)])
-
-    def _node_flags(self, local_nodes: np.ndarray) -> np.ndarray:
-        """Flag the given local FE nodes on every rank that has them (collective)."""
-        f = dolfinx.fem.Function(self.V)
-        f.x.array[:] = 0.0
-        f.x.array[2 * np.asarray(local_nodes, dtype=np.int64)] = 1.0
-        _compat.scatter_reverse_add(f)
-        f.x.scatter_forward()
-        return f.x.array[0::2] > 0.5
-
-    def _fe_indicator(self) -> dolfinx.fem.Function:
-        """DG0 indicator of the FE cells (owned and ghost)."""
-        msh = self.V.mesh
-        Q = _compat.scalar_function_space(msh, "DG", 0)
-        chi = dolfinx.fem.Function(Q)
-        dof_of_cell = _compat.dofmap_array(Q)[:, 0]
-        n_local = self.patch.in_patch.size
-        chi.x.array[:] = 0.0
-        chi.x.array[dof_of_cell[:n_local]] = (~self.patch.in_patch).astype(float)
-        chi.x.scatter_forward()
-        return chi
 
     def _split(self, facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Exterior facets beside FE cells and beside patch cells."""
@@ -334,7 +308,7 @@ class HybridElasticity:
         target[:n] = et.T @ (eq.weights[:, None] * eq.normals)
         iq = facet_quadrature(msh, patch.interface_facets, deg, patch.interface_patch_cells)
         it = tabulate_in_cells(V, iq.points, patch.interface_fe_cells[_facet_index(iq)], 0)
-        _, l2g = self._fe_layout()
+        _, l2g = fe_dof_layout(self.V)
         fl = it.values.T @ (iq.weights[:, None] * iq.normals)  # (local FE nodes, 2)
         np.add.at(target, n + l2g[: fl.shape[0]], fl)
         integral = np.stack([g.T @ weights for g in grads], axis=1)
@@ -388,7 +362,7 @@ class HybridElasticity:
         xe = ends.reshape(-1, 2)  # the two end nodes of each edge
         ne = np.repeat(normal, 2, axis=0)
         half = np.repeat(0.5 * length, 2)
-        _, l2g = self._fe_layout()
+        _, l2g = fe_dof_layout(self.V)
         tab = tabulate_in_cells(V, xe, np.repeat(fe_cells, 2), derivatives=0).values.tocoo()
         at_node = tab.data > 0.5  # N_a(X_k) = 1 at the edge's own nodes
         node = np.full(xe.shape[0], -1, dtype=np.int64)
@@ -444,8 +418,8 @@ class HybridElasticity:
         t0 = time.perf_counter()
         comm, P = self.comm, self.patch.particles
         n = P.num_particles
-        fe_layout, _ = self._fe_layout()
-        pl = self._particle_layout()
+        fe_layout, _ = fe_dof_layout(self.V)
+        pl = self.patch.particles.dof_layout()
         K = self.particle_energy_matrix()
         if self.variant == "HA-S":  # particle rows from the energy, FE rows from tractions
             keep = K.row < 2 * n
@@ -465,7 +439,7 @@ class HybridElasticity:
         K_pf = create_aij(comm, block(p, f, (2 * n, N2)), pl, fe_layout)
         K_fp = create_aij(comm, block(f, p, (N2, 2 * n)), fe_layout, pl)
         K_ff = create_aij(comm, block(f, f, (N2, N2)), fe_layout, fe_layout)
-        chi = self._fe_indicator()
+        chi = cell_indicator(self.V.mesh, ~self.patch.in_patch)
         u, v = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
         a = chi * ufl.inner(self.material.ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx
         K_fe = _compat.assemble_matrix(_compat.create_form(a))
@@ -473,7 +447,6 @@ class HybridElasticity:
         K_ff.destroy()
         q = self.stress_points()
         table = raise_on_all_ranks(comm, lambda: self.evaluator.tabulate(q.points, 0))
-        fe_nodes = _compat.dofmap_array(self.V)[self.patch.fe_cells].ravel()
         return CouplingOperators(
             coupling="hybrid",
             K_fe=K_fe,
@@ -481,7 +454,7 @@ class HybridElasticity:
             K_fp=K_fp,
             K_pf=K_pf,
             fe_weight=chi,
-            fe_active=self._node_flags(fe_nodes),
+            fe_active=node_flags(self.V, _compat.dofmap_array(self.V)[self.patch.fe_cells].ravel()),
             particle_quadrature=q,
             particle_table=table.values.tocsr(),
             fe_layout=fe_layout,
@@ -495,8 +468,8 @@ class HybridElasticity:
         """Traction loads: FE basis on FE facets, the particles' interpolant on patch facets."""
         V, comm, msh = self.V, self.comm, self.V.mesh
         P = self.patch.particles
-        fe_layout, l2g = self._fe_layout()
-        pl = self._particle_layout()
+        fe_layout, l2g = fe_dof_layout(self.V)
+        pl = self.patch.particles.dof_layout()
         deg = max(self.quadrature_degree, 4)
         rows, vals = [np.zeros(0, np.int64)], [np.zeros(0)]
         f_p = np.zeros(2 * P.num_particles)
@@ -543,7 +516,7 @@ class HybridElasticity:
         ops = self.operators()
         b_fe, b_p = self._loads()
         assemble = time.perf_counter() - t0
-        fe_layout, l2g = self._fe_layout()
+        fe_layout, l2g = fe_dof_layout(self.V)
         n_owned = V.dofmap.index_map.size_local
         # strong conditions on FE facets, zero on inactive FE nodes
         fixed = ~ops.fe_active.copy()
@@ -552,8 +525,8 @@ class HybridElasticity:
         patch_bc, dq = [], []
         for facets, fn in self._dirichlet:
             f_fe, f_pf = self._split(facets)
-            flags = self._node_flags(
-                dolfinx.fem.locate_dofs_topological(V, msh.topology.dim - 1, f_fe)
+            flags = node_flags(
+                self.V, dolfinx.fem.locate_dofs_topological(V, msh.topology.dim - 1, f_fe)
             )
             xn = coords[flags]
             vals = raise_on_all_ranks(
@@ -591,7 +564,7 @@ class HybridElasticity:
         if patch_bc:
             Gd, d_rows, d_vals, ml = facet_multipliers(P, patch_bc, dq, dtabs, self.material.E)
             if ml.size_global:
-                pl = self._particle_layout()
+                pl = self.patch.particles.dof_layout()
                 D = create_aij(comm, Gd, ml, pl)
                 DT = create_aij(comm, Gd.T.tocsr(), pl, ml)
                 blocks = [[K_fe, K_fp, None], [K_pf, K_p, DT], [None, D, None]]

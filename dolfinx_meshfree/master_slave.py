@@ -250,7 +250,7 @@ def solve_master_slave(problem, solver: str = "mumps"):
     s = problem.material.E
     pdofs = P.petsc_dofs(2)
     fe_layout, _ = problem._fe_layout()
-    pl = Layout(2 * P.layout.size_local, 2 * n, 2 * P.layout.start)
+    pl = P.dof_layout()
     t0 = time.perf_counter()
 
     boundary = patch.boundary() if problem.consistent else None
@@ -258,8 +258,7 @@ def solve_master_slave(problem, solver: str = "mumps"):
 
     # essential conditions: FE side strongly, patch side by multipliers
     _, patch_bc, dq, dtabs, ubc, is_bc = problem._essential_conditions()
-    fe_nodes = _compat.dofmap_array(V)[patch.fe_cells].ravel()
-    active = problem._node_flags(fe_nodes)
+    active = problem._fe_active()
 
     links = raise_on_all_ranks(
         comm, lambda: MasterSlaveLinks(problem, is_bc, ubc.x.array.reshape(-1, 2))
@@ -435,7 +434,7 @@ def master_slave_operators(problem, integration: str = "cells", slaves: str = "l
     n = P.num_particles
     pdofs = P.petsc_dofs(2)
     fe_layout, l2g = problem._fe_layout()
-    pl = problem._particle_layout()
+    pl = P.dof_layout()
     boundary = patch.boundary() if problem.consistent else None
     Kp_loc, q, tq, _ = particle_stiffness(
         P,

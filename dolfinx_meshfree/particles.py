@@ -220,6 +220,10 @@ class ParticleSet:
         _, first = np.unique(key, axis=0, return_index=True)
         return cls(x[first], comm=comm, mesh=mesh, cells=c)
 
+    def dof_layout(self, bs: int = 2) -> Layout:
+        """PETSc layout of the particles' ``bs`` interleaved dofs (owner by owner)."""
+        return Layout(bs * self.layout.size_local, bs * self.num_particles, bs * self.layout.start)
+
     def petsc_dofs(self, bs: int = 2) -> np.ndarray:
         """PETSc dof numbers (n, bs) of each particle's components."""
         return bs * self.petsc_index[:, None] + np.arange(bs)[None, :]

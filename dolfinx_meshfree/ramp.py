@@ -50,7 +50,7 @@ from .efg import _vector_values, particle_stiffness
 from .fe_points import tabulate_in_cells
 from .mls import MLS
 from .operators import consistent_gradients, load_vector, stiffness_matrix
-from .parallel import Layout, raise_on_all_ranks
+from .parallel import raise_on_all_ranks
 from .petsc import create_aij, create_vector
 from .quadrature import boundary_facets, cell_quadrature, facet_quadrature
 from .tables import ShapeTable
@@ -242,7 +242,7 @@ def solve_ramp(problem, solver: str = "mumps"):
     n = P.num_particles
     pdofs = P.petsc_dofs(2)
     fe_layout, l2g = problem._fe_layout()
-    pl = Layout(2 * P.layout.size_local, 2 * n, 2 * P.layout.start)
+    pl = P.dof_layout()
     t0 = time.perf_counter()
 
     blend = RampInterface(problem, cubic=RAMPS[problem.coupling])
@@ -273,8 +273,7 @@ def solve_ramp(problem, solver: str = "mumps"):
         dq.append(iq)
         dtabs.append(ShapeTable(iq.points, tab.values[:, n_loc:].tocsr(), []))
     # active FE nodes: nodes of FE cells (interface cells included) that are not on Gamma_E
-    fe_nodes = _compat.dofmap_array(V)[patch.fe_cells].ravel()
-    active = problem._node_flags(fe_nodes) & ~blend.on_gamma
+    active = problem._fe_active() & ~blend.on_gamma
     fixed_local = is_bc | ~active
 
     setup = problem._setup + time.perf_counter() - t0 - kt["assemble"]
@@ -474,7 +473,7 @@ def ramp_operators(problem):
     n = P.num_particles
     pdofs = P.petsc_dofs(2)
     fe_layout, l2g = problem._fe_layout()
-    pl = problem._particle_layout()
+    pl = P.dof_layout()
     blend = RampInterface(problem, cubic=RAMPS[problem.coupling])
     n_loc = blend.num_fe_columns
     Kp_loc, pq, ptab, _ = particle_stiffness(

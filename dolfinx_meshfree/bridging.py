@@ -352,7 +352,6 @@ def solve_bridging(problem, solver: str = "mumps"):
         K_pen = create_aij(comm, K_ff, fe_layout, fe_layout)
         K_fe.axpy(1.0, K_pen, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
         mats.append(K_pen)
-    n_owned = V.dofmap.index_map.size_local
     x_bc = problem._fix_fe_rows(K_fe, b_fe, fixed_local, x_fix)
     Kp = create_aij(comm, Kp_loc, pl, pl)
     b_p = create_vector(comm, pl, pdofs.ravel(), f_p)
@@ -378,11 +377,7 @@ def solve_bridging(problem, solver: str = "mumps"):
         mls=problem.mls,
         patch=patch,
         timings={"setup": setup, "assemble": assemble, "solve": solve},
-        sizes={
-            "fe_dofs": 2 * comm.allreduce(int(np.sum(active[:n_owned]))),
-            "particle_dofs": 2 * n,
-            "multiplier_dofs": ml.size_global + dl.size_global,
-        },
+        sizes=problem._sizes(active, ml.size_global + dl.size_global),
     )
     sol.band = band
     return sol

@@ -743,6 +743,16 @@ class CoupledElasticity:
             return ramp_operators(self)
         return self._interface_operators()
 
+    def _sizes(self, active: np.ndarray, multiplier_dofs: int) -> dict:
+        """The system's sizes for :attr:`CoupledSolution.sizes`: active FE dofs (from the flags
+        of the local nodes), particle dofs and multiplier dofs (collective)."""
+        n_owned = self.V.dofmap.index_map.size_local
+        return {
+            "fe_dofs": 2 * self.patch.comm.allreduce(int(np.sum(active[:n_owned]))),
+            "particle_dofs": 2 * self.patch.particles.num_particles,
+            "multiplier_dofs": multiplier_dofs,
+        }
+
     def _fe_active(self, cells: np.ndarray | None = None) -> np.ndarray:
         """Flag of every local FE node of the given owned cells (default: the FE cells)."""
         cells = self.patch.fe_cells if cells is None else cells
@@ -823,7 +833,7 @@ class CoupledElasticity:
             from .ramp import solve_ramp
 
             return solve_ramp(self, solver)
-        V, patch, P = self.V, self.patch, self.patch.particles
+        patch, P = self.patch, self.patch.particles
         comm = patch.comm
         deg = self.quadrature_degree
         n = P.num_particles
@@ -860,7 +870,6 @@ class CoupledElasticity:
         b_fe, f_p = self._traction_loads()
         cat = np.concatenate
         # strong conditions and inactive dofs on K_FE: zero rows and columns, lift into b_fe
-        n_owned = V.dofmap.index_map.size_local
         x_bc = self._fix_fe_rows(
             K_fe, b_fe, is_bc | ~active, np.where(is_bc[:, None], ubc.x.array.reshape(-1, 2), 0.0)
         )
@@ -883,11 +892,7 @@ class CoupledElasticity:
             mls=self.mls,
             patch=patch,
             timings={"setup": setup, "assemble": assemble, "solve": solve},
-            sizes={
-                "fe_dofs": 2 * comm.allreduce(int(np.sum(active[:n_owned]))),
-                "particle_dofs": 2 * n,
-                "multiplier_dofs": ml.size_global + dl.size_global,
-            },
+            sizes=self._sizes(active, ml.size_global + dl.size_global),
         )
 
 

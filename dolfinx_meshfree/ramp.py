@@ -353,7 +353,6 @@ def solve_ramp(problem, solver: str = "mumps"):
     K_fe = _fe_stiffness(problem, blend)
     K_int = create_aij(comm, K_ff, fe_layout, fe_layout)
     K_fe.axpy(1.0, K_int, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-    n_owned = V.dofmap.index_map.size_local
     x_bc = problem._fix_fe_rows(K_fe, b_fe, fixed_local, x_fix)
     Kp = create_aij(comm, Kp_loc, pl, pl)
     b_p = create_vector(comm, pl, pdofs.ravel(), f_p)
@@ -371,11 +370,7 @@ def solve_ramp(problem, solver: str = "mumps"):
         mls=problem.mls,
         patch=patch,
         timings={"setup": setup, "assemble": assemble, "solve": solve},
-        sizes={
-            "fe_dofs": 2 * comm.allreduce(int(np.sum(active[:n_owned]))),
-            "particle_dofs": 2 * n,
-            "multiplier_dofs": dl.size_global,
-        },
+        sizes=problem._sizes(active, dl.size_global),
         interface=blend,
     )
 

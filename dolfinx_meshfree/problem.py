@@ -183,7 +183,7 @@ class CoupledLinearProblem:
             X, _ = _compat.quadrature_rule(cname, deg)
             for itg in cell_integrals:
                 values = _replace_test_function(itg.integrand(), v, msh)
-                expr = _compat.create_expression(values, X)  # collective
+                expr = _compat.create_expression(values, X, msh)  # collective
                 cells = np.intersect1d(_integral_entities(itg, msh), patch.cells)
                 q = cell_quadrature(msh, deg, cells)
                 b = _compat.eval_expression(expr, msh, cells, 2).reshape(-1, 2)

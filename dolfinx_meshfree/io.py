@@ -28,7 +28,6 @@ import math
 import os
 import pathlib
 import sys
-import time as _time
 import xml.etree.ElementTree as ET
 from typing import IO, TYPE_CHECKING
 
@@ -106,13 +105,14 @@ def check_prefix(prefix: str | os.PathLike, comm: MPI.Comm) -> pathlib.Path:
 
 
 class ProgressBar:
-    """A dependency-free progress bar on rank 0's ``stderr`` for long runs.
+    """A progress bar on rank 0's ``stderr`` for long runs, drawn by ``tqdm``.
 
-    On a terminal the line is redrawn in place (``\\r``) at most every ``interval`` seconds;
-    forced onto a stream that is not a terminal, one line is printed per ``step_percent`` of the
-    run. In automatic mode (``enabled=None``) nothing is drawn before ``delay`` seconds have
-    passed, so that short runs stay silent. Other ranks print nothing; ``update`` never
-    communicates, so calling it on some ranks only is safe.
+    On a terminal the line is redrawn in place at most every ``interval`` seconds; forced onto a
+    stream that is not a terminal, it is redrawn once per ``step_percent`` of the run (each
+    draw starts with ``\\r``, so ``str.splitlines`` gives one line per draw). In automatic
+    mode (``enabled=None``) nothing is drawn before ``delay`` seconds have passed, so that short
+    runs stay silent. Other ranks print nothing; ``update`` never communicates, so calling it on
+    some ranks only is safe.
 
     Args:
         total: Number of steps of the run (> 0).
@@ -121,9 +121,9 @@ class ProgressBar:
             ``None``: on when the stream is a terminal.
         stream: Where to print (default ``sys.stderr`` at construction).
         interval: Seconds between redraws on a terminal.
-        step_percent: Percent of the run between lines when the stream is not a terminal.
+        step_percent: Percent of the run between draws when the stream is not a terminal.
         label: Text before the bar.
-        delay: Seconds before the first line; default 2 in automatic mode, 0 when forced.
+        delay: Seconds before the first draw; default 2 in automatic mode, 0 when forced.
     """
 
     def __init__(
@@ -144,73 +144,52 @@ class ProgressBar:
         comm = MPI.COMM_WORLD if comm is None else comm
         self.stream = sys.stderr if stream is None else stream
         self.total = int(total)
-        self.interval = float(interval)
-        self.step_percent = float(step_percent)
-        self.label = label
         self.tty = _isatty(self.stream)
         on = self.tty if enabled is None else enabled
         self.enabled = bool(on) and comm.rank == 0
-        self.delay = float(delay) if delay is not None else (2.0 if enabled is None else 0.0)
-        self._start = _time.perf_counter()
-        self._last = -math.inf
-        self._next_percent = 0.0
-        self._width = 0
-        self._closed = False
-        self._drawn = False
+        self._done = 0
+        self._bar = None
+        if not self.enabled:
+            return
+        from tqdm import tqdm
+
+        if self.tty:
+            every = {"mininterval": float(interval), "miniters": 1}
+        else:  # a log file: one draw per step_percent, whatever the time
+            every = {"mininterval": 0.0, "miniters": max(1, math.ceil(total * step_percent / 100))}
+        self._bar = tqdm(
+            total=self.total,
+            desc=label.rstrip(),
+            file=self.stream,
+            delay=float(delay) if delay is not None else (2.0 if enabled is None else 0.0),
+            maxinterval=math.inf,  # tqdm's monitor would otherwise lower miniters
+            dynamic_ncols=False,
+            ascii=not self.tty,
+            bar_format="{desc} {percentage:5.1f}%|{bar:24}| step {n}/{total}{postfix} "
+            "[{elapsed}<{remaining}]",
+            **every,
+        )
 
     def update(self, done: int, t: float | None = None) -> None:
         """Report ``done`` steps of ``total`` (and the simulated time ``t``); cheap when not due."""
-        if not self.enabled or self._closed:
+        if self._bar is None or done <= self._done:
             return
-        percent = 100.0 * done / self.total
-        now = _time.perf_counter()
-        if now - self._start < self.delay:
-            return
-        if self.tty:
-            if now - self._last < self.interval and done < self.total:
-                return
-            self._last = now
-            self._draw(done, t, "\r")
-        elif percent + 1e-12 >= self._next_percent or done >= self.total:
-            self._next_percent = (
-                math.floor(percent / self.step_percent + 1e-12) + 1
-            ) * self.step_percent
-            self._draw(done, t, "")
+        if t is not None:
+            self._bar.set_postfix_str(f"t = {t:.6g}", refresh=False)
+        self._bar.update(done - self._done)
+        self._done = done
 
     def close(self, done: int | None = None, t: float | None = None) -> None:
         """Draw the final state (if ``done`` is given) and end the line."""
-        if not self.enabled or self._closed:
-            self._closed = True
+        if self._bar is None:
             return
-        if not self._drawn:  # a run shorter than the delay: stay silent
-            self._closed = True
-            return
-        if done is not None:
-            self._last = -math.inf
-            if self.tty:
-                self._draw(done, t, "\r")
-            elif self._next_percent <= 100.0:
-                self._draw(done, t, "")
-        if self.tty:
-            self.stream.write("\n")
-            self.stream.flush()
-        self._closed = True
-
-    def _draw(self, done: int, t: float | None, lead: str) -> None:
-        frac = min(1.0, max(0.0, done / self.total))
-        elapsed = _time.perf_counter() - self._start
-        bar = "#" * round(24 * frac)
-        eta = f", {elapsed * (1 - frac) / frac:.1f} s left" if 0 < frac < 1 else ""
-        tt = f"  t = {t:.6g}" if t is not None else ""
-        text = (
-            f"{self.label}[{bar:<24}] {100 * frac:5.1f}%  step {done}/{self.total}{tt}  "
-            f"{elapsed:.1f} s{eta}"
-        )
-        self._drawn = True
-        pad = " " * max(0, self._width - len(text)) if lead else ""
-        self._width = len(text)
-        self.stream.write(lead + text + pad + ("" if lead else "\n"))
-        self.stream.flush()
+        if done is not None and done > self._done:
+            if t is not None:
+                self._bar.set_postfix_str(f"t = {t:.6g}", refresh=False)
+            self._bar.n = done
+            self._done = done
+        self._bar.close()
+        self._bar = None
 
 
 def _isatty(stream) -> bool:

@@ -7,16 +7,17 @@ Files written by :class:`DynamicsWriter` for a prefix ``out/rod``:
   DOLFINx :class:`~dolfinx.fem.Function` named ``"displacement"`` and ``"velocity"``, one
   temporal collection each, written collectively by DOLFINx's ``XDMFFile`` (HDF5). In a coupled
   model the FE nodes that only patch cells touch hold zero (they carry no mass);
-* ``out/rod_particles.xdmf`` (+ ``out/rod_particles.bin``): the particle cloud, one temporal
+* ``out/rod_particles.xdmf`` (+ ``out/rod_particles.h5``): the particle cloud, one temporal
   collection of ``Polyvertex`` grids; per output time the particle positions (reference
   configuration, ``XYZ`` with ``z = 0``) and the displacement and velocity *values* at the
   particles (``u_h(x_J)``, ``v_h(x_J)``: the MLS, blended or FE field evaluated there, not the
-  MLS coefficients), as 3-component vectors. DOLFINx has no particle writer in 0.5.2 and h5py is
-  not available in both lanes, so the heavy data go to one little-endian raw binary file that
-  the XDMF addresses with ``Format="Binary"`` and byte offsets (``Seek``), which ParaView's XDMF
-  readers (Xdmf3 and the legacy Xdmf2) read; rank 0 writes both files, with the replicated
-  positions and the values gathered from the owners of the particles. The XML is rewritten
-  (atomically) after every output, so an interrupted run leaves a readable file;
+  MLS coefficients), as 3-component vectors. DOLFINx has no particle writer in 0.5.2, so rank 0
+  writes the heavy data with h5py (serial HDF5: datasets ``/topology``, ``/geometry`` and
+  ``/step_<k>/displacement``, ``/step_<k>/velocity``) and the XDMF addresses them with
+  ``Format="HDF"`` DataItems (``rod_particles.h5:/step_0/velocity``), which ParaView's XDMF
+  readers read; positions are replicated, the values gathered from the owners of the
+  particles. The HDF5 file is closed and the XML rewritten (atomically) after every output, so
+  an interrupted run leaves readable files;
 * ``out/rod_energy.csv``: the :class:`~dolfinx_meshfree.EnergyRecord` at each output (rank 0).
 
 :func:`read_particles` reads a particle file back (tests, post-processing).
@@ -42,8 +43,6 @@ if TYPE_CHECKING:
 
 __all__ = ["DynamicsWriter", "ProgressBar", "check_prefix", "read_particles"]
 
-_FLOAT = np.dtype("<f8")
-_INT = np.dtype("<i4")
 _ENERGY_KEYS = (
     "step",
     "time",
@@ -221,7 +220,7 @@ class DynamicsWriter:
 
     Attributes:
         files: The files this writer produces, by kind (``"fe"``, ``"fe_h5"``, ``"particles"``,
-            ``"particles_bin"``, ``"energy"``); the same on every rank.
+            ``"particles_h5"``, ``"energy"``); the same on every rank.
         times: Output times written so far.
 
     Raises:
@@ -248,13 +247,13 @@ class DynamicsWriter:
         self._with_fe = bool(fe) and dynamics.V is not None
         self._with_particles = bool(particles) and dynamics.particles is not None
         self._with_energy = bool(energy)
-        self._grids: list[tuple[float, int, int]] = []  # (time, seek u, seek v)
+        self._grids: list[tuple[float, str]] = []  # (time, HDF5 group)
         if self._with_fe:
             self.files["fe"] = pathlib.Path(base + "_fe.xdmf")
             self.files["fe_h5"] = pathlib.Path(base + "_fe.h5")
         if self._with_particles:
             self.files["particles"] = pathlib.Path(base + "_particles.xdmf")
-            self.files["particles_bin"] = pathlib.Path(base + "_particles.bin")
+            self.files["particles_h5"] = pathlib.Path(base + "_particles.h5")
             P = dynamics.particles
             self._positions = np.zeros((P.num_particles, 3))
             self._positions[:, : P.positions.shape[1]] = P.positions
@@ -284,50 +283,50 @@ class DynamicsWriter:
 
     def _start_rank0_files(self) -> None:
         if self._with_particles:
+            import h5py
+
             n = self._positions.shape[0]
-            with open(self.files["particles_bin"], "wb") as f:
-                f.write(np.arange(n, dtype=_INT).tobytes())
-                f.write(self._positions.astype(_FLOAT).tobytes())
-            self._size = n * _INT.itemsize + self._positions.size * _FLOAT.itemsize
+            with h5py.File(self.files["particles_h5"], "w") as f:
+                f.create_dataset("topology", data=np.arange(n, dtype=np.int32)[:, None])
+                f.create_dataset("geometry", data=self._positions.astype(np.float64))
             self._write_particle_xml()
         if self._with_energy:
             with open(self.files["energy"], "w") as f:
                 f.write(",".join(_ENERGY_KEYS) + "\n")
 
     def _append_particles(self, t: float, u: np.ndarray, v: np.ndarray) -> None:
-        seek_u = self._size
-        with open(self.files["particles_bin"], "ab") as f:
-            for a in (u, v):
-                f.write(np.ascontiguousarray(a, dtype=_FLOAT).tobytes())
-        seek_v = seek_u + u.size * _FLOAT.itemsize
-        self._size = seek_v + v.size * _FLOAT.itemsize
-        self._grids.append((t, seek_u, seek_v))
+        import h5py
+
+        group = f"step_{len(self._grids)}"
+        with h5py.File(self.files["particles_h5"], "a") as f:
+            g = f.create_group(group)
+            g.attrs["time"] = float(t)
+            g.create_dataset("displacement", data=np.asarray(u, dtype=np.float64))
+            g.create_dataset("velocity", data=np.asarray(v, dtype=np.float64))
+        self._grids.append((t, group))
         self._write_particle_xml()
 
     def _write_particle_xml(self) -> None:
         n = self._positions.shape[0]
-        binary = self.files["particles_bin"].name
+        h5 = self.files["particles_h5"].name
         root = ET.Element("Xdmf", Version="3.0")
         domain = ET.SubElement(root, "Domain")
         series = ET.SubElement(
             domain, "Grid", Name="particles", GridType="Collection", CollectionType="Temporal"
         )
 
-        def data(parent, seek: int, dims: str, number: str, precision: int) -> None:
+        def data(parent, path: str, dims: str, number: str) -> None:
             item = ET.SubElement(
                 parent,
                 "DataItem",
                 Dimensions=dims,
                 NumberType=number,
-                Precision=str(precision),
-                Format="Binary",
-                Endian="Little",
-                Seek=str(seek),
+                Precision="4" if number == "Int" else "8",
+                Format="HDF",
             )
-            item.text = binary
+            item.text = f"{h5}:{path}"
 
-        pos_seek = n * _INT.itemsize
-        for t, su, sv in self._grids:
+        for t, group in self._grids:
             grid = ET.SubElement(series, "Grid", Name="particles", GridType="Uniform")
             ET.SubElement(grid, "Time", Value=repr(float(t)))
             topo = ET.SubElement(
@@ -337,14 +336,14 @@ class DynamicsWriter:
                 NumberOfElements=str(n),
                 NodesPerElement="1",
             )
-            data(topo, 0, f"{n} 1", "Int", _INT.itemsize)
+            data(topo, "/topology", f"{n} 1", "Int")
             geom = ET.SubElement(grid, "Geometry", GeometryType="XYZ")
-            data(geom, pos_seek, f"{n} 3", "Float", _FLOAT.itemsize)
-            for name, seek in (("displacement", su), ("velocity", sv)):
+            data(geom, "/geometry", f"{n} 3", "Float")
+            for name in ("displacement", "velocity"):
                 att = ET.SubElement(
                     grid, "Attribute", Name=name, AttributeType="Vector", Center="Node"
                 )
-                data(att, seek, f"{n} 3", "Float", _FLOAT.itemsize)
+                data(att, f"/{group}/{name}", f"{n} 3", "Float")
         ET.indent(root)
         path = self.files["particles"]
         tmp = path.with_name(path.name + ".tmp")
@@ -424,25 +423,31 @@ def read_particles(path: str | os.PathLike) -> dict[str, np.ndarray]:
         ``{"times": (k,), "positions": (k, n, 3), "displacement": (k, n, 3), "velocity":
         (k, n, 3)}`` for the ``k`` output times of ``n`` particles.
     """
+    import h5py
+
     path = pathlib.Path(path)
     root = ET.parse(path).getroot()
     grids = root.findall("./Domain/Grid[@CollectionType='Temporal']/Grid")
     out: dict[str, list] = {"times": [], "positions": [], "displacement": [], "velocity": []}
+    files: dict[str, h5py.File] = {}
 
     def load(item) -> np.ndarray:
         dims = tuple(int(d) for d in item.get("Dimensions").split())
-        dtype = _INT if item.get("NumberType") == "Int" else _FLOAT
-        count = int(np.prod(dims))
-        arr = np.fromfile(
-            path.parent / item.text.strip(), dtype=dtype, count=count, offset=int(item.get("Seek"))
-        )
-        if arr.size != count:
-            raise ValueError(f"{path}: the binary file holds fewer values than {dims}")
-        return arr.reshape(dims)
+        name, dataset = item.text.strip().split(":", 1)
+        if name not in files:
+            files[name] = h5py.File(path.parent / name, "r")
+        arr = np.asarray(files[name][dataset])
+        if arr.shape != dims:
+            raise ValueError(f"{path}: {item.text.strip()} has shape {arr.shape}, not {dims}")
+        return arr
 
-    for g in grids:
-        out["times"].append(float(g.find("Time").get("Value")))
-        out["positions"].append(load(g.find("Geometry/DataItem")))
-        for att in g.findall("Attribute"):
-            out[att.get("Name")].append(load(att.find("DataItem")))
+    try:
+        for g in grids:
+            out["times"].append(float(g.find("Time").get("Value")))
+            out["positions"].append(load(g.find("Geometry/DataItem")))
+            for att in g.findall("Attribute"):
+                out[att.get("Name")].append(load(att.find("DataItem")))
+    finally:
+        for f in files.values():
+            f.close()
     return {k: np.asarray(v) for k, v in out.items()}

@@ -267,8 +267,20 @@ def test_bad_density(rho):
 def test_unknown_method_and_coupling():
     with pytest.raises(ValueError, match=r"method='sph' is not available.*'lagrange'"):
         check_method("sph")
+    # every name check_method accepts has a builder: each coupling builds an explicit model
+    msh = rod_mesh(MPI.COMM_WORLD, 1.0, length=8.0, height=2.0)
+    n = msh.topology.index_map(2).size_local
+    xc = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], 0].mean(axis=1)
+    patch = mf.ParticlePatch(msh, np.flatnonzero(xc > 4.0), 0.5)
+    V = _compat.vector_function_space(msh)
     for m in mf.COUPLINGS:
-        assert check_method(m) == m
+        check_method(m)
+        dilation = 3.5 if m.startswith("ramp") else None
+        problem = mf.CoupledElasticity(V, patch, STEEL, coupling=m, dilation=dilation, overlap=1)
+        dyn = ExplicitDynamics.coupled(problem)
+        assert [f.name for f in dyn.fields] == ["fe", "particles"]
+        assert 0.0 < dyn.stable_time_step() < np.inf
+        dyn.destroy()
     with pytest.raises(TypeError, match="problem must be a CoupledElasticity"):
         ExplicitDynamics.coupled("lagrange")
     with pytest.raises(ValueError, match=r"safety=1\.5 must lie in"):
@@ -299,10 +311,13 @@ def test_rod_gauss_demo_json_and_probe(shared_dir):
         ["--method", "fe", "lagrange", "--nodes", "600", "--json", str(out),
          "--probe-in", str(pin), "--probe-out", str(pout)]
     )  # fmt: skip
-    assert [r["method"] for r in records] == ["fe", "lagrange"]
-    for r in records:
-        assert r["error_t1"] < 0.05 and r["error_t2"] < 0.05
+    # measured at 600 nodes, ratio 4 (serial = 2 ranks): fe 1.54e-3 / 2.36e-3, lagrange
+    # 9.19e-3 / 2.39e-2 at t1 / t2; the checks allow about twice that
+    bounds = [(3.1e-3, 4.7e-3), (1.9e-2, 4.8e-2)]
+    for r, (b1, b2) in zip(records, bounds, strict=True):
+        assert r["error_t1"] < b1 and r["error_t2"] < b2, r
         assert r["energy_drift"] < 1e-10 and r["ranks"] == comm.size
+    assert records[0]["particles"] == 0 and records[0]["fe_nodes"] == records[0]["nodes"]
     assert records[1]["particles"] > 3 * records[1]["fe_nodes"]
     comm.Barrier()
     data = json.loads(out.read_text())

@@ -123,10 +123,12 @@ def test_patch_test_with_consistent_integration(cell, rank_rng):
 def test_patch_test_with_gauss_quadrature_is_first_order(cell, rank_rng):
     """The issue's Gauss target (1e-6) is not met: a consistency error that goes to zero at
     first order under refinement."""
+    # measured 1.14e-2 / 1.05e-2 (quadrilaterals / triangles) at n = 6, 5.95e-3 / 5.49e-3 at 12:
+    # halved by each refinement (ratio 1.91, 1.90; bounds 1.8 to 2.2, first order both sides)
     err = patch_test_error(cell, 6, rank_rng, consistent=False)
-    assert 1e-4 < err <= PATCH_BOUND_GAUSS
+    assert 5e-3 < err <= PATCH_BOUND_GAUSS
     fine = patch_test_error(cell, 12, rank_rng, consistent=False)
-    assert fine <= err / 1.8
+    assert 1.8 <= err / fine <= 2.2
 
 
 def test_cantilever_rate_and_error_against_pure_fe():

@@ -44,6 +44,7 @@ import time
 import dolfinx
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.linalg import spsolve
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -257,7 +258,6 @@ def solve_bridging(problem, solver: str = "mumps"):
     b = band.in_band[q.cells]
     w[b] *= band.alpha_at(q.points[b], q.cells[b])
     tq = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(q.points))
-    test = _consistent_test_gradients(problem, band, q, w, tq) if problem.consistent else None
 
     # essential conditions: strongly on FE nodes of FE and band facets, multipliers on patch facets
     _, patch_bc, dq, dtabs, ubc, is_bc = problem._essential_conditions(
@@ -274,6 +274,11 @@ def solve_bridging(problem, solver: str = "mumps"):
     t_fe, t_p, cw = _constraint_tables(problem, band)
     M_fe = (t_fe.T @ sp.diags(cw) @ t_fe).tocoo()
     M_p = (t_fe.T @ sp.diags(cw) @ t_p).tocoo()
+    test = None
+    if problem.consistent:
+        test = _consistent_test_gradients(
+            problem, band, q, w, tq, (t_fe, t_p, cw), ids, ml.size_global // 2
+        )
     setup = problem._setup + time.perf_counter() - t0
 
     t1 = time.perf_counter()
@@ -383,39 +388,84 @@ def solve_bridging(problem, solver: str = "mumps"):
     return sol
 
 
-def _consistent_test_gradients(problem, band: BridgingBand, q, w: np.ndarray, tq) -> list:
+def _band_multiplier_of_alpha(problem, band: BridgingBand, ids: np.ndarray, nb: int, t_fe, cw):
+    r"""The multiplier field that balances ``grad(alpha)`` on the FE side: coefficients ``c``
+    (``nb`` band nodes x 2, on every rank) of ``Lambda = sum_k N_k c_k`` with
+
+    .. math::
+        \sum_L N_k(x_L) \Lambda(x_L) c_L = \int_{band} N_k \nabla\alpha \, dx
+
+    for every band node ``k`` (``x_L``, ``c_L``: the constraint's points and weights, eq. 52 or
+    79-81; the right side by Gauss quadrature, exact for the P1/Q1 ``alpha``). The FE equations
+    of the weighted energy (eq. 47-48) of a linear field ``u`` with stress ``sigma`` read
+    ``int (1 - alpha) grad N_a . sigma = int N_a sigma grad(alpha)`` (+ boundary terms), so
+    ``lambda = -sigma Lambda`` is the multiplier of the exact solution: the particles receive
+    ``sum_L phi_J(x_L) sigma Lambda(x_L) c_L``, which is what their consistent integration must
+    balance. ``Lambda = grad(alpha)`` when ``grad(alpha)`` lies in the multiplier space (uniform
+    straight layers); on unstructured bands it is its projection. The band node mass matrix is
+    small (band nodes only): it is gathered and solved on every rank. Collective."""
+    V, comm = problem.V, problem.patch.comm
+    q = cell_quadrature(V.mesh, problem.quadrature_degree, band.cells)
+    t = tabulate_in_cells(V, q.points, q.cells, derivatives=1)
+    grad_alpha = np.stack([g @ band.alpha for g in t.gradients], axis=1)
+    rhs = t.values.T @ (q.weights[:, None] * grad_alpha)
+    M = (t_fe.T @ sp.diags(cw) @ t_fe).tocoo()
+    keep = (ids[M.row] >= 0) & (ids[M.col] >= 0)
+    # sums over every rank's cells: ghost nodes' rows are added on the owner's numbering
+    rows_b = np.flatnonzero(ids >= 0)
+    parts = comm.allgather(
+        (ids[M.row[keep]], ids[M.col[keep]], M.data[keep], ids[rows_b], rhs[rows_b])
+    )
+    cat = np.concatenate
+    Mg = sp.csr_matrix(
+        (cat([p[2] for p in parts]), (cat([p[0] for p in parts]), cat([p[1] for p in parts]))),
+        shape=(nb, nb),
+    )
+    bg = np.zeros((nb, 2))
+    for p in parts:
+        np.add.at(bg, p[3], p[4])
+    return np.column_stack([spsolve(Mg.tocsc(), bg[:, k]) for k in range(2)])
+
+
+def _consistent_test_gradients(
+    problem, band: BridgingBand, q, w: np.ndarray, tq, constraint, ids: np.ndarray, nb: int
+) -> list:
     r"""Variationally consistent integration (Chen, Hillman & Rüter 2013) of the particle test
     functions under the energy weight ``alpha`` (eq. 46): corrected gradients with
 
     .. math::
         \sum_q \alpha \tilde\nabla\phi_J w_q = \sum_b \alpha \phi_J n w_b
-        - \sum_q \phi_J \nabla\alpha \, w_q,
+        - \sum_L \phi_J(x_L) \Lambda(x_L) c_L,
 
-    the divergence theorem for ``alpha phi_J`` under the quadrature actually used (``alpha = 0``
-    on the interface, so only the exterior facets of the patch count). With the integral
-    constraint (``constraint="integral"``, the same Gauss points) the band term
-    ``-phi_J grad(alpha) . sigma`` is then balanced exactly by the multipliers when
-    ``grad(alpha)`` lies in their space (a band of uniform straight layers), and the boundary term
-    by the alpha-weighted facet multipliers: the linear patch test passes to round-off.
+    the divergence theorem for ``alpha phi_J`` (``alpha = 0`` on the interface, so only the
+    exterior facets of the patch count) with its band term ``int phi_J grad(alpha)`` written
+    with the multiplier field ``Lambda`` of :func:`_band_multiplier_of_alpha` at the
+    constraint's points ``x_L`` and weights ``c_L`` (``constraint = (t_fe, t_p, cw)`` of
+    :func:`_constraint_tables`). For a linear field the band term ``-phi_J sigma Lambda`` is then
+    balanced exactly by the multipliers (which carry ``-sigma Lambda``), and the boundary term by
+    the alpha-weighted facet multipliers: the linear patch test passes to round-off on any mesh,
+    with either constraint. (With ``grad(alpha)`` itself in the band term, a piecewise constant
+    field outside the continuous multiplier space on unstructured bands, it missed by 1.6e-3.)
     Collective."""
     patch, comm = problem.patch, problem.patch.comm
     msh, deg = problem.V.mesh, problem.quadrature_degree
+    t_fe, t_p, cw = constraint
+    coef = _band_multiplier_of_alpha(problem, band, ids, nb, t_fe, cw)
+    lam = t_fe @ np.where(ids[:, None] >= 0, coef[np.maximum(ids, 0)], 0.0)
     bq = facet_quadrature(msh, patch.exterior_facets, deg, patch.exterior_cells)
     tb = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(bq.points, 0))
     in_b = band.in_band[bq.cells]
     alpha_b = np.ones(len(bq))
     alpha_b[in_b] = band.alpha_at(bq.points[in_b], bq.cells[in_b])
-    b = band.in_band[q.cells]
-    _, grad_alpha = band.alpha_at(q.points[b], q.cells[b], derivatives=1)
     return raise_on_all_ranks(
         comm,
         lambda: consistent_gradients(
             tq.values,
             tq.gradients,
             w,
-            sp.vstack([tb.values, tq.values[np.flatnonzero(b)]]).tocsr(),
-            np.concatenate([bq.weights * alpha_b, q.weights[b]]),
-            np.concatenate([bq.normals, -grad_alpha]),
+            sp.vstack([tb.values, t_p]).tocsr(),
+            np.concatenate([bq.weights * alpha_b, cw]),
+            np.concatenate([bq.normals, -lam]),
             comm,
         ),
     )

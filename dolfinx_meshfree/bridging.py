@@ -14,13 +14,16 @@ touching layer ``k - 1`` are layer ``k``; ``alpha = layer / overlap`` (for a str
 and uniform cells, the distance to the interface over the band width). The band cells are the
 patch cells whose nodes all lie in layers ``0..overlap``.
 
-Displacements are tied at the particles ``x_L`` of the band (closed band cells) with a multiplier
-field ``lambda = sum_k N_k lambda_k`` on the FE nodes of the band (eq. 52–53, 57, 79–80):
+Displacements are tied with a multiplier field ``lambda = sum_k N_k lambda_k`` on the FE nodes
+of the band, by default over the band cells by Gauss quadrature (``constraint="integral"``,
+eq. 52: ``x_L``, ``c_L`` below are the Gauss points and weights), or at the particles ``x_L`` of
+the band (closed band cells, unit weights, ``constraint="points"``, eq. 52–53, 57, 79–80):
 
 .. math::
-    L^{FE}_{k a} = \\sum_L N_k(x_L) N_a(x_L), \\qquad L^{P}_{k J} = -\\sum_L N_k(x_L) \\phi_J(x_L),
+    L^{FE}_{k a} = \\sum_L N_k(x_L) N_a(x_L) c_L, \\qquad
+    L^{P}_{k J} = -\\sum_L N_k(x_L) \\phi_J(x_L) c_L,
 
-i.e. ``sum_L lambda(x_L) (u_FE(x_L) - u_P(x_L)) = 0`` for every multiplier field. The optional
+i.e. ``sum_L lambda(x_L) (u_FE(x_L) - u_P(x_L)) c_L = 0`` for every multiplier field. The optional
 augmented-Lagrangian penalty ``p`` (eq. 54, 72–75) adds ``p G^T G`` to the displacement blocks,
 with the pointwise constraint gradients ``G^FE = [N_a(x_L)]``, ``G^P = [-phi_J(x_L)]`` (eq. 81).
 
@@ -33,7 +36,11 @@ Essential conditions: strongly on FE nodes of Dirichlet facets of FE and band ce
 piecewise-constant facet multipliers on the particles of Dirichlet facets of patch cells (band
 included: both discretisations live there). Constraint rows are scaled by ``s = E``.
 
-Not implemented: variationally consistent integration (``consistent=True`` is refused).
+Variationally consistent integration (``consistent=True``, the default of
+:class:`~dolfinx_meshfree.CoupledElasticity`): the particle test gradients are corrected under the
+weight ``alpha`` so that the linear patch test passes to round-off on any mesh, with either
+constraint (see :func:`_consistent_test_gradients`); the particle stiffness is then not
+symmetric. The dynamic operators (:func:`bridging_operators`) use the same stiffness.
 """
 
 from __future__ import annotations
@@ -66,12 +73,12 @@ __all__ = [
 ]
 
 
-#: Where the bridging constraint is imposed: at the band particles (eq. 79-81, the default) or
-#: by Gauss quadrature over the band cells (the integral of eq. 52).
+#: Where the bridging constraint is imposed: by Gauss quadrature over the band cells (the
+#: integral of eq. 52, the default) or at the band particles (eq. 79-81).
 CONSTRAINTS = ("points", "integral")
 
 
-def check_options(overlap, penalty, constraint: str = "points") -> tuple[int, float, str]:
+def check_options(overlap, penalty, constraint: str = "integral") -> tuple[int, float, str]:
     """Validate the ``overlap`` (positive integer), ``penalty`` (finite, >= 0) and
     ``constraint`` (one of :data:`CONSTRAINTS`) options."""
     if constraint not in CONSTRAINTS:
@@ -535,11 +542,6 @@ def bridging_operators(problem):
     """
     from .coupled import CouplingOperators
 
-    if problem.consistent:
-        raise ValueError(
-            "consistent=True is not available for the bridging coupling's dynamic operators "
-            "(the statics support it); use consistent=False for ExplicitDynamics"
-        )
     t0 = time.perf_counter()
     V, patch, P = problem.V, problem.patch, problem.patch.particles
     comm, msh = patch.comm, V.mesh
@@ -555,12 +557,17 @@ def bridging_operators(problem):
     w[b] *= band.alpha_at(q.points[b], q.cells[b])
     qa = QuadraturePoints(q.points, w, q.cells)
     tq = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(q.points))
-    Kq = stiffness_matrix(tq.gradients, w, problem.material).tocoo()
-    Kp_loc = sp.csr_matrix((Kq.data, (dof_map[Kq.row], dof_map[Kq.col])), shape=(2 * n, 2 * n))
     active = problem._fe_active(np.concatenate([patch.fe_cells, band.cells]))
 
     ids, ml = band.numbering(problem)
     t_fe, t_p, cw = _constraint_tables(problem, band)
+    test = None
+    if problem.consistent:
+        test = _consistent_test_gradients(
+            problem, band, q, w, tq, (t_fe, t_p, cw), ids, ml.size_global // 2
+        )
+    Kq = stiffness_matrix(test or tq.gradients, w, problem.material, tq.gradients).tocoo()
+    Kp_loc = sp.csr_matrix((Kq.data, (dof_map[Kq.row], dof_map[Kq.col])), shape=(2 * n, 2 * n))
     M_fe = (t_fe.T @ sp.diags(cw) @ t_fe).tocoo()
     M_p = (t_fe.T @ sp.diags(cw) @ t_p).tocoo()
     keep = ids[M_fe.row] >= 0

@@ -232,14 +232,15 @@ class CoupledElasticity:
             couplings, whose particle functions must also cover the interface cells up to their
             FE-side edge, which d_max = 2 leaves to collinear particles only.
         quadrature_degree: Gauss degree on cells and facets.
-        consistent: Variationally consistent integration on the patch (VCI over the patch
-            boundary, interface included).
+        consistent: Variationally consistent integration on the patch (VCI, Chen, Hillman &
+            Rüter 2013, over the patch boundary, interface included; the default: the linear
+            patch test passes to round-off). ``False``: the papers' plain Gauss quadrature.
         overlap, penalty, constraint: ``coupling="bridging"`` (bridging domain, Rabczuk et al.
             2006, sec. 5.3, see :mod:`~dolfinx_meshfree.bridging`): band width in cell layers
             (>= 1), the augmented-Lagrangian penalty ``p >= 0``, and where the band is tied:
-            ``"points"`` (at the band particles, eq. 79-81) or ``"integral"`` (Gauss quadrature
-            over the band cells, eq. 52; the choice when the band particles are too few to
-            determine the multipliers on the band nodes, e.g. grid particles on a gmsh mesh).
+            ``"integral"`` (the default: Gauss quadrature over the band cells, eq. 52) or
+            ``"points"`` (at the band particles, eq. 79-81, which needs enough band particles to
+            determine the multipliers on the band nodes: grid particles on a gmsh mesh are not).
     """
 
     def __init__(
@@ -252,10 +253,10 @@ class CoupledElasticity:
         dilation: float | None = None,
         basis: str = "linear",
         quadrature_degree: int = 7,
-        consistent: bool = False,
+        consistent: bool = True,
         overlap: int = 2,
         penalty: float = 0.0,
-        constraint: str = "points",
+        constraint: str = "integral",
     ):
         if coupling not in COUPLINGS:
             raise ValueError(

@@ -191,7 +191,9 @@ class EFGElasticity:
         material: :class:`~dolfinx_meshfree.LinearElastic`.
         weight, dilation, basis: MLS options (see :class:`~dolfinx_meshfree.MLS`).
         quadrature_degree: Degree of the cell Gauss rule (7: 4 x 4 points on quadrilaterals).
-        consistent: Use variationally consistent integration (VCI).
+        consistent: Variationally consistent integration (VCI, Chen, Hillman & Rüter 2013; the
+            default: the linear patch test passes to round-off). ``False``: plain Gauss
+            quadrature of Belytschko et al. 1995 (patch-test error 1e-4 to 6e-4 at 4 x 4 Gauss).
     """
 
     def __init__(
@@ -202,7 +204,7 @@ class EFGElasticity:
         dilation: float = 2.0,
         basis: str = "linear",
         quadrature_degree: int = 7,
-        consistent: bool = False,
+        consistent: bool = True,
     ):
         if particles.mesh is None:
             raise ValueError("EFGElasticity needs particles with a background mesh (mesh=...)")

@@ -198,8 +198,8 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--json", default=None, help="write the record(s) as JSON")
     args = p.parse_args(argv)
     preset = PRESETS.get(args.preset, {})
-    if args.consistent is None:
-        args.consistent = not (args.plain or args.preset is not None)
+    if args.consistent is None and (args.plain or args.preset is not None):
+        args.consistent = False
     if args.constraint is None:
         args.constraint = "points" if args.plain else "integral"
     args.preset_overridden = [
@@ -304,6 +304,15 @@ def dilation(args, method: str) -> float:
     return mf.DEFAULT_DILATION.get(method, 2.0)
 
 
+def consistent_option(args, method: str) -> bool:
+    """``--consistent`` / ``--no-consistent`` / ``--plain``, else the library's default: VCI for
+    EFG and every variational coupling, plain Gauss for master-slave (see
+    :class:`~dolfinx_meshfree.CoupledElasticity`)."""
+    if args.consistent is not None:
+        return bool(args.consistent)
+    return method != "master-slave"
+
+
 def run_fe(msh, args, exact, material, points):
     V = _compat.vector_function_space(msh)
     sol = mf.solve_fe_elasticity(
@@ -321,7 +330,7 @@ def run_efg(msh, args, exact, material, points, jitter):
         weight=args.weight,
         dilation=dilation(args, "efg"),
         quadrature_degree=args.quadrature_degree,
-        consistent=args.consistent,
+        consistent=consistent_option(args, "efg"),
     )
     problem.add_dirichlet(mf.boundary_facets(msh), exact.displacement)
     sol = problem.solve()
@@ -342,7 +351,7 @@ def run_coupled(msh, args, exact, material, points, jitter, coupling):
         weight=args.weight,
         dilation=dilation(args, coupling),
         quadrature_degree=args.quadrature_degree,
-        consistent=args.consistent,
+        consistent=consistent_option(args, coupling),
         **(
             {"overlap": args.overlap, "constraint": args.constraint}
             if coupling == "bridging"
@@ -403,7 +412,7 @@ def run(args, method: str, comm) -> dict:
     )
     material = mf.LinearElastic(1000.0, 0.3)
     points = probe_points(msh, args.cells, comm)
-    consistent = bool(args.consistent) if method != "fe" else False
+    consistent = consistent_option(args, method) if method != "fe" else False
     note = ""
     try:
         if method == "fe":

@@ -78,9 +78,21 @@ __all__ = [
 CONSTRAINTS = ("points", "integral")
 
 
-def check_options(overlap, penalty, constraint: str = "integral") -> tuple[int, float, str]:
-    """Validate the ``overlap`` (positive integer), ``penalty`` (finite, >= 0) and
-    ``constraint`` (one of :data:`CONSTRAINTS`) options."""
+def check_options(
+    overlap, penalty, constraint: str = "integral", band_width=None
+) -> tuple[int, float, str, float | None]:
+    """Validate the ``overlap`` (positive integer), ``penalty`` (finite, >= 0),
+    ``constraint`` (one of :data:`CONSTRAINTS`) and ``band_width`` (``None`` or finite > 0)
+    options."""
+    if band_width is not None and (
+        isinstance(band_width, bool)
+        or not isinstance(band_width, numbers.Real)
+        or not (np.isfinite(band_width) and band_width > 0)
+    ):
+        raise ValueError(
+            f"band_width must be None (a band of `overlap` cell layers) or a positive length, "
+            f"got {band_width!r}"
+        )
     if constraint not in CONSTRAINTS:
         raise ValueError(f"constraint={constraint!r} is not known; use one of {list(CONSTRAINTS)}")
     if isinstance(overlap, bool) or not isinstance(overlap, numbers.Integral) or overlap < 1:
@@ -89,19 +101,36 @@ def check_options(overlap, penalty, constraint: str = "integral") -> tuple[int, 
         raise ValueError(f"penalty must be a real number >= 0, got {penalty!r}")
     if not (np.isfinite(penalty) and penalty >= 0.0):
         raise ValueError(f"penalty must be finite and >= 0, got {penalty!r}")
-    return int(overlap), float(penalty), constraint
+    return (
+        int(overlap),
+        float(penalty),
+        constraint,
+        None if band_width is None else float(band_width),
+    )
 
 
 class BridgingBand:
     """The overlap band of a :class:`~dolfinx_meshfree.CoupledElasticity` (collective).
 
-    Raises ``ValueError`` on every rank when the patch has no interface or when the band is
-    wider than the patch (fewer than ``overlap`` layers of patch cells beside the interface).
+    Two constructions of the band and of ``alpha`` (a P1/Q1 function, 0 on the interface):
+
+    * ``band_width=None``: ``overlap`` cell layers, ``alpha = layer / overlap`` (the node
+      layer index, see the module docstring);
+    * ``band_width=w`` (a length): the patch cells with a node closer than ``w`` to the
+      interface, ``alpha = min(d / w, 1)`` at the nodes with ``d`` the distance to the interface
+      facets: a band of a physical width whatever the cells, which on a curved, unstructured
+      interface does not narrow or fray under refinement as layers of cells do.
+
+    Raises ``ValueError`` on every rank when the patch has no interface or when the band of
+    layers is wider than the patch (fewer than ``overlap`` layers of patch cells beside the
+    interface).
 
     Attributes:
-        layer: Node layer index per local node (``overlap + 1`` beyond the band or off it).
-        in_band_node: bool per local node: a node of the band (layers ``0..overlap``).
-        alpha: ``alpha`` per local node (``layer / overlap`` on band nodes, 1 elsewhere).
+        layer: Node layer index per local node (``overlap + 1`` beyond the band or off it);
+            ``None`` for a band of a width.
+        in_band_node: bool per local node: a node of the band (of a band cell).
+        alpha: ``alpha`` per local node (``layer / overlap`` or ``min(d / w, 1)`` on band nodes,
+            1 elsewhere).
         in_band: bool per local cell (owned and ghost): a band cell.
         cells: Owned band cells (local indices).
         particles: Indices of the band particles (in closed band cells), on every rank.
@@ -109,10 +138,10 @@ class BridgingBand:
             cell each lies in (each band particle is handled by exactly one rank).
     """
 
-    def __init__(self, problem, overlap: int):
+    def __init__(self, problem, overlap: int, band_width: float | None = None):
         V, patch = problem.V, problem.patch
         msh, comm = V.mesh, patch.comm
-        self.V, self.mls, self.overlap = V, problem.mls, overlap
+        self.V, self.mls, self.overlap, self.band_width = V, problem.mls, overlap, band_width
         tdim = msh.topology.dim
         if comm.allreduce(len(patch.interface_facets)) == 0:
             raise ValueError(
@@ -120,35 +149,23 @@ class BridgingBand:
                 "has none"
             )
         dofs = _compat.dofmap_array(V)
-        n_loc = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
-        n_own = V.dofmap.index_map.size_local
-        far = overlap + 1
-        layer = np.full(n_loc, far, dtype=np.int64)
+        self.coordinates = V.tabulate_dof_coordinates()[:, :2]
         iface = dolfinx.fem.locate_dofs_topological(V, tdim - 1, patch.interface_facets)
-        layer[problem._node_flags(iface)] = 0
-        owned_patch = dofs[patch.cells]
-        depth = 0
-        for k in range(1, overlap + 1):
-            touch = (layer[owned_patch] == k - 1).any(axis=1)
-            flags = problem._node_flags(owned_patch[touch].ravel())
-            new = flags & (layer == far)
-            layer[new] = k
-            if not comm.allreduce(bool(np.any(new[:n_own])), op=MPI.LOR):
-                break
-            depth = k
-        if depth < overlap:
-            raise ValueError(
-                f"overlap={overlap} cell layers is wider than the patch: only {depth} layer(s) of "
-                "patch cells lie beside the interface; choose a smaller overlap or a larger patch"
-            )
-        self.layer = layer
-        self.in_band_node = layer <= overlap
-        self.alpha = np.where(self.in_band_node, layer / overlap, 1.0)
+        on_interface = problem._node_flags(iface)
         ncl = patch.in_patch.size
-        self.in_band = patch.in_patch & self.in_band_node[dofs[:ncl]].all(axis=1)
+        if band_width is None:
+            self.layer, self.alpha = self._layers(problem, overlap, on_interface)
+            self.in_band_node = self.layer <= overlap
+            self.in_band = patch.in_patch & self.in_band_node[dofs[:ncl]].all(axis=1)
+        else:
+            self.layer = None
+            alpha = np.minimum(self._interface_distance(problem, on_interface) / band_width, 1.0)
+            self.in_band = patch.in_patch & (alpha[dofs[:ncl]] < 1.0).any(axis=1)
+            n_cells = msh.topology.index_map(tdim).size_local
+            self.in_band_node = problem._node_flags(dofs[:n_cells][self.in_band[:n_cells]].ravel())
+            self.alpha = np.where(self.in_band_node, alpha, 1.0)
         n_cells = msh.topology.index_map(tdim).size_local
         self.cells = np.flatnonzero(self.in_band[:n_cells]).astype(np.int32)
-        self.coordinates = V.tabulate_dof_coordinates()[:, :2]
 
         # band particles: those where the band indicator (P1 interpolant of in_band_node) is 1,
         # each handled by the lowest rank that owns a cell containing it
@@ -164,6 +181,53 @@ class BridgingBand:
         self.local_particles = mine[keep]
         self.local_cells = cells[mine][keep]
         self.particles = np.sort(np.concatenate(comm.allgather(self.local_particles)))
+
+    def _interface_distance(self, problem, on_interface: np.ndarray) -> np.ndarray:
+        """Distance of every local node to the interface facets (segments gathered from every
+        rank; 0 on the interface nodes). Collective."""
+        from .coupled import facet_nodes
+
+        patch, comm = problem.patch, problem.patch.comm
+        ends = self.coordinates[facet_nodes(self.V, patch.interface_facets)]  # (f, 2, 2)
+        seg = np.concatenate(comm.allgather(ends))
+        a, ab = seg[:, 0], seg[:, 1] - seg[:, 0]
+        ab2 = np.einsum("fi,fi->f", ab, ab)
+        dist = np.empty(self.coordinates.shape[0])
+        for chunk in np.array_split(np.arange(dist.size), max(1, dist.size // 2048)):
+            ap = self.coordinates[chunk, None, :] - a[None]
+            t = np.clip(np.einsum("nfi,fi->nf", ap, ab) / ab2, 0.0, 1.0)
+            gap = ap - t[..., None] * ab[None]
+            dist[chunk] = np.sqrt(np.einsum("nfi,nfi->nf", gap, gap).min(axis=1))
+        dist[on_interface] = 0.0
+        return dist
+
+    def _layers(self, problem, overlap: int, on_interface: np.ndarray):
+        """Node layer index (``overlap + 1`` beyond the band) and ``alpha = layer / overlap``
+        (1 beyond the band). Collective."""
+        V, patch, comm = self.V, problem.patch, problem.patch.comm
+        dofs = _compat.dofmap_array(V)
+        n_loc = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
+        n_own = V.dofmap.index_map.size_local
+        far = overlap + 1
+        layer = np.full(n_loc, far, dtype=np.int64)
+        layer[on_interface] = 0
+        owned_patch = dofs[patch.cells]
+        depth = 0
+        for k in range(1, overlap + 1):
+            touch = (layer[owned_patch] == k - 1).any(axis=1)
+            flags = problem._node_flags(owned_patch[touch].ravel())
+            new = flags & (layer == far)
+            layer[new] = k
+            if not comm.allreduce(bool(np.any(new[:n_own])), op=MPI.LOR):
+                break
+            depth = k
+        if depth < overlap:
+            raise ValueError(
+                f"overlap={overlap} cell layers is wider than the patch: only {depth} layer(s) of "
+                "patch cells lie beside the interface; choose a smaller overlap or a larger patch, "
+                "or a band of a physical width (band_width=...)"
+            )
+        return layer, np.where(layer <= overlap, layer / overlap, 1.0)
 
     def alpha_at(self, points: np.ndarray, cells: np.ndarray, derivatives: int = 0):
         """``alpha`` (m,) at points of local cells, and with ``derivatives`` its gradient."""
@@ -257,7 +321,7 @@ def solve_bridging(problem, solver: str = "mumps"):
     pl = P.dof_layout()
     t0 = time.perf_counter()
 
-    band = BridgingBand(problem, problem.overlap)
+    band = BridgingBand(problem, problem.overlap, problem.band_width)
 
     # particle side: Gauss quadrature on the patch cells, weights times alpha in the band
     q = cell_quadrature(msh, deg, P.cells)
@@ -550,7 +614,7 @@ def bridging_operators(problem):
     dof_map = pdofs.ravel()
     fe_layout, l2g = problem._fe_layout()
     pl = P.dof_layout()
-    band = BridgingBand(problem, problem.overlap)
+    band = BridgingBand(problem, problem.overlap, problem.band_width)
     q = cell_quadrature(msh, problem.quadrature_degree, P.cells)
     w = q.weights.copy()
     b = band.in_band[q.cells]

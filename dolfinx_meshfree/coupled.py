@@ -247,6 +247,9 @@ class CoupledElasticity:
             ``"integral"`` (the default: Gauss quadrature over the band cells, eq. 52) or
             ``"points"`` (at the band particles, eq. 79-81, which needs enough band particles to
             determine the multipliers on the band nodes: grid particles on a gmsh mesh are not).
+        band_width: ``coupling="bridging"``: a band of this physical width instead of
+            ``overlap`` cell layers, with ``alpha = min(d / band_width, 1)`` and ``d`` the
+            distance to the interface (see :class:`~dolfinx_meshfree.bridging.BridgingBand`).
     """
 
     def __init__(
@@ -263,6 +266,7 @@ class CoupledElasticity:
         overlap: int = 2,
         penalty: float = 0.0,
         constraint: str = "integral",
+        band_width: float | None = None,
     ):
         if coupling not in COUPLINGS:
             raise ValueError(
@@ -283,7 +287,9 @@ class CoupledElasticity:
         self.consistent = coupling != "master-slave" if consistent is None else bool(consistent)
         from .bridging import check_options
 
-        self.overlap, self.penalty, self.constraint = check_options(overlap, penalty, constraint)
+        self.overlap, self.penalty, self.constraint, self.band_width = check_options(
+            overlap, penalty, constraint, band_width
+        )
         self.mls = raise_on_all_ranks(
             patch.comm,
             lambda: MLS(

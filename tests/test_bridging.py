@@ -240,7 +240,8 @@ def test_band_of_a_physical_width(width, nodes):
     assert np.array_equal(band.particles, layers.particles)
     x = band.coordinates[band.in_band_node, 0]
     assert np.abs(band.alpha[band.in_band_node] - np.minimum((x - 24.0) / width, 1)).max() < 1e-12
-    assert np.allclose(np.unique(np.round(band.alpha[band.in_band_node], 12)), nodes)
+    values = np.concatenate(comm.allgather(band.alpha[band.in_band_node]))
+    assert np.allclose(np.unique(np.round(values, 12)), nodes)
 
 
 def test_band_of_a_physical_width_on_a_curved_gmsh_patch():

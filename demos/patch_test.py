@@ -429,9 +429,7 @@ def run(args, method: str, comm) -> dict:
         err, particles = None, 0
         note = f"{'refused by the library' if refused else 'ERROR'}: {e}"
     goal = target(method, consistent)
-    expected = (method, consistent) in EXPECTED_TO_PASS or preset_expects(
-        args, method, consistent
-    )
+    expected = (method, consistent) in EXPECTED_TO_PASS or preset_expects(args, method, consistent)
     if note.startswith("refused"):
         status = "refused"
     elif err is None:

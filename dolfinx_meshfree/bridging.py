@@ -51,9 +51,9 @@ import time
 import dolfinx
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.linalg import spsolve
 from mpi4py import MPI
 from petsc4py import PETSc
+from scipy.sparse.linalg import spsolve
 
 from . import _compat
 from .coupled import CoupledSolution, _fe_constraint_block, _particle_constraint_block

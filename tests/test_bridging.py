@@ -15,8 +15,8 @@ from dolfinx_meshfree.bridging import BridgingBand
 
 import numpy as np
 import pytest
-from mpi4py import MPI
 from conftest import load_demo
+from mpi4py import MPI
 from test_coupled import beam_mesh, cells_right_of, fe_beam_error, square
 
 EXACT = mf.LinearField(G=((0.3, -0.2), (0.5, 0.1)), c=(0.1, -0.4))

@@ -18,7 +18,8 @@
 # all and prints one table. ``--patch`` chooses the patch cells by another criterion:
 # ``slanted`` (centroid right of the line x + 0.4 y = 1.45, which crosses the cells), ``curved``
 # (centroid within 1.1 of the midpoint (2, 1) of the right side: an interface that follows a
-# circle through the cells).
+# circle through the cells). ``--placement vertices`` puts the couplings' particles on the
+# vertices of the patch cells instead of the (jittered) grid.
 #
 # Meshes (``--cells n`` per side, default 6):
 #
@@ -145,6 +146,13 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--cell", choices=("quadrilateral", "triangle"), default="quadrilateral")
     p.add_argument("--cells", type=int, default=6, help="cells per side (nominal for irregular)")
     p.add_argument("--patch", choices=PATCHES, default="axis", help="criterion of the patch cells")
+    p.add_argument(
+        "--placement",
+        choices=("grid", "vertices"),
+        default="grid",
+        help="couplings' particles: on the grid of spacing 2/n (jittered on the irregular "
+        "meshes), or one at every vertex of the patch cells",
+    )
     p.add_argument(
         "--consistent",
         action=argparse.BooleanOptionalAction,
@@ -342,7 +350,11 @@ def run_efg(msh, args, exact, material, points, jitter):
 
 
 def run_coupled(msh, args, exact, material, points, jitter, coupling):
-    patch = mf.ParticlePatch(msh, patch_cells(msh, args.patch), SIZE / args.cells, jitter=jitter)
+    cells = patch_cells(msh, args.patch)
+    if args.placement == "vertices":
+        patch = mf.ParticlePatch(msh, cells, placement="vertices")
+    else:
+        patch = mf.ParticlePatch(msh, cells, SIZE / args.cells, jitter=jitter)
     problem = mf.CoupledElasticity(
         _compat.vector_function_space(msh),
         patch,
@@ -446,6 +458,7 @@ def run(args, method: str, comm) -> dict:
         "method": method,
         "mesh": args.mesh,
         "patch": args.patch,
+        "placement": args.placement,
         "cell": args.cell,
         "cells": msh.topology.index_map(msh.topology.dim).size_global,
         "particles": particles,

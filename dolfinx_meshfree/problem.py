@@ -71,8 +71,9 @@ class CoupledLinearProblem:
             ``a`` on the patch cells.
         coupling: One of :data:`~dolfinx_meshfree.COUPLINGS`.
         **options: Passed to :class:`~dolfinx_meshfree.CoupledElasticity` (``weight``,
-            ``dilation``, ``basis``, ``quadrature_degree``, ``consistent``, ``overlap``,
-            ``penalty``).
+            ``dilation``, ``basis``, ``quadrature_degree``, ``consistent`` (default: VCI for
+            every variational coupling, plain Gauss for master-slave), ``overlap``,
+            ``penalty``, ``constraint`` (default ``"integral"``), ``band_width``).
 
     Example::
 

@@ -348,6 +348,10 @@ def solve_ramp(problem, solver: str = "mumps"):
     b_fe = create_vector(
         comm, fe_layout, cat([*f_fe_rows, np.zeros(0, np.int64)]), cat([*f_fe_vals, []])
     )
+    if problem._body_forces:  # pure FE cells with N_a, interface cells blended, patch phi_J
+        fe_body, p_body = _body_loads(problem, blend, qi, ti)
+        b_fe.array[:] += fe_body
+        f_p += p_body
 
     # K_FE = DOLFINx (pure FE cells) + interface FE-FE block, then strong conditions
     K_fe = _fe_stiffness(problem, blend)
@@ -373,6 +377,16 @@ def solve_ramp(problem, solver: str = "mumps"):
         sizes=problem._sizes(active, dl.size_global),
         interface=blend,
     )
+
+
+def _body_loads(problem, blend: RampInterface, q, tab: ShapeTable):
+    """The ramp coupling's shares of ``problem``'s body forces (collective): ``N_a`` on the pure
+    FE cells, the blended functions ``(1 - R) N_a`` and ``R phi_J`` of eq. 3.15 on the interface
+    cells (rule ``q``, table ``tab``; Rabczuk et al. 2006, eq. 38-42 for the cubic ramp), and
+    ``phi_J`` on the patch cells. Returns the FE loads per owned dof and the particle loads
+    (original interleaved order)."""
+    pure = ~problem.patch.in_patch & ~blend.in_interface
+    return problem._body_loads(problem.cell_indicator(pure), interface_rule=(q, tab.values))
 
 
 def _consistent_stiffness(problem, blend: RampInterface, q, tab: ShapeTable):

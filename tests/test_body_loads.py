@@ -45,8 +45,9 @@ OPTIONS = {"edge-to-edge": {"consistent": True}, "bridging": {"constraint": "int
 #: Patches: an axis-aligned box and a slanted band of cells, inside the unit square.
 SHAPES = {
     "box": lambda m: (np.abs(m[:, 0] - 0.5) < 0.25) & (np.abs(m[:, 1] - 0.5) < 0.25),
-    "slant": lambda m: (np.abs(m[:, 0] + 0.5 * m[:, 1] - 0.75) < 0.3)
-    & (np.abs(m[:, 1] - 0.5) < 0.35),
+    "slant": lambda m: (
+        (np.abs(m[:, 0] + 0.5 * m[:, 1] - 0.75) < 0.3) & (np.abs(m[:, 1] - 0.5) < 0.35)
+    ),
 }
 
 #: (cell type, patch, refinements): n x n cells on the unit square, particle spacing 1/n.
@@ -113,7 +114,7 @@ def l2_error(msh, evaluate, exact=EXACT) -> float:
     return mf.error_norms(msh, evaluate, exact, MAT)["l2"]
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def fe_errors(case: str) -> tuple[float, ...]:
     """Plain DOLFINx (LU) on the same meshes."""
     from dolfinx_meshfree.petsc import solve_lu
@@ -157,7 +158,7 @@ def coupled_errors(case: str, coupling: str) -> np.ndarray:
     cell, shape, ns = CASES[case]
     out = []
     for n in ns:
-        msh, V, a, L, bcs = model(n, cell)
+        msh, _, a, L, bcs = model(n, cell)
         patch = mf.ParticlePatch(msh, cells_where(msh, SHAPES[shape]), 1.0 / n)
         options = OPTIONS.get(coupling, {})
         problem = mf.CoupledLinearProblem(
@@ -199,8 +200,9 @@ def _case_params():
                 # the same 1.35x FE at n = 12 with f = 0: the coupling's own interface error on
                 # a staircase interface (issue 8, items 2-3), not the body load
                 marks = pytest.mark.xfail(
-                    strict=True, reason="lagrange on a slanted band: 1.34x FE at n = 12 (1.35x "
-                    "without body load)"
+                    strict=True,
+                    reason="lagrange on a slanted band: 1.34x FE at n = 12 (1.35x "
+                    "without body load)",
                 )
             yield pytest.param(case, coupling, marks=marks, id=f"{case}-{coupling}")
 
@@ -227,7 +229,7 @@ def test_master_slave_with_body_force_converges():
     assert np.all(np.diff(errors) < 0.0), errors
 
 
-# -- the shares of the load vectors ------------------------------------------------------------------
+# -- the shares of the load vectors ---------------------------------------------------------------
 
 
 def _f(x):
@@ -339,7 +341,7 @@ def test_form_and_callable_agree(coupling):
     assert np.abs(u1 - u2).max() <= 1e-10 * np.abs(u2).max()
 
 
-# -- the zero load and the linear patch test ---------------------------------------------------------
+# -- the zero load and the linear patch test ------------------------------------------------------
 
 
 class Linear:
@@ -383,7 +385,7 @@ def test_zero_body_load_keeps_the_patch_test(coupling):
     the linear field to the coupling's patch-test level (1e-10 with consistent integration)."""
     linear = Linear()
     n = 8
-    msh, V, a, L, bcs = model(n, "quadrilateral", force=np.zeros(2), exact=linear)
+    msh, _, a, L, bcs = model(n, "quadrilateral", force=np.zeros(2), exact=linear)
     v = L.arguments()[0]
     L_ds = ufl.inner(dolfinx.fem.Constant(msh, np.zeros(2)), v) * ufl.ds
     patch = mf.ParticlePatch(msh, cells_where(msh, SHAPES["box"]), 1.0 / n)
@@ -400,7 +402,7 @@ def test_zero_body_load_keeps_the_patch_test(coupling):
     assert np.abs(u[0] - linear.displacement(pts)).max() <= PATCH_LEVEL[coupling] * scale
 
 
-# -- dynamics ----------------------------------------------------------------------------------------
+# -- dynamics -------------------------------------------------------------------------------------
 
 STEEL = mf.LinearElastic(200.0, 0.25, "strain", rho=2.0)
 DYNAMIC = ["fe", "efg", *mf.COUPLINGS, "hybrid"]

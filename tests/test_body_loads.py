@@ -111,7 +111,7 @@ def model(n, cell, force=None, exact=EXACT):
 
 
 def l2_error(msh, evaluate, exact=EXACT) -> float:
-    return mf.error_norms(msh, evaluate, exact, MAT)["l2"]
+    return mf.error_norms(msh, evaluate, exact, MAT, degree=4)["l2"]
 
 
 @functools.cache
@@ -221,8 +221,8 @@ def test_quadratic_field_with_body_force(case, coupling):
 
 def test_master_slave_with_body_force_converges():
     """Master-slave is first order (its rigid slave layer; the body load is not the limit):
-    fitted rate measured 0.80 (quadrilateral box), checked in [0.5, 2.2]; the error decreases at
-    every refinement."""
+    fitted rate measured 0.78 (quadrilateral box; 0.87 on the slanted band), checked in
+    [0.5, 2.2]; the error decreases at every refinement."""
     errors = coupled_errors("quadrilateral-box", "master-slave")
     rate = fitted_rate(1.0 / np.array(CASES["quadrilateral-box"][2], float), errors)
     assert 0.5 <= rate <= 2.2, (rate, errors)
@@ -339,6 +339,27 @@ def test_form_and_callable_agree(coupling):
     pts = np.array([[0.1, 0.2], [0.5, 0.5], [0.3, 0.7], [0.74, 0.26], [0.9, 0.95]])
     u1, u2 = s1.displacement(pts), s2.displacement(pts)
     assert np.abs(u1 - u2).max() <= 1e-10 * np.abs(u2).max()
+
+
+# -- bad input ------------------------------------------------------------------------------------
+
+
+def test_body_force_bad_input():
+    """A body force that is not callable, or returns the wrong shape: errors naming it, on
+    every rank (the shape error is raised by a collective evaluation)."""
+    msh = dolfinx.mesh.create_unit_square(COMM, 8, 8, dolfinx.mesh.CellType.quadrilateral)
+    V = _compat.vector_function_space(msh)
+    patch = mf.ParticlePatch(msh, cells_where(msh, SHAPES["box"]), 1.0 / 8)
+    problem = mf.CoupledElasticity(V, patch, MAT, coupling="ramp")
+    with pytest.raises(TypeError, match=r"body force must be a callable b\(x\)"):
+        problem.set_body_force(np.array([0.0, -1.0]))
+    problem.add_dirichlet(mf.boundary_facets(msh), EXACT.displacement)
+    problem.set_body_force(lambda x: np.zeros(len(x)))
+    with pytest.raises(ValueError, match=r"the body force must return an array of shape"):
+        problem.solve()
+    dyn = _dynamics("fe")
+    with pytest.raises(ValueError, match=r"must return an array of shape"):
+        dyn.add_body_force(lambda x: np.zeros((len(x), 3)))
 
 
 # -- the zero load and the linear patch test ------------------------------------------------------

@@ -646,7 +646,8 @@ class CoupledElasticity:
 
     def _traction_loads(self) -> tuple[PETSc.Vec, np.ndarray]:
         """Tractions on FE facets (FE load vector, PETSc) and on patch facets (particle loads in
-        original particle order, local contributions). Collective."""
+        original particle order, local contributions), plus the body forces (FE cells with
+        ``N_a``, patch cells with ``phi_J``). Collective."""
         V, comm = self.V, self.patch.comm
         msh, deg = V.mesh, self.quadrature_degree
         fe_layout, l2g = self._fe_layout()

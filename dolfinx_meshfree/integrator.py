@@ -185,7 +185,8 @@ class ExplicitDynamics:
 
     Build with :meth:`fe`, :meth:`efg` or :meth:`coupled` (every coupling of
     :data:`~dolfinx_meshfree.dynamics.DYNAMICS_METHODS`); set the initial state with
-    :meth:`set_initial`; optionally :meth:`add_traction`; then :meth:`run`. The velocity can be
+    :meth:`set_initial`; optionally :meth:`add_traction` and :meth:`add_body_force`; then
+    :meth:`run`. The velocity can be
     evaluated at any points (:meth:`velocity_at`) and compared with an exact solution
     (:meth:`velocity_error`, Rabczuk et al. 2006, eq. 137) after a run, at the final time or in
     the ``on_output`` callback. Collective throughout.
@@ -373,8 +374,9 @@ class ExplicitDynamics:
         stiffness blocks, the MLS, the quadrature, the constraint blocks and the interface
         shape functions; see :func:`~dolfinx_meshfree.dynamic_builders.build_coupled`.
         ``fixed_facets``: owned exterior facets held at rest (FE nodes strongly, particles by
-        facet multipliers on the velocities). The static problem's own Dirichlet conditions and
-        tractions are not used (give loads with :meth:`add_traction`).
+        facet multipliers on the velocities). The static problem's own Dirichlet conditions,
+        tractions and body force are not used (give loads with :meth:`add_traction` and
+        :meth:`add_body_force`).
 
         ``integration="stress-points"`` integrates the particle stiffness at the particles and
         stress points (Rabczuk, Belytschko & Xiao 2004, Lagrangian kernel: the MLS functions

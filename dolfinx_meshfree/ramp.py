@@ -28,6 +28,12 @@ multipliers):
   off-diagonal blocks;
 * patch cells: EFG as in :func:`~dolfinx_meshfree.efg.particle_stiffness`.
 
+Loads use the same functions: tractions on facets of interface cells and body forces on the
+interface cells are integrated against the blended functions (the FE part ``(1 - R) N_a`` on the
+FE nodes, ``R phi_J`` and the Gamma_E nodes' ``(1 - R) N_a`` on the particles), body forces on
+pure FE cells against ``N_a`` and on patch cells against ``phi_J``
+(:mod:`~dolfinx_meshfree.body_loads`).
+
 Essential conditions act strongly on FE nodes. Where the particle part of an interface cell
 reaches a Dirichlet facet (an exterior facet of an interface cell), it is constrained like the
 patch facets, by piecewise-constant multipliers on ``u^h - ubar`` with the known FE part moved

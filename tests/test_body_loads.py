@@ -268,6 +268,28 @@ def test_loads_sum_to_the_integral_of_the_force(coupling):
     assert np.allclose(fe + fp, [1.5, 0.5], rtol=0.0, atol=1e-13)
 
 
+@pytest.mark.parametrize("coupling", mf.COUPLINGS)
+def test_tagged_form_load_covers_its_cells_only(coupling):
+    """L = f . v dx(FE_TAG) with the patch's cell tags: the loads sum to f times the area of the
+    FE cells (the ramp's interface cells included, with their blended functions), nothing on
+    the patch cells; the particles' share is the ramp's (:data:`RAMP_SHARES`) or zero."""
+    n, h = 8, 1.0 / 8
+    msh, V, a, _, bcs = model(n, "quadrilateral")
+    patch = mf.ParticlePatch(msh, cells_where(msh, SHAPES["box"]), h)
+    f = np.array([0.7, -0.4])
+    dx = ufl.Measure("dx", domain=msh, subdomain_data=patch.cell_tags)
+    v = ufl.TestFunction(V)
+    L = ufl.inner(dolfinx.fem.Constant(msh, f), v) * dx(mf.patch.FE_TAG)
+    problem = mf.CoupledLinearProblem(a, L, bcs, patch, material=MAT, coupling=coupling)
+    fe, fp = _shares(problem.problem)
+    assert np.allclose(fe + fp, 0.75 * f, rtol=1e-12, atol=0.0)  # the square minus the box
+    particle = 0.0
+    if coupling in RAMP_SHARES:  # 16 cells beside the box's edges, 4 at its corners
+        on_edge, at_corner = RAMP_SHARES[coupling]
+        particle = h * h * (16 * on_edge + 4 * at_corner)
+    assert np.allclose(fp, particle * f, rtol=1e-12, atol=1e-15)
+
+
 def _nodal_integral(msh, cells, nodal):
     """int over ``cells`` (owned, axis-aligned squares) of the Q1 interpolant of ``nodal(x)``:
     the cell area times the mean of the four vertex values (exact for bilinear functions)."""

@@ -448,7 +448,9 @@ def test_zero_body_load_keeps_the_patch_test(coupling):
 # -- dynamics -------------------------------------------------------------------------------------
 
 STEEL = mf.LinearElastic(200.0, 0.25, "strain", rho=2.0)
-DYNAMIC = ["fe", "efg", *mf.COUPLINGS, "hybrid"]
+#: Every model of ExplicitDynamics; "-sp": the particles integrated at the particles and
+#: stress points (Rabczuk, Belytschko & Xiao 2004) instead of the cells' Gauss rule.
+DYNAMIC = ["fe", "efg", "efg-sp", *mf.COUPLINGS, "lagrange-sp", "master-slave-sp", "hybrid"]
 
 
 def _dynamics(method: str) -> ExplicitDynamics:
@@ -457,16 +459,19 @@ def _dynamics(method: str) -> ExplicitDynamics:
         COMM, [np.zeros(2), np.array([2.0, 1.0])], [8, 4], dolfinx.mesh.CellType.quadrilateral
     )
     V = _compat.vector_function_space(msh)
+    stress_points = method.endswith("-sp")
+    method = method.removesuffix("-sp")
+    integration = {"integration": "stress-points"} if stress_points else {}
     if method == "fe":
         return ExplicitDynamics.fe(V, STEEL)
     if method == "efg":
-        return ExplicitDynamics.efg(mf.ParticleSet.from_cells(msh, 0.125), STEEL)
+        return ExplicitDynamics.efg(mf.ParticleSet.from_cells(msh, 0.125), STEEL, **integration)
     patch = mf.ParticlePatch(msh, cells_where(msh, lambda m: m[:, 0] > 1.0), 0.25)
     if method == "hybrid":
         return ExplicitDynamics.coupled(mf.HybridElasticity(V, patch, STEEL))
     options = {"overlap": 1} if method == "bridging" else {}
     return ExplicitDynamics.coupled(
-        mf.CoupledElasticity(V, patch, STEEL, coupling=method, **options)
+        mf.CoupledElasticity(V, patch, STEEL, coupling=method, **options), **integration
     )
 
 
@@ -481,7 +486,7 @@ def _momentum(dyn: ExplicitDynamics) -> np.ndarray:
 def _rigid_params():
     for method in DYNAMIC:
         marks = ()
-        if method == "master-slave":
+        if method.startswith("master-slave"):
             # the loads T^T f are the consistent ones (the momentum below is exact), but the
             # lumped masses are row sums of T^T M T over both components, which the slave
             # layer's rigid links (eq. 27) couple: M_red b / rho != T^T f

@@ -77,7 +77,7 @@ class CallableBodyForce(BodyForce):
         w = q.weights
         if weight is not None:
             X, _ = _compat.quadrature_rule(msh.topology.cell_type.name, degree)
-            expr = _compat.create_expression(weight, X)  # collective
+            expr = _compat.create_expression(weight, X, msh)  # collective
             n_owned = msh.topology.index_map(msh.topology.dim).size_local
             cells = np.arange(n_owned, dtype=np.int32)
             w = w * _compat.eval_expression(expr, msh, cells, 1).ravel()

@@ -376,7 +376,7 @@ class FormBodyForce(BodyForce):
         self._expressions = []
         for itg in self.integrals:
             b = _replace_test_function(itg.integrand(), v, msh)
-            expr = _compat.create_expression(ufl.as_vector([b[0], b[1], x[0], x[1]]), X)
+            expr = _compat.create_expression(ufl.as_vector([b[0], b[1], x[0], x[1]]), X, msh)
             n_cells = msh.topology.index_map(msh.topology.dim)
             on = np.zeros(n_cells.size_local + n_cells.num_ghosts, dtype=bool)
             on[_integral_entities(itg, msh)] = True

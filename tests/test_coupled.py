@@ -111,13 +111,17 @@ def test_patch_test_exact_with_consistent_integration(cell, rank_rng):
     assert errors[False] > 1e-8
 
 
-def test_cantilever_rate_and_error_against_pure_fe():
+@pytest.mark.parametrize("consistent", [False, True])
+def test_cantilever_rate_and_error_against_pure_fe(consistent):
+    """Measured (both integrations): fitted L2 rate 1.98; error 0.900, 0.896, 0.894 x pure FE's
+    at h = 3, 1.5, 1. Bounds: rate in [1.8, 2.2]; ratio in [0.8, 1.0] (below FE, as the README
+    states, with twice the measured 10 % gain as the lower margin)."""
     hs = [3.0, 1.5, 1.0]
-    errs = [solve_beam(MPI.COMM_WORLD, h)[2]["l2"] for h in hs]
+    errs = [solve_beam(MPI.COMM_WORLD, h, consistent)[2]["l2"] for h in hs]
     slope = np.polyfit(np.log(hs), np.log(errs), 1)[0]
-    assert slope >= 1.8
+    assert 1.8 <= slope <= 2.2
     for h, e in zip(hs, errs, strict=True):
-        assert e <= 1.5 * fe_beam_error(h)
+        assert 0.8 <= e / fe_beam_error(h) <= 1.0, (h, e)
 
 
 def test_interface_continuity_in_the_multiplier_space():

@@ -67,5 +67,7 @@ def test_patch_test_fails_without_consistent_integration(cell_name, jitter):
     _, _, _, sol = solve_patch(cell_name, jitter, consistent=False)
     x = np.random.default_rng(1).uniform(0.0, 2.0, (400, 2))
     err = np.abs(sol.displacement(x) - FIELD.displacement(x)).max()
-    assert err > 1e-8  # Gauss quadrature of rational shape functions is not exact
-    assert err < 1e-2  # but it is still an approximation of the right field
+    # Gauss quadrature of rational shape functions is not exact, but it is still an
+    # approximation of the right field: measured 1.1e-4 to 4.9e-4 (quadrilaterals, triangles,
+    # jittered or not); bounds half the smallest and twice the largest
+    assert 5e-5 < err < 1e-3

@@ -357,7 +357,7 @@ def build_coupled(
         blend = ops.interface if ops.interface_table is not None else None
         if blend is not None:  # the particle part of the ramp's interface cells
             n_loc = blend.num_fe_columns
-            groups.append(facets[~on_p & blend.in_interface[first]])
+            groups.append(blend.blended_facets(facets[~on_p]))
             tables.append(
                 lambda q: ShapeTable(
                     q.points, blend.table(q.points, q.cells, 0).values[:, n_loc:].tocsr(), []

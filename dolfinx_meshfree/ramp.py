@@ -148,6 +148,20 @@ class RampInterface:
             (np.ones(n_loc), (np.arange(n_loc), col)), shape=(n_loc, n_loc + self.num_particles)
         )
 
+    def blended_facets(self, facets: np.ndarray) -> np.ndarray:
+        """The given exterior facets on which the particle part of the blended functions lives:
+        facets of interface cells with a node on Gamma_E (elsewhere ``R = 0`` on the facet, and
+        a constraint on the particle part there would be an empty row)."""
+        msh = self.V.mesh
+        facets = np.asarray(facets, dtype=np.int32)
+        if facets.size == 0:
+            return facets
+        from .coupled import facet_nodes
+
+        keep = self.in_interface[_first_cells(msh, facets)]
+        keep &= self.on_gamma[facet_nodes(self.V, facets)].any(axis=1)
+        return facets[keep]
+
     def _check_supports(self, points: np.ndarray) -> None:
         try:
             self.mls.tabulate(points, 0)
@@ -267,7 +281,7 @@ def solve_ramp(problem, solver: str = "mumps"):
     fe_bc, patch_bc, dq, dtabs, ubc, is_bc = problem._essential_conditions()
     u_bc = ubc.x.array.reshape(-1, 2)
     for f, fn in fe_bc:
-        f_i = f[blend.in_interface[_first_cells(msh, f)]]
+        f_i = blend.blended_facets(f)
         iq = facet_quadrature(msh, f_i, deg)
         tab = raise_on_all_ranks(comm, lambda iq=iq: blend.table(iq.points, iq.cells, 0))
         ubar = raise_on_all_ranks(

@@ -31,7 +31,8 @@ Assembly: ``K_FE`` is DOLFINx's assembly of the FE form (the material's, or the 
 :class:`~dolfinx_meshfree.CoupledLinearProblem`) weighted by ``beta_FE``: 1 on FE cells,
 ``1 - alpha`` on band cells with ``alpha`` a P1 function (DG0 indicators select the cells);
 ``K_P`` is the EFG stiffness by Gauss quadrature on all patch cells with the
-weights multiplied by ``alpha`` in the band. Tractions are weighted the same way (eq. 49).
+weights multiplied by ``alpha`` in the band. Tractions and body loads are weighted the same way
+(eq. 49).
 Essential conditions: strongly on FE nodes of Dirichlet facets of FE and band cells, by
 piecewise-constant facet multipliers on the particles of Dirichlet facets of patch cells (band
 included: both discretisations live there). Constraint rows are scaled by ``s = E``.
@@ -295,16 +296,36 @@ def _first_cells(msh, facets: np.ndarray) -> np.ndarray:
     return np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]]
 
 
-def _fe_stiffness(problem, band: BridgingBand) -> PETSc.Mat:
-    """DOLFINx assembly of the FE form weighted by ``beta_FE`` (eq. 47-48): 1 on FE cells,
-    ``1 - alpha`` on band cells (alpha a P1 function), 0 on the rest of the patch."""
+def _fe_weight(problem, band: BridgingBand):
+    """``beta_FE`` (eq. 47-48) as a UFL expression: 1 on FE cells, ``1 - alpha`` on band cells
+    (alpha a P1 function), 0 on the rest of the patch."""
     V, patch = problem.V, problem.patch
     fe = problem.cell_indicator(~patch.in_patch & ~band.in_band)
     in_band = problem.cell_indicator(band.in_band)
     alpha = dolfinx.fem.Function(V)
     alpha.x.array[:] = 0.0
     alpha.x.array[0::2] = band.alpha
-    return problem._fe_stiffness(fe + in_band * (1.0 - alpha[0]))
+    return fe + in_band * (1.0 - alpha[0])
+
+
+def _fe_stiffness(problem, band: BridgingBand) -> PETSc.Mat:
+    """DOLFINx assembly of the FE form weighted by ``beta_FE`` (eq. 47-48, :func:`_fe_weight`)."""
+    return problem._fe_stiffness(_fe_weight(problem, band))
+
+
+def _body_loads(problem, band: BridgingBand) -> tuple[np.ndarray, np.ndarray]:
+    """The bridging coupling's shares of ``problem``'s body forces (eq. 49, collective): the FE
+    basis weighted by ``beta_FE = 1 - alpha`` in the band and 1 on FE cells, the particles on the
+    patch cells weighted by ``beta_P = alpha`` in the band and 1 beyond. Returns the FE loads
+    per owned dof and the particle loads (original interleaved order)."""
+
+    def alpha(q: QuadraturePoints) -> np.ndarray:
+        w = np.ones(len(q))
+        b = band.in_band[q.cells]
+        w[b] = band.alpha_at(q.points[b], q.cells[b])
+        return w
+
+    return problem._body_loads(_fe_weight(problem, band), alpha)
 
 
 def solve_bridging(problem, solver: str = "mumps"):
@@ -421,6 +442,10 @@ def solve_bridging(problem, solver: str = "mumps"):
     b_fe = create_vector(
         comm, fe_layout, cat([*f_fe_rows, np.zeros(0, np.int64)]), cat([*f_fe_vals, []])
     )
+    if problem._body_forces:  # weighted by beta_FE and beta_P like the tractions (eq. 49)
+        fe_body, p_body = _body_loads(problem, band)
+        b_fe.array[:] += fe_body
+        f_p += p_body
 
     K_fe = _fe_stiffness(problem, band)
     mats = [K_fe]
@@ -677,16 +702,11 @@ def bridging_operators(problem):
         )
         K_fp = create_aij(comm, fp, fe_layout, pl)
         K_pf = create_aij(comm, fp.T.tocsr(), pl, fe_layout)
-    fe_cells = problem.cell_indicator(~patch.in_patch & ~band.in_band)
-    in_band = problem.cell_indicator(band.in_band)
-    alpha = dolfinx.fem.Function(V)
-    alpha.x.array[:] = 0.0
-    alpha.x.array[0::2] = band.alpha
     return CouplingOperators(
         coupling=problem.coupling,
         K_fe=K_fe,
         K_p=create_aij(comm, Kp_loc, pl, pl),
-        fe_weight=fe_cells + in_band * (1.0 - alpha[0]),
+        fe_weight=_fe_weight(problem, band),
         fe_active=active,
         particle_quadrature=qa,
         particle_table=tq.values.tocsr(),

@@ -54,7 +54,7 @@ from .operators import load_vector
 from .parallel import Layout, raise_on_all_ranks
 from .patch import ParticlePatch
 from .petsc import BlockSystem, create_aij, create_vector
-from .quadrature import QuadraturePoints, facet_quadrature
+from .quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
 
 __all__ = [
     "COUPLINGS",
@@ -306,11 +306,11 @@ class CoupledElasticity:
         #: The user's bilinear form (set by :class:`~dolfinx_meshfree.CoupledLinearProblem`);
         #: ``None``: the elasticity form of :attr:`material`.
         self.form: ufl.Form | None = None
-        # set by CoupledLinearProblem: strong conditions by node (flags, values), an FE load form
-        # (already weighted to the FE cells) and particle loads (original order)
+        # set by CoupledLinearProblem: strong conditions by node (flags, values)
         self._strong: list[tuple[np.ndarray, np.ndarray]] = []
-        self._fe_load_form = None
-        self._particle_loads: np.ndarray | None = None
+        #: Body forces (:mod:`~dolfinx_meshfree.body_loads`): :meth:`set_body_force`, or the
+        #: cell integrals of a CoupledLinearProblem's ``L``.
+        self._body_forces: list = []
         self._setup = time.perf_counter() - t0
 
     def add_dirichlet(self, facets: np.ndarray, value: VectorFunction) -> None:
@@ -321,6 +321,36 @@ class CoupledElasticity:
     def add_traction(self, facets: np.ndarray, traction: Callable) -> None:
         """Traction ``traction(x, n)`` (m, 2) on owned exterior facets, on either side."""
         self._tractions.append((np.asarray(facets, dtype=np.int32), traction))
+
+    def set_body_force(self, force: VectorFunction) -> None:
+        """Body force per unit volume ``b(x)`` (m, 2) on the whole body (replaces a previous one),
+        as :meth:`EFGElasticity.set_body_force <dolfinx_meshfree.EFGElasticity.set_body_force>`.
+
+        Every coupling integrates it with the functions and weights of its stiffness (see
+        :mod:`~dolfinx_meshfree.body_loads`): FE cells with ``N_a``, patch cells with
+        ``phi_J``, ramp interface cells with the blended functions (Belytschko et al. 1995,
+        eq. 3.15), a bridging band with ``1 - alpha`` and ``alpha`` (Rabczuk et al. 2006,
+        eq. 49)."""
+        from .body_loads import CallableBodyForce
+
+        self._body_forces = [CallableBodyForce(force)]
+
+    def _body_loads(self, fe_weight, particle_weights=None, interface_rule=None):
+        """This coupling's shares of its body forces (collective): the FE loads per owned dof
+        (``fe_weight``: the FE energy's weight) and the particle loads (original interleaved
+        order) on the patch cells' Gauss rule, its weights multiplied by ``particle_weights(q)``
+        if given (the bridging band's ``alpha``); see
+        :func:`~dolfinx_meshfree.body_loads.body_load_vectors`."""
+        from .body_loads import body_load_vectors
+
+        msh, comm, deg = self.V.mesh, self.patch.comm, self.quadrature_degree
+        q = cell_quadrature(msh, deg, self.patch.particles.cells)
+        if particle_weights is not None:
+            q = QuadraturePoints(q.points, q.weights * particle_weights(q), q.cells)
+        table = raise_on_all_ranks(comm, lambda: self.mls.tabulate(q.points, 0)).values
+        return body_load_vectors(
+            self._body_forces, self.V, fe_weight, deg, (q, table), interface_rule, comm
+        )
 
     # -- pieces ---------------------------------------------------------------------------------
 
@@ -659,7 +689,8 @@ class CoupledElasticity:
 
     def _traction_loads(self) -> tuple[PETSc.Vec, np.ndarray]:
         """Tractions on FE facets (FE load vector, PETSc) and on patch facets (particle loads in
-        original particle order, local contributions). Collective."""
+        original particle order, local contributions), plus the body forces (FE cells with
+        ``N_a``, patch cells with ``phi_J``). Collective."""
         V, comm = self.V, self.patch.comm
         msh, deg = V.mesh, self.quadrature_degree
         fe_layout, l2g = self._fe_layout()
@@ -683,13 +714,10 @@ class CoupledElasticity:
             tab = raise_on_all_ranks(comm, lambda q=q: self.mls.tabulate(q.points, 0)).values
             f_p += load_vector(tab, q.weights, t)
         b_fe = create_vector(comm, fe_layout, np.concatenate(f_fe_rows), np.concatenate(f_fe_vals))
-        if self._fe_load_form is not None:  # the FE cells' share of a user's body loads
-            b = _compat.assemble_vector(self._fe_load_form)
-            b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-            b_fe.axpy(1.0, b)
-            b.destroy()
-        if self._particle_loads is not None:
-            f_p += self._particle_loads
+        if self._body_forces:  # FE cells with N_a, patch cells with phi_J
+            fe, fp = self._body_loads(self.cell_indicator(~self.patch.in_patch))
+            b_fe.array[:] += fe
+            f_p += fp
         return b_fe, f_p
 
     def _append_patch_conditions(self, blocks, rhs, mats, patch_bc, dq, dtabs) -> Layout:

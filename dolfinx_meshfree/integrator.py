@@ -188,7 +188,8 @@ class ExplicitDynamics:
 
     Build with :meth:`fe`, :meth:`efg` or :meth:`coupled` (every coupling of
     :data:`~dolfinx_meshfree.dynamics.DYNAMICS_METHODS`); set the initial state with
-    :meth:`set_initial`; optionally :meth:`add_traction`; then :meth:`run`. The velocity can be
+    :meth:`set_initial`; optionally :meth:`add_traction` and :meth:`add_body_force`; then
+    :meth:`run`. The velocity can be
     evaluated at any points (:meth:`velocity_at`) and compared with an exact solution
     (:meth:`velocity_error`, Rabczuk et al. 2006, eq. 137) after a run, at the final time or in
     the ``on_output`` callback. Collective throughout.
@@ -213,6 +214,11 @@ class ExplicitDynamics:
             :class:`~dolfinx_meshfree.bridging.BridgingBand` (weighted band cells).
         reduction: ``(T_PF, S)`` when the particle field holds master particles only
             (master–slave): the particle coefficients are ``T_PF d_FE + S d_M``.
+        body_load: ``body_load(b) -> (fe, particles)``: the consistent loads of a body force
+            ``b(x)`` per owned FE dof and per particle dof (original interleaved order, this
+            rank's contributions), either ``None`` for a missing field; set by the builders
+            (:mod:`~dolfinx_meshfree.dynamic_builders`). ``None``: :meth:`add_body_force` uses
+            the lumped masses.
     """
 
     def __init__(
@@ -233,6 +239,7 @@ class ExplicitDynamics:
         reduction: tuple[PETSc.Mat, PETSc.Mat] | None = None,
         timings: dict | None = None,
         multiplier_solver: str | None = None,
+        body_load: Callable | None = None,
     ):
         if isinstance(safety, bool) or not (
             isinstance(safety, int | float) and 0.0 < safety <= 1.0
@@ -252,6 +259,7 @@ class ExplicitDynamics:
         self.V, self.mls, self.particles, self.mesh = V, mls, particles, mesh
         self.in_patch, self.patch = in_patch, patch
         self.interface, self.reduction = interface, reduction
+        self._body_load = body_load
         self.comm = self.fields[0].mass.getComm().tompi4py()
         self.timings = dict(timings or {})
         t0 = time.perf_counter()
@@ -369,8 +377,9 @@ class ExplicitDynamics:
         stiffness blocks, the MLS, the quadrature, the constraint blocks and the interface
         shape functions; see :func:`~dolfinx_meshfree.dynamic_builders.build_coupled`.
         ``fixed_facets``: owned exterior facets held at rest (FE nodes strongly, particles by
-        facet multipliers on the velocities). The static problem's own Dirichlet conditions and
-        tractions are not used (give loads with :meth:`add_traction`).
+        facet multipliers on the velocities). The static problem's own Dirichlet conditions,
+        tractions and body force are not used (give loads with :meth:`add_traction` and
+        :meth:`add_body_force`).
 
         ``integration="stress-points"`` integrates the particle stiffness at the particles and
         stress points (Rabczuk, Belytschko & Xiao 2004, Lagrangian kernel: the MLS functions
@@ -710,7 +719,7 @@ class ExplicitDynamics:
             on_p = self.in_patch[first]
         else:
             on_p = np.full(facets.size, self.V is None)
-        vecs: list[PETSc.Vec | None] = []
+        parts = []
         for f in self.fields:
             sel = facets[on_p] if f.name == "particles" else facets[~on_p]
             q = facet_quadrature(msh, sel, deg)
@@ -724,12 +733,53 @@ class ExplicitDynamics:
                 )
                 tab = tabulate_in_cells(self.V, q.points, q.cells, derivatives=0).values
                 fl = load_vector(tab, q.weights, t).reshape(-1, 2)
-                rows = (2 * l2g[: fl.shape[0], None] + np.arange(2)).ravel()
-                vals = fl.ravel()
+                parts.append(((2 * l2g[: fl.shape[0], None] + np.arange(2)).ravel(), fl.ravel()))
             else:
                 tab = raise_on_all_ranks(self.comm, lambda q=q: self.mls.tabulate(q.points, 0))
-                vals = load_vector(tab.values, q.weights, t)
-                rows = self.particles.petsc_dofs(2).ravel()
+                parts.append(
+                    (self.particles.petsc_dofs(2).ravel(), load_vector(tab.values, q.weights, t))
+                )
+        self._add_load(parts, amplitude)
+
+    def add_body_force(
+        self, force: VectorFunction, amplitude: Callable[[float], float] | None = None
+    ) -> None:
+        """External load ``amplitude(t) * int b . v`` of a body force ``b(x)`` per unit volume
+        (points (m, 2) -> (m, 2)) on the whole body (collective).
+
+        FE, EFG and every coupling of :meth:`coupled` integrate it with the functions and
+        weights of their masses and stiffness (:mod:`~dolfinx_meshfree.body_loads`: ramp
+        interface cells blended, eq. 3.15 of Belytschko et al. 1995; bridging band weighted by
+        ``1 - alpha`` and ``alpha``, Rabczuk et al. 2006, eq. 49; master-slave through ``T^T``,
+        eq. 28); other models take the lumped load ``M b(x_I) / rho`` at their nodes and
+        particles, exact for a constant ``b``. ``amplitude`` defaults to 1 (a step load).
+        """
+        if self._body_load is not None:
+            fe, f_p = self._body_load(force)
+            parts = []
+            for f in self.fields:
+                if f.name == "fe":
+                    lo, hi = f.mass.getOwnershipRange()
+                    parts.append((np.arange(lo, hi), fe))
+                else:
+                    parts.append((self.particles.petsc_dofs(2).ravel(), f_p))
+            self._add_load(parts, amplitude)
+            return
+        vecs = []
+        for k, f in enumerate(self.fields):
+            x = self._owned_points(k)
+            b = raise_on_all_ranks(self.comm, lambda x=x: _values(force, x))
+            vec = f.mass.duplicate()
+            vec.array[:] = f.mass.array_r * b.ravel() / self.material.rho
+            vecs.append(vec)
+        self._add_load_vectors(vecs, amplitude)
+
+    def _add_load(self, parts: list, amplitude: Callable[[float], float] | None) -> None:
+        """Add a load given per field as ``(global dofs, values)`` (any rank may add any dof; a
+        master-slave particle field's values are reduced to the FE nodes and masters by
+        ``T^T``, eq. 28). Collective."""
+        vecs: list[PETSc.Vec] = []
+        for f, (rows, vals) in zip(self.fields, parts, strict=True):
             if self.reduction is not None and f.name == "particles":
                 # master-slave: particle forces reach the masters through T^T (eq. 28)
                 Tpf, S = self.reduction
@@ -746,6 +796,9 @@ class ExplicitDynamics:
             b.assemblyBegin()
             b.assemblyEnd()
             vecs.append(b)
+        self._add_load_vectors(vecs, amplitude)
+
+    def _add_load_vectors(self, vecs: list[PETSc.Vec], amplitude) -> None:
         for k, b in enumerate(vecs):  # no load on fixed dofs
             b.array[:] = b.array_r * self.free[k]
         self._loads.append((vecs, amplitude if amplitude is not None else _one))

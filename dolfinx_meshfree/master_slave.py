@@ -90,7 +90,7 @@ SLAVE_LAYER = 1.01
 
 #: Which particles are slaves: the first layer (eq. 17–28) or those on the interface FE nodes
 #: and edges (Johnson's coincident particles, eq. 15–16).
-SLAVES = ("layer", "coincident")
+SLAVES = ("layer", "band", "coincident")
 
 #: ``slaves="coincident"``: a particle is on Gamma_I (or on a node) within this times the spacing.
 COINCIDENT_TOL = 1e-8
@@ -195,7 +195,11 @@ class MasterSlaveLinks:
                     f"first {ends[k]} (nearest particle {gap[k]:.3e} away): use a particle "
                     "spacing that divides the FE cells' edges on the interface"
                 )
-        self.slaves = np.flatnonzero(self.distance <= self.width)
+        if slaves == "layer":
+            self.slaves = _first_layer(x, a, t, self.distance)
+            self.width = float(self.distance[self.slaves].max()) * (1.0 + 1e-9) + 1e-12 * self.spacing
+        else:
+            self.slaves = np.flatnonzero(self.distance <= self.width)
         if self.slaves.size == x.shape[0]:
             raise ValueError(
                 "master-slave coupling: every particle is a slave (the patch is one particle "
@@ -237,6 +241,37 @@ class MasterSlaveLinks:
                 if self.fixed[e, k]:
                     out[int(self.nodes[e, k])] = self.values[e, k]
         return out
+
+
+def _first_layer(x: np.ndarray, a: np.ndarray, t: np.ndarray, distance: np.ndarray) -> np.ndarray:
+    """The particles nearest to some stretch of the interface (sorted indices).
+
+    For every edge ``a + tau t`` (tau in [0, 1]) the squared distance to particle ``p`` is
+    ``|a - p|^2 + 2 tau t.(a - p) + tau^2 |t|^2``; the last term is common to all particles, so
+    the nearest particle along the edge is the lower envelope of lines in ``tau``: the particles
+    that attain it on an interval of positive length are the edge's first layer (their Voronoi
+    cells cut the edge).
+    """
+    tree = cKDTree(x)
+    out = set()
+    for e in range(a.shape[0]):
+        ends = np.array([a[e], a[e] + t[e]])
+        d_end, _ = tree.query(ends)
+        reach = np.linalg.norm(t[e]) + d_end.max() + 1e-12
+        cand = np.asarray(tree.query_ball_point(a[e] + 0.5 * t[e], reach), dtype=np.int64)
+        ra = a[e] - x[cand]
+        c0 = np.einsum("ij,ij->i", ra, ra)
+        c1 = 2.0 * ra @ t[e]
+        # breakpoints: pairwise intersections of the lines inside (0, 1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tau = (c0[None, :] - c0[:, None]) / (c1[:, None] - c1[None, :])
+        tau = np.unique(np.concatenate([[0.0, 1.0], tau[np.isfinite(tau) & (tau > 0) & (tau < 1)]]))
+        mid = 0.5 * (tau[1:] + tau[:-1])[np.diff(tau) > 1e-9]
+        f = c0[None, :] + mid[:, None] * c1[None, :]
+        scale = np.einsum("ij,ij->", t[e : e + 1], t[e : e + 1])
+        best = f.min(axis=1, keepdims=True)
+        out.update(cand[np.any(f <= best + 1e-9 * scale, axis=0)].tolist())
+    return np.asarray(sorted(out), dtype=np.int64)
 
 
 def solve_master_slave(problem, solver: str = "mumps"):

@@ -196,10 +196,13 @@ class MasterSlaveLinks:
                     "spacing that divides the FE cells' edges on the interface"
                 )
         if slaves == "layer":
-            self.slaves = _first_layer(x, a, t, self.distance)
-            self.width = float(self.distance[self.slaves].max()) * (1.0 + 1e-9) + 1e-12 * self.spacing
+            self._tree = cKDTree(x)
+            self.slaves = _first_layer(self._tree, x, a, t)
+            self.width = float(self.distance[self.slaves].max())
         else:
             self.slaves = np.flatnonzero(self.distance <= self.width)
+        self._is_slave = np.zeros(x.shape[0], dtype=bool)
+        self._is_slave[self.slaves] = True
         if self.slaves.size == x.shape[0]:
             raise ValueError(
                 "master-slave coupling: every particle is a slave (the patch is one particle "
@@ -224,8 +227,13 @@ class MasterSlaveLinks:
             self.rows.append((np.asarray(cols, dtype=np.int64), np.asarray(weights)))
 
     def in_layer(self, points: np.ndarray) -> np.ndarray:
-        """Whether each point lies within the slave layer (the slaves' distance criterion)."""
+        """Whether each point lies within the slave layer: ``slaves="layer"``, its nearest
+        particle is a slave (it lies in a slave's Voronoi cell); otherwise, within the slaves'
+        distance :attr:`width` of Gamma_I."""
         points = np.asarray(points, dtype=float).reshape(-1, 2)
+        if self.kind == "layer":
+            _, nearest = self._tree.query(points)
+            return self._is_slave[nearest]
         a = self.edges[:, 0]
         t = self.edges[:, 1] - a
         r = points[:, None, :] - a[None]
@@ -243,7 +251,7 @@ class MasterSlaveLinks:
         return out
 
 
-def _first_layer(x: np.ndarray, a: np.ndarray, t: np.ndarray, distance: np.ndarray) -> np.ndarray:
+def _first_layer(tree: cKDTree, x: np.ndarray, a: np.ndarray, t: np.ndarray) -> np.ndarray:
     """The particles nearest to some stretch of the interface (sorted indices).
 
     For every edge ``a + tau t`` (tau in [0, 1]) the squared distance to particle ``p`` is
@@ -252,7 +260,6 @@ def _first_layer(x: np.ndarray, a: np.ndarray, t: np.ndarray, distance: np.ndarr
     that attain it on an interval of positive length are the edge's first layer (their Voronoi
     cells cut the edge).
     """
-    tree = cKDTree(x)
     out = set()
     for e in range(a.shape[0]):
         ends = np.array([a[e], a[e] + t[e]])
@@ -274,8 +281,12 @@ def _first_layer(x: np.ndarray, a: np.ndarray, t: np.ndarray, distance: np.ndarr
     return np.asarray(sorted(out), dtype=np.int64)
 
 
-def solve_master_slave(problem, solver: str = "mumps"):
-    """Assemble and solve the master–slave coupled system of ``problem`` (collective)."""
+def solve_master_slave(problem, solver: str = "mumps", slaves: str = "layer"):
+    """Assemble and solve the master–slave coupled system of ``problem`` (collective).
+
+    ``slaves``: which particles are slaves, see :class:`MasterSlaveLinks` (``"layer"``, the
+    default of :meth:`CoupledElasticity.solve <dolfinx_meshfree.CoupledElasticity.solve>`).
+    """
     from .coupled import CoupledSolution
 
     V, patch, P = problem.V, problem.patch, problem.patch.particles
@@ -296,7 +307,7 @@ def solve_master_slave(problem, solver: str = "mumps"):
     active = problem._fe_active()
 
     links = raise_on_all_ranks(
-        comm, lambda: MasterSlaveLinks(problem, is_bc, ubc.x.array.reshape(-1, 2))
+        comm, lambda: MasterSlaveLinks(problem, is_bc, ubc.x.array.reshape(-1, 2), slaves)
     )
     patch_bc, dq, dtabs = _outside_slave_layer(problem, links, patch_bc, dq, dtabs)
     known = links.is_fixed()

@@ -13,12 +13,12 @@ from __future__ import annotations
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
+from dolfinx_meshfree.master_slave import solve_master_slave
 
 import dolfinx
 import numpy as np
 import pytest
 import ufl
-from dolfinx_meshfree.master_slave import solve_master_slave
 from mpi4py import MPI
 from test_coupled import beam_mesh, cells_right_of, square
 from test_problem import cells_where, plain_dolfinx
@@ -197,7 +197,10 @@ class Quadratic:
     def ufl(self, x):
         m = (x[0] ** 2, x[0] * x[1], x[1] ** 2)
         return ufl.as_vector(
-            [sum(Q[i, k] * m[k] for k in range(3)) + G[i, 0] * x[0] + G[i, 1] * x[1] for i in (0, 1)]
+            [
+                sum(Q[i, k] * m[k] for k in range(3)) + G[i, 0] * x[0] + G[i, 1] * x[1]
+                for i in (0, 1)
+            ]
         )
 
 
@@ -209,7 +212,9 @@ def mesh_of(kind, n, comm=MPI.COMM_WORLD):
     if kind != "gmsh":
         return dolfinx.mesh.create_unit_square(comm, n, n, getattr(dolfinx.mesh.CellType, kind))
     path = MESHES / f"bushing_triangle_h{n:g}.xdmf"
-    with dolfinx.io.XDMFFile(comm, str(path), "r", encoding=dolfinx.io.XDMFFile.Encoding.ASCII) as f:
+    with dolfinx.io.XDMFFile(
+        comm, str(path), "r", encoding=dolfinx.io.XDMFFile.Encoding.ASCII
+    ) as f:
         return f.read_mesh(name="mesh")
 
 
@@ -267,7 +272,7 @@ def test_first_layer_is_the_nearest_particles_of_the_interface():
     of some sample. A slanted staircase interface and a grid (spacing 0.75 h) that does not
     meet it, so the links have lengths between 0 and about one spacing."""
     msh = mesh_of("quadrilateral", 12)
-    V, a, L, bcs = quadratic_model(msh)
+    _, a, L, bcs = quadratic_model(msh)
     patch = mf.ParticlePatch(msh, cells_where(msh, PATCHES["slanted"]), 0.75 / 12)
     problem = mf.CoupledLinearProblem(a, L, bcs, patch, PLANE_STRESS, coupling="master-slave")
     links = problem.solve().links

@@ -88,7 +88,7 @@ either. The coupled error is first order in general (the paper's rates 1.23/1.23
 cantilever), second order where the whole layer lies on Gamma_I. Consistent integration
 (``consistent=True``, VCI over the patch boundary, Gamma_I included) cannot remove that jump and
 is not the choice here: measured on the cantilever (spacing h, slaves on Gamma_I), L2 errors
-1.9e-2, 2.9e-3, 2.0e-4, 8.1e-4, 1.3e-3, 1.4e-3 for h = 3 ... 0.375 (no convergence), against
+1.9e-2, 3.0e-3, 2.0e-4, 8.1e-4, 1.3e-3, 1.4e-3 for h = 3 ... 0.375 (no convergence), against
 2.2e-2 ... 5.3e-4 (rate 2.0) with Gauss integration; the linear patch test error at spacing
 h/4 grows from 2.6e-3 to 7.0e-3 (band: 1.6e-2 to 3.1e-2).
 """

@@ -60,6 +60,7 @@ particles' own :class:`~dolfinx_meshfree.hybrid_sph.CorrectedSPH` interpolant.
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from collections.abc import Callable
@@ -81,7 +82,12 @@ from .coupled import (
 )
 from .efg import _vector_values, facet_multipliers
 from .fe_points import tabulate_in_cells
-from .hybrid_sph import CorrectedSPH, hybrid_points, particle_spacing_median
+from .hybrid_sph import (
+    CorrectedSPH,
+    centred_particles,
+    hybrid_points,
+    particle_spacing_median,
+)
 from .kernels import sph_cubic_spline
 from .materials import LinearElastic
 from .neighbours import pairs_within_support
@@ -92,12 +98,14 @@ from .petsc import BlockSystem, create_aij, create_vector
 from .quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
 from .tables import strain_operator
 
-__all__ = ["HYBRID_INTEGRATIONS", "HYBRID_VARIANTS", "HybridElasticity"]
+__all__ = ["HYBRID_INTEGRATIONS", "HYBRID_PARTICLES", "HYBRID_VARIANTS", "HybridElasticity"]
 
 #: How the particle forces reach the FE nodes (Rabczuk et al. 2006, sec. 5.5).
 HYBRID_VARIANTS = ("HA-S", "HA-F")
 #: Stress points of the particle energy.
 HYBRID_INTEGRATIONS = ("cells", "particles")
+#: Where the SPH particles sit: centres of a lattice of squares, or the patch's own particles.
+HYBRID_PARTICLES = ("centred", "patch")
 
 VectorFunction = Callable[[np.ndarray], np.ndarray]
 
@@ -122,6 +130,15 @@ class HybridElasticity:
             129–130); default: about one point per particle spacing and direction (Sauer 2000:
             the particles' density).
         integration: ``"cells"`` or ``"particles"`` (see the module docstring).
+        particles: ``"centred"`` (default): the SPH particles sit at the centres of a lattice of
+            squares of the patch's particle spacing, none on the interface, each with the area of
+            its square in the patch as its volume
+            (:func:`~dolfinx_meshfree.hybrid_sph.centred_particles`); :attr:`patch` is then a
+            copy of the given patch holding these particles. ``"patch"``: the patch's own
+            particles and Voronoi volumes, which put a particle on every interface FE node (a
+            compliant double layer that reflects waves) and whose sampled volumes scatter when
+            the spacing does not divide the cells: the rod's error then depended on the
+            particle:node ratio (see :mod:`~dolfinx_meshfree.hybrid_sph`).
         consistent: Integration-consistent test gradients (Chen, Hillman & Rüter 2013; see
             :meth:`_consistent_test_gradients`): the linear patch test holds to round-off, at
             the price of a ``K`` that is not symmetric. ``False``: the symmetric
@@ -147,6 +164,7 @@ class HybridElasticity:
         hybrid_degree: int | None = None,
         integration: str = "cells",
         consistent: bool = True,
+        particles: str = "centred",
     ):
         comm = patch.comm
 
@@ -161,6 +179,12 @@ class HybridElasticity:
                 raise ValueError(
                     f"integration={integration!r} is not known; use 'cells' (Gauss points of "
                     "the patch cells) or 'particles' (nodal integration, dynamics only)"
+                )
+            if particles not in HYBRID_PARTICLES:
+                raise ValueError(
+                    f"particles={particles!r} is not known; use 'centred' (SPH particles at the "
+                    "centres of a lattice of squares, the default) or 'patch' (the patch's own "
+                    "particles)"
                 )
             if not isinstance(material, LinearElastic):
                 raise TypeError(f"material must be a LinearElastic, got {type(material).__name__}")
@@ -188,8 +212,14 @@ class HybridElasticity:
         raise_on_all_ranks(comm, check)
         t0 = time.perf_counter()
         self.consistent = bool(consistent)
-        self.V, self.patch, self.material = V, patch, material
         self.variant, self.integration = variant, integration
+        self.spacing = particle_spacing_median(patch.particles.positions)
+        if particles == "centred":
+            patch = copy.copy(patch)
+            patch.particles = centred_particles(patch, self.spacing)
+        #: The patch whose particles carry the particle field (a copy with the SPH particles of
+        #: ``particles="centred"``).
+        self.V, self.patch, self.material = V, patch, material
         P = patch.particles
         self.spacing = particle_spacing_median(P.positions)
         self.smoothing_length = float(smoothing) * self.spacing

@@ -82,6 +82,7 @@ from .coupled import (
 )
 from .efg import _vector_values, facet_multipliers
 from .fe_points import tabulate_in_cells
+from .hybrid_smoothing import EXTERIOR, INTERIOR, smoothing_cells
 from .hybrid_sph import (
     CorrectedSPH,
     centred_particles,
@@ -103,7 +104,7 @@ __all__ = ["HYBRID_INTEGRATIONS", "HYBRID_PARTICLES", "HYBRID_VARIANTS", "Hybrid
 #: How the particle forces reach the FE nodes (Rabczuk et al. 2006, sec. 5.5).
 HYBRID_VARIANTS = ("HA-S", "HA-F")
 #: Stress points of the particle energy.
-HYBRID_INTEGRATIONS = ("cells", "particles")
+HYBRID_INTEGRATIONS = ("cells", "particles", "smoothed")
 #: Where the SPH particles sit: centres of a lattice of squares, or the patch's own particles.
 HYBRID_PARTICLES = ("centred", "patch")
 
@@ -178,7 +179,8 @@ class HybridElasticity:
             if integration not in HYBRID_INTEGRATIONS:
                 raise ValueError(
                     f"integration={integration!r} is not known; use 'cells' (Gauss points of "
-                    "the patch cells) or 'particles' (nodal integration, dynamics only)"
+                    "the patch cells), 'smoothed' (strains smoothed over sub-cells: symmetric "
+                    "and consistent) or 'particles' (nodal integration, dynamics only)"
                 )
             if particles not in HYBRID_PARTICLES:
                 raise ValueError(
@@ -250,6 +252,7 @@ class HybridElasticity:
         self.evaluator = raise_on_all_ranks(
             comm, lambda: CorrectedSPH(P.positions, P.volumes, self.smoothing_length)
         )
+        self._smoothing = None
         self._dirichlet: list[tuple[np.ndarray, VectorFunction]] = []
         self._tractions: list[tuple[np.ndarray, Callable]] = []
         self._setup = time.perf_counter() - t0
@@ -297,9 +300,13 @@ class HybridElasticity:
 
     def stress_points(self) -> QuadraturePoints:
         """This rank's stress points of the particle energy: Gauss points of its patch cells
-        (``"cells"``) or its owned particles with their volumes (``"particles"``)."""
+        (``"cells"``), the centroids of the smoothing cells with their areas (``"smoothed"``)
+        or its owned particles with their volumes (``"particles"``)."""
         if self.integration == "cells":
             return cell_quadrature(self.V.mesh, self.quadrature_degree, self.patch.cells)
+        if self.integration == "smoothed":
+            sc = self._smoothing_cells()
+            return QuadraturePoints(sc.centroids, sc.areas, sc.cells)
         P = self.patch.particles
         own = P.owned
         return QuadraturePoints(
@@ -349,9 +356,65 @@ class HybridElasticity:
         xi = np.where(used[:, None], (target - integral) / np.where(used, volume, 1.0)[:, None], 0)
         return [(g + values @ sp.diags(xi[:, k])).tocsr() for k, g in enumerate(grads)]
 
+    def _smoothing_cells(self):
+        """This rank's smoothing cells (``"smoothed"``): ``(quadrature_degree + 1) // 2``
+        sub-cells per patch cell and direction, as many as the Gauss points of ``"cells"``."""
+        if self._smoothing is None:
+            n = max(1, (self.quadrature_degree + 1) // 2)
+            self._smoothing = smoothing_cells(self.V.mesh, self.patch.cells, self.patch.in_patch, n)
+        return self._smoothing
+
+    def _smoothed_gradients(self) -> tuple[list[sp.csr_matrix], np.ndarray]:
+        """Smoothed gradients (ns x (n + N)) of this rank's smoothing cells over [particles |
+        FE nodes] and the cells' areas (collective; :mod:`~dolfinx_meshfree.hybrid_smoothing`):
+        ``(1 / |Omega_k|) sum_p w_p n_p N_c(x_p)`` over the Gauss points of the cell's edges,
+        ``N_c`` the hybrid sums' functions inside the patch, the particles' own interpolant on
+        the exterior boundary (the functions of the traction loads) and the FE basis on the
+        interface.
+        """
+        sc = self._smoothing_cells()
+        n = self.patch.particles.num_particles
+        N = self.hybrid.interpolation.shape[1]
+        inner = np.flatnonzero(sc.fe_cell == INTERIOR)
+        t = raise_on_all_ranks(self.comm, lambda: self.sph.tabulate(sc.points[inner], 0))
+        T = (t.values @ self._node_map()).tocoo()
+        rows, cols, vals = [inner[T.row]], [T.col], [T.data]
+        outer = np.flatnonzero(sc.fe_cell == EXTERIOR)
+        t = raise_on_all_ranks(self.comm, lambda: self.evaluator.tabulate(sc.points[outer], 0))
+        T = t.values.tocoo()
+        rows, cols, vals = [*rows, outer[T.row]], [*cols, T.col], [*vals, T.data]
+        iface = np.flatnonzero(sc.fe_cell >= 0)
+        if iface.size:
+            _, l2g = fe_dof_layout(self.V)
+            tf = tabulate_in_cells(self.V, sc.points[iface], sc.fe_cell[iface], 0).values.tocoo()
+            rows.append(iface[tf.row])
+            cols.append(n + l2g[tf.col])
+            vals.append(tf.data)
+        m = sc.points.shape[0]
+        T = sp.csr_matrix(
+            (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(m, n + N)
+        )
+        ns = sc.areas.size
+        grads = []
+        for d in range(2):
+            R = sp.csr_matrix(
+                (sc.normals[:, d] / sc.areas[sc.owner], (sc.owner, np.arange(m))), shape=(ns, m)
+            )
+            grads.append((R @ T).tocsr())
+        return grads, sc.areas
+
     def particle_energy_matrix(self) -> sp.coo_matrix:
         """``sum_q w_q Bhat_q^T D B_q`` of this rank's stress points in the combined numbering
-        of :meth:`_dof_map` (collective); ``Bhat = B`` unless ``consistent``."""
+        of :meth:`_dof_map` (collective); ``Bhat = B`` unless ``consistent``. With
+        ``"smoothed"``: ``sum_k |Omega_k| B_k^T D B_k`` of the smoothed strains (symmetric and
+        consistent; ``consistent`` has no effect)."""
+        D = sp.csr_matrix(self.material.voigt())
+        dof = self._dof_map()
+        if self.integration == "smoothed":
+            grads, areas = self._smoothed_gradients()
+            B = strain_operator(grads)
+            K = (B.T @ sp.kron(sp.diags(areas), D, format="csr") @ B).tocoo()
+            return sp.coo_matrix((K.data, (dof[K.row], dof[K.col])), shape=K.shape)
         q = self.stress_points()
         t = raise_on_all_ranks(self.comm, lambda: self.sph.tabulate(q.points))
         Z = self._node_map()
@@ -361,9 +424,7 @@ class HybridElasticity:
         if self.consistent:
             shepard = (t.values @ Z).tocsr()
             Bt = strain_operator(self._consistent_test_gradients(shepard, grads, q.weights))
-        D = sp.csr_matrix(self.material.voigt())
         K = (Bt.T @ sp.kron(sp.diags(q.weights), D, format="csr") @ B).tocoo()
-        dof = self._dof_map()
         return sp.coo_matrix((K.data, (dof[K.row], dof[K.col])), shape=K.shape)
 
     def traction_matrix(self) -> sp.coo_matrix:

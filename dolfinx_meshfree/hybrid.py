@@ -42,6 +42,11 @@ patch cells as stress points (a background-cell quadrature, which keeps ``K`` fr
 zero-energy modes of nodal integration and gives a regular static problem), or ``"particles"``:
 the particles themselves with their volumes, eq. 127–128 as written (nodal integration; its
 sawtooth modes carry no energy, so the static problem is singular: dynamics only).
+``"smoothed"``: the strains smoothed over sub-cells of the patch cells by the divergence theorem
+(:mod:`~dolfinx_meshfree.hybrid_smoothing`): ``K`` is symmetric *and* integration-consistent
+(``consistent`` has no effect), so central differences conserve energy and a wave crosses the
+interface without the reflection that the inconsistent ``"cells"`` integration leaves there:
+the choice for explicit dynamics (``demos/rod_gauss.py``).
 
 Integration consistency (``consistent``, default ``True``): the corrected kernel gradients are
 not derivatives of a function, so on background cells they do not satisfy the divergence theorem

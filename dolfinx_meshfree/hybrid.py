@@ -381,8 +381,12 @@ class HybridElasticity:
         n = self.patch.particles.num_particles
         N = self.hybrid.interpolation.shape[1]
         inner = np.flatnonzero(sc.fe_cell == INTERIOR)
-        t = raise_on_all_ranks(self.comm, lambda: self.sph.tabulate(sc.points[inner], 0))
-        T = (t.values @ self._node_map()).tocoo()
+        # an edge inside the patch belongs to two sub-cells: tabulate its points once
+        key = np.round(sc.points[inner] / (1e-9 * self.spacing)).astype(np.int64)
+        _, first, back = np.unique(key, axis=0, return_index=True, return_inverse=True)
+        pts = sc.points[inner[first]]
+        t = raise_on_all_ranks(self.comm, lambda: self.sph.tabulate(pts, 0))
+        T = (t.values @ self._node_map()).tocsr()[back.ravel()].tocoo()
         rows, cols, vals = [inner[T.row]], [T.col], [T.data]
         outer = np.flatnonzero(sc.fe_cell == EXTERIOR)
         t = raise_on_all_ranks(self.comm, lambda: self.evaluator.tabulate(sc.points[outer], 0))

@@ -88,7 +88,7 @@ def _reference_subcells(cell_name: str, n: int) -> np.ndarray:
     return np.asarray(out, dtype=float) / n
 
 
-def smoothing_cells(msh, cells: np.ndarray, in_cells: np.ndarray, n: int, degree: int = 3):
+def smoothing_cells(msh, cells: np.ndarray, in_cells: np.ndarray, n: int, degree: int = 1):
     """Sub-cells of the local ``cells`` and the Gauss points of their edges (local).
 
     Args:

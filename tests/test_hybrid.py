@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
-from dolfinx_meshfree.dynamics import DYNAMICS_METHODS, ExplicitDynamics, check_method
+from dolfinx_meshfree.dynamics import ExplicitDynamics, check_method
 from dolfinx_meshfree.hybrid_sph import CorrectedSPH
 from dolfinx_meshfree.waves import GaussianPulseRod
 
@@ -173,8 +173,20 @@ def run_rod(variant, consistent=False, t_end=2 * ROD.transit_time):
     return dyn, res, errors
 
 
-def test_hybrid_is_a_dynamics_method():
-    assert "hybrid" in DYNAMICS_METHODS and check_method("hybrid") == "hybrid"
+def test_hybrid_dynamics_has_the_rods_mass():
+    """``ExplicitDynamics.coupled`` of a hybrid problem has an FE and a particle field whose
+    lumped masses add up to the rod's mass ``rho L H`` (FE cells' row sums plus ``rho V_I`` of
+    the SPH particles, whose volumes tile the patch), to round-off; an unknown method name is
+    refused with the list of the available ones."""
+    problem = rod_problem(MPI.COMM_WORLD, 1.0, np.sqrt(3.0), "HA-F", integration="smoothed")
+    dyn = ExplicitDynamics.coupled(problem, particle_mass="volume")
+    assert [f.name for f in dyn.fields] == ["fe", "particles"]
+    mass = sum(f.mass.sum() for f in dyn.fields) / 2  # two components per node
+    assert abs(mass - ROD.rho * 60.0 * 5.0) < 1e-12 * ROD.rho * 300.0
+    assert check_method("hybrid") == "hybrid"
+    with pytest.raises(ValueError, match=r"method='hybrid-sph' is not available.*'hybrid'"):
+        check_method("hybrid-sph")
+    dyn.destroy()
 
 
 def test_energy_is_conserved_without_load_ha_f():
@@ -316,3 +328,160 @@ def test_bad_particle_mass():
     problem = rod_problem(MPI.COMM_WORLD, 2.5, 1, "HA-F")
     with pytest.raises(ValueError, match="particle_mass='lumped' is not known"):
         ExplicitDynamics.coupled(problem, particle_mass="lumped")
+
+
+# --- the particle:node ratio ---------------------------------------------------------------------
+
+
+def pulse_errors(ratio: float, comm=MPI.COMM_WORLD, **options) -> tuple[float, float, float]:
+    """Relative L2 velocity errors at t1 = L / c and t2 = 2 L / c and the energy drift of the
+    rod with FE cells h = 0.5 on x < 30 and particles of spacing h / sqrt(ratio) on x > 30, the
+    pulse starting at x = 24 so that it crosses the interface before t1 and after it."""
+    rod = GaussianPulseRod(E=ROD.E, rho=ROD.rho, length=60.0, center=24.0)
+    problem = rod_problem(comm, 0.5, np.sqrt(ratio), "HA-F", consistent=False, **options)
+    dyn = ExplicitDynamics.coupled(problem, particle_mass="volume")
+    dyn.set_initial(velocity=rod.initial_velocity, particle_values="nodal")
+    errors = {}
+    res = dyn.run(
+        2 * rod.transit_time,
+        outputs=[rod.transit_time, 2 * rod.transit_time],
+        on_output=lambda d, n, t: errors.setdefault(t, d.velocity_error(rod.velocity)),
+    )
+    dyn.destroy()
+    e = [errors[t] for t in sorted(errors)]
+    return e[0], e[-1], res.energy_drift
+
+
+@pytest.mark.parametrize("ratio", [2.0, 3.0])
+def test_pulse_error_does_not_depend_on_the_ratio(ratio):
+    """A pulse crossing the interface, at particle:node ratios whose spacing does not divide the
+    cells. Measured (centred particles, smoothed strains), error at t1 / t2: ratio 2 4.6e-3 /
+    3.1e-3, ratio 3 2.2e-3 / 2.1e-3 (ratios 1, 4, 6, 8: 1.3e-2 / 7.8e-3, 1.4e-3 / 1.8e-3,
+    1.6e-3 / 1.5e-3, 2.1e-3 / 1.4e-3), so the bound 1e-2 is about 2x the larger; growth t1 -> t2
+    0.67 and 0.99 (bound 1.5); energy drift 1e-13.
+
+    The former discretisation (the patch's particles through the interface nodes with volumes
+    sampled by 3 x 3 Gauss points per cell, Gauss integration of the particle energy) misses
+    the bound 16-67x: 0.35 / 0.67 (ratio 2), 0.16 / 0.39 (ratio 3); with centred particles but
+    Gauss integration, whose missed patch test reflects part of the wave at the interface:
+    1.9e-2 / 2.9e-2 and 1.2e-2 / 1.8e-2."""
+    e1, e2, drift = pulse_errors(ratio, integration="smoothed")
+    assert e1 < 1e-2 and e2 < 1e-2
+    assert e2 < 1.5 * e1
+    assert drift < 1e-10
+    old = pulse_errors(ratio, particles="patch", integration="cells")
+    assert min(old[:2]) > 0.1  # the measured miss, not a tolerance
+
+
+@pytest.mark.parametrize("cell_name", ["quadrilateral", "triangle"])
+def test_centred_particles_tile_the_patch(cell_name):
+    """The SPH particles of ``particles="centred"``: none on the interface, volumes that add up
+    to the patch's area and equal the lattice square's area wherever the square lies inside the
+    patch (to round-off), for a patch of cells chosen by a slanted criterion and a spacing that
+    divides neither the cells nor the box."""
+    comm = MPI.COMM_WORLD
+    msh = rectangle(comm, [0, 0], [6, 3], [12, 6], CELL_TYPES[cell_name])
+    n = msh.topology.index_map(2).size_local
+    xc = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], :2].mean(axis=1)
+    cells = np.flatnonzero(xc[:, 0] + 0.5 * xc[:, 1] > 3.2)
+    patch = mf.ParticlePatch(msh, cells, 0.37)
+    V = _compat.vector_function_space(msh)
+    problem = mf.HybridElasticity(V, patch, STEEL, integration="smoothed")
+    P = problem.patch.particles
+    assert problem.patch is not patch and patch.particles.num_particles != P.num_particles
+    area = comm.allreduce(float(mf.cell_quadrature(msh, 1, patch.cells).weights.sum()))
+    assert abs(P.volumes.sum() - area) < 1e-12 * area
+    # a particle whose square lies inside the patch (all four corners satisfy the criterion
+    # of some patch cell: here, right of the slanted border by a cell diagonal) has the
+    # square's area; the squares' areas are the modal volume
+    square = np.median(P.volumes)
+    inside = P.positions[:, 0] + 0.5 * P.positions[:, 1] > 3.2 + 1.0
+    assert inside.sum() > 20
+    assert np.abs(P.volumes[inside] - square).max() < 1e-12 * square
+    # no particle on an FE node (the staircase interface's corners come nearest: measured 0.21
+    # spacing); the patch's own grid puts particles on them
+    fe_cells = np.flatnonzero(~patch.in_patch[:n])
+    fe_nodes = msh.geometry.x[np.unique(_compat.geometry_dofmap(msh)[fe_cells]), :2]
+
+    def nearest(x: np.ndarray) -> float:
+        return np.linalg.norm(x[:, None, :] - fe_nodes[None, :, :], axis=2).min(initial=np.inf)
+
+    assert nearest(P.positions) > 0.1 * np.sqrt(square)
+    assert comm.allreduce(nearest(patch.particles.positions), op=MPI.MIN) < 1e-12
+
+
+@pytest.mark.parametrize("variant", mf.HYBRID_VARIANTS)
+def test_smoothed_strains_pass_the_patch_test(variant):
+    """Strains smoothed over sub-cells (``integration="smoothed"``): a linear field leaves no
+    force at the FE nodes but their boundary loads, none at the particles whose kernel does not
+    reach the exterior boundary, and the particles' forces add up to their boundary loads, to
+    round-off (measured 3e-15 of the loads); at the particles near the exterior boundary the
+    residual is the difference between the edge rule and the loads' facet rule (measured 4.9e-3
+    of the loads, h = 3)."""
+    problem = beam_problem(MPI.COMM_WORLD, 1.5, variant, integration="smoothed")
+    ops = problem.operators()
+    u_fe, u_p = _vectors(ops, problem)
+    r_fe, r_p = ops.K_fe.createVecLeft(), ops.K_p.createVecLeft()
+    ops.K_fe.mult(u_fe, r_fe)
+    ops.K_fp.multAdd(u_p, r_fe, r_fe)
+    ops.K_p.mult(u_p, r_p)
+    ops.K_pf.multAdd(u_fe, r_p, r_p)
+    sigma = problem.material.stress(GRAD)
+    problem.add_traction(mf.boundary_facets(problem.V.mesh), lambda x, n: n @ sigma.T)
+    b_fe, b_p = problem._loads()
+    r_fe.axpy(-1.0, b_fe)
+    r_p.axpy(-1.0, b_p)
+    comm, P = problem.comm, problem.patch.particles
+    n_owned = problem.V.dofmap.index_map.size_local
+    active = np.repeat(ops.fe_active[:n_owned], 2)
+    scale = comm.allreduce(np.abs(b_p.array_r).max(initial=0.0), op=MPI.MAX)
+    assert scale > 1e4
+    fe = comm.allreduce(np.abs(r_fe.array_r * active).max(initial=0.0), op=MPI.MAX)
+    assert fe < 1e-12 * scale
+    own = P.owned[np.argsort(P.petsc_index[P.owned], kind="stable")]
+    x = P.positions[own]
+    support = problem.sph.support
+    far = (np.abs(x[:, 1]) < 6.0 - support) & (x[:, 0] < 48.0 - support)
+    r = r_p.array_r.reshape(-1, 2)
+    assert comm.allreduce(int(far.sum())) > 10
+    assert comm.allreduce(np.abs(r[far]).max(initial=0.0), op=MPI.MAX) < 1e-12 * scale
+    assert np.abs(comm.allreduce(r.sum(axis=0))).max() < 1e-12 * scale
+    for obj in (u_fe, u_p, r_fe, r_p, b_fe, b_p):
+        obj.destroy()
+    ops.destroy()
+
+
+def test_smoothed_stiffness_is_symmetric():
+    """``v . K u = u . K v`` over [FE | particles] for random ``u``, ``v`` (HA-F, smoothed; to
+    round-off of ``|u| |K| |v|``), which is what makes central differences conserve energy."""
+    problem = beam_problem(MPI.COMM_WORLD, 3.0, "HA-F", integration="smoothed")
+    ops = problem.operators()
+    rng = np.random.default_rng(7 + MPI.COMM_WORLD.rank)
+    vecs = []
+    for _ in range(2):
+        a, b = ops.K_fe.createVecRight(), ops.K_p.createVecRight()
+        n_owned = problem.V.dofmap.index_map.size_local
+        a.array[:] = rng.standard_normal(a.getLocalSize()) * np.repeat(ops.fe_active[:n_owned], 2)
+        b.array[:] = rng.standard_normal(b.getLocalSize())
+        vecs.append((a, b))
+
+    def apply(a, b):
+        ra, rb = ops.K_fe.createVecLeft(), ops.K_p.createVecLeft()
+        ops.K_fe.mult(a, ra)
+        ops.K_fp.multAdd(b, ra, ra)
+        ops.K_p.mult(b, rb)
+        ops.K_pf.multAdd(a, rb, rb)
+        return ra, rb
+
+    (ua, ub), (va, vb) = vecs
+    Ku, Kv = apply(ua, ub), apply(va, vb)
+    vKu = va.dot(Ku[0]) + vb.dot(Ku[1])
+    uKv = ua.dot(Kv[0]) + ub.dot(Kv[1])
+    scale = (
+        ops.K_p.norm(PETSc.NormType.INFINITY) * (ua.norm() + ub.norm()) * (va.norm() + vb.norm())
+    )
+    assert abs(vKu - uKv) < 1e-13 * scale
+    assert abs(vKu) > 1e-6 * scale  # not vacuous
+    for obj in (ua, ub, va, vb, *Ku, *Kv):
+        obj.destroy()
+    ops.destroy()

@@ -135,7 +135,11 @@ class HybridElasticity:
         hybrid_degree: Gauss degree of the FE integration points that join the sums (eq.
             129–130); default: about one point per particle spacing and direction (Sauer 2000:
             the particles' density).
-        integration: ``"cells"`` or ``"particles"`` (see the module docstring).
+        integration: ``"smoothed"``, ``"cells"`` or ``"particles"`` (see the module
+            docstring). Default: ``"smoothed"`` for HA-F (symmetric and consistent; cantilever
+            L2 errors 1.8e-2, 4.3e-3, 1.9e-3 at h = 3, 1.5, 1, against 0.20, 5.7e-2, 3.0e-2
+            with ``"cells"``), ``"cells"`` for HA-S (whose traction rows go with the Gauss
+            points: 0.14, 3.2e-2, 1.3e-2, against 0.38, 0.16, 9.7e-2 smoothed).
         particles: ``"centred"`` (default): the SPH particles sit at the centres of a lattice of
             squares of the patch's particle spacing, none on the interface, each with the area of
             its square in the patch as its volume
@@ -168,7 +172,7 @@ class HybridElasticity:
         smoothing: float = 1.0,
         quadrature_degree: int | None = None,
         hybrid_degree: int | None = None,
-        integration: str = "cells",
+        integration: str | None = None,
         consistent: bool = True,
         particles: str = "centred",
     ):
@@ -181,7 +185,7 @@ class HybridElasticity:
                     "tractions, Rabczuk et al. 2006, eq. 131-134) or 'HA-F' (by interpolation, "
                     "eq. 135)"
                 )
-            if integration not in HYBRID_INTEGRATIONS:
+            if integration is not None and integration not in HYBRID_INTEGRATIONS:
                 raise ValueError(
                     f"integration={integration!r} is not known; use 'cells' (Gauss points of "
                     "the patch cells), 'smoothed' (strains smoothed over sub-cells: symmetric "
@@ -217,6 +221,8 @@ class HybridElasticity:
                 raise ValueError(f"consistent={consistent!r} must be True or False")
 
         raise_on_all_ranks(comm, check)
+        if integration is None:
+            integration = "smoothed" if variant == "HA-F" else "cells"
         t0 = time.perf_counter()
         self.consistent = bool(consistent)
         self.variant, self.integration = variant, integration
@@ -565,7 +571,9 @@ class HybridElasticity:
     # -- statics --------------------------------------------------------------------------------
 
     def _loads(self) -> tuple[PETSc.Vec, PETSc.Vec]:
-        """Traction loads: FE basis on FE facets, the particles' interpolant on patch facets."""
+        """Traction loads: FE basis on FE facets, the particles' interpolant on patch facets
+        (collective; with ``"smoothed"`` by the smoothing cells' edge rule, so that the loads of
+        a constant stress are the boundary terms of the particle energy)."""
         V, comm, msh = self.V, self.comm, self.V.mesh
         P = self.patch.particles
         fe_layout, l2g = fe_dof_layout(self.V)
@@ -576,7 +584,10 @@ class HybridElasticity:
         for facets, fn in self._tractions:
             f_fe, f_pf = self._split(facets)
             for sel, side in ((f_fe, "fe"), (f_pf, "p")):
-                q = facet_quadrature(msh, sel, deg)
+                if side == "p" and self.integration == "smoothed":
+                    q = self._smoothing_cells().exterior_quadrature(msh, _global_facets(msh, sel))
+                else:
+                    q = facet_quadrature(msh, sel, deg)
                 t = raise_on_all_ranks(
                     comm, lambda fn=fn, q=q: _vector_values(fn, (q.points, q.normals), len(q), "t")
                 )
@@ -695,6 +706,17 @@ class HybridElasticity:
                 "hybrid_points": self.hybrid.num_points,
             },
         )
+
+
+def _global_facets(msh, facets: np.ndarray) -> np.ndarray:
+    """The given owned facets of every rank, as local facet indices of this rank where it
+    holds them (collective): an exterior facet that one rank owns may bound a cell that another
+    rank owns."""
+    fmap = msh.topology.index_map(msh.topology.dim - 1)
+    n_local = fmap.size_local + fmap.num_ghosts
+    to_global = np.asarray(fmap.local_to_global(np.arange(n_local, dtype=np.int32)))
+    wanted = np.concatenate(msh.comm.allgather(to_global[np.asarray(facets, dtype=np.int64)]))
+    return np.flatnonzero(np.isin(to_global, wanted))
 
 
 def _facet_index(q: QuadraturePoints) -> np.ndarray:

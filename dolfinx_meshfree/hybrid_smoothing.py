@@ -40,6 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _compat
+from .quadrature import QuadraturePoints
 
 __all__ = ["EXTERIOR", "INTERIOR", "SmoothingCells", "smoothing_cells"]
 
@@ -61,6 +62,7 @@ class SmoothingCells:
             times the Gauss weight (on [0, 1]). owner: (m,) the sub-cell of each point.
         fe_cell: (m,) the local FE cell across the interface for points on an interface facet,
             :data:`EXTERIOR` for points on an exterior facet, else :data:`INTERIOR`.
+        facet: (m,) the local facet that a point on the cell's boundary lies on, else -1.
     """
 
     centroids: np.ndarray
@@ -70,6 +72,22 @@ class SmoothingCells:
     normals: np.ndarray
     owner: np.ndarray
     fe_cell: np.ndarray
+    facet: np.ndarray
+
+    def exterior_quadrature(self, msh, facets: np.ndarray) -> QuadraturePoints:
+        """The edge points on the given exterior facets (local indices, any owner), as a facet
+        quadrature: points, weights (edge length times rule weight), unit normals, the local
+        patch cell and the facet of each point. The traction loads on these points are the
+        boundary terms of the smoothed strains (the patch test holds to round-off)."""
+        on = (self.fe_cell == EXTERIOR) & np.isin(self.facet, facets)
+        w = np.linalg.norm(self.normals[on], axis=1)
+        return QuadraturePoints(
+            points=self.points[on],
+            weights=w,
+            cells=self.cells[self.owner[on]],
+            normals=self.normals[on] / w[:, None],
+            entities=self.facet[on],
+        )
 
 
 def _reference_subcells(cell_name: str, n: int) -> np.ndarray:
@@ -134,6 +152,7 @@ def smoothing_cells(msh, cells: np.ndarray, in_cells: np.ndarray, n: int, degree
     c2f = msh.topology.connectivity(tdim, tdim - 1)
     f2c = msh.topology.connectivity(tdim - 1, tdim)
     across = np.full((cells.size, ns, nv), INTERIOR, dtype=np.int64)
+    on_facet = np.full((cells.size, ns, nv), -1, dtype=np.int64)
     if cells.size:
         per = int(np.asarray(c2f.offsets)[1] - np.asarray(c2f.offsets)[0])
         facets = np.asarray(c2f.array).reshape(-1, per)[cells]  # (nc, nf)
@@ -158,6 +177,7 @@ def smoothing_cells(msh, cells: np.ndarray, in_cells: np.ndarray, n: int, degree
                 dist = np.abs(d[..., 0] * t[..., 1] - d[..., 1] * t[..., 0]) / np.sqrt(tt)
                 on &= dist < 1e-10 * size
             across[on] = np.broadcast_to(label[:, k][:, None, None], on.shape)[on]
+            on_facet[on] = np.broadcast_to(facets[:, k][:, None, None], on.shape)[on]
     owner = np.broadcast_to(np.arange(cells.size * ns).reshape(cells.size, ns, 1, 1), wn.shape[:4])
     return SmoothingCells(
         centroids=cen.reshape(-1, 2),
@@ -167,4 +187,5 @@ def smoothing_cells(msh, cells: np.ndarray, in_cells: np.ndarray, n: int, degree
         normals=wn.reshape(-1, 2),
         owner=owner.ravel().copy(),
         fe_cell=np.repeat(across[..., None], nq, axis=3).ravel(),
+        facet=np.repeat(on_facet[..., None], nq, axis=3).ravel(),
     )

@@ -123,14 +123,17 @@ def test_linear_patch_test_with_consistent_integration(variant):
 
 def test_linear_patch_test_without_consistency_is_missed_at_the_particles():
     """With the symmetric ``K`` (``consistent=False``) the corrected kernel gradients integrated
-    on background cells leave forces near the exterior boundary: measured 0.45 (HA-F, FE and
-    particles) and 0.45 at the particles with exact FE rows (HA-S) relative to the boundary
-    loads at h = 3. HA-S's FE rows stay exact: the interface tractions of a constant stress are
-    exact (eq. 131-134) and cancel the FE cells' own boundary term."""
+    on background cells (``integration="cells"``) leave forces near the exterior boundary:
+    measured 0.43 / 0.29 (HA-F, FE / particles) and 0.29 at the particles with exact FE rows
+    (HA-S) relative to the boundary loads at h = 3. HA-S's FE rows stay exact: the interface
+    tractions of a constant stress are exact (eq. 131-134) and cancel the FE cells' own boundary
+    term."""
     fe, p, scale = patch_residual(beam_problem(MPI.COMM_WORLD, 3.0, "HA-S", consistent=False))
     assert fe < 1e-12 * scale
     assert p > 0.1 * scale  # the measured miss, not a tolerance
-    fe, p, scale = patch_residual(beam_problem(MPI.COMM_WORLD, 3.0, "HA-F", consistent=False))
+    fe, p, scale = patch_residual(
+        beam_problem(MPI.COMM_WORLD, 3.0, "HA-F", integration="cells", consistent=False)
+    )
     assert fe > 0.1 * scale and p > 0.1 * scale
 
 
@@ -231,7 +234,9 @@ def acceleration_difference(h: float, k: int) -> float:
     V = _compat.vector_function_space(msh)
     fields = []
     for variant in mf.HYBRID_VARIANTS:
-        problem = mf.HybridElasticity(V, patch, STEEL, variant=variant, consistent=False)
+        problem = mf.HybridElasticity(
+            V, patch, STEEL, variant=variant, integration="cells", consistent=False
+        )
         dyn = ExplicitDynamics.coupled(problem, particle_mass="volume")
         dyn.set_initial(displacement=smooth_wave, particle_values="nodal")
         dt = dyn.stable_time_step()
@@ -252,13 +257,18 @@ def acceleration_difference(h: float, k: int) -> float:
 def test_ha_s_and_ha_f_agree_on_a_smooth_wave():
     """HA-S (tractions, eq. 131-134) and HA-F (interpolation, eq. 135) give the same forces on
     a smooth wave through the hybrid zone, closer under refinement: relative difference of the
-    accelerations 1.1e-2, 7.6e-3, 5.3e-3 (h = 1, 0.5, 0.25), about h^0.5. (The velocities after
-    a transit were compared before, from local arrays of two separately built meshes, whose
-    partitions differ: on 2 ranks that compared different points, 1.41.)"""
+    accelerations 5.2e-2, 3.6e-2 (h = 1, 0.5; Gauss integration of the particle energy for
+    both), about h^0.5. With the patch's particle grid, which put particles on the interface
+    nodes, the difference was 1.1e-2, 7.6e-3: HA-S's node stress (eq. 131) was then nearly the
+    stress of the particle on the node; the centred particles lie half a spacing inside. Against
+    the exact acceleration ``c^2 u''`` on 25 < x < 35 the centred particles are the closer for
+    both variants (HA-F 6.7e-2 against 9.9e-2, HA-S 9.1e-2 against 0.10, h = 1). (The
+    velocities after a transit were compared before, from local arrays of two separately built
+    meshes, whose partitions differ: on 2 ranks that compared different points, 1.41.)"""
     coarse = acceleration_difference(1.0, 2)
     fine = acceleration_difference(0.5, 2)
-    assert coarse < 0.02
-    assert fine < 0.8 * coarse
+    assert coarse < 0.1  # measured 5.2e-2
+    assert fine < 0.8 * coarse  # measured 0.70
 
 
 # --- statics: the cantilever ---------------------------------------------------------------------
@@ -272,19 +282,24 @@ def solve_beam(comm, h, variant, **options):
     return problem, problem.solve()
 
 
-@pytest.mark.parametrize("variant", mf.HYBRID_VARIANTS)
-def test_cantilever_converges(variant):
+@pytest.mark.parametrize(
+    "variant, rate, finest",
+    [("HA-F", (1.8, 2.3), 4e-3), ("HA-S", (1.9, 2.5), 2.6e-2)],
+)
+def test_cantilever_converges(variant, rate, finest):
     """Fitted L2 slope over h = 3, 1.5, 1 (Rabczuk et al. 2006, Table II: 1.23 / 1.23 / 1.13 for
-    the hybrid coupling); measured HA-F 1.39 (errors 7.6e-2 .. 1.7e-2), HA-S 1.55 (1.0e-1 ..
-    1.9e-2)."""
+    the hybrid coupling) at the default options: HA-F (smoothed strains) measured 2.04, errors
+    1.8e-2, 4.3e-3, 1.9e-3; HA-S (Gauss points, consistent test gradients) 2.21, errors 0.14,
+    3.2e-2, 1.3e-2. Bounds: the slope within about 0.25 of the measured one on either side, the
+    finest error 2x the measured one."""
     hs, errs = [3.0, 1.5, 1.0], []
     for h in hs:
         problem, sol = solve_beam(MPI.COMM_WORLD, h, variant)
         errs.append(
             mf.error_norms(problem.V.mesh, sol.evaluate_at_quadrature, BEAM, BEAM_MATERIAL)["l2"]
         )
-    assert fitted_rate(hs, errs) > 1.13
-    assert errs[-1] < 0.03
+    assert rate[0] < fitted_rate(hs, errs) < rate[1]
+    assert errs[-1] < finest
 
 
 def test_two_ranks_equal_serial():
@@ -412,43 +427,13 @@ def test_centred_particles_tile_the_patch(cell_name):
 
 @pytest.mark.parametrize("variant", mf.HYBRID_VARIANTS)
 def test_smoothed_strains_pass_the_patch_test(variant):
-    """Strains smoothed over sub-cells (``integration="smoothed"``): a linear field leaves no
-    force at the FE nodes but their boundary loads, none at the particles whose kernel does not
-    reach the exterior boundary, and the particles' forces add up to their boundary loads, to
-    round-off (measured 3e-15 of the loads); at the particles near the exterior boundary the
-    residual is the difference between the edge rule and the loads' facet rule (measured 4.9e-3
-    of the loads, h = 3)."""
+    """Strains smoothed over sub-cells (``integration="smoothed"``, symmetric ``K``): a linear
+    field leaves no force at any FE node or particle but its boundary loads, to round-off
+    (measured 7e-15 of the loads, h = 1.5, both variants)."""
     problem = beam_problem(MPI.COMM_WORLD, 1.5, variant, integration="smoothed")
-    ops = problem.operators()
-    u_fe, u_p = _vectors(ops, problem)
-    r_fe, r_p = ops.K_fe.createVecLeft(), ops.K_p.createVecLeft()
-    ops.K_fe.mult(u_fe, r_fe)
-    ops.K_fp.multAdd(u_p, r_fe, r_fe)
-    ops.K_p.mult(u_p, r_p)
-    ops.K_pf.multAdd(u_fe, r_p, r_p)
-    sigma = problem.material.stress(GRAD)
-    problem.add_traction(mf.boundary_facets(problem.V.mesh), lambda x, n: n @ sigma.T)
-    b_fe, b_p = problem._loads()
-    r_fe.axpy(-1.0, b_fe)
-    r_p.axpy(-1.0, b_p)
-    comm, P = problem.comm, problem.patch.particles
-    n_owned = problem.V.dofmap.index_map.size_local
-    active = np.repeat(ops.fe_active[:n_owned], 2)
-    scale = comm.allreduce(np.abs(b_p.array_r).max(initial=0.0), op=MPI.MAX)
+    fe, p, scale = patch_residual(problem)
     assert scale > 1e4
-    fe = comm.allreduce(np.abs(r_fe.array_r * active).max(initial=0.0), op=MPI.MAX)
-    assert fe < 1e-12 * scale
-    own = P.owned[np.argsort(P.petsc_index[P.owned], kind="stable")]
-    x = P.positions[own]
-    support = problem.sph.support
-    far = (np.abs(x[:, 1]) < 6.0 - support) & (x[:, 0] < 48.0 - support)
-    r = r_p.array_r.reshape(-1, 2)
-    assert comm.allreduce(int(far.sum())) > 10
-    assert comm.allreduce(np.abs(r[far]).max(initial=0.0), op=MPI.MAX) < 1e-12 * scale
-    assert np.abs(comm.allreduce(r.sum(axis=0))).max() < 1e-12 * scale
-    for obj in (u_fe, u_p, r_fe, r_p, b_fe, b_p):
-        obj.destroy()
-    ops.destroy()
+    assert fe < 1e-12 * scale and p < 1e-12 * scale
 
 
 def test_smoothed_stiffness_is_symmetric():

@@ -388,6 +388,16 @@ def test_pulse_error_does_not_depend_on_the_ratio(ratio):
     assert min(old[:2]) > 0.1  # the measured miss, not a tolerance
 
 
+def test_pulse_two_ranks_equal_serial():
+    """The pulse errors and energy drift of the smoothed, centred hybrid (ratio 3) on
+    COMM_WORLD and on COMM_SELF agree to round-off: the centred particles, their volumes and the
+    smoothing cells do not depend on the partition."""
+    world = pulse_errors(3.0, MPI.COMM_WORLD, integration="smoothed")
+    alone = pulse_errors(3.0, MPI.COMM_SELF, integration="smoothed")
+    assert abs(world[0] - alone[0]) < 1e-9 * alone[0]
+    assert abs(world[1] - alone[1]) < 1e-9 * alone[1]
+
+
 @pytest.mark.parametrize("cell_name", ["quadrilateral", "triangle"])
 def test_centred_particles_tile_the_patch(cell_name):
     """The SPH particles of ``particles="centred"``: none on the interface, volumes that add up

@@ -248,7 +248,6 @@ class HybridElasticity:
         #: ``particles="centred"``).
         self.V, self.patch, self.material = V, patch, material
         P = patch.particles
-        self.spacing = particle_spacing_median(P.positions)
         self.smoothing_length = float(smoothing) * self.spacing
         msh = V.mesh
         q0 = cell_quadrature(msh, 1)

@@ -211,13 +211,40 @@ def _in_patch(patch, points: np.ndarray) -> np.ndarray:
     return inside.astype(bool)
 
 
+def _poorly_seen(centres: np.ndarray, vertices: np.ndarray, radius: float) -> np.ndarray:
+    """Whether some vertex of each cell (vertices: (nc, nv, gdim)) has fewer than three
+    non-collinear ``centres`` closer than ``radius`` (local)."""
+    nc, nv, gdim = vertices.shape
+    out = np.zeros(nc, dtype=bool)
+    if nc == 0:
+        return out
+    if centres.shape[0] < 3:
+        return ~out
+    near = cKDTree(centres).query_ball_point(vertices.reshape(-1, gdim), 0.999 * radius)
+    for k, idx in enumerate(near):
+        if out[k // nv]:
+            continue
+        if len(idx) < 3:
+            out[k // nv] = True
+            continue
+        if len(idx) >= 8:  # a lattice row holds at most 5 points within the support
+            continue
+        d = centres[idx] - centres[idx].mean(axis=0)
+        if np.linalg.eigvalsh(d.T @ d)[0] < 1e-6 * radius**2:  # collinear
+            out[k // nv] = True
+    return out
+
+
 def centred_particles(patch, spacing: float, samples: int = 4) -> ParticleSet:
     """SPH particles at the centres of a lattice of squares over the patch cells (collective).
 
     The lattice spans the bounding box of the patch cells with ``round(extent / spacing)``
     squares per direction (the box's sides are lattice lines, so an axis-aligned interface or
     boundary is one too); a particle sits at the centre of every square whose centre lies in a
-    patch cell (so none on the interface, where the FE nodes are), and its volume is the area of
+    patch cell (so none on the interface, where the FE nodes are), and at the centroid of every
+    patch cell with a vertex that sees fewer than three non-collinear of those within two
+    spacings (spacings above the cell size, at a staircase border); a particle's volume is the
+    area of
     the patch that is nearer to it than to any other particle (its Voronoi cell within the patch):
     the square itself inside the patch. The areas are measured by nearest-particle assignment of
     ``samples x samples`` points per square at the centres of a finer lattice aligned with the
@@ -251,6 +278,15 @@ def centred_particles(patch, spacing: float, samples: int = 4) -> ParticleSet:
 
     centres = lattice(1)
     centres = centres[_in_patch(patch, centres)]
+    # a patch cell with a vertex that sees fewer than three non-collinear centres within the
+    # kernel support 2 spacings (a corner of a staircase border when the spacing exceeds the
+    # cells) gets a particle at its centroid, so that the corrected sums are defined there
+    dofs = _compat.geometry_dofmap(msh)[patch.cells]
+    mid = msh.geometry.x[dofs, :gdim].mean(axis=1)
+    blind = _poorly_seen(centres, msh.geometry.x[dofs, :gdim], 2.0 * float(step.min()))
+    extra = np.concatenate(comm.allgather(mid[blind].reshape(-1, gdim)))
+    extra = extra[np.lexsort(extra.T[::-1])]
+    centres = np.vstack([centres, extra])
     fine = lattice(samples)
     fine = fine[_in_patch(patch, fine)]
     q = cell_quadrature(msh, 2, patch.cells)

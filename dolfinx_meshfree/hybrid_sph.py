@@ -212,26 +212,34 @@ def _in_patch(patch, points: np.ndarray) -> np.ndarray:
 
 
 def _poorly_seen(centres: np.ndarray, vertices: np.ndarray, radius: float) -> np.ndarray:
-    """Whether some vertex of each cell (vertices: (nc, nv, gdim)) has fewer than three
-    non-collinear ``centres`` closer than ``radius`` (local)."""
+    """For each cell (vertices (nc, nv, gdim)), the first of its points (vertices, midpoints of
+    every pair of them, centroid) that has fewer than three non-collinear ``centres`` within
+    ``0.9 radius``, or NaN where every point has enough (local); (nc, gdim)."""
     nc, nv, gdim = vertices.shape
-    out = np.zeros(nc, dtype=bool)
+    pairs = [(a, b) for a in range(nv) for b in range(a + 1, nv)]
+    probes = np.concatenate(
+        [vertices]
+        + [0.5 * (vertices[:, a : a + 1] + vertices[:, b : b + 1]) for a, b in pairs]
+        + [vertices.mean(axis=1, keepdims=True)],
+        axis=1,
+    )
+    per = probes.shape[1]
+    out = np.full((nc, gdim), np.nan)
     if nc == 0:
         return out
     if centres.shape[0] < 3:
-        return ~out
-    near = cKDTree(centres).query_ball_point(vertices.reshape(-1, gdim), 0.999 * radius)
+        return probes[:, 0].copy()
+    near = cKDTree(centres).query_ball_point(probes.reshape(-1, gdim), 0.9 * radius)
     for k, idx in enumerate(near):
-        if out[k // nv]:
+        c, j = divmod(k, per)
+        if not np.isnan(out[c, 0]) or len(idx) >= 8:  # a lattice row holds at most 5 in reach
             continue
         if len(idx) < 3:
-            out[k // nv] = True
-            continue
-        if len(idx) >= 8:  # a lattice row holds at most 5 points within the support
+            out[c] = probes[c, j]
             continue
         d = centres[idx] - centres[idx].mean(axis=0)
-        if np.linalg.eigvalsh(d.T @ d)[0] < 1e-6 * radius**2:  # collinear
-            out[k // nv] = True
+        if np.linalg.eigvalsh(d.T @ d)[0] < 1e-2 * radius**2:  # (nearly) collinear
+            out[c] = probes[c, j]
     return out
 
 
@@ -241,11 +249,10 @@ def centred_particles(patch, spacing: float, samples: int = 4) -> ParticleSet:
     The lattice spans the bounding box of the patch cells with ``round(extent / spacing)``
     squares per direction (the box's sides are lattice lines, so an axis-aligned interface or
     boundary is one too); a particle sits at the centre of every square whose centre lies in a
-    patch cell (so none on the interface, where the FE nodes are), and at the centroid of every
-    patch cell with a vertex that sees fewer than three non-collinear of those within two
-    spacings (spacings above the cell size, at a staircase border); a particle's volume is the
-    area of
-    the patch that is nearer to it than to any other particle (its Voronoi cell within the patch):
+    patch cell (so none on the interface, where the FE nodes are), and halfway between the
+    centroid and the point of a patch cell that sees fewer than three non-collinear particles
+    within 1.8 spacings (a corner of a staircase border); a particle's volume is the area of the
+    patch that is nearer to it than to any other particle (its Voronoi cell within the patch):
     the square itself inside the patch. The areas are measured by nearest-particle assignment of
     ``samples x samples`` points per square at the centres of a finer lattice aligned with the
     squares (no point is equidistant from two particles), then scaled so that they sum to the
@@ -278,15 +285,19 @@ def centred_particles(patch, spacing: float, samples: int = 4) -> ParticleSet:
 
     centres = lattice(1)
     centres = centres[_in_patch(patch, centres)]
-    # a patch cell with a vertex that sees fewer than three non-collinear centres within the
-    # kernel support 2 spacings (a corner of a staircase border when the spacing exceeds the
-    # cells) gets a particle at its centroid, so that the corrected sums are defined there
-    dofs = _compat.geometry_dofmap(msh)[patch.cells]
-    mid = msh.geometry.x[dofs, :gdim].mean(axis=1)
-    blind = _poorly_seen(centres, msh.geometry.x[dofs, :gdim], 2.0 * float(step.min()))
-    extra = np.concatenate(comm.allgather(mid[blind].reshape(-1, gdim)))
-    extra = extra[np.lexsort(extra.T[::-1])]
-    centres = np.vstack([centres, extra])
+    # a patch cell with a point that sees fewer than three non-collinear centres within the
+    # kernel support 2 spacings (a corner of a staircase border) gets a particle halfway
+    # between that point and its centroid (if still blind: at the point itself, ...), so that
+    # the corrected sums are defined there
+    vertices = msh.geometry.x[_compat.geometry_dofmap(msh)[patch.cells], :gdim]
+    mid = vertices.mean(axis=1)
+    for t in (0.5, 0.0, 0.25, 0.75):  # then at the point itself, and between
+        probe = _poorly_seen(centres, vertices, 2.0 * float(step.min()))
+        blind = ~np.isnan(probe[:, 0])
+        extra = np.concatenate(comm.allgather(probe[blind] + t * (mid[blind] - probe[blind])))
+        if extra.shape[0] == 0:
+            break
+        centres = np.vstack([centres, extra[np.lexsort(extra.T[::-1])]])
     fine = lattice(samples)
     fine = fine[_in_patch(patch, fine)]
     q = cell_quadrature(msh, 2, patch.cells)

@@ -24,11 +24,10 @@ rule, exact for the linear fields that all three reproduce. ``K = sum_k |Omega_k
 is symmetric; a linear field has its exact strain in every sub-cell; the edges inside the patch
 cancel pairwise, so the force of a constant stress on a particle is its exterior boundary
 integral ``int N_J sigma n`` (by the edge rule), and on an FE node of the interface the patch's
-``int N_a sigma n_P`` cancels the FE cells' own. So ``K`` is symmetric and the linear patch test
-holds to round-off at the FE nodes and at every particle whose kernel does not reach the
-exterior boundary; at the others it holds up to the difference between the edge rule here and
-the facet rule of the traction loads (measured 5e-3 of the loads on the cantilever at h = 3;
-the free rod of Table III has no loads). This module builds the geometry: sub-cells, their
+``int N_a sigma n_P`` cancels the FE cells' own. With the traction loads on the patch's facets
+integrated by the same edge rule (:meth:`SmoothingCells.exterior_quadrature`), ``K`` is
+symmetric and the linear patch test holds to round-off at every FE node and particle (measured
+7e-15 of the loads). This module builds the geometry: sub-cells, their
 areas and centroids, and the points of their edges with the outward normal times the edge
 length.
 """

@@ -89,6 +89,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from . import _compat
+from .body_loads import CallableBodyForce, body_load_vectors
 from .coupled import (
     CoupledSolution,
     CouplingOperators,
@@ -285,6 +286,7 @@ class HybridElasticity:
         self._smoothing = None
         self._dirichlet: list[tuple[np.ndarray, VectorFunction]] = []
         self._tractions: list[tuple[np.ndarray, Callable]] = []
+        self._body_forces: list[CallableBodyForce] = []
         self._setup = time.perf_counter() - t0
 
     # -- user data ------------------------------------------------------------------------------
@@ -301,6 +303,15 @@ class HybridElasticity:
     def add_traction(self, facets: np.ndarray, traction: Callable) -> None:
         """Traction ``traction(x, n)`` (m, 2) on owned exterior facets, on either side."""
         self._tractions.append((np.asarray(facets, dtype=np.int32), traction))
+
+    def set_body_force(self, force: VectorFunction) -> None:
+        """Body force per unit volume ``b(x)`` (m, 2) on the whole body (replaces a previous
+        one), as :meth:`CoupledElasticity.set_body_force
+        <dolfinx_meshfree.CoupledElasticity.set_body_force>`: ``int N_a b`` over the FE cells and
+        ``int phi_J b`` over the patch cells, ``phi_J`` the particles' corrected SPH
+        interpolant (the functions of the patch's displacement, eq. 125), on the patch cells'
+        Gauss rule of degree :attr:`quadrature_degree`."""
+        self._body_forces = [CallableBodyForce(force)]
 
     # -- numbering ------------------------------------------------------------------------------
 
@@ -590,9 +601,10 @@ class HybridElasticity:
     # -- statics --------------------------------------------------------------------------------
 
     def _loads(self) -> tuple[PETSc.Vec, PETSc.Vec]:
-        """Traction loads: FE basis on FE facets, the particles' interpolant on patch facets
-        (collective; with ``"smoothed"`` by the smoothing cells' edge rule, so that the loads of
-        a constant stress are the boundary terms of the particle energy)."""
+        """Traction and body loads: FE basis on FE facets and cells, the particles' interpolant
+        on patch facets and cells (collective; patch facets with ``"smoothed"`` by the smoothing
+        cells' edge rule, so that the loads of a constant stress are the boundary terms of the
+        particle energy)."""
         V, comm, msh = self.V, self.comm, self.V.mesh
         P = self.patch.particles
         fe_layout, l2g = fe_dof_layout(self.V)
@@ -621,6 +633,13 @@ class HybridElasticity:
                     ).values
                     f_p += load_vector(tab, q.weights, t)
         b_fe = create_vector(comm, fe_layout, np.concatenate(rows), np.concatenate(vals))
+        if self._body_forces:
+            q = cell_quadrature(msh, self.quadrature_degree, self.patch.cells)
+            table = raise_on_all_ranks(comm, lambda: self.evaluator.tabulate(q.points, 0))
+            chi = cell_indicator(msh, ~self.patch.in_patch)
+            fe, fp = body_load_vectors(self._body_forces, V, chi, deg, (q, table.values), comm=comm)
+            b_fe.array[:] += fe
+            f_p += fp
         b_p = create_vector(comm, pl, P.petsc_dofs(2).ravel(), f_p)
         return b_fe, b_p
 

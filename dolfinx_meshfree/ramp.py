@@ -11,8 +11,8 @@ node on Gamma_E. In an interface cell the displacement blends the two approximat
 with gradients by the product rule (eq. 3.16). ``coupling="ramp-cubic"`` replaces ``R`` by the
 smoothed ramp ``3R^2 - 2R^3`` (Rabczuk, Xiao & Sauer 2006, eq. 38–42). The nodes on Gamma_E are
 particles: the shape function ``(1 - R) N_a`` of a Gamma_E node belongs to the dof of the
-particle at the node's position (a :class:`~dolfinx_meshfree.ParticlePatch` whose spacing divides
-the element size puts particles there), so the FE dofs of Gamma_E are inactive like those inside
+particle at the node's position (a :class:`~dolfinx_meshfree.ParticlePatch` puts particles on
+the patch border's nodes, whatever its spacing, see :func:`ramp_mls` for the supports),
 the patch. The blended shape functions are a partition of unity and reproduce linear fields
 (eq. 3.17), so the coupling needs no interface multipliers.
 
@@ -55,11 +55,39 @@ from .petsc import create_aij, create_vector
 from .quadrature import boundary_facets, cell_quadrature, facet_quadrature
 from .tables import ShapeTable
 
-__all__ = ["RAMPS", "RampInterface", "ramp_operators"]
+__all__ = ["RAMPS", "RampInterface", "ramp_mls", "ramp_operators"]
 
 
 #: The ramp couplings and whether each smooths the ramp (3R^2 - 2R^3).
 RAMPS = {"ramp": False, "ramp-cubic": True}
+
+
+def _interface_element_size(patch) -> float:
+    """The longest interface facet of the patch on any rank (collective; 0 without interface)."""
+    msh = patch.mesh
+    fdim = msh.topology.dim - 1
+    h = 0.0
+    if patch.interface_facets.size:
+        ends = msh.geometry.x[_compat.entities_to_geometry(msh, fdim, patch.interface_facets), :2]
+        h = float(np.linalg.norm(ends[:, -1] - ends[:, 0], axis=1).max())
+    return patch.comm.allreduce(h, op=MPI.MAX)
+
+
+def ramp_mls(mls: MLS, patch) -> MLS:
+    """The MLS of a ramp coupling: support radii ``d_max * max(c_I, h_E)`` (collective).
+
+    ``c_I`` is eq. 3.11's nodal spacing and ``h_E`` the element size on the interface
+    (the longest interface facet). The particle functions must span the interface elements up
+    to their FE-side edge, one element size from the interface (eq. 3.12): with particles finer
+    than the elements, ``d_max * c_I`` reaches no further than the interface row there, whose
+    particles are collinear, so the supports are measured in element sizes. Where the particle
+    spacing is the element size or coarser (the paper's set-up) the radii are eq. 3.11's.
+    """
+    floor = mls.dilation * _interface_element_size(patch)
+    if np.all(mls.radii >= floor):
+        return mls
+    radii = np.maximum(mls.radii, floor)
+    return MLS(mls.points, mls.weight_name, mls.dilation, mls.basis, radii=radii, rcond=mls.rcond)
 
 
 class RampInterface:
@@ -86,7 +114,7 @@ class RampInterface:
         # dilation 2 they are the interface particles alone on the far edge, where R = 0 and the
         # particle part vanishes); there phi is multiplied by a vanishing ramp.
         m = problem.mls
-        self._mls = MLS(m.points, m.weight_name, m.dilation, m.basis, rcond=0.0)
+        self._mls = MLS(m.points, m.weight_name, m.dilation, m.basis, radii=m.radii, rcond=0.0)
         self.num_particles = patch.particles.num_particles
         fdim = msh.topology.dim - 1
         nodes = dolfinx.fem.locate_dofs_topological(V, fdim, patch.interface_facets)
@@ -98,13 +126,7 @@ class RampInterface:
         self.cells = np.flatnonzero(self.in_interface[:n_owned]).astype(np.int32)
 
         # the element size: the longest interface facet (on any rank)
-        h = 0.0
-        if patch.interface_facets.size:
-            ends = msh.geometry.x[
-                _compat.entities_to_geometry(msh, fdim, patch.interface_facets), :2
-            ]
-            h = float(np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1).max())
-        h = comm.allreduce(h, op=MPI.MAX)
+        h = _interface_element_size(patch)
         self.tolerance = 1e-10 * h
         positions = patch.particles.positions
 
@@ -119,10 +141,13 @@ class RampInterface:
                 k = g[bad[0]]
                 raise ValueError(
                     f"{bad.size} FE node(s) on the patch interface have no particle at their "
-                    f"position (within {self.tolerance:.1e}); first: local node {int(k)} at "
+                    f"position (within {self.tolerance:.1e}); first: the node at "
                     f"{np.array2string(self.coordinates[k], precision=6)}, nearest particle "
                     f"{dist[bad[0]]:.3e} away. The ramp couplings need particles on the "
-                    "interface nodes: choose a patch spacing that divides the element size"
+                    f"interface nodes (Belytschko et al. 1995, sec. 3.2), which "
+                    f"ParticlePatch(placement={patch.placement!r}) did not put there: use "
+                    "ParticlePatch(..., placement='conforming') (the default, any spacing) or "
+                    "placement='vertices'"
                 )
             owner[g] = idx
             return owner
@@ -148,8 +173,29 @@ class RampInterface:
         except ValueError as e:
             raise type(e)(
                 "the particle supports do not cover the ramp's interface cells (the FE cells "
-                f"beside the patch): {e}"
+                f"beside the patch; the points checked lie just inside their corners): {e}. "
+                f"The supports have radii d_max * max(c_I, h_E) with dilation d_max = "
+                f"{self.mls.dilation}: increase dilation, or place particles on every patch "
+                "vertex with ParticlePatch(..., placement='vertices')"
             ) from e
+
+    def dirichlet_facets(self, facets: np.ndarray) -> np.ndarray:
+        """The facets among ``facets`` (owned exterior facets) on which the particle part
+        ``R phi`` of an interface cell does not vanish: facets of interface cells with a node on
+        Gamma_E (``R = 0`` on the others, where a multiplier would have nothing to constrain).
+        Local."""
+        facets = np.asarray(facets, dtype=np.int32)
+        msh = self.V.mesh
+        cells = _first_cells(msh, facets)
+        inter = self.in_interface[cells]
+        facets, cells = facets[inter], cells[inter]
+        if facets.size == 0:
+            return facets
+        geo = _compat.entities_to_geometry(msh, msh.topology.dim - 1, facets)
+        mid = msh.geometry.x[geo, :2].mean(axis=1)
+        # R is linear along a facet (P1/Q1): positive at the midpoint iff a node is on Gamma_E
+        r = self._ramps(tabulate_in_cells(self.V, mid, cells, derivatives=0))[2]
+        return facets[r > 1e-12]
 
     @property
     def num_fe_columns(self) -> int:
@@ -261,7 +307,7 @@ def solve_ramp(problem, solver: str = "mumps"):
     fe_bc, patch_bc, dq, dtabs, ubc, is_bc = problem._essential_conditions()
     u_bc = ubc.x.array.reshape(-1, 2)
     for f, fn in fe_bc:
-        f_i = f[blend.in_interface[_first_cells(msh, f)]]
+        f_i = blend.dirichlet_facets(f)
         iq = facet_quadrature(msh, f_i, deg)
         tab = raise_on_all_ranks(comm, lambda iq=iq: blend.table(iq.points, iq.cells, 0))
         ubar = raise_on_all_ranks(

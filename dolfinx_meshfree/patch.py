@@ -69,9 +69,7 @@ class ParticlePatch:
     ):
         comm = mesh.comm
         if placement not in PLACEMENTS:
-            raise ValueError(
-                f"placement={placement!r} is not known; use one of {list(PLACEMENTS)}"
-            )
+            raise ValueError(f"placement={placement!r} is not known; use one of {list(PLACEMENTS)}")
         if placement != "vertices" and spacing is None:
             raise ValueError("spacing=None: give the particle spacing, or placement='vertices'")
         if placement == "vertices" and (spacing is not None or jitter):

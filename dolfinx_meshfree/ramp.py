@@ -14,7 +14,8 @@ particles: the shape function ``(1 - R) N_a`` of a Gamma_E node belongs to the d
 particle at the node's position (a :class:`~dolfinx_meshfree.ParticlePatch` puts particles on
 the patch border's nodes whatever its spacing; see :func:`ramp_mls` for the supports), so
 the FE dofs of Gamma_E are inactive like those inside the patch. The blended shape functions
-are a partition of unity and reproduce linear fields (eq. 3.17), so the coupling needs no interface multipliers.
+are a partition of unity and reproduce linear fields (eq. 3.17), so the coupling needs no
+interface multipliers.
 
 Assembly, in a PETSc nest ``[[K_FE, K_FP], [K_PF, K_P]]`` (plus patch-side Dirichlet
 multipliers):

@@ -131,7 +131,19 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     for h in args.h:
         if round(args.L / h) < 1 or round(args.D / h) < 1:
             p.error(f"--h {h} is larger than the beam ({args.L} x {args.D})")
+        if coupled and args.patch_fraction <= min_patch_fraction(args, h):
+            p.error(
+                f"--patch-fraction {args.patch_fraction} selects no cell at --h {h}; give a "
+                f"fraction above {min_patch_fraction(args, h):.4g} or a smaller --h"
+            )
     return args
+
+
+def min_patch_fraction(args, h: float) -> float:
+    """The patch fractions above this select at least one cell at ``h``: the last cell
+    column's centroids lie ``h_x / 2`` (quadrilaterals) or ``h_x / 3`` (triangles) from the end."""
+    hx = args.L / max(1, round(args.L / h))
+    return hx / (2.0 if args.cell == "quadrilateral" else 3.0) / args.L
 
 
 # -

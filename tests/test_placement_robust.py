@@ -13,6 +13,7 @@ from __future__ import annotations
 import dolfinx_meshfree as mf  # (first: lane B's MPI)
 from dolfinx_meshfree import _compat
 from dolfinx_meshfree.mls import MLS, MomentMatrixError
+from dolfinx_meshfree.parallel import raise_on_all_ranks
 from dolfinx_meshfree.ramp import RampInterface
 
 import dolfinx
@@ -104,10 +105,11 @@ def test_every_coupling_passes_the_patch_test_whatever_the_patch(coupling, cell,
     assert patch_test_error(msh, patch, coupling) <= LEVEL[coupling]
 
 
-def moment_matrices_are_well_conditioned(mls: MLS, points: np.ndarray, rcond: float) -> None:
-    """Raises MomentMatrixError where the scaled moment matrix's eigenvalue ratio < rcond."""
+def moment_matrices_are_well_conditioned(comm, mls: MLS, points: np.ndarray, rcond: float) -> None:
+    """Raises MomentMatrixError (on every rank) where the scaled moment matrix's eigenvalue
+    ratio at this rank's ``points`` is below ``rcond``."""
     strict = MLS(mls.points, mls.weight_name, mls.dilation, mls.basis, radii=mls.radii, rcond=rcond)
-    strict.tabulate(points, 0)
+    raise_on_all_ranks(comm, lambda: strict.tabulate(points, 0))
 
 
 @pytest.mark.parametrize("spacing", SPACINGS)
@@ -119,10 +121,11 @@ def test_moment_matrices_are_well_conditioned_in_patch_and_interface_cells(cell,
     material = mf.LinearElastic(1000.0, 0.3)
     q = mf.cell_quadrature(msh, 7, patch.cells)
     lagrange = mf.CoupledElasticity(V, patch, material, coupling="lagrange")
-    moment_matrices_are_well_conditioned(lagrange.mls, q.points, RCOND_PATCH)
+    moment_matrices_are_well_conditioned(msh.comm, lagrange.mls, q.points, RCOND_PATCH)
     ramp = mf.CoupledElasticity(V, patch, material, coupling="ramp")
     qi = mf.cell_quadrature(msh, 7, RampInterface(ramp).cells)
-    moment_matrices_are_well_conditioned(ramp.mls, np.vstack([q.points, qi.points]), RCOND_RAMP)
+    points = np.vstack([q.points, qi.points])
+    moment_matrices_are_well_conditioned(msh.comm, ramp.mls, points, RCOND_RAMP)
 
 
 def test_the_grid_placement_is_ill_conditioned_on_a_slanted_patch():
@@ -133,7 +136,7 @@ def test_the_grid_placement_is_ill_conditioned_on_a_slanted_patch():
     ).mls
     with pytest.raises(MomentMatrixError, match="ill-conditioned"):
         moment_matrices_are_well_conditioned(
-            mls, mf.cell_quadrature(msh, 7, patch.cells).points, RCOND_PATCH
+            msh.comm, mls, mf.cell_quadrature(msh, 7, patch.cells).points, RCOND_PATCH
         )
 
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dolfinx_meshfree as mf  # (first: lane B's MPI)
 from dolfinx_meshfree import _compat
-from dolfinx_meshfree.mls import MLS, MomentMatrixError
+from dolfinx_meshfree.mls import MLS
 from dolfinx_meshfree.parallel import raise_on_all_ranks
 from dolfinx_meshfree.ramp import RampInterface
 
@@ -134,7 +134,7 @@ def test_the_grid_placement_is_ill_conditioned_on_a_slanted_patch():
     mls = mf.CoupledElasticity(
         _compat.vector_function_space(msh), patch, mf.LinearElastic(1000.0, 0.3)
     ).mls
-    with pytest.raises(MomentMatrixError, match="ill-conditioned"):
+    with pytest.raises(ValueError, match="ill-conditioned"):  # (MomentMatrixError on its rank)
         moment_matrices_are_well_conditioned(
             msh.comm, mls, mf.cell_quadrature(msh, 7, patch.cells).points, RCOND_PATCH
         )
@@ -174,7 +174,7 @@ def test_ramp_refusals_name_the_fix():
     assert "the node at [" in str(e.value)  # by coordinates
     msh, patch = make_patch("quadrilateral", "axis-aligned", 0.5)
     problem = mf.CoupledElasticity(V, patch, material, coupling="ramp", dilation=1.2)
-    with pytest.raises(MomentMatrixError, match=r"dilation d_max = 1.2: increase dilation"):
+    with pytest.raises(ValueError, match=r"dilation d_max = 1.2: increase dilation"):
         problem.solve()
 
 

@@ -74,20 +74,42 @@ def _interface_element_size(patch) -> float:
     return patch.comm.allreduce(h, op=MPI.MAX)
 
 
-def ramp_mls(mls: MLS, patch) -> MLS:
-    """The MLS of a ramp coupling: support radii ``d_max * max(c_I, h_E)`` (collective).
+def _interface_reach(patch) -> float:
+    """The largest distance from a vertex of an interface element (an FE cell with a vertex on
+    Gamma_E) to the nearest Gamma_E node (collective; identical on every rank). One element
+    size beside a straight interface, the cell's diagonal where a staircase interface touches a
+    cell at one corner."""
+    msh, comm = patch.mesh, patch.comm
+    fdim = msh.topology.dim - 1
+    geo = _compat.entities_to_geometry(msh, fdim, patch.interface_facets)
+    gamma = np.concatenate(comm.allgather(msh.geometry.x[geo.ravel(), :2]))
+    if gamma.shape[0] == 0:
+        return 0.0
+    fe = patch.fe_cells
+    nodes = msh.geometry.x[_compat.geometry_dofmap(msh)[fe], :2]  # (cells, vertices, 2)
+    dist = cKDTree(gamma).query(nodes.reshape(-1, 2))[0].reshape(nodes.shape[:2])
+    touching = dist.min(axis=1, initial=np.inf) <= 1e-10 * max(np.ptp(gamma, axis=0).max(), 1.0)
+    return comm.allreduce(float(dist[touching].max(initial=0.0)), op=MPI.MAX)
 
-    ``c_I`` is eq. 3.11's nodal spacing and ``h_E`` the element size on the interface
-    (the longest interface facet). The particle functions must span the interface elements up
-    to their FE-side edge, one element size from the interface (eq. 3.12): with particles finer
-    than the elements, ``d_max * c_I`` reaches no further than the interface row there, whose
-    particles are collinear, so the supports are measured in element sizes. Where the particle
-    spacing is the element size or coarser (the paper's set-up) the radii are eq. 3.11's.
+
+def ramp_mls(mls: MLS, patch) -> MLS:
+    """The MLS of a ramp coupling: support radii ``(d_max - 1) c_I + max(c_I, rho)``
+    (collective).
+
+    ``c_I`` is eq. 3.11's nodal spacing and ``rho`` the reach of the interface elements: the
+    largest distance from one of their vertices to Gamma_E (:func:`_interface_reach`; the element
+    size ``h`` beside a straight interface). The particle functions must span the interface
+    elements up to their FE side (eq. 3.12), as eq. 3.11's ``d_max c_I`` does when the particles
+    are as far apart as the nodes (``c_I = h``, the paper's set-up, whose radii these are):
+    finer particles would reach no further than the interface row there, whose particles are
+    collinear. So the support reaches the interface elements' width beyond the paper's
+    ``(d_max - 1) c_I``. Where ``c_I >= rho`` the radii are eq. 3.11's.
     """
-    floor = mls.dilation * _interface_element_size(patch)
-    if np.all(mls.radii >= floor):
+    rho = _interface_reach(patch)
+    c = mls.radii / mls.dilation
+    radii = (mls.dilation - 1.0) * c + np.maximum(c, rho)
+    if np.all(radii <= mls.radii):
         return mls
-    radii = np.maximum(mls.radii, floor)
     return MLS(mls.points, mls.weight_name, mls.dilation, mls.basis, radii=radii, rcond=mls.rcond)
 
 
@@ -175,7 +197,8 @@ class RampInterface:
             raise type(e)(
                 "the particle supports do not cover the ramp's interface cells (the FE cells "
                 f"beside the patch; the points checked lie just inside their corners): {e}. "
-                f"The supports have radii d_max * max(c_I, h_E) with dilation d_max = "
+                f"The supports have radii (d_max - 1) c_I + max(c_I, rho) (see ramp_mls) with "
+                f"dilation d_max = "
                 f"{self.mls.dilation}: increase dilation, or place particles on every patch "
                 "vertex with ParticlePatch(..., placement='vertices')"
             ) from e

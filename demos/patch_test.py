@@ -4,7 +4,9 @@
 # the whole boundary of the square ``[0, 2] x [0, 2]`` with no body force; the exact solution is
 # that linear field, and a consistent method reproduces it to round-off. With EFG the error that
 # remains comes from quadrature: the paper reports 1e-6 with Gauss cells. Variationally
-# consistent integration (VCI, Chen, Hillman & Rüter 2013; ``--consistent``) removes it.
+# consistent integration (VCI, Chen, Hillman & Rüter 2013), the library's default, removes it;
+# ``--no-consistent`` gives the plain Gauss quadrature of the papers, and ``--plain`` the papers'
+# methods as published (plain Gauss, and bridging tied at its band particles, eq. 79-81).
 # ``--field general`` prescribes ``u = c + G x`` with a shear and a rotation in ``G`` instead
 # (the field of the coupling tests in ``tests/``).
 #
@@ -13,7 +15,11 @@
 # of the square (the cells with centroid x > 1, particle spacing = the nominal cell size 2/n),
 # the left half staying finite elements, as in the coupling tests (``tests/test_coupled.py``,
 # ``test_ramp.py``, ``test_bridging.py``, ``test_edge_to_edge.py``). ``--method all`` runs them
-# all and prints one table.
+# all and prints one table. ``--patch`` chooses the patch cells by another criterion:
+# ``slanted`` (centroid right of the line x + 0.4 y = 1.45, which crosses the cells), ``curved``
+# (centroid within 1.1 of the midpoint (2, 1) of the right side: an interface that follows a
+# circle through the cells). ``--placement vertices`` puts the couplings' particles on the
+# vertices of the patch cells instead of the (jittered) grid.
 #
 # Meshes (``--cells n`` per side, default 6):
 #
@@ -28,11 +34,12 @@
 # The demo prints the maximum displacement error over the particles, the mesh vertices and a
 # 41 x 41 grid of probe points, beside the target of the issue, and checks it:
 #
-# * targets: 1e-10 for FE and for every method with ``--consistent``; 1e-6 with Gauss
-#   quadrature; none for master–slave (first order by construction, exempt);
-# * a method that meets its target today and is expected to (``EXPECTED_TO_PASS``: FE, and EFG,
-#   Lagrange, edge-to-edge and both ramps with consistent integration) fails the run (exit
-#   code 1) when it misses;
+# * targets: 1e-10 for FE and for every method with consistent integration (the default);
+#   1e-6 with Gauss quadrature; none for master–slave (first order by construction, exempt);
+# * a method that meets its target today and is expected to (``EXPECTED_TO_PASS``: FE, and EFG
+#   and every variational coupling with consistent integration, on every mesh and patch) fails
+#   the run (exit code 1) when it misses; bridging with ``--constraint points`` refuses where its
+#   band has fewer particles than FE nodes (grid particles on the gmsh meshes), as expected;
 # * the methods that are known to miss are reported as MISSED with the measured figure (reasons
 #   in ``KNOWN_MISSES``) and do not change the exit code.
 #
@@ -50,8 +57,9 @@
 # weight (3.10a) as written is not zero at r = 1 (exp(-6.25) = 2e-3): its functions jump at the
 # support edges and the error stays at 1e-3 to 2e-2 whatever the quadrature.
 #
-#     python demos/patch_test.py --method efg --mesh irregular --consistent [--json out.json]
-#     python demos/patch_test.py --method all --mesh irregular --cell triangle
+#     python demos/patch_test.py --method efg --mesh irregular [--json out.json]
+#     python demos/patch_test.py --method all --mesh irregular --cell triangle --patch curved
+#     python demos/patch_test.py --method all --mesh irregular --plain
 #     python demos/patch_test.py --method all --mesh irregular --preset dense-gauss
 
 # +
@@ -72,6 +80,7 @@ from mpi4py import MPI
 
 METHODS = ("fe", "efg", *mf.COUPLINGS)
 MESHES = ("regular", "irregular", "perturbed")
+PATCHES = ("axis", "slanted", "curved")
 MESH_DIR = pathlib.Path(__file__).resolve().parents[1] / "meshes"
 SIZE = 2.0
 
@@ -86,6 +95,7 @@ EXPECTED_TO_PASS = {
     ("edge-to-edge", True),
     ("ramp", True),
     ("ramp-cubic", True),
+    ("bridging", True),
 }
 #: Settings (weight, d_max, Gauss degree) that trade cost for a smaller quadrature error; an
 #: explicit --weight / --dilation / --quadrature-degree overrides the preset's value. The preset's
@@ -117,10 +127,9 @@ KNOWN_MISSES = {
     "--consistent (VCI over the patch and the interface cells) passes",
     "ramp-cubic": "as ramp (1.9e-4 to 5e-4 at the defaults); --preset dense-gauss brings it "
     "below 1e-6 on the regular and gmsh meshes; --consistent passes",
-    "bridging": "the point constraints do not transmit the band's force consistently "
-    "(3.6e-2 here); --constraint integral: Gauss error (8e-5 here), and with --consistent exact "
-    "on the regular meshes; on unstructured ones grad(alpha) is piecewise constant, outside "
-    "the continuous multiplier space (1.6e-3)",
+    "bridging": "Gauss quadrature error of the alpha-weighted particle energy (8e-5 with the "
+    "integral constraint); the point constraints (--plain) also do not transmit the band's "
+    "force consistently (3.6e-2); consistent integration (the default) passes with either",
     "master-slave": "exempt: rigid links drop the strain across the first particle layer",
 }
 # -
@@ -136,7 +145,25 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--mesh", choices=MESHES, default="regular")
     p.add_argument("--cell", choices=("quadrilateral", "triangle"), default="quadrilateral")
     p.add_argument("--cells", type=int, default=6, help="cells per side (nominal for irregular)")
-    p.add_argument("--consistent", action="store_true", help="variationally consistent integration")
+    p.add_argument("--patch", choices=PATCHES, default="axis", help="criterion of the patch cells")
+    p.add_argument(
+        "--placement",
+        choices=("grid", "vertices"),
+        default="grid",
+        help="couplings' particles: on the grid of spacing 2/n (jittered on the irregular "
+        "meshes), or one at every vertex of the patch cells",
+    )
+    p.add_argument(
+        "--consistent",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="variationally consistent integration (default: on, off with --plain or --preset)",
+    )
+    p.add_argument(
+        "--plain",
+        action="store_true",
+        help="the papers' methods: plain Gauss quadrature, bridging tied at its band particles",
+    )
     p.add_argument(
         "--preset",
         choices=sorted(PRESETS),
@@ -166,8 +193,9 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument(
         "--constraint",
         choices=("points", "integral"),
-        default="points",
-        help="bridging: tie the band at its particles (eq. 79-81) or over its cells (eq. 52)",
+        default=None,
+        help="bridging: tie the band over its cells (eq. 52, default) or at its particles "
+        "(eq. 79-81, default with --plain)",
     )
     p.add_argument(
         "--field",
@@ -178,6 +206,10 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--json", default=None, help="write the record(s) as JSON")
     args = p.parse_args(argv)
     preset = PRESETS.get(args.preset, {})
+    if args.consistent is None and (args.plain or args.preset is not None):
+        args.consistent = False
+    if args.constraint is None:
+        args.constraint = "points" if args.plain else "integral"
     args.preset_overridden = [
         k for k in preset if getattr(args, k) is not None and getattr(args, k) != preset[k]
     ]
@@ -250,11 +282,17 @@ def probe_points(msh, n: int, comm) -> np.ndarray:
     return np.vstack([vertices, grid[comm.rank :: comm.size]])
 
 
-def cells_right_of(msh, x0: float) -> np.ndarray:
-    """Owned cells whose centroid lies right of ``x0`` (the coupling tests' patch)."""
+def patch_cells(msh, patch: str) -> np.ndarray:
+    """Owned cells of the patch of ``--patch``, chosen by their centroid ``c``: ``axis``
+    ``c_x > 1`` (the coupling tests' patch); ``slanted`` ``c_x + 0.4 c_y > 1.45``; ``curved``
+    ``|c - (2, 1)| < 1.1``."""
     n = msh.topology.index_map(msh.topology.dim).size_local
-    nodes = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], :2]
-    return np.flatnonzero(nodes[:, :, 0].mean(axis=1) > x0)
+    c = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], :2].mean(axis=1)
+    if patch == "slanted":
+        return np.flatnonzero(c[:, 0] + 0.4 * c[:, 1] > 1.45)
+    if patch == "curved":
+        return np.flatnonzero(np.hypot(c[:, 0] - SIZE, c[:, 1] - SIZE / 2) < 1.1)
+    return np.flatnonzero(c[:, 0] > SIZE / 2)
 
 
 # -
@@ -274,6 +312,15 @@ def dilation(args, method: str) -> float:
     return mf.DEFAULT_DILATION.get(method, 2.0)
 
 
+def consistent_option(args, method: str) -> bool:
+    """``--consistent`` / ``--no-consistent`` / ``--plain``, else the library's default: VCI for
+    EFG and every variational coupling, plain Gauss for master-slave (see
+    :class:`~dolfinx_meshfree.CoupledElasticity`)."""
+    if args.consistent is not None:
+        return bool(args.consistent)
+    return method != "master-slave"
+
+
 def run_fe(msh, args, exact, material, points):
     V = _compat.vector_function_space(msh)
     sol = mf.solve_fe_elasticity(
@@ -291,7 +338,7 @@ def run_efg(msh, args, exact, material, points, jitter):
         weight=args.weight,
         dilation=dilation(args, "efg"),
         quadrature_degree=args.quadrature_degree,
-        consistent=args.consistent,
+        consistent=consistent_option(args, "efg"),
     )
     problem.add_dirichlet(mf.boundary_facets(msh), exact.displacement)
     sol = problem.solve()
@@ -303,7 +350,11 @@ def run_efg(msh, args, exact, material, points, jitter):
 
 
 def run_coupled(msh, args, exact, material, points, jitter, coupling):
-    patch = mf.ParticlePatch(msh, cells_right_of(msh, SIZE / 2), SIZE / args.cells, jitter=jitter)
+    cells = patch_cells(msh, args.patch)
+    if args.placement == "vertices":
+        patch = mf.ParticlePatch(msh, cells, placement="vertices")
+    else:
+        patch = mf.ParticlePatch(msh, cells, SIZE / args.cells, jitter=jitter)
     problem = mf.CoupledElasticity(
         _compat.vector_function_space(msh),
         patch,
@@ -312,7 +363,7 @@ def run_coupled(msh, args, exact, material, points, jitter, coupling):
         weight=args.weight,
         dilation=dilation(args, coupling),
         quadrature_degree=args.quadrature_degree,
-        consistent=args.consistent,
+        consistent=consistent_option(args, coupling),
         **(
             {"overlap": args.overlap, "constraint": args.constraint}
             if coupling == "bridging"
@@ -354,14 +405,13 @@ def preset_expects(args, method: str, consistent: bool) -> bool:
     )
 
 
-def bridging_expected(args, method: str, consistent: bool) -> bool:
-    """Bridging passes with the integral constraint and VCI where grad(alpha) lies in the
-    multiplier space: the band of uniform straight layers of the regular meshes."""
+def refusal_expected(args, method: str, error: str) -> bool:
+    """Bridging with its point constraints refuses (a ValueError naming the remedies) where
+    its band has fewer particles than FE nodes: grid particles on the gmsh meshes."""
     return (
         method == "bridging"
-        and consistent
-        and args.constraint == "integral"
-        and args.mesh == "regular"
+        and args.constraint == "points"
+        and "cannot determine the band multipliers" in error
     )
 
 
@@ -374,7 +424,7 @@ def run(args, method: str, comm) -> dict:
     )
     material = mf.LinearElastic(1000.0, 0.3)
     points = probe_points(msh, args.cells, comm)
-    consistent = bool(args.consistent) if method != "fe" else False
+    consistent = consistent_option(args, method) if method != "fe" else False
     note = ""
     try:
         if method == "fe":
@@ -385,18 +435,16 @@ def run(args, method: str, comm) -> dict:
             err, particles = run_coupled(msh, args, exact, material, points, jitter, method)
         err = comm.allreduce(err, op=MPI.MAX)
     except (ValueError, RuntimeError) as e:
-        # The library raises these alike on every rank: a coupling that refuses consistent
-        # integration, or a solve that fails (reported, so that one method cannot hide the table)
-        refused = consistent and "consistent=True is not available" in str(e)
+        # The library raises these alike on every rank: a refusal with its remedy, or a solve
+        # that fails (reported, so that one method cannot hide the table)
+        refused = refusal_expected(args, method, str(e))
         err, particles = None, 0
         note = f"{'refused by the library' if refused else 'ERROR'}: {e}"
     goal = target(method, consistent)
-    expected = (
-        (method, consistent) in EXPECTED_TO_PASS
-        or preset_expects(args, method, consistent)
-        or bridging_expected(args, method, consistent)
-    )
-    if err is None and not note.startswith("refused"):
+    expected = (method, consistent) in EXPECTED_TO_PASS or preset_expects(args, method, consistent)
+    if note.startswith("refused"):
+        status = "refused"
+    elif err is None:
         status = "FAILED" if expected else "ERROR"
     elif goal is None:
         status = "exempt"
@@ -409,10 +457,13 @@ def run(args, method: str, comm) -> dict:
     return {
         "method": method,
         "mesh": args.mesh,
+        "patch": args.patch,
+        "placement": args.placement,
         "cell": args.cell,
         "cells": msh.topology.index_map(msh.topology.dim).size_global,
         "particles": particles,
         "consistent": consistent if method != "fe" else None,
+        "constraint": args.constraint if method == "bridging" else None,
         "quadrature_degree": args.quadrature_degree,
         "dilation": dilation(args, method) if method != "fe" else None,
         "weight": args.weight if method != "fe" else None,
@@ -438,7 +489,10 @@ def report(records: list[dict], comm) -> None:
     )
     r0 = next((r for r in records if r["weight"]), records[0])
     preset = f", preset {r0['preset']}" if r0["preset"] else ""
-    print(f"weight {r0['weight'] or '-'}, Gauss degree {r0['quadrature_degree']}{preset}")
+    print(
+        f"weight {r0['weight'] or '-'}, Gauss degree {r0['quadrature_degree']}{preset}, "
+        f"patch {r0['patch']}"
+    )
     head = (
         f"{'method':12} {'mesh':9} {'cells':17} {'part.':>5} {'d_max':>5} {'consistent':>10} "
         f"{'max error':>9} {'target':>7}  status"

@@ -19,12 +19,15 @@
 #         [--json out.json]
 #     mpirun -n 2 python demos/plug_into_existing_model.py
 #
-# The demo checks itself: for every coupling but master-slave (first order by construction) and
-# every mesh the coupled errors stay within 1.5x of the plain FE errors on the same mesh, and the
-# fitted L2 rate is at least 1.8 (FE: 2). The bridging band keeps a fixed physical width
-# (`--band-width`, default 0.2, i.e. round(0.2 / h) cell layers): with a fixed number of layers
-# the band narrows under refinement and, on this unstructured mesh with a curved interface, the
-# L2 rate drops to about 1.4.
+# The demo checks itself (`CHECKS` below, with the values measured): on every mesh each
+# coupling but master-slave lowers the L2 and energy errors of the model as written and divides
+# its hoop-stress error at the inner surface by at least 6 (ramps 7.5, bridging 2), and the
+# fitted L2 rate lies in [1.8, 2.4] (FE: 2); master-slave, first order by construction, stays
+# within 50 x plain FE's error with a hoop gain of at least 1.2. The bridging band keeps a fixed
+# physical width (`--band-width`, default 0.2: the coupling's `band_width` option, alpha =
+# distance to the interface / width, clipped to 1); `--overlap N` gives the band of N cell
+# layers instead, which narrows under refinement and, on this unstructured mesh with a curved
+# interface, frays (alpha follows the layer index, not the distance) and loses rate.
 
 # +
 from __future__ import annotations
@@ -49,9 +52,31 @@ from petsc4py import PETSc
 MESHES = pathlib.Path(__file__).resolve().parent.parent / "meshes"
 INNER, OUTER = 1, 2  # facet tags of the existing model
 RADII = (1.0, 1.4, 2.0)  # inner surface, patch boundary, housing
-#: Not checked: the reference, and master-slave, first order by construction (its rigidly
-#: linked particle layer loses the strain across one cell; see demos/cantilever.py).
-EXEMPT = ("plain FE", "master-slave")
+#: The demo's checks, per coupling: (largest L2 and energy error / plain FE's at the same h,
+#: smallest hoop-stress gain = plain FE's hoop error at r = 1 / the coupling's, fitted L2 rate
+#: range, fitted hoop-stress rate range). Measured at h = 0.2, 0.1, 0.05 with consistent=False /
+#: True (bridging: point / integral constraints):
+#:   lagrange       L2 0.64-0.65 x FE, energy 0.44-0.48 x, hoop gain 12.6-19.1, rate 2.03, hoop 1.37
+#:   edge-to-edge   0.31-0.33 / 0.50-0.53, 0.44-0.48, 12.9-19.2, 1.99 / 2.06, hoop 1.34-1.36
+#:   ramp           0.58-0.63, 0.36-0.42, 17.5-28.5, 1.97, hoop 1.41-1.42
+#:   ramp-cubic     0.59-0.64, 0.38-0.43, 15.5-28.1, 1.98, hoop 1.49-1.51
+#:   bridging       0.75-0.96 / 0.68-0.71, 0.62-0.91 / 0.49-0.53, 3.9-18.4 / 12.2-19.0,
+#:                  2.19 / 2.03, hoop 2.20 / 1.40
+#:   master-slave   4.0-23.7 x FE, energy 1.3-4.4 x, hoop gain 2.4-3.3, rate 0.74, hoop 1.31
+#: Bounds: the variational couplings lower both errors (<= 1.0 x FE) and the hoop error by at
+#: least half the smallest measured gain, at rates within about [1.8, 2.4] (L2) and [1.0, 2.5]
+#: (hoop); master-slave, first order (its rigidly linked layer loses the strain across one cell),
+#: within twice its measured 24 x FE, a hoop gain of at least 1.2, an L2 rate of at least 0.5.
+CHECKS = {
+    "lagrange": (1.0, 6.0, (1.8, 2.4), (1.0, 2.5)),
+    "edge-to-edge": (1.0, 6.0, (1.8, 2.4), (1.0, 2.5)),
+    "ramp": (1.0, 7.5, (1.8, 2.4), (1.0, 2.5)),
+    "ramp-cubic": (1.0, 7.5, (1.8, 2.4), (1.0, 2.5)),
+    # point constraints at h = 0.2 (a band one layer wide): gain 3.9; rates 0.2 -> 0.1 of L2 2.37
+    # and hoop 2.99
+    "bridging": (1.0, 2.0, (1.8, 2.8), (1.0, 3.5)),
+    "master-slave": (50.0, 1.2, (0.5, 2.4), (1.0, 2.5)),
+}
 # -
 
 
@@ -177,8 +202,7 @@ def run(comm, args, h: float, couplings: list[str]) -> list[dict]:
         | {"hoop": inner_hoop(msh, evaluate_fe, exact, material)}
     )
     for coupling in couplings:
-        # bridging: a band of fixed physical width, in cell layers of this mesh
-        options = {"overlap": max(1, round(args.band_width / h))} if coupling == "bridging" else {}
+        options = bridging_band(args) if coupling == "bridging" else {}
         sol = with_patch(msh, V, a, L, bcs, material, coupling, options)
         errors = mf.error_norms(msh, sol.evaluate_at_quadrature, exact, material)
         records.append(
@@ -187,6 +211,14 @@ def run(comm, args, h: float, couplings: list[str]) -> list[dict]:
             | {"hoop": inner_hoop(msh, sol.evaluate_at_quadrature, exact, material)}
         )
     return records
+
+
+def bridging_band(args) -> dict:
+    """The bridging band's option: ``--overlap`` cell layers, or by default a band of the
+    physical width ``--band-width`` with alpha = distance to the interface / width."""
+    if args.overlap is not None:
+        return {"overlap": args.overlap}
+    return {"band_width": args.band_width}
 
 
 def inner_hoop(msh, evaluate, exact, material) -> float:
@@ -227,7 +259,13 @@ def parse(argv):
         "--band-width",
         type=float,
         default=0.2,
-        help="bridging: width of the overlap band (overlap = round(width / h) cell layers)",
+        help="bridging: physical width of the overlap band (alpha = distance / width)",
+    )
+    p.add_argument(
+        "--overlap",
+        type=int,
+        default=None,
+        help="bridging: a band of this many cell layers instead of --band-width",
     )
     p.add_argument("--E", type=float, default=1000.0)
     p.add_argument("--nu", type=float, default=0.3)
@@ -236,6 +274,10 @@ def parse(argv):
     args = p.parse_args(argv)
     if not (args.E > 0 and -1 < args.nu < 0.5):
         p.error(f"--E {args.E} must be positive and --nu {args.nu} in (-1, 0.5)")
+    if not args.band_width > 0:
+        p.error(f"--band-width must be positive, got {args.band_width}")
+    if args.overlap is not None and args.overlap < 1:
+        p.error(f"--overlap must be at least 1, got {args.overlap}")
     return args
 
 
@@ -275,20 +317,33 @@ def report(records: list[dict], comm) -> None:
 
 
 def check(records: list[dict], comm) -> list[str]:
+    """The bounds of ``CHECKS``: errors against plain FE's on the same mesh, the hoop-stress gain
+    at the inner surface, and the fitted rates (two-sided); returns the failures."""
     failures = []
     fe = {r["h"]: r for r in records if r["method"] == "plain FE"}
     for r in records:
-        if r["method"] in EXEMPT:
+        if r["method"] not in CHECKS:
             continue
+        factor, gain, _, _ = CHECKS[r["method"]]
+        ref = fe[r["h"]]
         for key in ("l2", "energy"):
-            if r[key] > 1.5 * fe[r["h"]][key]:
+            if r[key] > factor * ref[key]:
                 failures.append(
-                    f"{r['method']} h={r['h']:g}: {key} error {r[key]:.3e} > 1.5 x plain FE "
-                    f"{fe[r['h']][key]:.3e}"
+                    f"{r['method']} h={r['h']:g}: {key} error {r[key]:.3e} > {factor} x plain FE "
+                    f"{ref[key]:.3e}"
                 )
-    for method, rate in rates(records, "l2").items():
-        if rate < 1.8 and method not in EXEMPT:
-            failures.append(f"{method}: fitted L2 rate {rate:.2f} < 1.8")
+        if ref["hoop"] < gain * r["hoop"]:
+            failures.append(
+                f"{r['method']} h={r['h']:g}: hoop stress error at r = 1 {r['hoop']:.3e}, plain "
+                f"FE {ref['hoop']:.3e}: gain {ref['hoop'] / r['hoop']:.2f} < {gain}"
+            )
+    for key, index in (("l2", 2), ("hoop", 3)):
+        for method, rate in rates(records, key).items():
+            if method not in CHECKS:
+                continue
+            lo, hi = CHECKS[method][index]
+            if not lo <= rate <= hi:
+                failures.append(f"{method}: fitted {key} rate {rate:.2f} outside [{lo}, {hi}]")
     if comm.rank == 0:
         print("checks passed" if not failures else "CHECKS FAILED:\n  " + "\n  ".join(failures))
     return failures

@@ -45,6 +45,7 @@ __all__ = [
     "function_petsc_vec",
     "geometry_dofmap",
     "quadrature_rule",
+    "refine",
     "scalar_function_space",
     "scatter_reverse_add",
     "set_bc",
@@ -115,6 +116,13 @@ def bb_tree(msh: _mesh.Mesh, dim: int):
     if MODERN:
         return _geometry.bb_tree(msh, dim)
     return _geometry.BoundingBoxTree(msh, dim)
+
+
+def refine(msh: _mesh.Mesh) -> _mesh.Mesh:
+    """Uniform refinement of a triangle mesh (every edge split), ghosted like the input."""
+    msh.topology.create_entities(1)
+    refined = _mesh.refine(msh)
+    return refined[0] if isinstance(refined, tuple) else refined
 
 
 def colliding_cells(msh: _mesh.Mesh, tree, points3: _np.ndarray) -> tuple[_np.ndarray, _np.ndarray]:
@@ -189,8 +197,16 @@ def function_petsc_vec(u: _fem.Function):
     return u.x.petsc_vec if MODERN else u.vector
 
 
-def create_expression(expr, points: _np.ndarray):
-    """JIT-compile a UFL expression at reference points ``points`` (k, tdim) (collective)."""
+def create_expression(expr, points: _np.ndarray, msh: _mesh.Mesh | None = None):
+    """JIT-compile a UFL expression at reference points ``points`` (k, tdim) (collective).
+
+    With ``msh`` the expression is tied to that mesh by a unit ``Constant`` factor: an expression
+    that the form compiler folds to numbers (``-div sigma(u)`` of a quadratic ``u``, whose
+    ``SpatialCoordinate`` vanishes when the derivatives are applied) otherwise compiles without a
+    mesh, and DOLFINx >= 0.10 refuses to evaluate it ("Expression was created on a different
+    mesh")."""
+    if msh is not None:
+        expr = expr * _fem.Constant(msh, _np.float64(1.0))
     return _fem.Expression(expr, _np.ascontiguousarray(points, dtype=_np.float64))
 
 

@@ -14,13 +14,16 @@ touching layer ``k - 1`` are layer ``k``; ``alpha = layer / overlap`` (for a str
 and uniform cells, the distance to the interface over the band width). The band cells are the
 patch cells whose nodes all lie in layers ``0..overlap``.
 
-Displacements are tied at the particles ``x_L`` of the band (closed band cells) with a multiplier
-field ``lambda = sum_k N_k lambda_k`` on the FE nodes of the band (eq. 52–53, 57, 79–80):
+Displacements are tied with a multiplier field ``lambda = sum_k N_k lambda_k`` on the FE nodes
+of the band, by default over the band cells by Gauss quadrature (``constraint="integral"``,
+eq. 52: ``x_L``, ``c_L`` below are the Gauss points and weights), or at the particles ``x_L`` of
+the band (closed band cells, unit weights, ``constraint="points"``, eq. 52–53, 57, 79–80):
 
 .. math::
-    L^{FE}_{k a} = \\sum_L N_k(x_L) N_a(x_L), \\qquad L^{P}_{k J} = -\\sum_L N_k(x_L) \\phi_J(x_L),
+    L^{FE}_{k a} = \\sum_L N_k(x_L) N_a(x_L) c_L, \\qquad
+    L^{P}_{k J} = -\\sum_L N_k(x_L) \\phi_J(x_L) c_L,
 
-i.e. ``sum_L lambda(x_L) (u_FE(x_L) - u_P(x_L)) = 0`` for every multiplier field. The optional
+i.e. ``sum_L lambda(x_L) (u_FE(x_L) - u_P(x_L)) c_L = 0`` for every multiplier field. The optional
 augmented-Lagrangian penalty ``p`` (eq. 54, 72–75) adds ``p G^T G`` to the displacement blocks,
 with the pointwise constraint gradients ``G^FE = [N_a(x_L)]``, ``G^P = [-phi_J(x_L)]`` (eq. 81).
 
@@ -28,12 +31,17 @@ Assembly: ``K_FE`` is DOLFINx's assembly of the FE form (the material's, or the 
 :class:`~dolfinx_meshfree.CoupledLinearProblem`) weighted by ``beta_FE``: 1 on FE cells,
 ``1 - alpha`` on band cells with ``alpha`` a P1 function (DG0 indicators select the cells);
 ``K_P`` is the EFG stiffness by Gauss quadrature on all patch cells with the
-weights multiplied by ``alpha`` in the band. Tractions are weighted the same way (eq. 49).
+weights multiplied by ``alpha`` in the band. Tractions and body loads are weighted the same way
+(eq. 49).
 Essential conditions: strongly on FE nodes of Dirichlet facets of FE and band cells, by
 piecewise-constant facet multipliers on the particles of Dirichlet facets of patch cells (band
 included: both discretisations live there). Constraint rows are scaled by ``s = E``.
 
-Not implemented: variationally consistent integration (``consistent=True`` is refused).
+Variationally consistent integration (``consistent=True``, the default of
+:class:`~dolfinx_meshfree.CoupledElasticity`): the particle test gradients are corrected under the
+weight ``alpha`` so that the linear patch test passes to round-off on any mesh, with either
+constraint (see :func:`_consistent_test_gradients`); the particle stiffness is then not
+symmetric. The dynamic operators (:func:`bridging_operators`) use the same stiffness.
 """
 
 from __future__ import annotations
@@ -46,6 +54,7 @@ import numpy as np
 import scipy.sparse as sp
 from mpi4py import MPI
 from petsc4py import PETSc
+from scipy.sparse.linalg import spsolve
 
 from . import _compat
 from .coupled import CoupledSolution, _fe_constraint_block, _particle_constraint_block
@@ -65,14 +74,26 @@ __all__ = [
 ]
 
 
-#: Where the bridging constraint is imposed: at the band particles (eq. 79-81, the default) or
-#: by Gauss quadrature over the band cells (the integral of eq. 52).
+#: Where the bridging constraint is imposed: by Gauss quadrature over the band cells (the
+#: integral of eq. 52, the default) or at the band particles (eq. 79-81).
 CONSTRAINTS = ("points", "integral")
 
 
-def check_options(overlap, penalty, constraint: str = "points") -> tuple[int, float, str]:
-    """Validate the ``overlap`` (positive integer), ``penalty`` (finite, >= 0) and
-    ``constraint`` (one of :data:`CONSTRAINTS`) options."""
+def check_options(
+    overlap, penalty, constraint: str = "integral", band_width=None
+) -> tuple[int, float, str, float | None]:
+    """Validate the ``overlap`` (positive integer), ``penalty`` (finite, >= 0),
+    ``constraint`` (one of :data:`CONSTRAINTS`) and ``band_width`` (``None`` or finite > 0)
+    options."""
+    if band_width is not None and (
+        isinstance(band_width, bool)
+        or not isinstance(band_width, numbers.Real)
+        or not (np.isfinite(band_width) and band_width > 0)
+    ):
+        raise ValueError(
+            f"band_width must be None (a band of `overlap` cell layers) or a positive length, "
+            f"got {band_width!r}"
+        )
     if constraint not in CONSTRAINTS:
         raise ValueError(f"constraint={constraint!r} is not known; use one of {list(CONSTRAINTS)}")
     if isinstance(overlap, bool) or not isinstance(overlap, numbers.Integral) or overlap < 1:
@@ -81,19 +102,36 @@ def check_options(overlap, penalty, constraint: str = "points") -> tuple[int, fl
         raise ValueError(f"penalty must be a real number >= 0, got {penalty!r}")
     if not (np.isfinite(penalty) and penalty >= 0.0):
         raise ValueError(f"penalty must be finite and >= 0, got {penalty!r}")
-    return int(overlap), float(penalty), constraint
+    return (
+        int(overlap),
+        float(penalty),
+        constraint,
+        None if band_width is None else float(band_width),
+    )
 
 
 class BridgingBand:
     """The overlap band of a :class:`~dolfinx_meshfree.CoupledElasticity` (collective).
 
-    Raises ``ValueError`` on every rank when the patch has no interface or when the band is
-    wider than the patch (fewer than ``overlap`` layers of patch cells beside the interface).
+    Two constructions of the band and of ``alpha`` (a P1/Q1 function, 0 on the interface):
+
+    * ``band_width=None``: ``overlap`` cell layers, ``alpha = layer / overlap`` (the node
+      layer index, see the module docstring);
+    * ``band_width=w`` (a length): the patch cells with a node closer than ``w`` to the
+      interface, ``alpha = min(d / w, 1)`` at the nodes with ``d`` the distance to the interface
+      facets: a band of a physical width whatever the cells, which on a curved, unstructured
+      interface does not narrow or fray under refinement as layers of cells do.
+
+    Raises ``ValueError`` on every rank when the patch has no interface or when the band of
+    layers is wider than the patch (fewer than ``overlap`` layers of patch cells beside the
+    interface).
 
     Attributes:
-        layer: Node layer index per local node (``overlap + 1`` beyond the band or off it).
-        in_band_node: bool per local node: a node of the band (layers ``0..overlap``).
-        alpha: ``alpha`` per local node (``layer / overlap`` on band nodes, 1 elsewhere).
+        layer: Node layer index per local node (``overlap + 1`` beyond the band or off it);
+            ``None`` for a band of a width.
+        in_band_node: bool per local node: a node of the band (of a band cell).
+        alpha: ``alpha`` per local node (``layer / overlap`` or ``min(d / w, 1)`` on band nodes,
+            1 elsewhere).
         in_band: bool per local cell (owned and ghost): a band cell.
         cells: Owned band cells (local indices).
         particles: Indices of the band particles (in closed band cells), on every rank.
@@ -101,10 +139,10 @@ class BridgingBand:
             cell each lies in (each band particle is handled by exactly one rank).
     """
 
-    def __init__(self, problem, overlap: int):
+    def __init__(self, problem, overlap: int, band_width: float | None = None):
         V, patch = problem.V, problem.patch
         msh, comm = V.mesh, patch.comm
-        self.V, self.mls, self.overlap = V, problem.mls, overlap
+        self.V, self.mls, self.overlap, self.band_width = V, problem.mls, overlap, band_width
         tdim = msh.topology.dim
         if comm.allreduce(len(patch.interface_facets)) == 0:
             raise ValueError(
@@ -112,35 +150,23 @@ class BridgingBand:
                 "has none"
             )
         dofs = _compat.dofmap_array(V)
-        n_loc = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
-        n_own = V.dofmap.index_map.size_local
-        far = overlap + 1
-        layer = np.full(n_loc, far, dtype=np.int64)
+        self.coordinates = V.tabulate_dof_coordinates()[:, :2]
         iface = dolfinx.fem.locate_dofs_topological(V, tdim - 1, patch.interface_facets)
-        layer[problem._node_flags(iface)] = 0
-        owned_patch = dofs[patch.cells]
-        depth = 0
-        for k in range(1, overlap + 1):
-            touch = (layer[owned_patch] == k - 1).any(axis=1)
-            flags = problem._node_flags(owned_patch[touch].ravel())
-            new = flags & (layer == far)
-            layer[new] = k
-            if not comm.allreduce(bool(np.any(new[:n_own])), op=MPI.LOR):
-                break
-            depth = k
-        if depth < overlap:
-            raise ValueError(
-                f"overlap={overlap} cell layers is wider than the patch: only {depth} layer(s) of "
-                "patch cells lie beside the interface; choose a smaller overlap or a larger patch"
-            )
-        self.layer = layer
-        self.in_band_node = layer <= overlap
-        self.alpha = np.where(self.in_band_node, layer / overlap, 1.0)
+        on_interface = problem._node_flags(iface)
         ncl = patch.in_patch.size
-        self.in_band = patch.in_patch & self.in_band_node[dofs[:ncl]].all(axis=1)
+        if band_width is None:
+            self.layer, self.alpha = self._layers(problem, overlap, on_interface)
+            self.in_band_node = self.layer <= overlap
+            self.in_band = patch.in_patch & self.in_band_node[dofs[:ncl]].all(axis=1)
+        else:
+            self.layer = None
+            alpha = np.minimum(self._interface_distance(problem, on_interface) / band_width, 1.0)
+            self.in_band = patch.in_patch & (alpha[dofs[:ncl]] < 1.0).any(axis=1)
+            n_cells = msh.topology.index_map(tdim).size_local
+            self.in_band_node = problem._node_flags(dofs[:n_cells][self.in_band[:n_cells]].ravel())
+            self.alpha = np.where(self.in_band_node, alpha, 1.0)
         n_cells = msh.topology.index_map(tdim).size_local
         self.cells = np.flatnonzero(self.in_band[:n_cells]).astype(np.int32)
-        self.coordinates = V.tabulate_dof_coordinates()[:, :2]
 
         # band particles: those where the band indicator (P1 interpolant of in_band_node) is 1,
         # each handled by the lowest rank that owns a cell containing it
@@ -156,6 +182,53 @@ class BridgingBand:
         self.local_particles = mine[keep]
         self.local_cells = cells[mine][keep]
         self.particles = np.sort(np.concatenate(comm.allgather(self.local_particles)))
+
+    def _interface_distance(self, problem, on_interface: np.ndarray) -> np.ndarray:
+        """Distance of every local node to the interface facets (segments gathered from every
+        rank; 0 on the interface nodes). Collective."""
+        from .coupled import facet_nodes
+
+        patch, comm = problem.patch, problem.patch.comm
+        ends = self.coordinates[facet_nodes(self.V, patch.interface_facets)]  # (f, 2, 2)
+        seg = np.concatenate(comm.allgather(ends))
+        a, ab = seg[:, 0], seg[:, 1] - seg[:, 0]
+        ab2 = np.einsum("fi,fi->f", ab, ab)
+        dist = np.empty(self.coordinates.shape[0])
+        for chunk in np.array_split(np.arange(dist.size), max(1, dist.size // 2048)):
+            ap = self.coordinates[chunk, None, :] - a[None]
+            t = np.clip(np.einsum("nfi,fi->nf", ap, ab) / ab2, 0.0, 1.0)
+            gap = ap - t[..., None] * ab[None]
+            dist[chunk] = np.sqrt(np.einsum("nfi,nfi->nf", gap, gap).min(axis=1))
+        dist[on_interface] = 0.0
+        return dist
+
+    def _layers(self, problem, overlap: int, on_interface: np.ndarray):
+        """Node layer index (``overlap + 1`` beyond the band) and ``alpha = layer / overlap``
+        (1 beyond the band). Collective."""
+        V, patch, comm = self.V, problem.patch, problem.patch.comm
+        dofs = _compat.dofmap_array(V)
+        n_loc = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
+        n_own = V.dofmap.index_map.size_local
+        far = overlap + 1
+        layer = np.full(n_loc, far, dtype=np.int64)
+        layer[on_interface] = 0
+        owned_patch = dofs[patch.cells]
+        depth = 0
+        for k in range(1, overlap + 1):
+            touch = (layer[owned_patch] == k - 1).any(axis=1)
+            flags = problem._node_flags(owned_patch[touch].ravel())
+            new = flags & (layer == far)
+            layer[new] = k
+            if not comm.allreduce(bool(np.any(new[:n_own])), op=MPI.LOR):
+                break
+            depth = k
+        if depth < overlap:
+            raise ValueError(
+                f"overlap={overlap} cell layers is wider than the patch: only {depth} layer(s) of "
+                "patch cells lie beside the interface; choose a smaller overlap or a larger patch, "
+                "or a band of a physical width (band_width=...)"
+            )
+        return layer, np.where(layer <= overlap, layer / overlap, 1.0)
 
     def alpha_at(self, points: np.ndarray, cells: np.ndarray, derivatives: int = 0):
         """``alpha`` (m,) at points of local cells, and with ``derivatives`` its gradient."""
@@ -223,16 +296,36 @@ def _first_cells(msh, facets: np.ndarray) -> np.ndarray:
     return np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]]
 
 
-def _fe_stiffness(problem, band: BridgingBand) -> PETSc.Mat:
-    """DOLFINx assembly of the FE form weighted by ``beta_FE`` (eq. 47-48): 1 on FE cells,
-    ``1 - alpha`` on band cells (alpha a P1 function), 0 on the rest of the patch."""
+def _fe_weight(problem, band: BridgingBand):
+    """``beta_FE`` (eq. 47-48) as a UFL expression: 1 on FE cells, ``1 - alpha`` on band cells
+    (alpha a P1 function), 0 on the rest of the patch."""
     V, patch = problem.V, problem.patch
     fe = problem.cell_indicator(~patch.in_patch & ~band.in_band)
     in_band = problem.cell_indicator(band.in_band)
     alpha = dolfinx.fem.Function(V)
     alpha.x.array[:] = 0.0
     alpha.x.array[0::2] = band.alpha
-    return problem._fe_stiffness(fe + in_band * (1.0 - alpha[0]))
+    return fe + in_band * (1.0 - alpha[0])
+
+
+def _fe_stiffness(problem, band: BridgingBand) -> PETSc.Mat:
+    """DOLFINx assembly of the FE form weighted by ``beta_FE`` (eq. 47-48, :func:`_fe_weight`)."""
+    return problem._fe_stiffness(_fe_weight(problem, band))
+
+
+def _body_loads(problem, band: BridgingBand) -> tuple[np.ndarray, np.ndarray]:
+    """The bridging coupling's shares of ``problem``'s body forces (eq. 49, collective): the FE
+    basis weighted by ``beta_FE = 1 - alpha`` in the band and 1 on FE cells, the particles on the
+    patch cells weighted by ``beta_P = alpha`` in the band and 1 beyond. Returns the FE loads
+    per owned dof and the particle loads (original interleaved order)."""
+
+    def alpha(q: QuadraturePoints) -> np.ndarray:
+        w = np.ones(len(q))
+        b = band.in_band[q.cells]
+        w[b] = band.alpha_at(q.points[b], q.cells[b])
+        return w
+
+    return problem._body_loads(_fe_weight(problem, band), alpha)
 
 
 def solve_bridging(problem, solver: str = "mumps"):
@@ -249,7 +342,7 @@ def solve_bridging(problem, solver: str = "mumps"):
     pl = P.dof_layout()
     t0 = time.perf_counter()
 
-    band = BridgingBand(problem, problem.overlap)
+    band = BridgingBand(problem, problem.overlap, problem.band_width)
 
     # particle side: Gauss quadrature on the patch cells, weights times alpha in the band
     q = cell_quadrature(msh, deg, P.cells)
@@ -257,7 +350,6 @@ def solve_bridging(problem, solver: str = "mumps"):
     b = band.in_band[q.cells]
     w[b] *= band.alpha_at(q.points[b], q.cells[b])
     tq = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(q.points))
-    test = _consistent_test_gradients(problem, band, q, w, tq) if problem.consistent else None
 
     # essential conditions: strongly on FE nodes of FE and band facets, multipliers on patch facets
     _, patch_bc, dq, dtabs, ubc, is_bc = problem._essential_conditions(
@@ -274,6 +366,11 @@ def solve_bridging(problem, solver: str = "mumps"):
     t_fe, t_p, cw = _constraint_tables(problem, band)
     M_fe = (t_fe.T @ sp.diags(cw) @ t_fe).tocoo()
     M_p = (t_fe.T @ sp.diags(cw) @ t_p).tocoo()
+    test = None
+    if problem.consistent:
+        test = _consistent_test_gradients(
+            problem, band, q, w, tq, (t_fe, t_p, cw), ids, ml.size_global // 2
+        )
     setup = problem._setup + time.perf_counter() - t0
 
     t1 = time.perf_counter()
@@ -345,6 +442,10 @@ def solve_bridging(problem, solver: str = "mumps"):
     b_fe = create_vector(
         comm, fe_layout, cat([*f_fe_rows, np.zeros(0, np.int64)]), cat([*f_fe_vals, []])
     )
+    if problem._body_forces:  # weighted by beta_FE and beta_P like the tractions (eq. 49)
+        fe_body, p_body = _body_loads(problem, band)
+        b_fe.array[:] += fe_body
+        f_p += p_body
 
     K_fe = _fe_stiffness(problem, band)
     mats = [K_fe]
@@ -383,39 +484,84 @@ def solve_bridging(problem, solver: str = "mumps"):
     return sol
 
 
-def _consistent_test_gradients(problem, band: BridgingBand, q, w: np.ndarray, tq) -> list:
+def _band_multiplier_of_alpha(problem, band: BridgingBand, ids: np.ndarray, nb: int, t_fe, cw):
+    r"""The multiplier field that balances ``grad(alpha)`` on the FE side: coefficients ``c``
+    (``nb`` band nodes x 2, on every rank) of ``Lambda = sum_k N_k c_k`` with
+
+    .. math::
+        \sum_L N_k(x_L) \Lambda(x_L) c_L = \int_{band} N_k \nabla\alpha \, dx
+
+    for every band node ``k`` (``x_L``, ``c_L``: the constraint's points and weights, eq. 52 or
+    79-81; the right side by Gauss quadrature, exact for the P1/Q1 ``alpha``). The FE equations
+    of the weighted energy (eq. 47-48) of a linear field ``u`` with stress ``sigma`` read
+    ``int (1 - alpha) grad N_a . sigma = int N_a sigma grad(alpha)`` (+ boundary terms), so
+    ``lambda = -sigma Lambda`` is the multiplier of the exact solution: the particles receive
+    ``sum_L phi_J(x_L) sigma Lambda(x_L) c_L``, which is what their consistent integration must
+    balance. ``Lambda = grad(alpha)`` when ``grad(alpha)`` lies in the multiplier space (uniform
+    straight layers); on unstructured bands it is its projection. The band node mass matrix is
+    small (band nodes only): it is gathered and solved on every rank. Collective."""
+    V, comm = problem.V, problem.patch.comm
+    q = cell_quadrature(V.mesh, problem.quadrature_degree, band.cells)
+    t = tabulate_in_cells(V, q.points, q.cells, derivatives=1)
+    grad_alpha = np.stack([g @ band.alpha for g in t.gradients], axis=1)
+    rhs = t.values.T @ (q.weights[:, None] * grad_alpha)
+    M = (t_fe.T @ sp.diags(cw) @ t_fe).tocoo()
+    keep = (ids[M.row] >= 0) & (ids[M.col] >= 0)
+    # sums over every rank's cells: ghost nodes' rows are added on the owner's numbering
+    rows_b = np.flatnonzero(ids >= 0)
+    parts = comm.allgather(
+        (ids[M.row[keep]], ids[M.col[keep]], M.data[keep], ids[rows_b], rhs[rows_b])
+    )
+    cat = np.concatenate
+    Mg = sp.csr_matrix(
+        (cat([p[2] for p in parts]), (cat([p[0] for p in parts]), cat([p[1] for p in parts]))),
+        shape=(nb, nb),
+    )
+    bg = np.zeros((nb, 2))
+    for p in parts:
+        np.add.at(bg, p[3], p[4])
+    return np.column_stack([spsolve(Mg.tocsc(), bg[:, k]) for k in range(2)])
+
+
+def _consistent_test_gradients(
+    problem, band: BridgingBand, q, w: np.ndarray, tq, constraint, ids: np.ndarray, nb: int
+) -> list:
     r"""Variationally consistent integration (Chen, Hillman & Rüter 2013) of the particle test
     functions under the energy weight ``alpha`` (eq. 46): corrected gradients with
 
     .. math::
         \sum_q \alpha \tilde\nabla\phi_J w_q = \sum_b \alpha \phi_J n w_b
-        - \sum_q \phi_J \nabla\alpha \, w_q,
+        - \sum_L \phi_J(x_L) \Lambda(x_L) c_L,
 
-    the divergence theorem for ``alpha phi_J`` under the quadrature actually used (``alpha = 0``
-    on the interface, so only the exterior facets of the patch count). With the integral
-    constraint (``constraint="integral"``, the same Gauss points) the band term
-    ``-phi_J grad(alpha) . sigma`` is then balanced exactly by the multipliers when
-    ``grad(alpha)`` lies in their space (a band of uniform straight layers), and the boundary term
-    by the alpha-weighted facet multipliers: the linear patch test passes to round-off.
+    the divergence theorem for ``alpha phi_J`` (``alpha = 0`` on the interface, so only the
+    exterior facets of the patch count) with its band term ``int phi_J grad(alpha)`` written
+    with the multiplier field ``Lambda`` of :func:`_band_multiplier_of_alpha` at the
+    constraint's points ``x_L`` and weights ``c_L`` (``constraint = (t_fe, t_p, cw)`` of
+    :func:`_constraint_tables`). For a linear field the band term ``-phi_J sigma Lambda`` is then
+    balanced exactly by the multipliers (which carry ``-sigma Lambda``), and the boundary term by
+    the alpha-weighted facet multipliers: the linear patch test passes to round-off on any mesh,
+    with either constraint. (With ``grad(alpha)`` itself in the band term, a piecewise constant
+    field outside the continuous multiplier space on unstructured bands, it missed by 1.6e-3.)
     Collective."""
     patch, comm = problem.patch, problem.patch.comm
     msh, deg = problem.V.mesh, problem.quadrature_degree
+    t_fe, t_p, cw = constraint
+    coef = _band_multiplier_of_alpha(problem, band, ids, nb, t_fe, cw)
+    lam = t_fe @ np.where(ids[:, None] >= 0, coef[np.maximum(ids, 0)], 0.0)
     bq = facet_quadrature(msh, patch.exterior_facets, deg, patch.exterior_cells)
     tb = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(bq.points, 0))
     in_b = band.in_band[bq.cells]
     alpha_b = np.ones(len(bq))
     alpha_b[in_b] = band.alpha_at(bq.points[in_b], bq.cells[in_b])
-    b = band.in_band[q.cells]
-    _, grad_alpha = band.alpha_at(q.points[b], q.cells[b], derivatives=1)
     return raise_on_all_ranks(
         comm,
         lambda: consistent_gradients(
             tq.values,
             tq.gradients,
             w,
-            sp.vstack([tb.values, tq.values[np.flatnonzero(b)]]).tocsr(),
-            np.concatenate([bq.weights * alpha_b, q.weights[b]]),
-            np.concatenate([bq.normals, -grad_alpha]),
+            sp.vstack([tb.values, t_p]).tocsr(),
+            np.concatenate([bq.weights * alpha_b, cw]),
+            np.concatenate([bq.normals, -lam]),
             comm,
         ),
     )
@@ -485,11 +631,6 @@ def bridging_operators(problem):
     """
     from .coupled import CouplingOperators
 
-    if problem.consistent:
-        raise ValueError(
-            "consistent=True is not available for the bridging coupling's dynamic operators "
-            "(the statics support it); use consistent=False for ExplicitDynamics"
-        )
     t0 = time.perf_counter()
     V, patch, P = problem.V, problem.patch, problem.patch.particles
     comm, msh = patch.comm, V.mesh
@@ -498,19 +639,24 @@ def bridging_operators(problem):
     dof_map = pdofs.ravel()
     fe_layout, l2g = problem._fe_layout()
     pl = P.dof_layout()
-    band = BridgingBand(problem, problem.overlap)
+    band = BridgingBand(problem, problem.overlap, problem.band_width)
     q = cell_quadrature(msh, problem.quadrature_degree, P.cells)
     w = q.weights.copy()
     b = band.in_band[q.cells]
     w[b] *= band.alpha_at(q.points[b], q.cells[b])
     qa = QuadraturePoints(q.points, w, q.cells)
     tq = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(q.points))
-    Kq = stiffness_matrix(tq.gradients, w, problem.material).tocoo()
-    Kp_loc = sp.csr_matrix((Kq.data, (dof_map[Kq.row], dof_map[Kq.col])), shape=(2 * n, 2 * n))
     active = problem._fe_active(np.concatenate([patch.fe_cells, band.cells]))
 
     ids, ml = band.numbering(problem)
     t_fe, t_p, cw = _constraint_tables(problem, band)
+    test = None
+    if problem.consistent:
+        test = _consistent_test_gradients(
+            problem, band, q, w, tq, (t_fe, t_p, cw), ids, ml.size_global // 2
+        )
+    Kq = stiffness_matrix(test or tq.gradients, w, problem.material, tq.gradients).tocoo()
+    Kp_loc = sp.csr_matrix((Kq.data, (dof_map[Kq.row], dof_map[Kq.col])), shape=(2 * n, 2 * n))
     M_fe = (t_fe.T @ sp.diags(cw) @ t_fe).tocoo()
     M_p = (t_fe.T @ sp.diags(cw) @ t_p).tocoo()
     keep = ids[M_fe.row] >= 0
@@ -556,16 +702,11 @@ def bridging_operators(problem):
         )
         K_fp = create_aij(comm, fp, fe_layout, pl)
         K_pf = create_aij(comm, fp.T.tocsr(), pl, fe_layout)
-    fe_cells = problem.cell_indicator(~patch.in_patch & ~band.in_band)
-    in_band = problem.cell_indicator(band.in_band)
-    alpha = dolfinx.fem.Function(V)
-    alpha.x.array[:] = 0.0
-    alpha.x.array[0::2] = band.alpha
     return CouplingOperators(
         coupling=problem.coupling,
         K_fe=K_fe,
         K_p=create_aij(comm, Kp_loc, pl, pl),
-        fe_weight=fe_cells + in_band * (1.0 - alpha[0]),
+        fe_weight=_fe_weight(problem, band),
         fe_active=active,
         particle_quadrature=qa,
         particle_table=tq.values.tocsr(),

@@ -31,6 +31,7 @@ passed only to first order in h, not exactly.
 
 from __future__ import annotations
 
+import copy
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -39,7 +40,9 @@ import dolfinx
 import numpy as np
 import scipy.sparse as sp
 import ufl
+from mpi4py import MPI
 from petsc4py import PETSc
+from scipy.sparse.linalg import spsolve
 from scipy.spatial import cKDTree
 
 from . import _compat
@@ -51,7 +54,7 @@ from .operators import load_vector
 from .parallel import Layout, raise_on_all_ranks
 from .patch import ParticlePatch
 from .petsc import BlockSystem, create_aij, create_vector
-from .quadrature import QuadraturePoints, facet_quadrature
+from .quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
 
 __all__ = [
     "COUPLINGS",
@@ -232,14 +235,23 @@ class CoupledElasticity:
             couplings, whose particle functions must also cover the interface cells up to their
             FE-side edge, which d_max = 2 leaves to collinear particles only.
         quadrature_degree: Gauss degree on cells and facets.
-        consistent: Variationally consistent integration on the patch (VCI over the patch
-            boundary, interface included).
+        consistent: Variationally consistent integration on the patch (VCI, Chen, Hillman &
+            Rüter 2013, over the patch boundary, interface included): the linear patch test
+            passes to round-off. Default (``None``): on for every variational coupling, off for
+            ``master-slave``, which is first order by construction (its rigid links drop the
+            strain across the slave layer) and whose slaves, not multipliers, carry the interface
+            traction that VCI's identity assumes: with VCI it loses the exact rigid-body motion
+            (2e-5 to 4e-4 instead of 3e-14, tests/test_master_slave.py). ``False``: the papers'
+            plain Gauss quadrature.
         overlap, penalty, constraint: ``coupling="bridging"`` (bridging domain, Rabczuk et al.
             2006, sec. 5.3, see :mod:`~dolfinx_meshfree.bridging`): band width in cell layers
             (>= 1), the augmented-Lagrangian penalty ``p >= 0``, and where the band is tied:
-            ``"points"`` (at the band particles, eq. 79-81) or ``"integral"`` (Gauss quadrature
-            over the band cells, eq. 52; the choice when the band particles are too few to
-            determine the multipliers on the band nodes, e.g. grid particles on a gmsh mesh).
+            ``"integral"`` (the default: Gauss quadrature over the band cells, eq. 52) or
+            ``"points"`` (at the band particles, eq. 79-81, which needs enough band particles to
+            determine the multipliers on the band nodes: grid particles on a gmsh mesh are not).
+        band_width: ``coupling="bridging"``: a band of this physical width instead of
+            ``overlap`` cell layers, with ``alpha = min(d / band_width, 1)`` and ``d`` the
+            distance to the interface (see :class:`~dolfinx_meshfree.bridging.BridgingBand`).
     """
 
     def __init__(
@@ -252,10 +264,11 @@ class CoupledElasticity:
         dilation: float | None = None,
         basis: str = "linear",
         quadrature_degree: int = 7,
-        consistent: bool = False,
+        consistent: bool | None = None,
         overlap: int = 2,
         penalty: float = 0.0,
-        constraint: str = "points",
+        constraint: str = "integral",
+        band_width: float | None = None,
     ):
         if coupling not in COUPLINGS:
             raise ValueError(
@@ -273,10 +286,12 @@ class CoupledElasticity:
         t0 = time.perf_counter()
         self.V, self.patch, self.material, self.coupling = V, patch, material, coupling
         self.quadrature_degree = quadrature_degree
-        self.consistent = bool(consistent)
+        self.consistent = coupling != "master-slave" if consistent is None else bool(consistent)
         from .bridging import check_options
 
-        self.overlap, self.penalty, self.constraint = check_options(overlap, penalty, constraint)
+        self.overlap, self.penalty, self.constraint, self.band_width = check_options(
+            overlap, penalty, constraint, band_width
+        )
         self.mls = raise_on_all_ranks(
             patch.comm,
             lambda: MLS(
@@ -295,11 +310,11 @@ class CoupledElasticity:
         #: The user's bilinear form (set by :class:`~dolfinx_meshfree.CoupledLinearProblem`);
         #: ``None``: the elasticity form of :attr:`material`.
         self.form: ufl.Form | None = None
-        # set by CoupledLinearProblem: strong conditions by node (flags, values), an FE load form
-        # (already weighted to the FE cells) and particle loads (original order)
+        # set by CoupledLinearProblem: strong conditions by node (flags, values)
         self._strong: list[tuple[np.ndarray, np.ndarray]] = []
-        self._fe_load_form = None
-        self._particle_loads: np.ndarray | None = None
+        #: Body forces (:mod:`~dolfinx_meshfree.body_loads`): :meth:`set_body_force`, or the
+        #: cell integrals of a CoupledLinearProblem's ``L``.
+        self._body_forces: list = []
         self._setup = time.perf_counter() - t0
 
     def add_dirichlet(self, facets: np.ndarray, value: VectorFunction) -> None:
@@ -310,6 +325,36 @@ class CoupledElasticity:
     def add_traction(self, facets: np.ndarray, traction: Callable) -> None:
         """Traction ``traction(x, n)`` (m, 2) on owned exterior facets, on either side."""
         self._tractions.append((np.asarray(facets, dtype=np.int32), traction))
+
+    def set_body_force(self, force: VectorFunction) -> None:
+        """Body force per unit volume ``b(x)`` (m, 2) on the whole body (replaces a previous one),
+        as :meth:`EFGElasticity.set_body_force <dolfinx_meshfree.EFGElasticity.set_body_force>`.
+
+        Every coupling integrates it with the functions and weights of its stiffness (see
+        :mod:`~dolfinx_meshfree.body_loads`): FE cells with ``N_a``, patch cells with
+        ``phi_J``, ramp interface cells with the blended functions (Belytschko et al. 1995,
+        eq. 3.15), a bridging band with ``1 - alpha`` and ``alpha`` (Rabczuk et al. 2006,
+        eq. 49)."""
+        from .body_loads import CallableBodyForce
+
+        self._body_forces = [CallableBodyForce(force)]
+
+    def _body_loads(self, fe_weight, particle_weights=None, interface_rule=None):
+        """This coupling's shares of its body forces (collective): the FE loads per owned dof
+        (``fe_weight``: the FE energy's weight) and the particle loads (original interleaved
+        order) on the patch cells' Gauss rule, its weights multiplied by ``particle_weights(q)``
+        if given (the bridging band's ``alpha``); see
+        :func:`~dolfinx_meshfree.body_loads.body_load_vectors`."""
+        from .body_loads import body_load_vectors
+
+        msh, comm, deg = self.V.mesh, self.patch.comm, self.quadrature_degree
+        q = cell_quadrature(msh, deg, self.patch.particles.cells)
+        if particle_weights is not None:
+            q = QuadraturePoints(q.points, q.weights * particle_weights(q), q.cells)
+        table = raise_on_all_ranks(comm, lambda: self.mls.tabulate(q.points, 0)).values
+        return body_load_vectors(
+            self._body_forces, self.V, fe_weight, deg, (q, table), interface_rule, comm
+        )
 
     # -- pieces ---------------------------------------------------------------------------------
 
@@ -443,9 +488,7 @@ class CoupledElasticity:
         iq = facet_quadrature(
             V.mesh, patch.interface_facets, self.quadrature_degree, patch.interface_fe_cells
         )
-        t_fe = tabulate_in_cells(V, iq.points, iq.cells, derivatives=0).values.tocsr()
-        t_fe.data[np.abs(t_fe.data) <= 1e-13] = 0.0  # nodes off the facet: round-off
-        t_fe.eliminate_zeros()
+        t_fe = facet_table(V, iq.points, iq.cells)
         t_p = raise_on_all_ranks(comm, lambda: self.mls.tabulate(iq.points, 0)).values
         lam, ml = self._interface_multipliers(iq, t_fe)
         W = sp.diags(iq.weights)
@@ -495,6 +538,38 @@ class CoupledElasticity:
             )
         return found
 
+    def _projected_normals(self, bq: QuadraturePoints) -> np.ndarray:
+        """VCI boundary normals of the Lagrange coupling: on the interface facets the normal
+        ``n`` is replaced by its L2 projection ``Pi n`` on the multiplier space (collective).
+
+        The FE side of a linear field receives ``int N_a sigma n`` at the interface, which the
+        multipliers carry as ``lambda = sigma Pi n`` (every trace ``N_a`` lies in their space);
+        the particles then receive ``int phi_J sigma Pi n``, which is what the divergence
+        identity of consistent integration must hold with. ``Pi n = n`` on straight pieces
+        between the corners of :meth:`_interface_multipliers`; where the interface turns by
+        less than :data:`CORNER_ANGLE` (a slanted staircase of gmsh cells) ``n`` jumps inside
+        one multiplier's support, and with ``n`` itself the linear patch test missed by 3.8e-5.
+        The interface's multiplier mass matrix is gathered and solved on every rank.
+        """
+        V, comm = self.V, self.patch.comm
+        on = np.flatnonzero(np.isin(bq.entities, self.patch.interface_facets))
+        iq = QuadraturePoints(
+            bq.points[on], bq.weights[on], bq.cells[on], bq.normals[on], bq.entities[on]
+        )
+        lam, _ = self._interface_multipliers(iq, facet_table(V, iq.points, iq.cells))
+        M = (lam.T @ sp.diags(iq.weights) @ lam).tocoo()
+        parts = comm.allgather((M.row, M.col, M.data))
+        cat = np.concatenate
+        M = sp.csc_matrix(
+            (cat([p[2] for p in parts]), (cat([p[0] for p in parts]), cat([p[1] for p in parts]))),
+            shape=M.shape,
+        )
+        rhs = comm.allreduce(np.asarray(lam.T @ (iq.weights[:, None] * iq.normals)), op=MPI.SUM)
+        coef = np.column_stack([spsolve(M, rhs[:, k]) for k in range(rhs.shape[1])])
+        normals = bq.normals.copy()
+        normals[on] = lam @ coef
+        return normals
+
     def _interface_interpolant(self, bq: QuadraturePoints, values: sp.csr_matrix) -> sp.csr_matrix:
         """VCI boundary values of the edge-to-edge coupling: on the interface facets the particle
         functions are replaced by their FE interpolant ``I_h phi_J = sum_a N_a phi_J(x_a)``
@@ -509,9 +584,7 @@ class CoupledElasticity:
         """
         V, comm = self.V, self.patch.comm
         on = np.isin(bq.entities, self.patch.interface_facets)
-        t = tabulate_in_cells(V, bq.points[on], bq.cells[on], derivatives=0).values.tocsr()
-        t.data[np.abs(t.data) <= 1e-13] = 0.0  # nodes off the facet: round-off
-        t.eliminate_zeros()
+        t = facet_table(V, bq.points[on], bq.cells[on])
         nodes = np.unique(t.indices)
         xn = V.tabulate_dof_coordinates()[nodes, :2]
         phi = raise_on_all_ranks(comm, lambda: self.mls.tabulate(xn, 0)).values
@@ -620,7 +693,8 @@ class CoupledElasticity:
 
     def _traction_loads(self) -> tuple[PETSc.Vec, np.ndarray]:
         """Tractions on FE facets (FE load vector, PETSc) and on patch facets (particle loads in
-        original particle order, local contributions). Collective."""
+        original particle order, local contributions), plus the body forces (FE cells with
+        ``N_a``, patch cells with ``phi_J``). Collective."""
         V, comm = self.V, self.patch.comm
         msh, deg = V.mesh, self.quadrature_degree
         fe_layout, l2g = self._fe_layout()
@@ -644,13 +718,10 @@ class CoupledElasticity:
             tab = raise_on_all_ranks(comm, lambda q=q: self.mls.tabulate(q.points, 0)).values
             f_p += load_vector(tab, q.weights, t)
         b_fe = create_vector(comm, fe_layout, np.concatenate(f_fe_rows), np.concatenate(f_fe_vals))
-        if self._fe_load_form is not None:  # the FE cells' share of a user's body loads
-            b = _compat.assemble_vector(self._fe_load_form)
-            b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-            b_fe.axpy(1.0, b)
-            b.destroy()
-        if self._particle_loads is not None:
-            f_p += self._particle_loads
+        if self._body_forces:  # FE cells with N_a, patch cells with phi_J
+            fe, fp = self._body_loads(self.cell_indicator(~self.patch.in_patch))
+            b_fe.array[:] += fe
+            f_p += fp
         return b_fe, f_p
 
     def _append_patch_conditions(self, blocks, rhs, mats, patch_bc, dq, dtabs) -> Layout:
@@ -690,7 +761,9 @@ class CoupledElasticity:
 
     # -- operators (explicit dynamics) ----------------------------------------------------------
 
-    def operators(self, integration: str = "cells", slaves: str = "layer") -> CouplingOperators:
+    def operators(
+        self, integration: str = "cells", slaves: str = "layer", consistent: bool = False
+    ) -> CouplingOperators:
         """The coupling's assembled operators without essential conditions (collective).
 
         Stiffness blocks, constraint blocks with unit scaling, the weights of the FE energy and
@@ -710,6 +783,12 @@ class CoupledElasticity:
                 rigidly linked to the interface, eq. 17–28) or ``"coincident"`` (Johnson's
                 particles fixed to the interface FE nodes, eq. 15–16); see
                 :class:`~dolfinx_meshfree.master_slave.MasterSlaveLinks`.
+            consistent: Variationally consistent integration in the particle stiffness. Default
+                ``False`` whatever :attr:`consistent` says: explicit dynamics needs a symmetric
+                ``K`` for its discrete energy identity; the VCI stiffness is Petrov-Galerkin, not
+                symmetric (rod of tests/test_dynamic_couplings.py, two transits: energy drift
+                1.4e-3 to 3.1e-3 instead of 1e-14, velocity error unchanged to 3 %, master-slave
+                +47 %). ``True``: VCI for lagrange, edge-to-edge, bridging and master-slave.
 
         Raises:
             ValueError: on every rank, for an unknown or unsupported option.
@@ -731,21 +810,22 @@ class CoupledElasticity:
                 "(its particle functions are blended or weighted on cells); use 'cells', or "
                 "lagrange, edge-to-edge or master-slave"
             )
+        # the builders read the option from the problem: a shallow copy carries this call's
+        problem = copy.copy(self)
+        problem.consistent = bool(consistent)
         if self.coupling == "master-slave":
             from .master_slave import master_slave_operators
 
-            return master_slave_operators(self, integration, slaves)
-        if self.coupling in ("lagrange", "edge-to-edge"):
-            return self._interface_operators(integration)
+            return master_slave_operators(problem, integration, slaves)
         if self.coupling == "bridging":
             from .bridging import bridging_operators
 
-            return bridging_operators(self)
+            return bridging_operators(problem)
         if self.coupling in ("ramp", "ramp-cubic"):
             from .ramp import ramp_operators
 
-            return ramp_operators(self)
-        return self._interface_operators()
+            return ramp_operators(problem)
+        return problem._interface_operators(integration)
 
     def _sizes(self, active: np.ndarray, multiplier_dofs: int) -> dict:
         """The system's sizes for :attr:`CoupledSolution.sizes`: active FE dofs (from the flags
@@ -785,6 +865,7 @@ class CoupledElasticity:
             self.quadrature_degree,
             boundary,
             quadrature=self._particle_rule(integration),
+            boundary_normals=self._projected_normals if self.coupling == "lagrange" else None,
         )
         if self.coupling == "lagrange":
             fe_rows, p_rows, ml = self._lagrange_rows()
@@ -850,7 +931,10 @@ class CoupledElasticity:
         # particle side
         boundary = patch.boundary() if self.consistent else None
         hook = self._interface_interpolant if self.coupling == "edge-to-edge" else None
-        Kp_loc, _, _, kt = particle_stiffness(P, self.mls, self.material, deg, boundary, hook)
+        normals = self._projected_normals if self.coupling == "lagrange" else None
+        Kp_loc, _, _, kt = particle_stiffness(
+            P, self.mls, self.material, deg, boundary, hook, boundary_normals=normals
+        )
 
         # essential conditions: FE side strongly, patch side by multipliers
         _, patch_bc, dq, dtabs, ubc, is_bc = self._essential_conditions()
@@ -973,6 +1057,20 @@ def _particle_constraint_block(
         ),
         shape=shape,
     )
+
+
+#: FE basis values at points on a facet below this are round-off of the nodes off the facet
+#: (the inverse map of a non-affine quadrilateral leaves up to 1.5e-13 on the gmsh meshes).
+ROUND_OFF = 1e-11
+
+
+def facet_table(V, points: np.ndarray, cells: np.ndarray) -> sp.csr_matrix:
+    """FE basis values (points x local nodes) at points on facets of the given cells, without
+    the round-off entries of the nodes off the facet."""
+    t = tabulate_in_cells(V, points, cells, derivatives=0).values.tocsr()
+    t.data[np.abs(t.data) <= ROUND_OFF] = 0.0
+    t.eliminate_zeros()
+    return t
 
 
 def facet_nodes(V, facets: np.ndarray) -> np.ndarray:

@@ -40,6 +40,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from . import _compat
+from .body_loads import CallableBodyForce, body_load_vectors
 from .efg import facet_multipliers, particle_stiffness
 from .integrator import Field
 from .masses import (
@@ -162,6 +163,10 @@ def build_fe(cls, V, material: LinearElastic, safety: float, fixed_facets=None):
     n_owned = msh.topology.index_map(msh.topology.dim).size_local
     h = fe_spacing(msh, np.arange(n_owned))
     field = Field("fe", K, mass, h, fixed=_fixed_fe_dofs(V, facets))
+
+    def body_load(force):  # int N_a b, Gauss degree 4 (as the tractions)
+        return body_load_vectors([CallableBodyForce(force)], V, None, 4)
+
     return cls(
         [field],
         material,
@@ -169,6 +174,7 @@ def build_fe(cls, V, material: LinearElastic, safety: float, fixed_facets=None):
         V=V,
         mesh=msh,
         timings={"setup": time.perf_counter() - t0},
+        body_load=body_load,
     )
 
 
@@ -214,6 +220,11 @@ def build_efg(
     if comm.allreduce(facets.size):
         D, dl = _particle_conditions(particles, [facets], [lambda q: mls.tabulate(q.points, 0)])
         constraint = [create_aij(comm, D, dl, pl)]
+
+    def body_load(force):  # int phi_J b on the particle rule (cells or stress points)
+        forces = [CallableBodyForce(force)]
+        return body_load_vectors(forces, None, None, quadrature_degree, (q, tq.values), comm=comm)
+
     return cls(
         [Field("particles", K, mass, particle_spacing(particles))],
         material,
@@ -224,6 +235,7 @@ def build_efg(
         mesh=particles.mesh,
         timings={"setup": time.perf_counter() - t0},
         multiplier_solver=multiplier_solver,
+        body_load=body_load,
     )
 
 
@@ -345,7 +357,7 @@ def build_coupled(
         blend = ops.interface if ops.interface_table is not None else None
         if blend is not None:  # the particle part of the ramp's interface cells
             n_loc = blend.num_fe_columns
-            groups.append(facets[~on_p & blend.in_interface[first]])
+            groups.append(blend.blended_facets(facets[~on_p]))
             tables.append(
                 lambda q: ShapeTable(
                     q.points, blend.table(q.points, q.cells, 0).values[:, n_loc:].tocsr(), []
@@ -415,6 +427,18 @@ def build_coupled(
         Field("particles", K_p, mass_p, particle_spacing(P), points=particle_points),
     ]
     constraint = None if G_p is None and G_fe is None else [G_fe, G_p]
+    # body forces with the functions and weights of the masses: FE weight, particle rule
+    # (bridging: times alpha), ramp interface cells blended; master-slave reduced by T^T
+    p_rule = (pq, ops.particle_table)
+    i_rule = None
+    if ops.interface_table is not None:
+        i_rule = (ops.interface_quadrature, ops.interface_table)
+
+    def body_load(force):
+        forces = [CallableBodyForce(force)]
+        deg = problem.quadrature_degree
+        return body_load_vectors(forces, V, ops.fe_weight, deg, p_rule, i_rule, comm)
+
     return cls(
         fields,
         material,
@@ -431,6 +455,7 @@ def build_coupled(
         reduction=ops.reduction,
         timings={"setup": time.perf_counter() - t0, "operators": ops.timings["operators"]},
         multiplier_solver=multiplier_solver,
+        body_load=body_load,
     )
 
 

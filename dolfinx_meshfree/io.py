@@ -7,16 +7,17 @@ Files written by :class:`DynamicsWriter` for a prefix ``out/rod``:
   DOLFINx :class:`~dolfinx.fem.Function` named ``"displacement"`` and ``"velocity"``, one
   temporal collection each, written collectively by DOLFINx's ``XDMFFile`` (HDF5). In a coupled
   model the FE nodes that only patch cells touch hold zero (they carry no mass);
-* ``out/rod_particles.xdmf`` (+ ``out/rod_particles.bin``): the particle cloud, one temporal
+* ``out/rod_particles.xdmf`` (+ ``out/rod_particles.h5``): the particle cloud, one temporal
   collection of ``Polyvertex`` grids; per output time the particle positions (reference
   configuration, ``XYZ`` with ``z = 0``) and the displacement and velocity *values* at the
   particles (``u_h(x_J)``, ``v_h(x_J)``: the MLS, blended or FE field evaluated there, not the
-  MLS coefficients), as 3-component vectors. DOLFINx has no particle writer in 0.5.2 and h5py is
-  not available in both lanes, so the heavy data go to one little-endian raw binary file that
-  the XDMF addresses with ``Format="Binary"`` and byte offsets (``Seek``), which ParaView's XDMF
-  readers (Xdmf3 and the legacy Xdmf2) read; rank 0 writes both files, with the replicated
-  positions and the values gathered from the owners of the particles. The XML is rewritten
-  (atomically) after every output, so an interrupted run leaves a readable file;
+  MLS coefficients), as 3-component vectors. DOLFINx has no particle writer in 0.5.2, so rank 0
+  writes the heavy data with h5py (serial HDF5: datasets ``/topology``, ``/geometry`` and
+  ``/step_<k>/displacement``, ``/step_<k>/velocity``) and the XDMF addresses them with
+  ``Format="HDF"`` DataItems (``rod_particles.h5:/step_0/velocity``), which ParaView's XDMF
+  readers read; positions are replicated, the values gathered from the owners of the
+  particles. The HDF5 file is closed and the XML rewritten (atomically) after every output, so
+  an interrupted run leaves readable files;
 * ``out/rod_energy.csv``: the :class:`~dolfinx_meshfree.EnergyRecord` at each output (rank 0).
 
 :func:`read_particles` reads a particle file back (tests, post-processing).
@@ -28,7 +29,6 @@ import math
 import os
 import pathlib
 import sys
-import time as _time
 import xml.etree.ElementTree as ET
 from typing import IO, TYPE_CHECKING
 
@@ -43,8 +43,6 @@ if TYPE_CHECKING:
 
 __all__ = ["DynamicsWriter", "ProgressBar", "check_prefix", "read_particles"]
 
-_FLOAT = np.dtype("<f8")
-_INT = np.dtype("<i4")
 _ENERGY_KEYS = (
     "step",
     "time",
@@ -106,13 +104,14 @@ def check_prefix(prefix: str | os.PathLike, comm: MPI.Comm) -> pathlib.Path:
 
 
 class ProgressBar:
-    """A dependency-free progress bar on rank 0's ``stderr`` for long runs.
+    """A progress bar on rank 0's ``stderr`` for long runs, drawn by ``tqdm``.
 
-    On a terminal the line is redrawn in place (``\\r``) at most every ``interval`` seconds;
-    forced onto a stream that is not a terminal, one line is printed per ``step_percent`` of the
-    run. In automatic mode (``enabled=None``) nothing is drawn before ``delay`` seconds have
-    passed, so that short runs stay silent. Other ranks print nothing; ``update`` never
-    communicates, so calling it on some ranks only is safe.
+    On a terminal the line is redrawn in place at most every ``interval`` seconds; forced onto a
+    stream that is not a terminal, it is redrawn once per ``step_percent`` of the run (each
+    draw starts with ``\\r``, so ``str.splitlines`` gives one line per draw). In automatic
+    mode (``enabled=None``) nothing is drawn before ``delay`` seconds have passed, so that short
+    runs stay silent. Other ranks print nothing; ``update`` never communicates, so calling it on
+    some ranks only is safe.
 
     Args:
         total: Number of steps of the run (> 0).
@@ -121,9 +120,9 @@ class ProgressBar:
             ``None``: on when the stream is a terminal.
         stream: Where to print (default ``sys.stderr`` at construction).
         interval: Seconds between redraws on a terminal.
-        step_percent: Percent of the run between lines when the stream is not a terminal.
+        step_percent: Percent of the run between draws when the stream is not a terminal.
         label: Text before the bar.
-        delay: Seconds before the first line; default 2 in automatic mode, 0 when forced.
+        delay: Seconds before the first draw; default 2 in automatic mode, 0 when forced.
     """
 
     def __init__(
@@ -144,73 +143,52 @@ class ProgressBar:
         comm = MPI.COMM_WORLD if comm is None else comm
         self.stream = sys.stderr if stream is None else stream
         self.total = int(total)
-        self.interval = float(interval)
-        self.step_percent = float(step_percent)
-        self.label = label
         self.tty = _isatty(self.stream)
         on = self.tty if enabled is None else enabled
         self.enabled = bool(on) and comm.rank == 0
-        self.delay = float(delay) if delay is not None else (2.0 if enabled is None else 0.0)
-        self._start = _time.perf_counter()
-        self._last = -math.inf
-        self._next_percent = 0.0
-        self._width = 0
-        self._closed = False
-        self._drawn = False
+        self._done = 0
+        self._bar = None
+        if not self.enabled:
+            return
+        from tqdm import tqdm
+
+        if self.tty:
+            every = {"mininterval": float(interval), "miniters": 1}
+        else:  # a log file: one draw per step_percent, whatever the time
+            every = {"mininterval": 0.0, "miniters": max(1, math.ceil(total * step_percent / 100))}
+        self._bar = tqdm(
+            total=self.total,
+            desc=label.rstrip(),
+            file=self.stream,
+            delay=float(delay) if delay is not None else (2.0 if enabled is None else 0.0),
+            maxinterval=math.inf,  # tqdm's monitor would otherwise lower miniters
+            dynamic_ncols=False,
+            ascii=not self.tty,
+            bar_format="{desc} {percentage:5.1f}%|{bar:24}| step {n}/{total}{postfix} "
+            "[{elapsed}<{remaining}]",
+            **every,
+        )
 
     def update(self, done: int, t: float | None = None) -> None:
         """Report ``done`` steps of ``total`` (and the simulated time ``t``); cheap when not due."""
-        if not self.enabled or self._closed:
+        if self._bar is None or done <= self._done:
             return
-        percent = 100.0 * done / self.total
-        now = _time.perf_counter()
-        if now - self._start < self.delay:
-            return
-        if self.tty:
-            if now - self._last < self.interval and done < self.total:
-                return
-            self._last = now
-            self._draw(done, t, "\r")
-        elif percent + 1e-12 >= self._next_percent or done >= self.total:
-            self._next_percent = (
-                math.floor(percent / self.step_percent + 1e-12) + 1
-            ) * self.step_percent
-            self._draw(done, t, "")
+        if t is not None:
+            self._bar.set_postfix_str(f"t = {t:.6g}", refresh=False)
+        self._bar.update(done - self._done)
+        self._done = done
 
     def close(self, done: int | None = None, t: float | None = None) -> None:
         """Draw the final state (if ``done`` is given) and end the line."""
-        if not self.enabled or self._closed:
-            self._closed = True
+        if self._bar is None:
             return
-        if not self._drawn:  # a run shorter than the delay: stay silent
-            self._closed = True
-            return
-        if done is not None:
-            self._last = -math.inf
-            if self.tty:
-                self._draw(done, t, "\r")
-            elif self._next_percent <= 100.0:
-                self._draw(done, t, "")
-        if self.tty:
-            self.stream.write("\n")
-            self.stream.flush()
-        self._closed = True
-
-    def _draw(self, done: int, t: float | None, lead: str) -> None:
-        frac = min(1.0, max(0.0, done / self.total))
-        elapsed = _time.perf_counter() - self._start
-        bar = "#" * round(24 * frac)
-        eta = f", {elapsed * (1 - frac) / frac:.1f} s left" if 0 < frac < 1 else ""
-        tt = f"  t = {t:.6g}" if t is not None else ""
-        text = (
-            f"{self.label}[{bar:<24}] {100 * frac:5.1f}%  step {done}/{self.total}{tt}  "
-            f"{elapsed:.1f} s{eta}"
-        )
-        self._drawn = True
-        pad = " " * max(0, self._width - len(text)) if lead else ""
-        self._width = len(text)
-        self.stream.write(lead + text + pad + ("" if lead else "\n"))
-        self.stream.flush()
+        if done is not None and done > self._done:
+            if t is not None:
+                self._bar.set_postfix_str(f"t = {t:.6g}", refresh=False)
+            self._bar.n = done
+            self._done = done
+        self._bar.close()
+        self._bar = None
 
 
 def _isatty(stream) -> bool:
@@ -242,7 +220,7 @@ class DynamicsWriter:
 
     Attributes:
         files: The files this writer produces, by kind (``"fe"``, ``"fe_h5"``, ``"particles"``,
-            ``"particles_bin"``, ``"energy"``); the same on every rank.
+            ``"particles_h5"``, ``"energy"``); the same on every rank.
         times: Output times written so far.
 
     Raises:
@@ -269,13 +247,13 @@ class DynamicsWriter:
         self._with_fe = bool(fe) and dynamics.V is not None
         self._with_particles = bool(particles) and dynamics.particles is not None
         self._with_energy = bool(energy)
-        self._grids: list[tuple[float, int, int]] = []  # (time, seek u, seek v)
+        self._grids: list[tuple[float, str]] = []  # (time, HDF5 group)
         if self._with_fe:
             self.files["fe"] = pathlib.Path(base + "_fe.xdmf")
             self.files["fe_h5"] = pathlib.Path(base + "_fe.h5")
         if self._with_particles:
             self.files["particles"] = pathlib.Path(base + "_particles.xdmf")
-            self.files["particles_bin"] = pathlib.Path(base + "_particles.bin")
+            self.files["particles_h5"] = pathlib.Path(base + "_particles.h5")
             P = dynamics.particles
             self._positions = np.zeros((P.num_particles, 3))
             self._positions[:, : P.positions.shape[1]] = P.positions
@@ -305,50 +283,50 @@ class DynamicsWriter:
 
     def _start_rank0_files(self) -> None:
         if self._with_particles:
+            import h5py
+
             n = self._positions.shape[0]
-            with open(self.files["particles_bin"], "wb") as f:
-                f.write(np.arange(n, dtype=_INT).tobytes())
-                f.write(self._positions.astype(_FLOAT).tobytes())
-            self._size = n * _INT.itemsize + self._positions.size * _FLOAT.itemsize
+            with h5py.File(self.files["particles_h5"], "w") as f:
+                f.create_dataset("topology", data=np.arange(n, dtype=np.int32)[:, None])
+                f.create_dataset("geometry", data=self._positions.astype(np.float64))
             self._write_particle_xml()
         if self._with_energy:
             with open(self.files["energy"], "w") as f:
                 f.write(",".join(_ENERGY_KEYS) + "\n")
 
     def _append_particles(self, t: float, u: np.ndarray, v: np.ndarray) -> None:
-        seek_u = self._size
-        with open(self.files["particles_bin"], "ab") as f:
-            for a in (u, v):
-                f.write(np.ascontiguousarray(a, dtype=_FLOAT).tobytes())
-        seek_v = seek_u + u.size * _FLOAT.itemsize
-        self._size = seek_v + v.size * _FLOAT.itemsize
-        self._grids.append((t, seek_u, seek_v))
+        import h5py
+
+        group = f"step_{len(self._grids)}"
+        with h5py.File(self.files["particles_h5"], "a") as f:
+            g = f.create_group(group)
+            g.attrs["time"] = float(t)
+            g.create_dataset("displacement", data=np.asarray(u, dtype=np.float64))
+            g.create_dataset("velocity", data=np.asarray(v, dtype=np.float64))
+        self._grids.append((t, group))
         self._write_particle_xml()
 
     def _write_particle_xml(self) -> None:
         n = self._positions.shape[0]
-        binary = self.files["particles_bin"].name
+        h5 = self.files["particles_h5"].name
         root = ET.Element("Xdmf", Version="3.0")
         domain = ET.SubElement(root, "Domain")
         series = ET.SubElement(
             domain, "Grid", Name="particles", GridType="Collection", CollectionType="Temporal"
         )
 
-        def data(parent, seek: int, dims: str, number: str, precision: int) -> None:
+        def data(parent, path: str, dims: str, number: str) -> None:
             item = ET.SubElement(
                 parent,
                 "DataItem",
                 Dimensions=dims,
                 NumberType=number,
-                Precision=str(precision),
-                Format="Binary",
-                Endian="Little",
-                Seek=str(seek),
+                Precision="4" if number == "Int" else "8",
+                Format="HDF",
             )
-            item.text = binary
+            item.text = f"{h5}:{path}"
 
-        pos_seek = n * _INT.itemsize
-        for t, su, sv in self._grids:
+        for t, group in self._grids:
             grid = ET.SubElement(series, "Grid", Name="particles", GridType="Uniform")
             ET.SubElement(grid, "Time", Value=repr(float(t)))
             topo = ET.SubElement(
@@ -358,14 +336,14 @@ class DynamicsWriter:
                 NumberOfElements=str(n),
                 NodesPerElement="1",
             )
-            data(topo, 0, f"{n} 1", "Int", _INT.itemsize)
+            data(topo, "/topology", f"{n} 1", "Int")
             geom = ET.SubElement(grid, "Geometry", GeometryType="XYZ")
-            data(geom, pos_seek, f"{n} 3", "Float", _FLOAT.itemsize)
-            for name, seek in (("displacement", su), ("velocity", sv)):
+            data(geom, "/geometry", f"{n} 3", "Float")
+            for name in ("displacement", "velocity"):
                 att = ET.SubElement(
                     grid, "Attribute", Name=name, AttributeType="Vector", Center="Node"
                 )
-                data(att, seek, f"{n} 3", "Float", _FLOAT.itemsize)
+                data(att, f"/{group}/{name}", f"{n} 3", "Float")
         ET.indent(root)
         path = self.files["particles"]
         tmp = path.with_name(path.name + ".tmp")
@@ -445,25 +423,31 @@ def read_particles(path: str | os.PathLike) -> dict[str, np.ndarray]:
         ``{"times": (k,), "positions": (k, n, 3), "displacement": (k, n, 3), "velocity":
         (k, n, 3)}`` for the ``k`` output times of ``n`` particles.
     """
+    import h5py
+
     path = pathlib.Path(path)
     root = ET.parse(path).getroot()
     grids = root.findall("./Domain/Grid[@CollectionType='Temporal']/Grid")
     out: dict[str, list] = {"times": [], "positions": [], "displacement": [], "velocity": []}
+    files: dict[str, h5py.File] = {}
 
     def load(item) -> np.ndarray:
         dims = tuple(int(d) for d in item.get("Dimensions").split())
-        dtype = _INT if item.get("NumberType") == "Int" else _FLOAT
-        count = int(np.prod(dims))
-        arr = np.fromfile(
-            path.parent / item.text.strip(), dtype=dtype, count=count, offset=int(item.get("Seek"))
-        )
-        if arr.size != count:
-            raise ValueError(f"{path}: the binary file holds fewer values than {dims}")
-        return arr.reshape(dims)
+        name, dataset = item.text.strip().split(":", 1)
+        if name not in files:
+            files[name] = h5py.File(path.parent / name, "r")
+        arr = np.asarray(files[name][dataset])
+        if arr.shape != dims:
+            raise ValueError(f"{path}: {item.text.strip()} has shape {arr.shape}, not {dims}")
+        return arr
 
-    for g in grids:
-        out["times"].append(float(g.find("Time").get("Value")))
-        out["positions"].append(load(g.find("Geometry/DataItem")))
-        for att in g.findall("Attribute"):
-            out[att.get("Name")].append(load(att.find("DataItem")))
+    try:
+        for g in grids:
+            out["times"].append(float(g.find("Time").get("Value")))
+            out["positions"].append(load(g.find("Geometry/DataItem")))
+            for att in g.findall("Attribute"):
+                out[att.get("Name")].append(load(att.find("DataItem")))
+    finally:
+        for f in files.values():
+            f.close()
     return {k: np.asarray(v) for k, v in out.items()}

@@ -12,11 +12,14 @@ coupled system (:class:`~dolfinx_meshfree.CoupledElasticity`):
   side. On the patch cells, ``a`` must equal the material's elasticity form; they are compared
   by assembling both there (relative Frobenius difference below 1e-8), and a disagreement is
   reported with the likely cause (plane stress against plane strain, or a scaled modulus).
-* ``L``: cell integrals (body loads) are weighted like ``a`` on the FE side and integrated against
-  the particle shape functions on the patch cells; exterior-facet integrals (tractions, pressures
-  with ``FacetNormal``) become tractions ``t(x, n)`` evaluated from the UFL integrand with a
-  DOLFINx ``Expression`` at the facet Gauss points, so they reach the FE nodes or the particles
-  of whichever side the facet belongs to. The test function may appear only undifferentiated.
+* ``L``: cell integrals (body loads, :class:`FormBodyForce`) are weighted like ``a`` on the FE
+  side and integrated against the particle shape functions on the patch cells, with every
+  coupling's own functions and weights (ramp interface cells: the blended functions; bridging
+  band: ``1 - alpha`` and ``alpha``, eq. 49; see :mod:`~dolfinx_meshfree.body_loads`);
+  exterior-facet integrals (tractions, pressures with ``FacetNormal``) become tractions
+  ``t(x, n)`` evaluated from the UFL integrand with a DOLFINx ``Expression`` at the facet
+  Gauss points, so they reach the FE nodes or the particles of whichever side the facet
+  belongs to. The test function may appear only undifferentiated.
 * ``bcs``: dofs of FE cells are fixed strongly (``MatZeroRowsColumns``), with the bc's values;
   exterior facets of patch cells whose nodes are all constrained become particle constraints
   with the bc's P1 interpolant as the prescribed value (Lagrange multipliers, as in
@@ -24,8 +27,7 @@ coupled system (:class:`~dolfinx_meshfree.CoupledElasticity`):
 
 Not supported (each raises a ``ValueError`` naming the fix): non-cell integrals in ``a``, interior
 facet integrals in ``L``, derivatives of the test function in ``L``, conditions on a single
-component (``V.sub(i)``), constrained nodes strictly inside the patch, and cell loads with the
-``ramp``/``bridging`` couplings (their blended interface cells have no body-load path yet).
+component (``V.sub(i)``) and constrained nodes strictly inside the patch.
 """
 
 from __future__ import annotations
@@ -42,15 +44,15 @@ from scipy.spatial import cKDTree
 from ufl.corealg.traversal import unique_pre_traversal
 
 from . import _compat
+from .body_loads import BodyForce
 from .coupled import COUPLINGS, CoupledElasticity, CoupledSolution, facet_nodes
 from .fe_points import evaluate_fe_function
 from .materials import LinearElastic
-from .operators import load_vector
 from .parallel import raise_on_all_ranks
 from .patch import ParticlePatch
-from .quadrature import boundary_facets, cell_quadrature
+from .quadrature import QuadraturePoints, boundary_facets
 
-__all__ = ["CoupledLinearProblem"]
+__all__ = ["CoupledLinearProblem", "FormBodyForce"]
 
 #: Relative Frobenius difference above which the form and the material disagree on the patch.
 MATERIAL_TOLERANCE = 1e-8
@@ -71,8 +73,9 @@ class CoupledLinearProblem:
             ``a`` on the patch cells.
         coupling: One of :data:`~dolfinx_meshfree.COUPLINGS`.
         **options: Passed to :class:`~dolfinx_meshfree.CoupledElasticity` (``weight``,
-            ``dilation``, ``basis``, ``quadrature_degree``, ``consistent``, ``overlap``,
-            ``penalty``).
+            ``dilation``, ``basis``, ``quadrature_degree``, ``consistent`` (default: VCI for
+            every variational coupling, plain Gauss for master-slave), ``overlap``,
+            ``penalty``, ``constraint`` (default ``"integral"``), ``band_width``).
 
     Example::
 
@@ -130,10 +133,21 @@ class CoupledLinearProblem:
 
         raise_on_all_ranks(patch.comm, check_components)
         problem._strong.append((fixed, values))
-        # patch facets whose nodes are all constrained
-        facets = patch.exterior_facets
+        # exterior facets whose nodes are all constrained, of patch cells (they constrain the
+        # particles) and of FE cells with a node on the interface (the nodes are fixed strongly
+        # anyway; the ramp's interface cells constrain the particle part of their blended
+        # functions there: without it a quadratic field missed by 2.5x the FE error on a patch
+        # reaching the boundary)
+        msh = V.mesh
+        facets = boundary_facets(msh)
         nodes = facet_nodes(V, facets)
-        on = fixed[nodes].all(axis=1) if facets.size else np.zeros(0, dtype=bool)
+        fdim = msh.topology.dim - 1
+        gamma = problem._node_flags(
+            dolfinx.fem.locate_dofs_topological(V, fdim, patch.interface_facets)
+        )
+        f2c = msh.topology.connectivity(fdim, fdim + 1)
+        beside_patch = patch.in_patch[np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]]]
+        on = fixed[nodes].all(axis=1) & (beside_patch | gamma[nodes].any(axis=1))
         bc_facets = facets[on]
         g = dolfinx.fem.Function(V)
         g.x.array[:] = values.ravel()
@@ -161,35 +175,22 @@ class CoupledLinearProblem:
     # -- loads ----------------------------------------------------------------------------------
 
     def _apply_loads(self) -> None:
-        problem, V, patch = self.problem, self.V, self.patch
+        """Exterior-facet integrals of ``L`` become tractions; its cell integrals one
+        :class:`FormBodyForce`, whose shares every coupling takes with its own functions and
+        weights (:mod:`~dolfinx_meshfree.body_loads`)."""
+        problem, V = self.problem, self.V
         msh = V.mesh
         v = self.L.arguments()[0]
         deg = problem.quadrature_degree
-        cell_integrals, fe_cell_integrals = [], []
-        chi_fe = None
+        cell_integrals = []
         for itg in self.L.integrals():
             if itg.integral_type() == "cell":
-                if chi_fe is None:
-                    chi_fe = problem.cell_indicator(~patch.in_patch)
-                fe_cell_integrals.append(itg.reconstruct(integrand=chi_fe * itg.integrand()))
                 cell_integrals.append(itg)
             else:
                 facets = np.intersect1d(_integral_entities(itg, msh), boundary_facets(msh))
                 problem.add_traction(facets.astype(np.int32), _FacetLoad(itg, v, facets, deg))
         if cell_integrals:
-            problem._fe_load_form = _compat.create_form(ufl.Form(fe_cell_integrals))
-            loads = np.zeros(2 * patch.particles.num_particles)
-            cname = msh.topology.cell_type.name
-            X, _ = _compat.quadrature_rule(cname, deg)
-            for itg in cell_integrals:
-                values = _replace_test_function(itg.integrand(), v, msh)
-                expr = _compat.create_expression(values, X)  # collective
-                cells = np.intersect1d(_integral_entities(itg, msh), patch.cells)
-                q = cell_quadrature(msh, deg, cells)
-                b = _compat.eval_expression(expr, msh, cells, 2).reshape(-1, 2)
-                tab = raise_on_all_ranks(patch.comm, lambda q=q: problem.mls.tabulate(q.points, 0))
-                loads += load_vector(tab.values, q.weights, b)
-            problem._particle_loads = loads
+            problem._body_forces = [FormBodyForce(cell_integrals, v, deg)]
 
     # -- solve ----------------------------------------------------------------------------------
 
@@ -253,11 +254,6 @@ def _check_arguments(a, L, bcs, patch, material, coupling, options):
             raise ValueError(
                 f"L's {itg.integral_type()} integral differentiates the test function; write the "
                 "load as a body force dot(f, v) dx or a traction dot(t, v) ds"
-            )
-        if itg.integral_type() == "cell" and coupling in ("ramp", "ramp-cubic", "bridging"):
-            raise ValueError(
-                f"L has a cell integral (a body load), which coupling={coupling!r} does not "
-                "support yet; use coupling='lagrange', 'edge-to-edge' or 'master-slave'"
             )
         if itg.subdomain_id() == "otherwise":
             raise ValueError("L uses an 'otherwise' subdomain; name the subdomain ids instead")
@@ -366,6 +362,69 @@ def _replace_test_function(integrand, v, msh, normal=None):
     for e in (ufl.as_vector([1.0, 0.0]), ufl.as_vector([0.0, 1.0])):
         comps.append(ufl.replace(integrand, {**mapping, v: e}))
     return ufl.as_vector(comps)
+
+
+class FormBodyForce(BodyForce):
+    """The cell integrals of a linear UFL form ``L(v)`` as a body force (collective
+    construction).
+
+    The FE share is DOLFINx's assembly of every integral with its integrand multiplied by the
+    coupling's FE weight (the user's measures, subdomains and quadrature metadata are kept); the
+    values ``b`` at a cell rule of ``degree`` come from a DOLFINx ``Expression`` of the integrand
+    with ``v`` replaced by ``e_0`` and ``e_1``, zero on the cells the integral does not cover.
+
+    Args:
+        integrals: The cell integrals of ``L``.
+        v: ``L``'s test function (on the vector P1/Q1 space).
+        degree: The quadrature degree of the rules :meth:`values` is called with.
+    """
+
+    def __init__(self, integrals: list, v, degree: int):
+        msh = v.ufl_function_space().mesh
+        self.integrals, self.mesh, self.degree = list(integrals), msh, degree
+        X, _ = _compat.quadrature_rule(msh.topology.cell_type.name, degree)
+        self.num_points = X.shape[0]
+        x = ufl.SpatialCoordinate(msh)
+        self._expressions = []
+        for itg in self.integrals:
+            b = _replace_test_function(itg.integrand(), v, msh)
+            expr = _compat.create_expression(ufl.as_vector([b[0], b[1], x[0], x[1]]), X, msh)
+            n_cells = msh.topology.index_map(msh.topology.dim)
+            on = np.zeros(n_cells.size_local + n_cells.num_ghosts, dtype=bool)
+            on[_integral_entities(itg, msh)] = True
+            self._expressions.append((expr, on))
+        self.tol = 1e-9 * (np.ptp(msh.geometry.x[:, :2], axis=0).max() + 1.0)
+
+    def fe_load(self, V, weight, degree: int) -> np.ndarray:
+        from .body_loads import accumulate
+
+        integrals = self.integrals
+        if weight is not None:
+            integrals = [itg.reconstruct(integrand=weight * itg.integrand()) for itg in integrals]
+        b = _compat.assemble_vector(_compat.create_form(ufl.Form(integrals)))
+        with b.localForm() as loc:
+            local = loc.array_r.copy()
+        b.destroy()
+        return accumulate(V, local)
+
+    def values(self, q: QuadraturePoints) -> np.ndarray:
+        nq = self.num_points
+        cells = q.cells[::nq]
+        if len(q) % nq or not np.array_equal(np.repeat(cells, nq), q.cells):
+            raise RuntimeError(
+                f"a body load of L was requested at {len(q)} points that are not a cell rule of "
+                f"degree {self.degree} (internal error: quadrature mismatch)"
+            )
+        out = np.zeros((len(q), 2))
+        for expr, on in self._expressions:
+            vals = _compat.eval_expression(expr, self.mesh, cells, 4).reshape(-1, 4)
+            if np.abs(vals[:, 2:] - q.points).max(initial=0.0) > self.tol:
+                raise RuntimeError(
+                    "a body load of L was requested at points that are not the Gauss points of "
+                    f"degree {self.degree} (internal error: quadrature mismatch)"
+                )
+            out += np.where(on[q.cells][:, None], vals[:, :2], 0.0)
+        return out
 
 
 class _FacetLoad:

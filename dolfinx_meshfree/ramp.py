@@ -29,6 +29,12 @@ multipliers):
   off-diagonal blocks;
 * patch cells: EFG as in :func:`~dolfinx_meshfree.efg.particle_stiffness`.
 
+Loads use the same functions: tractions on facets of interface cells and body forces on the
+interface cells are integrated against the blended functions (the FE part ``(1 - R) N_a`` on the
+FE nodes, ``R phi_J`` and the Gamma_E nodes' ``(1 - R) N_a`` on the particles), body forces on
+pure FE cells against ``N_a`` and on patch cells against ``phi_J``
+(:mod:`~dolfinx_meshfree.body_loads`).
+
 Essential conditions act strongly on FE nodes. Where the particle part of an interface cell
 reaches a Dirichlet facet (an exterior facet of an interface cell), it is constrained like the
 patch facets, by piecewise-constant multipliers on ``u^h - ubar`` with the known FE part moved
@@ -190,6 +196,20 @@ class RampInterface:
             (np.ones(n_loc), (np.arange(n_loc), col)), shape=(n_loc, n_loc + self.num_particles)
         )
 
+    def blended_facets(self, facets: np.ndarray) -> np.ndarray:
+        """The given exterior facets on which the particle part of the blended functions lives:
+        facets of interface cells with a node on Gamma_E (elsewhere ``R = 0`` on the facet, and
+        a constraint on the particle part there would be an empty row)."""
+        msh = self.V.mesh
+        facets = np.asarray(facets, dtype=np.int32)
+        if facets.size == 0:
+            return facets
+        from .coupled import facet_nodes
+
+        keep = self.in_interface[_first_cells(msh, facets)]
+        keep &= self.on_gamma[facet_nodes(self.V, facets)].any(axis=1)
+        return facets[keep]
+
     def _check_supports(self, points: np.ndarray) -> None:
         try:
             self.mls.tabulate(points, 0)
@@ -198,28 +218,9 @@ class RampInterface:
                 "the particle supports do not cover the ramp's interface cells (the FE cells "
                 f"beside the patch; the points checked lie just inside their corners): {e}. "
                 f"The supports have radii (d_max - 1) c_I + max(c_I, rho) (see ramp_mls) with "
-                f"dilation d_max = "
-                f"{self.mls.dilation}: increase dilation, or place particles on every patch "
-                "vertex with ParticlePatch(..., placement='vertices')"
+                f"dilation d_max = {self.mls.dilation}: increase dilation, or place particles on "
+                "every patch vertex with ParticlePatch(..., placement='vertices')"
             ) from e
-
-    def dirichlet_facets(self, facets: np.ndarray) -> np.ndarray:
-        """The facets among ``facets`` (owned exterior facets) on which the particle part
-        ``R phi`` of an interface cell does not vanish: facets of interface cells with a node on
-        Gamma_E (``R = 0`` on the others, where a multiplier would have nothing to constrain).
-        Local."""
-        facets = np.asarray(facets, dtype=np.int32)
-        msh = self.V.mesh
-        cells = _first_cells(msh, facets)
-        inter = self.in_interface[cells]
-        facets, cells = facets[inter], cells[inter]
-        if facets.size == 0:
-            return facets
-        geo = _compat.entities_to_geometry(msh, msh.topology.dim - 1, facets)
-        mid = msh.geometry.x[geo, :2].mean(axis=1)
-        # R is linear along a facet (P1/Q1): positive at the midpoint iff a node is on Gamma_E
-        r = self._ramps(tabulate_in_cells(self.V, mid, cells, derivatives=0))[2]
-        return facets[r > 1e-12]
 
     @property
     def num_fe_columns(self) -> int:
@@ -331,7 +332,7 @@ def solve_ramp(problem, solver: str = "mumps"):
     fe_bc, patch_bc, dq, dtabs, ubc, is_bc = problem._essential_conditions()
     u_bc = ubc.x.array.reshape(-1, 2)
     for f, fn in fe_bc:
-        f_i = blend.dirichlet_facets(f)
+        f_i = blend.blended_facets(f)
         iq = facet_quadrature(msh, f_i, deg)
         tab = raise_on_all_ranks(comm, lambda iq=iq: blend.table(iq.points, iq.cells, 0))
         ubar = raise_on_all_ranks(
@@ -418,6 +419,10 @@ def solve_ramp(problem, solver: str = "mumps"):
     b_fe = create_vector(
         comm, fe_layout, cat([*f_fe_rows, np.zeros(0, np.int64)]), cat([*f_fe_vals, []])
     )
+    if problem._body_forces:  # pure FE cells with N_a, interface cells blended, patch phi_J
+        fe_body, p_body = _body_loads(problem, blend, qi, ti)
+        b_fe.array[:] += fe_body
+        f_p += p_body
 
     # K_FE = DOLFINx (pure FE cells) + interface FE-FE block, then strong conditions
     K_fe = _fe_stiffness(problem, blend)
@@ -443,6 +448,16 @@ def solve_ramp(problem, solver: str = "mumps"):
         sizes=problem._sizes(active, dl.size_global),
         interface=blend,
     )
+
+
+def _body_loads(problem, blend: RampInterface, q, tab: ShapeTable):
+    """The ramp coupling's shares of ``problem``'s body forces (collective): ``N_a`` on the pure
+    FE cells, the blended functions ``(1 - R) N_a`` and ``R phi_J`` of eq. 3.15 on the interface
+    cells (rule ``q``, table ``tab``; Rabczuk et al. 2006, eq. 38-42 for the cubic ramp), and
+    ``phi_J`` on the patch cells. Returns the FE loads per owned dof and the particle loads
+    (original interleaved order)."""
+    pure = ~problem.patch.in_patch & ~blend.in_interface
+    return problem._body_loads(problem.cell_indicator(pure), interface_rule=(q, tab.values))
 
 
 def _consistent_stiffness(problem, blend: RampInterface, q, tab: ShapeTable):

@@ -12,6 +12,7 @@ import dolfinx_meshfree  # noqa: I001  (must come first: loads lane B's MPI)
 import gc
 import importlib.util
 import pathlib
+import sys
 import tempfile
 
 import dolfinx
@@ -129,6 +130,8 @@ def load_demo(name: str, alias: str | None = None):
     """Import ``demos/<name>.py`` as a module (the demos are scripts, not a package)."""
     spec = importlib.util.spec_from_file_location(alias or f"demo_{name}", DEMOS / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
+    # registered before it runs: dataclasses look their module up in sys.modules
+    sys.modules[spec.name] = module
     spec.loader.exec_module(module)
     return module
 

@@ -53,9 +53,11 @@ def test_fe_cantilever_converges_at_the_optimal_rates(series, plane):
     l2 = [e["l2"] for e in fe]
     energy = [e["energy"] for e in fe]
     assert np.all(np.diff(l2) < 0) and np.all(np.diff(energy) < 0)
-    assert 1.9 <= fitted_rate(H, l2) <= 2.3
-    assert 0.9 <= fitted_rate(H, energy) <= 1.3
-    assert l2[-1] < 0.01 and energy[-1] < 0.1  # and it converges to the right solution
+    # measured (stress / strain): L2 rate 1.97 / 1.96, energy 0.99 / 0.99; errors at h = 1: L2
+    # 3.2e-3 / 3.8e-3, energy 5.9e-2 / 6.4e-2 (converges to the right solution)
+    assert 1.9 <= fitted_rate(H, l2) <= 2.1
+    assert 0.9 <= fitted_rate(H, energy) <= 1.1
+    assert l2[-1] < 8e-3 and energy[-1] < 0.1
 
 
 @pytest.mark.parametrize("plane, cell_name", CASES)
@@ -63,12 +65,15 @@ def test_efg_cantilever_converges_and_beats_fe(series, plane, cell_name):
     fe, efg = series[plane, cell_name]
     l2 = np.array([e["l2"] for e in efg])
     energy = np.array([e["energy"] for e in efg])
-    assert fitted_rate(H, l2) >= 1.9
-    assert fitted_rate(H, energy) >= 0.9
-    assert l2[-1] < 1e-3
-    # EFG (linear basis, quartic weight, d_max = 2) is more accurate than FE on the same grid
-    assert np.all(l2 < [e["l2"] for e in fe])
-    assert np.all(energy < [e["energy"] for e in fe])
+    # measured over the three cases: L2 rate 2.70-2.90, energy 1.37-1.39; L2 error at h = 1
+    # 8.2e-5 to 1.1e-4 (bounds: two-sided rates, twice the largest error)
+    assert 2.4 <= fitted_rate(H, l2) <= 3.2
+    assert 1.2 <= fitted_rate(H, energy) <= 1.6
+    assert l2[-1] < 2.5e-4
+    # EFG (linear basis, quartic weight, d_max = 2) is more accurate than FE on the same grid:
+    # L2 0.005-0.067 x FE's, energy 0.05-0.20 x (bounds: about twice the largest ratio)
+    assert np.all(l2 <= 0.15 * np.array([e["l2"] for e in fe]))
+    assert np.all(energy <= 0.4 * np.array([e["energy"] for e in fe]))
 
 
 def test_plane_strain_solution_differs_from_plane_stress(series):

@@ -93,31 +93,37 @@ def test_patch_interface_and_boundary_facets():
 
 @pytest.mark.parametrize("cell", ["quadrilateral", "triangle"])
 def test_patch_test_exact_with_consistent_integration(cell, rank_rng):
+    """Default options (consistent integration; ``consistent=None`` is the default) pass the
+    linear patch test to round-off; plain Gauss (``consistent=False``) does not (2e-4)."""
     comm = MPI.COMM_WORLD
     msh = square(comm, cell)
     patch = mf.ParticlePatch(msh, cells_right_of(msh, 1.0), 1 / 3)
     V = _compat.vector_function_space(msh)
     exact = mf.LinearField(G=((0.3, -0.2), (0.5, 0.1)), c=(0.1, -0.4))
     errors = {}
-    for consistent in (False, True):
+    for consistent in (False, None):
         problem = mf.CoupledElasticity(V, patch, mf.LinearElastic(1000, 0.3), consistent=consistent)
         problem.add_dirichlet(mf.boundary_facets(msh), exact.displacement)
         sol = problem.solve()
         x = rank_rng.uniform(0, 2, (200, 2))
         err = np.abs(sol.displacement(x) - exact.displacement(x)).max(initial=0.0)
         errors[consistent] = comm.allreduce(err, op=MPI.MAX)
-    assert errors[True] <= 1e-10
+    assert errors[None] <= 1e-10
     # Gauss quadrature alone leaves an integration error: the check above can fail
     assert errors[False] > 1e-8
 
 
-def test_cantilever_rate_and_error_against_pure_fe():
+@pytest.mark.parametrize("consistent", [False, True])
+def test_cantilever_rate_and_error_against_pure_fe(consistent):
+    """Measured (both integrations): fitted L2 rate 1.98; error 0.900, 0.896, 0.894 x pure FE's
+    at h = 3, 1.5, 1. Bounds: rate in [1.8, 2.2]; ratio in [0.8, 1.0] (below FE, as the README
+    states, with twice the measured 10 % gain as the lower margin)."""
     hs = [3.0, 1.5, 1.0]
-    errs = [solve_beam(MPI.COMM_WORLD, h)[2]["l2"] for h in hs]
+    errs = [solve_beam(MPI.COMM_WORLD, h, consistent)[2]["l2"] for h in hs]
     slope = np.polyfit(np.log(hs), np.log(errs), 1)[0]
-    assert slope >= 1.8
+    assert 1.8 <= slope <= 2.2
     for h, e in zip(hs, errs, strict=True):
-        assert e <= 1.5 * fe_beam_error(h)
+        assert 0.8 <= e / fe_beam_error(h) <= 1.0, (h, e)
 
 
 def test_interface_continuity_in_the_multiplier_space():

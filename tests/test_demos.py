@@ -44,7 +44,7 @@ def test_cantilever_demo_series_json_and_probe(shared_dir):
     u = np.load(u_file)
     exact = mf.TimoshenkoBeam(mf.LinearElastic(3e7, 0.3)).displacement(pts)
     assert u.shape == (4, 2)
-    assert np.abs(u - exact).max() < 1e-2 * np.abs(exact).max()
+    assert np.abs(u - exact).max() < 5e-4 * np.abs(exact).max()  # measured 2.2e-4
 
 
 def test_cantilever_demo_rejects_probe_outside(shared_dir):
@@ -70,8 +70,10 @@ def test_patch_test_demo_consistent(mesh, shared_dir):
 
 
 def test_plug_into_existing_model_demo(shared_dir):
-    """The bushing model with a particle patch: the demo's checks (within 1.5x plain FE, rates)
-    pass, and against Lamé the patch's hoop stress at the inner surface beats plain P1."""
+    """The bushing model with a particle patch: the demo's checks pass, and, checked here again
+    from its records: against Lamé the patch lowers the L2 and energy errors of plain P1
+    (measured 0.58-0.65 and 0.36-0.48 x; bound 1.0 x) and its hoop-stress error at the inner
+    surface (measured 12.6-15.3 times for Lagrange, 17.5-28.5 for the ramp; bound 6 times)."""
     comm = MPI.COMM_WORLD
     out = shared_dir / "plug.json"
     demo = load_demo("plug_into_existing_model")
@@ -80,9 +82,10 @@ def test_plug_into_existing_model_demo(shared_dir):
         fe = next(r for r in records if r["method"] == "plain FE" and r["h"] == h)
         for method in ("lagrange", "ramp"):
             r = next(r for r in records if r["method"] == method and r["h"] == h)
-            assert r["l2"] <= 1.5 * fe["l2"] and r["energy"] <= 1.5 * fe["energy"]
-            assert r["hoop"] < 0.5 * fe["hoop"]
+            assert r["l2"] <= fe["l2"] and r["energy"] <= fe["energy"]
+            assert fe["hoop"] >= 6.0 * r["hoop"]
     comm.Barrier()
     if comm.rank == 0:
         data = json.loads(out.read_text())
-        assert data["ranks"] == comm.size and data["rates_l2"]["lagrange"] > 1.8
+        assert data["ranks"] == comm.size
+        assert 1.8 <= data["rates_l2"]["lagrange"] <= 2.4  # measured 2.05 (h = 0.2 -> 0.1)

@@ -191,7 +191,13 @@ def test_rod_converges_to_exact_solution(coupling):
         errors.append(dyn.velocity_error(ROD.velocity))
         dyn.destroy()
     rate = fitted_rate(hs, errors)
-    assert rate > 1.5, (errors, rate)
+    # measured at h = 0.25 (rate): lagrange 1.38e-3 (2.03), edge-to-edge 1.38e-3 (2.03), ramp
+    # 2.39e-3 (2.02), ramp-cubic 2.41e-3 (2.02), bridging 1.41e-3 (2.01), master-slave 2.63e-3
+    # (1.96); the checks allow twice the error and rates within [1.8, 2.3]
+    finest = {"lagrange": 1.38e-3, "edge-to-edge": 1.38e-3, "ramp": 2.39e-3,
+              "ramp-cubic": 2.41e-3, "bridging": 1.41e-3, "master-slave": 2.63e-3}  # fmt: skip
+    assert errors[-1] < 2.0 * finest[coupling], errors
+    assert 1.8 < rate < 2.3, (errors, rate)
 
 
 @pytest.mark.parametrize("coupling", COUPLINGS)
@@ -301,13 +307,59 @@ def test_rod_step_1d_demo(shared_dir):
     # FE -> EFG reflects (the FE's high frequencies), EFG -> FE hardly (Belytschko, Fig. 9)
     assert res["efg-loaded"]["reflection"] < 0.5 * res["fe-loaded"]["reflection"]
     MPI.COMM_WORLD.Barrier()
-    assert json.loads(out.read_text())["method"] == "lagrange"
+    data = json.loads(out.read_text())  # the file holds what the demo returned
+    assert data["ranks"] == MPI.COMM_WORLD.size
+    for o in ("fe-loaded", "efg-loaded"):
+        assert data[o]["reflection"] == res[o]["reflection"] and data[o]["steps"] == res[o]["steps"]
 
 
 def test_rod_gauss_demo_sweep():
+    """The ratio sweep at 300 nodes (--no-check: the coarse ramp at 4:1 is above the demo's
+    0.2). Measured errors at t1 / t2 (lane A, serial = 2 ranks): bridging 1:1 5.56e-2 / 6.09e-2,
+    ramp 1:1 9.43e-2 / 0.127, bridging 4:1 2.34e-2 / 6.06e-2, ramp 4:1 0.121 / 0.223; the
+    checks allow about twice that (ramp 4:1: 0.3, 1.35x)."""
     recs = load_demo("rod_gauss").main(
         ["--method", "bridging", "ramp", "--nodes", "300", "--sweep", "1", "4", "--no-check"]
     )
-    assert [r["method"] for r in recs] == ["bridging", "ramp"] * 2
+    assert len(recs) == 4
     assert recs[0]["ratio"] < 1.5 < 3.0 < recs[2]["ratio"]
-    assert all(r["energy_drift"] < 1e-10 and r["error_t2"] < 0.3 for r in recs)
+    bounds = {  # (method, sweep ratio): (t1, t2)
+        ("bridging", 1): (0.11, 0.12),
+        ("ramp", 1): (0.19, 0.25),
+        ("bridging", 4): (0.047, 0.12),
+        ("ramp", 4): (0.24, 0.3),
+    }
+    for r, ratio in zip(recs, (1, 1, 4, 4), strict=True):
+        b1, b2 = bounds[r["method"], ratio]
+        assert r["energy_drift"] < 1e-10
+        assert r["error_t1"] < b1 and r["error_t2"] < b2, r
+
+
+#: rod_gauss at --nodes 2000, ratio 4 (lane A, serial = 2 ranks): measured velocity errors at
+#: t1 and t2 and the growth t2 / t1. At this size the pulse is resolved by about 8 cells, so
+#: dispersion makes most errors grow (FE 1.04, EFG 4.4); the ramps' interface error, large at
+#: t1, falls. The hybrid's bounds belong to its own tests (tests/test_hybrid.py).
+ROD_2000 = {
+    "fe": (5.92e-4, 6.15e-4, 1.04),
+    "efg": (8.05e-4, 3.57e-3, 4.43),
+    "lagrange": (1.54e-3, 2.20e-3, 1.43),
+    "edge-to-edge": (1.54e-3, 2.20e-3, 1.43),
+    "ramp": (1.54e-2, 1.15e-2, 0.743),
+    "ramp-cubic": (1.56e-2, 1.10e-2, 0.707),
+    "bridging": (1.72e-3, 2.24e-3, 1.31),
+    "master-slave": (4.28e-3, 7.34e-3, None),  # rigid links: growth not checked (1.71)
+}
+
+
+def test_rod_gauss_errors_and_growth_per_method():
+    """Every method's errors at t1 and t2 below twice the measured value (the demo's own check,
+    0.2 at this size, is far looser), and the growth t1 -> t2 below 1.3x the measured growth
+    for every method but master-slave (2x would let the error double, which is the failure
+    this check exists for)."""
+    recs = load_demo("rod_gauss").main(["--method", *ROD_2000, "--nodes", "2000"])
+    assert len(recs) == len(ROD_2000)
+    for r in recs:
+        e1, e2, growth = ROD_2000[r["method"]]
+        assert r["error_t1"] < 2.0 * e1 and r["error_t2"] < 2.0 * e2, r
+        if growth is not None:
+            assert r["error_t2"] / r["error_t1"] < 1.3 * growth, r

@@ -40,7 +40,8 @@ def cells_right_of(msh, x0):
     return np.flatnonzero(nodes[:, :, 0].mean(axis=1) > x0)
 
 
-def solve_patch_test(comm, cell, exact, n=6, consistent=True):
+def solve_patch_test(comm, cell, exact, n=6, consistent=None):
+    """The patch test at default options (``consistent=None``: VCI) or the given variant."""
     msh = dolfinx.mesh.create_rectangle(
         comm, [np.zeros(2), np.full(2, 2.0)], [n, n], getattr(dolfinx.mesh.CellType, cell)
     )
@@ -73,11 +74,39 @@ def solve_beam(comm, h, consistent=False):
     return msh, problem, sol, mf.error_norms(msh, sol.evaluate_at_quadrature, BEAM, BEAM.material)
 
 
-def test_edge_to_edge_is_a_coupling():
-    assert "edge-to-edge" in mf.COUPLINGS
+def test_multipliers_sit_at_the_interface_particles():
+    """Edge-to-edge collocates one multiplier per interface particle, Lagrange one per FE trace
+    node: with particles at half the element size on the interface x = 24 of the h = 1.5 beam,
+    17 particles against 9 nodes; and the two couplings give different solutions."""
+    comm = MPI.COMM_WORLD
+    msh = beam_mesh(comm, 1.5)
+    left, right = beam_ends(msh)
+    patch = mf.ParticlePatch(msh, cells_right_of(msh, BEAM_L / 2), 0.75)
+    sols = {}
+    for coupling in ("edge-to-edge", "lagrange"):
+        problem = mf.CoupledElasticity(
+            _compat.vector_function_space(msh),
+            patch,
+            BEAM.material,
+            coupling=coupling,
+            consistent=False,
+        )
+        problem.add_dirichlet(left, BEAM.displacement)
+        problem.add_traction(right, BEAM.traction)
+        sols[coupling] = problem.solve()
+        if coupling == "edge-to-edge":
+            iface = problem.interface_particles()
+            x = patch.particles.positions[iface]
+            np.testing.assert_allclose(x[:, 0], BEAM_L / 2, atol=1e-12)
+            np.testing.assert_allclose(np.sort(x[:, 1]), np.linspace(-6.0, 6.0, 17), atol=1e-12)
+    assert sols["edge-to-edge"].sizes["multiplier_dofs"] == 2 * 17
+    assert sols["lagrange"].sizes["multiplier_dofs"] == 2 * 9
+    pts = np.array([[24.0, 6.0], [36.0, 0.0], [48.0, -6.0]])
+    a, b = sols["edge-to-edge"].displacement(pts), sols["lagrange"].displacement(pts)
+    assert np.abs(a - b).max() > 5e-5 * np.abs(b).max()  # measured 1.3e-4
 
 
-def patch_test_error(cell, n, rng, consistent=True):
+def patch_test_error(cell, n, rng, consistent=None):
     exact = mf.LinearField(G=((0.3, -0.2), (0.5, 0.1)), c=(0.1, -0.4))
     _, _, sol = solve_patch_test(MPI.COMM_WORLD, cell, exact, n, consistent)
     x = np.vstack([rng.uniform(0.0, 2.0, (60, 2)), sol.patch.particles.positions])
@@ -95,22 +124,28 @@ def test_patch_test_with_consistent_integration(cell, rank_rng):
 def test_patch_test_with_gauss_quadrature_is_first_order(cell, rank_rng):
     """The issue's Gauss target (1e-6) is not met: a consistency error that goes to zero at
     first order under refinement."""
+    # measured 1.14e-2 / 1.05e-2 (quadrilaterals / triangles) at n = 6, 5.95e-3 / 5.49e-3 at 12:
+    # halved by each refinement (ratio 1.91, 1.90; bounds 1.8 to 2.2, first order both sides)
     err = patch_test_error(cell, 6, rank_rng, consistent=False)
-    assert 1e-4 < err <= PATCH_BOUND_GAUSS
+    assert 5e-3 < err <= PATCH_BOUND_GAUSS
     fine = patch_test_error(cell, 12, rank_rng, consistent=False)
-    assert fine <= err / 1.8
+    assert 1.8 <= err / fine <= 2.2
 
 
 def test_cantilever_rate_and_error_against_pure_fe():
+    """Gauss quadrature (``consistent=False``): error 0.923, 0.915, 0.916 x pure FE's at h = 3,
+    1.5, 1, fitted rate 1.98; bounds: ratio in [0.8, 1.0], rate in [1.8, 2.2]. (With
+    ``consistent=True`` the error is 0.17, 0.37, 0.45 x FE's and approaches it from below at
+    rates 0.83, 1.50: demos/convergence.py holds that case.)"""
     hs = [3.0, 1.5, 1.0]
     errors = []
     for h in hs:
-        _, _, _, e = solve_beam(MPI.COMM_WORLD, h)
+        _, _, _, e = solve_beam(MPI.COMM_WORLD, h, consistent=False)
         msh = beam_mesh(MPI.COMM_WORLD, h)
         fe = fe_errors(msh, solve_beam_fe(msh, BEAM), BEAM)["l2"]
-        assert e["l2"] <= 1.5 * fe, (h, e["l2"], fe)
+        assert 0.8 <= e["l2"] / fe <= 1.0, (h, e["l2"], fe)
         errors.append(e["l2"])
-    assert fitted_rate(hs, errors) >= 1.8
+    assert 1.8 <= fitted_rate(hs, errors) <= 2.2
 
 
 def test_constraint_holds_at_the_interface_particles():

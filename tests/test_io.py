@@ -16,6 +16,7 @@ from dolfinx_meshfree.dynamics import ExplicitDynamics
 from dolfinx_meshfree.io import DynamicsWriter, ProgressBar, read_particles
 from dolfinx_meshfree.waves import GaussianPulseRod
 
+import h5py
 import numpy as np
 import pytest
 from conftest import CELL_TYPES, load_demo, rectangle
@@ -51,6 +52,27 @@ def temporal_grids(path: pathlib.Path) -> dict[str, list[ET.Element]]:
         for c in root.iter("Grid")
         if c.get("CollectionType") == "Temporal"
     }
+
+
+def xdmf_particles(path: pathlib.Path) -> tuple[list[float], dict[str, list[np.ndarray]]]:
+    """The particle file read independently of the package (xml.etree and h5py): times and the
+    arrays of every temporal grid, following the XDMF's HDF DataItems (``file.h5:/dataset``)."""
+    times, arrays = [], {"geometry": [], "topology": [], "displacement": [], "velocity": []}
+    for g in temporal_grids(path)["particles"]:
+        times.append(float(g.find("Time").get("Value")))
+        items = [
+            ("geometry", g.find("Geometry/DataItem")),
+            ("topology", g.find("Topology/DataItem")),
+        ]
+        items += [(a.get("Name"), a.find("DataItem")) for a in g.findall("Attribute")]
+        for name, item in items:
+            assert item.get("Format") == "HDF"
+            fname, dataset = item.text.strip().split(":")
+            with h5py.File(path.parent / fname, "r") as f:
+                arr = f[dataset][()]
+            assert arr.shape == tuple(int(d) for d in item.get("Dimensions").split())
+            arrays[name].append(arr)
+    return times, arrays
 
 
 def particle_values(dyn: ExplicitDynamics) -> tuple[np.ndarray, np.ndarray]:
@@ -104,25 +126,35 @@ def test_xdmf_files_parse_and_hold_what_the_solver_reports(method, shared_dir):
             assert topo.get("NumberOfElements") == str(n)
             assert {a.get("Name") for a in g.findall("Attribute")} == {"displacement", "velocity"}
             for item in g.iter("DataItem"):
-                assert item.get("Format") == "Binary" and item.get("Endian") == "Little"
-                assert item.text == f"rod_{method}_particles.bin"
-        data = read_particles(part_file)
-        assert data["times"] == pytest.approx(times)
-        assert data["positions"].shape == (3, n, 3)
-        assert np.array_equal(data["positions"][0, :, :2], dyn.particles.positions)
-        assert np.all(data["positions"][:, :, 2] == 0.0)
+                assert item.get("Format") == "HDF"
+                assert item.text.startswith(f"rod_{method}_particles.h5:/")
+        # read independently (xml.etree + h5py) and compared with what the dynamics had
+        xtimes, arrays = xdmf_particles(part_file)
+        assert xtimes == pytest.approx(times, rel=1e-15)
+        for geometry, topology in zip(arrays["geometry"], arrays["topology"], strict=True):
+            assert np.array_equal(geometry[:, :2], dyn.particles.positions)
+            assert np.all(geometry[:, 2] == 0.0)
+            assert np.array_equal(topology[:, 0], np.arange(n))
         if comm.rank == 0:
+            assert len(reported) == 3
             for k, (t, u, v) in enumerate(reported):
-                assert t == pytest.approx(data["times"][k], rel=1e-15)
+                assert t == pytest.approx(xtimes[k], rel=1e-15)
                 scale = np.abs(v).max()
-                assert np.abs(data["velocity"][k, :, :2] - v).max() <= 1e-12 * scale
-                assert np.abs(data["displacement"][k, :, :2] - u).max() <= 1e-12 * np.abs(u).max()
-                assert np.all(data["velocity"][k, :, 2] == 0.0)
+                assert np.abs(arrays["velocity"][k][:, :2] - v).max() <= 1e-12 * scale
+                du = arrays["displacement"][k][:, :2] - u
+                assert np.abs(du).max() <= 1e-12 * np.abs(u).max()
+                assert np.all(arrays["velocity"][k][:, 2] == 0.0)
             # and the initial state is the Gaussian pulse (collocated at the particles; Lagrange
             # projects it onto the constraint, master-slave slaves its first particle layer to
             # the FE edge: interface values move by up to about 1 %)
             v0 = ROD.initial_velocity(dyn.particles.positions)
-            assert np.abs(data["velocity"][0, :, :2] - v0).max() < 0.02
+            assert np.abs(arrays["velocity"][0][:, :2] - v0).max() < 0.02
+        # the package's own reader gives the same arrays
+        data = read_particles(part_file)
+        assert np.array_equal(data["times"], xtimes)
+        assert np.array_equal(data["velocity"], np.asarray(arrays["velocity"]))
+        assert np.array_equal(data["displacement"], np.asarray(arrays["displacement"]))
+        assert np.array_equal(data["positions"], np.asarray(arrays["geometry"]))
     with open(shared_dir / f"rod_{method}_energy.csv") as f:
         rows = list(csv.DictReader(f))
     assert [int(r["step"]) for r in rows] == [n for n, _ in res.outputs]
@@ -205,10 +237,12 @@ def test_progress_bar_forced_prints_on_rank_zero_only(capsys):
     err = capsys.readouterr().err
     lines = [line for line in err.splitlines() if "explicit dynamics" in line]
     if comm.rank == 0:
-        # not a terminal: one line per 10 % of the run, the last at 100 %
-        assert 2 <= len(lines) <= 12
-        assert lines[-1].split("]")[1].strip().startswith("100.0%")
+        # not a terminal: one draw per 10 % of the run (tqdm, each after a \r), the last at
+        # 100 % (drawn again by close)
+        assert 2 <= len(lines) <= 13
+        assert lines[-1].split("explicit dynamics")[1].strip().startswith("100.0%")
         assert f"step {res.steps}/{res.steps}" in lines[-1]
+        assert err.endswith("\n")
     else:
         assert not lines
     dyn.destroy()
@@ -236,8 +270,8 @@ def test_progress_bar_on_a_terminal_redraws_in_place_at_most_every_interval():
     bar.close(1000, 1.0)
     out = stream.getvalue()
     if comm.rank == 0:
-        # the first update and the last (forced) one, redrawn with \r, then a newline
-        assert out.count("\r") == 3 and out.endswith("\n")
+        # the first draw and the last (forced by close), redrawn with \r, then a newline
+        assert out.count("\r") == 2 and out.endswith("\n")
         assert "step 1000/1000" in out and "t = 1" in out
     else:
         assert out == ""

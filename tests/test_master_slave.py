@@ -2,20 +2,26 @@
 ``coupling="master-slave"``.
 
 Oracles: the slave constraint itself, recomputed here from the solved FE field (the interfaces
-are vertical lines, so the closest point and the edge rotation have closed forms); rigid-body
-motion (reproduced exactly); the linear patch test (not passed: measured); the Timoshenko
-solution (rates); the same problem solved on COMM_SELF.
+are vertical lines, so the closest point and the edge rotation have closed forms); the first
+layer, recomputed by sampling the interface densely (the nearest particle of each sample);
+rigid-body motion (reproduced exactly); the linear patch test (not passed: measured); the
+Timoshenko solution and a quadratic field with a constant body load on slanted, curved and gmsh
+patches (rates, against plain FE on the same mesh); the same problem solved on COMM_SELF.
 """
 
 from __future__ import annotations
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
+from dolfinx_meshfree.master_slave import solve_master_slave
 
+import dolfinx
 import numpy as np
 import pytest
+import ufl
 from mpi4py import MPI
 from test_coupled import beam_mesh, cells_right_of, square
+from test_problem import cells_where, plain_dolfinx
 
 RIGID = mf.LinearField(G=((0.0, -2e-3), (2e-3, 0.0)), c=(0.1, -0.4))
 LINEAR = mf.LinearField(G=((0.3, -0.2), (0.5, 0.1)), c=(0.1, -0.4))
@@ -43,13 +49,15 @@ def test_slave_constraint_holds(spacing):
     """u_P = u_C + theta x (P - C) for every slave, from the solved FE field: the interface is
     x = 1, so C = (1, y_P) and theta = -(u_x(b) - u_x(a)) / |b - a| on the edge [a, b] through
     C (the mean of the two edges when C is a node). Spacing 0.25 puts particles both at the
-    nodes' heights (k/3) and between them."""
+    nodes' heights (k/3) and between them. ``slaves="band"`` (the particles within 1.01 s of
+    Gamma_I: here the interface column and the next one), so that links of nonzero length are
+    checked; the default first layer is the interface column alone."""
     _, problem = patch_problem(MPI.COMM_WORLD, LINEAR, spacing)
-    sol = problem.solve()
+    sol = solve_master_slave(problem, slaves="band")
     x = problem.patch.particles.positions
     slaves = sol.links.slaves
-    # the first particle layer: x <= 1 + 1.01 s, the interface particles included
     assert np.array_equal(slaves, np.flatnonzero(x[:, 0] <= 1.0 + 1.01 * spacing + 1e-12))
+    assert np.array_equal(problem.solve().links.slaves, np.flatnonzero(np.isclose(x[:, 0], 1.0)))
     assert np.any(np.isclose(x[slaves, 0], 1.0)) and np.any(x[slaves, 0] > 1.0 + 1e-12)
     h = 1 / 3
     y = x[slaves, 1]
@@ -77,32 +85,40 @@ def test_slave_constraint_holds(spacing):
     assert np.abs(sol.coefficients[slaves] - expected).max() <= 1e-12 * scale
 
 
+@pytest.mark.parametrize("slaves", ["layer", "band"])
 @pytest.mark.parametrize("cell", ["quadrilateral", "triangle"])
 @pytest.mark.parametrize("spacing", [1 / 3, 0.25])
-def test_rigid_body_motion_is_reproduced(cell, spacing):
+def test_rigid_body_motion_is_reproduced(cell, spacing, slaves):
     """A rigid translation and a small rotation on the whole boundary: the links are rigid, so
     the motion is reproduced to round-off (measured 3e-14)."""
     msh, problem = patch_problem(MPI.COMM_WORLD, RIGID, spacing, cell)
-    assert max_error(msh, problem.solve(), RIGID) <= 1e-10
+    assert max_error(msh, solve_master_slave(problem, slaves=slaves), RIGID) <= 1e-10
 
 
-def test_linear_patch_test_is_not_passed():
+@pytest.mark.parametrize(
+    ("slaves", "low", "high"),
+    # measured: layer 2.1e-2, 3.7e-3, 2.6e-3; band 7.4e-2, 2.8e-2, 1.6e-2 (bounds about 2x)
+    [("layer", 1e-3, 4e-2), ("band", 7e-3, 0.15)],
+)
+def test_linear_patch_test_is_not_passed(slaves, low, high):
     """Master–slave is exempt from the linear patch test: a slave off the interface moves with
-    its edge's rotation, not with the field's strain. Maximum error at Gauss points, |G| ~ 0.5:
-    spacing 1/3: 7.4e-2, 1/6: 2.8e-2, 1/12: 1.6e-2 (h = 1/3 on the FE side). Dirichlet facets
-    of the patch inside the slave layer carry no multiplier (the slaves follow the strongly
-    fixed FE boundary): with them, at spacing 1/3, the constraints over-determined the slaves
-    and the error was 55 (1.9e2 for u = (x, y))."""
-    errs = [max_error(*_solved(s), LINEAR) for s in (1 / 3, 1 / 6, 1 / 12)]
-    assert 1e-3 < errs[2] < errs[1] < errs[0] < 0.1
+    its edge's rotation, not with the field's strain, and even a slave on Gamma_I (link of
+    length zero, the default layer here) ties the particle's *parameter*, not the MLS field, to
+    the FE trace, so the two sides do not match on Gamma_I. Maximum error at Gauss points,
+    |G| ~ 0.5, spacing 1/3, 1/6, 1/12 (h = 1/3 on the FE side): above. Dirichlet facets of the
+    patch inside the slave layer carry no multiplier (the slaves follow the strongly fixed FE
+    boundary): with them, at spacing 1/3, the constraints over-determined the slaves and the
+    error was 55 (1.9e2 for u = (x, y))."""
+    errs = [max_error(*_solved(s, slaves), LINEAR) for s in (1 / 3, 1 / 6, 1 / 12)]
+    assert low < errs[2] < errs[1] < errs[0] < high
 
 
-def _solved(spacing):
+def _solved(spacing, slaves="layer"):
     msh, problem = patch_problem(MPI.COMM_WORLD, LINEAR, spacing)
-    return msh, problem.solve()
+    return msh, solve_master_slave(problem, slaves=slaves)
 
 
-def solve_beam(comm, h):
+def solve_beam(comm, h, slaves="layer"):
     mat = mf.LinearElastic(3e7, 0.3)
     beam = mf.TimoshenkoBeam(mat)
     msh = beam_mesh(comm, h)
@@ -112,22 +128,30 @@ def solve_beam(comm, h):
     )
     problem.add_dirichlet(mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0)), beam.displacement)
     problem.add_traction(mf.boundary_facets(msh, lambda x: np.isclose(x[0], 48)), beam.traction)
-    sol = problem.solve()
+    sol = solve_master_slave(problem, slaves=slaves)
     return sol, mf.error_norms(msh, sol.evaluate_at_quadrature, beam, mat)
 
 
-def test_cantilever_rate():
-    """Timoshenko cantilever, patch x > 24, spacing h. Measured L2 errors 4.51e-2, 1.76e-2,
-    1.07e-2 for h = 3, 1.5, 1 (pure Q1: 2.81e-2, 7.21e-3, 3.22e-3): rates 1.36 and 1.22, fitted
-    1.31; the paper reports 1.23/1.23/1.13 (Table II). The slave layer (width s = h) moves
-    rigidly with the interface edges, which drops the field's strain across it: an O(h)
-    kinematic error on a band of width h, so first-order convergence instead of 2."""
+@pytest.mark.parametrize(
+    ("slaves", "rates", "first"),
+    # measured: layer 2.19e-2, 5.07e-3, 2.18e-3, fitted rate 2.10; band 4.51e-2, 1.76e-2,
+    # 1.07e-2, fitted 1.31 (the paper: 1.23/1.23/1.13, Table II)
+    [("layer", (1.8, 2.4), 0.03), ("band", (1.1, 1.6), 0.06)],
+)
+def test_cantilever_rate(slaves, rates, first):
+    """Timoshenko cantilever, patch x > 24, spacing h (pure Q1: 2.81e-2, 7.21e-3, 3.22e-3).
+
+    ``"band"`` (the particles within 1.01 s of Gamma_I: the interface column and the next one)
+    moves a layer of width s = h rigidly with the interface edges, which drops the field's
+    strain across it: an O(h) kinematic error, first-order convergence, the paper's figure.
+    The default first layer is the interface column alone (links of length zero): the error is
+    below pure Q1's and converges at second order on this aligned grid."""
     hs = [3.0, 1.5, 1.0]
-    errs = [solve_beam(MPI.COMM_WORLD, h)[1]["l2"] for h in hs]
+    errs = [solve_beam(MPI.COMM_WORLD, h, slaves)[1]["l2"] for h in hs]
     assert errs[0] > errs[1] > errs[2]
     slope = np.polyfit(np.log(hs), np.log(errs), 1)[0]
-    assert 1.1 <= slope <= 1.6
-    assert errs[0] < 0.05
+    assert rates[0] <= slope <= rates[1]
+    assert errs[0] < first
 
 
 def test_parallel_equals_serial(rank_rng):
@@ -148,3 +172,167 @@ def test_fieldsplit_equals_mumps():
     a = problem.solve("fieldsplit").coefficients
     b = problem.solve("mumps").coefficients
     assert np.abs(a - b).max() <= 1e-10 * np.abs(b).max()
+
+
+# -- the first layer and convergence on slanted, curved and unstructured patches ----------------
+
+MESHES = __import__("pathlib").Path(__file__).resolve().parent.parent / "meshes"
+PLANE_STRESS = mf.LinearElastic(1000.0, 0.3, plane="stress")
+#: u_i = Q[i] . (x^2, x y, y^2) + G[i] . (x, y): div sigma is constant (a constant body load)
+Q = np.array([[0.3, -0.2, 0.25], [0.15, 0.35, -0.3]])
+G = np.array([[0.1, 0.2], [-0.1, 0.05]])
+
+
+class Quadratic:
+    """The quadratic field above, for :func:`dolfinx_meshfree.error_norms` and as UFL."""
+
+    def displacement(self, x):
+        return np.stack([x[:, 0] ** 2, x[:, 0] * x[:, 1], x[:, 1] ** 2], 1) @ Q.T + x @ G.T
+
+    def displacement_gradient(self, x):
+        X, Y, Z = x[:, 0], x[:, 1], np.zeros(len(x))
+        dm = np.stack([np.stack([2 * X, Z], 1), np.stack([Y, X], 1), np.stack([Z, 2 * Y], 1)], 1)
+        return np.einsum("ik,qkj->qij", Q, dm) + G[None]
+
+    def ufl(self, x):
+        m = (x[0] ** 2, x[0] * x[1], x[1] ** 2)
+        return ufl.as_vector(
+            [
+                sum(Q[i, k] * m[k] for k in range(3)) + G[i, 0] * x[0] + G[i, 1] * x[1]
+                for i in (0, 1)
+            ]
+        )
+
+
+QUADRATIC = Quadratic()
+
+
+def mesh_of(kind, n, comm=MPI.COMM_WORLD):
+    """Unit square with n x n cells, or the gmsh bushing annulus 1 <= r <= 2 of size n."""
+    if kind != "gmsh":
+        return dolfinx.mesh.create_unit_square(comm, n, n, getattr(dolfinx.mesh.CellType, kind))
+    path = MESHES / f"bushing_triangle_h{n:g}.xdmf"
+    with dolfinx.io.XDMFFile(
+        comm, str(path), "r", encoding=dolfinx.io.XDMFFile.Encoding.ASCII
+    ) as f:
+        return f.read_mesh(name="mesh")
+
+
+#: Patches by cell centroid: above a slanted line, in a disk (unit square: around the corner
+#: (1, 1); bushing: the inner ring r < 1.4, a curved interface of the gmsh geometry).
+PATCHES = {
+    "slanted": lambda m: m[:, 1] > 0.4 * m[:, 0] + 0.2,
+    "curved": lambda m: np.hypot(m[:, 0] - 1.0, m[:, 1] - 1.0) < 0.6,
+    "ring": lambda m: np.hypot(m[:, 0], m[:, 1]) < 1.4,
+}
+
+
+def quadratic_model(msh):
+    """Plane stress, u = QUADRATIC on the whole boundary, its constant body load -div sigma."""
+    V = _compat.vector_function_space(msh)
+    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+    f = -ufl.div(PLANE_STRESS.ufl_stress(QUADRATIC.ufl(ufl.SpatialCoordinate(msh))))
+    a = ufl.inner(PLANE_STRESS.ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx
+    msh.topology.create_connectivity(1, 2)
+    g = dolfinx.fem.Function(V)
+    g.interpolate(lambda x: QUADRATIC.displacement(x[:2].T).T)
+    dofs = dolfinx.fem.locate_dofs_topological(
+        V, 1, dolfinx.mesh.exterior_facet_indices(msh.topology)
+    )
+    return V, a, ufl.dot(f, v) * ufl.dx, [dolfinx.fem.dirichletbc(g, dofs)]
+
+
+def coupled_and_fe_errors(kind, patch, n, spacing, slaves="layer"):
+    """Relative L2 errors of master-slave and of plain FE on the same mesh."""
+    msh = mesh_of(kind, n)
+    V, a, L, bcs = quadratic_model(msh)
+    uh = plain_dolfinx(V, a, L, bcs).x.array.reshape(-1, 2)
+
+    def fe(q):
+        t = mf.tabulate_in_cells(V, q.points, q.cells)
+        return t.values @ uh, t.gradient(uh)
+
+    cells = cells_where(msh, PATCHES[patch])
+    if spacing == "vertices":
+        p = mf.ParticlePatch(msh, cells, placement="vertices")
+    else:
+        p = mf.ParticlePatch(msh, cells, spacing / n)
+    problem = mf.CoupledLinearProblem(a, L, bcs, p, PLANE_STRESS, coupling="master-slave")
+    sol = solve_master_slave(problem.problem, slaves=slaves)
+    return (
+        mf.error_norms(msh, sol.evaluate_at_quadrature, QUADRATIC, PLANE_STRESS)["l2"],
+        mf.error_norms(msh, fe, QUADRATIC, PLANE_STRESS)["l2"],
+    )
+
+
+def test_first_layer_is_the_nearest_particles_of_the_interface():
+    """The default slaves are the particles nearest to some stretch of Gamma_I (exact lower
+    envelope of the distance along each edge), checked by sampling every interface edge at 400
+    points: each sample's nearest particle is a slave, and every slave is the nearest particle
+    of some sample. A slanted staircase interface and a grid (spacing 0.75 h) that does not
+    meet it, so the links have lengths between 0 and about one spacing."""
+    msh = mesh_of("quadrilateral", 12)
+    _, a, L, bcs = quadratic_model(msh)
+    patch = mf.ParticlePatch(msh, cells_where(msh, PATCHES["slanted"]), 0.75 / 12)
+    problem = mf.CoupledLinearProblem(a, L, bcs, patch, PLANE_STRESS, coupling="master-slave")
+    links = problem.solve().links
+    x = patch.particles.positions
+    tau = (np.arange(400) + 0.5) / 400
+    samples = (links.edges[:, :1] + tau[None, :, None] * np.diff(links.edges, axis=1)).reshape(
+        -1, 2
+    )
+    d = np.linalg.norm(samples[:, None, :] - x[None], axis=2)
+    order = np.sort(d, axis=1)
+    clear = order[:, 1] - order[:, 0] > 1e-9  # no tie between two particles
+    nearest = np.unique(np.argmin(d, axis=1)[clear])
+    assert np.array_equal(nearest, links.slaves)
+    assert 0.0 < links.distance[links.slaves].max() < 1.2 * 0.75 / 12
+
+
+@pytest.mark.parametrize(
+    ("kind", "patch", "spacing", "sizes", "rates", "ratio"),
+    [
+        # measured rates (L2) 1.94, 1.78, fitted 1.86; ratio to FE 0.81, 0.84, 0.98
+        ("quadrilateral", "slanted", 0.5, (8, 16, 32), (1.0, 2.5), 2.0),
+        # measured 1.42, 1.57, fitted 1.50; ratios 4.1, 6.1, 8.3
+        ("triangle", "curved", "vertices", (8, 16, 32), (1.0, 2.5), 16.0),
+        # gmsh bushing, inner ring: measured 1.76, 1.36, fitted 1.55; ratios 2.3, 2.7, 4.1
+        ("gmsh", "ring", "vertices", (0.2, 0.1, 0.05), (1.0, 2.5), 8.0),
+    ],
+)
+def test_rate_on_slanted_and_curved_patches(kind, patch, spacing, sizes, rates, ratio):
+    """Quadratic field with a constant body load (on FE cells and particles, the slaves' share
+    reaching their masters through T^T, eq. 28), plane stress, exact values on the boundary:
+    L2 rate in [1.0, 2.5] (two-sided; first order is the rigid layer's nature) and the error
+    ratio to plain FE on the same mesh below about 2x the measured value. The ratio may grow
+    at most like 1/h (a first-order method against FE's second order): ratio x h does not grow.
+    The 1.01 s band of the paper (``slaves="band"``) measured rates 0.46-1.0 on the gmsh ring
+    and ratios growing to 13-26 (see the module docstring of master_slave)."""
+    e, f = np.array([coupled_and_fe_errors(kind, patch, n, spacing) for n in sizes]).T
+    hs = np.array([1.0 / n for n in sizes]) if kind != "gmsh" else np.array(sizes)
+    slope = np.polyfit(np.log(hs), np.log(e), 1)[0]
+    assert rates[0] <= slope <= rates[1]
+    assert np.all(e / f <= ratio)
+    scaled = e / f * hs
+    assert np.all(scaled[1:] <= scaled[:-1] * 1.05)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="issue 8 item 5 target (rate >= 1.0 at every refinement) not met with grid particles "
+    "off Gamma_I: measured L2 errors 8.40e-3, 4.27e-3, 2.35e-3 (n = 16, 32, 64), steps 0.98 and "
+    "0.86, fitted 0.92 (n = 128: 1.02e-3, step 1.20, fitted over 16-128: 1.01); with particles "
+    "on the patch border (a boundary-conforming placement) 1.36 and 1.45",
+)
+def test_rate_with_grid_particles_off_the_interface():
+    """Slanted staircase interface on quadrilaterals, grid spacing 0.75 h, which puts no particle
+    on Gamma_I: the first layer lies 0-0.7 h off it (mean 0.26 h at every size), each slave
+    rigidly linked over that distance. The error is first order with a constant that changes
+    with the way the grid meets the staircase at each size (steps 0.98, 0.86, 1.20 up to
+    n = 128), so three sizes can fit below 1. It is the placement, not the links: the same
+    patch with particles on its border nodes and edges gives 1.36 and 1.45."""
+    e, _ = np.array(
+        [coupled_and_fe_errors("quadrilateral", "slanted", n, 0.75) for n in (16, 32, 64)]
+    ).T
+    slope = np.polyfit(np.log([1 / 16, 1 / 32, 1 / 64]), np.log(e), 1)[0]
+    assert 1.0 <= slope <= 2.5

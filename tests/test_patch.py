@@ -24,10 +24,12 @@ MATERIAL = mf.LinearElastic(1000.0, 0.3)
 N = 6
 
 
-def solve_patch(cell_name, jitter, consistent):
+def solve_patch(cell_name, jitter, consistent=None):
+    """EFG on the patch; ``consistent=None``: the default options (VCI)."""
     msh = rectangle(MPI.COMM_WORLD, [0.0, 0.0], [2.0, 2.0], [N, N], CELL_TYPES[cell_name])
     particles = mf.ParticleSet.from_cells(msh, 2.0 / N, jitter=jitter)
-    problem = mf.EFGElasticity(particles, MATERIAL, consistent=consistent)
+    options = {} if consistent is None else {"consistent": consistent}
+    problem = mf.EFGElasticity(particles, MATERIAL, **options)
     facets = mf.boundary_facets(msh)
     problem.add_dirichlet(facets, FIELD.displacement)
     return msh, facets, particles, problem.solve()
@@ -36,7 +38,7 @@ def solve_patch(cell_name, jitter, consistent):
 @pytest.mark.parametrize("jitter", [0.0, 0.3])
 @pytest.mark.parametrize("cell_name", sorted(CELL_TYPES))
 def test_patch_test_passes_with_consistent_integration(cell_name, jitter):
-    msh, facets, particles, sol = solve_patch(cell_name, jitter, consistent=True)
+    msh, facets, particles, sol = solve_patch(cell_name, jitter)  # default options
     num_facets = msh.comm.allreduce(facets.size)
     x = np.random.default_rng(1).uniform(0.0, 2.0, (400, 2))
     u, grad = sol.evaluate(x)
@@ -67,5 +69,7 @@ def test_patch_test_fails_without_consistent_integration(cell_name, jitter):
     _, _, _, sol = solve_patch(cell_name, jitter, consistent=False)
     x = np.random.default_rng(1).uniform(0.0, 2.0, (400, 2))
     err = np.abs(sol.displacement(x) - FIELD.displacement(x)).max()
-    assert err > 1e-8  # Gauss quadrature of rational shape functions is not exact
-    assert err < 1e-2  # but it is still an approximation of the right field
+    # Gauss quadrature of rational shape functions is not exact, but it is still an
+    # approximation of the right field: measured 1.1e-4 to 4.9e-4 (quadrilaterals, triangles,
+    # jittered or not); bounds half the smallest and twice the largest
+    assert 5e-5 < err < 1e-3

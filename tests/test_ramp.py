@@ -116,12 +116,15 @@ def solve_beam(comm, h, coupling, **options):
 
 @pytest.mark.parametrize("coupling", RAMPS)
 def test_cantilever_rate_and_error_against_pure_fe(coupling):
+    """Measured (consistent=False and True alike): error 0.853-0.882 x pure FE's at h = 3, 1.5,
+    1, fitted rate 1.95-1.96. Bounds: ratio in [0.7, 1.0] (below FE, twice the 15 % gain as the
+    lower margin), rate in [1.8, 2.2]."""
     hs = [3.0, 1.5, 1.0]
     errs = [solve_beam(MPI.COMM_WORLD, h, coupling)[1]["l2"] for h in hs]
     slope = np.polyfit(np.log(hs), np.log(errs), 1)[0]
-    assert slope >= 1.8
+    assert 1.8 <= slope <= 2.2
     for h, e in zip(hs, errs, strict=True):
-        assert e <= 1.5 * fe_beam_error(h)
+        assert 0.7 <= e / fe_beam_error(h) <= 1.0, (h, e)
 
 
 @pytest.mark.parametrize("coupling", RAMPS)

@@ -81,6 +81,12 @@ class QuadraticField:
     def displacement_gradient(self, x: np.ndarray) -> np.ndarray:
         return self.G[None] + np.einsum("ijk,qk->qij", self.H, x)
 
+    def body_force(self, material: mf.LinearElastic) -> np.ndarray:
+        """``-div sigma(u)``, constant: ``-(mu lap u + (lambda + mu) grad div u)``."""
+        lap = np.einsum("ijj->i", self.H)
+        grad_div = np.einsum("kki->i", self.H)
+        return -(material.mu * lap + (material.lmbda + material.mu) * grad_div)
+
     def ufl(self, x) -> ufl.core.expr.Expr:
         return ufl.as_vector(
             [
@@ -265,13 +271,11 @@ def solve_coupled(model: Model, patch, coupling: str) -> dict:
 
 
 def _solve_hybrid(model: Model, patch) -> dict:
-    if model.body is not None:
-        raise ValueError(
-            "HybridElasticity has no body loads; use a variational coupling "
-            "(CoupledLinearProblem) for a model with a dx load"
-        )
     problem = mf.HybridElasticity(model.V, patch, MATERIAL)
     exact = model.exact
+    if model.body is not None:
+        b = exact.body_force(MATERIAL)
+        problem.set_body_force(lambda x: np.tile(b, (x.shape[0], 1)))
     problem.add_dirichlet(model.dirichlet_facets, exact.displacement)
     if model.traction_facets.size or model.V.mesh.comm.allreduce(model.traction_facets.size):
 

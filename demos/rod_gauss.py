@@ -24,6 +24,14 @@
 #   the interface elements (Belytschko et al. 1995, eq. 3.15), whose MLS supports span the
 #   interface element at any ``k`` (radii ``(d_max - 1) h / k + h``, see ``mf.ramp.ramp_mls``);
 #   master–slave ties the first particle layer to the FE edges (eq. 27–28).
+# * ``hybrid`` (sec. 5.5): SPH particles with the FE integration points in their sums, forces on
+#   the FE nodes by interpolation (HA-F). The particles sit at the centres of a lattice of
+#   squares of spacing ``h / sqrt(ratio)``, none on the interface, with their squares' areas as
+#   volumes (``--hybrid-particles centred``), and the particle strains are smoothed over
+#   sub-cells (``--hybrid-integration smoothed``): a symmetric, integration-consistent ``K``.
+#   ``--hybrid-particles patch --hybrid-integration cells`` is the former discretisation, whose
+#   error depended on the ratio (particles on the interface FE nodes, volumes sampled by 3 x 3
+#   Gauss points per cell, inconsistent integration that reflects waves at the interface).
 #
 # ``--integration stress-points`` integrates the particle stiffness of ``efg``, ``lagrange``,
 # ``edge-to-edge`` and ``master-slave`` at the particles and the stress points between them
@@ -109,6 +117,22 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
         default=["HA-F"],
         help="hybrid: forces on the FE nodes by interpolation (HA-F, default) or by tractions "
         "(HA-S: unstable in explicit dynamics, its K is not symmetric; reported, fails the check)",
+    )
+    p.add_argument(
+        "--hybrid-particles",
+        choices=mf.hybrid.HYBRID_PARTICLES,
+        default="centred",
+        help="hybrid: SPH particles at the centres of a lattice of squares with their areas "
+        "(centred, default) or the patch's grid through the interface nodes with sampled Voronoi "
+        "volumes (patch: the error then depends on the particle:node ratio)",
+    )
+    p.add_argument(
+        "--hybrid-integration",
+        choices=("smoothed", "cells"),
+        default="smoothed",
+        help="hybrid: particle strains smoothed over sub-cells (smoothed, default: symmetric and "
+        "consistent) or at Gauss points of the patch cells (cells: symmetric, inconsistent; "
+        "reflects part of a wave at the interface)",
     )
     p.add_argument(
         "--integration",
@@ -246,8 +270,10 @@ def build(method: str, args, material, comm):
             patch,
             material,
             variant=getattr(args, "variant", "HA-F"),
-            quadrature_degree=degree_for(per_cell),
-            consistent=False,  # the symmetric K: HA-F conserves energy to round-off
+            quadrature_degree=degree_for(per_cell),  # also the smoothing cells per direction
+            integration=getattr(args, "hybrid_integration", "smoothed"),
+            consistent=False,  # "cells": the symmetric K, HA-F conserves energy to round-off
+            particles=getattr(args, "hybrid_particles", "centred"),
         )
         dyn = ExplicitDynamics.coupled(problem, particle_mass="volume", safety=args.safety)
         return dyn, {"h_fe": h, "h_p": hp, "dilation": None}
@@ -277,9 +303,15 @@ def johnson(args) -> bool:
     return getattr(args, "slaves", "layer") == "coincident"
 
 
-def variant_label(method: str, args) -> str | None:
-    """The options that change a method, for the table and the JSON (``None``: defaults)."""
-    parts = []
+def variant_label(method: str, args, variant: str | None = None) -> str | None:
+    """The options that change a method, for the table and the JSON (``None``: defaults;
+    the hybrid: its variant, then its particles and integration where not the defaults)."""
+    parts = [variant] if variant else []
+    if method == "hybrid":
+        for name, default in (("hybrid_particles", "centred"), ("hybrid_integration", "smoothed")):
+            value = getattr(args, name, default)
+            if value != default:
+                parts.append(value)
     if method == "master-slave" and johnson(args):
         parts.append("coincident")
     if method in ("efg", "lagrange", "edge-to-edge", "master-slave"):
@@ -400,8 +432,11 @@ def main(argv: list[str] | None = None) -> list[dict]:
             for variant in args.hybrid_variant if m == "hybrid" else [None]:
                 a.variant = variant
                 records.append(run(m, a, material, rod, comm, probe_points))
-                records[-1]["variant"] = variant or variant_label(m, a)
-                records[-1]["integration"] = a.integration if m != "hybrid" else None
+                records[-1]["variant"] = variant_label(m, a, variant)
+                records[-1]["integration"] = (
+                    a.integration if m != "hybrid" else a.hybrid_integration
+                )
+                records[-1]["placement"] = a.hybrid_particles if m == "hybrid" else None
                 records[-1]["slaves"] = a.slaves if m == "master-slave" else None
     report(records, comm)
     if args.json and comm.rank == 0:

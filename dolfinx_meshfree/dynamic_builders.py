@@ -477,7 +477,10 @@ def build_hybrid(
     The internal force is ``K u`` with the blocks of
     :meth:`~dolfinx_meshfree.hybrid.HybridElasticity.operators` (FE cells and the FE rows of
     HA-S tractions or HA-F interpolation; particle rows of the particle energy with the FE
-    integration points in the sums). No constraint joins the two fields.
+    integration points in the sums). No constraint joins the two fields. Central differences
+    conserve the discrete energy when ``K`` is symmetric: HA-F with its default smoothed strains
+    (also integration-consistent: no reflection at the interface) or with Gauss points and
+    ``consistent=False``; HA-S and the consistent Gauss integration give an unsymmetric ``K``.
 
     Args:
         problem: The static hybrid object.

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
-from dolfinx_meshfree.dynamics import DYNAMICS_METHODS, ExplicitDynamics, check_method
+from dolfinx_meshfree.dynamics import ExplicitDynamics, check_method
 from dolfinx_meshfree.hybrid_sph import CorrectedSPH
 from dolfinx_meshfree.waves import GaussianPulseRod
 
@@ -123,14 +123,17 @@ def test_linear_patch_test_with_consistent_integration(variant):
 
 def test_linear_patch_test_without_consistency_is_missed_at_the_particles():
     """With the symmetric ``K`` (``consistent=False``) the corrected kernel gradients integrated
-    on background cells leave forces near the exterior boundary: measured 0.45 (HA-F, FE and
-    particles) and 0.45 at the particles with exact FE rows (HA-S) relative to the boundary
-    loads at h = 3. HA-S's FE rows stay exact: the interface tractions of a constant stress are
-    exact (eq. 131-134) and cancel the FE cells' own boundary term."""
+    on background cells (``integration="cells"``) leave forces near the exterior boundary:
+    measured 0.43 / 0.29 (HA-F, FE / particles) and 0.29 at the particles with exact FE rows
+    (HA-S) relative to the boundary loads at h = 3. HA-S's FE rows stay exact: the interface
+    tractions of a constant stress are exact (eq. 131-134) and cancel the FE cells' own boundary
+    term."""
     fe, p, scale = patch_residual(beam_problem(MPI.COMM_WORLD, 3.0, "HA-S", consistent=False))
     assert fe < 1e-12 * scale
     assert p > 0.1 * scale  # the measured miss, not a tolerance
-    fe, p, scale = patch_residual(beam_problem(MPI.COMM_WORLD, 3.0, "HA-F", consistent=False))
+    fe, p, scale = patch_residual(
+        beam_problem(MPI.COMM_WORLD, 3.0, "HA-F", integration="cells", consistent=False)
+    )
     assert fe > 0.1 * scale and p > 0.1 * scale
 
 
@@ -173,8 +176,20 @@ def run_rod(variant, consistent=False, t_end=2 * ROD.transit_time):
     return dyn, res, errors
 
 
-def test_hybrid_is_a_dynamics_method():
-    assert "hybrid" in DYNAMICS_METHODS and check_method("hybrid") == "hybrid"
+def test_hybrid_dynamics_has_the_rods_mass():
+    """``ExplicitDynamics.coupled`` of a hybrid problem has an FE and a particle field whose
+    lumped masses add up to the rod's mass ``rho L H`` (FE cells' row sums plus ``rho V_I`` of
+    the SPH particles, whose volumes tile the patch), to round-off; an unknown method name is
+    refused with the list of the available ones."""
+    problem = rod_problem(MPI.COMM_WORLD, 1.0, np.sqrt(3.0), "HA-F", integration="smoothed")
+    dyn = ExplicitDynamics.coupled(problem, particle_mass="volume")
+    assert [f.name for f in dyn.fields] == ["fe", "particles"]
+    mass = sum(f.mass.sum() for f in dyn.fields) / 2  # two components per node
+    assert abs(mass - ROD.rho * 60.0 * 5.0) < 1e-12 * ROD.rho * 300.0
+    assert check_method("hybrid") == "hybrid"
+    with pytest.raises(ValueError, match=r"method='hybrid-sph' is not available.*'hybrid'"):
+        check_method("hybrid-sph")
+    dyn.destroy()
 
 
 def test_energy_is_conserved_without_load_ha_f():
@@ -219,7 +234,15 @@ def acceleration_difference(h: float, k: int) -> float:
     V = _compat.vector_function_space(msh)
     fields = []
     for variant in mf.HYBRID_VARIANTS:
-        problem = mf.HybridElasticity(V, patch, STEEL, variant=variant, consistent=False)
+        problem = mf.HybridElasticity(
+            V,
+            patch,
+            STEEL,
+            variant=variant,
+            integration="cells",
+            consistent=False,
+            particles="centred",
+        )
         dyn = ExplicitDynamics.coupled(problem, particle_mass="volume")
         dyn.set_initial(displacement=smooth_wave, particle_values="nodal")
         dt = dyn.stable_time_step()
@@ -240,13 +263,18 @@ def acceleration_difference(h: float, k: int) -> float:
 def test_ha_s_and_ha_f_agree_on_a_smooth_wave():
     """HA-S (tractions, eq. 131-134) and HA-F (interpolation, eq. 135) give the same forces on
     a smooth wave through the hybrid zone, closer under refinement: relative difference of the
-    accelerations 1.1e-2, 7.6e-3, 5.3e-3 (h = 1, 0.5, 0.25), about h^0.5. (The velocities after
-    a transit were compared before, from local arrays of two separately built meshes, whose
-    partitions differ: on 2 ranks that compared different points, 1.41.)"""
+    accelerations 5.2e-2, 3.6e-2 (h = 1, 0.5; Gauss integration of the particle energy for
+    both), about h^0.5. With the patch's particle grid, which put particles on the interface
+    nodes, the difference was 1.1e-2, 7.6e-3: HA-S's node stress (eq. 131) was then nearly the
+    stress of the particle on the node; the centred particles lie half a spacing inside. Against
+    the exact acceleration ``c^2 u''`` on 25 < x < 35 the centred particles are the closer for
+    both variants (HA-F 6.7e-2 against 9.9e-2, HA-S 9.1e-2 against 0.10, h = 1). (The
+    velocities after a transit were compared before, from local arrays of two separately built
+    meshes, whose partitions differ: on 2 ranks that compared different points, 1.41.)"""
     coarse = acceleration_difference(1.0, 2)
     fine = acceleration_difference(0.5, 2)
-    assert coarse < 0.02
-    assert fine < 0.8 * coarse
+    assert coarse < 0.1  # measured 5.2e-2
+    assert fine < 0.8 * coarse  # measured 0.70
 
 
 # --- statics: the cantilever ---------------------------------------------------------------------
@@ -260,19 +288,25 @@ def solve_beam(comm, h, variant, **options):
     return problem, problem.solve()
 
 
-@pytest.mark.parametrize("variant", mf.HYBRID_VARIANTS)
-def test_cantilever_converges(variant):
+@pytest.mark.parametrize(
+    "variant, rate, finest",
+    [("HA-F", (1.8, 2.3), 4e-3), ("HA-S", (1.3, 1.8), 4e-2)],
+)
+def test_cantilever_converges(variant, rate, finest):
     """Fitted L2 slope over h = 3, 1.5, 1 (Rabczuk et al. 2006, Table II: 1.23 / 1.23 / 1.13 for
-    the hybrid coupling); measured HA-F 1.39 (errors 7.6e-2 .. 1.7e-2), HA-S 1.55 (1.0e-1 ..
-    1.9e-2)."""
+    the hybrid coupling) at the default options: HA-F (centred particles, smoothed strains)
+    measured 2.04, errors 1.8e-2, 4.3e-3, 1.9e-3; HA-S (the patch's particles, Gauss points,
+    consistent test gradients) 1.55, errors 0.11, 3.6e-2, 1.9e-2 (before: HA-F 1.39, 7.6e-2 ..
+    1.7e-2). Bounds: the slope within about 0.25 of the measured one on either side, the finest
+    error 2x the measured one."""
     hs, errs = [3.0, 1.5, 1.0], []
     for h in hs:
         problem, sol = solve_beam(MPI.COMM_WORLD, h, variant)
         errs.append(
             mf.error_norms(problem.V.mesh, sol.evaluate_at_quadrature, BEAM, BEAM_MATERIAL)["l2"]
         )
-    assert fitted_rate(hs, errs) > 1.13
-    assert errs[-1] < 0.03
+    assert rate[0] < fitted_rate(hs, errs) < rate[1]
+    assert errs[-1] < finest
 
 
 def test_two_ranks_equal_serial():
@@ -316,3 +350,164 @@ def test_bad_particle_mass():
     problem = rod_problem(MPI.COMM_WORLD, 2.5, 1, "HA-F")
     with pytest.raises(ValueError, match="particle_mass='lumped' is not known"):
         ExplicitDynamics.coupled(problem, particle_mass="lumped")
+
+
+# --- the particle:node ratio ---------------------------------------------------------------------
+
+
+def pulse_errors(ratio: float, comm=MPI.COMM_WORLD, **options) -> tuple[float, float, float]:
+    """Relative L2 velocity errors at t1 = L / c and t2 = 2 L / c and the energy drift of the
+    rod with FE cells h = 0.5 on x < 30 and particles of spacing h / sqrt(ratio) on x > 30, the
+    pulse starting at x = 24 so that it crosses the interface before t1 and after it."""
+    rod = GaussianPulseRod(E=ROD.E, rho=ROD.rho, length=60.0, center=24.0)
+    problem = rod_problem(comm, 0.5, np.sqrt(ratio), "HA-F", consistent=False, **options)
+    dyn = ExplicitDynamics.coupled(problem, particle_mass="volume")
+    dyn.set_initial(velocity=rod.initial_velocity, particle_values="nodal")
+    errors = {}
+    res = dyn.run(
+        2 * rod.transit_time,
+        outputs=[rod.transit_time, 2 * rod.transit_time],
+        on_output=lambda d, n, t: errors.setdefault(t, d.velocity_error(rod.velocity)),
+    )
+    dyn.destroy()
+    e = [errors[t] for t in sorted(errors)]
+    return e[0], e[-1], res.energy_drift
+
+
+@pytest.mark.parametrize("ratio", [2.0, 3.0])
+def test_pulse_error_does_not_depend_on_the_ratio(ratio):
+    """A pulse crossing the interface, at particle:node ratios whose spacing does not divide the
+    cells. Measured (centred particles, smoothed strains), error at t1 / t2: ratio 2 4.6e-3 /
+    3.1e-3, ratio 3 2.2e-3 / 2.1e-3 (ratios 1, 4, 6, 8: 1.3e-2 / 7.8e-3, 1.4e-3 / 1.8e-3,
+    1.6e-3 / 1.5e-3, 2.1e-3 / 1.4e-3), so the bound 1e-2 is about 2x the larger; growth t1 -> t2
+    0.67 and 0.99 (bound 1.5); energy drift 1e-13.
+
+    The former discretisation (the patch's particles through the interface nodes with volumes
+    sampled by 3 x 3 Gauss points per cell, Gauss integration of the particle energy) misses
+    the bound 16-67x: 0.35 / 0.67 (ratio 2), 0.16 / 0.39 (ratio 3); with centred particles but
+    Gauss integration, whose missed patch test reflects part of the wave at the interface:
+    1.9e-2 / 2.9e-2 and 1.2e-2 / 1.8e-2."""
+    e1, e2, drift = pulse_errors(ratio, integration="smoothed")
+    assert e1 < 1e-2 and e2 < 1e-2
+    assert e2 < 1.5 * e1
+    assert drift < 1e-10
+    old = pulse_errors(ratio, particles="patch", integration="cells")
+    assert min(old[:2]) > 0.1  # the measured miss, not a tolerance
+
+
+def test_pulse_two_ranks_equal_serial():
+    """The pulse errors and energy drift of the smoothed, centred hybrid (ratio 3) on
+    COMM_WORLD and on COMM_SELF agree to round-off: the centred particles, their volumes and the
+    smoothing cells do not depend on the partition."""
+    world = pulse_errors(3.0, MPI.COMM_WORLD, integration="smoothed")
+    alone = pulse_errors(3.0, MPI.COMM_SELF, integration="smoothed")
+    assert abs(world[0] - alone[0]) < 1e-9 * alone[0]
+    assert abs(world[1] - alone[1]) < 1e-9 * alone[1]
+
+
+@pytest.mark.parametrize("cell_name", ["quadrilateral", "triangle"])
+def test_centred_particles_tile_the_patch(cell_name):
+    """The SPH particles of ``particles="centred"``: none on the interface, volumes that add up
+    to the patch's area and equal the lattice square's area wherever the square lies inside the
+    patch (to round-off), for a patch of cells chosen by a slanted criterion and a spacing that
+    divides neither the cells nor the box."""
+    comm = MPI.COMM_WORLD
+    msh = rectangle(comm, [0, 0], [6, 3], [12, 6], CELL_TYPES[cell_name])
+    n = msh.topology.index_map(2).size_local
+    xc = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], :2].mean(axis=1)
+    cells = np.flatnonzero(xc[:, 0] + 0.5 * xc[:, 1] > 3.2)
+    patch = mf.ParticlePatch(msh, cells, 0.37)
+    V = _compat.vector_function_space(msh)
+    problem = mf.HybridElasticity(V, patch, STEEL, "HA-S", particles="centred")
+    assert mf.HybridElasticity(V, patch, STEEL, "HA-S").patch is patch  # HA-S: the patch's own
+    P = problem.patch.particles
+    assert problem.patch is not patch and patch.particles.num_particles != P.num_particles
+    area = comm.allreduce(float(mf.cell_quadrature(msh, 1, patch.cells).weights.sum()))
+    assert abs(P.volumes.sum() - area) < 1e-12 * area
+    # a particle whose square lies inside the patch (all four corners satisfy the criterion
+    # of some patch cell: here, right of the slanted border by a cell diagonal) has the
+    # square's area; the squares' areas are the modal volume
+    square = np.median(P.volumes)
+    inside = P.positions[:, 0] + 0.5 * P.positions[:, 1] > 3.2 + 1.0
+    assert inside.sum() > 20
+    assert np.abs(P.volumes[inside] - square).max() < 1e-12 * square
+    # no particle on an FE node (the staircase interface's corners come nearest: measured 0.21
+    # spacing); the patch's own grid puts particles on them
+    fe_cells = np.flatnonzero(~patch.in_patch[:n])
+    fe_nodes = msh.geometry.x[np.unique(_compat.geometry_dofmap(msh)[fe_cells]), :2]
+
+    def nearest(x: np.ndarray) -> float:
+        return np.linalg.norm(x[:, None, :] - fe_nodes[None, :, :], axis=2).min(initial=np.inf)
+
+    assert nearest(P.positions) > 0.1 * np.sqrt(square)
+    assert comm.allreduce(nearest(patch.particles.positions), op=MPI.MIN) < 1e-12
+
+
+@pytest.mark.parametrize("variant", mf.HYBRID_VARIANTS)
+def test_smoothed_strains_pass_the_patch_test(variant):
+    """Strains smoothed over sub-cells (``integration="smoothed"``, symmetric ``K``): a linear
+    field leaves no force at any FE node or particle but its boundary loads, to round-off
+    (measured 7e-15 of the loads, h = 1.5, both variants)."""
+    problem = beam_problem(MPI.COMM_WORLD, 1.5, variant, integration="smoothed")
+    fe, p, scale = patch_residual(problem)
+    assert scale > 1e4
+    assert fe < 1e-12 * scale and p < 1e-12 * scale
+
+
+def test_smoothed_stiffness_is_symmetric():
+    """``v . K u = u . K v`` over [FE | particles] for random ``u``, ``v`` (HA-F, smoothed; to
+    round-off of ``|u| |K| |v|``), which is what makes central differences conserve energy."""
+    problem = beam_problem(MPI.COMM_WORLD, 3.0, "HA-F", integration="smoothed")
+    ops = problem.operators()
+    rng = np.random.default_rng(7 + MPI.COMM_WORLD.rank)
+    vecs = []
+    for _ in range(2):
+        a, b = ops.K_fe.createVecRight(), ops.K_p.createVecRight()
+        n_owned = problem.V.dofmap.index_map.size_local
+        a.array[:] = rng.standard_normal(a.getLocalSize()) * np.repeat(ops.fe_active[:n_owned], 2)
+        b.array[:] = rng.standard_normal(b.getLocalSize())
+        vecs.append((a, b))
+
+    def apply(a, b):
+        ra, rb = ops.K_fe.createVecLeft(), ops.K_p.createVecLeft()
+        ops.K_fe.mult(a, ra)
+        ops.K_fp.multAdd(b, ra, ra)
+        ops.K_p.mult(b, rb)
+        ops.K_pf.multAdd(a, rb, rb)
+        return ra, rb
+
+    (ua, ub), (va, vb) = vecs
+    Ku, Kv = apply(ua, ub), apply(va, vb)
+    vKu = va.dot(Ku[0]) + vb.dot(Ku[1])
+    uKv = ua.dot(Kv[0]) + ub.dot(Kv[1])
+    scale = (
+        ops.K_p.norm(PETSc.NormType.INFINITY) * (ua.norm() + ub.norm()) * (va.norm() + vb.norm())
+    )
+    assert abs(vKu - uKv) < 1e-13 * scale
+    assert abs(vKu) > 1e-6 * scale  # not vacuous
+    for obj in (ua, ub, va, vb, *Ku, *Kv):
+        obj.destroy()
+    ops.destroy()
+
+
+@pytest.mark.parametrize("cell_name", ["quadrilateral", "triangle"])
+@pytest.mark.parametrize("spacing", [0.25, 0.75, None])
+def test_slanted_patch_passes_the_patch_test_at_any_spacing(cell_name, spacing):
+    """A patch of cells chosen by a slanted criterion (a staircase border), particle spacing
+    0.5 h, 1.5 h or the patch's vertices, default options of both variants: the linear patch
+    test holds to round-off (measured below 2e-14 of the loads). At 1.5 h the lattice of HA-F's
+    centred particles leaves a corner of the staircase with two collinear particles in reach,
+    where the corrected sums are not defined; an extra particle in that cell restores them
+    (without it: "SPH gradient correction is singular")."""
+    comm = MPI.COMM_WORLD
+    msh = rectangle(comm, [0, 0], [6, 3], [12, 6], CELL_TYPES[cell_name])
+    n = msh.topology.index_map(2).size_local
+    xc = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], :2].mean(axis=1)
+    cells = np.flatnonzero(xc[:, 0] + 0.5 * xc[:, 1] > 3.2)
+    placement = "grid" if spacing else "vertices"
+    patch = mf.ParticlePatch(msh, cells, spacing, placement=placement)
+    V = _compat.vector_function_space(msh)
+    for variant in mf.HYBRID_VARIANTS:
+        fe, p, scale = patch_residual(mf.HybridElasticity(V, patch, BEAM_MATERIAL, variant))
+        assert scale > 1e3
+        assert fe < 1e-12 * scale and p < 1e-12 * scale

@@ -20,6 +20,7 @@ import os
 
 import dolfinx_meshfree as mf
 
+import numpy as np
 import pytest
 from conftest import load_demo
 from mpi4py import MPI
@@ -27,10 +28,8 @@ from mpi4py import MPI
 demo = load_demo("robustness")
 
 #: Cases that stop with a clear error, by (coupling, load): the fragment of the message that
-#: names the fix. Hybrid SPH–FE has no body loads (it has no form interface).
-REFUSALS = {
-    ("hybrid", "body"): "use a variational coupling",
-}
+#: names the fix.
+REFUSALS: dict[tuple[str, str], str] = {}
 
 FULL = os.environ.get("ROBUSTNESS_FULL") == "1" or (
     MPI.COMM_WORLD.size == 1 and not mf._compat.MODERN
@@ -66,3 +65,33 @@ def test_robustness_matrix(index, coupling, mesh, patch):
         elif r["misses"]:
             failures.append(f"{case.key}: {'; '.join(r['misses'])}")
     assert not failures, "\n".join(failures)
+
+
+def test_exact_fields_of_the_matrix():
+    """The matrix's oracles, by central differences of their own displacement (independent of
+    the closed forms): gradients, and div sigma = 0 (``HARMONIC``) or = -b with the body force
+    that the hybrid run is given (``LOADED``)."""
+    rng = np.random.default_rng(7)
+    x = rng.uniform(0.0, 2.0, (20, 2))
+    d = 1e-4
+    mat = demo.MATERIAL
+    for field in (demo.HARMONIC, demo.LOADED):
+        grad = np.stack(
+            [
+                (field.displacement(x + d * e) - field.displacement(x - d * e)) / (2 * d)
+                for e in np.eye(2)
+            ],
+            axis=2,
+        )
+        assert np.allclose(grad, field.displacement_gradient(x), rtol=0, atol=1e-10)
+        div = sum(
+            (
+                mat.stress(field.displacement_gradient(x + d * e))
+                - mat.stress(field.displacement_gradient(x - d * e))
+            )[:, :, k]
+            / (2 * d)
+            for k, e in enumerate(np.eye(2))
+        )
+        expected = 0.0 if field is demo.HARMONIC else -field.body_force(mat)
+        assert np.allclose(div, expected, rtol=0, atol=1e-8), (div[0], expected)
+    assert np.abs(demo.LOADED.body_force(mat)).min() > 0.1

@@ -75,6 +75,13 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
         help="fraction of the length at the free end modelled with particles by the couplings "
         "(efg models all of it)",
     )
+    p.add_argument(
+        "--placement",
+        choices=mf.PLACEMENTS,
+        default=mf.PLACEMENTS[0],
+        help="particles of the couplings' patch (see mf.ParticlePatch; 'vertices' ignores "
+        "--particle-spacing)",
+    )
     p.add_argument("--weight", choices=("quartic", "cubic", "gaussian"), default="quartic")
     p.add_argument(
         "--dilation",
@@ -113,12 +120,30 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
         p.error(f"--particle-spacing must be positive, got {args.particle_spacing}")
     if not 0.0 < args.patch_fraction <= 1.0:
         p.error(f"--patch-fraction must lie in (0, 1], got {args.patch_fraction}")
+    coupled = sorted(set(args.method) & {*mf.COUPLINGS, "hybrid"})
+    if args.patch_fraction == 1.0 and coupled:
+        p.error(
+            f"--patch-fraction 1 leaves no finite elements for --method {' '.join(coupled)} to "
+            "couple to; give a fraction below 1 (efg models the whole beam)"
+        )
     if (args.probe_in is None) != (args.probe_out is None):
         p.error("--probe-in and --probe-out go together")
     for h in args.h:
         if round(args.L / h) < 1 or round(args.D / h) < 1:
             p.error(f"--h {h} is larger than the beam ({args.L} x {args.D})")
+        if coupled and args.patch_fraction <= min_patch_fraction(args, h):
+            p.error(
+                f"--patch-fraction {args.patch_fraction} selects no cell at --h {h}; give a "
+                f"fraction above {min_patch_fraction(args, h):.4g} or a smaller --h"
+            )
     return args
+
+
+def min_patch_fraction(args, h: float) -> float:
+    """The patch fractions above this select at least one cell at ``h``: the last cell
+    column's centroids lie ``h_x / 2`` (quadrilaterals) or ``h_x / 3`` (triangles) from the end."""
+    hx = args.L / max(1, round(args.L / h))
+    return hx / (2.0 if args.cell == "quadrilateral" else 3.0) / args.L
 
 
 # -
@@ -221,14 +246,30 @@ def run_efg(msh, args, beam, material, h):
     return errors, sizes, sol.timings, probe
 
 
+def make_patch(msh, args, h: float) -> mf.ParticlePatch:
+    """The couplings' patch: the cells whose centroid lies in the free-end fraction
+    ``--patch-fraction`` of the length, particles of ``--placement`` (collective). A fraction
+    thinner than the cells at ``h`` is refused on every rank, naming the flag and the fix."""
+    n = msh.topology.index_map(2).size_local
+    centroid_x = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], 0].mean(axis=1)
+    cells = np.flatnonzero(centroid_x > (1.0 - args.patch_fraction) * args.L)
+    if msh.comm.allreduce(cells.size) == 0:
+        last = msh.comm.allreduce(float(centroid_x.max(initial=-np.inf)), op=MPI.MAX)
+        raise ValueError(
+            f"--patch-fraction {args.patch_fraction} selects no cell at --h {h}: the centroids "
+            f"of the last cells lie at x = {last:.6g}, outside the last "
+            f"{args.patch_fraction * args.L:.6g} of the beam; give --patch-fraction above "
+            f"{1.0 - last / args.L:.4g} or a smaller --h"
+        )
+    if args.placement == "vertices":
+        return mf.ParticlePatch(msh, cells, placement="vertices")
+    return mf.ParticlePatch(msh, cells, args.particle_spacing or h, placement=args.placement)
+
+
 def run_coupled(msh, args, beam, material, h, coupling, overlap=None):
     t0 = time.perf_counter()
     left, right = boundaries(msh, args)
-    n = msh.topology.index_map(2).size_local
-    nodes = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], :2]
-    centroid_x = nodes[:, :, 0].mean(axis=1)
-    cells = np.flatnonzero(centroid_x > (1.0 - args.patch_fraction) * args.L)
-    patch = mf.ParticlePatch(msh, cells, args.particle_spacing or h)
+    patch = make_patch(msh, args, h)
     problem = mf.CoupledElasticity(
         _compat.vector_function_space(msh),
         patch,
@@ -256,10 +297,7 @@ def run_hybrid(msh, args, beam, material, h):
     spacing ``--particle-spacing`` with the integration-consistent stress points."""
     t0 = time.perf_counter()
     left, right = boundaries(msh, args)
-    n = msh.topology.index_map(2).size_local
-    centroid_x = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], 0].mean(axis=1)
-    cells = np.flatnonzero(centroid_x > (1.0 - args.patch_fraction) * args.L)
-    patch = mf.ParticlePatch(msh, cells, args.particle_spacing or h)
+    patch = make_patch(msh, args, h)
     problem = mf.HybridElasticity(
         _compat.vector_function_space(msh),
         patch,
@@ -278,15 +316,29 @@ def run_hybrid(msh, args, beam, material, h):
 
 
 def warm_jit(args, material, beam):
-    """Compile the FE forms once on a tiny mesh so that timings exclude JIT compilation."""
-    msh = make_mesh(MPI.COMM_SELF, args, max(args.L, args.D) / 2)
-    run_fe(msh, args, beam, material)
-    for coupling in set(args.method) & set(mf.COUPLINGS):
+    """Compile the FE forms once on a tiny mesh so that timings exclude JIT compilation.
+
+    The forms depend on the material, the cell and the quadrature degree only: the patch, its
+    particles and the bridging band of the warm-up are fixed (half the beam, particles at the
+    element size, a one-cell band), so that it runs for every value of the other flags (a
+    patch fraction below a quarter selects no cell of this two-cell mesh)."""
+    warm = argparse.Namespace(
+        **{
+            **vars(args),
+            "patch_fraction": 0.5,
+            "particle_spacing": None,
+            "placement": mf.PLACEMENTS[0],
+            "overlap": 1,
+        }
+    )
+    msh = make_mesh(MPI.COMM_SELF, warm, max(args.L, args.D) / 2)
+    run_fe(msh, warm, beam, material)
+    for coupling in sorted(set(args.method) & set(mf.COUPLINGS)):
         # (one patch cell on this mesh: a one-cell bridging band)
-        run_coupled(msh, args, beam, material, max(args.L, args.D) / 2, coupling, overlap=1)
+        run_coupled(msh, warm, beam, material, max(args.L, args.D) / 2, coupling)
     if "hybrid" in args.method:  # (cells of D / 4: enough particles for the kernel sums)
         h = args.D / 4
-        run_hybrid(make_mesh(MPI.COMM_SELF, args, h), args, beam, material, h)
+        run_hybrid(make_mesh(MPI.COMM_SELF, warm, h), warm, beam, material, h)
 
 
 # -

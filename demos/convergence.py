@@ -137,6 +137,12 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
         p.error(f"--fractions must lie in (0, 1], got {ours.fractions}")
     if not (np.isfinite(ours.sweep_h) and ours.sweep_h > 0):
         p.error(f"--sweep-h must be positive, got {ours.sweep_h}")
+    low = cantilever.min_patch_fraction(args, ours.sweep_h)
+    if any(f <= low for f in ours.fractions):
+        p.error(
+            f"--fractions {ours.fractions}: fractions up to {low:.4g} select no cell at "
+            f"--sweep-h {ours.sweep_h}; give larger fractions or a smaller --sweep-h"
+        )
     for k, v in vars(ours).items():
         setattr(args, k, v)
     return args

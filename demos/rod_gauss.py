@@ -21,8 +21,8 @@
 #   printed). The multiplier couplings correct the trial velocities each step (Rabczuk et
 #   al. 2006, eq. 93–96, Table I); bridging weights stiffness and masses across a band of
 #   ``--overlap`` cell layers (eq. 46–48, 88–89); the ramp couplings blend FE and particles in
-#   the interface elements (Belytschko et al. 1995, eq. 3.15), which needs a dilation above
-#   ``k + 1`` (the MLS must span the interface element: ``max(2.5, k + 1.5)`` by default);
+#   the interface elements (Belytschko et al. 1995, eq. 3.15), whose MLS supports span the
+#   interface element at any ``k`` (radii ``(d_max - 1) h / k + h``, see ``mf.ramp.ramp_mls``);
 #   master–slave ties the first particle layer to the FE edges (eq. 27–28).
 # * ``hybrid`` (sec. 5.5): SPH particles with the FE integration points in their sums, forces on
 #   the FE nodes by interpolation (HA-F). The particles sit at the centres of a lattice of
@@ -107,7 +107,7 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--rho", type=float, default=0.0078, help="g/mm^3 (times in ms)")
     p.add_argument("--safety", type=float, default=0.9, help="fraction of the critical step")
     p.add_argument(
-        "--dilation", type=float, default=None, help="MLS d_max (default 2; ramps max(2.5, k+1.5))"
+        "--dilation", type=float, default=None, help="MLS d_max (default: mf.DEFAULT_DILATION)"
     )
     p.add_argument("--overlap", type=int, default=2, help="bridging band, cell layers")
     p.add_argument(
@@ -279,7 +279,7 @@ def build(method: str, args, material, comm):
         return dyn, {"h_fe": h, "h_p": hp, "dilation": None}
     dilation = args.dilation
     if dilation is None:
-        dilation = max(2.5, k + 1.5) if method.startswith("ramp") else 2.0
+        dilation = mf.DEFAULT_DILATION[method]
     problem = mf.CoupledElasticity(
         V,
         patch,
@@ -322,7 +322,8 @@ def variant_label(method: str, args, variant: str | None = None) -> str | None:
 
 def warm_jit(args, material) -> None:
     """Compile the FE forms (stiffness, lumped masses) once, on a tiny mesh, before timing."""
-    small = argparse.Namespace(**{**vars(args), "nodes": 40, "ratio": 1.0})
+    # (the forms do not depend on the band width: a one-cell band fits any tiny rod)
+    small = argparse.Namespace(**{**vars(args), "nodes": 40, "ratio": 1.0, "overlap": 1})
     for method in sorted(set(args.method) - {"efg"}):
         dyn, _ = build(method, small, material, MPI.COMM_SELF)
         dyn.destroy()

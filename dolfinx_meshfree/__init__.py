@@ -35,7 +35,7 @@ from .kernels import cubic_spline, gaussian, quartic, sph_cubic_spline
 from .materials import LinearElastic
 from .mls import MLS, MomentMatrixError
 from .particles import ParticleSet
-from .patch import ParticlePatch
+from .patch import PLACEMENTS, ParticlePatch
 from .problem import CoupledLinearProblem
 from .quadrature import boundary_facets, cell_quadrature, facet_quadrature
 from .sph import SPH
@@ -49,6 +49,7 @@ __all__ = [
     "DYNAMICS_METHODS",
     "HYBRID_VARIANTS",
     "MLS",
+    "PLACEMENTS",
     "SPH",
     "CoupledElasticity",
     "CoupledLinearProblem",

@@ -301,6 +301,10 @@ class CoupledElasticity:
                 basis=basis,
             ),
         )
+        if coupling in ("ramp", "ramp-cubic"):  # supports spanning the interface elements
+            from .ramp import ramp_mls
+
+            self.mls = ramp_mls(self.mls, patch)
         self._dirichlet: list[tuple[np.ndarray, VectorFunction]] = []
         self._tractions: list[tuple[np.ndarray, Callable]] = []
         #: The user's bilinear form (set by :class:`~dolfinx_meshfree.CoupledLinearProblem`);

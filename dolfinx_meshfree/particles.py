@@ -59,6 +59,64 @@ def _owned_cells(mesh, cells: npt.ArrayLike | None) -> np.ndarray:
     return c
 
 
+def _check_border(border: npt.ArrayLike, gdim: int) -> np.ndarray:
+    """Border facets as segments (k, 2, gdim) (a 1D facet, a point, is a segment of length 0)."""
+    b = np.asarray(border, dtype=float)
+    if b.ndim != 3 or b.shape[1] not in (1, 2) or b.shape[2] < gdim:
+        raise ValueError(
+            f"border should have shape (num_facets, 2, {gdim}) (facet end points), got {b.shape}"
+        )
+    b = b[:, :, :gdim]
+    return np.concatenate([b, b], axis=1) if b.shape[1] == 1 else b
+
+
+def _distance_to_segments(points: np.ndarray, segments: np.ndarray, reach: float) -> np.ndarray:
+    """Distance (m,) from each point to the nearest segment, exact where it is at most ``reach``
+    (``inf`` further away)."""
+    d = np.full(points.shape[0], np.inf)
+    if points.shape[0] == 0 or segments.shape[0] == 0:
+        return d
+    a, t = segments[:, 0], segments[:, 1] - segments[:, 0]
+    length = np.linalg.norm(t, axis=1)
+    near = cKDTree(points).query_ball_point(a + 0.5 * t, 0.5 * length + reach)
+    for f, cand in enumerate(near):
+        if not cand:
+            continue
+        cand = np.asarray(cand, dtype=np.int64)
+        r = points[cand] - a[f]
+        xi = np.clip(r @ t[f] / max(length[f] ** 2, np.finfo(float).tiny), 0.0, 1.0)
+        d[cand] = np.minimum(d[cand], np.linalg.norm(r - xi[:, None] * t[f], axis=1))
+    return d
+
+
+def _conforming_layer(
+    grid: np.ndarray, segments: np.ndarray, spacing: float, tol: float
+) -> np.ndarray:
+    """Grid points ``grid`` (m, gdim) in the cells joined with particles on the border
+    ``segments`` (k, 2, gdim): on every border vertex and at ``max(1, round(length / spacing))``
+    intervals along every facet. Grid points closer than ``spacing / 2`` to the border are
+    dropped, except those that coincide (within ``tol``) with a border particle, which they
+    replace: a grid whose lines hold the border is returned unchanged (and in its order). The
+    border particles follow the grid's, sorted by (y, x) (local; identical on every rank when the
+    inputs are)."""
+    a, b = segments[:, 0], segments[:, 1]
+    pieces = np.maximum(1, np.round(np.linalg.norm(b - a, axis=1) / spacing)).astype(np.int64)
+    facet = np.repeat(np.arange(len(segments)), pieces + 1)
+    start = np.repeat(np.cumsum(pieces + 1) - (pieces + 1), pieces + 1)
+    xi = (np.arange(facet.size) - start) / pieces[facet]
+    on = a[facet] + xi[:, None] * (b - a)[facet]
+    # one particle per border point (neighbouring facets share their end points)
+    key = np.round(on / tol).astype(np.int64)
+    on = on[np.sort(np.unique(key, axis=0, return_index=True)[1])]
+    keep = ~(_distance_to_segments(grid, segments, 0.5 * spacing) < 0.5 * spacing)
+    if grid.shape[0] and on.shape[0]:
+        dist, idx = cKDTree(on).query(grid, distance_upper_bound=2.0 * tol)
+        same = dist <= tol
+        keep |= same
+        on = np.delete(on, idx[same], axis=0)
+    return np.vstack([grid[keep], on[np.lexsort(on.T)]])
+
+
 class ParticleSet:
     """Particles with positions, volumes and MPI ownership.
 
@@ -165,13 +223,26 @@ class ParticleSet:
         cells: npt.ArrayLike | None = None,
         jitter: float = 0.0,
         seed: int = 0,
+        border: npt.ArrayLike | None = None,
     ) -> ParticleSet:
-        """A regular grid of particles with the given spacing filling the given cells.
+        """A regular grid of particles with the given spacing filling the given cells, optionally
+        with a boundary-conforming layer on the cells' border.
 
         The grid spans the bounding box of the cells with ``round(extent / spacing)`` intervals
         per direction (so its corners are the box's corners) and keeps the points that lie in
         the cells. ``jitter`` moves each interior point by up to ``jitter * spacing`` at random
-        (an irregular particle set; boundary points stay on the boundary). Collective.
+        (an irregular particle set; boundary points stay on the boundary).
+
+        ``border``: this rank's facets (k, 2, gdim) (segments; (k, 1, gdim) in 1D) of the border
+        of the cells (e.g. :meth:`ParticlePatch.boundary`). Then particles also sit on every
+        border vertex and along every border facet at about the spacing
+        (``max(1, round(length / spacing))`` intervals), and grid points closer than half a
+        spacing to the border are dropped: every border facet carries particles at its ends
+        whatever the spacing and whatever the shape of the border (slanted, curved), so the
+        MLS moment matrices stay well-conditioned up to the border, and the FE nodes of the
+        border (the interface nodes that the ramp couplings need, Belytschko et al. 1995,
+        sec. 3.2) are particles. When the border lies on grid lines and the spacing divides the
+        facets (the grid already has those particles) the set is the grid's. Collective.
         """
         comm = mesh.comm
         gdim = mesh.geometry.dim
@@ -192,14 +263,25 @@ class ParticleSet:
         counts = [max(1, round((hi[k] - lo[k]) / spacing)) for k in range(gdim)]
         axes = [np.linspace(lo[k], hi[k], counts[k] + 1) for k in range(gdim)]
         grid = np.stack(np.meshgrid(*axes, indexing="xy"), axis=-1).reshape(-1, gdim)
+        step = (hi - lo) / np.asarray(counts)
+        tol = 1e-9 * float(step.max())
+        if border is not None:
+            segments = np.concatenate(comm.allgather(_check_border(border, gdim)))
+            on_border = _distance_to_segments(grid, segments, tol) <= tol
+        else:
+            segments, on_border = None, np.zeros(grid.shape[0], dtype=bool)
         if jitter > 0.0:
             rng = np.random.default_rng(seed)
-            step = (hi - lo) / np.asarray(counts)
             interior = np.all((grid > lo + 1e-9 * step) & (grid < hi - 1e-9 * step), axis=1)
-            grid[interior] += rng.uniform(-jitter, jitter, (interior.sum(), gdim)) * step
+            moves = rng.uniform(-jitter, jitter, (interior.sum(), gdim)) * step
+            moves[on_border[interior]] = 0.0
+            grid[interior] += moves
         inside = _points_in_cells(mesh, grid, c).astype(np.int8)
         comm.Allreduce(MPI.IN_PLACE, inside, op=MPI.MAX)
-        return cls(grid[inside.astype(bool)], comm=comm, mesh=mesh, cells=c)
+        x = grid[inside.astype(bool)]
+        if segments is not None:
+            x = _conforming_layer(x, segments, spacing, tol)
+        return cls(x, comm=comm, mesh=mesh, cells=c)
 
     @classmethod
     def from_vertices(cls, mesh, cells: npt.ArrayLike | None = None) -> ParticleSet:

@@ -17,10 +17,13 @@ from . import _compat
 from .parallel import raise_on_all_ranks
 from .particles import ParticleSet
 
-__all__ = ["FE_TAG", "PATCH_TAG", "ParticlePatch"]
+__all__ = ["FE_TAG", "PATCH_TAG", "PLACEMENTS", "ParticlePatch"]
 
 FE_TAG = 1
 PATCH_TAG = 2
+
+#: Particle placements of a :class:`ParticlePatch` (the first is the default).
+PLACEMENTS = ("conforming", "grid", "vertices")
 
 
 class ParticlePatch:
@@ -29,13 +32,22 @@ class ParticlePatch:
     Args:
         mesh: The user's mesh (2D, degree-1 geometry, ghosted across facets in parallel).
         cells: Owned local indices of the cells to replace (each rank its own).
-        spacing: Particle spacing; particles fill the cells on a regular grid (see
-            :meth:`ParticleSet.from_cells`), including the interface, where they meet the FE nodes.
-            Must be ``None`` with ``placement="vertices"``.
+        spacing: Particle spacing of ``placement="conforming"`` or ``"grid"`` (any positive value;
+            0.5 to 1.5 times the element size is the tested range). Must be ``None`` with
+            ``placement="vertices"``.
         jitter: Random displacement of interior particles, as a fraction of the spacing.
-        placement: ``"grid"`` (default, the grid above) or ``"vertices"``: one particle at every
-            vertex of the patch cells (:meth:`ParticleSet.from_vertices`), the choice for an
-            unstructured mesh or a curved interface.
+        placement: ``"conforming"`` (default): a regular grid of the given spacing in the patch
+            cells plus a boundary-conforming layer: a particle on every vertex of the patch
+            border (interface and exterior facets) and along its facets at about the spacing,
+            grid points closer than half a spacing to the border dropped (see
+            :meth:`ParticleSet.from_cells` with ``border``). Every coupling works with it
+            whatever the cells and spacing: the border has particles at its ends however it is
+            shaped (slanted, staircase, curved), and the interface nodes are particles, as the
+            ramp couplings need (Belytschko et al. 1995, sec. 3.2). When the border lies on the
+            grid lines and the spacing divides the element size it is the grid itself.
+            ``"grid"``: the grid alone, clipped to the cells (the earlier default; near a border
+            off the grid lines it can leave too few particles). ``"vertices"``: one particle at
+            every vertex of the patch cells (:meth:`ParticleSet.from_vertices`).
 
     Attributes:
         particles: The :class:`ParticleSet`.
@@ -53,12 +65,12 @@ class ParticlePatch:
         spacing: float | None = None,
         jitter: float = 0.0,
         seed: int = 0,
-        placement: str = "grid",
+        placement: str = "conforming",
     ):
         comm = mesh.comm
-        if placement not in ("grid", "vertices"):
-            raise ValueError(f"placement={placement!r} is not known; use 'grid' or 'vertices'")
-        if placement == "grid" and spacing is None:
+        if placement not in PLACEMENTS:
+            raise ValueError(f"placement={placement!r} is not known; use one of {list(PLACEMENTS)}")
+        if placement != "vertices" and spacing is None:
             raise ValueError("spacing=None: give the particle spacing, or placement='vertices'")
         if placement == "vertices" and (spacing is not None or jitter):
             raise ValueError(
@@ -130,10 +142,18 @@ class ParticlePatch:
         owned = np.arange(num_owned, dtype=np.int32)
         values = np.where(self.in_patch[:num_owned], PATCH_TAG, FE_TAG).astype(np.int32)
         self.cell_tags = dolfinx.mesh.meshtags(mesh, tdim, owned, values)
+        self.placement = placement
         if placement == "vertices":
             self.particles = ParticleSet.from_vertices(mesh, c)
         else:
-            self.particles = ParticleSet.from_cells(mesh, spacing, c, jitter=jitter, seed=seed)
+            border = None
+            if placement == "conforming":
+                facets = self.boundary()[0]
+                geo = _compat.entities_to_geometry(mesh, tdim - 1, facets)
+                border = mesh.geometry.x[geo.reshape(-1, tdim)]
+            self.particles = ParticleSet.from_cells(
+                mesh, spacing, c, jitter=jitter, seed=seed, border=border
+            )
 
     @property
     def comm(self):

@@ -11,10 +11,11 @@ node on Gamma_E. In an interface cell the displacement blends the two approximat
 with gradients by the product rule (eq. 3.16). ``coupling="ramp-cubic"`` replaces ``R`` by the
 smoothed ramp ``3R^2 - 2R^3`` (Rabczuk, Xiao & Sauer 2006, eq. 38–42). The nodes on Gamma_E are
 particles: the shape function ``(1 - R) N_a`` of a Gamma_E node belongs to the dof of the
-particle at the node's position (a :class:`~dolfinx_meshfree.ParticlePatch` whose spacing divides
-the element size puts particles there), so the FE dofs of Gamma_E are inactive like those inside
-the patch. The blended shape functions are a partition of unity and reproduce linear fields
-(eq. 3.17), so the coupling needs no interface multipliers.
+particle at the node's position (a :class:`~dolfinx_meshfree.ParticlePatch` puts particles on
+the patch border's nodes whatever its spacing; see :func:`ramp_mls` for the supports), so
+the FE dofs of Gamma_E are inactive like those inside the patch. The blended shape functions
+are a partition of unity and reproduce linear fields (eq. 3.17), so the coupling needs no
+interface multipliers.
 
 Assembly, in a PETSc nest ``[[K_FE, K_FP], [K_PF, K_P]]`` (plus patch-side Dirichlet
 multipliers):
@@ -61,11 +62,69 @@ from .petsc import create_aij, create_vector
 from .quadrature import boundary_facets, cell_quadrature, facet_quadrature
 from .tables import ShapeTable
 
-__all__ = ["RAMPS", "RampInterface", "ramp_operators"]
+__all__ = ["RAMPS", "RampInterface", "ramp_mls", "ramp_operators"]
 
 
 #: The ramp couplings and whether each smooths the ramp (3R^2 - 2R^3).
 RAMPS = {"ramp": False, "ramp-cubic": True}
+
+
+def _interface_element_size(patch) -> float:
+    """The longest interface facet of the patch on any rank (collective; 0 without interface)."""
+    msh = patch.mesh
+    fdim = msh.topology.dim - 1
+    h = 0.0
+    if patch.interface_facets.size:
+        ends = msh.geometry.x[_compat.entities_to_geometry(msh, fdim, patch.interface_facets), :2]
+        h = float(np.linalg.norm(ends[:, -1] - ends[:, 0], axis=1).max())
+    return patch.comm.allreduce(h, op=MPI.MAX)
+
+
+def _interface_reach(patch) -> tuple[np.ndarray, float]:
+    """The largest distance from a vertex of an interface element (an FE cell with a vertex on
+    Gamma_E) to the nearest Gamma_E node (collective; identical on every rank). One element
+    size beside a straight interface, the cell's diagonal where a staircase interface touches a
+    cell at one corner. Returns the Gamma_E node positions (k, 2) too."""
+    msh, comm = patch.mesh, patch.comm
+    fdim = msh.topology.dim - 1
+    geo = _compat.entities_to_geometry(msh, fdim, patch.interface_facets)
+    gamma = np.concatenate(comm.allgather(msh.geometry.x[geo.ravel(), :2]))
+    if gamma.shape[0] == 0:
+        return gamma, 0.0
+    fe = patch.fe_cells
+    nodes = msh.geometry.x[_compat.geometry_dofmap(msh)[fe], :2]  # (cells, vertices, 2)
+    dist = cKDTree(gamma).query(nodes.reshape(-1, 2))[0].reshape(nodes.shape[:2])
+    touching = dist.min(axis=1, initial=np.inf) <= 1e-10 * max(np.ptp(gamma, axis=0).max(), 1.0)
+    return gamma, comm.allreduce(float(dist[touching].max(initial=0.0)), op=MPI.MAX)
+
+
+def ramp_mls(mls: MLS, patch) -> MLS:
+    """The MLS of a ramp coupling: support radii ``d_max max(c_I, rho)`` for the particles
+    within ``d_max rho`` of Gamma_E, eq. 3.11's ``d_max c_I`` for the others (collective).
+
+    ``c_I`` is eq. 3.11's nodal spacing and ``rho`` the reach of the interface elements: the
+    largest distance from one of their vertices to Gamma_E (:func:`_interface_reach`; the element
+    size ``h`` beside a straight interface, the diagonal at a staircase's corners). The particle
+    functions must span the interface elements up to their FE side (eq. 3.12), as ``d_max c_I``
+    does when the particles are as far apart as the nodes (``c_I = h``, the paper's set-up,
+    whose radii these are): finer particles would reach no further than the interface row
+    there, whose particles are collinear. Where ``c_I >= rho`` the radii are eq. 3.11's. (A
+    reach of ``(d_max - 1) c_I + rho`` is enough to be non-singular, but at 0.5 h it left the
+    FE-side corners to the tails of the weights: 2.25x the FE error on the robustness matrix's
+    square, against 1.0x with these radii.) Particles on the vertices
+    (``placement="vertices"``) are the paper's set-up on any mesh: their radii stay eq. 3.11's.
+    """
+    if getattr(patch, "placement", None) == "vertices":
+        return mls
+    gamma, rho = _interface_reach(patch)
+    c = mls.radii / mls.dilation
+    radii = mls.radii.copy()
+    if gamma.shape[0]:
+        near = cKDTree(gamma).query(mls.points)[0] < mls.dilation * rho
+        radii[near] = mls.dilation * np.maximum(c[near], rho)
+    if np.all(radii <= mls.radii):
+        return mls
+    return MLS(mls.points, mls.weight_name, mls.dilation, mls.basis, radii=radii, rcond=mls.rcond)
 
 
 class RampInterface:
@@ -92,7 +151,7 @@ class RampInterface:
         # dilation 2 they are the interface particles alone on the far edge, where R = 0 and the
         # particle part vanishes); there phi is multiplied by a vanishing ramp.
         m = problem.mls
-        self._mls = MLS(m.points, m.weight_name, m.dilation, m.basis, rcond=0.0)
+        self._mls = MLS(m.points, m.weight_name, m.dilation, m.basis, radii=m.radii, rcond=0.0)
         self.num_particles = patch.particles.num_particles
         fdim = msh.topology.dim - 1
         nodes = dolfinx.fem.locate_dofs_topological(V, fdim, patch.interface_facets)
@@ -104,13 +163,7 @@ class RampInterface:
         self.cells = np.flatnonzero(self.in_interface[:n_owned]).astype(np.int32)
 
         # the element size: the longest interface facet (on any rank)
-        h = 0.0
-        if patch.interface_facets.size:
-            ends = msh.geometry.x[
-                _compat.entities_to_geometry(msh, fdim, patch.interface_facets), :2
-            ]
-            h = float(np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1).max())
-        h = comm.allreduce(h, op=MPI.MAX)
+        h = _interface_element_size(patch)
         self.tolerance = 1e-10 * h
         positions = patch.particles.positions
 
@@ -125,10 +178,13 @@ class RampInterface:
                 k = g[bad[0]]
                 raise ValueError(
                     f"{bad.size} FE node(s) on the patch interface have no particle at their "
-                    f"position (within {self.tolerance:.1e}); first: local node {int(k)} at "
+                    f"position (within {self.tolerance:.1e}); first: the node at "
                     f"{np.array2string(self.coordinates[k], precision=6)}, nearest particle "
                     f"{dist[bad[0]]:.3e} away. The ramp couplings need particles on the "
-                    "interface nodes: choose a patch spacing that divides the element size"
+                    f"interface nodes (Belytschko et al. 1995, sec. 3.2), which "
+                    f"ParticlePatch(placement={patch.placement!r}) did not put there: use "
+                    "ParticlePatch(..., placement='conforming') (the default, any spacing) or "
+                    "placement='vertices'"
                 )
             owner[g] = idx
             return owner
@@ -168,7 +224,10 @@ class RampInterface:
         except ValueError as e:
             raise type(e)(
                 "the particle supports do not cover the ramp's interface cells (the FE cells "
-                f"beside the patch): {e}"
+                f"beside the patch; the points checked lie just inside their corners): {e}. "
+                f"The supports have radii (d_max - 1) c_I + max(c_I, rho) (see ramp_mls) with "
+                f"dilation d_max = {self.mls.dilation}: increase dilation, or place particles on "
+                "every patch vertex with ParticlePatch(..., placement='vertices')"
             ) from e
 
     @property

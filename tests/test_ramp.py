@@ -21,10 +21,12 @@ RAMPS = ["ramp", "ramp-cubic"]
 EXACT = mf.LinearField(G=((0.3, -0.2), (0.5, 0.1)), c=(0.1, -0.4))
 
 
-def patch_problem(comm, coupling, cell="quadrilateral", spacing=1 / 3, **options):
+def patch_problem(
+    comm, coupling, cell="quadrilateral", spacing=1 / 3, placement="conforming", **options
+):
     options.setdefault("dilation", 2.5)
     msh = square(comm, cell)
-    patch = mf.ParticlePatch(msh, cells_right_of(msh, 1.0), spacing)
+    patch = mf.ParticlePatch(msh, cells_right_of(msh, 1.0), spacing, placement=placement)
     V = _compat.vector_function_space(msh)
     problem = mf.CoupledElasticity(
         V, patch, mf.LinearElastic(1000, 0.3), coupling=coupling, **options
@@ -138,9 +140,23 @@ def test_parallel_equals_serial(coupling, rank_rng):
 
 
 def test_particles_must_sit_on_the_interface_nodes():
-    _, problem = patch_problem(MPI.COMM_WORLD, "ramp", spacing=0.4)
-    with pytest.raises(ValueError, match="no particle at their position"):
+    """The grid placement with a spacing that does not divide h leaves the interface nodes
+    without particles: the refusal names the node by its coordinates and the placements that
+    put particles there."""
+    _, problem = patch_problem(MPI.COMM_WORLD, "ramp", spacing=0.4, placement="grid")
+    with pytest.raises(
+        ValueError,
+        match=r"no particle at their position .*the node at \[.*placement='conforming'.*"
+        r"placement='vertices'",
+    ):
         problem.solve()
+
+
+@pytest.mark.parametrize("coupling", RAMPS)
+def test_any_spacing_with_the_default_placement(coupling):
+    """The conforming placement puts particles on the interface nodes at any spacing (0.4 on
+    cells of 1/3 here): the linear patch test to round-off."""
+    assert patch_test_error(coupling, spacing=0.4, consistent=True) <= 1e-10
 
 
 @pytest.mark.parametrize("coupling", ["ramp", "ramp-cubic"])

@@ -90,7 +90,13 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
         help="MLS d_max (default: 2.0; 2.5 for the ramp couplings, see mf.DEFAULT_DILATION)",
     )
     p.add_argument("--quadrature-degree", type=int, default=7, help="7: 4 x 4 Gauss on quads")
-    p.add_argument("--consistent", action="store_true", help="variationally consistent integration")
+    p.add_argument(
+        "--consistent",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="variationally consistent integration (default: the library's, on for EFG and the "
+        "variational couplings, off for master-slave); --no-consistent: the papers' plain Gauss",
+    )
     p.add_argument("--overlap", type=int, default=2, help="bridging: band width in cells")
     p.add_argument(
         "--hybrid-variant",
@@ -101,8 +107,9 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument(
         "--constraint",
         choices=("points", "integral"),
-        default="points",
-        help="bridging: tie the band at its particles (eq. 79-81) or over its cells (eq. 52)",
+        default="integral",
+        help="bridging: tie the band over its cells (eq. 52, the default) or at its particles "
+        "(eq. 79-81, the paper's)",
     )
     p.add_argument("--cell", choices=("quadrilateral", "triangle"), default="quadrilateral")
     p.add_argument("--json", default=None, help="write the results as JSON")
@@ -212,14 +219,27 @@ def dilation(args, method: str) -> float:
     return mf.DEFAULT_DILATION.get(method, 2.0)
 
 
+def consistent(args, method: str) -> bool | None:
+    """Whether a method runs with consistent integration: ``--consistent`` /
+    ``--no-consistent``, or the library's default (on for EFG and the variational couplings, off
+    for master-slave); ``None`` for FE."""
+    if method == "fe":
+        return None
+    if args.consistent is not None:
+        return args.consistent
+    return method != "master-slave"
+
+
 def particle_options(args, method: str) -> dict:
     """The particle-side options shared by every meshfree method."""
-    return {
+    options = {
         "weight": args.weight,
         "dilation": dilation(args, method),
         "quadrature_degree": args.quadrature_degree,
-        "consistent": args.consistent,
     }
+    if args.consistent is not None:  # else the library's default
+        options["consistent"] = args.consistent
+    return options
 
 
 def run_efg(msh, args, beam, material, h):
@@ -395,7 +415,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
                 "plane": args.plane,
                 "weight": args.weight if method != "fe" else None,
                 "dilation": dilation(args, method) if method != "fe" else None,
-                "consistent": args.consistent if method != "fe" else None,
+                "consistent": consistent(args, method),
             }
             records.append(rec)
             if probe_points is not None:

@@ -24,8 +24,8 @@
 #   (they are 4-15 % below it); edge-to-edge with ``--consistent`` is far below FE on coarse
 #   meshes (0.17 x at h = 3, 0.54 x at 0.5) and approaches it from below at L2 rates 1.69, 1.79;
 # * efg: L2 rate in [2.0, 3.2], energy rate in [1.0, 1.5], L2 error <= 0.15 x FE;
-# * master-slave and hybrid, first order (see ``dolfinx_meshfree.master_slave``): their own
-#   rate ranges, and an L2 error <= K (D / h) x FE (their ratio to FE grows like 1 / h).
+# * master-slave (first layer on the interface) and hybrid (HA-F): L2 rate in [1.8, 2.5] and
+#   [1.8, 2.3], L2 error <= 1.0 and 1.05 x pure FE.
 #
 # Every option of ``demos/cantilever.py`` applies (``--method``, ``--h``, ``--E``, ``--cell``,
 # ``--consistent``, ...; the probes excepted), plus those below. Plots need matplotlib (Debian:
@@ -67,15 +67,20 @@ PAPER_RATES = {
     "hybrid": (1.23, 1.23, 1.13),
 }
 #: Rates are judged on the refinements to h <= ASYMPTOTIC_H (16 cells through the depth of the
-#: default beam); the coarser steps are pre-asymptotic (hybrid 1.47 at 3 -> 1.5, edge-to-edge
-#: with --consistent 0.83).
+#: default beam); the coarser steps are pre-asymptotic (edge-to-edge with consistent
+#: integration 0.83 at 3 -> 1.5).
 ASYMPTOTIC_H = 0.75
 #: (L2, energy) rate ranges of those refinements, by method and --consistent (None: either).
-#: Measured on h = 3, 1.5, 1, 0.75, 0.5 (steps to 0.75 and 0.5; without / with --consistent):
+#: Measured on h = 3, 1.5, 1, 0.75, 0.5 (steps to 0.75 and 0.5; plain Gauss / consistent):
 #: fe 1.99 2.00 / energy 1.00 1.00; lagrange 2.00 2.00 (both) / 1.00 1.00; edge-to-edge 1.99 2.00
 #: / 1.69 1.79, energy 1.00 1.00; ramp 1.98 1.99, ramp-cubic 1.98 1.99 / energy 0.99; bridging
-#: 2.03 2.05 / energy 0.98 0.98; efg 2.62 2.55 / 2.51 2.30, energy 1.27 1.23; master-slave
-#: 1.15 1.10 / 2.15 2.15, energy 0.58 0.56 (both); hybrid 1.13 1.10, energy 1.14 1.09.
+#: 2.03 2.05 (points) / 2.01 2.00 (integral, the default), energy 0.98 / 1.00; efg 2.62 2.55 / 2.51 2.30,
+#: energy 1.27 1.23; master-slave (first layer, plain) 2.06 2.04, energy 0.98 0.98; hybrid
+#: (HA-F: centred particles, smoothed strains) 2.03 2.02, energy 1.04 1.03. Edge-to-edge with
+#: consistent integration approaches FE's error from below (0.17 x FE at h = 3) and its rate
+#: rises to 2 under refinement: 1.75, 1.87, 1.91 on the steps to h = 0.5, 0.375, 0.25
+#: (demos/cantilever.py --h 1 0.5 0.375 0.25); so does bridging with consistent integration and
+#: --constraint points (1.48, 1.65 here; 1.57, 1.74, 1.79 there), which this check fails.
 RATE_BOUNDS = {
     ("fe", None): ((1.8, 2.2), (0.9, 1.1)),
     **{(m, None): ((1.8, 2.2), (0.9, 1.1)) for m in ("lagrange", "ramp", "ramp-cubic")},
@@ -83,20 +88,21 @@ RATE_BOUNDS = {
     ("edge-to-edge", False): ((1.8, 2.2), (0.9, 1.1)),
     ("edge-to-edge", True): ((1.5, 2.2), (0.9, 1.1)),  # pre-asymptotic from below FE: 1.69, 1.79
     ("efg", None): ((2.0, 3.2), (1.0, 1.5)),
-    ("master-slave", False): ((0.95, 1.4), (0.4, 0.8)),
-    ("master-slave", True): ((1.8, 2.5), (0.4, 0.8)),
-    ("hybrid", None): ((0.95, 1.35), (0.9, 1.3)),
+    # master-slave with --consistent does not converge (its slaves on Gamma_I; see
+    # dolfinx_meshfree.master_slave): not a default, and not checked
+    ("master-slave", False): ((1.8, 2.5), (0.8, 1.2)),
+    ("hybrid", None): ((1.8, 2.3), (0.9, 1.2)),
 }
-#: L2 error / pure FE's at the same h must stay <= FACTOR, or <= FACTOR D / h (first-order
-#: methods: "per_h"). Measured (without / with --consistent, h = 3 ... 0.5): lagrange 0.89-0.90,
-#: edge-to-edge 0.92-0.92 / 0.17-0.54, ramp 0.85-0.89, ramp-cubic 0.86-0.89, bridging
-#: 0.91-0.96 (both); efg 0.017-0.067; master-slave ratio x h / D 0.26-0.40 / 0.10-0.40; hybrid
-#: ratio x h / D 0.48-0.81.
+#: L2 error / pure FE's at the same h must stay <= FACTOR, or <= FACTOR D / h ("per_h", for a
+#: first-order variant such as master-slave with slaves="band"). Measured (plain Gauss /
+#: consistent, h = 3 ... 0.5): lagrange 0.89-0.90, edge-to-edge 0.92-0.92 / 0.17-0.54, ramp
+#: 0.85-0.89, ramp-cubic 0.86-0.89, bridging 0.91-0.96 / 0.90-0.93 (integral); efg 0.017-0.067;
+#: master-slave 0.65-0.78; hybrid (HA-F) 0.82-0.93.
 ERROR_BOUNDS = {
     **{m: (1.05, False) for m in ("lagrange", "edge-to-edge", "ramp", "ramp-cubic", "bridging")},
     "efg": (0.15, False),
-    "master-slave": (0.8, True),
-    "hybrid": (1.6, True),
+    "master-slave": (1.0, False),
+    "hybrid": (1.05, False),
 }
 TIMES = ("time_setup", "time_assemble", "time_solve", "time_total")
 # -
@@ -196,7 +202,7 @@ def run_case(args, comm, method: str, h: float, material, beam) -> dict:
         "cell": args.cell,
         "weight": args.weight if method != "fe" else None,
         "dilation": cantilever.dilation(args, method) if method != "fe" else None,
-        "consistent": args.consistent if method != "fe" else None,
+        "consistent": cantilever.consistent(args, method),
         "depth": args.D,
     }
 

@@ -435,7 +435,12 @@ def main(argv: list[str] | None = None) -> list[dict]:
     args = parse(argv)
     comm = MPI.COMM_WORLD
     fe_cache: dict = {}
-    records = [run_case(comm, c, fe_cache=fe_cache) for c in cases(args)]
+    records = []
+    for c in cases(args):
+        records.append(run_case(comm, c, fe_cache=fe_cache))
+        if comm.rank == 0:  # progress, on stderr
+            print(f"{c.key}: {cell(records[-1])} ({records[-1]['seconds']:.1f} s)",
+                  file=sys.stderr, flush=True)  # fmt: skip
     report(records, comm)
     if args.json and comm.rank == 0:
         pathlib.Path(args.json).parent.mkdir(parents=True, exist_ok=True)

@@ -89,3 +89,18 @@ def test_plug_into_existing_model_demo(shared_dir):
         data = json.loads(out.read_text())
         assert data["ranks"] == comm.size
         assert 1.8 <= data["rates_l2"]["lagrange"] <= 2.4  # measured 2.05 (h = 0.2 -> 0.1)
+
+
+def test_plug_demo_two_ranks_equal_serial():
+    """The bushing's errors on the world communicator (2 ranks under mpirun) equal those of the
+    same run on each rank alone (COMM_SELF, the serial answer) to 1e-10 relative, for a
+    coupling of each family (measured 2.5e-12 and below)."""
+    demo = load_demo("plug_into_existing_model")
+    args = demo.parse([])
+    couplings = ["lagrange", "ramp", "bridging", "master-slave"]
+    world = demo.run(MPI.COMM_WORLD, args, 0.2, couplings)
+    alone = demo.run(MPI.COMM_SELF, args, 0.2, couplings)
+    for w, a in zip(world, alone, strict=True):
+        assert w["method"] == a["method"]
+        for key in ("l2", "energy", "hoop"):
+            assert abs(w[key] - a[key]) <= 1e-10 * abs(a[key]), (w["method"], key)

@@ -443,7 +443,10 @@ def main(argv: list[str] | None = None) -> list[dict]:
         with open(args.json, "w") as f:
             json.dump(records[0] if len(records) == 1 else records, f, indent=1)
     if not args.no_check:
-        check(records, comm)
+        defaults = vars(parse([]))
+        ignored = {"method", "json", "xdmf", "probe_in", "probe_out", "no_check", "variant"}
+        default_run = all(v == defaults.get(k) for k, v in vars(args).items() if k not in ignored)
+        check(records, comm, default_run)
     return records
 
 
@@ -499,13 +502,32 @@ def report(records: list[dict], comm) -> None:
     )
 
 
-def check(records: list[dict], comm) -> None:
+#: Velocity error bounds at t1 and t2 of the default run (about 20,000 nodes + particles, ratio
+#: about 4, pulse at 30 mm, quartic weight): about twice the larger of the two measured errors
+#: (fe 5.9e-5, efg 5.5e-5, lagrange / edge-to-edge / master-slave 1.22e-4, bridging 1.21e-4,
+#: ramp / ramp-cubic 4.55e-4, hybrid HA-F 2.36e-4; lane A, 1 rank).
+DEFAULT_RUN_BOUNDS = {
+    "fe": 1.2e-4,
+    "efg": 1.1e-4,
+    "lagrange": 2.5e-4,
+    "edge-to-edge": 2.5e-4,
+    "master-slave": 2.5e-4,
+    "bridging": 2.5e-4,
+    "ramp": 9.1e-4,
+    "ramp-cubic": 9.1e-4,
+    "hybrid": 4.8e-4,
+}
+
+
+def check(records: list[dict], comm, default_run: bool = False) -> None:
     """The demo checks its own results.
 
     * the discrete energy of central differences is conserved to round-off (drift < 1e-9) and
       the constraint residual stays at round-off (< 1e-12);
     * every velocity error below 0.2; from 15,000 nodes on, below the paper's best coupled
-      error 0.0107 (bridging, Table III) at both times (the issue's target);
+      error 0.0107 (bridging, Table III) at both times (the issue's target), and in the default
+      run (``default_run``: the defaults of every option but ``--method``) below
+      :data:`DEFAULT_RUN_BOUNDS`;
     * hybrid, from 15,000 nodes on: the error grows by at most 10 % from t1 to t2 (the issue's
       target: no spurious reflection).
     """
@@ -524,8 +546,10 @@ def check(records: list[dict], comm) -> None:
             failures.append(f"{m}: constraint residual {r['constraint_residual']:.2e} >= 1e-12")
         bound = 0.0107 if r["nodes"] >= 15000 else 0.2
         for key in ("error_t1", "error_t2", "error_end"):
-            if r[key] is not None and not r[key] < bound:
-                failures.append(f"{m}: {key} {r[key]:.3e} >= {bound}")
+            tight = default_run and key != "error_end" and r["method"] in DEFAULT_RUN_BOUNDS
+            limit = DEFAULT_RUN_BOUNDS[r["method"]] if tight else bound
+            if r[key] is not None and not r[key] < limit:
+                failures.append(f"{m}: {key} {r[key]:.3e} >= {limit}")
     if failures:
         if comm.rank == 0:
             print("CHECK FAILED:\n  " + "\n  ".join(failures), file=sys.stderr)

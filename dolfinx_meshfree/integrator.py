@@ -1226,6 +1226,7 @@ def _lu(A: PETSc.Mat) -> PETSc.KSP:
     pc.setType(PETSc.PC.Type.LU)
     pc.setFactorSolverType("mumps")
     ksp.setUp()
+    pc.destroy()  # our handle only (the KSP keeps its PC): see petsc.solve_lu
     return ksp
 
 

@@ -92,3 +92,36 @@ def test_fieldsplit_equals_mumps_for_couplings(coupling):
     scale = np.abs(direct.coefficients).max()
     assert np.abs(split.coefficients - direct.coefficients).max() <= 1e-9 * scale
     assert np.abs(split.u.x.array - direct.u.x.array).max() <= 1e-9 * scale
+
+
+def test_repeated_lu_solves_release_their_factorisations():
+    """solve_lu destroys every handle it takes (KSP, PC, factor matrix): 40 MUMPS solves of a
+    3,000-dof system leave the resident memory where it was (it grew by 1.3 MB per solve when
+    the PC and factor handles were left to petsc4py, gigabytes over the robustness matrix).
+    Bound: 8 MB over the 40 solves (the leak would be about 40 MB)."""
+    import gc
+
+    from dolfinx_meshfree.petsc import solve_lu
+
+    import scipy.sparse as sp
+    from petsc4py import PETSc
+
+    def rss_mb() -> float:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * 4096 / 2**20
+
+    n = 3000
+    M = sp.diags([-1.0, 2.5, -1.0], [-1, 0, 1], shape=(n, n)).tocsr()
+    A = PETSc.Mat().createAIJ(size=(n, n), csr=(M.indptr, M.indices, M.data), comm=PETSc.COMM_SELF)
+    A.assemble()
+    b = A.createVecLeft()
+    b.set(1.0)
+    solve_lu(A, b).destroy()  # MUMPS's first-call allocations
+    gc.collect()
+    before = rss_mb()
+    for _ in range(40):
+        solve_lu(A, b).destroy()
+    gc.collect()
+    assert rss_mb() - before < 8.0
+    A.destroy()
+    b.destroy()

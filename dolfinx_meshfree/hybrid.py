@@ -247,7 +247,11 @@ class HybridElasticity:
         t0 = time.perf_counter()
         self.consistent = bool(consistent)
         self.variant, self.integration = variant, integration
-        self.spacing = particle_spacing_median(patch.particles.positions)
+        # the median nearest-neighbour distance, but not below the spacing the patch was asked
+        # for: the conforming placement's border particles (at the FE nodes) are closer than the
+        # grid, and a kernel sized on them leaves the interior particles of a coarse grid with
+        # too few neighbours (singular corrections at spacing 1.5 h)
+        self.spacing = max(particle_spacing_median(patch.particles.positions), patch.spacing or 0.0)
         if particles == "centred":
             patch = copy.copy(patch)
             patch.particles = centred_particles(patch, self.spacing)

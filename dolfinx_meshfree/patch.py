@@ -143,6 +143,8 @@ class ParticlePatch:
         values = np.where(self.in_patch[:num_owned], PATCH_TAG, FE_TAG).astype(np.int32)
         self.cell_tags = dolfinx.mesh.meshtags(mesh, tdim, owned, values)
         self.placement = placement
+        #: The particle spacing asked for (``None`` with ``placement="vertices"``).
+        self.spacing = None if spacing is None else float(spacing)
         if placement == "vertices":
             self.particles = ParticleSet.from_vertices(mesh, c)
         else:

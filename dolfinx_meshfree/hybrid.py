@@ -135,9 +135,11 @@ class HybridElasticity:
         V: Vector P1/Q1 space on the whole mesh (FE on the cells outside the patch).
         patch: :class:`~dolfinx_meshfree.ParticlePatch` on the same mesh.
         material: :class:`~dolfinx_meshfree.LinearElastic`, on both sides.
-        variant: ``"HA-S"`` (forces on the FE nodes by interface tractions, eq. 131–134, with the
-            visibility criterion) or ``"HA-F"`` (by interpolation from the integration points,
-            eq. 135).
+        variant: ``"HA-F"`` (default: forces on the FE nodes by interpolation from the
+            integration points, eq. 135, with centred particles and smoothed strains) or
+            ``"HA-S"`` (by interface tractions, eq. 131–134, with the visibility criterion). Over
+            the 135 cases of ``demos/robustness.py`` HA-F's median L2 error is 2.1 x plain FE's
+            and HA-S's 42 x (HA-S above 5 % relative error in 67 cases, HA-F in 28).
         smoothing: Smoothing length over the particle spacing (median nearest-neighbour
             distance); the kernel support is twice the smoothing length. The default 1.0 (support
             two spacings, as EFG's d_max = 2) was the most accurate of 1.0, 1.3, 1.6 on the
@@ -187,7 +189,7 @@ class HybridElasticity:
         V,
         patch: ParticlePatch,
         material: LinearElastic,
-        variant: str = "HA-S",
+        variant: str = "HA-F",
         smoothing: float = 1.0,
         quadrature_degree: int | None = None,
         hybrid_degree: int | None = None,

@@ -5,9 +5,13 @@ spacings {0.5 h, 0.75 h, h, 1.5 h, vertices} x loads {none, body, traction} at t
 against an exact quadratic solution (oracle: the polynomial itself, and the plain FE error of the
 same user model on the same mesh, computed independently by DOLFINx's own assembly). Targets:
 variational couplings within ``RATIO_MAX`` = 1.2x the FE L2 error on the finer mesh with an L2
-rate of at least 1.8; master–slave and hybrid an L2 rate of at least 1.0. Every case either
-meets them or is refused with a ``ValueError`` listed in :data:`REFUSALS` (the message must
-contain the listed fix); anything else fails.
+rate of at least 1.8; master–slave and hybrid an L2 rate of at least 1.0.
+
+Every case meets them, or is refused with a ``ValueError`` listed in :data:`REFUSALS`, or is a
+known miss of ``robustness_known_misses.json`` (case -> the ratio and rate measured when it was
+recorded, and why). A known miss must not get worse (ratio at most 2x, rate at most 0.5 below
+the recorded figures) and must still miss: one that meets the targets fails the test until it
+is removed from the list (as a strict xfail would).
 
 The full matrix (945 cases) runs serially in lane A; the other runs (2 ranks, lane B) take one
 spacing and load per test in rotation (every spacing and load still appears for every coupling),
@@ -16,7 +20,9 @@ so that CI stays short. ``ROBUSTNESS_FULL=1`` runs the full matrix in any run.
 
 from __future__ import annotations
 
+import json
 import os
+import pathlib
 
 import dolfinx_meshfree as mf
 
@@ -30,6 +36,11 @@ demo = load_demo("robustness")
 #: Cases that stop with a clear error, by (coupling, load): the fragment of the message that
 #: names the fix.
 REFUSALS: dict[tuple[str, str], str] = {}
+
+#: case key -> {"ratio", "rate", "why"}: the misses measured (demos/robustness.py --json).
+KNOWN_MISSES: dict[str, dict] = json.loads(
+    (pathlib.Path(__file__).parent / "robustness_known_misses.json").read_text()
+)
 
 FULL = os.environ.get("ROBUSTNESS_FULL") == "1" or (
     MPI.COMM_WORLD.size == 1 and not mf._compat.MODERN
@@ -57,11 +68,20 @@ def test_robustness_matrix(index, coupling, mesh, patch):
         case = demo.Case(coupling, mesh, patch, spacing, load)
         r = demo.run_case(comm, case, fe_cache=fe_cache)
         fix = REFUSALS.get((coupling, load))
+        known = KNOWN_MISSES.get(case.key)
         if r["status"] == "refused":
             if fix is None or fix not in r["message"]:
                 failures.append(f"{case.key}: refused: {r['message']}")
         elif fix is not None:
             failures.append(f"{case.key}: expected the refusal naming {fix!r}, but it ran")
+        elif known is not None:
+            if not r["misses"]:
+                failures.append(f"{case.key}: meets the targets now: remove it from the list")
+            elif r["ratio"] > 2.0 * known["ratio"] or r["rate"] < known["rate"] - 0.5:
+                failures.append(
+                    f"{case.key}: known miss got worse: ratio {r['ratio']:.3g} (recorded "
+                    f"{known['ratio']:.3g}), rate {r['rate']:.3g} (recorded {known['rate']:.3g})"
+                )
         elif r["misses"]:
             failures.append(f"{case.key}: {'; '.join(r['misses'])}")
     assert not failures, "\n".join(failures)

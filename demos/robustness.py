@@ -277,7 +277,7 @@ def _solve_hybrid(model: Model, patch) -> dict:
         b = exact.body_force(MATERIAL)
         problem.set_body_force(lambda x: np.tile(b, (x.shape[0], 1)))
     problem.add_dirichlet(model.dirichlet_facets, exact.displacement)
-    if model.traction_facets.size or model.V.mesh.comm.allreduce(model.traction_facets.size):
+    if model.V.mesh.comm.allreduce(model.traction_facets.size) > 0:  # collective: every rank
 
         def traction(x, n):
             return np.einsum("qij,qj->qi", MATERIAL.stress(exact.displacement_gradient(x)), n)

@@ -9,7 +9,8 @@
 # Exit status is non-zero if any run fails. pytest's exit code 5 ("no tests
 # collected") counts as a failure, like any other non-zero code.
 #
-# Environment: TEST_TIMEOUT (seconds per pytest run, default 900) so that a
+# Environment: TEST_TIMEOUT (seconds per pytest run, default 1800; the serial lane-A run,
+# which holds the full robustness matrix, takes about 8 minutes) so that a
 # deadlocked MPI test cannot eat the whole CI budget.
 set -euo pipefail
 
@@ -36,7 +37,7 @@ done
 
 lane_setup "$lane" # sets PY, LAUNCHER, PYMPI; exports OMP_NUM_THREADS=1
 cd "$REPO_ROOT"
-timeout_s=${TEST_TIMEOUT:-900}
+timeout_s=${TEST_TIMEOUT:-1800}
 
 failed=()
 # run_pytest LABEL CMD... : run one pytest invocation under a timeout and

@@ -37,13 +37,11 @@ from dataclasses import dataclass
 
 import dolfinx_meshfree as mf  # first: it loads the right MPI for the dolfinx_solver lane
 from dolfinx_meshfree import _compat
-from dolfinx_meshfree.petsc import solve_lu
 
 import dolfinx
 import numpy as np
 import ufl
 from mpi4py import MPI
-from petsc4py import PETSc
 
 MESHES = pathlib.Path(__file__).resolve().parent.parent / "meshes"
 COUPLINGS = (*mf.COUPLINGS, "hybrid")
@@ -225,19 +223,7 @@ def user_model(msh, load: str) -> Model:
 
 def solve_plain_fe(model: Model) -> dict:
     """The model as written: DOLFINx assembly and LU; its L2 and energy errors."""
-    a_form, L_form = _compat.create_form(model.a), _compat.create_form(model.L)
-    A = _compat.assemble_matrix(a_form, model.bcs)
-    b = _compat.assemble_vector(L_form)
-    _compat.apply_lifting(b, a_form, model.bcs)
-    b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-    _compat.set_bc(b, model.bcs)
-    x = solve_lu(A, b)
-    uh = dolfinx.fem.Function(model.V)
-    _compat.function_petsc_vec(uh).array[:] = x.array
-    uh.x.scatter_forward()
-    for obj in (A, b, x):
-        obj.destroy()
-    local = uh.x.array.reshape(-1, 2)
+    local = mf.solve_forms(model.a, model.L, model.bcs).u.x.array.reshape(-1, 2)
 
     def evaluate(q):
         t = mf.tabulate_in_cells(model.V, q.points, q.cells)

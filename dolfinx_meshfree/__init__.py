@@ -6,7 +6,8 @@ Public API (stable names):
   :class:`ShapeTable`; weight functions in :mod:`dolfinx_meshfree.kernels`;
 * FE basis at arbitrary points: :func:`tabulate_fe_basis`, :func:`evaluate_fe_function`;
 * particles: :class:`ParticleSet`;
-* solvers: :class:`EFGElasticity` (pure EFG), :func:`solve_fe_elasticity` (pure FE);
+* solvers: :class:`EFGElasticity` (pure EFG), :func:`solve_fe_elasticity` and
+  :func:`solve_forms` (pure FE: a material, or the user's own forms);
 * material and exact solutions: :class:`LinearElastic`, :class:`TimoshenkoBeam`;
 * output of explicit dynamics: :class:`DynamicsWriter` (XDMF of the FE fields and the particle
   cloud over time), :func:`read_particles`, :class:`ProgressBar`.
@@ -21,7 +22,7 @@ from .coupled import COUPLINGS, DEFAULT_DILATION, CoupledElasticity, CoupledSolu
 from .dynamics import DYNAMICS_METHODS, DynamicsResult, EnergyRecord, ExplicitDynamics
 from .efg import EFGElasticity, EFGSolution
 from .errors import error_norms
-from .fe import FESolution, solve_fe_elasticity
+from .fe import FESolution, solve_fe_elasticity, solve_forms
 from .fe_points import (
     PointsOutsideMeshError,
     ensure_points_in_mesh,
@@ -85,6 +86,7 @@ __all__ = [
     "quartic",
     "read_particles",
     "solve_fe_elasticity",
+    "solve_forms",
     "sph_cubic_spline",
     "tabulate_fe_basis",
     "tabulate_in_cells",

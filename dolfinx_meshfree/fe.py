@@ -18,7 +18,7 @@ from . import _compat
 from .materials import LinearElastic
 from .petsc import solve_lu
 
-__all__ = ["FESolution", "solve_fe_elasticity"]
+__all__ = ["FESolution", "solve_fe_elasticity", "solve_forms"]
 
 
 @dataclass
@@ -73,6 +73,19 @@ def solve_fe_elasticity(
         ug.interpolate(g)
         dofs = dolfinx.fem.locate_dofs_topological(V, fdim, np.asarray(facets, dtype=np.int32))
         bcs.append(dolfinx.fem.dirichletbc(ug, dofs))
+    solution = solve_forms(a, L, bcs)
+    solution.timings["setup"] += time.perf_counter() - t0
+    return solution
+
+
+def solve_forms(a: ufl.Form, L: ufl.Form, bcs: Sequence = ()) -> FESolution:
+    """A linear model solved as written for DOLFINx: ``a`` and ``L`` (UFL forms on one space),
+    ``DirichletBC``s lifted into the right-hand side, and the MUMPS LU of
+    :func:`~dolfinx_meshfree.petsc.solve_lu` (collective). The reference that the coupled runs
+    are measured against."""
+    from petsc4py import PETSc
+
+    t0 = time.perf_counter()
     a_form, L_form = _compat.create_form(a), _compat.create_form(L)
     setup = time.perf_counter() - t0
 
@@ -80,8 +93,6 @@ def solve_fe_elasticity(
     A = _compat.assemble_matrix(a_form, bcs)
     b = _compat.assemble_vector(L_form)
     _compat.apply_lifting(b, a_form, bcs)
-    from petsc4py import PETSc
-
     b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
     _compat.set_bc(b, bcs)
     assemble = time.perf_counter() - t1
@@ -89,6 +100,7 @@ def solve_fe_elasticity(
     t2 = time.perf_counter()
     x_vec = solve_lu(A, b)
     solve = time.perf_counter() - t2
+    V = a.arguments()[0].ufl_function_space()
     uh = dolfinx.fem.Function(V)
     n_owned = V.dofmap.index_map.size_local * V.dofmap.index_map_bs
     uh.x.array[:n_owned] = x_vec.getArray(readonly=True)

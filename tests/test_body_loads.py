@@ -124,36 +124,13 @@ def fe_errors(case: str) -> tuple[float, ...]:
 
 def plain_fe_error(msh, V, a, L, bcs) -> float:
     """The L2 error of the model solved as written (DOLFINx assembly, LU)."""
-    from dolfinx_meshfree.petsc import solve_lu
-
-    a_form, L_form = _compat.create_form(a), _compat.create_form(L)
-    A = _compat.assemble_matrix(a_form, bcs)
-    b = _compat.assemble_vector(L_form)
-    _compat.apply_lifting(b, a_form, bcs)
-    b.ghostUpdate(addv=ADD, mode=REVERSE)
-    _compat.set_bc(b, bcs)
-    x = solve_lu(A, b)
-    uh = dolfinx.fem.Function(V)
-    uh.x.array[: x.getLocalSize()] = x.getArray()
-    uh.x.scatter_forward()
-    for obj in (A, b, x):
-        obj.destroy()
-    local = uh.x.array.reshape(-1, 2)
+    local = mf.solve_forms(a, L, bcs).u.x.array.reshape(-1, 2)
 
     def evaluate(q):
         t = mf.tabulate_in_cells(V, q.points, q.cells)
         return t.values @ local, t.gradient(local)
 
     return l2_error(msh, evaluate)
-
-
-def _petsc_modes():
-    from petsc4py import PETSc
-
-    return PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE
-
-
-ADD, REVERSE = _petsc_modes()
 
 
 def coupled_errors(case: str, coupling: str) -> np.ndarray:

@@ -150,34 +150,8 @@ def test_body_loads_partition_of_unity():
 
 
 def plain_dolfinx(V, a, L, bcs):
-    """The model solved as written, by DOLFINx assembly and an LU solve."""
-    from dolfinx_meshfree.petsc import solve_lu
-
-    a_form, L_form = _compat.create_form(a), _compat.create_form(L)
-    A = _compat.assemble_matrix(a_form, bcs)
-    b = _compat.assemble_vector(L_form)
-    _compat.apply_lifting(b, a_form, bcs)
-    b.ghostUpdate(addv=dolfinx_add(), mode=dolfinx_reverse())
-    _compat.set_bc(b, bcs)
-    x = solve_lu(A, b)
-    u = dolfinx.fem.Function(V)
-    u.x.array[: x.getLocalSize()] = x.getArray()
-    u.x.scatter_forward()
-    for obj in (A, b, x):
-        obj.destroy()
-    return u
-
-
-def dolfinx_add():
-    from petsc4py import PETSc
-
-    return PETSc.InsertMode.ADD
-
-
-def dolfinx_reverse():
-    from petsc4py import PETSc
-
-    return PETSc.ScatterMode.REVERSE
+    """The model (``V`` the space of ``a``) solved as written: DOLFINx assembly and LU."""
+    return mf.solve_forms(a, L, bcs).u
 
 
 def test_gravity_against_fine_fe():

@@ -482,8 +482,8 @@ def check(records: list[dict], comm) -> None:
             failures.append(f"{r['method']} h={r['h']}: L2 error {r['error_l2']:.3e} >= {cap}")
     fe = {r["h"]: r["error_l2"] for r in records if r["method"] == "fe"}
     # Master-slave is first order by construction (issue: "Master-slave measured and explained";
-    # see dolfinx_meshfree.master_slave): the slave layer moves rigidly with the interface edges,
-    # dropping the strain across a band of width h. Measured L2 rates 1.36/1.21/1.14/1.10 for
+    # see dolfinx_meshfree.couplings.master_slave): the slave layer moves rigidly with the interface
+    # edges, dropping the strain across a band of width h. Measured L2 rates 1.36/1.21/1.14/1.10 for
     # h = 3..0.5 (Rabczuk et al. 2006, Table II: 1.23/1.23/1.13), energy 0.56-0.66, so it is
     # checked against the paper's rate 1.1 instead of pure FE and the optimal rates.
     # The hybrid coupling is checked the same way: its particle side (corrected SPH gradients,

@@ -89,7 +89,7 @@ RATE_BOUNDS = {
     ("edge-to-edge", True): ((1.5, 2.2), (0.9, 1.1)),  # pre-asymptotic from below FE: 1.69, 1.79
     ("efg", None): ((2.0, 3.2), (1.0, 1.5)),
     # master-slave with --consistent does not converge (its slaves on Gamma_I; see
-    # dolfinx_meshfree.master_slave): not a default, and not checked
+    # dolfinx_meshfree.couplings.master_slave): not a default, and not checked
     ("master-slave", False): ((1.8, 2.5), (0.8, 1.2)),
     ("hybrid", None): ((1.8, 2.3), (0.9, 1.2)),
 }

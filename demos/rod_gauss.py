@@ -22,7 +22,8 @@
 #   al. 2006, eq. 93–96, Table I); bridging weights stiffness and masses across a band of
 #   ``--overlap`` cell layers (eq. 46–48, 88–89); the ramp couplings blend FE and particles in
 #   the interface elements (Belytschko et al. 1995, eq. 3.15), whose MLS supports span the
-#   interface element at any ``k`` (radii ``(d_max - 1) h / k + h``, see ``mf.ramp.ramp_mls``);
+#   interface element at any ``k`` (radii ``(d_max - 1) h / k + h``, see
+#   ``mf.couplings.ramp.ramp_mls``);
 #   master–slave ties the first particle layer to the FE edges (eq. 27–28).
 # * ``hybrid`` (sec. 5.5): SPH particles with the FE integration points in their sums, forces on
 #   the FE nodes by interpolation (HA-F). The particles sit at the centres of a lattice of

@@ -119,7 +119,7 @@ def body_load_vectors(
             ``alpha`` in a bridging band) and the MLS values there, (len(q) x n) CSR with
             columns in original particle order; ``None`` without particles.
         interface_rule: Ramp couplings: ``(q, table)``, the interface cells' rule and the blended
-            functions there (:meth:`~dolfinx_meshfree.ramp.RampInterface.table`, columns
+            functions there (:meth:`~dolfinx_meshfree.couplings.ramp.RampInterface.table`, columns
             ``[local FE nodes | particles]``).
         comm: The communicator (default: ``V``'s mesh's).
 

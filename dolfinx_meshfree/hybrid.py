@@ -90,7 +90,7 @@ from petsc4py import PETSc
 
 from . import _compat
 from .body_loads import CallableBodyForce, body_load_vectors
-from .coupled import (
+from .couplings.base import (
     CoupledSolution,
     CouplingOperators,
     cell_indicator,

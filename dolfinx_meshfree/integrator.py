@@ -210,8 +210,8 @@ class ExplicitDynamics:
         V, mls, particles, mesh, in_patch, patch: What evaluation needs: the FE space, the MLS
             approximation and its particles, the mesh, the patch flag of each local cell.
         interface: The coupling's interface object for evaluation: a
-            :class:`~dolfinx_meshfree.ramp.RampInterface` (blended interface cells) or a
-            :class:`~dolfinx_meshfree.bridging.BridgingBand` (weighted band cells).
+            :class:`~dolfinx_meshfree.couplings.ramp.RampInterface` (blended interface cells) or a
+            :class:`~dolfinx_meshfree.couplings.bridging.BridgingBand` (weighted band cells).
         reduction: ``(T_PF, S)`` when the particle field holds master particles only
             (master–slave): the particle coefficients are ``T_PF d_FE + S d_M``.
         body_load: ``body_load(b) -> (fe, particles)``: the consistent loads of a body force
@@ -386,7 +386,7 @@ class ExplicitDynamics:
         of the reference configuration, computed once at t = 0), for lagrange, edge-to-edge
         and master-slave. ``slaves="coincident"`` (master-slave only) fixes the particles on
         the interface to the FE nodes they sit on: Johnson's coupling, Rabczuk et al. 2006,
-        sec. 5.1.1, eq. 15–16 (see :mod:`~dolfinx_meshfree.master_slave`).
+        sec. 5.1.1, eq. 15–16 (see :mod:`~dolfinx_meshfree.couplings.master_slave`).
         """
         from .dynamic_builders import build_coupled
 
@@ -1071,9 +1071,9 @@ class ExplicitDynamics:
         if fe is None:
             x = ensure_points_in_mesh(self.mesh, points)
             return self.mls.tabulate(x, 0).values @ coeffs
-        from .bridging import BridgingBand, BridgingSolution
-        from .coupled import CoupledSolution
-        from .ramp import RampInterface
+        from .couplings.base import CoupledSolution
+        from .couplings.bridging import BridgingBand, BridgingSolution
+        from .couplings.ramp import RampInterface
 
         ramp = self.interface if isinstance(self.interface, RampInterface) else None
         sol = CoupledSolution(

@@ -45,7 +45,8 @@ from ufl.corealg.traversal import unique_pre_traversal
 
 from . import _compat
 from .body_loads import BodyForce
-from .coupled import COUPLINGS, CoupledElasticity, CoupledSolution, facet_nodes
+from .coupled import COUPLINGS, CoupledElasticity, CoupledSolution
+from .couplings.base import facet_nodes, node_flags
 from .fe_points import evaluate_fe_function
 from .materials import LinearElastic
 from .parallel import raise_on_all_ranks
@@ -132,7 +133,7 @@ class CoupledLinearProblem:
                 )
 
         raise_on_all_ranks(patch.comm, check_components)
-        problem._strong.append((fixed, values))
+        problem.strong.append((fixed, values))
         # exterior facets whose nodes are all constrained, of patch cells (they constrain the
         # particles) and of FE cells with a node on the interface (the nodes are fixed strongly
         # anyway; the ramp's interface cells constrain the particle part of their blended
@@ -142,8 +143,8 @@ class CoupledLinearProblem:
         facets = boundary_facets(msh)
         nodes = facet_nodes(V, facets)
         fdim = msh.topology.dim - 1
-        gamma = problem._node_flags(
-            dolfinx.fem.locate_dofs_topological(V, fdim, patch.interface_facets)
+        gamma = node_flags(
+            problem.V, dolfinx.fem.locate_dofs_topological(V, fdim, patch.interface_facets)
         )
         f2c = msh.topology.connectivity(fdim, fdim + 1)
         beside_patch = patch.in_patch[np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]]]
@@ -155,8 +156,8 @@ class CoupledLinearProblem:
         if patch.comm.allreduce(bc_facets.size):
             problem.add_dirichlet(bc_facets, lambda x, g=g: evaluate_fe_function(g, x))
         # constrained nodes that neither an FE cell nor a constrained patch facet carries
-        active = problem._node_flags(_compat.dofmap_array(V)[patch.fe_cells].ravel())
-        on_facet = problem._node_flags(nodes[on].ravel())
+        active = node_flags(problem.V, _compat.dofmap_array(V)[patch.fe_cells].ravel())
+        on_facet = node_flags(problem.V, nodes[on].ravel())
         n_owned = V.dofmap.index_map.size_local
         lone = np.flatnonzero((fixed & ~active & ~on_facet)[:n_owned])
         xy = V.tabulate_dof_coordinates()[lone, :2]
@@ -190,7 +191,7 @@ class CoupledLinearProblem:
                 facets = np.intersect1d(_integral_entities(itg, msh), boundary_facets(msh))
                 problem.add_traction(facets.astype(np.int32), _FacetLoad(itg, v, facets, deg))
         if cell_integrals:
-            problem._body_forces = [FormBodyForce(cell_integrals, v, deg)]
+            problem.body_forces = [FormBodyForce(cell_integrals, v, deg)]
 
     # -- solve ----------------------------------------------------------------------------------
 

@@ -234,7 +234,8 @@ def _f(x):
 def _shares(problem):
     """(FE total, particle total) of a CoupledElasticity's body loads, summed over the ranks,
     through the coupling's own load function."""
-    from dolfinx_meshfree import bridging, ramp
+    from dolfinx_meshfree.couplings import bridging, ramp
+    from dolfinx_meshfree.couplings.assembly import body_loads
     from dolfinx_meshfree.quadrature import cell_quadrature
 
     coupling = problem.coupling
@@ -245,7 +246,7 @@ def _shares(problem):
     elif coupling == "bridging":
         fe, fp = bridging._body_loads(problem, bridging.BridgingBand(problem, problem.overlap))
     else:
-        fe, fp = problem._body_loads(problem.cell_indicator(~problem.patch.in_patch))
+        fe, fp = body_loads(problem, problem.cell_indicator(~problem.patch.in_patch))
     return COMM.allreduce(fe.reshape(-1, 2).sum(axis=0)), COMM.allreduce(fp.reshape(-1, 2).sum(0))
 
 

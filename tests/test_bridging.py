@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
-from dolfinx_meshfree.bridging import BridgingBand
+from dolfinx_meshfree.couplings.bridging import BridgingBand
 
 import numpy as np
 import pytest

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
-from dolfinx_meshfree.master_slave import solve_master_slave
+from dolfinx_meshfree.couplings.master_slave import solve_master_slave
 
 import dolfinx
 import numpy as np

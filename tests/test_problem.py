@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
+from dolfinx_meshfree.couplings.assembly import body_loads
 
 import dolfinx
 import numpy as np
@@ -141,7 +142,7 @@ def test_body_loads_partition_of_unity():
     L = ufl.dot(ufl.as_vector((1.0 + x[0], 2.0 * x[1] * x[0])), v) * ufl.dx
     patch = mf.ParticlePatch(msh, cells_where(msh, lambda m: m[:, 0] > 1.5), 0.25)
     coupled = mf.CoupledLinearProblem(a, L, [], patch, material=MAT).problem
-    fe, particle = coupled._body_loads(coupled.cell_indicator(~patch.in_patch))
+    fe, particle = body_loads(coupled, coupled.cell_indicator(~patch.in_patch))
     # int over [1.5, 2] x [0, 1] of (1 + x, 2 x y) = (0.5 + 0.875, 0.875)
     total = COMM.allreduce(particle.reshape(-1, 2).sum(axis=0))
     assert np.allclose(total, [1.375, 0.875], rtol=1e-12)

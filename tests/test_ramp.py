@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
-from dolfinx_meshfree.ramp import RampInterface
+from dolfinx_meshfree.couplings.ramp import RampInterface
 
 import numpy as np
 import pytest

@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import numbers
 import time
+from typing import TYPE_CHECKING, ClassVar
 
 import dolfinx
 import numpy as np
@@ -56,14 +57,38 @@ from mpi4py import MPI
 from petsc4py import PETSc
 from scipy.sparse.linalg import spsolve
 
-from . import _compat
-from .coupled import CoupledSolution, _fe_constraint_block, _particle_constraint_block
-from .efg import _vector_values
-from .fe_points import locate_points, tabulate_in_cells
-from .operators import consistent_gradients, load_vector, stiffness_matrix
-from .parallel import Layout, raise_on_all_ranks
-from .petsc import create_aij, create_vector
-from .quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
+from .. import _compat
+from ..efg import _vector_values
+from ..fe_points import locate_points, tabulate_in_cells
+from ..mls import MLS
+from ..operators import consistent_gradients, load_vector, stiffness_matrix
+from ..parallel import Layout, raise_on_all_ranks
+from ..patch import ParticlePatch
+from ..petsc import create_aij, create_vector
+from ..quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
+from .assembly import (
+    append_patch_conditions,
+    body_loads,
+    essential_conditions,
+    fe_active,
+    fe_stiffness,
+    fix_fe_rows,
+    sizes,
+    solve_and_gather,
+    split_facets,
+)
+from .base import (
+    CoupledSolution,
+    CouplingOperators,
+    facet_nodes,
+    fe_constraint_block,
+    fe_dof_layout,
+    node_flags,
+    particle_constraint_block,
+)
+
+if TYPE_CHECKING:  # annotations only: the model imports this module
+    from ..coupled import CoupledElasticity
 
 __all__ = [
     "CONSTRAINTS",
@@ -152,7 +177,7 @@ class BridgingBand:
         dofs = _compat.dofmap_array(V)
         self.coordinates = V.tabulate_dof_coordinates()[:, :2]
         iface = dolfinx.fem.locate_dofs_topological(V, tdim - 1, patch.interface_facets)
-        on_interface = problem._node_flags(iface)
+        on_interface = node_flags(problem.V, iface)
         ncl = patch.in_patch.size
         if band_width is None:
             self.layer, self.alpha = self._layers(problem, overlap, on_interface)
@@ -163,7 +188,9 @@ class BridgingBand:
             alpha = np.minimum(self._interface_distance(problem, on_interface) / band_width, 1.0)
             self.in_band = patch.in_patch & (alpha[dofs[:ncl]] < 1.0).any(axis=1)
             n_cells = msh.topology.index_map(tdim).size_local
-            self.in_band_node = problem._node_flags(dofs[:n_cells][self.in_band[:n_cells]].ravel())
+            self.in_band_node = node_flags(
+                problem.V, dofs[:n_cells][self.in_band[:n_cells]].ravel()
+            )
             self.alpha = np.where(self.in_band_node, alpha, 1.0)
         n_cells = msh.topology.index_map(tdim).size_local
         self.cells = np.flatnonzero(self.in_band[:n_cells]).astype(np.int32)
@@ -186,7 +213,6 @@ class BridgingBand:
     def _interface_distance(self, problem, on_interface: np.ndarray) -> np.ndarray:
         """Distance of every local node to the interface facets (segments gathered from every
         rank; 0 on the interface nodes). Collective."""
-        from .coupled import facet_nodes
 
         patch, comm = problem.patch, problem.patch.comm
         ends = self.coordinates[facet_nodes(self.V, patch.interface_facets)]  # (f, 2, 2)
@@ -216,7 +242,7 @@ class BridgingBand:
         depth = 0
         for k in range(1, overlap + 1):
             touch = (layer[owned_patch] == k - 1).any(axis=1)
-            flags = problem._node_flags(owned_patch[touch].ravel())
+            flags = node_flags(problem.V, owned_patch[touch].ravel())
             new = flags & (layer == far)
             layer[new] = k
             if not comm.allreduce(bool(np.any(new[:n_own])), op=MPI.LOR):
@@ -310,7 +336,7 @@ def _fe_weight(problem, band: BridgingBand):
 
 def _fe_stiffness(problem, band: BridgingBand) -> PETSc.Mat:
     """DOLFINx assembly of the FE form weighted by ``beta_FE`` (eq. 47-48, :func:`_fe_weight`)."""
-    return problem._fe_stiffness(_fe_weight(problem, band))
+    return fe_stiffness(problem, _fe_weight(problem, band))
 
 
 def _body_loads(problem, band: BridgingBand) -> tuple[np.ndarray, np.ndarray]:
@@ -325,7 +351,7 @@ def _body_loads(problem, band: BridgingBand) -> tuple[np.ndarray, np.ndarray]:
         w[b] = band.alpha_at(q.points[b], q.cells[b])
         return w
 
-    return problem._body_loads(_fe_weight(problem, band), alpha)
+    return body_loads(problem, _fe_weight(problem, band), alpha)
 
 
 def solve_bridging(problem, solver: str = "mumps"):
@@ -338,7 +364,7 @@ def solve_bridging(problem, solver: str = "mumps"):
     s = problem.material.E
     p = problem.penalty
     pdofs = P.petsc_dofs(2)
-    fe_layout, l2g = problem._fe_layout()
+    fe_layout, l2g = fe_dof_layout(problem.V)
     pl = P.dof_layout()
     t0 = time.perf_counter()
 
@@ -352,12 +378,12 @@ def solve_bridging(problem, solver: str = "mumps"):
     tq = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(q.points))
 
     # essential conditions: strongly on FE nodes of FE and band facets, multipliers on patch facets
-    _, patch_bc, dq, dtabs, ubc, is_bc = problem._essential_conditions(
-        lambda f_p: f_p[band.in_band[_first_cells(msh, f_p)]]
+    _, patch_bc, dq, dtabs, ubc, is_bc = essential_conditions(
+        problem, lambda f_p: f_p[band.in_band[_first_cells(msh, f_p)]]
     )
     _weight_band_facets(band, dq)
     # active FE nodes: nodes of FE cells and band cells
-    active = problem._fe_active(np.concatenate([patch.fe_cells, band.cells]))
+    active = fe_active(problem, np.concatenate([patch.fe_cells, band.cells]))
     fixed_local = is_bc | ~active
     x_fix = np.where(np.repeat(is_bc, 2), ubc.x.array, 0.0)
 
@@ -371,7 +397,7 @@ def solve_bridging(problem, solver: str = "mumps"):
         test = _consistent_test_gradients(
             problem, band, q, w, tq, (t_fe, t_p, cw), ids, ml.size_global // 2
         )
-    setup = problem._setup + time.perf_counter() - t0
+    setup = problem.setup_time + time.perf_counter() - t0
 
     t1 = time.perf_counter()
     Kq = stiffness_matrix(test or tq.gradients, w, problem.material, tq.gradients).tocoo()
@@ -381,16 +407,16 @@ def solve_bridging(problem, solver: str = "mumps"):
     fe_rows = (ids[M_fe.row[keep]], M_fe.col[keep], M_fe.data[keep])
     keep = ids[M_p.row] >= 0
     p_rows = (ids[M_p.row[keep]], M_p.col[keep], M_p.data[keep])
-    G_fe, g_rows, g_vals = _fe_constraint_block(
+    G_fe, g_rows, g_vals = fe_constraint_block(
         *fe_rows, False, s, fixed_local, ubc, l2g, (ml.size_global, fe_layout.size_global)
     )
-    G_p = _particle_constraint_block(*p_rows, s, pdofs, (ml.size_global, 2 * n))
+    G_p = particle_constraint_block(*p_rows, s, pdofs, (ml.size_global, 2 * n))
 
     # loads: tractions weighted by beta_FE and beta_P (eq. 49)
     f_fe_rows, f_fe_vals = [], []
     f_p = np.zeros(2 * n)
-    for facets, fn in problem._tractions:
-        f_fe_facets, f_p_facets = problem._split(facets)
+    for facets, fn in problem.tractions:
+        f_fe_facets, f_p_facets = split_facets(problem, facets)
         f_fe_facets = np.concatenate(
             [f_fe_facets, f_p_facets[band.in_band[_first_cells(msh, f_p_facets)]]]
         )
@@ -442,7 +468,7 @@ def solve_bridging(problem, solver: str = "mumps"):
     b_fe = create_vector(
         comm, fe_layout, cat([*f_fe_rows, np.zeros(0, np.int64)]), cat([*f_fe_vals, []])
     )
-    if problem._body_forces:  # weighted by beta_FE and beta_P like the tractions (eq. 49)
+    if problem.body_forces:  # weighted by beta_FE and beta_P like the tractions (eq. 49)
         fe_body, p_body = _body_loads(problem, band)
         b_fe.array[:] += fe_body
         f_p += p_body
@@ -453,7 +479,7 @@ def solve_bridging(problem, solver: str = "mumps"):
         K_pen = create_aij(comm, K_ff, fe_layout, fe_layout)
         K_fe.axpy(1.0, K_pen, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
         mats.append(K_pen)
-    x_bc = problem._fix_fe_rows(K_fe, b_fe, fixed_local, x_fix)
+    x_bc = fix_fe_rows(problem, K_fe, b_fe, fixed_local, x_fix)
     Kp = create_aij(comm, Kp_loc, pl, pl)
     b_p = create_vector(comm, pl, pdofs.ravel(), f_p)
     Gfe = create_aij(comm, G_fe, ml, fe_layout)
@@ -469,16 +495,16 @@ def solve_bridging(problem, solver: str = "mumps"):
     blocks = [[K_fe, Kfp, GfeT], [Kpf, Kp, GpT], [Gfe, Gp, None]]
     rhs = [b_fe, b_p, g]
     mats += [Kp, Gfe, GfeT, Gp, GpT]
-    dl = problem._append_patch_conditions(blocks, rhs, mats, patch_bc, dq, dtabs)
+    dl = append_patch_conditions(problem, blocks, rhs, mats, patch_bc, dq, dtabs)
     assemble = time.perf_counter() - t1
-    uh, coeffs, solve = problem._solve_and_gather(blocks, rhs, [*mats, x_bc], solver)
+    uh, coeffs, solve = solve_and_gather(problem, blocks, rhs, [*mats, x_bc], solver)
     sol = BridgingSolution(
         u=uh,
         coefficients=coeffs,
         mls=problem.mls,
         patch=patch,
         timings={"setup": setup, "assemble": assemble, "solve": solve},
-        sizes=problem._sizes(active, ml.size_global + dl.size_global),
+        sizes=sizes(problem, active, ml.size_global + dl.size_global),
     )
     sol.band = band
     return sol
@@ -602,7 +628,7 @@ def _constraint_tables(
     t_fe.eliminate_zeros()
     t_p = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(points, 0)).values.tocsr()
     if problem.constraint == "points":
-        seen = problem._node_flags(np.unique(t_fe.indices))
+        seen = node_flags(problem.V, np.unique(t_fe.indices))
         n_owned = V.dofmap.index_map.size_local
         blind = int(np.sum((band.in_band_node & ~seen)[:n_owned]))
         blind = comm.allreduce(blind)
@@ -627,9 +653,8 @@ def bridging_operators(problem):
     (eq. 57, 79–80) with unit scaling. The particle
     quadrature's weights include ``alpha``, so its row sums give the weighted masses of eq. 89;
     ``fe_weight`` is ``beta_FE`` for eq. 88. See
-    :class:`~dolfinx_meshfree.coupled.CouplingOperators`.
+    :class:`~dolfinx_meshfree.couplings.base.CouplingOperators`.
     """
-    from .coupled import CouplingOperators
 
     t0 = time.perf_counter()
     V, patch, P = problem.V, problem.patch, problem.patch.particles
@@ -637,7 +662,7 @@ def bridging_operators(problem):
     n, p = P.num_particles, problem.penalty
     pdofs = P.petsc_dofs(2)
     dof_map = pdofs.ravel()
-    fe_layout, l2g = problem._fe_layout()
+    fe_layout, l2g = fe_dof_layout(problem.V)
     pl = P.dof_layout()
     band = BridgingBand(problem, problem.overlap, problem.band_width)
     q = cell_quadrature(msh, problem.quadrature_degree, P.cells)
@@ -646,7 +671,7 @@ def bridging_operators(problem):
     w[b] *= band.alpha_at(q.points[b], q.cells[b])
     qa = QuadraturePoints(q.points, w, q.cells)
     tq = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(q.points))
-    active = problem._fe_active(np.concatenate([patch.fe_cells, band.cells]))
+    active = fe_active(problem, np.concatenate([patch.fe_cells, band.cells]))
 
     ids, ml = band.numbering(problem)
     t_fe, t_p, cw = _constraint_tables(problem, band)
@@ -662,7 +687,7 @@ def bridging_operators(problem):
     keep = ids[M_fe.row] >= 0
     zero = dolfinx.fem.Function(V)
     zero.x.array[:] = 0.0
-    G_fe, _, _ = _fe_constraint_block(
+    G_fe, _, _ = fe_constraint_block(
         ids[M_fe.row[keep]],
         M_fe.col[keep],
         M_fe.data[keep],
@@ -674,7 +699,7 @@ def bridging_operators(problem):
         (ml.size_global, fe_layout.size_global),
     )
     keep = ids[M_p.row] >= 0
-    G_p = _particle_constraint_block(
+    G_p = particle_constraint_block(
         ids[M_p.row[keep]], M_p.col[keep], M_p.data[keep], 1.0, pdofs, (ml.size_global, 2 * n)
     )
 
@@ -720,3 +745,25 @@ def bridging_operators(problem):
         interface=band,
         timings={"operators": time.perf_counter() - t0},
     )
+
+
+class BridgingCoupling:
+    """The bridging domain: an overlap band with energy weights and multipliers on the band's FE
+    nodes (Rabczuk et al. 2006, sec. 5.3)."""
+
+    name: ClassVar[str] = "bridging"
+    default_dilation: ClassVar[float] = 2.0
+    consistent_default: ClassVar[bool] = True
+    integrations: ClassVar[tuple[str, ...]] = ("cells",)
+    blended: ClassVar[bool] = True
+
+    def prepare_mls(self, mls: MLS, patch: ParticlePatch) -> MLS:
+        return mls
+
+    def solve(self, problem: CoupledElasticity, solver: str) -> CoupledSolution:
+        return solve_bridging(problem, solver)
+
+    def operators(
+        self, problem: CoupledElasticity, integration: str, slaves: str
+    ) -> CouplingOperators:
+        return bridging_operators(problem)

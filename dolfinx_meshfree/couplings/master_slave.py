@@ -96,6 +96,7 @@ h/4 grows from 2.6e-3 to 7.0e-3 (band: 1.6e-2 to 3.1e-2).
 from __future__ import annotations
 
 import time
+from typing import TYPE_CHECKING, ClassVar
 
 import dolfinx
 import numpy as np
@@ -104,11 +105,26 @@ from mpi4py import MPI
 from petsc4py import PETSc
 from scipy.spatial import cKDTree
 
-from . import _compat
-from .efg import facet_multipliers, particle_stiffness
-from .parallel import Layout, raise_on_all_ranks
-from .petsc import BlockSystem, create_aij, create_vector
-from .quadrature import facet_quadrature
+from .. import _compat
+from ..efg import facet_multipliers, particle_stiffness
+from ..mls import MLS
+from ..parallel import Layout, raise_on_all_ranks
+from ..patch import ParticlePatch
+from ..petsc import BlockSystem, create_aij, create_vector
+from ..quadrature import facet_quadrature
+from ..stress_points import check_integration
+from .assembly import (
+    essential_conditions,
+    fe_active,
+    fe_stiffness,
+    fix_fe_rows,
+    particle_rule,
+    traction_loads,
+)
+from .base import CoupledSolution, CouplingOperators, fe_dof_layout
+
+if TYPE_CHECKING:  # annotations only: the model imports this module
+    from ..coupled import CoupledElasticity
 
 __all__ = [
     "SLAVES",
@@ -323,7 +339,6 @@ def solve_master_slave(problem, solver: str = "mumps", slaves: str = "layer"):
     ``slaves``: which particles are slaves, see :class:`MasterSlaveLinks` (``"layer"``, the
     default of :meth:`CoupledElasticity.solve <dolfinx_meshfree.CoupledElasticity.solve>`).
     """
-    from .coupled import CoupledSolution
 
     V, patch, P = problem.V, problem.patch, problem.patch.particles
     comm = patch.comm
@@ -331,7 +346,7 @@ def solve_master_slave(problem, solver: str = "mumps", slaves: str = "layer"):
     n = P.num_particles
     s = problem.material.E
     pdofs = P.petsc_dofs(2)
-    fe_layout, _ = problem._fe_layout()
+    fe_layout, _ = fe_dof_layout(problem.V)
     pl = P.dof_layout()
     t0 = time.perf_counter()
 
@@ -339,8 +354,8 @@ def solve_master_slave(problem, solver: str = "mumps", slaves: str = "layer"):
     Kp_loc, _, _, kt = particle_stiffness(P, problem.mls, problem.material, deg, boundary)
 
     # essential conditions: FE side strongly, patch side by multipliers
-    _, patch_bc, dq, dtabs, ubc, is_bc = problem._essential_conditions()
-    active = problem._fe_active()
+    _, patch_bc, dq, dtabs, ubc, is_bc = essential_conditions(problem)
+    active = fe_active(problem)
 
     links = raise_on_all_ranks(
         comm, lambda: MasterSlaveLinks(problem, is_bc, ubc.x.array.reshape(-1, 2), slaves)
@@ -376,15 +391,19 @@ def solve_master_slave(problem, solver: str = "mumps", slaves: str = "layer"):
     srow = pdofs[free_mine].ravel()
     scol = ml.start + np.arange(ml.size_local)
     S_loc = sp.csr_matrix((np.ones(srow.size), (srow, scol)), shape=(2 * n, ml.size_global))
-    setup = problem._setup + time.perf_counter() - t0 - kt["assemble"]
+    setup = problem.setup_time + time.perf_counter() - t0 - kt["assemble"]
 
     t1 = time.perf_counter()
-    b_fe, f_p = problem._traction_loads()
+    b_fe, f_p = traction_loads(problem)
     # K_FE with strong conditions and inactive dofs (zero rows and columns, lifted into b_fe)
-    K_fe = problem._fe_stiffness()
+    K_fe = fe_stiffness(problem)
     n_owned = V.dofmap.index_map.size_local
-    x_bc = problem._fix_fe_rows(
-        K_fe, b_fe, is_bc | ~active, np.where(is_bc[:, None], ubc.x.array.reshape(-1, 2), 0.0)
+    x_bc = fix_fe_rows(
+        problem,
+        K_fe,
+        b_fe,
+        is_bc | ~active,
+        np.where(is_bc[:, None], ubc.x.array.reshape(-1, 2), 0.0),
     )
 
     Kp = create_aij(comm, Kp_loc, pl, pl)
@@ -498,7 +517,7 @@ def master_slave_operators(problem, integration: str = "cells", slaves: str = "l
     ``(T_PF, S)``: ``u_P = T_PF u_FE + S u_M`` where the slaves follow their edges (eq. 27) and
     ``S`` selects the free (master) particles, numbered by :attr:`master_layout` in PETSc
     particle order. The reduced stiffness is ``T^T K T`` and the forces on the slaves go to their
-    masters with ``T^T`` (eq. 28). See :class:`~dolfinx_meshfree.coupled.CouplingOperators`.
+    masters with ``T^T`` (eq. 28). See :class:`~dolfinx_meshfree.couplings.base.CouplingOperators`.
 
     Args:
         integration: ``"cells"`` or ``"stress-points"``: the rule of ``K_P`` (see
@@ -506,8 +525,6 @@ def master_slave_operators(problem, integration: str = "cells", slaves: str = "l
         slaves: ``"layer"`` or ``"coincident"`` (Johnson, eq. 15–16): see
             :class:`MasterSlaveLinks`.
     """
-    from .coupled import CouplingOperators
-    from .stress_points import check_integration
 
     check_integration(integration)
     t0 = time.perf_counter()
@@ -515,7 +532,7 @@ def master_slave_operators(problem, integration: str = "cells", slaves: str = "l
     comm = patch.comm
     n = P.num_particles
     pdofs = P.petsc_dofs(2)
-    fe_layout, l2g = problem._fe_layout()
+    fe_layout, l2g = fe_dof_layout(problem.V)
     pl = P.dof_layout()
     boundary = patch.boundary() if problem.consistent else None
     Kp_loc, q, tq, _ = particle_stiffness(
@@ -524,7 +541,7 @@ def master_slave_operators(problem, integration: str = "cells", slaves: str = "l
         problem.material,
         problem.quadrature_degree,
         boundary,
-        quadrature=problem._particle_rule(integration),
+        quadrature=particle_rule(problem, integration),
     )
     no_bc = np.zeros(l2g.size, dtype=bool)
     links = raise_on_all_ranks(
@@ -558,10 +575,10 @@ def master_slave_operators(problem, integration: str = "cells", slaves: str = "l
     S_loc = sp.csr_matrix((np.ones(srow.size), (srow, scol)), shape=(2 * n, ml.size_global))
     return CouplingOperators(
         coupling=problem.coupling,
-        K_fe=problem._fe_stiffness(),
+        K_fe=fe_stiffness(problem),
         K_p=create_aij(comm, Kp_loc, pl, pl),
         fe_weight=problem.cell_indicator(~patch.in_patch),
-        fe_active=problem._fe_active(),
+        fe_active=fe_active(problem),
         particle_quadrature=q,
         particle_table=tq.values.tocsr(),
         fe_layout=fe_layout,
@@ -571,3 +588,28 @@ def master_slave_operators(problem, integration: str = "cells", slaves: str = "l
         interface=links,
         timings={"operators": time.perf_counter() - t0},
     )
+
+
+class MasterSlaveCoupling:
+    """Particles rigidly linked to the FE boundary (Rabczuk et al. 2006, sec. 5.1.2).
+
+    First order by construction; plain Gauss quadrature by default (its slaves, not
+    multipliers, carry the interface traction that consistent integration's identity assumes).
+    """
+
+    name: ClassVar[str] = "master-slave"
+    default_dilation: ClassVar[float] = 2.0
+    consistent_default: ClassVar[bool] = False
+    integrations: ClassVar[tuple[str, ...]] = ("cells", "stress-points")
+    blended: ClassVar[bool] = False
+
+    def prepare_mls(self, mls: MLS, patch: ParticlePatch) -> MLS:
+        return mls
+
+    def solve(self, problem: CoupledElasticity, solver: str) -> CoupledSolution:
+        return solve_master_slave(problem, solver)
+
+    def operators(
+        self, problem: CoupledElasticity, integration: str, slaves: str
+    ) -> CouplingOperators:
+        return master_slave_operators(problem, integration, slaves)

@@ -44,6 +44,7 @@ to the right-hand side.
 from __future__ import annotations
 
 import time
+from typing import TYPE_CHECKING, ClassVar
 
 import dolfinx
 import numpy as np
@@ -52,15 +53,37 @@ from mpi4py import MPI
 from petsc4py import PETSc
 from scipy.spatial import cKDTree
 
-from . import _compat
-from .efg import _vector_values, particle_stiffness
-from .fe_points import tabulate_in_cells
-from .mls import MLS
-from .operators import consistent_gradients, load_vector, stiffness_matrix
-from .parallel import raise_on_all_ranks
-from .petsc import create_aij, create_vector
-from .quadrature import boundary_facets, cell_quadrature, facet_quadrature
-from .tables import ShapeTable
+from .. import _compat
+from ..efg import _vector_values, particle_stiffness
+from ..fe_points import tabulate_in_cells
+from ..mls import MLS
+from ..operators import consistent_gradients, load_vector, stiffness_matrix
+from ..parallel import raise_on_all_ranks
+from ..patch import ParticlePatch
+from ..petsc import create_aij, create_vector
+from ..quadrature import boundary_facets, cell_quadrature, facet_quadrature
+from ..tables import ShapeTable
+from .assembly import (
+    append_patch_conditions,
+    body_loads,
+    essential_conditions,
+    fe_active,
+    fe_stiffness,
+    fix_fe_rows,
+    sizes,
+    solve_and_gather,
+    split_facets,
+)
+from .base import (
+    CoupledSolution,
+    CouplingOperators,
+    facet_nodes,
+    fe_dof_layout,
+    node_flags,
+)
+
+if TYPE_CHECKING:  # annotations only: the model imports this module
+    from ..coupled import CoupledElasticity
 
 __all__ = ["RAMPS", "RampInterface", "ramp_mls", "ramp_operators"]
 
@@ -155,7 +178,7 @@ class RampInterface:
         self.num_particles = patch.particles.num_particles
         fdim = msh.topology.dim - 1
         nodes = dolfinx.fem.locate_dofs_topological(V, fdim, patch.interface_facets)
-        self.on_gamma = problem._node_flags(nodes)
+        self.on_gamma = node_flags(problem.V, nodes)
         self.coordinates = V.tabulate_dof_coordinates()[:, :2]
         dofs = _compat.dofmap_array(V)
         self.in_interface = ~patch.in_patch & self.on_gamma[dofs[: patch.in_patch.size]].any(axis=1)
@@ -212,7 +235,6 @@ class RampInterface:
         facets = np.asarray(facets, dtype=np.int32)
         if facets.size == 0:
             return facets
-        from .coupled import facet_nodes
 
         keep = self.in_interface[_first_cells(msh, facets)]
         keep &= self.on_gamma[facet_nodes(self.V, facets)].any(axis=1)
@@ -307,12 +329,11 @@ class RampInterface:
 def _fe_stiffness(problem, interface: RampInterface) -> PETSc.Mat:
     """DOLFINx assembly of the FE form on the pure FE cells (not interface, not patch)."""
     pure = ~problem.patch.in_patch & ~interface.in_interface
-    return problem._fe_stiffness(problem.cell_indicator(pure))
+    return fe_stiffness(problem, problem.cell_indicator(pure))
 
 
 def solve_ramp(problem, solver: str = "mumps"):
     """Assemble and solve the ramp-coupled system of ``problem`` (collective)."""
-    from .coupled import CoupledSolution
 
     V, patch, P = problem.V, problem.patch, problem.patch.particles
     comm = patch.comm
@@ -320,7 +341,7 @@ def solve_ramp(problem, solver: str = "mumps"):
     deg = problem.quadrature_degree
     n = P.num_particles
     pdofs = P.petsc_dofs(2)
-    fe_layout, l2g = problem._fe_layout()
+    fe_layout, l2g = fe_dof_layout(problem.V)
     pl = P.dof_layout()
     t0 = time.perf_counter()
 
@@ -337,7 +358,7 @@ def solve_ramp(problem, solver: str = "mumps"):
 
     # essential conditions: FE nodes strongly; patch facets and the particle part of interface
     # cells' facets by multipliers
-    fe_bc, patch_bc, dq, dtabs, ubc, is_bc = problem._essential_conditions()
+    fe_bc, patch_bc, dq, dtabs, ubc, is_bc = essential_conditions(problem)
     u_bc = ubc.x.array.reshape(-1, 2)
     for f, fn in fe_bc:
         f_i = blend.blended_facets(f)
@@ -352,10 +373,10 @@ def solve_ramp(problem, solver: str = "mumps"):
         dq.append(iq)
         dtabs.append(ShapeTable(iq.points, tab.values[:, n_loc:].tocsr(), []))
     # active FE nodes: nodes of FE cells (interface cells included) that are not on Gamma_E
-    active = problem._fe_active() & ~blend.on_gamma
+    active = fe_active(problem) & ~blend.on_gamma
     fixed_local = is_bc | ~active
 
-    setup = problem._setup + time.perf_counter() - t0 - kt["assemble"]
+    setup = problem.setup_time + time.perf_counter() - t0 - kt["assemble"]
 
     # interface cells: blended stiffness split into FE/particle blocks
     t1 = time.perf_counter()
@@ -398,8 +419,8 @@ def solve_ramp(problem, solver: str = "mumps"):
 
     # loads: FE facets of pure FE cells with the FE basis, of interface cells blended
     f_fe_rows, f_fe_vals = [], []
-    for facets, fn in problem._tractions:
-        f_fe_facets, f_p_facets = problem._split(facets)
+    for facets, fn in problem.tractions:
+        f_fe_facets, f_p_facets = split_facets(problem, facets)
         inter = blend.in_interface[_first_cells(msh, f_fe_facets)]
         for part, use_blend in ((f_fe_facets[~inter], False), (f_fe_facets[inter], True)):
             fq = facet_quadrature(msh, part, deg)
@@ -427,7 +448,7 @@ def solve_ramp(problem, solver: str = "mumps"):
     b_fe = create_vector(
         comm, fe_layout, cat([*f_fe_rows, np.zeros(0, np.int64)]), cat([*f_fe_vals, []])
     )
-    if problem._body_forces:  # pure FE cells with N_a, interface cells blended, patch phi_J
+    if problem.body_forces:  # pure FE cells with N_a, interface cells blended, patch phi_J
         fe_body, p_body = _body_loads(problem, blend, qi, ti)
         b_fe.array[:] += fe_body
         f_p += p_body
@@ -436,7 +457,7 @@ def solve_ramp(problem, solver: str = "mumps"):
     K_fe = _fe_stiffness(problem, blend)
     K_int = create_aij(comm, K_ff, fe_layout, fe_layout)
     K_fe.axpy(1.0, K_int, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-    x_bc = problem._fix_fe_rows(K_fe, b_fe, fixed_local, x_fix)
+    x_bc = fix_fe_rows(problem, K_fe, b_fe, fixed_local, x_fix)
     Kp = create_aij(comm, Kp_loc, pl, pl)
     b_p = create_vector(comm, pl, pdofs.ravel(), f_p)
     Kfp = create_aij(comm, K_fp, fe_layout, pl)
@@ -444,16 +465,16 @@ def solve_ramp(problem, solver: str = "mumps"):
     blocks = [[K_fe, Kfp], [Kpf, Kp]]
     rhs = [b_fe, b_p]
     mats = [K_fe, K_int, Kp, Kfp, Kpf]
-    dl = problem._append_patch_conditions(blocks, rhs, mats, patch_bc, dq, dtabs)
+    dl = append_patch_conditions(problem, blocks, rhs, mats, patch_bc, dq, dtabs)
     assemble = time.perf_counter() - t1 + kt["assemble"]
-    uh, coeffs, solve = problem._solve_and_gather(blocks, rhs, [*mats, x_bc], solver)
+    uh, coeffs, solve = solve_and_gather(problem, blocks, rhs, [*mats, x_bc], solver)
     return CoupledSolution(
         u=uh,
         coefficients=coeffs,
         mls=problem.mls,
         patch=patch,
         timings={"setup": setup, "assemble": assemble, "solve": solve},
-        sizes=problem._sizes(active, dl.size_global),
+        sizes=sizes(problem, active, dl.size_global),
         interface=blend,
     )
 
@@ -465,7 +486,7 @@ def _body_loads(problem, blend: RampInterface, q, tab: ShapeTable):
     ``phi_J`` on the patch cells. Returns the FE loads per owned dof and the particle loads
     (original interleaved order)."""
     pure = ~problem.patch.in_patch & ~blend.in_interface
-    return problem._body_loads(problem.cell_indicator(pure), interface_rule=(q, tab.values))
+    return body_loads(problem, problem.cell_indicator(pure), interface_rule=(q, tab.values))
 
 
 def _consistent_stiffness(problem, blend: RampInterface, q, tab: ShapeTable):
@@ -546,9 +567,8 @@ def ramp_operators(problem):
     ``K_FP``/``K_PF``: the interface cells' mixed blocks, all from the blended shape functions
     of eq. 3.15–3.16 (Belytschko et al. 1995). The interface quadrature and its blended table
     give the interface cells' share of the row-sum masses with the same shape functions
-    (eq. 4.5). See :class:`~dolfinx_meshfree.coupled.CouplingOperators`.
+    (eq. 4.5). See :class:`~dolfinx_meshfree.couplings.base.CouplingOperators`.
     """
-    from .coupled import CouplingOperators
 
     if problem.consistent:
         raise ValueError(
@@ -560,14 +580,14 @@ def ramp_operators(problem):
     comm, msh = patch.comm, V.mesh
     n = P.num_particles
     pdofs = P.petsc_dofs(2)
-    fe_layout, l2g = problem._fe_layout()
+    fe_layout, l2g = fe_dof_layout(problem.V)
     pl = P.dof_layout()
     blend = RampInterface(problem, cubic=RAMPS[problem.coupling])
     n_loc = blend.num_fe_columns
     Kp_loc, pq, ptab, _ = particle_stiffness(
         P, problem.mls, problem.material, problem.quadrature_degree
     )
-    active = problem._fe_active() & ~blend.on_gamma
+    active = fe_active(problem) & ~blend.on_gamma
     q = cell_quadrature(msh, problem.quadrature_degree, blend.cells)
     tab = raise_on_all_ranks(comm, lambda: blend.table(q.points, q.cells))
     Ki = stiffness_matrix(tab.gradients, q.weights, problem.material).tocoo()
@@ -604,3 +624,36 @@ def ramp_operators(problem):
         interface=blend,
         timings={"operators": time.perf_counter() - t0},
     )
+
+
+class _RampCoupling:
+    """Interface elements with a ramp function (Belytschko et al. 1995, sec. 3.2)."""
+
+    default_dilation: ClassVar[float] = 2.5
+    consistent_default: ClassVar[bool] = True
+    integrations: ClassVar[tuple[str, ...]] = ("cells",)
+    blended: ClassVar[bool] = True
+
+    def prepare_mls(self, mls: MLS, patch: ParticlePatch) -> MLS:
+        """Supports spanning the interface elements (:func:`ramp_mls`)."""
+        return ramp_mls(mls, patch)
+
+    def solve(self, problem: CoupledElasticity, solver: str) -> CoupledSolution:
+        return solve_ramp(problem, solver)
+
+    def operators(
+        self, problem: CoupledElasticity, integration: str, slaves: str
+    ) -> CouplingOperators:
+        return ramp_operators(problem)
+
+
+class RampCoupling(_RampCoupling):
+    """The linear ramp ``R = sum_{a in Gamma_E} N_a`` (Belytschko et al. 1995, eq. 3.13)."""
+
+    name: ClassVar[str] = "ramp"
+
+
+class CubicRampCoupling(_RampCoupling):
+    """The smoothed ramp ``3R^2 - 2R^3`` (Rabczuk et al. 2006, eq. 38–42)."""
+
+    name: ClassVar[str] = "ramp-cubic"

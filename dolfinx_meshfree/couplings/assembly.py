@@ -1,0 +1,251 @@
+"""The assembly steps every coupling shares, as functions of the model.
+
+Each takes the :class:`~dolfinx_meshfree.CoupledElasticity` that holds the model (space, patch,
+material, MLS, loads, essential conditions) and builds one piece of a coupled block system:
+the FE stiffness on the FE cells, the essential conditions (strong on FE facets, piecewise
+constant multipliers on patch facets, as :mod:`~dolfinx_meshfree.efg`), traction and body loads
+(each side with its own functions), and the solve of the PETSc nest with the particle
+coefficients gathered. The coupling modules compose them with their own interface terms.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING
+
+import dolfinx
+import numpy as np
+from petsc4py import PETSc
+
+from .. import _compat
+from ..body_loads import body_load_vectors
+from ..efg import _vector_values, facet_multipliers
+from ..fe_points import tabulate_in_cells
+from ..operators import load_vector
+from ..parallel import Layout, raise_on_all_ranks
+from ..petsc import BlockSystem, create_aij, create_vector
+from ..quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
+from ..stress_points import stress_point_quadrature
+from .base import fe_dof_layout, node_flags
+
+if TYPE_CHECKING:  # annotations only
+    from ..coupled import CoupledElasticity
+
+__all__ = [
+    "append_patch_conditions",
+    "body_loads",
+    "essential_conditions",
+    "fe_active",
+    "fe_stiffness",
+    "fix_fe_rows",
+    "particle_rule",
+    "sizes",
+    "solve_and_gather",
+    "split_facets",
+    "traction_loads",
+]
+
+
+def split_facets(problem: CoupledElasticity, facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Exterior facets beside FE cells and beside patch cells."""
+    msh = problem.patch.mesh
+    f2c = msh.topology.connectivity(msh.topology.dim - 1, msh.topology.dim)
+    first = np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]]
+    in_patch = problem.patch.in_patch[first]
+    return facets[~in_patch], facets[in_patch]
+
+
+def fe_stiffness(problem: CoupledElasticity, weight=None) -> PETSc.Mat:
+    """DOLFINx assembly of :meth:`fe_form` with ``weight`` (default: 1 on the FE cells, 0 on
+    the patch)."""
+    if weight is None:
+        weight = problem.cell_indicator(~problem.patch.in_patch)
+    return _compat.assemble_matrix(_compat.create_form(problem.fe_form(weight)))
+
+
+def fe_active(problem: CoupledElasticity, cells: np.ndarray | None = None) -> np.ndarray:
+    """Flag of every local FE node of the given owned cells (default: the FE cells)."""
+    cells = problem.patch.fe_cells if cells is None else cells
+    return node_flags(problem.V, _compat.dofmap_array(problem.V)[cells].ravel())
+
+
+def particle_rule(problem: CoupledElasticity, integration: str) -> QuadraturePoints | None:
+    """The stress-point rule of the patch, or ``None`` for the cells' Gauss rule."""
+    if integration == "cells":
+        return None
+    return stress_point_quadrature(problem.patch.particles)
+
+
+def body_loads(problem: CoupledElasticity, fe_weight, particle_weights=None, interface_rule=None):
+    """This coupling's shares of its body forces (collective): the FE loads per owned dof
+    (``fe_weight``: the FE energy's weight) and the particle loads (original interleaved
+    order) on the patch cells' Gauss rule, its weights multiplied by ``particle_weights(q)``
+    if given (the bridging band's ``alpha``); see
+    :func:`~dolfinx_meshfree.body_loads.body_load_vectors`."""
+    msh, comm, deg = problem.V.mesh, problem.patch.comm, problem.quadrature_degree
+    q = cell_quadrature(msh, deg, problem.patch.particles.cells)
+    if particle_weights is not None:
+        q = QuadraturePoints(q.points, q.weights * particle_weights(q), q.cells)
+    table = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(q.points, 0)).values
+    return body_load_vectors(
+        problem.body_forces, problem.V, fe_weight, deg, (q, table), interface_rule, comm
+    )
+
+
+def essential_conditions(problem: CoupledElasticity, also_strong=None) -> tuple:
+    """Split the essential conditions: strong on FE facets, multipliers on patch facets.
+
+    Args:
+        also_strong: Optional ``also_strong(patch_facets) -> facets`` naming patch facets whose
+            FE nodes are fixed strongly as well (the bridging band, where FE also lives).
+
+    Returns:
+        ``(fe_bc, patch_bc, quadratures, tables, ubc, is_bc)``: the ``(facets, value)`` pairs
+        on FE facets (strong) and on patch facets, the patch facets' quadratures and particle
+        tables (for :func:`~dolfinx_meshfree.efg.facet_multipliers`), the FE values as a
+        Function and the flag of every local FE node fixed strongly (collective).
+    """
+    V, comm = problem.V, problem.patch.comm
+    msh = V.mesh
+    deg = problem.quadrature_degree
+    fe_bc, patch_bc = [], []
+    for facets, fn in problem.dirichlet:
+        f_fe, f_p = split_facets(problem, facets)
+        if also_strong is not None:
+            f_fe = np.concatenate([f_fe, also_strong(f_p)])
+        fe_bc.append((f_fe, fn))
+        patch_bc.append((f_p, fn))
+    dq = [facet_quadrature(msh, f, deg) for f, _ in patch_bc]
+    dtabs = [raise_on_all_ranks(comm, lambda d=d: problem.mls.tabulate(d.points, 0)) for d in dq]
+    ubc = dolfinx.fem.Function(V)
+    ubc.x.array[:] = 0.0
+    is_bc = np.zeros(ubc.x.array.size // 2, dtype=bool)
+    coords = V.tabulate_dof_coordinates()[:, :2]
+    for f, fn in fe_bc:
+        flags = node_flags(
+            problem.V, dolfinx.fem.locate_dofs_topological(V, msh.topology.dim - 1, f)
+        )
+        xn = coords[flags]
+        vals = raise_on_all_ranks(
+            comm, lambda fn=fn, xn=xn: _vector_values(fn, (xn,), len(xn), "dirichlet")
+        )
+        ubc.x.array.reshape(-1, 2)[flags] = vals
+        is_bc |= flags
+    for flags, vals in problem.strong:  # by node (CoupledLinearProblem's DirichletBCs)
+        ubc.x.array.reshape(-1, 2)[flags] = vals[flags]
+        is_bc |= flags
+    return fe_bc, patch_bc, dq, dtabs, ubc, is_bc
+
+
+def fix_fe_rows(
+    problem: CoupledElasticity, K_fe, b_fe, fixed_local: np.ndarray, values: np.ndarray
+):
+    """Fix FE dofs: zero their rows and columns of ``K_fe`` with 1 on the diagonal and lift the
+    values into ``b_fe`` (``MatZeroRowsColumns``). Collective.
+
+    Args:
+        fixed_local: bool per local node (owned and ghost) to fix.
+        values: (num local nodes, 2) values of the fixed nodes (others ignored).
+
+    Returns:
+        The PETSc vector of fixed values (the caller destroys it).
+    """
+    fe_layout, l2g = fe_dof_layout(problem.V)
+    n_owned = problem.V.dofmap.index_map.size_local
+    fixed = np.flatnonzero(fixed_local[:n_owned])
+    rows = (2 * l2g[fixed][:, None] + np.arange(2)).ravel().astype(PETSc.IntType)
+    x_bc = create_vector(
+        problem.patch.comm, fe_layout, rows, np.asarray(values).reshape(-1, 2)[fixed].ravel()
+    )
+    # rows of dofs that no FE cell supports are empty, diagonal included: add it
+    K_fe.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+    zero = K_fe.createVecLeft()
+    zero.set(0.0)
+    K_fe.setDiagonal(zero, addv=PETSc.InsertMode.ADD_VALUES)
+    zero.destroy()
+    K_fe.zeroRowsColumns(rows, diag=1.0, x=x_bc, b=b_fe)
+    return x_bc
+
+
+def traction_loads(problem: CoupledElasticity) -> tuple[PETSc.Vec, np.ndarray]:
+    """Tractions on FE facets (FE load vector, PETSc) and on patch facets (particle loads in
+    original particle order, local contributions), plus the body forces (FE cells with
+    ``N_a``, patch cells with ``phi_J``). Collective."""
+    V, comm = problem.V, problem.patch.comm
+    msh, deg = V.mesh, problem.quadrature_degree
+    fe_layout, l2g = fe_dof_layout(problem.V)
+    f_fe_rows, f_fe_vals = [np.zeros(0, np.int64)], [np.zeros(0)]
+    f_p = np.zeros(2 * problem.patch.particles.num_particles)
+    for facets, fn in problem.tractions:
+        f_fe_facets, f_p_facets = split_facets(problem, facets)
+        q = facet_quadrature(msh, f_fe_facets, deg)
+        t = raise_on_all_ranks(
+            comm, lambda fn=fn, q=q: _vector_values(fn, (q.points, q.normals), len(q), "t")
+        )
+        tab = tabulate_in_cells(V, q.points, q.cells, derivatives=0).values
+        fl = load_vector(tab, q.weights, t).reshape(-1, 2)
+        for comp in range(2):
+            f_fe_rows.append(2 * l2g[: fl.shape[0]] + comp)
+            f_fe_vals.append(fl[:, comp])
+        q = facet_quadrature(msh, f_p_facets, deg)
+        t = raise_on_all_ranks(
+            comm, lambda fn=fn, q=q: _vector_values(fn, (q.points, q.normals), len(q), "t")
+        )
+        tab = raise_on_all_ranks(comm, lambda q=q: problem.mls.tabulate(q.points, 0)).values
+        f_p += load_vector(tab, q.weights, t)
+    b_fe = create_vector(comm, fe_layout, np.concatenate(f_fe_rows), np.concatenate(f_fe_vals))
+    if problem.body_forces:  # FE cells with N_a, patch cells with phi_J
+        fe, fp = body_loads(problem, problem.cell_indicator(~problem.patch.in_patch))
+        b_fe.array[:] += fe
+        f_p += fp
+    return b_fe, f_p
+
+
+def append_patch_conditions(
+    problem: CoupledElasticity, blocks, rhs, mats, patch_bc, dq, dtabs
+) -> Layout:
+    """Append the multiplier field of essential conditions on patch facets (it couples to
+    field 1, the particles) to ``blocks``/``rhs``; new PETSc objects go to ``mats``."""
+    P, comm = problem.patch.particles, problem.patch.comm
+    pl = P.dof_layout()
+    Gd, d_rows, d_vals, dl = facet_multipliers(P, patch_bc, dq, dtabs, problem.material.E)
+    if dl.size_global:
+        D = create_aij(comm, Gd, dl, pl)
+        DT = create_aij(comm, Gd.T.tocsr(), pl, dl)
+        for row in blocks:
+            row.append(None)
+        blocks[1][-1] = DT
+        blocks.append([None, D] + [None] * (len(blocks) - 1))
+        rhs.append(create_vector(comm, dl, d_rows, d_vals))
+        mats += [D, DT]
+    return dl
+
+
+def solve_and_gather(problem: CoupledElasticity, blocks, rhs, objects, solver: str):
+    """Solve the nest (fields FE, particles, multipliers...), destroy ``objects`` and ``rhs``,
+    and return the FE Function, the particle coefficients (n, 2) in original order and the
+    solve time. Collective."""
+    V, P, comm = problem.V, problem.patch.particles, problem.patch.comm
+    system = BlockSystem(blocks, rhs, num_primal=2)
+    t0 = time.perf_counter()
+    parts = system.solve(solver)
+    seconds = time.perf_counter() - t0
+    system.destroy()
+    for obj in [*objects, *rhs]:
+        obj.destroy()
+    uh = dolfinx.fem.Function(V)
+    uh.x.array[: 2 * V.dofmap.index_map.size_local] = parts[0]
+    uh.x.scatter_forward()
+    owned = np.concatenate(comm.allgather(parts[1]))
+    return uh, owned.reshape(-1, 2)[P.petsc_index], seconds
+
+
+def sizes(problem: CoupledElasticity, active: np.ndarray, multiplier_dofs: int) -> dict:
+    """The system's sizes for :attr:`CoupledSolution.sizes`: active FE dofs (from the flags
+    of the local nodes), particle dofs and multiplier dofs (collective)."""
+    n_owned = problem.V.dofmap.index_map.size_local
+    return {
+        "fe_dofs": 2 * problem.patch.comm.allreduce(int(np.sum(active[:n_owned]))),
+        "particle_dofs": 2 * problem.patch.particles.num_particles,
+        "multiplier_dofs": multiplier_dofs,
+    }

@@ -1,0 +1,356 @@
+"""What every FE–particle coupling shares: the coupling protocol and registry, the solution
+and operator records, and the constraint-block helpers.
+
+A coupling family is one class registered by name (:func:`register`): it builds its static
+block system (:meth:`Coupling.solve`) and its unconstrained operators for explicit dynamics
+(:meth:`Coupling.operators`) from a :class:`~dolfinx_meshfree.CoupledElasticity`, which holds
+the model (space, patch, material, MLS, loads, essential conditions) and dispatches to the class
+of its ``coupling`` name. Adding a coupling touches its own module and the registry,
+:data:`dolfinx_meshfree.couplings.REGISTRY`, nowhere else.
+
+The constraint helpers write the multiplier rows of Rabczuk et al. 2006, eq. 103–110 (FE and
+particle columns of ``G``) in PETSc's global numbering.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, ClassVar, Protocol, runtime_checkable
+
+import dolfinx
+import numpy as np
+import scipy.sparse as sp
+from petsc4py import PETSc
+
+from .. import _compat
+from ..fe_points import _route, tabulate_in_cells
+from ..mls import MLS
+from ..neighbours import check_points
+from ..parallel import Layout, raise_on_all_ranks
+from ..patch import ParticlePatch
+from ..quadrature import QuadraturePoints
+
+if TYPE_CHECKING:  # annotations only: the model imports this module, not the reverse
+    from ..coupled import CoupledElasticity
+
+__all__ = [
+    "ROUND_OFF",
+    "CoupledSolution",
+    "Coupling",
+    "CouplingOperators",
+    "cell_indicator",
+    "facet_nodes",
+    "facet_table",
+    "fe_constraint_block",
+    "fe_dof_layout",
+    "node_flags",
+    "particle_constraint_block",
+]
+
+VectorFunction = Callable[[np.ndarray], np.ndarray]
+
+
+@dataclass
+class CoupledSolution:
+    """FE displacement, particle coefficients, and the means to evaluate the coupled field."""
+
+    u: dolfinx.fem.Function
+    coefficients: np.ndarray
+    mls: MLS
+    patch: ParticlePatch
+    timings: dict = field(default_factory=dict)
+    sizes: dict = field(default_factory=dict)
+    #: Ramp couplings: the :class:`~dolfinx_meshfree.couplings.ramp.RampInterface` (blended
+    #: interface cells).
+    interface: object | None = None
+
+    def evaluate_at_quadrature(self, q: QuadraturePoints) -> tuple[np.ndarray, np.ndarray]:
+        """Displacement (m, 2) and gradient (m, 2, 2) at quadrature points of local cells: FE in
+        FE cells, particles in patch cells, blended in a ramp coupling's interface cells (local)."""
+        V = self.u.function_space
+        local = self.u.x.array.reshape(-1, 2)
+        inside = self.patch.in_patch[q.cells]
+        u = np.empty((len(q), 2))
+        g = np.empty((len(q), 2, 2))
+        fe = ~inside
+        if self.interface is not None:
+            blended = self.interface.in_interface[q.cells]
+            fe &= ~blended
+            if np.any(blended):
+                u[blended], g[blended] = self.interface.evaluate(
+                    q.points[blended], q.cells[blended], local, self.coefficients
+                )
+        if np.any(fe):
+            t = tabulate_in_cells(V, q.points[fe], q.cells[fe])
+            u[fe], g[fe] = t.values @ local, t.gradient(local)
+        if np.any(inside):
+            t = self.mls.tabulate(q.points[inside])
+            u[inside], g[inside] = t.values @ self.coefficients, t.gradient(self.coefficients)
+        return u, g
+
+    def displacement(self, points: np.ndarray) -> np.ndarray:
+        """Displacement (m, 2) at any points of the mesh, on every rank (collective). Points on
+        the interface are evaluated on the FE side, the same on any partition."""
+        msh = self.patch.mesh
+        x = raise_on_all_ranks(msh.comm, lambda: check_points(points, 2, "points"))
+
+        def compute(pts: np.ndarray, cells: np.ndarray) -> list:
+            q = QuadraturePoints(pts, np.zeros(len(pts)), cells)
+            return list(self.evaluate_at_quadrature(q)[0])
+
+        # points on the interface belong to both sides, which a weak coupling makes differ
+        # slightly: take the FE side, whatever the partition
+        fe_side = ~self.patch.in_patch
+        return np.array(_route(msh, x, compute, fe_side), dtype=float).reshape(-1, 2)
+
+
+@dataclass
+class CouplingOperators:
+    """The assembled operators of a coupling, without essential conditions and unscaled.
+
+    What :meth:`CoupledElasticity.operators` returns, for explicit dynamics (Rabczuk et al.
+    2006, Table I) and for users who assemble their own systems. Two fields: the FE dofs of
+    ``V`` (two per node, PETSc global numbering, layout :attr:`fe_layout`) and the particle dofs
+    (:meth:`~dolfinx_meshfree.ParticleSet.petsc_dofs`, layout :attr:`particle_layout`). The
+    caller owns the PETSc objects (:meth:`destroy`).
+
+    Attributes:
+        coupling: The coupling's name.
+        K_fe: FE stiffness: the FE form weighted by :attr:`fe_weight`, plus the coupling's FE-FE
+            terms (ramp interface cells, bridging penalty). Rows of inactive dofs are empty.
+        K_p: Particle stiffness (EFG on the patch cells, bridging: weighted by ``alpha``, ramp:
+            plus the interface cells' particle-particle block).
+        K_fp, K_pf: Off-diagonal stiffness blocks (FE rows x particle columns and back; ramp
+            interface cells, bridging penalty), or ``None``.
+        G_fe, G_p: Constraint blocks (multipliers x FE dofs, multipliers x particle dofs) of the
+            multiplier couplings, ``G_FE u_FE + G_P u_P = 0`` with unit scaling (the static
+            system scales them by ``E``) and no column removed for essential conditions; ``None``
+            for the couplings without multipliers.
+        fe_weight: Scalar UFL expression, the weight of the FE energy on each cell (the DG0
+            indicator of the FE cells; bridging: ``beta_FE``, eq. 47–48). The FE masses are
+            ``rho fe_weight`` integrated against the FE basis (eq. 88).
+        fe_active: bool per local FE node (owned and ghost): the node carries FE dofs.
+        particle_quadrature: This rank's quadrature of the particle cells (bridging: weights
+            times ``alpha``, eq. 89); ``particle_table``: (nq x n) CSR of the MLS values there
+            (columns in original particle order). The row-sum particle masses are
+            ``rho particle_table^T w``.
+        interface_quadrature, interface_table: Ramp couplings: the interface cells' quadrature
+            and the blended shape functions there, (nq x (n_loc + n)) CSR with columns ``[local
+            FE nodes | particles]`` (Belytschko et al. 1995, eq. 3.15); ``None`` otherwise.
+        reduction: Master–slave: ``(T_PF, S)``, PETSc matrices with ``u_P = T_PF u_FE + S u_M``
+            (slaves follow the FE interface, eq. 27; ``S`` selects the free particles, whose
+            master layout is :attr:`master_layout`); ``None`` otherwise.
+        interface: The coupling's interface object for evaluation (``RampInterface``,
+            ``BridgingBand``, ``MasterSlaveLinks``) or ``None``.
+        fe_layout, particle_layout, multiplier_layout, master_layout: Layouts (dofs).
+        timings: Seconds spent.
+    """
+
+    coupling: str
+    K_fe: PETSc.Mat
+    K_p: PETSc.Mat
+    fe_weight: object
+    fe_active: np.ndarray
+    particle_quadrature: QuadraturePoints
+    particle_table: sp.csr_matrix
+    fe_layout: Layout
+    particle_layout: Layout
+    K_fp: PETSc.Mat | None = None
+    K_pf: PETSc.Mat | None = None
+    G_fe: PETSc.Mat | None = None
+    G_p: PETSc.Mat | None = None
+    multiplier_layout: Layout | None = None
+    interface_quadrature: QuadraturePoints | None = None
+    interface_table: sp.csr_matrix | None = None
+    reduction: tuple[PETSc.Mat, PETSc.Mat] | None = None
+    master_layout: Layout | None = None
+    interface: object | None = None
+    timings: dict = field(default_factory=dict)
+
+    def matrices(self) -> list[PETSc.Mat]:
+        """The PETSc matrices held (for destruction or transfer of ownership)."""
+        mats = [self.K_fe, self.K_p, self.K_fp, self.K_pf, self.G_fe, self.G_p]
+        mats += list(self.reduction or ())
+        return [m for m in mats if m is not None]
+
+    def destroy(self) -> None:
+        """Destroy the PETSc matrices (collective)."""
+        for m in self.matrices():
+            m.destroy()
+
+
+@runtime_checkable
+class Coupling(Protocol):
+    """One coupling family: its static system and its operators for explicit dynamics.
+
+    Implementations are stateless classes, listed by :attr:`name` in
+    :data:`~dolfinx_meshfree.couplings.REGISTRY`; the model
+    (:class:`~dolfinx_meshfree.CoupledElasticity`) holds the options and passes itself.
+
+    Attributes:
+        name: The ``coupling=`` name.
+        default_dilation: The MLS dilation ``d_max`` the coupling needs by default.
+        consistent_default: Whether variationally consistent integration is the default.
+        integrations: The particle integrations its dynamic operators offer.
+        blended: Whether its particle functions are blended or weighted on cells (ramp,
+            bridging): then no volume masses in dynamics.
+    """
+
+    name: ClassVar[str]
+    default_dilation: ClassVar[float]
+    consistent_default: ClassVar[bool]
+    integrations: ClassVar[tuple[str, ...]]
+    blended: ClassVar[bool]
+
+    def prepare_mls(self, mls: MLS, patch: ParticlePatch) -> MLS:
+        """The MLS the coupling works with (e.g. supports widened over interface cells)."""
+        ...
+
+    def solve(self, problem: CoupledElasticity, solver: str) -> CoupledSolution:
+        """Assemble and solve the static block system (collective)."""
+        ...
+
+    def operators(
+        self, problem: CoupledElasticity, integration: str, slaves: str
+    ) -> CouplingOperators:
+        """The assembled operators without essential conditions (collective)."""
+        ...
+
+
+def fe_constraint_block(
+    rows: np.ndarray,
+    nodes: np.ndarray,
+    values: np.ndarray,
+    global_nodes: bool,
+    s: float,
+    is_bc: np.ndarray,
+    ubc: dolfinx.fem.Function,
+    l2g: np.ndarray,
+    shape: tuple[int, int],
+) -> tuple[sp.csr_matrix, list, list]:
+    """FE columns ``s G_FE`` of multiplier rows, with strong Dirichlet dofs moved to the rhs.
+
+    Entry ``k`` contributes ``s values[k]`` at ``(2 rows[k] + i, 2 node + i)`` for each component
+    ``i``; a column that is a strong Dirichlet dof (``is_bc``, value in ``ubc``) is dropped and
+    ``-s values[k] ubc`` is added to the constraint's right-hand side instead.
+
+    Args:
+        rows: (k,) global multiplier block (node) numbers.
+        nodes: (k,) FE node columns: local nodes of ``V`` or, with ``global_nodes``, global nodes
+            (which must be local, owned or ghost, on this rank).
+        values: (k,) unscaled entries; ``s``: the scaling of the constraint rows.
+        is_bc, ubc: Strong-condition flags (per local node) and values; ``l2g``: local to global
+            node numbers.
+
+    Returns:
+        ``(G_FE, rhs rows, rhs values)``; the rhs as lists of arrays per component.
+    """
+    c = nodes
+    if global_nodes:
+        order = np.argsort(l2g, kind="stable")
+        pos = np.searchsorted(l2g[order], nodes)
+        c = order[np.minimum(pos, order.size - 1)] if order.size else pos
+        if c.size and not np.array_equal(l2g[c], nodes):
+            raise RuntimeError("FE constraint columns name nodes that are not local to this rank")
+    r, v = rows, values
+    bc_col = is_bc[c]
+    g_rows, g_vals = [], []
+    gfe: tuple[list, list, list] = ([], [], [])
+    for comp in range(2):
+        rr = 2 * r + comp
+        cols = 2 * l2g[c] + comp
+        # known FE values move to the right-hand side
+        g_rows.append(rr[bc_col])
+        g_vals.append(-s * v[bc_col] * ubc.x.array[2 * c[bc_col] + comp])
+        gfe[0].append(rr[~bc_col])
+        gfe[1].append(cols[~bc_col])
+        gfe[2].append(s * v[~bc_col])
+    G = sp.csr_matrix(
+        (np.concatenate(gfe[2]), (np.concatenate(gfe[0]), np.concatenate(gfe[1]))), shape=shape
+    )
+    return G, g_rows, g_vals
+
+
+def particle_constraint_block(
+    rows: np.ndarray,
+    particles: np.ndarray,
+    values: np.ndarray,
+    s: float,
+    pdofs: np.ndarray,
+    shape: tuple[int, int],
+) -> sp.csr_matrix:
+    """Particle columns ``s G_P``: ``-s values[k]`` at ``(2 rows[k] + i, pdofs[particle, i])``."""
+    return sp.csr_matrix(
+        (
+            np.concatenate([-s * values, -s * values]),
+            (
+                np.concatenate([2 * rows, 2 * rows + 1]),
+                np.concatenate([pdofs[particles, 0], pdofs[particles, 1]]),
+            ),
+        ),
+        shape=shape,
+    )
+
+
+#: FE basis values at points on a facet below this are round-off of the nodes off the facet
+#: (the inverse map of a non-affine quadrilateral leaves up to 1.5e-13 on the gmsh meshes).
+ROUND_OFF = 1e-11
+
+
+def facet_table(V, points: np.ndarray, cells: np.ndarray) -> sp.csr_matrix:
+    """FE basis values (points x local nodes) at points on facets of the given cells, without
+    the round-off entries of the nodes off the facet."""
+    t = tabulate_in_cells(V, points, cells, derivatives=0).values.tocsr()
+    t.data[np.abs(t.data) <= ROUND_OFF] = 0.0
+    t.eliminate_zeros()
+    return t
+
+
+def facet_nodes(V, facets: np.ndarray) -> np.ndarray:
+    """Local P1/Q1 nodes (block indices) of each facet of a 2D mesh, shape (num_facets, 2)."""
+    msh = V.mesh
+    tdim = msh.topology.dim
+    msh.topology.create_connectivity(tdim, 0)
+    msh.topology.create_connectivity(tdim - 1, 0)
+    c2v = msh.topology.connectivity(tdim, 0)
+    f2v = msh.topology.connectivity(tdim - 1, 0)
+    vmap = msh.topology.index_map(0)
+    node_of_vertex = np.empty(vmap.size_local + vmap.num_ghosts, dtype=np.int64)
+    node_of_vertex[np.asarray(c2v.array)] = _compat.dofmap_array(V).ravel()
+    fv = np.asarray(f2v.array).reshape(-1, 2)[np.asarray(facets, dtype=np.int64)]
+    return node_of_vertex[fv]
+
+
+def fe_dof_layout(V) -> tuple[Layout, np.ndarray]:
+    """PETSc layout of the interleaved dofs of a vector P1/Q1 space (DOLFINx's numbering), and
+    the global node number of every local node."""
+    imap = V.dofmap.index_map
+    l2g = np.asarray(
+        imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
+    )
+    return Layout(2 * imap.size_local, 2 * imap.size_global, 2 * imap.local_range[0]), l2g
+
+
+def node_flags(V, local_nodes: np.ndarray) -> np.ndarray:
+    """Flag nodes (local block indices) of ``V`` on every rank that has them, owned or ghost
+    (collective)."""
+    f = dolfinx.fem.Function(V)
+    f.x.array[:] = 0.0
+    f.x.array[2 * np.asarray(local_nodes, dtype=np.int64)] = 1.0
+    _compat.scatter_reverse_add(f)
+    f.x.scatter_forward()
+    return f.x.array[0::2] > 0.5
+
+
+def cell_indicator(msh, owned_flags: np.ndarray) -> dolfinx.fem.Function:
+    """DG0 Function equal to 1 on the owned cells flagged in ``owned_flags`` (and on their ghost
+    copies), 0 elsewhere (collective)."""
+    Q = _compat.scalar_function_space(msh, "DG", 0)
+    chi = dolfinx.fem.Function(Q)
+    dof_of_cell = _compat.dofmap_array(Q)[:, 0]
+    n_owned = msh.topology.index_map(msh.topology.dim).size_local
+    chi.x.array[:] = 0.0
+    chi.x.array[dof_of_cell[:n_owned]] = np.asarray(owned_flags[:n_owned], dtype=float)
+    chi.x.scatter_forward()
+    return chi

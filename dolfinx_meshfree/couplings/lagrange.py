@@ -1,0 +1,475 @@
+"""FE–EFG elastostatics on a mesh with a particle patch, coupled by Lagrange multipliers.
+
+Compatibility coupling (Rabczuk et al. 2006, sec. 5.4, eq. 98–110; Hegen 1996): the FE cells and
+the patch cells do not overlap and meet on the interface Gamma_I. Displacement continuity is
+imposed weakly by a multiplier field discretised with the FE trace functions of the interface
+nodes, Lambda_k = N_k on Gamma_I:
+
+.. math::
+    G_{FE} = \\int_{\\Gamma_I} \\Lambda^T N_{FE}, \\qquad G_P = -\\int_{\\Gamma_I} \\Lambda^T \\phi,
+
+and the block system (a PETSc MatNest, fields FE, particles, interface multipliers, and patch
+Dirichlet multipliers when essential conditions act on patch facets)
+
+.. math::
+    \\begin{bmatrix} K_{FE} & 0 & s G_{FE}^T \\\\ 0 & K_P & s G_P^T \\\\
+    s G_{FE} & s G_P & 0 \\end{bmatrix}.
+
+``K_FE`` is DOLFINx's assembly of the elasticity form restricted to the FE cells (``dx`` with the
+patch's cell tags); FE dofs that no FE cell supports become identity rows. Essential conditions on
+FE facets are applied to ``K_FE`` by ``MatZeroRowsColumns`` (which lifts them into the
+right-hand side) and removed from the coupling columns; on patch facets they are multiplier
+constraints as in :mod:`~dolfinx_meshfree.efg`. ``s = E`` scales the constraint rows.
+
+Edge-to-edge variant (``coupling="edge-to-edge"``, Rabczuk et al. 2006, sec. 5.4): the multipliers
+are collocated at the particles ``x_I`` on the interface, one per particle and component, so that
+``G_FE[I, a] = N_a(x_I)`` and ``G_P[I, J] = -phi_J(x_I)``: continuity holds exactly at the
+interface particles. It does not integrate the interface traction consistently (the particle
+forces become the integral of the linear interpolant of ``phi_J``), so the linear patch test is
+passed only to first order in h, not exactly.
+"""
+
+from __future__ import annotations
+
+import time
+from functools import partial
+from typing import TYPE_CHECKING, ClassVar
+
+import dolfinx
+import numpy as np
+import scipy.sparse as sp
+from mpi4py import MPI
+from scipy.sparse.linalg import spsolve
+from scipy.spatial import cKDTree
+
+from .. import _compat
+from ..efg import particle_stiffness
+from ..fe_points import tabulate_fe_basis
+from ..mls import MLS
+from ..parallel import Layout, raise_on_all_ranks
+from ..patch import ParticlePatch
+from ..petsc import create_aij, create_vector
+from ..quadrature import QuadraturePoints, facet_quadrature
+from .assembly import (
+    append_patch_conditions,
+    essential_conditions,
+    fe_active,
+    fe_stiffness,
+    fix_fe_rows,
+    particle_rule,
+    sizes,
+    solve_and_gather,
+    traction_loads,
+)
+from .base import (
+    CoupledSolution,
+    CouplingOperators,
+    facet_nodes,
+    facet_table,
+    fe_constraint_block,
+    fe_dof_layout,
+    particle_constraint_block,
+)
+
+if TYPE_CHECKING:  # annotations only
+    from ..coupled import CoupledElasticity
+
+__all__ = [
+    "CORNER_ANGLE",
+    "EdgeToEdgeCoupling",
+    "LagrangeCoupling",
+    "collocation_rows",
+    "interface_particles",
+    "lagrange_rows",
+]
+
+#: Interface nodes where adjacent interface facets turn by more than this (degrees) carry one
+#: Lagrange multiplier per side (see :func:`interface_multipliers`).
+CORNER_ANGLE = 30.0
+
+
+def interface_multipliers(problem: CoupledElasticity, iq: QuadraturePoints, t_fe: sp.csr_matrix):
+    """The multiplier basis of the compatibility coupling at the interface quadrature points
+    (collective): ``Lambda_k = N_a`` restricted to one smooth piece of the interface.
+
+    A node where the interface turns by more than :data:`CORNER_ANGLE` degrees (an L-shaped
+    patch) carries one multiplier per side: the traction ``sigma n`` jumps there, which
+    continuous trace multipliers cannot carry (a linear patch test then missed by 7e-6).
+    Elsewhere (straight or gently curved interfaces) one multiplier per node, as in Rabczuk
+    eq. 109. The interface is small, so its facets are gathered on every rank and every rank
+    numbers the multipliers the same way, owner by owner (the owner of the node).
+
+    Args:
+        iq: Quadrature points on ``patch.interface_facets`` (``entities``: the facet).
+        t_fe: FE basis there, (points x local nodes).
+
+    Returns:
+        ``(Lambda, layout)``: (points x global multipliers) CSR with the pattern of ``t_fe``
+        and the multipliers' layout (two components per multiplier).
+    """
+    V, patch, comm = problem.V, problem.patch, problem.patch.comm
+    imap = V.dofmap.index_map
+    l2g = np.asarray(
+        imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
+    )
+    facets = patch.interface_facets
+    nodes = facet_nodes(V, facets)
+    xy = V.tabulate_dof_coordinates()[:, :2]
+    tangent = xy[nodes[:, 1]] - xy[nodes[:, 0]] if facets.size else np.zeros((0, 2))
+    tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-300)
+    parts = comm.allgather((l2g[nodes].reshape(-1, 2), tangent))
+    offset = int(sum(len(p[0]) for p in parts[: comm.rank]))
+    ends = np.concatenate([p[0] for p in parts]).reshape(-1, 2)
+    lines = np.concatenate([p[1] for p in parts]).reshape(-1, 2)
+    # group the facets at each node: joined when their lines differ by < CORNER_ANGLE
+    group: dict[tuple[int, int], int] = {}
+    at_node: dict[int, list[int]] = {}
+    for f, (a, b) in enumerate(ends.tolist()):
+        at_node.setdefault(a, []).append(f)
+        at_node.setdefault(b, []).append(f)
+    sine = np.sin(np.radians(CORNER_ANGLE))
+    for g, fs in at_node.items():
+        for f in fs:
+            joined = [
+                group[(g, e)]
+                for e in fs
+                if (g, e) in group
+                and abs(lines[f, 0] * lines[e, 1] - lines[f, 1] * lines[e, 0]) < sine
+            ]
+            group[(g, f)] = min(joined) if joined else f
+    ranges = np.asarray([*comm.allgather(imap.local_range[0]), imap.size_global])
+    keys = sorted(
+        set(
+            (int(np.searchsorted(ranges, g, side="right") - 1), g, k) for (g, _), k in group.items()
+        )
+    )
+    number = {(g, k): i for i, (_, g, k) in enumerate(keys)}
+    owners = np.array([r for r, _, _ in keys], dtype=np.int64)
+    start = int(np.sum(owners < comm.rank))
+    count = int(np.sum(owners == comm.rank))
+    # Lambda: the pattern of t_fe, columns renumbered to the multiplier of (node, piece)
+    coo = t_fe.tocoo()
+    position = {int(f): offset + i for i, f in enumerate(facets)}
+    cols = np.array(
+        [
+            number[(int(l2g[a]), group[(int(l2g[a]), position[int(iq.entities[q])])])]
+            for q, a in zip(coo.row, coo.col, strict=True)
+        ],
+        dtype=np.int64,
+    )
+    lam = sp.csr_matrix((coo.data, (coo.row, cols)), shape=(len(iq), len(keys)))
+    return lam, Layout(2 * count, 2 * len(keys), 2 * start)
+
+
+def lagrange_rows(problem: CoupledElasticity, scale: float = 1.0) -> tuple[tuple, tuple, Layout]:
+    """Constraint entries of the compatibility coupling (Rabczuk eq. 109): ``G_FE = int
+    Lambda^T N`` and ``G_P = int Lambda^T phi`` on the interface (collective).
+
+    Returns:
+        ``(fe_rows, p_rows, layout)`` for :func:`_fe_constraint_block` (local node columns)
+        and :func:`_particle_constraint_block`, and the multipliers' layout.
+    """
+    V, patch, comm = problem.V, problem.patch, problem.patch.comm
+    iq = facet_quadrature(
+        V.mesh, patch.interface_facets, problem.quadrature_degree, patch.interface_fe_cells
+    )
+    t_fe = facet_table(V, iq.points, iq.cells)
+    t_p = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(iq.points, 0)).values
+    lam, ml = interface_multipliers(problem, iq, t_fe)
+    W = sp.diags(iq.weights)
+    M_fe = (lam.T @ W @ t_fe).tocoo()  # (multipliers x local nodes)
+    M_p = (lam.T @ W @ t_p).tocoo()  # (multipliers x particles)
+    tiny = 1e-14 * (np.abs(M_fe.data).max() if M_fe.nnz else 1.0)
+    keep = np.abs(M_fe.data) > tiny
+    fe_rows = (M_fe.row[keep], M_fe.col[keep], M_fe.data[keep], False)
+    keep = np.abs(M_p.data) > tiny
+    p_rows = (M_p.row[keep], M_p.col[keep], M_p.data[keep])
+    return fe_rows, p_rows, ml
+
+
+def interface_particles(problem: CoupledElasticity) -> np.ndarray:
+    """Indices of the particles on the interface facets, the same on every rank (collective).
+
+    A particle is on the interface when its distance to one of the interface facets is below
+    ``1e-10`` times that facet's length. Each rank tests its owned interface facets; the flags
+    are combined by an MPI MAX reduction.
+    """
+    from mpi4py import MPI
+
+    patch = problem.patch
+    msh, x = patch.mesh, patch.particles.positions
+    flags = np.zeros(len(x), dtype=np.int8)
+    facets = patch.interface_facets
+    if facets.size:
+        fdim = msh.topology.dim - 1
+        ends = msh.geometry.x[_compat.entities_to_geometry(msh, fdim, facets), :2]
+        a, t = ends[:, 0], ends[:, 1] - ends[:, 0]
+        length = np.linalg.norm(t, axis=1)
+        tol = 1e-10 * length
+        near = cKDTree(x).query_ball_point(a + 0.5 * t, 0.5 * length + 2.0 * tol)
+        for f, cand in enumerate(near):
+            cand = np.asarray(cand, dtype=np.int64)
+            # distance to the segment a + [0, 1] t
+            r = x[cand] - a[f]
+            xi = np.clip(r @ t[f] / length[f] ** 2, 0.0, 1.0)
+            d = np.linalg.norm(r - xi[:, None] * t[f], axis=1)
+            flags[cand[d <= tol[f]]] = 1
+    patch.comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.MAX)
+    found = np.flatnonzero(flags)
+    if found.size == 0 and patch.comm.allreduce(len(patch.interface_facets)) > 0:
+        raise ValueError(
+            "edge-to-edge coupling found no particle on the interface, so the FE and particle "
+            "sides would not be coupled; use a particle spacing that puts particles on the "
+            "interface (e.g. spacing = h) or coupling='lagrange'"
+        )
+    return found
+
+
+def projected_normals(problem: CoupledElasticity, bq: QuadraturePoints) -> np.ndarray:
+    """VCI boundary normals of the Lagrange coupling: on the interface facets the normal
+    ``n`` is replaced by its L2 projection ``Pi n`` on the multiplier space (collective).
+
+    The FE side of a linear field receives ``int N_a sigma n`` at the interface, which the
+    multipliers carry as ``lambda = sigma Pi n`` (every trace ``N_a`` lies in their space);
+    the particles then receive ``int phi_J sigma Pi n``, which is what the divergence
+    identity of consistent integration must hold with. ``Pi n = n`` on straight pieces
+    between the corners of :meth:`_interface_multipliers`; where the interface turns by
+    less than :data:`CORNER_ANGLE` (a slanted staircase of gmsh cells) ``n`` jumps inside
+    one multiplier's support, and with ``n`` itself the linear patch test missed by 3.8e-5.
+    The interface's multiplier mass matrix is gathered and solved on every rank.
+    """
+    V, comm = problem.V, problem.patch.comm
+    on = np.flatnonzero(np.isin(bq.entities, problem.patch.interface_facets))
+    iq = QuadraturePoints(
+        bq.points[on], bq.weights[on], bq.cells[on], bq.normals[on], bq.entities[on]
+    )
+    lam, _ = interface_multipliers(problem, iq, facet_table(V, iq.points, iq.cells))
+    M = (lam.T @ sp.diags(iq.weights) @ lam).tocoo()
+    parts = comm.allgather((M.row, M.col, M.data))
+    cat = np.concatenate
+    M = sp.csc_matrix(
+        (cat([p[2] for p in parts]), (cat([p[0] for p in parts]), cat([p[1] for p in parts]))),
+        shape=M.shape,
+    )
+    rhs = comm.allreduce(np.asarray(lam.T @ (iq.weights[:, None] * iq.normals)), op=MPI.SUM)
+    coef = np.column_stack([spsolve(M, rhs[:, k]) for k in range(rhs.shape[1])])
+    normals = bq.normals.copy()
+    normals[on] = lam @ coef
+    return normals
+
+
+def interface_interpolant(
+    problem: CoupledElasticity, bq: QuadraturePoints, values: sp.csr_matrix
+) -> sp.csr_matrix:
+    """VCI boundary values of the edge-to-edge coupling: on the interface facets the particle
+    functions are replaced by their FE interpolant ``I_h phi_J = sum_a N_a phi_J(x_a)``
+    (collective).
+
+    The collocated multipliers pass the interface force to particle ``J`` as
+    ``sum_I phi_J(x_I) F_I`` with ``F_I = int sigma n N_I`` the FE nodal force, i.e. as
+    ``int sigma n I_h phi_J`` when the interface particles sit on the FE nodes. With the
+    consistent integration's divergence identity written with the same ``I_h phi_J`` on the
+    interface, a linear field is in equilibrium on both sides and the linear patch test
+    passes to round-off (with ``int sigma n phi_J`` it missed by about 4e-2).
+    """
+    V, comm = problem.V, problem.patch.comm
+    on = np.isin(bq.entities, problem.patch.interface_facets)
+    t = facet_table(V, bq.points[on], bq.cells[on])
+    nodes = np.unique(t.indices)
+    xn = V.tabulate_dof_coordinates()[nodes, :2]
+    phi = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(xn, 0)).values
+    interpolant = (t[:, nodes] @ phi).tocsr()
+    rows = np.flatnonzero(on)
+    place = sp.csr_matrix(
+        (np.ones(rows.size), (rows, np.arange(rows.size))), shape=(len(bq), rows.size)
+    )
+    return (sp.diags((~on).astype(float)) @ values + place @ interpolant).tocsr()
+
+
+def collocation_rows(problem: CoupledElasticity) -> tuple[tuple, Layout]:
+    """Edge-to-edge coupling: one multiplier per interface particle and component, owned by
+    the particle's owner, rows ``u_FE(x_I) - u_P(x_I)`` (collective).
+
+    Returns:
+        ``((block rows, global FE nodes, N values, True), (block rows, particles, phi
+        values))`` of this rank's owned interface particles, and the multipliers' layout.
+    """
+    P, comm = problem.patch.particles, problem.patch.comm
+    iface = interface_particles(problem)
+    # multiplier blocks in PETSc particle order, hence owner by owner and contiguous per rank
+    iface = iface[np.argsort(P.petsc_index[iface], kind="stable")]
+    layout = Layout.from_local(comm, int(np.sum(P.owner[iface] == comm.rank)))
+    mine = iface[P.owner[iface] == comm.rank]
+    block = layout.start + np.arange(mine.size, dtype=np.int64)
+    xs = P.positions[mine]
+    n_fe = tabulate_fe_basis(problem.V, xs, derivatives=0).values.tocoo()
+    keep = np.abs(n_fe.data) > 1e-13  # nodes off the particle's facet: round-off
+    phi = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(xs, 0)).values.tocoo()
+    phi_keep = phi.data != 0.0
+    fe_rows = (block[n_fe.row[keep]], n_fe.col[keep], n_fe.data[keep], True)
+    p_rows = (block[phi.row[phi_keep]], phi.col[phi_keep], phi.data[phi_keep])
+    ml = Layout(2 * layout.size_local, 2 * layout.size_global, 2 * layout.start)
+    return (fe_rows, p_rows), ml
+
+
+def interface_operators(
+    problem: CoupledElasticity, integration: str = "cells"
+) -> CouplingOperators:
+    """Lagrange (FE trace multipliers, eq. 109) and edge-to-edge (collocation) operators."""
+    t0 = time.perf_counter()
+    V, patch, P = problem.V, problem.patch, problem.patch.particles
+    comm, n = patch.comm, patch.particles.num_particles
+    fe_layout, l2g = fe_dof_layout(problem.V)
+    pl = problem.patch.particles.dof_layout()
+    boundary = patch.boundary() if problem.consistent else None
+    Kp_loc, q, tq, _ = particle_stiffness(
+        P,
+        problem.mls,
+        problem.material,
+        problem.quadrature_degree,
+        boundary,
+        quadrature=particle_rule(problem, integration),
+        boundary_normals=partial(projected_normals, problem)
+        if problem.coupling == "lagrange"
+        else None,
+    )
+    if problem.coupling == "lagrange":
+        fe_rows, p_rows, ml = lagrange_rows(problem)
+    else:
+        (fe_rows, p_rows), ml = collocation_rows(problem)
+    no_bc = np.zeros(l2g.size, dtype=bool)
+    zero = dolfinx.fem.Function(V)
+    zero.x.array[:] = 0.0
+    G_fe, _, _ = fe_constraint_block(
+        *fe_rows[:3], fe_rows[3], 1.0, no_bc, zero, l2g, (ml.size_global, fe_layout.size_global)
+    )
+    G_p = particle_constraint_block(*p_rows, 1.0, P.petsc_dofs(2), (ml.size_global, 2 * n))
+    return CouplingOperators(
+        coupling=problem.coupling,
+        K_fe=fe_stiffness(problem),
+        K_p=create_aij(comm, Kp_loc, pl, pl),
+        fe_weight=problem.cell_indicator(~patch.in_patch),
+        fe_active=fe_active(problem),
+        particle_quadrature=q,
+        particle_table=tq.values.tocsr(),
+        fe_layout=fe_layout,
+        particle_layout=pl,
+        G_fe=create_aij(comm, G_fe, ml, fe_layout),
+        G_p=create_aij(comm, G_p, ml, pl),
+        multiplier_layout=ml,
+        timings={"operators": time.perf_counter() - t0},
+    )
+
+
+def solve_interface(problem: CoupledElasticity, solver: str = "mumps") -> CoupledSolution:
+    """Assemble the nest block system and solve it (collective).
+
+    Args:
+        solver: ``"mumps"`` (direct) or ``"fieldsplit"`` (Schur complement, displacements
+            against multipliers, on the augmented Lagrangian; see
+            :class:`~dolfinx_meshfree.petsc.BlockSystem`).
+    """
+    if solver not in ("mumps", "fieldsplit"):
+        raise ValueError(f"solver={solver!r} is not known; use 'mumps' or 'fieldsplit'")
+    patch, P = problem.patch, problem.patch.particles
+    comm = patch.comm
+    deg = problem.quadrature_degree
+    n = P.num_particles
+    s = problem.material.E
+    pdofs = P.petsc_dofs(2)
+    fe_layout, l2g = fe_dof_layout(problem.V)
+    pl = P.dof_layout()
+    t0 = time.perf_counter()
+
+    # particle side
+    boundary = patch.boundary() if problem.consistent else None
+    hook = partial(interface_interpolant, problem) if problem.coupling == "edge-to-edge" else None
+    normals = partial(projected_normals, problem) if problem.coupling == "lagrange" else None
+    Kp_loc, _, _, kt = particle_stiffness(
+        P, problem.mls, problem.material, deg, boundary, hook, boundary_normals=normals
+    )
+
+    # essential conditions: FE side strongly, patch side by multipliers
+    _, patch_bc, dq, dtabs, ubc, is_bc = essential_conditions(problem)
+    # FE nodes that no FE cell supports
+    active = fe_active(problem)
+
+    # interface multipliers
+    if problem.coupling == "lagrange":
+        fe_rows, p_rows, ml = lagrange_rows(problem)
+    else:
+        (fe_rows, p_rows), ml = collocation_rows(problem)
+    setup = problem.setup_time + time.perf_counter() - t0 - kt["assemble"]
+
+    t1 = time.perf_counter()
+    K_fe = fe_stiffness(problem)
+    G_fe, g_rows, g_vals = fe_constraint_block(
+        *fe_rows[:3], fe_rows[3], s, is_bc, ubc, l2g, (ml.size_global, fe_layout.size_global)
+    )
+    G_p = particle_constraint_block(*p_rows, s, pdofs, (ml.size_global, 2 * n))
+
+    b_fe, f_p = traction_loads(problem)
+    cat = np.concatenate
+    # strong conditions and inactive dofs on K_FE: zero rows and columns, lift into b_fe
+    x_bc = fix_fe_rows(
+        problem,
+        K_fe,
+        b_fe,
+        is_bc | ~active,
+        np.where(is_bc[:, None], ubc.x.array.reshape(-1, 2), 0.0),
+    )
+    Kp = create_aij(comm, Kp_loc, pl, pl)
+    b_p = create_vector(comm, pl, pdofs.ravel(), f_p)
+    Gfe = create_aij(comm, G_fe, ml, fe_layout)
+    GfeT = create_aij(comm, G_fe.T.tocsr(), fe_layout, ml)
+    Gp = create_aij(comm, G_p, ml, pl)
+    GpT = create_aij(comm, G_p.T.tocsr(), pl, ml)
+    g = create_vector(comm, ml, cat([*g_rows, np.zeros(0, np.int64)]), cat([*g_vals, []]))
+    blocks = [[K_fe, None, GfeT], [None, Kp, GpT], [Gfe, Gp, None]]
+    rhs = [b_fe, b_p, g]
+    mats = [K_fe, Kp, Gfe, GfeT, Gp, GpT]
+    dl = append_patch_conditions(problem, blocks, rhs, mats, patch_bc, dq, dtabs)
+    assemble = time.perf_counter() - t1 + kt["assemble"]
+    uh, coeffs, solve = solve_and_gather(problem, blocks, rhs, [*mats, x_bc], solver)
+    return CoupledSolution(
+        u=uh,
+        coefficients=coeffs,
+        mls=problem.mls,
+        patch=patch,
+        timings={"setup": setup, "assemble": assemble, "solve": solve},
+        sizes=sizes(problem, active, ml.size_global + dl.size_global),
+    )
+
+
+class _InterfaceCoupling:
+    """The two multiplier couplings on the interface facets (shared by name below)."""
+
+    default_dilation: ClassVar[float] = 2.0
+    consistent_default: ClassVar[bool] = True
+    integrations: ClassVar[tuple[str, ...]] = ("cells", "stress-points")
+    blended: ClassVar[bool] = False
+
+    def prepare_mls(self, mls: MLS, patch: ParticlePatch) -> MLS:
+        return mls
+
+    def solve(self, problem: CoupledElasticity, solver: str) -> CoupledSolution:
+        return solve_interface(problem, solver)
+
+    def operators(
+        self, problem: CoupledElasticity, integration: str, slaves: str
+    ) -> CouplingOperators:
+        return interface_operators(problem, integration)
+
+
+class LagrangeCoupling(_InterfaceCoupling):
+    """Compatibility coupling: FE trace multipliers on the interface (Rabczuk et al. 2006,
+    sec. 5.4, eq. 109)."""
+
+    name: ClassVar[str] = "lagrange"
+
+
+class EdgeToEdgeCoupling(_InterfaceCoupling):
+    """Edge-to-edge coupling: multipliers collocated at the interface particles (Rabczuk et al.
+    2006, sec. 5.4)."""
+
+    name: ClassVar[str] = "edge-to-edge"

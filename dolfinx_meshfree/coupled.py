@@ -17,7 +17,8 @@ from __future__ import annotations
 
 import copy
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from typing import Any
 
 import dolfinx
 import numpy as np
@@ -33,6 +34,7 @@ from .materials import LinearElastic
 from .mls import MLS
 from .parallel import raise_on_all_ranks
 from .patch import ParticlePatch
+from .petsc import SolverOptions, solver_options
 from .stress_points import check_integration
 
 __all__ = [
@@ -247,14 +249,27 @@ class CoupledElasticity:
         problem.consistent = bool(consistent)
         return self.family.operators(problem, integration, slaves)
 
-    def solve(self, solver: str = "mumps") -> CoupledSolution:
+    def solve(
+        self,
+        solver: str | SolverOptions = "mumps",
+        petsc_options: Mapping[str, Any] | None = None,
+        prefix: str | None = None,
+    ) -> CoupledSolution:
         """Assemble the nest block system and solve it (collective).
 
         Args:
-            solver: ``"mumps"`` (direct) or ``"fieldsplit"`` (Schur complement, displacements
-                against multipliers, on the augmented Lagrangian; see
-                :class:`~dolfinx_meshfree.petsc.BlockSystem`).
+            solver: ``"mumps"`` (direct, the default) or ``"fieldsplit"`` (Schur complement,
+                displacements against multipliers, on the augmented Lagrangian; see
+                :class:`~dolfinx_meshfree.petsc.BlockSystem`): shorthands of the two solvers
+                this package tunes; or a :class:`~dolfinx_meshfree.petsc.SolverOptions`.
+            petsc_options: PETSc options of a KSP on the assembled block system instead, as
+                ``dolfinx.fem.petsc.LinearProblem`` takes them (e.g. ``{"ksp_type": "gmres",
+                "pc_type": "fieldsplit", ...}``; the nest's fields are named ``fe``,
+                ``particles``, ``multiplier0``, ...). Nothing is left in PETSc's options
+                database.
+            prefix: The KSP's options prefix (default: a unique one).
         """
-        if solver not in ("mumps", "fieldsplit"):
-            raise ValueError(f"solver={solver!r} is not known; use 'mumps' or 'fieldsplit'")
-        return self.family.solve(self, solver)
+        options = raise_on_all_ranks(
+            self.patch.comm, lambda: solver_options(solver, petsc_options, prefix)
+        )
+        return self.family.solve(self, options)

@@ -23,8 +23,9 @@ to round-off; plain Gauss quadrature leaves an integration error of about 1e-6.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -34,7 +35,7 @@ from .mls import MLS
 from .operators import consistent_gradients, load_vector, stiffness_matrix
 from .parallel import Layout, raise_on_all_ranks
 from .particles import ParticleSet
-from .petsc import BlockSystem, create_aij, create_vector
+from .petsc import BlockSystem, SolverOptions, create_aij, create_vector, solver_options
 from .quadrature import QuadraturePoints, boundary_facets, cell_quadrature, facet_quadrature
 from .tables import ShapeTable
 
@@ -249,16 +250,24 @@ class EFGElasticity:
         """Body force per unit volume ``b(x)`` (m, 2)."""
         self._body = force
 
-    def solve(self, solver: str = "mumps") -> EFGSolution:
+    def solve(
+        self,
+        solver: str | SolverOptions = "mumps",
+        petsc_options: Mapping[str, Any] | None = None,
+        prefix: str | None = None,
+    ) -> EFGSolution:
         """Assemble the block system and solve it (collective).
 
         Args:
             solver: ``"mumps"`` (direct) or ``"fieldsplit"`` (Schur complement on the augmented
-                saddle point, see :class:`~dolfinx_meshfree.petsc.BlockSystem`).
+                saddle point, see :class:`~dolfinx_meshfree.petsc.BlockSystem`), or a
+                :class:`~dolfinx_meshfree.petsc.SolverOptions`.
+            petsc_options, prefix: PETSc options of a KSP on the block system instead (fields
+                ``particles`` and ``dirichlet``), and its prefix; see
+                :meth:`~dolfinx_meshfree.CoupledElasticity.solve`.
         """
-        if solver not in ("mumps", "fieldsplit"):
-            raise ValueError(f"solver={solver!r} is not known; use 'mumps' or 'fieldsplit'")
         comm = self.comm
+        solver = raise_on_all_ranks(comm, lambda: solver_options(solver, petsc_options, prefix))
         P = self.particles
         n = P.num_particles
         dof_map = P.petsc_dofs(2).ravel()  # original interleaved dof -> PETSc dof
@@ -303,9 +312,9 @@ class EFGElasticity:
         GT = create_aij(comm, Gg.T.tocsr(), udofs, mlayout)
         g = create_vector(comm, mlayout, g_rows, g_vals)
         if mlayout.size_global:
-            system = BlockSystem([[K, GT], [G, None]], [f, g])
+            system = BlockSystem([[K, GT], [G, None]], [f, g], names=["particles", "dirichlet"])
         else:
-            system = BlockSystem([[K]], [f])
+            system = BlockSystem([[K]], [f], names=["particles"])
         assemble = time.perf_counter() - t1 + kt["assemble"]
 
         t2 = time.perf_counter()

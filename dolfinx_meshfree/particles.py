@@ -17,6 +17,7 @@ from mpi4py import MPI
 from scipy.spatial import cKDTree
 
 from . import _compat
+from .fe_points import locate_points
 from .neighbours import check_points
 from .parallel import Layout, raise_on_all_ranks
 from .quadrature import cell_quadrature
@@ -158,8 +159,6 @@ class ParticleSet:
         n = x.shape[0]
         size = comm.size
         if mesh is not None:
-            from .fe_points import locate_points
-
             cl = locate_points(mesh, x)
             claim = np.where(cl >= 0, comm.rank, size).astype(np.int32)
             owner = np.empty_like(claim)

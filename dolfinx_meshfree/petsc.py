@@ -4,14 +4,18 @@ Mirrors ``dolfinx.fem.petsc``. Off-rank contributions go through PETSc's stash (
 with ``ADD_VALUES`` on rows another rank owns), never through hand-written messaging. The same
 code runs on PETSc 3.18 (no COO assembly in its petsc4py) and current PETSc.
 
-Solvers never touch PETSc's global options database: MUMPS is selected through the API on a KSP
-with its own prefix.
+Solvers never leave anything in PETSc's global options database: the shorthands (``"mumps"``,
+``"fieldsplit"``) configure a private KSP through the API; user ``petsc_options`` (as DOLFINx's
+``LinearProblem`` takes them) are written under the KSP's prefix, read by ``setFromOptions`` and
+removed again.
 """
 
 from __future__ import annotations
 
 import itertools
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -19,9 +23,63 @@ from petsc4py import PETSc
 
 from .parallel import Layout
 
-__all__ = ["BlockSystem", "create_aij", "create_vector", "solve_lu", "to_local_csr"]
+__all__ = [
+    "SHORTHANDS",
+    "BlockSystem",
+    "SolverOptions",
+    "create_aij",
+    "create_vector",
+    "solve_lu",
+    "solver_options",
+    "to_local_csr",
+]
+
+#: The solver shorthands of every ``solve(solver=...)``.
+SHORTHANDS = ("mumps", "fieldsplit")
 
 _prefix_counter = itertools.count()
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """A linear solver for a block system: a shorthand, or PETSc options under a prefix.
+
+    Attributes:
+        solver: ``"mumps"`` or ``"fieldsplit"`` (see :class:`BlockSystem`); ignored when
+            :attr:`petsc_options` is given.
+        petsc_options: PETSc options (without the prefix, e.g. ``{"ksp_type": "preonly",
+            "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}``) for a KSP on the
+            assembled block system, as ``dolfinx.fem.petsc.LinearProblem`` takes them. The
+            fields of the nest are available to ``pc_type: fieldsplit`` by name
+            (:attr:`BlockSystem.names`, e.g. ``fieldsplit_particles_pc_type``).
+        prefix: The KSP's options prefix (default: a unique ``dolfinx_meshfree_<n>_``).
+    """
+
+    solver: str = "mumps"
+    petsc_options: Mapping[str, Any] | None = field(default=None)
+    prefix: str | None = None
+
+
+def solver_options(
+    solver: str | SolverOptions = "mumps",
+    petsc_options: Mapping[str, Any] | None = None,
+    prefix: str | None = None,
+) -> SolverOptions:
+    """Check and bundle a ``solve`` call's solver arguments (raises ``ValueError`` on every rank
+    of a collective call alike: the check is local and the same everywhere)."""
+    if isinstance(solver, SolverOptions):
+        if petsc_options is not None or prefix is not None:
+            raise ValueError("give petsc_options and prefix inside the SolverOptions, not beside")
+        return solver
+    if solver not in SHORTHANDS:
+        raise ValueError(f"solver={solver!r} is not known; use one of {list(SHORTHANDS)}")
+    if petsc_options is not None and not isinstance(petsc_options, Mapping):
+        raise ValueError(
+            f"petsc_options must be a dict of PETSc options, got {type(petsc_options).__name__}"
+        )
+    if prefix is not None and (not isinstance(prefix, str) or not prefix or " " in prefix):
+        raise ValueError(f"prefix={prefix!r} must be a non-empty PETSc options prefix")
+    return SolverOptions(solver, None if petsc_options is None else dict(petsc_options), prefix)
 
 
 def to_local_csr(
@@ -137,8 +195,10 @@ class BlockSystem:
         num_primal: How many leading fields are primal (displacements); the rest are Lagrange
             multipliers with zero diagonal blocks. Default: every field but the last when the
             last diagonal block is ``None``, else all.
+        names: One name per field, for ``fieldsplit`` options (default ``field0``, ...).
 
-    Two solvers (:meth:`solve`):
+    Two shorthand solvers (:meth:`solve`), or any KSP from PETSc options
+    (:class:`SolverOptions`):
 
     * ``"mumps"``: the nest converted to AIJ and factorised by MUMPS (:func:`solve_lu`);
     * ``"fieldsplit"``: a Schur-complement fieldsplit on the same AIJ, primal fields against
@@ -156,6 +216,7 @@ class BlockSystem:
         blocks: Sequence[Sequence[PETSc.Mat | None]],
         rhs: Sequence[PETSc.Vec],
         num_primal: int | None = None,
+        names: Sequence[str] | None = None,
     ):
         self.blocks = [list(r) for r in blocks]
         self.rhs = list(rhs)
@@ -167,22 +228,25 @@ class BlockSystem:
         if not 1 <= num_primal <= n:
             raise ValueError(f"num_primal={num_primal} must lie in [1, {n}]")
         self.num_primal = num_primal
+        self.names = [f"field{i}" for i in range(n)] if names is None else list(names)
+        if len(self.names) != n:
+            raise ValueError(f"names={names!r} must name each of the {n} fields")
         self.comm = self.rhs[0].getComm()
         self.nest = PETSc.Mat().createNest(self.blocks, comm=self.comm)
         self.iterations: dict[str, int] = {}
 
     def solve(
-        self, solver: str = "mumps", inner: str = "lu", rtol: float = 1e-12
+        self, solver: str | SolverOptions = "mumps", inner: str = "lu", rtol: float = 1e-12
     ) -> list[np.ndarray]:
         """Solve and return the owned part of each block of the solution (collective).
 
         Args:
-            solver: ``"mumps"`` or ``"fieldsplit"``.
+            solver: ``"mumps"``, ``"fieldsplit"`` or :class:`SolverOptions` (PETSc options).
             inner: Primal-block solver of the fieldsplit: ``"lu"`` (MUMPS) or ``"gamg"``.
             rtol: Relative tolerance of the fieldsplit's outer FGMRES.
         """
-        if solver not in ("mumps", "fieldsplit"):
-            raise ValueError(f"solver={solver!r} is not known; use 'mumps' or 'fieldsplit'")
+        options = solver_options(solver)
+        solver = options.solver
         if inner not in ("lu", "gamg"):
             raise ValueError(f"inner={inner!r} is not known; use 'lu' or 'gamg'")
         if solver == "fieldsplit" and self.num_primal < len(self.blocks):
@@ -193,7 +257,9 @@ class BlockSystem:
         nest.convert("aij", aij)
         b = aij.createVecLeft()
         b.setArray(np.concatenate([v.getArray(readonly=True) for v in rhs]))
-        if solver == "mumps" or self.num_primal == len(self.blocks):
+        if options.petsc_options is not None:
+            x = self._from_options(aij, b, options)
+        elif solver == "mumps" or self.num_primal == len(self.blocks):
             x = solve_lu(aij, b)
         else:
             x = self._fieldsplit(aij, b, rhs, inner, rtol)
@@ -299,6 +365,48 @@ class BlockSystem:
             raise RuntimeError(
                 f"the fieldsplit solve did not converge (KSP reason {reason}, "
                 f"{self.iterations['outer']} iterations); use solver='mumps'"
+            )
+        return x
+
+    def _from_options(self, aij: PETSc.Mat, b: PETSc.Vec, options: SolverOptions) -> PETSc.Vec:
+        """A KSP configured from ``options.petsc_options`` under its prefix, with the nest's
+        fields as named index sets for a fieldsplit; the options are removed afterwards."""
+        prefix = options.prefix or f"dolfinx_meshfree_{next(_prefix_counter)}_"
+        ksp = PETSc.KSP().create(self.comm)
+        ksp.setOptionsPrefix(prefix)
+        ksp.setOperators(aij)
+        db = PETSc.Options()
+        previous = {}  # what the database held under these names: restored afterwards
+        for key, value in (options.petsc_options or {}).items():
+            name = f"{prefix}{key}"
+            previous[name] = db.getString(name) if db.hasName(name) else None
+            db.setValue(name, value)
+        try:
+            ksp.setFromOptions()
+            pc = ksp.getPC()
+            ises = []
+            if pc.getType() == PETSc.PC.Type.FIELDSPLIT:
+                ises = list(self.nest.getNestISs()[0])
+                pc.setFieldSplitIS(*zip(self.names, ises, strict=True))
+                ksp.setFromOptions()  # the split's own options, now that its fields exist
+            x = aij.createVecRight()
+            ksp.solve(b, x)
+            reason, its = ksp.getConvergedReason(), ksp.getIterationNumber()
+        finally:
+            for name, value in previous.items():
+                if value is None:
+                    db.delValue(name)
+                else:
+                    db.setValue(name, value)
+        self.iterations = {"ksp": its}
+        pc.destroy()  # see solve_lu
+        ksp.destroy()
+        for iset in ises:
+            iset.destroy()
+        if reason < 0:
+            raise RuntimeError(
+                f"the KSP of petsc_options={dict(options.petsc_options or {})!r} did not converge "
+                f"(KSP reason {reason}, {its} iterations)"
             )
         return x
 

@@ -32,7 +32,8 @@ component (``V.sub(i)``) and constrained nodes strictly inside the patch.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import basix
 import dolfinx
@@ -44,13 +45,14 @@ from scipy.spatial import cKDTree
 from ufl.corealg.traversal import unique_pre_traversal
 
 from . import _compat
-from .body_loads import BodyForce
+from .body_loads import BodyForce, accumulate
 from .coupled import COUPLINGS, CoupledElasticity, CoupledSolution
 from .couplings.base import facet_nodes, node_flags
 from .fe_points import evaluate_fe_function
 from .materials import LinearElastic
 from .parallel import raise_on_all_ranks
 from .patch import ParticlePatch
+from .petsc import solver_options
 from .quadrature import QuadraturePoints, boundary_facets
 
 __all__ = ["CoupledLinearProblem", "FormBodyForce"]
@@ -73,6 +75,12 @@ class CoupledLinearProblem:
         material: :class:`~dolfinx_meshfree.LinearElastic` of the particle side; must agree with
             ``a`` on the patch cells.
         coupling: One of :data:`~dolfinx_meshfree.COUPLINGS`.
+        petsc_options: PETSc options of the linear solver (a KSP on the assembled block system),
+            as ``dolfinx.fem.petsc.LinearProblem`` takes them; default (``None``): MUMPS LU
+            tuned for saddle points (see :meth:`solve` for the shorthands). The nest's fields
+            are named ``fe``, ``particles``, ``multiplier0``, ... for ``pc_type: fieldsplit``.
+        petsc_options_prefix: The KSP's options prefix (default: a unique one). The options
+            are removed from PETSc's database after each solve.
         **options: Passed to :class:`~dolfinx_meshfree.CoupledElasticity` (``weight``,
             ``dilation``, ``basis``, ``quadrature_degree``, ``consistent`` (default: VCI for
             every variational coupling, plain Gauss for master-slave), ``overlap``,
@@ -95,12 +103,17 @@ class CoupledLinearProblem:
         patch: ParticlePatch,
         material: LinearElastic,
         coupling: str = "lagrange",
+        petsc_options: Mapping[str, Any] | None = None,
+        petsc_options_prefix: str | None = None,
         **options,
     ):
         comm = patch.comm if isinstance(patch, ParticlePatch) else MPI.COMM_WORLD
         bcs = [] if bcs is None else list(bcs)
         V = raise_on_all_ranks(
             comm, lambda: _check_arguments(a, L, bcs, patch, material, coupling, options)
+        )
+        self._solver = raise_on_all_ranks(
+            comm, lambda: solver_options("mumps", petsc_options, petsc_options_prefix)
         )
         self.a, self.L, self.bcs = a, L, bcs
         self.problem = CoupledElasticity(V, patch, material, coupling, **options)
@@ -195,10 +208,15 @@ class CoupledLinearProblem:
 
     # -- solve ----------------------------------------------------------------------------------
 
-    def solve(self, solver: str = "mumps") -> CoupledSolution:
+    def solve(self, solver: str | None = None) -> CoupledSolution:
         """Assemble and solve the coupled system (collective); see
-        :meth:`~dolfinx_meshfree.CoupledElasticity.solve`."""
-        return self.problem.solve(solver)
+        :meth:`~dolfinx_meshfree.CoupledElasticity.solve`.
+
+        Args:
+            solver: A shorthand, ``"mumps"`` or ``"fieldsplit"``, instead of the constructor's
+                ``petsc_options``; default: those options, or ``"mumps"`` without them.
+        """
+        return self.problem.solve(self._solver if solver is None else solver)
 
 
 # -- checks -------------------------------------------------------------------------------------
@@ -397,8 +415,6 @@ class FormBodyForce(BodyForce):
         self.tol = 1e-9 * (np.ptp(msh.geometry.x[:, :2], axis=0).max() + 1.0)
 
     def fe_load(self, V, weight, degree: int) -> np.ndarray:
-        from .body_loads import accumulate
-
         integrals = self.integrals
         if weight is not None:
             integrals = [itg.reconstruct(integrand=weight * itg.integrand()) for itg in integrals]

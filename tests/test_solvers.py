@@ -125,3 +125,106 @@ def test_repeated_lu_solves_release_their_factorisations():
     assert rss_mb() - before < 8.0
     A.destroy()
     b.destroy()
+
+
+# -- PETSc options, as DOLFINx's LinearProblem takes them ----------------------------------------
+
+
+def _lagrange_problem(comm):
+    msh = dolfinx.mesh.create_rectangle(
+        comm, [np.zeros(2), np.full(2, 2.0)], [6, 6], dolfinx.mesh.CellType.quadrilateral
+    )
+    n = msh.topology.index_map(2).size_local
+    nodes = msh.geometry.x[mf._compat.geometry_dofmap(msh)[:n], :2]
+    patch = mf.ParticlePatch(msh, np.flatnonzero(nodes[:, :, 0].mean(axis=1) > 1.0), 1 / 3)
+    V = mf._compat.vector_function_space(msh)
+    problem = mf.CoupledElasticity(V, patch, mf.LinearElastic(1000.0, 0.3))
+    field = mf.LinearField(G=((0.1, 0.3), (-0.2, 0.05)))
+    problem.add_dirichlet(mf.boundary_facets(msh), field.displacement)
+    return problem
+
+
+def _our_options() -> list[str]:
+    from petsc4py import PETSc
+
+    return [k for k in PETSc.Options().getAll() if k.startswith("test_opts_")]
+
+
+def test_petsc_options_reach_the_solver_and_leave_no_trace():
+    """A KSP from options (GMRES preconditioned by MUMPS LU) gives the shorthand's solution;
+    options that cannot solve the saddle point (no preconditioner, 3 iterations) must fail,
+    which shows they were used; neither leaves an option in PETSc's database."""
+    problem = _lagrange_problem(MPI.COMM_WORLD)
+    direct = problem.solve("mumps")
+    lu = {
+        "ksp_type": "gmres",
+        "ksp_rtol": 1e-13,
+        "pc_type": "lu",
+        "pc_factor_mat_solver_type": "mumps",
+        "mat_mumps_icntl_14": 100,
+        "mat_mumps_cntl_1": 0.1,
+    }
+    sol = problem.solve(petsc_options=lu, prefix="test_opts_lu_")
+    scale = np.abs(direct.coefficients).max()
+    assert np.abs(sol.coefficients - direct.coefficients).max() <= 1e-9 * scale
+    assert np.abs(sol.u.x.array - direct.u.x.array).max() <= 1e-9 * scale
+    assert _our_options() == []
+    weak = {"ksp_type": "gmres", "pc_type": "none", "ksp_max_it": 3, "ksp_rtol": 1e-12}
+    with pytest.raises(RuntimeError, match="did not converge"):
+        problem.solve(petsc_options=weak, prefix="test_opts_weak_")
+    assert _our_options() == []
+
+
+def test_fieldsplit_options_name_the_nest_fields():
+    """The nest's fields reach a PETSc fieldsplit by name: on a block-diagonal SPD system an
+    additive split with an exact LU per named field is the inverse, one GMRES iteration."""
+    from petsc4py import PETSc
+
+    comm = MPI.COMM_WORLD
+    n = 10
+    blocks = []
+    for shift in (2.5, 4.0):
+        A = PETSc.Mat().createAIJ(size=((None, n), (None, n)), comm=comm)
+        A.setUp()
+        r0, r1 = A.getOwnershipRange()
+        for i in range(r0, r1):
+            A.setValue(i, i, shift)
+            if i + 1 < n:
+                A.setValue(i, i + 1, -1.0)
+            if i > 0:
+                A.setValue(i, i - 1, -1.0)
+        A.assemble()
+        blocks.append(A)
+    rhs = [blocks[0].createVecLeft(), blocks[1].createVecLeft()]
+    rhs[0].set(1.0)
+    rhs[1].set(2.0)
+    system = BlockSystem([[blocks[0], None], [None, blocks[1]]], rhs, names=["soft", "stiff"])
+    options = {
+        "ksp_type": "gmres",
+        "ksp_rtol": 1e-12,
+        "pc_type": "fieldsplit",
+        "pc_fieldsplit_type": "additive",
+        "fieldsplit_soft_ksp_type": "preonly",
+        "fieldsplit_soft_pc_type": "lu",
+        "fieldsplit_stiff_ksp_type": "preonly",
+        "fieldsplit_stiff_pc_type": "lu",
+    }
+    parts = system.solve(mf.petsc.SolverOptions(petsc_options=options, prefix="test_opts_fs_"))
+    assert system.iterations["ksp"] == 1
+    for k, A in enumerate(blocks):  # each part solves its own block
+        x = A.createVecRight()
+        x.setArray(parts[k])
+        r = A.createVecLeft()
+        A.mult(x, r)
+        r.axpy(-1.0, rhs[k])
+        assert r.norm() <= 1e-10 * rhs[k].norm()
+    assert _our_options() == []
+    system.destroy()
+
+
+def test_bad_solver_arguments_are_named():
+    problem = _lagrange_problem(MPI.COMM_WORLD)
+    with pytest.raises(ValueError, match="petsc_options must be a dict"):
+        problem.solve(petsc_options=["ksp_type", "cg"])
+    with pytest.raises(ValueError, match="prefix=' ' must be"):
+        problem.solve(petsc_options={}, prefix=" ")

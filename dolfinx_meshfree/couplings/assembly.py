@@ -23,7 +23,7 @@ from ..efg import _vector_values, facet_multipliers
 from ..fe_points import tabulate_in_cells
 from ..operators import load_vector
 from ..parallel import Layout, raise_on_all_ranks
-from ..petsc import BlockSystem, create_aij, create_vector
+from ..petsc import BlockSystem, SolverOptions, create_aij, create_vector
 from ..quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
 from ..stress_points import stress_point_quadrature
 from .base import fe_dof_layout, node_flags
@@ -221,12 +221,13 @@ def append_patch_conditions(
     return dl
 
 
-def solve_and_gather(problem: CoupledElasticity, blocks, rhs, objects, solver: str):
+def solve_and_gather(problem: CoupledElasticity, blocks, rhs, objects, solver: str | SolverOptions):
     """Solve the nest (fields FE, particles, multipliers...), destroy ``objects`` and ``rhs``,
     and return the FE Function, the particle coefficients (n, 2) in original order and the
     solve time. Collective."""
     V, P, comm = problem.V, problem.patch.particles, problem.patch.comm
-    system = BlockSystem(blocks, rhs, num_primal=2)
+    names = ["fe", "particles"] + [f"multiplier{i}" for i in range(len(blocks) - 2)]
+    system = BlockSystem(blocks, rhs, num_primal=2, names=names)
     t0 = time.perf_counter()
     parts = system.solve(solver)
     seconds = time.perf_counter() - t0

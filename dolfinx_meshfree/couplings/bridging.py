@@ -64,7 +64,7 @@ from ..mls import MLS
 from ..operators import consistent_gradients, load_vector, stiffness_matrix
 from ..parallel import Layout, raise_on_all_ranks
 from ..patch import ParticlePatch
-from ..petsc import create_aij, create_vector
+from ..petsc import SolverOptions, create_aij, create_vector
 from ..quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
 from .assembly import (
     append_patch_conditions,
@@ -354,7 +354,7 @@ def _body_loads(problem, band: BridgingBand) -> tuple[np.ndarray, np.ndarray]:
     return body_loads(problem, _fe_weight(problem, band), alpha)
 
 
-def solve_bridging(problem, solver: str = "mumps"):
+def solve_bridging(problem, solver: str | SolverOptions = "mumps"):
     """Assemble and solve the bridging-domain coupled system of ``problem`` (collective)."""
     V, patch, P = problem.V, problem.patch, problem.patch.particles
     comm = patch.comm
@@ -760,7 +760,7 @@ class BridgingCoupling:
     def prepare_mls(self, mls: MLS, patch: ParticlePatch) -> MLS:
         return mls
 
-    def solve(self, problem: CoupledElasticity, solver: str) -> CoupledSolution:
+    def solve(self, problem: CoupledElasticity, solver: str | SolverOptions) -> CoupledSolution:
         return solve_bridging(problem, solver)
 
     def operators(

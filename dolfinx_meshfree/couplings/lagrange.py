@@ -48,7 +48,7 @@ from ..fe_points import tabulate_fe_basis
 from ..mls import MLS
 from ..parallel import Layout, raise_on_all_ranks
 from ..patch import ParticlePatch
-from ..petsc import create_aij, create_vector
+from ..petsc import SolverOptions, create_aij, create_vector
 from ..quadrature import QuadraturePoints, facet_quadrature
 from .assembly import (
     append_patch_conditions,
@@ -361,7 +361,9 @@ def interface_operators(
     )
 
 
-def solve_interface(problem: CoupledElasticity, solver: str = "mumps") -> CoupledSolution:
+def solve_interface(
+    problem: CoupledElasticity, solver: str | SolverOptions = "mumps"
+) -> CoupledSolution:
     """Assemble the nest block system and solve it (collective).
 
     Args:
@@ -369,8 +371,6 @@ def solve_interface(problem: CoupledElasticity, solver: str = "mumps") -> Couple
             against multipliers, on the augmented Lagrangian; see
             :class:`~dolfinx_meshfree.petsc.BlockSystem`).
     """
-    if solver not in ("mumps", "fieldsplit"):
-        raise ValueError(f"solver={solver!r} is not known; use 'mumps' or 'fieldsplit'")
     patch, P = problem.patch, problem.patch.particles
     comm = patch.comm
     deg = problem.quadrature_degree
@@ -452,7 +452,7 @@ class _InterfaceCoupling:
     def prepare_mls(self, mls: MLS, patch: ParticlePatch) -> MLS:
         return mls
 
-    def solve(self, problem: CoupledElasticity, solver: str) -> CoupledSolution:
+    def solve(self, problem: CoupledElasticity, solver: str | SolverOptions) -> CoupledSolution:
         return solve_interface(problem, solver)
 
     def operators(

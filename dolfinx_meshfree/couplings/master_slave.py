@@ -110,7 +110,7 @@ from ..efg import facet_multipliers, particle_stiffness
 from ..mls import MLS
 from ..parallel import Layout, raise_on_all_ranks
 from ..patch import ParticlePatch
-from ..petsc import BlockSystem, create_aij, create_vector
+from ..petsc import BlockSystem, SolverOptions, create_aij, create_vector
 from ..quadrature import facet_quadrature
 from ..stress_points import check_integration
 from .assembly import (
@@ -333,7 +333,7 @@ def _first_layer(tree: cKDTree, x: np.ndarray, a: np.ndarray, t: np.ndarray) -> 
     return np.asarray(sorted(out), dtype=np.int64)
 
 
-def solve_master_slave(problem, solver: str = "mumps", slaves: str = "layer"):
+def solve_master_slave(problem, solver: str | SolverOptions = "mumps", slaves: str = "layer"):
     """Assemble and solve the master–slave coupled system of ``problem`` (collective).
 
     ``slaves``: which particles are slaves, see :class:`MasterSlaveLinks` (``"layer"``, the
@@ -441,7 +441,8 @@ def solve_master_slave(problem, solver: str = "mumps", slaves: str = "layer"):
         blocks = [[A_ff, A_fm, D_fT], [A_mf, A_mm, D_mT], [D_f, D_m, None]]
         rhs.append(d)
         mats += [D, Dg, D_f, D_m, D_fT, D_mT]
-    system = BlockSystem(blocks, rhs, num_primal=2)
+    names = ["fe", "particles"] + [f"multiplier{i}" for i in range(len(blocks) - 2)]
+    system = BlockSystem(blocks, rhs, num_primal=2, names=names)
     assemble = time.perf_counter() - t1 + kt["assemble"]
 
     t2 = time.perf_counter()
@@ -606,7 +607,7 @@ class MasterSlaveCoupling:
     def prepare_mls(self, mls: MLS, patch: ParticlePatch) -> MLS:
         return mls
 
-    def solve(self, problem: CoupledElasticity, solver: str) -> CoupledSolution:
+    def solve(self, problem: CoupledElasticity, solver: str | SolverOptions) -> CoupledSolution:
         return solve_master_slave(problem, solver)
 
     def operators(

@@ -60,7 +60,7 @@ from ..mls import MLS
 from ..operators import consistent_gradients, load_vector, stiffness_matrix
 from ..parallel import raise_on_all_ranks
 from ..patch import ParticlePatch
-from ..petsc import create_aij, create_vector
+from ..petsc import SolverOptions, create_aij, create_vector
 from ..quadrature import boundary_facets, cell_quadrature, facet_quadrature
 from ..tables import ShapeTable
 from .assembly import (
@@ -332,7 +332,7 @@ def _fe_stiffness(problem, interface: RampInterface) -> PETSc.Mat:
     return fe_stiffness(problem, problem.cell_indicator(pure))
 
 
-def solve_ramp(problem, solver: str = "mumps"):
+def solve_ramp(problem, solver: str | SolverOptions = "mumps"):
     """Assemble and solve the ramp-coupled system of ``problem`` (collective)."""
 
     V, patch, P = problem.V, problem.patch, problem.patch.particles
@@ -638,7 +638,7 @@ class _RampCoupling:
         """Supports spanning the interface elements (:func:`ramp_mls`)."""
         return ramp_mls(mls, patch)
 
-    def solve(self, problem: CoupledElasticity, solver: str) -> CoupledSolution:
+    def solve(self, problem: CoupledElasticity, solver: str | SolverOptions) -> CoupledSolution:
         return solve_ramp(problem, solver)
 
     def operators(

@@ -6,15 +6,14 @@ Every check is local to a rank (runs identically serial and under mpirun -n 2); 
 each rank's own cells of a distributed mesh.
 """
 
-import numpy as np
-import pytest
-import scipy.optimize
-
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
 from dolfinx_meshfree.constitutive import check_deformation_gradients
 
 import dolfinx
+import numpy as np
+import pytest
+import scipy.optimize
 import ufl
 from mpi4py import MPI
 
@@ -62,9 +61,8 @@ def _rotation(d: int, angle: float = 0.7) -> np.ndarray:
     if d == 2:
         return np.array([[c, -s], [s, c]])
     Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    Rx = np.array(
-        [[1.0, 0.0, 0.0], [0.0, np.cos(1.1), -np.sin(1.1)], [0.0, np.sin(1.1), np.cos(1.1)]]
-    )
+    c1, s1 = np.cos(1.1), np.sin(1.1)
+    Rx = np.array([[1.0, 0.0, 0.0], [0.0, c1, -s1], [0.0, s1, c1]])
     return Rz @ Rx
 
 

@@ -141,9 +141,7 @@ def test_finite_strain_patch_test_2d(cls, plane):
     particle set: the affine field u = (F0 - I) X has F = F0 at every point and f_int equals the
     boundary integral of N_J P(F0) n^0 (eq. 5) to round-off, at a large F0; summed over ranks."""
     comm = MPI.COMM_WORLD
-    msh = dolfinx.mesh.create_unit_square(
-        comm, 4, 4, dolfinx.mesh.CellType.quadrilateral, dolfinx.mesh.GhostMode.none
-    )
+    msh = dolfinx.mesh.create_unit_square(comm, 4, 4, dolfinx.mesh.CellType.quadrilateral)
     particles = mf.ParticleSet.from_cells(msh, 1.0 / 6, jitter=0.2, seed=1)
     mls = mf.MLS(particles, dilation=2.5)
     q = cell_quadrature(msh, 3)

@@ -19,16 +19,21 @@ Dofs are interleaved as in :func:`~dolfinx_meshfree.operators.stiffness_matrix`:
 of node ``J`` is ``d J + i``. For :class:`~dolfinx_meshfree.LinearElastic` ``K_T`` is that
 stiffness and ``f_int(u) = K u``.
 
-Example (a Newton iteration needs only ``internal_force`` and ``tangent``)::
+Example: Newton with load steps needs only ``internal_force`` and ``tangent`` (this loop is
+``tests/test_forces.py::test_newton_with_internal_force_and_tangent_converges_quadratically``;
+``free`` are the unconstrained dofs)::
 
     forces = InternalForces(table, q.weights, NeoHookean(E=1e3, nu=0.3), test_gradients=vci)
     u = np.zeros(forces.num_dofs)
-    for it in range(25):
-        r = f_ext - forces.internal_force(u)       # + constraints, e.g. u[fixed] = 0
-        if np.linalg.norm(r[free]) <= 1e-10 * np.linalg.norm(f_ext[free]):
-            break
-        K = forces.tangent(u)
-        u[free] += scipy.sparse.linalg.spsolve(K[free][:, free], r[free])
+    for lam in (0.5, 1.0):                       # load steps
+        for it in range(25):
+            r = lam * f_ext - forces.internal_force(u)
+            if np.linalg.norm(r[free]) <= 1e-10 * np.linalg.norm(f_ext[free]):
+                break
+            K = forces.tangent(u)[free][:, free]
+            u[free] += scipy.sparse.linalg.spsolve(K.tocsc(), r[free])
+        else:
+            raise RuntimeError("Newton did not converge")   # never return the last iterate
 """
 
 from __future__ import annotations

@@ -297,8 +297,15 @@ class NeoHookean(_Hyperelastic):
     ``det F <= 0`` at a point stops with a ``ValueError`` naming the point.
     """
 
-    #: Newton steps unrolled in the UFL plane-stress thickness solve (numpy iterates to round-off).
+    #: Newton steps unrolled in the UFL plane-stress thickness solve (numpy iterates to round-off);
+    #: 8 reach round-off for 0.05 <= J_2D <= 20 at any nu <= 0.49 (measured: at most 7 needed).
     plane_stress_iterations: int = 8
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        k = self.plane_stress_iterations
+        if not (isinstance(k, int) and k >= 1):
+            raise ValueError(f"plane_stress_iterations={k!r} must be an integer >= 1 (e.g. 8)")
 
     def thickness_stretch(self, F: npt.ArrayLike, points: np.ndarray | None = None) -> np.ndarray:
         """``lambda_3 = F_33`` (n,): 1 in plane strain; in plane stress the root of ``P_33 = 0``."""

@@ -151,7 +151,7 @@ class _Hyperelastic:
 
     E: float
     nu: float
-    plane: str | None = "strain"
+    plane: str | None = "stress"  # the default of LinearElastic, so that swapping laws keeps it
     rho: float = 1.0
 
     def __post_init__(self) -> None:
@@ -183,8 +183,8 @@ class SaintVenantKirchhoff(_Hyperelastic):
 
     Args:
         E: Young's modulus (> 0). nu: Poisson's ratio in (-1, 0.5). rho: reference density (> 0).
-        plane: ``"strain"`` (``F_33 = 1``: the 3D law with ``E_33 = 0``), ``"stress"`` or ``None``
-            (3D).
+        plane: ``"strain"`` (``F_33 = 1``: the 3D law with ``E_33 = 0``), ``"stress"`` (the
+            default, as for :class:`~dolfinx_meshfree.LinearElastic`) or ``None`` (3D).
 
     Plane stress: the 2D law with the effective ``lambda* = 2 lambda mu / (lambda + 2 mu)``. For
     this law that is not only the small-strain limit: with ``F = diag(F_2D, lambda_3)``,
@@ -285,7 +285,8 @@ class NeoHookean(_Hyperelastic):
 
     Args:
         E: Young's modulus (> 0). nu: Poisson's ratio in (-1, 0.5). rho: reference density (> 0).
-        plane: ``"strain"`` (the 3D law with ``F_33 = 1``), ``"stress"`` or ``None`` (3D).
+        plane: ``"strain"`` (the 3D law with ``F_33 = 1``), ``"stress"`` (the default, as for
+            :class:`~dolfinx_meshfree.LinearElastic`) or ``None`` (3D).
 
     Plane stress is the exact condition ``P_33 = 0`` on ``F = diag(F_2D, lambda_3)``:
     ``g(lambda_3) = mu (lambda_3^2 - 1) + lambda ln(J_2D lambda_3) = 0``, solved per point by

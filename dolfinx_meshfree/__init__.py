@@ -9,6 +9,9 @@ Public API (stable names):
 * solvers: :class:`EFGElasticity` (pure EFG), :func:`solve_fe_elasticity` and
   :func:`solve_forms` (pure FE: a material, or the user's own forms);
 * material and exact solutions: :class:`LinearElastic`, :class:`TimoshenkoBeam`;
+* finite deformation: the :class:`Material` protocol (nominal stress ``P(F)``, its tangent, ``W``,
+  a UFL twin, the wave speed), :class:`SaintVenantKirchhoff`, :class:`NeoHookean`, and
+  :class:`InternalForces` (``f_int(u)``, ``K_T(u)`` from shape tables);
 * output of explicit dynamics: :class:`DynamicsWriter` (XDMF of the FE fields and the particle
   cloud over time), :func:`read_particles`, :class:`ProgressBar`.
 
@@ -18,6 +21,7 @@ Importing this package first loads the ``dolfinx_solver`` wheel's MPI when that 
 from . import _compat  # noqa: F401  (must come first: loads dolfinx_solver's MPI in lane B)
 from ._compat import DOLFINX_VERSION
 from .analytic import LinearField, PressurizedBushing, TimoshenkoBeam
+from .constitutive import Material, NeoHookean, SaintVenantKirchhoff
 from .coupled import COUPLINGS, DEFAULT_DILATION, CoupledElasticity, CoupledSolution
 from .dynamics import DYNAMICS_METHODS, DynamicsResult, EnergyRecord, ExplicitDynamics
 from .efg import EFGElasticity, EFGSolution
@@ -30,6 +34,7 @@ from .fe_points import (
     tabulate_fe_basis,
     tabulate_in_cells,
 )
+from .forces import InternalForces
 from .hybrid import HYBRID_VARIANTS, HybridElasticity
 from .io import DynamicsWriter, ProgressBar, read_particles
 from .kernels import cubic_spline, gaussian, quartic, sph_cubic_spline
@@ -64,14 +69,18 @@ __all__ = [
     "FESolution",
     "GaussianPulseRod",
     "HybridElasticity",
+    "InternalForces",
     "LinearElastic",
     "LinearField",
+    "Material",
     "MomentMatrixError",
+    "NeoHookean",
     "ParticlePatch",
     "ParticleSet",
     "PointsOutsideMeshError",
     "PressurizedBushing",
     "ProgressBar",
+    "SaintVenantKirchhoff",
     "ShapeTable",
     "StepLoadedRod",
     "TimoshenkoBeam",

@@ -64,6 +64,47 @@ class LinearElastic:
         eps = ufl.sym(ufl.grad(u))
         return 2.0 * self.mu * eps + self.lmbda * ufl.tr(eps) * ufl.Identity(2)
 
-    def wave_speed(self) -> float:
-        """Dilatational wave speed ``sqrt((lambda + 2 mu) / rho)``."""
+    def wave_speed(self, F: np.ndarray | None = None) -> float:
+        """Dilatational wave speed ``sqrt((lambda + 2 mu) / rho)`` (the tangent is constant: any
+        ``F`` gives the same)."""
         return float(np.sqrt((self.lmbda + 2.0 * self.mu) / self.rho))
+
+    # --- the Material protocol (dolfinx_meshfree.constitutive): the small-strain member ---------
+
+    @property
+    def gdim(self) -> int:
+        """2 in plane strain/stress, 3 for ``plane=None``."""
+        return 3 if self.plane is None else 2
+
+    def _grad_u(self, F: np.ndarray) -> np.ndarray:
+        F = np.asarray(F, dtype=float)
+        d = self.gdim
+        if F.ndim != 3 or F.shape[1:] != (d, d):
+            raise ValueError(f"F should have shape (num_points, {d}, {d}), got {F.shape}")
+        return F - np.eye(d)
+
+    def first_piola(self, F: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
+        """Linearised nominal stress ``P = sigma(sym(F - I))`` (n, d, d): :meth:`stress` of the
+        displacement gradient ``F - I`` (no finite-strain check: the law is linear in ``F``)."""
+        return self.stress(self._grad_u(F))
+
+    def tangent(self, F: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
+        """Constant ``C_iJkL = lambda d_iJ d_kL + mu (d_ik d_JL + d_iL d_Jk)``, (n, d, d, d, d)."""
+        n = self._grad_u(F).shape[0]
+        eye = np.eye(self.gdim)
+        C = self.lmbda * np.einsum("ij,kl->ijkl", eye, eye) + self.mu * (
+            np.einsum("ik,jl->ijkl", eye, eye) + np.einsum("il,jk->ijkl", eye, eye)
+        )
+        return np.broadcast_to(C, (n, *C.shape)).copy()
+
+    def strain_energy_density(self, F: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
+        """``W = 1/2 eps : C : eps`` (n,) with ``eps = sym(F - I)``."""
+        H = self._grad_u(F)
+        return 0.5 * np.einsum("qij,qij->q", self.stress(H), H)
+
+    def ufl_first_piola(self, F):
+        """:meth:`ufl_stress` of the displacement gradient ``F - I`` in UFL."""
+        import ufl
+
+        eps = ufl.sym(F - ufl.Identity(self.gdim))
+        return 2.0 * self.mu * eps + self.lmbda * ufl.tr(eps) * ufl.Identity(self.gdim)

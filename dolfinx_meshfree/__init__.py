@@ -40,6 +40,13 @@ from .io import DynamicsWriter, ProgressBar, read_particles
 from .kernels import cubic_spline, gaussian, quartic, sph_cubic_spline
 from .materials import LinearElastic
 from .mls import MLS, MomentMatrixError
+from .newton import NewtonError, NewtonOptions, NewtonResult
+from .nonlinear import (
+    FINITE_STRAIN_COUPLINGS,
+    CoupledNonlinearProblem,
+    FENonlinearProblem,
+    NonlinearSolveResult,
+)
 from .particles import ParticleSet
 from .patch import PLACEMENTS, ParticlePatch
 from .problem import CoupledLinearProblem
@@ -53,12 +60,14 @@ __all__ = [
     "DEFAULT_DILATION",
     "DOLFINX_VERSION",
     "DYNAMICS_METHODS",
+    "FINITE_STRAIN_COUPLINGS",
     "HYBRID_VARIANTS",
     "MLS",
     "PLACEMENTS",
     "SPH",
     "CoupledElasticity",
     "CoupledLinearProblem",
+    "CoupledNonlinearProblem",
     "CoupledSolution",
     "DynamicsResult",
     "DynamicsWriter",
@@ -66,6 +75,7 @@ __all__ = [
     "EFGSolution",
     "EnergyRecord",
     "ExplicitDynamics",
+    "FENonlinearProblem",
     "FESolution",
     "GaussianPulseRod",
     "HybridElasticity",
@@ -75,6 +85,10 @@ __all__ = [
     "Material",
     "MomentMatrixError",
     "NeoHookean",
+    "NewtonError",
+    "NewtonOptions",
+    "NewtonResult",
+    "NonlinearSolveResult",
     "ParticlePatch",
     "ParticleSet",
     "PointsOutsideMeshError",

@@ -35,6 +35,7 @@ from . import batched
 
 __all__ = [
     "PLANES",
+    "DeformationError",
     "Material",
     "NeoHookean",
     "SaintVenantKirchhoff",
@@ -111,6 +112,12 @@ def _where(points: np.ndarray | None, q: int) -> str:
     return f"quadrature point {q} at X = {np.asarray(points)[q].tolist()}"
 
 
+class DeformationError(ValueError):
+    """A deformation gradient with ``det F <= 0`` or a non-finite entry: the material is
+    inverted (or the state is garbage) at a point. A ``ValueError``, so callers that expect one
+    still catch it; Newton's line search catches this one to shorten its step."""
+
+
 def check_deformation_gradients(
     F: npt.ArrayLike, gdim: int, points: np.ndarray | None = None, positive_jacobian: bool = True
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -128,7 +135,7 @@ def check_deformation_gradients(
         )
     bad = np.flatnonzero(~np.all(np.isfinite(F), axis=(1, 2)))
     if bad.size:
-        raise ValueError(
+        raise DeformationError(
             f"F is not finite at {bad.size} point(s), first {_where(points, int(bad[0]))}: "
             f"{F[bad[0]].tolist()}; stop: no NaNs carried on"
         )
@@ -137,7 +144,7 @@ def check_deformation_gradients(
         bad = np.flatnonzero(J <= 0.0)
         if bad.size:
             q = int(bad[0])
-            raise ValueError(
+            raise DeformationError(
                 f"det F = {J[q]:.3e} <= 0 at {bad.size} point(s), first {_where(points, q)}: "
                 "the deformation inverts the material there; stop: no NaNs carried on "
                 "(reduce the load step or the time step)"

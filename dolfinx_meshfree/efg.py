@@ -92,6 +92,7 @@ def particle_stiffness(
     boundary_values: Callable[[QuadraturePoints, sp.csr_matrix], sp.csr_matrix] | None = None,
     quadrature: QuadraturePoints | None = None,
     boundary_normals: Callable[[QuadraturePoints], np.ndarray] | None = None,
+    tables: dict | None = None,
 ) -> tuple[sp.csr_matrix, QuadraturePoints, ShapeTable, dict]:
     """EFG stiffness from this rank's integration cells (``particles.cells``), in PETSc numbering.
 
@@ -106,6 +107,9 @@ def particle_stiffness(
     replaces the cell Gauss rule (``quadrature_degree`` is then not used for it), e.g. the
     particles and stress points of :func:`~dolfinx_meshfree.stress_points.stress_point_quadrature`
     (Rabczuk, Belytschko & Xiao 2004). Collective (errors are raised on every rank).
+
+    ``tables``, if given, receives ``"quadrature"``, ``"table"`` and ``"test_gradients"`` (the
+    VCI-corrected ones when consistent): what a finite-strain solve needs for its internal force.
 
     Returns:
         ``(K, q, table, timings)``: K as a (2n x 2n) CSR of this rank's contributions with PETSc
@@ -134,6 +138,8 @@ def particle_stiffness(
                 tq.values, tq.gradients, q.weights, bvalues, bq.weights, normals, comm
             ),
         )
+    if tables is not None:
+        tables.update(quadrature=q, table=tq, test_gradients=test_grads)
     t1 = time.perf_counter()
     K = stiffness_matrix(test_grads, q.weights, material, tq.gradients).tocoo()
     Kg = sp.csr_matrix((K.data, (dof_map[K.row], dof_map[K.col])), shape=(2 * n, 2 * n))

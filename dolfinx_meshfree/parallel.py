@@ -20,8 +20,10 @@ class _RemoteError(ValueError):
 def raise_on_all_ranks(comm, fn: Callable[[], T]) -> T:
     """Run ``fn`` on every rank; if it raises on any rank, raise on every rank (collective).
 
-    The rank that failed re-raises its own exception; the others raise a ``ValueError`` with the
-    failing rank's message, so no rank goes on into a collective call that would hang.
+    The rank that failed re-raises its own exception; the others raise one of the same class
+    (when it takes a single message, else a ``ValueError``) with the failing rank's message, so
+    that no rank goes on into a collective call that would hang and every rank can catch the
+    same class (e.g. Newton's line search catches a ``DeformationError`` everywhere).
     """
     err: BaseException | None = None
     result = None
@@ -29,13 +31,17 @@ def raise_on_all_ranks(comm, fn: Callable[[], T]) -> T:
         result = fn()
     except (ValueError, TypeError, ArithmeticError) as e:  # user-input errors only
         err = e
-    messages = comm.allgather(None if err is None else f"{type(err).__name__}: {err}")
+    reports = comm.allgather(None if err is None else (type(err), f"{type(err).__name__}: {err}"))
     if err is not None:
         raise err
-    failed = [(r, msg) for r, msg in enumerate(messages) if msg is not None]
+    failed = [(r, rep) for r, rep in enumerate(reports) if rep is not None]
     if failed:
-        r, msg = failed[0]
-        raise _RemoteError(f"on rank {r}: {msg}")
+        r, (cls, msg) = failed[0]
+        try:
+            remote = cls(f"on rank {r}: {msg}")
+        except Exception:  # a class that needs more than a message
+            remote = _RemoteError(f"on rank {r}: {msg}")
+        raise remote
     return result  # type: ignore[return-value]
 
 

@@ -361,15 +361,20 @@ def interface_operators(
     )
 
 
-def solve_interface(
-    problem: CoupledElasticity, solver: str | SolverOptions = "mumps"
-) -> CoupledSolution:
-    """Assemble the nest block system and solve it (collective).
+def interface_system(problem: CoupledElasticity, tables: dict | None = None) -> tuple:
+    """The Lagrange or edge-to-edge block system, assembled, not solved (collective).
 
     Args:
-        solver: ``"mumps"`` (direct) or ``"fieldsplit"`` (Schur complement, displacements
-            against multipliers, on the augmented Lagrangian; see
-            :class:`~dolfinx_meshfree.petsc.BlockSystem`).
+        tables: If given, receives the particle quadrature (``"quadrature"``), its MLS table
+            (``"table"``) and the test gradients of the stiffness (``"test_gradients"``, VCI
+            when consistent): what a finite-strain solve evaluates its internal force with.
+
+    Returns:
+        ``(blocks, rhs, mats, extra)``: the nest's blocks and right-hand sides, the PETSc objects
+        to destroy, and ``extra`` with ``x_bc`` (PETSc vector of strong values, also to
+        destroy), ``active`` and ``is_bc`` (flags per local FE node), ``ubc`` (FE Function of the
+        strong values), ``multipliers`` (interface plus patch-boundary multiplier dofs) and the
+        ``setup``/``assemble`` seconds.
     """
     patch, P = problem.patch, problem.patch.particles
     comm = patch.comm
@@ -386,8 +391,9 @@ def solve_interface(
     hook = partial(interface_interpolant, problem) if problem.coupling == "edge-to-edge" else None
     normals = partial(projected_normals, problem) if problem.coupling == "lagrange" else None
     Kp_loc, _, _, kt = particle_stiffness(
-        P, problem.mls, problem.material, deg, boundary, hook, boundary_normals=normals
-    )
+        P, problem.mls, problem.material, deg, boundary, hook, boundary_normals=normals,
+        tables=tables,
+    )  # fmt: skip
 
     # essential conditions: FE side strongly, patch side by multipliers
     _, patch_bc, dq, dtabs, ubc, is_bc = essential_conditions(problem)
@@ -429,15 +435,37 @@ def solve_interface(
     rhs = [b_fe, b_p, g]
     mats = [K_fe, Kp, Gfe, GfeT, Gp, GpT]
     dl = append_patch_conditions(problem, blocks, rhs, mats, patch_bc, dq, dtabs)
-    assemble = time.perf_counter() - t1 + kt["assemble"]
-    uh, coeffs, solve = solve_and_gather(problem, blocks, rhs, [*mats, x_bc], solver)
+    extra = {
+        "x_bc": x_bc,
+        "active": active,
+        "is_bc": is_bc,
+        "ubc": ubc,
+        "multipliers": ml.size_global + dl.size_global,
+        "setup": setup,
+        "assemble": time.perf_counter() - t1 + kt["assemble"],
+    }
+    return blocks, rhs, mats, extra
+
+
+def solve_interface(
+    problem: CoupledElasticity, solver: str | SolverOptions = "mumps"
+) -> CoupledSolution:
+    """Assemble the nest block system and solve it (collective).
+
+    Args:
+        solver: ``"mumps"`` (direct) or ``"fieldsplit"`` (Schur complement, displacements
+            against multipliers, on the augmented Lagrangian; see
+            :class:`~dolfinx_meshfree.petsc.BlockSystem`).
+    """
+    blocks, rhs, mats, extra = interface_system(problem)
+    uh, coeffs, solve = solve_and_gather(problem, blocks, rhs, [*mats, extra["x_bc"]], solver)
     return CoupledSolution(
         u=uh,
         coefficients=coeffs,
         mls=problem.mls,
-        patch=patch,
-        timings={"setup": setup, "assemble": assemble, "solve": solve},
-        sizes=sizes(problem, active, ml.size_global + dl.size_global),
+        patch=problem.patch,
+        timings={"setup": extra["setup"], "assemble": extra["assemble"], "solve": solve},
+        sizes=sizes(problem, extra["active"], extra["multipliers"]),
     )
 
 

@@ -1,0 +1,513 @@
+"""Finite-deformation statics: FE, EFG and coupled models solved by Newton (total Lagrangian).
+
+Rabczuk, Xiao & Sauer 2006 write the particle method in the reference configuration: the
+momentum balance ``div_0 P + b_0 = 0`` (eq. 1) with the nominal stress ``P(F)`` (eq. 2–5), weak
+form eq. 34. Every block of the linear systems keeps its place; only the stiffness blocks become
+functions of the state:
+
+* FE side: the residual ``R_FE(u) = int chi (F(u; v) - F(0; v)) dx`` of the user's own UFL
+  residual ``F`` (its cell integrals, weighted by the indicator ``chi`` of the FE cells as the
+  linear problems weight ``a``), minus the FE share of the external load; Jacobian
+  ``dF/du`` by UFL's ``derivative``;
+* particle side: ``f_int(u) = sum_q B0(F_q)^T P(F_q) w_q`` and its consistent tangent on the
+  patch quadrature (:class:`~dolfinx_meshfree.InternalForces`), with the test gradients of the
+  linear stiffness (VCI when consistent, so a homogeneous deformation is reproduced exactly);
+* constraints (interface multipliers, patch Dirichlet multipliers) stay linear in the
+  displacements and are the linear system's blocks.
+
+The external load is dead: ``L_ext(v) = -F(0; v)`` (with ``P(I) = 0`` for every law here), split
+between FE and particles exactly as :class:`~dolfinx_meshfree.CoupledLinearProblem` splits
+``L``. Load steps scale the external load and the prescribed displacements by ``k / n``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple
+
+import dolfinx
+import numpy as np
+import scipy.sparse as sp
+import ufl
+from petsc4py import PETSc
+from ufl.algorithms import expand_derivatives, extract_coefficients
+from ufl.classes import Sum
+
+from . import _compat
+from .constitutive import Material
+from .coupled import CoupledElasticity, CoupledSolution
+from .couplings.assembly import traction_loads
+from .couplings.base import fe_dof_layout
+from .couplings.lagrange import interface_system
+from .forces import InternalForces
+from .materials import LinearElastic
+from .newton import NewtonOptions, NewtonResult, newton
+from .parallel import Layout, raise_on_all_ranks
+from .particles import ParticleSet
+from .patch import ParticlePatch
+from .petsc import SolverOptions, create_aij, create_vector, solver_options
+from .problem import CoupledLinearProblem
+
+__all__ = [
+    "FINITE_STRAIN_COUPLINGS",
+    "CoupledNonlinearProblem",
+    "FENonlinearProblem",
+    "NonlinearSolveResult",
+    "linearised",
+]
+
+#: Couplings available at finite strain (the others refuse with a clear error).
+FINITE_STRAIN_COUPLINGS = ("lagrange", "edge-to-edge")
+
+
+class NonlinearSolveResult(NamedTuple):
+    """``(iterations, converged)`` as DOLFINx's ``NewtonSolver.solve`` returns, over all load
+    steps; the per-step records are in ``steps``."""
+
+    iterations: int
+    converged: bool
+    steps: list
+
+
+def linearised(material: Material) -> LinearElastic:
+    """The small-strain law a finite-strain material reduces to at ``F = I`` (the same ``E``,
+    ``nu``, plane), with which the linearised forms are checked."""
+    if isinstance(material, LinearElastic):
+        return material
+    plane = getattr(material, "plane", None)
+    if plane is None:
+        raise ValueError(
+            f"{type(material).__name__} with plane=None is a 3D law; the coupled finite-strain "
+            "problems are 2D in this release: use plane='strain' or 'stress'"
+        )
+    return LinearElastic(material.E, material.nu, plane=plane, rho=material.rho)
+
+
+def _zeros(comm, layout: Layout) -> PETSc.Vec:
+    return create_vector(comm, layout, np.zeros(0, np.int64), np.zeros(0))
+
+
+# -- the two sides ------------------------------------------------------------------------------
+
+
+def _terms(expr) -> list:
+    """The operands of a top-level sum (the terms a user adds in a residual)."""
+    if isinstance(expr, Sum):
+        return [t for op in expr.ufl_operands for t in _terms(op)]
+    return [expr]
+
+
+def split_residual(F: ufl.Form, u: dolfinx.fem.Function) -> tuple[ufl.Form, ufl.Form | None]:
+    """``F(u; v) = F_int(u; v) - L(v)``: the terms that depend on ``u`` and the dead load ``L``
+    (minus the terms that do not), integral by integral and term by term of each integrand.
+
+    Returns ``(F_int, L)``; ``L`` is ``None`` without load terms.
+    """
+    internal, load = [], []
+    for itg in expand_derivatives(F).integrals():
+        for term in _terms(itg.integrand()):
+            part = itg.reconstruct(integrand=term)
+            (internal if u in extract_coefficients(term) else load).append(part)
+    L = ufl.Form([i.reconstruct(integrand=-i.integrand()) for i in load]) if load else None
+    return ufl.Form(internal), L
+
+
+def _cell_part(F: ufl.Form, weight=None) -> ufl.Form:
+    """The cell integrals of ``F``, each multiplied by ``weight`` if given."""
+    itgs = [i for i in F.integrals() if i.integral_type() == "cell"]
+    if weight is not None:
+        itgs = [i.reconstruct(integrand=weight * i.integrand()) for i in itgs]
+    return ufl.Form(itgs)
+
+
+class _FEBlock:
+    """The FE field: internal force and tangent of the user's residual on the FE cells.
+
+    ``fixed`` (bool per local node) are the dofs held: strong Dirichlet nodes and nodes no FE
+    cell carries; their rows and columns of the tangent are the identity and their residual 0.
+    """
+
+    def __init__(self, F_int: ufl.Form, u: dolfinx.fem.Function, weight, fixed: np.ndarray):
+        V = u.function_space
+        self.u, self.V = u, V
+        Fw = _cell_part(F_int, weight)
+        self._R = _compat.create_form(Fw)
+        self._J = _compat.create_form(ufl.derivative(Fw, u, ufl.TrialFunction(V)))
+        self.layout, l2g = fe_dof_layout(V)
+        n_owned = V.dofmap.index_map.size_local
+        nodes = np.flatnonzero(fixed[:n_owned])
+        self.fixed_rows = (2 * l2g[nodes][:, None] + np.arange(2)).ravel().astype(PETSc.IntType)
+        self.fixed_local = (2 * nodes[:, None] + np.arange(2)).ravel()
+        self.n_owned = 2 * n_owned
+
+    def set_state(self, x: PETSc.Vec) -> None:
+        self.u.x.array[: self.n_owned] = x.getArray(readonly=True)
+        self.u.x.scatter_forward()
+
+    def internal_force(self, x: PETSc.Vec) -> PETSc.Vec:
+        self.set_state(x)
+        b = _compat.assemble_vector(self._R)
+        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        r = _zeros(x.getComm(), self.layout)
+        r.array[:] = b.array_r[: self.n_owned]
+        r.array[self.fixed_local] = 0.0
+        b.destroy()
+        return r
+
+    def tangent(self, x: PETSc.Vec) -> PETSc.Mat:
+        self.set_state(x)
+        J = _compat.assemble_matrix(self._J)
+        J.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        diag = J.createVecLeft()
+        diag.set(0.0)
+        J.setDiagonal(diag, addv=PETSc.InsertMode.ADD_VALUES)  # room on empty rows
+        diag.destroy()
+        J.zeroRowsColumns(self.fixed_rows, diag=1.0)
+        return J
+
+
+class _ParticleBlock:
+    """The particle field: ``f_int`` and ``K_T`` on the patch quadrature, in PETSc numbering."""
+
+    def __init__(self, particles: ParticleSet, tables: dict, material: Material):
+        q, tq = tables["quadrature"], tables["table"]
+        self.P, self.comm = particles, particles.comm
+        self.forces = InternalForces(
+            tq, q.weights, material, test_gradients=tables["test_gradients"], comm=particles.comm
+        )
+        self.dof_map = particles.petsc_dofs(2).ravel()
+        self.layout = particles.dof_layout()
+
+    def coefficients(self, x: PETSc.Vec) -> np.ndarray:
+        """All particle coefficients, interleaved in original order, on every rank."""
+        owned = np.concatenate(self.comm.allgather(x.getArray(readonly=True)))
+        return owned.reshape(-1, 2)[self.P.petsc_index].ravel()
+
+    def internal_force(self, x: PETSc.Vec) -> PETSc.Vec:
+        f = self.forces.internal_force(self.coefficients(x))
+        return create_vector(self.comm, self.layout, self.dof_map, f)
+
+    def tangent(self, x: PETSc.Vec) -> PETSc.Mat:
+        K = self.forces.tangent(self.coefficients(x)).tocoo()
+        n = self.dof_map.size
+        Kg = sp.csr_matrix((K.data, (self.dof_map[K.row], self.dof_map[K.col])), shape=(n, n))
+        return create_aij(self.comm, Kg, self.layout, self.layout)
+
+
+# -- the block problem --------------------------------------------------------------------------
+
+
+@dataclass
+class _BlockProblem:
+    """``R(x) = f_int(x) - t f_ext + C x - t c`` on a nest whose first fields have nonlinear
+    diagonal blocks (``sides``) and whose other blocks ``C`` are constant (constraints)."""
+
+    names: list[str]
+    num_primal: int
+    sides: list  # one _FEBlock / _ParticleBlock per primal field
+    constant: list[list[PETSc.Mat | None]]  # the C blocks (primal diagonal blocks: None)
+    loads: list[PETSc.Vec]  # f_ext per primal field, c per constraint field
+    t: float = 1.0
+    _owned: list = field(default_factory=list)
+
+    def residual(self, x: Sequence[PETSc.Vec]) -> list[PETSc.Vec]:
+        out = []
+        for i, row in enumerate(self.constant):
+            r = self.sides[i].internal_force(x[i]) if i < self.num_primal else self.loads[i].copy()
+            if i < self.num_primal:
+                r.axpy(-self.t, self.loads[i])
+            else:
+                r.scale(-self.t)
+            for j, C in enumerate(row):
+                if C is not None:
+                    C.multAdd(x[j], r, r)
+            if i < self.num_primal and isinstance(self.sides[i], _FEBlock):
+                r.array[self.sides[i].fixed_local] = 0.0
+            out.append(r)
+        return out
+
+    def jacobian(self, x: Sequence[PETSc.Vec]) -> list[list[PETSc.Mat | None]]:
+        for M in self._owned:
+            M.destroy()
+        self._owned = [self.sides[i].tangent(x[i]) for i in range(self.num_primal)]
+        blocks = [list(row) for row in self.constant]
+        for i, K in enumerate(self._owned):
+            blocks[i][i] = K
+        return blocks
+
+    def destroy(self) -> None:
+        for M in self._owned:
+            M.destroy()
+        self._owned = []
+
+
+def _solve_steps(
+    problem: _BlockProblem,
+    x: list[PETSc.Vec],
+    load_steps: int,
+    options: NewtonOptions,
+    solver: SolverOptions,
+    before_step=None,
+) -> NonlinearSolveResult:
+    steps: list[NewtonResult] = []
+    for k in range(1, load_steps + 1):
+        problem.t = k / load_steps
+        if before_step is not None:
+            before_step(problem.t, x)
+        steps.append(newton(problem, x, options, solver))
+    return NonlinearSolveResult(sum(s.iterations for s in steps), True, steps)
+
+
+def _check_steps(load_steps: int) -> None:
+    if not (isinstance(load_steps, int | np.integer) and load_steps >= 1):
+        raise ValueError(f"load_steps={load_steps!r} must be an integer >= 1")
+
+
+def _check_residual(F: ufl.Form, u: dolfinx.fem.Function) -> dolfinx.fem.FunctionSpace:
+    if not isinstance(F, ufl.Form):
+        raise TypeError(f"F must be a UFL form (the residual F(u; v)), got {type(F).__name__}")
+    if not isinstance(u, dolfinx.fem.Function):
+        raise TypeError(f"u must be a dolfinx.fem.Function (the unknown), got {type(u).__name__}")
+    if len(F.arguments()) != 1:
+        raise ValueError(
+            f"F must be linear in one test function (a residual F(u; v)); it has "
+            f"{len(F.arguments())} arguments"
+        )
+    if u not in F.coefficients():
+        raise ValueError("F does not depend on u: pass the Function the residual is written in")
+    return F.arguments()[0].ufl_function_space()
+
+
+# -- pure FE ------------------------------------------------------------------------------------
+
+
+class FENonlinearProblem:
+    """A user's nonlinear FE model ``F(u; v) = 0`` with ``bcs``, by the same Newton as the coupled
+    problems (the FE reference of the finite-strain demos, in both DOLFINx lanes).
+
+    Args:
+        F: Residual, linear in the test function, written in ``u``.
+        u: The unknown (updated in place by :meth:`solve`; its values are the initial guess).
+        bcs: ``DirichletBC`` objects (their values are reached in ``load_steps`` steps).
+        load_steps: External load and prescribed values scaled by ``k / load_steps``.
+        newton: :class:`~dolfinx_meshfree.newton.NewtonOptions`.
+        petsc_options, petsc_options_prefix: The linear solver (default MUMPS LU).
+    """
+
+    def __init__(
+        self,
+        F: ufl.Form,
+        u: dolfinx.fem.Function,
+        bcs: Sequence = (),
+        load_steps: int = 1,
+        newton: NewtonOptions | None = None,
+        petsc_options: Mapping[str, Any] | None = None,
+        petsc_options_prefix: str | None = None,
+    ):
+        comm = u.function_space.mesh.comm
+        V = raise_on_all_ranks(comm, lambda: _check_residual(F, u))
+        raise_on_all_ranks(comm, lambda: _check_steps(load_steps))
+        self._solver = raise_on_all_ranks(
+            comm, lambda: solver_options("mumps", petsc_options, petsc_options_prefix)
+        )
+        self.F, self.u, self.bcs, self.V = F, u, list(bcs), V
+        self.load_steps, self.newton = int(load_steps), newton or NewtonOptions()
+        n_local = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
+        count = np.zeros(2 * n_local, dtype=int)
+        values = np.zeros(2 * n_local)
+        for bc in self.bcs:
+            dofs, vals = _compat.dirichlet_values(bc)
+            count[dofs] += 1
+            values[dofs] = vals
+        self._bc_dofs, self._bc_values = np.flatnonzero(count), values[count > 0]
+        F_int, L = split_residual(F, u)
+        if any(i.integral_type() != "cell" for i in F_int.integrals()):
+            raise ValueError(
+                "F has facet integrals that depend on u (follower loads); only dead loads "
+                "(u-free terms) are supported"
+            )
+        self.side = _FEBlock(F_int, u, None, np.zeros(n_local, dtype=bool))
+        # held dofs by component (a bc may fix one component of a node)
+        l2g = fe_dof_layout(V)[1]
+        d = self._bc_dofs[self._bc_dofs < 2 * V.dofmap.index_map.size_local]
+        self.side.fixed_rows = (2 * l2g[d // 2] + d % 2).astype(PETSc.IntType)
+        self.side.fixed_local = d
+        v = F.arguments()[0]
+        zero = dolfinx.fem.Constant(V.mesh, np.zeros(2))
+        self._load = _compat.create_form(L if L is not None else ufl.inner(zero, v) * ufl.dx)
+
+    def solve(self) -> NonlinearSolveResult:
+        """Newton over the load steps (collective); raises
+        :class:`~dolfinx_meshfree.newton.NewtonError` if a step does not converge."""
+        u = self.u
+        b = _compat.assemble_vector(self._load)
+        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        f = _zeros(b.getComm(), self.side.layout)
+        f.array[:] = b.array_r[: self.side.n_owned]
+        b.destroy()
+        x = _zeros(f.getComm(), self.side.layout)
+        x.array[:] = u.x.array[: self.side.n_owned]
+        problem = _BlockProblem(["fe"], 1, [self.side], [[None]], [f])
+
+        def before_step(t: float, state: list[PETSc.Vec]) -> None:
+            u.x.array[: self.side.n_owned] = state[0].getArray(readonly=True)
+            u.x.array[self._bc_dofs] = t * self._bc_values
+            state[0].array[:] = u.x.array[: self.side.n_owned]
+
+        try:
+            result = _solve_steps(
+                problem, [x], self.load_steps, self.newton, self._solver, before_step
+            )
+        finally:
+            problem.destroy()
+        self.side.set_state(x)
+        for obj in (f, x):
+            obj.destroy()
+        self.result = result
+        return result
+
+
+# -- coupled ------------------------------------------------------------------------------------
+
+
+class CoupledNonlinearProblem:
+    """``F(u; v) = 0`` with ``bcs`` on a mesh whose ``patch`` cells are particles, at finite
+    strain (total Lagrangian), shaped like DOLFINx's ``NonlinearProblem`` + ``NewtonSolver``.
+
+    Args:
+        F: The user's residual on the vector P1/Q1 space of ``u``, linear in its test function:
+            e.g. ``inner(P(F(u)), grad(v)) dx - inner(t, v) ds(k) - inner(b, v) dx``. Its cell
+            integrals are the FE side (weighted by the FE cells' indicator); its ``u``-free part
+            is the dead external load ``-F(0; v)``, split between the FE and particle sides.
+        u: The FE unknown (updated in place; the FE part of the solution).
+        bcs: ``DirichletBC`` objects on ``V`` (both components of a node).
+        patch: :class:`~dolfinx_meshfree.ParticlePatch` on ``u``'s mesh.
+        material: The particle side's law (:class:`~dolfinx_meshfree.NeoHookean`,
+            :class:`~dolfinx_meshfree.SaintVenantKirchhoff` or
+            :class:`~dolfinx_meshfree.LinearElastic`): ``F`` on the patch must be this law, which
+            is checked on its linearisation.
+        coupling: One of :data:`FINITE_STRAIN_COUPLINGS`.
+        load_steps: External load and prescribed values in ``k / load_steps`` steps (or change a
+            ``Constant`` in ``F`` between calls of :meth:`solve`: each call starts from the
+            current state).
+        newton: :class:`~dolfinx_meshfree.newton.NewtonOptions`.
+        petsc_options, petsc_options_prefix: The linear solver of each Newton iteration.
+        **options: Passed to :class:`~dolfinx_meshfree.CoupledElasticity`.
+    """
+
+    def __init__(
+        self,
+        F: ufl.Form,
+        u: dolfinx.fem.Function,
+        bcs: Sequence | None,
+        patch: ParticlePatch,
+        material: Material,
+        coupling: str = "lagrange",
+        load_steps: int = 1,
+        newton: NewtonOptions | None = None,
+        petsc_options: Mapping[str, Any] | None = None,
+        petsc_options_prefix: str | None = None,
+        **options,
+    ):
+        comm = patch.comm if isinstance(patch, ParticlePatch) else u.function_space.mesh.comm
+
+        def check() -> LinearElastic:
+            _check_residual(F, u)
+            _check_steps(load_steps)
+            if coupling not in FINITE_STRAIN_COUPLINGS:
+                raise ValueError(
+                    f"coupling={coupling!r} is not available at finite strain in this release; "
+                    f"use one of {list(FINITE_STRAIN_COUPLINGS)} (the ramps' blended tables, "
+                    "the bridging band's weights, master-slave's rotating links and the hybrid "
+                    "are not written on the internal force yet)"
+                )
+            if not isinstance(material, Material):
+                raise TypeError(
+                    f"material must follow the Material protocol, got {type(material).__name__}"
+                )
+            return linearised(material)
+
+        small = raise_on_all_ranks(comm, check)
+        V = u.function_space
+        du = ufl.TrialFunction(V)
+        zero = dolfinx.fem.Function(V)
+        zero.x.array[:] = 0.0
+        F_int, L0 = split_residual(F, u)
+        a0 = ufl.replace(expand_derivatives(ufl.derivative(_cell_part(F_int), u, du)), {u: zero})
+        if L0 is None:
+            L0 = ufl.inner(dolfinx.fem.Constant(V.mesh, np.zeros(2)), F.arguments()[0]) * ufl.dx
+        self._linear = CoupledLinearProblem(
+            a0, L0, bcs, patch, small, coupling, petsc_options, petsc_options_prefix, **options
+        )
+        self.F, self.F_int, self.u = F, F_int, u
+        self.patch, self.material = patch, material
+        self.coupling = coupling
+        self.load_steps, self.newton = int(load_steps), newton or NewtonOptions()
+        self._solver = self._linear._solver
+        self.solution: CoupledSolution | None = None
+        self._state: list[np.ndarray] | None = None
+
+    @property
+    def model(self) -> CoupledElasticity:
+        """The coupled model (space, patch, MLS, loads, essential conditions)."""
+        return self._linear.problem
+
+    def solve(self) -> NonlinearSolveResult:
+        """Newton over the load steps (collective); returns ``(iterations, converged, steps)``
+        and leaves the solution in ``u`` and :attr:`solution`. Raises
+        :class:`~dolfinx_meshfree.newton.NewtonError` (with the residual history) when a step
+        does not converge: the last iterate is not returned as a solution."""
+        model = self.model
+        P = model.patch.particles
+        t0 = time.perf_counter()
+        tables: dict = {}
+        blocks, rhs, mats, extra = interface_system(model, tables)
+        b_fe, f_p = traction_loads(model)  # the external load, not lifted
+        comm = model.patch.comm
+        pl = P.dof_layout()
+        loads = [b_fe, create_vector(comm, pl, P.petsc_dofs(2).ravel(), f_p), *rhs[2:]]
+        fixed = extra["is_bc"] | ~extra["active"]
+        fe = _FEBlock(self.F_int, self.u, model.cell_indicator(~model.patch.in_patch), fixed)
+        particles = _ParticleBlock(P, tables, self.material)
+        constant = [list(row) for row in blocks]
+        constant[0][0] = constant[1][1] = None
+        names = ["fe", "particles"] + [f"multiplier{i}" for i in range(len(blocks) - 2)]
+        problem = _BlockProblem(names, 2, [fe, particles], constant, loads)
+        x = []
+        for i, load in enumerate(loads):  # the previous solve's state, or u and zeros
+            v = load.duplicate()
+            v.set(0.0)
+            if self._state is not None and self._state[i].size == load.getLocalSize():
+                v.array[:] = self._state[i]
+            x.append(v)
+        ubc = extra["ubc"].x.array
+        n_owned = fe.n_owned
+        is_bc_dof = np.repeat(extra["is_bc"], 2)[:n_owned]
+        x[0].array[:] = self.u.x.array[:n_owned]
+        setup = time.perf_counter() - t0
+
+        def before_step(t: float, state: list[PETSc.Vec]) -> None:
+            state[0].array[is_bc_dof] = t * ubc[:n_owned][is_bc_dof]
+
+        try:
+            result = _solve_steps(
+                problem, x, self.load_steps, self.newton, self._solver, before_step
+            )
+        finally:
+            problem.destroy()
+        fe.set_state(x[0])
+        self._state = [v.getArray(readonly=True).copy() for v in x]
+        coeffs = particles.coefficients(x[1]).reshape(-1, 2)
+        self.solution = CoupledSolution(
+            u=self.u,
+            coefficients=coeffs,
+            mls=model.mls,
+            patch=model.patch,
+            timings={"setup": setup, "newton": time.perf_counter() - t0 - setup},
+        )
+        for obj in [*mats, extra["x_bc"], *rhs, *loads[:2], *x]:
+            obj.destroy()
+        self.result = result
+        return result

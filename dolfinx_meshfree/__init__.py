@@ -41,16 +41,12 @@ from .kernels import cubic_spline, gaussian, quartic, sph_cubic_spline
 from .materials import LinearElastic
 from .mls import MLS, MomentMatrixError
 from .newton import NewtonError, NewtonOptions, NewtonResult
-from .nonlinear import (
-    FINITE_STRAIN_COUPLINGS,
-    CoupledNonlinearProblem,
-    FENonlinearProblem,
-    NonlinearSolveResult,
-)
+from .nonlinear import FINITE_STRAIN_COUPLINGS, CoupledNonlinearProblem, FENonlinearProblem
 from .particles import ParticleSet
 from .patch import PLACEMENTS, ParticlePatch
 from .problem import CoupledLinearProblem
 from .quadrature import boundary_facets, cell_quadrature, facet_quadrature
+from .sides import NonlinearSolveResult
 from .sph import SPH
 from .tables import ShapeTable
 from .waves import GaussianPulseRod, StepLoadedRod

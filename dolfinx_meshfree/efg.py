@@ -30,13 +30,16 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from .constitutive import Material
 from .materials import LinearElastic
 from .mls import MLS
+from .newton import NewtonOptions
 from .operators import consistent_gradients, load_vector, stiffness_matrix
 from .parallel import Layout, raise_on_all_ranks
 from .particles import ParticleSet
 from .petsc import BlockSystem, SolverOptions, create_aij, create_vector, solver_options
 from .quadrature import QuadraturePoints, boundary_facets, cell_quadrature, facet_quadrature
+from .sides import BlockProblem, ParticleSide, solve_load_steps
 from .tables import ShapeTable
 
 __all__ = ["EFGElasticity", "EFGSolution", "facet_multipliers", "particle_stiffness"]
@@ -72,6 +75,8 @@ class EFGSolution:
     multipliers: np.ndarray
     timings: dict = field(default_factory=dict)
     num_multipliers: int = 0
+    #: Finite strain: the Newton record (:class:`~dolfinx_meshfree.NonlinearSolveResult`).
+    newton: object | None = None
 
     def displacement(self, points: np.ndarray) -> np.ndarray:
         """Displacement (m, 2) at points (m, 2); local, no communication."""
@@ -219,14 +224,23 @@ class EFGElasticity:
     ):
         if particles.mesh is None:
             raise ValueError("EFGElasticity needs particles with a background mesh (mesh=...)")
-        if not isinstance(material, LinearElastic):
-            raise TypeError(f"material must be a LinearElastic, got {type(material).__name__}")
+        if not isinstance(material, LinearElastic | Material):
+            raise TypeError(
+                f"material must be a LinearElastic or a finite-strain Material (NeoHookean, "
+                f"SaintVenantKirchhoff), got {type(material).__name__}"
+            )
         if not (isinstance(quadrature_degree, int) and quadrature_degree >= 1):
             raise ValueError(f"quadrature_degree={quadrature_degree!r} must be an integer >= 1")
         t0 = time.perf_counter()
         self.particles = particles
         self.mesh = particles.mesh
         self.material = material
+        #: The small-strain law of the stiffness (``material`` itself when linear).
+        self.linear_material = (
+            material
+            if isinstance(material, LinearElastic)
+            else LinearElastic(material.E, material.nu, plane=material.plane, rho=material.rho)
+        )
         self.mls = raise_on_all_ranks(
             particles.comm, lambda: MLS(particles, weight=weight, dilation=dilation, basis=basis)
         )
@@ -256,31 +270,27 @@ class EFGElasticity:
         """Body force per unit volume ``b(x)`` (m, 2)."""
         self._body = force
 
-    def solve(
-        self,
-        solver: str | SolverOptions = "mumps",
-        petsc_options: Mapping[str, Any] | None = None,
-        prefix: str | None = None,
-    ) -> EFGSolution:
-        """Assemble the block system and solve it (collective).
+    def system(self, tables: dict | None = None) -> tuple[BlockSystem, list, dict]:
+        """The assembled block system, not solved (collective).
 
         Args:
-            solver: ``"mumps"`` (direct) or ``"fieldsplit"`` (Schur complement on the augmented
-                saddle point, see :class:`~dolfinx_meshfree.petsc.BlockSystem`), or a
-                :class:`~dolfinx_meshfree.petsc.SolverOptions`.
-            petsc_options, prefix: PETSc options of a KSP on the block system instead (fields
-                ``particles`` and ``dirichlet``), and its prefix; see
-                :meth:`~dolfinx_meshfree.CoupledElasticity.solve`.
+            tables: If given, receives the quadrature, MLS table and test gradients of the
+                stiffness (see :func:`particle_stiffness`).
+
+        Returns:
+            ``(system, objects, extra)``: the :class:`~dolfinx_meshfree.petsc.BlockSystem`
+            (fields ``particles`` and, with Dirichlet facets, ``dirichlet``), the PETSc objects
+            to destroy with it, and ``extra`` with ``scale`` (the constraint rows' ``s``),
+            ``multipliers`` (their layout) and the ``setup``/``assemble`` seconds.
         """
         comm = self.comm
-        solver = raise_on_all_ranks(comm, lambda: solver_options(solver, petsc_options, prefix))
         P = self.particles
         n = P.num_particles
         dof_map = P.petsc_dofs(2).ravel()  # original interleaved dof -> PETSc dof
         t0 = time.perf_counter()
         boundary = (boundary_facets(self.mesh), None) if self.consistent else None
         Kg, q, tq, kt = particle_stiffness(
-            P, self.mls, self.material, self.quadrature_degree, boundary
+            P, self.mls, self.linear_material, self.quadrature_degree, boundary, tables=tables
         )
         dq = [facet_quadrature(self.mesh, f, self.quadrature_degree) for f, _ in self._dirichlet]
         dtabs = [raise_on_all_ranks(comm, lambda d=d: self.mls.tabulate(d.points, 0)) for d in dq]
@@ -323,10 +333,41 @@ class EFGElasticity:
             system = BlockSystem([[K]], [f], names=["particles"])
         assemble = time.perf_counter() - t1 + kt["assemble"]
 
+        extra = {"scale": s, "multipliers": mlayout, "setup": setup, "assemble": assemble}
+        return system, [K, G, GT, f, g], extra
+
+    def solve(
+        self,
+        solver: str | SolverOptions = "mumps",
+        petsc_options: Mapping[str, Any] | None = None,
+        prefix: str | None = None,
+        load_steps: int = 1,
+        newton: NewtonOptions | None = None,
+    ) -> EFGSolution:
+        """Assemble the block system and solve it (collective); with a finite-strain material,
+        by Newton (:func:`~dolfinx_meshfree.newton.newton`) over ``load_steps`` steps of the
+        tractions, body force and prescribed displacements (``newton``: its options); the
+        solution's ``newton`` then holds the :class:`~dolfinx_meshfree.NonlinearSolveResult`.
+
+        Args:
+            solver: ``"mumps"`` (direct) or ``"fieldsplit"`` (Schur complement on the augmented
+                saddle point, see :class:`~dolfinx_meshfree.petsc.BlockSystem`), or a
+                :class:`~dolfinx_meshfree.petsc.SolverOptions`.
+            petsc_options, prefix: PETSc options of a KSP on the block system instead (fields
+                ``particles`` and ``dirichlet``), and its prefix; see
+                :meth:`~dolfinx_meshfree.CoupledElasticity.solve`.
+        """
+        comm = self.comm
+        solver = raise_on_all_ranks(comm, lambda: solver_options(solver, petsc_options, prefix))
+        if not isinstance(self.material, LinearElastic):
+            return self._solve_finite_strain(solver, load_steps, newton)
+        P = self.particles
+        system, objects, extra = self.system()
+        s, mlayout = extra["scale"], extra["multipliers"]
         t2 = time.perf_counter()
         parts = system.solve(solver)
         solve = time.perf_counter() - t2
-        for obj in (system, K, G, GT, f, g):
+        for obj in (system, *objects):
             obj.destroy()
         owned = np.concatenate(comm.allgather(parts[0]))  # PETSc order, all ranks
         coeffs = owned.reshape(-1, 2)[P.petsc_index]
@@ -335,6 +376,48 @@ class EFGElasticity:
             mls=self.mls,
             coefficients=coeffs,
             multipliers=lam,
-            timings={"setup": setup, "assemble": assemble, "solve": solve},
+            timings={"setup": extra["setup"], "assemble": extra["assemble"], "solve": solve},
             num_multipliers=mlayout.size_global,
+        )
+
+    def _solve_finite_strain(
+        self, solver: SolverOptions, load_steps: int, options: NewtonOptions | None
+    ) -> EFGSolution:
+        """Newton on ``[[K_T(u), s G^T], [s G, 0]]`` with ``f_int(u) = sum_q B0^T P w_q`` on the
+        cells' quadrature and the stiffness's test gradients (VCI when consistent: a homogeneous
+        deformation is reproduced at any load level). Collective."""
+        P = self.particles
+
+        def check() -> None:
+            if not (isinstance(load_steps, int) and load_steps >= 1):
+                raise ValueError(f"load_steps={load_steps!r} must be an integer >= 1")
+
+        raise_on_all_ranks(self.comm, check)
+        tables: dict = {}
+        system, objects, extra = self.system(tables)
+        side = ParticleSide(P, tables, self.material)
+        constant = [list(row) for row in system.blocks]
+        constant[0][0] = None
+        problem = BlockProblem(system.names, 1, [side], constant, list(system.rhs))
+        x = [v.duplicate() for v in system.rhs]
+        for v in x:
+            v.set(0.0)
+        t0 = time.perf_counter()
+        try:
+            result = solve_load_steps(problem, x, load_steps, options or NewtonOptions(), solver)
+        finally:
+            problem.destroy()
+        seconds = time.perf_counter() - t0
+        coeffs = side.coefficients(x[0]).reshape(-1, 2)
+        s, mlayout = extra["scale"], extra["multipliers"]
+        lam = x[1].getArray(readonly=True) * s if len(x) > 1 else np.zeros(0)
+        for obj in (system, *objects, *x):
+            obj.destroy()
+        return EFGSolution(
+            mls=self.mls,
+            coefficients=coeffs,
+            multipliers=lam,
+            timings={"setup": extra["setup"], "assemble": extra["assemble"], "solve": seconds},
+            num_multipliers=mlayout.size_global,
+            newton=result,
         )

@@ -24,16 +24,13 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
-from typing import Any, NamedTuple
+from typing import Any
 
 import dolfinx
 import numpy as np
-import scipy.sparse as sp
 import ufl
 from petsc4py import PETSc
-from ufl.algorithms import expand_derivatives, extract_coefficients
-from ufl.classes import Sum
+from ufl.algorithms import expand_derivatives
 
 from . import _compat
 from .constitutive import Material
@@ -41,34 +38,32 @@ from .coupled import CoupledElasticity, CoupledSolution
 from .couplings.assembly import traction_loads
 from .couplings.base import fe_dof_layout
 from .couplings.lagrange import interface_system
-from .forces import InternalForces
 from .materials import LinearElastic
-from .newton import NewtonOptions, NewtonResult, newton
-from .parallel import Layout, raise_on_all_ranks
-from .particles import ParticleSet
+from .newton import NewtonOptions
+from .parallel import raise_on_all_ranks
 from .patch import ParticlePatch
-from .petsc import SolverOptions, create_aij, create_vector, solver_options
+from .petsc import create_vector, solver_options
 from .problem import CoupledLinearProblem
+from .sides import (
+    BlockProblem,
+    FESide,
+    NonlinearSolveResult,
+    ParticleSide,
+    cell_part,
+    solve_load_steps,
+    split_residual,
+    zeros,
+)
 
 __all__ = [
     "FINITE_STRAIN_COUPLINGS",
     "CoupledNonlinearProblem",
     "FENonlinearProblem",
-    "NonlinearSolveResult",
     "linearised",
 ]
 
 #: Couplings available at finite strain (the others refuse with a clear error).
 FINITE_STRAIN_COUPLINGS = ("lagrange", "edge-to-edge")
-
-
-class NonlinearSolveResult(NamedTuple):
-    """``(iterations, converged)`` as DOLFINx's ``NewtonSolver.solve`` returns, over all load
-    steps; the per-step records are in ``steps``."""
-
-    iterations: int
-    converged: bool
-    steps: list
 
 
 def linearised(material: Material) -> LinearElastic:
@@ -83,181 +78,6 @@ def linearised(material: Material) -> LinearElastic:
             "problems are 2D in this release: use plane='strain' or 'stress'"
         )
     return LinearElastic(material.E, material.nu, plane=plane, rho=material.rho)
-
-
-def _zeros(comm, layout: Layout) -> PETSc.Vec:
-    return create_vector(comm, layout, np.zeros(0, np.int64), np.zeros(0))
-
-
-# -- the two sides ------------------------------------------------------------------------------
-
-
-def _terms(expr) -> list:
-    """The operands of a top-level sum (the terms a user adds in a residual)."""
-    if isinstance(expr, Sum):
-        return [t for op in expr.ufl_operands for t in _terms(op)]
-    return [expr]
-
-
-def split_residual(F: ufl.Form, u: dolfinx.fem.Function) -> tuple[ufl.Form, ufl.Form | None]:
-    """``F(u; v) = F_int(u; v) - L(v)``: the terms that depend on ``u`` and the dead load ``L``
-    (minus the terms that do not), integral by integral and term by term of each integrand.
-
-    Returns ``(F_int, L)``; ``L`` is ``None`` without load terms.
-    """
-    internal, load = [], []
-    for itg in expand_derivatives(F).integrals():
-        for term in _terms(itg.integrand()):
-            part = itg.reconstruct(integrand=term)
-            (internal if u in extract_coefficients(term) else load).append(part)
-    L = ufl.Form([i.reconstruct(integrand=-i.integrand()) for i in load]) if load else None
-    return ufl.Form(internal), L
-
-
-def _cell_part(F: ufl.Form, weight=None) -> ufl.Form:
-    """The cell integrals of ``F``, each multiplied by ``weight`` if given."""
-    itgs = [i for i in F.integrals() if i.integral_type() == "cell"]
-    if weight is not None:
-        itgs = [i.reconstruct(integrand=weight * i.integrand()) for i in itgs]
-    return ufl.Form(itgs)
-
-
-class _FEBlock:
-    """The FE field: internal force and tangent of the user's residual on the FE cells.
-
-    ``fixed`` (bool per local node) are the dofs held: strong Dirichlet nodes and nodes no FE
-    cell carries; their rows and columns of the tangent are the identity and their residual 0.
-    """
-
-    def __init__(self, F_int: ufl.Form, u: dolfinx.fem.Function, weight, fixed: np.ndarray):
-        V = u.function_space
-        self.u, self.V = u, V
-        Fw = _cell_part(F_int, weight)
-        self._R = _compat.create_form(Fw)
-        self._J = _compat.create_form(ufl.derivative(Fw, u, ufl.TrialFunction(V)))
-        self.layout, l2g = fe_dof_layout(V)
-        n_owned = V.dofmap.index_map.size_local
-        nodes = np.flatnonzero(fixed[:n_owned])
-        self.fixed_rows = (2 * l2g[nodes][:, None] + np.arange(2)).ravel().astype(PETSc.IntType)
-        self.fixed_local = (2 * nodes[:, None] + np.arange(2)).ravel()
-        self.n_owned = 2 * n_owned
-
-    def set_state(self, x: PETSc.Vec) -> None:
-        self.u.x.array[: self.n_owned] = x.getArray(readonly=True)
-        self.u.x.scatter_forward()
-
-    def internal_force(self, x: PETSc.Vec) -> PETSc.Vec:
-        self.set_state(x)
-        b = _compat.assemble_vector(self._R)
-        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        r = _zeros(x.getComm(), self.layout)
-        r.array[:] = b.array_r[: self.n_owned]
-        r.array[self.fixed_local] = 0.0
-        b.destroy()
-        return r
-
-    def tangent(self, x: PETSc.Vec) -> PETSc.Mat:
-        self.set_state(x)
-        J = _compat.assemble_matrix(self._J)
-        J.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
-        diag = J.createVecLeft()
-        diag.set(0.0)
-        J.setDiagonal(diag, addv=PETSc.InsertMode.ADD_VALUES)  # room on empty rows
-        diag.destroy()
-        J.zeroRowsColumns(self.fixed_rows, diag=1.0)
-        return J
-
-
-class _ParticleBlock:
-    """The particle field: ``f_int`` and ``K_T`` on the patch quadrature, in PETSc numbering."""
-
-    def __init__(self, particles: ParticleSet, tables: dict, material: Material):
-        q, tq = tables["quadrature"], tables["table"]
-        self.P, self.comm = particles, particles.comm
-        self.forces = InternalForces(
-            tq, q.weights, material, test_gradients=tables["test_gradients"], comm=particles.comm
-        )
-        self.dof_map = particles.petsc_dofs(2).ravel()
-        self.layout = particles.dof_layout()
-
-    def coefficients(self, x: PETSc.Vec) -> np.ndarray:
-        """All particle coefficients, interleaved in original order, on every rank."""
-        owned = np.concatenate(self.comm.allgather(x.getArray(readonly=True)))
-        return owned.reshape(-1, 2)[self.P.petsc_index].ravel()
-
-    def internal_force(self, x: PETSc.Vec) -> PETSc.Vec:
-        f = self.forces.internal_force(self.coefficients(x))
-        return create_vector(self.comm, self.layout, self.dof_map, f)
-
-    def tangent(self, x: PETSc.Vec) -> PETSc.Mat:
-        K = self.forces.tangent(self.coefficients(x)).tocoo()
-        n = self.dof_map.size
-        Kg = sp.csr_matrix((K.data, (self.dof_map[K.row], self.dof_map[K.col])), shape=(n, n))
-        return create_aij(self.comm, Kg, self.layout, self.layout)
-
-
-# -- the block problem --------------------------------------------------------------------------
-
-
-@dataclass
-class _BlockProblem:
-    """``R(x) = f_int(x) - t f_ext + C x - t c`` on a nest whose first fields have nonlinear
-    diagonal blocks (``sides``) and whose other blocks ``C`` are constant (constraints)."""
-
-    names: list[str]
-    num_primal: int
-    sides: list  # one _FEBlock / _ParticleBlock per primal field
-    constant: list[list[PETSc.Mat | None]]  # the C blocks (primal diagonal blocks: None)
-    loads: list[PETSc.Vec]  # f_ext per primal field, c per constraint field
-    t: float = 1.0
-    _owned: list = field(default_factory=list)
-
-    def residual(self, x: Sequence[PETSc.Vec]) -> list[PETSc.Vec]:
-        out = []
-        for i, row in enumerate(self.constant):
-            r = self.sides[i].internal_force(x[i]) if i < self.num_primal else self.loads[i].copy()
-            if i < self.num_primal:
-                r.axpy(-self.t, self.loads[i])
-            else:
-                r.scale(-self.t)
-            for j, C in enumerate(row):
-                if C is not None:
-                    C.multAdd(x[j], r, r)
-            if i < self.num_primal and isinstance(self.sides[i], _FEBlock):
-                r.array[self.sides[i].fixed_local] = 0.0
-            out.append(r)
-        return out
-
-    def jacobian(self, x: Sequence[PETSc.Vec]) -> list[list[PETSc.Mat | None]]:
-        for M in self._owned:
-            M.destroy()
-        self._owned = [self.sides[i].tangent(x[i]) for i in range(self.num_primal)]
-        blocks = [list(row) for row in self.constant]
-        for i, K in enumerate(self._owned):
-            blocks[i][i] = K
-        return blocks
-
-    def destroy(self) -> None:
-        for M in self._owned:
-            M.destroy()
-        self._owned = []
-
-
-def _solve_steps(
-    problem: _BlockProblem,
-    x: list[PETSc.Vec],
-    load_steps: int,
-    options: NewtonOptions,
-    solver: SolverOptions,
-    before_step=None,
-) -> NonlinearSolveResult:
-    steps: list[NewtonResult] = []
-    for k in range(1, load_steps + 1):
-        problem.t = k / load_steps
-        if before_step is not None:
-            before_step(problem.t, x)
-        steps.append(newton(problem, x, options, solver))
-    return NonlinearSolveResult(sum(s.iterations for s in steps), True, steps)
 
 
 def _check_steps(load_steps: int) -> None:
@@ -328,7 +148,7 @@ class FENonlinearProblem:
                 "F has facet integrals that depend on u (follower loads); only dead loads "
                 "(u-free terms) are supported"
             )
-        self.side = _FEBlock(F_int, u, None, np.zeros(n_local, dtype=bool))
+        self.side = FESide(F_int, u, None, np.zeros(n_local, dtype=bool))
         # held dofs by component (a bc may fix one component of a node)
         l2g = fe_dof_layout(V)[1]
         d = self._bc_dofs[self._bc_dofs < 2 * V.dofmap.index_map.size_local]
@@ -344,12 +164,12 @@ class FENonlinearProblem:
         u = self.u
         b = _compat.assemble_vector(self._load)
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        f = _zeros(b.getComm(), self.side.layout)
+        f = zeros(b.getComm(), self.side.layout)
         f.array[:] = b.array_r[: self.side.n_owned]
         b.destroy()
-        x = _zeros(f.getComm(), self.side.layout)
+        x = zeros(f.getComm(), self.side.layout)
         x.array[:] = u.x.array[: self.side.n_owned]
-        problem = _BlockProblem(["fe"], 1, [self.side], [[None]], [f])
+        problem = BlockProblem(["fe"], 1, [self.side], [[None]], [f])
 
         def before_step(t: float, state: list[PETSc.Vec]) -> None:
             u.x.array[: self.side.n_owned] = state[0].getArray(readonly=True)
@@ -357,7 +177,7 @@ class FENonlinearProblem:
             state[0].array[:] = u.x.array[: self.side.n_owned]
 
         try:
-            result = _solve_steps(
+            result = solve_load_steps(
                 problem, [x], self.load_steps, self.newton, self._solver, before_step
             )
         finally:
@@ -435,7 +255,7 @@ class CoupledNonlinearProblem:
         zero = dolfinx.fem.Function(V)
         zero.x.array[:] = 0.0
         F_int, L0 = split_residual(F, u)
-        a0 = ufl.replace(expand_derivatives(ufl.derivative(_cell_part(F_int), u, du)), {u: zero})
+        a0 = ufl.replace(expand_derivatives(ufl.derivative(cell_part(F_int), u, du)), {u: zero})
         if L0 is None:
             L0 = ufl.inner(dolfinx.fem.Constant(V.mesh, np.zeros(2)), F.arguments()[0]) * ufl.dx
         self._linear = CoupledLinearProblem(
@@ -469,12 +289,12 @@ class CoupledNonlinearProblem:
         pl = P.dof_layout()
         loads = [b_fe, create_vector(comm, pl, P.petsc_dofs(2).ravel(), f_p), *rhs[2:]]
         fixed = extra["is_bc"] | ~extra["active"]
-        fe = _FEBlock(self.F_int, self.u, model.cell_indicator(~model.patch.in_patch), fixed)
-        particles = _ParticleBlock(P, tables, self.material)
+        fe = FESide(self.F_int, self.u, model.cell_indicator(~model.patch.in_patch), fixed)
+        particles = ParticleSide(P, tables, self.material)
         constant = [list(row) for row in blocks]
         constant[0][0] = constant[1][1] = None
         names = ["fe", "particles"] + [f"multiplier{i}" for i in range(len(blocks) - 2)]
-        problem = _BlockProblem(names, 2, [fe, particles], constant, loads)
+        problem = BlockProblem(names, 2, [fe, particles], constant, loads)
         x = []
         for i, load in enumerate(loads):  # the previous solve's state, or u and zeros
             v = load.duplicate()
@@ -492,7 +312,7 @@ class CoupledNonlinearProblem:
             state[0].array[is_bc_dof] = t * ubc[:n_owned][is_bc_dof]
 
         try:
-            result = _solve_steps(
+            result = solve_load_steps(
                 problem, x, self.load_steps, self.newton, self._solver, before_step
             )
         finally:

@@ -189,10 +189,14 @@ def newton(
                 alpha *= 0.5
                 continue
             n_try = _norm(r_try)
+            if not np.isfinite(n_try):  # never carried on: shorten the step
+                _destroy([*trial, *r_try])
+                alpha *= 0.5
+                continue
             if opts.line_search == "armijo":
                 good = n_try <= (1.0 - 1e-4 * alpha) * history[-1]
             elif opts.line_search == "guard":
-                good = np.isfinite(n_try) and n_try <= opts.growth * history[-1]
+                good = n_try <= opts.growth * history[-1]
             else:
                 good = True
             if good:
@@ -210,8 +214,8 @@ def newton(
                 _destroy(r)
                 raise NewtonError(
                     f"iteration {it + 1}: every step length down to 2^-{opts.max_halvings} "
-                    "inverts the material at a point (det F <= 0); take smaller load steps "
-                    "(load_steps=)",
+                    "inverts the material at a point (det F <= 0) or gives a non-finite "
+                    "residual; take smaller load steps (load_steps=)",
                     history,
                 )
             accepted = best  # no sufficient decrease: the best step, and carry on

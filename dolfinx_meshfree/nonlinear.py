@@ -41,7 +41,7 @@ from .couplings.lagrange import interface_system
 from .materials import LinearElastic
 from .newton import NewtonOptions
 from .parallel import raise_on_all_ranks
-from .patch import ParticlePatch
+from .patch import FE_TAG, ParticlePatch
 from .petsc import create_vector, solver_options
 from .problem import CoupledLinearProblem
 from .sides import (
@@ -152,8 +152,7 @@ class FENonlinearProblem:
         # held dofs by component (a bc may fix one component of a node)
         l2g = fe_dof_layout(V)[1]
         d = self._bc_dofs[self._bc_dofs < 2 * V.dofmap.index_map.size_local]
-        self.side.fixed_rows = (2 * l2g[d // 2] + d % 2).astype(PETSc.IntType)
-        self.side.fixed_local = d
+        self.side.hold(d, values[d], l2g)
         v = F.arguments()[0]
         zero = dolfinx.fem.Constant(V.mesh, np.zeros(2))
         self._load = _compat.create_form(L if L is not None else ufl.inner(zero, v) * ufl.dx)
@@ -171,15 +170,8 @@ class FENonlinearProblem:
         x.array[:] = u.x.array[: self.side.n_owned]
         problem = BlockProblem(["fe"], 1, [self.side], [[None]], [f])
 
-        def before_step(t: float, state: list[PETSc.Vec]) -> None:
-            u.x.array[: self.side.n_owned] = state[0].getArray(readonly=True)
-            u.x.array[self._bc_dofs] = t * self._bc_values
-            state[0].array[:] = u.x.array[: self.side.n_owned]
-
         try:
-            result = solve_load_steps(
-                problem, [x], self.load_steps, self.newton, self._solver, before_step
-            )
+            result = solve_load_steps(problem, [x], self.load_steps, self.newton, self._solver)
         finally:
             problem.destroy()
         self.side.set_state(x)
@@ -289,7 +281,7 @@ class CoupledNonlinearProblem:
         pl = P.dof_layout()
         loads = [b_fe, create_vector(comm, pl, P.petsc_dofs(2).ravel(), f_p), *rhs[2:]]
         fixed = extra["is_bc"] | ~extra["active"]
-        fe = FESide(self.F_int, self.u, model.cell_indicator(~model.patch.in_patch), fixed)
+        fe = FESide(self.F_int, self.u, (model.patch.cell_tags, FE_TAG), fixed)
         particles = ParticleSide(P, tables, self.material)
         constant = [list(row) for row in blocks]
         constant[0][0] = constant[1][1] = None
@@ -302,19 +294,14 @@ class CoupledNonlinearProblem:
             if self._state is not None and self._state[i].size == load.getLocalSize():
                 v.array[:] = self._state[i]
             x.append(v)
-        ubc = extra["ubc"].x.array
-        n_owned = fe.n_owned
-        is_bc_dof = np.repeat(extra["is_bc"], 2)[:n_owned]
-        x[0].array[:] = self.u.x.array[:n_owned]
+        # held FE dofs: the strong values on Dirichlet nodes, 0 on nodes no FE cell carries
+        fe.fixed_values = np.where(np.repeat(extra["is_bc"], 2), extra["ubc"].x.array, 0.0)[
+            fe.fixed_local
+        ]
+        x[0].array[:] = self.u.x.array[: fe.n_owned]
         setup = time.perf_counter() - t0
-
-        def before_step(t: float, state: list[PETSc.Vec]) -> None:
-            state[0].array[is_bc_dof] = t * ubc[:n_owned][is_bc_dof]
-
         try:
-            result = solve_load_steps(
-                problem, x, self.load_steps, self.newton, self._solver, before_step
-            )
+            result = solve_load_steps(problem, x, self.load_steps, self.newton, self._solver)
         finally:
             problem.destroy()
         fe.set_state(x[0])

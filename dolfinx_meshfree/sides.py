@@ -25,7 +25,7 @@ from ufl.classes import Sum
 
 from . import _compat
 from .constitutive import Material
-from .fe_dofs import fe_dof_layout
+from .fe_dofs import cell_indicator, fe_dof_layout
 from .forces import InternalForces
 from .newton import NewtonOptions, NewtonResult, newton
 from .parallel import Layout
@@ -38,6 +38,7 @@ __all__ = [
     "NonlinearSolveResult",
     "ParticleSide",
     "cell_part",
+    "on_cells",
     "solve_load_steps",
     "split_residual",
     "zeros",
@@ -83,6 +84,30 @@ def split_residual(F: ufl.Form, u: dolfinx.fem.Function) -> tuple[ufl.Form, ufl.
     return ufl.Form(internal), L
 
 
+def on_cells(F: ufl.Form, tags, tag: int) -> ufl.Form:
+    """The cell integrals of ``F`` restricted to the cells tagged ``tag`` in ``tags``.
+
+    Integrals with subdomain data of the user's own are not restricted but weighted by the
+    indicator of those cells (still exact where the integrand is finite everywhere)."""
+    msh = tags.mesh if hasattr(tags, "mesh") else None
+    out = []
+    for itg in F.integrals():
+        if itg.integral_type() != "cell":
+            continue
+        if itg.subdomain_data() is None and itg.subdomain_id() in ("everywhere", "otherwise"):
+            out.append(itg.reconstruct(subdomain_id=tag, subdomain_data=tags))
+        else:
+            weight = _indicator(tags, tag, msh or itg.ufl_domain().ufl_cargo())
+            out.append(itg.reconstruct(integrand=weight * itg.integrand()))
+    return ufl.Form(out)
+
+
+def _indicator(tags, tag: int, msh) -> dolfinx.fem.Function:
+    flags = np.zeros(msh.topology.index_map(msh.topology.dim).size_local, dtype=bool)
+    flags[tags.indices[tags.values == tag]] = True
+    return cell_indicator(msh, flags)
+
+
 def cell_part(F: ufl.Form, weight=None) -> ufl.Form:
     """The cell integrals of ``F``, each multiplied by ``weight`` if given."""
     itgs = [i for i in F.integrals() if i.integral_type() == "cell"]
@@ -95,13 +120,18 @@ class FESide:
     """The FE field: internal force and tangent of the user's residual on the FE cells.
 
     ``fixed`` (bool per local node) are the dofs held: strong Dirichlet nodes and nodes no FE
-    cell carries; their rows and columns of the tangent are the identity and their residual 0.
+    cell carries. Their tangent rows are the identity (columns kept, so that the first Newton
+    step of a load step carries the prescribed increment into the body, as DOLFINx's lifting
+    does) and their residual is ``x - t x_bar``, with :attr:`fixed_values` ``x_bar`` (0 on the
+    nodes no FE cell carries) and ``t`` the load factor.
     """
 
-    def __init__(self, F_int: ufl.Form, u: dolfinx.fem.Function, weight, fixed: np.ndarray):
+    def __init__(self, F_int: ufl.Form, u: dolfinx.fem.Function, cells, fixed: np.ndarray):
         V = u.function_space
         self.u, self.V = u, V
-        Fw = cell_part(F_int, weight)
+        # on the FE cells only (``cells = (tags, tag)``): a weight 0 on the patch cells would
+        # still evaluate the law there, on an FE field that means nothing (NaN at finite strain)
+        Fw = cell_part(F_int) if cells is None else on_cells(F_int, *cells)
         self._R = _compat.create_form(Fw)
         self._J = _compat.create_form(ufl.derivative(Fw, u, ufl.TrialFunction(V)))
         self.layout, l2g = fe_dof_layout(V)
@@ -109,7 +139,16 @@ class FESide:
         nodes = np.flatnonzero(fixed[:n_owned])
         self.fixed_rows = (2 * l2g[nodes][:, None] + np.arange(2)).ravel().astype(PETSc.IntType)
         self.fixed_local = (2 * nodes[:, None] + np.arange(2)).ravel()
+        #: Prescribed values of the fixed dofs (full load), set by the problem.
+        self.fixed_values = np.zeros(self.fixed_local.size)
         self.n_owned = 2 * n_owned
+
+    def hold(self, dofs: np.ndarray, values: np.ndarray, l2g: np.ndarray) -> None:
+        """Fix owned local dofs (not nodes) to ``values`` (at full load)."""
+        d = np.asarray(dofs, dtype=np.int64)
+        self.fixed_rows = (2 * l2g[d // 2] + d % 2).astype(PETSc.IntType)
+        self.fixed_local = d
+        self.fixed_values = np.asarray(values, dtype=float)
 
     def set_state(self, x: PETSc.Vec) -> None:
         self.u.x.array[: self.n_owned] = x.getArray(readonly=True)
@@ -121,7 +160,6 @@ class FESide:
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         r = zeros(x.getComm(), self.layout)
         r.array[:] = b.array_r[: self.n_owned]
-        r.array[self.fixed_local] = 0.0
         b.destroy()
         return r
 
@@ -133,7 +171,7 @@ class FESide:
         diag.set(0.0)
         J.setDiagonal(diag, addv=PETSc.InsertMode.ADD_VALUES)  # room on empty rows
         diag.destroy()
-        J.zeroRowsColumns(self.fixed_rows, diag=1.0)
+        J.zeroRows(self.fixed_rows, diag=1.0)
         return J
 
 
@@ -192,8 +230,10 @@ class BlockProblem:
             for j, C in enumerate(row):
                 if C is not None:
                     C.multAdd(x[j], r, r)
-            if i < self.num_primal and isinstance(self.sides[i], FESide):
-                r.array[self.sides[i].fixed_local] = 0.0
+            side = self.sides[i] if i < self.num_primal else None
+            if isinstance(side, FESide):  # held dofs: x - t x_bar
+                held = side.fixed_local
+                r.array[held] = x[i].getArray(readonly=True)[held] - self.t * side.fixed_values
             out.append(r)
         return out
 

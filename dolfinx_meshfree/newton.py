@@ -14,7 +14,11 @@ where full steps took 4-5). ``line_search="armijo"`` halves until ``|R|`` falls 
 ``1 - 1e-4 alpha``; ``"none"`` always takes the full step.
 
 Convergence: ``|R(x)| <= max(atol, rtol |R(x_0)|)`` with ``x_0`` the state at the start of the
-load step. A problem that does not converge in ``max_it`` iterations raises
+load step, or (PETSc SNES's step test) a step ``|alpha dx| <= stol |x|`` once ``|R|`` has fallen
+below ``sqrt(rtol) |R(x_0)|``: a stiff body under a small load reaches the round-off floor of its
+internal forces (``|f_int| ~ E``) above ``rtol |R(x_0)|`` (a slender cantilever: 1.6e-10 against
+a tolerance of 1.0e-10, after a quadratic 5e-5 -> 1.6e-10). A problem that does not converge in
+``max_it`` iterations raises
 :class:`NewtonError` with the residual history: the last iterate is never returned as a solution.
 """
 
@@ -60,6 +64,7 @@ class NewtonOptions:
     Attributes:
         max_it: Iterations per load step (>= 1).
         rtol, atol: Convergence when ``|R| <= max(atol, rtol |R_0|)``.
+        stol: ... or when a step is below ``stol |x|`` (and ``|R| <= sqrt(rtol) |R_0|``).
         line_search: ``"guard"`` (default), ``"armijo"`` or ``"none"``; see the module notes.
         growth: The residual growth that ``"guard"`` rejects.
         max_halvings: Most halvings of the step length per iteration.
@@ -69,6 +74,7 @@ class NewtonOptions:
     max_it: int = 25
     rtol: float = 1e-9
     atol: float = 1e-12
+    stol: float = 1e-10
     line_search: str = "guard"
     growth: float = 1e3
     max_halvings: int = 10
@@ -162,7 +168,8 @@ def newton(
     history, alphas = [norm0], []
     tol = max(opts.atol, opts.rtol * norm0)
     it = 0
-    while history[-1] > tol:
+    small_step = False
+    while history[-1] > tol and not small_step:
         if it == opts.max_it:
             _destroy(r)
             raise NewtonError(
@@ -222,6 +229,9 @@ def newton(
         elif best is not None:
             _destroy([*best[0], *best[1]])
         trial, r_new, n_new, alpha = accepted
+        step = alpha * float(np.sqrt(sum(comm.allreduce(float(d @ d)) for d in dx)))
+        size = float(np.sqrt(sum(t.norm() ** 2 for t in trial)))
+        small_step = step <= opts.stol * size and n_new <= np.sqrt(opts.rtol) * norm0
         for xi, ti in zip(x, trial, strict=True):
             ti.copy(xi)
         _destroy([*trial, *r])

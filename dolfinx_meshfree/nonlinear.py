@@ -35,13 +35,12 @@ from ufl.algorithms import expand_derivatives
 from . import _compat
 from .constitutive import Material
 from .coupled import CoupledElasticity, CoupledSolution
-from .couplings.assembly import traction_loads
+from .couplings import REGISTRY
 from .couplings.base import fe_dof_layout
-from .couplings.lagrange import interface_system
 from .materials import LinearElastic
 from .newton import NewtonOptions
 from .parallel import raise_on_all_ranks
-from .patch import FE_TAG, ParticlePatch
+from .patch import ParticlePatch
 from .petsc import create_vector, solver_options
 from .problem import CoupledLinearProblem
 from .sides import (
@@ -62,8 +61,9 @@ __all__ = [
     "linearised",
 ]
 
-#: Couplings available at finite strain (the others refuse with a clear error).
-FINITE_STRAIN_COUPLINGS = ("lagrange", "edge-to-edge")
+#: Couplings available at finite strain: those whose family assembles its block system apart
+#: from solving it (``system``); the others refuse with a clear error.
+FINITE_STRAIN_COUPLINGS = tuple(name for name, cls in REGISTRY.items() if hasattr(cls, "system"))
 
 
 def linearised(material: Material) -> LinearElastic:
@@ -232,8 +232,8 @@ class CoupledNonlinearProblem:
                 raise ValueError(
                     f"coupling={coupling!r} is not available at finite strain in this release; "
                     f"use one of {list(FINITE_STRAIN_COUPLINGS)} (the ramps' blended tables, "
-                    "the bridging band's weights, master-slave's rotating links and the hybrid "
-                    "are not written on the internal force yet)"
+                    "master-slave's rotating links and the hybrid are not written on the "
+                    "internal force yet)"
                 )
             if not isinstance(material, Material):
                 raise TypeError(
@@ -275,16 +275,16 @@ class CoupledNonlinearProblem:
         P = model.patch.particles
         t0 = time.perf_counter()
         tables: dict = {}
-        blocks, rhs, mats, extra = interface_system(model, tables)
-        b_fe, f_p = traction_loads(model)  # the external load, not lifted
+        blocks, rhs, mats, extra = model.family.system(model, tables)
+        b_fe, f_p = extra["loads"]  # the external load, not lifted
         comm = model.patch.comm
         pl = P.dof_layout()
-        loads = [b_fe, create_vector(comm, pl, P.petsc_dofs(2).ravel(), f_p), *rhs[2:]]
-        fixed = extra["is_bc"] | ~extra["active"]
-        fe = FESide(self.F_int, self.u, (model.patch.cell_tags, FE_TAG), fixed)
+        f_p = create_vector(comm, pl, P.petsc_dofs(2).ravel(), f_p)
+        loads = [b_fe, f_p, *rhs[2:]]
+        fe = FESide(self.F_int, self.u, extra["fe_cells"], extra["fixed"], extra["fe_weight"])
         particles = ParticleSide(P, tables, self.material)
         constant = [list(row) for row in blocks]
-        constant[0][0] = constant[1][1] = None
+        constant[0][0], constant[1][1] = extra["constant_diagonal"]
         names = ["fe", "particles"] + [f"multiplier{i}" for i in range(len(blocks) - 2)]
         problem = BlockProblem(names, 2, [fe, particles], constant, loads)
         x = []
@@ -295,9 +295,7 @@ class CoupledNonlinearProblem:
                 v.array[:] = self._state[i]
             x.append(v)
         # held FE dofs: the strong values on Dirichlet nodes, 0 on nodes no FE cell carries
-        fe.fixed_values = np.where(np.repeat(extra["is_bc"], 2), extra["ubc"].x.array, 0.0)[
-            fe.fixed_local
-        ]
+        fe.fixed_values = extra["fixed_values"][fe.fixed_local]
         x[0].array[:] = self.u.x.array[: fe.n_owned]
         setup = time.perf_counter() - t0
         try:
@@ -314,7 +312,7 @@ class CoupledNonlinearProblem:
             patch=model.patch,
             timings={"setup": setup, "newton": time.perf_counter() - t0 - setup},
         )
-        for obj in [*mats, extra["x_bc"], *rhs, *loads[:2], *x]:
+        for obj in [*mats, extra["x_bc"], *rhs, f_p, *x]:
             obj.destroy()
         self.result = result
         return result

@@ -84,28 +84,31 @@ def split_residual(F: ufl.Form, u: dolfinx.fem.Function) -> tuple[ufl.Form, ufl.
     return ufl.Form(internal), L
 
 
-def on_cells(F: ufl.Form, tags, tag: int) -> ufl.Form:
-    """The cell integrals of ``F`` restricted to the cells tagged ``tag`` in ``tags``.
+#: The tag of the cells a restricted FE residual integrates over.
+ON = 1
 
-    Integrals with subdomain data of the user's own are not restricted but weighted by the
-    indicator of those cells (still exact where the integrand is finite everywhere)."""
-    msh = tags.mesh if hasattr(tags, "mesh") else None
+
+def on_cells(F: ufl.Form, msh, flags: np.ndarray, weight=None) -> ufl.Form:
+    """The cell integrals of ``F`` on the owned cells flagged in ``flags`` only, each integrand
+    multiplied by ``weight`` if given.
+
+    Integrals with subdomain data of the user's own are weighted by the indicator of the cells
+    instead of restricted to them (the same where the integrand is finite everywhere)."""
+    tdim = msh.topology.dim
+    n_owned = msh.topology.index_map(tdim).size_local
+    cells = np.flatnonzero(flags[:n_owned]).astype(np.int32)
+    tags = dolfinx.mesh.meshtags(msh, tdim, cells, np.full(cells.size, ON, dtype=np.int32))
     out = []
     for itg in F.integrals():
         if itg.integral_type() != "cell":
             continue
+        integrand = itg.integrand() if weight is None else weight * itg.integrand()
         if itg.subdomain_data() is None and itg.subdomain_id() in ("everywhere", "otherwise"):
-            out.append(itg.reconstruct(subdomain_id=tag, subdomain_data=tags))
+            out.append(itg.reconstruct(integrand=integrand, subdomain_id=ON, subdomain_data=tags))
         else:
-            weight = _indicator(tags, tag, msh or itg.ufl_domain().ufl_cargo())
-            out.append(itg.reconstruct(integrand=weight * itg.integrand()))
+            chi = cell_indicator(msh, flags)
+            out.append(itg.reconstruct(integrand=chi * integrand))
     return ufl.Form(out)
-
-
-def _indicator(tags, tag: int, msh) -> dolfinx.fem.Function:
-    flags = np.zeros(msh.topology.index_map(msh.topology.dim).size_local, dtype=bool)
-    flags[tags.indices[tags.values == tag]] = True
-    return cell_indicator(msh, flags)
 
 
 def cell_part(F: ufl.Form, weight=None) -> ufl.Form:
@@ -126,12 +129,15 @@ class FESide:
     nodes no FE cell carries) and ``t`` the load factor.
     """
 
-    def __init__(self, F_int: ufl.Form, u: dolfinx.fem.Function, cells, fixed: np.ndarray):
+    def __init__(
+        self, F_int: ufl.Form, u: dolfinx.fem.Function, cells, fixed: np.ndarray, weight=None
+    ):
         V = u.function_space
         self.u, self.V = u, V
-        # on the FE cells only (``cells = (tags, tag)``): a weight 0 on the patch cells would
-        # still evaluate the law there, on an FE field that means nothing (NaN at finite strain)
-        Fw = cell_part(F_int) if cells is None else on_cells(F_int, *cells)
+        # on the FE cells only (``cells``: flags of the owned cells): a weight 0 on the patch
+        # cells would still evaluate the law there, on an FE field that means nothing (NaN at
+        # finite strain)
+        Fw = cell_part(F_int, weight) if cells is None else on_cells(F_int, V.mesh, cells, weight)
         self._R = _compat.create_form(Fw)
         self._J = _compat.create_form(ufl.derivative(Fw, u, ufl.TrialFunction(V)))
         self.layout, l2g = fe_dof_layout(V)
@@ -181,8 +187,9 @@ class ParticleSide:
     def __init__(self, particles: ParticleSet, tables: dict, material: Material):
         q, tq = tables["quadrature"], tables["table"]
         self.P, self.comm = particles, particles.comm
+        weights = tables.get("weights", q.weights)  # the bridging band's alpha w_q
         self.forces = InternalForces(
-            tq, q.weights, material, test_gradients=tables["test_gradients"], comm=particles.comm
+            tq, weights, material, test_gradients=tables["test_gradients"], comm=particles.comm
         )
         self.dof_map = particles.petsc_dofs(2).ravel()
         self.layout = particles.dof_layout()
@@ -243,6 +250,11 @@ class BlockProblem:
         self._owned = [self.sides[i].tangent(x[i]) for i in range(self.num_primal)]
         blocks = [list(row) for row in self.constant]
         for i, K in enumerate(self._owned):
+            if blocks[i][i] is not None:  # a constant part (a penalty): K_T + C_ii
+                K.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+                K.axpy(1.0, blocks[i][i], structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+                if isinstance(self.sides[i], FESide):  # held rows stay the identity
+                    K.zeroRows(self.sides[i].fixed_rows, diag=1.0)
             blocks[i][i] = K
         return blocks
 

@@ -354,8 +354,14 @@ def _body_loads(problem, band: BridgingBand) -> tuple[np.ndarray, np.ndarray]:
     return body_loads(problem, _fe_weight(problem, band), alpha)
 
 
-def solve_bridging(problem, solver: str | SolverOptions = "mumps"):
-    """Assemble and solve the bridging-domain coupled system of ``problem`` (collective)."""
+def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> tuple:
+    """The bridging-domain block system, assembled, not solved (collective); see
+    :func:`~dolfinx_meshfree.couplings.lagrange.interface_system` for ``tables`` and the
+    returned ``(blocks, rhs, mats, extra)``. ``extra`` also holds what a finite-strain solve
+    needs: the external loads before lifting (``loads``), the cells where the FE law lives
+    (``fe_cells``, FE and band cells) and its weight ``beta_FE`` (``fe_weight``, eq. 47-48), the
+    particles' weights ``alpha w_q`` (``particle_weights``, eq. 49) and the penalty's
+    constant diagonal blocks (``constant_diagonal``)."""
     V, patch, P = problem.V, problem.patch, problem.patch.particles
     comm = patch.comm
     msh = V.mesh
@@ -398,6 +404,8 @@ def solve_bridging(problem, solver: str | SolverOptions = "mumps"):
             problem, band, q, w, tq, (t_fe, t_p, cw), ids, ml.size_global // 2
         )
     setup = problem.setup_time + time.perf_counter() - t0
+    if tables is not None:
+        tables.update(quadrature=q, table=tq, test_gradients=test or tq.gradients, weights=w)
 
     t1 = time.perf_counter()
     Kq = stiffness_matrix(test or tq.gradients, w, problem.material, tq.gradients).tocoo()
@@ -442,7 +450,7 @@ def solve_bridging(problem, solver: str | SolverOptions = "mumps"):
     # augmented Lagrangian: p G^T G with the pointwise gradients G^FE = N, G^P = -phi (eq. 72-75)
     fe_dof = (2 * l2g[:, None] + np.arange(2)).ravel()
     fixed_dof = np.repeat(fixed_local, 2)
-    K_ff = K_fp = K_pf = None
+    K_ff = K_fp = K_pf = A22g = None
     if p > 0.0:
         e2 = sp.identity(2, format="csr")
         root = sp.diags(np.sqrt(cw))
@@ -453,9 +461,8 @@ def solve_bridging(problem, solver: str | SolverOptions = "mumps"):
         K_ff = sp.csr_matrix(
             (A11.data, (fe_dof[A11.row], fe_dof[A11.col])), shape=(fe_layout.size_global,) * 2
         )
-        Kp_loc = Kp_loc + sp.csr_matrix(
-            (A22.data, (dof_map[A22.row], dof_map[A22.col])), shape=(2 * n, 2 * n)
-        )
+        A22g = sp.csr_matrix((A22.data, (dof_map[A22.row], dof_map[A22.col])), shape=(2 * n, 2 * n))
+        Kp_loc = Kp_loc + A22g
         # FE rows of fixed dofs vanish; their columns move the known values to the particles' rhs
         keep = ~fixed_dof[A12.row]
         K_fp = sp.csr_matrix(
@@ -473,12 +480,16 @@ def solve_bridging(problem, solver: str | SolverOptions = "mumps"):
         b_fe.array[:] += fe_body
         f_p += p_body
 
+    loads = (b_fe.copy(), f_p.copy())
     K_fe = _fe_stiffness(problem, band)
-    mats = [K_fe]
+    mats = [K_fe, loads[0]]
+    constant_diagonal = [None, None]
     if K_ff is not None:
         K_pen = create_aij(comm, K_ff, fe_layout, fe_layout)
         K_fe.axpy(1.0, K_pen, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-        mats.append(K_pen)
+        K_pen_p = create_aij(comm, A22g, pl, pl)
+        mats += [K_pen, K_pen_p]
+        constant_diagonal = [K_pen, K_pen_p]
     x_bc = fix_fe_rows(problem, K_fe, b_fe, fixed_local, x_fix)
     Kp = create_aij(comm, Kp_loc, pl, pl)
     b_p = create_vector(comm, pl, pdofs.ravel(), f_p)
@@ -496,17 +507,37 @@ def solve_bridging(problem, solver: str | SolverOptions = "mumps"):
     rhs = [b_fe, b_p, g]
     mats += [Kp, Gfe, GfeT, Gp, GpT]
     dl = append_patch_conditions(problem, blocks, rhs, mats, patch_bc, dq, dtabs)
-    assemble = time.perf_counter() - t1
-    uh, coeffs, solve = solve_and_gather(problem, blocks, rhs, [*mats, x_bc], solver)
+    extra = {
+        "x_bc": x_bc,
+        "active": active,
+        "is_bc": is_bc,
+        "fixed": fixed_local,
+        "fixed_values": x_fix,
+        "multipliers": ml.size_global + dl.size_global,
+        "setup": setup,
+        "assemble": time.perf_counter() - t1,
+        "loads": loads,
+        "fe_cells": ~patch.in_patch | band.in_band,
+        "fe_weight": _fe_weight(problem, band),
+        "constant_diagonal": constant_diagonal,
+        "band": band,
+    }
+    return blocks, rhs, mats, extra
+
+
+def solve_bridging(problem, solver: str | SolverOptions = "mumps"):
+    """Assemble and solve the bridging-domain coupled system of ``problem`` (collective)."""
+    blocks, rhs, mats, extra = bridging_system(problem)
+    uh, coeffs, solve = solve_and_gather(problem, blocks, rhs, [*mats, extra["x_bc"]], solver)
     sol = BridgingSolution(
         u=uh,
         coefficients=coeffs,
         mls=problem.mls,
-        patch=patch,
-        timings={"setup": setup, "assemble": assemble, "solve": solve},
-        sizes=sizes(problem, active, ml.size_global + dl.size_global),
+        patch=problem.patch,
+        timings={"setup": extra["setup"], "assemble": extra["assemble"], "solve": solve},
+        sizes=sizes(problem, extra["active"], extra["multipliers"]),
     )
-    sol.band = band
+    sol.band = extra["band"]
     return sol
 
 
@@ -719,9 +750,8 @@ def bridging_operators(problem):
         K_pen = create_aij(comm, K_ff, fe_layout, fe_layout)
         K_fe.axpy(1.0, K_pen, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
         K_pen.destroy()
-        Kp_loc = Kp_loc + sp.csr_matrix(
-            (A22.data, (dof_map[A22.row], dof_map[A22.col])), shape=(2 * n, 2 * n)
-        )
+        A22g = sp.csr_matrix((A22.data, (dof_map[A22.row], dof_map[A22.col])), shape=(2 * n, 2 * n))
+        Kp_loc = Kp_loc + A22g
         fp = sp.csr_matrix(
             (A12.data, (fe_dof[A12.row], dof_map[A12.col])), shape=(fe_layout.size_global, 2 * n)
         )
@@ -762,6 +792,9 @@ class BridgingCoupling:
 
     def solve(self, problem: CoupledElasticity, solver: str | SolverOptions) -> CoupledSolution:
         return solve_bridging(problem, solver)
+
+    def system(self, problem: CoupledElasticity, tables: dict | None = None) -> tuple:
+        return bridging_system(problem, tables)
 
     def operators(
         self, problem: CoupledElasticity, integration: str, slaves: str

@@ -415,6 +415,7 @@ def interface_system(problem: CoupledElasticity, tables: dict | None = None) -> 
     G_p = particle_constraint_block(*p_rows, s, pdofs, (ml.size_global, 2 * n))
 
     b_fe, f_p = traction_loads(problem)
+    loads = (b_fe.copy(), f_p.copy())
     cat = np.concatenate
     # strong conditions and inactive dofs on K_FE: zero rows and columns, lift into b_fe
     x_bc = fix_fe_rows(
@@ -433,16 +434,21 @@ def interface_system(problem: CoupledElasticity, tables: dict | None = None) -> 
     g = create_vector(comm, ml, cat([*g_rows, np.zeros(0, np.int64)]), cat([*g_vals, []]))
     blocks = [[K_fe, None, GfeT], [None, Kp, GpT], [Gfe, Gp, None]]
     rhs = [b_fe, b_p, g]
-    mats = [K_fe, Kp, Gfe, GfeT, Gp, GpT]
+    mats = [K_fe, Kp, Gfe, GfeT, Gp, GpT, loads[0]]
     dl = append_patch_conditions(problem, blocks, rhs, mats, patch_bc, dq, dtabs)
     extra = {
         "x_bc": x_bc,
         "active": active,
         "is_bc": is_bc,
-        "ubc": ubc,
+        "fixed": is_bc | ~active,
+        "fixed_values": np.where(np.repeat(is_bc, 2), ubc.x.array, 0.0),
         "multipliers": ml.size_global + dl.size_global,
         "setup": setup,
         "assemble": time.perf_counter() - t1 + kt["assemble"],
+        "loads": loads,
+        "fe_cells": ~patch.in_patch,
+        "fe_weight": None,
+        "constant_diagonal": [None, None],
     }
     return blocks, rhs, mats, extra
 
@@ -487,6 +493,9 @@ class _InterfaceCoupling:
         self, problem: CoupledElasticity, integration: str, slaves: str
     ) -> CouplingOperators:
         return interface_operators(problem, integration)
+
+    def system(self, problem: CoupledElasticity, tables: dict | None = None) -> tuple:
+        return interface_system(problem, tables)
 
 
 class LagrangeCoupling(_InterfaceCoupling):

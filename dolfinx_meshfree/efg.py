@@ -195,7 +195,9 @@ class EFGElasticity:
     One code path for every dimension: the mesh's ``gdim`` (2: triangles, quadrilaterals; 3:
     tetrahedra, hexahedra) sets the number of displacement components, the Voigt strain of
     :func:`~dolfinx_meshfree.tables.strain_operator`, the facet rules and the multipliers (one
-    per Dirichlet facet and component).
+    per Dirichlet facet and component). The multipliers need fewer Dirichlet facets than
+    particles: a tetrahedral box mesh has about two boundary triangles per boundary vertex, so on
+    tetrahedra the particles must be finer than the mesh (e.g. spacing h / 2), not its vertices.
 
     Args:
         particles: Particles with a background mesh (``particles.mesh``); its cells
@@ -203,7 +205,8 @@ class EFGElasticity:
         material: :class:`~dolfinx_meshfree.LinearElastic` of the mesh's dimension
             (``plane="stress"|"strain"`` in 2D, ``plane=None`` in 3D).
         weight, dilation, basis: MLS options (see :class:`~dolfinx_meshfree.MLS`).
-        quadrature_degree: Degree of the cell Gauss rule (7: 4 x 4 points on quadrilaterals).
+        quadrature_degree: Degree of the cell Gauss rule (7: 4 x 4 points on quadrilaterals,
+            4 x 4 x 4 on hexahedra).
         consistent: Variationally consistent integration (VCI, Chen, Hillman & Rüter 2013; the
             default: the linear patch test passes to round-off). ``False``: plain Gauss
             quadrature of Belytschko et al. 1995 (patch-test error 1e-4 to 6e-4 at 4 x 4 Gauss).
@@ -279,6 +282,15 @@ class EFGElasticity:
             P, self.mls, self.material, self.quadrature_degree, boundary
         )
         dq = [facet_quadrature(self.mesh, f, self.quadrature_degree) for f, _ in self._dirichlet]
+        num_facets = comm.allreduce(sum(np.unique(d.entities).size for d in dq))
+        if num_facets > n:
+            raise ValueError(
+                f"the Dirichlet conditions have {num_facets} facets, each with {gdim} constant "
+                f"multipliers, more than the {gdim * n} particle dofs of {n} particles: the "
+                "saddle-point system is singular. Use more particles than Dirichlet facets (a "
+                "finer spacing, e.g. ParticleSet.from_cells(mesh, h / 2) on tetrahedra, whose "
+                "boundary has two triangles per vertex) or fewer Dirichlet facets"
+            )
         dtabs = [raise_on_all_ranks(comm, lambda d=d: self.mls.tabulate(d.points, 0)) for d in dq]
         tq_loads = [
             facet_quadrature(self.mesh, f, self.quadrature_degree) for f, _ in self._tractions

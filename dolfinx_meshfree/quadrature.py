@@ -2,7 +2,9 @@
 
 The FE mesh's own cells serve as EFG integration cells (Belytschko et al. 1995, sec. 5.1: "a cell
 structure that overlays Omega_E"). Each rank integrates over the cells it owns and the exterior
-facets it owns, so sums over ranks count every point once.
+facets it owns, so sums over ranks count every point once. Any dimension: cells are triangles,
+quadrilaterals, tetrahedra or hexahedra (basix rules), facets segments, triangles or
+quadrilaterals.
 """
 
 from __future__ import annotations
@@ -44,7 +46,7 @@ def cell_quadrature(msh, degree: int, cells: npt.ArrayLike | None = None) -> Qua
     Args:
         msh: Mesh with a degree-1 geometry.
         degree: Quadrature degree; 7 gives the 4 x 4 Gauss rule on quadrilaterals used by
-            Belytschko et al. 1995, sec. 5.1.2.
+            Belytschko et al. 1995, sec. 5.1.2 (4 x 4 x 4 on hexahedra).
         cells: Local cell indices (default: every owned cell).
     """
     tdim, gdim = msh.topology.dim, msh.geometry.dim

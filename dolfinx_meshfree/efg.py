@@ -52,10 +52,10 @@ def _cat(parts: list, dtype) -> np.ndarray:
     return np.concatenate(parts).astype(dtype) if parts else np.zeros(0, dtype)
 
 
-def _vector_values(fn, args, m: int, name: str) -> np.ndarray:
+def _vector_values(fn, args, m: int, name: str, gdim: int = 2) -> np.ndarray:
     v = np.asarray(fn(*args), dtype=float)
-    if v.shape != (m, 2):
-        raise ValueError(f"{name} must return an array of shape ({m}, 2), got {v.shape}")
+    if v.shape != (m, gdim):
+        raise ValueError(f"{name} must return an array of shape ({m}, {gdim}), got {v.shape}")
     return v
 
 
@@ -64,7 +64,7 @@ class EFGSolution:
     """Particle coefficients of an EFG solve and the means to evaluate them anywhere.
 
     Attributes:
-        coefficients: (n, 2) nodal parameters ``u_I`` (not the displacement at ``x_I``: MLS is
+        coefficients: (n, gdim) nodal parameters ``u_I`` (not the displacement at ``x_I``: MLS is
             not interpolating), replicated on every rank.
         multipliers: owned multiplier values (Lagrange multipliers = boundary tractions).
         timings: seconds spent in ``setup``, ``assemble`` and ``solve``.
@@ -79,11 +79,11 @@ class EFGSolution:
     newton: object | None = None
 
     def displacement(self, points: np.ndarray) -> np.ndarray:
-        """Displacement (m, 2) at points (m, 2); local, no communication."""
+        """Displacement (m, gdim) at points (m, gdim); local, no communication."""
         return self.mls.tabulate(points, derivatives=0).values @ self.coefficients
 
     def evaluate(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Displacement (m, 2) and its gradient (m, 2, 2), ``g[:, i, j] = du_i/dx_j``."""
+        """Displacement (m, gdim) and its gradient (m, gdim, gdim), ``g[:, i, j] = du_i/dx_j``."""
         t = self.mls.tabulate(points)
         return t.values @ self.coefficients, t.gradient(self.coefficients)
 
@@ -117,14 +117,15 @@ def particle_stiffness(
     VCI-corrected ones when consistent): what a finite-strain solve needs for its internal force.
 
     Returns:
-        ``(K, q, table, timings)``: K as a (2n x 2n) CSR of this rank's contributions with PETSc
-        rows and columns, the cell quadrature, the MLS table at its points, and the seconds spent
-        tabulating (``setup``) and forming K (``assemble``).
+        ``(K, q, table, timings)``: K as a (gdim n x gdim n) CSR of this rank's contributions
+        with PETSc rows and columns, the cell quadrature, the MLS table at its points, and the
+        seconds spent tabulating (``setup``) and forming K (``assemble``).
     """
     t0 = time.perf_counter()
     comm = particles.comm
     n = particles.num_particles
-    dof_map = particles.petsc_dofs(2).ravel()
+    gdim = particles.gdim
+    dof_map = particles.petsc_dofs(gdim).ravel()
     if quadrature is None:
         q = cell_quadrature(particles.mesh, quadrature_degree, particles.cells)
     else:
@@ -147,7 +148,7 @@ def particle_stiffness(
         tables.update(quadrature=q, table=tq, test_gradients=test_grads)
     t1 = time.perf_counter()
     K = stiffness_matrix(test_grads, q.weights, material, tq.gradients).tocoo()
-    Kg = sp.csr_matrix((K.data, (dof_map[K.row], dof_map[K.col])), shape=(2 * n, 2 * n))
+    Kg = sp.csr_matrix((K.data, (dof_map[K.row], dof_map[K.col])), shape=(gdim * n, gdim * n))
     timings = {"setup": t1 - t0, "assemble": time.perf_counter() - t1}
     return Kg, q, tq, timings
 
@@ -162,51 +163,62 @@ def facet_multipliers(
     """Constraint block of ``u = ubar`` on facets, one multiplier per facet and component.
 
     ``G_{(f,i),(J,i)} = s int_f phi_J`` and ``g_(f,i) = s int_f ubar_i`` (Belytschko, Lu & Gu 1994
-    with piecewise-constant multipliers), assembled from this rank's owned facets (collective).
+    with piecewise-constant multipliers), assembled from this rank's owned facets (collective);
+    ``i`` runs over the ``gdim`` components (edges in 2D, triangles or quadrilaterals in 3D).
 
     Args:
         conditions: ``(facets, ubar)`` pairs; ``quadratures``/``tables``: their facet quadrature
             and the particle shape functions there; ``scale``: ``s``.
 
     Returns:
-        ``(G, rows, values, layout)``: G as (M x 2n) CSR with PETSc particle columns, the rhs
+        ``(G, rows, values, layout)``: G as (M x gdim n) CSR with PETSc particle columns, the rhs
         entries (global rows and values) and the multipliers' layout.
     """
     comm = particles.comm
-    dof_map = particles.petsc_dofs(2).ravel()
+    gdim = particles.gdim
+    dof_map = particles.petsc_dofs(gdim).ravel()
     nfac = [np.unique(d.entities).size for d in quadratures]
-    mlayout = Layout.from_local(comm, 2 * int(sum(nfac)))
+    mlayout = Layout.from_local(comm, gdim * int(sum(nfac)))
     g_rows, g_cols, g_vals, r_rows, r_vals = [], [], [], [], []
-    offset = mlayout.start // 2
+    offset = mlayout.start // gdim
     for (_, fn), d, tab in zip(conditions, quadratures, tables, strict=True):
         _, facet_id = np.unique(d.entities, return_inverse=True)
         ubar = raise_on_all_ranks(
-            comm, lambda fn=fn, d=d: _vector_values(fn, (d.points,), len(d), "dirichlet")
+            comm, lambda fn=fn, d=d: _vector_values(fn, (d.points,), len(d), "dirichlet", gdim)
         )
         coo = tab.values.tocoo()
-        for c in range(2):
-            g_rows.append(2 * (offset + facet_id[coo.row]) + c)
-            g_cols.append(dof_map[2 * coo.col + c])
+        for c in range(gdim):
+            g_rows.append(gdim * (offset + facet_id[coo.row]) + c)
+            g_cols.append(dof_map[gdim * coo.col + c])
             g_vals.append(scale * d.weights[coo.row] * coo.data)
-            r_rows.append(2 * (offset + facet_id) + c)
+            r_rows.append(gdim * (offset + facet_id) + c)
             r_vals.append(scale * d.weights * ubar[:, c])
         offset += int(facet_id.max()) + 1 if facet_id.size else 0
     G = sp.csr_matrix(
         (_cat(g_vals, float), (_cat(g_rows, np.int64), _cat(g_cols, np.int64))),
-        shape=(mlayout.size_global, 2 * particles.num_particles),
+        shape=(mlayout.size_global, gdim * particles.num_particles),
     )
     return G, _cat(r_rows, np.int64), _cat(r_vals, float), mlayout
 
 
 class EFGElasticity:
-    """Linear elastostatics discretised by EFG on a particle set.
+    """Linear elastostatics discretised by EFG on a particle set, in 2D or 3D.
+
+    One code path for every dimension: the mesh's ``gdim`` (2: triangles, quadrilaterals; 3:
+    tetrahedra, hexahedra) sets the number of displacement components, the Voigt strain of
+    :func:`~dolfinx_meshfree.tables.strain_operator`, the facet rules and the multipliers (one
+    per Dirichlet facet and component). The multipliers need fewer Dirichlet facets than
+    particles: a tetrahedral box mesh has about two boundary triangles per boundary vertex, so on
+    tetrahedra the particles must be finer than the mesh (e.g. spacing h / 2), not its vertices.
 
     Args:
         particles: Particles with a background mesh (``particles.mesh``); its cells
             (``particles.cells``, default all owned cells) are the integration cells.
-        material: :class:`~dolfinx_meshfree.LinearElastic`.
+        material: :class:`~dolfinx_meshfree.LinearElastic` of the mesh's dimension
+            (``plane="stress"|"strain"`` in 2D, ``plane=None`` in 3D).
         weight, dilation, basis: MLS options (see :class:`~dolfinx_meshfree.MLS`).
-        quadrature_degree: Degree of the cell Gauss rule (7: 4 x 4 points on quadrilaterals).
+        quadrature_degree: Degree of the cell Gauss rule (7: 4 x 4 points on quadrilaterals,
+            4 x 4 x 4 on hexahedra).
         consistent: Variationally consistent integration (VCI, Chen, Hillman & Rüter 2013; the
             default: the linear patch test passes to round-off). ``False``: plain Gauss
             quadrature of Belytschko et al. 1995 (patch-test error 1e-4 to 6e-4 at 4 x 4 Gauss).
@@ -231,6 +243,7 @@ class EFGElasticity:
             )
         if not (isinstance(quadrature_degree, int) and quadrature_degree >= 1):
             raise ValueError(f"quadrature_degree={quadrature_degree!r} must be an integer >= 1")
+        material.check_gdim(particles.mesh.geometry.dim, "the particles' mesh")
         t0 = time.perf_counter()
         self.particles = particles
         self.mesh = particles.mesh
@@ -258,16 +271,16 @@ class EFGElasticity:
     def add_dirichlet(self, facets: np.ndarray, value: VectorFunction) -> None:
         """Impose ``u = value(x)`` on owned exterior facets by Lagrange multipliers.
 
-        ``value`` maps points (m, 2) to displacements (m, 2).
+        ``value`` maps points (m, gdim) to displacements (m, gdim).
         """
         self._dirichlet.append((np.asarray(facets, dtype=np.int32), value))
 
     def add_traction(self, facets: np.ndarray, traction: TractionFunction) -> None:
-        """Apply ``traction(x, n)`` (m, 2) on owned exterior facets; ``n`` are outward normals."""
+        """Apply ``traction(x, n)`` (m, gdim) on owned exterior facets (``n``: outward normals)."""
         self._tractions.append((np.asarray(facets, dtype=np.int32), traction))
 
     def set_body_force(self, force: VectorFunction) -> None:
-        """Body force per unit volume ``b(x)`` (m, 2)."""
+        """Body force per unit volume ``b(x)`` (m, gdim)."""
         self._body = force
 
     def system(self, tables: dict | None = None) -> tuple[BlockSystem, list, dict]:
@@ -286,13 +299,23 @@ class EFGElasticity:
         comm = self.comm
         P = self.particles
         n = P.num_particles
-        dof_map = P.petsc_dofs(2).ravel()  # original interleaved dof -> PETSc dof
+        gdim = P.gdim
+        dof_map = P.petsc_dofs(gdim).ravel()  # original interleaved dof -> PETSc dof
         t0 = time.perf_counter()
         boundary = (boundary_facets(self.mesh), None) if self.consistent else None
         Kg, q, tq, kt = particle_stiffness(
             P, self.mls, self.linear_material, self.quadrature_degree, boundary, tables=tables
         )
         dq = [facet_quadrature(self.mesh, f, self.quadrature_degree) for f, _ in self._dirichlet]
+        num_facets = comm.allreduce(sum(np.unique(d.entities).size for d in dq))
+        if num_facets > n:
+            raise ValueError(
+                f"the Dirichlet conditions have {num_facets} facets, each with {gdim} constant "
+                f"multipliers, more than the {gdim * n} particle dofs of {n} particles: the "
+                "saddle-point system is singular. Use more particles than Dirichlet facets (a "
+                "finer spacing, e.g. ParticleSet.from_cells(mesh, h / 2) on tetrahedra, whose "
+                "boundary has two triangles per vertex) or fewer Dirichlet facets"
+            )
         dtabs = [raise_on_all_ranks(comm, lambda d=d: self.mls.tabulate(d.points, 0)) for d in dq]
         tq_loads = [
             facet_quadrature(self.mesh, f, self.quadrature_degree) for f, _ in self._tractions
@@ -303,21 +326,21 @@ class EFGElasticity:
         setup = self._setup_time + time.perf_counter() - t0 - kt["assemble"]
 
         t1 = time.perf_counter()
-        udofs = P.dof_layout()
+        udofs = P.dof_layout(gdim)
         K = create_aij(comm, Kg, udofs, udofs)
 
-        f_loc = np.zeros(2 * n)
+        f_loc = np.zeros(gdim * n)
         for (_, fn), fq, tab in zip(self._tractions, tq_loads, ttabs, strict=True):
             t = raise_on_all_ranks(
                 comm,
                 lambda fn=fn, fq=fq: _vector_values(
-                    fn, (fq.points, fq.normals), len(fq), "traction"
+                    fn, (fq.points, fq.normals), len(fq), "traction", gdim
                 ),
             )
             f_loc += load_vector(tab.values, fq.weights, t)
         if self._body is not None:
             b = raise_on_all_ranks(
-                comm, lambda: _vector_values(self._body, (q.points,), len(q), "body force")
+                comm, lambda: _vector_values(self._body, (q.points,), len(q), "body force", gdim)
             )
             f_loc += load_vector(tq.values, q.weights, b)
         f = create_vector(comm, udofs, dof_map, f_loc)
@@ -370,7 +393,7 @@ class EFGElasticity:
         for obj in (system, *objects):
             obj.destroy()
         owned = np.concatenate(comm.allgather(parts[0]))  # PETSc order, all ranks
-        coeffs = owned.reshape(-1, 2)[P.petsc_index]
+        coeffs = owned.reshape(-1, gdim)[P.petsc_index]
         lam = parts[1] * s if len(parts) > 1 else np.zeros(0)
         return EFGSolution(
             mls=self.mls,

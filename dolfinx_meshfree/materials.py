@@ -11,16 +11,17 @@ __all__ = ["LinearElastic"]
 
 @dataclass(frozen=True)
 class LinearElastic:
-    """Isotropic linear elasticity in 2D, plane stress or plane strain.
+    """Isotropic linear elasticity: 2D plane stress or plane strain, or 3D (``plane=None``).
 
     Args:
         E: Young's modulus (> 0). nu: Poisson's ratio (-1 < nu < 0.5). plane: ``"stress"`` or
-            ``"strain"``. rho: Mass density (used by dynamics; > 0).
+            ``"strain"`` for a 2D mesh, ``None`` for a 3D mesh (the solvers check it against the
+            mesh with :meth:`check_gdim`). rho: Mass density (used by dynamics; > 0).
     """
 
     E: float
     nu: float
-    plane: str = "stress"
+    plane: str | None = "stress"
     rho: float = 1.0
 
     def __post_init__(self):
@@ -28,10 +29,31 @@ class LinearElastic:
             raise ValueError(f"E={self.E} must be a positive number")
         if not (np.isfinite(self.nu) and -1.0 < self.nu < 0.5):
             raise ValueError(f"nu={self.nu} must lie in (-1, 0.5)")
-        if self.plane not in ("stress", "strain"):
-            raise ValueError(f"plane={self.plane!r} must be 'stress' or 'strain'")
+        if self.plane not in ("stress", "strain", None):
+            raise ValueError(
+                f"plane={self.plane!r} must be 'stress' or 'strain' (2D), or None (3D)"
+            )
         if not (np.isfinite(self.rho) and self.rho > 0):
             raise ValueError(f"rho={self.rho} must be positive (a zero or negative density)")
+
+    @property
+    def gdim(self) -> int:
+        """Dimension of the law: 2 with ``plane="stress"|"strain"``, 3 with ``plane=None``."""
+        return 3 if self.plane is None else 2
+
+    def check_gdim(self, gdim: int, where: str = "the mesh") -> None:
+        """Raise a ValueError unless the law fits a geometric dimension ``gdim`` (local)."""
+        if gdim == self.gdim:
+            return
+        fix = (
+            "plane=None (3D elasticity)"
+            if gdim == 3
+            else "plane='stress' or plane='strain' (2D elasticity)"
+        )
+        raise ValueError(
+            f"material plane={self.plane!r} is a {self.gdim}D law but {where} has gdim={gdim}; "
+            f"use LinearElastic(E, nu, {fix})"
+        )
 
     @property
     def mu(self) -> float:
@@ -40,29 +62,47 @@ class LinearElastic:
 
     @property
     def lmbda(self) -> float:
-        """First Lamé parameter of the 2D law (plane-stress effective value for ``stress``)."""
+        """First Lamé parameter (plane-stress effective value for ``plane="stress"``)."""
         lam = self.E * self.nu / ((1.0 + self.nu) * (1.0 - 2.0 * self.nu))
         if self.plane == "stress":
             return 2.0 * lam * self.mu / (lam + 2.0 * self.mu)
         return lam
 
     def voigt(self) -> np.ndarray:
-        """3 x 3 matrix D with ``[s_xx, s_yy, s_xy] = D [e_xx, e_yy, gamma_xy]``."""
+        """Material matrix D in Voigt notation with engineering shears.
+
+        2D (3 x 3): ``[s_xx, s_yy, s_xy] = D [e_xx, e_yy, gamma_xy]``. 3D (6 x 6):
+        ``[s_xx, s_yy, s_zz, s_yz, s_xz, s_xy] = D [e_xx, e_yy, e_zz, gamma_yz, gamma_xz,
+        gamma_xy]`` with ``gamma_ij = 2 e_ij`` (the order of
+        :func:`~dolfinx_meshfree.tables.voigt_pairs` and of the strain operator).
+        """
         lam, mu = self.lmbda, self.mu
-        return np.array([[lam + 2 * mu, lam, 0.0], [lam, lam + 2 * mu, 0.0], [0.0, 0.0, mu]])
+        d = self.gdim
+        nv = d * (d + 1) // 2
+        D = np.zeros((nv, nv))
+        D[:d, :d] = lam
+        D[np.arange(d), np.arange(d)] = lam + 2 * mu
+        D[np.arange(d, nv), np.arange(d, nv)] = mu
+        return D
 
     def stress(self, grad_u: np.ndarray) -> np.ndarray:
-        """Cauchy stress (..., 2, 2) from displacement gradients (..., 2, 2)."""
+        """Cauchy stress (..., d, d) from displacement gradients (..., d, d), d = ``gdim``."""
+        d = self.gdim
+        if grad_u.shape[-2:] != (d, d):
+            raise ValueError(
+                f"grad_u should have shape (..., {d}, {d}) for plane={self.plane!r}, "
+                f"got {grad_u.shape}"
+            )
         eps = 0.5 * (grad_u + np.swapaxes(grad_u, -1, -2))
         tr = np.trace(eps, axis1=-2, axis2=-1)[..., None, None]
-        return 2.0 * self.mu * eps + self.lmbda * tr * np.eye(2)
+        return 2.0 * self.mu * eps + self.lmbda * tr * np.eye(d)
 
     def ufl_stress(self, u):
-        """The same law as a UFL expression, for DOLFINx forms."""
+        """The same law as a UFL expression, for DOLFINx forms (``u`` of ``gdim`` components)."""
         import ufl
 
         eps = ufl.sym(ufl.grad(u))
-        return 2.0 * self.mu * eps + self.lmbda * ufl.tr(eps) * ufl.Identity(2)
+        return 2.0 * self.mu * eps + self.lmbda * ufl.tr(eps) * ufl.Identity(self.gdim)
 
     def wave_speed(self, F: np.ndarray | None = None) -> float:
         """Dilatational wave speed ``sqrt((lambda + 2 mu) / rho)`` (the tangent is constant: any

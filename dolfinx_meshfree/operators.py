@@ -1,8 +1,10 @@
-"""Operators of 2D linear elasticity from shape tables: stiffness, loads, constraint blocks.
+"""Operators of linear elasticity (2D and 3D) from shape tables: stiffness, loads, VCI gradients.
 
 With tables every operator is sparse algebra (Belytschko et al. 1995, eq. 4.3):
 ``K = B_test^T (W (x) D) B_trial`` and ``f_I = sum_b N_I(x_b) t(x_b) w_b``.
-Dofs are interleaved, ``2 I + i`` for component ``i`` of node ``I``.
+Dofs are interleaved, ``gdim I + i`` for component ``i`` of node ``I``; the dimension is the
+number of gradient tables (2 or 3), the Voigt order that of
+:func:`~dolfinx_meshfree.tables.voigt_pairs`.
 """
 
 from __future__ import annotations
@@ -22,11 +24,14 @@ def stiffness_matrix(
     material: LinearElastic,
     trial_gradients: list[sp.csr_matrix] | None = None,
 ) -> sp.csr_matrix:
-    """Stiffness ``K = sum_q B_test(x_q)^T D B_trial(x_q) w_q`` (2n x 2n).
+    """Stiffness ``K = sum_q B_test(x_q)^T D B_trial(x_q) w_q`` (gdim n x gdim n).
 
-    ``trial_gradients`` defaults to ``test_gradients``; they differ for variationally consistent
-    integration, which corrects the test functions only (Chen, Hillman & Rüter 2013).
+    Belytschko et al. 1995, eq. (4.3), with ``gdim = len(test_gradients)`` (2 or 3; the material
+    must be the law of that dimension). ``trial_gradients`` defaults to ``test_gradients``; they
+    differ for variationally consistent integration, which corrects the test functions only
+    (Chen, Hillman & Rüter 2013).
     """
+    material.check_gdim(len(test_gradients), "the shape table")
     Bt = strain_operator(test_gradients)
     B = Bt if trial_gradients is None else strain_operator(trial_gradients)
     D = material.voigt()
@@ -35,7 +40,10 @@ def stiffness_matrix(
 
 
 def load_vector(values: sp.csr_matrix, weights: np.ndarray, forces: np.ndarray) -> np.ndarray:
-    """Consistent load ``f_{2I+i} = sum_b N_I(x_b) t_i(x_b) w_b``; ``forces`` is (nb, 2)."""
+    """Consistent load ``f_{gdim I + i} = sum_b N_I(x_b) t_i(x_b) w_b``; ``forces`` is (nb, gdim).
+
+    Belytschko et al. 1995, eq. (4.3) (the traction and body-force terms of ``f``).
+    """
     f = values.T @ (weights[:, None] * forces)
     return np.asarray(f).reshape(-1)
 
@@ -61,7 +69,8 @@ def consistent_gradients(
 
     satisfy it exactly, so the linear patch test passes to round-off with any quadrature.
     Sums run over every rank's cells and boundary facets (collective); the boundary must be the
-    whole boundary of the integration domain.
+    whole boundary of the integration domain. Any dimension: ``boundary_normals`` is (nb, gdim)
+    with ``gdim = len(cell_gradients)``.
     """
     from mpi4py import MPI
 

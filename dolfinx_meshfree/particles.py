@@ -4,7 +4,7 @@ Parallel model: a particle patch is small next to the FE mesh, so every rank hol
 position (``positions`` is replicated and identical on all ranks). Each particle is *owned* by the
 rank that owns the mesh cell containing it (the lowest such rank on shared boundaries); PETSc
 numbers particles owner by owner, so each rank's particle dofs form one contiguous range
-(:attr:`ParticleSet.layout`), with vector components interleaved like a DOLFINx block size 2.
+(:attr:`ParticleSet.layout`), with vector components interleaved like a DOLFINx block size gdim.
 Gathering positions sits behind :meth:`ParticleSet.from_cells` so that it can become a halo
 exchange later.
 """
@@ -251,6 +251,12 @@ class ParticleSet:
                 raise ValueError(f"spacing={spacing!r} must be a positive number")
             if not (0.0 <= jitter < 0.5):
                 raise ValueError(f"jitter={jitter} must lie in [0, 0.5)")
+            if border is not None and gdim > 2:
+                raise ValueError(
+                    f"border= (a boundary-conforming layer) is implemented on 1D and 2D meshes, "
+                    f"got gdim={gdim}: leave border out (a plain grid) or use from_vertices; "
+                    "for a ParticlePatch, placement='grid' or 'vertices'"
+                )
 
         raise_on_all_ranks(comm, check)
         c = _owned_cells(mesh, cells)

@@ -2,7 +2,9 @@
 
 The FE mesh's own cells serve as EFG integration cells (Belytschko et al. 1995, sec. 5.1: "a cell
 structure that overlays Omega_E"). Each rank integrates over the cells it owns and the exterior
-facets it owns, so sums over ranks count every point once.
+facets it owns, so sums over ranks count every point once. Any dimension: cells are triangles,
+quadrilaterals, tetrahedra or hexahedra (basix rules), facets segments, triangles or
+quadrilaterals.
 """
 
 from __future__ import annotations
@@ -44,7 +46,7 @@ def cell_quadrature(msh, degree: int, cells: npt.ArrayLike | None = None) -> Qua
     Args:
         msh: Mesh with a degree-1 geometry.
         degree: Quadrature degree; 7 gives the 4 x 4 Gauss rule on quadrilaterals used by
-            Belytschko et al. 1995, sec. 5.1.2.
+            Belytschko et al. 1995, sec. 5.1.2 (4 x 4 x 4 on hexahedra).
         cells: Local cell indices (default: every owned cell).
     """
     tdim, gdim = msh.topology.dim, msh.geometry.dim
@@ -86,31 +88,93 @@ def boundary_facets(msh, marker=None) -> np.ndarray:
     return np.asarray(facets, dtype=np.int32)
 
 
+_FACET_CELLS = {
+    "triangle": "interval",
+    "quadrilateral": "interval",
+    "tetrahedron": "triangle",
+    "hexahedron": "quadrilateral",
+}
+
+
+def _facet_rule(facet_name: str, degree: int) -> tuple[np.ndarray, np.ndarray]:
+    """Reference points (nqr, tdim - 1) and weights of a facet rule exact to ``degree``.
+
+    Intervals: Gauss–Legendre on [0, 1] with ``(degree + 2) // 2`` points; triangles and
+    quadrilaterals: basix's default rule on the reference facet cell.
+    """
+    if facet_name == "interval":
+        npts = max(1, (degree + 2) // 2)
+        s, ws = np.polynomial.legendre.leggauss(npts)
+        return 0.5 * (s[:, None] + 1.0), 0.5 * ws
+    return _compat.quadrature_rule(facet_name, degree)
+
+
+def _p1_reference(facet_name: str, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Degree-1 Lagrange basis on the reference facet (DOLFINx vertex order) at ``X``: values
+    (npts, nv) and derivatives (tdim - 1, npts, nv), written out so that they are exact."""
+    s = X[:, 0]
+    one, zero = np.ones_like(s), np.zeros_like(s)
+    if facet_name == "interval":
+        return np.stack([1.0 - s, s], axis=1), np.stack([np.stack([-one, one], axis=1)])
+    t = X[:, 1]
+    if facet_name == "triangle":
+        N = np.stack([1.0 - s - t, s, t], axis=1)
+        dN = np.stack([np.stack([-one, one, zero], axis=1), np.stack([-one, zero, one], axis=1)])
+        return N, dN
+    N = np.stack([(1.0 - s) * (1.0 - t), s * (1.0 - t), (1.0 - s) * t, s * t], axis=1)
+    ds = np.stack([t - 1.0, 1.0 - t, -t, t], axis=1)
+    dt = np.stack([s - 1.0, -s, 1.0 - s, s], axis=1)
+    return N, np.stack([ds, dt])
+
+
+def _unit_normals(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit normals (..., gdim) and area elements (...,) of facet Jacobians (..., gdim, gdim - 1).
+
+    2D: the tangent ``t`` rotated clockwise, ``(t_y, -t_x) / |t|``, area element ``|t|``; 3D:
+    ``t_0 x t_1 / |t_0 x t_1|``, area element ``|t_0 x t_1|``. Their sign is fixed by the caller.
+    """
+    if J.shape[-1] == 1:
+        t = J[..., 0]
+        length = np.linalg.norm(t, axis=-1)
+        return np.stack([t[..., 1], -t[..., 0]], axis=-1) / length[..., None], length
+    c = np.cross(J[..., 0], J[..., 1])
+    area = np.linalg.norm(c, axis=-1)
+    return c / area[..., None], area
+
+
 def facet_quadrature(
     msh, facets: npt.ArrayLike, degree: int, cells: npt.ArrayLike | None = None
 ) -> QuadraturePoints:
-    """Gauss–Legendre points on straight facets (2D meshes), with unit normals.
+    """Quadrature on facets of a 2D or 3D mesh, with unit normals pointing out of ``cells``.
+
+    Facets are mapped with their degree-1 geometry: segments in 2D (Gauss–Legendre), triangles
+    and (possibly non-planar, bilinear) quadrilaterals in 3D (basix rules on the reference facet
+    cell). Weights are the reference weights times the area element; normals are those of the
+    mapped facet at each point (constant on straight and planar facets).
 
     Args:
         facets: Local facet indices.
-        degree: Exactness degree of the rule.
+        degree: Exactness degree of the rule (for affine facets).
         cells: The local cell beside each facet that the normal points out of (needed on interior
             facets, e.g. a patch interface); default: the facet's first cell, which on exterior
             facets gives the outward normal.
     """
     tdim, gdim = msh.topology.dim, msh.geometry.dim
-    if tdim != 2:
-        raise ValueError(f"facet quadrature is implemented for 2D meshes; got tdim={tdim}")
+    cname = msh.topology.cell_type.name
+    if cname not in _FACET_CELLS or gdim != tdim:
+        raise ValueError(
+            f"facet quadrature needs a 2D or 3D mesh of triangles, quadrilaterals, tetrahedra or "
+            f"hexahedra with gdim == tdim; got {cname} cells, tdim={tdim}, gdim={gdim}"
+        )
     facets = np.asarray(facets, dtype=np.int32)
     msh.topology.create_connectivity(tdim - 1, tdim)
     f2c = msh.topology.connectivity(tdim - 1, tdim)
-    npts = max(1, (degree + 2) // 2)
-    s, ws = np.polynomial.legendre.leggauss(npts)
-    s, ws = 0.5 * (s + 1.0), 0.5 * ws
+    X, ws = _facet_rule(_FACET_CELLS[cname], degree)
+    npts = X.shape[0]
     if facets.size == 0:
         z = np.zeros((0, gdim))
         return QuadraturePoints(z, np.zeros(0), np.zeros(0, np.int64), z.copy(), np.zeros(0, int))
-    ends = msh.geometry.x[_compat.entities_to_geometry(msh, tdim - 1, facets), :gdim]  # (nf, 2, 2)
+    nodes = msh.geometry.x[_compat.entities_to_geometry(msh, tdim - 1, facets), :gdim]
     if cells is None:
         offsets = np.asarray(f2c.offsets)
         cells = np.asarray(f2c.array)[offsets[facets]].astype(np.int64)
@@ -118,18 +182,18 @@ def facet_quadrature(
         cells = np.asarray(cells, dtype=np.int64)
         if cells.shape != facets.shape:
             raise ValueError(f"cells should have shape {facets.shape}, got {cells.shape}")
-    a, b = ends[:, 0], ends[:, 1]
-    t = b - a
-    length = np.linalg.norm(t, axis=1)
-    n = np.stack([t[:, 1], -t[:, 0]], axis=1) / length[:, None]
+    # x = x_0 + sum_v N_v(X) (x_v - x_0) (on a segment a + s (b - a))
+    N, dN = _p1_reference(_FACET_CELLS[cname], X)
+    x = nodes[:, :1] + np.einsum("qv,fvg->fqg", N[:, 1:], nodes[:, 1:] - nodes[:, :1])
+    J = np.einsum("dqv,fvg->fqgd", dN, nodes)  # (nf, npts, gdim, tdim - 1)
+    n, area = _unit_normals(J)
     centroid = msh.geometry.x[_compat.geometry_dofmap(msh)[cells], :gdim].mean(axis=1)
-    flip = np.einsum("fg,fg->f", n, 0.5 * (a + b) - centroid) < 0
-    n[flip] *= -1.0
-    x = a[:, None, :] + s[None, :, None] * t[:, None, :]
+    outward = np.einsum("fg,fg->f", n.mean(axis=1), nodes.mean(axis=1) - centroid)
+    n[outward < 0] *= -1.0
     return QuadraturePoints(
         points=x.reshape(-1, gdim),
-        weights=(length[:, None] * ws[None, :]).ravel(),
+        weights=(area * ws[None, :]).ravel(),
         cells=np.repeat(cells, npts),
-        normals=np.repeat(n, npts, axis=0),
+        normals=n.reshape(-1, gdim),
         entities=np.repeat(facets, npts),
     )

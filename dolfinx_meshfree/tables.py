@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["ShapeTable", "strain_operator"]
+__all__ = ["ShapeTable", "strain_operator", "voigt_pairs"]
 
 
 @dataclass
@@ -46,25 +46,52 @@ class ShapeTable:
         return np.stack(cols, axis=-1)
 
 
-def strain_operator(gradients: list[sp.csr_matrix]) -> sp.csr_matrix:
-    """Voigt strain-displacement operator B for interleaved vector dofs (2D).
+def voigt_pairs(gdim: int) -> list[tuple[int, int]]:
+    """Index pairs ``(i, j)`` of the Voigt components of a symmetric gdim x gdim tensor, in order.
 
-    Rows ``3q, 3q+1, 3q+2`` give ``eps_xx, eps_yy, gamma_xy`` at point ``q``; column ``2I + i``
-    is component ``i`` of node ``I`` (the layout of a DOLFINx vector space of block size 2). This
-    is the ``B_I`` of Belytschko et al. 1995, eq. (4.3).
+    2D: ``xx, yy, xy``; 3D: ``xx, yy, zz, yz, xz, xy`` (the normal components, then the shear
+    components ``(i, j)`` with ``i < j`` in the order ``yz, xz, xy``). The strain operator of
+    :func:`strain_operator` and the material matrix of
+    :meth:`~dolfinx_meshfree.LinearElastic.voigt` share this order; shears are engineering
+    shears ``gamma_ij = 2 eps_ij``.
+    """
+    if gdim not in (1, 2, 3):
+        raise ValueError(f"gdim={gdim} must be 1, 2 or 3")
+    shears = {1: [], 2: [(0, 1)], 3: [(1, 2), (0, 2), (0, 1)]}[gdim]
+    return [(k, k) for k in range(gdim)] + shears
+
+
+def strain_operator(gradients: list[sp.csr_matrix]) -> sp.csr_matrix:
+    """Voigt strain-displacement operator B for interleaved vector dofs (gdim 1, 2 or 3).
+
+    With ``nv = gdim (gdim + 1) / 2`` Voigt components, rows ``nv q + r`` give component ``r``
+    of the strain at point ``q`` in the order of :func:`voigt_pairs` (2D: ``eps_xx, eps_yy,
+    gamma_xy``; 3D: ``eps_xx, eps_yy, eps_zz, gamma_yz, gamma_xz, gamma_xy``, engineering
+    shears ``gamma_ij = du_i/dx_j + du_j/dx_i``); column ``gdim I + i`` is component ``i`` of
+    node ``I`` (the layout of a DOLFINx vector space of block size gdim). This is the ``B_I`` of
+    Belytschko et al. 1995, eq. (4.3).
 
     Args:
-        gradients: ``[dN/dx, dN/dy]``, each (m x n).
+        gradients: ``[dN/dx, dN/dy(, dN/dz)]``, each (m x n).
 
     Returns:
-        CSR matrix (3m x 2n).
+        CSR matrix (nv m x gdim n).
     """
-    if len(gradients) != 2:
-        raise ValueError(f"strain_operator is 2D: expected 2 gradient tables, got {len(gradients)}")
-    gx = gradients[0].tocoo()
-    gy = gradients[1].tocoo()
+    gdim = len(gradients)
+    if gdim not in (2, 3):
+        raise ValueError(f"strain_operator needs 2 or 3 gradient tables, got {gdim}")
+    g = [t.tocoo() for t in gradients]
     m, n = gradients[0].shape
-    rows = np.concatenate([3 * gx.row, 3 * gy.row + 1, 3 * gy.row + 2, 3 * gx.row + 2])
-    cols = np.concatenate([2 * gx.col, 2 * gy.col + 1, 2 * gy.col, 2 * gx.col + 1])
-    vals = np.concatenate([gx.data, gy.data, gy.data, gx.data])
-    return sp.csr_matrix((vals, (rows, cols)), shape=(3 * m, 2 * n))
+    pairs = voigt_pairs(gdim)
+    nv = len(pairs)
+    rows, cols, vals = [], [], []
+    for r, (i, j) in enumerate(pairs):
+        # d u_i / d x_j, then (shears) d u_j / d x_i
+        for comp, der in ((i, j), (j, i)) if i != j else ((i, i),):
+            rows.append(nv * g[der].row + r)
+            cols.append(gdim * g[der].col + comp)
+            vals.append(g[der].data)
+    return sp.csr_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+        shape=(nv * m, gdim * n),
+    )

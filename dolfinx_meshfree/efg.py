@@ -31,7 +31,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .constitutive import Material
-from .materials import LinearElastic
+from .materials import LinearElastic, linear_twin
 from .mls import MLS
 from .newton import NewtonOptions
 from .operators import consistent_gradients, load_vector, stiffness_matrix
@@ -243,17 +243,13 @@ class EFGElasticity:
             )
         if not (isinstance(quadrature_degree, int) and quadrature_degree >= 1):
             raise ValueError(f"quadrature_degree={quadrature_degree!r} must be an integer >= 1")
-        material.check_gdim(particles.mesh.geometry.dim, "the particles' mesh")
+        linear_twin(material).check_gdim(particles.mesh.geometry.dim, "the particles' mesh")
         t0 = time.perf_counter()
         self.particles = particles
         self.mesh = particles.mesh
         self.material = material
         #: The small-strain law of the stiffness (``material`` itself when linear).
-        self.linear_material = (
-            material
-            if isinstance(material, LinearElastic)
-            else LinearElastic(material.E, material.nu, plane=material.plane, rho=material.rho)
-        )
+        self.linear_material = linear_twin(material)
         self.mls = raise_on_all_ranks(
             particles.comm, lambda: MLS(particles, weight=weight, dilation=dilation, basis=basis)
         )
@@ -393,7 +389,7 @@ class EFGElasticity:
         for obj in (system, *objects):
             obj.destroy()
         owned = np.concatenate(comm.allgather(parts[0]))  # PETSc order, all ranks
-        coeffs = owned.reshape(-1, gdim)[P.petsc_index]
+        coeffs = owned.reshape(-1, P.gdim)[P.petsc_index]
         lam = parts[1] * s if len(parts) > 1 else np.zeros(0)
         return EFGSolution(
             mls=self.mls,
@@ -431,7 +427,7 @@ class EFGElasticity:
         finally:
             problem.destroy()
         seconds = time.perf_counter() - t0
-        coeffs = side.coefficients(x[0]).reshape(-1, 2)
+        coeffs = side.coefficients(x[0]).reshape(-1, P.gdim)
         s, mlayout = extra["scale"], extra["multipliers"]
         lam = x[1].getArray(readonly=True) * s if len(x) > 1 else np.zeros(0)
         for obj in (system, *objects, *x):

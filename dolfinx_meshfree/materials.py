@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["LinearElastic"]
+__all__ = ["LinearElastic", "linear_twin"]
 
 
 @dataclass(frozen=True)
@@ -111,11 +111,6 @@ class LinearElastic:
 
     # --- the Material protocol (dolfinx_meshfree.constitutive): the small-strain member ---------
 
-    @property
-    def gdim(self) -> int:
-        """2 in plane strain/stress, 3 for ``plane=None``."""
-        return 3 if self.plane is None else 2
-
     def _grad_u(self, F: np.ndarray) -> np.ndarray:
         F = np.asarray(F, dtype=float)
         d = self.gdim
@@ -148,3 +143,12 @@ class LinearElastic:
 
         eps = ufl.sym(F - ufl.Identity(self.gdim))
         return 2.0 * self.mu * eps + self.lmbda * ufl.tr(eps) * ufl.Identity(self.gdim)
+
+
+def linear_twin(material) -> LinearElastic:
+    """The small-strain law a material reduces to at ``F = I``: the same ``E``, ``nu``,
+    ``plane`` and ``rho`` (``material`` itself when it is a :class:`LinearElastic`). The linear
+    stiffness of a finite-strain model at ``u = 0``, and its checks, use it."""
+    if isinstance(material, LinearElastic):
+        return material
+    return LinearElastic(material.E, material.nu, plane=material.plane, rho=material.rho)

@@ -37,7 +37,7 @@ from .constitutive import Material
 from .coupled import CoupledElasticity, CoupledSolution
 from .couplings import REGISTRY
 from .couplings.base import fe_dof_layout
-from .materials import LinearElastic
+from .materials import LinearElastic, linear_twin
 from .newton import NewtonOptions
 from .parallel import raise_on_all_ranks
 from .patch import ParticlePatch
@@ -58,26 +58,11 @@ __all__ = [
     "FINITE_STRAIN_COUPLINGS",
     "CoupledNonlinearProblem",
     "FENonlinearProblem",
-    "linearised",
 ]
 
 #: Couplings available at finite strain: those whose family assembles its block system apart
 #: from solving it (``system``); the others refuse with a clear error.
 FINITE_STRAIN_COUPLINGS = tuple(name for name, cls in REGISTRY.items() if hasattr(cls, "system"))
-
-
-def linearised(material: Material) -> LinearElastic:
-    """The small-strain law a finite-strain material reduces to at ``F = I`` (the same ``E``,
-    ``nu``, plane), with which the linearised forms are checked."""
-    if isinstance(material, LinearElastic):
-        return material
-    plane = getattr(material, "plane", None)
-    if plane is None:
-        raise ValueError(
-            f"{type(material).__name__} with plane=None is a 3D law; the coupled finite-strain "
-            "problems are 2D in this release: use plane='strain' or 'stress'"
-        )
-    return LinearElastic(material.E, material.nu, plane=plane, rho=material.rho)
 
 
 def _check_steps(load_steps: int) -> None:
@@ -239,7 +224,13 @@ class CoupledNonlinearProblem:
                 raise TypeError(
                     f"material must follow the Material protocol, got {type(material).__name__}"
                 )
-            return linearised(material)
+            if material.plane is None:
+                raise ValueError(
+                    f"{type(material).__name__}(plane=None) is a 3D law; the coupled "
+                    "finite-strain problems are 2D in this release: use plane='strain' or "
+                    "'stress'"
+                )
+            return linear_twin(material)
 
         small = raise_on_all_ranks(comm, check)
         V = u.function_space

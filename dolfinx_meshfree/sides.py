@@ -191,13 +191,14 @@ class ParticleSide:
         self.forces = InternalForces(
             tq, weights, material, test_gradients=tables["test_gradients"], comm=particles.comm
         )
-        self.dof_map = particles.petsc_dofs(2).ravel()
-        self.layout = particles.dof_layout()
+        self.gdim = particles.gdim
+        self.dof_map = particles.petsc_dofs(self.gdim).ravel()
+        self.layout = particles.dof_layout(self.gdim)
 
     def coefficients(self, x: PETSc.Vec) -> np.ndarray:
         """All particle coefficients, interleaved in original order, on every rank."""
         owned = np.concatenate(self.comm.allgather(x.getArray(readonly=True)))
-        return owned.reshape(-1, 2)[self.P.petsc_index].ravel()
+        return owned.reshape(-1, self.gdim)[self.P.petsc_index].ravel()
 
     def internal_force(self, x: PETSc.Vec) -> PETSc.Vec:
         f = self.forces.internal_force(self.coefficients(x))

@@ -194,3 +194,18 @@ def test_bad_input_is_named():
         mf.CoupledNonlinearProblem(F, u, bcs, patch, material, coupling="ramp")
     with pytest.raises(ValueError, match="line_search='wolfe'"):
         mf.NewtonOptions(line_search="wolfe")
+
+
+@pytest.mark.parametrize("cell", ["hexahedron", "tetrahedron"])
+def test_efg_patch_test_at_finite_strain_3d(cell):
+    """3D: an affine F (20-30 % stretch and shear) on the unit cube, particles at h/2 (finer
+    than the mesh: the Dirichlet multipliers need it in 3D, see tests/test_efg_3d.py)."""
+    msh = dolfinx.mesh.create_unit_cube(COMM, 2, 2, 2, getattr(dolfinx.mesh.CellType, cell))
+    G3 = np.array([[0.3, 0.1, -0.05], [-0.1, 0.2, 0.1], [0.05, 0.0, -0.2]])
+    P = mf.ParticleSet.from_cells(msh, 0.25)
+    problem = mf.EFGElasticity(P, mf.NeoHookean(E=1000.0, nu=0.3, plane=None))
+    problem.add_dirichlet(mf.boundary_facets(msh), lambda x: x[:, :3] @ G3.T)
+    sol = problem.solve(load_steps=2)
+    x = np.random.default_rng(4).uniform(0.0, 1.0, (200, 3))
+    # measured round-off; bound 1e-10
+    assert np.abs(sol.displacement(x) - x @ G3.T).max() <= 1e-10

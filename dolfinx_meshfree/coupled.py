@@ -74,8 +74,10 @@ DEFAULT_DILATION = {
     "master-slave": 2.0,
 }
 
-#: Interface nodes where adjacent interface facets turn by more than this (degrees) carry one
-#: Lagrange multiplier per side (see :meth:`CoupledElasticity._interface_multipliers`).
+#: The ``corner_angle`` of the earlier default (degrees): one Lagrange multiplier per side at
+#: interface nodes where the interface turns by more than this (see
+#: :meth:`CoupledElasticity._interface_multipliers`). No longer the default: on staircase
+#: interfaces it over-constrains the particles (measured: 2.2x the FE error instead of 1.1x).
 CORNER_ANGLE = 30.0
 
 #: Couplings available in this release.
@@ -252,6 +254,15 @@ class CoupledElasticity:
         band_width: ``coupling="bridging"``: a band of this physical width instead of
             ``overlap`` cell layers, with ``alpha = min(d / band_width, 1)`` and ``d`` the
             distance to the interface (see :class:`~dolfinx_meshfree.bridging.BridgingBand`).
+        corner_angle: ``coupling="lagrange"``: ``None`` (the default): the multipliers are the
+            FE traces of the interface nodes, continuous along the whole interface (Rabczuk et
+            al. 2006, eq. 109), also where it turns; the patch test still passes to round-off
+            with consistent integration (:meth:`_projected_normals`). A number in (0, 90)
+            (degrees, e.g. :data:`CORNER_ANGLE`, the earlier default): nodes where the interface
+            turns by more than this carry one multiplier per side. On a staircase of mesh facets
+            (a patch chosen by a slanted or curved criterion) that doubles the multipliers and
+            over-constrains the particles: 1.7-3.9x the FE error at particle spacings >= 0.75 h
+            (tests/test_lagrange_multipliers.py), against 0.9-1.1x with ``None``.
     """
 
     def __init__(
@@ -269,10 +280,18 @@ class CoupledElasticity:
         penalty: float = 0.0,
         constraint: str = "integral",
         band_width: float | None = None,
+        corner_angle: float | None = None,
     ):
         if coupling not in COUPLINGS:
             raise ValueError(
                 f"coupling={coupling!r} is not available; choose one of {list(COUPLINGS)}"
+            )
+        if corner_angle is not None and not (
+            isinstance(corner_angle, (int, float)) and 0.0 < corner_angle < 90.0
+        ):
+            raise ValueError(
+                f"corner_angle={corner_angle!r} must be None (multipliers continuous along the "
+                "interface, the default) or an angle in degrees between 0 and 90"
             )
         if not isinstance(material, LinearElastic):
             raise TypeError(f"material must be a LinearElastic, got {type(material).__name__}")
@@ -286,6 +305,7 @@ class CoupledElasticity:
         t0 = time.perf_counter()
         self.V, self.patch, self.material, self.coupling = V, patch, material, coupling
         self.quadrature_degree = quadrature_degree
+        self.corner_angle = None if corner_angle is None else float(corner_angle)
         self.consistent = coupling != "master-slave" if consistent is None else bool(consistent)
         from .bridging import check_options
 
@@ -405,14 +425,22 @@ class CoupledElasticity:
 
     def _interface_multipliers(self, iq: QuadraturePoints, t_fe: sp.csr_matrix):
         """The multiplier basis of the compatibility coupling at the interface quadrature points
-        (collective): ``Lambda_k = N_a`` restricted to one smooth piece of the interface.
+        (collective): ``Lambda_k = N_a``, the FE trace of interface node ``a`` (Rabczuk eq. 109).
 
-        A node where the interface turns by more than :data:`CORNER_ANGLE` degrees (an L-shaped
-        patch) carries one multiplier per side: the traction ``sigma n`` jumps there, which
-        continuous trace multipliers cannot carry (a linear patch test then missed by 7e-6).
-        Elsewhere (straight or gently curved interfaces) one multiplier per node, as in Rabczuk
-        eq. 109. The interface is small, so its facets are gathered on every rank and every rank
-        numbers the multipliers the same way, owner by owner (the owner of the node).
+        By default (``corner_angle=None``) one multiplier per interface node and component,
+        continuous along the whole interface: the multiplier space is the FE trace space, so
+        the constraint makes the FE trace the L2 projection of the particle trace (a stable
+        mortar pairing whatever the particle spacing). With ``corner_angle`` a node where the
+        interface turns by more than that angle carries one multiplier per side, so that
+        ``sigma n`` may jump there; on a staircase interface (every node a 90 degree turn)
+        that is one discontinuous linear function per facet side, twice the FE trace's
+        dimension, and the constraint also asks the particle trace's projection to be
+        continuous at every step: with particles at spacing >= 0.75 h this over-constrains
+        them (1.7-3.9x the FE error, tests/test_lagrange_multipliers.py). Consistent
+        integration does not need the split: :meth:`_projected_normals` carries the jump of
+        ``n`` (the linear patch test passes to round-off either way). The interface is small,
+        so its facets are gathered on every rank and every rank numbers the multipliers the
+        same way, owner by owner (the owner of the node).
 
         Args:
             iq: Quadrature points on ``patch.interface_facets`` (``entities``: the facet).
@@ -436,13 +464,14 @@ class CoupledElasticity:
         offset = int(sum(len(p[0]) for p in parts[: comm.rank]))
         ends = np.concatenate([p[0] for p in parts]).reshape(-1, 2)
         lines = np.concatenate([p[1] for p in parts]).reshape(-1, 2)
-        # group the facets at each node: joined when their lines differ by < CORNER_ANGLE
+        # group the facets at each node: joined when their lines differ by < corner_angle
         group: dict[tuple[int, int], int] = {}
         at_node: dict[int, list[int]] = {}
         for f, (a, b) in enumerate(ends.tolist()):
             at_node.setdefault(a, []).append(f)
             at_node.setdefault(b, []).append(f)
-        sine = np.sin(np.radians(CORNER_ANGLE))
+        # |sin| of the turn between two facet lines is at most 1: 2 joins every pair
+        sine = 2.0 if self.corner_angle is None else np.sin(np.radians(self.corner_angle))
         for g, fs in at_node.items():
             for f in fs:
                 joined = [
@@ -545,10 +574,10 @@ class CoupledElasticity:
         The FE side of a linear field receives ``int N_a sigma n`` at the interface, which the
         multipliers carry as ``lambda = sigma Pi n`` (every trace ``N_a`` lies in their space);
         the particles then receive ``int phi_J sigma Pi n``, which is what the divergence
-        identity of consistent integration must hold with. ``Pi n = n`` on straight pieces
-        between the corners of :meth:`_interface_multipliers`; where the interface turns by
-        less than :data:`CORNER_ANGLE` (a slanted staircase of gmsh cells) ``n`` jumps inside
-        one multiplier's support, and with ``n`` itself the linear patch test missed by 3.8e-5.
+        identity of consistent integration must hold with. Where the interface turns inside one
+        multiplier's support (every node by default, see :meth:`_interface_multipliers`) ``n``
+        jumps there and ``Pi n != n``; with ``n`` itself the linear patch test missed by 3.8e-5
+        (a slanted staircase of gmsh cells).
         The interface's multiplier mass matrix is gathered and solved on every rank.
         """
         V, comm = self.V, self.patch.comm

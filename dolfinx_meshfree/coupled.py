@@ -262,7 +262,7 @@ class CoupledElasticity:
             turns by more than this carry one multiplier per side. On a staircase of mesh facets
             (a patch chosen by a slanted or curved criterion) that doubles the multipliers and
             over-constrains the particles: 1.7-3.9x the FE error at particle spacings >= 0.75 h
-            (tests/test_lagrange_multipliers.py), against 0.9-1.1x with ``None``.
+            (tests/test_staircase_couplings.py), against 0.9-1.1x with ``None``.
     """
 
     def __init__(
@@ -436,7 +436,7 @@ class CoupledElasticity:
         that is one discontinuous linear function per facet side, twice the FE trace's
         dimension, and the constraint also asks the particle trace's projection to be
         continuous at every step: with particles at spacing >= 0.75 h this over-constrains
-        them (1.7-3.9x the FE error, tests/test_lagrange_multipliers.py). Consistent
+        them (1.7-3.9x the FE error, tests/test_staircase_couplings.py). Consistent
         integration does not need the split: :meth:`_projected_normals` carries the jump of
         ``n`` (the linear patch test passes to round-off either way). The interface is small,
         so its facets are gathered on every rank and every rank numbers the multipliers the

@@ -98,6 +98,7 @@ from .coupled import (
     node_flags,
 )
 from .efg import _vector_values, facet_multipliers
+from .facet_groups import FacetGroups, constraint_rank_check, grouped_facet_quadrature
 from .fe_points import tabulate_in_cells
 from .hybrid_smoothing import EXTERIOR, INTERIOR, smoothing_cells
 from .hybrid_sph import (
@@ -196,6 +197,7 @@ class HybridElasticity:
         integration: str | None = None,
         consistent: bool = True,
         particles: str | None = None,
+        multiplier_length: float = 2.0,
     ):
         comm = patch.comm
 
@@ -240,6 +242,16 @@ class HybridElasticity:
 
             if not isinstance(consistent, bool | np.bool_):
                 raise ValueError(f"consistent={consistent!r} must be True or False")
+            if isinstance(multiplier_length, bool) or not (
+                isinstance(multiplier_length, int | float)
+                and math.isfinite(multiplier_length)
+                and multiplier_length >= 0
+            ):
+                raise ValueError(
+                    f"multiplier_length={multiplier_length!r} must be a number >= 0 (the "
+                    "length of the pieces of a patch Dirichlet boundary that carry one "
+                    "multiplier, in particle spacings; 2.0 is the default, 0 one per facet)"
+                )
 
         raise_on_all_ranks(comm, check)
         if integration is None:
@@ -248,6 +260,7 @@ class HybridElasticity:
             particles = "centred" if variant == "HA-F" else "patch"
         t0 = time.perf_counter()
         self.consistent = bool(consistent)
+        self.multiplier_length = float(multiplier_length)
         self.variant, self.integration = variant, integration
         # the median nearest-neighbour distance, but not below the spacing the patch was asked
         # for: the conforming placement's border particles (at the FE nodes) are closer than the
@@ -649,6 +662,29 @@ class HybridElasticity:
         b_p = create_vector(comm, pl, P.petsc_dofs(2).ravel(), f_p)
         return b_fe, b_p
 
+    def _check_multipliers(self, pieces: list[FacetGroups]) -> None:
+        """Refuse linearly dependent multipliers of the patch's essential conditions, on every
+        rank before the solve (collective): the rows ``int_g phi_J`` of all pieces ``g`` (the
+        same on every rank: the particles are replicated) must have full rank, or the saddle
+        point is singular and its solution garbage
+        (:func:`~dolfinx_meshfree.facet_groups.constraint_rank_check`)."""
+        rows, where = [], []
+        deg = max(self.quadrature_degree, 4)
+        for groups in pieces:
+            q = groups.quadrature(deg)
+            m = np.arange(len(q))
+            S = sp.csr_matrix((q.weights, (q.entities, m)), shape=(groups.num_groups, len(q)))
+            t = raise_on_all_ranks(self.comm, lambda q=q: self.evaluator.tabulate(q.points, 0))
+            rows.append(S @ t.values)
+            where.append(np.stack([S @ q.points[:, k] for k in range(2)], axis=1))
+            where[-1] /= (S @ np.ones(len(q)))[:, None]
+        raise_on_all_ranks(
+            self.comm,
+            lambda: constraint_rank_check(
+                sp.vstack(rows).tocsr(), np.vstack(where), "HybridElasticity"
+            ),
+        )
+
     def solve(self, solver: str = "mumps") -> CoupledSolution:
         """Assemble ``K u = f`` with the essential conditions and solve it (collective).
 
@@ -677,7 +713,7 @@ class HybridElasticity:
         fixed = ~ops.fe_active.copy()
         values = np.zeros((fixed.size, 2))
         coords = V.tabulate_dof_coordinates()[:, :2]
-        patch_bc, dq = [], []
+        patch_bc, dq, pieces = [], [], []
         for facets, fn in self._dirichlet:
             f_fe, f_pf = self._split(facets)
             flags = node_flags(
@@ -690,7 +726,12 @@ class HybridElasticity:
             values[flags] = vals
             fixed |= flags
             patch_bc.append((f_pf, fn))
-            dq.append(facet_quadrature(msh, f_pf, max(self.quadrature_degree, 4)))
+            pieces.append(
+                grouped_facet_quadrature(msh, f_pf, self.multiplier_length * self.spacing)
+            )
+            dq.append(pieces[-1].quadrature(max(self.quadrature_degree, 4), comm.rank))
+        if pieces:
+            self._check_multipliers(pieces)
         own = np.flatnonzero(fixed[:n_owned])
         rows = (2 * l2g[own][:, None] + np.arange(2)).ravel().astype(PETSc.IntType)
         x_bc = create_vector(comm, fe_layout, rows, values[own].ravel())

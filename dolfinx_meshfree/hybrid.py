@@ -198,6 +198,7 @@ class HybridElasticity:
         consistent: bool = True,
         particles: str | None = None,
         multiplier_length: float = 2.0,
+        nitsche: float = 10.0,
     ):
         comm = patch.comm
 
@@ -261,6 +262,7 @@ class HybridElasticity:
         t0 = time.perf_counter()
         self.consistent = bool(consistent)
         self.multiplier_length = float(multiplier_length)
+        self.nitsche = float(nitsche)
         self.variant, self.integration = variant, integration
         # the median nearest-neighbour distance, but not below the spacing the patch was asked
         # for: the conforming placement's border particles (at the FE nodes) are closer than the
@@ -565,7 +567,7 @@ class HybridElasticity:
         dof = self._dof_map()
         return sp.coo_matrix((K.data, (K.row, dof[K.col])), shape=K.shape)
 
-    def operators(self) -> CouplingOperators:
+    def operators(self, extra: sp.coo_matrix | None = None) -> CouplingOperators:
         """The assembled operators without essential conditions (collective): ``K_fe`` (FE
         cells, plus the FE-FE hybrid block), ``K_p``, ``K_fp``, ``K_pf``; the FE weight (the FE
         cells' indicator), the active FE nodes, the stress points and the particles' values
@@ -583,6 +585,8 @@ class HybridElasticity:
             K = sp.coo_matrix(
                 (np.r_[K.data, T.data], (np.r_[K.row, T.row], np.r_[K.col, T.col])), shape=K.shape
             )
+        if extra is not None:  # statics: Nitsche's terms of the patch's essential conditions
+            K = (K.tocsr() + extra.tocsr()).tocoo()
         K = K.tocsr()
         N2 = K.shape[0] - 2 * n
 
@@ -619,7 +623,7 @@ class HybridElasticity:
 
     # -- statics --------------------------------------------------------------------------------
 
-    def _loads(self) -> tuple[PETSc.Vec, PETSc.Vec]:
+    def _loads(self, extra: np.ndarray | None = None) -> tuple[PETSc.Vec, PETSc.Vec]:
         """Traction and body loads: FE basis on FE facets and cells, the particles' interpolant
         on patch facets and cells (collective; patch facets with ``"smoothed"`` by the smoothing
         cells' edge rule, so that the loads of a constant stress are the boundary terms of the
@@ -651,16 +655,88 @@ class HybridElasticity:
                         comm, lambda q=q: self.evaluator.tabulate(q.points, 0)
                     ).values
                     f_p += load_vector(tab, q.weights, t)
-        b_fe = create_vector(comm, fe_layout, np.concatenate(rows), np.concatenate(vals))
+        fe = None
+        if extra is not None:  # interleaved [particles | FE nodes] (Nitsche's terms)
+            n2 = 2 * P.num_particles
+            f_p += extra[:n2]
+            hit = np.flatnonzero(extra[n2:])
+            rows.append(hit)
+            vals.append(extra[n2:][hit])
         if self._body_forces:
             q = cell_quadrature(msh, self.quadrature_degree, self.patch.cells)
-            table = raise_on_all_ranks(comm, lambda: self.evaluator.tabulate(q.points, 0))
             chi = cell_indicator(msh, ~self.patch.in_patch)
-            fe, fp = body_load_vectors(self._body_forces, V, chi, deg, (q, table.values), comm=comm)
+            # the hybrid sums' functions over [particles | FE nodes] (eq. 125): the displacement
+            # whose strains the particle energy holds, so the load is its work conjugate
+            t = raise_on_all_ranks(comm, lambda: self.sph.tabulate(q.points, 0))
+            table = (t.values @ self._node_map()).tocsr()
+            fe, fp = body_load_vectors(self._body_forces, V, chi, deg, (q, table), comm=comm)
+            n2 = 2 * P.num_particles
+            f_p += fp[:n2]
+            hit = np.flatnonzero(fp[n2:])
+            rows.append(hit)
+            vals.append(fp[n2:][hit])
+        b_fe = create_vector(comm, fe_layout, np.concatenate(rows), np.concatenate(vals))
+        if fe is not None:
             b_fe.array[:] += fe
-            f_p += fp
         b_p = create_vector(comm, pl, P.petsc_dofs(2).ravel(), f_p)
         return b_fe, b_p
+
+    def _nitsche(self, conditions: list) -> tuple[sp.coo_matrix, np.ndarray]:
+        """Nitsche's terms of ``u = ubar`` on patch facets with smoothed strains (collective):
+        ``-int (t(u).v + t(v).u) + beta int u.v`` and ``-int t(v).ubar + beta int v.ubar`` over
+        the exterior edge points of the smoothing cells on those facets, ``t = D B_k n`` the
+        traction of the smoothed strain of the edge's sub-cell, ``u`` the particles' interpolant
+        (the functions of the traction loads), ``beta = nitsche * max(D) / h_k`` with ``h_k``
+        the sub-cell's size. Returns ``K`` (combined numbering) and ``f`` (interleaved
+        [particles | FE nodes], this rank's share)."""
+        msh, comm = self.V.mesh, self.comm
+        sc = self._smoothing_cells()
+        n = self.patch.particles.num_particles
+        N = self.hybrid.interpolation.shape[1]
+        grads, areas = self._smoothed_gradients()
+        B = strain_operator(grads).tocsr()  # (3 ns x 2(n + N))
+        Dm = self.material.voigt()
+        dof = self._dof_map()
+        Ks, f = [], np.zeros(2 * (n + N))
+        for facets, fn in conditions:
+            on = np.flatnonzero(
+                (sc.fe_cell == EXTERIOR) & np.isin(sc.facet, _global_facets(msh, facets))
+            )
+            w = np.linalg.norm(sc.normals[on], axis=1)
+            nrm = sc.normals[on] / np.maximum(w, 1e-300)[:, None]
+            x = sc.points[on]
+            k = sc.owner[on]
+            g = raise_on_all_ranks(
+                comm, lambda fn=fn, x=x: _vector_values(fn, (x,), len(x), "dirichlet")
+            )
+            t = raise_on_all_ranks(comm, lambda x=x: self.evaluator.tabulate(x, 0)).values.tocoo()
+            m = on.size
+            # U: (2m x 2(n + N)) values of the particles' interpolant, interleaved
+            U = sp.csr_matrix(
+                (
+                    np.r_[t.data, t.data],
+                    (np.r_[2 * t.row, 2 * t.row + 1], np.r_[2 * t.col, 2 * t.col + 1]),
+                ),
+                shape=(2 * m, 2 * (n + N)),
+            )
+            # T: (2m x 2(n + N)) tractions N_n D B_k
+            Nn = np.zeros((m, 2, 3))
+            Nn[:, 0, 0], Nn[:, 0, 2] = nrm[:, 0], nrm[:, 1]
+            Nn[:, 1, 1], Nn[:, 1, 2] = nrm[:, 1], nrm[:, 0]
+            ND = Nn @ Dm  # (m, 2, 3)
+            rows3 = (3 * k[:, None] + np.arange(3)).ravel()
+            Bk = B[rows3]  # (3m x ...)
+            NDm = sp.block_diag(list(ND), format="csr") if m else sp.csr_matrix((0, 0))
+            T = (NDm @ Bk).tocsr() if m else sp.csr_matrix((0, 2 * (n + N)))
+            beta = self.nitsche * np.max(np.diag(Dm)) / np.sqrt(areas[k])
+            W = sp.diags(np.repeat(w, 2))
+            Wb = sp.diags(np.repeat(w * beta, 2))
+            K = -(U.T @ W @ T) - (T.T @ W @ U) + U.T @ Wb @ U
+            Ks.append(K.tocoo())
+            gv = g.ravel()
+            f += -(T.T @ (np.repeat(w, 2) * gv)) + U.T @ (np.repeat(w * beta, 2) * gv)
+        K = sum(Ks[1:], Ks[0]).tocoo() if Ks else sp.coo_matrix((2 * (n + N),) * 2)
+        return sp.coo_matrix((K.data, (dof[K.row], dof[K.col])), shape=K.shape), f
 
     def _check_multipliers(self, pieces: list[FacetGroups]) -> None:
         """Refuse linearly dependent multipliers of the patch's essential conditions, on every
@@ -704,8 +780,11 @@ class HybridElasticity:
         V, comm, msh = self.V, self.comm, self.V.mesh
         P = self.patch.particles
         t0 = time.perf_counter()
-        ops = self.operators()
-        b_fe, b_p = self._loads()
+        nitsche = self.integration == "smoothed" and self.nitsche > 0 and bool(self._dirichlet)
+        conditions = [(self._split(f)[1], fn) for f, fn in self._dirichlet]
+        K_n, f_n = self._nitsche(conditions) if nitsche else (None, None)
+        ops = self.operators(K_n)
+        b_fe, b_p = self._loads(f_n)
         assemble = time.perf_counter() - t0
         fe_layout, l2g = fe_dof_layout(self.V)
         n_owned = V.dofmap.index_map.size_local
@@ -725,6 +804,8 @@ class HybridElasticity:
             )
             values[flags] = vals
             fixed |= flags
+            if nitsche:
+                continue
             patch_bc.append((f_pf, fn))
             pieces.append(
                 grouped_facet_quadrature(msh, f_pf, self.multiplier_length * self.spacing)

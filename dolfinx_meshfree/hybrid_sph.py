@@ -247,13 +247,10 @@ def _apart(centres: np.ndarray, extra: np.ndarray, gap: float) -> np.ndarray:
     """The points of ``extra``, in order, that lie at least ``gap`` from ``centres`` and from
     the points of ``extra`` kept before them."""
     kept: list[np.ndarray] = []
-    tree = cKDTree(centres) if centres.shape[0] else None
-    for x in extra:
-        if tree is not None and tree.query(x)[0] < gap:
-            continue
-        if any(np.linalg.norm(x - y) < gap for y in kept):
-            continue
-        kept.append(x)
+    near = cKDTree(centres).query(extra)[0] if centres.shape[0] else np.full(len(extra), np.inf)
+    for x, d in zip(extra, near, strict=True):
+        if d >= gap and all(np.linalg.norm(x - y) >= gap for y in kept):
+            kept.append(x)
     return np.asarray(kept).reshape(-1, extra.shape[1])
 
 
@@ -308,10 +305,11 @@ def centred_particles(patch, spacing: float, samples: int = 4) -> ParticleSet:
     # two blind points of neighbouring cells (a shared vertex) would put two particles a few
     # hundredths of a spacing apart: a pair whose relative motion the kernel sums hardly see, a
     # near-zero-energy mode (measured: the curved gmsh patch at 0.75 h under a body load, 3.3 x
-    # the FE error at one level, 1.2 x at the next); particles closer than half a spacing to
-    # one already there are not added
-    gap = 0.5 * float(step.min())
-    for t in (0.5, 0.0, 0.25, 0.75):  # then at the point itself, and between
+    # the FE error at one level, 1.2 x at the next): a particle closer than half a spacing to
+    # another is added only if the points farther away leave a cell blind
+    half = 0.5 * float(step.min())
+    # then at the point itself, and between; then, for a point still blind, without the gap
+    for t, gap in [(t, g) for g in (half, 0.0) for t in (0.5, 0.0, 0.25, 0.75)]:
         probe = _poorly_seen(centres, vertices, 2.0 * float(step.min()))
         blind = ~np.isnan(probe[:, 0])
         extra = np.concatenate(comm.allgather(probe[blind] + t * (mid[blind] - probe[blind])))

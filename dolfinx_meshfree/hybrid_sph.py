@@ -308,8 +308,9 @@ def centred_particles(patch, spacing: float, samples: int = 4) -> ParticleSet:
     # the FE error at one level, 1.2 x at the next): a particle closer than half a spacing to
     # another is added only if the points farther away leave a cell blind
     half = 0.5 * float(step.min())
-    # then at the point itself, and between; then, for a point still blind, without the gap
-    for t, gap in [(t, g) for g in (half, 0.0) for t in (0.5, 0.0, 0.25, 0.75)]:
+    # then between; then, for a point still blind, without the gap, and at the point itself
+    tries = [(0.5, half), (0.25, half), (0.75, half), (0.5, 0.0), (0.0, 0.0), (0.25, 0.0)]
+    for t, gap in [*tries, (0.75, 0.0)]:
         probe = _poorly_seen(centres, vertices, 2.0 * float(step.min()))
         blind = ~np.isnan(probe[:, 0])
         extra = np.concatenate(comm.allgather(probe[blind] + t * (mid[blind] - probe[blind])))

@@ -330,6 +330,7 @@ class HybridElasticity:
             comm, lambda: CorrectedSPH(P.positions, P.volumes, self.smoothing_length)
         )
         self._smoothing = None
+        self._smoothed: tuple[list[sp.csr_matrix], np.ndarray] | None = None
         self._dirichlet: list[tuple[np.ndarray, VectorFunction]] = []
         self._tractions: list[tuple[np.ndarray, Callable]] = []
         self._body_forces: list[CallableBodyForce] = []
@@ -462,6 +463,8 @@ class HybridElasticity:
         the exterior boundary (the functions of the traction loads) and the FE basis on the
         interface.
         """
+        if self._smoothed is not None:
+            return self._smoothed
         sc = self._smoothing_cells()
         n = self.patch.particles.num_particles
         N = self.hybrid.interpolation.shape[1]
@@ -495,7 +498,8 @@ class HybridElasticity:
                 (sc.normals[:, d] / sc.areas[sc.owner], (sc.owner, np.arange(m))), shape=(ns, m)
             )
             grads.append((R @ T).tocsr())
-        return grads, sc.areas
+        self._smoothed = (grads, sc.areas)
+        return self._smoothed
 
     def particle_energy_matrix(self) -> sp.coo_matrix:
         """``sum_q w_q Bhat_q^T D B_q`` of this rank's stress points in the combined numbering
@@ -710,7 +714,8 @@ class HybridElasticity:
         return b_fe, b_p
 
     def _nitsche(self, conditions: list) -> tuple[sp.coo_matrix, np.ndarray]:
-        """Nitsche's terms of ``u = ubar`` on patch facets with smoothed strains (collective):
+        """Nitsche's terms (Nitsche 1971, symmetric) of ``u = ubar`` on patch facets with
+        smoothed strains (collective):
         ``-int (t(u).v + t(v).u) + beta int u.v`` and ``-int t(v).ubar + beta int v.ubar`` over
         the exterior edge points of the smoothing cells on those facets, ``t = D B_k n`` the
         traction of the smoothed strain of the edge's sub-cell, ``u`` the particles' interpolant

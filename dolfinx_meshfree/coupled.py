@@ -95,7 +95,8 @@ class CoupledElasticity:
             (degrees, e.g. :data:`~dolfinx_meshfree.couplings.lagrange.CORNER_ANGLE`, the
             earlier default): nodes where the interface turns by more than this carry one
             multiplier per side. On a staircase of mesh facets (a patch chosen by a slanted or
-            curved criterion) that doubles the multipliers and over-constrains the particles: 1.7-3.9x the FE error at particle spacings >= 0.75 h
+            curved criterion) that doubles the multipliers and over-constrains the particles:
+            1.7-3.9x the FE error at particle spacings >= 0.75 h
             (tests/test_staircase_couplings.py), against 0.9-1.1x with ``None``.
     """
 

@@ -113,6 +113,7 @@ from .quadrature import facet_quadrature
 __all__ = [
     "SLAVES",
     "SLAVE_LAYER",
+    "TIES",
     "MasterSlaveLinks",
     "master_slave_operators",
     "solve_master_slave",
@@ -125,6 +126,10 @@ SLAVE_LAYER = 1.01
 #: the band within ``SLAVE_LAYER`` spacings (the paper's figures) or those on the interface FE
 #: nodes and edges (Johnson's coincident particles, eq. 15–16).
 SLAVES = ("layer", "band", "coincident")
+
+#: What a slave's link fixes: its MLS value ``u^h(x_P)`` (default) or its nodal parameter
+#: ``u_P`` (the paper's, eq. 27). See :func:`_reduction`.
+TIES = ("values", "coefficients")
 
 #: ``slaves="coincident"``: a particle is on Gamma_I (or on a node) within this times the spacing.
 COINCIDENT_TOL = 1e-8
@@ -317,7 +322,7 @@ def _first_layer(tree: cKDTree, x: np.ndarray, a: np.ndarray, t: np.ndarray) -> 
     return np.asarray(sorted(out), dtype=np.int64)
 
 
-def solve_master_slave(problem, solver: str = "mumps", slaves: str = "layer"):
+def solve_master_slave(problem, solver: str = "mumps", slaves: str = "layer", tie: str = "values"):
     """Assemble and solve the master–slave coupled system of ``problem`` (collective).
 
     ``slaves``: which particles are slaves, see :class:`MasterSlaveLinks` (``"layer"``, the
@@ -328,7 +333,6 @@ def solve_master_slave(problem, solver: str = "mumps", slaves: str = "layer"):
     V, patch, P = problem.V, problem.patch, problem.patch.particles
     comm = patch.comm
     deg = problem.quadrature_degree
-    n = P.num_particles
     s = problem.material.E
     pdofs = P.petsc_dofs(2)
     fe_layout, _ = problem._fe_layout()
@@ -346,36 +350,7 @@ def solve_master_slave(problem, solver: str = "mumps", slaves: str = "layer"):
         comm, lambda: MasterSlaveLinks(problem, is_bc, ubc.x.array.reshape(-1, 2), slaves)
     )
     patch_bc, dq, dtabs = _outside_slave_layer(problem, links, patch_bc, dq, dtabs)
-    known = links.is_fixed()
-    is_slave = np.zeros(n, dtype=bool)
-    is_slave[links.slaves] = True
-    # master particle numbering: the owned free particles in PETSc order
-    mine = P.owned[np.argsort(P.petsc_index[P.owned], kind="stable")]
-    free_mine = mine[~is_slave[mine]]
-    mlay = Layout.from_local(comm, free_mine.size)
-    ml = Layout(2 * mlay.size_local, 2 * mlay.size_global, 2 * mlay.start)
-    # T_PF (particle dofs x FE dofs), S (particle dofs x master particle dofs), g_P
-    tr, tc, tv, g_rows, g_vals = [], [], [], [], []
-    owner = P.owner
-    for p, (nodes, weights) in zip(links.slaves, links.rows, strict=True):
-        if owner[p] != comm.rank:
-            continue
-        for node, w in zip(nodes, weights, strict=True):
-            u = known.get(int(node))
-            for i in range(2):
-                if u is not None:
-                    g_rows.append(pdofs[p, i])
-                    g_vals.append(w[i] @ u)
-                    continue
-                for j in range(2):
-                    if w[i, j] != 0.0:
-                        tr.append(pdofs[p, i])
-                        tc.append(2 * node + j)
-                        tv.append(w[i, j])
-    T_pf = sp.csr_matrix((tv, (tr, tc)), shape=(2 * n, fe_layout.size_global))
-    srow = pdofs[free_mine].ravel()
-    scol = ml.start + np.arange(ml.size_local)
-    S_loc = sp.csr_matrix((np.ones(srow.size), (srow, scol)), shape=(2 * n, ml.size_global))
+    T_pf, S_loc, g_rows, g_vals, ml = _reduction(problem, links, fe_layout, tie, links.is_fixed())
     setup = problem._setup + time.perf_counter() - t0 - kt["assemble"]
 
     t1 = time.perf_counter()
@@ -491,7 +466,9 @@ def _outside_slave_layer(problem, links: MasterSlaveLinks, patch_bc, dq, dtabs):
     return out_bc, out_q, out_t
 
 
-def master_slave_operators(problem, integration: str = "cells", slaves: str = "layer"):
+def master_slave_operators(
+    problem, integration: str = "cells", slaves: str = "layer", tie: str = "values"
+):
     """The master–slave coupling's operators without essential conditions (collective).
 
     ``K_FE`` on the FE cells and ``K_P`` on the patch, unreduced, with the reduction
@@ -513,8 +490,6 @@ def master_slave_operators(problem, integration: str = "cells", slaves: str = "l
     t0 = time.perf_counter()
     patch, P = problem.patch, problem.patch.particles
     comm = patch.comm
-    n = P.num_particles
-    pdofs = P.petsc_dofs(2)
     fe_layout, l2g = problem._fe_layout()
     pl = P.dof_layout()
     boundary = patch.boundary() if problem.consistent else None
@@ -530,32 +505,7 @@ def master_slave_operators(problem, integration: str = "cells", slaves: str = "l
     links = raise_on_all_ranks(
         comm, lambda: MasterSlaveLinks(problem, no_bc, np.zeros((l2g.size, 2)), slaves)
     )
-    is_slave = np.zeros(n, dtype=bool)
-    is_slave[links.slaves] = True
-    mine = P.owned[np.argsort(P.petsc_index[P.owned], kind="stable")]
-    free_mine = mine[~is_slave[mine]]
-    mlay = Layout.from_local(comm, free_mine.size)
-    ml = Layout(2 * mlay.size_local, 2 * mlay.size_global, 2 * mlay.start)
-    rows, cols, vals = [], [], []
-    for p, (nodes, weights) in zip(links.slaves, links.rows, strict=True):
-        if P.owner[p] == comm.rank:
-            # weights (k, 2, 2): u_P[i] += weights[k, i, j] u[nodes[k], j]
-            rows.append(np.broadcast_to(pdofs[p][None, :, None], weights.shape).ravel())
-            cols.append(
-                np.broadcast_to(
-                    (2 * nodes[:, None] + np.arange(2))[:, None, :], weights.shape
-                ).ravel()
-            )
-            vals.append(weights.ravel())
-    cat = np.concatenate
-    z = [np.zeros(0, np.int64)]
-    T_pf = sp.csr_matrix(
-        (cat([*vals, np.zeros(0)]), (cat([*rows, *z]), cat([*cols, *z]))),
-        shape=(2 * n, fe_layout.size_global),
-    )
-    srow = pdofs[free_mine].ravel()
-    scol = ml.start + np.arange(ml.size_local)
-    S_loc = sp.csr_matrix((np.ones(srow.size), (srow, scol)), shape=(2 * n, ml.size_global))
+    T_pf, S_loc, _, _, ml = _reduction(problem, links, fe_layout, tie, {})
     return CouplingOperators(
         coupling=problem.coupling,
         K_fe=problem._fe_stiffness(),
@@ -571,3 +521,84 @@ def master_slave_operators(problem, integration: str = "cells", slaves: str = "l
         interface=links,
         timings={"operators": time.perf_counter() - t0},
     )
+
+
+def _reduction(problem, links: MasterSlaveLinks, fe_layout: Layout, tie: str, known: dict):
+    """The reduction ``u_P = T_PF u_FE + S u_M + g`` of the owned particle dofs (eq. 27).
+
+    Every slave ``P`` has a target ``w_P = W_P u_FE + g_P``: the motion of its link (eq. 17-27),
+    ``W_P`` from :attr:`MasterSlaveLinks.rows`, ``g_P`` the part carried by strong FE values
+    (``known``: value by global FE node). ``tie="coefficients"`` (the paper's) sets the slave's
+    nodal parameter to it, ``u_P = w_P``. ``tie="values"`` sets the slave's MLS *value* to it,
+    ``u^h(x_P) = sum_J phi_J(x_P) u_J = w_P`` (eq. 3.3 of Belytschko et al. 1995): with
+    ``Phi_SS``, ``Phi_SM`` the slaves' shape functions at the slaves and at the masters,
+    ``u_S = Phi_SS^{-1} (w_S - Phi_SM u_M)``. MLS is not interpolating, so the two differ: a
+    tied nodal parameter leaves the field at the slave free to follow the masters, and the
+    interface loses consistency (see the module docstring for the measured effect).
+    ``Phi_SS`` is inverted densely (the slaves are one layer along Gamma_I; its condition number
+    is below 10 with the package's supports) and entries below ``1e-14`` of a row's largest,
+    which decay geometrically along the layer, are dropped. The positions are replicated, so
+    every rank computes the same inverse and keeps its owned slaves' rows.
+
+    Returns ``(T_PF, S, g_rows, g_vals, master_layout)``: local SciPy matrices (rows: the
+    particle dofs, PETSc numbering; columns: global FE dofs and master dofs), the owned nonzero
+    entries of ``g`` and the master dof layout.
+    """
+    if tie not in TIES:
+        raise ValueError(f"tie={tie!r} is not known; use one of {list(TIES)}")
+    P = problem.patch.particles
+    comm = problem.patch.comm
+    n = P.num_particles
+    pdofs = P.petsc_dofs(2)
+    sl = links.slaves
+    is_slave = np.zeros(n, dtype=bool)
+    is_slave[sl] = True
+    # masters in PETSc order, numbered owner by owner: the columns of S
+    order = np.argsort(P.petsc_index, kind="stable")
+    masters = order[~is_slave[order]]
+    mcol = np.full(n, -1, dtype=np.int64)
+    mcol[masters] = np.arange(masters.size)
+    mine = np.flatnonzero(~is_slave & (P.owner == comm.rank))
+    mlay = Layout.from_local(comm, mine.size)
+    ml = Layout(2 * mlay.size_local, 2 * mlay.size_global, 2 * mlay.start)
+    # W (2 n_S x FE dofs) and g (2 n_S) of every slave: the link targets
+    wr, wc, wv = [], [], []
+    g = np.zeros(2 * sl.size)
+    for k, (nodes, weights) in enumerate(links.rows):
+        for node, w in zip(nodes, weights, strict=True):
+            u = known.get(int(node))
+            if u is not None:
+                g[2 * k : 2 * k + 2] += w @ u
+                continue
+            for i in range(2):
+                for j in range(2):
+                    if w[i, j] != 0.0:
+                        wr.append(2 * k + i)
+                        wc.append(2 * node + j)
+                        wv.append(w[i, j])
+    W = sp.csr_matrix((wv, (wr, wc)), shape=(2 * sl.size, fe_layout.size_global))
+    own = np.flatnonzero(P.owner[sl] == comm.rank)  # owned slaves, positions in sl
+    if tie == "coefficients":
+        X = sp.identity(sl.size, format="csr")[own]
+        M = sp.csr_matrix((own.size, masters.size))
+    else:
+        Phi = sp.csr_matrix(problem.mls.tabulate(P.positions[sl], 0).values)
+        inv = np.linalg.inv(Phi[:, sl].toarray())[own]
+        inv[np.abs(inv) < 1e-14 * np.abs(inv).max(axis=1, initial=0.0)[:, None]] = 0.0
+        X = sp.csr_matrix(inv)
+        Psm = Phi[:, masters]
+        M = -(X @ Psm)
+    I2 = sp.identity(2, format="csr")
+    X2 = sp.kron(X, I2, format="csr")
+    rows = pdofs[sl[own]].ravel()
+    T_s = (X2 @ W).tocoo()
+    T_pf = sp.csr_matrix((T_s.data, (rows[T_s.row], T_s.col)), shape=(2 * n, fe_layout.size_global))
+    # S: identity on the owned masters, -Phi_SS^{-1} Phi_SM on the owned slaves
+    M2 = sp.kron(M, I2, format="coo")
+    srow = np.concatenate([pdofs[mine].ravel(), rows[M2.row]])
+    scol = np.concatenate([(2 * mcol[mine][:, None] + np.arange(2)).ravel(), M2.col])
+    sval = np.concatenate([np.ones(2 * mine.size), M2.data])
+    S_loc = sp.csr_matrix((sval, (srow, scol)), shape=(2 * n, ml.size_global))
+    gs = X2 @ g
+    nz = np.flatnonzero(gs)
+    return T_pf, S_loc, rows[nz], gs[nz], ml

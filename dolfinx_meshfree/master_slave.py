@@ -322,7 +322,9 @@ def _first_layer(tree: cKDTree, x: np.ndarray, a: np.ndarray, t: np.ndarray) -> 
     return np.asarray(sorted(out), dtype=np.int64)
 
 
-def solve_master_slave(problem, solver: str = "mumps", slaves: str = "layer", tie: str = "values"):
+def solve_master_slave(
+    problem, solver: str = "mumps", slaves: str = "layer", tie: str | None = None
+):
     """Assemble and solve the master–slave coupled system of ``problem`` (collective).
 
     ``slaves``: which particles are slaves, see :class:`MasterSlaveLinks` (``"layer"``, the
@@ -467,7 +469,7 @@ def _outside_slave_layer(problem, links: MasterSlaveLinks, patch_bc, dq, dtabs):
 
 
 def master_slave_operators(
-    problem, integration: str = "cells", slaves: str = "layer", tie: str = "values"
+    problem, integration: str = "cells", slaves: str = "layer", tie: str | None = None
 ):
     """The master–slave coupling's operators without essential conditions (collective).
 
@@ -523,7 +525,7 @@ def master_slave_operators(
     )
 
 
-def _reduction(problem, links: MasterSlaveLinks, fe_layout: Layout, tie: str, known: dict):
+def _reduction(problem, links: MasterSlaveLinks, fe_layout: Layout, tie: str | None, known: dict):
     """The reduction ``u_P = T_PF u_FE + S u_M + g`` of the owned particle dofs (eq. 27).
 
     Every slave ``P`` has a target ``w_P = W_P u_FE + g_P``: the motion of its link (eq. 17-27),
@@ -544,8 +546,10 @@ def _reduction(problem, links: MasterSlaveLinks, fe_layout: Layout, tie: str, kn
     particle dofs, PETSc numbering; columns: global FE dofs and master dofs), the owned nonzero
     entries of ``g`` and the master dof layout.
     """
+    if tie is None:
+        tie = "coefficients" if links.kind == "band" else "values"
     if tie not in TIES:
-        raise ValueError(f"tie={tie!r} is not known; use one of {list(TIES)}")
+        raise ValueError(f"tie={tie!r} is not known; use one of {list(TIES)} or None")
     P = problem.patch.particles
     comm = problem.patch.comm
     n = P.num_particles

@@ -44,16 +44,19 @@ def max_error(msh, sol, field):
     return MPI.COMM_WORLD.allreduce(err, op=MPI.MAX)
 
 
+@pytest.mark.parametrize("tie", ["values", "coefficients"])
 @pytest.mark.parametrize("spacing", [0.25, 1 / 6])
-def test_slave_constraint_holds(spacing):
+def test_slave_constraint_holds(spacing, tie):
     """u_P = u_C + theta x (P - C) for every slave, from the solved FE field: the interface is
     x = 1, so C = (1, y_P) and theta = -(u_x(b) - u_x(a)) / |b - a| on the edge [a, b] through
     C (the mean of the two edges when C is a node). Spacing 0.25 puts particles both at the
     nodes' heights (k/3) and between them. ``slaves="band"`` (the particles within 1.01 s of
     Gamma_I: here the interface column and the next one), so that links of nonzero length are
-    checked; the default first layer is the interface column alone."""
+    checked; the default first layer is the interface column alone. ``tie="values"`` (the
+    default) holds the MLS value ``u^h(x_P)`` there, ``tie="coefficients"`` the nodal
+    parameter ``u_P``."""
     _, problem = patch_problem(MPI.COMM_WORLD, LINEAR, spacing)
-    sol = solve_master_slave(problem, slaves="band")
+    sol = solve_master_slave(problem, slaves="band", tie=tie)
     x = problem.patch.particles.positions
     slaves = sol.links.slaves
     assert np.array_equal(slaves, np.flatnonzero(x[:, 0] <= 1.0 + 1.01 * spacing + 1e-12))
@@ -82,7 +85,12 @@ def test_slave_constraint_holds(spacing):
     r = x[slaves] - c
     expected = u_c + theta[:, None] * np.column_stack([-r[:, 1], r[:, 0]])
     scale = np.abs(expected).max()
-    assert np.abs(sol.coefficients[slaves] - expected).max() <= 1e-12 * scale
+    tied = sol.coefficients[slaves]
+    if tie == "values":
+        tied = sol.mls.tabulate(x[slaves], 0).values @ sol.coefficients
+        # the field is not its nodal parameters: the two ties differ
+        assert np.abs(sol.coefficients[slaves] - expected).max() > 1e-4 * scale
+    assert np.abs(tied - expected).max() <= 1e-12 * scale
 
 
 @pytest.mark.parametrize("slaves", ["layer", "band"])

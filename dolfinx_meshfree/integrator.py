@@ -675,7 +675,8 @@ class ExplicitDynamics:
             vals = out
         if self.reduction is None:
             return vals.ravel()
-        _, S = self.reduction  # master-slave: keep the masters' coefficients
+        # master-slave: keep the masters' coefficients (the selection of S's master rows)
+        S = self.reduction[1].query("master_selection") or self.reduction[1]
         full = S.createVecLeft()
         full.array[:] = vals.ravel()
         masters = S.createVecRight()

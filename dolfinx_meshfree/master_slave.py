@@ -352,7 +352,9 @@ def solve_master_slave(
         comm, lambda: MasterSlaveLinks(problem, is_bc, ubc.x.array.reshape(-1, 2), slaves)
     )
     patch_bc, dq, dtabs = _outside_slave_layer(problem, links, patch_bc, dq, dtabs)
-    T_pf, S_loc, g_rows, g_vals, ml = _reduction(problem, links, fe_layout, tie, links.is_fixed())
+    T_pf, S_loc, _, g_rows, g_vals, ml = _reduction(
+        problem, links, fe_layout, tie, links.is_fixed()
+    )
     setup = problem._setup + time.perf_counter() - t0 - kt["assemble"]
 
     t1 = time.perf_counter()
@@ -507,7 +509,7 @@ def master_slave_operators(
     links = raise_on_all_ranks(
         comm, lambda: MasterSlaveLinks(problem, no_bc, np.zeros((l2g.size, 2)), slaves)
     )
-    T_pf, S_loc, _, _, ml = _reduction(problem, links, fe_layout, tie, {})
+    T_pf, S_loc, sel, _, _, ml = _reduction(problem, links, fe_layout, tie, {})
     return CouplingOperators(
         coupling=problem.coupling,
         K_fe=problem._fe_stiffness(),
@@ -518,7 +520,10 @@ def master_slave_operators(
         particle_table=tq.values.tocsr(),
         fe_layout=fe_layout,
         particle_layout=pl,
-        reduction=(create_aij(comm, T_pf, pl, fe_layout), create_aij(comm, S_loc, pl, ml)),
+        reduction=(
+            create_aij(comm, T_pf, pl, fe_layout),
+            _with_selection(S_loc, sel, comm, pl, ml),
+        ),
         master_layout=ml,
         interface=links,
         timings={"operators": time.perf_counter() - t0},
@@ -542,12 +547,13 @@ def _reduction(problem, links: MasterSlaveLinks, fe_layout: Layout, tie: str | N
     which decay geometrically along the layer, are dropped. The positions are replicated, so
     every rank computes the same inverse and keeps its owned slaves' rows.
 
-    Returns ``(T_PF, S, g_rows, g_vals, master_layout)``: local SciPy matrices (rows: the
-    particle dofs, PETSc numbering; columns: global FE dofs and master dofs), the owned nonzero
-    entries of ``g`` and the master dof layout.
+    Returns ``(T_PF, S, S_sel, g_rows, g_vals, master_layout)``: local SciPy matrices (rows:
+    the particle dofs, PETSc numbering; columns: global FE dofs and master dofs; ``S_sel``: the
+    masters' rows of ``S``, a selection), the owned nonzero entries of ``g`` and the master dof
+    layout.
     """
     if tie is None:
-        tie = "coefficients" if links.kind == "band" else "values"
+        tie = "values" if links.kind == "layer" else "coefficients"
     if tie not in TIES:
         raise ValueError(f"tie={tie!r} is not known; use one of {list(TIES)} or None")
     P = problem.patch.particles
@@ -603,6 +609,25 @@ def _reduction(problem, links: MasterSlaveLinks, fe_layout: Layout, tie: str | N
     scol = np.concatenate([(2 * mcol[mine][:, None] + np.arange(2)).ravel(), M2.col])
     sval = np.concatenate([np.ones(2 * mine.size), M2.data])
     S_loc = sp.csr_matrix((sval, (srow, scol)), shape=(2 * n, ml.size_global))
+    k = 2 * mine.size
+    sel = sp.csr_matrix((sval[:k], (srow[:k], scol[:k])), shape=S_loc.shape)
     gs = X2 @ g
     nz = np.flatnonzero(gs)
-    return T_pf, S_loc, rows[nz], gs[nz], ml
+    return T_pf, S_loc, sel, rows[nz], gs[nz], ml
+
+
+#: Name under which the reduction's ``S`` carries the selection of the master rows (a PETSc
+#: object composed on it, see :func:`_with_selection`).
+MASTER_SELECTION = "master_selection"
+
+
+def _with_selection(S_loc: sp.csr_matrix, sel_loc: sp.csr_matrix, comm, pl: Layout, ml: Layout):
+    """``S`` as a PETSc matrix carrying (``compose``, name :data:`MASTER_SELECTION`) the
+    selection of its master rows ``S_sel``: ``S_sel^T c`` keeps the masters' entries of a
+    particle vector ``c`` (initial conditions). With ``tie="values"`` the slaves' rows of ``S``
+    are not zero, so ``S^T`` is not that restriction (collective)."""
+    S = create_aij(comm, S_loc, pl, ml)
+    sel = create_aij(comm, sel_loc, pl, ml)
+    S.compose(MASTER_SELECTION, sel)
+    sel.destroy()
+    return S

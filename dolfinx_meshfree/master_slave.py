@@ -238,7 +238,13 @@ class MasterSlaveLinks:
                 )
         if slaves == "layer":
             self._tree = cKDTree(x)
-            self.slaves = _first_layer(self._tree, x, a, t)
+            on = np.flatnonzero(self.distance <= COINCIDENT_TOL * self.spacing)
+            gap, _ = self._tree.query(np.unique(self.edges.reshape(-1, 2), axis=0))
+            if np.all(gap <= COINCIDENT_TOL * self.spacing):
+                # every interface FE node carries a particle: the particles on Gamma_I
+                self.slaves = on
+            else:
+                self.slaves = _first_layer(self._tree, x, a, t)
             self.width = float(self.distance[self.slaves].max())
         else:
             self.slaves = np.flatnonzero(self.distance <= self.width)

@@ -18,22 +18,33 @@ several edges are equally close (``C`` at a vertex, where the normal is undefine
 distance from two edges) the row of ``T`` is the mean of their rows: each reproduces rigid
 motions, so the mean does too, and the choice does not depend on the partition.
 
-The slaves are the particles of the first layer (``slaves="layer"``, the default): the particles
-"adjacent to the FEM model" (sec. 5.1.2, Figure 1), i.e. those nearest to some stretch of
-Gamma_I, whose Voronoi cells cut the interface, so that no other particle lies between a slave
-and the FE side. Along each interface edge the nearest particle is the lower envelope of the
-distance, computed exactly (:func:`_first_layer`). ``u_P`` is the particle's dof (nodal
-parameter) of the EFG approximation, as in the paper's particle methods. The layer is one
-particle thick; its width, the link length ``|PC|``, depends on where the particles are:
+The slaves (``slaves="layer"``, the default) are the particles on Gamma_I when every interface FE
+node carries one (the default placement puts particles on the patch border's nodes and edges,
+``placement="vertices"`` on the nodes): Johnson's coincident particles of sec. 5.1.1, with links
+of length zero. Otherwise (a grid that does not meet Gamma_I, ``placement="grid"``) they are the
+particles of the first layer: the particles "adjacent to the FEM model" (sec. 5.1.2, Figure 1),
+i.e. those nearest to some stretch of Gamma_I, whose Voronoi cells cut the interface, so that
+no other particle lies between a slave and the FE side. Along each interface edge the nearest
+particle is the lower envelope of the distance, computed exactly (:func:`_first_layer`); the
+links are between 0 and about one spacing long, varying along the interface: first order in
+the mean link length (rates 0.9-1.9 measured with coefficient ties).
 
-* particles on Gamma_I (``placement="vertices"``, a grid through the interface nodes, a
-  boundary-conforming placement): the layer is these particles, with links of length zero
-  (Johnson's coincident particles of sec. 5.1.1, plus a rigid link wherever an off-interface
-  particle is the nearest to part of an edge). Measured: cantilever L2 rate 2.1, errors below
-  pure Q1's; slanted, curved and gmsh patches 1.4-2.0;
-* a grid that does not meet Gamma_I (a slanted or curved interface, a spacing that does not
-  divide h): the first particle row, with links between 0 and about one spacing, the length
-  varying along the interface; first order in the mean link length (rates 1.0-1.9 measured).
+What a link fixes (``tie``, :func:`_reduction`): the layer's default ``"values"`` ties the
+slave's MLS *value*, ``u^h(x_P) = sum_J phi_J(x_P) u_J = u_P^{link}`` (Belytschko et al. 1995,
+eq. 3.3), solved for the slaves' parameters as ``u_S = Phi_SS^{-1} (u_S^{link} - Phi_SM u_M)``;
+``"coefficients"``, the default of ``"band"`` and ``"coincident"`` (the paper's), sets the
+slave's nodal parameter ``u_P`` itself. MLS is not interpolating, so the two differ, and with
+the coefficient tie the field at a slave is left free to follow its masters: the particle
+field does not meet the FE trace even at the slaves. Measured on the robustness matrix
+(``demos/robustness.py --coupling master-slave``, 135 cases, quadratic field): with coefficient
+ties and the first layer, 11 cases below rate 1.0 (curved patches in triangle and gmsh meshes,
+rates 0.28-1.0, 5.9-31x FE), errors 0.84-37x plain FE (median 10); with value ties and the
+particles on Gamma_I, every case at rate 1.09-2.87 with errors 0.84-9.5x FE (median 3.3), up to
+7.3x lower (median 2.9x; six body-load cases on axis-aligned patches 1-19 % higher). Value ties on
+the first layer's off-interface slaves impose the rigid link on the field itself (error
+``|strain| x |PC|``), hence the particles on Gamma_I whenever they exist. On the aligned
+cantilever (Table II set-up, spacing h) the coefficient tie happened to be lower (0.65-0.78x
+pure Q1 against 0.92x, both at rate 2.0).
 
 ``slaves="band"`` keeps the layer one spacing wide: the particles within ``SLAVE_LAYER = 1.01 s``
 of Gamma_I (``s``: the median nearest-neighbour distance), i.e. two rows when a row lies on
@@ -82,15 +93,17 @@ one-to-one pairing to ratios above 1:1. ``u_P`` is the particle's nodal paramete
 
 Master–slave reproduces rigid motions exactly but not linear fields: a slave off Gamma_I moves
 with the rotation of its edge, not with the strain of the field, so the linear patch test fails
-by about ``|strain| x |PC|`` at the slaves; and a slave on Gamma_I ties its nodal parameter, not
-the (non-interpolating) MLS field, to the FE trace, so the two sides do not match on Gamma_I
-either. The coupled error is first order in general (the paper's rates 1.23/1.23/1.13 for the
-cantilever), second order where the whole layer lies on Gamma_I. Consistent integration
-(``consistent=True``, VCI over the patch boundary, Gamma_I included) cannot remove that jump and
-is not the choice here: measured on the cantilever (spacing h, slaves on Gamma_I), L2 errors
-1.9e-2, 3.0e-3, 2.0e-4, 8.1e-4, 1.3e-3, 1.4e-3 for h = 3 ... 0.375 (no convergence), against
-2.2e-2 ... 5.3e-4 (rate 2.0) with Gauss integration; the linear patch test error at spacing
-h/4 grows from 2.6e-3 to 7.0e-3 (band: 1.6e-2 to 3.1e-2).
+by about ``|strain| x |PC|`` at the slaves; and a slave on Gamma_I matches the FE trace at its
+point only (value tie) or not at all (coefficient tie: it ties its nodal parameter, not the
+non-interpolating MLS field), so the two sides do not match between the slaves. The coupled
+error is first order in general (the paper's rates 1.23/1.23/1.13 for the cantilever), second
+order on aligned grids with the layer on Gamma_I. Consistent integration (``consistent=True``,
+VCI over the patch boundary, Gamma_I included) cannot remove that mismatch and is not the
+choice here: measured on the cantilever (spacing h, slaves on Gamma_I, coefficient ties), L2
+errors 1.9e-2, 3.0e-3, 2.0e-4, 8.1e-4, 1.3e-3, 1.4e-3 for h = 3 ... 0.375 (no convergence),
+against 2.2e-2 ... 5.3e-4 (rate 2.0) with Gauss integration; with value ties the linear patch
+test error (spacing 1/3, 1/6, 1/12) is 1.1e-2, 1.8e-3, 6.9e-3 with VCI against 1.1e-2, 1.9e-3,
+2.4e-3 with Gauss (coefficient ties: 2.1e-2, 3.7e-3, 2.6e-3).
 """
 
 from __future__ import annotations

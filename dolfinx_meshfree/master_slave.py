@@ -157,8 +157,9 @@ class MasterSlaveLinks:
     Args:
         problem: The :class:`~dolfinx_meshfree.CoupledElasticity`.
         is_bc, ubc: Strong-condition flags and values per local FE node.
-        slaves: ``"layer"``: the first particle layer, the particles nearest to some stretch
-            of Gamma_I (eq. 17–28); ``"band"``: the particles within ``SLAVE_LAYER`` spacings of
+        slaves: ``"layer"``: the particles on Gamma_I when every interface FE node carries
+            one, else the first particle layer, the particles nearest to some stretch of
+            Gamma_I (eq. 17–28); ``"band"``: the particles within ``SLAVE_LAYER`` spacings of
             Gamma_I; ``"coincident"``: the particles on Gamma_I, one on every interface FE node
             (Johnson's coupling, eq. 15–16). See the module docstring.
 
@@ -348,6 +349,9 @@ def solve_master_slave(
 
     ``slaves``: which particles are slaves, see :class:`MasterSlaveLinks` (``"layer"``, the
     default of :meth:`CoupledElasticity.solve <dolfinx_meshfree.CoupledElasticity.solve>`).
+    ``tie``: ``"values"`` (the slaves' MLS values follow their links) or ``"coefficients"``
+    (their nodal parameters, the paper's eq. 27); ``None``: values for ``"layer"``, the
+    paper's coefficients for ``"band"`` and ``"coincident"``. See :func:`_reduction`.
     """
     from .coupled import CoupledSolution
 
@@ -496,15 +500,18 @@ def master_slave_operators(
 
     ``K_FE`` on the FE cells and ``K_P`` on the patch, unreduced, with the reduction
     ``(T_PF, S)``: ``u_P = T_PF u_FE + S u_M`` where the slaves follow their edges (eq. 27) and
-    ``S`` selects the free (master) particles, numbered by :attr:`master_layout` in PETSc
-    particle order. The reduced stiffness is ``T^T K T`` and the forces on the slaves go to their
-    masters with ``T^T`` (eq. 28). See :class:`~dolfinx_meshfree.coupled.CouplingOperators`.
+    ``S`` is the identity on the free (master) particles, numbered by :attr:`master_layout` in
+    PETSc particle order (with value ties its slave rows are ``-Phi_SS^{-1} Phi_SM``; the
+    selection of its master rows is composed on it as :data:`MASTER_SELECTION`). The reduced
+    stiffness is ``T^T K T`` and the forces on the slaves go to their masters with ``T^T``
+    (eq. 28). See :class:`~dolfinx_meshfree.coupled.CouplingOperators`.
 
     Args:
         integration: ``"cells"`` or ``"stress-points"``: the rule of ``K_P`` (see
             :meth:`CoupledElasticity.operators <dolfinx_meshfree.CoupledElasticity.operators>`).
         slaves: ``"layer"`` or ``"coincident"`` (Johnson, eq. 15–16): see
             :class:`MasterSlaveLinks`.
+        tie: What a link fixes, as in :func:`solve_master_slave`.
     """
     from .coupled import CouplingOperators
     from .stress_points import check_integration

@@ -124,6 +124,7 @@ from .petsc import BlockSystem, create_aij, create_vector
 from .quadrature import facet_quadrature
 
 __all__ = [
+    "MASTER_SELECTION",
     "SLAVES",
     "SLAVE_LAYER",
     "TIES",

@@ -373,3 +373,24 @@ def test_rate_with_the_default_placement_off_the_grid():
     ).T
     steps = np.log(e[:-1] / e[1:]) / np.log(2.0)
     assert np.all((1.0 <= steps) & (steps <= 2.5)), (steps, e, e / f)
+
+
+@pytest.mark.parametrize("particle_values", ["nodal", "collocation"])
+def test_dynamics_initial_linear_field_on_every_particle(particle_values):
+    """Explicit dynamics with the master–slave reduction (default layer, value ties):
+    ``set_initial`` of a linear field keeps the masters' coefficients through the selection
+    composed on ``S`` (with value ties the slaves' rows of ``S`` are ``-Phi_SS^{-1} Phi_SM``,
+    so ``S^T`` is not the restriction), and the expansion ``u_P = T_PF u_FE + S u_M`` gives
+    every particle, slaves included, the field's value: MLS reproduces a linear field with
+    its values as coefficients, so the value tie holds exactly. Measured 5e-16 and 1.3e-15
+    relative; with ``S^T`` instead of the selection, 1.9e-2."""
+    msh = square(MPI.COMM_WORLD, "quadrilateral")
+    patch = mf.ParticlePatch(msh, cells_right_of(msh, 1.0), 1 / 6)
+    V = _compat.vector_function_space(msh)
+    problem = mf.CoupledElasticity(V, patch, mf.LinearElastic(1000, 0.3), coupling="master-slave")
+    dyn = mf.ExplicitDynamics.coupled(problem)
+    dyn.set_initial(displacement=LINEAR.displacement, particle_values=particle_values)
+    _, coeffs = dyn._local_values(dyn.u)
+    exact = LINEAR.displacement(patch.particles.positions)
+    assert np.abs(coeffs - exact).max() <= 1e-12 * np.abs(exact).max()
+    dyn.destroy()

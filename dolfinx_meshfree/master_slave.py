@@ -569,9 +569,12 @@ def _reduction(problem, links: MasterSlaveLinks, fe_layout: Layout, tie: str | N
     ``u_S = Phi_SS^{-1} (w_S - Phi_SM u_M)``. MLS is not interpolating, so the two differ: a
     tied nodal parameter leaves the field at the slave free to follow the masters, and the
     interface loses consistency (see the module docstring for the measured effect).
-    ``Phi_SS`` is inverted densely (the slaves are one layer along Gamma_I; its condition number
-    is below 10 with the package's supports) and entries below ``1e-14`` of a row's largest,
-    which decay geometrically along the layer, are dropped. The positions are replicated, so
+    ``Phi_SS`` is inverted densely (the slaves are one layer along Gamma_I; condition numbers
+    3.7-7.6 measured with the package's supports) and entries below ``1e-14`` of a row's
+    largest, which decay geometrically along the layer, are dropped: about 60 entries per row
+    remain whatever the interface's length (bushing ring, 44 / 59 / 61 at h = 0.2 / 0.1 /
+    0.05), so ``T`` has O(slaves) entries, each slave coupled to its neighbours within about
+    30 spacings along Gamma_I. The positions are replicated, so
     every rank computes the same inverse and keeps its owned slaves' rows.
 
     Returns ``(T_PF, S, S_sel, g_rows, g_vals, master_layout)``: local SciPy matrices (rows:

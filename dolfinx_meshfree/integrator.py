@@ -50,6 +50,7 @@ from petsc4py import PETSc
 from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
 from .fe_points import ensure_points_in_mesh, evaluate_fe_function, tabulate_in_cells
+from .master_slave import MASTER_SELECTION
 from .materials import LinearElastic
 from .mls import MLS
 from .operators import load_vector
@@ -675,7 +676,8 @@ class ExplicitDynamics:
             vals = out
         if self.reduction is None:
             return vals.ravel()
-        _, S = self.reduction  # master-slave: keep the masters' coefficients
+        # master-slave: keep the masters' coefficients (the selection of S's master rows)
+        S = self.reduction[1].query(MASTER_SELECTION) or self.reduction[1]
         full = S.createVecLeft()
         full.array[:] = vals.ravel()
         masters = S.createVecRight()

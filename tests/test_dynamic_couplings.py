@@ -103,8 +103,9 @@ def test_operators_annihilate_rigid_and_tie_linear_fields(coupling):
         rot = lambda x: (omega * np.stack([-x[:, 1], x[:, 0]], 1)).ravel()  # noqa: E731
         full = Tpf.createVecLeft()
         Tpf.mult(_vec(Tpf, rot(x_fe) * act), full)
-        masters = S.createVecRight()
-        S.multTranspose(_vec(S, rot(x_p), right=False), masters)
+        is_slave = np.zeros(P.num_particles, dtype=bool)
+        is_slave[ops.interface.slaves] = True
+        masters = _vec(S, rot(P.positions[own[~is_slave[own]]]))
         S.multAdd(masters, full, full)
         assert np.abs(full.array_r - rot(x_p)).max(initial=0.0) < 1e-13
     ops.destroy()

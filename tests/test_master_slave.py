@@ -44,16 +44,19 @@ def max_error(msh, sol, field):
     return MPI.COMM_WORLD.allreduce(err, op=MPI.MAX)
 
 
+@pytest.mark.parametrize("tie", ["values", "coefficients"])
 @pytest.mark.parametrize("spacing", [0.25, 1 / 6])
-def test_slave_constraint_holds(spacing):
+def test_slave_constraint_holds(spacing, tie):
     """u_P = u_C + theta x (P - C) for every slave, from the solved FE field: the interface is
     x = 1, so C = (1, y_P) and theta = -(u_x(b) - u_x(a)) / |b - a| on the edge [a, b] through
     C (the mean of the two edges when C is a node). Spacing 0.25 puts particles both at the
     nodes' heights (k/3) and between them. ``slaves="band"`` (the particles within 1.01 s of
     Gamma_I: here the interface column and the next one), so that links of nonzero length are
-    checked; the default first layer is the interface column alone."""
+    checked; the default first layer is the interface column alone. ``tie="values"`` (the
+    default) holds the MLS value ``u^h(x_P)`` there, ``tie="coefficients"`` the nodal
+    parameter ``u_P``."""
     _, problem = patch_problem(MPI.COMM_WORLD, LINEAR, spacing)
-    sol = solve_master_slave(problem, slaves="band")
+    sol = solve_master_slave(problem, slaves="band", tie=tie)
     x = problem.patch.particles.positions
     slaves = sol.links.slaves
     assert np.array_equal(slaves, np.flatnonzero(x[:, 0] <= 1.0 + 1.01 * spacing + 1e-12))
@@ -82,7 +85,12 @@ def test_slave_constraint_holds(spacing):
     r = x[slaves] - c
     expected = u_c + theta[:, None] * np.column_stack([-r[:, 1], r[:, 0]])
     scale = np.abs(expected).max()
-    assert np.abs(sol.coefficients[slaves] - expected).max() <= 1e-12 * scale
+    tied = sol.coefficients[slaves]
+    if tie == "values":
+        tied = sol.mls.tabulate(x[slaves], 0).values @ sol.coefficients
+        # the field is not its nodal parameters: the two ties differ
+        assert np.abs(sol.coefficients[slaves] - expected).max() > 1e-4 * scale
+    assert np.abs(tied - expected).max() <= 1e-12 * scale
 
 
 @pytest.mark.parametrize("slaves", ["layer", "band"])
@@ -96,26 +104,32 @@ def test_rigid_body_motion_is_reproduced(cell, spacing, slaves):
 
 
 @pytest.mark.parametrize(
-    ("slaves", "low", "high"),
-    # measured: layer 2.1e-2, 3.7e-3, 2.6e-3; band 7.4e-2, 2.8e-2, 1.6e-2 (bounds about 2x)
-    [("layer", 1e-3, 4e-2), ("band", 7e-3, 0.15)],
+    ("slaves", "tie", "measured"),
+    [
+        ("layer", "values", (1.12e-2, 1.86e-3, 2.43e-3)),
+        ("layer", "coefficients", (2.07e-2, 3.74e-3, 2.60e-3)),
+        ("band", "coefficients", (7.36e-2, 2.83e-2, 1.58e-2)),
+    ],
 )
-def test_linear_patch_test_is_not_passed(slaves, low, high):
-    """Master–slave is exempt from the linear patch test: a slave off the interface moves with
-    its edge's rotation, not with the field's strain, and even a slave on Gamma_I (link of
-    length zero, the default layer here) ties the particle's *parameter*, not the MLS field, to
-    the FE trace, so the two sides do not match on Gamma_I. Maximum error at Gauss points,
-    |G| ~ 0.5, spacing 1/3, 1/6, 1/12 (h = 1/3 on the FE side): above. Dirichlet facets of the
-    patch inside the slave layer carry no multiplier (the slaves follow the strongly fixed FE
-    boundary): with them, at spacing 1/3, the constraints over-determined the slaves and the
-    error was 55 (1.9e2 for u = (x, y))."""
-    errs = [max_error(*_solved(s, slaves), LINEAR) for s in (1 / 3, 1 / 6, 1 / 12)]
-    assert low < errs[2] < errs[1] < errs[0] < high
+def test_linear_patch_test_is_not_passed(slaves, tie, measured):
+    """Master–slave is exempt from the linear patch test: the slaves match the FE trace at
+    their points only (values, the default tie of the layer: the particles on Gamma_I here),
+    and with the paper's coefficient tie the particle's *parameter*, not the MLS field; a
+    slave off the interface (the band) moves with its edge's rotation, not with the field's
+    strain. Maximum error at Gauss points, |G| ~ 0.5, spacing 1/3, 1/6, 1/12 (h = 1/3 on the
+    FE side): each within [0.5, 2] x the measured value (VCI does not remove it: 1.1e-2,
+    1.8e-3, 6.9e-3 with the layer's value tie). Dirichlet facets of the patch inside the slave
+    layer carry no multiplier (the slaves follow the strongly fixed FE boundary): with them,
+    at spacing 1/3, the constraints over-determined the slaves and the error was 55 (1.9e2 for
+    u = (x, y))."""
+    errs = [max_error(*_solved(s, slaves, tie), LINEAR) for s in (1 / 3, 1 / 6, 1 / 12)]
+    for e, m in zip(errs, measured, strict=True):
+        assert 0.5 * m < e < 2.0 * m, (errs, measured)
 
 
-def _solved(spacing, slaves="layer"):
+def _solved(spacing, slaves="layer", tie=None):
     msh, problem = patch_problem(MPI.COMM_WORLD, LINEAR, spacing)
-    return msh, solve_master_slave(problem, slaves=slaves)
+    return msh, solve_master_slave(problem, slaves=slaves, tie=tie)
 
 
 def solve_beam(comm, h, slaves="layer"):
@@ -134,8 +148,9 @@ def solve_beam(comm, h, slaves="layer"):
 
 @pytest.mark.parametrize(
     ("slaves", "rates", "first"),
-    # measured: layer 2.19e-2, 5.07e-3, 2.18e-3, fitted rate 2.10; band 4.51e-2, 1.76e-2,
-    # 1.07e-2, fitted 1.31 (the paper: 1.23/1.23/1.13, Table II)
+    # measured: layer 2.60e-2, 6.60e-3, 2.95e-3, fitted rate 1.98 (coefficient ties: 2.19e-2,
+    # 5.07e-3, 2.18e-3, 2.10); band 4.51e-2, 1.76e-2, 1.07e-2, fitted 1.31 (the paper:
+    # 1.23/1.23/1.13, Table II)
     [("layer", (1.8, 2.4), 0.03), ("band", (1.1, 1.6), 0.06)],
 )
 def test_cantilever_rate(slaves, rates, first):
@@ -144,8 +159,9 @@ def test_cantilever_rate(slaves, rates, first):
     ``"band"`` (the particles within 1.01 s of Gamma_I: the interface column and the next one)
     moves a layer of width s = h rigidly with the interface edges, which drops the field's
     strain across it: an O(h) kinematic error, first-order convergence, the paper's figure.
-    The default first layer is the interface column alone (links of length zero): the error is
-    below pure Q1's and converges at second order on this aligned grid."""
+    The default layer is the interface column alone (links of length zero), its MLS values
+    tied to the FE nodes: the error is 0.92x pure Q1's and converges at second order on this
+    aligned grid."""
     hs = [3.0, 1.5, 1.0]
     errs = [solve_beam(MPI.COMM_WORLD, h, slaves)[1]["l2"] for h in hs]
     assert errs[0] > errs[1] > errs[2]
@@ -294,19 +310,23 @@ def test_first_layer_is_the_nearest_particles_of_the_interface():
 @pytest.mark.parametrize(
     ("kind", "patch", "spacing", "sizes", "rates", "ratio"),
     [
-        # measured rates (L2) 1.94, 1.78, fitted 1.86; ratio to FE 0.81, 0.84, 0.98
-        ("quadrilateral", "slanted", 0.5, (8, 16, 32), (1.0, 2.5), 2.0),
-        # measured 1.42, 1.57, fitted 1.50; ratios 4.1, 6.1, 8.3
-        ("triangle", "curved", "vertices", (8, 16, 32), (1.0, 2.5), 16.0),
-        # gmsh bushing, inner ring: measured 1.76, 1.36, fitted 1.55; ratios 2.3, 2.7, 4.1
-        ("gmsh", "ring", "vertices", (0.2, 0.1, 0.05), (1.0, 2.5), 8.0),
+        # measured (layer on Gamma_I, value ties): steps 2.00, 1.97, fitted 1.99; ratio to FE
+        # 0.75, 0.75, 0.76 (coefficient ties: fitted 1.86, ratios 0.81-0.98)
+        ("quadrilateral", "slanted", 0.5, (8, 16, 32), (1.7, 2.3), 1.5),
+        # measured 1.37, 1.96, fitted 1.66; ratios 1.66, 2.57, 2.64 (coefficient ties: fitted
+        # 1.50, ratios 4.1-8.3)
+        ("triangle", "curved", "vertices", (8, 16, 32), (1.3, 2.3), 5.5),
+        # gmsh bushing, inner ring: measured 1.99, 1.95, fitted 1.97; ratios 1.30, 1.29, 1.28
+        # (coefficient ties: fitted 1.55, ratios 2.3-4.1)
+        ("gmsh", "ring", "vertices", (0.2, 0.1, 0.05), (1.7, 2.3), 2.6),
     ],
 )
 def test_rate_on_slanted_and_curved_patches(kind, patch, spacing, sizes, rates, ratio):
     """Quadratic field with a constant body load (on FE cells and particles, the slaves' share
     reaching their masters through T^T, eq. 28), plane stress, exact values on the boundary:
-    L2 rate in [1.0, 2.5] (two-sided; first order is the rigid layer's nature) and the error
-    ratio to plain FE on the same mesh below about 2x the measured value. The ratio may grow
+    L2 rate two-sided about the measured one (the issue's target is 1.0: first order is the
+    method's nature, the slaves matching the FE trace at points) and the error ratio to plain
+    FE on the same mesh below about 2x the measured value. The ratio may grow
     at most like 1/h (a first-order method against FE's second order): ratio x h does not grow.
     The 1.01 s band of the paper (``slaves="band"``) measured rates 0.46-1.0 on the gmsh ring
     and ratios growing to 13-26 (see the module docstring of master_slave)."""
@@ -353,3 +373,24 @@ def test_rate_with_the_default_placement_off_the_grid():
     ).T
     steps = np.log(e[:-1] / e[1:]) / np.log(2.0)
     assert np.all((1.0 <= steps) & (steps <= 2.5)), (steps, e, e / f)
+
+
+@pytest.mark.parametrize("particle_values", ["nodal", "collocation"])
+def test_dynamics_initial_linear_field_on_every_particle(particle_values):
+    """Explicit dynamics with the master–slave reduction (default layer, value ties):
+    ``set_initial`` of a linear field keeps the masters' coefficients through the selection
+    composed on ``S`` (with value ties the slaves' rows of ``S`` are ``-Phi_SS^{-1} Phi_SM``,
+    so ``S^T`` is not the restriction), and the expansion ``u_P = T_PF u_FE + S u_M`` gives
+    every particle, slaves included, the field's value: MLS reproduces a linear field with
+    its values as coefficients, so the value tie holds exactly. Measured 5e-16 and 1.3e-15
+    relative; with ``S^T`` instead of the selection, 1.9e-2."""
+    msh = square(MPI.COMM_WORLD, "quadrilateral")
+    patch = mf.ParticlePatch(msh, cells_right_of(msh, 1.0), 1 / 6)
+    V = _compat.vector_function_space(msh)
+    problem = mf.CoupledElasticity(V, patch, mf.LinearElastic(1000, 0.3), coupling="master-slave")
+    dyn = mf.ExplicitDynamics.coupled(problem)
+    dyn.set_initial(displacement=LINEAR.displacement, particle_values=particle_values)
+    _, coeffs = dyn._local_values(dyn.u)
+    exact = LINEAR.displacement(patch.particles.positions)
+    assert np.abs(coeffs - exact).max() <= 1e-12 * np.abs(exact).max()
+    dyn.destroy()

@@ -18,22 +18,33 @@ several edges are equally close (``C`` at a vertex, where the normal is undefine
 distance from two edges) the row of ``T`` is the mean of their rows: each reproduces rigid
 motions, so the mean does too, and the choice does not depend on the partition.
 
-The slaves are the particles of the first layer (``slaves="layer"``, the default): the particles
-"adjacent to the FEM model" (sec. 5.1.2, Figure 1), i.e. those nearest to some stretch of
-Gamma_I, whose Voronoi cells cut the interface, so that no other particle lies between a slave
-and the FE side. Along each interface edge the nearest particle is the lower envelope of the
-distance, computed exactly (:func:`_first_layer`). ``u_P`` is the particle's dof (nodal
-parameter) of the EFG approximation, as in the paper's particle methods. The layer is one
-particle thick; its width, the link length ``|PC|``, depends on where the particles are:
+The slaves (``slaves="layer"``, the default) are the particles on Gamma_I when every interface FE
+node carries one (the default placement puts particles on the patch border's nodes and edges,
+``placement="vertices"`` on the nodes): Johnson's coincident particles of sec. 5.1.1, with links
+of length zero. Otherwise (a grid that does not meet Gamma_I, ``placement="grid"``) they are the
+particles of the first layer: the particles "adjacent to the FEM model" (sec. 5.1.2, Figure 1),
+i.e. those nearest to some stretch of Gamma_I, whose Voronoi cells cut the interface, so that
+no other particle lies between a slave and the FE side. Along each interface edge the nearest
+particle is the lower envelope of the distance, computed exactly (:func:`_first_layer`); the
+links are between 0 and about one spacing long, varying along the interface: first order in
+the mean link length (rates 0.9-1.9 measured with coefficient ties).
 
-* particles on Gamma_I (``placement="vertices"``, a grid through the interface nodes, a
-  boundary-conforming placement): the layer is these particles, with links of length zero
-  (Johnson's coincident particles of sec. 5.1.1, plus a rigid link wherever an off-interface
-  particle is the nearest to part of an edge). Measured: cantilever L2 rate 2.1, errors below
-  pure Q1's; slanted, curved and gmsh patches 1.4-2.0;
-* a grid that does not meet Gamma_I (a slanted or curved interface, a spacing that does not
-  divide h): the first particle row, with links between 0 and about one spacing, the length
-  varying along the interface; first order in the mean link length (rates 1.0-1.9 measured).
+What a link fixes (``tie``, :func:`_reduction`): the layer's default ``"values"`` ties the
+slave's MLS *value*, ``u^h(x_P) = sum_J phi_J(x_P) u_J = u_P^{link}`` (Belytschko et al. 1995,
+eq. 3.3), solved for the slaves' parameters as ``u_S = Phi_SS^{-1} (u_S^{link} - Phi_SM u_M)``;
+``"coefficients"``, the default of ``"band"`` and ``"coincident"`` (the paper's), sets the
+slave's nodal parameter ``u_P`` itself. MLS is not interpolating, so the two differ, and with
+the coefficient tie the field at a slave is left free to follow its masters: the particle
+field does not meet the FE trace even at the slaves. Measured on the robustness matrix
+(``demos/robustness.py --coupling master-slave``, 135 cases, quadratic field): with coefficient
+ties and the first layer, 11 cases below rate 1.0 (curved patches in triangle and gmsh meshes,
+rates 0.28-1.0, 5.9-31x FE), errors 0.84-37x plain FE (median 10); with value ties and the
+particles on Gamma_I, every case at rate 1.09-2.87 with errors 0.84-9.5x FE (median 3.3), up to
+7.3x lower (median 2.9x; six body-load cases on axis-aligned patches 1-19 % higher). Value ties on
+the first layer's off-interface slaves impose the rigid link on the field itself (error
+``|strain| x |PC|``), hence the particles on Gamma_I whenever they exist. On the aligned
+cantilever (Table II set-up, spacing h) the coefficient tie happened to be lower (0.65-0.78x
+pure Q1 against 0.92x, both at rate 2.0).
 
 ``slaves="band"`` keeps the layer one spacing wide: the particles within ``SLAVE_LAYER = 1.01 s``
 of Gamma_I (``s``: the median nearest-neighbour distance), i.e. two rows when a row lies on
@@ -82,15 +93,17 @@ one-to-one pairing to ratios above 1:1. ``u_P`` is the particle's nodal paramete
 
 Master–slave reproduces rigid motions exactly but not linear fields: a slave off Gamma_I moves
 with the rotation of its edge, not with the strain of the field, so the linear patch test fails
-by about ``|strain| x |PC|`` at the slaves; and a slave on Gamma_I ties its nodal parameter, not
-the (non-interpolating) MLS field, to the FE trace, so the two sides do not match on Gamma_I
-either. The coupled error is first order in general (the paper's rates 1.23/1.23/1.13 for the
-cantilever), second order where the whole layer lies on Gamma_I. Consistent integration
-(``consistent=True``, VCI over the patch boundary, Gamma_I included) cannot remove that jump and
-is not the choice here: measured on the cantilever (spacing h, slaves on Gamma_I), L2 errors
-1.9e-2, 3.0e-3, 2.0e-4, 8.1e-4, 1.3e-3, 1.4e-3 for h = 3 ... 0.375 (no convergence), against
-2.2e-2 ... 5.3e-4 (rate 2.0) with Gauss integration; the linear patch test error at spacing
-h/4 grows from 2.6e-3 to 7.0e-3 (band: 1.6e-2 to 3.1e-2).
+by about ``|strain| x |PC|`` at the slaves; and a slave on Gamma_I matches the FE trace at its
+point only (value tie) or not at all (coefficient tie: it ties its nodal parameter, not the
+non-interpolating MLS field), so the two sides do not match between the slaves. The coupled
+error is first order in general (the paper's rates 1.23/1.23/1.13 for the cantilever), second
+order on aligned grids with the layer on Gamma_I. Consistent integration (``consistent=True``,
+VCI over the patch boundary, Gamma_I included) cannot remove that mismatch and is not the
+choice here: measured on the cantilever (spacing h, slaves on Gamma_I, coefficient ties), L2
+errors 1.9e-2, 3.0e-3, 2.0e-4, 8.1e-4, 1.3e-3, 1.4e-3 for h = 3 ... 0.375 (no convergence),
+against 2.2e-2 ... 5.3e-4 (rate 2.0) with Gauss integration; with value ties the linear patch
+test error (spacing 1/3, 1/6, 1/12) is 1.1e-2, 1.8e-3, 6.9e-3 with VCI against 1.1e-2, 1.9e-3,
+2.4e-3 with Gauss (coefficient ties: 2.1e-2, 3.7e-3, 2.6e-3).
 """
 
 from __future__ import annotations
@@ -127,8 +140,10 @@ if TYPE_CHECKING:  # annotations only: the model imports this module
     from ..coupled import CoupledElasticity
 
 __all__ = [
+    "MASTER_SELECTION",
     "SLAVES",
     "SLAVE_LAYER",
+    "TIES",
     "MasterSlaveLinks",
     "master_slave_operators",
     "solve_master_slave",
@@ -141,6 +156,10 @@ SLAVE_LAYER = 1.01
 #: the band within ``SLAVE_LAYER`` spacings (the paper's figures) or those on the interface FE
 #: nodes and edges (Johnson's coincident particles, eq. 15–16).
 SLAVES = ("layer", "band", "coincident")
+
+#: What a slave's link fixes: its MLS value ``u^h(x_P)`` (default) or its nodal parameter
+#: ``u_P`` (the paper's, eq. 27). See :func:`_reduction`.
+TIES = ("values", "coefficients")
 
 #: ``slaves="coincident"``: a particle is on Gamma_I (or on a node) within this times the spacing.
 COINCIDENT_TOL = 1e-8
@@ -155,8 +174,9 @@ class MasterSlaveLinks:
     Args:
         problem: The :class:`~dolfinx_meshfree.CoupledElasticity`.
         is_bc, ubc: Strong-condition flags and values per local FE node.
-        slaves: ``"layer"``: the first particle layer, the particles nearest to some stretch
-            of Gamma_I (eq. 17–28); ``"band"``: the particles within ``SLAVE_LAYER`` spacings of
+        slaves: ``"layer"``: the particles on Gamma_I when every interface FE node carries
+            one, else the first particle layer, the particles nearest to some stretch of
+            Gamma_I (eq. 17–28); ``"band"``: the particles within ``SLAVE_LAYER`` spacings of
             Gamma_I; ``"coincident"``: the particles on Gamma_I, one on every interface FE node
             (Johnson's coupling, eq. 15–16). See the module docstring.
 
@@ -249,7 +269,13 @@ class MasterSlaveLinks:
                 )
         if slaves == "layer":
             self._tree = cKDTree(x)
-            self.slaves = _first_layer(self._tree, x, a, t)
+            on = np.flatnonzero(self.distance <= COINCIDENT_TOL * self.spacing)
+            gap, _ = self._tree.query(np.unique(self.edges.reshape(-1, 2), axis=0))
+            if np.all(gap <= COINCIDENT_TOL * self.spacing):
+                # every interface FE node carries a particle: the particles on Gamma_I
+                self.slaves = on
+            else:
+                self.slaves = _first_layer(self._tree, x, a, t)
             self.width = float(self.distance[self.slaves].max())
         else:
             self.slaves = np.flatnonzero(self.distance <= self.width)
@@ -333,17 +359,21 @@ def _first_layer(tree: cKDTree, x: np.ndarray, a: np.ndarray, t: np.ndarray) -> 
     return np.asarray(sorted(out), dtype=np.int64)
 
 
-def solve_master_slave(problem, solver: str | SolverOptions = "mumps", slaves: str = "layer"):
+def solve_master_slave(
+    problem, solver: str | SolverOptions = "mumps", slaves: str = "layer", tie: str | None = None
+):
     """Assemble and solve the master–slave coupled system of ``problem`` (collective).
 
     ``slaves``: which particles are slaves, see :class:`MasterSlaveLinks` (``"layer"``, the
     default of :meth:`CoupledElasticity.solve <dolfinx_meshfree.CoupledElasticity.solve>`).
+    ``tie``: ``"values"`` (the slaves' MLS values follow their links) or ``"coefficients"``
+    (their nodal parameters, the paper's eq. 27); ``None``: values for ``"layer"``, the
+    paper's coefficients for ``"band"`` and ``"coincident"``. See :func:`_reduction`.
     """
 
     V, patch, P = problem.V, problem.patch, problem.patch.particles
     comm = patch.comm
     deg = problem.quadrature_degree
-    n = P.num_particles
     s = problem.material.E
     pdofs = P.petsc_dofs(2)
     fe_layout, _ = fe_dof_layout(problem.V)
@@ -361,36 +391,9 @@ def solve_master_slave(problem, solver: str | SolverOptions = "mumps", slaves: s
         comm, lambda: MasterSlaveLinks(problem, is_bc, ubc.x.array.reshape(-1, 2), slaves)
     )
     patch_bc, dq, dtabs = _outside_slave_layer(problem, links, patch_bc, dq, dtabs)
-    known = links.is_fixed()
-    is_slave = np.zeros(n, dtype=bool)
-    is_slave[links.slaves] = True
-    # master particle numbering: the owned free particles in PETSc order
-    mine = P.owned[np.argsort(P.petsc_index[P.owned], kind="stable")]
-    free_mine = mine[~is_slave[mine]]
-    mlay = Layout.from_local(comm, free_mine.size)
-    ml = Layout(2 * mlay.size_local, 2 * mlay.size_global, 2 * mlay.start)
-    # T_PF (particle dofs x FE dofs), S (particle dofs x master particle dofs), g_P
-    tr, tc, tv, g_rows, g_vals = [], [], [], [], []
-    owner = P.owner
-    for p, (nodes, weights) in zip(links.slaves, links.rows, strict=True):
-        if owner[p] != comm.rank:
-            continue
-        for node, w in zip(nodes, weights, strict=True):
-            u = known.get(int(node))
-            for i in range(2):
-                if u is not None:
-                    g_rows.append(pdofs[p, i])
-                    g_vals.append(w[i] @ u)
-                    continue
-                for j in range(2):
-                    if w[i, j] != 0.0:
-                        tr.append(pdofs[p, i])
-                        tc.append(2 * node + j)
-                        tv.append(w[i, j])
-    T_pf = sp.csr_matrix((tv, (tr, tc)), shape=(2 * n, fe_layout.size_global))
-    srow = pdofs[free_mine].ravel()
-    scol = ml.start + np.arange(ml.size_local)
-    S_loc = sp.csr_matrix((np.ones(srow.size), (srow, scol)), shape=(2 * n, ml.size_global))
+    T_pf, S_loc, _, g_rows, g_vals, ml = _reduction(
+        problem, links, fe_layout, tie, links.is_fixed()
+    )
     setup = problem.setup_time + time.perf_counter() - t0 - kt["assemble"]
 
     t1 = time.perf_counter()
@@ -511,28 +514,31 @@ def _outside_slave_layer(problem, links: MasterSlaveLinks, patch_bc, dq, dtabs):
     return out_bc, out_q, out_t
 
 
-def master_slave_operators(problem, integration: str = "cells", slaves: str = "layer"):
+def master_slave_operators(
+    problem, integration: str = "cells", slaves: str = "layer", tie: str | None = None
+):
     """The master–slave coupling's operators without essential conditions (collective).
 
     ``K_FE`` on the FE cells and ``K_P`` on the patch, unreduced, with the reduction
     ``(T_PF, S)``: ``u_P = T_PF u_FE + S u_M`` where the slaves follow their edges (eq. 27) and
-    ``S`` selects the free (master) particles, numbered by :attr:`master_layout` in PETSc
-    particle order. The reduced stiffness is ``T^T K T`` and the forces on the slaves go to their
-    masters with ``T^T`` (eq. 28). See :class:`~dolfinx_meshfree.couplings.base.CouplingOperators`.
+    ``S`` is the identity on the free (master) particles, numbered by :attr:`master_layout` in
+    PETSc particle order (with value ties its slave rows are ``-Phi_SS^{-1} Phi_SM``; the
+    selection of its master rows is composed on it as :data:`MASTER_SELECTION`). The reduced
+    stiffness is ``T^T K T`` and the forces on the slaves go to their masters with ``T^T``
+    (eq. 28). See :class:`~dolfinx_meshfree.coupled.CouplingOperators`.
 
     Args:
         integration: ``"cells"`` or ``"stress-points"``: the rule of ``K_P`` (see
             :meth:`CoupledElasticity.operators <dolfinx_meshfree.CoupledElasticity.operators>`).
         slaves: ``"layer"`` or ``"coincident"`` (Johnson, eq. 15–16): see
             :class:`MasterSlaveLinks`.
+        tie: What a link fixes, as in :func:`solve_master_slave`.
     """
 
     check_integration(integration)
     t0 = time.perf_counter()
     patch, P = problem.patch, problem.patch.particles
     comm = patch.comm
-    n = P.num_particles
-    pdofs = P.petsc_dofs(2)
     fe_layout, l2g = fe_dof_layout(problem.V)
     pl = P.dof_layout()
     boundary = patch.boundary() if problem.consistent else None
@@ -548,32 +554,7 @@ def master_slave_operators(problem, integration: str = "cells", slaves: str = "l
     links = raise_on_all_ranks(
         comm, lambda: MasterSlaveLinks(problem, no_bc, np.zeros((l2g.size, 2)), slaves)
     )
-    is_slave = np.zeros(n, dtype=bool)
-    is_slave[links.slaves] = True
-    mine = P.owned[np.argsort(P.petsc_index[P.owned], kind="stable")]
-    free_mine = mine[~is_slave[mine]]
-    mlay = Layout.from_local(comm, free_mine.size)
-    ml = Layout(2 * mlay.size_local, 2 * mlay.size_global, 2 * mlay.start)
-    rows, cols, vals = [], [], []
-    for p, (nodes, weights) in zip(links.slaves, links.rows, strict=True):
-        if P.owner[p] == comm.rank:
-            # weights (k, 2, 2): u_P[i] += weights[k, i, j] u[nodes[k], j]
-            rows.append(np.broadcast_to(pdofs[p][None, :, None], weights.shape).ravel())
-            cols.append(
-                np.broadcast_to(
-                    (2 * nodes[:, None] + np.arange(2))[:, None, :], weights.shape
-                ).ravel()
-            )
-            vals.append(weights.ravel())
-    cat = np.concatenate
-    z = [np.zeros(0, np.int64)]
-    T_pf = sp.csr_matrix(
-        (cat([*vals, np.zeros(0)]), (cat([*rows, *z]), cat([*cols, *z]))),
-        shape=(2 * n, fe_layout.size_global),
-    )
-    srow = pdofs[free_mine].ravel()
-    scol = ml.start + np.arange(ml.size_local)
-    S_loc = sp.csr_matrix((np.ones(srow.size), (srow, scol)), shape=(2 * n, ml.size_global))
+    T_pf, S_loc, sel, _, _, ml = _reduction(problem, links, fe_layout, tie, {})
     return CouplingOperators(
         coupling=problem.coupling,
         K_fe=fe_stiffness(problem),
@@ -584,15 +565,124 @@ def master_slave_operators(problem, integration: str = "cells", slaves: str = "l
         particle_table=tq.values.tocsr(),
         fe_layout=fe_layout,
         particle_layout=pl,
-        reduction=(create_aij(comm, T_pf, pl, fe_layout), create_aij(comm, S_loc, pl, ml)),
+        reduction=(
+            create_aij(comm, T_pf, pl, fe_layout),
+            _with_selection(S_loc, sel, comm, pl, ml),
+        ),
         master_layout=ml,
         interface=links,
         timings={"operators": time.perf_counter() - t0},
     )
 
 
+def _reduction(problem, links: MasterSlaveLinks, fe_layout: Layout, tie: str | None, known: dict):
+    """The reduction ``u_P = T_PF u_FE + S u_M + g`` of the owned particle dofs (eq. 27).
+
+    Every slave ``P`` has a target ``w_P = W_P u_FE + g_P``: the motion of its link (eq. 17-27),
+    ``W_P`` from :attr:`MasterSlaveLinks.rows`, ``g_P`` the part carried by strong FE values
+    (``known``: value by global FE node). ``tie="coefficients"`` (the paper's) sets the slave's
+    nodal parameter to it, ``u_P = w_P``. ``tie="values"`` sets the slave's MLS *value* to it,
+    ``u^h(x_P) = sum_J phi_J(x_P) u_J = w_P`` (eq. 3.3 of Belytschko et al. 1995): with
+    ``Phi_SS``, ``Phi_SM`` the slaves' shape functions at the slaves and at the masters,
+    ``u_S = Phi_SS^{-1} (w_S - Phi_SM u_M)``. MLS is not interpolating, so the two differ: a
+    tied nodal parameter leaves the field at the slave free to follow the masters, and the
+    interface loses consistency (see the module docstring for the measured effect).
+    ``Phi_SS`` is inverted densely (the slaves are one layer along Gamma_I; condition numbers
+    3.7-7.6 measured with the package's supports) and entries below ``1e-14`` of a row's
+    largest, which decay geometrically along the layer, are dropped: about 60 entries per row
+    remain whatever the interface's length (bushing ring, 44 / 59 / 61 at h = 0.2 / 0.1 /
+    0.05), so ``T`` has O(slaves) entries, each slave coupled to its neighbours within about
+    30 spacings along Gamma_I. The positions are replicated, so
+    every rank computes the same inverse and keeps its owned slaves' rows.
+
+    Returns ``(T_PF, S, S_sel, g_rows, g_vals, master_layout)``: local SciPy matrices (rows:
+    the particle dofs, PETSc numbering; columns: global FE dofs and master dofs; ``S_sel``: the
+    masters' rows of ``S``, a selection), the owned nonzero entries of ``g`` and the master dof
+    layout.
+    """
+    if tie is None:
+        tie = "values" if links.kind == "layer" else "coefficients"
+    if tie not in TIES:
+        raise ValueError(f"tie={tie!r} is not known; use one of {list(TIES)} or None")
+    P = problem.patch.particles
+    comm = problem.patch.comm
+    n = P.num_particles
+    pdofs = P.petsc_dofs(2)
+    sl = links.slaves
+    is_slave = np.zeros(n, dtype=bool)
+    is_slave[sl] = True
+    # masters in PETSc order, numbered owner by owner: the columns of S
+    order = np.argsort(P.petsc_index, kind="stable")
+    masters = order[~is_slave[order]]
+    mcol = np.full(n, -1, dtype=np.int64)
+    mcol[masters] = np.arange(masters.size)
+    mine = np.flatnonzero(~is_slave & (P.owner == comm.rank))
+    mlay = Layout.from_local(comm, mine.size)
+    ml = Layout(2 * mlay.size_local, 2 * mlay.size_global, 2 * mlay.start)
+    # W (2 n_S x FE dofs) and g (2 n_S) of every slave: the link targets
+    wr, wc, wv = [], [], []
+    g = np.zeros(2 * sl.size)
+    for k, (nodes, weights) in enumerate(links.rows):
+        for node, w in zip(nodes, weights, strict=True):
+            u = known.get(int(node))
+            if u is not None:
+                g[2 * k : 2 * k + 2] += w @ u
+                continue
+            for i in range(2):
+                for j in range(2):
+                    if w[i, j] != 0.0:
+                        wr.append(2 * k + i)
+                        wc.append(2 * node + j)
+                        wv.append(w[i, j])
+    W = sp.csr_matrix((wv, (wr, wc)), shape=(2 * sl.size, fe_layout.size_global))
+    own = np.flatnonzero(P.owner[sl] == comm.rank)  # owned slaves, positions in sl
+    if tie == "coefficients":
+        X = sp.identity(sl.size, format="csr")[own]
+        M = sp.csr_matrix((own.size, masters.size))
+    else:
+        Phi = sp.csr_matrix(problem.mls.tabulate(P.positions[sl], 0).values)
+        inv = np.linalg.inv(Phi[:, sl].toarray())[own]
+        inv[np.abs(inv) < 1e-14 * np.abs(inv).max(axis=1, initial=0.0)[:, None]] = 0.0
+        X = sp.csr_matrix(inv)
+        Psm = Phi[:, masters]
+        M = -(X @ Psm)
+    I2 = sp.identity(2, format="csr")
+    X2 = sp.kron(X, I2, format="csr")
+    rows = pdofs[sl[own]].ravel()
+    T_s = (X2 @ W).tocoo()
+    T_pf = sp.csr_matrix((T_s.data, (rows[T_s.row], T_s.col)), shape=(2 * n, fe_layout.size_global))
+    # S: identity on the owned masters, -Phi_SS^{-1} Phi_SM on the owned slaves
+    M2 = sp.kron(M, I2, format="coo")
+    srow = np.concatenate([pdofs[mine].ravel(), rows[M2.row]])
+    scol = np.concatenate([(2 * mcol[mine][:, None] + np.arange(2)).ravel(), M2.col])
+    sval = np.concatenate([np.ones(2 * mine.size), M2.data])
+    S_loc = sp.csr_matrix((sval, (srow, scol)), shape=(2 * n, ml.size_global))
+    k = 2 * mine.size
+    sel = sp.csr_matrix((sval[:k], (srow[:k], scol[:k])), shape=S_loc.shape)
+    gs = X2 @ g
+    nz = np.flatnonzero(gs)
+    return T_pf, S_loc, sel, rows[nz], gs[nz], ml
+
+
+#: Name under which the reduction's ``S`` carries the selection of the master rows (a PETSc
+#: object composed on it, see :func:`_with_selection`).
+MASTER_SELECTION = "master_selection"
+
+
+def _with_selection(S_loc: sp.csr_matrix, sel_loc: sp.csr_matrix, comm, pl: Layout, ml: Layout):
+    """``S`` as a PETSc matrix carrying (``compose``, name :data:`MASTER_SELECTION`) the
+    selection of its master rows ``S_sel``: ``S_sel^T c`` keeps the masters' entries of a
+    particle vector ``c`` (initial conditions). With ``tie="values"`` the slaves' rows of ``S``
+    are not zero, so ``S^T`` is not that restriction (collective)."""
+    S = create_aij(comm, S_loc, pl, ml)
+    sel = create_aij(comm, sel_loc, pl, ml)
+    S.compose(MASTER_SELECTION, sel)
+    sel.destroy()
+    return S
+
+
 class MasterSlaveCoupling:
-    """Particles rigidly linked to the FE boundary (Rabczuk et al. 2006, sec. 5.1.2).
+    """Particles linked to the FE boundary (Rabczuk et al. 2006, sec. 5.1.2).
 
     First order by construction; plain Gauss quadrature by default (its slaves, not
     multipliers, carry the interface traction that consistent integration's identity assumes).

@@ -49,8 +49,8 @@ from mpi4py import MPI
 from petsc4py import PETSc
 from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
+from .couplings.master_slave import MASTER_SELECTION
 from .fe_points import ensure_points_in_mesh, evaluate_fe_function, tabulate_in_cells
-from .master_slave import MASTER_SELECTION
 from .materials import LinearElastic
 from .mls import MLS
 from .operators import load_vector

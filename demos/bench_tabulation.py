@@ -22,7 +22,7 @@ import time
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
-from dolfinx_meshfree.operators import stiffness_matrix
+from dolfinx_meshfree.physics.operators import stiffness_matrix
 
 import dolfinx
 import numpy as np

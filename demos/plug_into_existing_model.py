@@ -41,7 +41,7 @@ import time
 
 import dolfinx_meshfree as mf  # first: it loads the right MPI for the dolfinx_solver lane
 from dolfinx_meshfree import _compat
-from dolfinx_meshfree.petsc import solve_lu
+from dolfinx_meshfree.statics.petsc import solve_lu
 
 import dolfinx
 import numpy as np

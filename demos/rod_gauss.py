@@ -6,7 +6,7 @@
 # velocity ``v = (exp(-0.025 (x - 30)^2), 0)``. With nu = 0 the 1D d'Alembert solution is exact
 # in 2D (no lateral stress); the free ends reflect the two half-pulses, which meet again at the
 # start after ``L / c = 0.011563`` ms and again after ``0.023126`` ms
-# (:class:`dolfinx_meshfree.waves.GaussianPulseRod`).
+# (:class:`dolfinx_meshfree.verification.waves.GaussianPulseRod`).
 #
 # Methods (``--method``; default: all of them, ``mf.dynamics.DYNAMICS_METHODS``):
 #
@@ -71,7 +71,7 @@ import time
 import dolfinx_meshfree as mf  # first: it loads the right MPI for the dolfinx_solver lane
 from dolfinx_meshfree import _compat
 from dolfinx_meshfree.dynamics import DYNAMICS_METHODS, ExplicitDynamics, check_method
-from dolfinx_meshfree.waves import GaussianPulseRod
+from dolfinx_meshfree.verification.waves import GaussianPulseRod
 
 import dolfinx
 import numpy as np
@@ -121,7 +121,7 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     )
     p.add_argument(
         "--hybrid-particles",
-        choices=mf.hybrid.HYBRID_PARTICLES,
+        choices=mf.couplings.hybrid.HYBRID_PARTICLES,
         default="centred",
         help="hybrid: SPH particles at the centres of a lattice of squares with their areas "
         "(centred, default) or the patch's grid through the interface nodes with sampled Voronoi "

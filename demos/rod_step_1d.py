@@ -3,7 +3,8 @@
 # A rod ``0 <= x <= 1`` with ``E = rho = l = A = 1`` under a step traction ``sigma(t) = H(t)`` on
 # ``x = 0``, fixed at ``x = 1``: a step wave runs to the fixed end and back to the load point in
 # 200 steps at half the critical time step (``t = 2``). Velocity histories at ``x = 0.3`` and
-# ``0.7`` against the exact step wave (:class:`dolfinx_meshfree.waves.StepLoadedRod`), as in the
+# ``0.7`` against the exact step wave (:class:`dolfinx_meshfree.verification.waves.StepLoadedRod`),
+# as in the
 # paper's Fig. 9, for both orientations: FE at the loaded end (particles at the fixed end), then
 # reversed.
 #
@@ -49,7 +50,7 @@ import sys
 import dolfinx_meshfree as mf  # first: it loads the right MPI for the dolfinx_solver lane
 from dolfinx_meshfree import _compat
 from dolfinx_meshfree.dynamics import ExplicitDynamics
-from dolfinx_meshfree.waves import StepLoadedRod
+from dolfinx_meshfree.verification.waves import StepLoadedRod
 
 import dolfinx
 import numpy as np

@@ -3,7 +3,7 @@
 Public API (stable names):
 
 * approximations: :class:`MLS` (EFG shape functions), :class:`SPH`, tabulated into a
-  :class:`ShapeTable`; weight functions in :mod:`dolfinx_meshfree.kernels`;
+  :class:`ShapeTable`; weight functions in :mod:`dolfinx_meshfree.approx.kernels`;
 * FE basis at arbitrary points: :func:`tabulate_fe_basis`, :func:`evaluate_fe_function`;
 * particles: :class:`ParticleSet`;
 * solvers: :class:`EFGElasticity` (pure EFG), :func:`solve_fe_elasticity` and
@@ -20,36 +20,36 @@ Importing this package first loads the ``dolfinx_solver`` wheel's MPI when that 
 
 from . import _compat  # noqa: F401  (must come first: loads dolfinx_solver's MPI in lane B)
 from ._compat import DOLFINX_VERSION
-from .analytic import LinearField, PressurizedBushing, TimoshenkoBeam
-from .constitutive import Material, NeoHookean, SaintVenantKirchhoff
-from .coupled import COUPLINGS, DEFAULT_DILATION, CoupledElasticity, CoupledSolution
-from .dynamics import DYNAMICS_METHODS, DynamicsResult, EnergyRecord, ExplicitDynamics
-from .efg import EFGElasticity, EFGSolution
-from .errors import error_norms
-from .fe import FESolution, solve_fe_elasticity, solve_forms
-from .fe_points import (
+from .approx.fe_points import (
     PointsOutsideMeshError,
     ensure_points_in_mesh,
     evaluate_fe_function,
     tabulate_fe_basis,
     tabulate_in_cells,
 )
-from .forces import InternalForces
-from .hybrid import HYBRID_VARIANTS, HybridElasticity
+from .approx.kernels import cubic_spline, gaussian, quartic, sph_cubic_spline
+from .approx.mls import MLS, MomentMatrixError
+from .approx.sph import SPH
+from .approx.tables import ShapeTable
+from .couplings.hybrid import HYBRID_VARIANTS, HybridElasticity
+from .dynamics import DYNAMICS_METHODS, DynamicsResult, EnergyRecord, ExplicitDynamics
+from .geometry.particles import ParticleSet
+from .geometry.patch import PLACEMENTS, ParticlePatch
+from .geometry.quadrature import boundary_facets, cell_quadrature, facet_quadrature
 from .io import DynamicsWriter, ProgressBar, read_particles
-from .kernels import cubic_spline, gaussian, quartic, sph_cubic_spline
-from .materials import LinearElastic
-from .mls import MLS, MomentMatrixError
-from .newton import NewtonError, NewtonOptions, NewtonResult
-from .nonlinear import FINITE_STRAIN_COUPLINGS, CoupledNonlinearProblem, FENonlinearProblem
-from .particles import ParticleSet
-from .patch import PLACEMENTS, ParticlePatch
-from .problem import CoupledLinearProblem
-from .quadrature import boundary_facets, cell_quadrature, facet_quadrature
-from .sides import NonlinearSolveResult
-from .sph import SPH
-from .tables import ShapeTable
-from .waves import GaussianPulseRod, StepLoadedRod
+from .physics.constitutive import Material, NeoHookean, SaintVenantKirchhoff
+from .physics.forces import InternalForces
+from .physics.materials import LinearElastic
+from .statics.coupled import COUPLINGS, DEFAULT_DILATION, CoupledElasticity, CoupledSolution
+from .statics.efg import EFGElasticity, EFGSolution
+from .statics.fe import FESolution, solve_fe_elasticity, solve_forms
+from .statics.newton import NewtonError, NewtonOptions, NewtonResult
+from .statics.nonlinear import FINITE_STRAIN_COUPLINGS, CoupledNonlinearProblem, FENonlinearProblem
+from .statics.problem import CoupledLinearProblem
+from .statics.sides import NonlinearSolveResult
+from .verification.analytic import LinearField, PressurizedBushing, TimoshenkoBeam
+from .verification.errors import error_norms
+from .verification.waves import GaussianPulseRod, StepLoadedRod
 
 __all__ = [
     "COUPLINGS",

@@ -12,7 +12,7 @@ Each coupling enters dynamics through :meth:`CoupledElasticity.operators
 * ``ramp``, ``ramp-cubic``: the interface cells' blended shape functions (Belytschko et al.
   1995, eq. 3.15–3.16) give their stiffness (diagonal and off-diagonal blocks) and their share
   of the row-sum masses (eq. 4.5): no constraint.
-* ``hybrid`` (:func:`build_hybrid`): a :class:`~dolfinx_meshfree.hybrid.HybridElasticity`,
+* ``hybrid`` (:func:`build_hybrid`): a :class:`~dolfinx_meshfree.couplings.hybrid.HybridElasticity`,
   whose FE integration points join the particle sums (Rabczuk et al. 2006, sec. 5.5): its
   stiffness blocks, FE masses on the FE cells and SPH particle masses; no constraint.
 * ``master-slave``: the slave particles follow the FE interface, ``u = T u_M`` (eq. 27): the
@@ -22,7 +22,7 @@ Each coupling enters dynamics through :meth:`CoupledElasticity.operators
 
 Essential conditions (``fixed_facets``: the displacement held at its initial value): FE nodes
 strongly (zero velocity and acceleration), particles by one multiplier per facet and component
-(:func:`~dolfinx_meshfree.efg.facet_multipliers`) added to the velocity constraint, so that
+(:func:`~dolfinx_meshfree.statics.efg.facet_multipliers`) added to the velocity constraint, so that
 ``int_f v^h = 0`` after every correction (Table I, step 6). On ramp interface cells the particle
 part of the blended functions is constrained in the same way.
 """
@@ -40,8 +40,11 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from . import _compat
-from .body_loads import CallableBodyForce, body_load_vectors
-from .efg import facet_multipliers, particle_stiffness
+from .approx.mls import MLS
+from .approx.tables import ShapeTable
+from .geometry.particles import ParticleSet
+from .geometry.quadrature import facet_quadrature
+from .geometry.stress_points import check_integration, stress_point_quadrature
 from .integrator import Field
 from .masses import (
     fe_lumped_mass,
@@ -50,14 +53,11 @@ from .masses import (
     particle_spacing,
     table_lumped_mass,
 )
-from .materials import LinearElastic
-from .mls import MLS
 from .parallel import Layout, raise_on_all_ranks
-from .particles import ParticleSet
-from .petsc import create_aij
-from .quadrature import facet_quadrature
-from .stress_points import check_integration, stress_point_quadrature
-from .tables import ShapeTable
+from .physics.body_loads import CallableBodyForce, body_load_vectors
+from .physics.materials import LinearElastic
+from .statics.efg import facet_multipliers, particle_stiffness
+from .statics.petsc import create_aij
 
 __all__ = ["build_coupled", "build_efg", "build_fe", "build_hybrid"]
 
@@ -194,7 +194,8 @@ def build_efg(
 ):
     """Pure EFG on the particles' background cells (Belytschko et al. 1995, sec. 5.2) or, with
     ``integration="stress-points"``, at the particles and stress points (Rabczuk, Belytschko &
-    Xiao 2004, Lagrangian kernel: :mod:`~dolfinx_meshfree.stress_points`); fixed facets by facet
+    Xiao 2004, Lagrangian kernel: :mod:`~dolfinx_meshfree.geometry.stress_points`); fixed facets by
+    facet
     multipliers on the velocities. Collective."""
     _check_material(material)
     check_integration(integration)
@@ -271,9 +272,9 @@ def build_coupled(
             the acceleration ``(F_K + F_P) / (m_K + m_P)``, which the reduction ``T^T M T``,
             ``T^T f`` below gives).
     """
-    from .coupled import CoupledElasticity
+    from .couplings.hybrid import HybridElasticity
     from .dynamics import DYNAMICS_METHODS
-    from .hybrid import HybridElasticity
+    from .statics.coupled import CoupledElasticity
 
     if isinstance(problem, HybridElasticity):  # the hybrid SPH-FE coupling: its own builder
         if (integration, slaves) != ("cells", "layer"):
@@ -470,12 +471,14 @@ def build_hybrid(
     multiplier_solver: str | None = None,
     fixed_facets=None,
 ):
-    """Explicit dynamics of a :class:`~dolfinx_meshfree.hybrid.HybridElasticity` (Rabczuk et al.
+    """Explicit dynamics of a :class:`~dolfinx_meshfree.couplings.hybrid.HybridElasticity` (Rabczuk
+    et al.
     2006, sec. 5.5, with central differences as there), from its assembled operators
     (collective).
 
     The internal force is ``K u`` with the blocks of
-    :meth:`~dolfinx_meshfree.hybrid.HybridElasticity.operators` (FE cells and the FE rows of
+    :meth:`~dolfinx_meshfree.couplings.hybrid.HybridElasticity.operators` (FE cells and the FE rows
+    of
     HA-S tractions or HA-F interpolation; particle rows of the particle energy with the FE
     integration points in the sums). No constraint joins the two fields. Central differences
     conserve the discrete energy when ``K`` is symmetric: HA-F with its default smoothed strains
@@ -491,7 +494,7 @@ def build_hybrid(
         fixed_facets: Owned exterior facets held at rest (FE nodes strongly, particles by facet
             multipliers on the velocities).
     """
-    from .hybrid import HybridElasticity
+    from .couplings.hybrid import HybridElasticity
 
     if not isinstance(problem, HybridElasticity):
         raise TypeError(f"problem must be a HybridElasticity, got {type(problem).__name__}")

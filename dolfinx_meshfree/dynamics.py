@@ -11,15 +11,15 @@ et al. 2006, sec. 5.3.3 and Table I). The pieces live in modules of one idea eac
 * :mod:`~dolfinx_meshfree.dynamic_builders`: the builders of pure FE, pure EFG and every static
   coupling in dynamics, from :meth:`CoupledElasticity.operators
   <dolfinx_meshfree.CoupledElasticity.operators>`, and of the hybrid SPH–FE coupling
-  (:mod:`~dolfinx_meshfree.hybrid`);
-* :mod:`~dolfinx_meshfree.waves`: exact solutions of the rod benchmarks.
+  (:mod:`~dolfinx_meshfree.couplings.hybrid`);
+* :mod:`~dolfinx_meshfree.verification.waves`: exact solutions of the rod benchmarks.
 """
 
 from __future__ import annotations
 
-from .coupled import COUPLINGS
 from .integrator import DynamicsResult, EnergyRecord, ExplicitDynamics, Field
 from .masses import fe_lumped_mass, particle_lumped_mass, table_lumped_mass
+from .statics.coupled import COUPLINGS
 
 __all__ = [
     "DYNAMICS_METHODS",
@@ -34,7 +34,7 @@ __all__ = [
 ]
 
 #: Methods available in explicit dynamics: pure FE, pure EFG, every static coupling and the
-#: hybrid SPH-FE coupling (:class:`~dolfinx_meshfree.hybrid.HybridElasticity`).
+#: hybrid SPH-FE coupling (:class:`~dolfinx_meshfree.couplings.hybrid.HybridElasticity`).
 DYNAMICS_METHODS = ("fe", "efg", *COUPLINGS, "hybrid")
 
 

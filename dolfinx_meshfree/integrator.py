@@ -49,15 +49,15 @@ from mpi4py import MPI
 from petsc4py import PETSc
 from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
+from .approx.fe_points import ensure_points_in_mesh, evaluate_fe_function, tabulate_in_cells
+from .approx.mls import MLS
 from .couplings.master_slave import MASTER_SELECTION
-from .fe_points import ensure_points_in_mesh, evaluate_fe_function, tabulate_in_cells
-from .materials import LinearElastic
-from .mls import MLS
-from .operators import load_vector
+from .geometry.particles import ParticleSet
+from .geometry.quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
 from .parallel import Layout, raise_on_all_ranks
-from .particles import ParticleSet
-from .petsc import create_aij, create_vector
-from .quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
+from .physics.materials import LinearElastic
+from .physics.operators import load_vector
+from .statics.petsc import create_aij, create_vector
 
 __all__ = ["DynamicsResult", "EnergyRecord", "ExplicitDynamics", "Field"]
 
@@ -334,14 +334,16 @@ class ExplicitDynamics:
         integration: str = "cells",
     ) -> ExplicitDynamics:
         """Pure EFG on ``particles`` integrated on their background cells (Belytschko et al.
-        1995, sec. 5.2): :func:`~dolfinx_meshfree.efg.particle_stiffness` and row-sum masses.
+        1995, sec. 5.2): :func:`~dolfinx_meshfree.statics.efg.particle_stiffness` and row-sum
+        masses.
 
         ``fixed_facets``: owned exterior facets held at rest, by facet multipliers on the
         velocities (one per facet and component, corrected each step like eq. 94–96).
         ``integration``: ``"cells"`` (the Gauss rule of ``quadrature_degree``) or
         ``"stress-points"``: the particles and the stress points between them, with their
         volumes and MLS functions of the reference configuration (Lagrangian kernel, computed
-        once at t = 0; Rabczuk, Belytschko & Xiao 2004; :mod:`~dolfinx_meshfree.stress_points`);
+        once at t = 0; Rabczuk, Belytschko & Xiao 2004;
+        :mod:`~dolfinx_meshfree.geometry.stress_points`);
         the row-sum masses are then ``rho sum_q phi_I(x_q) V_q``.
         """
         from .dynamic_builders import build_efg
@@ -750,7 +752,7 @@ class ExplicitDynamics:
         (points (m, 2) -> (m, 2)) on the whole body (collective).
 
         FE, EFG and every coupling of :meth:`coupled` integrate it with the functions and
-        weights of their masses and stiffness (:mod:`~dolfinx_meshfree.body_loads`: ramp
+        weights of their masses and stiffness (:mod:`~dolfinx_meshfree.physics.body_loads`: ramp
         interface cells blended, eq. 3.15 of Belytschko et al. 1995; bridging band weighted by
         ``1 - alpha`` and ``alpha``, Rabczuk et al. 2006, eq. 49; master-slave through ``T^T``,
         eq. 28); other models take the lumped load ``M b(x_I) / rho`` at their nodes and

@@ -30,9 +30,9 @@ from petsc4py import PETSc
 from scipy.spatial import cKDTree
 
 from . import _compat
+from .geometry.particles import ParticleSet
 from .parallel import Layout
-from .particles import ParticleSet
-from .petsc import create_vector
+from .statics.petsc import create_vector
 
 __all__ = [
     "fe_lumped_mass",
@@ -101,7 +101,7 @@ def particle_lumped_mass(
     Args:
         particles: The particle set.
         table_values: (nq x n) MLS values at this rank's cell quadrature points (the table of
-            :func:`~dolfinx_meshfree.efg.particle_stiffness`); ``weights``: (nq,) weights
+            :func:`~dolfinx_meshfree.statics.efg.particle_stiffness`); ``weights``: (nq,) weights
             (bridging: times ``alpha``).
         rho: Density.
         kind: ``"row-sum"``: ``M_II = rho sum_q phi_I(x_q) w_q``, the row sums of

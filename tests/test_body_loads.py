@@ -230,7 +230,7 @@ def _shares(problem):
     through the coupling's own load function."""
     from dolfinx_meshfree.couplings import bridging, ramp
     from dolfinx_meshfree.couplings.assembly import body_loads
-    from dolfinx_meshfree.quadrature import cell_quadrature
+    from dolfinx_meshfree.geometry.quadrature import cell_quadrature
 
     coupling = problem.coupling
     if coupling in ("ramp", "ramp-cubic"):
@@ -268,7 +268,7 @@ def test_tagged_form_load_covers_its_cells_only(coupling):
     f = np.array([0.7, -0.4])
     dx = ufl.Measure("dx", domain=msh, subdomain_data=patch.cell_tags)
     v = ufl.TestFunction(V)
-    L = ufl.inner(dolfinx.fem.Constant(msh, f), v) * dx(mf.patch.FE_TAG)
+    L = ufl.inner(dolfinx.fem.Constant(msh, f), v) * dx(mf.geometry.patch.FE_TAG)
     problem = mf.CoupledLinearProblem(a, L, bcs, patch, material=MAT, coupling=coupling)
     fe, fp = _shares(problem.problem)
     assert np.allclose(fe + fp, 0.75 * f, rtol=1e-12, atol=0.0)  # the square minus the box

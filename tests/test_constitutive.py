@@ -8,9 +8,9 @@ each rank's own cells of a distributed mesh.
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
-from dolfinx_meshfree.constitutive import check_deformation_gradients
-from dolfinx_meshfree.fe_points import tabulate_in_cells
-from dolfinx_meshfree.quadrature import cell_quadrature
+from dolfinx_meshfree.approx.fe_points import tabulate_in_cells
+from dolfinx_meshfree.geometry.quadrature import cell_quadrature
+from dolfinx_meshfree.physics.constitutive import check_deformation_gradients
 
 import dolfinx
 import numpy as np

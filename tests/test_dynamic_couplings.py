@@ -11,7 +11,7 @@ import tempfile
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
 from dolfinx_meshfree.dynamics import ExplicitDynamics
-from dolfinx_meshfree.waves import GaussianPulseRod, StepLoadedRod
+from dolfinx_meshfree.verification.waves import GaussianPulseRod, StepLoadedRod
 
 import numpy as np
 import pytest

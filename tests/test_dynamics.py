@@ -9,7 +9,7 @@ import pathlib
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
 from dolfinx_meshfree.dynamics import ExplicitDynamics, check_method, fe_lumped_mass
-from dolfinx_meshfree.waves import GaussianPulseRod
+from dolfinx_meshfree.verification.waves import GaussianPulseRod
 
 import numpy as np
 import pytest

@@ -21,8 +21,8 @@ checkerboard mode (as Q1-P0): the saddle point is singular (strict xfail below).
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
-from dolfinx_meshfree.efg import facet_multipliers
-from dolfinx_meshfree.tables import strain_operator
+from dolfinx_meshfree.approx.tables import strain_operator
+from dolfinx_meshfree.statics.efg import facet_multipliers
 
 import dolfinx
 import numpy as np

@@ -14,7 +14,7 @@ scale is that with a margin; observed: 1e-16–1e-15.
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
-from dolfinx_meshfree.fe_points import locate_points
+from dolfinx_meshfree.approx.fe_points import locate_points
 
 import dolfinx
 import numpy as np

@@ -7,9 +7,9 @@ and 3D."""
 import itertools
 
 import dolfinx_meshfree as mf
-from dolfinx_meshfree.forces import gradient_operator
-from dolfinx_meshfree.operators import consistent_gradients, load_vector, stiffness_matrix
-from dolfinx_meshfree.quadrature import boundary_facets, cell_quadrature, facet_quadrature
+from dolfinx_meshfree.geometry.quadrature import boundary_facets, cell_quadrature, facet_quadrature
+from dolfinx_meshfree.physics.forces import gradient_operator
+from dolfinx_meshfree.physics.operators import consistent_gradients, load_vector, stiffness_matrix
 
 import dolfinx
 import numpy as np

@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
+from dolfinx_meshfree.couplings.hybrid_sph import CorrectedSPH
 from dolfinx_meshfree.dynamics import ExplicitDynamics, check_method
-from dolfinx_meshfree.hybrid_sph import CorrectedSPH
-from dolfinx_meshfree.waves import GaussianPulseRod
+from dolfinx_meshfree.verification.waves import GaussianPulseRod
 
 import numpy as np
 import pytest
@@ -566,11 +566,11 @@ def test_dependent_patch_multipliers_are_refused():
 
 
 def test_facet_pieces_do_not_depend_on_the_partition():
-    """:func:`~dolfinx_meshfree.facet_groups.grouped_facet_quadrature` on the boundary of a
+    """:func:`~dolfinx_meshfree.geometry.facet_groups.grouped_facet_quadrature` on the boundary of a
     square (one closed chain of length 8, facets 0.25 long): floor(8 / 0.6) = 13 pieces, each
     of length 8/13 within one facet, covering every facet once; the pieces computed on the
     distributed mesh equal those of the same mesh on one rank (checked by their midpoints)."""
-    from dolfinx_meshfree.facet_groups import grouped_facet_quadrature
+    from dolfinx_meshfree.geometry.facet_groups import grouped_facet_quadrature
 
     def pieces(comm):
         msh = rectangle(comm, [0, 0], [2, 2], [8, 8], CELL_TYPES["triangle"])

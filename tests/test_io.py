@@ -14,7 +14,7 @@ import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
 from dolfinx_meshfree.dynamics import ExplicitDynamics
 from dolfinx_meshfree.io import DynamicsWriter, ProgressBar, read_particles
-from dolfinx_meshfree.waves import GaussianPulseRod
+from dolfinx_meshfree.verification.waves import GaussianPulseRod
 
 import h5py
 import numpy as np

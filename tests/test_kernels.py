@@ -7,7 +7,7 @@ computed with the library's formulas.
 import math
 
 import dolfinx_meshfree as mf
-from dolfinx_meshfree.kernels import WEIGHTS, get_weight
+from dolfinx_meshfree.approx.kernels import WEIGHTS, get_weight
 
 import numpy as np
 import pytest

@@ -16,7 +16,7 @@ ratios of derivatives, bounded here by ``10 sqrt(eps)`` relative (observed <= 3e
 """
 
 import dolfinx_meshfree as mf
-from dolfinx_meshfree.kernels import WEIGHTS
+from dolfinx_meshfree.approx.kernels import WEIGHTS
 
 import numpy as np
 import pytest

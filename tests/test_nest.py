@@ -1,6 +1,7 @@
 """The PETSc nest of every coupling against a monolithic matrix solved independently.
 
-:class:`~dolfinx_meshfree.petsc.BlockSystem` converts the MatNest to AIJ and factorises it with
+:class:`~dolfinx_meshfree.statics.petsc.BlockSystem` converts the MatNest to AIJ and factorises it
+with
 MUMPS. Here each block's owned rows are read back (``getValuesCSR``), gathered, stacked into one
 monolithic scipy matrix in the nest's field order and solved with scipy's SuperLU on rank 0: the
 two solutions must agree, and the monolithic residual of the nest's solution must vanish. This
@@ -12,7 +13,7 @@ from __future__ import annotations
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
-from dolfinx_meshfree.petsc import BlockSystem
+from dolfinx_meshfree.statics.petsc import BlockSystem
 
 import dolfinx
 import numpy as np

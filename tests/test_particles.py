@@ -94,7 +94,7 @@ def test_patch_of_cells(msh):
 
 def test_ownership_follows_the_cells(msh):
     P = mf.ParticleSet.from_cells(msh, 0.5, jitter=0.2)
-    from dolfinx_meshfree.fe_points import locate_points
+    from dolfinx_meshfree.approx.fe_points import locate_points
 
     here = locate_points(msh, P.positions) >= 0
     counts = COMM.allgather(P.owned.size)

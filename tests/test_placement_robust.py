@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import dolfinx_meshfree as mf  # (first: lane B's MPI)
 from dolfinx_meshfree import _compat
+from dolfinx_meshfree.approx.mls import MLS
 from dolfinx_meshfree.couplings.ramp import RampInterface
-from dolfinx_meshfree.mls import MLS
 from dolfinx_meshfree.parallel import raise_on_all_ranks
 
 import dolfinx

@@ -8,7 +8,7 @@ solution must not change, which the direct solve checks independently.
 from __future__ import annotations
 
 import dolfinx_meshfree as mf
-from dolfinx_meshfree.petsc import BlockSystem
+from dolfinx_meshfree.statics.petsc import BlockSystem
 
 import dolfinx
 import numpy as np
@@ -101,7 +101,7 @@ def test_repeated_lu_solves_release_their_factorisations():
     Bound: 8 MB over the 40 solves (the leak would be about 40 MB)."""
     import gc
 
-    from dolfinx_meshfree.petsc import solve_lu
+    from dolfinx_meshfree.statics.petsc import solve_lu
 
     import scipy.sparse as sp
     from petsc4py import PETSc
@@ -209,7 +209,9 @@ def test_fieldsplit_options_name_the_nest_fields():
         "fieldsplit_stiff_ksp_type": "preonly",
         "fieldsplit_stiff_pc_type": "lu",
     }
-    parts = system.solve(mf.petsc.SolverOptions(petsc_options=options, prefix="test_opts_fs_"))
+    parts = system.solve(
+        mf.statics.petsc.SolverOptions(petsc_options=options, prefix="test_opts_fs_")
+    )
     assert system.iterations["ksp"] == 1
     for k, A in enumerate(blocks):  # each part solves its own block
         x = A.createVecRight()

@@ -10,9 +10,9 @@ import pathlib
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
 from dolfinx_meshfree.dynamics import ExplicitDynamics
-from dolfinx_meshfree.efg import particle_stiffness
-from dolfinx_meshfree.stress_points import stress_point_quadrature
-from dolfinx_meshfree.waves import GaussianPulseRod
+from dolfinx_meshfree.geometry.stress_points import stress_point_quadrature
+from dolfinx_meshfree.statics.efg import particle_stiffness
+from dolfinx_meshfree.verification.waves import GaussianPulseRod
 
 import numpy as np
 import pytest

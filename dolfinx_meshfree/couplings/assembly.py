@@ -3,7 +3,8 @@
 Each takes the :class:`~dolfinx_meshfree.CoupledElasticity` that holds the model (space, patch,
 material, MLS, loads, essential conditions) and builds one piece of a coupled block system:
 the FE stiffness on the FE cells, the essential conditions (strong on FE facets, piecewise
-constant multipliers on patch facets, as :mod:`~dolfinx_meshfree.efg`), traction and body loads
+constant multipliers on patch facets, as :mod:`~dolfinx_meshfree.statics.efg`), traction and body
+loads
 (each side with its own functions), and the solve of the PETSc nest with the particle
 coefficients gathered. The coupling modules compose them with their own interface terms.
 """
@@ -18,18 +19,18 @@ import numpy as np
 from petsc4py import PETSc
 
 from .. import _compat
-from ..body_loads import body_load_vectors
-from ..efg import _vector_values, facet_multipliers
-from ..fe_points import tabulate_in_cells
-from ..operators import load_vector
+from ..approx.fe_points import tabulate_in_cells
+from ..geometry.quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
+from ..geometry.stress_points import stress_point_quadrature
 from ..parallel import Layout, raise_on_all_ranks
-from ..petsc import BlockSystem, SolverOptions, create_aij, create_vector
-from ..quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
-from ..stress_points import stress_point_quadrature
+from ..physics.body_loads import body_load_vectors
+from ..physics.operators import load_vector
+from ..statics.efg import _vector_values, facet_multipliers
+from ..statics.petsc import BlockSystem, SolverOptions, create_aij, create_vector
 from .base import fe_dof_layout, node_flags
 
 if TYPE_CHECKING:  # annotations only
-    from ..coupled import CoupledElasticity
+    from ..statics.coupled import CoupledElasticity
 
 __all__ = [
     "append_patch_conditions",
@@ -81,7 +82,7 @@ def body_loads(problem: CoupledElasticity, fe_weight, particle_weights=None, int
     (``fe_weight``: the FE energy's weight) and the particle loads (original interleaved
     order) on the patch cells' Gauss rule, its weights multiplied by ``particle_weights(q)``
     if given (the bridging band's ``alpha``); see
-    :func:`~dolfinx_meshfree.body_loads.body_load_vectors`."""
+    :func:`~dolfinx_meshfree.physics.body_loads.body_load_vectors`."""
     msh, comm, deg = problem.V.mesh, problem.patch.comm, problem.quadrature_degree
     q = cell_quadrature(msh, deg, problem.patch.particles.cells)
     if particle_weights is not None:
@@ -102,7 +103,7 @@ def essential_conditions(problem: CoupledElasticity, also_strong=None) -> tuple:
     Returns:
         ``(fe_bc, patch_bc, quadratures, tables, ubc, is_bc)``: the ``(facets, value)`` pairs
         on FE facets (strong) and on patch facets, the patch facets' quadratures and particle
-        tables (for :func:`~dolfinx_meshfree.efg.facet_multipliers`), the FE values as a
+        tables (for :func:`~dolfinx_meshfree.statics.efg.facet_multipliers`), the FE values as a
         Function and the flag of every local FE node fixed strongly (collective).
     """
     V, comm = problem.V, problem.patch.comm

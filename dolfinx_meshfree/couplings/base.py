@@ -24,16 +24,16 @@ import scipy.sparse as sp
 from petsc4py import PETSc
 
 from .. import _compat
-from ..fe_dofs import cell_indicator, fe_dof_layout, node_flags
-from ..fe_points import _route, tabulate_in_cells
-from ..mls import MLS
-from ..neighbours import check_points
+from ..approx.fe_dofs import cell_indicator, fe_dof_layout, node_flags
+from ..approx.fe_points import _route, tabulate_in_cells
+from ..approx.mls import MLS
+from ..approx.neighbours import check_points
+from ..geometry.patch import ParticlePatch
+from ..geometry.quadrature import QuadraturePoints
 from ..parallel import Layout, raise_on_all_ranks
-from ..patch import ParticlePatch
-from ..quadrature import QuadraturePoints
 
 if TYPE_CHECKING:  # annotations only: the model imports this module, not the reverse
-    from ..coupled import CoupledElasticity
+    from ..statics.coupled import CoupledElasticity
 
 __all__ = [
     "ROUND_OFF",

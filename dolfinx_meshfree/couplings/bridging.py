@@ -58,14 +58,14 @@ from petsc4py import PETSc
 from scipy.sparse.linalg import spsolve
 
 from .. import _compat
-from ..efg import _vector_values
-from ..fe_points import locate_points, tabulate_in_cells
-from ..mls import MLS
-from ..operators import consistent_gradients, load_vector, stiffness_matrix
+from ..approx.fe_points import locate_points, tabulate_in_cells
+from ..approx.mls import MLS
+from ..geometry.patch import ParticlePatch
+from ..geometry.quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
 from ..parallel import Layout, raise_on_all_ranks
-from ..patch import ParticlePatch
-from ..petsc import SolverOptions, create_aij, create_vector
-from ..quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
+from ..physics.operators import consistent_gradients, load_vector, stiffness_matrix
+from ..statics.efg import _vector_values
+from ..statics.petsc import SolverOptions, create_aij, create_vector
 from .assembly import (
     append_patch_conditions,
     body_loads,
@@ -88,7 +88,7 @@ from .base import (
 )
 
 if TYPE_CHECKING:  # annotations only: the model imports this module
-    from ..coupled import CoupledElasticity
+    from ..statics.coupled import CoupledElasticity
 
 __all__ = [
     "CONSTRAINTS",

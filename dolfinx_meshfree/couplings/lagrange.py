@@ -19,7 +19,7 @@ Dirichlet multipliers when essential conditions act on patch facets)
 patch's cell tags); FE dofs that no FE cell supports become identity rows. Essential conditions on
 FE facets are applied to ``K_FE`` by ``MatZeroRowsColumns`` (which lifts them into the
 right-hand side) and removed from the coupling columns; on patch facets they are multiplier
-constraints as in :mod:`~dolfinx_meshfree.efg`. ``s = E`` scales the constraint rows.
+constraints as in :mod:`~dolfinx_meshfree.statics.efg`. ``s = E`` scales the constraint rows.
 
 Edge-to-edge variant (``coupling="edge-to-edge"``, Rabczuk et al. 2006, sec. 5.4): the multipliers
 are collocated at the particles ``x_I`` on the interface, one per particle and component, so that
@@ -43,13 +43,13 @@ from scipy.sparse.linalg import spsolve
 from scipy.spatial import cKDTree
 
 from .. import _compat
-from ..efg import particle_stiffness
-from ..fe_points import tabulate_fe_basis
-from ..mls import MLS
+from ..approx.fe_points import tabulate_fe_basis
+from ..approx.mls import MLS
+from ..geometry.patch import ParticlePatch
+from ..geometry.quadrature import QuadraturePoints, facet_quadrature
 from ..parallel import Layout, raise_on_all_ranks
-from ..patch import ParticlePatch
-from ..petsc import SolverOptions, create_aij, create_vector
-from ..quadrature import QuadraturePoints, facet_quadrature
+from ..statics.efg import particle_stiffness
+from ..statics.petsc import SolverOptions, create_aij, create_vector
 from .assembly import (
     append_patch_conditions,
     essential_conditions,
@@ -72,7 +72,7 @@ from .base import (
 )
 
 if TYPE_CHECKING:  # annotations only
-    from ..coupled import CoupledElasticity
+    from ..statics.coupled import CoupledElasticity
 
 __all__ = [
     "CORNER_ANGLE",
@@ -525,7 +525,7 @@ def solve_interface(
     Args:
         solver: ``"mumps"`` (direct) or ``"fieldsplit"`` (Schur complement, displacements
             against multipliers, on the augmented Lagrangian; see
-            :class:`~dolfinx_meshfree.petsc.BlockSystem`).
+            :class:`~dolfinx_meshfree.statics.petsc.BlockSystem`).
     """
     blocks, rhs, mats, extra = interface_system(problem)
     uh, coeffs, solve = solve_and_gather(problem, blocks, rhs, [*mats, extra["x_bc"]], solver)

@@ -72,12 +72,14 @@ assembled block by block with PETSc's products,
 
 rather than as one ``PtAP`` on an AIJ conversion of the whole ``K``: ``K`` is block diagonal, so
 three products give the same matrix; the system stays a MatNest with the fields FE, free
-particles and (patch-side) Dirichlet multipliers, which :class:`~dolfinx_meshfree.petsc.BlockSystem`
+particles and (patch-side) Dirichlet multipliers, which
+:class:`~dolfinx_meshfree.statics.petsc.BlockSystem`
 solves with MUMPS or its fieldsplit; and ``T`` keeps the natural FE and particle numberings
 instead of the rank-interleaved row order of a converted nest. Strong FE conditions are applied
-to ``K_FE`` as in :mod:`~dolfinx_meshfree.coupled` (``MatZeroRowsColumns``) and their columns
+to ``K_FE`` as in :mod:`~dolfinx_meshfree.statics.coupled` (``MatZeroRowsColumns``) and their
+columns
 are removed from ``T_PF`` (their values go to ``g``); patch-side Dirichlet facets are multiplier
-rows ``D`` of :func:`~dolfinx_meshfree.efg.facet_multipliers` mapped through ``T``: ``D T``,
+rows ``D`` of :func:`~dolfinx_meshfree.statics.efg.facet_multipliers` mapped through ``T``: ``D T``,
 right-hand side ``d - D g``.
 
 Johnson's coincident variant (``slaves="coincident"``, Rabczuk et al. 2006, sec. 5.1.1, eq.
@@ -119,13 +121,13 @@ from petsc4py import PETSc
 from scipy.spatial import cKDTree
 
 from .. import _compat
-from ..efg import facet_multipliers, particle_stiffness
-from ..mls import MLS
+from ..approx.mls import MLS
+from ..geometry.patch import ParticlePatch
+from ..geometry.quadrature import facet_quadrature
+from ..geometry.stress_points import check_integration
 from ..parallel import Layout, raise_on_all_ranks
-from ..patch import ParticlePatch
-from ..petsc import BlockSystem, SolverOptions, create_aij, create_vector
-from ..quadrature import facet_quadrature
-from ..stress_points import check_integration
+from ..statics.efg import facet_multipliers, particle_stiffness
+from ..statics.petsc import BlockSystem, SolverOptions, create_aij, create_vector
 from .assembly import (
     essential_conditions,
     fe_active,
@@ -137,7 +139,7 @@ from .assembly import (
 from .base import CoupledSolution, CouplingOperators, fe_dof_layout
 
 if TYPE_CHECKING:  # annotations only: the model imports this module
-    from ..coupled import CoupledElasticity
+    from ..statics.coupled import CoupledElasticity
 
 __all__ = [
     "MASTER_SELECTION",
@@ -525,7 +527,7 @@ def master_slave_operators(
     PETSc particle order (with value ties its slave rows are ``-Phi_SS^{-1} Phi_SM``; the
     selection of its master rows is composed on it as :data:`MASTER_SELECTION`). The reduced
     stiffness is ``T^T K T`` and the forces on the slaves go to their masters with ``T^T``
-    (eq. 28). See :class:`~dolfinx_meshfree.coupled.CouplingOperators`.
+    (eq. 28). See :class:`~dolfinx_meshfree.statics.coupled.CouplingOperators`.
 
     Args:
         integration: ``"cells"`` or ``"stress-points"``: the rule of ``K_P`` (see

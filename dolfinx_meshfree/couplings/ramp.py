@@ -27,13 +27,13 @@ multipliers):
   ``MatAXPY`` (``DIFFERENT_NONZERO_PATTERN``: DOLFINx's sparsity has no room for interface
   cells), the particle–particle part joins the EFG stiffness, the FE–particle parts are the
   off-diagonal blocks;
-* patch cells: EFG as in :func:`~dolfinx_meshfree.efg.particle_stiffness`.
+* patch cells: EFG as in :func:`~dolfinx_meshfree.statics.efg.particle_stiffness`.
 
 Loads use the same functions: tractions on facets of interface cells and body forces on the
 interface cells are integrated against the blended functions (the FE part ``(1 - R) N_a`` on the
 FE nodes, ``R phi_J`` and the Gamma_E nodes' ``(1 - R) N_a`` on the particles), body forces on
 pure FE cells against ``N_a`` and on patch cells against ``phi_J``
-(:mod:`~dolfinx_meshfree.body_loads`).
+(:mod:`~dolfinx_meshfree.physics.body_loads`).
 
 Essential conditions act strongly on FE nodes. Where the particle part of an interface cell
 reaches a Dirichlet facet (an exterior facet of an interface cell), it is constrained like the
@@ -54,15 +54,15 @@ from petsc4py import PETSc
 from scipy.spatial import cKDTree
 
 from .. import _compat
-from ..efg import _vector_values, particle_stiffness
-from ..fe_points import tabulate_in_cells
-from ..mls import MLS
-from ..operators import consistent_gradients, load_vector, stiffness_matrix
+from ..approx.fe_points import tabulate_in_cells
+from ..approx.mls import MLS
+from ..approx.tables import ShapeTable
+from ..geometry.patch import ParticlePatch
+from ..geometry.quadrature import boundary_facets, cell_quadrature, facet_quadrature
 from ..parallel import raise_on_all_ranks
-from ..patch import ParticlePatch
-from ..petsc import SolverOptions, create_aij, create_vector
-from ..quadrature import boundary_facets, cell_quadrature, facet_quadrature
-from ..tables import ShapeTable
+from ..physics.operators import consistent_gradients, load_vector, stiffness_matrix
+from ..statics.efg import _vector_values, particle_stiffness
+from ..statics.petsc import SolverOptions, create_aij, create_vector
 from .assembly import (
     append_patch_conditions,
     body_loads,
@@ -83,7 +83,7 @@ from .base import (
 )
 
 if TYPE_CHECKING:  # annotations only: the model imports this module
-    from ..coupled import CoupledElasticity
+    from ..statics.coupled import CoupledElasticity
 
 __all__ = ["RAMPS", "RampInterface", "ramp_mls", "ramp_operators"]
 
@@ -491,7 +491,7 @@ def _body_loads(problem, blend: RampInterface, q, tab: ShapeTable):
 
 def _consistent_stiffness(problem, blend: RampInterface, q, tab: ShapeTable):
     """Variationally consistent integration (VCI) of the particle test functions of a ramp
-    coupling (Chen, Hillman & Rüter 2013; see :func:`~dolfinx_meshfree.operators.
+    coupling (Chen, Hillman & Rüter 2013; see :func:`~dolfinx_meshfree.physics.operators.
     consistent_gradients`). Collective.
 
     A particle's test function is ``phi_J`` on the patch cells and ``R phi_J`` on the interface

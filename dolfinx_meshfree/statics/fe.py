@@ -1,7 +1,7 @@
 """Reference finite-element elastostatics through DOLFINx (plane stress and plane strain).
 
 The stiffness and the loads are ordinary DOLFINx forms; the solve uses the same MUMPS route as the
-meshfree solvers (:func:`~dolfinx_meshfree.petsc.solve_lu`) so that costs compare fairly.
+meshfree solvers (:func:`~dolfinx_meshfree.statics.petsc.solve_lu`) so that costs compare fairly.
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ import dolfinx
 import numpy as np
 import ufl
 
-from . import _compat
-from .materials import LinearElastic
+from .. import _compat
+from ..physics.materials import LinearElastic
 from .petsc import solve_lu
 
 __all__ = ["FESolution", "solve_fe_elasticity", "solve_forms"]
@@ -81,7 +81,8 @@ def solve_fe_elasticity(
 def solve_forms(a: ufl.Form, L: ufl.Form, bcs: Sequence = ()) -> FESolution:
     """A linear model solved as written for DOLFINx: ``a`` and ``L`` (UFL forms on one space),
     ``DirichletBC``s lifted into the right-hand side, and the MUMPS LU of
-    :func:`~dolfinx_meshfree.petsc.solve_lu` (collective). The reference that the coupled runs
+    :func:`~dolfinx_meshfree.statics.petsc.solve_lu` (collective). The reference that the coupled
+    runs
     are measured against."""
     from petsc4py import PETSc
 

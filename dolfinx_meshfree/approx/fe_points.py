@@ -21,9 +21,10 @@ import numpy as np
 import numpy.typing as npt
 import scipy.sparse as sp
 
-from . import _compat, batched
+from .. import _compat
+from ..parallel import raise_on_all_ranks
+from . import batched
 from .neighbours import check_points
-from .parallel import raise_on_all_ranks
 from .tables import ShapeTable
 
 __all__ = [

@@ -24,18 +24,18 @@ import dolfinx
 import numpy as np
 import ufl
 
-from .body_loads import CallableBodyForce
-from .couplings import COUPLINGS, DEFAULT_DILATION, REGISTRY
-from .couplings.base import CoupledSolution, CouplingOperators, cell_indicator
-from .couplings.bridging import check_options
-from .couplings.lagrange import interface_particles
-from .couplings.master_slave import SLAVES
-from .materials import LinearElastic
-from .mls import MLS
-from .parallel import raise_on_all_ranks
-from .patch import ParticlePatch
+from ..approx.mls import MLS
+from ..couplings import COUPLINGS, DEFAULT_DILATION, REGISTRY
+from ..couplings.base import CoupledSolution, CouplingOperators, cell_indicator
+from ..couplings.bridging import check_options
+from ..couplings.lagrange import interface_particles
+from ..couplings.master_slave import SLAVES
+from ..geometry.patch import ParticlePatch
+from ..geometry.stress_points import check_integration
+from ..parallel import raise_on_all_ranks
+from ..physics.body_loads import CallableBodyForce
+from ..physics.materials import LinearElastic
 from .petsc import SolverOptions, solver_options
-from .stress_points import check_integration
 
 __all__ = [
     "COUPLINGS",
@@ -165,7 +165,7 @@ class CoupledElasticity:
         self.form: ufl.Form | None = None
         # set by CoupledLinearProblem: strong conditions by node (flags, values)
         self.strong: list[tuple[np.ndarray, np.ndarray]] = []
-        #: Body forces (:mod:`~dolfinx_meshfree.body_loads`): :meth:`set_body_force`, or the
+        #: Body forces (:mod:`~dolfinx_meshfree.physics.body_loads`): :meth:`set_body_force`, or the
         #: cell integrals of a CoupledLinearProblem's ``L``.
         self.body_forces: list = []
         self.setup_time = time.perf_counter() - t0
@@ -184,7 +184,7 @@ class CoupledElasticity:
         as :meth:`EFGElasticity.set_body_force <dolfinx_meshfree.EFGElasticity.set_body_force>`.
 
         Every coupling integrates it with the functions and weights of its stiffness (see
-        :mod:`~dolfinx_meshfree.body_loads`): FE cells with ``N_a``, patch cells with
+        :mod:`~dolfinx_meshfree.physics.body_loads`): FE cells with ``N_a``, patch cells with
         ``phi_J``, ramp interface cells with the blended functions (Belytschko et al. 1995,
         eq. 3.15), a bridging band with ``1 - alpha`` and ``alpha`` (Rabczuk et al. 2006,
         eq. 49)."""
@@ -232,7 +232,7 @@ class CoupledElasticity:
             integration: ``"cells"`` (default): the particle stiffness on the patch cells' Gauss
                 rule; ``"stress-points"``: at the particles and stress points with their
                 volumes (Rabczuk, Belytschko & Xiao 2004; see
-                :mod:`~dolfinx_meshfree.stress_points`), for ``lagrange``, ``edge-to-edge``
+                :mod:`~dolfinx_meshfree.geometry.stress_points`), for ``lagrange``, ``edge-to-edge``
                 and ``master-slave``; :attr:`CouplingOperators.particle_quadrature` is then that
                 rule. The ramp and bridging couplings integrate blended or weighted functions
                 on cells and refuse it.
@@ -280,8 +280,8 @@ class CoupledElasticity:
         Args:
             solver: ``"mumps"`` (direct, the default) or ``"fieldsplit"`` (Schur complement,
                 displacements against multipliers, on the augmented Lagrangian; see
-                :class:`~dolfinx_meshfree.petsc.BlockSystem`): shorthands of the two solvers
-                this package tunes; or a :class:`~dolfinx_meshfree.petsc.SolverOptions`.
+                :class:`~dolfinx_meshfree.statics.petsc.BlockSystem`): shorthands of the two solvers
+                this package tunes; or a :class:`~dolfinx_meshfree.statics.petsc.SolverOptions`.
             petsc_options: PETSc options of a KSP on the assembled block system instead, as
                 ``dolfinx.fem.petsc.LinearProblem`` takes them (e.g. ``{"ksp_type": "gmres",
                 "pc_type": "fieldsplit", ...}``; the nest's fields are named ``fe``,

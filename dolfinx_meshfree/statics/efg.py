@@ -16,7 +16,8 @@ component): ``G_{(f,i),(J,i)} = int_f phi_J``, ``g_(f,i) = int_f ubar_i``. Piece
 the constraint rows to the stiffness so the saddle point is well balanced.
 
 ``consistent=True`` adds variationally consistent integration (Chen, Hillman & Rüter 2013, see
-:func:`~dolfinx_meshfree.operators.consistent_gradients`), with which the linear patch test passes
+:func:`~dolfinx_meshfree.physics.operators.consistent_gradients`), with which the linear patch test
+passes
 to round-off; plain Gauss quadrature leaves an integration error of about 1e-6.
 """
 
@@ -30,17 +31,22 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from .constitutive import Material
-from .materials import LinearElastic, linear_twin
-from .mls import MLS
+from ..approx.mls import MLS
+from ..approx.tables import ShapeTable
+from ..geometry.particles import ParticleSet
+from ..geometry.quadrature import (
+    QuadraturePoints,
+    boundary_facets,
+    cell_quadrature,
+    facet_quadrature,
+)
+from ..parallel import Layout, raise_on_all_ranks
+from ..physics.constitutive import Material
+from ..physics.materials import LinearElastic, linear_twin
+from ..physics.operators import consistent_gradients, load_vector, stiffness_matrix
 from .newton import NewtonOptions
-from .operators import consistent_gradients, load_vector, stiffness_matrix
-from .parallel import Layout, raise_on_all_ranks
-from .particles import ParticleSet
 from .petsc import BlockSystem, SolverOptions, create_aij, create_vector, solver_options
-from .quadrature import QuadraturePoints, boundary_facets, cell_quadrature, facet_quadrature
 from .sides import BlockProblem, ParticleSide, solve_load_steps
-from .tables import ShapeTable
 
 __all__ = ["EFGElasticity", "EFGSolution", "facet_multipliers", "particle_stiffness"]
 
@@ -110,7 +116,8 @@ def particle_stiffness(
     if given, replaces the normals there (the Lagrange coupling uses their projection on its
     multiplier space on the interface). ``quadrature``, if given,
     replaces the cell Gauss rule (``quadrature_degree`` is then not used for it), e.g. the
-    particles and stress points of :func:`~dolfinx_meshfree.stress_points.stress_point_quadrature`
+    particles and stress points of
+    :func:`~dolfinx_meshfree.geometry.stress_points.stress_point_quadrature`
     (Rabczuk, Belytschko & Xiao 2004). Collective (errors are raised on every rank).
 
     ``tables``, if given, receives ``"quadrature"``, ``"table"`` and ``"test_gradients"`` (the
@@ -206,7 +213,8 @@ class EFGElasticity:
 
     One code path for every dimension: the mesh's ``gdim`` (2: triangles, quadrilaterals; 3:
     tetrahedra, hexahedra) sets the number of displacement components, the Voigt strain of
-    :func:`~dolfinx_meshfree.tables.strain_operator`, the facet rules and the multipliers (one
+    :func:`~dolfinx_meshfree.approx.tables.strain_operator`, the facet rules and the multipliers
+    (one
     per Dirichlet facet and component). The multipliers need fewer Dirichlet facets than
     particles: a tetrahedral box mesh has about two boundary triangles per boundary vertex, so on
     tetrahedra the particles must be finer than the mesh (e.g. spacing h / 2), not its vertices.
@@ -287,7 +295,7 @@ class EFGElasticity:
                 stiffness (see :func:`particle_stiffness`).
 
         Returns:
-            ``(system, objects, extra)``: the :class:`~dolfinx_meshfree.petsc.BlockSystem`
+            ``(system, objects, extra)``: the :class:`~dolfinx_meshfree.statics.petsc.BlockSystem`
             (fields ``particles`` and, with Dirichlet facets, ``dirichlet``), the PETSc objects
             to destroy with it, and ``extra`` with ``scale`` (the constraint rows' ``s``),
             ``multipliers`` (their layout) and the ``setup``/``assemble`` seconds.
@@ -364,14 +372,14 @@ class EFGElasticity:
         newton: NewtonOptions | None = None,
     ) -> EFGSolution:
         """Assemble the block system and solve it (collective); with a finite-strain material,
-        by Newton (:func:`~dolfinx_meshfree.newton.newton`) over ``load_steps`` steps of the
+        by Newton (:func:`~dolfinx_meshfree.statics.newton.newton`) over ``load_steps`` steps of the
         tractions, body force and prescribed displacements (``newton``: its options); the
         solution's ``newton`` then holds the :class:`~dolfinx_meshfree.NonlinearSolveResult`.
 
         Args:
             solver: ``"mumps"`` (direct) or ``"fieldsplit"`` (Schur complement on the augmented
-                saddle point, see :class:`~dolfinx_meshfree.petsc.BlockSystem`), or a
-                :class:`~dolfinx_meshfree.petsc.SolverOptions`.
+                saddle point, see :class:`~dolfinx_meshfree.statics.petsc.BlockSystem`), or a
+                :class:`~dolfinx_meshfree.statics.petsc.SolverOptions`.
             petsc_options, prefix: PETSc options of a KSP on the block system instead (fields
                 ``particles`` and ``dirichlet``), and its prefix; see
                 :meth:`~dolfinx_meshfree.CoupledElasticity.solve`.

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .materials import LinearElastic
+from ..physics.materials import LinearElastic
 
 __all__ = ["LinearField", "PressurizedBushing", "TimoshenkoBeam"]
 

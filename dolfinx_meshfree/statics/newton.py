@@ -1,10 +1,12 @@
 """Newton's method with a backtracking line search on a PETSc block (nest) system.
 
-The nonlinear static problems (:mod:`~dolfinx_meshfree.nonlinear`) are block systems with the
+The nonlinear static problems (:mod:`~dolfinx_meshfree.statics.nonlinear`) are block systems with
+the
 fields of the linear ones (FE displacements, particle coefficients, Lagrange multipliers). At a
 state ``x`` (one PETSc vector per field) they give the residual ``R(x)`` and the Jacobian blocks
 ``J(x)``; Newton solves ``J(x) dx = -R(x)`` with the same block solvers as the linear problems
-(:class:`~dolfinx_meshfree.petsc.BlockSystem`, MUMPS by default or any ``petsc_options``) and
+(:class:`~dolfinx_meshfree.statics.petsc.BlockSystem`, MUMPS by default or any ``petsc_options``)
+and
 updates ``x <- x + alpha dx``. By default (``line_search="guard"``) the full Newton step is
 taken unless it would invert the material at a point (``det F <= 0``) or make the residual
 non-finite or grow by more than ``growth`` times, in which case ``alpha`` halves: the residual
@@ -32,7 +34,7 @@ from typing import Protocol
 import numpy as np
 from petsc4py import PETSc
 
-from .constitutive import DeformationError
+from ..physics.constitutive import DeformationError
 from .petsc import BlockSystem, SolverOptions
 
 __all__ = [

@@ -31,7 +31,7 @@ import numpy as np
 import numpy.typing as npt
 import ufl
 
-from . import batched
+from ..approx import batched
 
 __all__ = [
     "PLANES",

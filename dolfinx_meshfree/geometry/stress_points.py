@@ -41,7 +41,7 @@ import numpy as np
 from mpi4py import MPI
 from scipy.spatial import Voronoi, cKDTree
 
-from . import _compat
+from .. import _compat
 from .particles import ParticleSet
 from .quadrature import QuadraturePoints
 
@@ -129,7 +129,8 @@ def stress_point_quadrature(
             up to an even number per cell).
 
     Returns:
-        :class:`~dolfinx_meshfree.quadrature.QuadraturePoints` of the owned integration points:
+        :class:`~dolfinx_meshfree.geometry.quadrature.QuadraturePoints` of the owned integration
+        points:
         ``points`` (nq, 2), ``weights`` (nq,) the volumes ``V_q``, ``cells`` (nq,) a local
         integration cell containing each point, ``entities`` (nq,) the point's global index in
         the joint set (particles first, in their original order, then the stress points).

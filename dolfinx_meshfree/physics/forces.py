@@ -13,9 +13,11 @@ level or time step) and quadrature weights ``w_q``:
 i.e. ``f_int = sum_q B0(F_q)^T P(F_q) w_q`` and ``K_T = sum_q G^T A(F_q) G w_q`` with ``A = dP/dF``
 (material and geometric stiffness both). ``hat N`` are the test functions: the trial ones, or the
 variationally consistent (VCI) gradients of
-:func:`~dolfinx_meshfree.operators.consistent_gradients`, which keep the patch test exact at any
+:func:`~dolfinx_meshfree.physics.operators.consistent_gradients`, which keep the patch test exact
+at any
 load level (a homogeneous ``F`` gives ``f_int`` = the boundary integral of ``N_J P n^0``, eq. 5).
-Dofs are interleaved as in :func:`~dolfinx_meshfree.operators.stiffness_matrix`: component ``i``
+Dofs are interleaved as in :func:`~dolfinx_meshfree.physics.operators.stiffness_matrix`: component
+``i``
 of node ``J`` is ``d J + i``. For :class:`~dolfinx_meshfree.LinearElastic` ``K_T`` is that
 stiffness and ``f_int(u) = K u``.
 
@@ -44,9 +46,9 @@ import numpy as np
 import numpy.typing as npt
 import scipy.sparse as sp
 
+from ..approx.tables import ShapeTable
+from ..parallel import raise_on_all_ranks
 from .constitutive import Material
-from .parallel import raise_on_all_ranks
-from .tables import ShapeTable
 
 __all__ = ["InternalForces", "gradient_operator"]
 
@@ -84,7 +86,8 @@ class InternalForces:
         table: Trial shape functions at the quadrature points, with gradients (reference frame).
         weights: (m,) quadrature weights (reference volume; any extra factor such as a bridging
             weight included).
-        material: A :class:`~dolfinx_meshfree.constitutive.Material` with ``gdim`` equal to the
+        material: A :class:`~dolfinx_meshfree.physics.constitutive.Material` with ``gdim`` equal to
+        the
             table's dimension.
         test_gradients: Test-function gradients (default: the table's), e.g. VCI-corrected.
         comm: If given, material errors (``det F <= 0`` at a point) are raised on every rank of

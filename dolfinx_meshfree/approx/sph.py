@@ -1,7 +1,8 @@
 """Smoothed particle hydrodynamics (SPH) approximation.
 
 Standard SPH (Rabczuk et al. 2006, eq. 10): ``N_I(X) = dV_I W(X - X_I, h_0)`` with the
-cubic-spline kernel of :func:`~dolfinx_meshfree.kernels.sph_cubic_spline` (support ``2 h_0``), a
+cubic-spline kernel of :func:`~dolfinx_meshfree.approx.kernels.sph_cubic_spline` (support ``2
+h_0``), a
 Lagrangian kernel (evaluated in the reference configuration).
 
 Plain SPH reproduces neither constants nor linear fields near boundaries or on irregular particle

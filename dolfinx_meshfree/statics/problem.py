@@ -15,7 +15,7 @@ coupled system (:class:`~dolfinx_meshfree.CoupledElasticity`):
 * ``L``: cell integrals (body loads, :class:`FormBodyForce`) are weighted like ``a`` on the FE
   side and integrated against the particle shape functions on the patch cells, with every
   coupling's own functions and weights (ramp interface cells: the blended functions; bridging
-  band: ``1 - alpha`` and ``alpha``, eq. 49; see :mod:`~dolfinx_meshfree.body_loads`);
+  band: ``1 - alpha`` and ``alpha``, eq. 49; see :mod:`~dolfinx_meshfree.physics.body_loads`);
   exterior-facet integrals (tractions, pressures with ``FacetNormal``) become tractions
   ``t(x, n)`` evaluated from the UFL integrand with a DOLFINx ``Expression`` at the facet
   Gauss points, so they reach the FE nodes or the particles of whichever side the facet
@@ -23,7 +23,7 @@ coupled system (:class:`~dolfinx_meshfree.CoupledElasticity`):
 * ``bcs``: dofs of FE cells are fixed strongly (``MatZeroRowsColumns``), with the bc's values;
   exterior facets of patch cells whose nodes are all constrained become particle constraints
   with the bc's P1 interpolant as the prescribed value (Lagrange multipliers, as in
-  :func:`~dolfinx_meshfree.efg.facet_multipliers`).
+  :func:`~dolfinx_meshfree.statics.efg.facet_multipliers`).
 
 Not supported (each raises a ``ValueError`` naming the fix): non-cell integrals in ``a``, interior
 facet integrals in ``L``, derivatives of the test function in ``L``, conditions on a single
@@ -44,16 +44,16 @@ from petsc4py import PETSc
 from scipy.spatial import cKDTree
 from ufl.corealg.traversal import unique_pre_traversal
 
-from . import _compat
-from .body_loads import BodyForce, accumulate
+from .. import _compat
+from ..approx.fe_points import evaluate_fe_function
+from ..couplings.base import facet_nodes, node_flags
+from ..geometry.patch import ParticlePatch
+from ..geometry.quadrature import QuadraturePoints, boundary_facets
+from ..parallel import raise_on_all_ranks
+from ..physics.body_loads import BodyForce, accumulate
+from ..physics.materials import LinearElastic
 from .coupled import COUPLINGS, CoupledElasticity, CoupledSolution
-from .couplings.base import facet_nodes, node_flags
-from .fe_points import evaluate_fe_function
-from .materials import LinearElastic
-from .parallel import raise_on_all_ranks
-from .patch import ParticlePatch
 from .petsc import solver_options
-from .quadrature import QuadraturePoints, boundary_facets
 
 __all__ = ["CoupledLinearProblem", "FormBodyForce"]
 
@@ -191,7 +191,7 @@ class CoupledLinearProblem:
     def _apply_loads(self) -> None:
         """Exterior-facet integrals of ``L`` become tractions; its cell integrals one
         :class:`FormBodyForce`, whose shares every coupling takes with its own functions and
-        weights (:mod:`~dolfinx_meshfree.body_loads`)."""
+        weights (:mod:`~dolfinx_meshfree.physics.body_loads`)."""
         problem, V = self.problem, self.V
         msh = V.mesh
         v = self.L.arguments()[0]

@@ -42,13 +42,13 @@ import scipy.sparse as sp
 from mpi4py import MPI
 from scipy.spatial import cKDTree
 
-from . import _compat
-from .fe_points import locate_points, tabulate_in_cells
-from .neighbours import check_points
-from .particles import ParticleSet
-from .quadrature import cell_quadrature
-from .sph import SPH
-from .tables import ShapeTable
+from .. import _compat
+from ..approx.fe_points import locate_points, tabulate_in_cells
+from ..approx.neighbours import check_points
+from ..approx.sph import SPH
+from ..approx.tables import ShapeTable
+from ..geometry.particles import ParticleSet
+from ..geometry.quadrature import cell_quadrature
 
 __all__ = [
     "CorrectedSPH",

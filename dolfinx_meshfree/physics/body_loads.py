@@ -16,7 +16,8 @@ A body force is a :class:`BodyForce`: a callable ``b(x)`` (:class:`CallableBodyF
 :meth:`CoupledElasticity.set_body_force <dolfinx_meshfree.CoupledElasticity.set_body_force>`
 and :meth:`ExplicitDynamics.add_body_force
 <dolfinx_meshfree.integrator.ExplicitDynamics.add_body_force>` take), or the cell integrals of a
-UFL linear form (:class:`~dolfinx_meshfree.problem.FormBodyForce`). :func:`body_load_vectors`
+UFL linear form (:class:`~dolfinx_meshfree.statics.problem.FormBodyForce`).
+:func:`body_load_vectors`
 assembles the shares of a list of them from the quadrature rules of a coupling.
 """
 
@@ -28,12 +29,12 @@ import dolfinx
 import numpy as np
 import scipy.sparse as sp
 
-from . import _compat
-from .efg import _vector_values
-from .fe_points import tabulate_in_cells
+from .. import _compat
+from ..approx.fe_points import tabulate_in_cells
+from ..geometry.quadrature import QuadraturePoints, cell_quadrature
+from ..parallel import raise_on_all_ranks
+from ..statics.efg import _vector_values
 from .operators import load_vector
-from .parallel import raise_on_all_ranks
-from .quadrature import QuadraturePoints, cell_quadrature
 
 __all__ = ["BodyForce", "CallableBodyForce", "body_load_vectors"]
 

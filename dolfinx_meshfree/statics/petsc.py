@@ -21,7 +21,7 @@ import numpy as np
 import scipy.sparse as sp
 from petsc4py import PETSc
 
-from .parallel import Layout
+from ..parallel import Layout
 
 __all__ = [
     "SHORTHANDS",

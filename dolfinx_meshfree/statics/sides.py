@@ -6,7 +6,7 @@
   :class:`~dolfinx_meshfree.InternalForces` (Rabczuk et al. 2006, eq. 34) in PETSc numbering;
 * :class:`BlockProblem`: ``R(x) = f_int(x) - t f_ext + C x - t c`` on a nest whose primal
   diagonal blocks are the sides' tangents and whose other blocks ``C`` (constraints) are
-  constant; what :func:`~dolfinx_meshfree.newton.newton` solves.
+  constant; what :func:`~dolfinx_meshfree.statics.newton.newton` solves.
 """
 
 from __future__ import annotations
@@ -23,13 +23,13 @@ from petsc4py import PETSc
 from ufl.algorithms import expand_derivatives, extract_coefficients
 from ufl.classes import Sum
 
-from . import _compat
-from .constitutive import Material
-from .fe_dofs import cell_indicator, fe_dof_layout
-from .forces import InternalForces
+from .. import _compat
+from ..approx.fe_dofs import cell_indicator, fe_dof_layout
+from ..geometry.particles import ParticleSet
+from ..parallel import Layout
+from ..physics.constitutive import Material
+from ..physics.forces import InternalForces
 from .newton import NewtonOptions, NewtonResult, newton
-from .parallel import Layout
-from .particles import ParticleSet
 from .petsc import SolverOptions, create_aij, create_vector
 
 __all__ = [
@@ -47,7 +47,8 @@ __all__ = [
 
 class NonlinearSolveResult(NamedTuple):
     """``(iterations, converged)`` as DOLFINx's ``NewtonSolver.solve`` returns, over all load
-    steps; the per-step :class:`~dolfinx_meshfree.newton.NewtonResult` records in ``steps``."""
+    steps; the per-step :class:`~dolfinx_meshfree.statics.newton.NewtonResult` records in
+    ``steps``."""
 
     iterations: int
     converged: bool

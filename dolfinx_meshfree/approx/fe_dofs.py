@@ -8,8 +8,8 @@ from __future__ import annotations
 import dolfinx
 import numpy as np
 
-from . import _compat
-from .parallel import Layout
+from .. import _compat
+from ..parallel import Layout
 
 __all__ = ["cell_indicator", "fe_dof_layout", "node_flags"]
 

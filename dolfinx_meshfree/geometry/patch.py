@@ -13,8 +13,8 @@ import dolfinx
 import numpy as np
 import numpy.typing as npt
 
-from . import _compat
-from .parallel import raise_on_all_ranks
+from .. import _compat
+from ..parallel import raise_on_all_ranks
 from .particles import ParticleSet
 
 __all__ = ["FE_TAG", "PATCH_TAG", "PLACEMENTS", "ParticlePatch"]

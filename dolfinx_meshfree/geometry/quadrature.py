@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from . import _compat
+from .. import _compat
 
 __all__ = ["QuadraturePoints", "boundary_facets", "cell_quadrature", "facet_quadrature"]
 

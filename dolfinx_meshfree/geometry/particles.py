@@ -16,10 +16,10 @@ import numpy.typing as npt
 from mpi4py import MPI
 from scipy.spatial import cKDTree
 
-from . import _compat
-from .fe_points import locate_points
-from .neighbours import check_points
-from .parallel import Layout, raise_on_all_ranks
+from .. import _compat
+from ..approx.fe_points import locate_points
+from ..approx.neighbours import check_points
+from ..parallel import Layout, raise_on_all_ranks
 from .quadrature import cell_quadrature
 
 __all__ = ["ParticleSet"]

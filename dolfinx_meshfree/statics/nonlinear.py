@@ -32,15 +32,15 @@ import ufl
 from petsc4py import PETSc
 from ufl.algorithms import expand_derivatives
 
-from . import _compat
-from .constitutive import Material
+from .. import _compat
+from ..couplings import REGISTRY
+from ..couplings.base import fe_dof_layout
+from ..geometry.patch import ParticlePatch
+from ..parallel import raise_on_all_ranks
+from ..physics.constitutive import Material
+from ..physics.materials import LinearElastic, linear_twin
 from .coupled import CoupledElasticity, CoupledSolution
-from .couplings import REGISTRY
-from .couplings.base import fe_dof_layout
-from .materials import LinearElastic, linear_twin
 from .newton import NewtonOptions
-from .parallel import raise_on_all_ranks
-from .patch import ParticlePatch
 from .petsc import create_vector, solver_options
 from .problem import CoupledLinearProblem
 from .sides import (
@@ -97,7 +97,7 @@ class FENonlinearProblem:
         u: The unknown (updated in place by :meth:`solve`; its values are the initial guess).
         bcs: ``DirichletBC`` objects (their values are reached in ``load_steps`` steps).
         load_steps: External load and prescribed values scaled by ``k / load_steps``.
-        newton: :class:`~dolfinx_meshfree.newton.NewtonOptions`.
+        newton: :class:`~dolfinx_meshfree.statics.newton.NewtonOptions`.
         petsc_options, petsc_options_prefix: The linear solver (default MUMPS LU).
     """
 
@@ -144,7 +144,7 @@ class FENonlinearProblem:
 
     def solve(self) -> NonlinearSolveResult:
         """Newton over the load steps (collective); raises
-        :class:`~dolfinx_meshfree.newton.NewtonError` if a step does not converge."""
+        :class:`~dolfinx_meshfree.statics.newton.NewtonError` if a step does not converge."""
         u = self.u
         b = _compat.assemble_vector(self._load)
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
@@ -189,7 +189,7 @@ class CoupledNonlinearProblem:
         load_steps: External load and prescribed values in ``k / load_steps`` steps (or change a
             ``Constant`` in ``F`` between calls of :meth:`solve`: each call starts from the
             current state).
-        newton: :class:`~dolfinx_meshfree.newton.NewtonOptions`.
+        newton: :class:`~dolfinx_meshfree.statics.newton.NewtonOptions`.
         petsc_options, petsc_options_prefix: The linear solver of each Newton iteration.
         **options: Passed to :class:`~dolfinx_meshfree.CoupledElasticity`.
     """
@@ -260,7 +260,8 @@ class CoupledNonlinearProblem:
     def solve(self) -> NonlinearSolveResult:
         """Newton over the load steps (collective); returns ``(iterations, converged, steps)``
         and leaves the solution in ``u`` and :attr:`solution`. Raises
-        :class:`~dolfinx_meshfree.newton.NewtonError` (with the residual history) when a step
+        :class:`~dolfinx_meshfree.statics.newton.NewtonError` (with the residual history) when a
+        step
         does not converge: the last iterate is not returned as a solution."""
         model = self.model
         P = model.patch.particles

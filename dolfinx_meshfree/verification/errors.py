@@ -13,8 +13,8 @@ from collections.abc import Callable
 import numpy as np
 from mpi4py import MPI
 
-from .materials import LinearElastic
-from .quadrature import QuadraturePoints, cell_quadrature
+from ..geometry.quadrature import QuadraturePoints, cell_quadrature
+from ..physics.materials import LinearElastic
 
 __all__ = ["error_norms"]
 

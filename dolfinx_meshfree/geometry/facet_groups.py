@@ -3,7 +3,8 @@
 The essential condition ``u = ubar`` on exterior facets of a particle patch is enforced by
 piecewise-constant Lagrange multipliers (Belytschko, Lu & Gu 1994, with the multiplier field
 constant on pieces of the boundary): ``int_g lambda . (u^h - ubar) = 0`` for every piece ``g``.
-One multiplier per facet and component (:func:`~dolfinx_meshfree.efg.facet_multipliers` on the
+One multiplier per facet and component (:func:`~dolfinx_meshfree.statics.efg.facet_multipliers` on
+the
 facets themselves) is only well posed while the particles are denser than the facets. When the
 particle spacing is about the element size or larger, the facets' multipliers outnumber the
 particles that the boundary sees: the constraint block ``G`` (``int_f phi_J``) loses rank and the
@@ -28,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from . import _compat
+from .. import _compat
 from .quadrature import QuadraturePoints
 
 __all__ = ["FacetGroups", "constraint_rank_check", "grouped_facet_quadrature"]

@@ -1,6 +1,7 @@
 """Smoothing cells of the hybrid particle energy: strains smoothed over sub-cells of the patch.
 
-The corrected kernel gradients of :class:`~dolfinx_meshfree.hybrid_sph.CorrectedSPH` are exact
+The corrected kernel gradients of :class:`~dolfinx_meshfree.couplings.hybrid_sph.CorrectedSPH` are
+exact
 for linear fields but are not the derivatives of the kernel sums, so a Gauss rule on the patch
 cells does not satisfy the divergence theorem for them: a constant stress leaves forces of the
 order of the stress times the spacing at the particles near the patch's boundary and interface
@@ -38,8 +39,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _compat
-from .quadrature import QuadraturePoints
+from .. import _compat
+from ..geometry.quadrature import QuadraturePoints
 
 __all__ = ["EXTERIOR", "INTERIOR", "SmoothingCells", "smoothing_cells"]
 

@@ -74,7 +74,7 @@ class LinearElastic:
         2D (3 x 3): ``[s_xx, s_yy, s_xy] = D [e_xx, e_yy, gamma_xy]``. 3D (6 x 6):
         ``[s_xx, s_yy, s_zz, s_yz, s_xz, s_xy] = D [e_xx, e_yy, e_zz, gamma_yz, gamma_xz,
         gamma_xy]`` with ``gamma_ij = 2 e_ij`` (the order of
-        :func:`~dolfinx_meshfree.tables.voigt_pairs` and of the strain operator).
+        :func:`~dolfinx_meshfree.approx.tables.voigt_pairs` and of the strain operator).
         """
         lam, mu = self.lmbda, self.mu
         d = self.gdim
@@ -109,7 +109,8 @@ class LinearElastic:
         ``F`` gives the same)."""
         return float(np.sqrt((self.lmbda + 2.0 * self.mu) / self.rho))
 
-    # --- the Material protocol (dolfinx_meshfree.constitutive): the small-strain member ---------
+    # --- the Material protocol (dolfinx_meshfree.physics.constitutive): the small-strain member
+    # ---------
 
     def _grad_u(self, F: np.ndarray) -> np.ndarray:
         F = np.asarray(F, dtype=float)

@@ -4,7 +4,7 @@ With tables every operator is sparse algebra (Belytschko et al. 1995, eq. 4.3):
 ``K = B_test^T (W (x) D) B_trial`` and ``f_I = sum_b N_I(x_b) t(x_b) w_b``.
 Dofs are interleaved, ``gdim I + i`` for component ``i`` of node ``I``; the dimension is the
 number of gradient tables (2 or 3), the Voigt order that of
-:func:`~dolfinx_meshfree.tables.voigt_pairs`.
+:func:`~dolfinx_meshfree.approx.tables.voigt_pairs`.
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from ..approx.tables import strain_operator
 from .materials import LinearElastic
-from .tables import strain_operator
 
 __all__ = ["consistent_gradients", "load_vector", "stiffness_matrix"]
 

@@ -2,7 +2,8 @@
 
 The patch is discretised by SPH particles, the rest by finite elements; no interface element and
 no multiplier joins them. Instead the FE integration points of the cells near the patch join the
-particle sums (eq. 125–130, :mod:`~dolfinx_meshfree.hybrid_sph`): at a stress point ``x_q`` of the
+particle sums (eq. 125–130, :mod:`~dolfinx_meshfree.couplings.hybrid_sph`): at a stress point
+``x_q`` of the
 patch the displacement gradient is
 
 .. math::
@@ -10,7 +11,8 @@ patch the displacement gradient is
     \\qquad u^{FE}(X_g) = \\sum_a N_a(X_g) u_a,
 
 with the corrected kernel gradients ``G`` (exact for linear fields) of
-:class:`~dolfinx_meshfree.hybrid_sph.CorrectedSPH`. For linear elasticity the particle forces of
+:class:`~dolfinx_meshfree.couplings.hybrid_sph.CorrectedSPH`. For linear elasticity the particle
+forces of
 eq. 127 are then the derivatives of the particle strain energy
 ``sum_q w_q 1/2 eps(x_q) : C : eps(x_q)`` (the pair form ``(P_J + P_I) . grad N`` of eq. 127 is
 that derivative for nodal integration), a linear operator assembled once:
@@ -41,7 +43,8 @@ that derivative for nodal integration), a linear operator assembled once:
 Integration of the particle energy (``integration``):
 
 * ``"smoothed"`` (default for HA-F): the strains smoothed over sub-cells of the patch cells by
-  the divergence theorem (:mod:`~dolfinx_meshfree.hybrid_smoothing`), the hybrid sums on the
+  the divergence theorem (:mod:`~dolfinx_meshfree.couplings.hybrid_smoothing`), the hybrid sums on
+  the
   sub-cells' inner edges, the FE trace on the interface and the particles' interpolant on the
   exterior boundary: ``K`` is symmetric *and* integration-consistent (the linear patch test
   holds to round-off; ``consistent`` has no effect), so central differences conserve energy and
@@ -65,19 +68,23 @@ and ``K`` is no longer symmetric (central differences then do not conserve energ
 
 The SPH particles of HA-F (``particles``, default ``"centred"`` with HA-F) sit at the centres of
 a lattice of squares with the squares' areas as volumes
-(:func:`~dolfinx_meshfree.hybrid_sph.centred_particles`), not on the patch's own grid through
-the interface nodes (see :mod:`~dolfinx_meshfree.hybrid_sph` for why: with that grid the rod's
+(:func:`~dolfinx_meshfree.couplings.hybrid_sph.centred_particles`), not on the patch's own grid
+through
+the interface nodes (see :mod:`~dolfinx_meshfree.couplings.hybrid_sph` for why: with that grid the
+rod's
 error depended on the particle:node ratio).
 
 Essential conditions in statics: strongly on FE facets; on patch facets by Nitsche's method with
 the smoothed strains (``"smoothed"``, the default; :meth:`HybridElasticity._nitsche`), otherwise
 by piecewise-constant multipliers on pieces of the boundary at least ``multiplier_length``
-particle spacings long (:mod:`~dolfinx_meshfree.facet_groups`). One multiplier per facet, as
+particle spacings long (:mod:`~dolfinx_meshfree.geometry.facet_groups`). One multiplier per facet,
+as
 :class:`~dolfinx_meshfree.CoupledElasticity` has, outnumbers the centred particles near the
 boundary once the spacing reaches the element size: the constraint block loses rank and the
 solve returned garbage (on the gmsh square with particles at 1.5 h, 1.1e6 x the plain FE error);
 dependent multipliers are now refused with a ``ValueError`` before the solve. The displacement
-in the patch cells is the particles' own :class:`~dolfinx_meshfree.hybrid_sph.CorrectedSPH`
+in the patch cells is the particles' own
+:class:`~dolfinx_meshfree.couplings.hybrid_sph.CorrectedSPH`
 interpolant; body loads on the patch cells go to the dofs through the hybrid sums' functions
 (eq. 125), the displacement whose strains the particle energy holds.
 """
@@ -96,18 +103,27 @@ import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from . import _compat
-from .body_loads import CallableBodyForce, body_load_vectors
-from .couplings.base import (
+from .. import _compat
+from ..approx.fe_points import tabulate_in_cells
+from ..approx.kernels import sph_cubic_spline
+from ..approx.neighbours import pairs_within_support
+from ..approx.tables import strain_operator
+from ..geometry.facet_groups import FacetGroups, constraint_rank_check, grouped_facet_quadrature
+from ..geometry.patch import ParticlePatch
+from ..geometry.quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
+from ..parallel import Layout, raise_on_all_ranks
+from ..physics.body_loads import CallableBodyForce, body_load_vectors
+from ..physics.materials import LinearElastic
+from ..physics.operators import load_vector
+from ..statics.efg import _vector_values, facet_multipliers
+from ..statics.petsc import BlockSystem, create_aij, create_vector
+from .base import (
     CoupledSolution,
     CouplingOperators,
     cell_indicator,
     fe_dof_layout,
     node_flags,
 )
-from .efg import _vector_values, facet_multipliers
-from .facet_groups import FacetGroups, constraint_rank_check, grouped_facet_quadrature
-from .fe_points import tabulate_in_cells
 from .hybrid_smoothing import EXTERIOR, INTERIOR, smoothing_cells
 from .hybrid_sph import (
     CorrectedSPH,
@@ -115,15 +131,6 @@ from .hybrid_sph import (
     hybrid_points,
     particle_spacing_median,
 )
-from .kernels import sph_cubic_spline
-from .materials import LinearElastic
-from .neighbours import pairs_within_support
-from .operators import load_vector
-from .parallel import Layout, raise_on_all_ranks
-from .patch import ParticlePatch
-from .petsc import BlockSystem, create_aij, create_vector
-from .quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
-from .tables import strain_operator
 
 __all__ = ["HYBRID_INTEGRATIONS", "HYBRID_PARTICLES", "HYBRID_VARIANTS", "HybridElasticity"]
 
@@ -170,12 +177,14 @@ class HybridElasticity:
         particles: ``"centred"`` (default for HA-F): the SPH particles sit at the centres of a
             lattice of squares of the patch's particle spacing, none on the interface, each with
             the area of its square in the patch as its volume
-            (:func:`~dolfinx_meshfree.hybrid_sph.centred_particles`); :attr:`patch` is then a
+            (:func:`~dolfinx_meshfree.couplings.hybrid_sph.centred_particles`); :attr:`patch` is
+            then a
             copy of the given patch holding these particles. ``"patch"`` (default for HA-S): the
             patch's own particles and Voronoi volumes. Those put a particle on every interface
             FE node (a compliant double layer that reflects waves) and their sampled volumes
             scatter when the spacing does not divide the cells: the rod's error then depended on
-            the particle:node ratio (see :mod:`~dolfinx_meshfree.hybrid_sph`). HA-S keeps them:
+            the particle:node ratio (see :mod:`~dolfinx_meshfree.couplings.hybrid_sph`). HA-S keeps
+            them:
             its node stresses (eq. 131) average the particles that an interface node sees, which
             are then at the node; with centred particles its static L2 rate fell below 1 in 14
             of the 90 cases of ``demos/robustness.py`` (1 with the patch's particles).
@@ -187,7 +196,7 @@ class HybridElasticity:
             particles near exterior boundaries (the patch test is missed).
         multiplier_length: Statics without Nitsche: the length, in particle spacings, of the
             pieces of a patch Dirichlet boundary that carry one multiplier per component
-            (:func:`~dolfinx_meshfree.facet_groups.grouped_facet_quadrature`; 0: one per
+            (:func:`~dolfinx_meshfree.geometry.facet_groups.grouped_facet_quadrature`; 0: one per
             facet). The default 2.0 was the most accurate of 1, 1.5, 2, 3 on the robustness
             cases that have Dirichlet facets on the patch (1: 20-120 x FE at spacing 1.5 h;
             3: up to 35 x); dependent multipliers are refused.
@@ -457,7 +466,8 @@ class HybridElasticity:
 
     def _smoothed_gradients(self) -> tuple[list[sp.csr_matrix], np.ndarray]:
         """Smoothed gradients (ns x (n + N)) of this rank's smoothing cells over [particles |
-        FE nodes] and the cells' areas (collective; :mod:`~dolfinx_meshfree.hybrid_smoothing`):
+        FE nodes] and the cells' areas (collective;
+        :mod:`~dolfinx_meshfree.couplings.hybrid_smoothing`):
         ``(1 / |Omega_k|) sum_p w_p n_p N_c(x_p)`` over the Gauss points of the cell's edges,
         ``N_c`` the hybrid sums' functions inside the patch, the particles' own interpolant on
         the exterior boundary (the functions of the traction loads) and the FE basis on the
@@ -776,7 +786,7 @@ class HybridElasticity:
         rank before the solve (collective): the rows ``int_g phi_J`` of all pieces ``g`` (the
         same on every rank: the particles are replicated) must have full rank, or the saddle
         point is singular and its solution garbage
-        (:func:`~dolfinx_meshfree.facet_groups.constraint_rank_check`)."""
+        (:func:`~dolfinx_meshfree.geometry.facet_groups.constraint_rank_check`)."""
         rows, where = [], []
         deg = max(self.quadrature_degree, 4)
         for groups in pieces:

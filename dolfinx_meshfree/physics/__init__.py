@@ -1,0 +1,1 @@
+"""Constitutive laws, forces and stiffness from shape tables, loads."""

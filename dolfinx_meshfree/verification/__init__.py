@@ -1,0 +1,1 @@
+"""Exact solutions and error norms for tests, demos and benchmarks."""

@@ -1,5 +1,5 @@
-"""Builders of :class:`~dolfinx_meshfree.integrator.ExplicitDynamics`: pure FE, pure EFG and
-every static coupling, from the same operators as the static solvers.
+"""Builders of the explicit models of :class:`~dolfinx_meshfree.ExplicitDynamics`: pure FE, pure
+EFG and every static coupling, from the same operators as the static solvers.
 
 Each coupling enters dynamics through :meth:`CoupledElasticity.operators
 <dolfinx_meshfree.CoupledElasticity.operators>` (Rabczuk et al. 2006, Table I):
@@ -22,7 +22,7 @@ Each coupling enters dynamics through :meth:`CoupledElasticity.operators
 
 Essential conditions (``fixed_facets``: the displacement held at its initial value): FE nodes
 strongly (zero velocity and acceleration), particles by one multiplier per facet and component
-(:func:`~dolfinx_meshfree.efg.facet_multipliers`) added to the velocity constraint, so that
+(:mod:`~dolfinx_meshfree.dynamics.conditions`) added to the velocity constraint, so that
 ``int_f v^h = 0`` after every correction (Table I, step 6). On ramp interface cells the particle
 part of the blended functions is constrained in the same way.
 """
@@ -30,147 +30,118 @@ part of the blended functions is constrained in the same way.
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, field
 
 import dolfinx
 import numpy as np
 import numpy.typing as npt
-import scipy.sparse as sp
 import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from . import _compat
-from .body_loads import CallableBodyForce, body_load_vectors
-from .efg import facet_multipliers, particle_stiffness
-from .integrator import Field
-from .masses import (
+from .. import _compat
+from ..body_loads import CallableBodyForce, body_load_vectors
+from ..bridging import BridgingBand
+from ..coupled import CoupledElasticity
+from ..efg import particle_stiffness
+from ..hybrid import HybridElasticity
+from ..masses import (
     fe_lumped_mass,
     fe_spacing,
     particle_lumped_mass,
     particle_spacing,
     table_lumped_mass,
 )
-from .materials import LinearElastic
-from .mls import MLS
-from .parallel import Layout, raise_on_all_ranks
-from .particles import ParticleSet
-from .petsc import create_aij
-from .quadrature import facet_quadrature
-from .stress_points import check_integration, stress_point_quadrature
-from .tables import ShapeTable
+from ..materials import LinearElastic
+from ..mls import MLS
+from ..parallel import Layout, raise_on_all_ranks
+from ..particles import ParticleSet
+from ..patch import ParticlePatch
+from ..petsc import create_aij
+from ..ramp import RampInterface
+from ..stress_points import check_integration, stress_point_quadrature
+from ..tables import ShapeTable
+from .conditions import check_facets, first_cells, fixed_fe_dofs, particle_conditions, stack_rows
+from .loads import BodyLoad
+from .methods import DYNAMICS_METHODS
+from .system import Field
 
-__all__ = ["build_coupled", "build_efg", "build_fe", "build_hybrid"]
+__all__ = ["Model", "build_coupled", "build_efg", "build_fe", "build_hybrid", "check_particle_mass"]
 
 
-def _check_material(material) -> None:
+@dataclass
+class Model:
+    """An assembled explicit model: the arguments of :class:`~dolfinx_meshfree.ExplicitDynamics`
+    beside ``safety`` and ``multiplier_solver`` (see there).
+
+    Attributes:
+        fields: One or two :class:`~dolfinx_meshfree.dynamics.system.Field` (FE first).
+        material: The material. constraint: The constraint blocks per field, or ``None``.
+        blocks: Off-diagonal stiffness blocks. timings: Seconds spent building.
+        V, mls, particles, mesh, in_patch, patch, interface, reduction, body_load: What
+            evaluation and loads need.
+    """
+
+    fields: list[Field]
+    material: LinearElastic
+    constraint: list[PETSc.Mat | None] | None = None
+    blocks: dict[tuple[int, int], PETSc.Mat] = field(default_factory=dict)
+    V: dolfinx.fem.FunctionSpace | None = None
+    mls: MLS | None = None
+    particles: ParticleSet | None = None
+    mesh: dolfinx.mesh.Mesh | None = None
+    in_patch: np.ndarray | None = None
+    patch: ParticlePatch | None = None
+    interface: RampInterface | BridgingBand | None = None
+    reduction: tuple[PETSc.Mat, PETSc.Mat] | None = None
+    timings: dict = field(default_factory=dict)
+    body_load: BodyLoad | None = None
+
+
+def _check_material(material: LinearElastic) -> None:
     if not isinstance(material, LinearElastic):
         raise TypeError(f"material must be a LinearElastic, got {type(material).__name__}")
 
 
-def _facets(msh, facets: npt.ArrayLike | None) -> np.ndarray:
-    """Validated owned exterior facets (empty when ``None``), checked on every rank."""
-    tdim = msh.topology.dim
-    msh.topology.create_connectivity(tdim - 1, tdim)
-    n_own = msh.topology.index_map(tdim - 1).size_local
-
-    def check() -> np.ndarray:
-        if facets is None:
-            return np.zeros(0, dtype=np.int32)
-        f = np.asarray(facets)
-        if f.ndim != 1 or (f.size and not np.issubdtype(f.dtype, np.integer)):
-            raise ValueError(f"fixed_facets should be a 1D array of facet indices, got {f!r:.80}")
-        if f.size and (f.min() < 0 or f.max() >= n_own):
+def check_particle_mass(particle_mass: str, default: str = "row-sum") -> str:
+    """Return ``particle_mass`` if known, else raise a ``ValueError`` naming the choices."""
+    if particle_mass not in ("row-sum", "volume"):
+        if default == "volume":
             raise ValueError(
-                f"fixed_facets names facets that are not owned here (valid 0..{n_own - 1}); "
-                "pass owned exterior facets, e.g. from boundary_facets"
+                f"particle_mass={particle_mass!r} is not known; use 'volume' (rho V_I) or 'row-sum'"
             )
-        return f.astype(np.int32)
-
-    return raise_on_all_ranks(msh.comm, check)
-
-
-def _first_cells(msh, facets: np.ndarray) -> np.ndarray:
-    tdim = msh.topology.dim
-    f2c = msh.topology.connectivity(tdim - 1, tdim)
-    return np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]].astype(np.int64)
-
-
-def _fixed_fe_dofs(V, facets: np.ndarray) -> np.ndarray:
-    """bool per owned FE dof: a node of one of the facets (on any rank)."""
-    msh = V.mesh
-    nodes = dolfinx.fem.locate_dofs_topological(V, msh.topology.dim - 1, facets)
-    f = dolfinx.fem.Function(V)
-    f.x.array[:] = 0.0
-    f.x.array[2 * np.asarray(nodes, dtype=np.int64)] = 1.0
-    _compat.scatter_reverse_add(f)
-    f.x.scatter_forward()
-    n_owned = V.dofmap.index_map.size_local
-    return np.repeat(f.x.array[0 : 2 * n_owned : 2] > 0.5, 2)
-
-
-def _zero(x: np.ndarray) -> np.ndarray:
-    return np.zeros((x.shape[0], 2))
-
-
-def _particle_conditions(particles, facets, tables) -> tuple[sp.csr_matrix, Layout]:
-    """Facet multipliers ``int_f phi_J`` (unit scale) of facets with the given particle tables."""
-    msh = particles.mesh
-    comm = particles.comm
-    conds, quads, tabs = [], [], []
-    for f, table in zip(facets, tables, strict=True):
-        q = facet_quadrature(msh, f, 4)
-        conds.append((f, _zero))
-        quads.append(q)
-        tabs.append(raise_on_all_ranks(comm, lambda q=q, table=table: table(q)))
-    D, _, _, dl = facet_multipliers(particles, conds, quads, tabs, 1.0)
-    return D, dl
-
-
-def _stack(comm, mats: list[PETSc.Mat | None], row_layouts: list[Layout], col: Layout):
-    """Rows of several matrices with the same columns stacked (rank by rank); ``None``: zero."""
-    parts, total = [], 0
-    for A, rl in zip(mats, row_layouts, strict=True):
-        if A is None:
-            total += rl.size_local
-            continue
-        ai, aj, av = A.getValuesCSR()
-        rows = np.repeat(np.arange(rl.size_local), np.diff(ai)) + total
-        parts.append((rows, np.asarray(aj, dtype=np.int64), np.asarray(av)))
-        total += rl.size_local
-    lay = Layout.from_local(comm, total)
-    r, c, v = (np.concatenate([p[i] for p in parts] + [np.zeros(0)]) for i in range(3))
-    loc = sp.csr_matrix(
-        (v, (r.astype(np.int64) + lay.start, c.astype(np.int64))),
-        shape=(lay.size_global, col.size_global),
-    )
-    return create_aij(comm, loc, lay, col), lay
+        raise ValueError(f"particle_mass={particle_mass!r} is not known; use 'row-sum' or 'volume'")
+    return particle_mass
 
 
 # -- pure FE, pure EFG -------------------------------------------------------------------------
 
 
-def build_fe(cls, V, material: LinearElastic, safety: float, fixed_facets=None):
+def build_fe(
+    V: dolfinx.fem.FunctionSpace,
+    material: LinearElastic,
+    fixed_facets: npt.ArrayLike | None = None,
+) -> Model:
     """Pure FE: DOLFINx's stiffness ``inner(sigma(u), eps(v)) dx``, row-sum masses, fixed
     facets' nodes held strongly. Collective."""
     _check_material(material)
     t0 = time.perf_counter()
     msh = V.mesh
-    facets = _facets(msh, fixed_facets)
+    facets = check_facets(msh, fixed_facets)
     u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
     a = ufl.inner(material.ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx
     K = _compat.assemble_matrix(_compat.create_form(a))
     mass = fe_lumped_mass(V, material.rho)
     n_owned = msh.topology.index_map(msh.topology.dim).size_local
     h = fe_spacing(msh, np.arange(n_owned))
-    field = Field("fe", K, mass, h, fixed=_fixed_fe_dofs(V, facets))
+    fe_field = Field("fe", K, mass, h, fixed=fixed_fe_dofs(V, facets))
 
     def body_load(force):  # int N_a b, Gauss degree 4 (as the tractions)
         return body_load_vectors([CallableBodyForce(force)], V, None, 4)
 
-    return cls(
-        [field],
+    return Model(
+        [fe_field],
         material,
-        safety=safety,
         V=V,
         mesh=msh,
         timings={"setup": time.perf_counter() - t0},
@@ -179,7 +150,6 @@ def build_fe(cls, V, material: LinearElastic, safety: float, fixed_facets=None):
 
 
 def build_efg(
-    cls,
     particles: ParticleSet,
     material: LinearElastic,
     weight: str = "quartic",
@@ -187,11 +157,9 @@ def build_efg(
     basis: str = "linear",
     quadrature_degree: int = 7,
     particle_mass: str = "row-sum",
-    safety: float = 0.9,
-    fixed_facets=None,
-    multiplier_solver: str | None = None,
+    fixed_facets: npt.ArrayLike | None = None,
     integration: str = "cells",
-):
+) -> Model:
     """Pure EFG on the particles' background cells (Belytschko et al. 1995, sec. 5.2) or, with
     ``integration="stress-points"``, at the particles and stress points (Rabczuk, Belytschko &
     Xiao 2004, Lagrangian kernel: :mod:`~dolfinx_meshfree.stress_points`); fixed facets by facet
@@ -200,11 +168,10 @@ def build_efg(
     check_integration(integration)
     if particles.mesh is None:
         raise ValueError("explicit EFG needs particles with a background mesh (mesh=...)")
-    if particle_mass not in ("row-sum", "volume"):
-        raise ValueError(f"particle_mass={particle_mass!r} is not known; use 'row-sum' or 'volume'")
+    check_particle_mass(particle_mass)
     t0 = time.perf_counter()
     comm = particles.comm
-    facets = _facets(particles.mesh, fixed_facets)
+    facets = check_facets(particles.mesh, fixed_facets)
     mls = raise_on_all_ranks(
         comm, lambda: MLS(particles, weight=weight, dilation=dilation, basis=basis)
     )
@@ -218,23 +185,21 @@ def build_efg(
     mass = particle_lumped_mass(particles, tq.values, q.weights, material.rho, particle_mass)
     constraint = None
     if comm.allreduce(facets.size):
-        D, dl = _particle_conditions(particles, [facets], [lambda q: mls.tabulate(q.points, 0)])
+        D, dl = particle_conditions(particles, [facets], [lambda q: mls.tabulate(q.points, 0)])
         constraint = [create_aij(comm, D, dl, pl)]
 
     def body_load(force):  # int phi_J b on the particle rule (cells or stress points)
         forces = [CallableBodyForce(force)]
         return body_load_vectors(forces, None, None, quadrature_degree, (q, tq.values), comm=comm)
 
-    return cls(
+    return Model(
         [Field("particles", K, mass, particle_spacing(particles))],
         material,
         constraint,
-        safety=safety,
         mls=mls,
         particles=particles,
         mesh=particles.mesh,
         timings={"setup": time.perf_counter() - t0},
-        multiplier_solver=multiplier_solver,
         body_load=body_load,
     )
 
@@ -243,15 +208,12 @@ def build_efg(
 
 
 def build_coupled(
-    cls,
-    problem,
+    problem: CoupledElasticity | HybridElasticity,
     particle_mass: str = "row-sum",
-    safety: float = 0.9,
-    multiplier_solver: str | None = None,
-    fixed_facets=None,
+    fixed_facets: npt.ArrayLike | None = None,
     integration: str = "cells",
     slaves: str = "layer",
-):
+) -> Model:
     """Explicit dynamics of a :class:`~dolfinx_meshfree.CoupledElasticity` (any coupling),
     from :meth:`~dolfinx_meshfree.CoupledElasticity.operators` (collective).
 
@@ -261,7 +223,6 @@ def build_coupled(
             ``"volume"`` (``rho V_I``; not with bridging or the ramp couplings, whose masses
             follow their weighted/blended functions). Row sums are taken on the particle rule
             in use (cells or stress points).
-        safety, multiplier_solver: See :class:`ExplicitDynamics`.
         fixed_facets: Owned exterior facets held at rest.
         integration: ``"cells"`` or ``"stress-points"`` (Rabczuk, Belytschko & Xiao 2004;
             lagrange, edge-to-edge and master-slave), see :meth:`CoupledElasticity.operators
@@ -271,17 +232,13 @@ def build_coupled(
             the acceleration ``(F_K + F_P) / (m_K + m_P)``, which the reduction ``T^T M T``,
             ``T^T f`` below gives).
     """
-    from .coupled import CoupledElasticity
-    from .dynamics import DYNAMICS_METHODS
-    from .hybrid import HybridElasticity
-
     if isinstance(problem, HybridElasticity):  # the hybrid SPH-FE coupling: its own builder
         if (integration, slaves) != ("cells", "layer"):
             raise ValueError(
                 f"integration={integration!r}, slaves={slaves!r}: the hybrid coupling has its "
                 "own SPH sums; use integration='cells', slaves='layer'"
             )
-        return build_hybrid(cls, problem, particle_mass, safety, multiplier_solver, fixed_facets)
+        return build_hybrid(problem, particle_mass, fixed_facets)
     if not isinstance(problem, CoupledElasticity):
         raise TypeError(f"problem must be a CoupledElasticity, got {type(problem).__name__}")
     coupling = problem.coupling
@@ -290,8 +247,7 @@ def build_coupled(
             f"coupling={coupling!r} is not available in explicit dynamics; available: "
             f"{list(DYNAMICS_METHODS)}"
         )
-    if particle_mass not in ("row-sum", "volume"):
-        raise ValueError(f"particle_mass={particle_mass!r} is not known; use 'row-sum' or 'volume'")
+    check_particle_mass(particle_mass)
     if particle_mass == "volume" and coupling in ("bridging", "ramp", "ramp-cubic"):
         raise ValueError(
             f"particle_mass='volume' is not available with coupling={coupling!r}: its particle "
@@ -302,7 +258,7 @@ def build_coupled(
     t0 = time.perf_counter()
     V, patch, mls = problem.V, problem.patch, problem.mls
     P, comm, msh = patch.particles, patch.comm, V.mesh
-    facets = _facets(msh, fixed_facets)
+    facets = check_facets(msh, fixed_facets)
     ops = problem.operators(integration, slaves)
     rho = material.rho
     pdofs = P.petsc_dofs(2)
@@ -347,8 +303,8 @@ def build_coupled(
     mass_fe.array[:] = mass_fe.array_r * active  # inactive FE dofs: no mass, held at rest
 
     # essential conditions: FE nodes strongly, particles by facet multipliers
-    fixed_fe = _fixed_fe_dofs(V, facets)
-    first = _first_cells(msh, facets)
+    fixed_fe = fixed_fe_dofs(V, facets)
+    first = first_cells(msh, facets)
     on_p = patch.in_patch[first]
     D = dl = None
     if comm.allreduce(facets.size):
@@ -363,7 +319,7 @@ def build_coupled(
                     q.points, blend.table(q.points, q.cells, 0).values[:, n_loc:].tocsr(), []
                 )
             )
-        D_loc, dl = _particle_conditions(P, groups, tables)
+        D_loc, dl = particle_conditions(P, groups, tables)
         if dl.size_global:
             D = create_aij(comm, D_loc, dl, pl)
 
@@ -379,8 +335,8 @@ def build_coupled(
                 G_fe, G_p = None, D
             else:
                 ml = ops.multiplier_layout
-                G_fe2, _ = _stack(comm, [G_fe, None], [ml, dl], fl)
-                G_p2, _ = _stack(comm, [G_p, D], [ml, dl], pl)
+                G_fe2, _ = stack_rows(comm, [G_fe, None], [ml, dl], fl)
+                G_p2, _ = stack_rows(comm, [G_p, D], [ml, dl], pl)
                 for m in (G_fe, G_p, D):
                     m.destroy()
                 G_fe, G_p = G_fe2, G_p2
@@ -439,11 +395,10 @@ def build_coupled(
         deg = problem.quadrature_degree
         return body_load_vectors(forces, V, ops.fe_weight, deg, p_rule, i_rule, comm)
 
-    return cls(
+    return Model(
         fields,
         material,
         constraint,
-        safety=safety,
         blocks=blocks,
         V=V,
         mls=mls,
@@ -454,7 +409,6 @@ def build_coupled(
         interface=ops.interface if ops.reduction is None else None,
         reduction=ops.reduction,
         timings={"setup": time.perf_counter() - t0, "operators": ops.timings["operators"]},
-        multiplier_solver=multiplier_solver,
         body_load=body_load,
     )
 
@@ -463,13 +417,10 @@ def build_coupled(
 
 
 def build_hybrid(
-    cls,
-    problem,
+    problem: HybridElasticity,
     particle_mass: str = "volume",
-    safety: float = 0.9,
-    multiplier_solver: str | None = None,
-    fixed_facets=None,
-):
+    fixed_facets: npt.ArrayLike | None = None,
+) -> Model:
     """Explicit dynamics of a :class:`~dolfinx_meshfree.hybrid.HybridElasticity` (Rabczuk et al.
     2006, sec. 5.5, with central differences as there), from its assembled operators
     (collective).
@@ -486,25 +437,18 @@ def build_hybrid(
         problem: The static hybrid object.
         particle_mass: ``"volume"`` (``rho V_I``, the SPH mass) or ``"row-sum"``
             (``rho sum_q N_I(x_q) w_q`` with the particles' interpolant at the stress points).
-        safety, multiplier_solver: See :class:`~dolfinx_meshfree.integrator.ExplicitDynamics`
-            (the solver is used only for the multipliers of fixed particle facets).
         fixed_facets: Owned exterior facets held at rest (FE nodes strongly, particles by facet
             multipliers on the velocities).
     """
-    from .hybrid import HybridElasticity
-
     if not isinstance(problem, HybridElasticity):
         raise TypeError(f"problem must be a HybridElasticity, got {type(problem).__name__}")
-    if particle_mass not in ("row-sum", "volume"):
-        raise ValueError(
-            f"particle_mass={particle_mass!r} is not known; use 'volume' (rho V_I) or 'row-sum'"
-        )
+    check_particle_mass(particle_mass, default="volume")
     material = problem.material
     _check_material(material)
     t0 = time.perf_counter()
     V, patch = problem.V, problem.patch
     P, comm, msh = patch.particles, patch.comm, V.mesh
-    facets = _facets(msh, fixed_facets)
+    facets = check_facets(msh, fixed_facets)
     ops = problem.operators()
     rho = material.rho
     mass_fe = fe_lumped_mass(V, rho, weight=ops.fe_weight)
@@ -513,22 +457,21 @@ def build_hybrid(
     n_owned = V.dofmap.index_map.size_local
     active = np.repeat(ops.fe_active[:n_owned], 2)
     mass_fe.array[:] = mass_fe.array_r * active
-    fixed_fe = _fixed_fe_dofs(V, facets)
-    on_p = patch.in_patch[_first_cells(msh, facets)]
+    fixed_fe = fixed_fe_dofs(V, facets)
+    on_p = patch.in_patch[first_cells(msh, facets)]
     constraint = None
     if comm.allreduce(int(np.sum(on_p))):
         ev = problem.evaluator
-        D_loc, dl = _particle_conditions(P, [facets[on_p]], [lambda q: ev.tabulate(q.points, 0)])
+        D_loc, dl = particle_conditions(P, [facets[on_p]], [lambda q: ev.tabulate(q.points, 0)])
         constraint = [None, create_aij(comm, D_loc, dl, ops.particle_layout)]
     fields = [
         Field("fe", ops.K_fe, mass_fe, fe_spacing(msh, patch.fe_cells), fixed=fixed_fe),
         Field("particles", ops.K_p, mass_p, particle_spacing(P)),
     ]
-    return cls(
+    return Model(
         fields,
         material,
         constraint,
-        safety=safety,
         blocks={(0, 1): ops.K_fp, (1, 0): ops.K_pf},
         V=V,
         mls=problem.evaluator,
@@ -537,5 +480,4 @@ def build_hybrid(
         in_patch=patch.in_patch,
         patch=patch,
         timings={"setup": time.perf_counter() - t0, "operators": ops.timings["operators"]},
-        multiplier_solver=multiplier_solver,
     )

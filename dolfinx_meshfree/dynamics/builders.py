@@ -29,6 +29,7 @@ part of the blended functions is constrained in the same way.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -97,6 +98,10 @@ class Model:
     timings: dict = field(default_factory=dict)
     body_load: BodyLoad | None = None
 
+    def arguments(self) -> dict:
+        """The attributes as keyword arguments of ``ExplicitDynamics`` (no copies)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
 
 def _check_material(material: LinearElastic) -> None:
     if not isinstance(material, LinearElastic):
@@ -160,10 +165,22 @@ def build_efg(
     fixed_facets: npt.ArrayLike | None = None,
     integration: str = "cells",
 ) -> Model:
-    """Pure EFG on the particles' background cells (Belytschko et al. 1995, sec. 5.2) or, with
-    ``integration="stress-points"``, at the particles and stress points (Rabczuk, Belytschko &
-    Xiao 2004, Lagrangian kernel: :mod:`~dolfinx_meshfree.stress_points`); fixed facets by facet
-    multipliers on the velocities. Collective."""
+    """Pure EFG on the particles' background cells (Belytschko et al. 1995, sec. 5.2):
+    :func:`~dolfinx_meshfree.efg.particle_stiffness` and row-sum masses. Collective.
+
+    Args:
+        particles, weight, dilation, basis: The particles and their MLS approximation.
+        quadrature_degree: The Gauss rule on the background cells.
+        particle_mass: ``"row-sum"`` (eq. 4.5) or ``"volume"`` (``rho V_I``).
+        fixed_facets: Owned exterior facets held at rest, by facet multipliers on the
+            velocities (one per facet and component, corrected each step like eq. 94–96).
+        integration: ``"cells"`` (the Gauss rule of ``quadrature_degree``) or
+            ``"stress-points"``: the particles and the stress points between them, with their
+            volumes and MLS functions of the reference configuration (Lagrangian kernel,
+            computed once at t = 0; Rabczuk, Belytschko & Xiao 2004;
+            :mod:`~dolfinx_meshfree.stress_points`); the row-sum masses are then
+            ``rho sum_q phi_I(x_q) V_q``.
+    """
     _check_material(material)
     check_integration(integration)
     if particles.mesh is None:
@@ -223,7 +240,9 @@ def build_coupled(
             ``"volume"`` (``rho V_I``; not with bridging or the ramp couplings, whose masses
             follow their weighted/blended functions). Row sums are taken on the particle rule
             in use (cells or stress points).
-        fixed_facets: Owned exterior facets held at rest.
+        fixed_facets: Owned exterior facets held at rest (FE nodes strongly, particles by facet
+            multipliers on the velocities). The static problem's own Dirichlet conditions,
+            tractions and body force are not used.
         integration: ``"cells"`` or ``"stress-points"`` (Rabczuk, Belytschko & Xiao 2004;
             lagrange, edge-to-edge and master-slave), see :meth:`CoupledElasticity.operators
             <dolfinx_meshfree.CoupledElasticity.operators>`.

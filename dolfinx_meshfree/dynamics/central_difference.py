@@ -34,9 +34,21 @@ from .energy import (
 from .loads import ExternalLoads
 from .system import SemiDiscreteSystem
 
-__all__ = ["CentralDifference", "Stepped"]
+__all__ = ["CentralDifference", "Stepped", "schedule"]
 
 OnOutput = Callable[[int, float], None]
+
+
+def schedule(
+    n0: int, t0: float, nsteps: int, dt: float, outputs: Sequence[float], energy_records: int
+) -> tuple[dict[int, float], set[int]]:
+    """The output steps ``{step: requested time}`` (the nearest step of each output time) and
+    the energy steps (about ``energy_records`` of them, the outputs and the last step added)
+    of a run of ``nsteps`` steps of ``dt`` from step ``n0`` at time ``t0``."""
+    out_steps = {n0 + min(nsteps, max(0, round((t - t0) / dt))): t for t in outputs}
+    every = max(1, nsteps // max(1, energy_records))
+    energy_steps = set(range(n0, n0 + nsteps + 1, every)) | set(out_steps) | {n0 + nsteps}
+    return out_steps, energy_steps
 
 
 @dataclass
@@ -44,14 +56,21 @@ class Stepped:
     """What :meth:`CentralDifference.advance` did.
 
     Attributes:
-        records: This run's energy records. outputs: ``(step, time)`` of each output.
+        steps: The number of steps. records: This run's energy records.
+        outputs: ``(step, time)`` of each output.
         t_loop: Seconds in the loop, outputs excluded. t_out: Seconds in the outputs.
     """
 
+    steps: int
     records: list[EnergyRecord]
     outputs: list[tuple[int, float]]
     t_loop: float
     t_out: float
+
+    @property
+    def timings(self) -> dict[str, float]:
+        """Seconds in ``steps`` (the loop, outputs excluded), ``per_step``, ``outputs``."""
+        return {"steps": self.t_loop, "per_step": self.t_loop / self.steps, "outputs": self.t_out}
 
 
 class CentralDifference:
@@ -214,7 +233,7 @@ class CentralDifference:
         self.records, self.w_ext, self.w_c = records, w_ext, w_c
         for obj in (*ku, *vnew, *vnow, *imp):
             obj.destroy()
-        return Stepped(records[first:], outs, t_loop, t_out)
+        return Stepped(nsteps, records[first:], outs, t_loop, t_out)
 
     def destroy(self) -> None:
         """Destroy the state and work vectors (collective)."""

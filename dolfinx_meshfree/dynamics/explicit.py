@@ -40,15 +40,15 @@ from ..patch import ParticlePatch
 from ..quadrature import QuadraturePoints
 from ..ramp import RampInterface
 from .builders import Model, build_coupled, build_efg, build_fe
-from .central_difference import CentralDifference
+from .central_difference import CentralDifference, schedule
 from .constraint import VelocityProjection, check_multiplier_solver
 from .discretisation import Discretisation, VectorFunction
 from .energy import EnergyRecord
 from .evaluation import FieldEvaluator
-from .initial import check_particle_values, fe_nodal_values, particle_coefficients
+from .initial import check_particle_values, initial_values
 from .loads import Amplitude, BodyLoad, ExternalLoads, Traction
 from .results import DynamicsResult
-from .system import Field, LinearSystem
+from .system import Field, LinearSystem, inverse_masses
 from .time_step import TimeStepBound, check_safety
 
 __all__ = ["ExplicitDynamics"]
@@ -62,10 +62,9 @@ class ExplicitDynamics:
     Build with :meth:`fe`, :meth:`efg` or :meth:`coupled` (every coupling of
     :data:`~dolfinx_meshfree.dynamics.DYNAMICS_METHODS`); set the initial state with
     :meth:`set_initial`; optionally :meth:`add_traction` and :meth:`add_body_force`; then
-    :meth:`run`. The velocity can be
-    evaluated at any points (:meth:`velocity_at`) and compared with an exact solution
-    (:meth:`velocity_error`, Rabczuk et al. 2006, eq. 137) after a run, at the final time or in
-    the ``on_output`` callback. Collective throughout.
+    :meth:`run`. The velocity can be evaluated at any points (:meth:`velocity_at`) and compared
+    with an exact solution (:meth:`velocity_error`, Rabczuk et al. 2006, eq. 137) after a run,
+    at the final time or in the ``on_output`` callback. Collective throughout.
 
     Args:
         fields: One or two :class:`~dolfinx_meshfree.dynamics.system.Field` (FE first).
@@ -80,18 +79,12 @@ class ExplicitDynamics:
             (Cholesky on every rank, one ``Allgatherv`` of ``G v`` per step: the fastest for
             interface-sized ``S``), ``"mumps"`` (distributed LU), or ``None``: dense up to
             2000 multipliers.
-        V, mls, particles, mesh, in_patch, patch: What evaluation needs: the FE space, the MLS
-            approximation and its particles, the mesh, the patch flag of each local cell.
-        interface: The coupling's interface object for evaluation: a
-            :class:`~dolfinx_meshfree.ramp.RampInterface` (blended interface cells) or a
-            :class:`~dolfinx_meshfree.bridging.BridgingBand` (weighted band cells).
-        reduction: ``(T_PF, S)`` when the particle field holds master particles only
-            (master–slave): the particle coefficients are ``T_PF d_FE + S d_M``.
+        V, mls, particles, mesh, in_patch, patch, interface, reduction: The spaces, for
+            loads and evaluation (see
+            :class:`~dolfinx_meshfree.dynamics.discretisation.Discretisation`).
         body_load: ``body_load(b) -> (fe, particles)``: the consistent loads of a body force
-            ``b(x)`` per owned FE dof and per particle dof (original interleaved order, this
-            rank's contributions), either ``None`` for a missing field; set by the builders
-            (:mod:`~dolfinx_meshfree.dynamics.builders`). ``None``: :meth:`add_body_force` uses
-            the lumped masses.
+            (set by the builders, :class:`~dolfinx_meshfree.dynamics.loads.ExternalLoads`);
+            ``None``: :meth:`add_body_force` uses the lumped masses.
 
     Attributes:
         system: The :class:`~dolfinx_meshfree.dynamics.system.LinearSystem`.
@@ -123,6 +116,7 @@ class ExplicitDynamics:
         check_safety(safety)
         check_multiplier_solver(multiplier_solver)
         self.system = LinearSystem(fields, blocks, constraint)
+        self.fields, self.blocks, self.G = self.system.fields, self.system.blocks, self.system.G
         self.material = material
         self.V, self.mls, self.particles, self.mesh = V, mls, particles, mesh
         self.in_patch, self.patch = in_patch, patch
@@ -133,19 +127,7 @@ class ExplicitDynamics:
         self.comm = self.fields[0].mass.getComm().tompi4py()
         self.timings = dict(timings or {})
         t0 = time.perf_counter()
-        self._minv: list[PETSc.Vec] = []
-        self.active: list[np.ndarray] = []
-        self.free: list[np.ndarray] = []
-        for f in self.fields:
-            mi = f.mass.duplicate()
-            m = f.mass.array_r
-            free = m > 0.0
-            if f.fixed is not None:
-                free &= ~f.fixed
-            mi.array[:] = np.where(free, 1.0 / np.where(m > 0.0, m, 1.0), 0.0)
-            self._minv.append(mi)
-            self.active.append(m > 0.0)
-            self.free.append(free)
+        self._minv, self.active, self.free = inverse_masses(self.fields)
         self.multiplier_solver = multiplier_solver
         self.projection: VelocityProjection | None = None
         if self.G is not None:
@@ -158,30 +140,11 @@ class ExplicitDynamics:
         self.u, self.v = self.stepper.u, self.stepper.v
         self.timings["setup"] = self.timings.get("setup", 0.0) + time.perf_counter() - t0
 
-    # -- builders ------------------------------------------------------------------------------
-
     @classmethod
     def _from_model(
         cls, model: Model, safety: float, multiplier_solver: str | None = None
     ) -> ExplicitDynamics:
-        return cls(
-            model.fields,
-            model.material,
-            model.constraint,
-            safety=safety,
-            blocks=model.blocks,
-            V=model.V,
-            mls=model.mls,
-            particles=model.particles,
-            mesh=model.mesh,
-            in_patch=model.in_patch,
-            patch=model.patch,
-            interface=model.interface,
-            reduction=model.reduction,
-            timings=model.timings,
-            multiplier_solver=multiplier_solver,
-            body_load=model.body_load,
-        )
+        return cls(**model.arguments(), safety=safety, multiplier_solver=multiplier_solver)
 
     @classmethod
     def fe(
@@ -213,16 +176,10 @@ class ExplicitDynamics:
         multiplier_solver: str | None = None,
         integration: str = "cells",
     ) -> ExplicitDynamics:
-        """Pure EFG on ``particles`` integrated on their background cells (Belytschko et al.
-        1995, sec. 5.2): :func:`~dolfinx_meshfree.efg.particle_stiffness` and row-sum masses.
-
-        ``fixed_facets``: owned exterior facets held at rest, by facet multipliers on the
-        velocities (one per facet and component, corrected each step like eq. 94–96).
-        ``integration``: ``"cells"`` (the Gauss rule of ``quadrature_degree``) or
-        ``"stress-points"``: the particles and the stress points between them, with their
-        volumes and MLS functions of the reference configuration (Lagrangian kernel, computed
-        once at t = 0; Rabczuk, Belytschko & Xiao 2004; :mod:`~dolfinx_meshfree.stress_points`);
-        the row-sum masses are then ``rho sum_q phi_I(x_q) V_q``.
+        """Pure EFG on ``particles`` (Belytschko et al. 1995, sec. 5.2), on their background
+        cells or (``integration="stress-points"``) at the particles and stress points; fixed
+        facets by facet multipliers on the velocities. Arguments: see
+        :func:`~dolfinx_meshfree.dynamics.builders.build_efg`.
         """
         check_safety(safety)
         check_multiplier_solver(multiplier_solver)
@@ -250,45 +207,19 @@ class ExplicitDynamics:
         integration: str = "cells",
         slaves: str = "layer",
     ) -> ExplicitDynamics:
-        """A :class:`~dolfinx_meshfree.CoupledElasticity` in dynamics, any coupling (or a
-        :class:`~dolfinx_meshfree.HybridElasticity`).
-
-        Reuses the static coupling's operators (:meth:`CoupledElasticity.operators`): the
-        stiffness blocks, the MLS, the quadrature, the constraint blocks and the interface
-        shape functions; see :func:`~dolfinx_meshfree.dynamics.builders.build_coupled`.
-        ``fixed_facets``: owned exterior facets held at rest (FE nodes strongly, particles by
-        facet multipliers on the velocities). The static problem's own Dirichlet conditions,
-        tractions and body force are not used (give loads with :meth:`add_traction` and
-        :meth:`add_body_force`).
-
-        ``integration="stress-points"`` integrates the particle stiffness at the particles and
-        stress points (Rabczuk, Belytschko & Xiao 2004, Lagrangian kernel: the MLS functions
-        of the reference configuration, computed once at t = 0), for lagrange, edge-to-edge
-        and master-slave. ``slaves="coincident"`` (master-slave only) fixes the particles on
-        the interface to the FE nodes they sit on: Johnson's coupling, Rabczuk et al. 2006,
-        sec. 5.1.1, eq. 15–16 (see :mod:`~dolfinx_meshfree.master_slave`).
+        """A :class:`~dolfinx_meshfree.CoupledElasticity` (any coupling) or a
+        :class:`~dolfinx_meshfree.HybridElasticity` in dynamics, from the static problem's
+        operators (:meth:`CoupledElasticity.operators`: stiffness and constraint blocks, MLS,
+        quadrature, interface shape functions). Give loads with :meth:`add_traction` and
+        :meth:`add_body_force`. ``integration="stress-points"``: Lagrangian-kernel stress
+        points (lagrange, edge-to-edge, master-slave); ``slaves="coincident"``: Johnson's
+        coupling (master-slave, Rabczuk et al. 2006, eq. 15–16). Arguments: see
+        :func:`~dolfinx_meshfree.dynamics.builders.build_coupled`.
         """
         check_safety(safety)
         check_multiplier_solver(multiplier_solver)
         model = build_coupled(problem, particle_mass, fixed_facets, integration, slaves)
         return cls._from_model(model, safety, multiplier_solver)
-
-    # -- the system ----------------------------------------------------------------------------
-
-    @property
-    def fields(self) -> list[Field]:
-        """The fields of the system (FE first)."""
-        return self.system.fields
-
-    @property
-    def blocks(self) -> dict[tuple[int, int], PETSc.Mat]:
-        """The off-diagonal stiffness blocks."""
-        return self.system.blocks
-
-    @property
-    def G(self) -> list[PETSc.Mat | None] | None:
-        """The constraint blocks per field, or ``None``."""
-        return self.system.constraints()
 
     @property
     def safety(self) -> float:
@@ -325,8 +256,6 @@ class ExplicitDynamics:
         """``safety`` times the critical time step (collective)."""
         return self.bound.stable()
 
-    # -- state and loads -----------------------------------------------------------------------
-
     def set_initial(
         self,
         velocity: VectorFunction | None = None,
@@ -347,15 +276,11 @@ class ExplicitDynamics:
             (self.u, displacement, self.active),
             (self.v, velocity, self.free),
         ):
-            for k, f in enumerate(self.fields):
+            for k in range(len(self.fields)):
                 target[k].set(0.0)
-                if fn is None:
-                    continue
-                if f.name == "fe":
-                    vals = fe_nodal_values(disc, fn, self.comm)
-                else:
-                    vals = particle_coefficients(disc, fn, particle_values, self.comm)
-                target[k].array[:] = vals * mask[k]
+                if fn is not None:
+                    vals = initial_values(disc, k, fn, particle_values, self.comm)
+                    target[k].array[:] = vals * mask[k]
             if fn is not None and self.projection is not None:
                 self.projection.correct(target)
         self.stepper.reset()
@@ -363,29 +288,16 @@ class ExplicitDynamics:
     def add_traction(
         self, facets: npt.ArrayLike, traction: Traction, amplitude: Amplitude | None = None
     ) -> None:
-        """External load ``amplitude(t) * traction(x, n)`` on owned exterior facets (collective).
-
-        ``traction`` maps points (m, 2) and outward normals (m, 2) to tractions (m, 2), assembled
-        with the FE basis on facets of FE cells and with the MLS functions on facets of particle
-        cells (Belytschko et al. 1995, eq. 4.5). ``amplitude`` defaults to 1 (a step load).
-        Facets of ramp interface cells or bridging band cells are refused (``ValueError``).
-        """
+        """External load ``amplitude(t) * traction(x, n)`` on owned exterior facets: see
+        :meth:`ExternalLoads.add_traction
+        <dolfinx_meshfree.dynamics.loads.ExternalLoads.add_traction>` (collective)."""
         self.loads.add_traction(facets, traction, amplitude)
 
     def add_body_force(self, force: VectorFunction, amplitude: Amplitude | None = None) -> None:
         """External load ``amplitude(t) * int b . v`` of a body force ``b(x)`` per unit volume
-        (points (m, 2) -> (m, 2)) on the whole body (collective).
-
-        FE, EFG and every coupling of :meth:`coupled` integrate it with the functions and
-        weights of their masses and stiffness (:mod:`~dolfinx_meshfree.body_loads`: ramp
-        interface cells blended, eq. 3.15 of Belytschko et al. 1995; bridging band weighted by
-        ``1 - alpha`` and ``alpha``, Rabczuk et al. 2006, eq. 49; master-slave through ``T^T``,
-        eq. 28); other models take the lumped load ``M b(x_I) / rho`` at their nodes and
-        particles, exact for a constant ``b``. ``amplitude`` defaults to 1 (a step load).
-        """
+        on the whole body: see :meth:`ExternalLoads.add_body_force
+        <dolfinx_meshfree.dynamics.loads.ExternalLoads.add_body_force>` (collective)."""
         self.loads.add_body_force(force, amplitude)
-
-    # -- stepping ------------------------------------------------------------------------------
 
     def run(
         self,
@@ -400,8 +312,8 @@ class ExplicitDynamics:
         progress: bool | None = None,
     ) -> DynamicsResult:
         """Integrate from the current time to ``t_end`` (Belytschko et al. 1995, sec. 5.2;
-        Rabczuk et al. 2006, Table I): :class:`~dolfinx_meshfree.dynamics.central_difference.
-        CentralDifference`. Collective.
+        Rabczuk et al. 2006, Table I; :mod:`~dolfinx_meshfree.dynamics.central_difference`).
+        Collective.
 
         Args:
             t_end: Final time (> current time).
@@ -429,23 +341,10 @@ class ExplicitDynamics:
                 unusable ``xdmf`` prefix (on every rank, before any file is written).
         """
         crit = self.critical_time_step()
-        stable = self.safety * crit["critical"]
         span = float(t_end) - self.time
         if not (np.isfinite(span) and span > 0.0):
             raise ValueError(f"t_end={t_end!r} must lie after the current time {self.time}")
-        if dt is None:
-            dt = stable
-        elif not (isinstance(dt, int | float) and np.isfinite(dt) and dt > 0.0):
-            raise ValueError(f"dt={dt!r} must be a positive number")
-        elif dt > stable * (1.0 + 1e-12) and not force:
-            raise ValueError(
-                f"dt={dt:.6g} is above the stable time step {stable:.6g} (safety {self.safety} x "
-                f"critical 2/omega_bound = {crit['critical']:.6g}, omega_bound >= omega_max; "
-                f"Courant h_min/c = {crit['courant']:.6g} with h_min = {crit['h_min']:.4g}); "
-                f"pass dt <= {stable:.6g}, dt=None for the stable step, or force=True"
-            )
-        nsteps = max(1, int(np.ceil(span / dt - 1e-9)))
-        dt = span / nsteps
+        nsteps, dt = self.bound.steps_to(span, dt, force)
         n0, t0 = self.step, self.time
         progress_bar = ProgressBar(nsteps, self.comm, progress, label="explicit dynamics ")
         writer = DynamicsWriter(xdmf, self) if xdmf is not None else None
@@ -458,9 +357,7 @@ class ExplicitDynamics:
             if on_output is not None:
                 on_output(self, n, t)
 
-        out_steps = {n0 + min(nsteps, max(0, round((t - t0) / dt))): t for t in outputs}
-        every = max(1, nsteps // max(1, energy_records))
-        energy_steps = set(range(n0, n0 + nsteps + 1, every)) | set(out_steps) | {n0 + nsteps}
+        out_steps, energy_steps = schedule(n0, t0, nsteps, dt, outputs, energy_records)
         try:
             done = self.stepper.advance(
                 nsteps, dt, span, out_steps, energy_steps, notify, progress_bar
@@ -474,15 +371,9 @@ class ExplicitDynamics:
             time=self.time,
             energies=done.records,
             outputs=done.outputs,
-            critical={**crit, "stable": stable},
-            timings={
-                "steps": done.t_loop,
-                "per_step": done.t_loop / nsteps,
-                "outputs": done.t_out,
-            },
+            critical={**crit, "stable": self.stable_time_step()},
+            timings=done.timings,
         )
-
-    # -- evaluation ----------------------------------------------------------------------------
 
     def _current(self) -> list[PETSc.Vec]:
         """The velocity vectors at the current time (``v_n`` at outputs and after a run)."""

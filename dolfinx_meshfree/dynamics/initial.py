@@ -9,13 +9,20 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from mpi4py import MPI
 
 from ..parallel import Layout, raise_on_all_ranks
 from ..petsc import create_aij, create_vector
 from .discretisation import Discretisation, VectorFunction, vector_values
 from .linalg import mumps_lu
 
-__all__ = ["PARTICLE_VALUES", "check_particle_values", "fe_nodal_values", "particle_coefficients"]
+__all__ = [
+    "PARTICLE_VALUES",
+    "check_particle_values",
+    "fe_nodal_values",
+    "initial_values",
+    "particle_coefficients",
+]
 
 #: How particle coefficients take the values of a function.
 PARTICLE_VALUES = ("collocation", "nodal")
@@ -28,7 +35,7 @@ def check_particle_values(how: str) -> str:
     return how
 
 
-def fe_nodal_values(disc: Discretisation, fn: VectorFunction, comm) -> np.ndarray:
+def fe_nodal_values(disc: Discretisation, fn: VectorFunction, comm: MPI.Comm) -> np.ndarray:
     """``fn`` at the owned FE nodes (PETSc order), interleaved (2 per node; collective)."""
     x = disc.owned_points(0)
     vals = raise_on_all_ranks(comm, lambda: vector_values(fn, x))
@@ -77,3 +84,13 @@ def particle_coefficients(disc: Discretisation, fn: VectorFunction, how: str, co
     full.destroy()
     masters.destroy()
     return out
+
+
+def initial_values(
+    disc: Discretisation, k: int, fn: VectorFunction, how: str, comm: MPI.Comm
+) -> np.ndarray:
+    """The owned dof values of field ``k`` taking ``fn``: nodal values on the FE field,
+    coefficients (``how``) on the particle field (collective)."""
+    if disc.fields[k].name == "fe":
+        return fe_nodal_values(disc, fn, comm)
+    return particle_coefficients(disc, fn, how, comm)

@@ -70,6 +70,10 @@ class ExternalLoads:
     ) -> None:
         """``amplitude(t) * traction(x, n)`` on owned exterior facets (collective).
 
+        ``traction`` maps points (m, 2) and outward normals (m, 2) to tractions (m, 2), assembled
+        with the FE basis on facets of FE cells and with the MLS functions on facets of particle
+        cells (Belytschko et al. 1995, eq. 4.5). ``amplitude`` defaults to 1 (a step load).
+
         Raises:
             ValueError: a facet lies on a ramp interface or bridging band cell (on every rank).
         """
@@ -117,8 +121,16 @@ class ExternalLoads:
         self._add(parts, amplitude)
 
     def add_body_force(self, force: VectorFunction, amplitude: Amplitude | None = None) -> None:
-        """``amplitude(t) * int b . v`` of a body force ``b(x)`` per unit volume: consistent
-        (``body_load``) or lumped ``M b(x_I) / rho`` (collective)."""
+        """``amplitude(t) * int b . v`` of a body force ``b(x)`` per unit volume (points (m, 2)
+        -> (m, 2)) on the whole body (collective).
+
+        FE, EFG and every coupling integrate it with the functions and weights of their masses
+        and stiffness (``body_load``, :mod:`~dolfinx_meshfree.body_loads`: ramp interface cells
+        blended, eq. 3.15 of Belytschko et al. 1995; bridging band weighted by ``1 - alpha`` and
+        ``alpha``, Rabczuk et al. 2006, eq. 49; master-slave through ``T^T``, eq. 28); other
+        models take the lumped load ``M b(x_I) / rho`` at their nodes and particles, exact for
+        a constant ``b``. ``amplitude`` defaults to 1 (a step load).
+        """
         d = self.disc
         if self.body_load is not None:
             fe, f_p = self.body_load(force)

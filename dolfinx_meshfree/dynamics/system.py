@@ -25,7 +25,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from petsc4py import PETSc
 
-__all__ = ["Field", "LinearSystem", "SemiDiscreteSystem"]
+__all__ = ["Field", "LinearSystem", "SemiDiscreteSystem", "inverse_masses"]
 
 Blocks = dict[tuple[int, int], PETSc.Mat]
 
@@ -52,6 +52,25 @@ class Field:
     spacing: float
     points: np.ndarray | None = None
     fixed: np.ndarray | None = None
+
+
+def inverse_masses(
+    fields: Sequence[Field],
+) -> tuple[list[PETSc.Vec], list[np.ndarray], list[np.ndarray]]:
+    """``M^{-1}`` per field (0 on dofs held at rest: massless or fixed), and per field the
+    dofs with mass (``active``) and those free to move (``free``)."""
+    minv, active, free = [], [], []
+    for f in fields:
+        mi = f.mass.duplicate()
+        m = f.mass.array_r
+        on = m > 0.0
+        if f.fixed is not None:
+            on &= ~f.fixed
+        mi.array[:] = np.where(on, 1.0 / np.where(m > 0.0, m, 1.0), 0.0)
+        minv.append(mi)
+        active.append(m > 0.0)
+        free.append(on)
+    return minv, active, free
 
 
 @runtime_checkable

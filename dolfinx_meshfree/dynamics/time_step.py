@@ -170,6 +170,32 @@ class TimeStepBound:
         """``safety`` times the critical time step (collective)."""
         return self.safety * self.critical()["critical"]
 
+    def steps_to(self, span: float, dt: float | None, force: bool) -> tuple[int, float]:
+        """The number of steps and the step that cover ``span`` exactly: ``dt`` (default the
+        stable step) rounded down to ``span / ceil(span / dt)``.
+
+        Raises:
+            ValueError: ``span`` not positive and finite, ``dt`` not positive, or above the
+                stable step without ``force``.
+        """
+        crit = self.critical()
+        stable = self.safety * crit["critical"]
+        if not (np.isfinite(span) and span > 0.0):
+            raise ValueError(f"span={span!r} must be positive")
+        if dt is None:
+            dt = stable
+        elif not (isinstance(dt, int | float) and np.isfinite(dt) and dt > 0.0):
+            raise ValueError(f"dt={dt!r} must be a positive number")
+        elif dt > stable * (1.0 + 1e-12) and not force:
+            raise ValueError(
+                f"dt={dt:.6g} is above the stable time step {stable:.6g} (safety {self.safety} x "
+                f"critical 2/omega_bound = {crit['critical']:.6g}, omega_bound >= omega_max; "
+                f"Courant h_min/c = {crit['courant']:.6g} with h_min = {crit['h_min']:.4g}); "
+                f"pass dt <= {stable:.6g}, dt=None for the stable step, or force=True"
+            )
+        nsteps = max(1, int(np.ceil(span / dt - 1e-9)))
+        return nsteps, span / nsteps
+
     def invalidate(self) -> None:
         """Forget the bound: the next :meth:`critical` re-bounds the system's current tangent
         (the hook for a system whose tangent changed)."""

@@ -43,7 +43,7 @@ from petsc4py import PETSc
 from .. import _compat
 from ..body_loads import CallableBodyForce, body_load_vectors
 from ..bridging import BridgingBand
-from ..coupled import CoupledElasticity
+from ..coupled import CoupledElasticity, CouplingOperators
 from ..efg import particle_stiffness
 from ..hybrid import HybridElasticity
 from ..masses import (
@@ -65,6 +65,7 @@ from ..tables import ShapeTable
 from .conditions import check_facets, first_cells, fixed_fe_dofs, particle_conditions, stack_rows
 from .loads import BodyLoad
 from .methods import DYNAMICS_METHODS
+from .reduction import free_particle_points, reduce_master_slave
 from .system import Field
 
 __all__ = ["Model", "build_coupled", "build_efg", "build_fe", "build_hybrid", "check_particle_mass"]
@@ -224,6 +225,47 @@ def build_efg(
 # -- couplings ---------------------------------------------------------------------------------
 
 
+def _add_interface_masses(
+    ops: CouplingOperators,
+    V: dolfinx.fem.FunctionSpace,
+    P: ParticleSet,
+    rho: float,
+    mass_fe: PETSc.Vec,
+    mass_p: PETSc.Vec,
+    comm: MPI.Comm,
+) -> None:
+    """Add the ramp's interface cells' share of the row-sum masses (eq. 4.5 with the blended
+    functions, Belytschko et al. 1995, eq. 3.15) and check the particle masses positive
+    (collective)."""
+    imap = V.dofmap.index_map
+    l2g = np.asarray(
+        imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
+    )
+    fe_dofs = 2 * l2g[:, None] + np.arange(2)
+    m_fe, m_p = table_lumped_mass(
+        ops.interface_table,
+        ops.interface_quadrature.weights,
+        rho,
+        fe_dofs,
+        ops.fe_layout,
+        P.petsc_dofs(2),
+        ops.particle_layout,
+        comm,
+    )
+    mass_fe.axpy(1.0, m_fe)
+    mass_p.axpy(1.0, m_p)
+    m_fe.destroy()
+    m_p.destroy()
+    lo = comm.allreduce(
+        float(mass_p.array_r.min()) if mass_p.getLocalSize() else np.inf, op=MPI.MIN
+    )
+    if not lo > 0.0:
+        raise ValueError(
+            f"a lumped particle mass is not positive (min {lo:.3e}); raise quadrature_degree "
+            "or the dilation"
+        )
+
+
 def build_coupled(
     problem: CoupledElasticity | HybridElasticity,
     particle_mass: str = "row-sum",
@@ -280,7 +322,6 @@ def build_coupled(
     facets = check_facets(msh, fixed_facets)
     ops = problem.operators(integration, slaves)
     rho = material.rho
-    pdofs = P.petsc_dofs(2)
     fl, pl = ops.fe_layout, ops.particle_layout
 
     # lumped masses (eq. 4.5, 88-89)
@@ -290,33 +331,7 @@ def build_coupled(
         P, ops.particle_table, pq.weights, rho, particle_mass, check=ops.interface_table is None
     )
     if ops.interface_table is not None:  # ramp: the interface cells' share, same functions
-        imap = V.dofmap.index_map
-        l2g = np.asarray(
-            imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
-        )
-        fe_dofs = 2 * l2g[:, None] + np.arange(2)
-        m_fe, m_p = table_lumped_mass(
-            ops.interface_table,
-            ops.interface_quadrature.weights,
-            rho,
-            fe_dofs,
-            fl,
-            pdofs,
-            pl,
-            comm,
-        )
-        mass_fe.axpy(1.0, m_fe)
-        mass_p.axpy(1.0, m_p)
-        m_fe.destroy()
-        m_p.destroy()
-        lo = comm.allreduce(
-            float(mass_p.array_r.min()) if mass_p.getLocalSize() else np.inf, op=MPI.MIN
-        )
-        if not lo > 0.0:
-            raise ValueError(
-                f"a lumped particle mass is not positive (min {lo:.3e}); raise quadrature_degree "
-                "or the dilation"
-            )
+        _add_interface_masses(ops, V, P, rho, mass_fe, mass_p, comm)
     n_owned = V.dofmap.index_map.size_local
     active = np.repeat(ops.fe_active[:n_owned], 2)
     mass_fe.array[:] = mass_fe.array_r * active  # inactive FE dofs: no mass, held at rest
@@ -360,40 +375,13 @@ def build_coupled(
                     m.destroy()
                 G_fe, G_p = G_fe2, G_p2
         particle_points = None
-    else:
-        # master-slave: reduce by T = [[I, 0], [T_PF, S]] (eq. 27-28)
-        Tpf, S = ops.reduction
-        K_fe = ops.K_fe
-        A_pp = ops.K_p.PtAP(Tpf)
-        K_fe.axpy(1.0, A_pp, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-        KpS = ops.K_p.matMult(S)
-        A_fm = Tpf.transposeMatMult(KpS)
-        A_mf = KpS.transposeMatMult(Tpf)
-        K_p = ops.K_p.PtAP(S)
-        for m in (A_pp, KpS, ops.K_p):
-            m.destroy()
-        blocks = {(0, 1): A_fm, (1, 0): A_mf}
-        # row sums of T^T M T: T^T (M (T 1))
-        ones_f, ones_m = Tpf.createVecRight(), S.createVecRight()
-        ones_f.array[:] = active
-        ones_m.set(1.0)
-        e = Tpf.createVecLeft()
-        Tpf.mult(ones_f, e)
-        S.multAdd(ones_m, e, e)
-        e.pointwiseMult(e, mass_p)
-        Tpf.multTransposeAdd(e, mass_fe, mass_fe)
-        red = S.createVecRight()
-        S.multTranspose(e, red)
-        for x in (ones_f, ones_m, e, mass_p):
-            x.destroy()
-        mass_p = red
+    else:  # master-slave: reduce by T = [[I, 0], [T_PF, S]] (eq. 27-28)
+        red = reduce_master_slave(ops.K_fe, ops.K_p, ops.reduction, mass_fe, mass_p, active, D)
+        K_fe, K_p, blocks = red.K_fe, red.K_m, red.blocks
+        mass_fe, mass_p = red.mass_fe, red.mass_m
         if D is not None:
-            G_fe, G_p = D.matMult(Tpf), D.matMult(S)
-            D.destroy()
-        own = P.owned[np.argsort(P.petsc_index[P.owned], kind="stable")]
-        is_slave = np.zeros(P.num_particles, dtype=bool)
-        is_slave[ops.interface.slaves] = True
-        particle_points = P.positions[own[~is_slave[own]]]
+            G_fe, G_p = red.G_fe, red.G_m
+        particle_points = free_particle_points(P, ops.interface.slaves)
     fe_cells = patch.fe_cells
     if coupling == "bridging":
         fe_cells = np.concatenate([fe_cells, ops.interface.cells])

@@ -42,7 +42,9 @@ def fe_nodal_values(disc: Discretisation, fn: VectorFunction, comm: MPI.Comm) ->
     return vals.ravel()
 
 
-def particle_coefficients(disc: Discretisation, fn: VectorFunction, how: str, comm) -> np.ndarray:
+def particle_coefficients(
+    disc: Discretisation, fn: VectorFunction, how: str, comm: MPI.Comm
+) -> np.ndarray:
     """Owned particle coefficients (PETSc order, interleaved) of the particle field; for
     master–slave those of the masters (collective).
 

@@ -39,7 +39,7 @@ from mpi4py import MPI
 from .parallel import raise_on_all_ranks
 
 if TYPE_CHECKING:
-    from .integrator import ExplicitDynamics
+    from .dynamics import ExplicitDynamics
 
 __all__ = ["DynamicsWriter", "ProgressBar", "check_prefix", "read_particles"]
 

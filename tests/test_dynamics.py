@@ -123,9 +123,9 @@ def test_energy_balance_with_step_load():
 def test_lagrange_constraint_at_round_off(solver):
     dyn = build("lagrange", MPI.COMM_WORLD, 1.0, ratio=2.0, multiplier_solver=solver)
     if solver == "mumps":  # the factorisation actually used
-        assert dyn._ksp.getPC().getFactorSolverType() == "mumps"
+        assert dyn.projection.ksp.getPC().getFactorSolverType() == "mumps"
     else:
-        assert dyn._ksp is None and dyn._chol[0].shape == (12, 12)
+        assert dyn.projection.ksp is None and dyn.projection.chol[0].shape == (12, 12)
     dyn.set_initial(velocity=ROD.initial_velocity)
     assert dyn.constraint_residual() < 1e-14  # the projected initial velocity
     errors = []

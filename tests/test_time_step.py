@@ -56,7 +56,7 @@ def true_omega_max(dyn: ExplicitDynamics) -> float:
     if dyn.G is not None:
         G = np.hstack(
             [
-                _dense(g) if g is not None else np.zeros((dyn._S.getSize()[0], sizes[k]))
+                _dense(g) if g is not None else np.zeros((dyn.projection.num_multipliers, sizes[k]))
                 for k, g in enumerate(dyn.G)
             ]
         )

@@ -15,7 +15,7 @@ functions and weights as the stiffness of each coupling:
 A body force is a :class:`BodyForce`: a callable ``b(x)`` (:class:`CallableBodyForce`, what
 :meth:`CoupledElasticity.set_body_force <dolfinx_meshfree.CoupledElasticity.set_body_force>`
 and :meth:`ExplicitDynamics.add_body_force
-<dolfinx_meshfree.integrator.ExplicitDynamics.add_body_force>` take), or the cell integrals of a
+<dolfinx_meshfree.dynamics.ExplicitDynamics.add_body_force>` take), or the cell integrals of a
 UFL linear form (:class:`~dolfinx_meshfree.statics.problem.FormBodyForce`).
 :func:`body_load_vectors`
 assembles the shares of a list of them from the quadrature rules of a coupling.

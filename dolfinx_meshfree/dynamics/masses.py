@@ -29,10 +29,10 @@ from mpi4py import MPI
 from petsc4py import PETSc
 from scipy.spatial import cKDTree
 
-from . import _compat
-from .geometry.particles import ParticleSet
-from .parallel import Layout
-from .statics.petsc import create_vector
+from .. import _compat
+from ..geometry.particles import ParticleSet
+from ..parallel import Layout
+from ..statics.petsc import create_vector
 
 __all__ = [
     "fe_lumped_mass",

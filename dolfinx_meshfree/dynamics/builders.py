@@ -1,5 +1,5 @@
-"""Builders of :class:`~dolfinx_meshfree.integrator.ExplicitDynamics`: pure FE, pure EFG and
-every static coupling, from the same operators as the static solvers.
+"""Builders of the explicit models of :class:`~dolfinx_meshfree.ExplicitDynamics`: pure FE, pure
+EFG and every static coupling, from the same operators as the static solvers.
 
 Each coupling enters dynamics through :meth:`CoupledElasticity.operators
 <dolfinx_meshfree.CoupledElasticity.operators>` (Rabczuk et al. 2006, Table I):
@@ -22,30 +22,41 @@ Each coupling enters dynamics through :meth:`CoupledElasticity.operators
 
 Essential conditions (``fixed_facets``: the displacement held at its initial value): FE nodes
 strongly (zero velocity and acceleration), particles by one multiplier per facet and component
-(:func:`~dolfinx_meshfree.statics.efg.facet_multipliers`) added to the velocity constraint, so that
+(:mod:`~dolfinx_meshfree.dynamics.conditions`) added to the velocity constraint, so that
 ``int_f v^h = 0`` after every correction (Table I, step 6). On ramp interface cells the particle
 part of the blended functions is constrained in the same way.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
+from dataclasses import dataclass, field
 
 import dolfinx
 import numpy as np
 import numpy.typing as npt
-import scipy.sparse as sp
 import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from . import _compat
-from .approx.mls import MLS
-from .approx.tables import ShapeTable
-from .geometry.particles import ParticleSet
-from .geometry.quadrature import facet_quadrature
-from .geometry.stress_points import check_integration, stress_point_quadrature
-from .integrator import Field
+from .. import _compat
+from ..approx.mls import MLS
+from ..approx.tables import ShapeTable
+from ..bridging import BridgingBand
+from ..couplings.hybrid import HybridElasticity
+from ..geometry.particles import ParticleSet
+from ..geometry.patch import ParticlePatch
+from ..geometry.stress_points import check_integration, stress_point_quadrature
+from ..parallel import Layout, raise_on_all_ranks
+from ..physics.body_loads import CallableBodyForce, body_load_vectors
+from ..physics.materials import LinearElastic
+from ..ramp import RampInterface
+from ..statics.coupled import CoupledElasticity, CouplingOperators
+from ..statics.efg import particle_stiffness
+from ..statics.petsc import create_aij
+from .conditions import check_facets, first_cells, fixed_fe_dofs, particle_conditions, stack_rows
+from .loads import BodyLoad
 from .masses import (
     fe_lumped_mass,
     fe_spacing,
@@ -53,124 +64,90 @@ from .masses import (
     particle_spacing,
     table_lumped_mass,
 )
-from .parallel import Layout, raise_on_all_ranks
-from .physics.body_loads import CallableBodyForce, body_load_vectors
-from .physics.materials import LinearElastic
-from .statics.efg import facet_multipliers, particle_stiffness
-from .statics.petsc import create_aij
+from .methods import DYNAMICS_METHODS
+from .reduction import free_particle_points, reduce_master_slave
+from .system import Field
 
-__all__ = ["build_coupled", "build_efg", "build_fe", "build_hybrid"]
+__all__ = ["Model", "build_coupled", "build_efg", "build_fe", "build_hybrid", "check_particle_mass"]
 
 
-def _check_material(material) -> None:
+@dataclass
+class Model:
+    """An assembled explicit model: the arguments of :class:`~dolfinx_meshfree.ExplicitDynamics`
+    beside ``safety`` and ``multiplier_solver`` (see there).
+
+    Attributes:
+        fields: One or two :class:`~dolfinx_meshfree.dynamics.system.Field` (FE first).
+        material: The material. constraint: The constraint blocks per field, or ``None``.
+        blocks: Off-diagonal stiffness blocks. timings: Seconds spent building.
+        V, mls, particles, mesh, in_patch, patch, interface, reduction, body_load: What
+            evaluation and loads need.
+    """
+
+    fields: list[Field]
+    material: LinearElastic
+    constraint: list[PETSc.Mat | None] | None = None
+    blocks: dict[tuple[int, int], PETSc.Mat] = field(default_factory=dict)
+    V: dolfinx.fem.FunctionSpace | None = None
+    mls: MLS | None = None
+    particles: ParticleSet | None = None
+    mesh: dolfinx.mesh.Mesh | None = None
+    in_patch: np.ndarray | None = None
+    patch: ParticlePatch | None = None
+    interface: RampInterface | BridgingBand | None = None
+    reduction: tuple[PETSc.Mat, PETSc.Mat] | None = None
+    timings: dict = field(default_factory=dict)
+    body_load: BodyLoad | None = None
+
+    def arguments(self) -> dict:
+        """The attributes as keyword arguments of ``ExplicitDynamics`` (no copies)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
+
+def _check_material(material: LinearElastic) -> None:
     if not isinstance(material, LinearElastic):
         raise TypeError(f"material must be a LinearElastic, got {type(material).__name__}")
 
 
-def _facets(msh, facets: npt.ArrayLike | None) -> np.ndarray:
-    """Validated owned exterior facets (empty when ``None``), checked on every rank."""
-    tdim = msh.topology.dim
-    msh.topology.create_connectivity(tdim - 1, tdim)
-    n_own = msh.topology.index_map(tdim - 1).size_local
-
-    def check() -> np.ndarray:
-        if facets is None:
-            return np.zeros(0, dtype=np.int32)
-        f = np.asarray(facets)
-        if f.ndim != 1 or (f.size and not np.issubdtype(f.dtype, np.integer)):
-            raise ValueError(f"fixed_facets should be a 1D array of facet indices, got {f!r:.80}")
-        if f.size and (f.min() < 0 or f.max() >= n_own):
+def check_particle_mass(particle_mass: str, default: str = "row-sum") -> str:
+    """Return ``particle_mass`` if known, else raise a ``ValueError`` naming the choices."""
+    if particle_mass not in ("row-sum", "volume"):
+        if default == "volume":
             raise ValueError(
-                f"fixed_facets names facets that are not owned here (valid 0..{n_own - 1}); "
-                "pass owned exterior facets, e.g. from boundary_facets"
+                f"particle_mass={particle_mass!r} is not known; use 'volume' (rho V_I) or 'row-sum'"
             )
-        return f.astype(np.int32)
-
-    return raise_on_all_ranks(msh.comm, check)
-
-
-def _first_cells(msh, facets: np.ndarray) -> np.ndarray:
-    tdim = msh.topology.dim
-    f2c = msh.topology.connectivity(tdim - 1, tdim)
-    return np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]].astype(np.int64)
-
-
-def _fixed_fe_dofs(V, facets: np.ndarray) -> np.ndarray:
-    """bool per owned FE dof: a node of one of the facets (on any rank)."""
-    msh = V.mesh
-    nodes = dolfinx.fem.locate_dofs_topological(V, msh.topology.dim - 1, facets)
-    f = dolfinx.fem.Function(V)
-    f.x.array[:] = 0.0
-    f.x.array[2 * np.asarray(nodes, dtype=np.int64)] = 1.0
-    _compat.scatter_reverse_add(f)
-    f.x.scatter_forward()
-    n_owned = V.dofmap.index_map.size_local
-    return np.repeat(f.x.array[0 : 2 * n_owned : 2] > 0.5, 2)
-
-
-def _zero(x: np.ndarray) -> np.ndarray:
-    return np.zeros((x.shape[0], 2))
-
-
-def _particle_conditions(particles, facets, tables) -> tuple[sp.csr_matrix, Layout]:
-    """Facet multipliers ``int_f phi_J`` (unit scale) of facets with the given particle tables."""
-    msh = particles.mesh
-    comm = particles.comm
-    conds, quads, tabs = [], [], []
-    for f, table in zip(facets, tables, strict=True):
-        q = facet_quadrature(msh, f, 4)
-        conds.append((f, _zero))
-        quads.append(q)
-        tabs.append(raise_on_all_ranks(comm, lambda q=q, table=table: table(q)))
-    D, _, _, dl = facet_multipliers(particles, conds, quads, tabs, 1.0)
-    return D, dl
-
-
-def _stack(comm, mats: list[PETSc.Mat | None], row_layouts: list[Layout], col: Layout):
-    """Rows of several matrices with the same columns stacked (rank by rank); ``None``: zero."""
-    parts, total = [], 0
-    for A, rl in zip(mats, row_layouts, strict=True):
-        if A is None:
-            total += rl.size_local
-            continue
-        ai, aj, av = A.getValuesCSR()
-        rows = np.repeat(np.arange(rl.size_local), np.diff(ai)) + total
-        parts.append((rows, np.asarray(aj, dtype=np.int64), np.asarray(av)))
-        total += rl.size_local
-    lay = Layout.from_local(comm, total)
-    r, c, v = (np.concatenate([p[i] for p in parts] + [np.zeros(0)]) for i in range(3))
-    loc = sp.csr_matrix(
-        (v, (r.astype(np.int64) + lay.start, c.astype(np.int64))),
-        shape=(lay.size_global, col.size_global),
-    )
-    return create_aij(comm, loc, lay, col), lay
+        raise ValueError(f"particle_mass={particle_mass!r} is not known; use 'row-sum' or 'volume'")
+    return particle_mass
 
 
 # -- pure FE, pure EFG -------------------------------------------------------------------------
 
 
-def build_fe(cls, V, material: LinearElastic, safety: float, fixed_facets=None):
+def build_fe(
+    V: dolfinx.fem.FunctionSpace,
+    material: LinearElastic,
+    fixed_facets: npt.ArrayLike | None = None,
+) -> Model:
     """Pure FE: DOLFINx's stiffness ``inner(sigma(u), eps(v)) dx``, row-sum masses, fixed
     facets' nodes held strongly. Collective."""
     _check_material(material)
     t0 = time.perf_counter()
     msh = V.mesh
-    facets = _facets(msh, fixed_facets)
+    facets = check_facets(msh, fixed_facets)
     u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
     a = ufl.inner(material.ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx
     K = _compat.assemble_matrix(_compat.create_form(a))
     mass = fe_lumped_mass(V, material.rho)
     n_owned = msh.topology.index_map(msh.topology.dim).size_local
     h = fe_spacing(msh, np.arange(n_owned))
-    field = Field("fe", K, mass, h, fixed=_fixed_fe_dofs(V, facets))
+    fe_field = Field("fe", K, mass, h, fixed=fixed_fe_dofs(V, facets))
 
     def body_load(force):  # int N_a b, Gauss degree 4 (as the tractions)
         return body_load_vectors([CallableBodyForce(force)], V, None, 4)
 
-    return cls(
-        [field],
+    return Model(
+        [fe_field],
         material,
-        safety=safety,
         V=V,
         mesh=msh,
         timings={"setup": time.perf_counter() - t0},
@@ -179,7 +156,6 @@ def build_fe(cls, V, material: LinearElastic, safety: float, fixed_facets=None):
 
 
 def build_efg(
-    cls,
     particles: ParticleSet,
     material: LinearElastic,
     weight: str = "quartic",
@@ -187,25 +163,33 @@ def build_efg(
     basis: str = "linear",
     quadrature_degree: int = 7,
     particle_mass: str = "row-sum",
-    safety: float = 0.9,
-    fixed_facets=None,
-    multiplier_solver: str | None = None,
+    fixed_facets: npt.ArrayLike | None = None,
     integration: str = "cells",
-):
-    """Pure EFG on the particles' background cells (Belytschko et al. 1995, sec. 5.2) or, with
-    ``integration="stress-points"``, at the particles and stress points (Rabczuk, Belytschko &
-    Xiao 2004, Lagrangian kernel: :mod:`~dolfinx_meshfree.geometry.stress_points`); fixed facets by
-    facet
-    multipliers on the velocities. Collective."""
+) -> Model:
+    """Pure EFG on the particles' background cells (Belytschko et al. 1995, sec. 5.2):
+    :func:`~dolfinx_meshfree.statics.efg.particle_stiffness` and row-sum masses. Collective.
+
+    Args:
+        particles, weight, dilation, basis: The particles and their MLS approximation.
+        quadrature_degree: The Gauss rule on the background cells.
+        particle_mass: ``"row-sum"`` (eq. 4.5) or ``"volume"`` (``rho V_I``).
+        fixed_facets: Owned exterior facets held at rest, by facet multipliers on the
+            velocities (one per facet and component, corrected each step like eq. 94–96).
+        integration: ``"cells"`` (the Gauss rule of ``quadrature_degree``) or
+            ``"stress-points"``: the particles and the stress points between them, with their
+            volumes and MLS functions of the reference configuration (Lagrangian kernel,
+            computed once at t = 0; Rabczuk, Belytschko & Xiao 2004;
+            :mod:`~dolfinx_meshfree.geometry.stress_points`); the row-sum masses are then
+            ``rho sum_q phi_I(x_q) V_q``.
+    """
     _check_material(material)
     check_integration(integration)
     if particles.mesh is None:
         raise ValueError("explicit EFG needs particles with a background mesh (mesh=...)")
-    if particle_mass not in ("row-sum", "volume"):
-        raise ValueError(f"particle_mass={particle_mass!r} is not known; use 'row-sum' or 'volume'")
+    check_particle_mass(particle_mass)
     t0 = time.perf_counter()
     comm = particles.comm
-    facets = _facets(particles.mesh, fixed_facets)
+    facets = check_facets(particles.mesh, fixed_facets)
     mls = raise_on_all_ranks(
         comm, lambda: MLS(particles, weight=weight, dilation=dilation, basis=basis)
     )
@@ -219,23 +203,21 @@ def build_efg(
     mass = particle_lumped_mass(particles, tq.values, q.weights, material.rho, particle_mass)
     constraint = None
     if comm.allreduce(facets.size):
-        D, dl = _particle_conditions(particles, [facets], [lambda q: mls.tabulate(q.points, 0)])
+        D, dl = particle_conditions(particles, [facets], [lambda q: mls.tabulate(q.points, 0)])
         constraint = [create_aij(comm, D, dl, pl)]
 
     def body_load(force):  # int phi_J b on the particle rule (cells or stress points)
         forces = [CallableBodyForce(force)]
         return body_load_vectors(forces, None, None, quadrature_degree, (q, tq.values), comm=comm)
 
-    return cls(
+    return Model(
         [Field("particles", K, mass, particle_spacing(particles))],
         material,
         constraint,
-        safety=safety,
         mls=mls,
         particles=particles,
         mesh=particles.mesh,
         timings={"setup": time.perf_counter() - t0},
-        multiplier_solver=multiplier_solver,
         body_load=body_load,
     )
 
@@ -243,16 +225,54 @@ def build_efg(
 # -- couplings ---------------------------------------------------------------------------------
 
 
+def _add_interface_masses(
+    ops: CouplingOperators,
+    V: dolfinx.fem.FunctionSpace,
+    P: ParticleSet,
+    rho: float,
+    mass_fe: PETSc.Vec,
+    mass_p: PETSc.Vec,
+    comm: MPI.Comm,
+) -> None:
+    """Add the ramp's interface cells' share of the row-sum masses (eq. 4.5 with the blended
+    functions, Belytschko et al. 1995, eq. 3.15) and check the particle masses positive
+    (collective)."""
+    imap = V.dofmap.index_map
+    l2g = np.asarray(
+        imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
+    )
+    fe_dofs = 2 * l2g[:, None] + np.arange(2)
+    m_fe, m_p = table_lumped_mass(
+        ops.interface_table,
+        ops.interface_quadrature.weights,
+        rho,
+        fe_dofs,
+        ops.fe_layout,
+        P.petsc_dofs(2),
+        ops.particle_layout,
+        comm,
+    )
+    mass_fe.axpy(1.0, m_fe)
+    mass_p.axpy(1.0, m_p)
+    m_fe.destroy()
+    m_p.destroy()
+    lo = comm.allreduce(
+        float(mass_p.array_r.min()) if mass_p.getLocalSize() else np.inf, op=MPI.MIN
+    )
+    if not lo > 0.0:
+        raise ValueError(
+            f"a lumped particle mass is not positive (min {lo:.3e}); raise quadrature_degree "
+            "or the dilation"
+        )
+
+
 def build_coupled(
-    cls,
-    problem,
+    problem: CoupledElasticity | HybridElasticity,
     particle_mass: str = "row-sum",
-    safety: float = 0.9,
-    multiplier_solver: str | None = None,
-    fixed_facets=None,
+    fixed_facets: npt.ArrayLike | None = None,
     integration: str = "cells",
     slaves: str = "layer",
-):
+) -> Model:
     """Explicit dynamics of a :class:`~dolfinx_meshfree.CoupledElasticity` (any coupling),
     from :meth:`~dolfinx_meshfree.CoupledElasticity.operators` (collective).
 
@@ -262,8 +282,9 @@ def build_coupled(
             ``"volume"`` (``rho V_I``; not with bridging or the ramp couplings, whose masses
             follow their weighted/blended functions). Row sums are taken on the particle rule
             in use (cells or stress points).
-        safety, multiplier_solver: See :class:`ExplicitDynamics`.
-        fixed_facets: Owned exterior facets held at rest.
+        fixed_facets: Owned exterior facets held at rest (FE nodes strongly, particles by facet
+            multipliers on the velocities). The static problem's own Dirichlet conditions,
+            tractions and body force are not used.
         integration: ``"cells"`` or ``"stress-points"`` (Rabczuk, Belytschko & Xiao 2004;
             lagrange, edge-to-edge and master-slave), see :meth:`CoupledElasticity.operators
             <dolfinx_meshfree.CoupledElasticity.operators>`.
@@ -272,17 +293,13 @@ def build_coupled(
             the acceleration ``(F_K + F_P) / (m_K + m_P)``, which the reduction ``T^T M T``,
             ``T^T f`` below gives).
     """
-    from .couplings.hybrid import HybridElasticity
-    from .dynamics import DYNAMICS_METHODS
-    from .statics.coupled import CoupledElasticity
-
     if isinstance(problem, HybridElasticity):  # the hybrid SPH-FE coupling: its own builder
         if (integration, slaves) != ("cells", "layer"):
             raise ValueError(
                 f"integration={integration!r}, slaves={slaves!r}: the hybrid coupling has its "
                 "own SPH sums; use integration='cells', slaves='layer'"
             )
-        return build_hybrid(cls, problem, particle_mass, safety, multiplier_solver, fixed_facets)
+        return build_hybrid(problem, particle_mass, fixed_facets)
     if not isinstance(problem, CoupledElasticity):
         raise TypeError(f"problem must be a CoupledElasticity, got {type(problem).__name__}")
     coupling = problem.coupling
@@ -291,8 +308,7 @@ def build_coupled(
             f"coupling={coupling!r} is not available in explicit dynamics; available: "
             f"{list(DYNAMICS_METHODS)}"
         )
-    if particle_mass not in ("row-sum", "volume"):
-        raise ValueError(f"particle_mass={particle_mass!r} is not known; use 'row-sum' or 'volume'")
+    check_particle_mass(particle_mass)
     if particle_mass == "volume" and coupling in ("bridging", "ramp", "ramp-cubic"):
         raise ValueError(
             f"particle_mass='volume' is not available with coupling={coupling!r}: its particle "
@@ -303,10 +319,9 @@ def build_coupled(
     t0 = time.perf_counter()
     V, patch, mls = problem.V, problem.patch, problem.mls
     P, comm, msh = patch.particles, patch.comm, V.mesh
-    facets = _facets(msh, fixed_facets)
+    facets = check_facets(msh, fixed_facets)
     ops = problem.operators(integration, slaves)
     rho = material.rho
-    pdofs = P.petsc_dofs(2)
     fl, pl = ops.fe_layout, ops.particle_layout
 
     # lumped masses (eq. 4.5, 88-89)
@@ -316,40 +331,14 @@ def build_coupled(
         P, ops.particle_table, pq.weights, rho, particle_mass, check=ops.interface_table is None
     )
     if ops.interface_table is not None:  # ramp: the interface cells' share, same functions
-        imap = V.dofmap.index_map
-        l2g = np.asarray(
-            imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
-        )
-        fe_dofs = 2 * l2g[:, None] + np.arange(2)
-        m_fe, m_p = table_lumped_mass(
-            ops.interface_table,
-            ops.interface_quadrature.weights,
-            rho,
-            fe_dofs,
-            fl,
-            pdofs,
-            pl,
-            comm,
-        )
-        mass_fe.axpy(1.0, m_fe)
-        mass_p.axpy(1.0, m_p)
-        m_fe.destroy()
-        m_p.destroy()
-        lo = comm.allreduce(
-            float(mass_p.array_r.min()) if mass_p.getLocalSize() else np.inf, op=MPI.MIN
-        )
-        if not lo > 0.0:
-            raise ValueError(
-                f"a lumped particle mass is not positive (min {lo:.3e}); raise quadrature_degree "
-                "or the dilation"
-            )
+        _add_interface_masses(ops, V, P, rho, mass_fe, mass_p, comm)
     n_owned = V.dofmap.index_map.size_local
     active = np.repeat(ops.fe_active[:n_owned], 2)
     mass_fe.array[:] = mass_fe.array_r * active  # inactive FE dofs: no mass, held at rest
 
     # essential conditions: FE nodes strongly, particles by facet multipliers
-    fixed_fe = _fixed_fe_dofs(V, facets)
-    first = _first_cells(msh, facets)
+    fixed_fe = fixed_fe_dofs(V, facets)
+    first = first_cells(msh, facets)
     on_p = patch.in_patch[first]
     D = dl = None
     if comm.allreduce(facets.size):
@@ -364,7 +353,7 @@ def build_coupled(
                     q.points, blend.table(q.points, q.cells, 0).values[:, n_loc:].tocsr(), []
                 )
             )
-        D_loc, dl = _particle_conditions(P, groups, tables)
+        D_loc, dl = particle_conditions(P, groups, tables)
         if dl.size_global:
             D = create_aij(comm, D_loc, dl, pl)
 
@@ -380,46 +369,19 @@ def build_coupled(
                 G_fe, G_p = None, D
             else:
                 ml = ops.multiplier_layout
-                G_fe2, _ = _stack(comm, [G_fe, None], [ml, dl], fl)
-                G_p2, _ = _stack(comm, [G_p, D], [ml, dl], pl)
+                G_fe2, _ = stack_rows(comm, [G_fe, None], [ml, dl], fl)
+                G_p2, _ = stack_rows(comm, [G_p, D], [ml, dl], pl)
                 for m in (G_fe, G_p, D):
                     m.destroy()
                 G_fe, G_p = G_fe2, G_p2
         particle_points = None
-    else:
-        # master-slave: reduce by T = [[I, 0], [T_PF, S]] (eq. 27-28)
-        Tpf, S = ops.reduction
-        K_fe = ops.K_fe
-        A_pp = ops.K_p.PtAP(Tpf)
-        K_fe.axpy(1.0, A_pp, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-        KpS = ops.K_p.matMult(S)
-        A_fm = Tpf.transposeMatMult(KpS)
-        A_mf = KpS.transposeMatMult(Tpf)
-        K_p = ops.K_p.PtAP(S)
-        for m in (A_pp, KpS, ops.K_p):
-            m.destroy()
-        blocks = {(0, 1): A_fm, (1, 0): A_mf}
-        # row sums of T^T M T: T^T (M (T 1))
-        ones_f, ones_m = Tpf.createVecRight(), S.createVecRight()
-        ones_f.array[:] = active
-        ones_m.set(1.0)
-        e = Tpf.createVecLeft()
-        Tpf.mult(ones_f, e)
-        S.multAdd(ones_m, e, e)
-        e.pointwiseMult(e, mass_p)
-        Tpf.multTransposeAdd(e, mass_fe, mass_fe)
-        red = S.createVecRight()
-        S.multTranspose(e, red)
-        for x in (ones_f, ones_m, e, mass_p):
-            x.destroy()
-        mass_p = red
+    else:  # master-slave: reduce by T = [[I, 0], [T_PF, S]] (eq. 27-28)
+        red = reduce_master_slave(ops.K_fe, ops.K_p, ops.reduction, mass_fe, mass_p, active, D)
+        K_fe, K_p, blocks = red.K_fe, red.K_m, red.blocks
+        mass_fe, mass_p = red.mass_fe, red.mass_m
         if D is not None:
-            G_fe, G_p = D.matMult(Tpf), D.matMult(S)
-            D.destroy()
-        own = P.owned[np.argsort(P.petsc_index[P.owned], kind="stable")]
-        is_slave = np.zeros(P.num_particles, dtype=bool)
-        is_slave[ops.interface.slaves] = True
-        particle_points = P.positions[own[~is_slave[own]]]
+            G_fe, G_p = red.G_fe, red.G_m
+        particle_points = free_particle_points(P, ops.interface.slaves)
     fe_cells = patch.fe_cells
     if coupling == "bridging":
         fe_cells = np.concatenate([fe_cells, ops.interface.cells])
@@ -440,11 +402,10 @@ def build_coupled(
         deg = problem.quadrature_degree
         return body_load_vectors(forces, V, ops.fe_weight, deg, p_rule, i_rule, comm)
 
-    return cls(
+    return Model(
         fields,
         material,
         constraint,
-        safety=safety,
         blocks=blocks,
         V=V,
         mls=mls,
@@ -455,7 +416,6 @@ def build_coupled(
         interface=ops.interface if ops.reduction is None else None,
         reduction=ops.reduction,
         timings={"setup": time.perf_counter() - t0, "operators": ops.timings["operators"]},
-        multiplier_solver=multiplier_solver,
         body_load=body_load,
     )
 
@@ -464,13 +424,10 @@ def build_coupled(
 
 
 def build_hybrid(
-    cls,
-    problem,
+    problem: HybridElasticity,
     particle_mass: str = "volume",
-    safety: float = 0.9,
-    multiplier_solver: str | None = None,
-    fixed_facets=None,
-):
+    fixed_facets: npt.ArrayLike | None = None,
+) -> Model:
     """Explicit dynamics of a :class:`~dolfinx_meshfree.couplings.hybrid.HybridElasticity` (Rabczuk
     et al.
     2006, sec. 5.5, with central differences as there), from its assembled operators
@@ -489,25 +446,18 @@ def build_hybrid(
         problem: The static hybrid object.
         particle_mass: ``"volume"`` (``rho V_I``, the SPH mass) or ``"row-sum"``
             (``rho sum_q N_I(x_q) w_q`` with the particles' interpolant at the stress points).
-        safety, multiplier_solver: See :class:`~dolfinx_meshfree.integrator.ExplicitDynamics`
-            (the solver is used only for the multipliers of fixed particle facets).
         fixed_facets: Owned exterior facets held at rest (FE nodes strongly, particles by facet
             multipliers on the velocities).
     """
-    from .couplings.hybrid import HybridElasticity
-
     if not isinstance(problem, HybridElasticity):
         raise TypeError(f"problem must be a HybridElasticity, got {type(problem).__name__}")
-    if particle_mass not in ("row-sum", "volume"):
-        raise ValueError(
-            f"particle_mass={particle_mass!r} is not known; use 'volume' (rho V_I) or 'row-sum'"
-        )
+    check_particle_mass(particle_mass, default="volume")
     material = problem.material
     _check_material(material)
     t0 = time.perf_counter()
     V, patch = problem.V, problem.patch
     P, comm, msh = patch.particles, patch.comm, V.mesh
-    facets = _facets(msh, fixed_facets)
+    facets = check_facets(msh, fixed_facets)
     ops = problem.operators()
     rho = material.rho
     mass_fe = fe_lumped_mass(V, rho, weight=ops.fe_weight)
@@ -516,22 +466,21 @@ def build_hybrid(
     n_owned = V.dofmap.index_map.size_local
     active = np.repeat(ops.fe_active[:n_owned], 2)
     mass_fe.array[:] = mass_fe.array_r * active
-    fixed_fe = _fixed_fe_dofs(V, facets)
-    on_p = patch.in_patch[_first_cells(msh, facets)]
+    fixed_fe = fixed_fe_dofs(V, facets)
+    on_p = patch.in_patch[first_cells(msh, facets)]
     constraint = None
     if comm.allreduce(int(np.sum(on_p))):
         ev = problem.evaluator
-        D_loc, dl = _particle_conditions(P, [facets[on_p]], [lambda q: ev.tabulate(q.points, 0)])
+        D_loc, dl = particle_conditions(P, [facets[on_p]], [lambda q: ev.tabulate(q.points, 0)])
         constraint = [None, create_aij(comm, D_loc, dl, ops.particle_layout)]
     fields = [
         Field("fe", ops.K_fe, mass_fe, fe_spacing(msh, patch.fe_cells), fixed=fixed_fe),
         Field("particles", ops.K_p, mass_p, particle_spacing(P)),
     ]
-    return cls(
+    return Model(
         fields,
         material,
         constraint,
-        safety=safety,
         blocks={(0, 1): ops.K_fp, (1, 0): ops.K_pf},
         V=V,
         mls=problem.evaluator,
@@ -540,5 +489,4 @@ def build_hybrid(
         in_patch=patch.in_patch,
         patch=patch,
         timings={"setup": time.perf_counter() - t0, "operators": ops.timings["operators"]},
-        multiplier_solver=multiplier_solver,
     )

@@ -1,0 +1,52 @@
+"""Explicit dynamics: central differences with lumped masses, for FE, EFG and every coupling.
+
+The public entry point is :class:`ExplicitDynamics` (Belytschko et al. 1995, sec. 4.2 and 5.2;
+Rabczuk et al. 2006, sec. 5.3.3 and Table I). The pieces live in modules of one idea each:
+
+* :mod:`~dolfinx_meshfree.dynamics.system`: the semi-discrete system
+  (:class:`SemiDiscreteSystem`: ``mass()``, ``internal_force(u)``, ``tangent(u)``,
+  ``constraints()``, ``rebuild(changed)``) and its linear member :class:`LinearSystem`
+  (``f^int = K u``);
+* :mod:`~dolfinx_meshfree.dynamics.central_difference`: the stepping (eq. 93), written on
+  ``internal_force``;
+* :mod:`~dolfinx_meshfree.dynamics.constraint`: the multiplier correction of the velocities
+  (eq. 94–96);
+* :mod:`~dolfinx_meshfree.dynamics.time_step`: the stable step (an upper bound of
+  ``omega_max``) and its re-bounding hook;
+* :mod:`~dolfinx_meshfree.dynamics.energy`: :class:`EnergyRecord`, the strain energy from the
+  system, the discrete energy and the work of loads and constraints;
+* :mod:`~dolfinx_meshfree.dynamics.loads`, :mod:`~dolfinx_meshfree.dynamics.initial`,
+  :mod:`~dolfinx_meshfree.dynamics.evaluation`: tractions and body forces, initial conditions,
+  the fields anywhere and their error (eq. 137);
+* :mod:`~dolfinx_meshfree.dynamics.builders` (with :mod:`~dolfinx_meshfree.dynamics.conditions`):
+  pure FE, pure EFG, every static coupling from :meth:`CoupledElasticity.operators
+  <dolfinx_meshfree.CoupledElasticity.operators>` and the hybrid SPH–FE coupling;
+* :mod:`~dolfinx_meshfree.dynamics.results`: :class:`DynamicsResult`.
+
+Row-sum lumped masses (eq. 4.5; weighted, eq. 88–89) are in
+:mod:`~dolfinx_meshfree.dynamics.masses`, the
+exact solutions of the rod benchmarks in :mod:`~dolfinx_meshfree.verification.waves`.
+"""
+
+from __future__ import annotations
+
+from .energy import EnergyRecord
+from .explicit import ExplicitDynamics
+from .masses import fe_lumped_mass, particle_lumped_mass, table_lumped_mass
+from .methods import DYNAMICS_METHODS, check_method
+from .results import DynamicsResult
+from .system import Field, LinearSystem, SemiDiscreteSystem
+
+__all__ = [
+    "DYNAMICS_METHODS",
+    "DynamicsResult",
+    "EnergyRecord",
+    "ExplicitDynamics",
+    "Field",
+    "LinearSystem",
+    "SemiDiscreteSystem",
+    "check_method",
+    "fe_lumped_mass",
+    "particle_lumped_mass",
+    "table_lumped_mass",
+]

@@ -1,0 +1,241 @@
+"""Central differences with half-step velocities and the multiplier correction.
+
+Belytschko et al. 1995, sec. 5.2; Rabczuk et al. 2006, Table I. With ``f^int`` the internal
+force of the system (``K d`` for a linear one) and ``M`` lumped:
+
+* trial velocities (eq. 93): ``vbar = v_{n-1/2} + dt M^{-1} (f^ext_n - f^int(d_n))``;
+* the multiplier correction (eq. 94–96, :mod:`~dolfinx_meshfree.dynamics.constraint`):
+  ``v_{n+1/2} = vbar - M^{-1} G^T lambda`` with ``G v_{n+1/2} = 0``;
+* ``d_{n+1} = d_n + dt v_{n+1/2}``; ``v_{1/2} = v_0 + dt/2 M^{-1} f_0``; a run continued with
+  another step size uses ``(dt_{n-1/2} + dt_{n+1/2}) / 2`` for its first velocity update.
+
+Dofs fixed strongly (FE Dirichlet nodes) have ``M^{-1} = 0``: zero velocity and acceleration.
+The velocity at an output time is ``v_n = (v_{n-1/2} + v_{n+1/2}) / 2``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Collection, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from petsc4py import PETSc
+
+from ..io import ProgressBar
+from .constraint import VelocityProjection
+from .energy import (
+    EnergyRecord,
+    constraint_work,
+    discrete_energy,
+    external_work,
+    kinetic_energy,
+)
+from .loads import ExternalLoads
+from .system import SemiDiscreteSystem
+
+__all__ = ["CentralDifference", "Stepped", "schedule"]
+
+OnOutput = Callable[[int, float], None]
+
+
+def schedule(
+    n0: int, t0: float, nsteps: int, dt: float, outputs: Sequence[float], energy_records: int
+) -> tuple[dict[int, float], set[int]]:
+    """The output steps ``{step: requested time}`` (the nearest step of each output time) and
+    the energy steps (about ``energy_records`` of them, the outputs and the last step added)
+    of a run of ``nsteps`` steps of ``dt`` from step ``n0`` at time ``t0``."""
+    out_steps = {n0 + min(nsteps, max(0, round((t - t0) / dt))): t for t in outputs}
+    every = max(1, nsteps // max(1, energy_records))
+    energy_steps = set(range(n0, n0 + nsteps + 1, every)) | set(out_steps) | {n0 + nsteps}
+    return out_steps, energy_steps
+
+
+@dataclass
+class Stepped:
+    """What :meth:`CentralDifference.advance` did.
+
+    Attributes:
+        steps: The number of steps. records: This run's energy records.
+        outputs: ``(step, time)`` of each output.
+        t_loop: Seconds in the loop, outputs excluded. t_out: Seconds in the outputs.
+    """
+
+    steps: int
+    records: list[EnergyRecord]
+    outputs: list[tuple[int, float]]
+    t_loop: float
+    t_out: float
+
+    @property
+    def timings(self) -> dict[str, float]:
+        """Seconds in ``steps`` (the loop, outputs excluded), ``per_step``, ``outputs``."""
+        return {"steps": self.t_loop, "per_step": self.t_loop / self.steps, "outputs": self.t_out}
+
+
+class CentralDifference:
+    """The state ``(d_n, v_{n-1/2})`` of a semi-discrete system and its time stepping.
+
+    Args:
+        system: The semi-discrete system (masses, internal force, constraints).
+        minv: ``M^{-1}`` per field (0 on dofs held at rest).
+        loads: The external loads.
+        projection: The velocity correction onto ``G v = 0``, or ``None``: no constraint.
+
+    Attributes:
+        u, v: ``d_n`` and ``v_{n-1/2}`` (``v_0`` before the first step) per field.
+        step, time: The current step and time.
+        records: The energy records of every run since :meth:`reset`.
+    """
+
+    def __init__(
+        self,
+        system: SemiDiscreteSystem,
+        minv: Sequence[PETSc.Vec],
+        loads: ExternalLoads,
+        projection: VelocityProjection | None = None,
+    ):
+        self.system, self.minv = system, list(minv)
+        self.loads, self.projection = loads, projection
+        masses = system.mass()
+        self.u = [m.duplicate() for m in masses]
+        self.v = [m.duplicate() for m in masses]
+        for x in (*self.u, *self.v):
+            x.set(0.0)
+        self._work = [m.duplicate() for m in masses]
+        self._tmp = [m.duplicate() for m in masses]
+        self._final: list[PETSc.Vec] = []
+        self.reset()
+
+    def reset(self) -> None:
+        """Time, step and the energy account back to zero (the state vectors are kept)."""
+        self.step, self.time = 0, 0.0
+        self.dt_prev = 0.0
+        self.v_now: list[PETSc.Vec] | None = None  # v_n at the current output time
+        self.records: list[EnergyRecord] = []
+        self.w_ext, self.w_c = 0.0, np.zeros(len(self.u))
+
+    def current_velocity(self) -> list[PETSc.Vec]:
+        """``v_n`` at an output time or after a run, else ``v_{n-1/2}``."""
+        return self.v_now if self.v_now is not None else self.v
+
+    def residual(self, vel: Sequence[PETSc.Vec] | None = None) -> float:
+        """The relative constraint residual of ``vel`` (default: the current velocities); 0
+        without a constraint (collective)."""
+        if self.projection is None:
+            return 0.0
+        return self.projection.residual(vel if vel is not None else self.current_velocity())
+
+    def advance(
+        self,
+        nsteps: int,
+        dt: float,
+        span: float,
+        out_steps: Mapping[int, float],
+        energy_steps: Collection[int],
+        on_output: OnOutput | None,
+        progress: ProgressBar,
+    ) -> Stepped:
+        """Take ``nsteps`` steps of ``dt`` (``nsteps dt = span``), recording the energies at
+        ``energy_steps`` and calling ``on_output(step, time)`` at ``out_steps`` with ``v_n``
+        current; closes ``progress``. Collective.
+
+        The state stays ``(d_N, v_{N-1/2})`` for a next run; ``v_N`` is kept for evaluation.
+        """
+        system, loads, G = self.system, self.loads, self.system.constraints()
+        masses = system.mass()
+        F = len(masses)
+        n0, t0 = self.step, self.time
+        ku, vnew, vnow, imp = ([m.duplicate() for m in masses] for _ in range(4))
+        for x in imp:
+            x.set(0.0)
+        records = self.records
+        first = len(records)
+        w_ext, w_c = self.w_ext, self.w_c
+        pk = [k for k, f in enumerate(system.fields) if f.name == "particles"]
+        t_out = 0.0
+        outs: list[tuple[int, float]] = []
+        clock = time.perf_counter()
+        n = n0
+        try:
+            for n in range(n0, n0 + nsteps + 1):
+                tn = t0 + (n - n0) * dt
+                # v_{n+1/2} = v_{n-1/2} + (dt_{n-1/2} + dt_{n+1/2}) / 2 a_n (a new run may
+                # change dt)
+                gamma = 0.5 if n == 0 else (0.5 * (1.0 + self.dt_prev / dt) if n == n0 else 1.0)
+                amps = loads.at(tn)
+                # trial velocities (eq. 93): vbar = v_{n-1/2} + gamma dt M^{-1} (f_ext - f_int)
+                system.internal_force(self.u, ku)
+                for k in range(F):
+                    ku[k].copy(self._work[k])
+                    for vecs, an in amps:
+                        if vecs[k] is not None and an != 0.0:
+                            self._work[k].axpy(-an, vecs[k])
+                    vnew[k].pointwiseMult(self.minv[k], self._work[k])
+                    vnew[k].aypx(-gamma * dt, self.v[k])
+                # multiplier correction (eq. 94-96): G v_{n+1/2} = 0
+                if self.projection is not None:
+                    self.projection.correct(vnew, imp)
+                # work of the step (see energy.external_work)
+                d_ext, d_c = 0.0, np.zeros(F)
+                if n > 0:
+                    d_ext = external_work(amps, self.v, vnew, dt)
+                    if G is not None:  # constraint force -G^T lambda / dt
+                        d_c = constraint_work(G, imp, self.v, vnew)
+                if n in energy_steps:
+                    tic = time.perf_counter()
+                    for k in range(F):  # v_n
+                        if n == 0:
+                            self.v[k].copy(vnow[k])
+                        else:
+                            vnow[k].waxpy(1.0, self.v[k], vnew[k])
+                            vnow[k].scale(0.5)
+                    internal = system.strain_energy(self.u, ku)
+                    half = kinetic_energy(masses, vnew, self._tmp)
+                    rec = EnergyRecord(
+                        step=n,
+                        time=tn,
+                        kinetic=float(kinetic_energy(masses, vnow, self._tmp)),
+                        internal=float(internal),
+                        external=float(w_ext + d_ext),
+                        constraint=float((w_c + d_c).sum()),
+                        transfer=float((w_c + d_c)[pk[0]]) if pk and G is not None else 0.0,
+                        discrete=float(discrete_energy(half, internal, ku, vnew, dt)),
+                        residual=self.residual(vnew),
+                    )
+                    records.append(rec)
+                    if n in out_steps:
+                        self.v_now = vnow
+                        self.time, self.step = tn, n
+                        outs.append((n, tn))
+                        if on_output is not None:
+                            on_output(n, tn)
+                        self.v_now = None
+                    t_out += time.perf_counter() - tic
+                if n == n0 + nsteps:
+                    break  # v_N is known; the state stays (d_N, v_{N-1/2}) for a next run
+                w_ext += d_ext
+                w_c = w_c + d_c
+                for k in range(F):
+                    self.u[k].axpy(dt, vnew[k])
+                    vnew[k].copy(self.v[k])
+                progress.update(n + 1 - n0, t0 + (n + 1 - n0) * dt)
+        finally:
+            progress.close(nsteps if n == n0 + nsteps else None, t0 + (n - n0) * dt)
+        t_loop = time.perf_counter() - clock - t_out
+        self.step, self.time = n0 + nsteps, t0 + span
+        self.dt_prev = dt
+        # keep v_N for evaluation after the run
+        for x in self._final:
+            x.destroy()
+        self._final = [x.copy() for x in vnow]
+        self.v_now = self._final
+        self.records, self.w_ext, self.w_c = records, w_ext, w_c
+        for obj in (*ku, *vnew, *vnow, *imp):
+            obj.destroy()
+        return Stepped(nsteps, records[first:], outs, t_loop, t_out)
+
+    def destroy(self) -> None:
+        """Destroy the state and work vectors (collective)."""
+        for obj in (*self.u, *self.v, *self._work, *self._tmp, *self._final):
+            obj.destroy()

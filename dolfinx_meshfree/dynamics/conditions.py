@@ -1,0 +1,130 @@
+"""Essential conditions of explicit dynamics: facets held at rest.
+
+FE nodes are held strongly (zero velocity and acceleration: ``M^{-1} = 0``), particles by one
+multiplier per facet and component (:func:`~dolfinx_meshfree.statics.efg.facet_multipliers`) added
+to
+the velocity constraint, so that ``int_f v^h = 0`` after every correction (Rabczuk et al. 2006,
+Table I, step 6; Belytschko et al. 1995, eq. 94–96).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import dolfinx
+import numpy as np
+import numpy.typing as npt
+import scipy.sparse as sp
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from .. import _compat
+from ..approx.tables import ShapeTable
+from ..geometry.particles import ParticleSet
+from ..geometry.quadrature import QuadraturePoints, facet_quadrature
+from ..parallel import Layout, raise_on_all_ranks
+from ..statics.efg import facet_multipliers
+from ..statics.petsc import create_aij
+
+__all__ = [
+    "check_facets",
+    "first_cells",
+    "fixed_fe_dofs",
+    "particle_conditions",
+    "stack_rows",
+]
+
+
+def check_facets(msh: dolfinx.mesh.Mesh, facets: npt.ArrayLike | None) -> np.ndarray:
+    """Validated owned exterior facets (empty when ``None``), checked on every rank.
+
+    Raises:
+        ValueError: not a 1D integer array, or a facet not owned here (on every rank).
+    """
+    tdim = msh.topology.dim
+    msh.topology.create_connectivity(tdim - 1, tdim)
+    n_own = msh.topology.index_map(tdim - 1).size_local
+
+    def check() -> np.ndarray:
+        if facets is None:
+            return np.zeros(0, dtype=np.int32)
+        f = np.asarray(facets)
+        if f.ndim != 1 or (f.size and not np.issubdtype(f.dtype, np.integer)):
+            raise ValueError(f"fixed_facets should be a 1D array of facet indices, got {f!r:.80}")
+        if f.size and (f.min() < 0 or f.max() >= n_own):
+            raise ValueError(
+                f"fixed_facets names facets that are not owned here (valid 0..{n_own - 1}); "
+                "pass owned exterior facets, e.g. from boundary_facets"
+            )
+        return f.astype(np.int32)
+
+    return raise_on_all_ranks(msh.comm, check)
+
+
+def first_cells(msh: dolfinx.mesh.Mesh, facets: np.ndarray) -> np.ndarray:
+    """The first cell of each facet (the only one of an exterior facet)."""
+    tdim = msh.topology.dim
+    f2c = msh.topology.connectivity(tdim - 1, tdim)
+    return np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]].astype(np.int64)
+
+
+def fixed_fe_dofs(V: dolfinx.fem.FunctionSpace, facets: np.ndarray) -> np.ndarray:
+    """bool per owned FE dof: a node of one of the facets (on any rank; collective)."""
+    msh = V.mesh
+    nodes = dolfinx.fem.locate_dofs_topological(V, msh.topology.dim - 1, facets)
+    f = dolfinx.fem.Function(V)
+    f.x.array[:] = 0.0
+    f.x.array[2 * np.asarray(nodes, dtype=np.int64)] = 1.0
+    _compat.scatter_reverse_add(f)
+    f.x.scatter_forward()
+    n_owned = V.dofmap.index_map.size_local
+    return np.repeat(f.x.array[0 : 2 * n_owned : 2] > 0.5, 2)
+
+
+def _zero(x: np.ndarray) -> np.ndarray:
+    return np.zeros((x.shape[0], 2))
+
+
+def particle_conditions(
+    particles: ParticleSet,
+    facets: Sequence[np.ndarray],
+    tables: Sequence[Callable[[QuadraturePoints], ShapeTable]],
+) -> tuple[sp.csr_matrix, Layout]:
+    """Facet multipliers ``int_f phi_J`` (unit scale) of groups of facets, each with the
+    particle table of its cells (collective)."""
+    msh = particles.mesh
+    comm = particles.comm
+    conds, quads, tabs = [], [], []
+    for f, table in zip(facets, tables, strict=True):
+        q = facet_quadrature(msh, f, 4)
+        conds.append((f, _zero))
+        quads.append(q)
+        tabs.append(raise_on_all_ranks(comm, lambda q=q, table=table: table(q)))
+    D, _, _, dl = facet_multipliers(particles, conds, quads, tabs, 1.0)
+    return D, dl
+
+
+def stack_rows(
+    comm: MPI.Comm,
+    mats: Sequence[PETSc.Mat | None],
+    row_layouts: Sequence[Layout],
+    col: Layout,
+) -> tuple[PETSc.Mat, Layout]:
+    """Rows of several matrices with the same columns stacked (rank by rank); ``None``: zero
+    rows (collective)."""
+    parts, total = [], 0
+    for A, rl in zip(mats, row_layouts, strict=True):
+        if A is None:
+            total += rl.size_local
+            continue
+        ai, aj, av = A.getValuesCSR()
+        rows = np.repeat(np.arange(rl.size_local), np.diff(ai)) + total
+        parts.append((rows, np.asarray(aj, dtype=np.int64), np.asarray(av)))
+        total += rl.size_local
+    lay = Layout.from_local(comm, total)
+    r, c, v = (np.concatenate([p[i] for p in parts] + [np.zeros(0)]) for i in range(3))
+    loc = sp.csr_matrix(
+        (v, (r.astype(np.int64) + lay.start, c.astype(np.int64))),
+        shape=(lay.size_global, col.size_global),
+    )
+    return create_aij(comm, loc, lay, col), lay

@@ -1,0 +1,159 @@
+"""The multiplier correction of the velocities: ``G v = 0`` after every step.
+
+Trial velocities ``vbar`` (Belytschko et al. 1995, eq. 93; Rabczuk et al. 2006, eq. 93) are
+projected onto the constraint in the mass metric (eq. 94–96):
+
+.. math::
+    (G M^{-1} G^T) \\lambda = G \\bar v, \\qquad v = \\bar v - M^{-1} G^T \\lambda.
+
+``S = G M^{-1} G^T`` is factorised once (dense Cholesky on every rank, or MUMPS), so each
+correction costs two sparse products with ``G`` and one triangular solve; ``G v`` stays at
+round-off. Dofs with ``M^{-1} = 0`` (held at rest) are not moved.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+from scipy.linalg import LinAlgError, cho_factor, cho_solve
+
+from .linalg import mumps_lu
+
+__all__ = ["MULTIPLIER_SOLVERS", "VelocityProjection", "check_multiplier_solver"]
+
+#: Factorisations of ``S`` (``None``: automatic, dense up to :data:`DENSE_MAX` multipliers).
+MULTIPLIER_SOLVERS = (None, "dense", "mumps")
+DENSE_MAX = 2000
+
+
+def check_multiplier_solver(solver: str | None) -> str | None:
+    """Return ``solver`` if known, else raise a ``ValueError`` naming the choices."""
+    if solver not in MULTIPLIER_SOLVERS:
+        raise ValueError(
+            f"multiplier_solver={solver!r} is not known; use None (automatic), 'dense' or 'mumps'"
+        )
+    return solver
+
+
+class VelocityProjection:
+    """The projection ``v -> v - M^{-1} G^T S^{-1} G v`` onto ``G v = 0`` (eq. 94–96).
+
+    Args:
+        G: The constraint blocks ``G_f`` of each field (``None`` for a field without).
+        minv: ``M^{-1}`` per field (0 on dofs held at rest).
+        comm: The communicator.
+        solver: ``"dense"`` (Cholesky on every rank, one ``Allgatherv`` of ``G v`` per step:
+            the fastest for interface-sized ``S``), ``"mumps"`` (distributed LU), or ``None``:
+            dense up to 2000 multipliers. The choice made is :attr:`solver`.
+
+    Raises:
+        ValueError: ``S`` is singular (dense): two constraints act on the same dofs only.
+    """
+
+    def __init__(
+        self,
+        G: Sequence[PETSc.Mat | None],
+        minv: Sequence[PETSc.Vec],
+        comm: MPI.Comm,
+        solver: str | None = None,
+    ):
+        self.G = list(G)
+        self.minv = list(minv)
+        self.comm = comm
+        self.ksp: PETSc.KSP | None = None
+        self.chol: tuple | None = None
+        self._work = [m.duplicate() for m in self.minv]
+        self._tmp = [m.duplicate() for m in self.minv]
+        S = None
+        for g, mi in zip(self.G, self.minv, strict=True):
+            if g is None:
+                continue
+            GT = g.transpose(PETSc.Mat())  # (without an argument petsc4py transposes in place)
+            GT.diagonalScale(L=mi)
+            Sf = g.matMult(GT)
+            GT.destroy()
+            if S is None:
+                S = Sf
+            else:
+                S.axpy(1.0, Sf, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+                Sf.destroy()
+        self.S: PETSc.Mat = S
+        size = S.getSize()[0]
+        if solver is None:
+            solver = "dense" if size <= DENSE_MAX else "mumps"
+        self.solver: str = solver
+        if solver == "dense":
+            self._dense(S, size)
+        else:
+            self.ksp = mumps_lu(S)
+        self._lam = S.createVecRight()
+        self._gv = S.createVecLeft()
+        self._gnorm = [0.0 if g is None else g.norm(PETSc.NormType.INFINITY) for g in self.G]
+
+    @property
+    def num_multipliers(self) -> int:
+        """Global number of multipliers (rows of ``G``)."""
+        return int(self.S.getSize()[0])
+
+    def _dense(self, S: PETSc.Mat, size: int) -> None:
+        """Small ``S``: every rank holds its Cholesky factor, one Allgatherv per step."""
+        ai, aj, av = S.getValuesCSR()
+        lo, hi = S.getOwnershipRange()
+        rows = np.repeat(np.arange(lo, hi), np.diff(ai))
+        parts = self.comm.allgather((rows, np.asarray(aj), np.asarray(av)))
+        dense = np.zeros((size, size))
+        for r, c, v in parts:
+            np.add.at(dense, (r, c), v)
+        try:
+            self.chol = cho_factor(dense)
+        except LinAlgError as e:
+            raise ValueError(
+                f"the constraint matrix G M^-1 G^T ({size} rows) is singular: two constraints "
+                "act on the same dofs only (e.g. an interface node on a fixed facet whose "
+                "particles are fixed too); fix fewer facets or move the interface"
+            ) from e
+        self._counts = np.array(self.comm.allgather(hi - lo))
+        self._full = np.zeros(size)
+
+    def correct(self, vel: Sequence[PETSc.Vec], impulse: Sequence[PETSc.Vec] | None = None) -> None:
+        """Project ``vel`` in place onto ``G v = 0``: solve ``S lambda = G v``, then
+        ``v -= M^{-1} G^T lambda``; ``impulse`` receives ``G_f^T lambda`` per field
+        (collective)."""
+        self._gv.set(0.0)
+        for g, x in zip(self.G, vel, strict=True):
+            if g is not None:
+                g.multAdd(x, self._gv, self._gv)
+        if self.ksp is not None:
+            self.ksp.solve(self._gv, self._lam)
+        else:
+            self.comm.Allgatherv(self._gv.array_r, [self._full, self._counts])
+            lam = cho_solve(self.chol, self._full)
+            lo, hi = self._lam.getOwnershipRange()
+            self._lam.array[:] = lam[lo:hi]
+        for k, (g, x) in enumerate(zip(self.G, vel, strict=True)):
+            if g is None:
+                continue
+            w = self._work[k] if impulse is None else impulse[k]
+            g.multTranspose(self._lam, w)
+            self._tmp[k].pointwiseMult(self.minv[k], w)
+            x.axpy(-1.0, self._tmp[k])
+
+    def residual(self, vel: Sequence[PETSc.Vec]) -> float:
+        """Relative residual ``|sum_f G_f v_f|_inf / sum_f |G_f|_inf |v_f|_inf`` (collective)."""
+        self._gv.set(0.0)
+        scale = 0.0
+        for g, x, gn in zip(self.G, vel, self._gnorm, strict=True):
+            if g is not None:
+                g.multAdd(x, self._gv, self._gv)
+                scale += gn * x.norm(PETSc.NormType.INFINITY)
+        r = self._gv.norm(PETSc.NormType.INFINITY)
+        return float(r / scale) if scale > 0 else float(r)
+
+    def destroy(self) -> None:
+        """Destroy the factorisation and work vectors (not ``G`` or ``M^{-1}``; collective)."""
+        for obj in (self.ksp, self.S, self._lam, self._gv, *self._work, *self._tmp):
+            if obj is not None:
+                obj.destroy()

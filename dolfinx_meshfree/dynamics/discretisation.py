@@ -1,0 +1,91 @@
+"""Where the dofs of an explicit model live: the FE space, the particles and their
+approximation, the patch and the coupling's interface.
+
+Loads, initial conditions and evaluation need the same facts about a model: the positions of
+each field's owned nodes or particles, which cells are particle cells and which are blended
+(ramp interface, bridging band), and the master–slave reduction of the particle coefficients.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import dolfinx
+import numpy as np
+from petsc4py import PETSc
+
+from ..approx.mls import MLS
+from ..bridging import BridgingBand
+from ..geometry.particles import ParticleSet
+from ..geometry.patch import ParticlePatch
+from ..ramp import RampInterface
+from ..statics.efg import _vector_values
+from .system import Field
+
+__all__ = ["Discretisation", "vector_values"]
+
+VectorFunction = Callable[[np.ndarray], np.ndarray]
+
+
+def vector_values(fn: Callable[..., np.ndarray], *args: np.ndarray) -> np.ndarray:
+    """``fn(*args)`` as an (m, 2) float array, ``m = len(args[0])``, else a ``ValueError``."""
+    return _vector_values(fn, args, args[0].shape[0], "the function")
+
+
+@dataclass
+class Discretisation:
+    """The spaces of an explicit model (``None`` where a model has none).
+
+    Attributes:
+        fields: The fields of the system (FE first).
+        V: The FE space. mls: The particles' approximation (MLS, or the hybrid's evaluator).
+        particles: The particle set. mesh: The mesh. in_patch: bool per local cell: a
+            particle cell. patch: The particle patch.
+        interface: The coupling's interface: a :class:`~dolfinx_meshfree.ramp.RampInterface`
+            (blended interface cells) or a :class:`~dolfinx_meshfree.bridging.BridgingBand`
+            (weighted band cells).
+        reduction: ``(T_PF, S)`` when the particle field holds master particles only
+            (master–slave): the particle coefficients are ``T_PF d_FE + S d_M``.
+    """
+
+    fields: Sequence[Field]
+    V: dolfinx.fem.FunctionSpace | None = None
+    mls: MLS | None = None
+    particles: ParticleSet | None = None
+    mesh: dolfinx.mesh.Mesh | None = None
+    in_patch: np.ndarray | None = None
+    patch: ParticlePatch | None = None
+    interface: RampInterface | BridgingBand | None = None
+    reduction: tuple[PETSc.Mat, PETSc.Mat] | None = None
+
+    def blended_cells(self) -> np.ndarray | None:
+        """bool per local cell: a ramp interface cell or a bridging band cell (else ``None``)."""
+        if self.interface is None:
+            return None
+        for name in ("in_interface", "in_band"):
+            flags = getattr(self.interface, name, None)
+            if flags is not None:
+                return flags
+        return None
+
+    def on_particles(self, cells: np.ndarray) -> np.ndarray:
+        """bool per given local cell: a particle cell (pure EFG: every cell)."""
+        if self.in_patch is not None:
+            return self.in_patch[cells]
+        return np.full(np.asarray(cells).size, self.V is None)
+
+    def owned_particles(self) -> np.ndarray:
+        """Local indices of the owned particles in PETSc order."""
+        P = self.particles
+        return P.owned[np.argsort(P.petsc_index[P.owned], kind="stable")]
+
+    def owned_points(self, k: int) -> np.ndarray:
+        """Positions (owned, in PETSc order) of field ``k``'s nodes or particles."""
+        f = self.fields[k]
+        if f.points is not None:
+            return f.points
+        if f.name == "fe":
+            n_owned = self.V.dofmap.index_map.size_local
+            return self.V.tabulate_dof_coordinates()[:n_owned, :2]
+        return self.particles.positions[self.owned_particles()]

@@ -1,0 +1,188 @@
+"""The displacement or velocity of an explicit model anywhere: at points, at quadrature points,
+as DOLFINx Functions, and its relative L2 error (Rabczuk et al. 2006, eq. 137).
+
+FE on FE cells, the particles' approximation on particle cells, the ramp's blended functions on
+interface cells (Belytschko et al. 1995, eq. 3.15) and ``(1 - alpha) u_FE + alpha u_P`` on
+bridging band cells (Rabczuk et al. 2006, eq. 46–48); master–slave expands the slaves
+(``u_P = T_PF u_FE + S u_M``, eq. 27).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import dolfinx
+import numpy as np
+import numpy.typing as npt
+import scipy.sparse as sp
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from ..approx.fe_points import ensure_points_in_mesh, evaluate_fe_function, tabulate_in_cells
+from ..bridging import BridgingBand, BridgingSolution
+from ..geometry.quadrature import QuadraturePoints, cell_quadrature
+from ..parallel import raise_on_all_ranks
+from ..ramp import RampInterface
+from ..statics.coupled import CoupledSolution
+from .discretisation import Discretisation
+
+__all__ = ["FieldEvaluator"]
+
+Tables = tuple[QuadraturePoints, sp.csr_matrix | None, sp.csr_matrix | None]
+
+
+class FieldEvaluator:
+    """Evaluates fields given by their dof vectors (one per field) on a discretisation.
+
+    Collective throughout; the quadrature tables are cached per degree.
+    """
+
+    def __init__(self, disc: Discretisation, comm: MPI.Comm):
+        self.disc = disc
+        self.comm = comm
+        self._tables: dict[int, Tables] = {}
+
+    def local_values(
+        self, vecs: Sequence[PETSc.Vec], particles: bool = True
+    ) -> tuple[dolfinx.fem.Function | None, np.ndarray | None]:
+        """(FE Function with ghosts or None, particle coefficients (n, 2) or None); with
+        ``particles=False`` the particle coefficients are not gathered (``None``)."""
+        d = self.disc
+        fe, coeffs = None, None
+        for f, x in zip(d.fields, vecs, strict=True):
+            if f.name != "fe" and not particles:
+                continue
+            if f.name == "fe":
+                fe = dolfinx.fem.Function(d.V)
+                fe.x.array[: x.getLocalSize()] = x.array_r
+                fe.x.scatter_forward()
+            else:
+                if d.reduction is not None:  # master-slave: u_P = T_PF u_FE + S u_M
+                    Tpf, S = d.reduction
+                    full = Tpf.createVecLeft()
+                    Tpf.mult(vecs[0], full)
+                    S.multAdd(x, full, full)
+                    owned = np.concatenate(self.comm.allgather(full.array_r.copy()))
+                    full.destroy()
+                else:
+                    owned = np.concatenate(self.comm.allgather(x.array_r.copy()))
+                coeffs = owned.reshape(-1, 2)[d.particles.petsc_index]
+        return fe, coeffs
+
+    def at_points(self, vecs: Sequence[PETSc.Vec], points: npt.ArrayLike) -> np.ndarray:
+        """The field with dof values ``vecs`` at this rank's points (m, 2) -> (m, 2).
+
+        Raises:
+            PointsOutsideMeshError: a point is outside the body (on every rank).
+        """
+        d = self.disc
+        fe, coeffs = self.local_values(vecs)
+        if coeffs is None:
+            return evaluate_fe_function(fe, points)
+        if fe is None:
+            x = ensure_points_in_mesh(d.mesh, points)
+            return d.mls.tabulate(x, 0).values @ coeffs
+        ramp = d.interface if isinstance(d.interface, RampInterface) else None
+        sol = CoupledSolution(u=fe, coefficients=coeffs, mls=d.mls, patch=d.patch, interface=ramp)
+        if isinstance(d.interface, BridgingBand):
+            sol = BridgingSolution(u=fe, coefficients=coeffs, mls=d.mls, patch=d.patch)
+            sol.band = d.interface
+        return sol.displacement(points)
+
+    def fe_function(self, vecs: Sequence[PETSc.Vec], name: str) -> dolfinx.fem.Function:
+        """The FE field of ``vecs`` as a new Function named ``name`` (ghosts updated)."""
+        fe, _ = self.local_values(vecs, particles=False)
+        fe.name = name
+        return fe
+
+    def quadrature_tables(self, degree: int) -> Tables:
+        """Cell quadrature and the maps ``(A_FE, A_P)`` (nq x local FE nodes, nq x particles)
+        from FE nodal values and particle coefficients to the field at its points: FE on FE
+        cells, MLS on particle cells, the ramp's blended functions on interface cells and
+        ``(1 - alpha) N, alpha phi`` on bridging band cells (cached)."""
+        if degree in self._tables:
+            return self._tables[degree]
+        d = self.disc
+        q = cell_quadrature(d.mesh, degree)
+        nq = len(q)
+        on_p = d.on_particles(q.cells)
+        blended = d.blended_cells()
+        mixed = blended[q.cells] if blended is not None else np.zeros(nq, dtype=bool)
+        n_fe = d.V.dofmap.index_map.size_local + d.V.dofmap.index_map.num_ghosts if d.V else 0
+        n_p = d.particles.num_particles if d.particles is not None else 0
+        parts_fe: list = []
+        parts_p: list = []
+
+        def add(parts, rows, mat):
+            c = mat.tocoo()
+            parts.append((rows[c.row], c.col, c.data))
+
+        pure_fe = np.flatnonzero(~on_p & ~mixed)
+        pure_p = np.flatnonzero(on_p & ~mixed)
+        mix = np.flatnonzero(mixed)
+        if d.V is not None and pure_fe.size:
+            add(
+                parts_fe,
+                pure_fe,
+                tabulate_in_cells(d.V, q.points[pure_fe], q.cells[pure_fe], 0).values,
+            )
+        if d.mls is not None:
+            pts = q.points[pure_p]
+            t = raise_on_all_ranks(self.comm, lambda: d.mls.tabulate(pts, 0)).values
+            add(parts_p, pure_p, t)
+        if blended is not None:
+            pts, cells = q.points[mix], q.cells[mix]
+            if hasattr(d.interface, "in_interface"):  # ramp: [FE nodes | particles] columns
+                t = raise_on_all_ranks(self.comm, lambda: d.interface.table(pts, cells, 0))
+                t = t.values.tocsc()
+                add(parts_fe, mix, t[:, :n_fe])
+                add(parts_p, mix, t[:, n_fe:])
+            else:  # bridging band: (1 - alpha) u_FE + alpha u_P
+                a = d.interface.alpha_at(pts, cells)
+                t_fe = tabulate_in_cells(d.V, pts, cells, 0).values
+                t_p = raise_on_all_ranks(self.comm, lambda: d.mls.tabulate(pts, 0)).values
+                add(parts_fe, mix, sp.diags(1.0 - a) @ t_fe)
+                add(parts_p, mix, sp.diags(a) @ t_p)
+
+        def assemble(parts, ncols):
+            if not ncols:
+                return None
+            r, c, v = (np.concatenate([p[i] for p in parts] + [np.zeros(0)]) for i in range(3))
+            return sp.csr_matrix((v, (r.astype(np.int64), c.astype(np.int64))), shape=(nq, ncols))
+
+        self._tables[degree] = (q, assemble(parts_fe, n_fe), assemble(parts_p, n_p))
+        return self._tables[degree]
+
+    def at_quadrature(
+        self, vecs: Sequence[PETSc.Vec], degree: int = 5
+    ) -> tuple[QuadraturePoints, np.ndarray]:
+        """Cell quadrature of degree ``degree`` on the owned cells and the field (nq, 2)
+        there."""
+        q, A_fe, A_p = self.quadrature_tables(degree)
+        fe, coeffs = self.local_values(vecs)
+        vals = np.zeros((len(q), 2))
+        if A_fe is not None:
+            vals += A_fe @ fe.x.array.reshape(-1, 2)
+        if A_p is not None:
+            vals += A_p @ coeffs
+        return q, vals
+
+    def relative_error(
+        self,
+        vecs: Sequence[PETSc.Vec],
+        exact: Callable[[np.ndarray, float], np.ndarray],
+        time: float,
+        degree: int = 5,
+    ) -> float:
+        """Relative L2 error ``|f_h - f| / |f|`` of the field against ``exact(points, time)``
+        (Rabczuk et al. 2006, eq. 137), integrated on the owned cells (same on every rank)."""
+        q, vh = self.at_quadrature(vecs, degree)
+        ve = np.asarray(exact(q.points, time), dtype=float)
+        s = np.array(
+            [
+                np.sum(q.weights * np.sum((vh - ve) ** 2, axis=1)),
+                np.sum(q.weights * np.sum(ve**2, 1)),
+            ]
+        )
+        s = self.comm.allreduce(s, op=MPI.SUM)
+        return float(np.sqrt(s[0] / s[1])) if s[1] > 0 else float(np.sqrt(s[0]))

@@ -1,0 +1,451 @@
+"""The public entry point of explicit dynamics: :class:`ExplicitDynamics`.
+
+Semi-discrete equations of motion (Belytschko et al. 1995, eq. 4.4–4.5; Rabczuk et al. 2006,
+eq. 86–92), one block per field (FE nodes, particles):
+
+.. math::
+    M \\ddot d + f^{int}(d) = f^{ext} + G^T \\lambda, \\qquad G \\dot d = 0,
+
+with ``M`` lumped (row sums, :mod:`~dolfinx_meshfree.dynamics.masses`), ``f^int(d) = K d`` for
+linear
+elasticity (:class:`~dolfinx_meshfree.dynamics.system.LinearSystem`: diagonal blocks per field
+and, for the ramp couplings, the bridging penalty, master–slave and the hybrid coupling,
+off-diagonal blocks), and ``G`` the constraint blocks (interface multipliers, and essential
+conditions on particles). The facade puts together one module per idea: the system, central
+differences (:mod:`~dolfinx_meshfree.dynamics.central_difference`), the multiplier correction
+(:mod:`~dolfinx_meshfree.dynamics.constraint`), the stable step
+(:mod:`~dolfinx_meshfree.dynamics.time_step`), the loads, the initial conditions, the
+evaluation and the builders of every method (:mod:`~dolfinx_meshfree.dynamics.builders`).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable, Sequence
+
+import dolfinx
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from ..approx.mls import MLS
+from ..bridging import BridgingBand
+from ..couplings.hybrid import HybridElasticity
+from ..geometry.particles import ParticleSet
+from ..geometry.patch import ParticlePatch
+from ..geometry.quadrature import QuadraturePoints
+from ..io import DynamicsWriter, ProgressBar
+from ..physics.materials import LinearElastic
+from ..ramp import RampInterface
+from ..statics.coupled import CoupledElasticity
+from .builders import Model, build_coupled, build_efg, build_fe
+from .central_difference import CentralDifference, schedule
+from .constraint import VelocityProjection, check_multiplier_solver
+from .discretisation import Discretisation, VectorFunction
+from .energy import EnergyRecord
+from .evaluation import FieldEvaluator
+from .initial import check_particle_values, initial_values
+from .loads import Amplitude, BodyLoad, ExternalLoads, Traction
+from .results import DynamicsResult
+from .system import Field, LinearSystem, inverse_masses
+from .time_step import TimeStepBound, check_safety
+
+__all__ = ["ExplicitDynamics"]
+
+OnOutput = Callable[["ExplicitDynamics", int, float], None]
+
+
+class ExplicitDynamics:
+    """Central-difference explicit dynamics of linear elasticity, FE, EFG or coupled.
+
+    Build with :meth:`fe`, :meth:`efg` or :meth:`coupled` (every coupling of
+    :data:`~dolfinx_meshfree.dynamics.DYNAMICS_METHODS`); set the initial state with
+    :meth:`set_initial`; optionally :meth:`add_traction` and :meth:`add_body_force`; then
+    :meth:`run`. The velocity can be evaluated at any points (:meth:`velocity_at`) and compared
+    with an exact solution (:meth:`velocity_error`, Rabczuk et al. 2006, eq. 137) after a run,
+    at the final time or in the ``on_output`` callback. Collective throughout.
+
+    Args:
+        fields: One or two :class:`~dolfinx_meshfree.dynamics.system.Field` (FE first).
+        material: The :class:`~dolfinx_meshfree.LinearElastic` law (density and wave speed).
+        constraint: The constraint blocks ``G_f`` of each field (``None`` for a field without),
+            or ``None``: no constraint.
+        safety: Fraction of the critical time step used by default and allowed without
+            ``force`` (0 < safety <= 1).
+        blocks: Off-diagonal stiffness blocks ``{(k, l): K_kl}`` (rows of field ``k``, columns
+            of field ``l``).
+        multiplier_solver: How ``S = G M^{-1} G^T`` is factorised (once): ``"dense"``
+            (Cholesky on every rank, one ``Allgatherv`` of ``G v`` per step: the fastest for
+            interface-sized ``S``), ``"mumps"`` (distributed LU), or ``None``: dense up to
+            2000 multipliers.
+        V, mls, particles, mesh, in_patch, patch, interface, reduction: The spaces, for
+            loads and evaluation (see
+            :class:`~dolfinx_meshfree.dynamics.discretisation.Discretisation`).
+        body_load: ``body_load(b) -> (fe, particles)``: the consistent loads of a body force
+            (set by the builders, :class:`~dolfinx_meshfree.dynamics.loads.ExternalLoads`);
+            ``None``: :meth:`add_body_force` uses the lumped masses.
+
+    Attributes:
+        system: The :class:`~dolfinx_meshfree.dynamics.system.LinearSystem`.
+        projection: The :class:`~dolfinx_meshfree.dynamics.constraint.VelocityProjection`, or
+            ``None`` without a constraint.
+        u, v: ``d_n`` and ``v_{n-1/2}`` per field (PETSc vectors).
+    """
+
+    def __init__(
+        self,
+        fields: Sequence[Field],
+        material: LinearElastic,
+        constraint: Sequence[PETSc.Mat | None] | None = None,
+        safety: float = 0.9,
+        *,
+        blocks: dict[tuple[int, int], PETSc.Mat] | None = None,
+        V: dolfinx.fem.FunctionSpace | None = None,
+        mls: MLS | None = None,
+        particles: ParticleSet | None = None,
+        mesh: dolfinx.mesh.Mesh | None = None,
+        in_patch: np.ndarray | None = None,
+        patch: ParticlePatch | None = None,
+        interface: RampInterface | BridgingBand | None = None,
+        reduction: tuple[PETSc.Mat, PETSc.Mat] | None = None,
+        timings: dict | None = None,
+        multiplier_solver: str | None = None,
+        body_load: BodyLoad | None = None,
+    ):
+        check_safety(safety)
+        check_multiplier_solver(multiplier_solver)
+        self.system = LinearSystem(fields, blocks, constraint)
+        self.fields, self.blocks, self.G = self.system.fields, self.system.blocks, self.system.G
+        self.material = material
+        self.V, self.mls, self.particles, self.mesh = V, mls, particles, mesh
+        self.in_patch, self.patch = in_patch, patch
+        self.interface, self.reduction = interface, reduction
+        disc = Discretisation(
+            self.system.fields, V, mls, particles, mesh, in_patch, patch, interface, reduction
+        )
+        self.comm = self.fields[0].mass.getComm().tompi4py()
+        self.timings = dict(timings or {})
+        t0 = time.perf_counter()
+        self._minv, self.active, self.free = inverse_masses(self.fields)
+        self.multiplier_solver = multiplier_solver
+        self.projection: VelocityProjection | None = None
+        if self.G is not None:
+            self.projection = VelocityProjection(self.G, self._minv, self.comm, multiplier_solver)
+            self.multiplier_solver = self.projection.solver
+        self.bound = TimeStepBound(self.system, material, self._minv, self.free, self.comm, safety)
+        self.loads = ExternalLoads(disc, self.free, self.comm, material.rho, body_load)
+        self.stepper = CentralDifference(self.system, self._minv, self.loads, self.projection)
+        self.evaluator = FieldEvaluator(disc, self.comm)
+        self.u, self.v = self.stepper.u, self.stepper.v
+        self.timings["setup"] = self.timings.get("setup", 0.0) + time.perf_counter() - t0
+
+    @classmethod
+    def _from_model(
+        cls, model: Model, safety: float, multiplier_solver: str | None = None
+    ) -> ExplicitDynamics:
+        return cls(**model.arguments(), safety=safety, multiplier_solver=multiplier_solver)
+
+    @classmethod
+    def fe(
+        cls,
+        V: dolfinx.fem.FunctionSpace,
+        material: LinearElastic,
+        safety: float = 0.9,
+        fixed_facets: npt.ArrayLike | None = None,
+    ) -> ExplicitDynamics:
+        """Pure FE: DOLFINx's stiffness ``inner(sigma(u), eps(v)) dx`` and row-sum masses.
+
+        ``fixed_facets``: owned exterior facets whose nodes are held at rest (strongly).
+        """
+        check_safety(safety)
+        return cls._from_model(build_fe(V, material, fixed_facets), safety)
+
+    @classmethod
+    def efg(
+        cls,
+        particles: ParticleSet,
+        material: LinearElastic,
+        weight: str = "quartic",
+        dilation: float = 2.0,
+        basis: str = "linear",
+        quadrature_degree: int = 7,
+        particle_mass: str = "row-sum",
+        safety: float = 0.9,
+        fixed_facets: npt.ArrayLike | None = None,
+        multiplier_solver: str | None = None,
+        integration: str = "cells",
+    ) -> ExplicitDynamics:
+        """Pure EFG on ``particles`` (Belytschko et al. 1995, sec. 5.2), on their background
+        cells or (``integration="stress-points"``) at the particles and stress points; fixed
+        facets by facet multipliers on the velocities. Arguments: see
+        :func:`~dolfinx_meshfree.dynamics.builders.build_efg`.
+        """
+        check_safety(safety)
+        check_multiplier_solver(multiplier_solver)
+        model = build_efg(
+            particles,
+            material,
+            weight=weight,
+            dilation=dilation,
+            basis=basis,
+            quadrature_degree=quadrature_degree,
+            particle_mass=particle_mass,
+            fixed_facets=fixed_facets,
+            integration=integration,
+        )
+        return cls._from_model(model, safety, multiplier_solver)
+
+    @classmethod
+    def coupled(
+        cls,
+        problem: CoupledElasticity | HybridElasticity,
+        particle_mass: str = "row-sum",
+        safety: float = 0.9,
+        multiplier_solver: str | None = None,
+        fixed_facets: npt.ArrayLike | None = None,
+        integration: str = "cells",
+        slaves: str = "layer",
+    ) -> ExplicitDynamics:
+        """A :class:`~dolfinx_meshfree.CoupledElasticity` (any coupling) or a
+        :class:`~dolfinx_meshfree.HybridElasticity` in dynamics, from the static problem's
+        operators (:meth:`CoupledElasticity.operators`: stiffness and constraint blocks, MLS,
+        quadrature, interface shape functions). Give loads with :meth:`add_traction` and
+        :meth:`add_body_force`. ``integration="stress-points"``: Lagrangian-kernel stress
+        points (lagrange, edge-to-edge, master-slave); ``slaves="coincident"``: Johnson's
+        coupling (master-slave, Rabczuk et al. 2006, eq. 15–16). Arguments: see
+        :func:`~dolfinx_meshfree.dynamics.builders.build_coupled`.
+        """
+        check_safety(safety)
+        check_multiplier_solver(multiplier_solver)
+        model = build_coupled(problem, particle_mass, fixed_facets, integration, slaves)
+        return cls._from_model(model, safety, multiplier_solver)
+
+    @property
+    def safety(self) -> float:
+        """Fraction of the critical time step used by default."""
+        return self.bound.safety
+
+    @property
+    def step(self) -> int:
+        """The current step."""
+        return self.stepper.step
+
+    @property
+    def time(self) -> float:
+        """The current time."""
+        return self.stepper.time
+
+    def constraint_residual(self, vel: list[PETSc.Vec] | None = None) -> float:
+        """Relative residual ``|sum_f G_f v_f|_inf / sum_f |G_f|_inf |v_f|_inf`` (collective);
+        0 without a constraint. Default: the velocities at the current time."""
+        return self.stepper.residual(vel)
+
+    def critical_time_step(self, iterations: int = 30) -> dict:
+        """Critical time step ``2 / omega_bound`` from an upper bound of ``omega_max``
+        (collective, computed once): see :mod:`~dolfinx_meshfree.dynamics.time_step`.
+
+        Returns:
+            ``{"courant": h_min / c, "spectral": 2 / omega_bound, "critical": the same (the
+            guard), "omega_bound": ..., "gershgorin": 2 / (the row-sum bound with y = 1),
+            "h_min": ..., "wave_speed": ...}``.
+        """
+        return self.bound.critical(iterations)
+
+    def stable_time_step(self) -> float:
+        """``safety`` times the critical time step (collective)."""
+        return self.bound.stable()
+
+    def set_initial(
+        self,
+        velocity: VectorFunction | None = None,
+        displacement: VectorFunction | None = None,
+        particle_values: str = "collocation",
+    ) -> None:
+        """Initial displacement and velocity from functions of position (m, 2) -> (m, 2).
+
+        FE dofs take the nodal values; particle coefficients either reproduce the values at the
+        particles (``"collocation"``: ``Phi(x_J) c = f(x_J)``, one sparse LU, MLS being not
+        interpolating) or take them (``"nodal"``); master–slave keeps the masters' values. Fixed
+        dofs start at rest. With a constraint, both fields are then projected onto ``G d = 0``,
+        ``G v = 0`` in the mass metric. Resets time to 0.
+        """
+        check_particle_values(particle_values)
+        disc = self.evaluator.disc
+        for target, fn, mask in (
+            (self.u, displacement, self.active),
+            (self.v, velocity, self.free),
+        ):
+            for k in range(len(self.fields)):
+                target[k].set(0.0)
+                if fn is not None:
+                    vals = initial_values(disc, k, fn, particle_values, self.comm)
+                    target[k].array[:] = vals * mask[k]
+            if fn is not None and self.projection is not None:
+                self.projection.correct(target)
+        self.stepper.reset()
+
+    def add_traction(
+        self, facets: npt.ArrayLike, traction: Traction, amplitude: Amplitude | None = None
+    ) -> None:
+        """External load ``amplitude(t) * traction(x, n)`` on owned exterior facets: see
+        :meth:`ExternalLoads.add_traction
+        <dolfinx_meshfree.dynamics.loads.ExternalLoads.add_traction>` (collective)."""
+        self.loads.add_traction(facets, traction, amplitude)
+
+    def add_body_force(self, force: VectorFunction, amplitude: Amplitude | None = None) -> None:
+        """External load ``amplitude(t) * int b . v`` of a body force ``b(x)`` per unit volume
+        on the whole body: see :meth:`ExternalLoads.add_body_force
+        <dolfinx_meshfree.dynamics.loads.ExternalLoads.add_body_force>` (collective)."""
+        self.loads.add_body_force(force, amplitude)
+
+    def run(
+        self,
+        t_end: float,
+        dt: float | None = None,
+        *,
+        force: bool = False,
+        outputs: Sequence[float] = (),
+        energy_records: int = 100,
+        on_output: OnOutput | None = None,
+        xdmf: str | os.PathLike | None = None,
+        progress: bool | None = None,
+    ) -> DynamicsResult:
+        """Integrate from the current time to ``t_end`` (Belytschko et al. 1995, sec. 5.2;
+        Rabczuk et al. 2006, Table I; :mod:`~dolfinx_meshfree.dynamics.central_difference`).
+        Collective.
+
+        Args:
+            t_end: Final time (> current time).
+            dt: Requested time step; default the stable one (:meth:`stable_time_step`). The step
+                actually used is ``(t_end - t) / ceil((t_end - t) / dt)`` so that ``t_end`` is
+                hit exactly.
+            force: Allow ``dt`` above the stable step.
+            outputs: Times at which ``on_output(self, step, time)`` is called with the state at
+                the nearest step (``velocity_at``/``velocity_error`` then see ``v_n``).
+            energy_records: About how many :class:`EnergyRecord` to keep (outputs added).
+            on_output: ``on_output(self, step, time)``, called at each output time, e.g. a
+                :class:`~dolfinx_meshfree.io.DynamicsWriter`.
+            xdmf: An output prefix: write the FE fields, the particle cloud and the energy
+                records at every output time through a
+                :class:`~dolfinx_meshfree.io.DynamicsWriter` made (and closed) for this run,
+                before ``on_output`` is called; without ``outputs``, at the current time and at
+                ``t_end``. A second run with the same prefix overwrites the files (pass one
+                writer as ``on_output`` to several runs to append instead).
+            progress: A progress bar on rank 0's stderr (:class:`~dolfinx_meshfree.io.ProgressBar`):
+                ``True`` on, ``False`` off, ``None`` on when stderr is a terminal.
+
+        Raises:
+            ValueError: ``dt`` not positive, above the stable step without ``force``, or
+                ``t_end`` not after the current time; ``progress`` not a bool or ``None``; an
+                unusable ``xdmf`` prefix (on every rank, before any file is written).
+        """
+        crit = self.critical_time_step()
+        span = float(t_end) - self.time
+        if not (np.isfinite(span) and span > 0.0):
+            raise ValueError(f"t_end={t_end!r} must lie after the current time {self.time}")
+        nsteps, dt = self.bound.steps_to(span, dt, force)
+        n0, t0 = self.step, self.time
+        progress_bar = ProgressBar(nsteps, self.comm, progress, label="explicit dynamics ")
+        writer = DynamicsWriter(xdmf, self) if xdmf is not None else None
+        if writer is not None and not len(outputs):
+            outputs = (t0, float(t_end))
+
+        def notify(n: int, t: float) -> None:
+            if writer is not None:
+                writer(self, n, t)
+            if on_output is not None:
+                on_output(self, n, t)
+
+        out_steps, energy_steps = schedule(n0, t0, nsteps, dt, outputs, energy_records)
+        try:
+            done = self.stepper.advance(
+                nsteps, dt, span, out_steps, energy_steps, notify, progress_bar
+            )
+        finally:
+            if writer is not None:
+                writer.close()
+        return DynamicsResult(
+            dt=dt,
+            steps=nsteps,
+            time=self.time,
+            energies=done.records,
+            outputs=done.outputs,
+            critical={**crit, "stable": self.stable_time_step()},
+            timings=done.timings,
+        )
+
+    def _current(self) -> list[PETSc.Vec]:
+        """The velocity vectors at the current time (``v_n`` at outputs and after a run)."""
+        return self.stepper.current_velocity()
+
+    def _local_values(self, vecs: list[PETSc.Vec], particles: bool = True) -> tuple:
+        """(FE Function with ghosts or None, particle coefficients (n, 2) or None)."""
+        return self.evaluator.local_values(vecs, particles)
+
+    def velocity_at(self, points: npt.ArrayLike) -> np.ndarray:
+        """Velocity (m, 2) at this rank's points, which may lie anywhere in the mesh
+        (collective). Raises :class:`~dolfinx_meshfree.PointsOutsideMeshError` on every rank if
+        a point is outside the body."""
+        return self.evaluator.at_points(self._current(), points)
+
+    def displacement_at(self, points: npt.ArrayLike) -> np.ndarray:
+        """Displacement (m, 2) at this rank's points, like :meth:`velocity_at` (collective)."""
+        return self.evaluator.at_points(self.u, points)
+
+    def fe_functions(self) -> tuple[dolfinx.fem.Function, dolfinx.fem.Function]:
+        """The FE displacement and velocity at the current time as new DOLFINx Functions named
+        ``"displacement"`` and ``"velocity"`` (ghosts updated; collective). FE nodes outside
+        the FE field (touched by patch cells only) hold zero.
+
+        Raises:
+            ValueError: the model has no FE field (pure EFG).
+        """
+        if self.V is None:
+            raise ValueError("this model has no FE field (pure EFG): no FE functions")
+        u = self.evaluator.fe_function(self.u, "displacement")
+        return u, self.evaluator.fe_function(self._current(), "velocity")
+
+    @property
+    def energy_record(self) -> EnergyRecord | None:
+        """The latest :class:`EnergyRecord` (at an output time: that step's), or ``None``."""
+        records = self.stepper.records
+        return records[-1] if records else None
+
+    def velocity_at_quadrature(self, degree: int = 5) -> tuple[QuadraturePoints, np.ndarray]:
+        """Cell quadrature of degree ``degree`` on the owned cells and the velocity (nq, 2)
+        there: FE on FE cells, MLS on particle cells, blended on ramp interface and bridging
+        band cells (tables cached; collective)."""
+        return self.evaluator.at_quadrature(self._current(), degree)
+
+    def velocity_error(
+        self, exact: Callable[[np.ndarray, float], np.ndarray], degree: int = 5
+    ) -> float:
+        """Relative L2 velocity error ``|v_h - v| / |v|`` at the current time (Rabczuk et al.
+        2006, eq. 137), integrated on the owned cells (collective, same on every rank).
+
+        Args:
+            exact: ``exact(points (m, 2), t) -> (m, 2)``.
+        """
+        return self.evaluator.relative_error(self._current(), exact, self.time, degree)
+
+    def num_dofs(self) -> dict:
+        """Active FE dofs, particle dofs (master–slave: the masters) and multipliers (global)."""
+        out = {"fe_dofs": 0, "particle_dofs": 0, "multiplier_dofs": 0}
+        for f, act in zip(self.fields, self.active, strict=True):
+            key = "fe_dofs" if f.name == "fe" else "particle_dofs"
+            out[key] = int(self.comm.allreduce(int(act.sum()), op=MPI.SUM))
+        if self.projection is not None:
+            out["multiplier_dofs"] = self.projection.num_multipliers
+        return out
+
+    def destroy(self) -> None:
+        """Destroy the PETSc objects (collective)."""
+        self.stepper.destroy()
+        self.loads.destroy()
+        if self.projection is not None:
+            self.projection.destroy()
+        for obj in (*self._minv, *(self.reduction or ())):
+            obj.destroy()
+        self.system.destroy()

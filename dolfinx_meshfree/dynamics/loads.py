@@ -1,0 +1,192 @@
+"""External loads of explicit dynamics: tractions and body forces with time amplitudes.
+
+Each load is a vector per field and an amplitude ``a(t)``: the force at ``t`` is
+``a(t) f`` (Belytschko et al. 1995, eq. 4.5). Tractions are assembled with the FE basis on
+facets of FE cells and the particles' functions on facets of particle cells; body forces with
+the functions and weights of the masses (:mod:`~dolfinx_meshfree.physics.body_loads`), else lumped.
+Particle forces of master–slave reach the FE nodes and masters through ``T^T`` (Rabczuk et
+al. 2006, eq. 28). Fixed dofs carry no load.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import numpy as np
+import numpy.typing as npt
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from ..approx.fe_points import tabulate_in_cells
+from ..geometry.quadrature import facet_quadrature
+from ..parallel import raise_on_all_ranks
+from ..physics.operators import load_vector
+from ..statics.petsc import create_vector
+from .discretisation import Discretisation, VectorFunction, vector_values
+from .linalg import row_layout
+
+__all__ = ["Amplitude", "BodyLoad", "ExternalLoads"]
+
+Amplitude = Callable[[float], float]
+BodyLoad = Callable[[VectorFunction], tuple[np.ndarray | None, np.ndarray | None]]
+Traction = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+def _one(t: float) -> float:
+    return 1.0
+
+
+class ExternalLoads:
+    """The loads of a model: ``(vectors per field, amplitude)`` pairs.
+
+    Args:
+        disc: The model's spaces.
+        free: bool per owned dof of each field: not held at rest (loads are zeroed elsewhere).
+        comm: The communicator.
+        rho: The density (lumped body loads ``M b / rho``).
+        body_load: ``body_load(b) -> (fe, particles)``: the consistent loads of a body force
+            ``b(x)`` per owned FE dof and per particle dof (original interleaved order, this
+            rank's contributions), either ``None`` for a missing field; ``None``: lumped.
+    """
+
+    def __init__(
+        self,
+        disc: Discretisation,
+        free: Sequence[np.ndarray],
+        comm: MPI.Comm,
+        rho: float,
+        body_load: BodyLoad | None = None,
+    ):
+        self.disc, self.free, self.comm, self.rho = disc, list(free), comm, rho
+        self.body_load = body_load
+        self.loads: list[tuple[list[PETSc.Vec], Amplitude]] = []
+
+    def at(self, t: float) -> list[tuple[list[PETSc.Vec], float]]:
+        """The load vectors with their amplitudes at time ``t``."""
+        return [(vecs, a(t)) for vecs, a in self.loads]
+
+    def add_traction(
+        self, facets: npt.ArrayLike, traction: Traction, amplitude: Amplitude | None = None
+    ) -> None:
+        """``amplitude(t) * traction(x, n)`` on owned exterior facets (collective).
+
+        ``traction`` maps points (m, 2) and outward normals (m, 2) to tractions (m, 2), assembled
+        with the FE basis on facets of FE cells and with the MLS functions on facets of particle
+        cells (Belytschko et al. 1995, eq. 4.5). ``amplitude`` defaults to 1 (a step load).
+
+        Raises:
+            ValueError: a facet lies on a ramp interface or bridging band cell (on every rank).
+        """
+        d = self.disc
+        msh = d.mesh
+        deg = 4
+        facets = np.asarray(facets, dtype=np.int32)
+        msh.topology.create_connectivity(msh.topology.dim - 1, msh.topology.dim)
+        f2c = msh.topology.connectivity(msh.topology.dim - 1, msh.topology.dim)
+        first = np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]]
+        blended = d.blended_cells()
+
+        def check() -> None:
+            if blended is not None and np.any(blended[first]):
+                raise ValueError(
+                    f"{int(np.sum(blended[first]))} traction facet(s) lie on ramp interface or "
+                    "bridging band cells, where the load would need the blended functions; load "
+                    "facets of pure FE or particle cells"
+                )
+
+        raise_on_all_ranks(self.comm, check)
+        on_p = d.on_particles(first)
+        parts = []
+        for f in d.fields:
+            sel = facets[on_p] if f.name == "particles" else facets[~on_p]
+            q = facet_quadrature(msh, sel, deg)
+            t = raise_on_all_ranks(
+                self.comm, lambda q=q: vector_values(traction, q.points, q.normals)
+            )
+            if f.name == "fe":
+                imap = d.V.dofmap.index_map
+                l2g = np.asarray(
+                    imap.local_to_global(
+                        np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
+                    )
+                )
+                tab = tabulate_in_cells(d.V, q.points, q.cells, derivatives=0).values
+                fl = load_vector(tab, q.weights, t).reshape(-1, 2)
+                parts.append(((2 * l2g[: fl.shape[0], None] + np.arange(2)).ravel(), fl.ravel()))
+            else:
+                tab = raise_on_all_ranks(self.comm, lambda q=q: d.mls.tabulate(q.points, 0))
+                parts.append(
+                    (d.particles.petsc_dofs(2).ravel(), load_vector(tab.values, q.weights, t))
+                )
+        self._add(parts, amplitude)
+
+    def add_body_force(self, force: VectorFunction, amplitude: Amplitude | None = None) -> None:
+        """``amplitude(t) * int b . v`` of a body force ``b(x)`` per unit volume (points (m, 2)
+        -> (m, 2)) on the whole body (collective).
+
+        FE, EFG and every coupling integrate it with the functions and weights of their masses
+        and stiffness (``body_load``, :mod:`~dolfinx_meshfree.physics.body_loads`: ramp interface
+        cells
+        blended, eq. 3.15 of Belytschko et al. 1995; bridging band weighted by ``1 - alpha`` and
+        ``alpha``, Rabczuk et al. 2006, eq. 49; master-slave through ``T^T``, eq. 28); other
+        models take the lumped load ``M b(x_I) / rho`` at their nodes and particles, exact for
+        a constant ``b``. ``amplitude`` defaults to 1 (a step load).
+        """
+        d = self.disc
+        if self.body_load is not None:
+            fe, f_p = self.body_load(force)
+            parts = []
+            for f in d.fields:
+                if f.name == "fe":
+                    lo, hi = f.mass.getOwnershipRange()
+                    parts.append((np.arange(lo, hi), fe))
+                else:
+                    parts.append((d.particles.petsc_dofs(2).ravel(), f_p))
+            self._add(parts, amplitude)
+            return
+        vecs = []
+        for k, f in enumerate(d.fields):
+            x = d.owned_points(k)
+            b = raise_on_all_ranks(self.comm, lambda x=x: vector_values(force, x))
+            vec = f.mass.duplicate()
+            vec.array[:] = f.mass.array_r * b.ravel() / self.rho
+            vecs.append(vec)
+        self._add_vectors(vecs, amplitude)
+
+    def _add(self, parts: list, amplitude: Amplitude | None) -> None:
+        """Add a load given per field as ``(global dofs, values)`` (any rank may add any dof; a
+        master-slave particle field's values are reduced to the FE nodes and masters by
+        ``T^T``, eq. 28). Collective."""
+        d = self.disc
+        vecs: list[PETSc.Vec] = []
+        for f, (rows, vals) in zip(d.fields, parts, strict=True):
+            if d.reduction is not None and f.name == "particles":
+                # master-slave: particle forces reach the masters through T^T (eq. 28)
+                Tpf, S = d.reduction
+                full = create_vector(self.comm, row_layout(S), rows, vals)
+                b = S.createVecRight()
+                S.multTranspose(full, b)
+                Tpf.multTransposeAdd(full, vecs[0], vecs[0])
+                full.destroy()
+                vecs.append(b)
+                continue
+            b = f.mass.duplicate()
+            b.set(0.0)
+            b.setValues(rows.astype(PETSc.IntType), vals, addv=PETSc.InsertMode.ADD_VALUES)
+            b.assemblyBegin()
+            b.assemblyEnd()
+            vecs.append(b)
+        self._add_vectors(vecs, amplitude)
+
+    def _add_vectors(self, vecs: list[PETSc.Vec], amplitude: Amplitude | None) -> None:
+        for k, b in enumerate(vecs):  # no load on fixed dofs
+            b.array[:] = b.array_r * self.free[k]
+        self.loads.append((vecs, amplitude if amplitude is not None else _one))
+
+    def destroy(self) -> None:
+        """Destroy the load vectors (collective)."""
+        for vecs, _ in self.loads:
+            for b in vecs:
+                if b is not None:
+                    b.destroy()
+        self.loads = []

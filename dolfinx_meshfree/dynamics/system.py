@@ -1,0 +1,198 @@
+"""The semi-discrete system of explicit dynamics: masses, internal force, tangent, constraints.
+
+Central differences need only these (Belytschko et al. 1995, eq. 4.4–4.5; Rabczuk et al. 2006,
+eq. 86–92): the lumped masses ``M``, the internal force ``f^int(d)``, the constraint blocks
+``G`` of ``G \\dot d = 0`` and, for the stable step, the tangent ``df^int/dd``:
+
+.. math::
+    M \\ddot d + f^{int}(d) = f^{ext} + G^T \\lambda, \\qquad G \\dot d = 0.
+
+:class:`SemiDiscreteSystem` is that interface; :class:`LinearSystem` is its linear member,
+wrapping the assembled blocks of today's builders: ``f^int(d) = K d`` and the strain energy
+``1/2 d^T K d``. A finite-deformation system gives ``f^int(d) = sum_q B_0^T P(F_q) w_q`` and
+the stored energy ``W(F)`` through the same methods.
+
+Each system is split into fields (:class:`Field`: FE nodes, particles), one PETSc vector per
+field; the lists of vectors below have one entry per field, in the order of the fields.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Sequence
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+from petsc4py import PETSc
+
+__all__ = ["Field", "LinearSystem", "SemiDiscreteSystem", "inverse_masses"]
+
+Blocks = dict[tuple[int, int], PETSc.Mat]
+
+
+@dataclass
+class Field:
+    """One discretisation of an explicit system: stiffness and lumped masses of its dofs.
+
+    Attributes:
+        name: ``"fe"`` or ``"particles"``.
+        K: Assembled stiffness (PETSc, owned rows).
+        mass: Lumped masses (PETSc vector, same layout); 0 marks dofs outside the field (FE nodes
+            that only patch cells touch), which the integrator holds at rest.
+        spacing: Smallest node or particle spacing (for the Courant condition).
+        points: (owned nodes, 2) positions of the owned nodes/particles in PETSc order (two dofs
+            each); ``None``: derived from the field's space or particle set.
+        fixed: bool per owned dof: held at zero velocity and acceleration (strong essential
+            conditions: ``M^{-1} = 0`` there); ``None``: none.
+    """
+
+    name: str
+    K: PETSc.Mat
+    mass: PETSc.Vec
+    spacing: float
+    points: np.ndarray | None = None
+    fixed: np.ndarray | None = None
+
+
+def inverse_masses(
+    fields: Sequence[Field],
+) -> tuple[list[PETSc.Vec], list[np.ndarray], list[np.ndarray]]:
+    """``M^{-1}`` per field (0 on dofs held at rest: massless or fixed), and per field the
+    dofs with mass (``active``) and those free to move (``free``)."""
+    minv, active, free = [], [], []
+    for f in fields:
+        mi = f.mass.duplicate()
+        m = f.mass.array_r
+        on = m > 0.0
+        if f.fixed is not None:
+            on &= ~f.fixed
+        mi.array[:] = np.where(on, 1.0 / np.where(m > 0.0, m, 1.0), 0.0)
+        minv.append(mi)
+        active.append(m > 0.0)
+        free.append(on)
+    return minv, active, free
+
+
+@runtime_checkable
+class SemiDiscreteSystem(Protocol):
+    """What explicit dynamics asks of a discretisation (collective methods).
+
+    Attributes:
+        fields: The fields, FE first: each gives its lumped masses and node spacing.
+    """
+
+    fields: list[Field]
+
+    def mass(self) -> list[PETSc.Vec]:
+        """The lumped masses of each field (owned dofs; the system keeps ownership)."""
+        ...
+
+    def internal_force(
+        self, u: Sequence[PETSc.Vec], out: Sequence[PETSc.Vec] | None = None
+    ) -> list[PETSc.Vec]:
+        """``f^int(u)`` per field, into ``out`` (or new vectors the caller owns)."""
+        ...
+
+    def tangent(self, u: Sequence[PETSc.Vec] | None = None) -> Blocks:
+        """The blocks ``{(k, l): df^int_k / du_l}`` at ``u`` (``None``: the reference state);
+        diagonal blocks first, in field order."""
+        ...
+
+    def constraints(self) -> list[PETSc.Mat | None] | None:
+        """The constraint blocks ``G_f`` of each field (``None`` for a field without), or
+        ``None``: no constraint."""
+        ...
+
+    def strain_energy(self, u: Sequence[PETSc.Vec], f_int: Sequence[PETSc.Vec]) -> float:
+        """The stored energy at ``u``, given ``f_int = f^int(u)`` (every rank)."""
+        ...
+
+    def rebuild(self, changed: Collection[str]) -> bool:
+        """Rebuild what depends on the ``changed`` inputs (e.g. ``"approximation"`` when a
+        crack changes which particles see each other); ``True`` when the masses, tangent or
+        constraints changed, so that their consumers (the velocity projection, the stable
+        step) rebuild too."""
+        ...
+
+
+class LinearSystem:
+    """Small-strain linear elasticity: ``f^int(u) = K u`` with assembled blocks.
+
+    ``K`` has a diagonal block per field (:attr:`Field.K`) and off-diagonal blocks
+    ``{(k, l): K_kl}`` (rows of field ``k``, columns of field ``l``: the ramp couplings, the
+    bridging penalty, master–slave's reduced blocks, the hybrid coupling). The system holds
+    references; :meth:`destroy` destroys them.
+
+    Args:
+        fields: One or two :class:`Field` (FE first).
+        blocks: The off-diagonal blocks, or ``None``.
+        constraint: The constraint blocks ``G_f`` of each field (``None`` for a field without),
+            or ``None``: no constraint.
+    """
+
+    def __init__(
+        self,
+        fields: Sequence[Field],
+        blocks: Blocks | None = None,
+        constraint: Sequence[PETSc.Mat | None] | None = None,
+    ):
+        self.fields = list(fields)
+        self.blocks: Blocks = dict(blocks or {})
+        self.G: list[PETSc.Mat | None] | None = None
+        if constraint is not None and any(g is not None for g in constraint):
+            self.G = list(constraint)
+
+    def mass(self) -> list[PETSc.Vec]:
+        """The lumped masses of each field."""
+        return [f.mass for f in self.fields]
+
+    def internal_force(
+        self, u: Sequence[PETSc.Vec], out: Sequence[PETSc.Vec] | None = None
+    ) -> list[PETSc.Vec]:
+        """``K u``: the diagonal blocks, then the off-diagonal ones added (collective)."""
+        y = list(out) if out is not None else [f.mass.duplicate() for f in self.fields]
+        for k, f in enumerate(self.fields):
+            f.K.mult(u[k], y[k])
+        for (k, j), B in self.blocks.items():
+            B.multAdd(u[j], y[k], y[k])
+        return y
+
+    def tangent(self, u: Sequence[PETSc.Vec] | None = None) -> Blocks:
+        """``K`` as blocks, whatever ``u``: the diagonal blocks, then the off-diagonal ones."""
+        out: Blocks = {(k, k): f.K for k, f in enumerate(self.fields)}
+        out.update(self.blocks)
+        return out
+
+    def constraints(self) -> list[PETSc.Mat | None] | None:
+        """The constraint blocks (``None``: no constraint)."""
+        return self.G
+
+    def strain_energy(self, u: Sequence[PETSc.Vec], f_int: Sequence[PETSc.Vec]) -> float:
+        """``1/2 u^T K u`` from ``f_int = K u``, summed field by field (collective)."""
+        energy = 0.0
+        for x, f in zip(u, f_int, strict=True):
+            energy += 0.5 * x.dot(f)
+        return energy
+
+    def rebuild(self, changed: Collection[str]) -> bool:
+        """Nothing to rebuild when nothing changed (``False``).
+
+        Raises:
+            NotImplementedError: ``changed`` is not empty: the assembled blocks cannot follow a
+                changed approximation; build a new model instead.
+        """
+        if changed:
+            raise NotImplementedError(
+                f"changed={sorted(changed)!r}: a LinearSystem wraps assembled blocks and cannot "
+                "rebuild them; build a new ExplicitDynamics from the changed model"
+            )
+        return False
+
+    def destroy(self) -> None:
+        """Destroy the blocks, masses and constraint blocks (collective)."""
+        objs = [*self.blocks.values()]
+        for f in self.fields:
+            objs += [f.K, f.mass]
+        objs += [g for g in (self.G or []) if g is not None]
+        for obj in objs:
+            obj.destroy()

@@ -1,0 +1,202 @@
+"""The stable time step of central differences: an upper bound of the largest frequency.
+
+Central differences are stable for ``dt <= 2 / omega_max`` (Belytschko et al. 1995, sec. 5.2),
+``omega_max^2`` the largest eigenvalue of the constrained operator ``P M^{-1} K`` on the free dofs
+(``P`` the velocity projection of eq. 94–96, which is ``M``-orthogonal, and dofs with
+``M^{-1} = 0`` held at rest), ``K`` the tangent of the system. A too large estimate of the step is
+unstable, so the guard is a bound that cannot be too small in ``omega``: the Schur test with
+``B = M^{-1/2} K M^{-1/2}`` (free dofs) and any positive ``y``,
+
+.. math::
+    \\omega_{max}^2 \\le |P M^{-1} K|_M \\le |B|_2 \\le \\sqrt{
+    \\max_i \\frac{(|K| y)_i}{m_i y_i} \\, \\max_j \\frac{(|K|^T y)_j}{m_j y_j}},
+
+since ``|P|_M = 1``; measured 1.00-1.14x the true ``omega_max`` on FE, EFG and every coupling.
+The Courant condition ``h_min / c`` is reported only: it is exact for square Q1 elements at
+``nu = 0`` but exceeds the critical step on triangles (1.44x on right triangles), for
+``nu -> 1/2`` and for small weighted masses (bridging); for EFG it is conservative.
+
+:class:`TimeStepBound` holds the bound of a system: computed once for a linear system, and
+re-bounded when the system says its tangent changed (:meth:`TimeStepBound.invalidate`, the hook
+of a stiffening material or a rebuilt approximation).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from ..physics.materials import LinearElastic
+from .linalg import absolute
+from .system import SemiDiscreteSystem
+
+__all__ = ["TimeStepBound", "check_safety", "frequency_bound"]
+
+
+def check_safety(safety: float) -> float:
+    """Return ``safety`` as a float if it lies in (0, 1], else raise a ``ValueError``."""
+    if isinstance(safety, bool) or not (isinstance(safety, int | float) and 0.0 < safety <= 1.0):
+        raise ValueError(
+            f"safety={safety!r} must lie in (0, 1] (a fraction of the critical time step)"
+        )
+    return float(safety)
+
+
+def frequency_bound(
+    system: SemiDiscreteSystem,
+    minv: Sequence[PETSc.Vec],
+    free: Sequence[np.ndarray],
+    comm: MPI.Comm,
+    iterations: int = 30,
+) -> tuple[float, float]:
+    """Upper bounds of ``omega_max^2`` by the Schur test (collective).
+
+    With ``y = 1`` it is Gershgorin's row-sum bound ``max_i sum_j |K_ij| / m_i`` (for a
+    symmetric ``K`` both factors agree); ``y`` is then improved by ``iterations`` power steps
+    with ``M^{-1} (|K| + |K|^T) / 2`` and the smallest bound is kept (every iterate gives a valid
+    bound; it tends to the spectral radius of ``|M^{-1} K|``). The bound holds for a
+    non-symmetric ``K`` too (consistent integration), for ``|lambda|``.
+
+    Args:
+        system: Its masses and its tangent at the reference state.
+        minv: ``M^{-1}`` per field (0 on dofs held at rest).
+        free: bool per owned dof of each field: not held at rest.
+
+    Returns:
+        ``(best, first)``: the smallest bound of ``omega_max^2`` and the Gershgorin one.
+    """
+    masses = system.mass()
+    F = len(masses)
+    tangent = {kl: absolute(A) for kl, A in system.tangent().items()}
+    on_free = [fr.astype(float) for fr in free]
+    y = [m.duplicate() for m in masses]
+    r = [m.duplicate() for m in masses]
+    col = [m.duplicate() for m in masses]
+    for yk, fk in zip(y, on_free, strict=True):
+        yk.array[:] = fk
+
+    def ratio(vecs: list[PETSc.Vec]) -> float:
+        """``max_i v_i / (m_i y_i)`` over the free dofs (every rank)."""
+        loc = 0.0
+        for v, yk, m, fk in zip(vecs, y, masses, on_free, strict=True):
+            on = fk > 0.0
+            if on.any():
+                loc = max(loc, float(np.max(v.array_r[on] / (m.array_r[on] * yk.array_r[on]))))
+        return float(comm.allreduce(loc, op=MPI.MAX))
+
+    best, first = np.inf, np.inf
+    for it in range(iterations + 1):
+        for k in range(F):
+            r[k].set(0.0)
+            col[k].set(0.0)
+        for (k, j), A in tangent.items():
+            A.multAdd(y[j], r[k], r[k])
+            A.multTransposeAdd(y[k], col[j], col[j])
+        lam = np.sqrt(ratio(r) * ratio(col))
+        best = min(best, lam)
+        if it == 0:
+            first = lam
+        if it == iterations or lam == 0.0:
+            break
+        top = 0.0
+        for k in range(F):  # y <- M^{-1} (|K| + |K|^T) y / 2 on the free dofs
+            yk = 0.5 * (r[k].array_r + col[k].array_r) * minv[k].array_r * on_free[k]
+            y[k].array[:] = yk
+            top = max(top, float(yk.max(initial=0.0)))
+        top = comm.allreduce(top, op=MPI.MAX)
+        if top <= 0.0:
+            break
+        for yk, fk in zip(y, on_free, strict=True):  # positive on the free dofs
+            yk.array[:] = np.maximum(yk.array_r / top, 1e-3) * fk
+    for obj in (*tangent.values(), *y, *r, *col):
+        obj.destroy()
+    return float(best), float(first)
+
+
+class TimeStepBound:
+    """The critical and stable time steps of a system (cached until :meth:`invalidate`).
+
+    Args:
+        system: The semi-discrete system.
+        material: Its material (the wave speed of the Courant estimate).
+        minv, free: ``M^{-1}`` and the free dofs of each field.
+        comm: The communicator.
+        safety: Fraction of the critical step used by default (0 < safety <= 1).
+    """
+
+    def __init__(
+        self,
+        system: SemiDiscreteSystem,
+        material: LinearElastic,
+        minv: Sequence[PETSc.Vec],
+        free: Sequence[np.ndarray],
+        comm: MPI.Comm,
+        safety: float = 0.9,
+    ):
+        self.system, self.material = system, material
+        self.minv, self.free, self.comm = list(minv), list(free), comm
+        self.safety = check_safety(safety)
+        self._critical: dict | None = None
+
+    def critical(self, iterations: int = 30) -> dict:
+        """Critical time step from an upper bound of ``omega_max`` (collective, cached).
+
+        Returns:
+            ``{"courant": h_min / c, "spectral": 2 / omega_bound, "critical": the same (the
+            guard), "omega_bound": ..., "gershgorin": 2 / (the row-sum bound with y = 1),
+            "h_min": ..., "wave_speed": ...}``.
+        """
+        if self._critical is not None:
+            return self._critical
+        c = self.material.wave_speed()
+        h = min(f.spacing for f in self.system.fields)
+        best, first = frequency_bound(self.system, self.minv, self.free, self.comm, iterations)
+        spectral = 2.0 / np.sqrt(best) if best > 0 else np.inf
+        self._critical = {
+            "courant": float(h / c),
+            "spectral": float(spectral),
+            "critical": float(spectral),
+            "omega_bound": float(np.sqrt(best)),
+            "gershgorin": float(2.0 / np.sqrt(first)) if first > 0 else np.inf,
+            "h_min": float(h),
+            "wave_speed": float(c),
+        }
+        return self._critical
+
+    def stable(self) -> float:
+        """``safety`` times the critical time step (collective)."""
+        return self.safety * self.critical()["critical"]
+
+    def steps_to(self, span: float, dt: float | None, force: bool) -> tuple[int, float]:
+        """The number of steps and the step that cover ``span`` exactly: ``dt`` (default the
+        stable step) rounded down to ``span / ceil(span / dt)``.
+
+        Raises:
+            ValueError: ``span`` not positive and finite, ``dt`` not positive, or above the
+                stable step without ``force``.
+        """
+        crit = self.critical()
+        stable = self.safety * crit["critical"]
+        if not (np.isfinite(span) and span > 0.0):
+            raise ValueError(f"span={span!r} must be positive")
+        if dt is None:
+            dt = stable
+        elif not (isinstance(dt, int | float) and np.isfinite(dt) and dt > 0.0):
+            raise ValueError(f"dt={dt!r} must be a positive number")
+        elif dt > stable * (1.0 + 1e-12) and not force:
+            raise ValueError(
+                f"dt={dt:.6g} is above the stable time step {stable:.6g} (safety {self.safety} x "
+                f"critical 2/omega_bound = {crit['critical']:.6g}, omega_bound >= omega_max; "
+                f"Courant h_min/c = {crit['courant']:.6g} with h_min = {crit['h_min']:.4g}); "
+                f"pass dt <= {stable:.6g}, dt=None for the stable step, or force=True"
+            )
+        nsteps = max(1, int(np.ceil(span / dt - 1e-9)))
+        return nsteps, span / nsteps
+
+    def invalidate(self) -> None:
+        """Forget the bound: the next :meth:`critical` re-bounds the system's current tangent
+        (the hook for a system whose tangent changed)."""
+        self._critical = None

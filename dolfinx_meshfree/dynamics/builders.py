@@ -43,15 +43,15 @@ from petsc4py import PETSc
 from .. import _compat
 from ..approx.mls import MLS
 from ..approx.tables import ShapeTable
-from ..bridging import BridgingBand
+from ..couplings.bridging import BridgingBand
 from ..couplings.hybrid import HybridElasticity
+from ..couplings.ramp import RampInterface
 from ..geometry.particles import ParticleSet
 from ..geometry.patch import ParticlePatch
 from ..geometry.stress_points import check_integration, stress_point_quadrature
 from ..parallel import Layout, raise_on_all_ranks
 from ..physics.body_loads import CallableBodyForce, body_load_vectors
 from ..physics.materials import LinearElastic
-from ..ramp import RampInterface
 from ..statics.coupled import CoupledElasticity, CouplingOperators
 from ..statics.efg import particle_stiffness
 from ..statics.petsc import create_aij

@@ -16,10 +16,10 @@ import numpy as np
 from petsc4py import PETSc
 
 from ..approx.mls import MLS
-from ..bridging import BridgingBand
+from ..couplings.bridging import BridgingBand
+from ..couplings.ramp import RampInterface
 from ..geometry.particles import ParticleSet
 from ..geometry.patch import ParticlePatch
-from ..ramp import RampInterface
 from ..statics.efg import _vector_values
 from .system import Field
 
@@ -42,8 +42,8 @@ class Discretisation:
         V: The FE space. mls: The particles' approximation (MLS, or the hybrid's evaluator).
         particles: The particle set. mesh: The mesh. in_patch: bool per local cell: a
             particle cell. patch: The particle patch.
-        interface: The coupling's interface: a :class:`~dolfinx_meshfree.ramp.RampInterface`
-            (blended interface cells) or a :class:`~dolfinx_meshfree.bridging.BridgingBand`
+        interface: The coupling's interface: a :class:`~dolfinx_meshfree.couplings.ramp.RampInterface`
+            (blended interface cells) or a :class:`~dolfinx_meshfree.couplings.bridging.BridgingBand`
             (weighted band cells).
         reduction: ``(T_PF, S)`` when the particle field holds master particles only
             (master–slave): the particle coefficients are ``T_PF d_FE + S d_M``.

@@ -19,10 +19,10 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from ..approx.fe_points import ensure_points_in_mesh, evaluate_fe_function, tabulate_in_cells
-from ..bridging import BridgingBand, BridgingSolution
+from ..couplings.bridging import BridgingBand, BridgingSolution
+from ..couplings.ramp import RampInterface
 from ..geometry.quadrature import QuadraturePoints, cell_quadrature
 from ..parallel import raise_on_all_ranks
-from ..ramp import RampInterface
 from ..statics.coupled import CoupledSolution
 from .discretisation import Discretisation
 

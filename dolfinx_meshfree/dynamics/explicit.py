@@ -31,14 +31,14 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from ..approx.mls import MLS
-from ..bridging import BridgingBand
+from ..couplings.bridging import BridgingBand
 from ..couplings.hybrid import HybridElasticity
+from ..couplings.ramp import RampInterface
 from ..geometry.particles import ParticleSet
 from ..geometry.patch import ParticlePatch
 from ..geometry.quadrature import QuadraturePoints
 from ..io import DynamicsWriter, ProgressBar
 from ..physics.materials import LinearElastic
-from ..ramp import RampInterface
 from ..statics.coupled import CoupledElasticity
 from .builders import Model, build_coupled, build_efg, build_fe
 from .central_difference import CentralDifference, schedule

@@ -42,8 +42,10 @@ class Discretisation:
         V: The FE space. mls: The particles' approximation (MLS, or the hybrid's evaluator).
         particles: The particle set. mesh: The mesh. in_patch: bool per local cell: a
             particle cell. patch: The particle patch.
-        interface: The coupling's interface: a :class:`~dolfinx_meshfree.couplings.ramp.RampInterface`
-            (blended interface cells) or a :class:`~dolfinx_meshfree.couplings.bridging.BridgingBand`
+        interface: The coupling's interface: a
+        :class:`~dolfinx_meshfree.couplings.ramp.RampInterface`
+            (blended interface cells) or a
+            :class:`~dolfinx_meshfree.couplings.bridging.BridgingBand`
             (weighted band cells).
         reduction: ``(T_PF, S)`` when the particle field holds master particles only
             (master–slave): the particle coefficients are ``T_PF d_FE + S d_M``.

@@ -142,7 +142,7 @@ def run(method: str, n: int, args) -> dict:
 
 
 # +
-def main() -> int:
+def main(argv: list[str] | None = None) -> list[dict]:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--method", nargs="+", default=list(METHODS), choices=METHODS)
     p.add_argument("--cells", nargs="+", type=int, default=[8, 16, 32], help="cells per side")
@@ -151,7 +151,7 @@ def main() -> int:
     p.add_argument("--ref-cells", type=int, default=48, help="P2 reference: cells per side")
     p.add_argument("--json", default=None)
     p.add_argument("--no-check", action="store_true")
-    args = p.parse_args()
+    args = p.parse_args(argv)
     comm = MPI.COMM_WORLD
     t0 = time.perf_counter()
     ref = reference(args)
@@ -185,11 +185,13 @@ def main() -> int:
                 failures.append(f"{m}: error does not fall under refinement: {errs}")
             if max(args.cells) >= 32 and not errs[-1] <= 0.01:
                 failures.append(f"{m}: error {errs[-1]:.2%} > 1 % at the finest run")
-    if failures and comm.rank == 0:
-        print("FAILED:\n  " + "\n  ".join(failures))
-    return 1 if failures else 0
+    if failures:
+        if comm.rank == 0:
+            print("FAILED:\n  " + "\n  ".join(failures))
+        raise SystemExit(1)
+    return records
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    main()
 # -

@@ -170,7 +170,7 @@ def run(method: str, K: float, h: float, args) -> dict:
 
 
 # +
-def main() -> int:
+def main(argv: list[str] | None = None) -> list[dict]:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--method", nargs="+", default=list(METHODS), choices=METHODS)
     p.add_argument("--load", nargs="+", type=float, default=[1.0, 2.0, 5.0, 10.0])
@@ -180,7 +180,7 @@ def main() -> int:
     p.add_argument("--steps", type=int, default=None, help="load steps (default max(2, 2K))")
     p.add_argument("--json", default=None)
     p.add_argument("--no-check", action="store_true")
-    args = p.parse_args()
+    args = p.parse_args(argv)
     comm = MPI.COMM_WORLD
     # the elastica against Mattiasson's table (5 digits)
     for K, (w_ref, u_ref) in MATTIASSON.items():
@@ -218,11 +218,13 @@ def main() -> int:
                     failures.append(
                         f"{r['method']} K={r['load']}: {key} {r[key]:.3%} > {target:.1%}"
                     )
-    if failures and comm.rank == 0:
-        print("FAILED:\n  " + "\n  ".join(failures))
-    return 1 if failures else 0
+    if failures:
+        if comm.rank == 0:
+            print("FAILED:\n  " + "\n  ".join(failures))
+        raise SystemExit(1)
+    return records
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    main()
 # -

@@ -30,7 +30,7 @@ from .approx.fe_points import (
 from .approx.kernels import cubic_spline, gaussian, quartic, sph_cubic_spline
 from .approx.mls import MLS, MomentMatrixError
 from .approx.sph import SPH
-from .approx.tables import ShapeTable
+from .approx.tables import Approximation, ShapeTable, StaleTableError
 from .couplings.hybrid import HYBRID_VARIANTS, HybridElasticity
 from .dynamics import DYNAMICS_METHODS, DynamicsResult, EnergyRecord, ExplicitDynamics
 from .geometry.particles import ParticleSet
@@ -61,6 +61,7 @@ __all__ = [
     "MLS",
     "PLACEMENTS",
     "SPH",
+    "Approximation",
     "CoupledElasticity",
     "CoupledLinearProblem",
     "CoupledNonlinearProblem",
@@ -92,6 +93,7 @@ __all__ = [
     "ProgressBar",
     "SaintVenantKirchhoff",
     "ShapeTable",
+    "StaleTableError",
     "StepLoadedRod",
     "TimoshenkoBeam",
     "boundary_facets",

@@ -209,3 +209,31 @@ def test_efg_patch_test_at_finite_strain_3d(cell):
     x = np.random.default_rng(4).uniform(0.0, 1.0, (200, 3))
     # measured round-off; bound 1e-10
     assert np.abs(sol.displacement(x) - x @ G3.T).max() <= 1e-10
+
+
+def test_a_changed_approximation_is_not_used_stale():
+    """Approximations carry a version (issue 9): a table built before the MLS changed (particles
+    moved, supports cut) is refused by the operators built on it, on every rank."""
+    msh = _square()
+    P = mf.ParticleSet.from_cells(msh, 1 / 3)
+    problem = mf.EFGElasticity(P, MATERIALS["neo-hookean-strain"])
+    problem.add_dirichlet(mf.boundary_facets(msh), lambda x: x[:, :2] @ G.T)
+    tables: dict = {}
+    system, objects, _ = problem.system(tables)
+    forces = mf.InternalForces(
+        tables["table"], tables["quadrature"].weights, problem.material,
+        comm=COMM, approximation=problem.mls,
+    )  # fmt: skip
+    u = np.zeros(forces.num_dofs)
+    assert np.abs(forces.internal_force(u)).max() == 0.0
+    version = problem.mls.version
+    problem.mls.changed()
+    assert problem.mls.version == version + 1
+    with pytest.raises(mf.StaleTableError, match=r"version 0 .* now at version 1"):
+        forces.internal_force(u)
+    with pytest.raises(mf.StaleTableError):
+        forces.tangent(u)
+    fresh = problem.mls.tabulate(tables["quadrature"].points)
+    assert fresh.version == version + 1
+    for obj in (system, *objects):
+        obj.destroy()

@@ -125,6 +125,14 @@ class MLS:
         self.rcond = float(rcond)
         self._scale = float(np.median(self.radii))
         self._tree = cKDTree(self.points)
+        #: Changes whenever the shape functions do (:meth:`changed`); tables carry the version
+        #: they were built at (:attr:`ShapeTable.version`).
+        self.version = 0
+
+    def changed(self) -> None:
+        """Mark the shape functions changed (the caller moved particles, changed supports or
+        cut them): the version increments, and consumers holding older tables must rebuild."""
+        self.version += 1
 
     @property
     def num_particles(self) -> int:
@@ -183,7 +191,7 @@ class MLS:
                     + w * np.einsum("pa,pa->p", dp, g_pair)
                 )
                 grads.append(sp.csr_matrix((dphi, (i, j)), shape=(m, n)))
-        return ShapeTable(points=x, values=values, gradients=grads)
+        return ShapeTable(points=x, values=values, gradients=grads, version=self.version)
 
     @staticmethod
     def _sum_outer(

@@ -78,6 +78,14 @@ class SPH:
             raise ValueError(f"smoothing_length={smoothing_length} must be positive")
         self.h = float(smoothing_length)
 
+    #: Changes whenever the shape functions do (see :meth:`changed`).
+    version: int = 0
+
+    def changed(self) -> None:
+        """Mark the shape functions changed: the version increments (see
+        :class:`~dolfinx_meshfree.approx.tables.Approximation`)."""
+        self.version += 1
+
     def tabulate(self, x: npt.ArrayLike, derivatives: int = 1) -> ShapeTable:
         """Shape functions and first derivatives at ``x`` (m, gdim); local, no communication."""
         x = check_points(x, self.gdim, "x")
@@ -107,7 +115,7 @@ class SPH:
                 dN = self._corrected_gradient(i, j, N, dN, x, m)
             for k in range(self.gdim):
                 grads.append(sp.csr_matrix((dN[:, k], (i, j)), shape=(m, n)))
-        return ShapeTable(points=x, values=values, gradients=grads)
+        return ShapeTable(points=x, values=values, gradients=grads, version=self.version)
 
     def _corrected_gradient(
         self, i: np.ndarray, j: np.ndarray, N: np.ndarray, dN: np.ndarray, x: np.ndarray, m: int

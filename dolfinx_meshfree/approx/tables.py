@@ -8,11 +8,19 @@ SPH, FE basis functions) at ``m`` evaluation points, as scipy CSR matrices with 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["ShapeTable", "strain_operator", "voigt_pairs"]
+__all__ = [
+    "Approximation",
+    "ShapeTable",
+    "StaleTableError",
+    "check_current",
+    "strain_operator",
+    "voigt_pairs",
+]
 
 
 @dataclass
@@ -24,11 +32,15 @@ class ShapeTable:
         values: CSR matrix (m x n), ``values[q, I] = N_I(x_q)``.
         gradients: ``gdim`` CSR matrices (m x n), ``gradients[k][q, I] = dN_I/dx_k (x_q)``, or an
             empty list when derivatives were not requested.
+        version: The :attr:`Approximation.version` of the approximation when it tabulated this
+            table; a consumer that keeps the table checks it against the approximation's
+            current version (:func:`check_current`) and rebuilds when they differ.
     """
 
     points: np.ndarray
     values: sp.csr_matrix
     gradients: list[sp.csr_matrix]
+    version: int = 0
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -95,3 +107,32 @@ def strain_operator(gradients: list[sp.csr_matrix]) -> sp.csr_matrix:
         (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
         shape=(nv * m, gdim * n),
     )
+
+
+@runtime_checkable
+class Approximation(Protocol):
+    """What consumers need of an approximation (MLS/EFG, SPH): shape functions tabulated at
+    points, and a ``version`` that changes whenever the functions do (particles move, supports
+    change, a crack cuts the supports), so that whatever was built from an older table (a
+    stiffness, masses, an internal-force operator) is rebuilt, not used stale."""
+
+    version: int
+
+    def tabulate(self, x: np.ndarray, derivatives: int = 1) -> ShapeTable:
+        """Values (and gradients with ``derivatives=1``) at the points ``x``."""
+        ...
+
+
+class StaleTableError(ValueError):
+    """A table built from an older version of its approximation was used."""
+
+
+def check_current(table: ShapeTable, approximation: Approximation, what: str) -> None:
+    """Raise :class:`StaleTableError` (local) if ``approximation`` changed since it tabulated
+    ``table``; ``what`` names the consumer in the message."""
+    if table.version != approximation.version:
+        raise StaleTableError(
+            f"{what} was built on version {table.version} of its {type(approximation).__name__} "
+            f"approximation, which is now at version {approximation.version} (its particles or "
+            "supports changed): rebuild it (a new problem or operator) after such a change"
+        )

@@ -405,7 +405,13 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
         )
     setup = problem.setup_time + time.perf_counter() - t0
     if tables is not None:
-        tables.update(quadrature=q, table=tq, test_gradients=test or tq.gradients, weights=w)
+        tables.update(
+            quadrature=q,
+            table=tq,
+            test_gradients=test or tq.gradients,
+            weights=w,
+            approximation=problem.mls,
+        )
 
     t1 = time.perf_counter()
     Kq = stiffness_matrix(test or tq.gradients, w, problem.material, tq.gradients).tocoo()

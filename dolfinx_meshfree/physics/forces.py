@@ -46,7 +46,7 @@ import numpy as np
 import numpy.typing as npt
 import scipy.sparse as sp
 
-from ..approx.tables import ShapeTable
+from ..approx.tables import Approximation, ShapeTable, check_current
 from ..parallel import raise_on_all_ranks
 from .constitutive import Material
 
@@ -92,6 +92,9 @@ class InternalForces:
         test_gradients: Test-function gradients (default: the table's), e.g. VCI-corrected.
         comm: If given, material errors (``det F <= 0`` at a point) are raised on every rank of
             ``comm``, so each call is collective; by default calls are local (no communication).
+        approximation: The approximation that tabulated ``table`` (an MLS or SPH): every call
+            checks that it has not changed since (its ``version``), and raises
+            :class:`~dolfinx_meshfree.approx.tables.StaleTableError` if it has.
 
     All results are this rank's contributions (the quadrature points it was given), unassembled
     across ranks, in the table's column numbering.
@@ -104,6 +107,7 @@ class InternalForces:
         material: Material,
         test_gradients: Sequence[sp.spmatrix] | None = None,
         comm=None,
+        approximation: Approximation | None = None,
     ):
         def check() -> np.ndarray:
             if not isinstance(material, Material):
@@ -129,6 +133,7 @@ class InternalForces:
 
         self.weights = check() if comm is None else raise_on_all_ranks(comm, check)
         self.table = table
+        self.approximation = approximation
         self.material = material
         self.comm = comm
         self.gdim = material.gdim
@@ -153,7 +158,12 @@ class InternalForces:
         return self._G.shape[1]
 
     def _call(self, fn):
-        return fn() if self.comm is None else raise_on_all_ranks(self.comm, fn)
+        def checked():
+            if self.approximation is not None:
+                check_current(self.table, self.approximation, "this internal-force operator")
+            return fn()
+
+        return checked() if self.comm is None else raise_on_all_ranks(self.comm, checked)
 
     def _vector(self, u: npt.ArrayLike) -> np.ndarray:
         u = np.asarray(u, dtype=float).reshape(-1)

@@ -152,7 +152,7 @@ def particle_stiffness(
             ),
         )
     if tables is not None:
-        tables.update(quadrature=q, table=tq, test_gradients=test_grads)
+        tables.update(quadrature=q, table=tq, test_gradients=test_grads, approximation=mls)
     t1 = time.perf_counter()
     K = stiffness_matrix(test_grads, q.weights, material, tq.gradients).tocoo()
     Kg = sp.csr_matrix((K.data, (dof_map[K.row], dof_map[K.col])), shape=(gdim * n, gdim * n))

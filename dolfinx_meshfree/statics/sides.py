@@ -190,7 +190,12 @@ class ParticleSide:
         self.P, self.comm = particles, particles.comm
         weights = tables.get("weights", q.weights)  # the bridging band's alpha w_q
         self.forces = InternalForces(
-            tq, weights, material, test_gradients=tables["test_gradients"], comm=particles.comm
+            tq,
+            weights,
+            material,
+            test_gradients=tables["test_gradients"],
+            comm=particles.comm,
+            approximation=tables.get("approximation"),
         )
         self.gdim = particles.gdim
         self.dof_map = particles.petsc_dofs(self.gdim).ravel()

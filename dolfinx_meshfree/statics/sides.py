@@ -29,7 +29,7 @@ from ..geometry.particles import ParticleSet
 from ..parallel import Layout
 from ..physics.constitutive import Material
 from ..physics.forces import InternalForces
-from .newton import NewtonOptions, NewtonResult, newton
+from .newton import NewtonError, NewtonOptions, NewtonResult, newton
 from .petsc import SolverOptions, create_aij, create_vector
 
 __all__ = [
@@ -277,12 +277,36 @@ def solve_load_steps(
     load_steps: int,
     options: NewtonOptions,
     solver: SolverOptions,
-    before_step=None,
+    max_cuts: int = 6,
 ) -> NonlinearSolveResult:
+    """Newton over the load factor ``t`` from 0 to 1 in ``load_steps`` equal steps (collective).
+
+    A step whose Newton iterations do not converge is cut in half, from the last converged
+    state, up to ``max_cuts`` times below the nominal step (a slender body under a large load
+    step can fall into a cycle of full Newton steps); after a converged cut step the increment
+    grows back towards the nominal one. Raises :class:`~dolfinx_meshfree.statics.newton.NewtonError`
+    when even the smallest step does not converge: no unconverged state is returned.
+    """
     steps: list[NewtonResult] = []
-    for k in range(1, load_steps + 1):
-        problem.t = k / load_steps
-        if before_step is not None:
-            before_step(problem.t, x)
-        steps.append(newton(problem, x, options, solver))
+    nominal = 1.0 / load_steps
+    t, dt, cuts = 0.0, nominal, 0
+    while t < 1.0 - 1e-12:
+        t_new = min(1.0, t + dt)
+        saved = [v.copy() for v in x]
+        problem.t = t_new
+        try:
+            steps.append(newton(problem, x, options, solver))
+        except NewtonError:
+            for v, w in zip(x, saved, strict=True):
+                w.copy(v)
+                w.destroy()
+            if cuts == max_cuts:
+                raise
+            cuts, dt = cuts + 1, 0.5 * dt
+            continue
+        for w in saved:
+            w.destroy()
+        t = t_new
+        if cuts:  # grow back after a cut step converged
+            cuts, dt = cuts - 1, 2.0 * dt
     return NonlinearSolveResult(sum(s.iterations for s in steps), True, steps)

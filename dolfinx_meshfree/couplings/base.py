@@ -299,7 +299,9 @@ def particle_constraint_block(
 ROUND_OFF = 1e-11
 
 
-def facet_table(V, points: np.ndarray, cells: np.ndarray) -> sp.csr_matrix:
+def facet_table(
+    V: dolfinx.fem.FunctionSpace, points: np.ndarray, cells: np.ndarray
+) -> sp.csr_matrix:
     """FE basis values (points x local nodes) at points on facets of the given cells, without
     the round-off entries of the nodes off the facet."""
     t = tabulate_in_cells(V, points, cells, derivatives=0).values.tocsr()
@@ -308,7 +310,7 @@ def facet_table(V, points: np.ndarray, cells: np.ndarray) -> sp.csr_matrix:
     return t
 
 
-def facet_nodes(V, facets: np.ndarray) -> np.ndarray:
+def facet_nodes(V: dolfinx.fem.FunctionSpace, facets: np.ndarray) -> np.ndarray:
     """Local P1/Q1 nodes (block indices) of each facet of a 2D mesh, shape (num_facets, 2)."""
     msh = V.mesh
     tdim = msh.topology.dim

@@ -315,7 +315,7 @@ class DynamicsWriter:
             domain, "Grid", Name="particles", GridType="Collection", CollectionType="Temporal"
         )
 
-        def data(parent, path: str, dims: str, number: str) -> None:
+        def data(parent: ET.Element, path: str, dims: str, number: str) -> None:
             item = ET.SubElement(
                 parent,
                 "DataItem",
@@ -431,7 +431,7 @@ def read_particles(path: str | os.PathLike) -> dict[str, np.ndarray]:
     out: dict[str, list] = {"times": [], "positions": [], "displacement": [], "velocity": []}
     files: dict[str, h5py.File] = {}
 
-    def load(item) -> np.ndarray:
+    def load(item: ET.Element) -> np.ndarray:
         dims = tuple(int(d) for d in item.get("Dimensions").split())
         name, dataset = item.text.strip().split(":", 1)
         if name not in files:

@@ -94,7 +94,7 @@ class GaussianPulseRod:
         s = np.sqrt(a)
         scale = 0.5 * A * np.sqrt(np.pi / a)
 
-        def prim(z):  # an antiderivative of W on the reduced coordinate
+        def prim(z: np.ndarray) -> np.ndarray:  # an antiderivative of W on the reduced coordinate
             return scale * (erf(s * (z - 2 * ks * L - yc)) - erf(s * (-z - 2 * ks * L - yc))).sum(
                 axis=0
             )

@@ -54,7 +54,7 @@ class FacetGroups:
             assembles each piece's multipliers (the owner of its first facet).
     """
 
-    def __init__(self, ends: np.ndarray, group: np.ndarray, owner: np.ndarray):
+    def __init__(self, ends: np.ndarray, group: np.ndarray, owner: np.ndarray) -> None:
         self.ends, self.group, self.owner = ends, group, owner
         self.num_groups = int(group.max()) + 1 if group.size else 0
         first = np.full(self.num_groups, np.iinfo(np.int64).max, dtype=np.int64)

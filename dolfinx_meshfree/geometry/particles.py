@@ -143,7 +143,7 @@ class ParticleSet:
         mesh: dolfinx.mesh.Mesh | None = None,
         cells: npt.ArrayLike | None = None,
         volumes: npt.ArrayLike | None = None,
-    ):
+    ) -> None:
         if comm is None:
             if mesh is None:
                 raise ValueError("ParticleSet needs comm= or mesh=")

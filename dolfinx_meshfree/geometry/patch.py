@@ -71,7 +71,7 @@ class ParticlePatch:
         jitter: float = 0.0,
         seed: int = 0,
         placement: str = "conforming",
-    ):
+    ) -> None:
         comm = mesh.comm
         if placement not in PLACEMENTS:
             raise ValueError(f"placement={placement!r} is not known; use one of {list(PLACEMENTS)}")

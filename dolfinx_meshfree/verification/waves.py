@@ -59,7 +59,7 @@ class GaussianPulseRod:
     amplitude: float = 1.0
     x0: float = 0.0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in ("E", "rho", "length", "alpha"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
@@ -150,7 +150,7 @@ class StepLoadedRod:
     sigma0: float = 1.0
     x0: float = 0.0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in ("E", "rho", "length"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):

@@ -27,6 +27,13 @@ import dolfinx.geometry as _geometry
 import dolfinx.mesh as _mesh
 import numpy as _np
 
+if _typing.TYPE_CHECKING:  # annotations only; the class names are lane B's (0.5.2: *MetaClass)
+    from dolfinx.fem import DirichletBC as _DirichletBC
+    from dolfinx.fem import Form as _Form
+    from petsc4py import PETSc as _PETSc
+    from ufl import Form as _UFLForm
+    from ufl.core.expr import Expr as _Expr
+
 __all__ = [
     "DOLFINX_VERSION",
     "MODERN",
@@ -111,7 +118,7 @@ def quadrature_rule(cell_name: str, degree: int) -> tuple[_np.ndarray, _np.ndarr
     return _np.asarray(pts, dtype=float), _np.asarray(wts, dtype=float)
 
 
-def bb_tree(msh: _mesh.Mesh, dim: int):
+def bb_tree(msh: _mesh.Mesh, dim: int) -> _geometry.BoundingBoxTree:
     """Bounding-box tree of the local entities of dimension ``dim``."""
     if MODERN:
         return _geometry.bb_tree(msh, dim)
@@ -125,7 +132,9 @@ def refine(msh: _mesh.Mesh) -> _mesh.Mesh:
     return refined[0] if isinstance(refined, tuple) else refined
 
 
-def colliding_cells(msh: _mesh.Mesh, tree, points3: _np.ndarray) -> tuple[_np.ndarray, _np.ndarray]:
+def colliding_cells(
+    msh: _mesh.Mesh, tree: _geometry.BoundingBoxTree, points3: _np.ndarray
+) -> tuple[_np.ndarray, _np.ndarray]:
     """Local cells that contain each point, as CSR (offsets, cells); ``points3`` is (m, 3)."""
     if MODERN:
         cand = _geometry.compute_collisions_points(tree, points3)
@@ -147,14 +156,16 @@ def entities_to_geometry(msh: _mesh.Mesh, dim: int, entities: _np.ndarray) -> _n
     return _np.asarray(_cppmesh.entities_to_geometry(cpp_mesh, dim, entities, False))
 
 
-def create_form(form, jit_options: dict | None = None):
+def create_form(form: _UFLForm, jit_options: dict | None = None) -> _Form:
     """JIT-compile a UFL form (collective)."""
     if MODERN:
         return _fem.form(form, jit_options=jit_options)
     return _fem.form(form, jit_params=jit_options)
 
 
-def assemble_matrix(a, bcs: _typing.Sequence = (), diagonal: float = 1.0):
+def assemble_matrix(
+    a: _Form, bcs: _typing.Sequence[_DirichletBC] = (), diagonal: float = 1.0
+) -> _PETSc.Mat:
     """Assemble a bilinear form into an assembled PETSc matrix with ``diagonal`` on bc rows."""
     if MODERN:
         A = _fem_petsc.assemble_matrix(a, bcs=list(bcs), diag=diagonal)
@@ -164,17 +175,22 @@ def assemble_matrix(a, bcs: _typing.Sequence = (), diagonal: float = 1.0):
     return A
 
 
-def assemble_vector(L):
+def assemble_vector(L: _Form) -> _PETSc.Vec:
     """Assemble a linear form into a new PETSc vector (ghosted, not yet accumulated)."""
     return _fem_petsc.assemble_vector(L)
 
 
-def apply_lifting(b, a, bcs) -> None:
+def apply_lifting(b: _PETSc.Vec, a: _Form, bcs: _typing.Sequence[_DirichletBC]) -> None:
     """Lift the Dirichlet values of ``bcs`` through ``a`` into ``b`` (DOLFINx ``apply_lifting``)."""
     _fem_petsc.apply_lifting(b, [a], bcs=[list(bcs)])
 
 
-def set_bc(b, bcs, x0=None, scale: float = 1.0) -> None:
+def set_bc(
+    b: _PETSc.Vec,
+    bcs: _typing.Sequence[_DirichletBC],
+    x0: _PETSc.Vec | None = None,
+    scale: float = 1.0,
+) -> None:
     """Set Dirichlet values in ``b`` (DOLFINx ``set_bc``)."""
     if MODERN:
         _fem_petsc.set_bc(b, list(bcs), x0, alpha=scale)
@@ -192,12 +208,14 @@ def scatter_reverse_add(u: _fem.Function) -> None:
         u.x.scatter_reverse(_la.ScatterMode.add)
 
 
-def function_petsc_vec(u: _fem.Function):
+def function_petsc_vec(u: _fem.Function) -> _PETSc.Vec:
     """The PETSc vector that wraps the owned and ghost values of ``u``."""
     return u.x.petsc_vec if MODERN else u.vector
 
 
-def create_expression(expr, points: _np.ndarray, msh: _mesh.Mesh | None = None):
+def create_expression(
+    expr: _Expr, points: _np.ndarray, msh: _mesh.Mesh | None = None
+) -> _fem.Expression:
     """JIT-compile a UFL expression at reference points ``points`` (k, tdim) (collective).
 
     With ``msh`` the expression is tied to that mesh by a unit ``Constant`` factor: an expression
@@ -210,7 +228,9 @@ def create_expression(expr, points: _np.ndarray, msh: _mesh.Mesh | None = None):
     return _fem.Expression(expr, _np.ascontiguousarray(points, dtype=_np.float64))
 
 
-def eval_expression(expr, msh: _mesh.Mesh, cells: _np.ndarray, value_size: int) -> _np.ndarray:
+def eval_expression(
+    expr: _fem.Expression, msh: _mesh.Mesh, cells: _np.ndarray, value_size: int
+) -> _np.ndarray:
     """Values of a compiled expression on local ``cells``, shape (num_cells, k, value_size)."""
     cells = _np.ascontiguousarray(cells, dtype=_np.int32)
     if cells.size == 0:
@@ -219,7 +239,7 @@ def eval_expression(expr, msh: _mesh.Mesh, cells: _np.ndarray, value_size: int) 
     return _np.asarray(values).reshape(cells.size, -1, value_size)
 
 
-def dirichlet_values(bc) -> tuple[_np.ndarray, _np.ndarray]:
+def dirichlet_values(bc: _DirichletBC) -> tuple[_np.ndarray, _np.ndarray]:
     """Local dofs (owned and ghost, unrolled by block) of a DirichletBC and its values there.
 
     The value is the bc's ``Function`` (read at those dofs of its own space) or ``Constant``

@@ -30,6 +30,7 @@ import os
 import pathlib
 import sys
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from typing import IO, TYPE_CHECKING
 
 import dolfinx.io
@@ -135,7 +136,7 @@ class ProgressBar:
         step_percent: float = 10.0,
         label: str = "",
         delay: float | None = None,
-    ):
+    ) -> None:
         if enabled not in (None, True, False):
             raise ValueError(f"progress={enabled!r} should be True, False or None (automatic)")
         if isinstance(total, bool) or not isinstance(total, int | np.integer) or total < 1:
@@ -191,7 +192,7 @@ class ProgressBar:
         self._bar = None
 
 
-def _isatty(stream) -> bool:
+def _isatty(stream: IO[str]) -> bool:
     try:
         return bool(stream.isatty())
     except (AttributeError, ValueError, OSError):
@@ -235,7 +236,7 @@ class DynamicsWriter:
         fe: bool = True,
         particles: bool = True,
         energy: bool = True,
-    ):
+    ) -> None:
         self.dynamics = dynamics
         self.comm = dynamics.comm
         self.prefix = check_prefix(prefix, self.comm)
@@ -268,7 +269,7 @@ class DynamicsWriter:
 
     # -- rank 0 files --------------------------------------------------------------------------
 
-    def _rank0(self, fn) -> None:
+    def _rank0(self, fn: Callable[[], object]) -> None:
         """Run ``fn`` on rank 0; an ``OSError`` there is raised as a ``ValueError`` on every
         rank (collective)."""
         msg = None
@@ -315,7 +316,7 @@ class DynamicsWriter:
             domain, "Grid", Name="particles", GridType="Collection", CollectionType="Temporal"
         )
 
-        def data(parent, path: str, dims: str, number: str) -> None:
+        def data(parent: ET.Element, path: str, dims: str, number: str) -> None:
             item = ET.SubElement(
                 parent,
                 "DataItem",
@@ -409,7 +410,7 @@ class DynamicsWriter:
     def __enter__(self) -> DynamicsWriter:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
 
@@ -431,7 +432,7 @@ def read_particles(path: str | os.PathLike) -> dict[str, np.ndarray]:
     out: dict[str, list] = {"times": [], "positions": [], "displacement": [], "velocity": []}
     files: dict[str, h5py.File] = {}
 
-    def load(item) -> np.ndarray:
+    def load(item: ET.Element) -> np.ndarray:
         dims = tuple(int(d) for d in item.get("Dimensions").split())
         name, dataset = item.text.strip().split(":", 1)
         if name not in files:

@@ -4,9 +4,12 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
+
+if TYPE_CHECKING:  # annotations only
+    from mpi4py import MPI
 
 __all__ = ["Layout", "raise_on_all_ranks"]
 
@@ -17,7 +20,7 @@ class _RemoteError(ValueError):
     """Raised on the ranks where a check passed because it failed on another rank."""
 
 
-def raise_on_all_ranks(comm, fn: Callable[[], T]) -> T:
+def raise_on_all_ranks(comm: MPI.Comm, fn: Callable[[], T]) -> T:
     """Run ``fn`` on every rank; if it raises on any rank, raise on every rank (collective).
 
     The rank that failed re-raises its own exception; the others raise one of the same class
@@ -54,7 +57,7 @@ class Layout:
     start: int
 
     @classmethod
-    def from_local(cls, comm, size_local: int) -> Layout:
+    def from_local(cls, comm: MPI.Comm, size_local: int) -> Layout:
         """Layout with ``size_local`` entries on this rank, ranks in order (collective)."""
         sizes = np.array(comm.allgather(int(size_local)), dtype=np.int64)
         start = int(sizes[: comm.rank].sum())

@@ -14,7 +14,7 @@ from ..parallel import Layout
 __all__ = ["cell_indicator", "fe_dof_layout", "node_flags"]
 
 
-def fe_dof_layout(V) -> tuple[Layout, np.ndarray]:
+def fe_dof_layout(V: dolfinx.fem.FunctionSpace) -> tuple[Layout, np.ndarray]:
     """PETSc layout of the interleaved dofs of a vector P1/Q1 space (DOLFINx's numbering), and
     the global node number of every local node."""
     imap = V.dofmap.index_map
@@ -24,7 +24,7 @@ def fe_dof_layout(V) -> tuple[Layout, np.ndarray]:
     return Layout(2 * imap.size_local, 2 * imap.size_global, 2 * imap.local_range[0]), l2g
 
 
-def node_flags(V, local_nodes: np.ndarray) -> np.ndarray:
+def node_flags(V: dolfinx.fem.FunctionSpace, local_nodes: np.ndarray) -> np.ndarray:
     """Flag nodes (local block indices) of ``V`` on every rank that has them, owned or ghost
     (collective)."""
     f = dolfinx.fem.Function(V)
@@ -35,7 +35,7 @@ def node_flags(V, local_nodes: np.ndarray) -> np.ndarray:
     return f.x.array[0::2] > 0.5
 
 
-def cell_indicator(msh, owned_flags: np.ndarray) -> dolfinx.fem.Function:
+def cell_indicator(msh: dolfinx.mesh.Mesh, owned_flags: np.ndarray) -> dolfinx.fem.Function:
     """DG0 Function equal to 1 on the owned cells flagged in ``owned_flags`` (and on their ghost
     copies), 0 elsewhere (collective)."""
     Q = _compat.scalar_function_space(msh, "DG", 0)

@@ -16,6 +16,7 @@ basis values by one basix tabulation for all points; gradients by ``J^-T`` (no l
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -26,6 +27,11 @@ from ..parallel import raise_on_all_ranks
 from . import batched
 from .neighbours import check_points
 from .tables import ShapeTable
+
+if TYPE_CHECKING:  # annotations only
+    import dolfinx.fem
+    import dolfinx.mesh
+    from mpi4py import MPI
 
 __all__ = [
     "PointsOutsideMeshError",
@@ -41,7 +47,7 @@ class PointsOutsideMeshError(ValueError):
     """Some evaluation points lie in no cell of the mesh."""
 
 
-def _check_space(V) -> None:
+def _check_space(V: dolfinx.fem.FunctionSpace) -> None:
     msh = V.mesh
     ncv = _compat.geometry_dofmap(msh).shape[1]
     if V.dofmap.dof_layout.num_dofs != ncv:
@@ -51,7 +57,9 @@ def _check_space(V) -> None:
         )
 
 
-def reference_coordinates(msh, points: np.ndarray, cells: np.ndarray) -> np.ndarray:
+def reference_coordinates(
+    msh: dolfinx.mesh.Mesh, points: np.ndarray, cells: np.ndarray
+) -> np.ndarray:
     """Pull physical points back to the reference cell of their (local) cells by Newton.
 
     Args:
@@ -77,7 +85,9 @@ def reference_coordinates(msh, points: np.ndarray, cells: np.ndarray) -> np.ndar
     return X
 
 
-def tabulate_in_cells(V, points: npt.ArrayLike, cells: npt.ArrayLike, derivatives: int = 1):
+def tabulate_in_cells(
+    V: dolfinx.fem.FunctionSpace, points: npt.ArrayLike, cells: npt.ArrayLike, derivatives: int = 1
+) -> ShapeTable:
     """Basis of ``V`` at points that lie in the given local cells; columns are local nodes.
 
     Args:
@@ -114,7 +124,9 @@ def tabulate_in_cells(V, points: npt.ArrayLike, cells: npt.ArrayLike, derivative
     return ShapeTable(points=x, values=values, gradients=grads)
 
 
-def locate_points(msh, points: np.ndarray, preferred: np.ndarray | None = None) -> np.ndarray:
+def locate_points(
+    msh: dolfinx.mesh.Mesh, points: np.ndarray, preferred: np.ndarray | None = None
+) -> np.ndarray:
     """Owned local cell containing each point (-1 where this rank owns none); local.
 
     ``preferred`` (bool per local cell): among several owned cells containing a point (points
@@ -141,7 +153,10 @@ def locate_points(msh, points: np.ndarray, preferred: np.ndarray | None = None) 
 
 
 def _owners(
-    msh, everything: np.ndarray, counts: np.ndarray, preferred: np.ndarray | None = None
+    msh: dolfinx.mesh.Mesh,
+    everything: np.ndarray,
+    counts: np.ndarray,
+    preferred: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Owning rank and owned local cell of every gathered point; raises on every rank if any
     point lies outside the mesh. With ``preferred`` (bool per local cell), a rank owning a
@@ -179,13 +194,13 @@ def _owners(
     return owner, cells
 
 
-def _gather(comm, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _gather(comm: MPI.Comm, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     counts = np.array(comm.allgather(points.shape[0]))
     everything = np.vstack(comm.allgather(points)) if counts.sum() else points
     return everything, counts
 
 
-def ensure_points_in_mesh(msh, points: npt.ArrayLike) -> np.ndarray:
+def ensure_points_in_mesh(msh: dolfinx.mesh.Mesh, points: npt.ArrayLike) -> np.ndarray:
     """Validate this rank's points and check that every rank's points lie in the mesh.
 
     Raises :class:`PointsOutsideMeshError` on every rank otherwise (collective).
@@ -196,7 +211,7 @@ def ensure_points_in_mesh(msh, points: npt.ArrayLike) -> np.ndarray:
 
 
 def _route(
-    msh,
+    msh: dolfinx.mesh.Mesh,
     points: np.ndarray,
     compute: Callable[[np.ndarray, np.ndarray], list],
     preferred: np.ndarray | None = None,
@@ -227,7 +242,9 @@ def _route(
     return ordered
 
 
-def tabulate_fe_basis(V, points: npt.ArrayLike, derivatives: int = 1) -> ShapeTable:
+def tabulate_fe_basis(
+    V: dolfinx.fem.FunctionSpace, points: npt.ArrayLike, derivatives: int = 1
+) -> ShapeTable:
     """Values and gradients of the basis of ``V`` at any points of the mesh (collective).
 
     Every rank passes its own points (possibly none). Points outside the mesh raise
@@ -270,7 +287,7 @@ def tabulate_fe_basis(V, points: npt.ArrayLike, derivatives: int = 1) -> ShapeTa
     return ShapeTable(points=x, values=mats[0], gradients=mats[1:])
 
 
-def evaluate_fe_function(u, points: npt.ArrayLike) -> np.ndarray:
+def evaluate_fe_function(u: dolfinx.fem.Function, points: npt.ArrayLike) -> np.ndarray:
     """Values of a degree-1 Lagrange :class:`dolfinx.fem.Function` at any points (collective).
 
     Ghost values of ``u`` must be up to date (``u.x.scatter_forward()``).

@@ -17,6 +17,8 @@ Python loop over points.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import numpy.typing as npt
 import scipy.sparse as sp
@@ -26,6 +28,9 @@ from . import batched
 from .kernels import get_weight
 from .neighbours import check_points, pairs_within_support, support_radii
 from .tables import ShapeTable
+
+if TYPE_CHECKING:  # annotations only
+    from ..geometry.particles import ParticleSet
 
 __all__ = ["MLS", "MomentMatrixError", "polynomial_basis"]
 
@@ -86,13 +91,13 @@ class MLS:
 
     def __init__(
         self,
-        points,
+        points: npt.ArrayLike | ParticleSet,
         weight: str = "quartic",
         dilation: float = 2.0,
         basis: str = "linear",
         radii: npt.ArrayLike | None = None,
         rcond: float = 1e-10,
-    ):
+    ) -> None:
         positions = getattr(points, "positions", points)
         self.weight_name = weight
         self._weight = get_weight(weight)

@@ -17,6 +17,8 @@ sets. Two corrections are offered:
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import numpy.typing as npt
 import scipy.sparse as sp
@@ -26,6 +28,9 @@ from . import batched
 from .kernels import sph_cubic_spline
 from .neighbours import check_points, pairs_within_support
 from .tables import ShapeTable
+
+if TYPE_CHECKING:  # annotations only
+    from ..geometry.particles import ParticleSet
 
 __all__ = ["SPH"]
 
@@ -46,11 +51,11 @@ class SPH:
 
     def __init__(
         self,
-        points,
+        points: npt.ArrayLike | ParticleSet,
         volumes: npt.ArrayLike | None = None,
         smoothing_length: float | None = None,
         correction: str | None = "gradient",
-    ):
+    ) -> None:
         positions = getattr(points, "positions", points)
         if volumes is None:
             volumes = getattr(points, "volumes", None)

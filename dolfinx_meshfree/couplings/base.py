@@ -34,6 +34,9 @@ from ..parallel import Layout, raise_on_all_ranks
 
 if TYPE_CHECKING:  # annotations only: the model imports this module, not the reverse
     from ..statics.coupled import CoupledElasticity
+    from .bridging import BridgingBand
+    from .master_slave import MasterSlaveLinks
+    from .ramp import RampInterface
 
 __all__ = [
     "ROUND_OFF",
@@ -60,11 +63,11 @@ class CoupledSolution:
     coefficients: np.ndarray
     mls: MLS
     patch: ParticlePatch
-    timings: dict = field(default_factory=dict)
-    sizes: dict = field(default_factory=dict)
+    timings: dict[str, float] = field(default_factory=dict)
+    sizes: dict[str, int] = field(default_factory=dict)
     #: Ramp couplings: the :class:`~dolfinx_meshfree.couplings.ramp.RampInterface` (blended
     #: interface cells).
-    interface: object | None = None
+    interface: RampInterface | None = None
 
     def evaluate_at_quadrature(self, q: QuadraturePoints) -> tuple[np.ndarray, np.ndarray]:
         """Displacement (m, 2) and gradient (m, 2, 2) at quadrature points of local cells: FE in
@@ -166,8 +169,8 @@ class CouplingOperators:
     interface_table: sp.csr_matrix | None = None
     reduction: tuple[PETSc.Mat, PETSc.Mat] | None = None
     master_layout: Layout | None = None
-    interface: object | None = None
-    timings: dict = field(default_factory=dict)
+    interface: RampInterface | MasterSlaveLinks | BridgingBand | None = None
+    timings: dict[str, float] = field(default_factory=dict)
 
     def matrices(self) -> list[PETSc.Mat]:
         """The PETSc matrices held (for destruction or transfer of ownership)."""
@@ -299,7 +302,9 @@ def particle_constraint_block(
 ROUND_OFF = 1e-11
 
 
-def facet_table(V, points: np.ndarray, cells: np.ndarray) -> sp.csr_matrix:
+def facet_table(
+    V: dolfinx.fem.FunctionSpace, points: np.ndarray, cells: np.ndarray
+) -> sp.csr_matrix:
     """FE basis values (points x local nodes) at points on facets of the given cells, without
     the round-off entries of the nodes off the facet."""
     t = tabulate_in_cells(V, points, cells, derivatives=0).values.tocsr()
@@ -308,7 +313,7 @@ def facet_table(V, points: np.ndarray, cells: np.ndarray) -> sp.csr_matrix:
     return t
 
 
-def facet_nodes(V, facets: np.ndarray) -> np.ndarray:
+def facet_nodes(V: dolfinx.fem.FunctionSpace, facets: np.ndarray) -> np.ndarray:
     """Local P1/Q1 nodes (block indices) of each facet of a 2D mesh, shape (num_facets, 2)."""
     msh = V.mesh
     tdim = msh.topology.dim

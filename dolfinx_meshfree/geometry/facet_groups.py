@@ -26,11 +26,16 @@ rows are (nearly) dependent instead of returning the garbage of a singular solve
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import scipy.sparse as sp
 
 from .. import _compat
 from .quadrature import QuadraturePoints
+
+if TYPE_CHECKING:  # annotations only
+    import dolfinx.mesh
 
 __all__ = ["FacetGroups", "constraint_rank_check", "grouped_facet_quadrature"]
 
@@ -49,7 +54,7 @@ class FacetGroups:
             assembles each piece's multipliers (the owner of its first facet).
     """
 
-    def __init__(self, ends: np.ndarray, group: np.ndarray, owner: np.ndarray):
+    def __init__(self, ends: np.ndarray, group: np.ndarray, owner: np.ndarray) -> None:
         self.ends, self.group, self.owner = ends, group, owner
         self.num_groups = int(group.max()) + 1 if group.size else 0
         first = np.full(self.num_groups, np.iinfo(np.int64).max, dtype=np.int64)
@@ -110,7 +115,9 @@ def _chains(ends: np.ndarray) -> list[np.ndarray]:
     return chains
 
 
-def grouped_facet_quadrature(msh, facets: np.ndarray, length: float) -> FacetGroups:
+def grouped_facet_quadrature(
+    msh: dolfinx.mesh.Mesh, facets: np.ndarray, length: float
+) -> FacetGroups:
     """Pieces of at least ``length`` (if a chain is that long) of the given facets (collective).
 
     Args:

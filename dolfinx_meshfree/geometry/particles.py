@@ -11,6 +11,8 @@ exchange later.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
@@ -22,10 +24,13 @@ from ..approx.neighbours import check_points
 from ..parallel import Layout, raise_on_all_ranks
 from .quadrature import cell_quadrature
 
+if TYPE_CHECKING:  # annotations only
+    import dolfinx.mesh
+
 __all__ = ["ParticleSet"]
 
 
-def _points_in_cells(msh, points: np.ndarray, cells: np.ndarray) -> np.ndarray:
+def _points_in_cells(msh: dolfinx.mesh.Mesh, points: np.ndarray, cells: np.ndarray) -> np.ndarray:
     """Whether each point lies in one of the given local cells (local, no communication)."""
     m = points.shape[0]
     inside = np.zeros(m, dtype=bool)
@@ -40,7 +45,7 @@ def _points_in_cells(msh, points: np.ndarray, cells: np.ndarray) -> np.ndarray:
     return inside
 
 
-def _owned_cells(mesh, cells: npt.ArrayLike | None) -> np.ndarray:
+def _owned_cells(mesh: dolfinx.mesh.Mesh, cells: npt.ArrayLike | None) -> np.ndarray:
     """Validated owned local cells (default: every owned cell); an error on every rank when
     they are not owned cells or when no rank names any (collective)."""
     num_owned = mesh.topology.index_map(mesh.topology.dim).size_local
@@ -135,10 +140,10 @@ class ParticleSet:
         self,
         positions: npt.ArrayLike,
         comm: MPI.Comm | None = None,
-        mesh=None,
+        mesh: dolfinx.mesh.Mesh | None = None,
         cells: npt.ArrayLike | None = None,
         volumes: npt.ArrayLike | None = None,
-    ):
+    ) -> None:
         if comm is None:
             if mesh is None:
                 raise ValueError("ParticleSet needs comm= or mesh=")
@@ -197,7 +202,7 @@ class ParticleSet:
     def gdim(self) -> int:
         return self.positions.shape[1]
 
-    def _voronoi_volumes(self, msh, cells: np.ndarray | None) -> np.ndarray:
+    def _voronoi_volumes(self, msh: dolfinx.mesh.Mesh, cells: np.ndarray | None) -> np.ndarray:
         """Voronoi volumes by quadrature: every quadrature point of the background cells gives its
         weight to the nearest particle (collective). Their sum is the area of the cells.
 
@@ -217,7 +222,7 @@ class ParticleSet:
     @classmethod
     def from_cells(
         cls,
-        mesh,
+        mesh: dolfinx.mesh.Mesh,
         spacing: float,
         cells: npt.ArrayLike | None = None,
         jitter: float = 0.0,
@@ -246,7 +251,7 @@ class ParticleSet:
         comm = mesh.comm
         gdim = mesh.geometry.dim
 
-        def check():
+        def check() -> None:
             if not (isinstance(spacing, int | float) and np.isfinite(spacing) and spacing > 0):
                 raise ValueError(f"spacing={spacing!r} must be a positive number")
             if not (0.0 <= jitter < 0.5):
@@ -289,7 +294,9 @@ class ParticleSet:
         return cls(x, comm=comm, mesh=mesh, cells=c)
 
     @classmethod
-    def from_vertices(cls, mesh, cells: npt.ArrayLike | None = None) -> ParticleSet:
+    def from_vertices(
+        cls, mesh: dolfinx.mesh.Mesh, cells: npt.ArrayLike | None = None
+    ) -> ParticleSet:
         """One particle at every vertex of the given cells (collective).
 
         The natural particle set of an unstructured (e.g. gmsh) patch: particles sit on the FE

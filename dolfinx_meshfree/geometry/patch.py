@@ -9,6 +9,8 @@ user's forms. Requires a mesh whose ranks share ghost cells across facets (DOLFI
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import dolfinx
 import numpy as np
 import numpy.typing as npt
@@ -16,6 +18,9 @@ import numpy.typing as npt
 from .. import _compat
 from ..parallel import raise_on_all_ranks
 from .particles import ParticleSet
+
+if TYPE_CHECKING:  # annotations only
+    from mpi4py import MPI
 
 __all__ = ["FE_TAG", "PATCH_TAG", "PLACEMENTS", "ParticlePatch"]
 
@@ -60,13 +65,13 @@ class ParticlePatch:
 
     def __init__(
         self,
-        mesh,
+        mesh: dolfinx.mesh.Mesh,
         cells: npt.ArrayLike,
         spacing: float | None = None,
         jitter: float = 0.0,
         seed: int = 0,
         placement: str = "conforming",
-    ):
+    ) -> None:
         comm = mesh.comm
         if placement not in PLACEMENTS:
             raise ValueError(f"placement={placement!r} is not known; use one of {list(PLACEMENTS)}")
@@ -158,7 +163,8 @@ class ParticlePatch:
             )
 
     @property
-    def comm(self):
+    def comm(self) -> MPI.Comm:
+        """The communicator of the mesh."""
         return self.mesh.comm
 
     def boundary(self) -> tuple[np.ndarray, np.ndarray]:

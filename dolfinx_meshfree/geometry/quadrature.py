@@ -9,12 +9,17 @@ quadrilaterals.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
 from .. import _compat
+
+if TYPE_CHECKING:  # annotations only
+    import dolfinx.mesh
 
 __all__ = ["QuadraturePoints", "boundary_facets", "cell_quadrature", "facet_quadrature"]
 
@@ -40,7 +45,9 @@ class QuadraturePoints:
         return self.weights.shape[0]
 
 
-def cell_quadrature(msh, degree: int, cells: npt.ArrayLike | None = None) -> QuadraturePoints:
+def cell_quadrature(
+    msh: dolfinx.mesh.Mesh, degree: int, cells: npt.ArrayLike | None = None
+) -> QuadraturePoints:
     """Gauss(–Jacobi) points on owned cells, exact for polynomials of ``degree`` on affine cells.
 
     Args:
@@ -69,7 +76,9 @@ def cell_quadrature(msh, degree: int, cells: npt.ArrayLike | None = None) -> Qua
     )
 
 
-def boundary_facets(msh, marker=None) -> np.ndarray:
+def boundary_facets(
+    msh: dolfinx.mesh.Mesh, marker: Callable[[np.ndarray], npt.ArrayLike] | None = None
+) -> np.ndarray:
     """Owned exterior facets (local indices), optionally those whose midpoints satisfy ``marker``.
 
     ``marker(x)`` takes coordinates shaped (3, n) like DOLFINx's ``locate_entities_boundary``.
@@ -143,7 +152,7 @@ def _unit_normals(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def facet_quadrature(
-    msh, facets: npt.ArrayLike, degree: int, cells: npt.ArrayLike | None = None
+    msh: dolfinx.mesh.Mesh, facets: npt.ArrayLike, degree: int, cells: npt.ArrayLike | None = None
 ) -> QuadraturePoints:
     """Quadrature on facets of a 2D or 3D mesh, with unit normals pointing out of ``cells``.
 

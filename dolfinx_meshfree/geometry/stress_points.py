@@ -37,6 +37,8 @@ Construction (:func:`stress_point_quadrature`):
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from mpi4py import MPI
 from scipy.spatial import Voronoi, cKDTree
@@ -44,6 +46,9 @@ from scipy.spatial import Voronoi, cKDTree
 from .. import _compat
 from .particles import ParticleSet
 from .quadrature import QuadraturePoints
+
+if TYPE_CHECKING:  # annotations only
+    import dolfinx.mesh
 
 __all__ = ["INTEGRATIONS", "check_integration", "stress_point_quadrature"]
 
@@ -68,7 +73,7 @@ def _owned_cells(particles: ParticleSet) -> np.ndarray:
     return np.arange(msh.topology.index_map(msh.topology.dim).size_local, dtype=np.int64)
 
 
-def _cell_of(msh, points: np.ndarray, cells: np.ndarray) -> np.ndarray:
+def _cell_of(msh: dolfinx.mesh.Mesh, points: np.ndarray, cells: np.ndarray) -> np.ndarray:
     """A cell among ``cells`` (local) containing each point, or -1 (local, no communication)."""
     m = points.shape[0]
     out = np.full(m, -1, dtype=np.int64)
@@ -84,7 +89,7 @@ def _cell_of(msh, points: np.ndarray, cells: np.ndarray) -> np.ndarray:
     return out
 
 
-def _sampling(msh, cells: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
+def _sampling(msh: dolfinx.mesh.Mesh, cells: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
     """Uniform sampling of the cells: ``m x m`` sub-cell midpoints of each quadrilateral (``m^2``
     sub-triangle centroids of each triangle), with their areas. Returns (points, weights)."""
     cname = msh.topology.cell_type.name

@@ -24,6 +24,7 @@ assembles the shares of a list of them from the quadrature rules of a coupling.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import dolfinx
 import numpy as np
@@ -36,6 +37,10 @@ from ..parallel import raise_on_all_ranks
 from ..statics.efg import _vector_values
 from .operators import load_vector
 
+if TYPE_CHECKING:  # annotations only
+    import ufl
+    from mpi4py import MPI
+
 __all__ = ["BodyForce", "CallableBodyForce", "body_load_vectors"]
 
 VectorFunction = Callable[[np.ndarray], np.ndarray]
@@ -47,7 +52,9 @@ class BodyForce:
     Subclasses implement :meth:`fe_load` (collective) and :meth:`values` (local).
     """
 
-    def fe_load(self, V, weight, degree: int) -> np.ndarray:
+    def fe_load(
+        self, V: dolfinx.fem.FunctionSpace, weight: ufl.core.expr.Expr | None, degree: int
+    ) -> np.ndarray:
         """``int weight N_a b`` per owned dof of the vector space ``V`` (ghost contributions
         accumulated), shape (2 num_owned_nodes,); ``weight``: a scalar UFL expression or
         ``None`` (1 on every cell). Collective."""
@@ -61,7 +68,7 @@ class BodyForce:
 class CallableBodyForce(BodyForce):
     """``b(x)``: a callable mapping points (m, 2) to forces per unit volume (m, 2)."""
 
-    def __init__(self, force: VectorFunction):
+    def __init__(self, force: VectorFunction) -> None:
         if not callable(force):
             raise TypeError(
                 f"the body force must be a callable b(x) mapping points (m, 2) to (m, 2), got "
@@ -72,7 +79,9 @@ class CallableBodyForce(BodyForce):
     def values(self, q: QuadraturePoints) -> np.ndarray:
         return _vector_values(self.force, (q.points,), len(q), "the body force")
 
-    def fe_load(self, V, weight, degree: int) -> np.ndarray:
+    def fe_load(
+        self, V: dolfinx.fem.FunctionSpace, weight: ufl.core.expr.Expr | None, degree: int
+    ) -> np.ndarray:
         msh = V.mesh
         q = cell_quadrature(msh, degree)
         w = q.weights
@@ -89,7 +98,7 @@ class CallableBodyForce(BodyForce):
         return accumulate(V, load_vector(tab, q.weights, b))
 
 
-def accumulate(V, local: np.ndarray) -> np.ndarray:
+def accumulate(V: dolfinx.fem.FunctionSpace, local: np.ndarray) -> np.ndarray:
     """Owned dof values (2 num_owned,) of local contributions (2 num_local,) to the nodes of
     ``V``, owned and ghost, summed over the ranks that hold each node (collective)."""
     f = dolfinx.fem.Function(V)
@@ -101,12 +110,12 @@ def accumulate(V, local: np.ndarray) -> np.ndarray:
 
 def body_load_vectors(
     forces: list[BodyForce],
-    V,
-    fe_weight,
+    V: dolfinx.fem.FunctionSpace | None,
+    fe_weight: ufl.core.expr.Expr | None,
     degree: int,
     particle_rule: tuple[QuadraturePoints, sp.csr_matrix] | None = None,
     interface_rule: tuple[QuadraturePoints, sp.csr_matrix] | None = None,
-    comm=None,
+    comm: MPI.Comm | None = None,
 ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """The FE and particle shares of body forces (module docstring). Collective.
 

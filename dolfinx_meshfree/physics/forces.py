@@ -40,7 +40,8 @@ Example: Newton with load steps needs only ``internal_force`` and ``tangent`` (t
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -49,6 +50,11 @@ import scipy.sparse as sp
 from ..approx.tables import Approximation, ShapeTable, check_current
 from ..parallel import raise_on_all_ranks
 from .constitutive import Material
+
+if TYPE_CHECKING:  # annotations only
+    from mpi4py import MPI
+
+_T = TypeVar("_T")
 
 __all__ = ["InternalForces", "gradient_operator"]
 
@@ -106,9 +112,9 @@ class InternalForces:
         weights: npt.ArrayLike,
         material: Material,
         test_gradients: Sequence[sp.spmatrix] | None = None,
-        comm=None,
+        comm: MPI.Comm | None = None,
         approximation: Approximation | None = None,
-    ):
+    ) -> None:
         def check() -> np.ndarray:
             if not isinstance(material, Material):
                 raise TypeError(
@@ -157,8 +163,8 @@ class InternalForces:
         """``d n``: interleaved dofs of the table's nodes."""
         return self._G.shape[1]
 
-    def _call(self, fn):
-        def checked():
+    def _call(self, fn: Callable[[], _T]) -> _T:
+        def checked() -> _T:
             if self.approximation is not None:
                 check_current(self.table, self.approximation, "this internal-force operator")
             return fn()

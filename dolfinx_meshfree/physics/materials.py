@@ -3,8 +3,13 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+import ufl
+
+if TYPE_CHECKING:  # annotations only
+    from .constitutive import Material
 
 __all__ = ["LinearElastic", "linear_twin"]
 
@@ -24,7 +29,7 @@ class LinearElastic:
     plane: str | None = "stress"
     rho: float = 1.0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not (np.isfinite(self.E) and self.E > 0):
             raise ValueError(f"E={self.E} must be a positive number")
         if not (np.isfinite(self.nu) and -1.0 < self.nu < 0.5):
@@ -97,10 +102,8 @@ class LinearElastic:
         tr = np.trace(eps, axis1=-2, axis2=-1)[..., None, None]
         return 2.0 * self.mu * eps + self.lmbda * tr * np.eye(d)
 
-    def ufl_stress(self, u):
+    def ufl_stress(self, u: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
         """The same law as a UFL expression, for DOLFINx forms (``u`` of ``gdim`` components)."""
-        import ufl
-
         eps = ufl.sym(ufl.grad(u))
         return 2.0 * self.mu * eps + self.lmbda * ufl.tr(eps) * ufl.Identity(self.gdim)
 
@@ -138,15 +141,13 @@ class LinearElastic:
         H = self._grad_u(F)
         return 0.5 * np.einsum("qij,qij->q", self.stress(H), H)
 
-    def ufl_first_piola(self, F):
+    def ufl_first_piola(self, F: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
         """:meth:`ufl_stress` of the displacement gradient ``F - I`` in UFL."""
-        import ufl
-
         eps = ufl.sym(F - ufl.Identity(self.gdim))
         return 2.0 * self.mu * eps + self.lmbda * ufl.tr(eps) * ufl.Identity(self.gdim)
 
 
-def linear_twin(material) -> LinearElastic:
+def linear_twin(material: Material) -> LinearElastic:
     """The small-strain law a material reduces to at ``F = I``: the same ``E``, ``nu``,
     ``plane`` and ``rho`` (``material`` itself when it is a :class:`LinearElastic`). The linear
     stiffness of a finite-strain model at ``u = 0``, and its checks, use it."""

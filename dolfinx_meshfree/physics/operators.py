@@ -9,11 +9,16 @@ number of gradient tables (2 or 3), the Voigt order that of
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import scipy.sparse as sp
 
 from ..approx.tables import strain_operator
 from .materials import LinearElastic
+
+if TYPE_CHECKING:  # annotations only
+    from mpi4py import MPI
 
 __all__ = ["consistent_gradients", "load_vector", "stiffness_matrix"]
 
@@ -55,7 +60,7 @@ def consistent_gradients(
     boundary_values: sp.csr_matrix,
     boundary_weights: np.ndarray,
     boundary_normals: np.ndarray,
-    comm,
+    comm: MPI.Comm,
 ) -> list[sp.csr_matrix]:
     """Variationally consistent integration (VCI) of test-function gradients.
 

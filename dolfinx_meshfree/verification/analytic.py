@@ -27,7 +27,7 @@ class TimoshenkoBeam:
     D: float = 12.0
     P: float = 1000.0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in ("L", "D"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
@@ -116,7 +116,7 @@ class PressurizedBushing:
     b: float = 2.0
     p: float = 1.0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not (0 < self.a < self.b):
             raise ValueError(f"radii a={self.a}, b={self.b} must satisfy 0 < a < b")
 

@@ -9,6 +9,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 from mpi4py import MPI
@@ -16,9 +17,24 @@ from mpi4py import MPI
 from ..geometry.quadrature import QuadraturePoints, cell_quadrature
 from ..physics.materials import LinearElastic
 
-__all__ = ["error_norms"]
+if TYPE_CHECKING:  # annotations only
+    import dolfinx.mesh
+
+__all__ = ["ExactSolution", "error_norms"]
 
 Evaluator = Callable[[QuadraturePoints], tuple[np.ndarray, np.ndarray]]
+
+
+class ExactSolution(Protocol):
+    """An exact displacement field (e.g. :class:`~dolfinx_meshfree.TimoshenkoBeam`)."""
+
+    def displacement(self, x: np.ndarray) -> np.ndarray:
+        """Displacement (m, gdim) at points (m, gdim)."""
+        ...
+
+    def displacement_gradient(self, x: np.ndarray) -> np.ndarray:
+        """Gradient ``du_i/dx_j`` (m, gdim, gdim) at points (m, gdim)."""
+        ...
 
 
 def _energy_density(grad: np.ndarray, material: LinearElastic) -> np.ndarray:
@@ -28,9 +44,9 @@ def _energy_density(grad: np.ndarray, material: LinearElastic) -> np.ndarray:
 
 
 def error_norms(
-    msh,
+    msh: dolfinx.mesh.Mesh,
     evaluate: Evaluator,
-    exact,
+    exact: ExactSolution,
     material: LinearElastic,
     degree: int = 8,
     cells: np.ndarray | None = None,

@@ -59,7 +59,7 @@ class GaussianPulseRod:
     amplitude: float = 1.0
     x0: float = 0.0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in ("E", "rho", "length", "alpha"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
@@ -94,7 +94,7 @@ class GaussianPulseRod:
         s = np.sqrt(a)
         scale = 0.5 * A * np.sqrt(np.pi / a)
 
-        def prim(z):  # an antiderivative of W on the reduced coordinate
+        def prim(z: np.ndarray) -> np.ndarray:  # an antiderivative of W on the reduced coordinate
             return scale * (erf(s * (z - 2 * ks * L - yc)) - erf(s * (-z - 2 * ks * L - yc))).sum(
                 axis=0
             )
@@ -150,7 +150,7 @@ class StepLoadedRod:
     sigma0: float = 1.0
     x0: float = 0.0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in ("E", "rho", "length"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):

@@ -362,8 +362,11 @@ def _first_layer(tree: cKDTree, x: np.ndarray, a: np.ndarray, t: np.ndarray) -> 
 
 
 def solve_master_slave(
-    problem, solver: str | SolverOptions = "mumps", slaves: str = "layer", tie: str | None = None
-):
+    problem: CoupledElasticity,
+    solver: str | SolverOptions = "mumps",
+    slaves: str = "layer",
+    tie: str | None = None,
+) -> CoupledSolution:
     """Assemble and solve the master–slave coupled system of ``problem`` (collective).
 
     ``slaves``: which particles are slaves, see :class:`MasterSlaveLinks` (``"layer"``, the
@@ -517,8 +520,11 @@ def _outside_slave_layer(problem, links: MasterSlaveLinks, patch_bc, dq, dtabs):
 
 
 def master_slave_operators(
-    problem, integration: str = "cells", slaves: str = "layer", tie: str | None = None
-):
+    problem: CoupledElasticity,
+    integration: str = "cells",
+    slaves: str = "layer",
+    tie: str | None = None,
+) -> CouplingOperators:
     """The master–slave coupling's operators without essential conditions (collective).
 
     ``K_FE`` on the FE cells and ``K_P`` on the patch, unreduced, with the reduction

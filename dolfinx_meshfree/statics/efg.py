@@ -26,7 +26,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -47,6 +47,9 @@ from ..physics.operators import consistent_gradients, load_vector, stiffness_mat
 from .newton import NewtonOptions
 from .petsc import BlockSystem, SolverOptions, create_aij, create_vector, solver_options
 from .sides import BlockProblem, ParticleSide, solve_load_steps
+
+if TYPE_CHECKING:  # annotations only
+    from mpi4py import MPI
 
 __all__ = ["EFGElasticity", "EFGSolution", "facet_multipliers", "particle_stiffness"]
 
@@ -269,7 +272,8 @@ class EFGElasticity:
         self._setup_time = time.perf_counter() - t0
 
     @property
-    def comm(self):
+    def comm(self) -> MPI.Comm:
+        """The particles' communicator."""
         return self.particles.comm
 
     def add_dirichlet(self, facets: np.ndarray, value: VectorFunction) -> None:

@@ -15,13 +15,16 @@ from __future__ import annotations
 import itertools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
 from petsc4py import PETSc
 
 from ..parallel import Layout
+
+if TYPE_CHECKING:  # annotations only
+    from mpi4py import MPI
 
 __all__ = [
     "SHORTHANDS",
@@ -89,7 +92,9 @@ def to_local_csr(
     return sp.csr_matrix((vals, (rows, cols)), shape=shape)
 
 
-def create_aij(comm, local: sp.spmatrix, row_layout: Layout, col_layout: Layout) -> PETSc.Mat:
+def create_aij(
+    comm: MPI.Comm | PETSc.Comm, local: sp.spmatrix, row_layout: Layout, col_layout: Layout
+) -> PETSc.Mat:
     """Distributed AIJ matrix from this rank's contributions in global numbering (collective).
 
     Args:
@@ -131,7 +136,9 @@ def create_aij(comm, local: sp.spmatrix, row_layout: Layout, col_layout: Layout)
     return M
 
 
-def create_vector(comm, layout: Layout, rows: np.ndarray, vals: np.ndarray) -> PETSc.Vec:
+def create_vector(
+    comm: MPI.Comm | PETSc.Comm, layout: Layout, rows: np.ndarray, vals: np.ndarray
+) -> PETSc.Vec:
     """Distributed vector with ``vals`` added at global ``rows`` (any rank may add any row)."""
     v = PETSc.Vec().createMPI(layout.petsc_sizes(), comm=comm)
     v.set(0.0)

@@ -456,7 +456,7 @@ def interface_system(problem: CoupledElasticity, tables: dict | None = None) -> 
     normals = partial(projected_normals, problem) if problem.coupling == "lagrange" else None
     Kp_loc, _, _, kt = particle_stiffness(
         P, problem.mls, problem.material, deg, boundary, hook, boundary_normals=normals,
-        tables=tables,
+        tables=tables, boundary_moments=hook is not None,
     )  # fmt: skip
 
     # essential conditions: FE side strongly, patch side by multipliers

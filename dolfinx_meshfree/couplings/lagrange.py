@@ -386,16 +386,19 @@ def interface_operators(
     fe_layout, l2g = fe_dof_layout(problem.V)
     pl = problem.patch.particles.dof_layout()
     boundary = patch.boundary() if problem.consistent else None
+    hook = partial(interface_interpolant, problem) if problem.coupling == "edge-to-edge" else None
     Kp_loc, q, tq, _ = particle_stiffness(
         P,
         problem.mls,
         problem.material,
         problem.quadrature_degree,
         boundary,
+        hook,
         quadrature=particle_rule(problem, integration),
         boundary_normals=partial(projected_normals, problem)
         if problem.coupling == "lagrange"
         else None,
+        boundary_moments=hook is not None,
     )
     if problem.coupling == "lagrange":
         fe_rows, p_rows, ml = lagrange_rows(problem)

@@ -115,6 +115,25 @@ def test_edge_to_edge_with_particles_between_nodes_matches_fe(patch, load, measu
     assert 1.8 <= rate <= 2.5, rate
 
 
+@pytest.mark.parametrize(
+    "patch, measured, before",
+    [("axis", 0.86, 1.40), ("curved", 0.86, 1.46)],
+)
+def test_edge_to_edge_with_traction_matches_fe(patch, measured, before):
+    """Traction on the right and top edges, spacing h: 0.86x the FE error at h = 1/12 on the
+    axis patch (interface ending on the loaded top edge) and on the curved staircase, rates
+    2.01 (measured). Before, consistent integration carried the interface interpolant's
+    mismatch ``I_P phi_J - phi_J`` with one constant per particle, which samples the stress at
+    the support's centroid instead of on the interface: 1.40x and 1.46x (rates 1.99, 1.95),
+    the error largest where the interface meets the free edge. Bounds: the issue's target
+    1.2x, rate in [1.8, 2.5]."""
+    e0, _ = _errors(0, "edge-to-edge", patch=patch, load="traction")
+    e1, f1 = _errors(1, "edge-to-edge", patch=patch, load="traction")
+    rate = np.log2(e0 / e1)
+    assert e1 <= 1.2 * f1, (e1 / f1, measured, before)
+    assert 1.8 <= rate <= 2.5, rate
+
+
 @pytest.mark.parametrize("angle", [0.0, 90.0, 120.0, "30"])
 def test_bad_corner_angle_is_refused(angle):
     msh, h = demo.build_mesh(MPI.COMM_WORLD, "quadrilateral", 0)

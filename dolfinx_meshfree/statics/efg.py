@@ -43,7 +43,12 @@ from ..geometry.quadrature import (
 from ..parallel import Layout, raise_on_all_ranks
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic, linear_twin
-from ..physics.operators import consistent_gradients, load_vector, stiffness_matrix
+from ..physics.operators import (
+    consistent_gradients,
+    load_vector,
+    moment_corrections,
+    stiffness_matrix,
+)
 from .newton import NewtonOptions
 from .petsc import BlockSystem, SolverOptions, create_aij, create_vector, solver_options
 from .sides import BlockProblem, ParticleSide, solve_load_steps
@@ -107,6 +112,7 @@ def particle_stiffness(
     quadrature: QuadraturePoints | None = None,
     boundary_normals: Callable[[QuadraturePoints], np.ndarray] | None = None,
     tables: dict | None = None,
+    boundary_moments: bool = False,
 ) -> tuple[sp.csr_matrix, QuadraturePoints, ShapeTable, dict]:
     """EFG stiffness from this rank's integration cells (``particles.cells``), in PETSc numbering.
 
@@ -117,7 +123,11 @@ def particle_stiffness(
     function values at the boundary quadrature ``bq`` in the VCI boundary integral (the
     edge-to-edge coupling uses their FE interpolant on the interface); ``boundary_normals(bq)``,
     if given, replaces the normals there (the Lagrange coupling uses their projection on its
-    multiplier space on the interface). ``quadrature``, if given,
+    multiplier space on the interface); with ``boundary_moments`` the VCI constant uses the
+    traces themselves and the difference ``boundary_values - traces`` is carried by a linear
+    correction per shape function that also matches its first moments
+    (:func:`~dolfinx_meshfree.physics.operators.moment_corrections`: exact interface terms
+    for linear stresses). ``quadrature``, if given,
     replaces the cell Gauss rule (``quadrature_degree`` is then not used for it), e.g. the
     particles and stress points of
     :func:`~dolfinx_meshfree.geometry.stress_points.stress_point_quadrature`
@@ -148,12 +158,25 @@ def particle_stiffness(
         tb = raise_on_all_ranks(comm, lambda: mls.tabulate(bq.points, derivatives=0))
         bvalues = tb.values if boundary_values is None else boundary_values(bq, tb.values)
         normals = bq.normals if boundary_normals is None else boundary_normals(bq)
+        moments = boundary_moments and boundary_values is not None
         test_grads = raise_on_all_ranks(
             comm,
             lambda: consistent_gradients(
-                tq.values, tq.gradients, q.weights, bvalues, bq.weights, normals, comm
+                tq.values,
+                tq.gradients,
+                q.weights,
+                tb.values if moments else bvalues,
+                bq.weights,
+                normals,
+                comm,
             ),
         )
+        if moments:
+            extra = moment_corrections(
+                tq.values, q.points[:, :gdim], q.weights, (bvalues - tb.values).tocsr(),
+                bq.points[:, :gdim], bq.weights, normals, comm,
+            )  # fmt: skip
+            test_grads = [(g + c).tocsr() for g, c in zip(test_grads, extra, strict=True)]
     if tables is not None:
         tables.update(quadrature=q, table=tq, test_gradients=test_grads, approximation=mls)
     t1 = time.perf_counter()

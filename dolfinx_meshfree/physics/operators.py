@@ -110,7 +110,7 @@ def moment_corrections(
     boundary_points: np.ndarray,
     boundary_weights: np.ndarray,
     boundary_normals: np.ndarray,
-    comm,
+    comm: MPI.Comm,
 ) -> list[sp.csr_matrix]:
     """Gradient corrections ``c_I(x) N_I(x)``, ``c_I`` linear in ``x`` per component, that carry
     a boundary term ``int_Gamma D_I n`` into the test gradients with its first moments.
@@ -156,7 +156,7 @@ def moment_corrections(
     radius = np.sqrt(np.where(mass > 0, second / np.where(mass > 0, mass, 1.0), 1.0))
     radius = np.where(radius > 0, radius, 1.0)
 
-    def basis(points, cols):
+    def basis(points: np.ndarray, cols: np.ndarray) -> np.ndarray:
         return np.column_stack([np.ones(len(cols)), (points - centre[cols]) / radius[cols, None]])
 
     p = basis(cell_points[V.row], V.col)  # (nnz, 1 + gdim)

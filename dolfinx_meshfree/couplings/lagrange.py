@@ -386,6 +386,7 @@ def interface_operators(
     fe_layout, l2g = fe_dof_layout(problem.V)
     pl = problem.patch.particles.dof_layout()
     boundary = patch.boundary() if problem.consistent else None
+    tables: dict = {}
     Kp_loc, q, tq, _ = particle_stiffness(
         P,
         problem.mls,
@@ -396,6 +397,7 @@ def interface_operators(
         boundary_normals=partial(projected_normals, problem)
         if problem.coupling == "lagrange"
         else None,
+        tables=tables,
     )
     if problem.coupling == "lagrange":
         fe_rows, p_rows, ml = lagrange_rows(problem)
@@ -421,6 +423,7 @@ def interface_operators(
         G_fe=create_aij(comm, G_fe, ml, fe_layout),
         G_p=create_aij(comm, G_p, ml, pl),
         multiplier_layout=ml,
+        particle_tables=tables,
         timings={"operators": time.perf_counter() - t0},
     )
 

@@ -135,12 +135,17 @@ class CentralDifference:
         energy_steps: Collection[int],
         on_output: OnOutput | None,
         progress: ProgressBar,
+        stop: Callable[[int], bool] | None = None,
     ) -> Stepped:
         """Take ``nsteps`` steps of ``dt`` (``nsteps dt = span``), recording the energies at
         ``energy_steps`` and calling ``on_output(step, time)`` at ``out_steps`` with ``v_n``
         current; closes ``progress``. Collective.
 
         The state stays ``(d_N, v_{N-1/2})`` for a next run; ``v_N`` is kept for evaluation.
+        ``stop(n)``, if given, is asked before each step ``n > n0`` (collective, the same answer
+        on every rank): ``True`` ends the run there, in the state ``(d_n, v_{n-1/2})``
+        (:attr:`Stepped.steps` tells how many steps were taken), e.g. to continue with a smaller
+        step (:class:`~dolfinx_meshfree.dynamics.time_step.Rebound`).
         """
         system, loads, G = self.system, self.loads, self.system.constraints()
         masses = system.mass()
@@ -157,8 +162,12 @@ class CentralDifference:
         outs: list[tuple[int, float]] = []
         clock = time.perf_counter()
         n = n0
+        stopped = False
         try:
             for n in range(n0, n0 + nsteps + 1):
+                if stop is not None and n > n0 and stop(n):
+                    stopped = True
+                    break  # the state is (d_n, v_{n-1/2})
                 tn = t0 + (n - n0) * dt
                 # v_{n+1/2} = v_{n-1/2} + (dt_{n-1/2} + dt_{n+1/2}) / 2 a_n (a new run may
                 # change dt)
@@ -223,8 +232,14 @@ class CentralDifference:
         finally:
             progress.close(nsteps if n == n0 + nsteps else None, t0 + (n - n0) * dt)
         t_loop = time.perf_counter() - clock - t_out
-        self.step, self.time = n0 + nsteps, t0 + span
         self.dt_prev = dt
+        if stopped:
+            self.step, self.time, self.v_now = n, t0 + (n - n0) * dt, None
+            self.records, self.w_ext, self.w_c = records, w_ext, w_c
+            for obj in (*ku, *vnew, *vnow, *imp):
+                obj.destroy()
+            return Stepped(n - n0, records[first:], outs, t_loop, t_out)
+        self.step, self.time = n0 + nsteps, t0 + span
         # keep v_N for evaluation after the run
         for x in self._final:
             x.destroy()

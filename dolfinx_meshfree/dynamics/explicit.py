@@ -173,7 +173,7 @@ class ExplicitDynamics:
     def fe(
         cls,
         V: dolfinx.fem.FunctionSpace,
-        material: LinearElastic,
+        material: LinearElastic | Material,
         safety: float = 0.9,
         fixed_facets: npt.ArrayLike | None = None,
     ) -> ExplicitDynamics:
@@ -188,7 +188,7 @@ class ExplicitDynamics:
     def efg(
         cls,
         particles: ParticleSet,
-        material: LinearElastic,
+        material: LinearElastic | Material,
         weight: str = "quartic",
         dilation: float = 2.0,
         basis: str = "linear",
@@ -229,6 +229,7 @@ class ExplicitDynamics:
         fixed_facets: npt.ArrayLike | None = None,
         integration: str = "cells",
         slaves: str = "layer",
+        material: Material | None = None,
     ) -> ExplicitDynamics:
         """A :class:`~dolfinx_meshfree.CoupledElasticity` (any coupling) or a
         :class:`~dolfinx_meshfree.HybridElasticity` in dynamics, from the static problem's
@@ -236,12 +237,13 @@ class ExplicitDynamics:
         quadrature, interface shape functions). Give loads with :meth:`add_traction` and
         :meth:`add_body_force`. ``integration="stress-points"``: Lagrangian-kernel stress
         points (lagrange, edge-to-edge, master-slave); ``slaves="coincident"``: Johnson's
-        coupling (master-slave, Rabczuk et al. 2006, eq. 15–16). Arguments: see
+        coupling (master-slave, Rabczuk et al. 2006, eq. 15–16). ``material``: a finite-strain
+        law whose linear twin is the problem's material (lagrange, edge-to-edge). Arguments: see
         :func:`~dolfinx_meshfree.dynamics.builders.build_coupled`.
         """
         check_safety(safety)
         check_multiplier_solver(multiplier_solver)
-        model = build_coupled(problem, particle_mass, fixed_facets, integration, slaves)
+        model = build_coupled(problem, particle_mass, fixed_facets, integration, slaves, material)
         return cls._from_model(model, safety, multiplier_solver)
 
     @property

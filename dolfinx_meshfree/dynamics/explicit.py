@@ -309,6 +309,8 @@ class ExplicitDynamics:
             if fn is not None and self.projection is not None:
                 self.projection.correct(target)
         self.stepper.reset()
+        if self.bound.state is not None:  # a state-dependent tangent: bound the new state
+            self.bound.invalidate()
 
     def add_traction(
         self, facets: npt.ArrayLike, traction: Traction, amplitude: Amplitude | None = None

@@ -43,10 +43,10 @@ from .system import Field, LinearSystem, SemiDiscreteSystem
 
 __all__ = [
     "DYNAMICS_METHODS",
+    "FINITE_STRAIN_DYNAMICS",
     "DynamicsResult",
     "EnergyRecord",
     "ExplicitDynamics",
-    "FINITE_STRAIN_DYNAMICS",
     "Field",
     "LinearSystem",
     "NonlinearSystem",

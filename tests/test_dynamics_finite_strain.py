@@ -50,7 +50,7 @@ def rotation(theta: float) -> np.ndarray:
     return np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
 
 
-# --- rigid motions ---------------------------------------------------------------------------------
+# --- rigid motions --------------------------------------------------------------------------------
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -79,7 +79,7 @@ def test_rigid_motions_are_force_free(method):
     dyn.destroy()
 
 
-# --- the linear law through the finite-strain path -------------------------------------------------
+# --- the linear law through the finite-strain path ------------------------------------------------
 
 
 @pytest.mark.parametrize("method", ["fe", "efg", "lagrange"])
@@ -125,7 +125,7 @@ def test_linear_law_through_the_nonlinear_path_equals_the_linear_system(method):
     dyn.destroy()
 
 
-# --- a spinning plate ------------------------------------------------------------------------------
+# --- a spinning plate -----------------------------------------------------------------------------
 
 
 def spin(method: str, dt_factor: float, omega: float = 0.05, steps: int = 300):
@@ -157,7 +157,7 @@ def test_spinning_run_conserves_energy_to_second_order(method):
     assert 3.5 <= drift / half <= 4.5
 
 
-# --- the stable step -------------------------------------------------------------------------------
+# --- the stable step ------------------------------------------------------------------------------
 
 
 def test_stable_step_is_rebounded_downward_as_the_material_stiffens():
@@ -191,7 +191,7 @@ def test_stable_step_is_rebounded_downward_as_the_material_stiffens():
     dyn.destroy()
 
 
-# --- what is refused -------------------------------------------------------------------------------
+# --- what is refused ------------------------------------------------------------------------------
 
 
 @pytest.mark.parametrize(

@@ -23,6 +23,7 @@ import numpy as np
 from petsc4py import PETSc
 
 from ..io import ProgressBar
+from ..physics.constitutive import DeformationError
 from .constraint import VelocityProjection
 from .energy import (
     EnergyRecord,
@@ -33,8 +34,9 @@ from .energy import (
 )
 from .loads import ExternalLoads
 from .system import SemiDiscreteSystem
+from .time_step import Rebound, TimeStepBound
 
-__all__ = ["CentralDifference", "Stepped", "schedule"]
+__all__ = ["CentralDifference", "Stepped", "advance_to", "schedule"]
 
 OnOutput = Callable[[int, float], None]
 
@@ -59,6 +61,7 @@ class Stepped:
         steps: The number of steps. records: This run's energy records.
         outputs: ``(step, time)`` of each output.
         t_loop: Seconds in the loop, outputs excluded. t_out: Seconds in the outputs.
+        dt: The (last) step.
     """
 
     steps: int
@@ -66,6 +69,7 @@ class Stepped:
     outputs: list[tuple[int, float]]
     t_loop: float
     t_out: float
+    dt: float = 0.0
 
     @property
     def timings(self) -> dict[str, float]:
@@ -238,7 +242,7 @@ class CentralDifference:
             self.records, self.w_ext, self.w_c = records, w_ext, w_c
             for obj in (*ku, *vnew, *vnow, *imp):
                 obj.destroy()
-            return Stepped(n - n0, records[first:], outs, t_loop, t_out)
+            return Stepped(n - n0, records[first:], outs, t_loop, t_out, dt)
         self.step, self.time = n0 + nsteps, t0 + span
         # keep v_N for evaluation after the run
         for x in self._final:
@@ -248,9 +252,64 @@ class CentralDifference:
         self.records, self.w_ext, self.w_c = records, w_ext, w_c
         for obj in (*ku, *vnew, *vnow, *imp):
             obj.destroy()
-        return Stepped(nsteps, records[first:], outs, t_loop, t_out)
+        return Stepped(nsteps, records[first:], outs, t_loop, t_out, dt)
 
     def destroy(self) -> None:
         """Destroy the state and work vectors (collective)."""
         for obj in (*self.u, *self.v, *self._work, *self._tmp, *self._final):
             obj.destroy()
+
+
+def advance_to(
+    stepper: CentralDifference,
+    bound: TimeStepBound,
+    t_end: float,
+    nsteps: int,
+    dt: float,
+    outputs: Sequence[float],
+    energy_records: int,
+    on_output: OnOutput | None,
+    progress: Callable[[int], ProgressBar],
+    rebound: int | None = None,
+    force: bool = False,
+) -> Stepped:
+    """Advance ``stepper`` to ``t_end`` in ``nsteps`` steps of ``dt``, or, with ``rebound`` (steps
+    between two checks of the wave speed, :class:`~dolfinx_meshfree.dynamics.time_step.Rebound`),
+    in segments whose step is lowered each time the re-bounded stable step falls below it
+    (collective). Outputs not reached in a segment carry over; energy records stay about one
+    per ``nsteps / energy_records`` steps. A ``DeformationError`` is raised with the step where
+    it happened.
+
+    Args:
+        progress: ``progress(n)``: a progress bar of ``n`` steps (one per segment).
+    """
+    every = max(1, nsteps // max(1, energy_records))
+    pending = [float(t) for t in outputs]
+    parts: list[Stepped] = []
+    count = energy_records
+    while True:
+        n0, t0 = stepper.step, stepper.time
+        stop = Rebound(bound, dt, n0, rebound) if rebound is not None else None
+        out_steps, energy_steps = schedule(n0, t0, nsteps, dt, pending, count)
+        try:
+            done = stepper.advance(
+                nsteps, dt, t_end - t0, out_steps, energy_steps, on_output, progress(nsteps), stop
+            )
+        except DeformationError as e:
+            at = f" (explicit dynamics: step {stop.step})" if stop is not None else ""
+            raise DeformationError(f"{e}{at}") from e
+        parts.append(done)
+        if done.steps == nsteps:
+            break
+        reached = stepper.step - n0  # outputs not reached before the stop stay pending
+        pending = [t for t in pending if round((t - t0) / dt) >= reached]
+        nsteps, dt = bound.steps_to(t_end - stepper.time, min(dt, bound.stable()), force)
+        count = max(1, nsteps // every)
+    return Stepped(
+        steps=sum(p.steps for p in parts),
+        records=[r for p in parts for r in p.records],
+        outputs=[o for p in parts for o in p.outputs],
+        t_loop=sum(p.t_loop for p in parts),
+        t_out=sum(p.t_out for p in parts),
+        dt=dt,
+    )

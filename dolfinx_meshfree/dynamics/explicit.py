@@ -38,11 +38,11 @@ from ..geometry.particles import ParticleSet
 from ..geometry.patch import ParticlePatch
 from ..geometry.quadrature import QuadraturePoints
 from ..io import DynamicsWriter, ProgressBar
-from ..physics.constitutive import DeformationError, Material
+from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic
 from ..statics.coupled import CoupledElasticity
 from .builders import Model, build_coupled, build_efg, build_fe
-from .central_difference import CentralDifference, schedule
+from .central_difference import CentralDifference, advance_to
 from .constraint import VelocityProjection, check_multiplier_solver
 from .discretisation import Discretisation, VectorFunction
 from .energy import EnergyRecord
@@ -51,7 +51,7 @@ from .initial import check_particle_values, initial_values
 from .loads import Amplitude, BodyLoad, ExternalLoads, Traction
 from .results import DynamicsResult
 from .system import Field, LinearSystem, SemiDiscreteSystem, inverse_masses
-from .time_step import Rebound, TimeStepBound, check_safety
+from .time_step import TimeStepBound, check_safety
 
 __all__ = ["ExplicitDynamics"]
 
@@ -372,7 +372,9 @@ class ExplicitDynamics:
         if not (np.isfinite(span) and span > 0.0):
             raise ValueError(f"t_end={t_end!r} must lie after the current time {self.time}")
         nsteps, dt = self.bound.steps_to(span, dt, force)
-        n0, t0 = self.step, self.time
+        t0 = self.time
+        label = "explicit dynamics "
+        bars = [ProgressBar(nsteps, self.comm, progress, label=label)]  # checks `progress`
         writer = DynamicsWriter(xdmf, self) if xdmf is not None else None
         if writer is not None and not len(outputs):
             outputs = (t0, float(t_end))
@@ -384,45 +386,25 @@ class ExplicitDynamics:
                 on_output(self, n, t)
 
         # a finite-strain system re-bounds its step as it stiffens (not with a forced dt)
-        rebound = hasattr(self.system, "wave_speed") and not force
-        every = max(1, nsteps // max(1, energy_records))
-        pending = [float(t) for t in outputs]
-        records, outs, t_loop, t_out, total = [], [], 0.0, 0.0, 0
-        count = energy_records  # records wanted in this segment (about one per `every` steps)
+        rebound = self.rebound_every if hasattr(self.system, "wave_speed") and not force else None
         try:
-            while True:
-                n0, t0 = self.step, self.time
-                stop = Rebound(self.bound, dt, n0, self.rebound_every) if rebound else None
-                out_steps, energy_steps = schedule(n0, t0, nsteps, dt, pending, count)
-                progress_bar = ProgressBar(nsteps, self.comm, progress, label="explicit dynamics ")
-                try:
-                    done = self.stepper.advance(
-                        nsteps, dt, span, out_steps, energy_steps, notify, progress_bar, stop
-                    )
-                except DeformationError as e:
-                    at = f" (explicit dynamics: step {stop.step})" if stop is not None else ""
-                    raise DeformationError(f"{e}{at}") from e
-                records += done.records
-                outs += done.outputs
-                t_loop, t_out, total = t_loop + done.t_loop, t_out + done.t_out, total + done.steps
-                if done.steps == nsteps:
-                    break
-                reached = self.step - n0  # outputs not reached before the stop stay pending
-                pending = [t for t in pending if round((t - t0) / dt) >= reached]
-                span = float(t_end) - self.time
-                nsteps, dt = self.bound.steps_to(span, min(dt, self.stable_time_step()), force)
-                count = max(1, nsteps // every)
+            done = advance_to(
+                self.stepper, self.bound, float(t_end), nsteps, dt, outputs, energy_records,
+                notify, lambda n: bars.pop() if bars else ProgressBar(n, self.comm, progress,
+                                                                       label=label),
+                rebound, force,
+            )  # fmt: skip
         finally:
             if writer is not None:
                 writer.close()
         return DynamicsResult(
-            dt=dt,
-            steps=total,
+            dt=done.dt,
+            steps=done.steps,
             time=self.time,
-            energies=records,
-            outputs=outs,
+            energies=done.records,
+            outputs=done.outputs,
             critical={**crit, **self.critical_time_step(), "stable": self.stable_time_step()},
-            timings={"steps": t_loop, "per_step": t_loop / total, "outputs": t_out},
+            timings=done.timings,
         )
 
     def _current(self) -> list[PETSc.Vec]:

@@ -9,6 +9,7 @@ from dolfinx_meshfree import _compat
 from dolfinx_meshfree.dynamics import ExplicitDynamics, LinearSystem, NonlinearSystem
 from dolfinx_meshfree.dynamics.finite_strain import fe_forces, particle_forces
 from dolfinx_meshfree.dynamics.time_step import frequency_bound
+from dolfinx_meshfree.physics.constitutive import DeformationError
 from dolfinx_meshfree.statics.efg import particle_stiffness
 
 import numpy as np
@@ -212,6 +213,18 @@ def test_couplings_without_a_finite_strain_force_refuse(coupling, missing):
     problem = mf.CoupledElasticity(V, patch, LIN, coupling=coupling, **options)
     with pytest.raises(ValueError, match=f"coupling='{coupling}'.*{missing}"):
         ExplicitDynamics.coupled(problem, material=NH)
+
+
+@pytest.mark.parametrize("method", ["fe", "efg", "lagrange"])
+def test_an_inverted_material_stops_the_run_naming_point_and_step(method):
+    """v = -3 X with a forced step of 1/3 collapses the plate to a point at the first step
+    (F = 0): the run stops with a DeformationError on every rank naming the point and the step,
+    no NaN carried on."""
+    dyn = build(method)
+    dyn.set_initial(velocity=lambda x: -3.0 * x[:, :2])
+    with pytest.raises(DeformationError, match=r"det F .* at X = .*step 1, t = 0.333333"):
+        dyn.run(1.0, 1.0 / 3.0, force=True)
+    dyn.destroy()
 
 
 def test_finite_strain_material_must_match_the_problem_and_be_2d():

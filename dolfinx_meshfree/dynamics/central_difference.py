@@ -178,7 +178,11 @@ class CentralDifference:
                 gamma = 0.5 if n == 0 else (0.5 * (1.0 + self.dt_prev / dt) if n == n0 else 1.0)
                 amps = loads.at(tn)
                 # trial velocities (eq. 93): vbar = v_{n-1/2} + gamma dt M^{-1} (f_ext - f_int)
-                system.internal_force(self.u, ku)
+                try:
+                    system.internal_force(self.u, ku)
+                except DeformationError as e:  # finite strain: name the step and stop
+                    at = f"(explicit dynamics: step {n}, t = {tn:.6g})"
+                    raise DeformationError(f"{e} {at}") from e
                 for k in range(F):
                     ku[k].copy(self._work[k])
                     for vecs, an in amps:
@@ -277,8 +281,7 @@ def advance_to(
     between two checks of the wave speed, :class:`~dolfinx_meshfree.dynamics.time_step.Rebound`),
     in segments whose step is lowered each time the re-bounded stable step falls below it
     (collective). Outputs not reached in a segment carry over; energy records stay about one
-    per ``nsteps / energy_records`` steps. A ``DeformationError`` is raised with the step where
-    it happened.
+    per ``nsteps / energy_records`` steps.
 
     Args:
         progress: ``progress(n)``: a progress bar of ``n`` steps (one per segment).
@@ -291,13 +294,9 @@ def advance_to(
         n0, t0 = stepper.step, stepper.time
         stop = Rebound(bound, dt, n0, rebound) if rebound is not None else None
         out_steps, energy_steps = schedule(n0, t0, nsteps, dt, pending, count)
-        try:
-            done = stepper.advance(
-                nsteps, dt, t_end - t0, out_steps, energy_steps, on_output, progress(nsteps), stop
-            )
-        except DeformationError as e:
-            at = f" (explicit dynamics: step {stop.step})" if stop is not None else ""
-            raise DeformationError(f"{e}{at}") from e
+        done = stepper.advance(
+            nsteps, dt, t_end - t0, out_steps, energy_steps, on_output, progress(nsteps), stop
+        )
         parts.append(done)
         if done.steps == nsteps:
             break

@@ -239,9 +239,6 @@ class Rebound:
         start: The first step of the run.
         every: Steps between two checks of the wave speed.
         growth: Relative growth of the wave speed that triggers a re-bound.
-
-    Attributes:
-        step: The step of the last check (to name it in an error).
     """
 
     def __init__(
@@ -251,10 +248,8 @@ class Rebound:
             raise ValueError(f"every={every!r} must be an integer >= 1 (steps between checks)")
         self.bound, self.dt, self.start = bound, float(dt), int(start)
         self.every, self.growth = every, float(growth)
-        self.step = self.start
 
     def __call__(self, n: int) -> bool:
-        self.step = n
         if (n - self.start) % self.every:
             return False
         speed = self.bound.system.wave_speed(self.bound.state())

@@ -19,7 +19,7 @@ from mpi4py import MPI
 
 NH = mf.NeoHookean(E=1.0, nu=0.3, plane="strain", rho=1.0)
 LIN = mf.LinearElastic(1.0, 0.3, "strain", rho=1.0)
-METHODS = ["fe", "efg", "lagrange", "edge-to-edge"]
+METHODS = ["fe", "efg", "lagrange", "edge-to-edge", "bridging"]
 
 
 def mesh(n: int = 4):
@@ -27,14 +27,17 @@ def mesh(n: int = 4):
     return rectangle(MPI.COMM_WORLD, [-1.0, -1.0], [1.0, 1.0], [n, n], CELL_TYPES["quadrilateral"])
 
 
-def patch_problem(msh, method: str, material=LIN) -> mf.CoupledElasticity:
-    """Particles (spacing h / 2) on the cells with centres in |x|, |y| < 1/2."""
+def patch_problem(msh, method: str, material=LIN, **options) -> mf.CoupledElasticity:
+    """Particles (spacing h / 2) on the cells with centres in |x|, |y| < 1/2 (bridging: a band
+    of one cell layer)."""
     V = _compat.vector_function_space(msh)
     n = msh.topology.index_map(2).size_local
     xc = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], :2].mean(axis=1)
     h = 2.0 / round(np.sqrt(msh.topology.index_map(2).size_global))
     patch = mf.ParticlePatch(msh, np.flatnonzero(np.all(np.abs(xc) < 0.5, axis=1)), h / 2)
-    return mf.CoupledElasticity(V, patch, material, coupling=method, quadrature_degree=3)
+    if method == "bridging":
+        options.setdefault("overlap", 1)
+    return mf.CoupledElasticity(V, patch, material, coupling=method, quadrature_degree=3, **options)
 
 
 def build(method: str, material=NH, n: int = 4) -> ExplicitDynamics:
@@ -83,7 +86,7 @@ def test_rigid_motions_are_force_free(method):
 # --- the linear law through the finite-strain path ------------------------------------------------
 
 
-@pytest.mark.parametrize("method", ["fe", "efg", "lagrange"])
+@pytest.mark.parametrize("method", ["fe", "efg", "lagrange", "bridging"])
 def test_linear_law_through_the_nonlinear_path_equals_the_linear_system(method):
     """A NonlinearSystem of LinearElastic (the UFL law on the FE cells, InternalForces on the
     particle tables) gives f = K u of the LinearSystem of the builders (assembled by DOLFINx and
@@ -104,8 +107,17 @@ def test_linear_law_through_the_nonlinear_path_equals_the_linear_system(method):
         dyn = ExplicitDynamics.coupled(problem)
         ops = problem.operators("cells", "layer")
         P = problem.patch.particles
+        cells, weight, weight_at = ~problem.patch.in_patch, None, None
+        if method == "bridging":  # beta_FE = 1 - alpha in the band (eq. 47-48)
+            band = ops.interface
+            cells, weight = cells | band.in_band, ops.fe_weight
+
+            def weight_at(q):
+                b = band.in_band[q.cells]
+                return np.where(b, 1.0 - band.alpha_at(q.points, q.cells), 1.0)
+
         sides = [
-            fe_forces(V, LIN, ~problem.patch.in_patch),
+            fe_forces(V, LIN, cells, weight=weight, weight_at=weight_at),
             particle_forces(P, ops.particle_tables, LIN),
         ]
         ops.destroy()
@@ -197,19 +209,17 @@ def test_stable_step_is_rebounded_downward_as_the_material_stiffens():
 
 @pytest.mark.parametrize(
     ("coupling", "missing"),
-    [("ramp", "blended"), ("bridging", "beta_FE"), ("master-slave", "finite rotations")],
+    [("ramp", "blended"), ("ramp-cubic", "blended"), ("master-slave", "finite rotations")],
 )
 def test_couplings_without_a_finite_strain_force_refuse(coupling, missing):
     """The couplings whose dynamics is not written on the internal force yet refuse a
     finite-strain material, naming what is missing."""
-    options = {"dilation": 2.5} if coupling == "ramp" else {}
+    options = {"dilation": 2.5} if coupling.startswith("ramp") else {}
     msh = mesh()
     V = _compat.vector_function_space(msh)
     n = msh.topology.index_map(2).size_local
     xc = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], :2].mean(axis=1)
     patch = mf.ParticlePatch(msh, np.flatnonzero(xc[:, 0] > 0.0), 0.25)
-    if coupling == "bridging":
-        options["overlap"] = 1
     problem = mf.CoupledElasticity(V, patch, LIN, coupling=coupling, **options)
     with pytest.raises(ValueError, match=f"coupling='{coupling}'.*{missing}"):
         ExplicitDynamics.coupled(problem, material=NH)
@@ -228,7 +238,11 @@ def test_an_inverted_material_stops_the_run_naming_point_and_step(method):
 
 
 def test_finite_strain_material_must_match_the_problem_and_be_2d():
+    """The linear twin of the law must be the problem's material; 3D laws, and the bridging
+    penalty, are refused at finite strain."""
     msh = mesh()
+    with pytest.raises(ValueError, match=r"penalty=1.0.*use penalty=0"):
+        ExplicitDynamics.coupled(patch_problem(msh, "bridging", penalty=1.0), material=NH)
     problem = patch_problem(msh, "lagrange")
     with pytest.raises(ValueError, match="linear twin"):
         ExplicitDynamics.coupled(problem, material=mf.NeoHookean(E=2.0, nu=0.3, plane="strain"))

@@ -342,6 +342,11 @@ def build_coupled(
         )
     law = problem.material if material is None else material
     material = small_strain(law, coupling)
+    if law is not material and coupling == "bridging" and problem.penalty > 0.0:
+        raise ValueError(
+            f"penalty={problem.penalty!r}: the bridging penalty is not available at finite strain "
+            "in explicit dynamics (its blocks are mixed into the stiffness); use penalty=0"
+        )
     if material != problem.material:
         raise ValueError(
             f"material={law!r} reduces to {material!r} at small strain, but the problem's material "
@@ -436,9 +441,7 @@ def build_coupled(
 
     system = None
     if law is not material:
-        P_side = particle_forces(P, ops.particle_tables, law)
-        fe_side = fe_forces(V, law, ~patch.in_patch)
-        system = NonlinearSystem(fields, [fe_side, P_side], law, constraint)
+        system = _finite_strain_system(problem, ops, law, fields, constraint)
     return Model(
         fields,
         law,
@@ -456,6 +459,36 @@ def build_coupled(
         body_load=body_load,
         system=system,
     )
+
+
+def _finite_strain_system(
+    problem: CoupledElasticity,
+    ops: CouplingOperators,
+    law: Material,
+    fields: list[Field],
+    constraint: list[PETSc.Mat | None] | None,
+) -> NonlinearSystem:
+    """The finite-strain system of a coupling from its operators: the FE law on the cells
+    whose energy is FE (weighted by ``beta_FE`` in the bridging band, eq. 47–48) and the particle
+    tables of ``K_P`` (bridging: weights times ``alpha``, eq. 46). Collective.
+    """
+    V, patch = problem.V, problem.patch
+    cells, weight, weight_at = ~patch.in_patch, None, None
+    if problem.coupling == "bridging":
+        band = ops.interface
+        cells, weight = cells | band.in_band, ops.fe_weight
+
+        def weight_at(q):  # beta_FE = 1 - alpha in the band, 1 on the FE cells
+            w = np.ones(len(q))
+            b = band.in_band[q.cells]
+            w[b] = 1.0 - band.alpha_at(q.points[b], q.cells[b])
+            return w
+
+    sides = [
+        fe_forces(V, law, cells, weight=weight, weight_at=weight_at),
+        particle_forces(patch.particles, ops.particle_tables, law),
+    ]
+    return NonlinearSystem(fields, sides, law, constraint)
 
 
 # -- hybrid SPH-FE ---------------------------------------------------------------------------------

@@ -23,7 +23,7 @@ largest current Lagrangian wave speed, the cheap test of stiffening between two 
 
 from __future__ import annotations
 
-from collections.abc import Collection, Sequence
+from collections.abc import Callable, Collection, Sequence
 
 import dolfinx
 import numpy as np
@@ -33,7 +33,7 @@ from petsc4py import PETSc
 
 from ..approx.fe_points import tabulate_in_cells
 from ..geometry.particles import ParticleSet
-from ..geometry.quadrature import cell_quadrature
+from ..geometry.quadrature import QuadraturePoints, cell_quadrature
 from ..parallel import raise_on_all_ranks
 from ..physics.constitutive import DeformationError, Material, check_deformation_gradients
 from ..physics.forces import InternalForces
@@ -51,14 +51,12 @@ __all__ = [
 ]
 
 #: Methods of explicit dynamics at finite strain (``fe``, ``efg`` and these couplings).
-FINITE_STRAIN_DYNAMICS = ("fe", "efg", "lagrange", "edge-to-edge")
+FINITE_STRAIN_DYNAMICS = ("fe", "efg", "lagrange", "edge-to-edge", "bridging")
 
 #: What the other methods miss at finite strain in explicit dynamics.
 MISSING = {
     "ramp": "the internal force of the blended interface cells (Belytschko et al. 1995, eq. 3.15)",
     "ramp-cubic": "the internal force of the blended interface cells",
-    "bridging": "the beta_FE-weighted FE force and the alpha-weighted particle tables "
-    "in its dynamic operators (and its penalty blocks kept apart)",
     "master-slave": "rigid links with finite rotations (today's links are small-rotation)",
     "hybrid": "SPH sums of the nominal stress P",
 }
@@ -127,13 +125,18 @@ def fe_forces(
     material: Material,
     cells: np.ndarray | None = None,
     degree: int = 2,
+    weight: ufl.core.expr.Expr | None = None,
+    weight_at: Callable[[QuadraturePoints], np.ndarray] | None = None,
 ) -> FEForces:
     """The FE side of a finite-strain system on the owned cells flagged in ``cells`` (``None``:
     every cell), with ``degree`` the Gauss rule of both the assembled force and the energy
     (collective).
 
     ``degree = 2`` integrates the P1/Q1 stiffness exactly (its linear limit is DOLFINx's
-    ``inner(sigma(u), eps(v)) dx``) and ``W(F)`` exactly on triangles (``F`` constant per cell).
+    ``inner(sigma(u), eps(v)) dx``, also with a P1 weight) and ``W(F)`` exactly on triangles
+    (``F`` constant per cell). ``weight`` (UFL) multiplies the FE energy, e.g. the bridging
+    coupling's ``beta_FE`` (Rabczuk et al. 2006, eq. 47–48), and ``weight_at(q)`` (m,) gives its
+    values at the points of the energy's rule.
     """
     msh = V.mesh
     tdim, gdim = msh.topology.dim, msh.geometry.dim
@@ -144,12 +147,13 @@ def fe_forces(
     F = ufl.Identity(gdim) + ufl.grad(u)
     F_int = ufl.inner(material.ufl_first_piola(F), ufl.grad(v)) * dx
     n_local = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
-    side = FESide(F_int, u, cells, np.zeros(n_local, dtype=bool))
+    side = FESide(F_int, u, cells, np.zeros(n_local, dtype=bool), weight)
     n_owned = msh.topology.index_map(tdim).size_local
     owned = np.arange(n_owned) if cells is None else np.flatnonzero(cells[:n_owned])
     q = cell_quadrature(msh, degree, owned)
     table = tabulate_in_cells(V, q.points, q.cells, derivatives=1)
-    return FEForces(side, InternalForces(table, q.weights, material, comm=msh.comm))
+    w = q.weights if weight_at is None else q.weights * weight_at(q)
+    return FEForces(side, InternalForces(table, w, material, comm=msh.comm))
 
 
 def particle_forces(particles: ParticleSet, tables: dict, material: Material) -> ParticleSide:

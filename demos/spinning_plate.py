@@ -157,7 +157,8 @@ def run(method: str, model: str, args) -> dict:
 
 
 # +
-def main() -> int:
+def main(argv: list[str] | None = None) -> list[dict]:
+    """Run, print the table, write the JSON; raise ``SystemExit(1)`` when a check fails."""
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--method", nargs="+", default=["lagrange"], choices=METHODS)
     p.add_argument("--n", type=int, default=8, help="cells per side")
@@ -171,7 +172,7 @@ def main() -> int:
     p.add_argument("--no-linear", action="store_true", help="skip the small-strain runs")
     p.add_argument("--json", default=None)
     p.add_argument("--no-check", action="store_true")
-    args = p.parse_args()
+    args = p.parse_args(argv)
     comm = MPI.COMM_WORLD
     models = ["neo-Hookean"] + ([] if args.no_linear else ["small strain"])
     records = [run(m, model, args) for m in args.method for model in models]
@@ -211,11 +212,13 @@ def main() -> int:
             for key, target in TARGETS.items():
                 if not r[key] <= target:
                     failures.append(f"{name}: {key} {r[key]:.2e} > {target:.0e}")
-    if failures and comm.rank == 0:
-        print("FAILED:\n  " + "\n  ".join(failures))
-    return 1 if failures else 0
+    if failures:
+        if comm.rank == 0:
+            print("FAILED:\n  " + "\n  ".join(failures))
+        raise SystemExit(1)
+    return records
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    main()
 # -

@@ -148,6 +148,9 @@ class CouplingOperators:
         interface: The coupling's interface object for evaluation (``RampInterface``,
             ``BridgingBand``, ``MasterSlaveLinks``) or ``None``.
         fe_layout, particle_layout, multiplier_layout, master_layout: Layouts (dofs).
+        particle_tables: What a finite-strain internal force needs on the particle rule
+            (``"quadrature"``, ``"table"``, ``"test_gradients"`` of ``K_P``, and ``"weights"``
+            if they differ from the quadrature's), or ``None`` (couplings without it yet).
         timings: Seconds spent.
     """
 
@@ -170,6 +173,7 @@ class CouplingOperators:
     reduction: tuple[PETSc.Mat, PETSc.Mat] | None = None
     master_layout: Layout | None = None
     interface: RampInterface | MasterSlaveLinks | BridgingBand | None = None
+    particle_tables: dict | None = None
     timings: dict[str, float] = field(default_factory=dict)
 
     def matrices(self) -> list[PETSc.Mat]:

@@ -779,6 +779,12 @@ def bridging_operators(problem):
         G_p=create_aij(comm, G_p, ml, pl),
         multiplier_layout=ml,
         interface=band,
+        particle_tables={
+            "quadrature": q,
+            "table": tq,
+            "test_gradients": test or tq.gradients,
+            "weights": w,
+        },
         timings={"operators": time.perf_counter() - t0},
     )
 

@@ -396,6 +396,7 @@ def interface_operators(
     pl = problem.patch.particles.dof_layout()
     boundary = patch.boundary() if problem.consistent else None
     hook = partial(interface_interpolant, problem) if problem.coupling == "edge-to-edge" else None
+    tables: dict = {}
     Kp_loc, q, tq, _ = particle_stiffness(
         P,
         problem.mls,
@@ -408,6 +409,7 @@ def interface_operators(
         if problem.coupling == "lagrange"
         else None,
         boundary_moments=hook is not None,
+        tables=tables,
     )
     if problem.coupling == "lagrange":
         fe_rows, p_rows, ml = lagrange_rows(problem)
@@ -433,6 +435,7 @@ def interface_operators(
         G_fe=create_aij(comm, G_fe, ml, fe_layout),
         G_p=create_aij(comm, G_p, ml, pl),
         multiplier_layout=ml,
+        particle_tables=tables,
         timings={"operators": time.perf_counter() - t0},
     )
 

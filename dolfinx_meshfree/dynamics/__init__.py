@@ -7,6 +7,9 @@ Rabczuk et al. 2006, sec. 5.3.3 and Table I). The pieces live in modules of one 
   (:class:`SemiDiscreteSystem`: ``mass()``, ``internal_force(u)``, ``tangent(u)``,
   ``constraints()``, ``rebuild(changed)``) and its linear member :class:`LinearSystem`
   (``f^int = K u``);
+* :mod:`~dolfinx_meshfree.dynamics.finite_strain`: the finite-deformation member
+  :class:`NonlinearSystem` (total Lagrangian, ``f^int = sum_q B0^T P(F_q) w_q``, stored energy
+  ``W(F)``);
 * :mod:`~dolfinx_meshfree.dynamics.central_difference`: the stepping (eq. 93), written on
   ``internal_force``;
 * :mod:`~dolfinx_meshfree.dynamics.constraint`: the multiplier correction of the velocities
@@ -32,6 +35,7 @@ from __future__ import annotations
 
 from .energy import EnergyRecord
 from .explicit import ExplicitDynamics
+from .finite_strain import FINITE_STRAIN_DYNAMICS, NonlinearSystem
 from .masses import fe_lumped_mass, particle_lumped_mass, table_lumped_mass
 from .methods import DYNAMICS_METHODS, check_method
 from .results import DynamicsResult
@@ -39,11 +43,13 @@ from .system import Field, LinearSystem, SemiDiscreteSystem
 
 __all__ = [
     "DYNAMICS_METHODS",
+    "FINITE_STRAIN_DYNAMICS",
     "DynamicsResult",
     "EnergyRecord",
     "ExplicitDynamics",
     "Field",
     "LinearSystem",
+    "NonlinearSystem",
     "SemiDiscreteSystem",
     "check_method",
     "fe_lumped_mass",

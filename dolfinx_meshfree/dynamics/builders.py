@@ -51,11 +51,13 @@ from ..geometry.patch import ParticlePatch
 from ..geometry.stress_points import check_integration, stress_point_quadrature
 from ..parallel import Layout, raise_on_all_ranks
 from ..physics.body_loads import CallableBodyForce, body_load_vectors
+from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic
 from ..statics.coupled import CoupledElasticity, CouplingOperators
 from ..statics.efg import particle_stiffness
 from ..statics.petsc import create_aij
 from .conditions import check_facets, first_cells, fixed_fe_dofs, particle_conditions, stack_rows
+from .finite_strain import NonlinearSystem, fe_forces, particle_forces, small_strain
 from .loads import BodyLoad
 from .masses import (
     fe_lumped_mass,
@@ -80,6 +82,7 @@ class Model:
         fields: One or two :class:`~dolfinx_meshfree.dynamics.system.Field` (FE first).
         material: The material. constraint: The constraint blocks per field, or ``None``.
         blocks: Off-diagonal stiffness blocks. timings: Seconds spent building.
+        system: The finite-strain system, or ``None``: the linear one of the blocks.
         V, mls, particles, mesh, in_patch, patch, interface, reduction, body_load: What
             evaluation and loads need.
     """
@@ -98,6 +101,7 @@ class Model:
     reduction: tuple[PETSc.Mat, PETSc.Mat] | None = None
     timings: dict = field(default_factory=dict)
     body_load: BodyLoad | None = None
+    system: NonlinearSystem | None = None
 
     def arguments(self) -> dict:
         """The attributes as keyword arguments of ``ExplicitDynamics`` (no copies)."""
@@ -125,12 +129,13 @@ def check_particle_mass(particle_mass: str, default: str = "row-sum") -> str:
 
 def build_fe(
     V: dolfinx.fem.FunctionSpace,
-    material: LinearElastic,
+    material: LinearElastic | Material,
     fixed_facets: npt.ArrayLike | None = None,
 ) -> Model:
     """Pure FE: DOLFINx's stiffness ``inner(sigma(u), eps(v)) dx``, row-sum masses, fixed
-    facets' nodes held strongly. Collective."""
-    _check_material(material)
+    facets' nodes held strongly; at finite strain the assembled ``int P(F) : grad v dX``
+    (:class:`~dolfinx_meshfree.dynamics.finite_strain.NonlinearSystem`). Collective."""
+    law, material = material, small_strain(material, "fe")
     t0 = time.perf_counter()
     msh = V.mesh
     facets = check_facets(msh, fixed_facets)
@@ -145,19 +150,23 @@ def build_fe(
     def body_load(force):  # int N_a b, Gauss degree 4 (as the tractions)
         return body_load_vectors([CallableBodyForce(force)], V, None, 4)
 
+    system = None
+    if law is not material:
+        system = NonlinearSystem([fe_field], [fe_forces(V, law)], law)
     return Model(
         [fe_field],
-        material,
+        law,
         V=V,
         mesh=msh,
         timings={"setup": time.perf_counter() - t0},
         body_load=body_load,
+        system=system,
     )
 
 
 def build_efg(
     particles: ParticleSet,
-    material: LinearElastic,
+    material: LinearElastic | Material,
     weight: str = "quartic",
     dilation: float = 2.0,
     basis: str = "linear",
@@ -181,8 +190,11 @@ def build_efg(
             computed once at t = 0; Rabczuk, Belytschko & Xiao 2004;
             :mod:`~dolfinx_meshfree.geometry.stress_points`); the row-sum masses are then
             ``rho sum_q phi_I(x_q) V_q``.
+
+    A finite-strain ``material`` gives the internal force of
+    :class:`~dolfinx_meshfree.InternalForces` on the same rule and table.
     """
-    _check_material(material)
+    law, material = material, small_strain(material, "efg")
     check_integration(integration)
     if particles.mesh is None:
         raise ValueError("explicit EFG needs particles with a background mesh (mesh=...)")
@@ -194,8 +206,9 @@ def build_efg(
         comm, lambda: MLS(particles, weight=weight, dilation=dilation, basis=basis)
     )
     rule = None if integration == "cells" else stress_point_quadrature(particles)
+    tables: dict = {}
     K_loc, q, tq, _ = particle_stiffness(
-        particles, mls, material, quadrature_degree, quadrature=rule
+        particles, mls, material, quadrature_degree, quadrature=rule, tables=tables
     )
     n = particles.num_particles
     pl = Layout(2 * particles.layout.size_local, 2 * n, 2 * particles.layout.start)
@@ -210,15 +223,20 @@ def build_efg(
         forces = [CallableBodyForce(force)]
         return body_load_vectors(forces, None, None, quadrature_degree, (q, tq.values), comm=comm)
 
+    fields = [Field("particles", K, mass, particle_spacing(particles))]
+    system = None
+    if law is not material:
+        system = NonlinearSystem(fields, [particle_forces(particles, tables, law)], law, constraint)
     return Model(
-        [Field("particles", K, mass, particle_spacing(particles))],
-        material,
+        fields,
+        law,
         constraint,
         mls=mls,
         particles=particles,
         mesh=particles.mesh,
         timings={"setup": time.perf_counter() - t0},
         body_load=body_load,
+        system=system,
     )
 
 
@@ -272,6 +290,7 @@ def build_coupled(
     fixed_facets: npt.ArrayLike | None = None,
     integration: str = "cells",
     slaves: str = "layer",
+    material: Material | None = None,
 ) -> Model:
     """Explicit dynamics of a :class:`~dolfinx_meshfree.CoupledElasticity` (any coupling),
     from :meth:`~dolfinx_meshfree.CoupledElasticity.operators` (collective).
@@ -292,8 +311,15 @@ def build_coupled(
             interface nodes, Rabczuk et al. 2006, eq. 15–16: the node and its particle share
             the acceleration ``(F_K + F_P) / (m_K + m_P)``, which the reduction ``T^T M T``,
             ``T^T f`` below gives).
+        material: A finite-strain law (:class:`~dolfinx_meshfree.NeoHookean`,
+            :class:`~dolfinx_meshfree.SaintVenantKirchhoff`) whose linear twin is the problem's
+            material: the internal force is then the total-Lagrangian one of both sides
+            (:class:`~dolfinx_meshfree.dynamics.finite_strain.NonlinearSystem`; lagrange and
+            edge-to-edge). ``None``: the problem's material.
     """
     if isinstance(problem, HybridElasticity):  # the hybrid SPH-FE coupling: its own builder
+        if material is not None and not isinstance(material, LinearElastic):
+            small_strain(material, "hybrid")
         if (integration, slaves) != ("cells", "layer"):
             raise ValueError(
                 f"integration={integration!r}, slaves={slaves!r}: the hybrid coupling has its "
@@ -314,8 +340,19 @@ def build_coupled(
             f"particle_mass='volume' is not available with coupling={coupling!r}: its particle "
             "masses follow the weighted/blended shape functions; use particle_mass='row-sum'"
         )
-    material = problem.material
-    _check_material(material)
+    law = problem.material if material is None else material
+    material = small_strain(law, coupling)
+    if law is not material and coupling == "bridging" and problem.penalty > 0.0:
+        raise ValueError(
+            f"penalty={problem.penalty!r}: the bridging penalty is not available at finite strain "
+            "in explicit dynamics (its blocks are mixed into the stiffness); use penalty=0"
+        )
+    if material != problem.material:
+        raise ValueError(
+            f"material={law!r} reduces to {material!r} at small strain, but the problem's material "
+            f"is {problem.material!r}: build the CoupledElasticity with the linear twin "
+            "(dolfinx_meshfree.physics.materials.linear_twin(material))"
+        )
     t0 = time.perf_counter()
     V, patch, mls = problem.V, problem.patch, problem.mls
     P, comm, msh = patch.particles, patch.comm, V.mesh
@@ -402,9 +439,12 @@ def build_coupled(
         deg = problem.quadrature_degree
         return body_load_vectors(forces, V, ops.fe_weight, deg, p_rule, i_rule, comm)
 
+    system = None
+    if law is not material:
+        system = _finite_strain_system(problem, ops, law, fields, constraint)
     return Model(
         fields,
-        material,
+        law,
         constraint,
         blocks=blocks,
         V=V,
@@ -417,7 +457,38 @@ def build_coupled(
         reduction=ops.reduction,
         timings={"setup": time.perf_counter() - t0, "operators": ops.timings["operators"]},
         body_load=body_load,
+        system=system,
     )
+
+
+def _finite_strain_system(
+    problem: CoupledElasticity,
+    ops: CouplingOperators,
+    law: Material,
+    fields: list[Field],
+    constraint: list[PETSc.Mat | None] | None,
+) -> NonlinearSystem:
+    """The finite-strain system of a coupling from its operators: the FE law on the cells
+    whose energy is FE (weighted by ``beta_FE`` in the bridging band, eq. 47–48) and the particle
+    tables of ``K_P`` (bridging: weights times ``alpha``, eq. 46). Collective.
+    """
+    V, patch = problem.V, problem.patch
+    cells, weight, weight_at = ~patch.in_patch, None, None
+    if problem.coupling == "bridging":
+        band = ops.interface
+        cells, weight = cells | band.in_band, ops.fe_weight
+
+        def weight_at(q):  # beta_FE = 1 - alpha in the band, 1 on the FE cells
+            w = np.ones(len(q))
+            b = band.in_band[q.cells]
+            w[b] = 1.0 - band.alpha_at(q.points[b], q.cells[b])
+            return w
+
+    sides = [
+        fe_forces(V, law, cells, weight=weight, weight_at=weight_at),
+        particle_forces(patch.particles, ops.particle_tables, law),
+    ]
+    return NonlinearSystem(fields, sides, law, constraint)
 
 
 # -- hybrid SPH-FE ---------------------------------------------------------------------------------

@@ -23,6 +23,7 @@ import numpy as np
 from petsc4py import PETSc
 
 from ..io import ProgressBar
+from ..physics.constitutive import DeformationError
 from .constraint import VelocityProjection
 from .energy import (
     EnergyRecord,
@@ -33,8 +34,9 @@ from .energy import (
 )
 from .loads import ExternalLoads
 from .system import SemiDiscreteSystem
+from .time_step import Rebound, TimeStepBound
 
-__all__ = ["CentralDifference", "Stepped", "schedule"]
+__all__ = ["CentralDifference", "Stepped", "advance_to", "schedule"]
 
 OnOutput = Callable[[int, float], None]
 
@@ -59,6 +61,7 @@ class Stepped:
         steps: The number of steps. records: This run's energy records.
         outputs: ``(step, time)`` of each output.
         t_loop: Seconds in the loop, outputs excluded. t_out: Seconds in the outputs.
+        dt: The (last) step.
     """
 
     steps: int
@@ -66,6 +69,7 @@ class Stepped:
     outputs: list[tuple[int, float]]
     t_loop: float
     t_out: float
+    dt: float = 0.0
 
     @property
     def timings(self) -> dict[str, float]:
@@ -135,12 +139,17 @@ class CentralDifference:
         energy_steps: Collection[int],
         on_output: OnOutput | None,
         progress: ProgressBar,
+        stop: Callable[[int], bool] | None = None,
     ) -> Stepped:
         """Take ``nsteps`` steps of ``dt`` (``nsteps dt = span``), recording the energies at
         ``energy_steps`` and calling ``on_output(step, time)`` at ``out_steps`` with ``v_n``
         current; closes ``progress``. Collective.
 
         The state stays ``(d_N, v_{N-1/2})`` for a next run; ``v_N`` is kept for evaluation.
+        ``stop(n)``, if given, is asked before each step ``n > n0`` (collective, the same answer
+        on every rank): ``True`` ends the run there, in the state ``(d_n, v_{n-1/2})``
+        (:attr:`Stepped.steps` tells how many steps were taken), e.g. to continue with a smaller
+        step (:class:`~dolfinx_meshfree.dynamics.time_step.Rebound`).
         """
         system, loads, G = self.system, self.loads, self.system.constraints()
         masses = system.mass()
@@ -157,15 +166,23 @@ class CentralDifference:
         outs: list[tuple[int, float]] = []
         clock = time.perf_counter()
         n = n0
+        stopped = False
         try:
             for n in range(n0, n0 + nsteps + 1):
+                if stop is not None and n > n0 and stop(n):
+                    stopped = True
+                    break  # the state is (d_n, v_{n-1/2})
                 tn = t0 + (n - n0) * dt
                 # v_{n+1/2} = v_{n-1/2} + (dt_{n-1/2} + dt_{n+1/2}) / 2 a_n (a new run may
                 # change dt)
                 gamma = 0.5 if n == 0 else (0.5 * (1.0 + self.dt_prev / dt) if n == n0 else 1.0)
                 amps = loads.at(tn)
                 # trial velocities (eq. 93): vbar = v_{n-1/2} + gamma dt M^{-1} (f_ext - f_int)
-                system.internal_force(self.u, ku)
+                try:
+                    system.internal_force(self.u, ku)
+                except DeformationError as e:  # finite strain: name the step and stop
+                    at = f"(explicit dynamics: step {n}, t = {tn:.6g})"
+                    raise DeformationError(f"{e} {at}") from e
                 for k in range(F):
                     ku[k].copy(self._work[k])
                     for vecs, an in amps:
@@ -223,8 +240,14 @@ class CentralDifference:
         finally:
             progress.close(nsteps if n == n0 + nsteps else None, t0 + (n - n0) * dt)
         t_loop = time.perf_counter() - clock - t_out
-        self.step, self.time = n0 + nsteps, t0 + span
         self.dt_prev = dt
+        if stopped:
+            self.step, self.time, self.v_now = n, t0 + (n - n0) * dt, None
+            self.records, self.w_ext, self.w_c = records, w_ext, w_c
+            for obj in (*ku, *vnew, *vnow, *imp):
+                obj.destroy()
+            return Stepped(n - n0, records[first:], outs, t_loop, t_out, dt)
+        self.step, self.time = n0 + nsteps, t0 + span
         # keep v_N for evaluation after the run
         for x in self._final:
             x.destroy()
@@ -233,9 +256,59 @@ class CentralDifference:
         self.records, self.w_ext, self.w_c = records, w_ext, w_c
         for obj in (*ku, *vnew, *vnow, *imp):
             obj.destroy()
-        return Stepped(nsteps, records[first:], outs, t_loop, t_out)
+        return Stepped(nsteps, records[first:], outs, t_loop, t_out, dt)
 
     def destroy(self) -> None:
         """Destroy the state and work vectors (collective)."""
         for obj in (*self.u, *self.v, *self._work, *self._tmp, *self._final):
             obj.destroy()
+
+
+def advance_to(
+    stepper: CentralDifference,
+    bound: TimeStepBound,
+    t_end: float,
+    nsteps: int,
+    dt: float,
+    outputs: Sequence[float],
+    energy_records: int,
+    on_output: OnOutput | None,
+    progress: Callable[[int], ProgressBar],
+    rebound: int | None = None,
+    force: bool = False,
+) -> Stepped:
+    """Advance ``stepper`` to ``t_end`` in ``nsteps`` steps of ``dt``, or, with ``rebound`` (steps
+    between two checks of the wave speed, :class:`~dolfinx_meshfree.dynamics.time_step.Rebound`),
+    in segments whose step is lowered each time the re-bounded stable step falls below it
+    (collective). Outputs not reached in a segment carry over; energy records stay about one
+    per ``nsteps / energy_records`` steps.
+
+    Args:
+        progress: ``progress(n)``: a progress bar of ``n`` steps (one per segment).
+    """
+    every = max(1, nsteps // max(1, energy_records))
+    pending = [float(t) for t in outputs]
+    parts: list[Stepped] = []
+    count = energy_records
+    while True:
+        n0, t0 = stepper.step, stepper.time
+        stop = Rebound(bound, dt, n0, rebound) if rebound is not None else None
+        out_steps, energy_steps = schedule(n0, t0, nsteps, dt, pending, count)
+        done = stepper.advance(
+            nsteps, dt, t_end - t0, out_steps, energy_steps, on_output, progress(nsteps), stop
+        )
+        parts.append(done)
+        if done.steps == nsteps:
+            break
+        reached = stepper.step - n0  # outputs not reached before the stop stay pending
+        pending = [t for t in pending if round((t - t0) / dt) >= reached]
+        nsteps, dt = bound.steps_to(t_end - stepper.time, min(dt, bound.stable()), force)
+        count = max(1, nsteps // every)
+    return Stepped(
+        steps=sum(p.steps for p in parts),
+        records=[r for p in parts for r in p.records],
+        outputs=[o for p in parts for o in p.outputs],
+        t_loop=sum(p.t_loop for p in parts),
+        t_out=sum(p.t_out for p in parts),
+        dt=dt,
+    )

@@ -34,7 +34,8 @@ class EnergyRecord:
 
     Attributes:
         kinetic: ``1/2 v_n^T M v_n`` with ``v_n = (v_{n-1/2} + v_{n+1/2}) / 2``.
-        internal: ``1/2 d_n^T K d_n``.
+        internal: The strain energy of the system at ``d_n``: ``1/2 d_n^T K d_n`` (linear), the
+            stored energy ``sum_q W(F_q) w_q`` (finite strain).
         external: Work of the external loads, ``sum_k f_k . (d_{k+1} - d_{k-1}) / 2``.
         constraint: Net work of the constraint forces ``-G^T lambda / dt`` in the same form
             (zero to round-off, since ``G v = 0``).
@@ -42,7 +43,9 @@ class EnergyRecord:
             from the FE side to the particles (the FE side receives ``constraint - transfer``).
         discrete: ``1/2 v_{n+1/2}^T M v_{n+1/2} + 1/2 d_n^T K d_{n+1}``, the energy that central
             differences conserve exactly for linear problems (with the velocity projection too):
-            ``discrete - external - constraint`` is constant to round-off.
+            ``discrete - external - constraint`` is constant to round-off; for a nonlinear
+            internal force (``internal + dt/2 f^int(d_n) . v_{n+1/2}`` in place of the second
+            term) it is conserved to O(dt^2).
         residual: Relative constraint residual ``|G v| / (|G| |v|)`` (max norms) at ``n + 1/2``.
     """
 

@@ -38,10 +38,11 @@ from ..geometry.particles import ParticleSet
 from ..geometry.patch import ParticlePatch
 from ..geometry.quadrature import QuadraturePoints
 from ..io import DynamicsWriter, ProgressBar
+from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic
 from ..statics.coupled import CoupledElasticity
 from .builders import Model, build_coupled, build_efg, build_fe
-from .central_difference import CentralDifference, schedule
+from .central_difference import CentralDifference, advance_to
 from .constraint import VelocityProjection, check_multiplier_solver
 from .discretisation import Discretisation, VectorFunction
 from .energy import EnergyRecord
@@ -49,7 +50,7 @@ from .evaluation import FieldEvaluator
 from .initial import check_particle_values, initial_values
 from .loads import Amplitude, BodyLoad, ExternalLoads, Traction
 from .results import DynamicsResult
-from .system import Field, LinearSystem, inverse_masses
+from .system import Field, LinearSystem, SemiDiscreteSystem, inverse_masses
 from .time_step import TimeStepBound, check_safety
 
 __all__ = ["ExplicitDynamics"]
@@ -58,7 +59,12 @@ OnOutput = Callable[["ExplicitDynamics", int, float], None]
 
 
 class ExplicitDynamics:
-    """Central-difference explicit dynamics of linear elasticity, FE, EFG or coupled.
+    """Central-difference explicit dynamics of elasticity, FE, EFG or coupled: small strain
+    (:class:`~dolfinx_meshfree.LinearElastic`, ``f^int = K d``) or finite strain, total
+    Lagrangian (:class:`~dolfinx_meshfree.NeoHookean`,
+    :class:`~dolfinx_meshfree.SaintVenantKirchhoff`: the
+    :class:`~dolfinx_meshfree.dynamics.finite_strain.NonlinearSystem`, with the stable step
+    re-bounded as the material stiffens, :class:`~dolfinx_meshfree.dynamics.time_step.Rebound`).
 
     Build with :meth:`fe`, :meth:`efg` or :meth:`coupled` (every coupling of
     :data:`~dolfinx_meshfree.dynamics.DYNAMICS_METHODS`); set the initial state with
@@ -69,7 +75,8 @@ class ExplicitDynamics:
 
     Args:
         fields: One or two :class:`~dolfinx_meshfree.dynamics.system.Field` (FE first).
-        material: The :class:`~dolfinx_meshfree.LinearElastic` law (density and wave speed).
+        material: The law (density and wave speed): :class:`~dolfinx_meshfree.LinearElastic`
+            or a finite-strain :class:`~dolfinx_meshfree.physics.constitutive.Material`.
         constraint: The constraint blocks ``G_f`` of each field (``None`` for a field without),
             or ``None``: no constraint.
         safety: Fraction of the critical time step used by default and allowed without
@@ -86,9 +93,16 @@ class ExplicitDynamics:
         body_load: ``body_load(b) -> (fe, particles)``: the consistent loads of a body force
             (set by the builders, :class:`~dolfinx_meshfree.dynamics.loads.ExternalLoads`);
             ``None``: :meth:`add_body_force` uses the lumped masses.
+        system: The semi-discrete system; ``None``: the
+            :class:`~dolfinx_meshfree.dynamics.system.LinearSystem` of ``fields``, ``blocks``
+            and ``constraint`` (the builders give a
+            :class:`~dolfinx_meshfree.dynamics.finite_strain.NonlinearSystem` for a
+            finite-strain material).
+        rebound_every: Steps between two checks of the current wave speed of a finite-strain
+            system (a growth above 5 % re-bounds the step, :class:`Rebound`).
 
     Attributes:
-        system: The :class:`~dolfinx_meshfree.dynamics.system.LinearSystem`.
+        system: The :class:`~dolfinx_meshfree.dynamics.system.SemiDiscreteSystem`.
         projection: The :class:`~dolfinx_meshfree.dynamics.constraint.VelocityProjection`, or
             ``None`` without a constraint.
         u, v: ``d_n`` and ``v_{n-1/2}`` per field (PETSc vectors).
@@ -97,7 +111,7 @@ class ExplicitDynamics:
     def __init__(
         self,
         fields: Sequence[Field],
-        material: LinearElastic,
+        material: LinearElastic | Material,
         constraint: Sequence[PETSc.Mat | None] | None = None,
         safety: float = 0.9,
         *,
@@ -113,11 +127,17 @@ class ExplicitDynamics:
         timings: dict | None = None,
         multiplier_solver: str | None = None,
         body_load: BodyLoad | None = None,
+        system: SemiDiscreteSystem | None = None,
+        rebound_every: int = 10,
     ):
         check_safety(safety)
         check_multiplier_solver(multiplier_solver)
-        self.system = LinearSystem(fields, blocks, constraint)
-        self.fields, self.blocks, self.G = self.system.fields, self.system.blocks, self.system.G
+        if system is None:
+            system = LinearSystem(fields, blocks, constraint)
+        self.system = system
+        self.fields, self.G = self.system.fields, self.system.constraints()
+        self.blocks = getattr(self.system, "blocks", {})
+        self.rebound_every = rebound_every
         self.material = material
         self.V, self.mls, self.particles, self.mesh = V, mls, particles, mesh
         self.in_patch, self.patch = in_patch, patch
@@ -137,6 +157,8 @@ class ExplicitDynamics:
         self.bound = TimeStepBound(self.system, material, self._minv, self.free, self.comm, safety)
         self.loads = ExternalLoads(disc, self.free, self.comm, material.rho, body_load)
         self.stepper = CentralDifference(self.system, self._minv, self.loads, self.projection)
+        if hasattr(self.system, "wave_speed"):  # bounded at the current state
+            self.bound.state = lambda: self.stepper.u
         self.evaluator = FieldEvaluator(disc, self.comm)
         self.u, self.v = self.stepper.u, self.stepper.v
         self.timings["setup"] = self.timings.get("setup", 0.0) + time.perf_counter() - t0
@@ -151,7 +173,7 @@ class ExplicitDynamics:
     def fe(
         cls,
         V: dolfinx.fem.FunctionSpace,
-        material: LinearElastic,
+        material: LinearElastic | Material,
         safety: float = 0.9,
         fixed_facets: npt.ArrayLike | None = None,
     ) -> ExplicitDynamics:
@@ -166,7 +188,7 @@ class ExplicitDynamics:
     def efg(
         cls,
         particles: ParticleSet,
-        material: LinearElastic,
+        material: LinearElastic | Material,
         weight: str = "quartic",
         dilation: float = 2.0,
         basis: str = "linear",
@@ -207,6 +229,7 @@ class ExplicitDynamics:
         fixed_facets: npt.ArrayLike | None = None,
         integration: str = "cells",
         slaves: str = "layer",
+        material: Material | None = None,
     ) -> ExplicitDynamics:
         """A :class:`~dolfinx_meshfree.CoupledElasticity` (any coupling) or a
         :class:`~dolfinx_meshfree.HybridElasticity` in dynamics, from the static problem's
@@ -214,12 +237,13 @@ class ExplicitDynamics:
         quadrature, interface shape functions). Give loads with :meth:`add_traction` and
         :meth:`add_body_force`. ``integration="stress-points"``: Lagrangian-kernel stress
         points (lagrange, edge-to-edge, master-slave); ``slaves="coincident"``: Johnson's
-        coupling (master-slave, Rabczuk et al. 2006, eq. 15–16). Arguments: see
+        coupling (master-slave, Rabczuk et al. 2006, eq. 15–16). ``material``: a finite-strain
+        law whose linear twin is the problem's material (lagrange, edge-to-edge). Arguments: see
         :func:`~dolfinx_meshfree.dynamics.builders.build_coupled`.
         """
         check_safety(safety)
         check_multiplier_solver(multiplier_solver)
-        model = build_coupled(problem, particle_mass, fixed_facets, integration, slaves)
+        model = build_coupled(problem, particle_mass, fixed_facets, integration, slaves, material)
         return cls._from_model(model, safety, multiplier_solver)
 
     @property
@@ -285,6 +309,8 @@ class ExplicitDynamics:
             if fn is not None and self.projection is not None:
                 self.projection.correct(target)
         self.stepper.reset()
+        if self.bound.state is not None:  # a state-dependent tangent: bound the new state
+            self.bound.invalidate()
 
     def add_traction(
         self, facets: npt.ArrayLike, traction: Traction, amplitude: Amplitude | None = None
@@ -346,8 +372,9 @@ class ExplicitDynamics:
         if not (np.isfinite(span) and span > 0.0):
             raise ValueError(f"t_end={t_end!r} must lie after the current time {self.time}")
         nsteps, dt = self.bound.steps_to(span, dt, force)
-        n0, t0 = self.step, self.time
-        progress_bar = ProgressBar(nsteps, self.comm, progress, label="explicit dynamics ")
+        t0 = self.time
+        label = "explicit dynamics "
+        bars = [ProgressBar(nsteps, self.comm, progress, label=label)]  # checks `progress`
         writer = DynamicsWriter(xdmf, self) if xdmf is not None else None
         if writer is not None and not len(outputs):
             outputs = (t0, float(t_end))
@@ -358,21 +385,25 @@ class ExplicitDynamics:
             if on_output is not None:
                 on_output(self, n, t)
 
-        out_steps, energy_steps = schedule(n0, t0, nsteps, dt, outputs, energy_records)
+        # a finite-strain system re-bounds its step as it stiffens (not with a forced dt)
+        rebound = self.rebound_every if hasattr(self.system, "wave_speed") and not force else None
         try:
-            done = self.stepper.advance(
-                nsteps, dt, span, out_steps, energy_steps, notify, progress_bar
-            )
+            done = advance_to(
+                self.stepper, self.bound, float(t_end), nsteps, dt, outputs, energy_records,
+                notify, lambda n: bars.pop() if bars else ProgressBar(n, self.comm, progress,
+                                                                       label=label),
+                rebound, force,
+            )  # fmt: skip
         finally:
             if writer is not None:
                 writer.close()
         return DynamicsResult(
-            dt=dt,
-            steps=nsteps,
+            dt=done.dt,
+            steps=done.steps,
             time=self.time,
             energies=done.records,
             outputs=done.outputs,
-            critical={**crit, "stable": self.stable_time_step()},
+            critical={**crit, **self.critical_time_step(), "stable": self.stable_time_step()},
             timings=done.timings,
         )
 

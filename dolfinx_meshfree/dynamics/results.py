@@ -14,15 +14,16 @@ class DynamicsResult:
     """What :meth:`ExplicitDynamics.run <dolfinx_meshfree.ExplicitDynamics.run>` did.
 
     Attributes:
-        dt: The time step. steps: Number of steps taken. time: The final time.
+        dt: The time step (the last one, if a finite-strain run lowered it). steps: Number of
+            steps taken. time: The final time.
         energies: :class:`~dolfinx_meshfree.dynamics.energy.EnergyRecord` at this run's energy
             steps (outputs included; a run continued with another step size starts a new level
             of the discrete energy).
         outputs: ``(step, time)`` of each requested output time (nearest step).
         critical: :meth:`ExplicitDynamics.critical_time_step
             <dolfinx_meshfree.ExplicitDynamics.critical_time_step>` (``critical = spectral =
-            2 / omega_bound``, the guard; ``courant = h_min / c`` reported only) and ``stable``
-            (times ``safety``).
+            2 / omega_bound``, the guard; ``courant = h_min / c`` reported only; ``bounds``: how
+            many times it was computed) and ``stable`` (times ``safety``).
         timings: Seconds in ``steps`` (the loop, outputs excluded), ``per_step``, ``outputs``.
     """
 

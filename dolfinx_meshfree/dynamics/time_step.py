@@ -23,7 +23,7 @@ of a stiffening material or a rebuilt approximation).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from mpi4py import MPI
@@ -33,7 +33,7 @@ from ..physics.materials import LinearElastic
 from .linalg import absolute
 from .system import SemiDiscreteSystem
 
-__all__ = ["TimeStepBound", "check_safety", "frequency_bound"]
+__all__ = ["Rebound", "TimeStepBound", "check_safety", "frequency_bound"]
 
 
 def check_safety(safety: float) -> float:
@@ -51,6 +51,7 @@ def frequency_bound(
     free: Sequence[np.ndarray],
     comm: MPI.Comm,
     iterations: int = 30,
+    u: Sequence[PETSc.Vec] | None = None,
 ) -> tuple[float, float]:
     """Upper bounds of ``omega_max^2`` by the Schur test (collective).
 
@@ -61,16 +62,17 @@ def frequency_bound(
     non-symmetric ``K`` too (consistent integration), for ``|lambda|``.
 
     Args:
-        system: Its masses and its tangent at the reference state.
+        system: Its masses and its tangent at ``u``.
         minv: ``M^{-1}`` per field (0 on dofs held at rest).
         free: bool per owned dof of each field: not held at rest.
+        u: The state of the tangent (``None``: the reference state).
 
     Returns:
         ``(best, first)``: the smallest bound of ``omega_max^2`` and the Gershgorin one.
     """
     masses = system.mass()
     F = len(masses)
-    tangent = {kl: absolute(A) for kl, A in system.tangent().items()}
+    tangent = {kl: absolute(A) for kl, A in system.tangent(u).items()}
     on_free = [fr.astype(float) for fr in free]
     y = [m.duplicate() for m in masses]
     r = [m.duplicate() for m in masses]
@@ -119,12 +121,19 @@ def frequency_bound(
 class TimeStepBound:
     """The critical and stable time steps of a system (cached until :meth:`invalidate`).
 
+    A system with a state-dependent tangent (finite strain) is bounded at its current state
+    (``state``) and its current wave speed (``system.wave_speed``, reported and the reference of
+    :class:`Rebound`); the guard ``critical`` is the smallest bound met so far: a re-bound may
+    lower the step, never raise it (a softening material keeps the step of its stiffest state).
+
     Args:
         system: The semi-discrete system.
         material: Its material (the wave speed of the Courant estimate).
         minv, free: ``M^{-1}`` and the free dofs of each field.
         comm: The communicator.
         safety: Fraction of the critical step used by default (0 < safety <= 1).
+        state: ``state()`` -> the current displacement per field, or ``None``: the tangent at
+            the reference state (a linear system's, the same at any state).
     """
 
     def __init__(
@@ -135,34 +144,44 @@ class TimeStepBound:
         free: Sequence[np.ndarray],
         comm: MPI.Comm,
         safety: float = 0.9,
+        state: Callable[[], Sequence[PETSc.Vec]] | None = None,
     ):
         self.system, self.material = system, material
         self.minv, self.free, self.comm = list(minv), list(free), comm
         self.safety = check_safety(safety)
+        self.state = state
         self._critical: dict | None = None
+        self._lowest = np.inf
+        #: How many times the bound was computed.
+        self.count = 0
 
     def critical(self, iterations: int = 30) -> dict:
         """Critical time step from an upper bound of ``omega_max`` (collective, cached).
 
         Returns:
-            ``{"courant": h_min / c, "spectral": 2 / omega_bound, "critical": the same (the
-            guard), "omega_bound": ..., "gershgorin": 2 / (the row-sum bound with y = 1),
-            "h_min": ..., "wave_speed": ...}``.
+            ``{"courant": h_min / c, "spectral": 2 / omega_bound, "critical": the smallest
+            spectral bound so far (the guard), "omega_bound": ..., "gershgorin": 2 / (the row-sum
+            bound with y = 1), "h_min": ..., "wave_speed": c (current), "bounds": count}``.
         """
         if self._critical is not None:
             return self._critical
-        c = self.material.wave_speed()
+        u = self.state() if self.state is not None else None
+        speed = getattr(self.system, "wave_speed", None)
+        c = speed(u) if (u is not None and speed is not None) else self.material.wave_speed()
         h = min(f.spacing for f in self.system.fields)
-        best, first = frequency_bound(self.system, self.minv, self.free, self.comm, iterations)
+        best, first = frequency_bound(self.system, self.minv, self.free, self.comm, iterations, u)
         spectral = 2.0 / np.sqrt(best) if best > 0 else np.inf
+        self._lowest = min(self._lowest, float(spectral))
+        self.count += 1
         self._critical = {
             "courant": float(h / c),
             "spectral": float(spectral),
-            "critical": float(spectral),
+            "critical": float(self._lowest),
             "omega_bound": float(np.sqrt(best)),
             "gershgorin": float(2.0 / np.sqrt(first)) if first > 0 else np.inf,
             "h_min": float(h),
             "wave_speed": float(c),
+            "bounds": self.count,
         }
         return self._critical
 
@@ -200,3 +219,41 @@ class TimeStepBound:
         """Forget the bound: the next :meth:`critical` re-bounds the system's current tangent
         (the hook for a system whose tangent changed)."""
         self._critical = None
+
+
+class Rebound:
+    """Re-bounds the stable step of a stiffening system during a run (a ``stop`` hook of
+    :meth:`~dolfinx_meshfree.dynamics.central_difference.CentralDifference.advance`).
+
+    Every ``every`` steps the largest current wave speed (``system.wave_speed(u)``, cheap:
+    ``F`` at the quadrature points) is compared with the one of the last bound; when it grew by
+    more than ``growth``, the bound is recomputed at the current tangent
+    (:meth:`TimeStepBound.invalidate`). The run stops (``True``) when the new stable step lies
+    below the step in use, so that the caller continues with a smaller one. Between two checks
+    the step has a margin ``1 / safety`` on the last bound, which a growth of the frequencies by
+    less than ``growth`` (5 %) cannot use up at ``safety <= 0.95``.
+
+    Args:
+        bound: The bound (its ``state`` gives the current displacement).
+        dt: The step in use.
+        start: The first step of the run.
+        every: Steps between two checks of the wave speed.
+        growth: Relative growth of the wave speed that triggers a re-bound.
+    """
+
+    def __init__(
+        self, bound: TimeStepBound, dt: float, start: int, every: int = 10, growth: float = 0.05
+    ):
+        if not (isinstance(every, int) and every >= 1):
+            raise ValueError(f"every={every!r} must be an integer >= 1 (steps between checks)")
+        self.bound, self.dt, self.start = bound, float(dt), int(start)
+        self.every, self.growth = every, float(growth)
+
+    def __call__(self, n: int) -> bool:
+        if (n - self.start) % self.every:
+            return False
+        speed = self.bound.system.wave_speed(self.bound.state())
+        if speed <= (1.0 + self.growth) * self.bound.critical()["wave_speed"]:
+            return False
+        self.bound.invalidate()
+        return self.bound.stable() < self.dt * (1.0 - 1e-12)

@@ -1,0 +1,302 @@
+"""The finite-deformation member of the semi-discrete systems: ``f^int(d) = sum_q B0^T P(F_q) w_q``.
+
+Total-Lagrangian explicit dynamics (Rabczuk et al. 2006, eq. 1–5, 34 and 86–92): the lumped
+masses, the constraint blocks ``G`` (interface multipliers, essential conditions on particles)
+and the velocity projection of eq. 94–96 are those of the linear model (they do not depend on
+the deformation); only the internal force changes:
+
+* FE side: DOLFINx assembles ``int_FE P(I + grad u) : grad v dX`` of the material's UFL law
+  (:meth:`~dolfinx_meshfree.physics.constitutive.Material.ufl_first_piola`) on the FE cells
+  (the cells whose energy the coupling gives to FE), through
+  :class:`~dolfinx_meshfree.statics.sides.FESide`, on a fixed Gauss rule;
+* particle side: :class:`~dolfinx_meshfree.physics.forces.InternalForces` on the particle
+  quadrature and the shape table the builders use for the masses and ``K_P`` (test gradients
+  VCI-corrected when the coupling is consistent), through
+  :class:`~dolfinx_meshfree.statics.sides.ParticleSide`.
+
+The strain energy is the stored energy ``sum_q W(F_q) w_q`` of both sides (the FE one on the same
+Gauss rule as its force, with the FE basis tabulated at those points), not ``1/2 d^T K d``; the
+tangent is the consistent one of both sides at the current state (for the stable step, see
+:mod:`~dolfinx_meshfree.dynamics.time_step`), and :meth:`NonlinearSystem.wave_speed` the
+largest current Lagrangian wave speed, the cheap test of stiffening between two bounds.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Collection, Sequence
+
+import dolfinx
+import numpy as np
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from ..approx.fe_points import tabulate_in_cells
+from ..geometry.particles import ParticleSet
+from ..geometry.quadrature import QuadraturePoints, cell_quadrature
+from ..parallel import raise_on_all_ranks
+from ..physics.constitutive import DeformationError, Material, check_deformation_gradients
+from ..physics.forces import InternalForces
+from ..physics.materials import LinearElastic, linear_twin
+from ..statics.sides import FESide, ParticleSide
+from .system import Blocks, Field
+
+__all__ = [
+    "FINITE_STRAIN_DYNAMICS",
+    "FEForces",
+    "NonlinearSystem",
+    "fe_forces",
+    "particle_forces",
+    "small_strain",
+]
+
+#: Methods of explicit dynamics at finite strain (``fe``, ``efg`` and these couplings).
+FINITE_STRAIN_DYNAMICS = ("fe", "efg", "lagrange", "edge-to-edge", "bridging")
+
+#: What the other methods miss at finite strain in explicit dynamics.
+MISSING = {
+    "ramp": "the internal force of the blended interface cells (Belytschko et al. 1995, eq. 3.15)",
+    "ramp-cubic": "the internal force of the blended interface cells",
+    "master-slave": "rigid links with finite rotations (today's links are small-rotation)",
+    "hybrid": "SPH sums of the nominal stress P",
+}
+
+
+def small_strain(material: LinearElastic | Material, method: str) -> LinearElastic:
+    """The small-strain law a model is assembled with: ``material`` itself if it is a
+    :class:`~dolfinx_meshfree.LinearElastic`, else its linear twin (same ``E``, ``nu``,
+    ``plane``, ``rho``: the masses, the constraints and the tangent at ``d = 0``).
+
+    Raises:
+        TypeError: ``material`` is not a material.
+        ValueError: a finite-strain material with a ``method`` not in
+            :data:`FINITE_STRAIN_DYNAMICS` (naming what it misses), or in 3D.
+    """
+    if isinstance(material, LinearElastic):
+        return material
+    if not isinstance(material, Material):
+        raise TypeError(
+            f"material must be a LinearElastic or a finite-strain Material (NeoHookean, "
+            f"SaintVenantKirchhoff), got {type(material).__name__}"
+        )
+    name = type(material).__name__
+    if method not in FINITE_STRAIN_DYNAMICS:
+        missing = MISSING.get(method, "a finite-strain internal force")
+        raise ValueError(
+            f"material={name}: coupling={method!r} is not available at finite strain in explicit "
+            f"dynamics (missing: {missing}); use one of {list(FINITE_STRAIN_DYNAMICS)} or "
+            "LinearElastic"
+        )
+    if material.plane is None:
+        raise ValueError(
+            f"material={name}(plane=None) is a 3D law; explicit dynamics at finite strain is 2D "
+            "in this release (its FE side is written for two components): use plane='strain' or "
+            "'stress'"
+        )
+    return linear_twin(material)
+
+
+class FEForces:
+    """The FE side of a finite-strain system: the assembled UFL internal force and tangent
+    (:class:`~dolfinx_meshfree.statics.sides.FESide`) and, on the same Gauss rule, the FE basis
+    at the points for ``F`` and ``W(F)`` (:class:`~dolfinx_meshfree.physics.forces.InternalForces`).
+
+    Args:
+        side: The assembled side (its Function holds the state).
+        points: Its quadrature, as :class:`InternalForces` of the FE basis (local nodes).
+    """
+
+    def __init__(self, side: FESide, points: InternalForces):
+        self.side, self.points = side, points
+
+    def state(self, x: PETSc.Vec) -> np.ndarray:
+        """Set the side's Function to ``x`` (ghosts updated) and return its local values,
+        interleaved (owned and ghost nodes: the columns of the table)."""
+        self.side.set_state(x)
+        return self.side.u.x.array
+
+    def deformation_gradient(self, x: PETSc.Vec) -> np.ndarray:
+        """``F`` (m, d, d) at this rank's FE quadrature points."""
+        return self.points.deformation_gradient(self.state(x))
+
+
+def fe_forces(
+    V: dolfinx.fem.FunctionSpace,
+    material: Material,
+    cells: np.ndarray | None = None,
+    degree: int = 2,
+    weight: ufl.core.expr.Expr | None = None,
+    weight_at: Callable[[QuadraturePoints], np.ndarray] | None = None,
+) -> FEForces:
+    """The FE side of a finite-strain system on the owned cells flagged in ``cells`` (``None``:
+    every cell), with ``degree`` the Gauss rule of both the assembled force and the energy
+    (collective).
+
+    ``degree = 2`` integrates the P1/Q1 stiffness exactly (its linear limit is DOLFINx's
+    ``inner(sigma(u), eps(v)) dx``, also with a P1 weight) and ``W(F)`` exactly on triangles
+    (``F`` constant per cell). ``weight`` (UFL) multiplies the FE energy, e.g. the bridging
+    coupling's ``beta_FE`` (Rabczuk et al. 2006, eq. 47–48), and ``weight_at(q)`` (m,) gives its
+    values at the points of the energy's rule.
+    """
+    msh = V.mesh
+    tdim, gdim = msh.topology.dim, msh.geometry.dim
+    u = dolfinx.fem.Function(V)
+    u.x.array[:] = 0.0
+    v = ufl.TestFunction(V)
+    dx = ufl.dx(metadata={"quadrature_degree": degree})
+    F = ufl.Identity(gdim) + ufl.grad(u)
+    F_int = ufl.inner(material.ufl_first_piola(F), ufl.grad(v)) * dx
+    n_local = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
+    side = FESide(F_int, u, cells, np.zeros(n_local, dtype=bool), weight)
+    n_owned = msh.topology.index_map(tdim).size_local
+    owned = np.arange(n_owned) if cells is None else np.flatnonzero(cells[:n_owned])
+    q = cell_quadrature(msh, degree, owned)
+    table = tabulate_in_cells(V, q.points, q.cells, derivatives=1)
+    w = q.weights if weight_at is None else q.weights * weight_at(q)
+    return FEForces(side, InternalForces(table, w, material, comm=msh.comm))
+
+
+def particle_forces(particles: ParticleSet, tables: dict, material: Material) -> ParticleSide:
+    """The particle side on ``tables`` (``"quadrature"``, ``"table"``, ``"test_gradients"``,
+    optional ``"weights"``: what :func:`~dolfinx_meshfree.statics.efg.particle_stiffness`
+    returns), in PETSc numbering."""
+    return ParticleSide(particles, tables, material)
+
+
+class NonlinearSystem:
+    """Finite deformation: ``f^int(d)`` of a hyperelastic material on each field, with the masses
+    and constraints of the linear model.
+
+    Args:
+        fields: The fields of the linear model (FE first): masses, spacing, fixed dofs; their
+            ``K`` is the tangent at ``d = 0`` (the linear twin's stiffness).
+        sides: Per field its :class:`FEForces` (FE) or
+            :class:`~dolfinx_meshfree.statics.sides.ParticleSide` (particles).
+        material: The hyperelastic law (its current wave speed).
+        constraint: The constraint blocks ``G_f`` of each field (``None`` for a field without),
+            or ``None``: no constraint.
+    """
+
+    def __init__(
+        self,
+        fields: Sequence[Field],
+        sides: Sequence[FEForces | ParticleSide],
+        material: Material,
+        constraint: Sequence[PETSc.Mat | None] | None = None,
+    ):
+        if len(sides) != len(fields):
+            raise ValueError(f"{len(sides)} sides for {len(fields)} fields")
+        self.fields, self.sides, self.material = list(fields), list(sides), material
+        self.G: list[PETSc.Mat | None] | None = None
+        if constraint is not None and any(g is not None for g in constraint):
+            self.G = list(constraint)
+        self.comm: MPI.Comm = self.fields[0].mass.getComm().tompi4py()
+        self._tangent: list[PETSc.Mat] = []
+
+    def mass(self) -> list[PETSc.Vec]:
+        """The lumped masses of each field."""
+        return [f.mass for f in self.fields]
+
+    def _check_fe(self, side: FEForces, x: PETSc.Vec) -> None:
+        """Name the first FE point where ``det F <= 0`` or ``F`` is not finite (every rank)."""
+        F, gdim = side.deformation_gradient(x), self.material.gdim
+        points = side.points.table.points
+        raise_on_all_ranks(self.comm, lambda: check_deformation_gradients(F, gdim, points))
+
+    def internal_force(
+        self, u: Sequence[PETSc.Vec], out: Sequence[PETSc.Vec] | None = None
+    ) -> list[PETSc.Vec]:
+        """``f^int(u)`` per field (collective). Raises a
+        :class:`~dolfinx_meshfree.physics.constitutive.DeformationError` on every rank, naming
+        the point, where ``det F <= 0`` (particles: at once; FE: when the assembled force is not
+        finite, and at every wave-speed check)."""
+        y = list(out) if out is not None else [f.mass.duplicate() for f in self.fields]
+        for k, side in enumerate(self.sides):
+            if isinstance(side, FEForces):
+                r = side.side.internal_force(u[k])
+                finite = bool(np.all(np.isfinite(r.array_r)))
+                if not self.comm.allreduce(finite, op=MPI.LAND):
+                    r.destroy()
+                    self._check_fe(side, u[k])
+                    raise DeformationError("the FE internal force is not finite; stop")
+            else:
+                r = side.internal_force(u[k])
+            y[k].array[:] = r.array_r
+            r.destroy()
+        return y
+
+    def tangent(self, u: Sequence[PETSc.Vec] | None = None) -> Blocks:
+        """The consistent tangent of each field at ``u`` (``None``: ``d = 0``); the system owns
+        the matrices until the next call (collective)."""
+        for M in self._tangent:
+            M.destroy()
+        if u is None:
+            u = [f.mass.duplicate() for f in self.fields]
+            for x in u:
+                x.set(0.0)
+        self._tangent = [side.tangent(x) for side, x in zip(self._raw_sides(), u, strict=True)]
+        return {(k, k): M for k, M in enumerate(self._tangent)}
+
+    def _raw_sides(self) -> list:
+        return [s.side if isinstance(s, FEForces) else s for s in self.sides]
+
+    def constraints(self) -> list[PETSc.Mat | None] | None:
+        """The constraint blocks (``None``: no constraint)."""
+        return self.G
+
+    def strain_energy(self, u: Sequence[PETSc.Vec], f_int: Sequence[PETSc.Vec]) -> float:
+        """The stored energy ``sum_q W(F_q) w_q`` over both sides and all ranks (``f_int`` is
+        not used; collective)."""
+        local = 0.0
+        for side, x in zip(self.sides, u, strict=True):
+            if isinstance(side, FEForces):
+                local += side.points.strain_energy(side.state(x))
+            else:
+                local += side.forces.strain_energy(side.coefficients(x))
+        return float(self.comm.allreduce(local, op=MPI.SUM))
+
+    def deformation_gradients(self, u: Sequence[PETSc.Vec]) -> np.ndarray:
+        """``F`` (m, d, d) at this rank's quadrature points of every field."""
+        out = []
+        for side, x in zip(self.sides, u, strict=True):
+            if isinstance(side, FEForces):
+                out.append(side.deformation_gradient(x))
+            else:
+                out.append(side.forces.deformation_gradient(side.coefficients(x)))
+        return np.concatenate(out)
+
+    def wave_speed(self, u: Sequence[PETSc.Vec]) -> float:
+        """The largest current Lagrangian wave speed over every quadrature point and rank
+        (:meth:`~dolfinx_meshfree.physics.constitutive.Material.wave_speed`); raises a
+        :class:`~dolfinx_meshfree.physics.constitutive.DeformationError` on every rank where
+        ``det F <= 0`` (collective)."""
+        F = self.deformation_gradients(u)
+        if F.shape[0] == 0:
+            return float(self.comm.allreduce(0.0, op=MPI.MAX))
+        c = raise_on_all_ranks(self.comm, lambda: self.material.wave_speed(F))
+        return float(self.comm.allreduce(c, op=MPI.MAX))
+
+    def rebuild(self, changed: Collection[str]) -> bool:
+        """Nothing to rebuild when nothing changed (``False``).
+
+        Raises:
+            NotImplementedError: ``changed`` is not empty: the tables follow the reference
+                configuration of the model; build a new ExplicitDynamics instead.
+        """
+        if changed:
+            raise NotImplementedError(
+                f"changed={sorted(changed)!r}: a NonlinearSystem keeps the reference tables of "
+                "its model; build a new ExplicitDynamics from the changed model"
+            )
+        return False
+
+    def destroy(self) -> None:
+        """Destroy the tangents, the fields' reference stiffness and masses and the constraint
+        blocks (collective)."""
+        objs = [*self._tangent]
+        for f in self.fields:
+            objs += [f.K, f.mass]
+        objs += [g for g in (self.G or []) if g is not None]
+        for obj in objs:
+            obj.destroy()
+        self._tangent = []

@@ -37,12 +37,11 @@ from ..couplings.ramp import RampInterface
 from ..geometry.particles import ParticleSet
 from ..geometry.patch import ParticlePatch
 from ..geometry.quadrature import QuadraturePoints
-from ..io import DynamicsWriter, ProgressBar
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic
 from ..statics.coupled import CoupledElasticity
 from .builders import Model, build_coupled, build_efg, build_fe
-from .central_difference import CentralDifference, advance_to
+from .central_difference import CentralDifference
 from .constraint import VelocityProjection, check_multiplier_solver
 from .discretisation import Discretisation, VectorFunction
 from .energy import EnergyRecord
@@ -50,6 +49,7 @@ from .evaluation import FieldEvaluator
 from .initial import check_particle_values, initial_values
 from .loads import Amplitude, BodyLoad, ExternalLoads, Traction
 from .results import DynamicsResult
+from .run import integrate
 from .system import Field, LinearSystem, SemiDiscreteSystem, inverse_masses
 from .time_step import TimeStepBound, check_safety
 
@@ -367,45 +367,7 @@ class ExplicitDynamics:
                 ``t_end`` not after the current time; ``progress`` not a bool or ``None``; an
                 unusable ``xdmf`` prefix (on every rank, before any file is written).
         """
-        crit = self.critical_time_step()
-        span = float(t_end) - self.time
-        if not (np.isfinite(span) and span > 0.0):
-            raise ValueError(f"t_end={t_end!r} must lie after the current time {self.time}")
-        nsteps, dt = self.bound.steps_to(span, dt, force)
-        t0 = self.time
-        label = "explicit dynamics "
-        bars = [ProgressBar(nsteps, self.comm, progress, label=label)]  # checks `progress`
-        writer = DynamicsWriter(xdmf, self) if xdmf is not None else None
-        if writer is not None and not len(outputs):
-            outputs = (t0, float(t_end))
-
-        def notify(n: int, t: float) -> None:
-            if writer is not None:
-                writer(self, n, t)
-            if on_output is not None:
-                on_output(self, n, t)
-
-        # a finite-strain system re-bounds its step as it stiffens (not with a forced dt)
-        rebound = self.rebound_every if hasattr(self.system, "wave_speed") and not force else None
-        try:
-            done = advance_to(
-                self.stepper, self.bound, float(t_end), nsteps, dt, outputs, energy_records,
-                notify, lambda n: bars.pop() if bars else ProgressBar(n, self.comm, progress,
-                                                                       label=label),
-                rebound, force,
-            )  # fmt: skip
-        finally:
-            if writer is not None:
-                writer.close()
-        return DynamicsResult(
-            dt=done.dt,
-            steps=done.steps,
-            time=self.time,
-            energies=done.records,
-            outputs=done.outputs,
-            critical={**crit, **self.critical_time_step(), "stable": self.stable_time_step()},
-            timings=done.timings,
-        )
+        return integrate(self, t_end, dt, force, outputs, energy_records, on_output, xdmf, progress)
 
     def _current(self) -> list[PETSc.Vec]:
         """The velocity vectors at the current time (``v_n`` at outputs and after a run)."""

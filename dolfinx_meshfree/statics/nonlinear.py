@@ -44,6 +44,7 @@ from .newton import NewtonOptions
 from .petsc import create_vector, solver_options
 from .problem import CoupledLinearProblem
 from .sides import (
+    BlendedSide,
     BlockProblem,
     FESide,
     NonlinearSolveResult,
@@ -278,7 +279,16 @@ class CoupledNonlinearProblem:
         constant = [list(row) for row in blocks]
         constant[0][0], constant[1][1] = extra["constant_diagonal"]
         names = ["fe", "particles"] + [f"multiplier{i}" for i in range(len(blocks) - 2)]
-        problem = BlockProblem(names, 2, [fe, particles], constant, loads)
+        blended = []
+        if "blended" in extra:  # the ramps' interface cells: both fields, from the state
+            b = extra["blended"]
+            blended.append(
+                BlendedSide(
+                    fe, particles, b["table"], b["weights"], self.material, b["test_gradients"]
+                )
+            )
+            constant[0][1] = constant[1][0] = None
+        problem = BlockProblem(names, 2, [fe, particles], constant, loads, blended=blended)
         x = []
         for i, load in enumerate(loads):  # the previous solve's state, or u and zeros
             v = load.duplicate()
@@ -303,6 +313,7 @@ class CoupledNonlinearProblem:
             mls=model.mls,
             patch=model.patch,
             timings={"setup": setup, "newton": time.perf_counter() - t0 - setup},
+            interface=extra.get("interface"),
         )
         for obj in [*mats, extra["x_bc"], *rhs, f_p, *x]:
             obj.destroy()

@@ -12,6 +12,10 @@ functions of the state:
 * particle side: ``f_int(u) = sum_q B0(F_q)^T P(F_q) w_q`` and its consistent tangent on the
   patch quadrature (:class:`~dolfinx_meshfree.InternalForces`), with the test gradients of the
   linear stiffness (VCI when consistent, so a homogeneous deformation is reproduced exactly);
+* blended cells (the ramps' interface elements, Belytschko et al. 1995, eq. 3.12-3.16): the
+  same ``f_int`` and tangent on the blended table, whose columns are the FE nodes and the
+  particles, so they add to both fields' rows and fill the FE-particle blocks
+  (:class:`~dolfinx_meshfree.statics.sides.BlendedSide`);
 * constraints (interface multipliers, patch Dirichlet multipliers) stay linear in the
   displacements and are the linear system's blocks.
 
@@ -64,6 +68,19 @@ __all__ = [
 #: Couplings available at finite strain: those whose family assembles its block system apart
 #: from solving it (``system``); the others refuse with a clear error.
 FINITE_STRAIN_COUPLINGS = tuple(name for name, cls in REGISTRY.items() if hasattr(cls, "system"))
+
+
+#: What a coupling that refuses finite strain is missing (for its error message).
+_NOT_YET = {
+    "master-slave": (
+        "its slaves' rigid links would have to rotate with their interface edge, u_P = u_C + "
+        "(R(theta) - I)(x_P - x_C) with R the edge's finite rotation (Rabczuk et al. 2006, eq. "
+        "17-27 linearise it to theta e_z x (x_P - x_C)); the reduction u = T(u_m) + g is then "
+        "nonlinear, with tangent T'^T K_T T' plus the links' curvature against the slaves' "
+        "forces, which is not written (the linear link would leave a rigid rotation of the "
+        "body strained)"
+    ),
+}
 
 
 def _check_steps(load_steps: int) -> None:
@@ -215,11 +232,10 @@ class CoupledNonlinearProblem:
             _check_residual(F, u)
             _check_steps(load_steps)
             if coupling not in FINITE_STRAIN_COUPLINGS:
+                why = _NOT_YET.get(coupling, "it has no finite-strain system")
                 raise ValueError(
-                    f"coupling={coupling!r} is not available at finite strain in this release; "
-                    f"use one of {list(FINITE_STRAIN_COUPLINGS)} (the ramps' blended tables, "
-                    "master-slave's rotating links and the hybrid are not written on the "
-                    "internal force yet)"
+                    f"coupling={coupling!r} is not available at finite strain in this release: "
+                    f"{why}; use one of {list(FINITE_STRAIN_COUPLINGS)}"
                 )
             if not isinstance(material, Material):
                 raise TypeError(

@@ -63,6 +63,7 @@ from ..parallel import raise_on_all_ranks
 from ..physics.operators import consistent_gradients, load_vector, stiffness_matrix
 from ..statics.efg import _vector_values, particle_stiffness
 from ..statics.petsc import SolverOptions, create_aij, create_vector
+from ..statics.sides import BlendedSide
 from .assembly import (
     append_patch_conditions,
     body_loads,
@@ -337,10 +338,11 @@ def ramp_system(problem: CoupledElasticity, tables: dict | None = None) -> tuple
     :func:`~dolfinx_meshfree.couplings.lagrange.interface_system` for ``tables`` (the patch
     cells' quadrature, MLS table and test gradients) and the returned ``(blocks, rhs, mats,
     extra)``. ``extra`` also holds what a finite-strain solve needs: the external loads before
-    lifting (``loads``), the pure FE cells (``fe_cells``), the interface cells' quadrature
-    ``blended = {"table", "weights", "test_gradients"}`` (the blended table of eq. 3.15-3.16,
-    columns ``[local FE nodes | particles]``, with the particle columns' test gradients VCI
-    corrected when consistent) and the :class:`RampInterface` (``interface``)."""
+    lifting (``loads``), the pure FE cells (``fe_cells``), ``shared_sides(fe, particles,
+    material)``: the interface cells' :class:`~dolfinx_meshfree.statics.sides.BlendedSide` on
+    the blended table of eq. 3.15-3.16 (columns ``[local FE nodes | particles]``, particle
+    columns' test gradients VCI corrected when consistent), whose FE-particle blocks replace
+    the linear ones (``state_blocks``), and the :class:`RampInterface` (``interface``)."""
 
     V, patch, P = problem.V, problem.patch, problem.patch.particles
     comm = patch.comm
@@ -488,7 +490,10 @@ def ramp_system(problem: CoupledElasticity, tables: dict | None = None) -> tuple
         "fe_cells": ~patch.in_patch & ~blend.in_interface,
         "fe_weight": None,
         "constant_diagonal": [None, None],
-        "blended": {"table": ti, "weights": qi.weights, "test_gradients": test},
+        "shared_sides": lambda fe, particles, material: [
+            BlendedSide(fe, particles, ti, qi.weights, material, test)
+        ],
+        "state_blocks": [(0, 1), (1, 0)],
         "interface": blend,
     }
     return blocks, rhs, mats, extra

@@ -15,7 +15,9 @@ functions of the state:
 * blended cells (the ramps' interface elements, Belytschko et al. 1995, eq. 3.12-3.16): the
   same ``f_int`` and tangent on the blended table, whose columns are the FE nodes and the
   particles, so they add to both fields' rows and fill the FE-particle blocks
-  (:class:`~dolfinx_meshfree.statics.sides.BlendedSide`);
+  (:class:`~dolfinx_meshfree.statics.sides.BlendedSide`); a coupling's ``system`` supplies
+  such sides over several fields (``extra["shared_sides"]``) and names the linear blocks they
+  replace (``extra["state_blocks"]``);
 * constraints (interface multipliers, patch Dirichlet multipliers) stay linear in the
   displacements and are the linear system's blocks.
 
@@ -48,7 +50,6 @@ from .newton import NewtonOptions
 from .petsc import create_vector, solver_options
 from .problem import CoupledLinearProblem
 from .sides import (
-    BlendedSide,
     BlockProblem,
     FESide,
     NonlinearSolveResult,
@@ -295,16 +296,14 @@ class CoupledNonlinearProblem:
         constant = [list(row) for row in blocks]
         constant[0][0], constant[1][1] = extra["constant_diagonal"]
         names = ["fe", "particles"] + [f"multiplier{i}" for i in range(len(blocks) - 2)]
-        blended = []
-        if "blended" in extra:  # the ramps' interface cells: both fields, from the state
-            b = extra["blended"]
-            blended.append(
-                BlendedSide(
-                    fe, particles, b["table"], b["weights"], self.material, b["test_gradients"]
-                )
-            )
-            constant[0][1] = constant[1][0] = None
-        problem = BlockProblem(names, 2, [fe, particles], constant, loads, blended=blended)
+        # sides over several fields (the ramps' blended cells, master-slave's rotating links)
+        # and the linear blocks they replace
+        shared = (
+            extra["shared_sides"](fe, particles, self.material) if "shared_sides" in extra else []
+        )
+        for i, j in extra.get("state_blocks", ()):
+            constant[i][j] = None
+        problem = BlockProblem(names, 2, [fe, particles], constant, loads, shared=shared)
         x = []
         for i, load in enumerate(loads):  # the previous solve's state, or u and zeros
             v = load.duplicate()

@@ -302,8 +302,8 @@ class BlendedSide:
 class BlockProblem:
     """``R(x) = f_int(x) - t f_ext + C x - t c`` on a nest whose first fields have nonlinear
     diagonal blocks (``sides``), whose other blocks ``C`` are constant (constraints), and whose
-    ``blended`` sides (:class:`BlendedSide`) add internal forces and tangent blocks over several
-    fields."""
+    ``shared`` sides (e.g. :class:`BlendedSide`: ``fields``, ``internal_force(xs)`` per field,
+    ``tangent(xs)`` by blocks) add internal forces and tangent blocks over several fields."""
 
     names: list[str]
     num_primal: int
@@ -311,7 +311,7 @@ class BlockProblem:
     constant: list[list[PETSc.Mat | None]]  # the C blocks (primal diagonal blocks: None)
     loads: list[PETSc.Vec]  # f_ext per primal field, c per constraint field
     t: float = 1.0
-    blended: list = field(default_factory=list)  # sides over several fields
+    shared: list = field(default_factory=list)  # sides over several fields (BlendedSide...)
     _owned: list = field(default_factory=list)
 
     def residual(self, x: Sequence[PETSc.Vec]) -> list[PETSc.Vec]:
@@ -326,7 +326,7 @@ class BlockProblem:
                 if C is not None:
                     C.multAdd(x[j], r, r)
             out.append(r)
-        for side in self.blended:
+        for side in self.shared:
             for i, f in zip(
                 side.fields, side.internal_force([x[i] for i in side.fields]), strict=True
             ):
@@ -351,7 +351,7 @@ class BlockProblem:
                     K.zeroRows(self.sides[i].fixed_rows, diag=1.0)
             blocks[i][i] = K
         different = PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN
-        for side in self.blended:  # held rows are not in its blocks
+        for side in self.shared:  # held rows are not in its blocks
             for (a, b), K in side.tangent([x[k] for k in side.fields]).items():
                 i, j = side.fields[a], side.fields[b]
                 if i == j:  # onto the owned diagonal block

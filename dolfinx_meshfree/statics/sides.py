@@ -158,6 +158,11 @@ class FESide:
         self.fixed_values = np.zeros(self.fixed_local.size)
         self.n_owned = 2 * n_owned
 
+    def held_everywhere(self) -> np.ndarray:
+        """The held rows (global FE dofs) of every rank (collective)."""
+        comm = self.V.mesh.comm
+        return np.concatenate(comm.allgather(np.asarray(self.fixed_rows, np.int64)))
+
     def hold(self, dofs: np.ndarray, values: np.ndarray, l2g: np.ndarray) -> None:
         """Fix owned local dofs (not nodes) to ``values`` (at full load)."""
         d = np.asarray(dofs, dtype=np.int64)
@@ -261,8 +266,7 @@ class BlendedSide:
         fe_dofs = (gdim * fe.l2g[:, None] + np.arange(gdim)).ravel()
         self.dofs = np.concatenate([fe_dofs, particles.dof_map]).astype(np.int64)
         # rows of held FE dofs, ghosts' included (held by their owner's FE side)
-        held = np.concatenate(self.comm.allgather(np.asarray(fe.fixed_rows, np.int64)))
-        self._held = np.isin(fe_dofs, held)
+        self._held = np.isin(fe_dofs, fe.held_everywhere())
 
     def _coefficients(self, xs: Sequence[PETSc.Vec]) -> np.ndarray:
         self.fe.set_state(xs[0])

@@ -71,19 +71,6 @@ __all__ = [
 FINITE_STRAIN_COUPLINGS = tuple(name for name, cls in REGISTRY.items() if hasattr(cls, "system"))
 
 
-#: What a coupling that refuses finite strain is missing (for its error message).
-_NOT_YET = {
-    "master-slave": (
-        "its slaves' rigid links would have to rotate with their interface edge, u_P = u_C + "
-        "(R(theta) - I)(x_P - x_C) with R the edge's finite rotation (Rabczuk et al. 2006, eq. "
-        "17-27 linearise it to theta e_z x (x_P - x_C)); the reduction u = T(u_m) + g is then "
-        "nonlinear, with tangent T'^T K_T T' plus the links' curvature against the slaves' "
-        "forces, which is not written (the linear link would leave a rigid rotation of the "
-        "body strained)"
-    ),
-}
-
-
 def _check_steps(load_steps: int) -> None:
     if not (isinstance(load_steps, int | np.integer) and load_steps >= 1):
         raise ValueError(f"load_steps={load_steps!r} must be an integer >= 1")
@@ -233,10 +220,10 @@ class CoupledNonlinearProblem:
             _check_residual(F, u)
             _check_steps(load_steps)
             if coupling not in FINITE_STRAIN_COUPLINGS:
-                why = _NOT_YET.get(coupling, "it has no finite-strain system")
                 raise ValueError(
-                    f"coupling={coupling!r} is not available at finite strain in this release: "
-                    f"{why}; use one of {list(FINITE_STRAIN_COUPLINGS)}"
+                    f"coupling={coupling!r} is not available at finite strain in this release "
+                    f"(its family has no finite-strain system); use one of "
+                    f"{list(FINITE_STRAIN_COUPLINGS)}"
                 )
             if not isinstance(material, Material):
                 raise TypeError(
@@ -330,6 +317,8 @@ class CoupledNonlinearProblem:
             timings={"setup": setup, "newton": time.perf_counter() - t0 - setup},
             interface=extra.get("interface"),
         )
+        if "links" in extra:  # master-slave: the slaves' links, as the linear solution has
+            self.solution.links = extra["links"]
         for obj in [*mats, extra["x_bc"], *rhs, f_p, *x]:
             obj.destroy()
         self.result = result

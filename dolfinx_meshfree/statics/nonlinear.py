@@ -18,8 +18,11 @@ functions of the state:
   (:class:`~dolfinx_meshfree.statics.sides.BlendedSide`); a coupling's ``system`` supplies
   such sides over several fields (``extra["shared_sides"]``) and names the linear blocks they
   replace (``extra["state_blocks"]``);
-* constraints (interface multipliers, patch Dirichlet multipliers) stay linear in the
-  displacements and are the linear system's blocks.
+* master-slave's rigid links turn with their interface edge: constraints nonlinear in the FE
+  displacements, with multipliers
+  (:class:`~dolfinx_meshfree.couplings.master_slave_finite.RotatingLinks`);
+* the other constraints (interface multipliers, patch Dirichlet multipliers) stay linear in
+  the displacements and are the linear system's blocks.
 
 The external load is dead: ``L_ext(v) = -F(0; v)`` (with ``P(I) = 0`` for every law here), split
 between FE and particles exactly as :class:`~dolfinx_meshfree.CoupledLinearProblem` splits

@@ -11,7 +11,7 @@ from __future__ import annotations
 from .base import CoupledSolution, Coupling, CouplingOperators
 from .bridging import BridgingCoupling
 from .lagrange import EdgeToEdgeCoupling, LagrangeCoupling
-from .master_slave import MasterSlaveCoupling
+from .master_slave_finite import FiniteMasterSlaveCoupling
 from .ramp import CubicRampCoupling, RampCoupling
 
 __all__ = [
@@ -32,7 +32,7 @@ REGISTRY: dict[str, type[Coupling]] = {
         RampCoupling,
         CubicRampCoupling,
         BridgingCoupling,
-        MasterSlaveCoupling,
+        FiniteMasterSlaveCoupling,
     )
 }
 

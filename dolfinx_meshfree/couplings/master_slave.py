@@ -290,9 +290,14 @@ class MasterSlaveLinks:
             )
         tol = 1e-9 * np.sqrt(length2.max())
         self.rows = []
+        #: Per slave, its links ``(edge, xi, C -> P)`` to the equally close edges.
+        self.links = []
         for p in self.slaves:
             tied = np.flatnonzero(dist[p] <= self.distance[p] + tol)
             cols, weights = [], []
+            self.links.append(
+                [(int(e), float(xi[p, e]), x[p] - (a[e] + xi[p, e] * t[e])) for e in tied]
+            )
             for e in tied:
                 s = xi[p, e]
                 rr = x[p] - (a[e] + s * t[e])  # the link C -> P

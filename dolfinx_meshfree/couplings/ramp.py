@@ -63,6 +63,7 @@ from ..parallel import raise_on_all_ranks
 from ..physics.operators import consistent_gradients, load_vector, stiffness_matrix
 from ..statics.efg import _vector_values, particle_stiffness
 from ..statics.petsc import SolverOptions, create_aij, create_vector
+from ..statics.sides import BlendedSide
 from .assembly import (
     append_patch_conditions,
     body_loads,
@@ -85,7 +86,7 @@ from .base import (
 if TYPE_CHECKING:  # annotations only: the model imports this module
     from ..statics.coupled import CoupledElasticity
 
-__all__ = ["RAMPS", "RampInterface", "ramp_mls", "ramp_operators"]
+__all__ = ["RAMPS", "RampInterface", "ramp_mls", "ramp_operators", "ramp_system", "solve_ramp"]
 
 
 #: The ramp couplings and whether each smooths the ramp (3R^2 - 2R^3).
@@ -332,8 +333,16 @@ def _fe_stiffness(problem, interface: RampInterface) -> PETSc.Mat:
     return fe_stiffness(problem, problem.cell_indicator(pure))
 
 
-def solve_ramp(problem, solver: str | SolverOptions = "mumps"):
-    """Assemble and solve the ramp-coupled system of ``problem`` (collective)."""
+def ramp_system(problem: CoupledElasticity, tables: dict | None = None) -> tuple:
+    """The ramp-coupled block system, assembled, not solved (collective); see
+    :func:`~dolfinx_meshfree.couplings.lagrange.interface_system` for ``tables`` (the patch
+    cells' quadrature, MLS table and test gradients) and the returned ``(blocks, rhs, mats,
+    extra)``. ``extra`` also holds what a finite-strain solve needs: the external loads before
+    lifting (``loads``), the pure FE cells (``fe_cells``), ``shared_sides(fe, particles,
+    material)``: the interface cells' :class:`~dolfinx_meshfree.statics.sides.BlendedSide` on
+    the blended table of eq. 3.15-3.16 (columns ``[local FE nodes | particles]``, particle
+    columns' test gradients VCI corrected when consistent), whose FE-particle blocks replace
+    the linear ones (``state_blocks``), and the :class:`RampInterface` (``interface``)."""
 
     V, patch, P = problem.V, problem.patch, problem.patch.particles
     comm = patch.comm
@@ -352,9 +361,9 @@ def solve_ramp(problem, solver: str | SolverOptions = "mumps"):
     ti = raise_on_all_ranks(comm, lambda: blend.table(qi.points, qi.cells))
     test = ti.gradients
     if problem.consistent:
-        Kp_loc, kt, test = _consistent_stiffness(problem, blend, qi, ti)
+        Kp_loc, kt, test = _consistent_stiffness(problem, blend, qi, ti, tables)
     else:
-        Kp_loc, _, _, kt = particle_stiffness(P, problem.mls, problem.material, deg)
+        Kp_loc, _, _, kt = particle_stiffness(P, problem.mls, problem.material, deg, tables=tables)
 
     # essential conditions: FE nodes strongly; patch facets and the particle part of interface
     # cells' facets by multipliers
@@ -411,11 +420,12 @@ def solve_ramp(problem, solver: str | SolverOptions = "mumps"):
         (Ki.data[keep], (prow[keep], fe_dof[Ki.col[keep]])), shape=(2 * n, fe_layout.size_global)
     )
     lift = pf & col_fixed
-    f_p = np.zeros(2 * n)
-    # f_p is in interleaved particle order (2 J + i), like the EFG loads
+    f_lift = np.zeros(2 * n)
+    # particle loads in interleaved particle order (2 J + i), like the EFG loads
     inv = np.empty(2 * n, dtype=np.int64)
     inv[pdofs.ravel()] = np.arange(2 * n)
-    np.add.at(f_p, inv[prow[lift]], -Ki.data[lift] * x_fix[Ki.col[lift]])
+    np.add.at(f_lift, inv[prow[lift]], -Ki.data[lift] * x_fix[Ki.col[lift]])
+    f_p = np.zeros(2 * n)
 
     # loads: FE facets of pure FE cells with the FE basis, of interface cells blended
     f_fe_rows, f_fe_vals = [], []
@@ -453,29 +463,54 @@ def solve_ramp(problem, solver: str | SolverOptions = "mumps"):
         b_fe.array[:] += fe_body
         f_p += p_body
 
+    loads = (b_fe.copy(), f_p.copy())
     # K_FE = DOLFINx (pure FE cells) + interface FE-FE block, then strong conditions
     K_fe = _fe_stiffness(problem, blend)
     K_int = create_aij(comm, K_ff, fe_layout, fe_layout)
     K_fe.axpy(1.0, K_int, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
     x_bc = fix_fe_rows(problem, K_fe, b_fe, fixed_local, x_fix)
     Kp = create_aij(comm, Kp_loc, pl, pl)
-    b_p = create_vector(comm, pl, pdofs.ravel(), f_p)
+    b_p = create_vector(comm, pl, pdofs.ravel(), f_lift + f_p)
     Kfp = create_aij(comm, K_fp, fe_layout, pl)
     Kpf = create_aij(comm, K_pf, pl, fe_layout)
     blocks = [[K_fe, Kfp], [Kpf, Kp]]
     rhs = [b_fe, b_p]
-    mats = [K_fe, K_int, Kp, Kfp, Kpf]
+    mats = [K_fe, K_int, Kp, Kfp, Kpf, loads[0]]
     dl = append_patch_conditions(problem, blocks, rhs, mats, patch_bc, dq, dtabs)
-    assemble = time.perf_counter() - t1 + kt["assemble"]
-    uh, coeffs, solve = solve_and_gather(problem, blocks, rhs, [*mats, x_bc], solver)
+    extra = {
+        "x_bc": x_bc,
+        "active": active,
+        "is_bc": is_bc,
+        "fixed": fixed_local,
+        "fixed_values": x_fix,
+        "multipliers": dl.size_global,
+        "setup": setup,
+        "assemble": time.perf_counter() - t1 + kt["assemble"],
+        "loads": loads,
+        "fe_cells": ~patch.in_patch & ~blend.in_interface,
+        "fe_weight": None,
+        "constant_diagonal": [None, None],
+        "shared_sides": lambda fe, particles, material: [
+            BlendedSide(fe, particles, ti, qi.weights, material, test)
+        ],
+        "state_blocks": [(0, 1), (1, 0)],
+        "interface": blend,
+    }
+    return blocks, rhs, mats, extra
+
+
+def solve_ramp(problem, solver: str | SolverOptions = "mumps"):
+    """Assemble and solve the ramp-coupled system of ``problem`` (collective)."""
+    blocks, rhs, mats, extra = ramp_system(problem)
+    uh, coeffs, solve = solve_and_gather(problem, blocks, rhs, [*mats, extra["x_bc"]], solver)
     return CoupledSolution(
         u=uh,
         coefficients=coeffs,
         mls=problem.mls,
-        patch=patch,
-        timings={"setup": setup, "assemble": assemble, "solve": solve},
-        sizes=sizes(problem, active, dl.size_global),
-        interface=blend,
+        patch=problem.patch,
+        timings={"setup": extra["setup"], "assemble": extra["assemble"], "solve": solve},
+        sizes=sizes(problem, extra["active"], extra["multipliers"]),
+        interface=extra["interface"],
     )
 
 
@@ -489,7 +524,9 @@ def _body_loads(problem, blend: RampInterface, q, tab: ShapeTable):
     return body_loads(problem, problem.cell_indicator(pure), interface_rule=(q, tab.values))
 
 
-def _consistent_stiffness(problem, blend: RampInterface, q, tab: ShapeTable):
+def _consistent_stiffness(
+    problem, blend: RampInterface, q, tab: ShapeTable, tables: dict | None = None
+):
     """Variationally consistent integration (VCI) of the particle test functions of a ramp
     coupling (Chen, Hillman & Rüter 2013; see :func:`~dolfinx_meshfree.physics.operators.
     consistent_gradients`). Collective.
@@ -504,7 +541,8 @@ def _consistent_stiffness(problem, blend: RampInterface, q, tab: ShapeTable):
     Returns:
         ``(K_P, timings, test)``: the patch cells' particle stiffness (PETSc numbering) with the
         corrected test gradients, and the interface table's test gradients (FE columns as they
-        are, particle columns corrected).
+        are, particle columns corrected). ``tables``, if given, receives the patch cells'
+        quadrature, MLS table and corrected test gradients.
     """
     patch, P, comm = problem.patch, problem.patch.particles, problem.patch.comm
     msh, deg, mls = problem.V.mesh, problem.quadrature_degree, problem.mls
@@ -538,6 +576,8 @@ def _consistent_stiffness(problem, blend: RampInterface, q, tab: ShapeTable):
         ),
     )
     m = len(qp)
+    if tables is not None:  # the patch cells' rule, table and test gradients
+        tables.update(quadrature=qp, table=tp, test_gradients=[c[:m] for c in corrected])
     t1 = time.perf_counter()
     K = stiffness_matrix([c[:m] for c in corrected], qp.weights, problem.material, tp.gradients)
     K = K.tocoo()
@@ -640,6 +680,9 @@ class _RampCoupling:
 
     def solve(self, problem: CoupledElasticity, solver: str | SolverOptions) -> CoupledSolution:
         return solve_ramp(problem, solver)
+
+    def system(self, problem: CoupledElasticity, tables: dict | None = None) -> tuple:
+        return ramp_system(problem, tables)
 
     def operators(
         self, problem: CoupledElasticity, integration: str, slaves: str

@@ -12,8 +12,17 @@ functions of the state:
 * particle side: ``f_int(u) = sum_q B0(F_q)^T P(F_q) w_q`` and its consistent tangent on the
   patch quadrature (:class:`~dolfinx_meshfree.InternalForces`), with the test gradients of the
   linear stiffness (VCI when consistent, so a homogeneous deformation is reproduced exactly);
-* constraints (interface multipliers, patch Dirichlet multipliers) stay linear in the
-  displacements and are the linear system's blocks.
+* blended cells (the ramps' interface elements, Belytschko et al. 1995, eq. 3.12-3.16): the
+  same ``f_int`` and tangent on the blended table, whose columns are the FE nodes and the
+  particles, so they add to both fields' rows and fill the FE-particle blocks
+  (:class:`~dolfinx_meshfree.statics.sides.BlendedSide`); a coupling's ``system`` supplies
+  such sides over several fields (``extra["shared_sides"]``) and names the linear blocks they
+  replace (``extra["state_blocks"]``);
+* master-slave's rigid links turn with their interface edge: constraints nonlinear in the FE
+  displacements, with multipliers
+  (:class:`~dolfinx_meshfree.couplings.master_slave_finite.RotatingLinks`);
+* the other constraints (interface multipliers, patch Dirichlet multipliers) stay linear in
+  the displacements and are the linear system's blocks.
 
 The external load is dead: ``L_ext(v) = -F(0; v)`` (with ``P(I) = 0`` for every law here), split
 between FE and particles exactly as :class:`~dolfinx_meshfree.CoupledLinearProblem` splits
@@ -215,10 +224,9 @@ class CoupledNonlinearProblem:
             _check_steps(load_steps)
             if coupling not in FINITE_STRAIN_COUPLINGS:
                 raise ValueError(
-                    f"coupling={coupling!r} is not available at finite strain in this release; "
-                    f"use one of {list(FINITE_STRAIN_COUPLINGS)} (the ramps' blended tables, "
-                    "master-slave's rotating links and the hybrid are not written on the "
-                    "internal force yet)"
+                    f"coupling={coupling!r} is not available at finite strain in this release "
+                    f"(its family has no finite-strain system); use one of "
+                    f"{list(FINITE_STRAIN_COUPLINGS)}"
                 )
             if not isinstance(material, Material):
                 raise TypeError(
@@ -278,7 +286,14 @@ class CoupledNonlinearProblem:
         constant = [list(row) for row in blocks]
         constant[0][0], constant[1][1] = extra["constant_diagonal"]
         names = ["fe", "particles"] + [f"multiplier{i}" for i in range(len(blocks) - 2)]
-        problem = BlockProblem(names, 2, [fe, particles], constant, loads)
+        # sides over several fields (the ramps' blended cells, master-slave's rotating links)
+        # and the linear blocks they replace
+        shared = (
+            extra["shared_sides"](fe, particles, self.material) if "shared_sides" in extra else []
+        )
+        for i, j in extra.get("state_blocks", ()):
+            constant[i][j] = None
+        problem = BlockProblem(names, 2, [fe, particles], constant, loads, shared=shared)
         x = []
         for i, load in enumerate(loads):  # the previous solve's state, or u and zeros
             v = load.duplicate()
@@ -303,7 +318,10 @@ class CoupledNonlinearProblem:
             mls=model.mls,
             patch=model.patch,
             timings={"setup": setup, "newton": time.perf_counter() - t0 - setup},
+            interface=extra.get("interface"),
         )
+        if "links" in extra:  # master-slave: the slaves' links, as the linear solution has
+            self.solution.links = extra["links"]
         for obj in [*mats, extra["x_bc"], *rhs, f_p, *x]:
             obj.destroy()
         self.result = result

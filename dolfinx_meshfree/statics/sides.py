@@ -1,12 +1,17 @@
-"""The two sides of a finite-strain block system, and the block problem Newton solves.
+"""The sides of a finite-strain block system, and the block problem Newton solves.
 
 * :class:`FESide`: the FE field, residual and Jacobian of a user's UFL residual (its cell
   integrals, weighted by a cell indicator), assembled by DOLFINx;
 * :class:`ParticleSide`: the particle field, ``f_int`` and ``K_T`` of a
   :class:`~dolfinx_meshfree.InternalForces` (Rabczuk et al. 2006, eq. 34) in PETSc numbering;
+* :class:`BlendedSide`: cells where the displacement blends both fields (the ramps' interface
+  elements, Belytschko et al. 1995, eq. 3.12-3.16): ``f_int`` and ``K_T`` on a table with
+  columns ``[local FE nodes | particles]``, split into the FE and particle rows and the four
+  blocks FE-FE, FE-P, P-FE, P-P;
 * :class:`BlockProblem`: ``R(x) = f_int(x) - t f_ext + C x - t c`` on a nest whose primal
-  diagonal blocks are the sides' tangents and whose other blocks ``C`` (constraints) are
-  constant; what :func:`~dolfinx_meshfree.statics.newton.newton` solves.
+  diagonal blocks are the sides' tangents (plus the blended sides' blocks) and whose other
+  blocks ``C`` (constraints) are constant; what :func:`~dolfinx_meshfree.statics.newton.newton`
+  solves.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ from ufl.classes import Sum
 
 from .. import _compat
 from ..approx.fe_dofs import cell_indicator, fe_dof_layout
+from ..approx.tables import ShapeTable
 from ..geometry.particles import ParticleSet
 from ..parallel import Layout
 from ..physics.constitutive import Material
@@ -33,6 +39,7 @@ from .newton import NewtonError, NewtonOptions, NewtonResult, newton
 from .petsc import SolverOptions, create_aij, create_vector
 
 __all__ = [
+    "BlendedSide",
     "BlockProblem",
     "FESide",
     "NonlinearSolveResult",
@@ -142,6 +149,7 @@ class FESide:
         self._R = _compat.create_form(Fw)
         self._J = _compat.create_form(ufl.derivative(Fw, u, ufl.TrialFunction(V)))
         self.layout, l2g = fe_dof_layout(V)
+        self.l2g = l2g
         n_owned = V.dofmap.index_map.size_local
         nodes = np.flatnonzero(fixed[:n_owned])
         self.fixed_rows = (2 * l2g[nodes][:, None] + np.arange(2)).ravel().astype(PETSc.IntType)
@@ -149,6 +157,11 @@ class FESide:
         #: Prescribed values of the fixed dofs (full load), set by the problem.
         self.fixed_values = np.zeros(self.fixed_local.size)
         self.n_owned = 2 * n_owned
+
+    def held_everywhere(self) -> np.ndarray:
+        """The held rows (global FE dofs) of every rank (collective)."""
+        comm = self.V.mesh.comm
+        return np.concatenate(comm.allgather(np.asarray(self.fixed_rows, np.int64)))
 
     def hold(self, dofs: np.ndarray, values: np.ndarray, l2g: np.ndarray) -> None:
         """Fix owned local dofs (not nodes) to ``values`` (at full load)."""
@@ -217,13 +230,89 @@ class ParticleSide:
         return create_aij(self.comm, Kg, self.layout, self.layout)
 
 
+class BlendedSide:
+    """Cells where the displacement blends the FE and particle fields: the ramps' interface
+    elements, ``u = (1 - R) sum_a N_a u_a + R sum_J phi_J u_J`` (Belytschko et al. 1995, eq.
+    3.12; Rabczuk et al. 2006, eq. 38-42 for the cubic ramp).
+
+    ``F = I + grad_0 u`` with the blended gradients (eq. 3.16), ``f_int = sum_q B0^T P(F) w_q``
+    and ``K_T`` by :class:`~dolfinx_meshfree.InternalForces` on the blended table (columns
+    ``[local FE nodes | particles]``), then split by field: FE rows to the FE layout (ghost
+    nodes' rows are sent to their owners), particle rows to the PETSc particle numbering.
+    Rows of the FE side's held dofs are dropped (the block problem holds them).
+
+    Args:
+        fe, particles: The two sides (their state and numbering).
+        table: The blended shape functions at this rank's interface quadrature points.
+        weights: Their quadrature weights.
+        material: The law of the interface cells.
+        test_gradients: Test gradients (default: the table's), e.g. VCI-corrected particle
+            columns.
+    """
+
+    #: The fields (block indices) this side couples.
+    fields = (0, 1)
+
+    def __init__(
+        self,
+        fe: FESide,
+        particles: ParticleSide,
+        table: ShapeTable,
+        weights: np.ndarray,
+        material: Material,
+        test_gradients: Sequence[sp.spmatrix] | None = None,
+    ):
+        self.fe, self.particles, self.comm = fe, particles, particles.comm
+        self.forces = InternalForces(
+            table, weights, material, test_gradients=test_gradients, comm=particles.comm
+        )
+        gdim = particles.gdim
+        self.nf = fe.u.x.array.size  # FE columns: gdim per local node, owned and ghost
+        fe_dofs = (gdim * fe.l2g[:, None] + np.arange(gdim)).ravel()
+        self.dofs = np.concatenate([fe_dofs, particles.dof_map]).astype(np.int64)
+        # rows of held FE dofs, ghosts' included (held by their owner's FE side)
+        self._held = np.isin(fe_dofs, fe.held_everywhere())
+
+    def _coefficients(self, xs: Sequence[PETSc.Vec]) -> np.ndarray:
+        self.fe.set_state(xs[0])
+        return np.concatenate([self.fe.u.x.array, self.particles.coefficients(xs[1])])
+
+    def internal_force(self, xs: Sequence[PETSc.Vec]) -> list[PETSc.Vec]:
+        """``f_int`` of the blended cells: ``[FE rows, particle rows]``. Collective."""
+        f = self.forces.internal_force(self._coefficients(xs))
+        keep = np.concatenate([~self._held, np.ones(f.size - self.nf, dtype=bool)])
+        nf = self.nf
+        fe = create_vector(self.comm, self.fe.layout, self.dofs[:nf][keep[:nf]], f[:nf][keep[:nf]])
+        p = create_vector(self.comm, self.particles.layout, self.dofs[nf:], f[nf:])
+        return [fe, p]
+
+    def tangent(self, xs: Sequence[PETSc.Vec]) -> dict[tuple[int, int], PETSc.Mat]:
+        """``K_T`` of the blended cells by blocks ``{(i, j): Mat}`` of :attr:`fields`."""
+        K = self.forces.tangent(self._coefficients(xs)).tocoo()
+        nf = self.nf
+        row_fe, col_fe = K.row < nf, K.col < nf
+        keep = ~(row_fe & self._held[np.minimum(K.row, nf - 1)])
+        r, c = self.dofs[K.row], self.dofs[K.col]
+        layouts = [self.fe.layout, self.particles.layout]
+        out = {}
+        for i, rows in enumerate((row_fe, ~row_fe)):
+            for j, cols in enumerate((col_fe, ~col_fe)):
+                sel = keep & rows & cols
+                shape = (layouts[i].size_global, layouts[j].size_global)
+                local = sp.csr_matrix((K.data[sel], (r[sel], c[sel])), shape=shape)
+                out[i, j] = create_aij(self.comm, local, layouts[i], layouts[j])
+        return out
+
+
 # -- the block problem --------------------------------------------------------------------------
 
 
 @dataclass
 class BlockProblem:
     """``R(x) = f_int(x) - t f_ext + C x - t c`` on a nest whose first fields have nonlinear
-    diagonal blocks (``sides``) and whose other blocks ``C`` are constant (constraints)."""
+    diagonal blocks (``sides``), whose other blocks ``C`` are constant (constraints), and whose
+    ``shared`` sides (e.g. :class:`BlendedSide`: ``fields``, ``internal_force(xs)`` per field,
+    ``tangent(xs)`` by blocks) add internal forces and tangent blocks over several fields."""
 
     names: list[str]
     num_primal: int
@@ -231,6 +320,7 @@ class BlockProblem:
     constant: list[list[PETSc.Mat | None]]  # the C blocks (primal diagonal blocks: None)
     loads: list[PETSc.Vec]  # f_ext per primal field, c per constraint field
     t: float = 1.0
+    shared: list = field(default_factory=list)  # sides over several fields (BlendedSide...)
     _owned: list = field(default_factory=list)
 
     def residual(self, x: Sequence[PETSc.Vec]) -> list[PETSc.Vec]:
@@ -244,11 +334,17 @@ class BlockProblem:
             for j, C in enumerate(row):
                 if C is not None:
                     C.multAdd(x[j], r, r)
-            side = self.sides[i] if i < self.num_primal else None
+            out.append(r)
+        for side in self.shared:
+            for i, f in zip(
+                side.fields, side.internal_force([x[i] for i in side.fields]), strict=True
+            ):
+                out[i].axpy(1.0, f)
+                f.destroy()
+        for i, side in enumerate(self.sides):
             if isinstance(side, FESide):  # held dofs: x - t x_bar
                 held = side.fixed_local
-                r.array[held] = x[i].getArray(readonly=True)[held] - self.t * side.fixed_values
-            out.append(r)
+                out[i].array[held] = x[i].getArray(readonly=True)[held] - self.t * side.fixed_values
         return out
 
     def jacobian(self, x: Sequence[PETSc.Vec]) -> list[list[PETSc.Mat | None]]:
@@ -263,6 +359,19 @@ class BlockProblem:
                 if isinstance(self.sides[i], FESide):  # held rows stay the identity
                     K.zeroRows(self.sides[i].fixed_rows, diag=1.0)
             blocks[i][i] = K
+        different = PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN
+        for side in self.shared:  # held rows are not in its blocks
+            for (a, b), K in side.tangent([x[k] for k in side.fields]).items():
+                i, j = side.fields[a], side.fields[b]
+                if i == j:  # onto the owned diagonal block
+                    blocks[i][i].setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+                    blocks[i][i].axpy(1.0, K, structure=different)
+                    K.destroy()
+                    continue
+                if blocks[i][j] is not None:  # a constant block stays as it is: K + C
+                    K.axpy(1.0, blocks[i][j], structure=different)
+                self._owned.append(K)
+                blocks[i][j] = K
         return blocks
 
     def destroy(self) -> None:

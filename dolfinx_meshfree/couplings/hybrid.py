@@ -121,6 +121,7 @@ from .base import (
     CoupledSolution,
     CouplingOperators,
     cell_indicator,
+    check_dimension,
     fe_dof_layout,
     node_flags,
 )
@@ -230,6 +231,13 @@ class HybridElasticity:
         comm = patch.comm
 
         def check() -> None:
+            check_dimension(
+                V.mesh,
+                "hybrid",
+                (2,),
+                "its SPH particles (a 2D lattice of squares), kernel normalisation and "
+                "interface tractions (Rabczuk et al. 2006, eq. 131-135) are written for 2D",
+            )
             if variant not in HYBRID_VARIANTS:
                 raise ValueError(
                     f"variant={variant!r} is not known; use 'HA-S' (forces by interface "

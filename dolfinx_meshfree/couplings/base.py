@@ -254,8 +254,9 @@ def fe_constraint_block(
     """FE columns ``s G_FE`` of multiplier rows, with strong Dirichlet dofs moved to the rhs.
 
     Entry ``k`` contributes ``s values[k]`` at ``(d rows[k] + i, d node + i)`` for each component
-    ``i < d`` (``d``: the block size of ``ubc``'s space, the mesh's ``gdim``); a column that is a strong Dirichlet dof (``is_bc``, value in ``ubc``) is dropped and
-    ``-s values[k] ubc`` is added to the constraint's right-hand side instead.
+    ``i < d`` (``d``: the block size of ``ubc``'s space, the mesh's ``gdim``); a column that is
+    a strong Dirichlet dof (``is_bc``, value in ``ubc``) is dropped and ``-s values[k] ubc`` is
+    added to the constraint's right-hand side instead.
 
     Args:
         rows: (k,) global multiplier block (node) numbers.

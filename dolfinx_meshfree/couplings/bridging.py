@@ -135,6 +135,44 @@ def check_options(
     )
 
 
+def _segment_distance2(x: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Squared distances (points x segments) of points (m, d) to the segments ``[a, b]``."""
+    ab = b - a
+    ab2 = np.einsum("fi,fi->f", ab, ab)
+    ap = x[:, None, :] - a[None]
+    t = np.clip(np.einsum("nfi,fi->nf", ap, ab) / ab2, 0.0, 1.0)
+    gap = ap - t[..., None] * ab[None]
+    return np.einsum("nfi,nfi->nf", gap, gap)
+
+
+def distance_to_facets(x: np.ndarray, facets: np.ndarray) -> np.ndarray:
+    """Distance of points (m, gdim) to the nearest of the facets (f, nv, gdim): segments
+    (``nv = 2``), triangles (3) or quadrilaterals (4, DOLFINx's vertex order, taken as the two
+    triangles 0-1-3 and 0-3-2: exact on planar faces). Local."""
+    if facets.shape[1] == 2:
+        return np.sqrt(_segment_distance2(x, facets[:, 0], facets[:, 1]).min(axis=1))
+    tri = (
+        facets
+        if facets.shape[1] == 3
+        else np.concatenate([facets[:, [0, 1, 3]], facets[:, [0, 3, 2]]])
+    )
+    a, e1, e2 = tri[:, 0], tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    # the foot of the perpendicular in barycentric coordinates: inside, the plane's distance
+    g = np.stack([np.einsum("fi,fi->f", e1, e1), np.einsum("fi,fi->f", e1, e2)], axis=1)
+    g22 = np.einsum("fi,fi->f", e2, e2)
+    det = g[:, 0] * g22 - g[:, 1] ** 2
+    ap = x[:, None, :] - a[None]
+    r1, r2 = np.einsum("nfi,fi->nf", ap, e1), np.einsum("nfi,fi->nf", ap, e2)
+    s = (g22 * r1 - g[:, 1] * r2) / det
+    t = (g[:, 0] * r2 - g[:, 1] * r1) / det
+    foot = ap - s[..., None] * e1[None] - t[..., None] * e2[None]
+    inside = (s >= 0.0) & (t >= 0.0) & (s + t <= 1.0)
+    d2 = np.where(inside, np.einsum("nfi,nfi->nf", foot, foot), np.inf)
+    for i, j in ((0, 1), (1, 2), (2, 0)):  # else the nearest edge
+        d2 = np.minimum(d2, _segment_distance2(x, tri[:, i], tri[:, j]))
+    return np.sqrt(d2.min(axis=1))
+
+
 class BridgingBand:
     """The overlap band of a :class:`~dolfinx_meshfree.CoupledElasticity` (collective).
 
@@ -215,16 +253,11 @@ class BridgingBand:
         rank; 0 on the interface nodes). Collective."""
 
         patch, comm = problem.patch, problem.patch.comm
-        ends = self.coordinates[facet_nodes(self.V, patch.interface_facets)]  # (f, 2, 2)
-        seg = np.concatenate(comm.allgather(ends))
-        a, ab = seg[:, 0], seg[:, 1] - seg[:, 0]
-        ab2 = np.einsum("fi,fi->f", ab, ab)
+        corners = self.coordinates[facet_nodes(self.V, patch.interface_facets)]  # (f, nv, gdim)
+        facets = np.concatenate(comm.allgather(corners))
         dist = np.empty(self.coordinates.shape[0])
         for chunk in np.array_split(np.arange(dist.size), max(1, dist.size // 2048)):
-            ap = self.coordinates[chunk, None, :] - a[None]
-            t = np.clip(np.einsum("nfi,fi->nf", ap, ab) / ab2, 0.0, 1.0)
-            gap = ap - t[..., None] * ab[None]
-            dist[chunk] = np.sqrt(np.einsum("nfi,nfi->nf", gap, gap).min(axis=1))
+            dist[chunk] = distance_to_facets(self.coordinates[chunk], facets)
         dist[on_interface] = 0.0
         return dist
 

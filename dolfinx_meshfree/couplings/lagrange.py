@@ -220,8 +220,10 @@ def facet_particles(
     """
     msh, x = problem.patch.mesh, problem.patch.particles.positions
     if facets.size == 0 or msh.geometry.dim != 2:  # 3D facets: no particle lines (I_h)
-        return np.zeros((0, 2)), np.zeros((0, 2)), [(np.zeros(0, np.int64), np.zeros(0))] * len(
-            facets
+        return (
+            np.zeros((0, 2)),
+            np.zeros((0, 2)),
+            [(np.zeros(0, np.int64), np.zeros(0))] * len(facets),
         )
     fdim = msh.topology.dim - 1
     ends = msh.geometry.x[_compat.entities_to_geometry(msh, fdim, facets), :2]

@@ -70,9 +70,7 @@ class CallableBodyForce(BodyForce):
         self.force = force
 
     def values(self, q: QuadraturePoints) -> np.ndarray:
-        return _vector_values(
-            self.force, (q.points,), len(q), "the body force", q.points.shape[1]
-        )
+        return _vector_values(self.force, (q.points,), len(q), "the body force", q.points.shape[1])
 
     def fe_load(self, V, weight, degree: int) -> np.ndarray:
         msh = V.mesh

@@ -194,8 +194,9 @@ class CoupledElasticity:
         self.tractions.append((np.asarray(facets, dtype=np.int32), traction))
 
     def set_body_force(self, force: VectorFunction) -> None:
-        """Body force per unit volume ``b(x)`` (m, gdim) on the whole body (replaces a previous one),
-        as :meth:`EFGElasticity.set_body_force <dolfinx_meshfree.EFGElasticity.set_body_force>`.
+        """Body force per unit volume ``b(x)`` (m, gdim) on the whole body (replaces a previous
+        one), as
+        :meth:`EFGElasticity.set_body_force <dolfinx_meshfree.EFGElasticity.set_body_force>`.
 
         Every coupling integrates it with the functions and weights of its stiffness (see
         :mod:`~dolfinx_meshfree.physics.body_loads`): FE cells with ``N_a``, patch cells with

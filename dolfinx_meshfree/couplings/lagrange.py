@@ -115,7 +115,7 @@ def interface_multipliers(problem: CoupledElasticity, iq: QuadraturePoints, t_fe
 
     Returns:
         ``(Lambda, layout)``: (points x global multipliers) CSR with the pattern of ``t_fe``
-        and the multipliers' layout (two components per multiplier).
+        and the multipliers' layout (gdim components per multiplier).
     """
     V, patch, comm = problem.V, problem.patch, problem.patch.comm
     imap = V.dofmap.index_map

@@ -57,7 +57,14 @@ class CoupledElasticity:
     """Linear elastostatics with FE cells and a particle patch, coupled by Lagrange multipliers.
 
     Args:
-        V: Vector P1/Q1 space on the whole mesh (the FE side lives on its non-patch cells).
+        V: Vector P1/Q1 space on the whole mesh (the FE side lives on its non-patch cells), 2D
+            (triangles, quadrilaterals) or 3D (tetrahedra, hexahedra): one code path, the
+            mesh's ``gdim`` sets the components. In 3D ``lagrange``, ``edge-to-edge`` and
+            ``bridging`` work; ``ramp``, ``ramp-cubic`` and ``master-slave`` refuse a 3D mesh
+            with a ValueError saying what they lack (their ``missing_3d``). Edge-to-edge in 3D
+            integrates the interface with the FE interpolant of the particle functions (exact
+            patch test when the interface FE nodes are particles, e.g. a grid at h / 2 on a
+            regular mesh or ``placement="vertices"``).
         patch: :class:`~dolfinx_meshfree.ParticlePatch` on the same mesh.
         material: :class:`~dolfinx_meshfree.LinearElastic`, used on both sides.
         coupling: ``"lagrange"`` (compatibility coupling with FE trace multipliers, Rabczuk et

@@ -18,6 +18,7 @@ import json
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
+from dolfinx_meshfree.couplings.bridging import BridgingBand
 
 import dolfinx
 import numpy as np
@@ -42,7 +43,7 @@ def half_patch(msh, n, placement="grid", jitter=0.0):
 
 def coupled(msh, patch, coupling, **options):
     V = _compat.vector_function_space(msh, 1)
-    if coupling == "bridging":
+    if coupling == "bridging" and "band_width" not in options:
         options.setdefault("overlap", 1)
     return mf.CoupledElasticity(V, patch, MATERIAL, coupling=coupling, **options)
 
@@ -248,3 +249,27 @@ def test_plug_in_3d_demo(shared_dir):
     assert (fe["method"], lagrange["method"]) == ("fe", "lagrange")
     for key in ("l2", "compliance_error"):
         assert 1e-2 < lagrange[key] <= 1.2 * fe[key]
+
+
+@pytest.mark.parametrize("cell_name", sorted(CELLS))
+def test_bridging_band_of_a_width_3d(cell_name):
+    """``band_width``: alpha = min(d / w, 1) with d the distance to the interface triangles or
+    quadrilaterals (the plane x = 1/2 here: d = x - 1/2 at the band's nodes), and the patch test
+    to round-off on a perturbed mesh (the interface then a warped surface of facets)."""
+    n, width = 4, 0.3
+    msh = unit_cube(MPI.COMM_WORLD, n, cell_name)
+    problem = coupled(msh, half_patch(msh, n), "bridging", band_width=width)
+    band = BridgingBand(problem, 1, width)
+    x = problem.V.tabulate_dof_coordinates()
+    on = band.in_band_node
+    assert np.any(on & (x[:, 0] > 0.5 + 1e-9))
+    assert np.allclose(band.alpha[on], np.minimum((x[on, 0] - 0.5) / width, 1.0), atol=1e-12)
+    msh = unit_cube(MPI.COMM_WORLD, n, cell_name, perturbed=True)
+    patch = half_patch(msh, n, jitter=0.3)
+    problem = coupled(msh, patch, "bridging", band_width=width)
+    problem.add_dirichlet(mf.boundary_facets(msh), affine)
+    sol = problem.solve()
+    q = mf.cell_quadrature(msh, 2)
+    u, grad = sol.evaluate_at_quadrature(q)
+    assert msh.comm.allreduce(np.abs(u - affine(q.points)).max(initial=0.0), op=MPI.MAX) <= 1e-10
+    assert msh.comm.allreduce(np.abs(grad - G).max(initial=0.0), op=MPI.MAX) <= 1e-10

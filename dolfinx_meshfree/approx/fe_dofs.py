@@ -15,24 +15,25 @@ __all__ = ["cell_indicator", "fe_dof_layout", "node_flags"]
 
 
 def fe_dof_layout(V: dolfinx.fem.FunctionSpace) -> tuple[Layout, np.ndarray]:
-    """PETSc layout of the interleaved dofs of a vector P1/Q1 space (DOLFINx's numbering), and
-    the global node number of every local node."""
-    imap = V.dofmap.index_map
+    """PETSc layout of the interleaved dofs of a vector P1/Q1 space (DOLFINx's numbering, block
+    size ``gdim``), and the global node number of every local node."""
+    imap, bs = V.dofmap.index_map, V.dofmap.index_map_bs
     l2g = np.asarray(
         imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
     )
-    return Layout(2 * imap.size_local, 2 * imap.size_global, 2 * imap.local_range[0]), l2g
+    return Layout(bs * imap.size_local, bs * imap.size_global, bs * imap.local_range[0]), l2g
 
 
 def node_flags(V: dolfinx.fem.FunctionSpace, local_nodes: np.ndarray) -> np.ndarray:
     """Flag nodes (local block indices) of ``V`` on every rank that has them, owned or ghost
     (collective)."""
+    bs = V.dofmap.index_map_bs
     f = dolfinx.fem.Function(V)
     f.x.array[:] = 0.0
-    f.x.array[2 * np.asarray(local_nodes, dtype=np.int64)] = 1.0
+    f.x.array[bs * np.asarray(local_nodes, dtype=np.int64)] = 1.0
     _compat.scatter_reverse_add(f)
     f.x.scatter_forward()
-    return f.x.array[0::2] > 0.5
+    return f.x.array[0::bs] > 0.5
 
 
 def cell_indicator(msh: dolfinx.mesh.Mesh, owned_flags: np.ndarray) -> dolfinx.fem.Function:

@@ -118,22 +118,23 @@ def essential_conditions(problem: CoupledElasticity, also_strong=None) -> tuple:
         patch_bc.append((f_p, fn))
     dq = [facet_quadrature(msh, f, deg) for f, _ in patch_bc]
     dtabs = [raise_on_all_ranks(comm, lambda d=d: problem.mls.tabulate(d.points, 0)) for d in dq]
+    gdim = msh.geometry.dim
     ubc = dolfinx.fem.Function(V)
     ubc.x.array[:] = 0.0
-    is_bc = np.zeros(ubc.x.array.size // 2, dtype=bool)
-    coords = V.tabulate_dof_coordinates()[:, :2]
+    is_bc = np.zeros(ubc.x.array.size // gdim, dtype=bool)
+    coords = V.tabulate_dof_coordinates()[:, :gdim]
     for f, fn in fe_bc:
         flags = node_flags(
             problem.V, dolfinx.fem.locate_dofs_topological(V, msh.topology.dim - 1, f)
         )
         xn = coords[flags]
         vals = raise_on_all_ranks(
-            comm, lambda fn=fn, xn=xn: _vector_values(fn, (xn,), len(xn), "dirichlet")
+            comm, lambda fn=fn, xn=xn: _vector_values(fn, (xn,), len(xn), "dirichlet", gdim)
         )
-        ubc.x.array.reshape(-1, 2)[flags] = vals
+        ubc.x.array.reshape(-1, gdim)[flags] = vals
         is_bc |= flags
     for flags, vals in problem.strong:  # by node (CoupledLinearProblem's DirichletBCs)
-        ubc.x.array.reshape(-1, 2)[flags] = vals[flags]
+        ubc.x.array.reshape(-1, gdim)[flags] = vals[flags]
         is_bc |= flags
     return fe_bc, patch_bc, dq, dtabs, ubc, is_bc
 
@@ -146,17 +147,18 @@ def fix_fe_rows(
 
     Args:
         fixed_local: bool per local node (owned and ghost) to fix.
-        values: (num local nodes, 2) values of the fixed nodes (others ignored).
+        values: (num local nodes, gdim) values of the fixed nodes (others ignored).
 
     Returns:
         The PETSc vector of fixed values (the caller destroys it).
     """
     fe_layout, l2g = fe_dof_layout(problem.V)
     n_owned = problem.V.dofmap.index_map.size_local
+    bs = problem.V.dofmap.index_map_bs
     fixed = np.flatnonzero(fixed_local[:n_owned])
-    rows = (2 * l2g[fixed][:, None] + np.arange(2)).ravel().astype(PETSc.IntType)
+    rows = (bs * l2g[fixed][:, None] + np.arange(bs)).ravel().astype(PETSc.IntType)
     x_bc = create_vector(
-        problem.patch.comm, fe_layout, rows, np.asarray(values).reshape(-1, 2)[fixed].ravel()
+        problem.patch.comm, fe_layout, rows, np.asarray(values).reshape(-1, bs)[fixed].ravel()
     )
     # rows of dofs that no FE cell supports are empty, diagonal included: add it
     K_fe.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
@@ -175,22 +177,23 @@ def traction_loads(problem: CoupledElasticity) -> tuple[PETSc.Vec, np.ndarray]:
     V, comm = problem.V, problem.patch.comm
     msh, deg = V.mesh, problem.quadrature_degree
     fe_layout, l2g = fe_dof_layout(problem.V)
+    gdim = msh.geometry.dim
     f_fe_rows, f_fe_vals = [np.zeros(0, np.int64)], [np.zeros(0)]
-    f_p = np.zeros(2 * problem.patch.particles.num_particles)
+    f_p = np.zeros(gdim * problem.patch.particles.num_particles)
     for facets, fn in problem.tractions:
         f_fe_facets, f_p_facets = split_facets(problem, facets)
         q = facet_quadrature(msh, f_fe_facets, deg)
         t = raise_on_all_ranks(
-            comm, lambda fn=fn, q=q: _vector_values(fn, (q.points, q.normals), len(q), "t")
+            comm, lambda fn=fn, q=q: _vector_values(fn, (q.points, q.normals), len(q), "t", gdim)
         )
         tab = tabulate_in_cells(V, q.points, q.cells, derivatives=0).values
-        fl = load_vector(tab, q.weights, t).reshape(-1, 2)
-        for comp in range(2):
-            f_fe_rows.append(2 * l2g[: fl.shape[0]] + comp)
+        fl = load_vector(tab, q.weights, t).reshape(-1, gdim)
+        for comp in range(gdim):
+            f_fe_rows.append(gdim * l2g[: fl.shape[0]] + comp)
             f_fe_vals.append(fl[:, comp])
         q = facet_quadrature(msh, f_p_facets, deg)
         t = raise_on_all_ranks(
-            comm, lambda fn=fn, q=q: _vector_values(fn, (q.points, q.normals), len(q), "t")
+            comm, lambda fn=fn, q=q: _vector_values(fn, (q.points, q.normals), len(q), "t", gdim)
         )
         tab = raise_on_all_ranks(comm, lambda q=q: problem.mls.tabulate(q.points, 0)).values
         f_p += load_vector(tab, q.weights, t)
@@ -208,7 +211,7 @@ def append_patch_conditions(
     """Append the multiplier field of essential conditions on patch facets (it couples to
     field 1, the particles) to ``blocks``/``rhs``; new PETSc objects go to ``mats``."""
     P, comm = problem.patch.particles, problem.patch.comm
-    pl = P.dof_layout()
+    pl = P.dof_layout(P.gdim)
     Gd, d_rows, d_vals, dl = facet_multipliers(P, patch_bc, dq, dtabs, problem.material.E)
     if dl.size_global:
         D = create_aij(comm, Gd, dl, pl)
@@ -224,9 +227,10 @@ def append_patch_conditions(
 
 def solve_and_gather(problem: CoupledElasticity, blocks, rhs, objects, solver: str | SolverOptions):
     """Solve the nest (fields FE, particles, multipliers...), destroy ``objects`` and ``rhs``,
-    and return the FE Function, the particle coefficients (n, 2) in original order and the
+    and return the FE Function, the particle coefficients (n, gdim) in original order and the
     solve time. Collective."""
     V, P, comm = problem.V, problem.patch.particles, problem.patch.comm
+    bs = V.dofmap.index_map_bs
     names = ["fe", "particles"] + [f"multiplier{i}" for i in range(len(blocks) - 2)]
     system = BlockSystem(blocks, rhs, num_primal=2, names=names)
     t0 = time.perf_counter()
@@ -236,18 +240,19 @@ def solve_and_gather(problem: CoupledElasticity, blocks, rhs, objects, solver: s
     for obj in [*objects, *rhs]:
         obj.destroy()
     uh = dolfinx.fem.Function(V)
-    uh.x.array[: 2 * V.dofmap.index_map.size_local] = parts[0]
+    uh.x.array[: bs * V.dofmap.index_map.size_local] = parts[0]
     uh.x.scatter_forward()
     owned = np.concatenate(comm.allgather(parts[1]))
-    return uh, owned.reshape(-1, 2)[P.petsc_index], seconds
+    return uh, owned.reshape(-1, bs)[P.petsc_index], seconds
 
 
 def sizes(problem: CoupledElasticity, active: np.ndarray, multiplier_dofs: int) -> dict:
     """The system's sizes for :attr:`CoupledSolution.sizes`: active FE dofs (from the flags
     of the local nodes), particle dofs and multiplier dofs (collective)."""
     n_owned = problem.V.dofmap.index_map.size_local
+    bs = problem.V.dofmap.index_map_bs
     return {
-        "fe_dofs": 2 * problem.patch.comm.allreduce(int(np.sum(active[:n_owned]))),
-        "particle_dofs": 2 * problem.patch.particles.num_particles,
+        "fe_dofs": bs * problem.patch.comm.allreduce(int(np.sum(active[:n_owned]))),
+        "particle_dofs": bs * problem.patch.particles.num_particles,
         "multiplier_dofs": multiplier_dofs,
     }

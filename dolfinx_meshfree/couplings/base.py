@@ -44,6 +44,7 @@ __all__ = [
     "Coupling",
     "CouplingOperators",
     "cell_indicator",
+    "check_dimension",
     "facet_nodes",
     "facet_table",
     "fe_constraint_block",
@@ -70,13 +71,15 @@ class CoupledSolution:
     interface: RampInterface | None = None
 
     def evaluate_at_quadrature(self, q: QuadraturePoints) -> tuple[np.ndarray, np.ndarray]:
-        """Displacement (m, 2) and gradient (m, 2, 2) at quadrature points of local cells: FE in
-        FE cells, particles in patch cells, blended in a ramp coupling's interface cells (local)."""
+        """Displacement (m, gdim) and gradient (m, gdim, gdim) at quadrature points of local
+        cells: FE in FE cells, particles in patch cells, blended in a ramp coupling's interface
+        cells (local)."""
         V = self.u.function_space
-        local = self.u.x.array.reshape(-1, 2)
+        gdim = V.mesh.geometry.dim
+        local = self.u.x.array.reshape(-1, gdim)
         inside = self.patch.in_patch[q.cells]
-        u = np.empty((len(q), 2))
-        g = np.empty((len(q), 2, 2))
+        u = np.empty((len(q), gdim))
+        g = np.empty((len(q), gdim, gdim))
         fe = ~inside
         if self.interface is not None:
             blended = self.interface.in_interface[q.cells]
@@ -94,10 +97,11 @@ class CoupledSolution:
         return u, g
 
     def displacement(self, points: np.ndarray) -> np.ndarray:
-        """Displacement (m, 2) at any points of the mesh, on every rank (collective). Points on
-        the interface are evaluated on the FE side, the same on any partition."""
+        """Displacement (m, gdim) at any points of the mesh, on every rank (collective). Points
+        on the interface are evaluated on the FE side, the same on any partition."""
         msh = self.patch.mesh
-        x = raise_on_all_ranks(msh.comm, lambda: check_points(points, 2, "points"))
+        gdim = msh.geometry.dim
+        x = raise_on_all_ranks(msh.comm, lambda: check_points(points, gdim, "points"))
 
         def compute(pts: np.ndarray, cells: np.ndarray) -> list:
             q = QuadraturePoints(pts, np.zeros(len(pts)), cells)
@@ -106,7 +110,7 @@ class CoupledSolution:
         # points on the interface belong to both sides, which a weak coupling makes differ
         # slightly: take the FE side, whatever the partition
         fe_side = ~self.patch.in_patch
-        return np.array(_route(msh, x, compute, fe_side), dtype=float).reshape(-1, 2)
+        return np.array(_route(msh, x, compute, fe_side), dtype=float).reshape(-1, gdim)
 
 
 @dataclass
@@ -203,6 +207,8 @@ class Coupling(Protocol):
         integrations: The particle integrations its dynamic operators offer.
         blended: Whether its particle functions are blended or weighted on cells (ramp,
             bridging): then no volume masses in dynamics.
+        dimensions: The geometric dimensions it works in (2, or 2 and 3).
+        missing_3d: For a 2D-only coupling, what it lacks in 3D (the refusal's message).
     """
 
     name: ClassVar[str]
@@ -210,6 +216,8 @@ class Coupling(Protocol):
     consistent_default: ClassVar[bool]
     integrations: ClassVar[tuple[str, ...]]
     blended: ClassVar[bool]
+    dimensions: ClassVar[tuple[int, ...]]
+    missing_3d: ClassVar[str]
 
     def prepare_mls(self, mls: MLS, patch: ParticlePatch) -> MLS:
         """The MLS the coupling works with (e.g. supports widened over interface cells)."""
@@ -226,6 +234,19 @@ class Coupling(Protocol):
         ...
 
 
+def check_dimension(msh, name: str, dimensions: tuple[int, ...], missing: str) -> None:
+    """Refuse a mesh whose geometric dimension the coupling ``name`` does not work in: a
+    ValueError on every rank (the dimension is the same on every rank), saying what is
+    ``missing`` and which couplings work in that dimension."""
+    gdim = msh.geometry.dim
+    if gdim not in dimensions:
+        raise ValueError(
+            f"coupling={name!r} works on {' and '.join(f'{d}D' for d in dimensions)} meshes "
+            f"only, this mesh has gdim={gdim}: {missing}. In 3D use coupling='lagrange', "
+            "'edge-to-edge' or 'bridging'"
+        )
+
+
 def fe_constraint_block(
     rows: np.ndarray,
     nodes: np.ndarray,
@@ -239,9 +260,10 @@ def fe_constraint_block(
 ) -> tuple[sp.csr_matrix, list, list]:
     """FE columns ``s G_FE`` of multiplier rows, with strong Dirichlet dofs moved to the rhs.
 
-    Entry ``k`` contributes ``s values[k]`` at ``(2 rows[k] + i, 2 node + i)`` for each component
-    ``i``; a column that is a strong Dirichlet dof (``is_bc``, value in ``ubc``) is dropped and
-    ``-s values[k] ubc`` is added to the constraint's right-hand side instead.
+    Entry ``k`` contributes ``s values[k]`` at ``(d rows[k] + i, d node + i)`` for each component
+    ``i < d`` (``d``: the block size of ``ubc``'s space, the mesh's ``gdim``); a column that is
+    a strong Dirichlet dof (``is_bc``, value in ``ubc``) is dropped and ``-s values[k] ubc`` is
+    added to the constraint's right-hand side instead.
 
     Args:
         rows: (k,) global multiplier block (node) numbers.
@@ -262,15 +284,16 @@ def fe_constraint_block(
         if c.size and not np.array_equal(l2g[c], nodes):
             raise RuntimeError("FE constraint columns name nodes that are not local to this rank")
     r, v = rows, values
+    bs = ubc.function_space.dofmap.index_map_bs
     bc_col = is_bc[c]
     g_rows, g_vals = [], []
     gfe: tuple[list, list, list] = ([], [], [])
-    for comp in range(2):
-        rr = 2 * r + comp
-        cols = 2 * l2g[c] + comp
+    for comp in range(bs):
+        rr = bs * r + comp
+        cols = bs * l2g[c] + comp
         # known FE values move to the right-hand side
         g_rows.append(rr[bc_col])
-        g_vals.append(-s * v[bc_col] * ubc.x.array[2 * c[bc_col] + comp])
+        g_vals.append(-s * v[bc_col] * ubc.x.array[bs * c[bc_col] + comp])
         gfe[0].append(rr[~bc_col])
         gfe[1].append(cols[~bc_col])
         gfe[2].append(s * v[~bc_col])
@@ -288,13 +311,15 @@ def particle_constraint_block(
     pdofs: np.ndarray,
     shape: tuple[int, int],
 ) -> sp.csr_matrix:
-    """Particle columns ``s G_P``: ``-s values[k]`` at ``(2 rows[k] + i, pdofs[particle, i])``."""
+    """Particle columns ``s G_P``: ``-s values[k]`` at ``(d rows[k] + i, pdofs[particle, i])``
+    for each component ``i < d = pdofs.shape[1]``."""
+    d = pdofs.shape[1]
     return sp.csr_matrix(
         (
-            np.concatenate([-s * values, -s * values]),
+            np.concatenate([-s * values] * d),
             (
-                np.concatenate([2 * rows, 2 * rows + 1]),
-                np.concatenate([pdofs[particles, 0], pdofs[particles, 1]]),
+                np.concatenate([d * rows + i for i in range(d)]),
+                np.concatenate([pdofs[particles, i] for i in range(d)]),
             ),
         ),
         shape=shape,
@@ -318,7 +343,8 @@ def facet_table(
 
 
 def facet_nodes(V: dolfinx.fem.FunctionSpace, facets: np.ndarray) -> np.ndarray:
-    """Local P1/Q1 nodes (block indices) of each facet of a 2D mesh, shape (num_facets, 2)."""
+    """Local P1/Q1 nodes (block indices) of each facet, shape (num_facets, vertices per facet):
+    2 in 2D, 3 (triangles) or 4 (quadrilaterals, DOLFINx's vertex order) in 3D."""
     msh = V.mesh
     tdim = msh.topology.dim
     msh.topology.create_connectivity(tdim, 0)
@@ -328,5 +354,6 @@ def facet_nodes(V: dolfinx.fem.FunctionSpace, facets: np.ndarray) -> np.ndarray:
     vmap = msh.topology.index_map(0)
     node_of_vertex = np.empty(vmap.size_local + vmap.num_ghosts, dtype=np.int64)
     node_of_vertex[np.asarray(c2v.array)] = _compat.dofmap_array(V).ravel()
-    fv = np.asarray(f2v.array).reshape(-1, 2)[np.asarray(facets, dtype=np.int64)]
+    per_facet = int(np.asarray(f2v.offsets)[1]) if len(f2v.offsets) > 1 else tdim
+    fv = np.asarray(f2v.array).reshape(-1, per_facet)[np.asarray(facets, dtype=np.int64)]
     return node_of_vertex[fv]

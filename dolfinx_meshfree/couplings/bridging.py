@@ -135,6 +135,44 @@ def check_options(
     )
 
 
+def _segment_distance2(x: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Squared distances (points x segments) of points (m, d) to the segments ``[a, b]``."""
+    ab = b - a
+    ab2 = np.einsum("fi,fi->f", ab, ab)
+    ap = x[:, None, :] - a[None]
+    t = np.clip(np.einsum("nfi,fi->nf", ap, ab) / ab2, 0.0, 1.0)
+    gap = ap - t[..., None] * ab[None]
+    return np.einsum("nfi,nfi->nf", gap, gap)
+
+
+def distance_to_facets(x: np.ndarray, facets: np.ndarray) -> np.ndarray:
+    """Distance of points (m, gdim) to the nearest of the facets (f, nv, gdim): segments
+    (``nv = 2``), triangles (3) or quadrilaterals (4, DOLFINx's vertex order, taken as the two
+    triangles 0-1-3 and 0-3-2: exact on planar faces). Local."""
+    if facets.shape[1] == 2:
+        return np.sqrt(_segment_distance2(x, facets[:, 0], facets[:, 1]).min(axis=1))
+    tri = (
+        facets
+        if facets.shape[1] == 3
+        else np.concatenate([facets[:, [0, 1, 3]], facets[:, [0, 3, 2]]])
+    )
+    a, e1, e2 = tri[:, 0], tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    # the foot of the perpendicular in barycentric coordinates: inside, the plane's distance
+    g = np.stack([np.einsum("fi,fi->f", e1, e1), np.einsum("fi,fi->f", e1, e2)], axis=1)
+    g22 = np.einsum("fi,fi->f", e2, e2)
+    det = g[:, 0] * g22 - g[:, 1] ** 2
+    ap = x[:, None, :] - a[None]
+    r1, r2 = np.einsum("nfi,fi->nf", ap, e1), np.einsum("nfi,fi->nf", ap, e2)
+    s = (g22 * r1 - g[:, 1] * r2) / det
+    t = (g[:, 0] * r2 - g[:, 1] * r1) / det
+    foot = ap - s[..., None] * e1[None] - t[..., None] * e2[None]
+    inside = (s >= 0.0) & (t >= 0.0) & (s + t <= 1.0)
+    d2 = np.where(inside, np.einsum("nfi,nfi->nf", foot, foot), np.inf)
+    for i, j in ((0, 1), (1, 2), (2, 0)):  # else the nearest edge
+        d2 = np.minimum(d2, _segment_distance2(x, tri[:, i], tri[:, j]))
+    return np.sqrt(d2.min(axis=1))
+
+
 class BridgingBand:
     """The overlap band of a :class:`~dolfinx_meshfree.CoupledElasticity` (collective).
 
@@ -175,7 +213,7 @@ class BridgingBand:
                 "has none"
             )
         dofs = _compat.dofmap_array(V)
-        self.coordinates = V.tabulate_dof_coordinates()[:, :2]
+        self.coordinates = V.tabulate_dof_coordinates()[:, : msh.geometry.dim]
         iface = dolfinx.fem.locate_dofs_topological(V, tdim - 1, patch.interface_facets)
         on_interface = node_flags(problem.V, iface)
         ncl = patch.in_patch.size
@@ -215,16 +253,11 @@ class BridgingBand:
         rank; 0 on the interface nodes). Collective."""
 
         patch, comm = problem.patch, problem.patch.comm
-        ends = self.coordinates[facet_nodes(self.V, patch.interface_facets)]  # (f, 2, 2)
-        seg = np.concatenate(comm.allgather(ends))
-        a, ab = seg[:, 0], seg[:, 1] - seg[:, 0]
-        ab2 = np.einsum("fi,fi->f", ab, ab)
+        corners = self.coordinates[facet_nodes(self.V, patch.interface_facets)]  # (f, nv, gdim)
+        facets = np.concatenate(comm.allgather(corners))
         dist = np.empty(self.coordinates.shape[0])
         for chunk in np.array_split(np.arange(dist.size), max(1, dist.size // 2048)):
-            ap = self.coordinates[chunk, None, :] - a[None]
-            t = np.clip(np.einsum("nfi,fi->nf", ap, ab) / ab2, 0.0, 1.0)
-            gap = ap - t[..., None] * ab[None]
-            dist[chunk] = np.sqrt(np.einsum("nfi,nfi->nf", gap, gap).min(axis=1))
+            dist[chunk] = distance_to_facets(self.coordinates[chunk], facets)
         dist[on_interface] = 0.0
         return dist
 
@@ -272,10 +305,11 @@ class BridgingBand:
         layout = Layout.from_local(comm, mine.size)
         num = dolfinx.fem.Function(V)
         num.x.array[:] = 0.0
-        num.x.array[2 * mine] = layout.start + np.arange(mine.size) + 1
+        bs = V.dofmap.index_map_bs
+        num.x.array[bs * mine] = layout.start + np.arange(mine.size) + 1
         num.x.scatter_forward()
-        ids = np.rint(num.x.array[0::2]).astype(np.int64) - 1
-        return ids, Layout(2 * layout.size_local, 2 * layout.size_global, 2 * layout.start)
+        ids = np.rint(num.x.array[0::bs]).astype(np.int64) - 1
+        return ids, Layout(bs * layout.size_local, bs * layout.size_global, bs * layout.start)
 
 
 class BridgingSolution(CoupledSolution):
@@ -287,12 +321,13 @@ class BridgingSolution(CoupledSolution):
 
     def evaluate_at_quadrature(self, q: QuadraturePoints) -> tuple[np.ndarray, np.ndarray]:
         V = self.u.function_space
-        local = self.u.x.array.reshape(-1, 2)
+        gdim = V.mesh.geometry.dim
+        local = self.u.x.array.reshape(-1, gdim)
         in_band = self.band.in_band[q.cells]
         inside = self.patch.in_patch[q.cells] & ~in_band
         fe = ~inside & ~in_band
-        u = np.empty((len(q), 2))
-        g = np.empty((len(q), 2, 2))
+        u = np.empty((len(q), gdim))
+        g = np.empty((len(q), gdim, gdim))
         if np.any(fe):
             t = tabulate_in_cells(V, q.points[fe], q.cells[fe])
             u[fe], g[fe] = t.values @ local, t.gradient(local)
@@ -330,7 +365,7 @@ def _fe_weight(problem, band: BridgingBand):
     in_band = problem.cell_indicator(band.in_band)
     alpha = dolfinx.fem.Function(V)
     alpha.x.array[:] = 0.0
-    alpha.x.array[0::2] = band.alpha
+    alpha.x.array[0 :: V.dofmap.index_map_bs] = band.alpha
     return fe + in_band * (1.0 - alpha[0])
 
 
@@ -369,9 +404,10 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
     n = P.num_particles
     s = problem.material.E
     p = problem.penalty
-    pdofs = P.petsc_dofs(2)
+    d = msh.geometry.dim
+    pdofs = P.petsc_dofs(d)
     fe_layout, l2g = fe_dof_layout(problem.V)
-    pl = P.dof_layout()
+    pl = P.dof_layout(d)
     t0 = time.perf_counter()
 
     band = BridgingBand(problem, problem.overlap, problem.band_width)
@@ -391,7 +427,7 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
     # active FE nodes: nodes of FE cells and band cells
     active = fe_active(problem, np.concatenate([patch.fe_cells, band.cells]))
     fixed_local = is_bc | ~active
-    x_fix = np.where(np.repeat(is_bc, 2), ubc.x.array, 0.0)
+    x_fix = np.where(np.repeat(is_bc, d), ubc.x.array, 0.0)
 
     # constraints at the band particles (or at the band cells' Gauss points, with weights)
     ids, ml = band.numbering(problem)
@@ -401,7 +437,7 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
     test = None
     if problem.consistent:
         test = _consistent_test_gradients(
-            problem, band, q, w, tq, (t_fe, t_p, cw), ids, ml.size_global // 2
+            problem, band, q, w, tq, (t_fe, t_p, cw), ids, ml.size_global // d
         )
     setup = problem.setup_time + time.perf_counter() - t0
     if tables is not None:
@@ -416,7 +452,7 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
     t1 = time.perf_counter()
     Kq = stiffness_matrix(test or tq.gradients, w, problem.material, tq.gradients).tocoo()
     dof_map = pdofs.ravel()
-    Kp_loc = sp.csr_matrix((Kq.data, (dof_map[Kq.row], dof_map[Kq.col])), shape=(2 * n, 2 * n))
+    Kp_loc = sp.csr_matrix((Kq.data, (dof_map[Kq.row], dof_map[Kq.col])), shape=(d * n, d * n))
     keep = ids[M_fe.row] >= 0
     fe_rows = (ids[M_fe.row[keep]], M_fe.col[keep], M_fe.data[keep])
     keep = ids[M_p.row] >= 0
@@ -424,11 +460,11 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
     G_fe, g_rows, g_vals = fe_constraint_block(
         *fe_rows, False, s, fixed_local, ubc, l2g, (ml.size_global, fe_layout.size_global)
     )
-    G_p = particle_constraint_block(*p_rows, s, pdofs, (ml.size_global, 2 * n))
+    G_p = particle_constraint_block(*p_rows, s, pdofs, (ml.size_global, d * n))
 
     # loads: tractions weighted by beta_FE and beta_P (eq. 49)
     f_fe_rows, f_fe_vals = [], []
-    f_p = np.zeros(2 * n)
+    f_p = np.zeros(d * n)
     for facets, fn in problem.tractions:
         f_fe_facets, f_p_facets = split_facets(problem, facets)
         f_fe_facets = np.concatenate(
@@ -436,17 +472,19 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
         )
         fq = facet_quadrature(msh, f_fe_facets, deg)
         t = raise_on_all_ranks(
-            comm, lambda fn=fn, fq=fq: _vector_values(fn, (fq.points, fq.normals), len(fq), "t")
+            comm,
+            lambda fn=fn, fq=fq: _vector_values(fn, (fq.points, fq.normals), len(fq), "t", d),
         )
         beta = np.where(band.in_band[fq.cells], 1.0 - band.alpha_at(fq.points, fq.cells), 1.0)
         tab = tabulate_in_cells(V, fq.points, fq.cells, derivatives=0).values
-        fl = load_vector(tab, fq.weights * beta, t).reshape(-1, 2)
-        for comp in range(2):
-            f_fe_rows.append(2 * l2g[: fl.shape[0]] + comp)
+        fl = load_vector(tab, fq.weights * beta, t).reshape(-1, d)
+        for comp in range(d):
+            f_fe_rows.append(d * l2g[: fl.shape[0]] + comp)
             f_fe_vals.append(fl[:, comp])
         fq = facet_quadrature(msh, f_p_facets, deg)
         t = raise_on_all_ranks(
-            comm, lambda fn=fn, fq=fq: _vector_values(fn, (fq.points, fq.normals), len(fq), "t")
+            comm,
+            lambda fn=fn, fq=fq: _vector_values(fn, (fq.points, fq.normals), len(fq), "t", d),
         )
         beta = np.where(band.in_band[fq.cells], band.alpha_at(fq.points, fq.cells), 1.0)
         tab = raise_on_all_ranks(comm, lambda fq=fq: problem.mls.tabulate(fq.points, 0)).values
@@ -454,11 +492,11 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
     cat = np.concatenate
 
     # augmented Lagrangian: p G^T G with the pointwise gradients G^FE = N, G^P = -phi (eq. 72-75)
-    fe_dof = (2 * l2g[:, None] + np.arange(2)).ravel()
-    fixed_dof = np.repeat(fixed_local, 2)
+    fe_dof = (d * l2g[:, None] + np.arange(d)).ravel()
+    fixed_dof = np.repeat(fixed_local, d)
     K_ff = K_fp = K_pf = A22g = None
     if p > 0.0:
-        e2 = sp.identity(2, format="csr")
+        e2 = sp.identity(d, format="csr")
         root = sp.diags(np.sqrt(cw))
         Nf, Np = sp.kron(root @ t_fe, e2).tocsr(), sp.kron(root @ t_p, e2).tocsr()
         A11 = (p * (Nf.T @ Nf)).tocoo()
@@ -467,13 +505,13 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
         K_ff = sp.csr_matrix(
             (A11.data, (fe_dof[A11.row], fe_dof[A11.col])), shape=(fe_layout.size_global,) * 2
         )
-        A22g = sp.csr_matrix((A22.data, (dof_map[A22.row], dof_map[A22.col])), shape=(2 * n, 2 * n))
+        A22g = sp.csr_matrix((A22.data, (dof_map[A22.row], dof_map[A22.col])), shape=(d * n, d * n))
         Kp_loc = Kp_loc + A22g
         # FE rows of fixed dofs vanish; their columns move the known values to the particles' rhs
         keep = ~fixed_dof[A12.row]
         K_fp = sp.csr_matrix(
             (A12.data[keep], (fe_dof[A12.row[keep]], dof_map[A12.col[keep]])),
-            shape=(fe_layout.size_global, 2 * n),
+            shape=(fe_layout.size_global, d * n),
         )
         K_pf = K_fp.T.tocsr()
         lift = fixed_dof[A12.row]
@@ -549,7 +587,7 @@ def solve_bridging(problem, solver: str | SolverOptions = "mumps"):
 
 def _band_multiplier_of_alpha(problem, band: BridgingBand, ids: np.ndarray, nb: int, t_fe, cw):
     r"""The multiplier field that balances ``grad(alpha)`` on the FE side: coefficients ``c``
-    (``nb`` band nodes x 2, on every rank) of ``Lambda = sum_k N_k c_k`` with
+    (``nb`` band nodes x gdim, on every rank) of ``Lambda = sum_k N_k c_k`` with
 
     .. math::
         \sum_L N_k(x_L) \Lambda(x_L) c_L = \int_{band} N_k \nabla\alpha \, dx
@@ -580,10 +618,10 @@ def _band_multiplier_of_alpha(problem, band: BridgingBand, ids: np.ndarray, nb: 
         (cat([p[2] for p in parts]), (cat([p[0] for p in parts]), cat([p[1] for p in parts]))),
         shape=(nb, nb),
     )
-    bg = np.zeros((nb, 2))
+    bg = np.zeros((nb, grad_alpha.shape[1]))
     for p in parts:
         np.add.at(bg, p[3], p[4])
-    return np.column_stack([spsolve(Mg.tocsc(), bg[:, k]) for k in range(2)])
+    return np.column_stack([spsolve(Mg.tocsc(), bg[:, k]) for k in range(bg.shape[1])])
 
 
 def _consistent_test_gradients(
@@ -697,10 +735,11 @@ def bridging_operators(problem):
     V, patch, P = problem.V, problem.patch, problem.patch.particles
     comm, msh = patch.comm, V.mesh
     n, p = P.num_particles, problem.penalty
-    pdofs = P.petsc_dofs(2)
+    d = msh.geometry.dim
+    pdofs = P.petsc_dofs(d)
     dof_map = pdofs.ravel()
     fe_layout, l2g = fe_dof_layout(problem.V)
-    pl = P.dof_layout()
+    pl = P.dof_layout(d)
     band = BridgingBand(problem, problem.overlap, problem.band_width)
     q = cell_quadrature(msh, problem.quadrature_degree, P.cells)
     w = q.weights.copy()
@@ -715,10 +754,10 @@ def bridging_operators(problem):
     test = None
     if problem.consistent:
         test = _consistent_test_gradients(
-            problem, band, q, w, tq, (t_fe, t_p, cw), ids, ml.size_global // 2
+            problem, band, q, w, tq, (t_fe, t_p, cw), ids, ml.size_global // d
         )
     Kq = stiffness_matrix(test or tq.gradients, w, problem.material, tq.gradients).tocoo()
-    Kp_loc = sp.csr_matrix((Kq.data, (dof_map[Kq.row], dof_map[Kq.col])), shape=(2 * n, 2 * n))
+    Kp_loc = sp.csr_matrix((Kq.data, (dof_map[Kq.row], dof_map[Kq.col])), shape=(d * n, d * n))
     M_fe = (t_fe.T @ sp.diags(cw) @ t_fe).tocoo()
     M_p = (t_fe.T @ sp.diags(cw) @ t_p).tocoo()
     keep = ids[M_fe.row] >= 0
@@ -737,14 +776,14 @@ def bridging_operators(problem):
     )
     keep = ids[M_p.row] >= 0
     G_p = particle_constraint_block(
-        ids[M_p.row[keep]], M_p.col[keep], M_p.data[keep], 1.0, pdofs, (ml.size_global, 2 * n)
+        ids[M_p.row[keep]], M_p.col[keep], M_p.data[keep], 1.0, pdofs, (ml.size_global, d * n)
     )
 
     K_fe = _fe_stiffness(problem, band)
     K_fp = K_pf = None
     if p > 0.0:
-        fe_dof = (2 * l2g[:, None] + np.arange(2)).ravel()
-        e2 = sp.identity(2, format="csr")
+        fe_dof = (d * l2g[:, None] + np.arange(d)).ravel()
+        e2 = sp.identity(d, format="csr")
         root = sp.diags(np.sqrt(cw))
         Nf, Np = sp.kron(root @ t_fe, e2).tocsr(), sp.kron(root @ t_p, e2).tocsr()
         A11 = (p * (Nf.T @ Nf)).tocoo()
@@ -756,10 +795,10 @@ def bridging_operators(problem):
         K_pen = create_aij(comm, K_ff, fe_layout, fe_layout)
         K_fe.axpy(1.0, K_pen, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
         K_pen.destroy()
-        A22g = sp.csr_matrix((A22.data, (dof_map[A22.row], dof_map[A22.col])), shape=(2 * n, 2 * n))
+        A22g = sp.csr_matrix((A22.data, (dof_map[A22.row], dof_map[A22.col])), shape=(d * n, d * n))
         Kp_loc = Kp_loc + A22g
         fp = sp.csr_matrix(
-            (A12.data, (fe_dof[A12.row], dof_map[A12.col])), shape=(fe_layout.size_global, 2 * n)
+            (A12.data, (fe_dof[A12.row], dof_map[A12.col])), shape=(fe_layout.size_global, d * n)
         )
         K_fp = create_aij(comm, fp, fe_layout, pl)
         K_pf = create_aij(comm, fp.T.tocsr(), pl, fe_layout)
@@ -798,6 +837,8 @@ class BridgingCoupling:
     consistent_default: ClassVar[bool] = True
     integrations: ClassVar[tuple[str, ...]] = ("cells",)
     blended: ClassVar[bool] = True
+    dimensions: ClassVar[tuple[int, ...]] = (2, 3)
+    missing_3d: ClassVar[str] = ""
 
     def prepare_mls(self, mls: MLS, patch: ParticlePatch) -> MLS:
         return mls

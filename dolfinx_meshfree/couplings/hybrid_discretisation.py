@@ -26,6 +26,7 @@ from ..geometry.patch import ParticlePatch
 from ..geometry.quadrature import QuadraturePoints, cell_quadrature
 from ..parallel import raise_on_all_ranks
 from ..physics.materials import LinearElastic
+from .base import check_dimension
 from .hybrid_smoothing import SmoothingCells, smoothing_cells
 from .hybrid_sph import (
     CorrectedSPH,
@@ -73,6 +74,13 @@ def check_options(
             a smoothing, degree, ``nitsche`` or ``multiplier_length`` out of range.
         TypeError: a material that is not a :class:`~dolfinx_meshfree.LinearElastic`.
     """
+    check_dimension(
+        V.mesh,
+        "hybrid",
+        (2,),
+        "its SPH particles (a 2D lattice of squares), kernel normalisation and interface "
+        "tractions (Rabczuk et al. 2006, eq. 131-135) are written for 2D",
+    )
     if variant not in HYBRID_VARIANTS:
         raise ValueError(
             f"variant={variant!r} is not known; use 'HA-S' (forces by interface "

@@ -43,7 +43,7 @@ from scipy.sparse.linalg import spsolve
 from scipy.spatial import cKDTree
 
 from .. import _compat
-from ..approx.fe_points import tabulate_fe_basis
+from ..approx.fe_points import tabulate_fe_basis, tabulate_in_cells
 from ..approx.mls import MLS
 from ..geometry.patch import ParticlePatch
 from ..geometry.quadrature import QuadraturePoints, facet_quadrature
@@ -115,7 +115,7 @@ def interface_multipliers(problem: CoupledElasticity, iq: QuadraturePoints, t_fe
 
     Returns:
         ``(Lambda, layout)``: (points x global multipliers) CSR with the pattern of ``t_fe``
-        and the multipliers' layout (two components per multiplier).
+        and the multipliers' layout (gdim components per multiplier).
     """
     V, patch, comm = problem.V, problem.patch, problem.patch.comm
     imap = V.dofmap.index_map
@@ -123,31 +123,38 @@ def interface_multipliers(problem: CoupledElasticity, iq: QuadraturePoints, t_fe
         imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
     )
     facets = patch.interface_facets
-    nodes = facet_nodes(V, facets)
-    xy = V.tabulate_dof_coordinates()[:, :2]
-    tangent = xy[nodes[:, 1]] - xy[nodes[:, 0]] if facets.size else np.zeros((0, 2))
-    tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-300)
-    parts = comm.allgather((l2g[nodes].reshape(-1, 2), tangent))
-    offset = int(sum(len(p[0]) for p in parts[: comm.rank]))
-    ends = np.concatenate([p[0] for p in parts]).reshape(-1, 2)
-    lines = np.concatenate([p[1] for p in parts]).reshape(-1, 2)
-    # group the facets at each node: joined when their lines differ by < corner_angle
+    gdim = V.mesh.geometry.dim
+    nodes = facet_nodes(V, facets)  # (facets, vertices per facet)
+    per_facet = nodes.shape[1]
+    parts = comm.allgather(l2g[nodes].reshape(-1, per_facet))
+    offset = int(sum(len(p) for p in parts[: comm.rank]))
+    ends = np.concatenate(parts).reshape(-1, per_facet)
+    # group the facets at each node: joined when their lines differ by < corner_angle (2D);
+    # without corner_angle (any dimension) every facet at a node joins the first one
     group: dict[tuple[int, int], int] = {}
     at_node: dict[int, list[int]] = {}
-    for f, (a, b) in enumerate(ends.tolist()):
-        at_node.setdefault(a, []).append(f)
-        at_node.setdefault(b, []).append(f)
-    # |sin| of the turn between two facet lines is at most 1: 2 joins every pair
-    sine = 2.0 if problem.corner_angle is None else np.sin(np.radians(problem.corner_angle))
-    for g, fs in at_node.items():
-        for f in fs:
-            joined = [
-                group[(g, e)]
-                for e in fs
-                if (g, e) in group
-                and abs(lines[f, 0] * lines[e, 1] - lines[f, 1] * lines[e, 0]) < sine
-            ]
-            group[(g, f)] = min(joined) if joined else f
+    for f, vertices in enumerate(ends.tolist()):
+        for a in vertices:
+            at_node.setdefault(a, []).append(f)
+    if problem.corner_angle is None:
+        for g, fs in at_node.items():
+            for f in fs:
+                group[(g, f)] = fs[0]
+    else:
+        xy = V.tabulate_dof_coordinates()[:, :2]
+        tangent = xy[nodes[:, 1]] - xy[nodes[:, 0]] if facets.size else np.zeros((0, 2))
+        tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-300)
+        lines = np.concatenate(comm.allgather(tangent)).reshape(-1, 2)
+        sine = np.sin(np.radians(problem.corner_angle))
+        for g, fs in at_node.items():
+            for f in fs:
+                joined = [
+                    group[(g, e)]
+                    for e in fs
+                    if (g, e) in group
+                    and abs(lines[f, 0] * lines[e, 1] - lines[f, 1] * lines[e, 0]) < sine
+                ]
+                group[(g, f)] = min(joined) if joined else f
     ranges = np.asarray([*comm.allgather(imap.local_range[0]), imap.size_global])
     keys = sorted(
         set(
@@ -169,7 +176,7 @@ def interface_multipliers(problem: CoupledElasticity, iq: QuadraturePoints, t_fe
         dtype=np.int64,
     )
     lam = sp.csr_matrix((coo.data, (coo.row, cols)), shape=(len(iq), len(keys)))
-    return lam, Layout(2 * count, 2 * len(keys), 2 * start)
+    return lam, Layout(gdim * count, gdim * len(keys), gdim * start)
 
 
 def lagrange_rows(problem: CoupledElasticity, scale: float = 1.0) -> tuple[tuple, tuple, Layout]:
@@ -212,8 +219,12 @@ def facet_particles(
         ``a + xi t``.
     """
     msh, x = problem.patch.mesh, problem.patch.particles.positions
-    if facets.size == 0:
-        return np.zeros((0, 2)), np.zeros((0, 2)), []
+    if facets.size == 0 or msh.geometry.dim != 2:  # 3D facets: no particle lines (I_h)
+        return (
+            np.zeros((0, 2)),
+            np.zeros((0, 2)),
+            [(np.zeros(0, np.int64), np.zeros(0))] * len(facets),
+        )
     fdim = msh.topology.dim - 1
     ends = msh.geometry.x[_compat.entities_to_geometry(msh, fdim, facets), :2]
     a, t = ends[:, 0], ends[:, 1] - ends[:, 0]
@@ -233,18 +244,58 @@ def facet_particles(
     return a, t, on
 
 
+def particles_on_facets(
+    problem: CoupledElasticity, facets: np.ndarray, cells: np.ndarray
+) -> np.ndarray:
+    """The particles on any of ``facets`` (local), ``cells``: the local cell beside each; local.
+
+    Dimension-generic (segments, triangles, planar or not quadrilaterals): a particle near a
+    facet is on it when the degree-1 basis of the cell at the particle is non-negative (it
+    lies in the cell) and the basis functions of the facet's nodes sum to 1 (those of the
+    other nodes vanish there), both to ``1e-10``.
+    """
+    V, x = problem.V, problem.patch.particles.positions
+    if len(facets) == 0:
+        return np.zeros(0, dtype=np.int64)
+    msh = V.mesh
+    corners = msh.geometry.x[_compat.entities_to_geometry(msh, msh.topology.dim - 1, facets)]
+    corners = corners[:, :, : msh.geometry.dim]
+    centre = corners.mean(axis=1)
+    radius = np.linalg.norm(corners - centre[:, None], axis=2).max(axis=1)
+    near = [
+        np.asarray(c, dtype=np.int64)
+        for c in cKDTree(x).query_ball_point(centre, radius * (1.0 + 1e-9))
+    ]
+    counts = np.array([c.size for c in near], dtype=np.int64)
+    cand = np.concatenate(near) if near else np.zeros(0, np.int64)
+    which = np.repeat(np.arange(len(facets)), counts)
+    if cand.size == 0:
+        return cand
+    t = tabulate_in_cells(V, x[cand], np.asarray(cells)[which], derivatives=0).values.tocsr()
+    nodes = facet_nodes(V, facets)[which]
+    rows = np.repeat(np.arange(cand.size), np.diff(t.indptr))
+    on_facet = (t.indices[:, None] == nodes[rows]).any(axis=1)
+    on_sum = np.bincount(rows, weights=np.where(on_facet, t.data, 0.0), minlength=cand.size)
+    low = np.full(cand.size, np.inf)
+    np.minimum.at(low, rows, t.data)
+    hit = (np.abs(on_sum - 1.0) <= 1e-10) & (low >= -1e-10)
+    return np.unique(cand[hit])
+
+
 def interface_particles(problem: CoupledElasticity) -> np.ndarray:
     """Indices of the particles on the interface facets, the same on every rank (collective).
 
-    A particle is on the interface when its distance to one of the interface facets is below
-    ``1e-10`` times that facet's length. Each rank tests its owned interface facets; the flags
-    are combined by an MPI MAX reduction.
+    In 2D a particle is on the interface when its distance to one of the interface facets is
+    below ``1e-10`` times that facet's length; in 3D by :func:`particles_on_facets`. Each rank
+    tests its owned interface facets; the flags are combined by an MPI MAX reduction.
     """
-    from mpi4py import MPI
-
     patch = problem.patch
     flags = np.zeros(patch.particles.num_particles, dtype=np.int8)
-    for found, _ in facet_particles(problem, patch.interface_facets)[2]:
+    if patch.mesh.geometry.dim == 2:
+        for found, _ in facet_particles(problem, patch.interface_facets)[2]:
+            flags[found] = 1
+    else:
+        found = particles_on_facets(problem, patch.interface_facets, patch.interface_patch_cells)
         flags[found] = 1
     patch.comm.Allreduce(MPI.IN_PLACE, flags, op=MPI.MAX)
     found = np.flatnonzero(flags)
@@ -326,7 +377,8 @@ def interface_interpolant(
     a, t, found = facet_particles(problem, patch.interface_facets)
     index = {int(f): i for i, f in enumerate(patch.interface_facets)}
     fe = facet_table(V, bq.points[on], bq.cells[on])
-    xn = V.tabulate_dof_coordinates()[:, :2]
+    gdim = V.mesh.geometry.dim
+    xn = V.tabulate_dof_coordinates()[:, :gdim]
     xp = patch.particles.positions
     rows, sites, weights = [], [], []
     for r, q in enumerate(on):
@@ -343,7 +395,7 @@ def interface_interpolant(
         rows += [r] * len(ws)
         sites.append(pts)
         weights += ws
-    sites = np.vstack(sites) if sites else np.zeros((0, 2))
+    sites = np.vstack(sites) if sites else np.zeros((0, gdim))
     phi = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(sites, 0)).values
     B = sp.csr_matrix(
         (
@@ -381,7 +433,8 @@ def collocation_rows(problem: CoupledElasticity) -> tuple[tuple, Layout]:
     phi_keep = phi.data != 0.0
     fe_rows = (block[n_fe.row[keep]], n_fe.col[keep], n_fe.data[keep], True)
     p_rows = (block[phi.row[phi_keep]], phi.col[phi_keep], phi.data[phi_keep])
-    ml = Layout(2 * layout.size_local, 2 * layout.size_global, 2 * layout.start)
+    d = P.gdim
+    ml = Layout(d * layout.size_local, d * layout.size_global, d * layout.start)
     return (fe_rows, p_rows), ml
 
 
@@ -393,7 +446,7 @@ def interface_operators(
     V, patch, P = problem.V, problem.patch, problem.patch.particles
     comm, n = patch.comm, patch.particles.num_particles
     fe_layout, l2g = fe_dof_layout(problem.V)
-    pl = problem.patch.particles.dof_layout()
+    pl = problem.patch.particles.dof_layout(problem.patch.particles.gdim)
     boundary = patch.boundary() if problem.consistent else None
     hook = partial(interface_interpolant, problem) if problem.coupling == "edge-to-edge" else None
     tables: dict = {}
@@ -421,7 +474,8 @@ def interface_operators(
     G_fe, _, _ = fe_constraint_block(
         *fe_rows[:3], fe_rows[3], 1.0, no_bc, zero, l2g, (ml.size_global, fe_layout.size_global)
     )
-    G_p = particle_constraint_block(*p_rows, 1.0, P.petsc_dofs(2), (ml.size_global, 2 * n))
+    d = P.gdim
+    G_p = particle_constraint_block(*p_rows, 1.0, P.petsc_dofs(d), (ml.size_global, d * n))
     return CouplingOperators(
         coupling=problem.coupling,
         K_fe=fe_stiffness(problem),
@@ -460,9 +514,10 @@ def interface_system(problem: CoupledElasticity, tables: dict | None = None) -> 
     deg = problem.quadrature_degree
     n = P.num_particles
     s = problem.material.E
-    pdofs = P.petsc_dofs(2)
+    d = P.gdim
+    pdofs = P.petsc_dofs(d)
     fe_layout, l2g = fe_dof_layout(problem.V)
-    pl = P.dof_layout()
+    pl = P.dof_layout(d)
     t0 = time.perf_counter()
 
     # particle side
@@ -491,7 +546,7 @@ def interface_system(problem: CoupledElasticity, tables: dict | None = None) -> 
     G_fe, g_rows, g_vals = fe_constraint_block(
         *fe_rows[:3], fe_rows[3], s, is_bc, ubc, l2g, (ml.size_global, fe_layout.size_global)
     )
-    G_p = particle_constraint_block(*p_rows, s, pdofs, (ml.size_global, 2 * n))
+    G_p = particle_constraint_block(*p_rows, s, pdofs, (ml.size_global, d * n))
 
     b_fe, f_p = traction_loads(problem)
     loads = (b_fe.copy(), f_p.copy())
@@ -502,7 +557,7 @@ def interface_system(problem: CoupledElasticity, tables: dict | None = None) -> 
         K_fe,
         b_fe,
         is_bc | ~active,
-        np.where(is_bc[:, None], ubc.x.array.reshape(-1, 2), 0.0),
+        np.where(is_bc[:, None], ubc.x.array.reshape(-1, d), 0.0),
     )
     Kp = create_aij(comm, Kp_loc, pl, pl)
     b_p = create_vector(comm, pl, pdofs.ravel(), f_p)
@@ -520,7 +575,7 @@ def interface_system(problem: CoupledElasticity, tables: dict | None = None) -> 
         "active": active,
         "is_bc": is_bc,
         "fixed": is_bc | ~active,
-        "fixed_values": np.where(np.repeat(is_bc, 2), ubc.x.array, 0.0),
+        "fixed_values": np.where(np.repeat(is_bc, d), ubc.x.array, 0.0),
         "multipliers": ml.size_global + dl.size_global,
         "setup": setup,
         "assemble": time.perf_counter() - t1 + kt["assemble"],
@@ -561,6 +616,8 @@ class _InterfaceCoupling:
     consistent_default: ClassVar[bool] = True
     integrations: ClassVar[tuple[str, ...]] = ("cells", "stress-points")
     blended: ClassVar[bool] = False
+    dimensions: ClassVar[tuple[int, ...]] = (2, 3)
+    missing_3d: ClassVar[str] = ""
 
     def prepare_mls(self, mls: MLS, patch: ParticlePatch) -> MLS:
         return mls

@@ -706,6 +706,11 @@ class MasterSlaveCoupling:
     consistent_default: ClassVar[bool] = False
     integrations: ClassVar[tuple[str, ...]] = ("cells", "stress-points")
     blended: ClassVar[bool] = False
+    dimensions: ClassVar[tuple[int, ...]] = (2,)
+    missing_3d: ClassVar[str] = (
+        "its rigid links (Rabczuk et al. 2006, eq. 17-28) carry a 2D in-plane rotation per "
+        "master node and its slave layer is found from 2D interface edges"
+    )
 
     def prepare_mls(self, mls: MLS, patch: ParticlePatch) -> MLS:
         return mls

@@ -673,6 +673,11 @@ class _RampCoupling:
     consistent_default: ClassVar[bool] = True
     integrations: ClassVar[tuple[str, ...]] = ("cells",)
     blended: ClassVar[bool] = True
+    dimensions: ClassVar[tuple[int, ...]] = (2,)
+    missing_3d: ClassVar[str] = (
+        "its interface elements, ramp function and the widened particle supports over them "
+        "(Belytschko et al. 1995, eq. 3.13-3.15) are built from 2D interface cells and edges"
+    )
 
     def prepare_mls(self, mls: MLS, patch: ParticlePatch) -> MLS:
         """Supports spanning the interface elements (:func:`ramp_mls`)."""

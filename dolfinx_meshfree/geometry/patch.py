@@ -35,7 +35,8 @@ class ParticlePatch:
     """Cells of ``mesh`` to be modelled with particles.
 
     Args:
-        mesh: The user's mesh (2D, degree-1 geometry, ghosted across facets in parallel).
+        mesh: The user's mesh (2D or 3D, degree-1 geometry, ghosted across facets in
+            parallel; in 3D the placements are ``"grid"`` and ``"vertices"``).
         cells: Owned local indices of the cells to replace (each rank its own).
         spacing: Particle spacing of ``placement="conforming"`` or ``"grid"`` (any positive value;
             0.5 to 1.5 times the element size is the tested range). Must be ``None`` with

@@ -13,6 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+import basix
 import numpy as np
 import numpy.typing as npt
 
@@ -21,7 +22,13 @@ from .. import _compat
 if TYPE_CHECKING:  # annotations only
     import dolfinx.mesh
 
-__all__ = ["QuadraturePoints", "boundary_facets", "cell_quadrature", "facet_quadrature"]
+__all__ = [
+    "QuadraturePoints",
+    "boundary_facets",
+    "cell_quadrature",
+    "facet_quadrature",
+    "reference_facet_points",
+]
 
 
 @dataclass
@@ -134,6 +141,22 @@ def _p1_reference(facet_name: str, X: np.ndarray) -> tuple[np.ndarray, np.ndarra
     ds = np.stack([t - 1.0, 1.0 - t, -t, t], axis=1)
     dt = np.stack([s - 1.0, -s, 1.0 - s, s], axis=1)
     return N, np.stack([ds, dt])
+
+
+def reference_facet_points(cell_name: str, degree: int) -> np.ndarray:
+    """The points of :func:`facet_quadrature`'s rule of ``degree`` on every facet of the
+    reference cell, facet by facet in basix's order, shape (num_facets * nqr, tdim): where a
+    cell-wise evaluation (a DOLFINx ``Expression``) meets the facet rule's points."""
+    cell = getattr(basix.CellType, cell_name)
+    ref = np.asarray(basix.geometry(cell))
+    tdim = ref.shape[1]
+    X, _ = _facet_rule(_FACET_CELLS[cell_name], degree)
+    N, _ = _p1_reference(_FACET_CELLS[cell_name], X)
+    out = []
+    for f in basix.topology(cell)[tdim - 1]:
+        corners = ref[f]
+        out.append(corners[0] + np.einsum("qv,vg->qg", N[:, 1:], corners[1:] - corners[0]))
+    return np.concatenate(out)
 
 
 def _unit_normals(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -56,17 +56,17 @@ class BodyForce:
         self, V: dolfinx.fem.FunctionSpace, weight: ufl.core.expr.Expr | None, degree: int
     ) -> np.ndarray:
         """``int weight N_a b`` per owned dof of the vector space ``V`` (ghost contributions
-        accumulated), shape (2 num_owned_nodes,); ``weight``: a scalar UFL expression or
+        accumulated), shape (gdim num_owned_nodes,); ``weight``: a scalar UFL expression or
         ``None`` (1 on every cell). Collective."""
         raise NotImplementedError
 
     def values(self, q: QuadraturePoints) -> np.ndarray:
-        """``b`` (len(q), 2) at the points of a cell rule of :func:`cell_quadrature`. Local."""
+        """``b`` (len(q), gdim) at the points of a cell rule of :func:`cell_quadrature`. Local."""
         raise NotImplementedError
 
 
 class CallableBodyForce(BodyForce):
-    """``b(x)``: a callable mapping points (m, 2) to forces per unit volume (m, 2)."""
+    """``b(x)``: a callable mapping points (m, gdim) to forces per unit volume (m, gdim)."""
 
     def __init__(self, force: VectorFunction) -> None:
         if not callable(force):
@@ -77,7 +77,7 @@ class CallableBodyForce(BodyForce):
         self.force = force
 
     def values(self, q: QuadraturePoints) -> np.ndarray:
-        return _vector_values(self.force, (q.points,), len(q), "the body force")
+        return _vector_values(self.force, (q.points,), len(q), "the body force", q.points.shape[1])
 
     def fe_load(
         self, V: dolfinx.fem.FunctionSpace, weight: ufl.core.expr.Expr | None, degree: int
@@ -99,13 +99,13 @@ class CallableBodyForce(BodyForce):
 
 
 def accumulate(V: dolfinx.fem.FunctionSpace, local: np.ndarray) -> np.ndarray:
-    """Owned dof values (2 num_owned,) of local contributions (2 num_local,) to the nodes of
+    """Owned dof values (gdim num_owned,) of local contributions (gdim num_local,) to the nodes of
     ``V``, owned and ghost, summed over the ranks that hold each node (collective)."""
     f = dolfinx.fem.Function(V)
     f.x.array[:] = 0.0
     f.x.array[: local.size] = local
     _compat.scatter_reverse_add(f)
-    return f.x.array[: 2 * V.dofmap.index_map.size_local].copy()
+    return f.x.array[: V.dofmap.index_map_bs * V.dofmap.index_map.size_local].copy()
 
 
 def body_load_vectors(
@@ -135,12 +135,15 @@ def body_load_vectors(
 
     Returns:
         ``(fe, particles)``: the FE loads per owned dof of ``V`` (``None`` without ``V``) and
-        this rank's particle loads ``(2 n,)`` interleaved in original particle order
+        this rank's particle loads ``(gdim n,)`` interleaved in original particle order
         (``None`` without particles; the ranks' contributions add up).
     """
     comm = V.mesh.comm if comm is None else comm
-    fe = None if V is None else np.zeros(2 * V.dofmap.index_map.size_local)
-    f_p = None if particle_rule is None else np.zeros(particle_rule[1].shape[1] * 2)
+    fe = None if V is None else np.zeros(V.dofmap.index_map_bs * V.dofmap.index_map.size_local)
+    f_p = None
+    if particle_rule is not None:
+        gdim = particle_rule[0].points.shape[1]
+        f_p = np.zeros(particle_rule[1].shape[1] * gdim)
     for force in forces:
         if V is not None:
             fe += force.fe_load(V, fe_weight, degree)

@@ -26,7 +26,12 @@ import ufl
 
 from ..approx.mls import MLS
 from ..couplings import COUPLINGS, DEFAULT_DILATION, REGISTRY
-from ..couplings.base import CoupledSolution, CouplingOperators, cell_indicator
+from ..couplings.base import (
+    CoupledSolution,
+    CouplingOperators,
+    cell_indicator,
+    check_dimension,
+)
 from ..couplings.bridging import check_options
 from ..couplings.lagrange import interface_particles
 from ..couplings.master_slave import SLAVES
@@ -52,7 +57,14 @@ class CoupledElasticity:
     """Linear elastostatics with FE cells and a particle patch, coupled by Lagrange multipliers.
 
     Args:
-        V: Vector P1/Q1 space on the whole mesh (the FE side lives on its non-patch cells).
+        V: Vector P1/Q1 space on the whole mesh (the FE side lives on its non-patch cells), 2D
+            (triangles, quadrilaterals) or 3D (tetrahedra, hexahedra): one code path, the
+            mesh's ``gdim`` sets the components. In 3D ``lagrange``, ``edge-to-edge`` and
+            ``bridging`` work; ``ramp``, ``ramp-cubic`` and ``master-slave`` refuse a 3D mesh
+            with a ValueError saying what they lack (their ``missing_3d``). Edge-to-edge in 3D
+            integrates the interface with the FE interpolant of the particle functions (exact
+            patch test when the interface FE nodes are particles, e.g. a grid at h / 2 on a
+            regular mesh or ``placement="vertices"``).
         patch: :class:`~dolfinx_meshfree.ParticlePatch` on the same mesh.
         material: :class:`~dolfinx_meshfree.LinearElastic`, used on both sides.
         coupling: ``"lagrange"`` (compatibility coupling with FE trace multipliers, Rabczuk et
@@ -128,8 +140,17 @@ class CoupledElasticity:
                 f"corner_angle={corner_angle!r} must be None (multipliers continuous along the "
                 "interface, the default) or an angle in degrees between 0 and 90"
             )
+        family = REGISTRY[coupling]
+        check_dimension(V.mesh, coupling, family.dimensions, family.missing_3d)
+        if corner_angle is not None and V.mesh.geometry.dim != 2:
+            raise ValueError(
+                f"corner_angle={corner_angle!r} splits the multipliers where a 2D interface turns "
+                "(a polyline); it is not defined on a 3D interface: leave it None (multipliers "
+                "continuous along the interface)"
+            )
         if not isinstance(material, LinearElastic):
             raise TypeError(f"material must be a LinearElastic, got {type(material).__name__}")
+        material.check_gdim(V.mesh.geometry.dim, "V's mesh")
         if V.mesh is not patch.mesh:
             raise ValueError("V and patch must live on the same mesh object")
         if patch.comm.allreduce(patch.fe_cells.size) == 0:
@@ -172,16 +193,17 @@ class CoupledElasticity:
 
     def add_dirichlet(self, facets: np.ndarray, value: VectorFunction) -> None:
         """``u = value(x)`` on owned exterior facets (FE side: strongly; patch side: multipliers).
-        ``value`` maps points (m, 2) to (m, 2)."""
+        ``value`` maps points (m, gdim) to (m, gdim)."""
         self.dirichlet.append((np.asarray(facets, dtype=np.int32), value))
 
     def add_traction(self, facets: np.ndarray, traction: Callable) -> None:
-        """Traction ``traction(x, n)`` (m, 2) on owned exterior facets, on either side."""
+        """Traction ``traction(x, n)`` (m, gdim) on owned exterior facets, on either side."""
         self.tractions.append((np.asarray(facets, dtype=np.int32), traction))
 
     def set_body_force(self, force: VectorFunction) -> None:
-        """Body force per unit volume ``b(x)`` (m, 2) on the whole body (replaces a previous one),
-        as :meth:`EFGElasticity.set_body_force <dolfinx_meshfree.EFGElasticity.set_body_force>`.
+        """Body force per unit volume ``b(x)`` (m, gdim) on the whole body (replaces a previous
+        one), as
+        :meth:`EFGElasticity.set_body_force <dolfinx_meshfree.EFGElasticity.set_body_force>`.
 
         Every coupling integrates it with the functions and weights of its stiffness (see
         :mod:`~dolfinx_meshfree.physics.body_loads`): FE cells with ``N_a``, patch cells with

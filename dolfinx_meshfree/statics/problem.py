@@ -48,7 +48,7 @@ from .. import _compat
 from ..approx.fe_points import evaluate_fe_function
 from ..couplings.base import facet_nodes, node_flags
 from ..geometry.patch import ParticlePatch
-from ..geometry.quadrature import QuadraturePoints, boundary_facets
+from ..geometry.quadrature import QuadraturePoints, boundary_facets, reference_facet_points
 from ..parallel import raise_on_all_ranks
 from ..physics.body_loads import BodyForce, accumulate
 from ..physics.materials import LinearElastic
@@ -65,7 +65,8 @@ class CoupledLinearProblem:
     """``a(u, v) = L(v)`` with ``bcs`` on a mesh whose ``patch`` cells are particles.
 
     Mirrors ``dolfinx.fem.petsc.LinearProblem`` (``problem.solve()``), for linear elasticity on a
-    vector P1/Q1 space in 2D.
+    vector P1/Q1 space in 2D or 3D (the couplings of 3D: ``lagrange``, ``edge-to-edge``,
+    ``bridging``).
 
     Args:
         a: Bilinear UFL form on the vector P1/Q1 space ``V`` (cell integrals only).
@@ -92,7 +93,7 @@ class CoupledLinearProblem:
                                           material=mf.LinearElastic(E=E, nu=nu, plane="strain"),
                                           coupling="lagrange")
         solution = problem.solve()
-        u = solution.displacement(points)  # (m, 2), on every rank
+        u = solution.displacement(points)  # (m, gdim), on every rank
     """
 
     def __init__(
@@ -129,8 +130,9 @@ class CoupledLinearProblem:
         """Strong FE conditions by node; particle constraints on fully constrained patch facets."""
         problem, V, patch = self.problem, self.V, self.patch
         n_local = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
-        count = np.zeros((n_local, 2), dtype=int)
-        values = np.zeros((n_local, 2))
+        gdim = V.mesh.geometry.dim
+        count = np.zeros((n_local, gdim), dtype=int)
+        values = np.zeros((n_local, gdim))
         for bc in self.bcs:
             dofs, vals = _compat.dirichlet_values(bc)
             count.ravel()[dofs] += 1
@@ -141,8 +143,8 @@ class CoupledLinearProblem:
         def check_components() -> None:
             if half.size:
                 raise ValueError(
-                    f"bcs constrain only one component at {half.size} node(s); "
-                    "CoupledLinearProblem supports conditions on both components of a node"
+                    f"bcs constrain only some components at {half.size} node(s); "
+                    "CoupledLinearProblem supports conditions on all components of a node"
                 )
 
         raise_on_all_ranks(patch.comm, check_components)
@@ -173,7 +175,7 @@ class CoupledLinearProblem:
         on_facet = node_flags(problem.V, nodes[on].ravel())
         n_owned = V.dofmap.index_map.size_local
         lone = np.flatnonzero((fixed & ~active & ~on_facet)[:n_owned])
-        xy = V.tabulate_dof_coordinates()[lone, :2]
+        xy = V.tabulate_dof_coordinates()[lone, :gdim]
 
         def check() -> None:
             if lone.size:
@@ -249,14 +251,16 @@ def _check_arguments(a, L, bcs, patch, material, coupling, options):
     if msh is not patch.mesh:
         raise ValueError("the forms' space and the patch must live on the same mesh object")
     nv = _compat.geometry_dofmap(msh).shape[1]
+    gdim = msh.geometry.dim
     if (
-        msh.topology.dim != 2
-        or V.dofmap.index_map_bs != 2
+        msh.topology.dim not in (2, 3)
+        or msh.topology.dim != gdim
+        or V.dofmap.index_map_bs != gdim
         or _compat.dofmap_array(V).shape[1] != nv
     ):
         raise ValueError(
-            "V must be the vector P1/Q1 space of a 2D mesh (e.g. "
-            "functionspace(mesh, ('Lagrange', 1, (2,)))), got another space"
+            "V must be the vector P1/Q1 space of a 2D or 3D mesh (e.g. "
+            f"functionspace(mesh, ('Lagrange', 1, ({gdim},)))), got another space"
         )
     for itg in a.integrals():
         if itg.integral_type() != "cell":
@@ -283,7 +287,7 @@ def _check_arguments(a, L, bcs, patch, material, coupling, options):
             raise ValueError(
                 f"bcs[{i}] constrains component {list(bc.function_space.component())} of V (a "
                 "subspace); CoupledLinearProblem supports conditions on all components of V: "
-                "constrain both components with dirichletbc(value, dofs, V)"
+                "constrain every component with dirichletbc(value, dofs, V)"
             )
     return V
 
@@ -315,9 +319,11 @@ def _check_material(problem: CoupledElasticity) -> None:
     rel = difference(B)
     if rel > MATERIAL_TOLERANCE:
         other = "strain" if material.plane == "stress" else "stress"
-        C = stiffness(material_form(LinearElastic(E=material.E, nu=material.nu, plane=other)))
+        C = None
+        if material.plane is not None:  # 2D: the other plane law
+            C = stiffness(material_form(LinearElastic(E=material.E, nu=material.nu, plane=other)))
         hint = ""
-        if difference(C) <= MATERIAL_TOLERANCE:
+        if C is not None and difference(C) <= MATERIAL_TOLERANCE:
             hint = f"; the form is the plane-{other} law: pass plane={other!r}"
         else:
             ratio = A.norm(PETSc.NormType.FROBENIUS) / nb
@@ -326,7 +332,8 @@ def _check_material(problem: CoupledElasticity) -> None:
                     f"; the form's stiffness is {ratio:.6g} times the material's: "
                     f"E={ratio * material.E:.6g}?"
                 )
-        C.destroy()
+        if C is not None:
+            C.destroy()
         A.destroy()
         B.destroy()
         raise ValueError(
@@ -371,15 +378,16 @@ def _integral_entities(itg, msh) -> np.ndarray:
 
 
 def _replace_test_function(integrand, v, msh, normal=None):
-    """The vector ``(I(e_0), I(e_1))`` of a linear integrand ``I(v)``, FacetNormal -> ``normal``."""
+    """The vector ``(I(e_0), ..., I(e_{gdim-1}))`` of a linear integrand ``I(v)``, FacetNormal
+    -> ``normal``."""
     mapping = {}
     if normal is not None:
         for node in unique_pre_traversal(integrand):
             if isinstance(node, ufl.classes.FacetNormal):
                 mapping[node] = normal
     comps = []
-    for e in (ufl.as_vector([1.0, 0.0]), ufl.as_vector([0.0, 1.0])):
-        comps.append(ufl.replace(integrand, {**mapping, v: e}))
+    for e in np.eye(msh.geometry.dim):
+        comps.append(ufl.replace(integrand, {**mapping, v: ufl.as_vector(e.tolist())}))
     return ufl.as_vector(comps)
 
 
@@ -390,7 +398,8 @@ class FormBodyForce(BodyForce):
     The FE share is DOLFINx's assembly of every integral with its integrand multiplied by the
     coupling's FE weight (the user's measures, subdomains and quadrature metadata are kept); the
     values ``b`` at a cell rule of ``degree`` come from a DOLFINx ``Expression`` of the integrand
-    with ``v`` replaced by ``e_0`` and ``e_1``, zero on the cells the integral does not cover.
+    with ``v`` replaced by ``e_0``, ..., ``e_{gdim-1}``, zero on the cells the integral does not
+    cover.
 
     Args:
         integrals: The cell integrals of ``L``.
@@ -404,15 +413,18 @@ class FormBodyForce(BodyForce):
         X, _ = _compat.quadrature_rule(msh.topology.cell_type.name, degree)
         self.num_points = X.shape[0]
         x = ufl.SpatialCoordinate(msh)
+        self.gdim = gdim = msh.geometry.dim
         self._expressions = []
         for itg in self.integrals:
             b = _replace_test_function(itg.integrand(), v, msh)
-            expr = _compat.create_expression(ufl.as_vector([b[0], b[1], x[0], x[1]]), X, msh)
+            expr = _compat.create_expression(
+                ufl.as_vector([b[i] for i in range(gdim)] + [x[i] for i in range(gdim)]), X, msh
+            )
             n_cells = msh.topology.index_map(msh.topology.dim)
             on = np.zeros(n_cells.size_local + n_cells.num_ghosts, dtype=bool)
             on[_integral_entities(itg, msh)] = True
             self._expressions.append((expr, on))
-        self.tol = 1e-9 * (np.ptp(msh.geometry.x[:, :2], axis=0).max() + 1.0)
+        self.tol = 1e-9 * (np.ptp(msh.geometry.x[:, :gdim], axis=0).max() + 1.0)
 
     def fe_load(self, V, weight, degree: int) -> np.ndarray:
         integrals = self.integrals
@@ -432,15 +444,16 @@ class FormBodyForce(BodyForce):
                 f"a body load of L was requested at {len(q)} points that are not a cell rule of "
                 f"degree {self.degree} (internal error: quadrature mismatch)"
             )
-        out = np.zeros((len(q), 2))
+        d = self.gdim
+        out = np.zeros((len(q), d))
         for expr, on in self._expressions:
-            vals = _compat.eval_expression(expr, self.mesh, cells, 4).reshape(-1, 4)
-            if np.abs(vals[:, 2:] - q.points).max(initial=0.0) > self.tol:
+            vals = _compat.eval_expression(expr, self.mesh, cells, 2 * d).reshape(-1, 2 * d)
+            if np.abs(vals[:, d:] - q.points).max(initial=0.0) > self.tol:
                 raise RuntimeError(
                     "a body load of L was requested at points that are not the Gauss points of "
                     f"degree {self.degree} (internal error: quadrature mismatch)"
                 )
-            out += np.where(on[q.cells][:, None], vals[:, :2], 0.0)
+            out += np.where(on[q.cells][:, None], vals[:, :d], 0.0)
         return out
 
 
@@ -449,27 +462,28 @@ class _FacetLoad:
     points of :func:`~dolfinx_meshfree.facet_quadrature` (collective construction).
 
     ``t(x, n) = A(x) + B(x) n``: the integrand is evaluated with ``FacetNormal`` replaced by a
-    Constant set to 0, e_0 and e_1 (and checked to be affine in n at a fourth value).
+    Constant set to 0 and each ``e_i`` (and checked to be affine in n at one more value).
     """
 
     def __init__(self, itg, v, facets: np.ndarray, degree: int):
         msh = v.ufl_function_space().mesh
         tdim = msh.topology.dim
+        d = msh.geometry.dim
         cname = msh.topology.cell_type.name
         cell = getattr(basix.CellType, cname)
-        ref = np.asarray(basix.geometry(cell))
         ref_facets = basix.topology(cell)[tdim - 1]
-        npts = max(1, (degree + 2) // 2)
-        s = 0.5 * (np.polynomial.legendre.leggauss(npts)[0] + 1.0)
-        X = np.concatenate([ref[f[0]] + s[:, None] * (ref[f[1]] - ref[f[0]]) for f in ref_facets])
-        nc = dolfinx.fem.Constant(msh, np.zeros(2))
+        X = reference_facet_points(cname, degree)
+        npts = X.shape[0] // len(ref_facets)
+        nc = dolfinx.fem.Constant(msh, np.zeros(d))
         integrand = itg.integrand()
         has_normal = any(
             isinstance(o, ufl.classes.FacetNormal) for o in unique_pre_traversal(integrand)
         )
         x = ufl.SpatialCoordinate(msh)
         values = _replace_test_function(integrand, v, msh, nc)
-        expr = _compat.create_expression(ufl.as_vector([values[0], values[1], x[0], x[1]]), X)
+        expr = _compat.create_expression(
+            ufl.as_vector([values[i] for i in range(d)] + [x[i] for i in range(d)]), X
+        )
         # (cell, local facet) of each facet
         msh.topology.create_connectivity(tdim - 1, tdim)
         msh.topology.create_connectivity(tdim, tdim - 1)
@@ -484,21 +498,22 @@ class _FacetLoad:
         cols = (local[:, None] * npts + np.arange(npts)).ravel()
         rows = np.repeat(pos, npts)
 
-        def evaluate(n: tuple[float, float]) -> np.ndarray:
+        def evaluate(n) -> np.ndarray:
             nc.value[:] = n
-            vals = _compat.eval_expression(expr, msh, ucells, 4)
-            return vals[rows, cols] if facets.size else np.zeros((0, 4))
+            vals = _compat.eval_expression(expr, msh, ucells, 2 * d)
+            return vals[rows, cols] if facets.size else np.zeros((0, 2 * d))
 
         def tabulate() -> int:
-            base = evaluate((0.0, 0.0))
-            self.points, self.A = base[:, 2:], base[:, :2]
-            self.B = np.zeros((len(self.A), 2, 2))
+            base = evaluate(np.zeros(d))
+            self.points, self.A = base[:, d:], base[:, :d]
+            self.B = np.zeros((len(self.A), d, d))
             if not has_normal:
                 return 0
-            self.B[:] = np.stack([evaluate((1.0, 0.0))[:, :2], evaluate((0.0, 1.0))[:, :2]], -1)
+            self.B[:] = np.stack([evaluate(e)[:, :d] for e in np.eye(d)], -1)
             self.B -= self.A[:, :, None]
-            probe = evaluate((0.6, 0.8))[:, :2]
-            affine = self.A + self.B @ np.array([0.6, 0.8])
+            unit = np.array([0.6, 0.8, 0.0][:d]) if d == 2 else np.array([0.48, 0.64, 0.6])
+            probe = evaluate(unit)[:, :d]
+            affine = self.A + self.B @ unit
             scale = np.abs(self.A).max(initial=0.0) + np.abs(self.B).max(initial=0.0) + 1e-300
             return int(np.abs(probe - affine).max(initial=0.0) > 1e-10 * scale)
 
@@ -509,11 +524,12 @@ class _FacetLoad:
                 "load as dot(t0 + T n, v) ds with t0, T independent of n"
             )
         self.tree = cKDTree(self.points) if len(self.points) else None
-        self.tol = 1e-9 * (np.ptp(msh.geometry.x[:, :2], axis=0).max() + 1.0)
+        self.tol = 1e-9 * (np.ptp(msh.geometry.x[:, :d], axis=0).max() + 1.0)
+        self.gdim = d
 
     def __call__(self, x: np.ndarray, n: np.ndarray) -> np.ndarray:
         if len(x) == 0:
-            return np.zeros((0, 2))
+            return np.zeros((0, self.gdim))
         if self.tree is None:
             raise RuntimeError("a traction was requested at points of no facet of its integral")
         d, idx = self.tree.query(x)

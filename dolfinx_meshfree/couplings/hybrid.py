@@ -311,7 +311,7 @@ class HybridElasticity(HybridDiscretisation):
         K = K.tocsr()
         N2 = K.shape[0] - 2 * n
 
-        def block(rows: slice, cols: slice, shape) -> sp.csr_matrix:
+        def block(rows: slice, cols: slice, shape: tuple[int, int]) -> sp.csr_matrix:
             return K[rows, cols].tocsr() if K.nnz else sp.csr_matrix(shape)
 
         p, f = slice(0, 2 * n), slice(2 * n, K.shape[0])

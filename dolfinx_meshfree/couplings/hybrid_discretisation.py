@@ -17,10 +17,15 @@ from __future__ import annotations
 import copy
 import math
 import time
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
 from mpi4py import MPI
+
+if TYPE_CHECKING:  # annotations only
+    import dolfinx.fem
+    import dolfinx.mesh
 
 from ..geometry.patch import ParticlePatch
 from ..geometry.quadrature import QuadraturePoints, cell_quadrature
@@ -53,7 +58,7 @@ HYBRID_PARTICLES = ("centred", "patch")
 
 
 def check_options(
-    V,
+    V: dolfinx.fem.FunctionSpace,
     patch: ParticlePatch,
     material: LinearElastic,
     variant: str,
@@ -289,7 +294,7 @@ class HybridDiscretisation:
         )
 
 
-def global_facets(msh, facets: np.ndarray) -> np.ndarray:
+def global_facets(msh: dolfinx.mesh.Mesh, facets: np.ndarray) -> np.ndarray:
     """The given owned facets of every rank, as local facet indices of this rank where it
     holds them (collective): an exterior facet that one rank owns may bound a cell that another
     rank owns."""

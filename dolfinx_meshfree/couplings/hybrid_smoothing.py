@@ -36,11 +36,15 @@ length.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .. import _compat
 from ..geometry.quadrature import QuadraturePoints
+
+if TYPE_CHECKING:  # annotations only
+    import dolfinx.mesh
 
 __all__ = ["EXTERIOR", "INTERIOR", "SmoothingCells", "smoothing_cells"]
 
@@ -74,7 +78,7 @@ class SmoothingCells:
     fe_cell: np.ndarray
     facet: np.ndarray
 
-    def exterior_quadrature(self, msh, facets: np.ndarray) -> QuadraturePoints:
+    def exterior_quadrature(self, msh: dolfinx.mesh.Mesh, facets: np.ndarray) -> QuadraturePoints:
         """The edge points on the given exterior facets (local indices, any owner), as a facet
         quadrature: points, weights (edge length times rule weight), unit normals, the local
         patch cell and the facet of each point. The traction loads on these points are the
@@ -109,7 +113,9 @@ def _reference_subcells(cell_name: str, n: int) -> np.ndarray:
     return np.asarray(out, dtype=float) / n
 
 
-def smoothing_cells(msh, cells: np.ndarray, in_cells: np.ndarray, n: int, degree: int = 1):
+def smoothing_cells(
+    msh: dolfinx.mesh.Mesh, cells: np.ndarray, in_cells: np.ndarray, n: int, degree: int = 1
+) -> SmoothingCells:
     """Sub-cells of the local ``cells`` and the Gauss points of their edges (local).
 
     Args:

@@ -35,6 +35,7 @@ no volume at all) otherwise, so masses and kernel sums changed with the particle
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -49,6 +50,11 @@ from ..approx.sph import SPH
 from ..approx.tables import ShapeTable
 from ..geometry.particles import ParticleSet
 from ..geometry.quadrature import cell_quadrature
+
+if TYPE_CHECKING:  # annotations only
+    import dolfinx.fem
+
+    from ..geometry.patch import ParticlePatch
 
 __all__ = [
     "CorrectedSPH",
@@ -143,7 +149,13 @@ def particle_spacing_median(positions: np.ndarray) -> float:
     return float(np.median(d[:, 1]))
 
 
-def hybrid_points(V, fe_cells: np.ndarray, particles: np.ndarray, radius: float, degree: int):
+def hybrid_points(
+    V: dolfinx.fem.FunctionSpace,
+    fe_cells: np.ndarray,
+    particles: np.ndarray,
+    radius: float,
+    degree: int,
+) -> HybridPoints:
     """The integration points of the FE cells within ``radius`` of a particle (collective).
 
     Each rank takes its owned FE cells ``fe_cells`` whose vertices come within ``radius`` of a
@@ -254,7 +266,7 @@ def _apart(centres: np.ndarray, extra: np.ndarray, gap: float) -> np.ndarray:
     return np.asarray(kept).reshape(-1, extra.shape[1])
 
 
-def centred_particles(patch, spacing: float, samples: int = 4) -> ParticleSet:
+def centred_particles(patch: ParticlePatch, spacing: float, samples: int = 4) -> ParticleSet:
     """SPH particles at the centres of a lattice of squares over the patch cells (collective).
 
     The lattice spans the bounding box of the patch cells with ``round(extent / spacing)``

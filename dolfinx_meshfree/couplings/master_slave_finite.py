@@ -24,6 +24,7 @@ the constraint is linear and a linear law through Newton equals the linear maste
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
@@ -138,7 +139,7 @@ class RotatingLinks:
         db = self.w[:, None, None] * (self.xi[:, None, None] * eye + turn)
         return np.stack([da, db], axis=2)
 
-    def internal_force(self, xs) -> list[PETSc.Vec]:
+    def internal_force(self, xs: Sequence[PETSc.Vec]) -> list[PETSc.Vec]:
         """``[-E (dw/du_FE)^T mu, E Phi^T mu, E (Phi u_P - w(u_FE))]``. Collective."""
         u = self._fe_values(xs[0])
         w, _, JRd, grad, _ = self._links(u)
@@ -158,7 +159,7 @@ class RotatingLinks:
         Phi.destroy()
         return [fe, p, g]
 
-    def tangent(self, xs) -> dict[tuple[int, int], PETSc.Mat]:
+    def tangent(self, xs: Sequence[PETSc.Vec]) -> dict[tuple[int, int], PETSc.Mat]:
         """Blocks FE-FE (the links' curvature), FE-link, link-FE, particle-link, link-particle."""
         u = self._fe_values(xs[0])
         _, Rd, JRd, grad, hess = self._links(u)

@@ -122,7 +122,7 @@ def _interface_reach(patch) -> tuple[np.ndarray, float]:
     return gamma, comm.allreduce(float(dist[touching].max(initial=0.0)), op=MPI.MAX)
 
 
-def ramp_mls(mls: MLS, patch) -> MLS:
+def ramp_mls(mls: MLS, patch: ParticlePatch) -> MLS:
     """The MLS of a ramp coupling: support radii ``d_max max(c_I, rho)`` for the particles
     within ``d_max rho`` of Gamma_E, eq. 3.11's ``d_max c_I`` for the others (collective).
 
@@ -319,7 +319,7 @@ class RampInterface:
         return ShapeTable(points=points, values=values, gradients=grads)
 
     def evaluate(
-        self, points: np.ndarray, cells: np.ndarray, fe_values: np.ndarray, coefficients
+        self, points: np.ndarray, cells: np.ndarray, fe_values: np.ndarray, coefficients: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         """Displacement (m, 2) and gradient (m, 2, 2) of the blended field in interface cells."""
         c = np.vstack([fe_values, coefficients])
@@ -499,7 +499,9 @@ def ramp_system(problem: CoupledElasticity, tables: dict | None = None) -> tuple
     return blocks, rhs, mats, extra
 
 
-def solve_ramp(problem, solver: str | SolverOptions = "mumps"):
+def solve_ramp(
+    problem: CoupledElasticity, solver: str | SolverOptions = "mumps"
+) -> CoupledSolution:
     """Assemble and solve the ramp-coupled system of ``problem`` (collective)."""
     blocks, rhs, mats, extra = ramp_system(problem)
     uh, coeffs, solve = solve_and_gather(problem, blocks, rhs, [*mats, extra["x_bc"]], solver)
@@ -599,7 +601,7 @@ def _first_cells(msh, facets: np.ndarray) -> np.ndarray:
     return np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]]
 
 
-def ramp_operators(problem):
+def ramp_operators(problem: CoupledElasticity) -> CouplingOperators:
     """The ramp couplings' operators without essential conditions (collective).
 
     ``K_FE``: DOLFINx's assembly on the pure FE cells plus the interface cells' FE–FE block;
@@ -638,7 +640,7 @@ def ramp_operators(problem):
     fr, fc = Ki.row < nf, Ki.col < nf
     nfe = fe_layout.size_global
 
-    def block(sel, shape):
+    def block(sel: np.ndarray, shape: tuple[int, int]) -> sp.csr_matrix:
         return sp.csr_matrix((Ki.data[sel], (r[sel], c[sel])), shape=shape)
 
     K_int = create_aij(comm, block(fr & fc, (nfe, nfe)), fe_layout, fe_layout)

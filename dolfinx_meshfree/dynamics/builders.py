@@ -32,6 +32,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import dolfinx
 import numpy as np
@@ -69,6 +70,10 @@ from .masses import (
 from .methods import DYNAMICS_METHODS
 from .reduction import free_particle_points, reduce_master_slave
 from .system import Field
+
+if TYPE_CHECKING:  # annotations only
+    from ..geometry.quadrature import QuadraturePoints
+    from ..physics.body_loads import VectorFunction
 
 __all__ = ["Model", "build_coupled", "build_efg", "build_fe", "build_hybrid", "check_particle_mass"]
 
@@ -147,7 +152,11 @@ def build_fe(
     h = fe_spacing(msh, np.arange(n_owned))
     fe_field = Field("fe", K, mass, h, fixed=fixed_fe_dofs(V, facets))
 
-    def body_load(force):  # int N_a b, Gauss degree 4 (as the tractions)
+    def body_load(
+        force: VectorFunction,
+    ) -> tuple[
+        np.ndarray | None, np.ndarray | None
+    ]:  # int N_a b, Gauss degree 4 (as the tractions)
         return body_load_vectors([CallableBodyForce(force)], V, None, 4)
 
     system = None
@@ -219,7 +228,11 @@ def build_efg(
         D, dl = particle_conditions(particles, [facets], [lambda q: mls.tabulate(q.points, 0)])
         constraint = [create_aij(comm, D, dl, pl)]
 
-    def body_load(force):  # int phi_J b on the particle rule (cells or stress points)
+    def body_load(
+        force: VectorFunction,
+    ) -> tuple[
+        np.ndarray | None, np.ndarray | None
+    ]:  # int phi_J b on the particle rule (cells or stress points)
         forces = [CallableBodyForce(force)]
         return body_load_vectors(forces, None, None, quadrature_degree, (q, tq.values), comm=comm)
 
@@ -434,7 +447,7 @@ def build_coupled(
     if ops.interface_table is not None:
         i_rule = (ops.interface_quadrature, ops.interface_table)
 
-    def body_load(force):
+    def body_load(force: VectorFunction) -> tuple[np.ndarray | None, np.ndarray | None]:
         forces = [CallableBodyForce(force)]
         deg = problem.quadrature_degree
         return body_load_vectors(forces, V, ops.fe_weight, deg, p_rule, i_rule, comm)
@@ -478,7 +491,9 @@ def _finite_strain_system(
         band = ops.interface
         cells, weight = cells | band.in_band, ops.fe_weight
 
-        def weight_at(q):  # beta_FE = 1 - alpha in the band, 1 on the FE cells
+        def weight_at(
+            q: QuadraturePoints,
+        ) -> np.ndarray:  # beta_FE = 1 - alpha in the band, 1 on the FE cells
             w = np.ones(len(q))
             b = band.in_band[q.cells]
             w[b] = 1.0 - band.alpha_at(q.points[b], q.cells[b])

@@ -113,7 +113,7 @@ class FieldEvaluator:
         parts_fe: list = []
         parts_p: list = []
 
-        def add(parts, rows, mat):
+        def add(parts: list, rows: np.ndarray, mat: sp.spmatrix) -> None:
             c = mat.tocoo()
             parts.append((rows[c.row], c.col, c.data))
 
@@ -144,7 +144,7 @@ class FieldEvaluator:
                 add(parts_fe, mix, sp.diags(1.0 - a) @ t_fe)
                 add(parts_p, mix, sp.diags(a) @ t_p)
 
-        def assemble(parts, ncols):
+        def assemble(parts: list, ncols: int) -> sp.csr_matrix | None:
             if not ncols:
                 return None
             r, c, v = (np.concatenate([p[i] for p in parts] + [np.zeros(0)]) for i in range(3))

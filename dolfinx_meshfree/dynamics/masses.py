@@ -43,7 +43,12 @@ __all__ = [
 ]
 
 
-def fe_lumped_mass(V, rho: float, dx: ufl.Measure | None = None, weight=None) -> PETSc.Vec:
+def fe_lumped_mass(
+    V: dolfinx.fem.FunctionSpace,
+    rho: float,
+    dx: ufl.Measure | None = None,
+    weight: ufl.core.expr.Expr | None = None,
+) -> PETSc.Vec:
     """Row-sum lumped FE masses ``M_II = int beta rho N_I`` (Belytschko et al. 1995, eq. 4.5;
     Rabczuk et al. 2006, eq. 88), one entry per owned dof of the vector space ``V``
     (collective).
@@ -144,7 +149,7 @@ def table_lumped_mass(
     fe_layout: Layout,
     particle_dofs: np.ndarray,
     particle_layout: Layout,
-    comm,
+    comm: MPI.Comm,
 ) -> tuple[PETSc.Vec, PETSc.Vec]:
     """Row-sum masses ``rho sum_q Nbar_c(x_q) w_q`` of a table with columns ``[local FE nodes |
     particles]`` (the ramp's blended interface functions, Belytschko et al. 1995, eq. 3.15 and
@@ -165,7 +170,7 @@ def table_lumped_mass(
     return m_fe, m_p
 
 
-def fe_spacing(msh, cells: np.ndarray) -> float:
+def fe_spacing(msh: dolfinx.mesh.Mesh, cells: np.ndarray) -> float:
     """Smallest distance between two vertices of one of the given owned cells (collective)."""
     gdim = msh.geometry.dim
     nodes = msh.geometry.x[_compat.geometry_dofmap(msh)[cells], :gdim]  # (nc, nv, gdim)

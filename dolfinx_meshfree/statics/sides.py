@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import dolfinx
 import numpy as np
@@ -37,6 +37,9 @@ from ..physics.constitutive import Material
 from ..physics.forces import InternalForces
 from .newton import NewtonError, NewtonOptions, NewtonResult, newton
 from .petsc import SolverOptions, create_aij, create_vector
+
+if TYPE_CHECKING:  # annotations only
+    from mpi4py import MPI
 
 __all__ = [
     "BlendedSide",
@@ -62,7 +65,7 @@ class NonlinearSolveResult(NamedTuple):
     steps: list
 
 
-def zeros(comm, layout: Layout) -> PETSc.Vec:
+def zeros(comm: MPI.Comm, layout: Layout) -> PETSc.Vec:
     """A distributed zero vector of ``layout``."""
     return create_vector(comm, layout, np.zeros(0, np.int64), np.zeros(0))
 
@@ -96,7 +99,9 @@ def split_residual(F: ufl.Form, u: dolfinx.fem.Function) -> tuple[ufl.Form, ufl.
 ON = 1
 
 
-def on_cells(F: ufl.Form, msh, flags: np.ndarray, weight=None) -> ufl.Form:
+def on_cells(
+    F: ufl.Form, msh: dolfinx.mesh.Mesh, flags: np.ndarray, weight: ufl.core.expr.Expr | None = None
+) -> ufl.Form:
     """The cell integrals of ``F`` on the owned cells flagged in ``flags`` only, each integrand
     multiplied by ``weight`` if given.
 
@@ -119,7 +124,7 @@ def on_cells(F: ufl.Form, msh, flags: np.ndarray, weight=None) -> ufl.Form:
     return ufl.Form(out)
 
 
-def cell_part(F: ufl.Form, weight=None) -> ufl.Form:
+def cell_part(F: ufl.Form, weight: ufl.core.expr.Expr | None = None) -> ufl.Form:
     """The cell integrals of ``F``, each multiplied by ``weight`` if given."""
     itgs = [i for i in F.integrals() if i.integral_type() == "cell"]
     if weight is not None:
@@ -138,8 +143,13 @@ class FESide:
     """
 
     def __init__(
-        self, F_int: ufl.Form, u: dolfinx.fem.Function, cells, fixed: np.ndarray, weight=None
-    ):
+        self,
+        F_int: ufl.Form,
+        u: dolfinx.fem.Function,
+        cells: np.ndarray | None,
+        fixed: np.ndarray,
+        weight: ufl.core.expr.Expr | None = None,
+    ) -> None:
         V = u.function_space
         self.u, self.V = u, V
         # on the FE cells only (``cells``: flags of the owned cells): a weight 0 on the patch

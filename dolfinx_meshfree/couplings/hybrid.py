@@ -207,7 +207,7 @@ class HybridElasticity(HybridDiscretisation):
 
     def __init__(
         self,
-        V,
+        V: dolfinx.fem.FunctionSpace,
         patch: ParticlePatch,
         material: LinearElastic,
         variant: str = "HA-F",
@@ -219,7 +219,7 @@ class HybridElasticity(HybridDiscretisation):
         particles: str | None = None,
         multiplier_length: float = 2.0,
         nitsche: float = 10.0,
-    ):
+    ) -> None:
         super().__init__(
             V,
             patch,

@@ -156,7 +156,7 @@ class HybridDiscretisation:
 
     def __init__(
         self,
-        V,
+        V: dolfinx.fem.FunctionSpace,
         patch: ParticlePatch,
         material: LinearElastic,
         variant: str = "HA-F",
@@ -168,7 +168,7 @@ class HybridDiscretisation:
         particles: str | None = None,
         multiplier_length: float = 2.0,
         nitsche: float = 10.0,
-    ):
+    ) -> None:
         comm = patch.comm
         raise_on_all_ranks(
             comm,

@@ -87,7 +87,9 @@ class CorrectedSPH:
         smoothing_length: ``h``; the cubic-spline kernel's support is ``2 h``.
     """
 
-    def __init__(self, points: npt.ArrayLike, volumes: npt.ArrayLike, smoothing_length: float):
+    def __init__(
+        self, points: npt.ArrayLike, volumes: npt.ArrayLike, smoothing_length: float
+    ) -> None:
         self._sph = SPH(points, volumes, smoothing_length=smoothing_length, correction="shepard")
         self.points = self._sph.points
         self.volumes = self._sph.volumes
@@ -215,7 +217,7 @@ def hybrid_points(
     )
 
 
-def _in_patch(patch, points: np.ndarray) -> np.ndarray:
+def _in_patch(patch: ParticlePatch, points: np.ndarray) -> np.ndarray:
     """Whether each point lies in a patch cell of some rank (collective, the same on every rank)."""
     cells = locate_points(patch.mesh, points, preferred=patch.in_patch)
     inside = ((cells >= 0) & patch.in_patch[np.maximum(cells, 0)]).astype(np.int8)

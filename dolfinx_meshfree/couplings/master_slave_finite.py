@@ -78,7 +78,7 @@ class RotatingLinks:
         own: np.ndarray,
         layout: Layout,
         scale: float,
-    ):
+    ) -> None:
         self.fe, self.particles, self.comm = fe, particles, particles.comm
         self.layout, self.scale = layout, float(scale)
         k, e, xi, d, w = [], [], [], [], []

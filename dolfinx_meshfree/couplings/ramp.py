@@ -93,7 +93,7 @@ __all__ = ["RAMPS", "RampInterface", "ramp_mls", "ramp_operators", "ramp_system"
 RAMPS = {"ramp": False, "ramp-cubic": True}
 
 
-def _interface_element_size(patch) -> float:
+def _interface_element_size(patch: ParticlePatch) -> float:
     """The longest interface facet of the patch on any rank (collective; 0 without interface)."""
     msh = patch.mesh
     fdim = msh.topology.dim - 1
@@ -104,7 +104,7 @@ def _interface_element_size(patch) -> float:
     return patch.comm.allreduce(h, op=MPI.MAX)
 
 
-def _interface_reach(patch) -> tuple[np.ndarray, float]:
+def _interface_reach(patch: ParticlePatch) -> tuple[np.ndarray, float]:
     """The largest distance from a vertex of an interface element (an FE cell with a vertex on
     Gamma_E) to the nearest Gamma_E node (collective; identical on every rank). One element
     size beside a straight interface, the cell's diagonal where a staircase interface touches a
@@ -165,7 +165,7 @@ class RampInterface:
         cubic: Whether the smoothed ramp ``3R^2 - 2R^3`` is used.
     """
 
-    def __init__(self, problem, cubic: bool = False):
+    def __init__(self, problem: CoupledElasticity, cubic: bool = False) -> None:
         V, patch = problem.V, problem.patch
         msh = V.mesh
         comm = patch.comm
@@ -327,7 +327,7 @@ class RampInterface:
         return t.values @ c, t.gradient(c)
 
 
-def _fe_stiffness(problem, interface: RampInterface) -> PETSc.Mat:
+def _fe_stiffness(problem: CoupledElasticity, interface: RampInterface) -> PETSc.Mat:
     """DOLFINx assembly of the FE form on the pure FE cells (not interface, not patch)."""
     pure = ~problem.patch.in_patch & ~interface.in_interface
     return fe_stiffness(problem, problem.cell_indicator(pure))
@@ -593,7 +593,7 @@ def _consistent_stiffness(
     return Kp, {"setup": t1 - t0, "assemble": time.perf_counter() - t1}, test
 
 
-def _first_cells(msh, facets: np.ndarray) -> np.ndarray:
+def _first_cells(msh: dolfinx.mesh.Mesh, facets: np.ndarray) -> np.ndarray:
     """The first local cell of each facet (the only one on exterior facets)."""
     tdim = msh.topology.dim
     msh.topology.create_connectivity(tdim - 1, tdim)

@@ -98,7 +98,7 @@ class CentralDifference:
         minv: Sequence[PETSc.Vec],
         loads: ExternalLoads,
         projection: VelocityProjection | None = None,
-    ):
+    ) -> None:
         self.system, self.minv = system, list(minv)
         self.loads, self.projection = loads, projection
         masses = system.mass()

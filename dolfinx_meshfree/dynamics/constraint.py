@@ -59,7 +59,7 @@ class VelocityProjection:
         minv: Sequence[PETSc.Vec],
         comm: MPI.Comm,
         solver: str | None = None,
-    ):
+    ) -> None:
         self.G = list(G)
         self.minv = list(minv)
         self.comm = comm

@@ -37,7 +37,7 @@ class FieldEvaluator:
     Collective throughout; the quadrature tables are cached per degree.
     """
 
-    def __init__(self, disc: Discretisation, comm: MPI.Comm):
+    def __init__(self, disc: Discretisation, comm: MPI.Comm) -> None:
         self.disc = disc
         self.comm = comm
         self._tables: dict[int, Tables] = {}

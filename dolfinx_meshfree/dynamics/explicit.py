@@ -129,7 +129,7 @@ class ExplicitDynamics:
         body_load: BodyLoad | None = None,
         system: SemiDiscreteSystem | None = None,
         rebound_every: int = 10,
-    ):
+    ) -> None:
         check_safety(safety)
         check_multiplier_solver(multiplier_solver)
         if system is None:

@@ -106,7 +106,7 @@ class FEForces:
         points: Its quadrature, as :class:`InternalForces` of the FE basis (local nodes).
     """
 
-    def __init__(self, side: FESide, points: InternalForces):
+    def __init__(self, side: FESide, points: InternalForces) -> None:
         self.side, self.points = side, points
 
     def state(self, x: PETSc.Vec) -> np.ndarray:
@@ -183,7 +183,7 @@ class NonlinearSystem:
         sides: Sequence[FEForces | ParticleSide],
         material: Material,
         constraint: Sequence[PETSc.Mat | None] | None = None,
-    ):
+    ) -> None:
         if len(sides) != len(fields):
             raise ValueError(f"{len(sides)} sides for {len(fields)} fields")
         self.fields, self.sides, self.material = list(fields), list(sides), material

@@ -56,7 +56,7 @@ class ExternalLoads:
         comm: MPI.Comm,
         rho: float,
         body_load: BodyLoad | None = None,
-    ):
+    ) -> None:
         self.disc, self.free, self.comm, self.rho = disc, list(free), comm, rho
         self.body_load = body_load
         self.loads: list[tuple[list[PETSc.Vec], Amplitude]] = []

@@ -83,7 +83,7 @@ def fe_lumped_mass(
     return m
 
 
-def _check_positive(m: PETSc.Vec, comm, what: str) -> None:
+def _check_positive(m: PETSc.Vec, comm: MPI.Comm, what: str) -> None:
     lo = comm.allreduce(float(m.array_r.min()) if m.getLocalSize() else np.inf, op=MPI.MIN)
     if not lo > 0.0:
         raise ValueError(

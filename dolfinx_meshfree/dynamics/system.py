@@ -135,7 +135,7 @@ class LinearSystem:
         fields: Sequence[Field],
         blocks: Blocks | None = None,
         constraint: Sequence[PETSc.Mat | None] | None = None,
-    ):
+    ) -> None:
         self.fields = list(fields)
         self.blocks: Blocks = dict(blocks or {})
         self.G: list[PETSc.Mat | None] | None = None

@@ -145,7 +145,7 @@ class TimeStepBound:
         comm: MPI.Comm,
         safety: float = 0.9,
         state: Callable[[], Sequence[PETSc.Vec]] | None = None,
-    ):
+    ) -> None:
         self.system, self.material = system, material
         self.minv, self.free, self.comm = list(minv), list(free), comm
         self.safety = check_safety(safety)
@@ -243,7 +243,7 @@ class Rebound:
 
     def __init__(
         self, bound: TimeStepBound, dt: float, start: int, every: int = 10, growth: float = 0.05
-    ):
+    ) -> None:
         if not (isinstance(every, int) and every >= 1):
             raise ValueError(f"every={every!r} must be an integer >= 1 (steps between checks)")
         self.bound, self.dt, self.start = bound, float(dt), int(start)

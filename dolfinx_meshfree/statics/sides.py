@@ -208,7 +208,7 @@ class FESide:
 class ParticleSide:
     """The particle field: ``f_int`` and ``K_T`` on the patch quadrature, in PETSc numbering."""
 
-    def __init__(self, particles: ParticleSet, tables: dict, material: Material):
+    def __init__(self, particles: ParticleSet, tables: dict, material: Material) -> None:
         q, tq = tables["quadrature"], tables["table"]
         self.P, self.comm = particles, particles.comm
         weights = tables.get("weights", q.weights)  # the bridging band's alpha w_q
@@ -271,7 +271,7 @@ class BlendedSide:
         weights: np.ndarray,
         material: Material,
         test_gradients: Sequence[sp.spmatrix] | None = None,
-    ):
+    ) -> None:
         self.fe, self.particles, self.comm = fe, particles, particles.comm
         self.forces = InternalForces(
             table, weights, material, test_gradients=test_gradients, comm=particles.comm

@@ -123,6 +123,23 @@ def test_no_class_above_about_400_lines():
     assert big == []
 
 
+def test_every_public_function_is_typed():
+    """Every public function and method (name without a leading underscore, nested helpers
+    included) annotates each argument but ``self``/``cls`` and its return."""
+    untyped = []
+    for f in ROOT.rglob("*.py"):
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(
+                node, ast.FunctionDef | ast.AsyncFunctionDef
+            ) and not node.name.startswith("_"):
+                args = [
+                    a for a in node.args.args + node.args.kwonlyargs if a.arg not in ("self", "cls")
+                ]
+                if node.returns is None or any(a.annotation is None for a in args):
+                    untyped.append(f"{f.relative_to(ROOT)}:{node.lineno} {node.name}")
+    assert untyped == []
+
+
 def test_every_module_lists_its_public_api():
     missing = [
         str(f.relative_to(ROOT)) for f in ROOT.rglob("*.py") if "__all__" not in f.read_text()

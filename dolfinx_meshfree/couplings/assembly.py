@@ -12,6 +12,7 @@ coefficients gathered. The coupling modules compose them with their own interfac
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import dolfinx
@@ -30,6 +31,10 @@ from ..statics.petsc import BlockSystem, SolverOptions, create_aij, create_vecto
 from .base import fe_dof_layout, node_flags
 
 if TYPE_CHECKING:  # annotations only
+    import scipy.sparse as sp
+    import ufl
+
+    from ..approx.tables import ShapeTable
     from ..statics.coupled import CoupledElasticity
 
 __all__ = [
@@ -56,7 +61,7 @@ def split_facets(problem: CoupledElasticity, facets: np.ndarray) -> tuple[np.nda
     return facets[~in_patch], facets[in_patch]
 
 
-def fe_stiffness(problem: CoupledElasticity, weight=None) -> PETSc.Mat:
+def fe_stiffness(problem: CoupledElasticity, weight: ufl.core.expr.Expr | None = None) -> PETSc.Mat:
     """DOLFINx assembly of :meth:`fe_form` with ``weight`` (default: 1 on the FE cells, 0 on
     the patch)."""
     if weight is None:
@@ -77,7 +82,12 @@ def particle_rule(problem: CoupledElasticity, integration: str) -> QuadraturePoi
     return stress_point_quadrature(problem.patch.particles)
 
 
-def body_loads(problem: CoupledElasticity, fe_weight, particle_weights=None, interface_rule=None):
+def body_loads(
+    problem: CoupledElasticity,
+    fe_weight: ufl.core.expr.Expr,
+    particle_weights: Callable[[QuadraturePoints], np.ndarray] | None = None,
+    interface_rule: tuple[QuadraturePoints, sp.csr_matrix] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """This coupling's shares of its body forces (collective): the FE loads per owned dof
     (``fe_weight``: the FE energy's weight) and the particle loads (original interleaved
     order) on the patch cells' Gauss rule, its weights multiplied by ``particle_weights(q)``
@@ -93,7 +103,10 @@ def body_loads(problem: CoupledElasticity, fe_weight, particle_weights=None, int
     )
 
 
-def essential_conditions(problem: CoupledElasticity, also_strong=None) -> tuple:
+def essential_conditions(
+    problem: CoupledElasticity,
+    also_strong: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> tuple:
     """Split the essential conditions: strong on FE facets, multipliers on patch facets.
 
     Args:
@@ -140,8 +153,12 @@ def essential_conditions(problem: CoupledElasticity, also_strong=None) -> tuple:
 
 
 def fix_fe_rows(
-    problem: CoupledElasticity, K_fe, b_fe, fixed_local: np.ndarray, values: np.ndarray
-):
+    problem: CoupledElasticity,
+    K_fe: PETSc.Mat,
+    b_fe: PETSc.Vec,
+    fixed_local: np.ndarray,
+    values: np.ndarray,
+) -> PETSc.Vec:
     """Fix FE dofs: zero their rows and columns of ``K_fe`` with 1 on the diagonal and lift the
     values into ``b_fe`` (``MatZeroRowsColumns``). Collective.
 
@@ -206,7 +223,13 @@ def traction_loads(problem: CoupledElasticity) -> tuple[PETSc.Vec, np.ndarray]:
 
 
 def append_patch_conditions(
-    problem: CoupledElasticity, blocks, rhs, mats, patch_bc, dq, dtabs
+    problem: CoupledElasticity,
+    blocks: list[list[PETSc.Mat | None]],
+    rhs: list[PETSc.Vec],
+    mats: list[PETSc.Mat],
+    patch_bc: list,
+    dq: list[QuadraturePoints],
+    dtabs: list[ShapeTable],
 ) -> Layout:
     """Append the multiplier field of essential conditions on patch facets (it couples to
     field 1, the particles) to ``blocks``/``rhs``; new PETSc objects go to ``mats``."""
@@ -225,7 +248,13 @@ def append_patch_conditions(
     return dl
 
 
-def solve_and_gather(problem: CoupledElasticity, blocks, rhs, objects, solver: str | SolverOptions):
+def solve_and_gather(
+    problem: CoupledElasticity,
+    blocks: list[list[PETSc.Mat | None]],
+    rhs: list[PETSc.Vec],
+    objects: list,
+    solver: str | SolverOptions,
+) -> tuple[dolfinx.fem.Function, np.ndarray, float]:
     """Solve the nest (fields FE, particles, multipliers...), destroy ``objects`` and ``rhs``,
     and return the FE Function, the particle coefficients (n, gdim) in original order and the
     solve time. Collective."""

@@ -234,7 +234,9 @@ class Coupling(Protocol):
         ...
 
 
-def check_dimension(msh, name: str, dimensions: tuple[int, ...], missing: str) -> None:
+def check_dimension(
+    msh: dolfinx.mesh.Mesh, name: str, dimensions: tuple[int, ...], missing: str
+) -> None:
     """Refuse a mesh whose geometric dimension the coupling ``name`` does not work in: a
     ValueError on every rank (the dimension is the same on every rank), saying what is
     ``missing`` and which couplings work in that dimension."""

@@ -105,7 +105,7 @@ CONSTRAINTS = ("points", "integral")
 
 
 def check_options(
-    overlap, penalty, constraint: str = "integral", band_width=None
+    overlap: int, penalty: float, constraint: str = "integral", band_width: float | None = None
 ) -> tuple[int, float, str, float | None]:
     """Validate the ``overlap`` (positive integer), ``penalty`` (finite, >= 0),
     ``constraint`` (one of :data:`CONSTRAINTS`) and ``band_width`` (``None`` or finite > 0)
@@ -289,7 +289,9 @@ class BridgingBand:
             )
         return layer, np.where(layer <= overlap, layer / overlap, 1.0)
 
-    def alpha_at(self, points: np.ndarray, cells: np.ndarray, derivatives: int = 0):
+    def alpha_at(
+        self, points: np.ndarray, cells: np.ndarray, derivatives: int = 0
+    ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """``alpha`` (m,) at points of local cells, and with ``derivatives`` its gradient."""
         t = tabulate_in_cells(self.V, points, cells, derivatives=derivatives)
         a = t.values @ self.alpha
@@ -297,7 +299,7 @@ class BridgingBand:
             return a
         return a, np.stack([g @ self.alpha for g in t.gradients], axis=1)
 
-    def numbering(self, problem) -> tuple[np.ndarray, Layout]:
+    def numbering(self, problem: CoupledElasticity) -> tuple[np.ndarray, Layout]:
         """Global multiplier (block) number of each local band node (-1 elsewhere); collective."""
         V, comm = self.V, problem.patch.comm
         n_owned = V.dofmap.index_map.size_local
@@ -569,7 +571,9 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
     return blocks, rhs, mats, extra
 
 
-def solve_bridging(problem, solver: str | SolverOptions = "mumps"):
+def solve_bridging(
+    problem: CoupledElasticity, solver: str | SolverOptions = "mumps"
+) -> BridgingSolution:
     """Assemble and solve the bridging-domain coupled system of ``problem`` (collective)."""
     blocks, rhs, mats, extra = bridging_system(problem)
     uh, coeffs, solve = solve_and_gather(problem, blocks, rhs, [*mats, extra["x_bc"]], solver)
@@ -718,7 +722,7 @@ def _constraint_tables(
     return t_fe, t_p, weights
 
 
-def bridging_operators(problem):
+def bridging_operators(problem: CoupledElasticity) -> CouplingOperators:
     """The bridging coupling's operators without essential conditions (collective).
 
     ``K_FE`` weighted by ``beta_FE`` (eq. 47–48) plus the penalty's FE block, ``K_P`` with the

@@ -90,7 +90,9 @@ __all__ = [
 CORNER_ANGLE = 30.0
 
 
-def interface_multipliers(problem: CoupledElasticity, iq: QuadraturePoints, t_fe: sp.csr_matrix):
+def interface_multipliers(
+    problem: CoupledElasticity, iq: QuadraturePoints, t_fe: sp.csr_matrix
+) -> tuple[sp.csr_matrix, Layout]:
     """The multiplier basis of the compatibility coupling at the interface quadrature points
     (collective): ``Lambda_k = N_a``, the FE trace of interface node ``a`` (Rabczuk eq. 109).
 

@@ -217,7 +217,7 @@ class CoupledElasticity:
         ghost copies), 0 elsewhere (collective)."""
         return cell_indicator(self.V.mesh, owned_flags)
 
-    def fe_form(self, weight) -> ufl.Form:
+    def fe_form(self, weight: ufl.core.expr.Expr) -> ufl.Form:
         """The FE bilinear form weighted by ``weight`` (a scalar UFL expression: a cell indicator,
         or the bridging energy weight ``1 - alpha``).
 

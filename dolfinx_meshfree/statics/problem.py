@@ -426,7 +426,9 @@ class FormBodyForce(BodyForce):
             self._expressions.append((expr, on))
         self.tol = 1e-9 * (np.ptp(msh.geometry.x[:, :gdim], axis=0).max() + 1.0)
 
-    def fe_load(self, V, weight, degree: int) -> np.ndarray:
+    def fe_load(
+        self, V: dolfinx.fem.FunctionSpace, weight: ufl.core.expr.Expr | None, degree: int
+    ) -> np.ndarray:
         integrals = self.integrals
         if weight is not None:
             integrals = [itg.reconstruct(integrand=weight * itg.integrand()) for itg in integrals]
@@ -498,7 +500,7 @@ class _FacetLoad:
         cols = (local[:, None] * npts + np.arange(npts)).ravel()
         rows = np.repeat(pos, npts)
 
-        def evaluate(n) -> np.ndarray:
+        def evaluate(n: np.ndarray) -> np.ndarray:
             nc.value[:] = n
             vals = _compat.eval_expression(expr, msh, ucells, 2 * d)
             return vals[rows, cols] if facets.size else np.zeros((0, 2 * d))

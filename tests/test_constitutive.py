@@ -24,30 +24,11 @@ E, NU = 3.0, 0.3
 PLANES = ["strain", "stress", None]
 
 
-def _linear_3d_supported() -> bool:
-    try:
-        mf.LinearElastic(E=E, nu=NU, plane=None)
-    except ValueError:
-        return False
-    return True
-
-
 def _materials():
     out = []
     for cls in (mf.SaintVenantKirchhoff, mf.NeoHookean):
         out += [pytest.param(cls, p, id=f"{cls.__name__}-{p}") for p in PLANES]
-    out += [pytest.param(mf.LinearElastic, p, id=f"LinearElastic-{p}") for p in PLANES[:2]]
-    out.append(
-        pytest.param(
-            mf.LinearElastic,
-            None,
-            id="LinearElastic-None",
-            marks=pytest.mark.skipif(
-                not _linear_3d_supported(),
-                reason="LinearElastic(plane=None) (3D) lands with the 3D branch, not this one",
-            ),
-        )
-    )
+    out += [pytest.param(mf.LinearElastic, p, id=f"LinearElastic-{p}") for p in PLANES]
     return out
 
 

@@ -42,6 +42,7 @@ __all__ = [
     "ROUND_OFF",
     "CoupledSolution",
     "Coupling",
+    "CouplingDefaults",
     "CouplingOperators",
     "cell_indicator",
     "check_dimension",
@@ -232,6 +233,15 @@ class Coupling(Protocol):
     ) -> CouplingOperators:
         """The assembled operators without essential conditions (collective)."""
         ...
+
+
+class CouplingDefaults:
+    """What most coupling families share: the particle side's MLS used as given (the ramps
+    widen its supports over their interface cells instead)."""
+
+    def prepare_mls(self, mls: MLS, patch: ParticlePatch) -> MLS:
+        """``mls`` itself."""
+        return mls
 
 
 def check_dimension(

@@ -59,8 +59,6 @@ from scipy.sparse.linalg import spsolve
 
 from .. import _compat
 from ..approx.fe_points import locate_points, tabulate_in_cells
-from ..approx.mls import MLS
-from ..geometry.patch import ParticlePatch
 from ..geometry.quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
 from ..parallel import Layout, raise_on_all_ranks
 from ..physics.operators import consistent_gradients, load_vector, stiffness_matrix
@@ -79,6 +77,7 @@ from .assembly import (
 )
 from .base import (
     CoupledSolution,
+    CouplingDefaults,
     CouplingOperators,
     facet_nodes,
     fe_constraint_block,
@@ -832,7 +831,7 @@ def bridging_operators(problem: CoupledElasticity) -> CouplingOperators:
     )
 
 
-class BridgingCoupling:
+class BridgingCoupling(CouplingDefaults):
     """The bridging domain: an overlap band with energy weights and multipliers on the band's FE
     nodes (Rabczuk et al. 2006, sec. 5.3)."""
 
@@ -843,9 +842,6 @@ class BridgingCoupling:
     blended: ClassVar[bool] = True
     dimensions: ClassVar[tuple[int, ...]] = (2, 3)
     missing_3d: ClassVar[str] = ""
-
-    def prepare_mls(self, mls: MLS, patch: ParticlePatch) -> MLS:
-        return mls
 
     def solve(self, problem: CoupledElasticity, solver: str | SolverOptions) -> CoupledSolution:
         return solve_bridging(problem, solver)

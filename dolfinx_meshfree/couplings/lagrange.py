@@ -44,8 +44,6 @@ from scipy.spatial import cKDTree
 
 from .. import _compat
 from ..approx.fe_points import tabulate_fe_basis, tabulate_in_cells
-from ..approx.mls import MLS
-from ..geometry.patch import ParticlePatch
 from ..geometry.quadrature import QuadraturePoints, facet_quadrature
 from ..parallel import Layout, raise_on_all_ranks
 from ..statics.efg import particle_stiffness
@@ -63,6 +61,7 @@ from .assembly import (
 )
 from .base import (
     CoupledSolution,
+    CouplingDefaults,
     CouplingOperators,
     facet_nodes,
     facet_table,
@@ -611,7 +610,7 @@ def solve_interface(
     )
 
 
-class _InterfaceCoupling:
+class _InterfaceCoupling(CouplingDefaults):
     """The two multiplier couplings on the interface facets (shared by name below)."""
 
     default_dilation: ClassVar[float] = 2.0
@@ -620,9 +619,6 @@ class _InterfaceCoupling:
     blended: ClassVar[bool] = False
     dimensions: ClassVar[tuple[int, ...]] = (2, 3)
     missing_3d: ClassVar[str] = ""
-
-    def prepare_mls(self, mls: MLS, patch: ParticlePatch) -> MLS:
-        return mls
 
     def solve(self, problem: CoupledElasticity, solver: str | SolverOptions) -> CoupledSolution:
         return solve_interface(problem, solver)

@@ -121,8 +121,6 @@ from petsc4py import PETSc
 from scipy.spatial import cKDTree
 
 from .. import _compat
-from ..approx.mls import MLS
-from ..geometry.patch import ParticlePatch
 from ..geometry.quadrature import facet_quadrature
 from ..geometry.stress_points import check_integration
 from ..parallel import Layout, raise_on_all_ranks
@@ -136,7 +134,7 @@ from .assembly import (
     particle_rule,
     traction_loads,
 )
-from .base import CoupledSolution, CouplingOperators, fe_dof_layout
+from .base import CoupledSolution, CouplingDefaults, CouplingOperators, fe_dof_layout
 
 if TYPE_CHECKING:  # annotations only: the model imports this module
     from ..statics.coupled import CoupledElasticity
@@ -694,7 +692,7 @@ def _with_selection(S_loc: sp.csr_matrix, sel_loc: sp.csr_matrix, comm, pl: Layo
     return S
 
 
-class MasterSlaveCoupling:
+class MasterSlaveCoupling(CouplingDefaults):
     """Particles linked to the FE boundary (Rabczuk et al. 2006, sec. 5.1.2).
 
     First order by construction; plain Gauss quadrature by default (its slaves, not
@@ -711,9 +709,6 @@ class MasterSlaveCoupling:
         "its rigid links (Rabczuk et al. 2006, eq. 17-28) carry a 2D in-plane rotation per "
         "master node and its slave layer is found from 2D interface edges"
     )
-
-    def prepare_mls(self, mls: MLS, patch: ParticlePatch) -> MLS:
-        return mls
 
     def solve(self, problem: CoupledElasticity, solver: str | SolverOptions) -> CoupledSolution:
         return solve_master_slave(problem, solver)

@@ -17,6 +17,7 @@ Python loop over points.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -32,7 +33,30 @@ from .tables import ShapeTable
 if TYPE_CHECKING:  # annotations only
     from ..geometry.particles import ParticleSet
 
-__all__ = ["MLS", "MomentMatrixError", "polynomial_basis"]
+__all__ = ["MLS", "MomentMatrixError", "PairCut", "pair_distances", "polynomial_basis"]
+
+#: A pair cut ``(x, i, j, dx, dist, ddist) -> (i, j, dx, dist, ddist)``: see :attr:`MLS.pair_cuts`.
+PairCut = Callable[
+    [np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+]
+
+
+def pair_distances(dx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distances ``|x - x_I|`` of the pairs and their gradients with respect to ``x``.
+
+    Args:
+        dx: ``x_i - x_j`` per pair (npairs, gdim).
+
+    Returns:
+        ``(dist, ddist)``: (npairs,) and (npairs, gdim); the gradient is the unit vector, zero
+        where the point coincides with the particle (where every weight is flat).
+    """
+    dist = np.linalg.norm(dx, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ddist = np.where(dist[:, None] > 0.0, dx / dist[:, None], 0.0)
+    return dist, ddist
+
 
 _BASES = {"linear": 1, "quadratic": 2}
 
@@ -130,6 +154,11 @@ class MLS:
         self.rcond = float(rcond)
         self._scale = float(np.median(self.radii))
         self._tree = cKDTree(self.points)
+        #: Pair cuts applied in order after the neighbour search, each
+        #: ``cut(x, i, j, dx, dist, ddist) -> (i, j, dx, dist, ddist)``: it may drop pairs or
+        #: change the distance that enters the weight and its gradient ``d dist / dx`` (a crack's
+        #: visibility or diffraction criterion). Call :meth:`changed` after changing the list.
+        self.pair_cuts: list[PairCut] = []
         #: Changes whenever the shape functions do (:meth:`changed`); tables carry the version
         #: they were built at (:attr:`ShapeTable.version`).
         self.version = 0
@@ -156,6 +185,9 @@ class MLS:
         m = x.shape[0]
         n = self.num_particles
         i, j, dx = pairs_within_support(x, self.points, self.radii, self._tree)
+        dist, ddist = pair_distances(dx)
+        for cut in self.pair_cuts:
+            i, j, dx, dist, ddist = cut(x, i, j, dx, dist, ddist)
         counts = np.bincount(i, minlength=m)
         nb = self.num_basis
         too_few = np.flatnonzero(counts < nb)
@@ -167,7 +199,6 @@ class MLS:
                 f"at least {nb}: {self._fix} or add particles"
             )
         s = self._scale
-        dist = np.linalg.norm(dx, axis=1)
         rho = self.radii[j]
         w, dwdr = self._weight(dist / rho)
         # p_I = p((x_I - x)/s); d p_I / dx_k = -(1/s) dp/dxi_k
@@ -182,10 +213,8 @@ class MLS:
         values = sp.csr_matrix((phi, (i, j)), shape=(m, n))
         grads: list[sp.csr_matrix] = []
         if derivatives:
-            with np.errstate(invalid="ignore", divide="ignore"):
-                unit = np.where(dist[:, None] > 0.0, dx / dist[:, None], 0.0)
             for k in range(self.gdim):
-                dw = dwdr / rho * unit[:, k]
+                dw = dwdr / rho * ddist[:, k]
                 dp = -dpdxi[k] / s
                 dA = self._sum_outer(i, dw, p, p, m) + self._sum_outer(i, w, dp, p, m)
                 dA += np.transpose(self._sum_outer(i, w, dp, p, m), (0, 2, 1))

@@ -34,6 +34,7 @@ from ..parallel import Layout, raise_on_all_ranks
 
 if TYPE_CHECKING:  # annotations only: the model imports this module, not the reverse
     from ..statics.coupled import CoupledElasticity
+    from ..statics.sides import NonlinearSolveResult
     from .bridging import BridgingBand
     from .master_slave import MasterSlaveLinks
     from .ramp import RampInterface
@@ -70,6 +71,8 @@ class CoupledSolution:
     #: Ramp couplings: the :class:`~dolfinx_meshfree.couplings.ramp.RampInterface` (blended
     #: interface cells).
     interface: RampInterface | None = None
+    #: Finite strain: Newton's record (:class:`~dolfinx_meshfree.NonlinearSolveResult`).
+    newton: NonlinearSolveResult | None = None
 
     def evaluate_at_quadrature(self, q: QuadraturePoints) -> tuple[np.ndarray, np.ndarray]:
         """Displacement (m, gdim) and gradient (m, gdim, gdim) at quadrature points of local

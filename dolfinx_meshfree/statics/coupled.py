@@ -39,7 +39,15 @@ from ..geometry.patch import ParticlePatch
 from ..geometry.stress_points import check_integration
 from ..parallel import raise_on_all_ranks
 from ..physics.body_loads import CallableBodyForce
-from ..physics.materials import LinearElastic
+from ..physics.constitutive import Material
+from ..physics.materials import LinearElastic, linear_twin
+from .coupled_newton import (
+    FE_LAW_DEGREE,
+    FINITE_STRAIN_COUPLINGS,
+    check_load_steps,
+    solve_finite_strain,
+)
+from .newton import NewtonOptions
 from .petsc import SolverOptions, solver_options
 
 __all__ = [
@@ -66,7 +74,12 @@ class CoupledElasticity:
             patch test when the interface FE nodes are particles, e.g. a grid at h / 2 on a
             regular mesh or ``placement="vertices"``).
         patch: :class:`~dolfinx_meshfree.ParticlePatch` on the same mesh.
-        material: :class:`~dolfinx_meshfree.LinearElastic`, used on both sides.
+        material: :class:`~dolfinx_meshfree.LinearElastic`, used on both sides; or a
+            finite-strain law (:class:`~dolfinx_meshfree.NeoHookean`,
+            :class:`~dolfinx_meshfree.SaintVenantKirchhoff`) with a coupling of
+            :data:`~dolfinx_meshfree.FINITE_STRAIN_COUPLINGS`: :meth:`solve` then runs Newton,
+            the FE cells with the law's UFL twin, and :attr:`material` is its small-strain twin
+            (the linear blocks; :attr:`law` the law given).
         coupling: ``"lagrange"`` (compatibility coupling with FE trace multipliers, Rabczuk et
             al. 2006, sec. 5.4) or ``"edge-to-edge"`` (multipliers collocated at the interface
             particles, see :meth:`interface_particles`), ``"ramp"`` or ``"ramp-cubic"``
@@ -148,9 +161,18 @@ class CoupledElasticity:
                 "(a polyline); it is not defined on a 3D interface: leave it None (multipliers "
                 "continuous along the interface)"
             )
-        if not isinstance(material, LinearElastic):
-            raise TypeError(f"material must be a LinearElastic, got {type(material).__name__}")
-        material.check_gdim(V.mesh.geometry.dim, "V's mesh")
+        if not isinstance(material, LinearElastic | Material):
+            raise TypeError(
+                f"material must be a LinearElastic or a finite-strain Material (NeoHookean, "
+                f"SaintVenantKirchhoff), got {type(material).__name__}"
+            )
+        if not isinstance(material, LinearElastic) and coupling not in FINITE_STRAIN_COUPLINGS:
+            raise ValueError(
+                f"material={type(material).__name__}: coupling={coupling!r} is not available at "
+                f"finite strain (its family has no finite-strain system); use one of "
+                f"{list(FINITE_STRAIN_COUPLINGS)} or material=LinearElastic"
+            )
+        linear_twin(material).check_gdim(V.mesh.geometry.dim, "V's mesh")
         if V.mesh is not patch.mesh:
             raise ValueError("V and patch must live on the same mesh object")
         if patch.comm.allreduce(patch.fe_cells.size) == 0:
@@ -159,7 +181,12 @@ class CoupledElasticity:
                 "EFGElasticity, or leave some cells out of the patch"
             )
         t0 = time.perf_counter()
-        self.V, self.patch, self.material, self.coupling = V, patch, material, coupling
+        self.V, self.patch, self.coupling = V, patch, coupling
+        #: The small-strain law of the linear blocks (``law`` itself when it is linear).
+        self.material = linear_twin(material)
+        #: The law given: :class:`~dolfinx_meshfree.LinearElastic` (one linear solve) or a
+        #: finite-strain :class:`~dolfinx_meshfree.physics.constitutive.Material` (Newton).
+        self.law = material
         self.quadrature_degree = quadrature_degree
         self.corner_angle = None if corner_angle is None else float(corner_angle)
         #: The coupling family (:mod:`~dolfinx_meshfree.couplings`).
@@ -296,8 +323,16 @@ class CoupledElasticity:
         solver: str | SolverOptions = "mumps",
         petsc_options: Mapping[str, Any] | None = None,
         prefix: str | None = None,
+        load_steps: int = 1,
+        newton: NewtonOptions | None = None,
     ) -> CoupledSolution:
-        """Assemble the nest block system and solve it (collective).
+        """Assemble the nest block system and solve it (collective); with a finite-strain
+        material, by Newton over ``load_steps`` steps of the tractions, body force and prescribed
+        displacements (total Lagrangian, :mod:`~dolfinx_meshfree.statics.nonlinear`: the FE
+        cells' ``int P(F) : grad v dX`` of the law's UFL twin, the particles'
+        ``sum_q B0^T P(F_q) w_q``); the solution's ``newton`` then holds the
+        :class:`~dolfinx_meshfree.NonlinearSolveResult` (a step that does not converge raises
+        :class:`~dolfinx_meshfree.statics.newton.NewtonError` with the residual history).
 
         Args:
             solver: ``"mumps"`` (direct, the default) or ``"fieldsplit"`` (Schur complement,
@@ -310,8 +345,24 @@ class CoupledElasticity:
                 ``particles``, ``multiplier0``, ...). Nothing is left in PETSc's options
                 database.
             prefix: The KSP's options prefix (default: a unique one).
+            load_steps: Finite strain: the loads and prescribed displacements in ``k /
+                load_steps`` steps (ignored by a linear material).
+            newton: Finite strain: :class:`~dolfinx_meshfree.statics.newton.NewtonOptions`.
         """
-        options = raise_on_all_ranks(
-            self.patch.comm, lambda: solver_options(solver, petsc_options, prefix)
+        comm = self.patch.comm
+        options = raise_on_all_ranks(comm, lambda: solver_options(solver, petsc_options, prefix))
+        if isinstance(self.law, LinearElastic):
+            return self.family.solve(self, options)
+        raise_on_all_ranks(comm, lambda: check_load_steps(load_steps))
+        V = self.V
+        u = dolfinx.fem.Function(V)
+        u.x.array[:] = 0.0
+        d = V.mesh.geometry.dim
+        dx = ufl.Measure("dx", domain=V.mesh, metadata={"quadrature_degree": FE_LAW_DEGREE})
+        F = ufl.Identity(d) + ufl.grad(u)
+        F_int = ufl.inner(self.law.ufl_first_piola(F), ufl.grad(ufl.TestFunction(V))) * dx
+        out = solve_finite_strain(
+            self, F_int, u, self.law, load_steps, newton or NewtonOptions(), options
         )
-        return self.family.solve(self, options)
+        out.solution.newton = out.result
+        return out.solution

@@ -31,7 +31,6 @@ between FE and particles exactly as :class:`~dolfinx_meshfree.CoupledLinearProbl
 
 from __future__ import annotations
 
-import time
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -42,21 +41,20 @@ from petsc4py import PETSc
 from ufl.algorithms import expand_derivatives
 
 from .. import _compat
-from ..couplings import REGISTRY
 from ..couplings.base import fe_dof_layout
 from ..geometry.patch import ParticlePatch
 from ..parallel import raise_on_all_ranks
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic, linear_twin
 from .coupled import CoupledElasticity, CoupledSolution
+from .coupled_newton import FINITE_STRAIN_COUPLINGS, check_load_steps, solve_finite_strain
 from .newton import NewtonOptions
-from .petsc import create_vector, solver_options
+from .petsc import solver_options
 from .problem import CoupledLinearProblem
 from .sides import (
     BlockProblem,
     FESide,
     NonlinearSolveResult,
-    ParticleSide,
     cell_part,
     solve_load_steps,
     split_residual,
@@ -68,15 +66,6 @@ __all__ = [
     "CoupledNonlinearProblem",
     "FENonlinearProblem",
 ]
-
-#: Couplings available at finite strain: those whose family assembles its block system apart
-#: from solving it (``system``); the others refuse with a clear error.
-FINITE_STRAIN_COUPLINGS = tuple(name for name, cls in REGISTRY.items() if hasattr(cls, "system"))
-
-
-def _check_steps(load_steps: int) -> None:
-    if not (isinstance(load_steps, int | np.integer) and load_steps >= 1):
-        raise ValueError(f"load_steps={load_steps!r} must be an integer >= 1")
 
 
 def _check_residual(F: ufl.Form, u: dolfinx.fem.Function) -> dolfinx.fem.FunctionSpace:
@@ -122,7 +111,7 @@ class FENonlinearProblem:
     ):
         comm = u.function_space.mesh.comm
         V = raise_on_all_ranks(comm, lambda: _check_residual(F, u))
-        raise_on_all_ranks(comm, lambda: _check_steps(load_steps))
+        raise_on_all_ranks(comm, lambda: check_load_steps(load_steps))
         self._solver = raise_on_all_ranks(
             comm, lambda: solver_options("mumps", petsc_options, petsc_options_prefix)
         )
@@ -145,10 +134,10 @@ class FENonlinearProblem:
         self.side = FESide(F_int, u, None, np.zeros(n_local, dtype=bool))
         # held dofs by component (a bc may fix one component of a node)
         l2g = fe_dof_layout(V)[1]
-        d = self._bc_dofs[self._bc_dofs < 2 * V.dofmap.index_map.size_local]
+        d = self._bc_dofs[self._bc_dofs < V.dofmap.index_map_bs * V.dofmap.index_map.size_local]
         self.side.hold(d, values[d], l2g)
         v = F.arguments()[0]
-        zero = dolfinx.fem.Constant(V.mesh, np.zeros(2))
+        zero = dolfinx.fem.Constant(V.mesh, np.zeros(V.mesh.geometry.dim))
         self._load = _compat.create_form(L if L is not None else ufl.inner(zero, v) * ufl.dx)
 
     def solve(self) -> NonlinearSolveResult:
@@ -221,7 +210,7 @@ class CoupledNonlinearProblem:
 
         def check() -> LinearElastic:
             _check_residual(F, u)
-            _check_steps(load_steps)
+            check_load_steps(load_steps)
             if coupling not in FINITE_STRAIN_COUPLINGS:
                 raise ValueError(
                     f"coupling={coupling!r} is not available at finite strain in this release "
@@ -231,12 +220,6 @@ class CoupledNonlinearProblem:
             if not isinstance(material, Material):
                 raise TypeError(
                     f"material must follow the Material protocol, got {type(material).__name__}"
-                )
-            if material.plane is None:
-                raise ValueError(
-                    f"{type(material).__name__}(plane=None) is a 3D law; the coupled "
-                    "finite-strain problems are 2D in this release: use plane='strain' or "
-                    "'stress'"
                 )
             return linear_twin(material)
 
@@ -248,7 +231,12 @@ class CoupledNonlinearProblem:
         F_int, L0 = split_residual(F, u)
         a0 = ufl.replace(expand_derivatives(ufl.derivative(cell_part(F_int), u, du)), {u: zero})
         if L0 is None:
-            L0 = ufl.inner(dolfinx.fem.Constant(V.mesh, np.zeros(2)), F.arguments()[0]) * ufl.dx
+            L0 = (
+                ufl.inner(
+                    dolfinx.fem.Constant(V.mesh, np.zeros(V.mesh.geometry.dim)), F.arguments()[0]
+                )
+                * ufl.dx
+            )
         self._linear = CoupledLinearProblem(
             a0, L0, bcs, patch, small, coupling, petsc_options, petsc_options_prefix, **options
         )
@@ -271,58 +259,11 @@ class CoupledNonlinearProblem:
         :class:`~dolfinx_meshfree.statics.newton.NewtonError` (with the residual history) when a
         step
         does not converge: the last iterate is not returned as a solution."""
-        model = self.model
-        P = model.patch.particles
-        t0 = time.perf_counter()
-        tables: dict = {}
-        blocks, rhs, mats, extra = model.family.system(model, tables)
-        b_fe, f_p = extra["loads"]  # the external load, not lifted
-        comm = model.patch.comm
-        pl = P.dof_layout()
-        f_p = create_vector(comm, pl, P.petsc_dofs(2).ravel(), f_p)
-        loads = [b_fe, f_p, *rhs[2:]]
-        fe = FESide(self.F_int, self.u, extra["fe_cells"], extra["fixed"], extra["fe_weight"])
-        particles = ParticleSide(P, tables, self.material)
-        constant = [list(row) for row in blocks]
-        constant[0][0], constant[1][1] = extra["constant_diagonal"]
-        names = ["fe", "particles"] + [f"multiplier{i}" for i in range(len(blocks) - 2)]
-        # sides over several fields (the ramps' blended cells, master-slave's rotating links)
-        # and the linear blocks they replace
-        shared = (
-            extra["shared_sides"](fe, particles, self.material) if "shared_sides" in extra else []
-        )
-        for i, j in extra.get("state_blocks", ()):
-            constant[i][j] = None
-        problem = BlockProblem(names, 2, [fe, particles], constant, loads, shared=shared)
-        x = []
-        for i, load in enumerate(loads):  # the previous solve's state, or u and zeros
-            v = load.duplicate()
-            v.set(0.0)
-            if self._state is not None and self._state[i].size == load.getLocalSize():
-                v.array[:] = self._state[i]
-            x.append(v)
-        # held FE dofs: the strong values on Dirichlet nodes, 0 on nodes no FE cell carries
-        fe.fixed_values = extra["fixed_values"][fe.fixed_local]
-        x[0].array[:] = self.u.x.array[: fe.n_owned]
-        setup = time.perf_counter() - t0
-        try:
-            result = solve_load_steps(problem, x, self.load_steps, self.newton, self._solver)
-        finally:
-            problem.destroy()
-        fe.set_state(x[0])
-        self._state = [v.getArray(readonly=True).copy() for v in x]
-        coeffs = particles.coefficients(x[1]).reshape(-1, 2)
-        self.solution = CoupledSolution(
-            u=self.u,
-            coefficients=coeffs,
-            mls=model.mls,
-            patch=model.patch,
-            timings={"setup": setup, "newton": time.perf_counter() - t0 - setup},
-            interface=extra.get("interface"),
-        )
-        if "links" in extra:  # master-slave: the slaves' links, as the linear solution has
-            self.solution.links = extra["links"]
-        for obj in [*mats, extra["x_bc"], *rhs, f_p, *x]:
-            obj.destroy()
-        self.result = result
-        return result
+        out = solve_finite_strain(
+            self.model, self.F_int, self.u, self.material, self.load_steps, self.newton,
+            self._solver, self._state,
+        )  # fmt: skip
+        self.solution, self._state = out.solution, out.state
+        self.solution.newton = out.result
+        self.result = out.result
+        return out.result

@@ -161,12 +161,13 @@ class FESide:
         self.layout, l2g = fe_dof_layout(V)
         self.l2g = l2g
         n_owned = V.dofmap.index_map.size_local
+        self.bs = bs = V.mesh.geometry.dim  # dofs per node: the vector space's block size
         nodes = np.flatnonzero(fixed[:n_owned])
-        self.fixed_rows = (2 * l2g[nodes][:, None] + np.arange(2)).ravel().astype(PETSc.IntType)
-        self.fixed_local = (2 * nodes[:, None] + np.arange(2)).ravel()
+        self.fixed_rows = (bs * l2g[nodes][:, None] + np.arange(bs)).ravel().astype(PETSc.IntType)
+        self.fixed_local = (bs * nodes[:, None] + np.arange(bs)).ravel()
         #: Prescribed values of the fixed dofs (full load), set by the problem.
         self.fixed_values = np.zeros(self.fixed_local.size)
-        self.n_owned = 2 * n_owned
+        self.n_owned = bs * n_owned
 
     def held_everywhere(self) -> np.ndarray:
         """The held rows (global FE dofs) of every rank (collective)."""
@@ -176,7 +177,7 @@ class FESide:
     def hold(self, dofs: np.ndarray, values: np.ndarray, l2g: np.ndarray) -> None:
         """Fix owned local dofs (not nodes) to ``values`` (at full load)."""
         d = np.asarray(dofs, dtype=np.int64)
-        self.fixed_rows = (2 * l2g[d // 2] + d % 2).astype(PETSc.IntType)
+        self.fixed_rows = (self.bs * l2g[d // self.bs] + d % self.bs).astype(PETSc.IntType)
         self.fixed_local = d
         self.fixed_values = np.asarray(values, dtype=float)
 

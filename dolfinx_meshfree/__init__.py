@@ -33,6 +33,9 @@ from .approx.sph import SPH
 from .approx.tables import Approximation, ShapeTable, StaleTableError
 from .couplings.hybrid import HYBRID_VARIANTS, HybridElasticity
 from .dynamics import DYNAMICS_METHODS, DynamicsResult, EnergyRecord, ExplicitDynamics
+from .fracture.criteria import equivalent_sif, kink_angle
+from .fracture.interaction import StressIntensityFactors, interaction_integral
+from .fracture.williams import WilliamsField
 from .geometry.particles import ParticleSet
 from .geometry.patch import PLACEMENTS, ParticlePatch
 from .geometry.quadrature import boundary_facets, cell_quadrature, facet_quadrature
@@ -48,6 +51,7 @@ from .statics.nonlinear import FINITE_STRAIN_COUPLINGS, CoupledNonlinearProblem,
 from .statics.problem import CoupledLinearProblem
 from .statics.sides import NonlinearSolveResult
 from .verification.analytic import LinearField, PressurizedBushing, TimoshenkoBeam
+from .verification.crack_fields import InclinedCentreCrack, edge_crack_factor
 from .verification.errors import error_norms
 from .verification.waves import GaussianPulseRod, StepLoadedRod
 
@@ -76,6 +80,7 @@ __all__ = [
     "FESolution",
     "GaussianPulseRod",
     "HybridElasticity",
+    "InclinedCentreCrack",
     "InternalForces",
     "LinearElastic",
     "LinearField",
@@ -95,15 +100,21 @@ __all__ = [
     "ShapeTable",
     "StaleTableError",
     "StepLoadedRod",
+    "StressIntensityFactors",
     "TimoshenkoBeam",
+    "WilliamsField",
     "boundary_facets",
     "cell_quadrature",
     "cubic_spline",
+    "edge_crack_factor",
     "ensure_points_in_mesh",
+    "equivalent_sif",
     "error_norms",
     "evaluate_fe_function",
     "facet_quadrature",
     "gaussian",
+    "interaction_integral",
+    "kink_angle",
     "quartic",
     "read_particles",
     "solve_fe_elasticity",

@@ -286,7 +286,12 @@ def test_centre_crack_interaction_integral(alpha, plane):
     nI, nII = c.normalized
     for tip, direction in zip(c.tips, c.tip_directions, strict=True):
         res = interaction_integral(
-            c.displacement_gradient, c.material, tip, direction, np.array([0.1, 0.5, 1.5]) * c.a
+            c.displacement_gradient,
+            c.material,
+            tip,
+            direction,
+            np.array([0.1, 0.5, 1.5]) * c.a,
+            keep_outside=c.tips[np.linalg.norm(c.tips - tip, axis=1) > 0],
         )
         assert np.abs(res.K_I / ref - nI).max() < 1e-6
         assert np.abs(res.K_II / ref - nII).max() < 1e-6
@@ -383,6 +388,7 @@ def test_growth_decision_and_direction():
         ({"weight": "cubic"}, "weight='cubic'"),
         ({"points": (0, 8)}, "points="),
         ({"material": mf.LinearElastic(1.0, 0.3, plane=None)}, "plane=None"),
+        ({"keep_outside": [[5.0, 5.0], [0.9, 0.1]]}, r"contains \(0\.9, 0\.1\)"),
         ({"grad_u": lambda x: np.zeros((len(x), 2))}, r"shape \(\d+, 2, 2\)"),
         ({"grad_u": lambda x: np.full((len(x), 2, 2), np.nan)}, "non-finite"),
     ],

@@ -153,6 +153,7 @@ def interaction_integral(
     inner: float = 0.5,
     weight: str = "linear",
     points: tuple[int, int] = (8, 32),
+    keep_outside: np.ndarray | None = None,
 ) -> StressIntensityFactors:
     """K_I, K_II and J at a crack tip by the domain interaction integral (module docstring).
 
@@ -169,6 +170,9 @@ def interaction_integral(
             is least accurate, has ``grad q = 0`` and is not sampled).
         weight: ``q`` across the annulus, one of :data:`Q_WEIGHTS`.
         points: Gauss points (in r, in theta) per annulus.
+        keep_outside: (k, 2) points no domain may contain (``r <= r2``): the crack's other tip,
+            its kinks, the corners of the region where the field is valid. A ValueError names
+            the first one inside.
 
     Returns:
         :class:`StressIntensityFactors`, one entry per domain (path independence report).
@@ -181,6 +185,16 @@ def interaction_integral(
     if len(points) != 2 or min(points) < 1 or any(int(p) != p for p in points):
         raise ValueError(f"points={points!r} must be two positive integers (n_r, n_theta)")
 
+    if keep_outside is not None:
+        pts = np.asarray(keep_outside, dtype=float).reshape(-1, 2)
+        dist = np.linalg.norm(pts - frame.tip, axis=1)
+        inside = dist <= r2s.max()
+        if np.any(inside):
+            k = int(np.argmax(inside))
+            raise ValueError(
+                f"the domain of radius {r2s.max()} about the tip {tuple(frame.tip)} contains "
+                f"{tuple(pts[k])} (at distance {dist[k]:.6g}); use a radius below {dist.min():.6g}"
+            )
     rules = [annulus_quadrature(a, b, points) for a, b in zip(r1s, r2s, strict=True)]
     x_local = np.concatenate([x for x, _, _ in rules])
     H_global = np.asarray(grad_u(frame.to_global(x_local)), dtype=float)

@@ -388,7 +388,7 @@ def test_growth_decision_and_direction():
         ({"weight": "cubic"}, "weight='cubic'"),
         ({"points": (0, 8)}, "points="),
         ({"material": mf.LinearElastic(1.0, 0.3, plane=None)}, "plane=None"),
-        ({"keep_outside": [[5.0, 5.0], [0.9, 0.1]]}, r"contains \(0\.9, 0\.1\)"),
+        ({"keep_outside": [[5.0, 5.0], [0.9, 0.1]]}, r"contains \[0\.9, 0\.1\]"),
         ({"grad_u": lambda x: np.zeros((len(x), 2))}, r"shape \(\d+, 2, 2\)"),
         ({"grad_u": lambda x: np.full((len(x), 2, 2), np.nan)}, "non-finite"),
     ],

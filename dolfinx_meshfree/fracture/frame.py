@@ -37,7 +37,7 @@ class TipFrame:
         n = float(np.hypot(*d))
         if not n > 1e-14 * max(1.0, float(np.abs(tip).max())):
             raise ValueError(
-                f"direction={self.direction!r} at tip {tuple(tip)} has zero length; pass the "
+                f"direction={self.direction!r} at tip {tip.tolist()} has zero length; pass the "
                 f"unit tangent of the crack pointing ahead of the tip"
             )
         object.__setattr__(self, "tip", tip)

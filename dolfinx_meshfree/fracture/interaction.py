@@ -192,8 +192,9 @@ def interaction_integral(
         if np.any(inside):
             k = int(np.argmax(inside))
             raise ValueError(
-                f"the domain of radius {r2s.max()} about the tip {tuple(frame.tip)} contains "
-                f"{tuple(pts[k])} (at distance {dist[k]:.6g}); use a radius below {dist.min():.6g}"
+                f"the domain of radius {float(r2s.max())} about the tip {frame.tip.tolist()} "
+                f"contains {pts[k].tolist()} (at distance {dist[k]:.6g}); use a radius below "
+                f"{dist.min():.6g}"
             )
     rules = [annulus_quadrature(a, b, points) for a, b in zip(r1s, r2s, strict=True)]
     x_local = np.concatenate([x for x, _, _ in rules])
@@ -204,8 +205,8 @@ def interaction_integral(
         )
     if not np.all(np.isfinite(H_global)):
         raise ValueError(
-            f"grad_u returned non-finite values in the domain r <= {r2s.max()} about the tip "
-            f"{tuple(frame.tip)}"
+            f"grad_u returned non-finite values in the domain r <= {float(r2s.max())} about the "
+            f"tip {frame.tip.tolist()}"
         )
     H = frame.tensors_to_local(H_global)
     sigma = material.stress(H)  # small strain, linear elastic

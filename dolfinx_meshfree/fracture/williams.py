@@ -68,7 +68,7 @@ class WilliamsField:
         x = frame.to_local(np.asarray(points, dtype=float).reshape(-1, 2))
         z = x[:, 0] + 1j * x[:, 1]
         if np.any(z == 0):
-            raise ValueError(f"the Williams field is singular at the tip {tuple(frame.tip)}")
+            raise ValueError(f"the Williams field is singular at the tip {frame.tip.tolist()}")
         root = np.sqrt(z)  # branch cut along the crack, theta = +-pi
         phi, dphi, d2phi = (np.zeros_like(z) for _ in range(3))
         psi, dpsi = np.zeros_like(z), np.zeros_like(z)

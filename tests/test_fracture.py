@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree.fracture.criteria import (
+    advance,
     equivalent_sif,
     grows,
     hoop_stress_factor,
@@ -368,6 +369,11 @@ def test_growth_decision_and_direction():
     np.testing.assert_array_equal(grows([1.0, 2.0, 3.0], 0.0, K_Ic), [False, True, True])
     d = kinked_direction(np.array([0.0, 2.0]), np.radians(-90.0))
     np.testing.assert_allclose(d, [1.0, 0.0], atol=1e-15)
+    # pure mode II, crack pointing along +y: it turns clockwise by 70.53 deg (towards +x)
+    tip, d, theta = advance((1.0, 2.0), (0.0, 3.0), 0.0, 1.0, 0.1)
+    np.testing.assert_allclose(d, [2 * np.sqrt(2) / 3, 1 / 3], atol=1e-15)
+    np.testing.assert_allclose(tip, [1.0 + 0.1 * 2 * np.sqrt(2) / 3, 2.0 + 0.1 / 3], atol=1e-15)
+    assert theta == pytest.approx(-2 * np.arctan(1 / np.sqrt(2)), abs=1e-15)
 
 
 # --- bad input ----------------------------------------------------------------------------------
@@ -423,3 +429,5 @@ def test_bad_input_fields_and_criteria():
         kink_angle(np.inf, 1.0)
     with pytest.raises(ValueError, match="nonzero 2-vector"):
         kinked_direction(np.zeros(2), 0.1)
+    with pytest.raises(ValueError, match="increment=0"):
+        advance((0, 0), (1, 0), 1.0, 0.0, 0)

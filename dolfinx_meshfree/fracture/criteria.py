@@ -23,7 +23,14 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["equivalent_sif", "grows", "hoop_stress_factor", "kink_angle", "kinked_direction"]
+__all__ = [
+    "advance",
+    "equivalent_sif",
+    "grows",
+    "hoop_stress_factor",
+    "kink_angle",
+    "kinked_direction",
+]
 
 
 def _pair(K_I: float | np.ndarray, K_II: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -81,3 +88,22 @@ def kinked_direction(direction: np.ndarray, theta: float) -> np.ndarray:
         raise ValueError(f"direction={direction!r} must be a nonzero 2-vector")
     c, s = np.cos(theta), np.sin(theta)
     return np.array([c * d[0] - s * d[1], s * d[0] + c * d[1]]) / n
+
+
+def advance(
+    tip: np.ndarray, direction: np.ndarray, K_I: float, K_II: float, increment: float
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """One growth step: kink by ``theta_c`` at the tip, then a straight segment of length
+    ``increment`` (``da``).
+
+    Returns:
+        The new tip (2,), the new unit direction (2,) and ``theta_c`` (radians).
+    """
+    if not (np.isfinite(increment) and increment > 0):
+        raise ValueError(f"increment={increment} must be a positive crack extension da")
+    tip = np.asarray(tip, dtype=float)
+    if tip.shape != (2,) or not np.all(np.isfinite(tip)):
+        raise ValueError(f"tip should be two finite coordinates (x, y), got {tip.tolist()}")
+    theta = float(kink_angle(K_I, K_II))
+    d = kinked_direction(direction, theta)
+    return tip + increment * d, d, theta

@@ -169,7 +169,10 @@ def interaction_integral(
         inner: r1/r2 when only r2 is given (default 0.5: the tip region, where a numerical field
             is least accurate, has ``grad q = 0`` and is not sampled).
         weight: ``q`` across the annulus, one of :data:`Q_WEIGHTS`.
-        points: Gauss points (in r, in theta) per annulus.
+        points: Gauss points (in r, in theta) per annulus. Exact fields converge
+            exponentially (1e-10 at the default); a finite element field, whose gradient jumps
+            between elements, wants a few points per element across the annulus (P2 edge crack
+            with 32 x 32 graded cells: the rule moves K by ~0.1 %, by 0.02 % with 128 x 128).
         keep_outside: (k, 2) points no domain may contain (``r <= r2``): the crack's other tip,
             its kinks, the corners of the region where the field is valid. A ValueError names
             the first one inside.

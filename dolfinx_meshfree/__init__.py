@@ -12,6 +12,10 @@ Public API (stable names):
 * finite deformation: the :class:`Material` protocol (nominal stress ``P(F)``, its tangent, ``W``,
   a UFL twin, the wave speed), :class:`SaintVenantKirchhoff`, :class:`NeoHookean`, and
   :class:`InternalForces` (``f_int(u)``, ``K_T(u)`` from shape tables);
+* fracture on any 2D field given by its gradient: :func:`interaction_integral` (K_I, K_II, J
+  per domain radius), the near-tip :class:`WilliamsField`, :func:`kink_angle` and
+  :func:`equivalent_sif` (maximum hoop stress); exact references :class:`InclinedCentreCrack`
+  and :func:`edge_crack_factor`;
 * output of explicit dynamics: :class:`DynamicsWriter` (XDMF of the FE fields and the particle
   cloud over time), :func:`read_particles`, :class:`ProgressBar`.
 

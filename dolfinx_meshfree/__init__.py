@@ -12,6 +12,10 @@ Public API (stable names):
 * finite deformation: the :class:`Material` protocol (nominal stress ``P(F)``, its tangent, ``W``,
   a UFL twin, the wave speed), :class:`SaintVenantKirchhoff`, :class:`NeoHookean`, and
   :class:`InternalForces` (``f_int(u)``, ``K_T(u)`` from shape tables);
+* fracture on any 2D field given by its gradient: :func:`interaction_integral` (K_I, K_II, J
+  per domain radius), the near-tip :class:`WilliamsField`, :func:`kink_angle` and
+  :func:`equivalent_sif` (maximum hoop stress); exact references :class:`InclinedCentreCrack`
+  and :func:`edge_crack_factor`;
 * output of explicit dynamics: :class:`DynamicsWriter` (XDMF of the FE fields and the particle
   cloud over time), :func:`read_particles`, :class:`ProgressBar`.
 
@@ -33,6 +37,9 @@ from .approx.sph import SPH
 from .approx.tables import Approximation, ShapeTable, StaleTableError
 from .couplings.hybrid import HYBRID_VARIANTS, HybridElasticity
 from .dynamics import DYNAMICS_METHODS, DynamicsResult, EnergyRecord, ExplicitDynamics
+from .fracture.criteria import equivalent_sif, kink_angle
+from .fracture.interaction import StressIntensityFactors, interaction_integral
+from .fracture.williams import WilliamsField
 from .geometry.particles import ParticleSet
 from .geometry.patch import PLACEMENTS, ParticlePatch
 from .geometry.quadrature import boundary_facets, cell_quadrature, facet_quadrature
@@ -48,6 +55,7 @@ from .statics.nonlinear import FINITE_STRAIN_COUPLINGS, CoupledNonlinearProblem,
 from .statics.problem import CoupledLinearProblem
 from .statics.sides import NonlinearSolveResult
 from .verification.analytic import LinearField, PressurizedBushing, TimoshenkoBeam
+from .verification.crack_fields import InclinedCentreCrack, edge_crack_factor
 from .verification.errors import error_norms
 from .verification.waves import GaussianPulseRod, StepLoadedRod
 
@@ -76,6 +84,7 @@ __all__ = [
     "FESolution",
     "GaussianPulseRod",
     "HybridElasticity",
+    "InclinedCentreCrack",
     "InternalForces",
     "LinearElastic",
     "LinearField",
@@ -95,15 +104,21 @@ __all__ = [
     "ShapeTable",
     "StaleTableError",
     "StepLoadedRod",
+    "StressIntensityFactors",
     "TimoshenkoBeam",
+    "WilliamsField",
     "boundary_facets",
     "cell_quadrature",
     "cubic_spline",
+    "edge_crack_factor",
     "ensure_points_in_mesh",
+    "equivalent_sif",
     "error_norms",
     "evaluate_fe_function",
     "facet_quadrature",
     "gaussian",
+    "interaction_integral",
+    "kink_angle",
     "quartic",
     "read_particles",
     "solve_fe_elasticity",

@@ -1,0 +1,247 @@
+"""Stress intensity factors by the domain form of the interaction integral (Yau, Wang & Corten
+1980; Moran & Shih 1987), on any displacement field given by its gradient at points.
+
+In the tip frame (``x1`` along the crack's extension, :class:`~.frame.TipFrame`),
+
+.. math::
+    I = \\int_A \\left[\\sigma_{ij}\\,u^{aux}_{i,1} + \\sigma^{aux}_{ij}\\,u_{i,1}
+        - \\sigma_{ik}\\,\\varepsilon^{aux}_{ik}\\,\\delta_{1j}\\right] q_{,j}\\, dA
+      = \\frac{2}{E'}\\left(K_I K_I^{aux} + K_{II} K_{II}^{aux}\\right),
+
+so that ``K_I = E' I(mode I aux) / 2`` and ``K_II = E' I(mode II aux) / 2`` with the unit
+Williams fields as auxiliary fields (:class:`~.williams.WilliamsField`), and the J-integral
+``J = int_A [sigma_ij u_i,1 - W delta_1j] q_,j dA`` from the same points (``= (K_I^2 + K_II^2)/E'``
+for a field that satisfies the assumptions). ``E' = E`` (plane stress), ``E/(1 - nu^2)`` (plane
+strain).
+
+The domain is an annulus ``r1 <= r <= r2`` about the tip with ``q = 1`` inside ``r1`` and
+``q = 0`` outside ``r2`` (only the annulus contributes: ``grad q = 0`` elsewhere), integrated by a
+tensor-product Gauss–Legendre rule in ``(r, theta)``, ``theta`` in ``(-pi, pi)`` from the crack's
+extension, so that no point lies on the crack behind the tip. Independent of any mesh.
+
+Assumptions (the domain form is exact under them): small strain and the linear elastic law of
+``material`` (the stress is computed from the displacement gradient); no body force in the
+domain; traction-free crack faces; the crack straight inside ``r2`` (faces at ``theta = +-pi``;
+a crack that kinks inside the domain, another tip or a boundary within ``r2`` is the caller's to
+avoid); the field's gradient evaluated on the correct side of the crack near ``theta = +-pi``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..physics.materials import LinearElastic
+from .frame import TipFrame
+from .kolosov import effective_modulus
+from .williams import WilliamsField
+
+__all__ = ["Q_WEIGHTS", "StressIntensityFactors", "annulus_quadrature", "interaction_integral"]
+
+#: The weight function ``q(r)`` across the annulus: ``"linear"`` (the plateau of Moran & Shih
+#: 1987: ``q = (r2 - r) / (r2 - r1)``) or ``"smooth"`` (``q = 1 - 3 s^2 + 2 s^3``,
+#: ``s = (r - r1)/(r2 - r1)``, continuous gradient).
+Q_WEIGHTS = ("linear", "smooth")
+
+GradientFunction = Callable[[np.ndarray], np.ndarray]
+
+
+@dataclass(frozen=True)
+class StressIntensityFactors:
+    """K_I, K_II and J per integration domain (one entry per annulus ``inner[k] .. outer[k]``).
+
+    ``path_dependence`` is the largest spread ``max - min`` of K_I or K_II over the domains,
+    relative to ``sqrt(K_I^2 + K_II^2)`` of their mean (0 for a single domain).
+    """
+
+    inner: np.ndarray
+    outer: np.ndarray
+    K_I: np.ndarray
+    K_II: np.ndarray
+    J: np.ndarray
+    E_prime: float
+    tip: np.ndarray
+    direction: np.ndarray
+
+    @property
+    def path_dependence(self) -> float:
+        scale = float(np.hypot(self.K_I.mean(), self.K_II.mean()))
+        spread = max(np.ptp(self.K_I), np.ptp(self.K_II))
+        return float(spread / scale) if scale > 0 else float(spread)
+
+    def as_dict(self) -> dict:
+        """Plain lists and floats (for JSON)."""
+        return {
+            "tip": self.tip.tolist(),
+            "direction": self.direction.tolist(),
+            "inner_radius": self.inner.tolist(),
+            "outer_radius": self.outer.tolist(),
+            "KI": self.K_I.tolist(),
+            "KII": self.K_II.tolist(),
+            "J": self.J.tolist(),
+            "E_prime": self.E_prime,
+            "path_dependence": self.path_dependence,
+        }
+
+
+def _radii(radius: float | Sequence | np.ndarray, inner: float) -> tuple[np.ndarray, np.ndarray]:
+    if not (np.isfinite(inner) and 0.0 <= inner < 1.0):
+        raise ValueError(f"inner={inner} must be the ratio r1/r2 in [0, 1)")
+    r = np.asarray(radius, dtype=float)
+    if r.ndim <= 1:
+        r2 = np.atleast_1d(r)
+        r1 = inner * r2
+    elif r.ndim == 2 and r.shape[1] == 2:
+        r1, r2 = r[:, 0], r[:, 1]
+    else:
+        raise ValueError(
+            f"radius should be an outer radius, a list of them, or (k, 2) pairs (r1, r2); "
+            f"got shape {r.shape}"
+        )
+    if r2.size == 0:
+        raise ValueError("radius is empty: give at least one domain radius")
+    bad = ~(np.isfinite(r2) & (r2 > 0))
+    if np.any(bad):
+        raise ValueError(f"radius={r2[bad].tolist()}: a domain radius must be positive and finite")
+    bad = ~(np.isfinite(r1) & (r1 >= 0) & (r1 < r2))
+    if np.any(bad):
+        raise ValueError(
+            f"inner radius r1={r1[bad].tolist()} against outer r2={r2[bad].tolist()}: "
+            f"need 0 <= r1 < r2"
+        )
+    return r1, r2
+
+
+def annulus_quadrature(
+    r1: float, r2: float, points: tuple[int, int] = (8, 32)
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Gauss–Legendre rule on the annulus ``r1 < r < r2``, ``-pi < theta < pi`` (tip frame).
+
+    Returns:
+        Local points (n, 2), weights (n,) (including the Jacobian ``r``), and radii r (n,).
+    """
+    nr, nt = points
+    s, ws = np.polynomial.legendre.leggauss(nr)
+    t, wt = np.polynomial.legendre.leggauss(nt)
+    r = r1 + 0.5 * (r2 - r1) * (s + 1.0)
+    th = np.pi * t
+    R, TH = np.meshgrid(r, th, indexing="ij")
+    W = np.outer(0.5 * (r2 - r1) * ws, np.pi * wt) * R
+    R, TH, W = R.ravel(), TH.ravel(), W.ravel()
+    return np.stack([R * np.cos(TH), R * np.sin(TH)], axis=1), W, R
+
+
+def _q_gradient(x: np.ndarray, r: np.ndarray, r1: float, r2: float, weight: str) -> np.ndarray:
+    """grad q (n, 2) in the tip frame."""
+    if weight == "linear":
+        dq = np.full_like(r, -1.0 / (r2 - r1))
+    else:
+        s = (r - r1) / (r2 - r1)
+        dq = 6.0 * s * (s - 1.0) / (r2 - r1)
+    return (dq / r)[:, None] * x
+
+
+def interaction_integral(
+    grad_u: GradientFunction,
+    material: LinearElastic,
+    tip: Sequence[float] | np.ndarray,
+    direction: Sequence[float] | np.ndarray,
+    radius: float | Sequence | np.ndarray,
+    *,
+    inner: float = 0.5,
+    weight: str = "linear",
+    points: tuple[int, int] = (8, 32),
+    keep_outside: np.ndarray | None = None,
+) -> StressIntensityFactors:
+    """K_I, K_II and J at a crack tip by the domain interaction integral (module docstring).
+
+    Args:
+        grad_u: ``grad_u(x)`` -> (m, 2, 2), ``[:, i, j] = du_i/dx_j``, at global points x (m, 2).
+            Called once, with all the domains' points. Collective exactly when ``grad_u`` is:
+            every rank gets the same result when ``grad_u`` returns the same values on every
+            rank (e.g. replicated particle coefficients).
+        material: the 2D linear elastic law of the field (plane stress or strain).
+        tip: (2,) tip position. direction: (2,) crack tangent pointing ahead of the tip.
+        radius: outer radius r2 of the domain, or several (one result per radius), each with
+            ``r1 = inner * r2``; or (k, 2) pairs ``(r1, r2)``.
+        inner: r1/r2 when only r2 is given (default 0.5: the tip region, where a numerical field
+            is least accurate, has ``grad q = 0`` and is not sampled).
+        weight: ``q`` across the annulus, one of :data:`Q_WEIGHTS`.
+        points: Gauss points (in r, in theta) per annulus. Exact fields converge
+            exponentially (1e-10 at the default); a finite element field, whose gradient jumps
+            between elements, wants a few points per element across the annulus (P2 edge crack
+            with 32 x 32 graded cells: the rule moves K by ~0.1 %, by 0.02 % with 128 x 128).
+        keep_outside: (k, 2) points no domain may contain (``r <= r2``): the crack's other tip,
+            its kinks, the corners of the region where the field is valid. A ValueError names
+            the first one inside.
+
+    Returns:
+        :class:`StressIntensityFactors`, one entry per domain (path independence report).
+    """
+    frame = TipFrame(np.asarray(tip), np.asarray(direction))
+    E_prime = effective_modulus(material)
+    r1s, r2s = _radii(radius, inner)
+    if weight not in Q_WEIGHTS:
+        raise ValueError(f"weight={weight!r} must be one of {Q_WEIGHTS}")
+    if len(points) != 2 or min(points) < 1 or any(int(p) != p for p in points):
+        raise ValueError(f"points={points!r} must be two positive integers (n_r, n_theta)")
+
+    if keep_outside is not None:
+        pts = np.asarray(keep_outside, dtype=float).reshape(-1, 2)
+        dist = np.linalg.norm(pts - frame.tip, axis=1)
+        inside = dist <= r2s.max()
+        if np.any(inside):
+            k = int(np.argmax(inside))
+            raise ValueError(
+                f"the domain of radius {float(r2s.max())} about the tip {frame.tip.tolist()} "
+                f"contains {pts[k].tolist()} (at distance {dist[k]:.6g}); use a radius below "
+                f"{dist.min():.6g}"
+            )
+    rules = [annulus_quadrature(a, b, points) for a, b in zip(r1s, r2s, strict=True)]
+    x_local = np.concatenate([x for x, _, _ in rules])
+    H_global = np.asarray(grad_u(frame.to_global(x_local)), dtype=float)
+    if H_global.shape != (len(x_local), 2, 2):
+        raise ValueError(
+            f"grad_u must return an array of shape ({len(x_local)}, 2, 2), got {H_global.shape}"
+        )
+    if not np.all(np.isfinite(H_global)):
+        raise ValueError(
+            f"grad_u returned non-finite values in the domain r <= {float(r2s.max())} about the "
+            f"tip {frame.tip.tolist()}"
+        )
+    H = frame.tensors_to_local(H_global)
+    sigma = material.stress(H)  # small strain, linear elastic
+    eps = 0.5 * (H + np.swapaxes(H, 1, 2))
+    aux = [WilliamsField(material, *k).fields(x_local) for k in ((1.0, 0.0), (0.0, 1.0))]
+
+    KI, KII, J = (np.empty(len(rules)) for _ in range(3))
+    start = 0
+    for k, (x, w, r) in enumerate(rules):
+        sl = slice(start, start + len(w))
+        start += len(w)
+        dq = _q_gradient(x, r, r1s[k], r2s[k], weight)
+        s, h, e = sigma[sl], H[sl], eps[sl]
+        # J: (sigma_ij u_i,1 - W delta_1j) q_,j
+        flux = np.einsum("qij,qi->qj", s, h[:, :, 0])
+        flux[:, 0] -= 0.5 * np.einsum("qij,qij->q", s, e)
+        J[k] = np.sum(w * np.einsum("qj,qj->q", flux, dq))
+        for out, (_, h_aux, s_aux) in zip((KI, KII), aux, strict=True):
+            h_a, s_a = h_aux[sl], s_aux[sl]
+            e_a = 0.5 * (h_a + np.swapaxes(h_a, 1, 2))
+            flux = np.einsum("qij,qi->qj", s, h_a[:, :, 0]) + np.einsum(
+                "qij,qi->qj", s_a, h[:, :, 0]
+            )
+            flux[:, 0] -= np.einsum("qik,qik->q", s, e_a)
+            out[k] = 0.5 * E_prime * np.sum(w * np.einsum("qj,qj->q", flux, dq))
+    return StressIntensityFactors(
+        inner=r1s,
+        outer=r2s,
+        K_I=KI,
+        K_II=KII,
+        J=J,
+        E_prime=E_prime,
+        tip=frame.tip,
+        direction=frame.direction,
+    )

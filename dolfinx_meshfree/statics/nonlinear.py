@@ -118,8 +118,9 @@ class FENonlinearProblem:
         self.F, self.u, self.bcs, self.V = F, u, list(bcs), V
         self.load_steps, self.newton = int(load_steps), newton or NewtonOptions()
         n_local = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
-        count = np.zeros(2 * n_local, dtype=int)
-        values = np.zeros(2 * n_local)
+        bs = V.dofmap.index_map_bs
+        count = np.zeros(bs * n_local, dtype=int)
+        values = np.zeros(bs * n_local)
         for bc in self.bcs:
             dofs, vals = _compat.dirichlet_values(bc)
             count[dofs] += 1
@@ -134,7 +135,7 @@ class FENonlinearProblem:
         self.side = FESide(F_int, u, None, np.zeros(n_local, dtype=bool))
         # held dofs by component (a bc may fix one component of a node)
         l2g = fe_dof_layout(V)[1]
-        d = self._bc_dofs[self._bc_dofs < V.dofmap.index_map_bs * V.dofmap.index_map.size_local]
+        d = self._bc_dofs[self._bc_dofs < bs * V.dofmap.index_map.size_local]
         self.side.hold(d, values[d], l2g)
         v = F.arguments()[0]
         zero = dolfinx.fem.Constant(V.mesh, np.zeros(V.mesh.geometry.dim))

@@ -50,7 +50,7 @@ from ..couplings.ramp import RampInterface
 from ..geometry.particles import ParticleSet
 from ..geometry.patch import ParticlePatch
 from ..geometry.stress_points import check_integration, stress_point_quadrature
-from ..parallel import Layout, raise_on_all_ranks
+from ..parallel import raise_on_all_ranks
 from ..physics.body_loads import CallableBodyForce, body_load_vectors
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic
@@ -143,6 +143,7 @@ def build_fe(
     law, material = material, small_strain(material, "fe")
     t0 = time.perf_counter()
     msh = V.mesh
+    raise_on_all_ranks(msh.comm, lambda: material.check_gdim(msh.geometry.dim, "V's mesh"))
     facets = check_facets(msh, fixed_facets)
     u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
     a = ufl.inner(material.ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx
@@ -219,8 +220,7 @@ def build_efg(
     K_loc, q, tq, _ = particle_stiffness(
         particles, mls, material, quadrature_degree, quadrature=rule, tables=tables
     )
-    n = particles.num_particles
-    pl = Layout(2 * particles.layout.size_local, 2 * n, 2 * particles.layout.start)
+    pl = particles.dof_layout(particles.gdim)
     K = create_aij(comm, K_loc, pl, pl)
     mass = particle_lumped_mass(particles, tq.values, q.weights, material.rho, particle_mass)
     constraint = None
@@ -272,14 +272,15 @@ def _add_interface_masses(
     l2g = np.asarray(
         imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
     )
-    fe_dofs = 2 * l2g[:, None] + np.arange(2)
+    gdim = P.gdim
+    fe_dofs = gdim * l2g[:, None] + np.arange(gdim)
     m_fe, m_p = table_lumped_mass(
         ops.interface_table,
         ops.interface_quadrature.weights,
         rho,
         fe_dofs,
         ops.fe_layout,
-        P.petsc_dofs(2),
+        P.petsc_dofs(gdim),
         ops.particle_layout,
         comm,
     )
@@ -383,7 +384,7 @@ def build_coupled(
     if ops.interface_table is not None:  # ramp: the interface cells' share, same functions
         _add_interface_masses(ops, V, P, rho, mass_fe, mass_p, comm)
     n_owned = V.dofmap.index_map.size_local
-    active = np.repeat(ops.fe_active[:n_owned], 2)
+    active = np.repeat(ops.fe_active[:n_owned], msh.geometry.dim)
     mass_fe.array[:] = mass_fe.array_r * active  # inactive FE dofs: no mass, held at rest
 
     # essential conditions: FE nodes strongly, particles by facet multipliers
@@ -550,7 +551,7 @@ def build_hybrid(
     pq = ops.particle_quadrature
     mass_p = particle_lumped_mass(P, ops.particle_table, pq.weights, rho, particle_mass)
     n_owned = V.dofmap.index_map.size_local
-    active = np.repeat(ops.fe_active[:n_owned], 2)
+    active = np.repeat(ops.fe_active[:n_owned], msh.geometry.dim)
     mass_fe.array[:] = mass_fe.array_r * active
     fixed_fe = fixed_fe_dofs(V, facets)
     on_p = patch.in_patch[first_cells(msh, facets)]

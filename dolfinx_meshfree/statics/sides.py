@@ -160,13 +160,13 @@ class FESide:
         self._J = _compat.create_form(ufl.derivative(Fw, u, ufl.TrialFunction(V)))
         self.layout, l2g = fe_dof_layout(V)
         self.l2g = l2g
-        n_owned = V.dofmap.index_map.size_local
+        n_owned, bs = V.dofmap.index_map.size_local, V.dofmap.index_map_bs
         nodes = np.flatnonzero(fixed[:n_owned])
-        self.fixed_rows = (2 * l2g[nodes][:, None] + np.arange(2)).ravel().astype(PETSc.IntType)
-        self.fixed_local = (2 * nodes[:, None] + np.arange(2)).ravel()
+        self.fixed_rows = (bs * l2g[nodes][:, None] + np.arange(bs)).ravel().astype(PETSc.IntType)
+        self.fixed_local = (bs * nodes[:, None] + np.arange(bs)).ravel()
         #: Prescribed values of the fixed dofs (full load), set by the problem.
         self.fixed_values = np.zeros(self.fixed_local.size)
-        self.n_owned = 2 * n_owned
+        self.n_owned = bs * n_owned
 
     def held_everywhere(self) -> np.ndarray:
         """The held rows (global FE dofs) of every rank (collective)."""

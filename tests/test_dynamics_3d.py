@@ -14,7 +14,7 @@
 * A step traction and a body force on a free bar: the discrete energy balances the work of the
   loads, and the total momentum is the impulse of the loads (exact for central differences).
 * The couplings that refuse 3D (ramp, ramp-cubic, master-slave, hybrid) say what they lack,
-  through ExplicitDynamics too; a 2D law on a 3D mesh is refused.
+  through ExplicitDynamics too; so do stress-point integration and a 2D law on a 3D mesh.
 * 2 ranks equal serial: efg, lagrange, and lagrange at finite strain.
 """
 
@@ -334,6 +334,19 @@ def test_hybrid_and_2d_laws_refuse_3d_in_dynamics():
     for law in (mf.LinearElastic(1.0, 0.3, "strain"), mf.NeoHookean(1.0, 0.3, plane="strain")):
         with pytest.raises(ValueError, match=r"2D law but V's mesh has gdim=3"):
             ExplicitDynamics.fe(V, law)
+
+
+def test_stress_points_refuse_3d_in_dynamics():
+    """Stress-point integration is built in the plane: refused in 3D, for EFG and the couplings
+    (on every rank, before any collective call)."""
+    msh, patch = small_cube()
+    message = r"integration='stress-points' works on 2D meshes only.*use integration='cells'"
+    with pytest.raises(ValueError, match=message):
+        ExplicitDynamics.efg(mf.ParticleSet.from_cells(msh, 0.5), BAR, integration="stress-points")
+    V = _compat.vector_function_space(msh)
+    problem = mf.CoupledElasticity(V, patch, BAR, coupling="lagrange")
+    with pytest.raises(ValueError, match=message):
+        ExplicitDynamics.coupled(problem, integration="stress-points")
 
 
 # --- 2 ranks = serial -----------------------------------------------------------------------------

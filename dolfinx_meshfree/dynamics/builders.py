@@ -129,6 +129,19 @@ def check_particle_mass(particle_mass: str, default: str = "row-sum") -> str:
     return particle_mass
 
 
+def _check_integration(integration: str, gdim: int) -> None:
+    """Refuse an unknown ``integration`` and stress points in 3D (the same on every rank: the
+    dimension is global)."""
+    check_integration(integration)
+    if integration == "stress-points" and gdim != 2:
+        raise ValueError(
+            f"integration='stress-points' works on 2D meshes only, this mesh has gdim={gdim}: "
+            "the stress points and their volumes are built in the plane (the vertices of the "
+            "particles' Voronoi diagram, sampled Voronoi areas; "
+            "dolfinx_meshfree.geometry.stress_points); in 3D use integration='cells'"
+        )
+
+
 # -- pure FE, pure EFG -------------------------------------------------------------------------
 
 
@@ -205,9 +218,9 @@ def build_efg(
     :class:`~dolfinx_meshfree.InternalForces` on the same rule and table.
     """
     law, material = material, small_strain(material, "efg")
-    check_integration(integration)
     if particles.mesh is None:
         raise ValueError("explicit EFG needs particles with a background mesh (mesh=...)")
+    _check_integration(integration, particles.gdim)
     check_particle_mass(particle_mass)
     t0 = time.perf_counter()
     comm = particles.comm
@@ -349,6 +362,7 @@ def build_coupled(
             f"{list(DYNAMICS_METHODS)}"
         )
     check_particle_mass(particle_mass)
+    _check_integration(integration, problem.V.mesh.geometry.dim)
     if particle_mass == "volume" and coupling in ("bridging", "ramp", "ramp-cubic"):
         raise ValueError(
             f"particle_mass='volume' is not available with coupling={coupling!r}: its particle "

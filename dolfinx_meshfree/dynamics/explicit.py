@@ -67,7 +67,9 @@ class ExplicitDynamics:
     re-bounded as the material stiffens, :class:`~dolfinx_meshfree.dynamics.time_step.Rebound`).
 
     Build with :meth:`fe`, :meth:`efg` or :meth:`coupled` (every coupling of
-    :data:`~dolfinx_meshfree.dynamics.DYNAMICS_METHODS`); set the initial state with
+    :data:`~dolfinx_meshfree.dynamics.DYNAMICS_METHODS`), in 2D or 3D (the mesh's ``gdim``
+    sets the components; in 3D FE, EFG, lagrange, edge-to-edge and bridging, the couplings that
+    refuse 3D saying so when their static problem is built); set the initial state with
     :meth:`set_initial`; optionally :meth:`add_traction` and :meth:`add_body_force`; then
     :meth:`run`. The velocity can be evaluated at any points (:meth:`velocity_at`) and compared
     with an exact solution (:meth:`velocity_error`, Rabczuk et al. 2006, eq. 137) after a run,

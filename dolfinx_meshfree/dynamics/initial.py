@@ -63,7 +63,7 @@ def particle_coefficients(
         rows = P.petsc_index[own]
         A_loc = sp.csr_matrix((phi.data, (rows[phi.row], P.petsc_index[phi.col])), shape=(n, n))
         A = create_aij(comm, A_loc, sl, sl)
-        ksp = mumps_lu(A)  # one factorisation, two components
+        ksp = mumps_lu(A)  # one factorisation, every component
         out = np.empty_like(vals)
         xs = A.createVecRight()
         for comp in range(vals.shape[1]):

@@ -331,9 +331,12 @@ def test_hybrid_and_2d_laws_refuse_3d_in_dynamics():
     V = _compat.vector_function_space(msh)
     with pytest.raises(ValueError, match=r"coupling='hybrid' works on 2D.*SPH particles"):
         ExplicitDynamics.coupled(mf.HybridElasticity(V, patch, BAR))
+    particles = mf.ParticleSet.from_cells(msh, 0.5)
     for law in (mf.LinearElastic(1.0, 0.3, "strain"), mf.NeoHookean(1.0, 0.3, plane="strain")):
         with pytest.raises(ValueError, match=r"2D law but V's mesh has gdim=3"):
             ExplicitDynamics.fe(V, law)
+        with pytest.raises(ValueError, match=r"2D law but the particles' mesh has gdim=3"):
+            ExplicitDynamics.efg(particles, law)
 
 
 def test_stress_points_refuse_3d_in_dynamics():

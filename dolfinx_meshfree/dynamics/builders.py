@@ -221,6 +221,8 @@ def build_efg(
     if particles.mesh is None:
         raise ValueError("explicit EFG needs particles with a background mesh (mesh=...)")
     _check_integration(integration, particles.gdim)
+    gdim = particles.gdim
+    raise_on_all_ranks(particles.comm, lambda: material.check_gdim(gdim, "the particles' mesh"))
     check_particle_mass(particle_mass)
     t0 = time.perf_counter()
     comm = particles.comm

@@ -160,7 +160,8 @@ class FESide:
         self._J = _compat.create_form(ufl.derivative(Fw, u, ufl.TrialFunction(V)))
         self.layout, l2g = fe_dof_layout(V)
         self.l2g = l2g
-        n_owned, bs = V.dofmap.index_map.size_local, V.dofmap.index_map_bs
+        n_owned = V.dofmap.index_map.size_local
+        self.bs = bs = V.mesh.geometry.dim  # dofs per node: the vector space's block size
         nodes = np.flatnonzero(fixed[:n_owned])
         self.fixed_rows = (bs * l2g[nodes][:, None] + np.arange(bs)).ravel().astype(PETSc.IntType)
         self.fixed_local = (bs * nodes[:, None] + np.arange(bs)).ravel()
@@ -176,7 +177,7 @@ class FESide:
     def hold(self, dofs: np.ndarray, values: np.ndarray, l2g: np.ndarray) -> None:
         """Fix owned local dofs (not nodes) to ``values`` (at full load)."""
         d = np.asarray(dofs, dtype=np.int64)
-        self.fixed_rows = (2 * l2g[d // 2] + d % 2).astype(PETSc.IntType)
+        self.fixed_rows = (self.bs * l2g[d // self.bs] + d % self.bs).astype(PETSc.IntType)
         self.fixed_local = d
         self.fixed_values = np.asarray(values, dtype=float)
 

@@ -240,15 +240,15 @@ def test_an_inverted_material_stops_the_run_naming_point_and_step(method):
 
 
 def test_finite_strain_material_must_match_the_problem_and_be_2d():
-    """The linear twin of the law must be the problem's material; 3D laws, and the bridging
-    penalty, are refused at finite strain."""
+    """The linear twin of the law must be the problem's material; a 3D law on a 2D mesh, and
+    the bridging penalty, are refused at finite strain."""
     msh = mesh()
     with pytest.raises(ValueError, match=r"penalty=1.0.*use penalty=0"):
         ExplicitDynamics.coupled(patch_problem(msh, "bridging", penalty=1.0), material=NH)
     problem = patch_problem(msh, "lagrange")
     with pytest.raises(ValueError, match="linear twin"):
         ExplicitDynamics.coupled(problem, material=mf.NeoHookean(E=2.0, nu=0.3, plane="strain"))
-    with pytest.raises(ValueError, match="plane=None"):
+    with pytest.raises(ValueError, match="plane=None is a 3D law but V's mesh has gdim=2"):
         ExplicitDynamics.fe(_compat.vector_function_space(msh), mf.NeoHookean(1.0, 0.3, None))
 
 

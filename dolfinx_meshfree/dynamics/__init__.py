@@ -26,6 +26,12 @@ Rabczuk et al. 2006, sec. 5.3.3 and Table I). The pieces live in modules of one 
   <dolfinx_meshfree.CoupledElasticity.operators>` and the hybrid SPH–FE coupling;
 * :mod:`~dolfinx_meshfree.dynamics.results`: :class:`DynamicsResult`.
 
+Dimension-generic: the mesh's ``gdim`` sets the components (2D: triangles, quadrilaterals; 3D:
+tetrahedra, hexahedra). In 3D ``fe``, ``efg``, ``lagrange``, ``edge-to-edge`` and ``bridging``
+run, small strain and finite strain (``plane=None`` laws); ``ramp``, ``ramp-cubic``,
+``master-slave`` and the hybrid coupling refuse a 3D mesh when their static problem is built,
+saying what they lack, and stress-point integration is 2D only.
+
 Row-sum lumped masses (eq. 4.5; weighted, eq. 88–89) are in
 :mod:`~dolfinx_meshfree.dynamics.masses`, the
 exact solutions of the rod benchmarks in :mod:`~dolfinx_meshfree.verification.waves`.

@@ -50,7 +50,7 @@ from ..couplings.ramp import RampInterface
 from ..geometry.particles import ParticleSet
 from ..geometry.patch import ParticlePatch
 from ..geometry.stress_points import check_integration, stress_point_quadrature
-from ..parallel import Layout, raise_on_all_ranks
+from ..parallel import raise_on_all_ranks
 from ..physics.body_loads import CallableBodyForce, body_load_vectors
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic
@@ -129,6 +129,19 @@ def check_particle_mass(particle_mass: str, default: str = "row-sum") -> str:
     return particle_mass
 
 
+def _check_integration(integration: str, gdim: int) -> None:
+    """Refuse an unknown ``integration`` and stress points in 3D (the same on every rank: the
+    dimension is global)."""
+    check_integration(integration)
+    if integration == "stress-points" and gdim != 2:
+        raise ValueError(
+            f"integration='stress-points' works on 2D meshes only, this mesh has gdim={gdim}: "
+            "the stress points and their volumes are built in the plane (the vertices of the "
+            "particles' Voronoi diagram, sampled Voronoi areas; "
+            "dolfinx_meshfree.geometry.stress_points); in 3D use integration='cells'"
+        )
+
+
 # -- pure FE, pure EFG -------------------------------------------------------------------------
 
 
@@ -143,6 +156,7 @@ def build_fe(
     law, material = material, small_strain(material, "fe")
     t0 = time.perf_counter()
     msh = V.mesh
+    raise_on_all_ranks(msh.comm, lambda: material.check_gdim(msh.geometry.dim, "V's mesh"))
     facets = check_facets(msh, fixed_facets)
     u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
     a = ufl.inner(material.ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx
@@ -204,9 +218,11 @@ def build_efg(
     :class:`~dolfinx_meshfree.InternalForces` on the same rule and table.
     """
     law, material = material, small_strain(material, "efg")
-    check_integration(integration)
     if particles.mesh is None:
         raise ValueError("explicit EFG needs particles with a background mesh (mesh=...)")
+    _check_integration(integration, particles.gdim)
+    gdim = particles.gdim
+    raise_on_all_ranks(particles.comm, lambda: material.check_gdim(gdim, "the particles' mesh"))
     check_particle_mass(particle_mass)
     t0 = time.perf_counter()
     comm = particles.comm
@@ -219,8 +235,7 @@ def build_efg(
     K_loc, q, tq, _ = particle_stiffness(
         particles, mls, material, quadrature_degree, quadrature=rule, tables=tables
     )
-    n = particles.num_particles
-    pl = Layout(2 * particles.layout.size_local, 2 * n, 2 * particles.layout.start)
+    pl = particles.dof_layout(particles.gdim)
     K = create_aij(comm, K_loc, pl, pl)
     mass = particle_lumped_mass(particles, tq.values, q.weights, material.rho, particle_mass)
     constraint = None
@@ -272,14 +287,15 @@ def _add_interface_masses(
     l2g = np.asarray(
         imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
     )
-    fe_dofs = 2 * l2g[:, None] + np.arange(2)
+    gdim = P.gdim
+    fe_dofs = gdim * l2g[:, None] + np.arange(gdim)
     m_fe, m_p = table_lumped_mass(
         ops.interface_table,
         ops.interface_quadrature.weights,
         rho,
         fe_dofs,
         ops.fe_layout,
-        P.petsc_dofs(2),
+        P.petsc_dofs(gdim),
         ops.particle_layout,
         comm,
     )
@@ -348,6 +364,7 @@ def build_coupled(
             f"{list(DYNAMICS_METHODS)}"
         )
     check_particle_mass(particle_mass)
+    _check_integration(integration, problem.V.mesh.geometry.dim)
     if particle_mass == "volume" and coupling in ("bridging", "ramp", "ramp-cubic"):
         raise ValueError(
             f"particle_mass='volume' is not available with coupling={coupling!r}: its particle "
@@ -383,7 +400,7 @@ def build_coupled(
     if ops.interface_table is not None:  # ramp: the interface cells' share, same functions
         _add_interface_masses(ops, V, P, rho, mass_fe, mass_p, comm)
     n_owned = V.dofmap.index_map.size_local
-    active = np.repeat(ops.fe_active[:n_owned], 2)
+    active = np.repeat(ops.fe_active[:n_owned], msh.geometry.dim)
     mass_fe.array[:] = mass_fe.array_r * active  # inactive FE dofs: no mass, held at rest
 
     # essential conditions: FE nodes strongly, particles by facet multipliers
@@ -550,7 +567,7 @@ def build_hybrid(
     pq = ops.particle_quadrature
     mass_p = particle_lumped_mass(P, ops.particle_table, pq.weights, rho, particle_mass)
     n_owned = V.dofmap.index_map.size_local
-    active = np.repeat(ops.fe_active[:n_owned], 2)
+    active = np.repeat(ops.fe_active[:n_owned], msh.geometry.dim)
     mass_fe.array[:] = mass_fe.array_r * active
     fixed_fe = fixed_fe_dofs(V, facets)
     on_p = patch.in_patch[first_cells(msh, facets)]

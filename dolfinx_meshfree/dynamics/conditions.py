@@ -74,15 +74,17 @@ def fixed_fe_dofs(V: dolfinx.fem.FunctionSpace, facets: np.ndarray) -> np.ndarra
     nodes = dolfinx.fem.locate_dofs_topological(V, msh.topology.dim - 1, facets)
     f = dolfinx.fem.Function(V)
     f.x.array[:] = 0.0
-    f.x.array[2 * np.asarray(nodes, dtype=np.int64)] = 1.0
+    bs = msh.geometry.dim
+    f.x.array[bs * np.asarray(nodes, dtype=np.int64)] = 1.0
     _compat.scatter_reverse_add(f)
     f.x.scatter_forward()
     n_owned = V.dofmap.index_map.size_local
-    return np.repeat(f.x.array[0 : 2 * n_owned : 2] > 0.5, 2)
+    return np.repeat(f.x.array[0 : bs * n_owned : bs] > 0.5, bs)
 
 
 def _zero(x: np.ndarray) -> np.ndarray:
-    return np.zeros((x.shape[0], 2))
+    """Zero values (m, gdim) at points (m, gdim)."""
+    return np.zeros(x.shape)
 
 
 def particle_conditions(

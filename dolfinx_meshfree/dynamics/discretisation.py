@@ -29,8 +29,9 @@ VectorFunction = Callable[[np.ndarray], np.ndarray]
 
 
 def vector_values(fn: Callable[..., np.ndarray], *args: np.ndarray) -> np.ndarray:
-    """``fn(*args)`` as an (m, 2) float array, ``m = len(args[0])``, else a ``ValueError``."""
-    return _vector_values(fn, args, args[0].shape[0], "the function")
+    """``fn(*args)`` as an (m, gdim) float array, ``m, gdim = args[0].shape`` (the points), else
+    a ``ValueError``."""
+    return _vector_values(fn, args, args[0].shape[0], "the function", args[0].shape[1])
 
 
 @dataclass
@@ -61,6 +62,13 @@ class Discretisation:
     interface: RampInterface | BridgingBand | None = None
     reduction: tuple[PETSc.Mat, PETSc.Mat] | None = None
 
+    @property
+    def gdim(self) -> int:
+        """The geometric dimension (2 or 3): the components of every field."""
+        if self.mesh is not None:
+            return self.mesh.geometry.dim
+        return self.particles.gdim
+
     def blended_cells(self) -> np.ndarray | None:
         """bool per local cell: a ramp interface cell or a bridging band cell (else ``None``)."""
         if self.interface is None:
@@ -89,5 +97,5 @@ class Discretisation:
             return f.points
         if f.name == "fe":
             n_owned = self.V.dofmap.index_map.size_local
-            return self.V.tabulate_dof_coordinates()[:n_owned, :2]
+            return self.V.tabulate_dof_coordinates()[:n_owned, : self.gdim]
         return self.particles.positions[self.owned_particles()]

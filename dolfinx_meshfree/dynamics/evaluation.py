@@ -45,7 +45,7 @@ class FieldEvaluator:
     def local_values(
         self, vecs: Sequence[PETSc.Vec], particles: bool = True
     ) -> tuple[dolfinx.fem.Function | None, np.ndarray | None]:
-        """(FE Function with ghosts or None, particle coefficients (n, 2) or None); with
+        """(FE Function with ghosts or None, particle coefficients (n, gdim) or None); with
         ``particles=False`` the particle coefficients are not gathered (``None``)."""
         d = self.disc
         fe, coeffs = None, None
@@ -66,11 +66,11 @@ class FieldEvaluator:
                     full.destroy()
                 else:
                     owned = np.concatenate(self.comm.allgather(x.array_r.copy()))
-                coeffs = owned.reshape(-1, 2)[d.particles.petsc_index]
+                coeffs = owned.reshape(-1, d.gdim)[d.particles.petsc_index]
         return fe, coeffs
 
     def at_points(self, vecs: Sequence[PETSc.Vec], points: npt.ArrayLike) -> np.ndarray:
-        """The field with dof values ``vecs`` at this rank's points (m, 2) -> (m, 2).
+        """The field with dof values ``vecs`` at this rank's points (m, gdim) -> (m, gdim).
 
         Raises:
             PointsOutsideMeshError: a point is outside the body (on every rank).
@@ -156,13 +156,14 @@ class FieldEvaluator:
     def at_quadrature(
         self, vecs: Sequence[PETSc.Vec], degree: int = 5
     ) -> tuple[QuadraturePoints, np.ndarray]:
-        """Cell quadrature of degree ``degree`` on the owned cells and the field (nq, 2)
+        """Cell quadrature of degree ``degree`` on the owned cells and the field (nq, gdim)
         there."""
         q, A_fe, A_p = self.quadrature_tables(degree)
         fe, coeffs = self.local_values(vecs)
-        vals = np.zeros((len(q), 2))
+        gdim = self.disc.gdim
+        vals = np.zeros((len(q), gdim))
         if A_fe is not None:
-            vals += A_fe @ fe.x.array.reshape(-1, 2)
+            vals += A_fe @ fe.x.array.reshape(-1, gdim)
         if A_p is not None:
             vals += A_p @ coeffs
         return q, vals

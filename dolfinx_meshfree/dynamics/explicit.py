@@ -67,7 +67,9 @@ class ExplicitDynamics:
     re-bounded as the material stiffens, :class:`~dolfinx_meshfree.dynamics.time_step.Rebound`).
 
     Build with :meth:`fe`, :meth:`efg` or :meth:`coupled` (every coupling of
-    :data:`~dolfinx_meshfree.dynamics.DYNAMICS_METHODS`); set the initial state with
+    :data:`~dolfinx_meshfree.dynamics.DYNAMICS_METHODS`), in 2D or 3D (the mesh's ``gdim``
+    sets the components; in 3D FE, EFG, lagrange, edge-to-edge and bridging, the couplings that
+    refuse 3D saying so when their static problem is built); set the initial state with
     :meth:`set_initial`; optionally :meth:`add_traction` and :meth:`add_body_force`; then
     :meth:`run`. The velocity can be evaluated at any points (:meth:`velocity_at`) and compared
     with an exact solution (:meth:`velocity_error`, Rabczuk et al. 2006, eq. 137) after a run,
@@ -287,7 +289,7 @@ class ExplicitDynamics:
         displacement: VectorFunction | None = None,
         particle_values: str = "collocation",
     ) -> None:
-        """Initial displacement and velocity from functions of position (m, 2) -> (m, 2).
+        """Initial displacement and velocity from functions of position (m, gdim) -> (m, gdim).
 
         FE dofs take the nodal values; particle coefficients either reproduce the values at the
         particles (``"collocation"``: ``Phi(x_J) c = f(x_J)``, one sparse LU, MLS being not
@@ -374,17 +376,17 @@ class ExplicitDynamics:
         return self.stepper.current_velocity()
 
     def _local_values(self, vecs: list[PETSc.Vec], particles: bool = True) -> tuple:
-        """(FE Function with ghosts or None, particle coefficients (n, 2) or None)."""
+        """(FE Function with ghosts or None, particle coefficients (n, gdim) or None)."""
         return self.evaluator.local_values(vecs, particles)
 
     def velocity_at(self, points: npt.ArrayLike) -> np.ndarray:
-        """Velocity (m, 2) at this rank's points, which may lie anywhere in the mesh
+        """Velocity (m, gdim) at this rank's points, which may lie anywhere in the mesh
         (collective). Raises :class:`~dolfinx_meshfree.PointsOutsideMeshError` on every rank if
         a point is outside the body."""
         return self.evaluator.at_points(self._current(), points)
 
     def displacement_at(self, points: npt.ArrayLike) -> np.ndarray:
-        """Displacement (m, 2) at this rank's points, like :meth:`velocity_at` (collective)."""
+        """Displacement (m, gdim) at this rank's points, like :meth:`velocity_at` (collective)."""
         return self.evaluator.at_points(self.u, points)
 
     def fe_functions(self) -> tuple[dolfinx.fem.Function, dolfinx.fem.Function]:
@@ -407,7 +409,7 @@ class ExplicitDynamics:
         return records[-1] if records else None
 
     def velocity_at_quadrature(self, degree: int = 5) -> tuple[QuadraturePoints, np.ndarray]:
-        """Cell quadrature of degree ``degree`` on the owned cells and the velocity (nq, 2)
+        """Cell quadrature of degree ``degree`` on the owned cells and the velocity (nq, gdim)
         there: FE on FE cells, MLS on particle cells, blended on ramp interface and bridging
         band cells (tables cached; collective)."""
         return self.evaluator.at_quadrature(self._current(), degree)
@@ -419,9 +421,20 @@ class ExplicitDynamics:
         2006, eq. 137), integrated on the owned cells (collective, same on every rank).
 
         Args:
-            exact: ``exact(points (m, 2), t) -> (m, 2)``.
+            exact: ``exact(points (m, gdim), t) -> (m, gdim)``.
         """
         return self.evaluator.relative_error(self._current(), exact, self.time, degree)
+
+    def displacement_error(
+        self, exact: Callable[[np.ndarray, float], np.ndarray], degree: int = 5
+    ) -> float:
+        """Relative L2 displacement error ``|u_h - u| / |u|`` at the current time, like
+        :meth:`velocity_error` (collective, same on every rank).
+
+        Args:
+            exact: ``exact(points (m, gdim), t) -> (m, gdim)``.
+        """
+        return self.evaluator.relative_error(self.u, exact, self.time, degree)
 
     def num_dofs(self) -> dict:
         """Active FE dofs, particle dofs (master–slave: the masters) and multipliers (global)."""

@@ -70,7 +70,7 @@ def small_strain(material: LinearElastic | Material, method: str) -> LinearElast
     Raises:
         TypeError: ``material`` is not a material.
         ValueError: a finite-strain material with a ``method`` not in
-            :data:`FINITE_STRAIN_DYNAMICS` (naming what it misses), or in 3D.
+            :data:`FINITE_STRAIN_DYNAMICS` (naming what it misses).
     """
     if isinstance(material, LinearElastic):
         return material
@@ -86,12 +86,6 @@ def small_strain(material: LinearElastic | Material, method: str) -> LinearElast
             f"material={name}: coupling={method!r} is not available at finite strain in explicit "
             f"dynamics (missing: {missing}); use one of {list(FINITE_STRAIN_DYNAMICS)} or "
             "LinearElastic"
-        )
-    if material.plane is None:
-        raise ValueError(
-            f"material={name}(plane=None) is a 3D law; explicit dynamics at finite strain is 2D "
-            "in this release (its FE side is written for two components): use plane='strain' or "
-            "'stress'"
         )
     return linear_twin(material)
 

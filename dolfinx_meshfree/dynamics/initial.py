@@ -37,7 +37,7 @@ def check_particle_values(how: str) -> str:
 
 
 def fe_nodal_values(disc: Discretisation, fn: VectorFunction, comm: MPI.Comm) -> np.ndarray:
-    """``fn`` at the owned FE nodes (PETSc order), interleaved (2 per node; collective)."""
+    """``fn`` at the owned FE nodes (PETSc order), interleaved (gdim per node; collective)."""
     x = disc.owned_points(0)
     vals = raise_on_all_ranks(comm, lambda: vector_values(fn, x))
     return vals.ravel()
@@ -63,10 +63,10 @@ def particle_coefficients(
         rows = P.petsc_index[own]
         A_loc = sp.csr_matrix((phi.data, (rows[phi.row], P.petsc_index[phi.col])), shape=(n, n))
         A = create_aij(comm, A_loc, sl, sl)
-        ksp = mumps_lu(A)  # one factorisation, two components
+        ksp = mumps_lu(A)  # one factorisation, every component
         out = np.empty_like(vals)
         xs = A.createVecRight()
-        for comp in range(2):
+        for comp in range(vals.shape[1]):
             b = create_vector(comm, sl, rows, vals[:, comp])
             ksp.solve(b, xs)
             if ksp.getConvergedReason() < 0:

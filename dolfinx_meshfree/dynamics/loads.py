@@ -70,7 +70,8 @@ class ExternalLoads:
     ) -> None:
         """``amplitude(t) * traction(x, n)`` on owned exterior facets (collective).
 
-        ``traction`` maps points (m, 2) and outward normals (m, 2) to tractions (m, 2), assembled
+        ``traction`` maps points (m, gdim) and outward normals (m, gdim) to tractions (m, gdim),
+        assembled
         with the FE basis on facets of FE cells and with the MLS functions on facets of particle
         cells (Belytschko et al. 1995, eq. 4.5). ``amplitude`` defaults to 1 (a step load).
 
@@ -78,7 +79,7 @@ class ExternalLoads:
             ValueError: a facet lies on a ramp interface or bridging band cell (on every rank).
         """
         d = self.disc
-        msh = d.mesh
+        msh, gdim = d.mesh, d.gdim
         deg = 4
         facets = np.asarray(facets, dtype=np.int32)
         msh.topology.create_connectivity(msh.topology.dim - 1, msh.topology.dim)
@@ -111,18 +112,19 @@ class ExternalLoads:
                     )
                 )
                 tab = tabulate_in_cells(d.V, q.points, q.cells, derivatives=0).values
-                fl = load_vector(tab, q.weights, t).reshape(-1, 2)
-                parts.append(((2 * l2g[: fl.shape[0], None] + np.arange(2)).ravel(), fl.ravel()))
+                fl = load_vector(tab, q.weights, t).reshape(-1, gdim)
+                dofs = gdim * l2g[: fl.shape[0], None] + np.arange(gdim)
+                parts.append((dofs.ravel(), fl.ravel()))
             else:
                 tab = raise_on_all_ranks(self.comm, lambda q=q: d.mls.tabulate(q.points, 0))
                 parts.append(
-                    (d.particles.petsc_dofs(2).ravel(), load_vector(tab.values, q.weights, t))
+                    (d.particles.petsc_dofs(gdim).ravel(), load_vector(tab.values, q.weights, t))
                 )
         self._add(parts, amplitude)
 
     def add_body_force(self, force: VectorFunction, amplitude: Amplitude | None = None) -> None:
-        """``amplitude(t) * int b . v`` of a body force ``b(x)`` per unit volume (points (m, 2)
-        -> (m, 2)) on the whole body (collective).
+        """``amplitude(t) * int b . v`` of a body force ``b(x)`` per unit volume (points
+        (m, gdim) -> (m, gdim)) on the whole body (collective).
 
         FE, EFG and every coupling integrate it with the functions and weights of their masses
         and stiffness (``body_load``, :mod:`~dolfinx_meshfree.physics.body_loads`: ramp interface
@@ -141,7 +143,7 @@ class ExternalLoads:
                     lo, hi = f.mass.getOwnershipRange()
                     parts.append((np.arange(lo, hi), fe))
                 else:
-                    parts.append((d.particles.petsc_dofs(2).ravel(), f_p))
+                    parts.append((d.particles.petsc_dofs(d.gdim).ravel(), f_p))
             self._add(parts, amplitude)
             return
         vecs = []

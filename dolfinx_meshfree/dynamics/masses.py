@@ -124,17 +124,16 @@ def particle_lumped_mass(
             f"particle_mass={kind!r} is not known; use 'row-sum' (rho sum_q phi_I w_q) or "
             "'volume' (rho V_I)"
         )
-    n = particles.num_particles
-    comm = particles.comm
-    pl = Layout(2 * particles.layout.size_local, 2 * n, 2 * particles.layout.start)
-    pdofs = particles.petsc_dofs(2)
+    comm, gdim = particles.comm, particles.gdim
+    pl = particles.dof_layout(gdim)
+    pdofs = particles.petsc_dofs(gdim)
     if kind == "row-sum":
         local = float(rho) * np.asarray(table_values.T @ weights).ravel()
-        m = create_vector(comm, pl, pdofs.ravel(), np.repeat(local, 2))
+        m = create_vector(comm, pl, pdofs.ravel(), np.repeat(local, gdim))
     else:
         own = particles.owned
         m = create_vector(
-            comm, pl, pdofs[own].ravel(), np.repeat(float(rho) * particles.volumes[own], 2)
+            comm, pl, pdofs[own].ravel(), np.repeat(float(rho) * particles.volumes[own], gdim)
         )
     if check:
         _check_positive(m, comm, "particle")
@@ -157,16 +156,17 @@ def table_lumped_mass(
 
     Args:
         table_values: (nq x (n_loc + n)) CSR; ``weights``: (nq,).
-        fe_dofs: (n_loc, 2) global FE dofs of the local nodes; ``particle_dofs``: (n, 2) PETSc
+        fe_dofs: (n_loc, gdim) global FE dofs of the local nodes; ``particle_dofs``: (n, gdim)
+            PETSc
             particle dofs.
 
     Returns:
         ``(FE masses, particle masses)`` (PETSc vectors with the given layouts).
     """
-    n_loc = fe_dofs.shape[0]
+    n_loc, gdim = fe_dofs.shape
     col = float(rho) * np.asarray(table_values.T @ weights).ravel()
-    m_fe = create_vector(comm, fe_layout, fe_dofs.ravel(), np.repeat(col[:n_loc], 2))
-    m_p = create_vector(comm, particle_layout, particle_dofs.ravel(), np.repeat(col[n_loc:], 2))
+    m_fe = create_vector(comm, fe_layout, fe_dofs.ravel(), np.repeat(col[:n_loc], gdim))
+    m_p = create_vector(comm, particle_layout, particle_dofs.ravel(), np.repeat(col[n_loc:], gdim))
     return m_fe, m_p
 
 

@@ -40,7 +40,7 @@ class Field:
         mass: Lumped masses (PETSc vector, same layout); 0 marks dofs outside the field (FE nodes
             that only patch cells touch), which the integrator holds at rest.
         spacing: Smallest node or particle spacing (for the Courant condition).
-        points: (owned nodes, 2) positions of the owned nodes/particles in PETSc order (two dofs
+        points: (owned nodes, gdim) positions of the owned nodes/particles in PETSc order (gdim dofs
             each); ``None``: derived from the field's space or particle set.
         fixed: bool per owned dof: held at zero velocity and acceleration (strong essential
             conditions: ``M^{-1} = 0`` there); ``None``: none.

@@ -326,7 +326,7 @@ def _gathered_segments(patch: ParticlePatch, facets: np.ndarray) -> np.ndarray:
     """Facets of the 2D patch mesh as segments (k, 2, 2), gathered from every rank (collective)."""
     mesh = patch.mesh
     geo = _compat.entities_to_geometry(mesh, 1, facets).reshape(-1, 2)
-    seg = mesh.geometry.x[geo][:, :2].reshape(-1, 2, 2)
+    seg = mesh.geometry.x[geo][..., :2].reshape(-1, 2, 2)
     return np.concatenate(patch.comm.allgather(seg)).reshape(-1, 2, 2)
 
 
@@ -371,18 +371,21 @@ def validate_in_patch(
     start = np.repeat(np.cumsum(nsub + 1) - (nsub + 1), nsub + 1)
     xi = (np.arange(seg.size) - start) / nsub[seg]
     samples = a[seg] + xi[:, None] * (b - a)[seg]
+    num_owned = patch.mesh.topology.index_map(2).size_local
     inside = _points_in_cells(patch.mesh, samples, patch.cells).astype(np.int32)
-    inside = comm.allreduce(inside, op=MPI.MAX)
+    inside += _points_in_cells(patch.mesh, samples, np.arange(num_owned)).astype(np.int32)
+    comm.Allreduce(MPI.IN_PLACE, inside, op=MPI.MAX)  # 2: patch cell, 1: FE cell, 0: outside
     clearance = h if clearance is None else float(clearance)
     x_particles = patch.particles.positions[:, :2]
 
     def check() -> list[bool]:
-        out = np.flatnonzero(inside == 0)
+        out = np.flatnonzero(inside < 2)
         if out.size:
+            where = "in an FE cell" if inside[out[0]] == 1 else "outside the mesh"
             raise ValueError(
-                f"the crack leaves the patch: its point {_fmt(samples[out[0]])} is in no patch "
-                "cell (an FE cell or outside the mesh); keep the crack inside the patch cells, or "
-                "add the cells around it to the patch"
+                f"the crack leaves the patch: its point {_fmt(samples[out[0]])} lies {where}, "
+                "not in a patch cell (the FE side cannot carry a crack); keep the crack inside "
+                "the patch cells, or add the cells around it to the patch"
             )
         if iface.size:
             hit = np.argwhere(segments_intersect(a, b, iface[:, 0], iface[:, 1]))

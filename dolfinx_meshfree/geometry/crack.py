@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import weakref
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -24,12 +25,23 @@ from scipy.spatial import cKDTree
 
 from .. import _compat
 from ..parallel import raise_on_all_ranks
-from .particles import _points_in_cells
+from .particles import ParticleSet, _points_in_cells
+from .quadrature import boundary_facets
 
 if TYPE_CHECKING:  # annotations only
+    import dolfinx.mesh
+
     from .patch import ParticlePatch
 
-__all__ = ["CRACK_METHODS", "Crack", "particle_spacing", "segments_intersect", "validate_in_patch"]
+__all__ = [
+    "CRACK_METHODS",
+    "Crack",
+    "CrackDomain",
+    "particle_spacing",
+    "place_crack",
+    "segments_intersect",
+    "validate_in_patch",
+]
 
 #: Crack criteria of the MLS weights (the first is the default; see ``approx/crack_cuts.py``).
 CRACK_METHODS = ("diffraction", "visibility")
@@ -322,7 +334,39 @@ class Crack:
 
 
 # --- the crack in a patch ---------------------------------------------------------------------
-def _gathered_segments(patch: ParticlePatch, facets: np.ndarray) -> np.ndarray:
+@dataclass
+class CrackDomain:
+    """Where a crack may lie: what :func:`validate_in_patch` reads from a
+    :class:`~dolfinx_meshfree.ParticlePatch` (which has these attributes), built here for pure
+    EFG (:meth:`from_particles`: no FE interface).
+
+    Attributes:
+        mesh: The 2D mesh; cells: owned cells carried by particles; particles: the particles;
+        exterior_facets, interface_facets: owned facets; spacing: the particle spacing or None.
+    """
+
+    mesh: dolfinx.mesh.Mesh
+    cells: np.ndarray
+    particles: ParticleSet
+    exterior_facets: np.ndarray
+    interface_facets: np.ndarray
+    spacing: float | None = None
+
+    @property
+    def comm(self) -> MPI.Comm:
+        return self.mesh.comm
+
+    @classmethod
+    def from_particles(cls, particles: ParticleSet) -> CrackDomain:
+        """Pure EFG: the particles' integration cells (every owned cell by default), the mesh's
+        exterior facets, no interface."""
+        mesh = particles.mesh
+        num_owned = mesh.topology.index_map(mesh.topology.dim).size_local
+        cells = np.arange(num_owned) if particles.cells is None else particles.cells
+        return cls(mesh, cells, particles, boundary_facets(mesh), np.zeros(0, dtype=np.int32))
+
+
+def _gathered_segments(patch: ParticlePatch | CrackDomain, facets: np.ndarray) -> np.ndarray:
     """Facets of the 2D patch mesh as segments (k, 2, 2), gathered from every rank (collective)."""
     mesh = patch.mesh
     geo = _compat.entities_to_geometry(mesh, 1, facets).reshape(-1, 2)
@@ -330,7 +374,7 @@ def _gathered_segments(patch: ParticlePatch, facets: np.ndarray) -> np.ndarray:
     return np.concatenate(patch.comm.allgather(seg)).reshape(-1, 2, 2)
 
 
-def particle_spacing(patch: ParticlePatch) -> float:
+def particle_spacing(patch: ParticlePatch | CrackDomain) -> float:
     """The patch's particle spacing ``h``: the one asked for, else the median nearest-neighbour
     distance of the particles (``placement="vertices"``)."""
     if patch.spacing is not None:
@@ -341,11 +385,12 @@ def particle_spacing(patch: ParticlePatch) -> float:
 
 def validate_in_patch(
     crack: Crack,
-    patch: ParticlePatch,
+    patch: ParticlePatch | CrackDomain,
     points: np.ndarray | None = None,
     clearance: float | None = None,
 ) -> list[bool]:
-    """Check that a crack (or the candidate polyline ``points``) fits the patch; collective.
+    """Check that a crack (or the candidate polyline ``points``) fits the patch (or a
+    :class:`CrackDomain`); collective.
 
     The checks (a ``ValueError`` on every rank, before any further collective call): every point
     of the crack lies in a patch cell and no segment crosses the FE interface (the FE side cannot
@@ -364,7 +409,7 @@ def validate_in_patch(
     h = particle_spacing(patch)
     iface = _gathered_segments(patch, patch.interface_facets)
     exterior = _gathered_segments(patch, patch.exterior_facets)
-    # sample the polyline densely enough that no patch cell is skipped (cells >= h / 4 here)
+    # samples along the polyline name a point outside the patch (the facet tests below are exact)
     a, b = pts[:-1], pts[1:]
     nsub = np.maximum(1, np.ceil(np.linalg.norm(b - a, axis=1) / (0.25 * h))).astype(int)
     seg = np.repeat(np.arange(a.shape[0]), nsub + 1)
@@ -464,3 +509,14 @@ def validate_in_patch(
         return [not mouth[0], not mouth[1]]
 
     return raise_on_all_ranks(comm, check)
+
+
+def place_crack(crack: Crack, domain: ParticlePatch | CrackDomain) -> None:
+    """Put ``crack`` into ``domain`` (collective): :func:`validate_in_patch` (a ``ValueError`` on
+    every rank), its tips and mouths set from it, and every later :meth:`Crack.extend` checked
+    the same way before it changes the crack."""
+    if not isinstance(crack, Crack):
+        raise ValueError(f"crack should be a dolfinx_meshfree.Crack, got {crack!r:.80}")
+    is_tip = validate_in_patch(crack, domain)
+    crack.set_mouths(not is_tip[0], not is_tip[1])
+    crack._validators.append(lambda c, pts: validate_in_patch(c, domain, pts))

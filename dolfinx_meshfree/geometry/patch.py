@@ -18,7 +18,7 @@ import numpy.typing as npt
 
 from .. import _compat
 from ..parallel import raise_on_all_ranks
-from .crack import CRACK_METHODS, Crack, validate_in_patch
+from .crack import CRACK_METHODS, Crack, place_crack
 from .particles import ParticleSet
 
 if TYPE_CHECKING:  # annotations only
@@ -182,11 +182,7 @@ class ParticlePatch:
         at least one particle spacing from the FE interface and the exterior boundary, no
         particle on the crack; a ``ValueError`` on every rank otherwise), which also decides its
         tips and mouths; later :meth:`Crack.extend` calls are checked the same way."""
-        if not isinstance(crack, Crack):
-            raise ValueError(f"crack should be a dolfinx_meshfree.Crack, got {crack!r:.80}")
-        is_tip = validate_in_patch(crack, self)
-        crack.set_mouths(not is_tip[0], not is_tip[1])
-        crack._validators.append(lambda c, pts: validate_in_patch(c, self, pts))
+        place_crack(crack, self)
         self.cracks.append(crack)
 
     @property

@@ -265,10 +265,15 @@ def test_extend_grows_the_crack_and_marks_the_mls_changed():
     assert crack.version == 2  # a refused extension leaves the crack unchanged
 
 
-def test_crack_method_is_checked():
+def test_crack_method_and_sides_are_checked():
     mls = mf.MLS(GRID)
     with pytest.raises(ValueError, match="crack_method='shadow' is not known"):
         mf.attach_cracks(mls, [mf.Crack([[0.2, 0.52], TIP])], "shadow")
+    mf.attach_cracks(mls, [mf.Crack([[0.2, 0.52], TIP])])
+    with pytest.raises(ValueError, match=r"sides should have shape \(2,\)"):
+        mls.tabulate([[0.4, 0.52], [0.5, 0.52]], sides=[1])
+    with pytest.raises(ValueError, match=r"sides should be \+1, -1 or 0 .* got \[2\]"):
+        mls.tabulate([[0.4, 0.52], [0.5, 0.52]], sides=[1, 2])
 
 
 # --- the crack in a patch (serial and 2 ranks) -------------------------------------------------

@@ -117,6 +117,9 @@ class CrackCut:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         if not self.cracks or i.size == 0:
             return i, j, dx, dist, ddist
+        if sides is not None and not np.all(np.isin(sides, (-1, 0, 1))):
+            bad = np.asarray(sides)[~np.isin(sides, (-1, 0, 1))]
+            raise ValueError(f"sides should be +1, -1 or 0 (the crack face), got {bad[:5]}")
         p, q = x[i], self.mls.points[j]
         side = None if sides is None else np.asarray(sides).reshape(-1)[i]
         ncross = np.zeros(i.size, dtype=np.int64)

@@ -206,8 +206,9 @@ def test_cut_gradients_match_finite_differences(method, exponent):
     for k in range(2):
         e = np.eye(2)[k] * h
         fd = (mls.tabulate(x + e, 0).values - mls.tabulate(x - e, 0).values) / (2 * h)
-        # central differences: O(h^2) truncation, O(eps/h) round-off; measured <= 5e-9
-        assert abs(fd - t.gradients[k]).max() <= 1e-7
+        # central differences: O(h^2) truncation, O(eps/h) round-off, gradients up to 9; measured
+        # 1.1e-8 (diffraction, lambda 2), 3.5e-9 (lambda 1), 2.1e-9 (visibility)
+        assert abs(fd - t.gradients[k]).max() <= 3e-8
 
 
 @pytest.mark.parametrize("exponent", [1.0, 2.0, 2.5])

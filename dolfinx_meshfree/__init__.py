@@ -5,7 +5,8 @@ Public API (stable names):
 * approximations: :class:`MLS` (EFG shape functions), :class:`SPH`, tabulated into a
   :class:`ShapeTable`; weight functions in :mod:`dolfinx_meshfree.approx.kernels`;
 * FE basis at arbitrary points: :func:`tabulate_fe_basis`, :func:`evaluate_fe_function`;
-* particles: :class:`ParticleSet`;
+* particles: :class:`ParticleSet`; cracks: :class:`Crack` (a 2D polyline in a
+  :class:`ParticlePatch`), cutting MLS weights by :func:`attach_cracks` (diffraction or visibility);
 * solvers: :class:`EFGElasticity` (pure EFG), :func:`solve_fe_elasticity` and
   :func:`solve_forms` (pure FE: a material, or the user's own forms);
 * material and exact solutions: :class:`LinearElastic`, :class:`TimoshenkoBeam`;
@@ -24,6 +25,7 @@ Importing this package first loads the ``dolfinx_solver`` wheel's MPI when that 
 
 from . import _compat  # noqa: F401  (must come first: loads dolfinx_solver's MPI in lane B)
 from ._compat import DOLFINX_VERSION
+from .approx.crack_cuts import CRACK_METHODS, attach_cracks
 from .approx.fe_points import (
     PointsOutsideMeshError,
     ensure_points_in_mesh,
@@ -40,6 +42,7 @@ from .dynamics import DYNAMICS_METHODS, DynamicsResult, EnergyRecord, ExplicitDy
 from .fracture.criteria import equivalent_sif, kink_angle
 from .fracture.interaction import StressIntensityFactors, interaction_integral
 from .fracture.williams import WilliamsField
+from .geometry.crack import Crack
 from .geometry.particles import ParticleSet
 from .geometry.patch import PLACEMENTS, ParticlePatch
 from .geometry.quadrature import boundary_facets, cell_quadrature, facet_quadrature
@@ -61,6 +64,7 @@ from .verification.waves import GaussianPulseRod, StepLoadedRod
 
 __all__ = [
     "COUPLINGS",
+    "CRACK_METHODS",
     "DEFAULT_DILATION",
     "DOLFINX_VERSION",
     "DYNAMICS_METHODS",
@@ -74,6 +78,7 @@ __all__ = [
     "CoupledLinearProblem",
     "CoupledNonlinearProblem",
     "CoupledSolution",
+    "Crack",
     "DynamicsResult",
     "DynamicsWriter",
     "EFGElasticity",
@@ -107,6 +112,7 @@ __all__ = [
     "StressIntensityFactors",
     "TimoshenkoBeam",
     "WilliamsField",
+    "attach_cracks",
     "boundary_facets",
     "cell_quadrature",
     "cubic_spline",

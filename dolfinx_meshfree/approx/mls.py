@@ -35,9 +35,10 @@ if TYPE_CHECKING:  # annotations only
 
 __all__ = ["MLS", "MomentMatrixError", "PairCut", "pair_distances", "polynomial_basis"]
 
-#: A pair cut ``(x, i, j, dx, dist, ddist) -> (i, j, dx, dist, ddist)``: see :attr:`MLS.pair_cuts`.
+#: A pair cut ``(x, i, j, dx, dist, ddist, sides) -> (i, j, dx, dist, ddist)``: see
+#: :attr:`MLS.pair_cuts`.
 PairCut = Callable[
-    [np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    [np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray | None],
     tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
 ]
 
@@ -155,9 +156,10 @@ class MLS:
         self._scale = float(np.median(self.radii))
         self._tree = cKDTree(self.points)
         #: Pair cuts applied in order after the neighbour search, each
-        #: ``cut(x, i, j, dx, dist, ddist) -> (i, j, dx, dist, ddist)``: it may drop pairs or
-        #: change the distance that enters the weight and its gradient ``d dist / dx`` (a crack's
-        #: visibility or diffraction criterion). Call :meth:`changed` after changing the list.
+        #: ``cut(x, i, j, dx, dist, ddist, sides) -> (i, j, dx, dist, ddist)``: it may drop pairs
+        #: or change the distance that enters the weight and its gradient ``d dist / dx`` (a
+        #: crack's visibility or diffraction criterion); ``sides`` is the argument of
+        #: :meth:`tabulate`. Call :meth:`changed` after changing the list.
         self.pair_cuts: list[PairCut] = []
         #: Changes whenever the shape functions do (:meth:`changed`); tables carry the version
         #: they were built at (:attr:`ShapeTable.version`).
@@ -173,8 +175,13 @@ class MLS:
         """Number of particles (columns of every table)."""
         return self.points.shape[0]
 
-    def tabulate(self, x: npt.ArrayLike, derivatives: int = 1) -> ShapeTable:
+    def tabulate(
+        self, x: npt.ArrayLike, derivatives: int = 1, sides: npt.ArrayLike | None = None
+    ) -> ShapeTable:
         """Shape functions (and first derivatives) at the points ``x`` (m, gdim).
+
+        ``sides`` (m,) of ``+1``/``-1``/``0``, passed to the :attr:`pair_cuts`: the face of a
+        crack on which a point lying on the crack is taken (the one-sided limit; 0: none).
 
         Local: no MPI communication. Raises :class:`MomentMatrixError` naming the first bad point,
         its neighbour count and the fix when ``A(x)`` is singular or ill-conditioned.
@@ -184,10 +191,14 @@ class MLS:
         x = check_points(x, self.gdim, "x")
         m = x.shape[0]
         n = self.num_particles
+        if sides is not None and np.shape(sides) != (m,):
+            raise ValueError(
+                f"sides should have shape ({m},) (one per point), got {np.shape(sides)}"
+            )
         i, j, dx = pairs_within_support(x, self.points, self.radii, self._tree)
         dist, ddist = pair_distances(dx)
         for cut in self.pair_cuts:
-            i, j, dx, dist, ddist = cut(x, i, j, dx, dist, ddist)
+            i, j, dx, dist, ddist = cut(x, i, j, dx, dist, ddist, sides)
         counts = np.bincount(i, minlength=m)
         nb = self.num_basis
         too_few = np.flatnonzero(counts < nb)

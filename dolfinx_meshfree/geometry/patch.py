@@ -9,6 +9,7 @@ user's forms. Requires a mesh whose ranks share ghost cells across facets (DOLFI
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import dolfinx
@@ -17,6 +18,7 @@ import numpy.typing as npt
 
 from .. import _compat
 from ..parallel import raise_on_all_ranks
+from .crack import CRACK_METHODS, Crack, place_crack
 from .particles import ParticleSet
 
 if TYPE_CHECKING:  # annotations only
@@ -62,6 +64,7 @@ class ParticlePatch:
             ``interface_patch_cells`` and ``interface_fe_cells`` the local cell on each side.
         exterior_facets: Owned exterior facets of patch cells.
         cell_tags: ``MeshTags`` of the owned cells: ``FE_TAG`` or ``PATCH_TAG``.
+        cracks: The cracks added (:meth:`add_crack`).
     """
 
     def __init__(
@@ -72,8 +75,14 @@ class ParticlePatch:
         jitter: float = 0.0,
         seed: int = 0,
         placement: str = "conforming",
+        cracks: Sequence[Crack] = (),
+        crack_method: str = "diffraction",
     ) -> None:
         comm = mesh.comm
+        if crack_method not in CRACK_METHODS:
+            raise ValueError(
+                f"crack_method={crack_method!r} is not known; use one of {list(CRACK_METHODS)}"
+            )
         if placement not in PLACEMENTS:
             raise ValueError(f"placement={placement!r} is not known; use one of {list(PLACEMENTS)}")
         if placement != "vertices" and spacing is None:
@@ -162,6 +171,19 @@ class ParticlePatch:
             self.particles = ParticleSet.from_cells(
                 mesh, spacing, c, jitter=jitter, seed=seed, border=border
             )
+        self.crack_method = crack_method
+        self.cracks: list[Crack] = []
+        for crack in cracks:
+            self.add_crack(crack)
+
+    def add_crack(self, crack: Crack) -> None:
+        """Put ``crack`` into the patch (collective): checked by
+        :func:`~dolfinx_meshfree.geometry.crack.validate_in_patch` (inside the patch cells, tips
+        at least one particle spacing from the FE interface and the exterior boundary, no
+        particle on the crack; a ``ValueError`` on every rank otherwise), which also decides its
+        tips and mouths; later :meth:`Crack.extend` calls are checked the same way."""
+        place_crack(crack, self)
+        self.cracks.append(crack)
 
     @property
     def comm(self) -> MPI.Comm:

@@ -1,0 +1,381 @@
+"""Quadrature of cells and facets cut by a crack (geometry/cut_cells.py, issue 10 item 3).
+
+The oracle is the divergence theorem on the cracked domain, which consistent integration needs
+under the quadrature actually used: for ``f`` polynomial on each side of the crack,
+``sum_q grad f w_q = sum_b f n w_b + sum_c f_side n w_c`` (exterior boundary + both crack faces),
+exact to round-off. Areas are checked against the shoelace area of the exact split of the domain
+(computed from the crack's points, without the mesh) and of each cell (its own ``cell_quadrature``).
+
+A jump that a polynomial carries cannot end at a tip (a polynomial that vanishes on the crack's
+extension vanishes on the whole line), so the tip cases use a jump that vanishes at the tip and
+on a rectangle ``R`` beside the last segment: ``f = (c - eta)(xi - s0)(-xi) p(x)`` on ``R``
+(``xi``, ``eta``: coordinates along and across the last segment from the tip), 0 elsewhere; the
+other three sides of ``R`` are given to ``cut_cell_quadrature`` as extra cut lines (not crack
+faces), so that ``f`` is a polynomial on every piece.
+
+Meshes: unit square, triangles and quadrilaterals, regular and perturbed (interior vertices
+moved by a smooth deterministic field of up to 0.25 h, so the quadrilaterals are not
+parallelograms). Serial and 2 ranks: each rank integrates its owned cells and facets, sums are
+allreduced.
+"""
+
+import dolfinx_meshfree  # noqa: F401, I001  (must come first: loads lane B's MPI)
+
+import itertools
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from conftest import CELL_TYPES, rectangle
+from dolfinx_meshfree.geometry.cut_cells import (
+    cells_cut_by,
+    crack_face_quadrature,
+    crack_polylines,
+    cut_cell_quadrature,
+    cut_facet_quadrature,
+    join_quadrature,
+    replace_cells,
+)
+from dolfinx_meshfree.geometry.quadrature import boundary_facets, cell_quadrature
+
+COMM = MPI.COMM_WORLD
+N = 8  # cells per side
+H = 1.0 / N
+#: Divergence-theorem residuals (absolute; f and its terms are O(1)) and areas (relative).
+#: Measured: <= 4e-16 (areas), <= 2e-15 (divergence); the bounds leave room for other partitions.
+DIV_TOL = 1e-12
+AREA_TOL = 1e-13
+
+
+def _perturb(x: np.ndarray) -> np.ndarray:
+    """Smooth displacement, zero on the boundary of the unit square, at most 0.25 h."""
+    b = np.sin(np.pi * x[:, 0]) * np.sin(np.pi * x[:, 1])
+    return (
+        0.25
+        * H
+        * b[:, None]
+        * np.stack(
+            [np.sin(12.9 * x[:, 0] + 7.1 * x[:, 1]), np.cos(5.3 * x[:, 0] - 11.7 * x[:, 1])], axis=1
+        )
+    )
+
+
+def _mesh(cell, perturbed, comm=COMM):
+    msh = rectangle(comm, [0, 0], [1, 1], [N, N], CELL_TYPES[cell])
+    if perturbed:
+        x = msh.geometry.x
+        x[:, :2] += _perturb(x[:, :2])
+    return msh
+
+
+def _vertex(i, j, perturbed):
+    """The mesh vertex that starts at (i h, j h)."""
+    x = np.array([[i * H, j * H]])
+    return (x + _perturb(x) if perturbed else x)[0]
+
+
+def _owned(msh):
+    return np.arange(msh.topology.index_map(2).size_local, dtype=np.int64)
+
+
+def _sum(a):
+    return COMM.allreduce(np.asarray(a, dtype=float), op=MPI.SUM)
+
+
+def _dist_to_polyline(x, p):
+    d = np.full(x.shape[0], np.inf)
+    for a, b in itertools.pairwise(p):
+        t = np.clip((x - a) @ (b - a) / ((b - a) @ (b - a)), 0.0, 1.0)
+        d = np.minimum(d, np.linalg.norm(x - a - t[:, None] * (b - a), axis=1))
+    return d
+
+
+def _shoelace(p):
+    q = np.roll(p, -1, axis=0)
+    return 0.5 * np.sum(p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1])
+
+
+# f_+ and f_- with their gradients: linear for degree 1, quadratic for degree >= 2
+def _f(x, side, quadratic):
+    X, Y = x[:, 0], x[:, 1]
+    if side > 0:
+        f, g = 1 + 2 * X - 3 * Y, np.stack([2 + 0 * X, -3 + 0 * X], axis=1)
+        if quadratic:
+            f = f + X**2 - X * Y + 2 * Y**2
+            g = g + np.stack([2 * X - Y, -X + 4 * Y], axis=1)
+    else:
+        f, g = -2 + X + 4 * Y, np.stack([1 + 0 * X, 4 + 0 * X], axis=1)
+        if quadratic:
+            f = f + 3 * X**2 + X * Y - Y**2
+            g = g + np.stack([6 * X + Y, X - 2 * Y], axis=1)
+    return f, g
+
+
+def _through_crack(kind, perturbed):
+    """x-monotone cracks from the left edge to the right edge (mouths off the vertices)."""
+    if kind == "straight":
+        return np.array([[0.0, 0.4437], [1.0, 0.4437]])
+    if kind == "inclined":
+        return np.array([[0.0, 0.2113], [1.0, 0.7391]])
+    if kind == "kinked-in-cell":
+        return np.array([[0.0, 0.3311], [0.4723, 0.6049], [1.0, 0.4172]])
+    # kinked at a mesh vertex, one segment along no grid line
+    return np.array([[0.0, 0.3311], _vertex(4, 5, perturbed), [1.0, 0.4172]])
+
+
+@pytest.mark.parametrize("degree", [1, 2, 5])
+@pytest.mark.parametrize("kind", ["straight", "inclined", "kinked-in-cell", "kinked-at-vertex"])
+@pytest.mark.parametrize("perturbed", [False, True])
+@pytest.mark.parametrize("cell", ["triangle", "quadrilateral"])
+def test_divergence_theorem_through_crack(cell, perturbed, kind, degree):
+    """A crack across the whole square: f = f_+ above, f_- below (different polynomials)."""
+    msh = _mesh(cell, perturbed)
+    crack = _through_crack(kind, perturbed)
+    cells = _owned(msh)
+    q = cut_cell_quadrature(msh, cells, crack, degree)
+    faces = crack_face_quadrature(msh, cells, crack, degree)
+    ext = cut_facet_quadrature(msh, boundary_facets(msh), crack, degree)
+    bnd = join_quadrature(ext, faces)
+    quadratic = degree >= 2
+
+    def side(x):  # above (+, left of the left-to-right polyline) or below
+        return np.where(x[:, 1] > np.interp(x[:, 0], crack[:, 0], crack[:, 1]), 1, -1)
+
+    # no point on the crack; the exterior split at both mouths
+    d_min = COMM.allreduce(float(_dist_to_polyline(q.points, crack).min()), op=MPI.MIN)
+    assert d_min > 1e-8 * H, d_min  # not on it (a sliver near a vertex can be close)
+    assert _sum(len(ext)) > _sum(
+        len(cut_facet_quadrature(msh, boundary_facets(msh), [[2, 2], [3, 3]], degree))
+    )
+
+    lhs = np.zeros(2)
+    s = side(q.points)
+    for sd in (1, -1):
+        _, g = _f(q.points[s == sd], sd, quadratic)
+        lhs += g.T @ q.weights[s == sd]
+    sb = np.where(bnd.sides == 0, side(bnd.points), bnd.sides)
+    rhs = np.zeros(2)
+    for sd in (1, -1):
+        f, _ = _f(bnd.points[sb == sd], sd, quadratic)
+        rhs += bnd.normals[sb == sd].T @ (f * bnd.weights[sb == sd])
+    lhs, rhs = _sum(lhs), _sum(rhs)
+    assert np.abs(lhs).max() > 0.1  # a real test: the jump matters
+    assert np.abs(lhs - rhs).max() < DIV_TOL, (lhs, rhs)
+
+    # areas of the two sides: shoelace of the exact split of the square
+    above = np.vstack([crack, [[1.0, 1.0], [0.0, 1.0]]])
+    below = np.vstack([[[0.0, 0.0], [1.0, 0.0]], crack[::-1]])
+    a_plus, a_minus = _sum(q.weights[s > 0].sum()), _sum(q.weights[s < 0].sum())
+    assert abs(a_plus - _shoelace(above)) < AREA_TOL
+    assert abs(a_minus - _shoelace(below)) < AREA_TOL
+    # crack faces: each side's length is the crack's
+    length = np.linalg.norm(np.diff(crack, axis=0), axis=1).sum()
+    for sd in (1, -1):
+        assert abs(_sum(faces.weights[faces.sides == sd].sum()) - length) < AREA_TOL
+
+
+def _per_cell(q, values, cells):
+    pos = np.full(int(cells.max()) + 1, -1)
+    pos[cells] = np.arange(cells.size)
+    return np.bincount(pos[q.cells], weights=values, minlength=cells.size)
+
+
+@pytest.mark.parametrize("degree", [1, 3, 6])
+@pytest.mark.parametrize("perturbed", [False, True])
+@pytest.mark.parametrize("cell", ["triangle", "quadrilateral"])
+def test_cut_cells_integrate_polynomials(cell, perturbed, degree):
+    """Per cut cell, the pieces integrate x^i y^j (i + j <= degree) as the cell's own rule of
+    degree + 2 does (exact also on non-affine quadrilaterals, where the rule of ``degree`` itself
+    is not: x^i y^j times det J has degree i + j + 1 in each reference variable); uncut cells keep
+    their points."""
+    msh = _mesh(cell, perturbed)
+    cells = _owned(msh)
+    crack = _through_crack("kinked-in-cell", perturbed)
+    q = cut_cell_quadrature(msh, cells, crack, degree)
+    ref = cell_quadrature(msh, degree + 2, cells)
+    cut = cells_cut_by(msh, cells, crack)
+    assert _sum(cut.size) >= N  # the crack crosses the square
+    worst = 0.0
+    for i in range(degree + 1):
+        for j in range(degree + 1 - i):
+            v = _per_cell(q, q.points[:, 0] ** i * q.points[:, 1] ** j * q.weights, cells)
+            r = _per_cell(ref, ref.points[:, 0] ** i * ref.points[:, 1] ** j * ref.weights, cells)
+            worst = max(worst, float(np.abs(v - r)[np.isin(cells, cut)].max() / H**2))
+    assert COMM.allreduce(worst, op=MPI.MAX) < AREA_TOL
+    # uncut cells: exactly cell_quadrature's points, weights and order
+    plain = cell_quadrature(msh, degree, np.setdiff1d(cells, cut))
+    mine = ~np.isin(q.cells, cut)
+    assert np.array_equal(q.points[mine], plain.points)
+    assert np.array_equal(q.weights[mine], plain.weights)
+    assert np.array_equal(q.cells[mine], plain.cells)
+
+
+def test_no_crack_in_the_cells_changes_nothing():
+    msh = _mesh("quadrilateral", True)
+    cells = _owned(msh)
+    left = cells[: cells.size // 2]
+    far = np.array([[1.5, 0.2], [1.7, 0.9]])  # outside the square
+    q, ref = cut_cell_quadrature(msh, left, far, 3), cell_quadrature(msh, 3, left)
+    for name in ("points", "weights", "cells", "entities"):
+        assert np.array_equal(getattr(q, name), getattr(ref, name))
+    assert len(crack_face_quadrature(msh, left, far, 3)) == 0
+
+
+def _tip_crack(kind, tip_at, perturbed):
+    """Edge crack from the left edge to a tip at (near) (0.56, 0.5): in a cell, at the midpoint
+    of a mesh edge, or at a mesh vertex; straight or with a kink."""
+    if tip_at == "cell":
+        tip = np.array([0.5637, 0.5281])
+    elif tip_at == "edge":
+        tip = 0.5 * (_vertex(4, 4, perturbed) + _vertex(5, 4, perturbed))
+    else:
+        tip = _vertex(5, 4, perturbed)
+    if kind == "straight":
+        return np.array([[0.0, 0.4113], tip])
+    return np.array([[0.0, 0.3309], [0.3127, 0.4211], tip])
+
+
+@pytest.mark.parametrize("tip_at", ["cell", "edge", "vertex"])
+@pytest.mark.parametrize("kind", ["straight", "kinked"])
+@pytest.mark.parametrize("perturbed", [False, True])
+@pytest.mark.parametrize("cell", ["triangle", "quadrilateral"])
+def test_divergence_theorem_at_a_tip(cell, perturbed, kind, tip_at):
+    """Edge crack with its tip inside: a jump that runs up to the tip (f on the rectangle R
+    beside the last segment), and a continuous f over the whole square."""
+    degree = 4  # f is quartic; grad f cubic (exact on the non-affine quads' rule of degree 4)
+    msh = _mesh(cell, perturbed)
+    crack = _tip_crack(kind, tip_at, perturbed)
+    cells = _owned(msh)
+    tip, prev = crack[-1], crack[-2]
+    t = (tip - prev) / np.linalg.norm(tip - prev)
+    n = np.array([-t[1], t[0]])  # + side of the last segment
+    s0, c = -0.5 * np.linalg.norm(tip - prev), 0.2
+    R = tip + np.array([[0.0, c], [s0, c], [s0, 0.0]]) @ np.stack([t, n])
+    rect = np.vstack([tip, R])  # the three sides of R that are not crack
+    q = cut_cell_quadrature(msh, cells, [crack, rect], degree)
+    # f has a kink on the crack at xi = s0: the faces are split there by an extra (collinear)
+    # point of the polyline, which does not change the crack
+    split = np.vstack([crack[:-1], R[2], tip])
+    faces = crack_face_quadrature(msh, cells, split, degree)
+
+    def local(x):
+        return (x - tip) @ t, (x - tip) @ n
+
+    def f_R(x):
+        xi, eta = local(x)
+        inside = (xi > s0) & (xi < 0) & (eta > 0) & (eta < c)
+        p = 1 + x[:, 0] - 2 * x[:, 1]
+        dp = np.array([1.0, -2.0])
+        b = (c - eta) * (xi - s0) * (-xi)
+        db = np.outer(-(xi - s0) * (-xi), n) + np.outer((c - eta) * (s0 - 2 * xi), t)
+        scale = 1.0 / (c * s0**2 / 4)
+        f = np.where(inside, b * p, 0.0) * scale
+        g = np.where(inside[:, None], db * p[:, None] + b[:, None] * dp, 0.0) * scale
+        return f, g, inside
+
+    _, g, inside = f_R(q.points)
+    lhs = g.T @ q.weights
+    on_last = faces.entities == split.shape[0] - 2  # the part of the crack beside R
+    xi, _ = local(faces.points)  # the + side's limit of f (eta -> 0+); f_- = 0
+    p = 1 + faces.points[:, 0] - 2 * faces.points[:, 1]
+    f_plus = c * (xi - s0) * (-xi) * p / (c * s0**2 / 4)
+    fc = np.where((faces.sides > 0) & on_last, f_plus, 0.0)
+    rhs = faces.normals.T @ (fc * faces.weights)  # f = 0 on the exterior boundary
+    lhs, rhs = _sum(lhs), _sum(rhs)
+    assert np.abs(lhs).max() > 0.02  # a real test: measured >= 0.04
+    assert np.abs(lhs - rhs).max() < DIV_TOL, (lhs, rhs)
+    assert abs(_sum(q.weights[inside].sum()) - c * abs(s0)) < AREA_TOL
+
+    # crack only: continuous quadratic f, the crack faces cancel pairwise
+    q = cut_cell_quadrature(msh, cells, crack, degree)
+    faces = crack_face_quadrature(msh, cells, crack, degree)
+    ext = cut_facet_quadrature(msh, boundary_facets(msh), crack, degree)
+    bnd = join_quadrature(ext, faces)
+    _, g = _f(q.points, 1, True)
+    f, _ = _f(bnd.points, 1, True)
+    res = _sum(g.T @ q.weights - bnd.normals.T @ (f * bnd.weights))
+    assert np.abs(res).max() < DIV_TOL
+    d_min = COMM.allreduce(float(_dist_to_polyline(q.points, crack).min()), op=MPI.MIN)
+    assert d_min > 1e-8 * H, d_min
+    ref = cell_quadrature(msh, degree, cells)
+    area = np.abs(_per_cell(q, q.weights, cells) - _per_cell(ref, ref.weights, cells))
+    assert COMM.allreduce(float(area.max()), op=MPI.MAX) < AREA_TOL * H**2
+    length = np.linalg.norm(np.diff(crack, axis=0), axis=1).sum()
+    assert abs(_sum(faces.weights[faces.sides > 0].sum()) - length) < AREA_TOL
+
+
+def _sorted_points(q):
+    pts = np.vstack(COMM.allgather(np.column_stack([q.points, q.weights])))
+    return pts[np.lexsort(pts.T[::-1])]
+
+
+@pytest.mark.parametrize("cell", ["triangle", "quadrilateral"])
+def test_same_points_serial_and_parallel(cell):
+    """The points of the distributed mesh (gathered) are those of the same mesh on one rank."""
+    crack = _tip_crack("kinked", "cell", True)
+    dist, local = _mesh(cell, True), _mesh(cell, True, MPI.COMM_SELF)
+    for fn in (cut_cell_quadrature, crack_face_quadrature):
+        a = _sorted_points(fn(dist, _owned(dist), crack, 3))
+        b = fn(local, _owned(local), crack, 3)
+        b = np.column_stack([b.points, b.weights])
+        b = b[np.lexsort(b.T[::-1])]
+        assert a.shape == b.shape
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-15)
+
+
+def test_growth_reintegrates_only_the_cells_the_new_segment_cuts():
+    msh = _mesh("triangle", True)
+    cells = _owned(msh)
+    old = _tip_crack("kinked", "cell", True)
+    step = np.array([old[-1], old[-1] + [0.16, 0.09]])  # a kink at the old tip
+    new = np.vstack([old, step[1:]])
+    touched = cells_cut_by(msh, cells, step)
+    q_old, q_new = cut_cell_quadrature(msh, cells, old, 3), cut_cell_quadrature(msh, cells, new, 3)
+
+    def by_cell(q):
+        key = np.lexsort((q.points[:, 1], q.points[:, 0], q.cells))
+        return np.column_stack([q.cells, q.points, q.weights])[key]
+
+    changed = [
+        c
+        for c in cells
+        if not np.array_equal(
+            by_cell(q_old)[by_cell(q_old)[:, 0] == c], by_cell(q_new)[by_cell(q_new)[:, 0] == c]
+        )
+    ]
+    assert np.array_equal(np.array(changed, dtype=np.int64), touched)
+    assert _sum(touched.size) >= 2
+    q_up = replace_cells(q_old, touched, cut_cell_quadrature(msh, touched, new, 3))
+    assert np.array_equal(by_cell(q_up), by_cell(q_new))
+
+
+@pytest.mark.parametrize(
+    ("crack", "degree", "match"),
+    [
+        ([[0.1, 0.5]], 2, "at least two points"),
+        ([[0.1, 0.5], [np.nan, 0.5]], 2, "non-finite"),
+        ([[0.1, 0.5], [0.4, 0.5], [0.4, 0.5]], 2, "zero length"),
+        ([0.1, 0.5, 0.4], 2, r"\(n, 2\)"),
+        ([[0.1, 0.5], [0.4, 0.5]], 0, "degree"),
+        ([[0.1, 0.5], [0.4, 0.5]], 1.5, "degree"),
+    ],
+)
+def test_bad_input(crack, degree, match):
+    msh = _mesh("triangle", False)
+    cells = _owned(msh)
+    for fn in (cut_cell_quadrature, crack_face_quadrature):
+        with pytest.raises(ValueError, match=match):
+            fn(msh, cells, crack, degree)
+
+
+def test_crack_objects_and_lists():
+    """A ``Crack``-like object (with ``points``) and a list of polylines are accepted."""
+
+    class Crack:
+        points = np.array([[0.1, 0.5], [0.4, 0.5]])
+
+    assert np.array_equal(crack_polylines(Crack())[0], Crack.points)
+    two = crack_polylines([Crack(), [[0.6, 0.1], [0.7, 0.2], [0.9, 0.2]]])
+    assert [p.shape for p in two] == [(2, 2), (3, 2)]
+    assert crack_polylines([[0.0, 0.0], [1.0, 1.0]])[0].shape == (2, 2)

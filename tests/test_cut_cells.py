@@ -113,23 +113,26 @@ def _f(x, side, quadratic):
 
 
 def _through_crack(kind, perturbed):
-    """x-monotone cracks from the left edge to the right edge (mouths off the vertices)."""
+    """x-monotone cracks from the left edge to the right edge (mouths off the vertices, except
+    along the mesh edges)."""
     if kind == "straight":
         return np.array([[0.0, 0.4437], [1.0, 0.4437]])
     if kind == "inclined":
         return np.array([[0.0, 0.2113], [1.0, 0.7391]])
     if kind == "kinked-in-cell":
         return np.array([[0.0, 0.3311], [0.4723, 0.6049], [1.0, 0.4172]])
-    # kinked at a mesh vertex, one segment along no grid line
-    return np.array([[0.0, 0.3311], _vertex(4, 5, perturbed), [1.0, 0.4172]])
+    if kind == "kinked-at-vertex":  # segments along no mesh edge
+        return np.array([[0.0, 0.3311], _vertex(4, 5, perturbed), [1.0, 0.4172]])
+    # along mesh edges (through the vertices that start on y = 0.5): no cell is cut
+    return np.array([_vertex(i, N // 2, perturbed) for i in range(N + 1)])
 
 
-@pytest.mark.parametrize("degree", [1, 2, 5])
-@pytest.mark.parametrize("kind", ["straight", "inclined", "kinked-in-cell", "kinked-at-vertex"])
-@pytest.mark.parametrize("perturbed", [False, True])
-@pytest.mark.parametrize("cell", ["triangle", "quadrilateral"])
-def test_divergence_theorem_through_crack(cell, perturbed, kind, degree):
-    """A crack across the whole square: f = f_+ above, f_- below (different polynomials)."""
+THROUGH = ["straight", "inclined", "kinked-in-cell", "kinked-at-vertex", "along-edges"]
+
+
+def through_crack_figures(cell, perturbed, kind, degree):
+    """Divergence-theorem residual and side areas for a crack across the whole square, with
+    f = f_+ above and f_- below (different polynomials of the rule's degree, at most 2)."""
     msh = _mesh(cell, perturbed)
     crack = _through_crack(kind, perturbed)
     cells = _owned(msh)
@@ -142,13 +145,6 @@ def test_divergence_theorem_through_crack(cell, perturbed, kind, degree):
     def side(x):  # above (+, left of the left-to-right polyline) or below
         return np.where(x[:, 1] > np.interp(x[:, 0], crack[:, 0], crack[:, 1]), 1, -1)
 
-    # no point on the crack; the exterior split at both mouths
-    d_min = COMM.allreduce(float(_dist_to_polyline(q.points, crack).min()), op=MPI.MIN)
-    assert d_min > 1e-8 * H, d_min  # not on it (a sliver near a vertex can be close)
-    assert _sum(len(ext)) > _sum(
-        len(cut_facet_quadrature(msh, boundary_facets(msh), [[2, 2], [3, 3]], degree))
-    )
-
     lhs = np.zeros(2)
     s = side(q.points)
     for sd in (1, -1):
@@ -160,19 +156,39 @@ def test_divergence_theorem_through_crack(cell, perturbed, kind, degree):
         f, _ = _f(bnd.points[sb == sd], sd, quadratic)
         rhs += bnd.normals[sb == sd].T @ (f * bnd.weights[sb == sd])
     lhs, rhs = _sum(lhs), _sum(rhs)
-    assert np.abs(lhs).max() > 0.1  # a real test: the jump matters
-    assert np.abs(lhs - rhs).max() < DIV_TOL, (lhs, rhs)
-
     # areas of the two sides: shoelace of the exact split of the square
     above = np.vstack([crack, [[1.0, 1.0], [0.0, 1.0]]])
     below = np.vstack([[[0.0, 0.0], [1.0, 0.0]], crack[::-1]])
-    a_plus, a_minus = _sum(q.weights[s > 0].sum()), _sum(q.weights[s < 0].sum())
-    assert abs(a_plus - _shoelace(above)) < AREA_TOL
-    assert abs(a_minus - _shoelace(below)) < AREA_TOL
-    # crack faces: each side's length is the crack's
     length = np.linalg.norm(np.diff(crack, axis=0), axis=1).sum()
-    for sd in (1, -1):
-        assert abs(_sum(faces.weights[faces.sides == sd].sum()) - length) < AREA_TOL
+    no_split = cut_facet_quadrature(msh, boundary_facets(msh), [[2, 2], [3, 3]], degree)
+    return {
+        "lhs": float(np.abs(lhs).max()),
+        "divergence": float(np.abs(lhs - rhs).max()),
+        "area_plus": abs(_sum(q.weights[s > 0].sum()) - _shoelace(above)),
+        "area_minus": abs(_sum(q.weights[s < 0].sum()) - _shoelace(below)),
+        "faces": max(abs(_sum(faces.weights[faces.sides == sd].sum()) - length) for sd in (1, -1)),
+        "d_min": COMM.allreduce(float(_dist_to_polyline(q.points, crack).min()), op=MPI.MIN),
+        "mouths_split": _sum(len(ext)) > _sum(len(no_split)),
+        "cut_cells": int(_sum(cells_cut_by(msh, cells, crack).size)),
+    }
+
+
+@pytest.mark.parametrize("degree", [1, 2, 5])
+@pytest.mark.parametrize("kind", THROUGH)
+@pytest.mark.parametrize("perturbed", [False, True])
+@pytest.mark.parametrize("cell", ["triangle", "quadrilateral"])
+def test_divergence_theorem_through_crack(cell, perturbed, kind, degree):
+    """A crack across the whole square: f = f_+ above, f_- below."""
+    r = through_crack_figures(cell, perturbed, kind, degree)
+    assert r["lhs"] > 0.1  # a real test: the jump matters
+    assert r["divergence"] < DIV_TOL, r
+    assert r["area_plus"] < AREA_TOL and r["area_minus"] < AREA_TOL, r
+    assert r["faces"] < AREA_TOL, r  # each face is as long as the crack
+    assert r["d_min"] > 1e-8 * H, r  # no point on the crack (a sliver near a vertex is close)
+    # the exterior facets are split at the mouths unless these are mesh vertices; along the
+    # edges no cell is cut
+    assert r["mouths_split"] == (kind != "along-edges"), r
+    assert (r["cut_cells"] == 0) == (kind == "along-edges"), r
 
 
 def _per_cell(q, values, cells):
@@ -236,13 +252,9 @@ def _tip_crack(kind, tip_at, perturbed):
     return np.array([[0.0, 0.3309], [0.3127, 0.4211], tip])
 
 
-@pytest.mark.parametrize("tip_at", ["cell", "edge", "vertex"])
-@pytest.mark.parametrize("kind", ["straight", "kinked"])
-@pytest.mark.parametrize("perturbed", [False, True])
-@pytest.mark.parametrize("cell", ["triangle", "quadrilateral"])
-def test_divergence_theorem_at_a_tip(cell, perturbed, kind, tip_at):
-    """Edge crack with its tip inside: a jump that runs up to the tip (f on the rectangle R
-    beside the last segment), and a continuous f over the whole square."""
+def tip_figures(cell, perturbed, kind, tip_at):
+    """Edge crack with its tip inside: residuals of a jump that runs up to the tip (f on the
+    rectangle R beside the last segment) and of a continuous f over the whole square."""
     degree = 4  # f is quartic; grad f cubic (exact on the non-affine quads' rule of degree 4)
     msh = _mesh(cell, perturbed)
     crack = _tip_crack(kind, tip_at, perturbed)
@@ -283,9 +295,11 @@ def test_divergence_theorem_at_a_tip(cell, perturbed, kind, tip_at):
     fc = np.where((faces.sides > 0) & on_last, f_plus, 0.0)
     rhs = faces.normals.T @ (fc * faces.weights)  # f = 0 on the exterior boundary
     lhs, rhs = _sum(lhs), _sum(rhs)
-    assert np.abs(lhs).max() > 0.02  # a real test: measured >= 0.04
-    assert np.abs(lhs - rhs).max() < DIV_TOL, (lhs, rhs)
-    assert abs(_sum(q.weights[inside].sum()) - c * abs(s0)) < AREA_TOL
+    out = {
+        "lhs": float(np.abs(lhs).max()),
+        "divergence_jump": float(np.abs(lhs - rhs).max()),
+        "area_R": abs(_sum(q.weights[inside].sum()) - c * abs(s0)),
+    }
 
     # crack only: continuous quadratic f, the crack faces cancel pairwise
     q = cut_cell_quadrature(msh, cells, crack, degree)
@@ -295,14 +309,32 @@ def test_divergence_theorem_at_a_tip(cell, perturbed, kind, tip_at):
     _, g = _f(q.points, 1, True)
     f, _ = _f(bnd.points, 1, True)
     res = _sum(g.T @ q.weights - bnd.normals.T @ (f * bnd.weights))
-    assert np.abs(res).max() < DIV_TOL
-    d_min = COMM.allreduce(float(_dist_to_polyline(q.points, crack).min()), op=MPI.MIN)
-    assert d_min > 1e-8 * H, d_min
     ref = cell_quadrature(msh, degree, cells)
-    area = np.abs(_per_cell(q, q.weights, cells) - _per_cell(ref, ref.weights, cells))
-    assert COMM.allreduce(float(area.max()), op=MPI.MAX) < AREA_TOL * H**2
+    area = np.abs(_per_cell(q, q.weights, cells) - _per_cell(ref, ref.weights, cells)) / H**2
     length = np.linalg.norm(np.diff(crack, axis=0), axis=1).sum()
-    assert abs(_sum(faces.weights[faces.sides > 0].sum()) - length) < AREA_TOL
+    tip_cells = cells_cut_by(msh, cells, crack[-2:])
+    return out | {
+        "divergence_smooth": float(np.abs(res).max()),
+        "area_cells": COMM.allreduce(float(area.max()), op=MPI.MAX),
+        "faces": max(abs(_sum(faces.weights[faces.sides == sd].sum()) - length) for sd in (1, -1)),
+        "d_min": COMM.allreduce(float(_dist_to_polyline(q.points, crack).min()), op=MPI.MIN),
+        "cut_cells": int(_sum(cells_cut_by(msh, cells, crack).size)),
+        "last_segment_cells": int(_sum(tip_cells.size)),
+    }
+
+
+@pytest.mark.parametrize("tip_at", ["cell", "edge", "vertex"])
+@pytest.mark.parametrize("kind", ["straight", "kinked"])
+@pytest.mark.parametrize("perturbed", [False, True])
+@pytest.mark.parametrize("cell", ["triangle", "quadrilateral"])
+def test_divergence_theorem_at_a_tip(cell, perturbed, kind, tip_at):
+    r = tip_figures(cell, perturbed, kind, tip_at)
+    assert r["lhs"] > 0.02, r  # a real test: measured >= 0.04
+    assert r["divergence_jump"] < DIV_TOL and r["divergence_smooth"] < DIV_TOL, r
+    assert r["area_R"] < AREA_TOL and r["area_cells"] < AREA_TOL, r
+    assert r["faces"] < AREA_TOL, r  # both faces end at the tip
+    assert r["d_min"] > 1e-8 * H, r
+    assert r["last_segment_cells"] >= 2, r
 
 
 def _sorted_points(q):

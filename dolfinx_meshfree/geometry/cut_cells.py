@@ -182,9 +182,15 @@ def _segments(polylines: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
 
 def _pieces(polys: np.ndarray, a: np.ndarray, b: np.ndarray) -> _Pieces:
     """Clip every segment ``[a_s, b_s]`` to every convex polygon (Cyrus–Beck), a bounding-box
-    filter first; loops over segments (few), vectorised over cells."""
+    filter first (the cracks' box, then each segment's); loops over segments (few), vectorised
+    over cells."""
     lo, hi = polys.min(axis=1), polys.max(axis=1)
     diam = np.linalg.norm(hi - lo, axis=1)
+    near = np.flatnonzero(
+        np.all(np.minimum(a, b).min(axis=0) <= hi + TOL * diam[:, None], axis=1)
+        & np.all(np.maximum(a, b).max(axis=0) >= lo - TOL * diam[:, None], axis=1)
+    )
+    polys, lo, hi, diam = polys[near], lo[near], hi[near], diam[near]
     edges = np.roll(polys, -1, axis=1) - polys
     normals = np.stack([edges[..., 1], -edges[..., 0]], axis=-1)  # outward on CCW polygons
     normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
@@ -217,7 +223,7 @@ def _pieces(polys: np.ndarray, a: np.ndarray, b: np.ndarray) -> _Pieces:
         depth = -np.max(np.einsum("cvg,cvg->cv", n, mid[:, None, :] - v), axis=1)
         interior = depth > tc
         left = (polys[cand].mean(axis=1) - sa) @ np.array([-d[1], d[0]]) > 0.0
-        out.append((cand, np.full(cand.size, s), t0, t1, interior, left))
+        out.append((near[cand], np.full(cand.size, s), t0, t1, interior, left))
     if not out:
         e = np.zeros(0)
         return _Pieces(e.astype(np.int64), e.astype(np.int64), e, e, e.astype(bool), e.astype(bool))

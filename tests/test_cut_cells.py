@@ -32,6 +32,7 @@ from dolfinx_meshfree.geometry.cut_cells import (
     cells_cut_by,
     crack_face_quadrature,
     crack_polylines,
+    cracked_boundary_quadrature,
     cut_cell_quadrature,
     cut_facet_quadrature,
     join_quadrature,
@@ -121,13 +122,15 @@ def _through_crack(kind, perturbed):
         return np.array([[0.0, 0.2113], [1.0, 0.7391]])
     if kind == "kinked-in-cell":
         return np.array([[0.0, 0.3311], [0.4723, 0.6049], [1.0, 0.4172]])
+    if kind == "diagonal":  # corner to corner: through the vertices (regular mesh)
+        return np.array([[0.0, 0.0], [1.0, 1.0]])
     if kind == "kinked-at-vertex":  # segments along no mesh edge
         return np.array([[0.0, 0.3311], _vertex(4, 5, perturbed), [1.0, 0.4172]])
     # along mesh edges (through the vertices that start on y = 0.5): no cell is cut
     return np.array([_vertex(i, N // 2, perturbed) for i in range(N + 1)])
 
 
-THROUGH = ["straight", "inclined", "kinked-in-cell", "kinked-at-vertex", "along-edges"]
+THROUGH = ["straight", "inclined", "diagonal", "kinked-in-cell", "kinked-at-vertex", "along-edges"]
 
 
 def through_crack_figures(cell, perturbed, kind, degree):
@@ -139,7 +142,8 @@ def through_crack_figures(cell, perturbed, kind, degree):
     q = cut_cell_quadrature(msh, cells, crack, degree)
     faces = crack_face_quadrature(msh, cells, crack, degree)
     ext = cut_facet_quadrature(msh, boundary_facets(msh), crack, degree)
-    bnd = join_quadrature(ext, faces)
+    bnd = cracked_boundary_quadrature(msh, boundary_facets(msh), cells, crack, degree)
+    assert np.array_equal(bnd.points, join_quadrature(ext, faces).points)
     quadratic = degree >= 2
 
     def side(x):  # above (+, left of the left-to-right polyline) or below
@@ -185,10 +189,12 @@ def test_divergence_theorem_through_crack(cell, perturbed, kind, degree):
     assert r["area_plus"] < AREA_TOL and r["area_minus"] < AREA_TOL, r
     assert r["faces"] < AREA_TOL, r  # each face is as long as the crack
     assert r["d_min"] > 1e-8 * H, r  # no point on the crack (a sliver near a vertex is close)
-    # the exterior facets are split at the mouths unless these are mesh vertices; along the
-    # edges no cell is cut
-    assert r["mouths_split"] == (kind != "along-edges"), r
-    assert (r["cut_cells"] == 0) == (kind == "along-edges"), r
+    # the exterior facets are split at the mouths unless these are mesh vertices (corners);
+    # along the edges no cell is cut
+    assert r["mouths_split"] == (kind not in ("along-edges", "diagonal")), r
+    # (DOLFINx's "right" diagonals run from (0, 0) to (1, 1) on the regular triangle mesh)
+    along = kind == "along-edges" or (kind == "diagonal" and cell == "triangle" and not perturbed)
+    assert (r["cut_cells"] == 0) == along, r
 
 
 def _per_cell(q, values, cells):
@@ -411,3 +417,20 @@ def test_crack_objects_and_lists():
     two = crack_polylines([Crack(), [[0.6, 0.1], [0.7, 0.2], [0.9, 0.2]]])
     assert [p.shape for p in two] == [(2, 2), (3, 2)]
     assert crack_polylines([[0.0, 0.0], [1.0, 1.0]])[0].shape == (2, 2)
+
+
+def test_bad_meshes():
+    """A 3D mesh, and a non-convex cell that a crack cuts (a local check: the mesh is on one
+    rank here; callers with a distributed mesh wrap the call in ``raise_on_all_ranks``)."""
+    import dolfinx
+
+    cube = dolfinx.mesh.create_unit_cube(MPI.COMM_SELF, 1, 1, 1)
+    with pytest.raises(ValueError, match="2D meshes"):
+        cut_cell_quadrature(cube, [0], [[0.1, 0.5], [0.4, 0.5]], 2)
+    msh = _mesh("quadrilateral", False, MPI.COMM_SELF)
+    x = msh.geometry.x
+    v = np.flatnonzero(np.all(np.isclose(x[:, :2], [4 * H, 4 * H]), axis=1))
+    x[v, :2] += 0.8 * H  # beyond the diagonal of the cell [4h, 5h]^2: a reflex vertex
+    crack = [[0.0, 4.5 * H], [1.0, 4.5 * H]]
+    with pytest.raises(ValueError, match=r"not convex \(vertices .*0\.6"):
+        cut_cell_quadrature(msh, _owned(msh), crack, 2)

@@ -49,6 +49,7 @@ __all__ = [
     "cells_cut_by",
     "crack_face_quadrature",
     "crack_polylines",
+    "cracked_boundary_quadrature",
     "cut_cell_quadrature",
     "cut_facet_quadrature",
     "join_quadrature",
@@ -191,6 +192,7 @@ def _pieces(polys: np.ndarray, a: np.ndarray, b: np.ndarray) -> _Pieces:
         & np.all(np.maximum(a, b).max(axis=0) >= lo - TOL * diam[:, None], axis=1)
     )
     polys, lo, hi, diam = polys[near], lo[near], hi[near], diam[near]
+    _check_convex(polys)
     edges = np.roll(polys, -1, axis=1) - polys
     normals = np.stack([edges[..., 1], -edges[..., 0]], axis=-1)  # outward on CCW polygons
     normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
@@ -271,6 +273,20 @@ def _clean(poly: np.ndarray, tol2: float) -> np.ndarray:
         return p
     start = int(np.lexsort((p[:, 1], p[:, 0]))[0])
     return np.roll(p, -start, axis=0)
+
+
+def _check_convex(polys: np.ndarray) -> None:
+    """Refuse polygons (nc, nv, 2) that are not strictly convex: clipping needs convex cells (a
+    valid degree-1 quadrilateral is). A local check, on the cells near the crack."""
+    e = np.roll(polys, -1, axis=1) - polys
+    f = np.roll(e, -1, axis=1)
+    cross = e[..., 0] * f[..., 1] - e[..., 1] * f[..., 0]
+    bad = np.flatnonzero(np.any(cross <= 0.0, axis=1))
+    if bad.size:
+        raise ValueError(
+            f"a cell near the crack is not convex (vertices {polys[bad[0]].tolist()}); "
+            "cut-cell quadrature clips convex cells: fix the mesh (a valid quadrilateral is convex)"
+        )
 
 
 def _sub_triangles(poly: np.ndarray, a: np.ndarray, b: np.ndarray, segs: np.ndarray) -> np.ndarray:
@@ -471,6 +487,32 @@ def cut_facet_quadrature(
         cells=np.concatenate([q.cells[keep], *cls])[order],
         normals=np.concatenate([q.normals[keep], *nrm])[order],
         entities=np.concatenate([q.entities[keep], *ent])[order],
+    )
+
+
+def cracked_boundary_quadrature(
+    msh: dolfinx.mesh.Mesh,
+    facets: npt.ArrayLike,
+    cells: npt.ArrayLike,
+    cracks: Any,
+    degree: int,
+    facet_cells: npt.ArrayLike | None = None,
+) -> SidedQuadraturePoints:
+    """The whole boundary of a cracked patch: its boundary facets (split at the crack's mouths,
+    :func:`cut_facet_quadrature`, ``sides = 0``) and both crack faces in ``cells``
+    (:func:`crack_face_quadrature`, ``sides = +-1``): the boundary set that consistent
+    integration (:func:`~dolfinx_meshfree.physics.operators.consistent_gradients`) needs, with
+    shape functions evaluated one-sidedly where ``sides != 0``.
+
+    Args:
+        msh: 2D mesh. facets: the patch's boundary facets (local, owned), e.g. from
+        ``ParticlePatch.boundary()``. cells: the patch's owned cells. cracks: as in
+        :func:`cut_cell_quadrature`. degree: exactness degree. facet_cells: the patch cell beside
+        each facet (the normals point out of it; default: the facet's first cell).
+    """
+    return join_quadrature(
+        cut_facet_quadrature(msh, facets, cracks, degree, facet_cells),
+        crack_face_quadrature(msh, cells, cracks, degree),
     )
 
 

@@ -19,15 +19,24 @@ and each piece gets Gauss–Legendre points, every point twice, once per side. S
 along the polyline's direction (from ``points[i]`` to ``points[i + 1]``, tangent ``t``) the
 **+ side is on the left**, the side of ``n_L = (-t_y, t_x)``. The domain on the + side has outward
 normal ``-n_L`` on the crack face (pointing to the - side), the domain on the - side ``+n_L``.
-Concatenated with the exterior boundary points (:func:`join_quadrature`), they give the whole
-boundary of the cracked domain, which consistent integration (Chen, Hillman & Rüter 2013,
-:func:`~dolfinx_meshfree.physics.operators.consistent_gradients`) needs: for a function ``f``
-smooth on each side, ``sum_q grad f w_q = sum_b f n w_b + sum_c f_side(c) n_c w_c``, exactly when
-``f`` is a polynomial of the rule's degree on each piece.
+With the exterior boundary facets, split where the crack's mouth meets them
+(:func:`cut_facet_quadrature`), they give the whole boundary of the cracked domain
+(:func:`cracked_boundary_quadrature`), which consistent integration (Chen, Hillman & Rüter 2013,
+:func:`~dolfinx_meshfree.physics.operators.consistent_gradients`) needs: for ``f`` smooth on each
+side of the crack (continuous elsewhere), ``sum_q grad f w_q = sum_b f n w_b + sum_c f_side(c)
+n_c w_c``, exactly when ``f`` is a polynomial of the rule's degree on each piece (on a non-affine
+quadrilateral that is not cut, as exact as its own rule).
 
-Parallel: every function works on the local cells (and facets) it is given; with the owned ones
-each crack-face piece is counted on one rank only (a piece that runs along a cell edge belongs
-to the cell on its + side), so sums over ranks count every point once.
+Growth: a new segment changes the points of :func:`cells_cut_by` it only; re-integrate those
+with :func:`cut_cell_quadrature` (the whole crack, those cells) and swap them in with
+:func:`replace_cells`; the faces of the old segments do not change.
+
+Parallel: every function works on the local cells (and facets) it is given, without
+communication; with the owned ones each crack-face piece is counted on one rank only (a piece
+that runs along a cell edge belongs to the cell on its + side), so sums over ranks count every
+point once. Checks of the crack's points fail alike on every rank; the convexity check of the
+cells near the crack is local (wrap the call in ``parallel.raise_on_all_ranks`` before a
+collective call).
 """
 
 from __future__ import annotations

@@ -48,7 +48,8 @@ COMM = MPI.COMM_WORLD
 N = 8  # cells per side
 H = 1.0 / N
 #: Divergence-theorem residuals (absolute; f and its terms are O(1)) and areas (relative).
-#: Measured: <= 4e-16 (areas), <= 2e-15 (divergence); the bounds leave room for other partitions.
+#: Measured (serial and 2 ranks): divergence <= 4.7e-15, side areas <= 3.3e-16, cell areas <=
+#: 1.2e-15 (relative); the bounds are far above round-off and far below any real defect.
 DIV_TOL = 1e-12
 AREA_TOL = 1e-13
 
@@ -181,24 +182,26 @@ def through_crack_figures(cell, perturbed, kind, degree):
     }
 
 
-@pytest.mark.parametrize("degree", [1, 2])
 @pytest.mark.parametrize("kind", THROUGH)
 @pytest.mark.parametrize("perturbed", [False, True])
 @pytest.mark.parametrize("cell", ["triangle", "quadrilateral"])
-def test_divergence_theorem_through_crack(cell, perturbed, kind, degree):
-    """A crack across the whole square: f = f_+ above, f_- below."""
-    r = through_crack_figures(cell, perturbed, kind, degree)
-    assert r["lhs"] > 0.1  # a real test: the jump matters
-    assert r["divergence"] < DIV_TOL, r
-    assert r["area_plus"] < AREA_TOL and r["area_minus"] < AREA_TOL, r
-    assert r["faces"] < AREA_TOL, r  # each face is as long as the crack
-    assert r["d_min"] > 1e-8 * H, r  # no point on the crack (a sliver near a vertex is close)
-    # the exterior facets are split at the mouths unless these are mesh vertices (corners);
-    # along the edges no cell is cut
-    assert r["mouths_split"] == (kind not in ("along-edges", "diagonal")), r
-    # (DOLFINx's "right" diagonals run from (0, 0) to (1, 1) on the regular triangle mesh)
-    along = kind == "along-edges" or (kind == "diagonal" and cell == "triangle" and not perturbed)
-    assert (r["cut_cells"] == 0) == along, r
+def test_divergence_theorem_through_crack(cell, perturbed, kind):
+    """A crack across the whole square: f = f_+ above, f_- below (degrees 1 and 2)."""
+    for degree in (1, 2):
+        r = through_crack_figures(cell, perturbed, kind, degree) | {"degree": degree}
+        assert r["lhs"] > 0.1  # a real test: the jump matters
+        assert r["divergence"] < DIV_TOL, r
+        assert r["area_plus"] < AREA_TOL and r["area_minus"] < AREA_TOL, r
+        assert r["faces"] < AREA_TOL, r  # each face is as long as the crack
+        assert r["d_min"] > 1e-8 * H, r  # no point on the crack (a sliver near a vertex is close)
+        # the exterior facets are split at the mouths unless these are mesh vertices (corners);
+        # along the edges no cell is cut
+        assert r["mouths_split"] == (kind not in ("along-edges", "diagonal")), r
+        # (DOLFINx's "right" diagonals run from (0, 0) to (1, 1) on the regular triangle mesh)
+        along = kind == "along-edges" or (
+            kind == "diagonal" and cell == "triangle" and not perturbed
+        )
+        assert (r["cut_cells"] == 0) == along, r
 
 
 def _per_cell(q, values, cells):
@@ -333,18 +336,18 @@ def tip_figures(cell, perturbed, kind, tip_at):
     }
 
 
-@pytest.mark.parametrize("tip_at", ["cell", "edge", "vertex"])
 @pytest.mark.parametrize("kind", ["straight", "kinked"])
 @pytest.mark.parametrize("perturbed", [False, True])
 @pytest.mark.parametrize("cell", ["triangle", "quadrilateral"])
-def test_divergence_theorem_at_a_tip(cell, perturbed, kind, tip_at):
-    r = tip_figures(cell, perturbed, kind, tip_at)
-    assert r["lhs"] > 0.02, r  # a real test: measured >= 0.04
-    assert r["divergence_jump"] < DIV_TOL and r["divergence_smooth"] < DIV_TOL, r
-    assert r["area_R"] < AREA_TOL and r["area_cells"] < AREA_TOL, r
-    assert r["faces"] < AREA_TOL, r  # both faces end at the tip
-    assert r["d_min"] > 1e-8 * H, r
-    assert r["last_segment_cells"] >= 2, r
+def test_divergence_theorem_at_a_tip(cell, perturbed, kind):
+    for tip_at in ("cell", "edge", "vertex"):
+        r = tip_figures(cell, perturbed, kind, tip_at) | {"tip_at": tip_at}
+        assert r["lhs"] > 0.02, r  # a real test: measured >= 0.04
+        assert r["divergence_jump"] < DIV_TOL and r["divergence_smooth"] < DIV_TOL, r
+        assert r["area_R"] < AREA_TOL and r["area_cells"] < AREA_TOL, r
+        assert r["faces"] < AREA_TOL, r  # both faces end at the tip
+        assert r["d_min"] > 1e-8 * H, r
+        assert r["last_segment_cells"] >= 2, r
 
 
 def _sorted_points(q):

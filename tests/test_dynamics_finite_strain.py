@@ -39,7 +39,8 @@ def patch_problem(msh, method: str, material=LIN, **options) -> mf.CoupledElasti
     patch = mf.ParticlePatch(msh, np.flatnonzero(np.all(np.abs(xc) < 0.5, axis=1)), h / 2)
     if method == "bridging":
         options.setdefault("overlap", 1)
-    return mf.CoupledElasticity(V, patch, material, coupling=method, quadrature_degree=3, **options)
+    options.setdefault("quadrature_degree", 3)
+    return mf.CoupledElasticity(V, patch, material, coupling=method, **options)
 
 
 def build(method: str, material=NH, n: int = 4) -> ExplicitDynamics:

@@ -46,6 +46,7 @@ from ..approx.mls import MLS
 from ..approx.tables import ShapeTable
 from ..couplings.bridging import BridgingBand
 from ..couplings.hybrid import HybridElasticity
+from ..couplings.master_slave_finite import SlaveCorrection
 from ..couplings.ramp import RampInterface
 from ..geometry.particles import ParticleSet
 from ..geometry.patch import ParticlePatch
@@ -57,8 +58,15 @@ from ..physics.materials import LinearElastic
 from ..statics.coupled import CoupledElasticity, CouplingOperators
 from ..statics.efg import particle_stiffness
 from ..statics.petsc import create_aij
+from ..statics.sides import BlendedSide
 from .conditions import check_facets, first_cells, fixed_fe_dofs, particle_conditions, stack_rows
-from .finite_strain import NonlinearSystem, fe_forces, particle_forces, small_strain
+from .finite_strain import (
+    NonlinearSystem,
+    ReducedParticles,
+    fe_forces,
+    particle_forces,
+    small_strain,
+)
 from .loads import BodyLoad
 from .masses import (
     fe_lumped_mass,
@@ -455,6 +463,9 @@ def build_coupled(
     system = None
     if law is not material:
         system = _finite_strain_system(problem, ops, law, fields, constraint)
+        for B in blocks.values():  # the ramps' or master-slave's linear blocks: not used
+            B.destroy()
+        blocks = {}
     return Model(
         fields,
         law,
@@ -482,11 +493,17 @@ def _finite_strain_system(
     constraint: list[PETSc.Mat | None] | None,
 ) -> NonlinearSystem:
     """The finite-strain system of a coupling from its operators: the FE law on the cells
-    whose energy is FE (weighted by ``beta_FE`` in the bridging band, eq. 47–48) and the particle
-    tables of ``K_P`` (bridging: weights times ``alpha``, eq. 46). Collective.
+    whose energy is FE (weighted by ``beta_FE`` in the bridging band, eq. 47–48; not the ramps'
+    interface cells) and the particle tables of ``K_P`` (bridging: weights times ``alpha``,
+    eq. 46); the ramps' interface cells on their blended table (Belytschko et al. 1995,
+    eq. 3.15–3.16, :class:`~dolfinx_meshfree.statics.sides.BlendedSide`); master–slave's
+    particles through the reduction (eq. 27–28, :class:`ReducedParticles`, finite-rotation
+    links). Collective.
     """
     V, patch = problem.V, problem.patch
     cells, weight, weight_at = ~patch.in_patch, None, None
+    if ops.interface_table is not None:  # ramps: the interface cells are blended
+        cells = cells & ~ops.interface.in_interface
     if problem.coupling == "bridging":
         band = ops.interface
         cells, weight = cells | band.in_band, ops.fe_weight
@@ -499,11 +516,20 @@ def _finite_strain_system(
             w[b] = 1.0 - band.alpha_at(q.points[b], q.cells[b])
             return w
 
-    sides = [
-        fe_forces(V, law, cells, weight=weight, weight_at=weight_at),
-        particle_forces(patch.particles, ops.particle_tables, law),
-    ]
-    return NonlinearSystem(fields, sides, law, constraint)
+    fe = fe_forces(V, law, cells, weight=weight, weight_at=weight_at)
+    particles = particle_forces(patch.particles, ops.particle_tables, law)
+    sides: list = [fe, particles]
+    shared: list = []
+    if ops.interface_table is not None:
+        q, blend = ops.interface_quadrature, ops.interface
+        table = raise_on_all_ranks(patch.comm, lambda: blend.table(q.points, q.cells))
+        shared = [BlendedSide(fe.side, particles, table, q.weights, law)]
+    elif ops.reduction is not None:
+        correction = SlaveCorrection(problem, ops.interface, ops.fe_layout, ops.particle_layout)
+        if not correction.length > 0.0:  # links of length zero: u_P = T u, exactly
+            correction = None
+        shared, sides = [ReducedParticles(particles, ops.reduction, correction)], [fe, None]
+    return NonlinearSystem(fields, sides, law, constraint, shared)
 
 
 # -- hybrid SPH-FE ---------------------------------------------------------------------------------

@@ -287,6 +287,14 @@ class BlendedSide:
         self.fe.set_state(xs[0])
         return np.concatenate([self.fe.u.x.array, self.particles.coefficients(xs[1])])
 
+    def strain_energy(self, xs: Sequence[PETSc.Vec]) -> float:
+        """``sum_q W(F_q) w_q`` over this rank's blended points (not summed over ranks)."""
+        return self.forces.strain_energy(self._coefficients(xs))
+
+    def deformation_gradient(self, xs: Sequence[PETSc.Vec]) -> np.ndarray:
+        """``F`` (m, d, d) at this rank's blended points."""
+        return self.forces.deformation_gradient(self._coefficients(xs))
+
     def internal_force(self, xs: Sequence[PETSc.Vec]) -> list[PETSc.Vec]:
         """``f_int`` of the blended cells: ``[FE rows, particle rows]``. Collective."""
         f = self.forces.internal_force(self._coefficients(xs))

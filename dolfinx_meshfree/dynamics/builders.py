@@ -363,11 +363,6 @@ def build_coupled(
         )
     law = problem.material if material is None else material
     material = small_strain(law, coupling)
-    if law is not material and coupling == "bridging" and problem.penalty > 0.0:
-        raise ValueError(
-            f"penalty={problem.penalty!r}: the bridging penalty is not available at finite strain "
-            "in explicit dynamics (its blocks are mixed into the stiffness); use penalty=0"
-        )
     if material != problem.material:
         raise ValueError(
             f"material={law!r} reduces to {material!r} at small strain, but the problem's material "
@@ -462,10 +457,11 @@ def build_coupled(
 
     system = None
     if law is not material:
-        system = _finite_strain_system(problem, ops, law, fields, constraint)
-        for B in blocks.values():  # the ramps' or master-slave's linear blocks: not used
-            B.destroy()
+        system = _finite_strain_system(problem, ops, law, fields, constraint, blocks)
         blocks = {}
+    else:
+        for B in ops.penalty_blocks or ():  # already in K_fe, K_p
+            B.destroy()
     return Model(
         fields,
         law,
@@ -491,6 +487,7 @@ def _finite_strain_system(
     law: Material,
     fields: list[Field],
     constraint: list[PETSc.Mat | None] | None,
+    blocks: dict[tuple[int, int], PETSc.Mat],
 ) -> NonlinearSystem:
     """The finite-strain system of a coupling from its operators: the FE law on the cells
     whose energy is FE (weighted by ``beta_FE`` in the bridging band, eq. 47–48; not the ramps'
@@ -498,8 +495,16 @@ def _finite_strain_system(
     eq. 46); the ramps' interface cells on their blended table (Belytschko et al. 1995,
     eq. 3.15–3.16, :class:`~dolfinx_meshfree.statics.sides.BlendedSide`); master–slave's
     particles through the reduction (eq. 27–28, :class:`ReducedParticles`, finite-rotation
-    links). Collective.
+    links); the bridging penalty (eq. 72–75, linear in the displacements) as constant blocks.
+    The linear model's off-diagonal ``blocks`` are taken over (the penalty's) or destroyed.
+    Collective.
     """
+    constant: dict = {}
+    if ops.penalty_blocks is not None:  # the bridging penalty: its four blocks stay linear
+        constant = {(0, 0): ops.penalty_blocks[0], (1, 1): ops.penalty_blocks[1], **blocks}
+    else:
+        for B in blocks.values():  # the ramps' or master-slave's linear blocks: not used
+            B.destroy()
     V, patch = problem.V, problem.patch
     cells, weight, weight_at = ~patch.in_patch, None, None
     if ops.interface_table is not None:  # ramps: the interface cells are blended
@@ -529,7 +534,7 @@ def _finite_strain_system(
         if not correction.length > 0.0:  # links of length zero: u_P = T u, exactly
             correction = None
         shared, sides = [ReducedParticles(particles, ops.reduction, correction)], [fe, None]
-    return NonlinearSystem(fields, sides, law, constraint, shared)
+    return NonlinearSystem(fields, sides, law, constraint, shared, constant)
 
 
 # -- hybrid SPH-FE ---------------------------------------------------------------------------------

@@ -362,10 +362,14 @@ class SlaveCorrection(LinkMotion):
         u = self._fe_values(x_fe)
         _, _, JRd, grad, _ = self._links(u)
         D = self._derivative(JRd, grad) - self.D0
-        rows = np.broadcast_to(2 * self.k[:, None, None, None] + np.arange(2)[:, None, None], D.shape)
+        rows = np.broadcast_to(
+            2 * self.k[:, None, None, None] + np.arange(2)[:, None, None], D.shape
+        )
         cols = np.broadcast_to(self.dofs[:, None, :, :], D.shape)
         nfe = self.fe_layout.size_global
-        Dc = sp.csr_matrix((D.ravel(), (rows.ravel(), cols.ravel())), shape=(2 * self.num_slaves, nfe))
+        Dc = sp.csr_matrix(
+            (D.ravel(), (rows.ravel(), cols.ravel())), shape=(2 * self.num_slaves, nfe)
+        )
         J = (self.X2 @ Dc).tocoo()
         local = sp.csr_matrix(
             (J.data, (self.rows[J.row], J.col)), shape=(self.particle_layout.size_global, nfe)

@@ -335,8 +335,10 @@ def build_coupled(
         material: A finite-strain law (:class:`~dolfinx_meshfree.NeoHookean`,
             :class:`~dolfinx_meshfree.SaintVenantKirchhoff`) whose linear twin is the problem's
             material: the internal force is then the total-Lagrangian one of both sides
-            (:class:`~dolfinx_meshfree.dynamics.finite_strain.NonlinearSystem`; lagrange and
-            edge-to-edge). ``None``: the problem's material.
+            (:class:`~dolfinx_meshfree.dynamics.finite_strain.NonlinearSystem`; every coupling
+            of :data:`~dolfinx_meshfree.dynamics.finite_strain.FINITE_STRAIN_DYNAMICS`: the
+            ramps' interface cells blended, master-slave's links rotating, the bridging
+            penalty linear). ``None``: the problem's material.
     """
     if isinstance(problem, HybridElasticity):  # the hybrid SPH-FE coupling: its own builder
         if material is not None and not isinstance(material, LinearElastic):

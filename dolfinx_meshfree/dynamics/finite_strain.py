@@ -12,7 +12,12 @@ the deformation); only the internal force changes:
 * particle side: :class:`~dolfinx_meshfree.physics.forces.InternalForces` on the particle
   quadrature and the shape table the builders use for the masses and ``K_P`` (test gradients
   VCI-corrected when the coupling is consistent), through
-  :class:`~dolfinx_meshfree.statics.sides.ParticleSide`.
+  :class:`~dolfinx_meshfree.statics.sides.ParticleSide`;
+* sides over both fields (:class:`SharedSide`): the ramps' interface cells on their blended
+  table (:class:`~dolfinx_meshfree.statics.sides.BlendedSide`, Belytschko et al. 1995, eq.
+  3.15–3.16) and master–slave's particles seen through the reduction with rotating links
+  (:class:`ReducedParticles`, eq. 27–28);
+* constant blocks: the bridging penalty (eq. 72–75), linear in the displacements.
 
 The strain energy is the stored energy ``sum_q W(F_q) w_q`` of both sides (the FE one on the same
 Gauss rule as its force, with the FE basis tabulated at those points), not ``1/2 d^T K d``; the

@@ -160,6 +160,9 @@ class ExplicitDynamics:
         if hasattr(self.system, "wave_speed"):  # bounded at the current state
             self.bound.state = lambda: self.stepper.u
         self.evaluator = FieldEvaluator(disc, self.comm)
+        for side in getattr(self.system, "shared", ()):  # master-slave's rotating links
+            if getattr(side, "correction", None) is not None:
+                self.evaluator.expand = lambda vecs, side=side: side.expand(vecs, self.stepper.u)
         self.u, self.v = self.stepper.u, self.stepper.v
         self.timings["setup"] = self.timings.get("setup", 0.0) + time.perf_counter() - t0
 

@@ -247,6 +247,19 @@ class ReducedParticles:
             y.array[self.correction.local_rows] += self.correction.values(xs[0])
         return y
 
+    def expand(self, vecs: Sequence[PETSc.Vec], state: Sequence[PETSc.Vec]) -> PETSc.Vec:
+        """The particle parameters of ``vecs`` (a new vector; collective): ``u_P(u)`` if
+        ``vecs`` is the displacement ``state`` itself, else a rate ``T(u) v`` at the state (the
+        velocity of the slaves, whose links turn with their edges)."""
+        if all(a is b for a, b in zip(vecs, state, strict=True)):
+            return self.particle_state(state)
+        T = self._map(state)
+        y = T.createVecLeft()
+        T.mult(vecs[0], y)
+        self.S.multAdd(vecs[1], y, y)
+        T.destroy()
+        return y
+
     def _map(self, xs: Sequence[PETSc.Vec]) -> PETSc.Mat:
         """``T_PF + X c'(u_FE)`` (a new matrix; collective)."""
         T = self.T.copy()

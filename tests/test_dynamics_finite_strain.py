@@ -220,7 +220,7 @@ def test_hybrid_coupling_refuses_a_finite_strain_material():
     xc = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], :2].mean(axis=1)
     patch = mf.ParticlePatch(msh, np.flatnonzero(xc[:, 0] > 0.0), 0.25)
     problem = mf.HybridElasticity(V, patch, LIN)
-    with pytest.raises(ValueError, match="coupling='hybrid'.*SPH sums of the nominal stress P"):
+    with pytest.raises(ValueError, match=r"coupling='hybrid'.*SPH sums of the nominal stress P"):
         ExplicitDynamics.coupled(problem, material=NH)
 
 

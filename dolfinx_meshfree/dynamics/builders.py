@@ -46,6 +46,7 @@ from ..approx.mls import MLS
 from ..approx.tables import ShapeTable
 from ..couplings.bridging import BridgingBand
 from ..couplings.hybrid import HybridElasticity
+from ..couplings.hybrid_finite import HybridForces
 from ..couplings.master_slave_finite import SlaveCorrection
 from ..couplings.ramp import RampInterface
 from ..geometry.particles import ParticleSet
@@ -124,6 +125,17 @@ class Model:
 def _check_material(material: LinearElastic) -> None:
     if not isinstance(material, LinearElastic):
         raise TypeError(f"material must be a LinearElastic, got {type(material).__name__}")
+
+
+def _check_twin(law: Material | LinearElastic, twin: LinearElastic, problem: LinearElastic) -> None:
+    """Raise a ``ValueError`` unless ``twin``, the small-strain law of ``law``, is the
+    problem's material."""
+    if twin != problem:
+        raise ValueError(
+            f"material={law!r} reduces to {twin!r} at small strain, but the problem's material "
+            f"is {problem!r}: build the problem with the linear twin "
+            "(dolfinx_meshfree.physics.materials.linear_twin(material))"
+        )
 
 
 def check_particle_mass(particle_mass: str, default: str = "row-sum") -> str:
@@ -341,14 +353,12 @@ def build_coupled(
             penalty linear). ``None``: the problem's material.
     """
     if isinstance(problem, HybridElasticity):  # the hybrid SPH-FE coupling: its own builder
-        if material is not None and not isinstance(material, LinearElastic):
-            small_strain(material, "hybrid")
         if (integration, slaves) != ("cells", "layer"):
             raise ValueError(
                 f"integration={integration!r}, slaves={slaves!r}: the hybrid coupling has its "
                 "own SPH sums; use integration='cells', slaves='layer'"
             )
-        return build_hybrid(problem, particle_mass, fixed_facets)
+        return build_hybrid(problem, particle_mass, fixed_facets, material)
     if not isinstance(problem, CoupledElasticity):
         raise TypeError(f"problem must be a CoupledElasticity, got {type(problem).__name__}")
     coupling = problem.coupling
@@ -365,12 +375,7 @@ def build_coupled(
         )
     law = problem.material if material is None else material
     material = small_strain(law, coupling)
-    if material != problem.material:
-        raise ValueError(
-            f"material={law!r} reduces to {material!r} at small strain, but the problem's material "
-            f"is {problem.material!r}: build the CoupledElasticity with the linear twin "
-            "(dolfinx_meshfree.physics.materials.linear_twin(material))"
-        )
+    _check_twin(law, material, problem.material)
     t0 = time.perf_counter()
     V, patch, mls = problem.V, problem.patch, problem.mls
     P, comm, msh = patch.particles, patch.comm, V.mesh
@@ -546,6 +551,7 @@ def build_hybrid(
     problem: HybridElasticity,
     particle_mass: str = "volume",
     fixed_facets: npt.ArrayLike | None = None,
+    material: Material | None = None,
 ) -> Model:
     """Explicit dynamics of a :class:`~dolfinx_meshfree.couplings.hybrid.HybridElasticity` (Rabczuk
     et al.
@@ -567,11 +573,25 @@ def build_hybrid(
             (``rho sum_q N_I(x_q) w_q`` with the particles' interpolant at the stress points).
         fixed_facets: Owned exterior facets held at rest (FE nodes strongly, particles by facet
             multipliers on the velocities).
+        material: A finite-strain law whose linear twin is the problem's material (HA-F): the
+            FE cells' ``int P(F) : grad v dX`` and the SPH sums of ``P`` on the particle
+            energy's rule (:class:`~dolfinx_meshfree.couplings.hybrid_finite.HybridForces`);
+            ``None``: the problem's material.
     """
     if not isinstance(problem, HybridElasticity):
         raise TypeError(f"problem must be a HybridElasticity, got {type(problem).__name__}")
     check_particle_mass(particle_mass, default="volume")
-    material = problem.material
+    law = problem.material if material is None else material
+    material = small_strain(law, "hybrid")
+    if law is not material:
+        _check_twin(law, material, problem.material)
+        if problem.variant != "HA-F":
+            raise ValueError(
+                f"variant={problem.variant!r}: the hybrid coupling at finite strain is HA-F (the "
+                "forces reach the FE nodes by interpolation, eq. 135); HA-S's interface "
+                "tractions of the particle stresses (eq. 131-134) are not written for the "
+                "nominal stress: use variant='HA-F'"
+            )
     _check_material(material)
     t0 = time.perf_counter()
     V, patch = problem.V, problem.patch
@@ -596,11 +616,18 @@ def build_hybrid(
         Field("fe", ops.K_fe, mass_fe, fe_spacing(msh, patch.fe_cells), fixed=fixed_fe),
         Field("particles", ops.K_p, mass_p, particle_spacing(P)),
     ]
+    blocks, system = {(0, 1): ops.K_fp, (1, 0): ops.K_pf}, None
+    if law is not material:  # FE cells by UFL, the particle energy by the SPH sums of P
+        sides = [fe_forces(V, law, ~patch.in_patch), None]
+        system = NonlinearSystem(fields, sides, law, constraint, [HybridForces(problem, law)])
+        for B in blocks.values():
+            B.destroy()
+        blocks = {}
     return Model(
         fields,
-        material,
+        law,
         constraint,
-        blocks={(0, 1): ops.K_fp, (1, 0): ops.K_pf},
+        blocks=blocks,
         V=V,
         mls=problem.evaluator,
         particles=P,
@@ -608,4 +635,5 @@ def build_hybrid(
         in_patch=patch.in_patch,
         patch=patch,
         timings={"setup": time.perf_counter() - t0, "operators": ops.timings["operators"]},
+        system=system,
     )

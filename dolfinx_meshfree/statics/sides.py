@@ -49,6 +49,7 @@ __all__ = [
     "ParticleSide",
     "cell_part",
     "on_cells",
+    "particle_coefficients",
     "solve_load_steps",
     "split_residual",
     "zeros",
@@ -205,6 +206,13 @@ class FESide:
         return J
 
 
+def particle_coefficients(particles: ParticleSet, x: PETSc.Vec) -> np.ndarray:
+    """All particle coefficients of ``x`` (PETSc numbering), interleaved in original order, on
+    every rank (collective)."""
+    owned = np.concatenate(particles.comm.allgather(x.getArray(readonly=True)))
+    return owned.reshape(-1, particles.gdim)[particles.petsc_index].ravel()
+
+
 class ParticleSide:
     """The particle field: ``f_int`` and ``K_T`` on the patch quadrature, in PETSc numbering."""
 
@@ -226,8 +234,7 @@ class ParticleSide:
 
     def coefficients(self, x: PETSc.Vec) -> np.ndarray:
         """All particle coefficients, interleaved in original order, on every rank."""
-        owned = np.concatenate(self.comm.allgather(x.getArray(readonly=True)))
-        return owned.reshape(-1, self.gdim)[self.P.petsc_index].ravel()
+        return particle_coefficients(self.P, x)
 
     def internal_force(self, x: PETSc.Vec) -> PETSc.Vec:
         f = self.forces.internal_force(self.coefficients(x))

@@ -210,17 +210,17 @@ def test_stable_step_is_rebounded_downward_as_the_material_stiffens():
 # --- what is refused ------------------------------------------------------------------------------
 
 
-def test_hybrid_coupling_refuses_a_finite_strain_material():
-    """The hybrid SPH-FE coupling, whose dynamics is not written on the internal force yet,
-    refuses a finite-strain material, naming what is missing (the ramps and master-slave run at
-    finite strain: tests/test_dynamics_finite_strain_couplings.py)."""
+def test_hybrid_ha_s_refuses_a_finite_strain_material():
+    """The hybrid SPH-FE coupling's HA-S variant, whose interface tractions are not written
+    for the nominal stress, refuses a finite-strain material, naming what is missing (HA-F and
+    the other couplings run at finite strain: tests/test_dynamics_finite_strain_couplings.py)."""
     msh = mesh()
     V = _compat.vector_function_space(msh)
     n = msh.topology.index_map(2).size_local
     xc = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], :2].mean(axis=1)
     patch = mf.ParticlePatch(msh, np.flatnonzero(xc[:, 0] > 0.0), 0.25)
-    problem = mf.HybridElasticity(V, patch, LIN)
-    with pytest.raises(ValueError, match=r"coupling='hybrid'.*SPH sums of the nominal stress P"):
+    problem = mf.HybridElasticity(V, patch, LIN, variant="HA-S")
+    with pytest.raises(ValueError, match=r"variant='HA-S'.*use variant='HA-F'"):
         ExplicitDynamics.coupled(problem, material=NH)
 
 

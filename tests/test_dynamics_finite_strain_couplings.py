@@ -1,5 +1,6 @@
 """Explicit dynamics at finite strain of the ramps (blended interface cells), master-slave
-(finite-rotation links through the reduction) and the bridging penalty: rigid motions, the
+(finite-rotation links through the reduction), the bridging penalty and the hybrid SPH-FE
+coupling (HA-F, SPH sums of P): rigid motions, the
 small-amplitude limit (the linear system's force and the linear rod run), the spinning plate,
 energy conservation at large amplitude; serial and 2 ranks."""
 
@@ -233,10 +234,10 @@ def spin_quarter_turn(case: str, omega: float = 0.005) -> tuple[float, float, fl
 
 @pytest.mark.parametrize("case", list(CASES))
 def test_spinning_plate(case):
-    """The demo's targets: velocity error <= 1e-2 (measured 1.2e-3 ... 1.8e-3; master-slave
+    """The demo's targets: velocity error <= 1e-2 (measured 1.1e-3 ... 1.8e-3; master-slave
     with band slaves 1.6e-3, whose slaves' velocities are T(u) v at the current state: the
     reference's linear expansion T_PF v gave 5.2e-2), angular momentum drift <= 1e-10
-    (measured <= 5e-15, bridging with penalty 2.5e-12) and energy drift <= 1e-6 (measured
+    (measured <= 7e-15, bridging with penalty 2.5e-12) and energy drift <= 1e-6 (measured
     1.4e-7 ... 5.1e-7, band slaves 7.7e-7)."""
     err, drift, energy = spin_quarter_turn(case)
     assert err <= 1e-2, err

@@ -678,7 +678,7 @@ def _resolve_tie(links: MasterSlaveLinks, tie: str | None) -> str:
 
 
 def slave_solve(
-    problem, links: MasterSlaveLinks, tie: str | None, own: np.ndarray
+    problem: CoupledElasticity, links: MasterSlaveLinks, tie: str | None, own: np.ndarray
 ) -> tuple[sp.csr_matrix, sp.csr_matrix | None]:
     """``(X, Phi)``: the rows ``own`` (positions in ``links.slaves``) of the map from the slaves'
     link targets to their nodal parameters, ``u_S = X (w_S - Phi_SM u_M)`` (see

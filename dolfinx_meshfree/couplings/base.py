@@ -156,6 +156,10 @@ class CouplingOperators:
         interface: The coupling's interface object for evaluation (``RampInterface``,
             ``BridgingBand``, ``MasterSlaveLinks``) or ``None``.
         fe_layout, particle_layout, multiplier_layout, master_layout: Layouts (dofs).
+        penalty_blocks: The bridging penalty's diagonal blocks ``(FE, particles)`` (eq. 72–75;
+            already added to ``K_fe`` and ``K_p``, its off-diagonal blocks are ``K_fp``,
+            ``K_pf``): the part of the stiffness that stays linear at finite strain; ``None``
+            without a penalty.
         particle_tables: What a finite-strain internal force needs on the particle rule
             (``"quadrature"``, ``"table"``, ``"test_gradients"`` of ``K_P``, and ``"weights"``
             if they differ from the quadrature's), or ``None`` (couplings without it yet).
@@ -182,12 +186,13 @@ class CouplingOperators:
     master_layout: Layout | None = None
     interface: RampInterface | MasterSlaveLinks | BridgingBand | None = None
     particle_tables: dict | None = None
+    penalty_blocks: tuple[PETSc.Mat, PETSc.Mat] | None = None
     timings: dict[str, float] = field(default_factory=dict)
 
     def matrices(self) -> list[PETSc.Mat]:
         """The PETSc matrices held (for destruction or transfer of ownership)."""
         mats = [self.K_fe, self.K_p, self.K_fp, self.K_pf, self.G_fe, self.G_p]
-        mats += list(self.reduction or ())
+        mats += list(self.reduction or ()) + list(self.penalty_blocks or ())
         return [m for m in mats if m is not None]
 
     def destroy(self) -> None:

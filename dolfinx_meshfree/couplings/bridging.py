@@ -783,7 +783,7 @@ def bridging_operators(problem: CoupledElasticity) -> CouplingOperators:
     )
 
     K_fe = _fe_stiffness(problem, band)
-    K_fp = K_pf = None
+    K_fp = K_pf = penalty = None
     if p > 0.0:
         fe_dof = (d * l2g[:, None] + np.arange(d)).ravel()
         e2 = sp.identity(d, format="csr")
@@ -797,9 +797,9 @@ def bridging_operators(problem: CoupledElasticity) -> CouplingOperators:
         )
         K_pen = create_aij(comm, K_ff, fe_layout, fe_layout)
         K_fe.axpy(1.0, K_pen, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-        K_pen.destroy()
         A22g = sp.csr_matrix((A22.data, (dof_map[A22.row], dof_map[A22.col])), shape=(d * n, d * n))
         Kp_loc = Kp_loc + A22g
+        penalty = (K_pen, create_aij(comm, A22g, pl, pl))
         fp = sp.csr_matrix(
             (A12.data, (fe_dof[A12.row], dof_map[A12.col])), shape=(fe_layout.size_global, d * n)
         )
@@ -821,6 +821,7 @@ def bridging_operators(problem: CoupledElasticity) -> CouplingOperators:
         G_p=create_aij(comm, G_p, ml, pl),
         multiplier_layout=ml,
         interface=band,
+        penalty_blocks=penalty,
         particle_tables={
             "quadrature": q,
             "table": tq,

@@ -32,6 +32,7 @@ from .hybrid_smoothing import EXTERIOR, INTERIOR
 
 __all__ = [
     "consistent_test_gradients",
+    "energy_tables",
     "particle_energy_matrix",
     "smoothed_gradients",
     "strain_rows",
@@ -137,6 +138,28 @@ def smoothed_gradients(d: HybridDiscretisation) -> tuple[list[sp.csr_matrix], np
     return grads, sc.areas
 
 
+def energy_tables(
+    d: HybridDiscretisation, smoothed: tuple[list[sp.csr_matrix], np.ndarray] | None = None
+) -> tuple[np.ndarray, list[sp.csr_matrix], list[sp.csr_matrix], np.ndarray]:
+    """The particle energy's rule over [particles | FE nodes] on this rank (collective):
+    ``(points, trial gradients, test gradients, weights)``. ``"smoothed"``: the smoothing
+    cells' centroids, smoothed gradients (``smoothed``, computed here if not given) for both,
+    and areas; else the stress points, the corrected kernel gradients of the hybrid sums and,
+    if ``consistent``, their integration-consistent test gradients."""
+    if d.integration == "smoothed":
+        grads, areas = smoothed if smoothed is not None else smoothed_gradients(d)
+        return d.smoothing_cells().centroids, grads, grads, areas
+    q = d.stress_points()
+    t = raise_on_all_ranks(d.comm, lambda: d.sph.tabulate(q.points))
+    Z = d.node_map()
+    grads = [(g @ Z).tocsr() for g in t.gradients]
+    test = grads
+    if d.consistent:
+        shepard = (t.values @ Z).tocsr()
+        test = consistent_test_gradients(d, shepard, grads, q.weights)
+    return q.points, grads, test, q.weights
+
+
 def particle_energy_matrix(
     d: HybridDiscretisation, smoothed: tuple[list[sp.csr_matrix], np.ndarray] | None = None
 ) -> sp.coo_matrix:
@@ -145,22 +168,11 @@ def particle_energy_matrix(
     (collective; eq. 127 as the derivative of the particle strain energy); ``Bhat = B`` unless
     ``consistent``. With ``"smoothed"``: ``sum_k |Omega_k| B_k^T D B_k`` of the smoothed strains
     ``smoothed`` (:func:`smoothed_gradients`, computed here if not given; symmetric and
-    consistent; ``consistent`` has no effect)."""
+    consistent; ``consistent`` has no effect). The rule: :func:`energy_tables`."""
     D = sp.csr_matrix(d.material.voigt())
     dof = d.dof_map()
-    if d.integration == "smoothed":
-        grads, areas = smoothed if smoothed is not None else smoothed_gradients(d)
-        B = strain_operator(grads)
-        K = (B.T @ sp.kron(sp.diags(areas), D, format="csr") @ B).tocoo()
-        return sp.coo_matrix((K.data, (dof[K.row], dof[K.col])), shape=K.shape)
-    q = d.stress_points()
-    t = raise_on_all_ranks(d.comm, lambda: d.sph.tabulate(q.points))
-    Z = d.node_map()
-    grads = [(g @ Z).tocsr() for g in t.gradients]
+    _, grads, test, weights = energy_tables(d, smoothed)
     B = strain_operator(grads)
-    Bt = B
-    if d.consistent:
-        shepard = (t.values @ Z).tocsr()
-        Bt = strain_operator(consistent_test_gradients(d, shepard, grads, q.weights))
-    K = (Bt.T @ sp.kron(sp.diags(q.weights), D, format="csr") @ B).tocoo()
+    Bt = B if test is grads else strain_operator(test)
+    K = (Bt.T @ sp.kron(sp.diags(weights), D, format="csr") @ B).tocoo()
     return sp.coo_matrix((K.data, (dof[K.row], dof[K.col])), shape=K.shape)

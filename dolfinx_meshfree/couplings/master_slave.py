@@ -146,6 +146,7 @@ __all__ = [
     "TIES",
     "MasterSlaveLinks",
     "master_slave_operators",
+    "slave_solve",
     "solve_master_slave",
 ]
 
@@ -553,6 +554,7 @@ def master_slave_operators(
     fe_layout, l2g = fe_dof_layout(problem.V)
     pl = P.dof_layout()
     boundary = patch.boundary() if problem.consistent else None
+    tables: dict = {}  # the particle rule, table and test gradients (finite strain)
     Kp_loc, q, tq, _ = particle_stiffness(
         P,
         problem.mls,
@@ -560,6 +562,7 @@ def master_slave_operators(
         problem.quadrature_degree,
         boundary,
         quadrature=particle_rule(problem, integration),
+        tables=tables,
     )
     no_bc = np.zeros(l2g.size, dtype=bool)
     links = raise_on_all_ranks(
@@ -582,6 +585,7 @@ def master_slave_operators(
         ),
         master_layout=ml,
         interface=links,
+        particle_tables=tables,
         timings={"operators": time.perf_counter() - t0},
     )
 
@@ -611,10 +615,7 @@ def _reduction(problem, links: MasterSlaveLinks, fe_layout: Layout, tie: str | N
     masters' rows of ``S``, a selection), the owned nonzero entries of ``g`` and the master dof
     layout.
     """
-    if tie is None:
-        tie = "values" if links.kind == "layer" else "coefficients"
-    if tie not in TIES:
-        raise ValueError(f"tie={tie!r} is not known; use one of {list(TIES)} or None")
+    tie = _resolve_tie(links, tie)
     P = problem.patch.particles
     comm = problem.patch.comm
     n = P.num_particles
@@ -647,16 +648,8 @@ def _reduction(problem, links: MasterSlaveLinks, fe_layout: Layout, tie: str | N
                         wv.append(w[i, j])
     W = sp.csr_matrix((wv, (wr, wc)), shape=(2 * sl.size, fe_layout.size_global))
     own = np.flatnonzero(P.owner[sl] == comm.rank)  # owned slaves, positions in sl
-    if tie == "coefficients":
-        X = sp.identity(sl.size, format="csr")[own]
-        M = sp.csr_matrix((own.size, masters.size))
-    else:
-        Phi = sp.csr_matrix(problem.mls.tabulate(P.positions[sl], 0).values)
-        inv = np.linalg.inv(Phi[:, sl].toarray())[own]
-        inv[np.abs(inv) < 1e-14 * np.abs(inv).max(axis=1, initial=0.0)[:, None]] = 0.0
-        X = sp.csr_matrix(inv)
-        Psm = Phi[:, masters]
-        M = -(X @ Psm)
+    X, Phi = slave_solve(problem, links, tie, own)
+    M = sp.csr_matrix((own.size, masters.size)) if Phi is None else -(X @ Phi[:, masters])
     I2 = sp.identity(2, format="csr")
     X2 = sp.kron(X, I2, format="csr")
     rows = pdofs[sl[own]].ravel()
@@ -673,6 +666,33 @@ def _reduction(problem, links: MasterSlaveLinks, fe_layout: Layout, tie: str | N
     gs = X2 @ g
     nz = np.flatnonzero(gs)
     return T_pf, S_loc, sel, rows[nz], gs[nz], ml
+
+
+def _resolve_tie(links: MasterSlaveLinks, tie: str | None) -> str:
+    """``tie``, or the default of ``links.kind`` for ``None``; a ``ValueError`` if unknown."""
+    if tie is None:
+        tie = "values" if links.kind == "layer" else "coefficients"
+    if tie not in TIES:
+        raise ValueError(f"tie={tie!r} is not known; use one of {list(TIES)} or None")
+    return tie
+
+
+def slave_solve(
+    problem: CoupledElasticity, links: MasterSlaveLinks, tie: str | None, own: np.ndarray
+) -> tuple[sp.csr_matrix, sp.csr_matrix | None]:
+    """``(X, Phi)``: the rows ``own`` (positions in ``links.slaves``) of the map from the slaves'
+    link targets to their nodal parameters, ``u_S = X (w_S - Phi_SM u_M)`` (see
+    :func:`_reduction`): ``Phi_SS^{-1}`` with the slaves' MLS values ``Phi`` (value tie) or the
+    identity and ``None`` (coefficient tie). ``tie=None``: the default of ``links.kind``."""
+    tie = _resolve_tie(links, tie)
+    sl = links.slaves
+    if tie == "coefficients":
+        return sp.identity(sl.size, format="csr")[own], None
+    P = problem.patch.particles
+    Phi = sp.csr_matrix(problem.mls.tabulate(P.positions[sl], 0).values)
+    inv = np.linalg.inv(Phi[:, sl].toarray())[own]
+    inv[np.abs(inv) < 1e-14 * np.abs(inv).max(axis=1, initial=0.0)[:, None]] = 0.0
+    return sp.csr_matrix(inv), Phi
 
 
 #: Name under which the reduction's ``S`` carries the selection of the master rows (a PETSc

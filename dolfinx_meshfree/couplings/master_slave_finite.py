@@ -43,44 +43,38 @@ from .assembly import (
     fix_fe_rows,
     traction_loads,
 )
-from .master_slave import MasterSlaveCoupling, MasterSlaveLinks, _outside_slave_layer
+from .master_slave import (
+    MasterSlaveCoupling,
+    MasterSlaveLinks,
+    _outside_slave_layer,
+    slave_solve,
+)
 
 if TYPE_CHECKING:  # annotations only: the model imports this module
     from ..statics.coupled import CoupledElasticity
 
-__all__ = ["FiniteMasterSlaveCoupling", "RotatingLinks", "master_slave_system"]
+__all__ = [
+    "FiniteMasterSlaveCoupling",
+    "LinkMotion",
+    "RotatingLinks",
+    "SlaveCorrection",
+    "master_slave_system",
+]
 
 _J = np.array([[0.0, -1.0], [1.0, 0.0]])  # e_z x
 
 
-class RotatingLinks:
-    """The slaves' rigid links at finite rotation as constraints over the FE, particle and link
-    multiplier fields (a shared side of :class:`~dolfinx_meshfree.statics.sides.BlockProblem`).
+class LinkMotion:
+    """The motion ``w_P(u)`` of the rigid links of the slaves ``own`` (positions in
+    ``links.slaves``), one term per link (a slave linked to equally close edges has one term per
+    edge, weighted by ``1 / count``): targets and derivatives in the edge ends' displacements.
 
-    Args:
-        fe, particles: The two sides (state and numbering).
-        links: The :class:`~dolfinx_meshfree.couplings.master_slave.MasterSlaveLinks`.
-        tie: (k x n) sparse rows of this rank's owned slaves: their MLS values at their
-            positions (value tie) or their selection (coefficient tie).
-        own: Positions in ``links.slaves`` of this rank's owned slaves.
-        layout: The multiplier layout (2 per owned slave).
-        scale: The multipliers' scaling (``E``).
+    Attributes:
+        k: The slot (position in ``own``) of each term; dofs: (terms, 2 ends, 2) global FE dofs
+            of the edge ends.
     """
 
-    fields = (0, 1, 2)
-
-    def __init__(
-        self,
-        fe: FESide,
-        particles: ParticleSide,
-        links: MasterSlaveLinks,
-        tie: sp.csr_matrix,
-        own: np.ndarray,
-        layout: Layout,
-        scale: float,
-    ) -> None:
-        self.fe, self.particles, self.comm = fe, particles, particles.comm
-        self.layout, self.scale = layout, float(scale)
+    def __init__(self, links: MasterSlaveLinks, own: np.ndarray) -> None:
         k, e, xi, d, w = [], [], [], [], []
         for slot, s in enumerate(own):
             ties = links.links[s]
@@ -97,19 +91,6 @@ class RotatingLinks:
         self.t = (links.edges[e, 1] - links.edges[e, 0]).reshape(-1, 2)
         # FE dofs (global) of the edge ends, (terms, 2 ends, 2 components)
         self.dofs = 2 * links.nodes[e][:, :, None] + np.arange(2)
-        tie2 = sp.kron(tie, sp.identity(2), format="coo")
-        rows = layout.start + tie2.row
-        cols = particles.dof_map[tie2.col]
-        n_p = particles.layout.size_global
-        self._Phi = sp.csr_matrix(
-            (self.scale * tie2.data, (rows, cols)), shape=(layout.size_global, n_p)
-        )
-        self._held = np.isin(self.dofs.ravel(), fe.held_everywhere()).reshape(self.dofs.shape)
-
-    def _fe_values(self, x: PETSc.Vec) -> np.ndarray:
-        """The edge ends' displacements (terms, 2, 2) from the distributed FE state."""
-        full = np.concatenate(self.comm.allgather(x.getArray(readonly=True)))
-        return full[self.dofs]
 
     def _links(self, u: np.ndarray):
         """Targets ``w`` (terms, 2) and, per term, ``R d``, ``J R d``, ``grad theta`` and its
@@ -138,6 +119,51 @@ class RotatingLinks:
         da = self.w[:, None, None] * ((1.0 - self.xi)[:, None, None] * eye - turn)
         db = self.w[:, None, None] * (self.xi[:, None, None] * eye + turn)
         return np.stack([da, db], axis=2)
+
+    def _fe_values(self, x: PETSc.Vec) -> np.ndarray:
+        """The edge ends' displacements (terms, 2, 2) from the distributed FE state
+        (collective)."""
+        full = np.concatenate(x.getComm().tompi4py().allgather(x.getArray(readonly=True)))
+        return full[self.dofs]
+
+
+class RotatingLinks(LinkMotion):
+    """The slaves' rigid links at finite rotation as constraints over the FE, particle and link
+    multiplier fields (a shared side of :class:`~dolfinx_meshfree.statics.sides.BlockProblem`).
+
+    Args:
+        fe, particles: The two sides (state and numbering).
+        links: The :class:`~dolfinx_meshfree.couplings.master_slave.MasterSlaveLinks`.
+        tie: (k x n) sparse rows of this rank's owned slaves: their MLS values at their
+            positions (value tie) or their selection (coefficient tie).
+        own: Positions in ``links.slaves`` of this rank's owned slaves.
+        layout: The multiplier layout (2 per owned slave).
+        scale: The multipliers' scaling (``E``).
+    """
+
+    fields = (0, 1, 2)
+
+    def __init__(
+        self,
+        fe: FESide,
+        particles: ParticleSide,
+        links: MasterSlaveLinks,
+        tie: sp.csr_matrix,
+        own: np.ndarray,
+        layout: Layout,
+        scale: float,
+    ) -> None:
+        super().__init__(links, own)
+        self.fe, self.particles, self.comm = fe, particles, particles.comm
+        self.layout, self.scale = layout, float(scale)
+        tie2 = sp.kron(tie, sp.identity(2), format="coo")
+        rows = layout.start + tie2.row
+        cols = particles.dof_map[tie2.col]
+        n_p = particles.layout.size_global
+        self._Phi = sp.csr_matrix(
+            (self.scale * tie2.data, (rows, cols)), shape=(layout.size_global, n_p)
+        )
+        self._held = np.isin(self.dofs.ravel(), fe.held_everywhere()).reshape(self.dofs.shape)
 
     def internal_force(self, xs: Sequence[PETSc.Vec]) -> list[PETSc.Vec]:
         """``[-E (dw/du_FE)^T mu, E Phi^T mu, E (Phi u_P - w(u_FE))]``. Collective."""
@@ -273,3 +299,79 @@ class FiniteMasterSlaveCoupling(MasterSlaveCoupling):
 
     def system(self, problem: CoupledElasticity, tables: dict | None = None) -> tuple:
         return master_slave_system(problem, tables)
+
+
+class SlaveCorrection(LinkMotion):
+    """The finite-rotation part of master–slave's reduction in explicit dynamics.
+
+    The linear reduction (:func:`~dolfinx_meshfree.couplings.master_slave.master_slave_operators`)
+    is ``u_P = T_PF u_FE + S u_M`` with the links' rotation linearised (eq. 27); at finite
+    rotation a slave's target is ``w_P(u)`` of :class:`LinkMotion`, so
+
+    .. math::
+        u_P = T_{PF} u_{FE} + S u_M + X c(u_{FE}), \\qquad c = w(u) - w'(0) u,
+
+    with ``X`` the map from the slaves' targets to their parameters (``Phi_SS^{-1}``, value tie,
+    or the identity, :func:`~dolfinx_meshfree.couplings.master_slave.slave_solve`). ``c`` is of
+    second order in the rotation and vanishes for links of length zero (slaves on Gamma_I).
+    Every rank evaluates every slave's links (replicated FE state of the edge ends) and keeps
+    the rows of its owned slaves.
+
+    Args:
+        problem: The coupled problem (MLS, particles).
+        links: Its :class:`~dolfinx_meshfree.couplings.master_slave.MasterSlaveLinks`.
+        fe_layout, particle_layout: The dof layouts.
+        tie: What a link fixes (``None``: the default of the links' kind).
+    """
+
+    def __init__(
+        self,
+        problem: CoupledElasticity,
+        links: MasterSlaveLinks,
+        fe_layout: Layout,
+        particle_layout: Layout,
+        tie: str | None = None,
+    ) -> None:
+        sl = links.slaves
+        super().__init__(links, np.arange(sl.size))
+        P, comm = problem.patch.particles, problem.patch.comm
+        own = np.flatnonzero(P.owner[sl] == comm.rank)
+        X, _ = raise_on_all_ranks(comm, lambda: slave_solve(problem, links, tie, own))
+        self.X2 = sp.kron(X, sp.identity(2), format="csr")
+        self.rows = P.petsc_dofs(2)[sl[own]].ravel()
+        self.local_rows = self.rows - particle_layout.start
+        self.fe_layout, self.particle_layout, self.comm = fe_layout, particle_layout, comm
+        self.num_slaves = sl.size
+        #: The longest link (0: slaves on Gamma_I, ``c = 0``).
+        self.length = float(np.max(np.linalg.norm(self.d, axis=1), initial=0.0))
+        if self.length <= 1e-12 * links.spacing:
+            self.length = 0.0
+        _, _, JRd, grad, _ = self._links(np.zeros((self.k.size, 2, 2)))
+        self.D0 = self._derivative(JRd, grad)
+
+    def values(self, x_fe: PETSc.Vec) -> np.ndarray:
+        """``X c(u_FE)`` on this rank's owned slaves' dofs (:attr:`local_rows`; collective)."""
+        u = self._fe_values(x_fe)
+        w = self._links(u)[0] - np.einsum("tcej,tej->tc", self.D0, u)
+        c = np.zeros((self.num_slaves, 2))
+        np.add.at(c, self.k, w)
+        return self.X2 @ c.ravel()
+
+    def jacobian(self, x_fe: PETSc.Vec) -> PETSc.Mat:
+        """``X dc/du_FE`` (particle dofs x FE dofs, PETSc; collective)."""
+        u = self._fe_values(x_fe)
+        _, _, JRd, grad, _ = self._links(u)
+        D = self._derivative(JRd, grad) - self.D0
+        rows = np.broadcast_to(
+            2 * self.k[:, None, None, None] + np.arange(2)[:, None, None], D.shape
+        )
+        cols = np.broadcast_to(self.dofs[:, None, :, :], D.shape)
+        nfe = self.fe_layout.size_global
+        Dc = sp.csr_matrix(
+            (D.ravel(), (rows.ravel(), cols.ravel())), shape=(2 * self.num_slaves, nfe)
+        )
+        J = (self.X2 @ Dc).tocoo()
+        local = sp.csr_matrix(
+            (J.data, (self.rows[J.row], J.col)), shape=(self.particle_layout.size_global, nfe)
+        )
+        return create_aij(self.comm, local, self.particle_layout, self.fe_layout)

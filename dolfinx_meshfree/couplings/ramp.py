@@ -626,8 +626,9 @@ def ramp_operators(problem: CoupledElasticity) -> CouplingOperators:
     pl = P.dof_layout()
     blend = RampInterface(problem, cubic=RAMPS[problem.coupling])
     n_loc = blend.num_fe_columns
+    tables: dict = {}  # the patch cells' rule, table and test gradients (finite strain)
     Kp_loc, pq, ptab, _ = particle_stiffness(
-        P, problem.mls, problem.material, problem.quadrature_degree
+        P, problem.mls, problem.material, problem.quadrature_degree, tables=tables
     )
     active = fe_active(problem) & ~blend.on_gamma
     q = cell_quadrature(msh, problem.quadrature_degree, blend.cells)
@@ -664,6 +665,7 @@ def ramp_operators(problem: CoupledElasticity) -> CouplingOperators:
         interface_quadrature=q,
         interface_table=tab.values.tocsr(),
         interface=blend,
+        particle_tables=tables,
         timings={"operators": time.perf_counter() - t0},
     )
 

@@ -46,6 +46,8 @@ from ..approx.mls import MLS
 from ..approx.tables import ShapeTable
 from ..couplings.bridging import BridgingBand
 from ..couplings.hybrid import HybridElasticity
+from ..couplings.hybrid_finite import HybridForces
+from ..couplings.master_slave_finite import SlaveCorrection
 from ..couplings.ramp import RampInterface
 from ..geometry.particles import ParticleSet
 from ..geometry.patch import ParticlePatch
@@ -57,8 +59,15 @@ from ..physics.materials import LinearElastic
 from ..statics.coupled import CoupledElasticity, CouplingOperators
 from ..statics.efg import particle_stiffness
 from ..statics.petsc import create_aij
+from ..statics.sides import BlendedSide
 from .conditions import check_facets, first_cells, fixed_fe_dofs, particle_conditions, stack_rows
-from .finite_strain import NonlinearSystem, fe_forces, particle_forces, small_strain
+from .finite_strain import (
+    NonlinearSystem,
+    ReducedParticles,
+    fe_forces,
+    particle_forces,
+    small_strain,
+)
 from .loads import BodyLoad
 from .masses import (
     fe_lumped_mass,
@@ -116,6 +125,17 @@ class Model:
 def _check_material(material: LinearElastic) -> None:
     if not isinstance(material, LinearElastic):
         raise TypeError(f"material must be a LinearElastic, got {type(material).__name__}")
+
+
+def _check_twin(law: Material | LinearElastic, twin: LinearElastic, problem: LinearElastic) -> None:
+    """Raise a ``ValueError`` unless ``twin``, the small-strain law of ``law``, is the
+    problem's material."""
+    if twin != problem:
+        raise ValueError(
+            f"material={law!r} reduces to {twin!r} at small strain, but the problem's material "
+            f"is {problem!r}: build the problem with the linear twin "
+            "(dolfinx_meshfree.physics.materials.linear_twin(material))"
+        )
 
 
 def check_particle_mass(particle_mass: str, default: str = "row-sum") -> str:
@@ -343,18 +363,18 @@ def build_coupled(
         material: A finite-strain law (:class:`~dolfinx_meshfree.NeoHookean`,
             :class:`~dolfinx_meshfree.SaintVenantKirchhoff`) whose linear twin is the problem's
             material: the internal force is then the total-Lagrangian one of both sides
-            (:class:`~dolfinx_meshfree.dynamics.finite_strain.NonlinearSystem`; lagrange and
-            edge-to-edge). ``None``: the problem's material.
+            (:class:`~dolfinx_meshfree.dynamics.finite_strain.NonlinearSystem`; every coupling
+            of :data:`~dolfinx_meshfree.dynamics.finite_strain.FINITE_STRAIN_DYNAMICS`: the
+            ramps' interface cells blended, master-slave's links rotating, the bridging
+            penalty linear). ``None``: the problem's material.
     """
     if isinstance(problem, HybridElasticity):  # the hybrid SPH-FE coupling: its own builder
-        if material is not None and not isinstance(material, LinearElastic):
-            small_strain(material, "hybrid")
         if (integration, slaves) != ("cells", "layer"):
             raise ValueError(
                 f"integration={integration!r}, slaves={slaves!r}: the hybrid coupling has its "
                 "own SPH sums; use integration='cells', slaves='layer'"
             )
-        return build_hybrid(problem, particle_mass, fixed_facets)
+        return build_hybrid(problem, particle_mass, fixed_facets, material)
     if not isinstance(problem, CoupledElasticity):
         raise TypeError(f"problem must be a CoupledElasticity, got {type(problem).__name__}")
     coupling = problem.coupling
@@ -372,17 +392,7 @@ def build_coupled(
         )
     law = problem.material if material is None else material
     material = small_strain(law, coupling)
-    if law is not material and coupling == "bridging" and problem.penalty > 0.0:
-        raise ValueError(
-            f"penalty={problem.penalty!r}: the bridging penalty is not available at finite strain "
-            "in explicit dynamics (its blocks are mixed into the stiffness); use penalty=0"
-        )
-    if material != problem.material:
-        raise ValueError(
-            f"material={law!r} reduces to {material!r} at small strain, but the problem's material "
-            f"is {problem.material!r}: build the CoupledElasticity with the linear twin "
-            "(dolfinx_meshfree.physics.materials.linear_twin(material))"
-        )
+    _check_twin(law, material, problem.material)
     t0 = time.perf_counter()
     V, patch, mls = problem.V, problem.patch, problem.mls
     P, comm, msh = patch.particles, patch.comm, V.mesh
@@ -471,7 +481,11 @@ def build_coupled(
 
     system = None
     if law is not material:
-        system = _finite_strain_system(problem, ops, law, fields, constraint)
+        system = _finite_strain_system(problem, ops, law, fields, constraint, blocks)
+        blocks = {}
+    else:
+        for B in ops.penalty_blocks or ():  # already in K_fe, K_p
+            B.destroy()
     return Model(
         fields,
         law,
@@ -497,13 +511,28 @@ def _finite_strain_system(
     law: Material,
     fields: list[Field],
     constraint: list[PETSc.Mat | None] | None,
+    blocks: dict[tuple[int, int], PETSc.Mat],
 ) -> NonlinearSystem:
     """The finite-strain system of a coupling from its operators: the FE law on the cells
-    whose energy is FE (weighted by ``beta_FE`` in the bridging band, eq. 47–48) and the particle
-    tables of ``K_P`` (bridging: weights times ``alpha``, eq. 46). Collective.
+    whose energy is FE (weighted by ``beta_FE`` in the bridging band, eq. 47–48; not the ramps'
+    interface cells) and the particle tables of ``K_P`` (bridging: weights times ``alpha``,
+    eq. 46); the ramps' interface cells on their blended table (Belytschko et al. 1995,
+    eq. 3.15–3.16, :class:`~dolfinx_meshfree.statics.sides.BlendedSide`); master–slave's
+    particles through the reduction (eq. 27–28, :class:`ReducedParticles`, finite-rotation
+    links); the bridging penalty (eq. 72–75, linear in the displacements) as constant blocks.
+    The linear model's off-diagonal ``blocks`` are taken over (the penalty's) or destroyed.
+    Collective.
     """
+    constant: dict = {}
+    if ops.penalty_blocks is not None:  # the bridging penalty: its four blocks stay linear
+        constant = {(0, 0): ops.penalty_blocks[0], (1, 1): ops.penalty_blocks[1], **blocks}
+    else:
+        for B in blocks.values():  # the ramps' or master-slave's linear blocks: not used
+            B.destroy()
     V, patch = problem.V, problem.patch
     cells, weight, weight_at = ~patch.in_patch, None, None
+    if ops.interface_table is not None:  # ramps: the interface cells are blended
+        cells = cells & ~ops.interface.in_interface
     if problem.coupling == "bridging":
         band = ops.interface
         cells, weight = cells | band.in_band, ops.fe_weight
@@ -516,11 +545,20 @@ def _finite_strain_system(
             w[b] = 1.0 - band.alpha_at(q.points[b], q.cells[b])
             return w
 
-    sides = [
-        fe_forces(V, law, cells, weight=weight, weight_at=weight_at),
-        particle_forces(patch.particles, ops.particle_tables, law),
-    ]
-    return NonlinearSystem(fields, sides, law, constraint)
+    fe = fe_forces(V, law, cells, weight=weight, weight_at=weight_at)
+    particles = particle_forces(patch.particles, ops.particle_tables, law)
+    sides: list = [fe, particles]
+    shared: list = []
+    if ops.interface_table is not None:
+        q, blend = ops.interface_quadrature, ops.interface
+        table = raise_on_all_ranks(patch.comm, lambda: blend.table(q.points, q.cells))
+        shared = [BlendedSide(fe.side, particles, table, q.weights, law)]
+    elif ops.reduction is not None:
+        correction = SlaveCorrection(problem, ops.interface, ops.fe_layout, ops.particle_layout)
+        if not correction.length > 0.0:  # links of length zero: u_P = T u, exactly
+            correction = None
+        shared, sides = [ReducedParticles(particles, ops.reduction, correction)], [fe, None]
+    return NonlinearSystem(fields, sides, law, constraint, shared, constant)
 
 
 # -- hybrid SPH-FE ---------------------------------------------------------------------------------
@@ -530,6 +568,7 @@ def build_hybrid(
     problem: HybridElasticity,
     particle_mass: str = "volume",
     fixed_facets: npt.ArrayLike | None = None,
+    material: Material | None = None,
 ) -> Model:
     """Explicit dynamics of a :class:`~dolfinx_meshfree.couplings.hybrid.HybridElasticity` (Rabczuk
     et al.
@@ -551,11 +590,25 @@ def build_hybrid(
             (``rho sum_q N_I(x_q) w_q`` with the particles' interpolant at the stress points).
         fixed_facets: Owned exterior facets held at rest (FE nodes strongly, particles by facet
             multipliers on the velocities).
+        material: A finite-strain law whose linear twin is the problem's material (HA-F): the
+            FE cells' ``int P(F) : grad v dX`` and the SPH sums of ``P`` on the particle
+            energy's rule (:class:`~dolfinx_meshfree.couplings.hybrid_finite.HybridForces`);
+            ``None``: the problem's material.
     """
     if not isinstance(problem, HybridElasticity):
         raise TypeError(f"problem must be a HybridElasticity, got {type(problem).__name__}")
     check_particle_mass(particle_mass, default="volume")
-    material = problem.material
+    law = problem.material if material is None else material
+    material = small_strain(law, "hybrid")
+    if law is not material:
+        _check_twin(law, material, problem.material)
+        if problem.variant != "HA-F":
+            raise ValueError(
+                f"variant={problem.variant!r}: the hybrid coupling at finite strain is HA-F (the "
+                "forces reach the FE nodes by interpolation, eq. 135); HA-S's interface "
+                "tractions of the particle stresses (eq. 131-134) are not written for the "
+                "nominal stress: use variant='HA-F'"
+            )
     _check_material(material)
     t0 = time.perf_counter()
     V, patch = problem.V, problem.patch
@@ -580,11 +633,18 @@ def build_hybrid(
         Field("fe", ops.K_fe, mass_fe, fe_spacing(msh, patch.fe_cells), fixed=fixed_fe),
         Field("particles", ops.K_p, mass_p, particle_spacing(P)),
     ]
+    blocks, system = {(0, 1): ops.K_fp, (1, 0): ops.K_pf}, None
+    if law is not material:  # FE cells by UFL, the particle energy by the SPH sums of P
+        sides = [fe_forces(V, law, ~patch.in_patch), None]
+        system = NonlinearSystem(fields, sides, law, constraint, [HybridForces(problem, law)])
+        for B in blocks.values():
+            B.destroy()
+        blocks = {}
     return Model(
         fields,
-        material,
+        law,
         constraint,
-        blocks={(0, 1): ops.K_fp, (1, 0): ops.K_pf},
+        blocks=blocks,
         V=V,
         mls=problem.evaluator,
         particles=P,
@@ -592,4 +652,5 @@ def build_hybrid(
         in_patch=patch.in_patch,
         patch=patch,
         timings={"setup": time.perf_counter() - t0, "operators": ops.timings["operators"]},
+        system=system,
     )

@@ -41,6 +41,9 @@ class FieldEvaluator:
         self.disc = disc
         self.comm = comm
         self._tables: dict[int, Tables] = {}
+        #: ``expand(vecs) -> particle vector``: master–slave's expansion when it depends on the
+        #: state (finite-rotation links, set by ExplicitDynamics); ``None``: ``T_PF u + S u_M``.
+        self.expand: Callable[[Sequence[PETSc.Vec]], PETSc.Vec] | None = None
 
     def local_values(
         self, vecs: Sequence[PETSc.Vec], particles: bool = True
@@ -57,7 +60,11 @@ class FieldEvaluator:
                 fe.x.array[: x.getLocalSize()] = x.array_r
                 fe.x.scatter_forward()
             else:
-                if d.reduction is not None:  # master-slave: u_P = T_PF u_FE + S u_M
+                if self.expand is not None:  # master-slave with rotating links
+                    full = self.expand(vecs)
+                    owned = np.concatenate(self.comm.allgather(full.array_r.copy()))
+                    full.destroy()
+                elif d.reduction is not None:  # master-slave: u_P = T_PF u_FE + S u_M
                     Tpf, S = d.reduction
                     full = Tpf.createVecLeft()
                     Tpf.mult(vecs[0], full)

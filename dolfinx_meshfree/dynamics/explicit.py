@@ -162,6 +162,9 @@ class ExplicitDynamics:
         if hasattr(self.system, "wave_speed"):  # bounded at the current state
             self.bound.state = lambda: self.stepper.u
         self.evaluator = FieldEvaluator(disc, self.comm)
+        for side in getattr(self.system, "shared", ()):  # master-slave's rotating links
+            if getattr(side, "correction", None) is not None:
+                self.evaluator.expand = lambda vecs, side=side: side.expand(vecs, self.stepper.u)
         self.u, self.v = self.stepper.u, self.stepper.v
         self.timings["setup"] = self.timings.get("setup", 0.0) + time.perf_counter() - t0
 
@@ -240,7 +243,7 @@ class ExplicitDynamics:
         :meth:`add_body_force`. ``integration="stress-points"``: Lagrangian-kernel stress
         points (lagrange, edge-to-edge, master-slave); ``slaves="coincident"``: Johnson's
         coupling (master-slave, Rabczuk et al. 2006, eq. 15–16). ``material``: a finite-strain
-        law whose linear twin is the problem's material (lagrange, edge-to-edge). Arguments: see
+        law whose linear twin is the problem's material (not hybrid). Arguments: see
         :func:`~dolfinx_meshfree.dynamics.builders.build_coupled`.
         """
         check_safety(safety)

@@ -12,7 +12,12 @@ the deformation); only the internal force changes:
 * particle side: :class:`~dolfinx_meshfree.physics.forces.InternalForces` on the particle
   quadrature and the shape table the builders use for the masses and ``K_P`` (test gradients
   VCI-corrected when the coupling is consistent), through
-  :class:`~dolfinx_meshfree.statics.sides.ParticleSide`.
+  :class:`~dolfinx_meshfree.statics.sides.ParticleSide`;
+* sides over both fields (:class:`SharedSide`): the ramps' interface cells on their blended
+  table (:class:`~dolfinx_meshfree.statics.sides.BlendedSide`, Belytschko et al. 1995, eq.
+  3.15–3.16) and master–slave's particles seen through the reduction with rotating links
+  (:class:`ReducedParticles`, eq. 27–28);
+* constant blocks: the bridging penalty (eq. 72–75), linear in the displacements.
 
 The strain energy is the stored energy ``sum_q W(F_q) w_q`` of both sides (the FE one on the same
 Gauss rule as its force, with the FE basis tabulated at those points), not ``1/2 d^T K d``; the
@@ -24,6 +29,7 @@ largest current Lagrangian wave speed, the cheap test of stiffening between two 
 from __future__ import annotations
 
 from collections.abc import Callable, Collection, Sequence
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import dolfinx
 import numpy as np
@@ -41,25 +47,35 @@ from ..physics.materials import LinearElastic, linear_twin
 from ..statics.sides import FESide, ParticleSide
 from .system import Blocks, Field
 
+if TYPE_CHECKING:  # annotations only
+    from ..couplings.master_slave_finite import SlaveCorrection
+
 __all__ = [
     "FINITE_STRAIN_DYNAMICS",
     "FEForces",
     "NonlinearSystem",
+    "ReducedParticles",
+    "SharedSide",
     "fe_forces",
     "particle_forces",
     "small_strain",
 ]
 
 #: Methods of explicit dynamics at finite strain (``fe``, ``efg`` and these couplings).
-FINITE_STRAIN_DYNAMICS = ("fe", "efg", "lagrange", "edge-to-edge", "bridging")
+FINITE_STRAIN_DYNAMICS = (
+    "fe",
+    "efg",
+    "lagrange",
+    "edge-to-edge",
+    "bridging",
+    "ramp",
+    "ramp-cubic",
+    "master-slave",
+    "hybrid",
+)
 
 #: What the other methods miss at finite strain in explicit dynamics.
-MISSING = {
-    "ramp": "the internal force of the blended interface cells (Belytschko et al. 1995, eq. 3.15)",
-    "ramp-cubic": "the internal force of the blended interface cells",
-    "master-slave": "rigid links with finite rotations (today's links are small-rotation)",
-    "hybrid": "SPH sums of the nominal stress P",
-}
+MISSING: dict[str, str] = {}
 
 
 def small_strain(material: LinearElastic | Material, method: str) -> LinearElastic:
@@ -157,6 +173,133 @@ def particle_forces(particles: ParticleSet, tables: dict, material: Material) ->
     return ParticleSide(particles, tables, material)
 
 
+@runtime_checkable
+class SharedSide(Protocol):
+    """Internal force over several fields (:attr:`fields`, block indices): the ramps' blended
+    cells (:class:`~dolfinx_meshfree.statics.sides.BlendedSide`), master–slave's reduced
+    particles (:class:`ReducedParticles`). Collective methods."""
+
+    fields: tuple[int, ...]
+
+    def internal_force(self, xs: Sequence[PETSc.Vec]) -> list[PETSc.Vec]:
+        """``f_int`` per field of :attr:`fields` (new vectors the caller owns)."""
+        ...
+
+    def tangent(self, xs: Sequence[PETSc.Vec]) -> Blocks:
+        """``K_T`` by blocks ``{(a, b): Mat}`` (positions in :attr:`fields`)."""
+        ...
+
+    def strain_energy(self, xs: Sequence[PETSc.Vec]) -> float:
+        """``sum_q W(F_q) w_q`` on this rank."""
+        ...
+
+    def deformation_gradient(self, xs: Sequence[PETSc.Vec]) -> np.ndarray:
+        """``F`` (m, d, d) at this rank's points."""
+        ...
+
+
+class ReducedParticles:
+    """Master–slave's particle side in the reduced state ``(u_FE, u_M)`` (Rabczuk et al. 2006,
+    eq. 27–28): the particle parameters ``u_P = T_PF u_FE + S u_M`` (plus, for links of
+    nonzero length, the finite-rotation part ``X c(u_FE)`` of
+    :class:`~dolfinx_meshfree.couplings.master_slave_finite.SlaveCorrection`), the force
+    ``T(u)^T f_P(u_P)`` with ``T(u) = [T_PF + X c'(u), S]`` (work conjugate: the gradient of the
+    stored energy of the reduced state) and the tangent ``T^T K_T T`` (the links' curvature
+    ``c''`` left out: it only serves the stable-step bound).
+
+    The masses stay those of the linear reduction, the row sums of ``T^T M T`` at the reference
+    (:func:`~dolfinx_meshfree.dynamics.reduction.reduce_master_slave`): a constant mass matrix,
+    so central differences keep the energy balance of ``1/2 v^T M v + W``.
+
+    Args:
+        side: The particle side (all particles, PETSc numbering).
+        reduction: ``(T_PF, S)`` of the linear operators (not owned).
+        correction: The finite-rotation part, or ``None`` (links of length zero: ``c = 0``).
+    """
+
+    fields = (0, 1)
+
+    def __init__(
+        self,
+        side: ParticleSide,
+        reduction: tuple[PETSc.Mat, PETSc.Mat],
+        correction: SlaveCorrection | None = None,
+    ) -> None:
+        self.side, (self.T, self.S), self.correction = side, reduction, correction
+        self.forces = side.forces
+
+    def particle_state(self, xs: Sequence[PETSc.Vec]) -> PETSc.Vec:
+        """``u_P`` of the reduced state (a new vector; collective)."""
+        y = self.T.createVecLeft()
+        self.T.mult(xs[0], y)
+        self.S.multAdd(xs[1], y, y)
+        if self.correction is not None:
+            y.array[self.correction.local_rows] += self.correction.values(xs[0])
+        return y
+
+    def expand(self, vecs: Sequence[PETSc.Vec], state: Sequence[PETSc.Vec]) -> PETSc.Vec:
+        """The particle parameters of ``vecs`` (a new vector; collective): ``u_P(u)`` if
+        ``vecs`` is the displacement ``state`` itself, else a rate ``T(u) v`` at the state (the
+        velocity of the slaves, whose links turn with their edges)."""
+        if all(a is b for a, b in zip(vecs, state, strict=True)):
+            return self.particle_state(state)
+        T = self._map(state)
+        y = T.createVecLeft()
+        T.mult(vecs[0], y)
+        self.S.multAdd(vecs[1], y, y)
+        T.destroy()
+        return y
+
+    def _map(self, xs: Sequence[PETSc.Vec]) -> PETSc.Mat:
+        """``T_PF + X c'(u_FE)`` (a new matrix; collective)."""
+        T = self.T.copy()
+        if self.correction is not None:
+            J = self.correction.jacobian(xs[0])
+            T.axpy(1.0, J, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+            J.destroy()
+        return T
+
+    def internal_force(self, xs: Sequence[PETSc.Vec]) -> list[PETSc.Vec]:
+        """``[T(u)^T f_P, S^T f_P]`` (collective)."""
+        y = self.particle_state(xs)
+        f = self.side.internal_force(y)
+        T = self._map(xs)
+        fe, m = T.createVecRight(), self.S.createVecRight()
+        T.multTranspose(f, fe)
+        self.S.multTranspose(f, m)
+        for obj in (y, f, T):
+            obj.destroy()
+        return [fe, m]
+
+    def tangent(self, xs: Sequence[PETSc.Vec]) -> Blocks:
+        """``T^T K_T T`` by blocks (PETSc ``PtAP`` and products; collective)."""
+        y = self.particle_state(xs)
+        K = self.side.tangent(y)
+        T = self._map(xs)
+        KS = K.matMult(self.S)
+        out = {
+            (0, 0): K.PtAP(T),
+            (0, 1): T.transposeMatMult(KS),
+            (1, 0): KS.transposeMatMult(T),
+            (1, 1): K.PtAP(self.S),
+        }
+        for obj in (y, K, T, KS):
+            obj.destroy()
+        return out
+
+    def strain_energy(self, xs: Sequence[PETSc.Vec]) -> float:
+        y = self.particle_state(xs)
+        energy = self.forces.strain_energy(self.side.coefficients(y))
+        y.destroy()
+        return energy
+
+    def deformation_gradient(self, xs: Sequence[PETSc.Vec]) -> np.ndarray:
+        y = self.particle_state(xs)
+        F = self.forces.deformation_gradient(self.side.coefficients(y))
+        y.destroy()
+        return F
+
+
 class NonlinearSystem:
     """Finite deformation: ``f^int(d)`` of a hyperelastic material on each field, with the masses
     and constraints of the linear model.
@@ -164,23 +307,32 @@ class NonlinearSystem:
     Args:
         fields: The fields of the linear model (FE first): masses, spacing, fixed dofs; their
             ``K`` is the tangent at ``d = 0`` (the linear twin's stiffness).
-        sides: Per field its :class:`FEForces` (FE) or
-            :class:`~dolfinx_meshfree.statics.sides.ParticleSide` (particles).
+        sides: Per field its :class:`FEForces` (FE),
+            :class:`~dolfinx_meshfree.statics.sides.ParticleSide` (particles) or ``None`` (a
+            field whose force only ``shared`` sides give: master–slave's masters).
         material: The hyperelastic law (its current wave speed).
         constraint: The constraint blocks ``G_f`` of each field (``None`` for a field without),
             or ``None``: no constraint.
+        shared: Sides over several fields (:class:`SharedSide`): the ramps' blended interface
+            cells, master–slave's :class:`ReducedParticles`.
+        constant: Constant stiffness blocks ``{(k, l): B_kl}`` added to ``f^int`` as ``B u``
+            and to the energy as ``1/2 u^T B u`` (the bridging penalty, eq. 72–75: its
+            constraint ``u_FE - u_P`` stays linear; owned by the system).
     """
 
     def __init__(
         self,
         fields: Sequence[Field],
-        sides: Sequence[FEForces | ParticleSide],
+        sides: Sequence[FEForces | ParticleSide | None],
         material: Material,
         constraint: Sequence[PETSc.Mat | None] | None = None,
+        shared: Sequence[SharedSide] = (),
+        constant: Blocks | None = None,
     ) -> None:
         if len(sides) != len(fields):
             raise ValueError(f"{len(sides)} sides for {len(fields)} fields")
         self.fields, self.sides, self.material = list(fields), list(sides), material
+        self.shared, self.constant = list(shared), dict(constant or {})
         self.G: list[PETSc.Mat | None] | None = None
         if constraint is not None and any(g is not None for g in constraint):
             self.G = list(constraint)
@@ -206,6 +358,9 @@ class NonlinearSystem:
         finite, and at every wave-speed check)."""
         y = list(out) if out is not None else [f.mass.duplicate() for f in self.fields]
         for k, side in enumerate(self.sides):
+            if side is None:
+                y[k].set(0.0)
+                continue
             if isinstance(side, FEForces):
                 r = side.side.internal_force(u[k])
                 finite = bool(np.all(np.isfinite(r.array_r)))
@@ -217,6 +372,13 @@ class NonlinearSystem:
                 r = side.internal_force(u[k])
             y[k].array[:] = r.array_r
             r.destroy()
+        for shared in self.shared:
+            forces = shared.internal_force([u[i] for i in shared.fields])
+            for i, r in zip(shared.fields, forces, strict=True):
+                y[i].axpy(1.0, r)
+                r.destroy()
+        for (k, j), B in self.constant.items():
+            B.multAdd(u[j], y[k], y[k])
         return y
 
     def tangent(self, u: Sequence[PETSc.Vec] | None = None) -> Blocks:
@@ -228,8 +390,29 @@ class NonlinearSystem:
             u = [f.mass.duplicate() for f in self.fields]
             for x in u:
                 x.set(0.0)
-        self._tangent = [side.tangent(x) for side, x in zip(self._raw_sides(), u, strict=True)]
-        return {(k, k): M for k, M in enumerate(self._tangent)}
+        blocks: Blocks = {}
+        for k, side in enumerate(self._raw_sides()):
+            if side is not None:
+                blocks[k, k] = side.tangent(u[k])
+        different = PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN
+        parts = [
+            (shared.fields[a], shared.fields[b], M, True)
+            for shared in self.shared
+            for (a, b), M in shared.tangent([u[i] for i in shared.fields]).items()
+        ]
+        parts += [(k, j, B, False) for (k, j), B in self.constant.items()]
+        for k, j, M, owned in parts:
+            if (k, j) in blocks:
+                blocks[k, j].setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+                blocks[k, j].axpy(1.0, M, structure=different)
+                if owned:
+                    M.destroy()
+            else:
+                blocks[k, j] = M if owned else M.copy()
+        # diagonal blocks first, in field order
+        order = sorted(blocks, key=lambda kl: (kl[0] != kl[1], kl))
+        self._tangent = [blocks[kl] for kl in order]
+        return {kl: blocks[kl] for kl in order}
 
     def _raw_sides(self) -> list:
         return [s.side if isinstance(s, FEForces) else s for s in self.sides]
@@ -245,9 +428,17 @@ class NonlinearSystem:
         for side, x in zip(self.sides, u, strict=True):
             if isinstance(side, FEForces):
                 local += side.points.strain_energy(side.state(x))
-            else:
+            elif side is not None:
                 local += side.forces.strain_energy(side.coefficients(x))
-        return float(self.comm.allreduce(local, op=MPI.SUM))
+        for shared in self.shared:
+            local += shared.strain_energy([u[i] for i in shared.fields])
+        energy = float(self.comm.allreduce(local, op=MPI.SUM))
+        for (k, j), B in self.constant.items():  # 1/2 u^T B u, collective
+            y = B.createVecLeft()
+            B.mult(u[j], y)
+            energy += 0.5 * y.dot(u[k])
+            y.destroy()
+        return energy
 
     def deformation_gradients(self, u: Sequence[PETSc.Vec]) -> np.ndarray:
         """``F`` (m, d, d) at this rank's quadrature points of every field."""
@@ -255,8 +446,10 @@ class NonlinearSystem:
         for side, x in zip(self.sides, u, strict=True):
             if isinstance(side, FEForces):
                 out.append(side.deformation_gradient(x))
-            else:
+            elif side is not None:
                 out.append(side.forces.deformation_gradient(side.coefficients(x)))
+        for shared in self.shared:
+            out.append(shared.deformation_gradient([u[i] for i in shared.fields]))
         return np.concatenate(out)
 
     def wave_speed(self, u: Sequence[PETSc.Vec]) -> float:
@@ -285,9 +478,9 @@ class NonlinearSystem:
         return False
 
     def destroy(self) -> None:
-        """Destroy the tangents, the fields' reference stiffness and masses and the constraint
-        blocks (collective)."""
-        objs = [*self._tangent]
+        """Destroy the tangents, the constant blocks, the fields' reference stiffness and masses
+        and the constraint blocks (collective)."""
+        objs = [*self._tangent, *self.constant.values()]
         for f in self.fields:
             objs += [f.K, f.mass]
         objs += [g for g in (self.G or []) if g is not None]

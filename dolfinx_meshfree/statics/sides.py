@@ -49,6 +49,7 @@ __all__ = [
     "ParticleSide",
     "cell_part",
     "on_cells",
+    "particle_coefficients",
     "solve_load_steps",
     "split_residual",
     "zeros",
@@ -206,6 +207,13 @@ class FESide:
         return J
 
 
+def particle_coefficients(particles: ParticleSet, x: PETSc.Vec) -> np.ndarray:
+    """All particle coefficients of ``x`` (PETSc numbering), interleaved in original order, on
+    every rank (collective)."""
+    owned = np.concatenate(particles.comm.allgather(x.getArray(readonly=True)))
+    return owned.reshape(-1, particles.gdim)[particles.petsc_index].ravel()
+
+
 class ParticleSide:
     """The particle field: ``f_int`` and ``K_T`` on the patch quadrature, in PETSc numbering."""
 
@@ -227,8 +235,7 @@ class ParticleSide:
 
     def coefficients(self, x: PETSc.Vec) -> np.ndarray:
         """All particle coefficients, interleaved in original order, on every rank."""
-        owned = np.concatenate(self.comm.allgather(x.getArray(readonly=True)))
-        return owned.reshape(-1, self.gdim)[self.P.petsc_index].ravel()
+        return particle_coefficients(self.P, x)
 
     def internal_force(self, x: PETSc.Vec) -> PETSc.Vec:
         f = self.forces.internal_force(self.coefficients(x))
@@ -287,6 +294,14 @@ class BlendedSide:
     def _coefficients(self, xs: Sequence[PETSc.Vec]) -> np.ndarray:
         self.fe.set_state(xs[0])
         return np.concatenate([self.fe.u.x.array, self.particles.coefficients(xs[1])])
+
+    def strain_energy(self, xs: Sequence[PETSc.Vec]) -> float:
+        """``sum_q W(F_q) w_q`` over this rank's blended points (not summed over ranks)."""
+        return self.forces.strain_energy(self._coefficients(xs))
+
+    def deformation_gradient(self, xs: Sequence[PETSc.Vec]) -> np.ndarray:
+        """``F`` (m, d, d) at this rank's blended points."""
+        return self.forces.deformation_gradient(self._coefficients(xs))
 
     def internal_force(self, xs: Sequence[PETSc.Vec]) -> list[PETSc.Vec]:
         """``f_int`` of the blended cells: ``[FE rows, particle rows]``. Collective."""

@@ -115,15 +115,16 @@ def test_quadratic_solution_3d(coupling, cell_name):
     coupling      cells       n = 2        n = 4        rate   / FE (n = 4)  n = 8 / FE
     ============  ==========  ===========  ===========  =====  ============  ============
     lagrange      hexahedra   5.630e-2     1.324e-2     2.09   0.70          0.69
-    lagrange      tetrahedra  6.909e-2     1.641e-2     2.07   0.69          0.72
+    lagrange      tetrahedra  6.905e-2     1.638e-2     2.08   0.69          0.68
     edge-to-edge  hexahedra   5.753e-2     1.350e-2     2.09   0.72          0.70
-    edge-to-edge  tetrahedra  7.107e-2     1.684e-2     2.08   0.71          0.72
+    edge-to-edge  tetrahedra  7.153e-2     1.700e-2     2.07   0.71          0.70
     bridging      hexahedra   7.496e-2     1.515e-2     2.31   0.81          0.73
-    bridging      tetrahedra  9.521e-2     1.881e-2     2.34   0.79          0.80
+    bridging      tetrahedra  9.520e-2     1.882e-2     2.34   0.79          0.72
     ============  ==========  ===========  ===========  =====  ============  ============
 
-    Between n = 4 and 8 (too long for a test: 12-34 s each): rates 2.04, 1.95, 2.04, 1.98,
-    2.14, 1.98. Plain FE on the same mesh: 7.52e-2, 1.88e-2, 4.70e-3 (Q1) and 9.52e-2,
+    Between n = 4 and 8 (too long for a test: 12-34 s each): rates 2.04, 2.03, 2.04, 2.03,
+    2.14, 2.13 (tetrahedra on the positive-weight rule). Plain FE on the same mesh: 7.52e-2,
+    1.88e-2, 4.70e-3 (Q1) and 9.52e-2,
     2.38e-2, 5.95e-3 (P1) at n = 2, 4, 8."""
     h, l2, ratio = [], [], []
     for n in (2, 4):

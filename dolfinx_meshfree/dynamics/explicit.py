@@ -243,7 +243,8 @@ class ExplicitDynamics:
         :meth:`add_body_force`. ``integration="stress-points"``: Lagrangian-kernel stress
         points (lagrange, edge-to-edge, master-slave); ``slaves="coincident"``: Johnson's
         coupling (master-slave, Rabczuk et al. 2006, eq. 15–16). ``material``: a finite-strain
-        law whose linear twin is the problem's material (not hybrid). Arguments: see
+        law whose linear twin is the problem's material (every coupling; the hybrid with HA-F).
+        Arguments: see
         :func:`~dolfinx_meshfree.dynamics.builders.build_coupled`.
         """
         check_safety(safety)

@@ -21,6 +21,7 @@ reference, and the fallback without numba) is batched over all points at once (s
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -51,8 +52,12 @@ __all__ = [
 
 #: The implementations of :meth:`MLS.tabulate`.
 BACKENDS = ("numba", "numpy")
-#: ``"numba"`` when numba is importable, else the numpy fallback.
-DEFAULT_BACKEND = "numba" if jit.AVAILABLE else "numpy"
+#: ``"numba"`` when numba is importable, else the numpy fallback; the environment variable
+#: ``DOLFINX_MESHFREE_MLS_BACKEND`` (``numba`` or ``numpy``) overrides it, e.g. to run a test
+#: suite on the reference path.
+DEFAULT_BACKEND = os.environ.get("DOLFINX_MESHFREE_MLS_BACKEND") or (
+    "numba" if jit.AVAILABLE else "numpy"
+)
 #: Evaluation points per chunk of the compiled path (bounds its temporaries).
 CHUNK = 8192
 
@@ -148,7 +153,10 @@ class MLS:
     ) -> None:
         backend = DEFAULT_BACKEND if backend is None else backend
         if backend not in BACKENDS:
-            raise ValueError(f"backend={backend!r} is not known; use one of {BACKENDS}")
+            raise ValueError(
+                f"backend={backend!r} (argument or DOLFINX_MESHFREE_MLS_BACKEND) is not known; "
+                f"use one of {BACKENDS}"
+            )
         if backend == "numba" and not jit.AVAILABLE:
             raise ValueError(
                 "backend='numba' needs numba, which is not importable: install numba "

@@ -120,11 +120,20 @@ def test_compiled_equals_numpy_with_pair_cuts(cuts, basis):
         assert_tables_equal(plain, tb)
 
 
-def test_chunks_give_the_same_table(monkeypatch):
+def identity_cut(x, i, j, dx, dist, ddist):
+    """Changes nothing, but sends the tabulation through the chunked path with cuts."""
+    return i, j, dx, dist, ddist
+
+
+def test_fused_and_chunked_paths_give_the_same_table(monkeypatch):
+    """Without cuts search and kernel are fused point by point; with cuts the pairs of a chunk
+    are searched, cut and then passed to the same per-point kernel: equal to the last bit."""
     P, x = cloud("grid", 2, 12, seed=9)
     whole = mf.MLS(P, backend="numba").tabulate(x)
     monkeypatch.setattr(mls_module, "CHUNK", 7)  # many chunks, the last one partial
-    chunked = mf.MLS(P, backend="numba").tabulate(x)
+    mls = mf.MLS(P, backend="numba")
+    mls.pair_cuts = [identity_cut]
+    chunked = mls.tabulate(x)
     mats = zip([whole.values, *whole.gradients], [chunked.values, *chunked.gradients], strict=True)
     for a, b in mats:
         np.testing.assert_array_equal(a.indptr, b.indptr)
@@ -186,7 +195,8 @@ def test_errors_are_those_of_the_numpy_path(layout, expected):
     assert msgs[0] == msgs[1]
 
 
-def test_points_near_rcond_are_checked_exactly():
+@pytest.mark.parametrize("cuts", [[], [identity_cut]])
+def test_points_near_rcond_are_checked_exactly(cuts):
     """With rcond just below the smallest eigenvalue ratio, the kernel's cheap bound
     ``1 / (tr A tr A^-1)`` (up to m^2 below the ratio) flags points that the exact check then
     accepts; the table is the numpy one. Slightly above it, both paths reject the same point."""
@@ -198,12 +208,12 @@ def test_points_near_rcond_are_checked_exactly():
     rcond = 0.99 * ratio[q]
     bound = 1.0 / (np.trace(A, axis1=1, axis2=2) * np.trace(np.linalg.inv(A), axis1=1, axis2=2))
     assert np.count_nonzero(bound < rcond) >= 1  # the exact check runs (measured: 2 points)
-    a, b = both(P, dilation=3.5, rcond=rcond)
+    a, b = both(P, cuts, dilation=3.5, rcond=rcond)
     assert_tables_equal(a.tabulate(x), b.tabulate(x))
     msgs = []
-    for backend in ("numpy", "numba"):
+    for mls in both(P, cuts, dilation=3.5, rcond=1.01 * ratio[q]):
         with pytest.raises(mf.MomentMatrixError, match=f"first: point {q} ") as err:
-            mf.MLS(P, dilation=3.5, backend=backend, rcond=1.01 * ratio[q]).tabulate(x)
+            mls.tabulate(x)
         msgs.append(masked(str(err.value)))
     assert msgs[0] == msgs[1]
 

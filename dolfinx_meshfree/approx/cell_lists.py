@@ -15,7 +15,7 @@ import numpy as np
 
 from .jit import AVAILABLE, jit
 
-__all__ = ["CellList"]
+__all__ = ["CellList", "gather", "pair_data"]
 
 #: At most this many bins per particle (a sparse cloud in a large box gets coarser bins).
 _MAX_BINS_PER_PARTICLE = 4
@@ -56,70 +56,109 @@ def _build(
 
 
 @jit
-def _search(
-    x: np.ndarray,
-    pts: np.ndarray,
-    radii: np.ndarray,
-    order: np.ndarray,
-    start: np.ndarray,
-    lo: np.ndarray,
-    size: float,
-    shape: np.ndarray,
-    reach: float,
-    capacity: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Pairs of the points ``x`` (m, 3) with the binned particles (``pts`` (n, 3), ``radii``
-    and ``order`` in bin order); coordinates padded with zeros to 3, ``g`` of them real.
+def gather(
+    xq: np.ndarray,
+    grid: tuple,
+    cand: np.ndarray,
+    cdist: np.ndarray,
+    key: np.ndarray,
+    range3: np.ndarray,
+) -> int:
+    """The particles within the support of the point ``xq`` (3,; zero-padded), sorted by index.
 
-    Returns ``(counts, j, dx, dist, ddist)``: pairs per point, then per pair the particle index,
-    ``x_i - x_j``, the distance and its gradient ``dx / dist`` (0 where the distance is 0).
+    Args:
+        xq: The point.
+        grid: :attr:`CellList.grid`.
+        cand, cdist, key: Outputs (n,): position in bin order, distance and particle index of
+            each pair, in increasing particle index.
+        range3: Work array (2, 3) of ints.
+
+    Returns:
+        The number of pairs.
     """
-    m = x.shape[0]
+    pts, radii, order, start, lo, size, shape, reach = grid
     g = lo.size
+    range3[:, :] = 0
+    for d in range(g):
+        a = np.floor((xq[d] - reach - lo[d]) / size)
+        e = np.floor((xq[d] + reach - lo[d]) / size)
+        range3[0, d] = int(min(max(a, 0.0), float(shape[d])))
+        range3[1, d] = int(min(max(e, -1.0), float(shape[d] - 1)))
+    x0, x1, x2 = xq[0], xq[1], xq[2]
+    nc = 0
+    for c0 in range(range3[0, 0], range3[1, 0] + 1):
+        for c1 in range(range3[0, 1], range3[1, 1] + 1):
+            for c2 in range(range3[0, 2], range3[1, 2] + 1):
+                b = (c0 * shape[1] + c1) * shape[2] + c2
+                for s in range(start[b], start[b + 1]):
+                    e0 = x0 - pts[s, 0]
+                    e1 = x1 - pts[s, 1]
+                    e2 = x2 - pts[s, 2]
+                    ss = e0 * e0 + e1 * e1 + e2 * e2
+                    rs = radii[s]
+                    if ss <= rs * rs * (1.0 + 1e-10):  # cheap pre-test, then the exact one
+                        r = np.sqrt(ss)
+                        if r < rs:
+                            jj = order[s]  # insertion by particle index
+                            t = nc
+                            while t > 0 and key[t - 1] > jj:
+                                key[t] = key[t - 1]
+                                cand[t] = cand[t - 1]
+                                cdist[t] = cdist[t - 1]
+                                t -= 1
+                            key[t] = jj
+                            cand[t] = s
+                            cdist[t] = r
+                            nc += 1
+    return nc
+
+
+@jit
+def pair_data(
+    xq: np.ndarray,
+    grid: tuple,
+    nc: int,
+    cand: np.ndarray,
+    cdist: np.ndarray,
+    dx: np.ndarray,
+    dist: np.ndarray,
+    ddist: np.ndarray,
+    k: int,
+) -> None:
+    """Write ``x - x_I``, the distance and its gradient (0 at distance 0) of the ``nc`` pairs
+    found by :func:`gather` into rows ``k, k + 1, ...`` of ``dx``, ``dist``, ``ddist``."""
+    pts = grid[0]
+    g = dx.shape[1]
+    for t in range(nc):
+        r = cdist[t]
+        dist[k + t] = r
+        for d in range(g):
+            e = xq[d] - pts[cand[t], d]
+            dx[k + t, d] = e
+            ddist[k + t, d] = e / r if r > 0.0 else 0.0
+
+
+@jit
+def _search(
+    x: np.ndarray, grid: tuple, capacity: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Pairs of the points ``x`` (m, 3; zero-padded) with the particles of ``grid``."""
+    m = x.shape[0]
+    n = grid[1].size
+    g = grid[4].size
     counts = np.zeros(m, np.int64)
     cap = max(capacity, 16)
     j = np.empty(cap, np.int32)
     dx = np.empty((cap, g))
     dist = np.empty(cap)
-    cand = np.empty(radii.size, np.int64)
-    cdist = np.empty(radii.size)
-    key = np.empty(radii.size, np.int64)
-    lo3 = np.zeros(3, np.int64)
-    hi3 = np.zeros(3, np.int64)
+    ddist = np.empty((cap, g))
+    cand = np.empty(n, np.int64)
+    cdist = np.empty(n)
+    key = np.empty(n, np.int64)
+    range3 = np.zeros((2, 3), np.int64)
     k = 0
     for q in range(m):
-        x0, x1, x2 = x[q, 0], x[q, 1], x[q, 2]
-        for d in range(g):
-            a = np.floor((x[q, d] - reach - lo[d]) / size)
-            e = np.floor((x[q, d] + reach - lo[d]) / size)
-            lo3[d] = int(min(max(a, 0.0), float(shape[d])))
-            hi3[d] = int(min(max(e, -1.0), float(shape[d] - 1)))
-        nc = 0
-        for c0 in range(lo3[0], hi3[0] + 1):
-            for c1 in range(lo3[1], hi3[1] + 1):
-                for c2 in range(lo3[2], hi3[2] + 1):
-                    b = (c0 * shape[1] + c1) * shape[2] + c2
-                    for s in range(start[b], start[b + 1]):
-                        e0 = x0 - pts[s, 0]
-                        e1 = x1 - pts[s, 1]
-                        e2 = x2 - pts[s, 2]
-                        ss = e0 * e0 + e1 * e1 + e2 * e2
-                        rs = radii[s]
-                        if ss <= rs * rs * (1.0 + 1e-10):  # cheap pre-test, then the exact one
-                            r = np.sqrt(ss)
-                            if r < rs:
-                                # insertion by particle index
-                                jj = order[s]
-                                t = nc
-                                while t > 0 and key[t - 1] > jj:
-                                    key[t] = key[t - 1]
-                                    cand[t] = cand[t - 1]
-                                    cdist[t] = cdist[t - 1]
-                                    t -= 1
-                                key[t] = jj
-                                cand[t] = s
-                                cdist[t] = r
-                                nc += 1
+        nc = gather(x[q], grid, cand, cdist, key, range3)
         if k + nc > cap:  # grow the output
             cap = max(2 * cap, k + nc)
             j2 = np.empty(cap, np.int32)
@@ -131,19 +170,15 @@ def _search(
             dist2 = np.empty(cap)
             dist2[:k] = dist[:k]
             dist = dist2
+            ddist2 = np.empty((cap, g))
+            ddist2[:k] = ddist[:k]
+            ddist = ddist2
         for t in range(nc):
-            j[k] = key[t]
-            for d in range(g):
-                dx[k, d] = x[q, d] - pts[cand[t], d]
-            dist[k] = cdist[t]
-            k += 1
+            j[k + t] = key[t]
+        pair_data(x[q], grid, nc, cand, cdist, dx, dist, ddist, k)
+        k += nc
         counts[q] = nc
-    ddist = np.zeros((k, g))
-    for p in range(k):
-        if dist[p] > 0.0:
-            for d in range(g):
-                ddist[p, d] = dx[p, d] / dist[p]
-    return counts, j[:k].copy(), dx[:k].copy(), dist[:k].copy(), ddist
+    return counts, j[:k], dx[:k], dist[:k], ddist[:k]
 
 
 class CellList:
@@ -180,6 +215,14 @@ class CellList:
         self._pts[:, :g] = pts[self._order]
         self._radii = np.ascontiguousarray(radii[self._order], dtype=float)
         self._pairs_per_point = 16.0  # capacity guess, updated from each query
+        #: What the compiled functions take: ``(pts, radii, order, start, lo, size, shape,
+        #: reach)``, the positions (n, 3; zero-padded) and radii in bin order, the particle index
+        #: of each, the first of each bin (nbins + 1,), the grid's corner, bin size and shape
+        #: (3,), and the reach of the search.
+        self.grid = (
+            self._pts, self._radii, self._order, self._start, self._lo, self._size,
+            self._shape, self._reach,
+        )  # fmt: skip
 
     def pairs(
         self, x: np.ndarray
@@ -194,10 +237,7 @@ class CellList:
         x3 = np.zeros((x.shape[0], 3))
         x3[:, : self.gdim] = x
         capacity = int(1.1 * self._pairs_per_point * x.shape[0]) + 16
-        out = _search(
-            x3, self._pts, self._radii, self._order, self._start, self._lo, self._size,
-            self._shape, self._reach, capacity,
-        )  # fmt: skip
+        out = _search(x3, self.grid, capacity)
         if x.shape[0]:
             self._pairs_per_point = max(out[1].size / x.shape[0], 1.0)
         return out

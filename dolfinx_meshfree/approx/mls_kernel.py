@@ -26,10 +26,17 @@ from __future__ import annotations
 
 import numpy as np
 
+from .cell_lists import gather, pair_data
 from .jit import jit
 from .kernels import cubic_inner_piece, cubic_outer_piece, gaussian_piece, quartic_piece
 
-__all__ = ["WEIGHT_IDS", "derivative_matrices", "mls_shape_functions", "monomial_exponents"]
+__all__ = [
+    "WEIGHT_IDS",
+    "derivative_matrices",
+    "mls_fused",
+    "mls_shape_functions",
+    "monomial_exponents",
+]
 
 #: The weights of :data:`~dolfinx_meshfree.approx.kernels.WEIGHTS` by kernel code.
 WEIGHT_IDS = {"gaussian": 0, "cubic": 1, "quartic": 2}
@@ -116,6 +123,143 @@ def _invert(A: np.ndarray, Ainv: np.ndarray, work: np.ndarray) -> None:
 
 
 @jit
+def _workspace(kmax: int, nb: int, g: int) -> tuple:
+    """Per-point scratch arrays of :func:`_point` for up to ``kmax`` pairs."""
+    return (
+        np.empty((kmax, nb)),  # P: basis per pair
+        np.empty(kmax),  # W: weight per pair
+        np.empty((kmax, g)),  # DW: weight gradient per pair
+        np.empty((nb, nb)),  # A
+        np.empty((g, nb, nb)),  # sum of dw p p^T
+        np.empty((nb, nb)),  # A^-1
+        np.empty((nb, 2 * nb)),  # Gauss-Jordan
+        np.empty(nb),  # gamma
+        np.empty((g, nb)),  # C_k
+        np.empty(nb),  # v
+        np.empty((nb, nb)),  # D_k A
+    )
+
+
+@jit
+def _point(
+    cnt: int,
+    a0: int,
+    j: np.ndarray,
+    dx: np.ndarray,
+    dist: np.ndarray,
+    ddist: np.ndarray,
+    radii: np.ndarray,
+    kind: int,
+    exponents: tuple,
+    D: np.ndarray,
+    s: float,
+    derivatives: bool,
+    ws: tuple,
+    phi: np.ndarray,
+    dphi: np.ndarray,
+    o0: int,
+) -> float:
+    """Shape functions of one point from its pairs ``a0 .. a0 + cnt - 1`` into ``phi[o0 ...]``
+    and ``dphi[:, o0 ...]``; ``ws[3]`` holds ``A`` afterwards. Returns the bound
+    ``1 / (tr A tr A^-1)`` of the eigenvalue ratio (0 where ``A`` is singular or indefinite)."""
+    P, W, DW, A, dA, Ainv, work, gamma, C, v, DA = ws
+    # the basis as a tuple of tuples: its sizes are compile-time constants (loops unrolled)
+    nb = len(exponents)
+    g = len(exponents[0])
+    linear = True
+    for a in range(nb):
+        tot = 0
+        for d in range(g):
+            tot += exponents[a][d]
+        if tot > 1:
+            linear = False
+    inv_s = 1.0 / s
+    A[:, :] = 0.0
+    dA[:, :, :] = 0.0
+    for t in range(cnt):
+        p = a0 + t
+        rho = radii[j[p]]
+        w, dwdr = _weight(kind, dist[p] / rho)
+        W[t] = w
+        f = dwdr / rho
+        for d in range(g):
+            DW[t, d] = f * ddist[p, d]
+        if linear:
+            P[t, 0] = 1.0
+            for d in range(g):
+                P[t, 1 + d] = -dx[p, d] / s
+        else:
+            for a in range(nb):
+                val = 1.0
+                for d in range(g):
+                    for _ in range(exponents[a][d]):
+                        val *= -dx[p, d] / s
+                P[t, a] = val
+        for a in range(nb):
+            wa = w * P[t, a]
+            for b in range(a, nb):
+                A[a, b] += wa * P[t, b]
+        if derivatives:
+            for d in range(g):
+                for a in range(nb):
+                    da = DW[t, d] * P[t, a]
+                    for b in range(a, nb):
+                        dA[d, a, b] += da * P[t, b]
+    for a in range(nb):
+        for b in range(a):
+            A[a, b] = A[b, a]
+    _invert(A, Ainv, work)
+    tr_a = 0.0
+    tr_inv = 0.0
+    for a in range(nb):
+        tr_a += A[a, a]
+        tr_inv += Ainv[a, a]
+    lb = 1.0 / (tr_a * tr_inv)
+    bound = lb if (tr_inv > 0.0 and lb > 0.0 and lb <= 1.0) else 0.0
+    for a in range(nb):
+        gamma[a] = Ainv[a, 0]
+    for t in range(cnt):
+        pg = 0.0
+        for a in range(nb):
+            pg += P[t, a] * gamma[a]
+        phi[o0 + t] = W[t] * pg
+    if not derivatives:
+        return bound
+    for d in range(g):
+        # full A_,k = sum dw p p^T - (D_k A + A D_k^T) / s; then v = A_,k gamma
+        for a in range(nb):
+            for b in range(nb):
+                acc = 0.0
+                for c in range(nb):
+                    acc += D[d, a, c] * A[c, b]
+                DA[a, b] = acc
+        for a in range(nb):
+            acc = 0.0
+            for b in range(nb):
+                dab = dA[d, a, b] if b >= a else dA[d, b, a]
+                acc += (dab - (DA[a, b] + DA[b, a]) * inv_s) * gamma[b]
+            v[a] = acc
+        # C_k = gamma_,k - D_k^T gamma / s, gamma_,k = -A^-1 v
+        for a in range(nb):
+            acc = 0.0
+            dtg = 0.0
+            for b in range(nb):
+                acc += Ainv[a, b] * v[b]
+                dtg += D[d, b, a] * gamma[b]
+            C[d, a] = -acc - dtg * inv_s
+    for t in range(cnt):
+        pg = 0.0
+        for a in range(nb):
+            pg += P[t, a] * gamma[a]
+        for d in range(g):
+            pc = 0.0
+            for a in range(nb):
+                pc += P[t, a] * C[d, a]
+            dphi[d, o0 + t] = W[t] * pc + DW[t, d] * pg
+    return bound
+
+
+@jit
 def mls_shape_functions(
     indptr: np.ndarray,
     j: np.ndarray,
@@ -129,7 +273,7 @@ def mls_shape_functions(
     s: float,
     derivatives: bool,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """MLS shape functions of the pairs of ``len(indptr) - 1`` points (CSR layout).
+    """MLS shape functions of the given pairs of ``len(indptr) - 1`` points (CSR layout).
 
     Args:
         indptr: Pair offsets per point (m + 1,).
@@ -150,122 +294,96 @@ def mls_shape_functions(
         the caller checks exactly where the bound is not above its ``rcond``.
     """
     m = indptr.size - 1
-    # the basis as a tuple of tuples: its sizes are compile-time constants (loops unrolled)
     nb = len(exponents)
     g = len(exponents[0])
-    npairs = dist.size
-    linear = True
-    for a in range(nb):
-        tot = 0
-        for d in range(g):
-            tot += exponents[a][d]
-        if tot > 1:
-            linear = False
     kmax = 0
     for q in range(m):
         kmax = max(kmax, indptr[q + 1] - indptr[q])
-    phi = np.empty(npairs)
-    dphi = np.empty((g if derivatives else 0, npairs))
+    phi = np.empty(dist.size)
+    dphi = np.empty((g if derivatives else 0, dist.size))
     bound = np.empty(m)
     Aout = np.empty((m, nb, nb))
-    P = np.empty((kmax, nb))
-    W = np.empty(kmax)
-    DW = np.empty((kmax, g))
-    A = np.empty((nb, nb))
-    dA = np.empty((g, nb, nb))
-    Ainv = np.empty((nb, nb))
-    work = np.empty((nb, 2 * nb))
-    gamma = np.empty(nb)
-    C = np.empty((g, nb))
-    v = np.empty(nb)
-    DA = np.empty((nb, nb))
-    xi = np.empty(g)
-    inv_s = 1.0 / s
+    ws = _workspace(kmax, nb, g)
     for q in range(m):
         a0 = indptr[q]
         cnt = indptr[q + 1] - a0
-        A[:, :] = 0.0
-        dA[:, :, :] = 0.0
-        for t in range(cnt):
-            p = a0 + t
-            rho = radii[j[p]]
-            w, dwdr = _weight(kind, dist[p] / rho)
-            W[t] = w
-            f = dwdr / rho
-            for d in range(g):
-                DW[t, d] = f * ddist[p, d]
-                xi[d] = -dx[p, d] / s
-            if linear:
-                P[t, 0] = 1.0
-                for d in range(g):
-                    P[t, 1 + d] = xi[d]
-            else:
-                for a in range(nb):
-                    val = 1.0
-                    for d in range(g):
-                        for _ in range(exponents[a][d]):
-                            val *= xi[d]
-                    P[t, a] = val
-            for a in range(nb):
-                wa = w * P[t, a]
-                for b in range(a, nb):
-                    A[a, b] += wa * P[t, b]
-            if derivatives:
-                for d in range(g):
-                    for a in range(nb):
-                        da = DW[t, d] * P[t, a]
-                        for b in range(a, nb):
-                            dA[d, a, b] += da * P[t, b]
-        for a in range(nb):
-            for b in range(a):
-                A[a, b] = A[b, a]
-        Aout[q] = A
-        _invert(A, Ainv, work)
-        tr_a = 0.0
-        tr_inv = 0.0
-        for a in range(nb):
-            tr_a += A[a, a]
-            tr_inv += Ainv[a, a]
-        lb = 1.0 / (tr_a * tr_inv)
-        bound[q] = lb if (tr_inv > 0.0 and lb > 0.0 and lb <= 1.0) else 0.0
-        for a in range(nb):
-            gamma[a] = Ainv[a, 0]
-        for t in range(cnt):
-            pg = 0.0
-            for a in range(nb):
-                pg += P[t, a] * gamma[a]
-            phi[a0 + t] = W[t] * pg
-        if not derivatives:
-            continue
-        for d in range(g):
-            # full A_,k = sum dw p p^T - (D_k A + A D_k^T) / s; then v = A_,k gamma
-            for a in range(nb):
-                for b in range(nb):
-                    acc = 0.0
-                    for c in range(nb):
-                        acc += D[d, a, c] * A[c, b]
-                    DA[a, b] = acc
-            for a in range(nb):
-                acc = 0.0
-                for b in range(nb):
-                    dab = dA[d, a, b] if b >= a else dA[d, b, a]
-                    acc += (dab - (DA[a, b] + DA[b, a]) * inv_s) * gamma[b]
-                v[a] = acc
-            # C_k = gamma_,k - D_k^T gamma / s, gamma_,k = -A^-1 v
-            for a in range(nb):
-                acc = 0.0
-                dtg = 0.0
-                for b in range(nb):
-                    acc += Ainv[a, b] * v[b]
-                    dtg += D[d, b, a] * gamma[b]
-                C[d, a] = -acc - dtg * inv_s
-        for t in range(cnt):
-            pg = 0.0
-            for a in range(nb):
-                pg += P[t, a] * gamma[a]
-            for d in range(g):
-                pc = 0.0
-                for a in range(nb):
-                    pc += P[t, a] * C[d, a]
-                dphi[d, a0 + t] = W[t] * pc + DW[t, d] * pg
+        bound[q] = _point(
+            cnt, a0, j, dx, dist, ddist, radii, kind, exponents, D, s, derivatives, ws,
+            phi, dphi, a0,
+        )  # fmt: skip
+        Aout[q] = ws[3]
     return phi, dphi, bound, Aout
+
+
+@jit
+def mls_fused(
+    x: np.ndarray,
+    grid: tuple,
+    radii: np.ndarray,
+    kind: int,
+    exponents: tuple,
+    D: np.ndarray,
+    s: float,
+    derivatives: bool,
+    capacity: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+    """Neighbour search and shape functions in one pass over the points ``x`` (m, 3;
+    zero-padded), for tables without pair cuts: the pairs of a point live in per-point buffers
+    (:func:`~.cell_lists.gather`, :func:`~.cell_lists.pair_data`) and go to the same
+    :func:`_point` as in :func:`mls_shape_functions`; the outputs grow geometrically from
+    ``capacity`` pairs.
+
+    Returns:
+        ``(counts, j, phi, dphi, bound, npairs)``: pairs per point (m,), the particle index,
+        value and gradients (gdim, ...) of each pair (the first ``npairs`` entries are used) and
+        the eigenvalue-ratio bound per point.
+    """
+    m = x.shape[0]
+    n = radii.size
+    nb = len(exponents)
+    g = len(exponents[0])
+    cand = np.empty(n, np.int64)
+    cdist = np.empty(n)
+    key = np.empty(n, np.int64)
+    range3 = np.zeros((2, 3), np.int64)
+    counts = np.zeros(m, np.int64)
+    bound = np.empty(m)
+    cap = max(capacity, 16)
+    j = np.empty(cap, np.int32)
+    phi = np.empty(cap)
+    dphi = np.empty((g if derivatives else 0, cap))
+    kmax = 64
+    ws = _workspace(kmax, nb, g)
+    dx = np.empty((kmax, g))
+    dist = np.empty(kmax)
+    ddist = np.empty((kmax, g))
+    k = 0
+    for q in range(m):
+        nc = gather(x[q], grid, cand, cdist, key, range3)
+        if nc > kmax:
+            kmax = 2 * nc
+            ws = _workspace(kmax, nb, g)
+            dx = np.empty((kmax, g))
+            dist = np.empty(kmax)
+            ddist = np.empty((kmax, g))
+        if k + nc > cap:
+            cap = max(2 * cap, k + nc)
+            j2 = np.empty(cap, np.int32)
+            j2[:k] = j[:k]
+            j = j2
+            phi2 = np.empty(cap)
+            phi2[:k] = phi[:k]
+            phi = phi2
+            dphi2 = np.empty((dphi.shape[0], cap))
+            dphi2[:, :k] = dphi[:, :k]
+            dphi = dphi2
+        pair_data(x[q], grid, nc, cand, cdist, dx, dist, ddist, 0)
+        for t in range(nc):
+            j[k + t] = key[t]
+        bound[q] = _point(
+            nc, 0, key, dx, dist, ddist, radii, kind, exponents, D, s, derivatives, ws,
+            phi, dphi, k,
+        )  # fmt: skip
+        counts[q] = nc
+        k += nc
+    return counts, j, phi, dphi, bound, k

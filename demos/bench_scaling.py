@@ -88,7 +88,7 @@ def bench_mls(sizes_index: str, repeats: int) -> list[dict]:
                 mls.tabulate(x[:8])  # compile or load the cache; builds the cell list
                 first = time.perf_counter() - t0
                 tables[backend] = mls.tabulate(x)
-                t = median_time(lambda mls=mls: mls.tabulate(x), repeats)
+                t = median_time(lambda mls=mls, x=x: mls.tabulate(x), repeats)
                 rec[backend] = {"time": t, "points_per_second": x.shape[0] / t, "first": first}
             records.append(
                 {
@@ -158,13 +158,14 @@ def report(mls: list[dict], static: list[dict]) -> None:
     print(head)
     print("-" * len(head))
     for r in mls:
-        nb = r.get("points_per_second_numba")
+        nan = float("nan")
+        nb = r.get("points_per_second_numba") or nan
+        first = r["time_first_call_numba"] or nan
+        diff = nan if r["max_difference"] is None else r["max_difference"]
         print(
             f"{r['gdim']}D {r['basis']:>9} {r['particles']:9d} {r['points']:8d} "
-            f"{r['pairs_per_point']:8.1f} {r['points_per_second_numpy']:11.3g} "
-            f"{(nb or float('nan')):11.3g} {(nb or float('nan')) / r['points_per_second_numpy']:8.1f} "
-            f"{(r['time_first_call_numba'] or float('nan')):10.3f} "
-            f"{(r['max_difference'] if r['max_difference'] is not None else float('nan')):9.1e}"
+            f"{r['pairs_per_point']:8.1f} {r['points_per_second_numpy']:11.3g} {nb:11.3g} "
+            f"{nb / r['points_per_second_numpy']:8.1f} {first:10.3f} {diff:9.1e}"
         )
     if not static:
         return

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .jit import AVAILABLE, jit
+from .jit import AVAILABLE, jit, jit_inline
 
 __all__ = ["CellList", "gather", "pair_data"]
 
@@ -55,6 +55,16 @@ def _build(
     return start, order
 
 
+@jit_inline
+def _gap(x: float, a: float, size: float) -> float:
+    """Squared distance from ``x`` to the interval ``[a, a + size]``."""
+    if x < a:
+        return (a - x) * (a - x)
+    if x > a + size:
+        return (x - a - size) * (x - a - size)
+    return 0.0
+
+
 @jit
 def gather(
     xq: np.ndarray,
@@ -76,7 +86,7 @@ def gather(
     Returns:
         The number of pairs.
     """
-    pts, radii, order, start, lo, size, shape, reach = grid
+    pts, radii, order, start, lo, size, shape, reach, bin_reach = grid
     g = lo.size
     range3[:, :] = 0
     for d in range(g):
@@ -87,9 +97,14 @@ def gather(
     x0, x1, x2 = xq[0], xq[1], xq[2]
     nc = 0
     for c0 in range(range3[0, 0], range3[1, 0] + 1):
+        g0 = _gap(x0, lo[0] + c0 * size, size)
         for c1 in range(range3[0, 1], range3[1, 1] + 1):
+            g1 = g0 + (_gap(x1, lo[1] + c1 * size, size) if g > 1 else 0.0)
             for c2 in range(range3[0, 2], range3[1, 2] + 1):
+                g2 = g1 + (_gap(x2, lo[2] + c2 * size, size) if g > 2 else 0.0)
                 b = (c0 * shape[1] + c1) * shape[2] + c2
+                if g2 > bin_reach[b]:  # the bin is beyond the supports of its particles
+                    continue
                 for s in range(start[b], start[b + 1]):
                     e0 = x0 - pts[s, 0]
                     e1 = x1 - pts[s, 1]
@@ -216,12 +231,16 @@ class CellList:
         self._radii = np.ascontiguousarray(radii[self._order], dtype=float)
         self._pairs_per_point = 16.0  # capacity guess, updated from each query
         #: What the compiled functions take: ``(pts, radii, order, start, lo, size, shape,
-        #: reach)``, the positions (n, 3; zero-padded) and radii in bin order, the particle index
-        #: of each, the first of each bin (nbins + 1,), the grid's corner, bin size and shape
-        #: (3,), and the reach of the search.
+        #: reach, bin_reach)``, the positions (n, 3; zero-padded) and radii in bin order, the
+        #: particle index of each, the first of each bin (nbins + 1,), the grid's corner, bin
+        #: size and shape (3,), the reach of the search and the squared largest radius per bin.
+        # squared largest radius per bin, with a margin for the rounding of the bin boundaries
+        bin_of = np.repeat(np.arange(self._start.size - 1), np.diff(self._start))
+        bin_reach = np.zeros(self._start.size - 1)
+        np.maximum.at(bin_reach, bin_of, self._radii * (1.0 + 1e-6) + 1e-9 * size)
         self.grid = (
             self._pts, self._radii, self._order, self._start, self._lo, self._size,
-            self._shape, self._reach,
+            self._shape, self._reach, bin_reach**2,
         )  # fmt: skip
 
     def pairs(

@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from .cell_lists import gather, pair_data
-from .jit import jit
+from .jit import jit, jit_inline
 from .kernels import cubic_inner_piece, cubic_outer_piece, gaussian_piece, quartic_piece
 
 __all__ = [
@@ -76,7 +76,7 @@ def derivative_matrices(exponents: np.ndarray) -> np.ndarray:
     return D
 
 
-@jit
+@jit_inline
 def _weight(kind: int, r: float) -> tuple[float, float]:
     """``(w, dw/dr)`` of weight ``kind`` (:data:`WEIGHT_IDS`), zero outside ``r <= 1``."""
     if not r <= 1.0:
@@ -140,7 +140,7 @@ def _workspace(kmax: int, nb: int, g: int) -> tuple:
     )
 
 
-@jit
+@jit_inline
 def _point(
     cnt: int,
     a0: int,
@@ -178,22 +178,22 @@ def _point(
     dA[:, :, :] = 0.0
     for t in range(cnt):
         p = a0 + t
-        rho = radii[j[p]]
-        w, dwdr = _weight(kind, dist[p] / rho)
+        inv_rho = 1.0 / radii[j[p]]
+        w, dwdr = _weight(kind, dist[p] * inv_rho)
         W[t] = w
-        f = dwdr / rho
+        f = dwdr * inv_rho
         for d in range(g):
             DW[t, d] = f * ddist[p, d]
         if linear:
             P[t, 0] = 1.0
             for d in range(g):
-                P[t, 1 + d] = -dx[p, d] / s
+                P[t, 1 + d] = -dx[p, d] * inv_s
         else:
             for a in range(nb):
                 val = 1.0
                 for d in range(g):
                     for _ in range(exponents[a][d]):
-                        val *= -dx[p, d] / s
+                        val *= -dx[p, d] * inv_s
                 P[t, a] = val
         for a in range(nb):
             wa = w * P[t, a]

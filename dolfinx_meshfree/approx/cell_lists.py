@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .jit import AVAILABLE, jit, jit_inline
+from .jit import AVAILABLE, jit
 
 __all__ = ["CellList", "gather", "pair_data"]
 
@@ -55,7 +55,7 @@ def _build(
     return start, order
 
 
-@jit_inline
+@jit
 def _gap(x: float, a: float, size: float) -> float:
     """Squared distance from ``x`` to the interval ``[a, a + size]``."""
     if x < a:

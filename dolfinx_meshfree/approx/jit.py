@@ -17,7 +17,7 @@ import importlib.util
 from collections.abc import Callable
 from typing import Any, TypeVar
 
-__all__ = ["AVAILABLE", "jit", "jit_inline"]
+__all__ = ["AVAILABLE", "jit"]
 
 #: True when numba can be imported: the compiled kernels are then the default.
 AVAILABLE: bool = importlib.util.find_spec("numba") is not None
@@ -31,14 +31,8 @@ if AVAILABLE:
         """Compile ``fn`` in nopython mode (cached on disk, numpy error model, no fastmath)."""
         return _numba.njit(cache=True, error_model="numpy", nogil=True)(fn)
 
-    def jit_inline(fn: F) -> F:
-        """:func:`jit`, inlined into its callers (small per-point helpers)."""
-        return _numba.njit(cache=True, error_model="numpy", nogil=True, inline="always")(fn)
-
 else:
 
     def jit(fn: F) -> F:
         """Without numba the function stays plain Python (never called by the default paths)."""
         return fn
-
-    jit_inline = jit

@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from .cell_lists import gather, pair_data
-from .jit import jit, jit_inline
+from .jit import jit
 from .kernels import cubic_inner_piece, cubic_outer_piece, gaussian_piece, quartic_piece
 
 __all__ = [
@@ -76,7 +76,7 @@ def derivative_matrices(exponents: np.ndarray) -> np.ndarray:
     return D
 
 
-@jit_inline
+@jit
 def _weight(kind: int, r: float) -> tuple[float, float]:
     """``(w, dw/dr)`` of weight ``kind`` (:data:`WEIGHT_IDS`), zero outside ``r <= 1``."""
     if not r <= 1.0:
@@ -140,7 +140,7 @@ def _workspace(kmax: int, nb: int, g: int) -> tuple:
     )
 
 
-@jit_inline
+@jit
 def _point(
     cnt: int,
     a0: int,

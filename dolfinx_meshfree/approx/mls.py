@@ -36,7 +36,6 @@ from .kernels import get_weight
 from .mls_kernel import (
     WEIGHT_IDS,
     derivative_matrices,
-    mls_fused,
     mls_shape_functions,
     monomial_exponents,
 )
@@ -263,43 +262,10 @@ class MLS:
             self._exponents = tuple(map(tuple, exponents.tolist()))
             self._dmat = derivative_matrices(exponents)
 
-    def _tabulate_fused(self, x: np.ndarray, derivatives: int) -> ShapeTable:
-        """The compiled path without pair cuts: search and kernel fused, one pass, no chunks
-        (the temporaries are per point)."""
-        self._prepare_compiled()
-        m, g = x.shape
-        x3 = np.zeros((m, 3))
-        x3[:, :g] = x
-        sample = x[:: max(m // 256, 1)]
-        per_point = self._cells.pairs(sample)[1].size / max(sample.shape[0], 1)
-        counts, j, phi, dphi, bound, k = mls_fused(
-            x3, self._cells.grid, self.radii, WEIGHT_IDS[self.weight_name], self._exponents,
-            self._dmat, self._scale, bool(derivatives), int(1.2 * per_point * m) + 64,
-        )  # fmt: skip
-        self._check_counts(counts, x)
-        sus = np.flatnonzero(~(bound > self.rcond))
-        if sus.size:  # the moment matrices of these points, by the chunked path, for eigvalsh
-            c, jj, dx, dist, ddist = self._cells.pairs(x[sus])
-            indptr = np.zeros(sus.size + 1, np.int64)
-            np.cumsum(c, out=indptr[1:])
-            A = mls_shape_functions(
-                indptr, jj, dx, dist, ddist, self.radii, WEIGHT_IDS[self.weight_name],
-                self._exponents, self._dmat, self._scale, False,
-            )[3]  # fmt: skip
-            ratio = np.full(m, np.inf)
-            ratio[sus] = self._eigenvalue_ratio(A)
-            self._check_ratio(ratio, counts, x)
-        cols = [phi[:k], *(row[:k] for row in dphi)]
-        if k < 0.8 * j.size:  # do not keep much unused capacity alive
-            cols = [c.copy() for c in cols]
-        return self._table(x, counts, j[:k], cols, derivatives)
-
     def _tabulate_compiled(self, x: np.ndarray, derivatives: int) -> ShapeTable:
         """The compiled path: cell-list pairs, cuts, compiled kernel, chunk by chunk."""
         m, g = x.shape
         self._prepare_compiled()
-        if not self.pair_cuts:
-            return self._tabulate_fused(x, derivatives)
         counts = np.empty(m, np.int64)
         out = _GrowingColumns(1 + (g if derivatives else 0))
         suspects: list[np.ndarray] = [np.zeros(0, np.int64)]

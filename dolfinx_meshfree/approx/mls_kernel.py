@@ -26,14 +26,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from .cell_lists import gather, pair_data
 from .jit import jit
 from .kernels import cubic_inner_piece, cubic_outer_piece, gaussian_piece, quartic_piece
 
 __all__ = [
     "WEIGHT_IDS",
     "derivative_matrices",
-    "mls_fused",
     "mls_shape_functions",
     "monomial_exponents",
 ]
@@ -313,77 +311,3 @@ def mls_shape_functions(
         )  # fmt: skip
         Aout[q] = ws[3]
     return phi, dphi, bound, Aout
-
-
-@jit
-def mls_fused(
-    x: np.ndarray,
-    grid: tuple,
-    radii: np.ndarray,
-    kind: int,
-    exponents: tuple,
-    D: np.ndarray,
-    s: float,
-    derivatives: bool,
-    capacity: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
-    """Neighbour search and shape functions in one pass over the points ``x`` (m, 3;
-    zero-padded), for tables without pair cuts: the pairs of a point live in per-point buffers
-    (:func:`~.cell_lists.gather`, :func:`~.cell_lists.pair_data`) and go to the same
-    :func:`_point` as in :func:`mls_shape_functions`; the outputs grow geometrically from
-    ``capacity`` pairs.
-
-    Returns:
-        ``(counts, j, phi, dphi, bound, npairs)``: pairs per point (m,), the particle index,
-        value and gradients (gdim, ...) of each pair (the first ``npairs`` entries are used) and
-        the eigenvalue-ratio bound per point.
-    """
-    m = x.shape[0]
-    n = radii.size
-    nb = len(exponents)
-    g = len(exponents[0])
-    cand = np.empty(n, np.int64)
-    cdist = np.empty(n)
-    key = np.empty(n, np.int64)
-    range3 = np.zeros((2, 3), np.int64)
-    counts = np.zeros(m, np.int64)
-    bound = np.empty(m)
-    cap = max(capacity, 16)
-    j = np.empty(cap, np.int32)
-    phi = np.empty(cap)
-    dphi = np.empty((g if derivatives else 0, cap))
-    kmax = 64
-    ws = _workspace(kmax, nb, g)
-    dx = np.empty((kmax, g))
-    dist = np.empty(kmax)
-    ddist = np.empty((kmax, g))
-    k = 0
-    for q in range(m):
-        nc = gather(x[q], grid, cand, cdist, key, range3)
-        if nc > kmax:
-            kmax = 2 * nc
-            ws = _workspace(kmax, nb, g)
-            dx = np.empty((kmax, g))
-            dist = np.empty(kmax)
-            ddist = np.empty((kmax, g))
-        if k + nc > cap:
-            cap = max(2 * cap, k + nc)
-            j2 = np.empty(cap, np.int32)
-            j2[:k] = j[:k]
-            j = j2
-            phi2 = np.empty(cap)
-            phi2[:k] = phi[:k]
-            phi = phi2
-            dphi2 = np.empty((dphi.shape[0], cap))
-            dphi2[:, :k] = dphi[:, :k]
-            dphi = dphi2
-        pair_data(x[q], grid, nc, cand, cdist, dx, dist, ddist, 0)
-        for t in range(nc):
-            j[k + t] = key[t]
-        bound[q] = _point(
-            nc, 0, key, dx, dist, ddist, radii, kind, exponents, D, s, derivatives, ws,
-            phi, dphi, k,
-        )  # fmt: skip
-        counts[q] = nc
-        k += nc
-    return counts, j, phi, dphi, bound, k

@@ -6,9 +6,10 @@ the reference the compiled kernels are tested against). ``AVAILABLE`` says which
 
 The kernels are compiled on first use and cached on disk (``cache=True``: next to the module, or
 in numba's user-wide cache directory when the install is read-only; ``NUMBA_CACHE_DIR``
-overrides the location; without any writable place they are compiled in every process). IEEE semantics are kept (no ``fastmath``), and a division by zero gives
-inf/nan as numpy does (``error_model="numpy"``) instead of raising: singular moment matrices are
-detected from the results.
+overrides the location; without any writable place they are compiled in every process). IEEE
+semantics are kept (no ``fastmath``), and a division by zero gives inf/nan as numpy does
+(``error_model="numpy"``) instead of raising: singular moment matrices are detected from the
+results.
 """
 
 from __future__ import annotations

@@ -267,7 +267,7 @@ class MLS:
         m, g = x.shape
         self._prepare_compiled()
         counts = np.empty(m, np.int64)
-        out = _GrowingColumns(1 + (g if derivatives else 0))
+        out = _GrowingColumns(1 + (g if derivatives else 0), m)
         suspects: list[np.ndarray] = [np.zeros(0, np.int64)]
         suspect_A: list[np.ndarray] = [np.zeros((0, self.num_basis, self.num_basis))]
         for start in range(0, m, CHUNK):
@@ -293,7 +293,7 @@ class MLS:
             sus = np.flatnonzero(~(bound > self.rcond))
             suspects.append(sus + start)
             suspect_A.append(A[sus])
-            out.append(j, [phi, *dphi])
+            out.append(j, [phi, *dphi], stop - start)
         self._check_counts(counts, x)
         sus = np.concatenate(suspects)
         if sus.size:
@@ -312,8 +312,9 @@ class MLS:
         indptr = np.zeros(m + 1, idx)
         np.cumsum(counts, out=indptr[1:])
         mats = []
-        for data in columns:
-            a = sp.csr_matrix((data, j.astype(idx), indptr.copy()), shape=(m, n))
+        for c, data in enumerate(columns):
+            cols = j.astype(idx, copy=c > 0)
+            a = sp.csr_matrix((data, cols, indptr if c == 0 else indptr.copy()), shape=(m, n))
             a.has_sorted_indices = True
             mats.append(a)
         grads = mats[1:] if derivatives else []
@@ -396,15 +397,22 @@ class _GrowingColumns:
     """Pair columns (int32 indices + float columns) appended chunk by chunk into buffers that
     grow geometrically and are trimmed in place at the end (no concatenation of the chunks)."""
 
-    def __init__(self, ncols: int) -> None:
+    def __init__(self, ncols: int, num_points: int) -> None:
         self._n = 0
+        self._points = 0
+        self._num_points = num_points
         self._j = np.empty(0, np.int32)
         self._cols = [np.empty(0) for _ in range(ncols)]
 
-    def append(self, j: np.ndarray, cols: list[np.ndarray]) -> None:
+    def append(self, j: np.ndarray, cols: list[np.ndarray], points: int) -> None:
+        """Append the pairs of the next ``points`` points."""
         k = j.size
+        self._points += points
         if self._n + k > self._j.size:
-            cap = max(2 * self._j.size, self._n + k, 1024)
+            # room for all points at the pair density seen so far (+10 %), at least 1.5x
+            need = self._n + k
+            estimate = int(1.1 * need * self._num_points / self._points) + 1024
+            cap = max(need, estimate, int(1.5 * self._j.size))
             self._j = _grown(self._j, self._n, cap)
             self._cols = [_grown(c, self._n, cap) for c in self._cols]
         self._j[self._n : self._n + k] = j

@@ -36,13 +36,13 @@ REPO_ROOT="$(cd "$CI_DIR/.." && pwd)"
 # in by python3-mpi4py via mpi-default-bin; it is listed because we call it.
 LANE_A_DEBS=(python3-dolfinx python3-petsc4py python3-mpi4py python3-scipy
              python3-pytest python3-venv libopenblas0 openmpi-bin python3-matplotlib
-             python3-tqdm python3-h5py)
+             python3-tqdm python3-h5py python3-numba)
 # Lane a must use Debian's interpreter: the python3 first on PATH may be a
 # pyenv one that cannot see the Debian DOLFINx.
 LANE_A_PYTHON=/usr/bin/python3
 # What pip installs into each venv before `pip install -e .`.
 LANE_A_PIP=(ruff)
-LANE_B_PIP=(dolfinx-solver-real scipy pytest ruff matplotlib tqdm h5py)
+LANE_B_PIP=(dolfinx-solver-real scipy pytest ruff matplotlib tqdm h5py numba)
 
 lane_log() { echo "[lane] $*" >&2; }
 lane_die() {

@@ -8,20 +8,52 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import TypeVar
 
 import numpy as np
 import numpy.typing as npt
 
 __all__ = [
     "WEIGHTS",
+    "cubic_inner_piece",
+    "cubic_outer_piece",
     "cubic_spline",
     "gaussian",
+    "gaussian_piece",
     "get_weight",
     "quartic",
+    "quartic_piece",
     "sph_cubic_spline",
 ]
 
+#: A float or an array of floats: the pieces below work on both.
+Piece = TypeVar("Piece", float, np.ndarray)
+
 WeightFunction = Callable[[npt.NDArray[np.floating]], tuple[np.ndarray, np.ndarray]]
+
+
+# The polynomial (or exponential) piece of each weight as a plain formula in ``r``, for arrays and
+# scalars alike: the vectorised weights below mask them to their intervals, and the compiled MLS
+# path (:mod:`.compiled`) compiles the same formulas, so each weight is written once.
+def gaussian_piece(r: Piece) -> tuple[Piece, Piece]:
+    """``(w, dw/dr)`` of eq. (3.10a) without the cut-off at ``r = 1``."""
+    w = np.exp(-((r / 0.4) ** 2))
+    return w, -2.0 * r / 0.16 * w
+
+
+def cubic_inner_piece(r: Piece) -> tuple[Piece, Piece]:
+    """``(w, dw/dr)`` of eq. (3.10b) for ``r <= 1/2``."""
+    return 2.0 / 3.0 - 4.0 * r**2 + 4.0 * r**3, -8.0 * r + 12.0 * r**2
+
+
+def cubic_outer_piece(r: Piece) -> tuple[Piece, Piece]:
+    """``(w, dw/dr)`` of eq. (3.10b) for ``1/2 < r <= 1``."""
+    return 4.0 / 3.0 - 4.0 * r + 4.0 * r**2 - 4.0 / 3.0 * r**3, -4.0 + 8.0 * r - 4.0 * r**2
+
+
+def quartic_piece(r: Piece) -> tuple[Piece, Piece]:
+    """``(w, dw/dr)`` of eq. (3.10c) for ``r <= 1``."""
+    return 1.0 - 6.0 * r**2 + 8.0 * r**3 - 3.0 * r**4, -12.0 * r + 24.0 * r**2 - 12.0 * r**3
 
 
 def gaussian(r: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -32,9 +64,8 @@ def gaussian(r: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """
     r = np.asarray(r, dtype=float)
     inside = r <= 1.0
-    w = np.where(inside, np.exp(-((r / 0.4) ** 2)), 0.0)
-    dw = np.where(inside, -2.0 * r / 0.16 * w, 0.0)
-    return w, dw
+    w, dw = gaussian_piece(r)
+    return np.where(inside, w, 0.0), np.where(inside, dw, 0.0)
 
 
 def cubic_spline(r: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -45,10 +76,10 @@ def cubic_spline(r: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     r = np.asarray(r, dtype=float)
     inner = r <= 0.5
     outer = (r > 0.5) & (r <= 1.0)
-    w = np.where(inner, 2.0 / 3.0 - 4.0 * r**2 + 4.0 * r**3, 0.0)
-    w = np.where(outer, 4.0 / 3.0 - 4.0 * r + 4.0 * r**2 - 4.0 / 3.0 * r**3, w)
-    dw = np.where(inner, -8.0 * r + 12.0 * r**2, 0.0)
-    dw = np.where(outer, -4.0 + 8.0 * r - 4.0 * r**2, dw)
+    w_in, dw_in = cubic_inner_piece(r)
+    w_out, dw_out = cubic_outer_piece(r)
+    w = np.where(outer, w_out, np.where(inner, w_in, 0.0))
+    dw = np.where(outer, dw_out, np.where(inner, dw_in, 0.0))
     return w, dw
 
 
@@ -56,9 +87,8 @@ def quartic(r: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Quartic polynomial, Belytschko et al. 1995, eq. (3.10c): ``1 - 6r^2 + 8r^3 - 3r^4``."""
     r = np.asarray(r, dtype=float)
     inside = r <= 1.0
-    w = np.where(inside, 1.0 - 6.0 * r**2 + 8.0 * r**3 - 3.0 * r**4, 0.0)
-    dw = np.where(inside, -12.0 * r + 24.0 * r**2 - 12.0 * r**3, 0.0)
-    return w, dw
+    w, dw = quartic_piece(r)
+    return np.where(inside, w, 0.0), np.where(inside, dw, 0.0)
 
 
 WEIGHTS: dict[str, WeightFunction] = {

@@ -1,0 +1,313 @@
+"""Compiled MLS kernel: moment matrix, its inverse and the shape functions, one point at a time.
+
+For each evaluation point ``x`` with pairs sorted by point (the CSR layout of the table), it
+evaluates Belytschko et al. 1995, eq. (3.7a) and (3.9) in the basis shifted to ``x`` and scaled
+by ``s`` (see :mod:`.mls`), ``p_I = p((x_I - x)/s)``:
+
+.. math::
+    A = \\sum_I w_I p_I p_I^T, \\quad A \\gamma = e_1, \\quad \\phi_I = w_I p_I^T \\gamma,
+
+and the derivatives ``A_{,k} = \\sum_I w_{I,k} p_I p_I^T - (D_k A + A D_k^T)/s``,
+``\\gamma_{,k} = -A^{-1} A_{,k} \\gamma`` and
+``\\phi_{I,k} = w_I p_I^T (\\gamma_{,k} - D_k^T \\gamma / s) + w_{I,k} p_I^T \\gamma``, where
+``D_k`` is the constant matrix with ``dp/d\\xi_k = D_k p`` (:func:`derivative_matrices`): the terms
+of ``A_{,k}`` with basis derivatives are products of ``D_k`` and ``A``, summed once per point
+instead of once per pair. The weights ``w(dist / d_I)`` and ``w_{I,k} = w'(r)/d_I \\, dist_{,k}``
+are evaluated from the (possibly cut) distances and distance gradients of the pairs.
+
+The inverse is a Gauss-Jordan elimination with partial pivoting. For the conditioning check the
+kernel returns a lower bound of the eigenvalue ratio of ``A``, ``1 / (tr A \\, tr A^{-1})`` (it is
+within a factor ``m^2`` of the ratio for a symmetric positive definite ``A`` of size m): where the
+bound is above ``rcond`` the point is accepted; elsewhere ``A`` is returned for the exact
+``eigvalsh`` check of :class:`~dolfinx_meshfree.approx.mls.MLS`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .jit import jit
+from .kernels import cubic_inner_piece, cubic_outer_piece, gaussian_piece, quartic_piece
+
+__all__ = [
+    "WEIGHT_IDS",
+    "derivative_matrices",
+    "mls_shape_functions",
+    "monomial_exponents",
+]
+
+#: The weights of :data:`~dolfinx_meshfree.approx.kernels.WEIGHTS` by kernel code.
+WEIGHT_IDS = {"gaussian": 0, "cubic": 1, "quartic": 2}
+
+_gaussian = jit(gaussian_piece)
+_cubic_inner = jit(cubic_inner_piece)
+_cubic_outer = jit(cubic_outer_piece)
+_quartic = jit(quartic_piece)
+
+
+def monomial_exponents(gdim: int, order: int) -> np.ndarray:
+    """Exponents (m, gdim) of the monomials of the basis, in the order of
+    :func:`~dolfinx_meshfree.approx.mls.polynomial_basis`: ``1, x, y(, z)`` then
+    ``x^2, xy, y^2`` for the 2D quadratic basis."""
+    rows = [[0] * gdim] + [[int(d == k) for d in range(gdim)] for k in range(gdim)]
+    if order == 2 and gdim == 2:
+        rows += [[2, 0], [1, 1], [0, 2]]
+    elif order != 1:
+        raise ValueError(
+            f"basis of order {order} in {gdim}D is not supported; use linear or 2D quadratic"
+        )
+    return np.array(rows, dtype=np.int64)
+
+
+def derivative_matrices(exponents: np.ndarray) -> np.ndarray:
+    """``D`` (gdim, m, m) with ``dp/dxi_k = D_k p`` for the monomials of ``exponents`` (m, gdim):
+    ``D_k[a, b] = e_ak`` where monomial ``b`` is monomial ``a`` with ``e_ak`` lowered by one."""
+    m, gdim = exponents.shape
+    index = {tuple(e): b for b, e in enumerate(exponents.tolist())}
+    D = np.zeros((gdim, m, m))
+    for k in range(gdim):
+        for a, e in enumerate(exponents.tolist()):
+            if e[k] > 0:
+                lowered = list(e)
+                lowered[k] -= 1
+                D[k, a, index[tuple(lowered)]] = e[k]
+    return D
+
+
+@jit
+def _weight(kind: int, r: float) -> tuple[float, float]:
+    """``(w, dw/dr)`` of weight ``kind`` (:data:`WEIGHT_IDS`), zero outside ``r <= 1``."""
+    if not r <= 1.0:
+        return 0.0, 0.0
+    if kind == 0:
+        return _gaussian(r)
+    if kind == 1:
+        if r <= 0.5:
+            return _cubic_inner(r)
+        return _cubic_outer(r)
+    return _quartic(r)
+
+
+@jit
+def _invert(A: np.ndarray, Ainv: np.ndarray, work: np.ndarray) -> None:
+    """``Ainv = A^-1`` by Gauss-Jordan elimination with partial pivoting (inf/nan if singular)."""
+    m = A.shape[0]
+    work[:, :m] = A
+    work[:, m:] = 0.0
+    for a in range(m):
+        work[a, m + a] = 1.0
+    for col in range(m):
+        piv = col
+        big = abs(work[col, col])
+        for r in range(col + 1, m):
+            if abs(work[r, col]) > big:
+                big = abs(work[r, col])
+                piv = r
+        if piv != col:
+            for c in range(2 * m):
+                t = work[col, c]
+                work[col, c] = work[piv, c]
+                work[piv, c] = t
+        inv_p = 1.0 / work[col, col]
+        for c in range(2 * m):
+            work[col, c] *= inv_p
+        for r in range(m):
+            if r != col:
+                f = work[r, col]
+                if f != 0.0:
+                    for c in range(2 * m):
+                        work[r, c] -= f * work[col, c]
+    Ainv[:, :] = work[:, m:]
+
+
+@jit
+def _workspace(kmax: int, nb: int, g: int) -> tuple:
+    """Per-point scratch arrays of :func:`_point` for up to ``kmax`` pairs."""
+    return (
+        np.empty((kmax, nb)),  # P: basis per pair
+        np.empty(kmax),  # W: weight per pair
+        np.empty((kmax, g)),  # DW: weight gradient per pair
+        np.empty((nb, nb)),  # A
+        np.empty((g, nb, nb)),  # sum of dw p p^T
+        np.empty((nb, nb)),  # A^-1
+        np.empty((nb, 2 * nb)),  # Gauss-Jordan
+        np.empty(nb),  # gamma
+        np.empty((g, nb)),  # C_k
+        np.empty(nb),  # v
+        np.empty((nb, nb)),  # D_k A
+    )
+
+
+@jit
+def _point(
+    cnt: int,
+    a0: int,
+    j: np.ndarray,
+    dx: np.ndarray,
+    dist: np.ndarray,
+    ddist: np.ndarray,
+    radii: np.ndarray,
+    kind: int,
+    exponents: tuple,
+    D: np.ndarray,
+    s: float,
+    derivatives: bool,
+    ws: tuple,
+    phi: np.ndarray,
+    dphi: np.ndarray,
+    o0: int,
+) -> float:
+    """Shape functions of one point from its pairs ``a0 .. a0 + cnt - 1`` into ``phi[o0 ...]``
+    and ``dphi[:, o0 ...]``; ``ws[3]`` holds ``A`` afterwards. Returns the bound
+    ``1 / (tr A tr A^-1)`` of the eigenvalue ratio (0 where ``A`` is singular or indefinite)."""
+    P, W, DW, A, dA, Ainv, work, gamma, C, v, DA = ws
+    # the basis as a tuple of tuples: its sizes are compile-time constants (loops unrolled)
+    nb = len(exponents)
+    g = len(exponents[0])
+    linear = True
+    for a in range(nb):
+        tot = 0
+        for d in range(g):
+            tot += exponents[a][d]
+        if tot > 1:
+            linear = False
+    inv_s = 1.0 / s
+    A[:, :] = 0.0
+    dA[:, :, :] = 0.0
+    for t in range(cnt):
+        p = a0 + t
+        inv_rho = 1.0 / radii[j[p]]
+        w, dwdr = _weight(kind, dist[p] * inv_rho)
+        W[t] = w
+        f = dwdr * inv_rho
+        for d in range(g):
+            DW[t, d] = f * ddist[p, d]
+        if linear:
+            P[t, 0] = 1.0
+            for d in range(g):
+                P[t, 1 + d] = -dx[p, d] * inv_s
+        else:
+            for a in range(nb):
+                val = 1.0
+                for d in range(g):
+                    for _ in range(exponents[a][d]):
+                        val *= -dx[p, d] * inv_s
+                P[t, a] = val
+        for a in range(nb):
+            wa = w * P[t, a]
+            for b in range(a, nb):
+                A[a, b] += wa * P[t, b]
+        if derivatives:
+            for d in range(g):
+                for a in range(nb):
+                    da = DW[t, d] * P[t, a]
+                    for b in range(a, nb):
+                        dA[d, a, b] += da * P[t, b]
+    for a in range(nb):
+        for b in range(a):
+            A[a, b] = A[b, a]
+    _invert(A, Ainv, work)
+    tr_a = 0.0
+    tr_inv = 0.0
+    for a in range(nb):
+        tr_a += A[a, a]
+        tr_inv += Ainv[a, a]
+    lb = 1.0 / (tr_a * tr_inv)
+    bound = lb if (tr_inv > 0.0 and lb > 0.0 and lb <= 1.0) else 0.0
+    for a in range(nb):
+        gamma[a] = Ainv[a, 0]
+    for t in range(cnt):
+        pg = 0.0
+        for a in range(nb):
+            pg += P[t, a] * gamma[a]
+        phi[o0 + t] = W[t] * pg
+    if not derivatives:
+        return bound
+    for d in range(g):
+        # full A_,k = sum dw p p^T - (D_k A + A D_k^T) / s; then v = A_,k gamma
+        for a in range(nb):
+            for b in range(nb):
+                acc = 0.0
+                for c in range(nb):
+                    acc += D[d, a, c] * A[c, b]
+                DA[a, b] = acc
+        for a in range(nb):
+            acc = 0.0
+            for b in range(nb):
+                dab = dA[d, a, b] if b >= a else dA[d, b, a]
+                acc += (dab - (DA[a, b] + DA[b, a]) * inv_s) * gamma[b]
+            v[a] = acc
+        # C_k = gamma_,k - D_k^T gamma / s, gamma_,k = -A^-1 v
+        for a in range(nb):
+            acc = 0.0
+            dtg = 0.0
+            for b in range(nb):
+                acc += Ainv[a, b] * v[b]
+                dtg += D[d, b, a] * gamma[b]
+            C[d, a] = -acc - dtg * inv_s
+    for t in range(cnt):
+        pg = 0.0
+        for a in range(nb):
+            pg += P[t, a] * gamma[a]
+        for d in range(g):
+            pc = 0.0
+            for a in range(nb):
+                pc += P[t, a] * C[d, a]
+            dphi[d, o0 + t] = W[t] * pc + DW[t, d] * pg
+    return bound
+
+
+@jit
+def mls_shape_functions(
+    indptr: np.ndarray,
+    j: np.ndarray,
+    dx: np.ndarray,
+    dist: np.ndarray,
+    ddist: np.ndarray,
+    radii: np.ndarray,
+    kind: int,
+    exponents: tuple,
+    D: np.ndarray,
+    s: float,
+    derivatives: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """MLS shape functions of the given pairs of ``len(indptr) - 1`` points (CSR layout).
+
+    Args:
+        indptr: Pair offsets per point (m + 1,).
+        j, dx, dist, ddist: Per pair: particle index, ``x_i - x_I`` (npairs, gdim), the distance
+            entering the weight and its gradient (npairs, gdim).
+        radii: Support radii of all particles (n,).
+        kind: Weight code (:data:`WEIGHT_IDS`).
+        exponents: Monomial exponents, a tuple of ``nb`` tuples of ``gdim`` ints (tuples, so
+            that numba compiles one kernel per basis with constant loop bounds); ``D``:
+            derivative matrices (gdim, nb, nb).
+        s: Length scale of the basis.
+        derivatives: Whether to compute the gradients.
+
+    Returns:
+        ``(phi, dphi, bound, A)``: values (npairs,), gradients (gdim, npairs) (none without
+        derivatives), the lower bound ``1 / (tr A tr A^-1)`` of the eigenvalue ratio per point
+        (m,; 0 where ``A`` is singular or indefinite) and the moment matrices (m, nb, nb), which
+        the caller checks exactly where the bound is not above its ``rcond``.
+    """
+    m = indptr.size - 1
+    nb = len(exponents)
+    g = len(exponents[0])
+    kmax = 0
+    for q in range(m):
+        kmax = max(kmax, indptr[q + 1] - indptr[q])
+    phi = np.empty(dist.size)
+    dphi = np.empty((g if derivatives else 0, dist.size))
+    bound = np.empty(m)
+    Aout = np.empty((m, nb, nb))
+    ws = _workspace(kmax, nb, g)
+    for q in range(m):
+        a0 = indptr[q]
+        cnt = indptr[q + 1] - a0
+        bound[q] = _point(
+            cnt, a0, j, dx, dist, ddist, radii, kind, exponents, D, s, derivatives, ws,
+            phi, dphi, a0,
+        )  # fmt: skip
+        Aout[q] = ws[3]
+    return phi, dphi, bound, Aout

@@ -78,7 +78,7 @@ def test_compiled_equals_numpy(gdim, basis, weight, kind):
     assert_tables_equal(ta, tb)
 
 
-def crack_cut(x, i, j, dx, dist, ddist):
+def crack_cut(x, i, j, dx, dist, ddist, sides=None):
     """Visibility across the segment y = 2.5, x < 2.5: drop the pairs whose line of sight
     crosses it (keeps the order of the others)."""
     xi, xj = x[i], x[i] - dx
@@ -89,14 +89,14 @@ def crack_cut(x, i, j, dx, dist, ddist):
     return i[keep], j[keep], dx[keep], dist[keep], ddist[keep]
 
 
-def stretch_cut(x, i, j, dx, dist, ddist):
+def stretch_cut(x, i, j, dx, dist, ddist, sides=None):
     """A distance changed by a term that depends on the particle only (its gradient is
     unchanged): ``dist + 0.05 |x_I - (2.5, 2.5)|``."""
     xj = x[i] - dx
     return i, j, dx, dist + 0.05 * np.linalg.norm(xj - 2.5, axis=1), ddist
 
 
-def reversing_cut(x, i, j, dx, dist, ddist):
+def reversing_cut(x, i, j, dx, dist, ddist, sides=None):
     """Returns the pairs reversed: the compiled path must restore the CSR order."""
     return i[::-1], j[::-1], dx[::-1], dist[::-1], ddist[::-1]
 
@@ -120,7 +120,7 @@ def test_compiled_equals_numpy_with_pair_cuts(cuts, basis):
         assert_tables_equal(plain, tb)
 
 
-def identity_cut(x, i, j, dx, dist, ddist):
+def identity_cut(x, i, j, dx, dist, ddist, sides=None):
     """Changes nothing (but the cut path runs: pairs to numpy and back)."""
     return i, j, dx, dist, ddist
 

@@ -24,6 +24,7 @@ import dolfinx
 import numpy as np
 import ufl
 
+from ..approx.crack_cuts import attach_cracks
 from ..approx.mls import MLS
 from ..couplings import COUPLINGS, DEFAULT_DILATION, REGISTRY
 from ..couplings.base import (
@@ -52,6 +53,7 @@ from .petsc import SolverOptions, solver_options
 
 __all__ = [
     "COUPLINGS",
+    "CRACK_COUPLINGS",
     "DEFAULT_DILATION",
     "CoupledElasticity",
     "CoupledSolution",
@@ -59,6 +61,10 @@ __all__ = [
 ]
 
 VectorFunction = Callable[[np.ndarray], np.ndarray]
+
+#: The couplings that carry cracks in the patch (cut MLS weights, cut-cell quadrature, the crack
+#: faces in the consistent integration's boundary): the variational interface couplings.
+CRACK_COUPLINGS: tuple[str, ...] = ("lagrange", "edge-to-edge")
 
 
 class CoupledElasticity:
@@ -206,6 +212,8 @@ class CoupledElasticity:
             ),
         )
         self.mls = self.family.prepare_mls(self.mls, patch)
+        if patch.cracks:
+            raise_on_all_ranks(patch.comm, lambda: self._attach_cracks(coupling))
         self.dirichlet: list[tuple[np.ndarray, VectorFunction]] = []
         self.tractions: list[tuple[np.ndarray, Callable]] = []
         #: The user's bilinear form (set by :class:`~dolfinx_meshfree.CoupledLinearProblem`);
@@ -217,6 +225,18 @@ class CoupledElasticity:
         #: cell integrals of a CoupledLinearProblem's ``L``.
         self.body_forces: list = []
         self.setup_time = time.perf_counter() - t0
+
+    def _attach_cracks(self, coupling: str) -> None:
+        """Cut the MLS weights by the patch's cracks (Organ, Fleming & Belytschko 1996); only
+        the couplings whose particle side is the plain cracked EFG block can carry them."""
+        if coupling not in CRACK_COUPLINGS:
+            raise ValueError(
+                f"coupling={coupling!r} cannot carry a cracked patch (its particle block is "
+                f"not integrated on cut cells with the crack faces as boundary); use one of "
+                f"{list(CRACK_COUPLINGS)}, or leave the cracks out of the patch"
+            )
+        patch = self.patch
+        attach_cracks(self.mls, patch.cracks, patch.crack_method, patch=patch)
 
     def add_dirichlet(self, facets: np.ndarray, value: VectorFunction) -> None:
         """``u = value(x)`` on owned exterior facets (FE side: strongly; patch side: multipliers).

@@ -23,6 +23,7 @@ to round-off; plain Gauss quadrature leaves an integration error of about 1e-6.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -31,8 +32,15 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import scipy.sparse as sp
 
+from ..approx.crack_cuts import attach_cracks
 from ..approx.mls import MLS
 from ..approx.tables import ShapeTable
+from ..geometry.crack import Crack, CrackDomain, place_crack
+from ..geometry.cut_cells import (
+    cracked_boundary_quadrature,
+    cut_cell_quadrature,
+    cut_facet_quadrature,
+)
 from ..geometry.particles import ParticleSet
 from ..geometry.quadrature import (
     QuadraturePoints,
@@ -54,9 +62,16 @@ from .petsc import BlockSystem, SolverOptions, create_aij, create_vector, solver
 from .sides import BlockProblem, ParticleSide, solve_load_steps
 
 if TYPE_CHECKING:  # annotations only
+    import dolfinx.mesh
     from mpi4py import MPI
 
-__all__ = ["EFGElasticity", "EFGSolution", "facet_multipliers", "particle_stiffness"]
+__all__ = [
+    "EFGElasticity",
+    "EFGSolution",
+    "crack_rules",
+    "facet_multipliers",
+    "particle_stiffness",
+]
 
 VectorFunction = Callable[[np.ndarray], np.ndarray]
 TractionFunction = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -113,6 +128,7 @@ def particle_stiffness(
     boundary_normals: Callable[[QuadraturePoints], np.ndarray] | None = None,
     tables: dict | None = None,
     boundary_moments: bool = False,
+    boundary_quadrature: QuadraturePoints | None = None,
 ) -> tuple[sp.csr_matrix, QuadraturePoints, ShapeTable, dict]:
     """EFG stiffness from this rank's integration cells (``particles.cells``), in PETSc numbering.
 
@@ -131,7 +147,11 @@ def particle_stiffness(
     replaces the cell Gauss rule (``quadrature_degree`` is then not used for it), e.g. the
     particles and stress points of
     :func:`~dolfinx_meshfree.geometry.stress_points.stress_point_quadrature`
-    (Rabczuk, Belytschko & Xiao 2004). Collective (errors are raised on every rank).
+    (Rabczuk, Belytschko & Xiao 2004). ``boundary_quadrature``, if given, replaces the facet
+    rule of ``consistent_boundary``'s facets (e.g. a cracked patch's boundary with both crack
+    faces, :func:`~dolfinx_meshfree.geometry.cut_cells.cracked_boundary_quadrature`; its
+    ``sides`` select the one-sided shape functions on the crack faces). Collective (errors are
+    raised on every rank).
 
     ``tables``, if given, receives ``"quadrature"``, ``"table"`` and ``"test_gradients"`` (the
     VCI-corrected ones when consistent): what a finite-strain solve needs for its internal force.
@@ -154,8 +174,12 @@ def particle_stiffness(
     test_grads = tq.gradients
     if consistent_boundary is not None:
         facets, cells = consistent_boundary
-        bq = facet_quadrature(particles.mesh, facets, quadrature_degree, cells)
-        tb = raise_on_all_ranks(comm, lambda: mls.tabulate(bq.points, derivatives=0))
+        if boundary_quadrature is None:
+            bq = facet_quadrature(particles.mesh, facets, quadrature_degree, cells)
+        else:
+            bq = boundary_quadrature
+        sides = getattr(bq, "sides", None)
+        tb = raise_on_all_ranks(comm, lambda: mls.tabulate(bq.points, derivatives=0, sides=sides))
         bvalues = tb.values if boundary_values is None else boundary_values(bq, tb.values)
         normals = bq.normals if boundary_normals is None else boundary_normals(bq)
         moments = boundary_moments and boundary_values is not None
@@ -184,6 +208,33 @@ def particle_stiffness(
     Kg = sp.csr_matrix((K.data, (dof_map[K.row], dof_map[K.col])), shape=(gdim * n, gdim * n))
     timings = {"setup": t1 - t0, "assemble": time.perf_counter() - t1}
     return Kg, q, tq, timings
+
+
+def crack_rules(
+    msh: dolfinx.mesh.Mesh,
+    cells: np.ndarray,
+    cracks: list[Crack],
+    degree: int,
+    boundary: tuple[np.ndarray, np.ndarray | None] | None,
+) -> tuple[QuadraturePoints | None, QuadraturePoints | None]:
+    """The cell rule and VCI boundary rule of particles cut by ``cracks`` (Belytschko et al.
+    1995, sec. 5.2.2: each side of a crack integrated on its own, the faces traction-free):
+    :func:`~dolfinx_meshfree.geometry.cut_cells.cut_cell_quadrature` on ``cells`` and, with
+    ``boundary = (facets, facet cells)``,
+    :func:`~dolfinx_meshfree.geometry.cut_cells.cracked_boundary_quadrature` (its crack-face
+    points have ``entities = -1``: they are no mesh facet, e.g. of an interface). ``(None,
+    None)`` without cracks: :func:`particle_stiffness`'s defaults. Collective.
+    """
+    if not cracks:
+        return None, None
+    comm = msh.comm
+    q = raise_on_all_ranks(comm, lambda: cut_cell_quadrature(msh, cells, cracks, degree))
+    if boundary is None:
+        return q, None
+    facets, fcells = boundary
+    bq = cracked_boundary_quadrature(msh, facets, cells, cracks, degree, fcells)
+    entities = np.where(bq.sides != 0, -1, bq.entities)
+    return q, dataclasses.replace(bq, entities=entities)
 
 
 def facet_multipliers(
@@ -256,6 +307,13 @@ class EFGElasticity:
         consistent: Variationally consistent integration (VCI, Chen, Hillman & Rüter 2013; the
             default: the linear patch test passes to round-off). ``False``: plain Gauss
             quadrature of Belytschko et al. 1995 (patch-test error 1e-4 to 6e-4 at 4 x 4 Gauss).
+        cracks: 2D :class:`~dolfinx_meshfree.Crack` polylines in the particles' cells (checked by
+            :func:`~dolfinx_meshfree.geometry.crack.place_crack`): the MLS weights are cut by
+            them (:func:`~dolfinx_meshfree.approx.crack_cuts.attach_cracks`), cut cells are
+            integrated side by side, the crack faces are traction-free and part of VCI's boundary
+            (:mod:`~dolfinx_meshfree.geometry.cut_cells`).
+        crack_method: ``"diffraction"`` (default) or ``"visibility"`` (Organ, Fleming &
+            Belytschko 1996).
     """
 
     def __init__(
@@ -267,6 +325,8 @@ class EFGElasticity:
         basis: str = "linear",
         quadrature_degree: int = 7,
         consistent: bool = True,
+        cracks: tuple[Crack, ...] | list[Crack] = (),
+        crack_method: str = "diffraction",
     ):
         if particles.mesh is None:
             raise ValueError("EFGElasticity needs particles with a background mesh (mesh=...)")
@@ -289,6 +349,15 @@ class EFGElasticity:
         )
         self.quadrature_degree = quadrature_degree
         self.consistent = bool(consistent)
+        #: The cracks cutting the particles' shape functions.
+        self.cracks = list(cracks)
+        if self.cracks:
+            domain = CrackDomain.from_particles(particles)
+            for crack in self.cracks:
+                place_crack(crack, domain)
+            raise_on_all_ranks(
+                particles.comm, lambda: attach_cracks(self.mls, self.cracks, crack_method)
+            )
         self._dirichlet: list[tuple[np.ndarray, VectorFunction]] = []
         self._tractions: list[tuple[np.ndarray, TractionFunction]] = []
         self._body: VectorFunction | None = None
@@ -333,11 +402,22 @@ class EFGElasticity:
         gdim = P.gdim
         dof_map = P.petsc_dofs(gdim).ravel()  # original interleaved dof -> PETSc dof
         t0 = time.perf_counter()
+        deg = self.quadrature_degree
         boundary = (boundary_facets(self.mesh), None) if self.consistent else None
+        num_owned = self.mesh.topology.index_map(self.mesh.topology.dim).size_local
+        cells = np.arange(num_owned) if P.cells is None else P.cells
+        q, bq = crack_rules(self.mesh, cells, self.cracks, deg, boundary)
+
+        def fq(f: np.ndarray) -> QuadraturePoints:  # facets split at the cracks' mouths
+            if self.cracks:
+                return cut_facet_quadrature(self.mesh, f, self.cracks, deg)
+            return facet_quadrature(self.mesh, f, deg)
+
         Kg, q, tq, kt = particle_stiffness(
-            P, self.mls, self.linear_material, self.quadrature_degree, boundary, tables=tables
-        )
-        dq = [facet_quadrature(self.mesh, f, self.quadrature_degree) for f, _ in self._dirichlet]
+            P, self.mls, self.linear_material, deg, boundary, tables=tables,
+            quadrature=q, boundary_quadrature=bq,
+        )  # fmt: skip
+        dq = [fq(f) for f, _ in self._dirichlet]
         num_facets = comm.allreduce(sum(np.unique(d.entities).size for d in dq))
         if num_facets > n:
             raise ValueError(
@@ -348,9 +428,7 @@ class EFGElasticity:
                 "boundary has two triangles per vertex) or fewer Dirichlet facets"
             )
         dtabs = [raise_on_all_ranks(comm, lambda d=d: self.mls.tabulate(d.points, 0)) for d in dq]
-        tq_loads = [
-            facet_quadrature(self.mesh, f, self.quadrature_degree) for f, _ in self._tractions
-        ]
+        tq_loads = [fq(f) for f, _ in self._tractions]
         ttabs = [
             raise_on_all_ranks(comm, lambda d=d: self.mls.tabulate(d.points, 0)) for d in tq_loads
         ]

@@ -372,7 +372,9 @@ class CoupledElasticity:
         comm = self.patch.comm
         options = raise_on_all_ranks(comm, lambda: solver_options(solver, petsc_options, prefix))
         if isinstance(self.law, LinearElastic):
-            return self.family.solve(self, options)
+            solution = self.family.solve(self, options)
+            solution.material = self.material
+            return solution
         raise_on_all_ranks(comm, lambda: check_load_steps(load_steps))
         V = self.V
         u = dolfinx.fem.Function(V)

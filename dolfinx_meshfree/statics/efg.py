@@ -41,6 +41,7 @@ from ..geometry.cut_cells import (
     cut_cell_quadrature,
     cut_facet_quadrature,
 )
+from ..fracture.interaction import StressIntensityFactors
 from ..geometry.particles import ParticleSet
 from ..geometry.quadrature import (
     QuadraturePoints,
@@ -60,6 +61,7 @@ from ..physics.operators import (
 from .newton import NewtonOptions
 from .petsc import BlockSystem, SolverOptions, create_aij, create_vector, solver_options
 from .sides import BlockProblem, ParticleSide, solve_load_steps
+from .sifs import solution_sifs
 
 if TYPE_CHECKING:  # annotations only
     import dolfinx.mesh
@@ -106,6 +108,11 @@ class EFGSolution:
     num_multipliers: int = 0
     #: Finite strain: the Newton record (:class:`~dolfinx_meshfree.NonlinearSolveResult`).
     newton: object | None = None
+    #: The small-strain law of the solve (for :meth:`stress_intensity_factors`).
+    material: LinearElastic | None = None
+    #: The cracks of the model and where they lie (pure EFG: the whole mesh).
+    cracks: list = field(default_factory=list)
+    domain: CrackDomain | None = None
 
     def displacement(self, points: np.ndarray) -> np.ndarray:
         """Displacement (m, gdim) at points (m, gdim); local, no communication."""
@@ -115,6 +122,35 @@ class EFGSolution:
         """Displacement (m, gdim) and its gradient (m, gdim, gdim), ``g[:, i, j] = du_i/dx_j``."""
         t = self.mls.tabulate(points)
         return t.values @ self.coefficients, t.gradient(self.coefficients)
+
+    def stress_intensity_factors(
+        self,
+        crack: Crack,
+        tip: int | np.ndarray = 0,
+        radius: float | np.ndarray | None = None,
+        material: LinearElastic | None = None,
+        **options,
+    ) -> StressIntensityFactors:
+        """K_I, K_II and J at a tip of ``crack`` by the domain interaction integral on the
+        crack-aware MLS field (collective; see :func:`~dolfinx_meshfree.statics.sifs.solution_sifs`).
+
+        Args:
+            crack: one of the model's cracks. tip: an index of ``crack.tips`` or its coordinates.
+            radius: outer domain radii (default 3, 4, 5 particle spacings, ``r1 = r2 / 2``):
+                one result per radius, the path independence report.
+            material: the law (default: the solve's).
+            options: ``inner``, ``weight``, ``points`` of
+                :func:`~dolfinx_meshfree.interaction_integral`.
+        """
+        if self.domain is None:  # the same on every rank
+            raise ValueError(
+                "the model has no cracks: give EFGElasticity(..., cracks=[crack]) to compute "
+                "stress intensity factors"
+            )
+        return solution_sifs(
+            lambda x: self.evaluate(x)[1], material or self.material, self.cracks, self.domain,
+            crack, tip, radius, **options,
+        )  # fmt: skip
 
 
 def particle_stiffness(
@@ -351,8 +387,9 @@ class EFGElasticity:
         self.consistent = bool(consistent)
         #: The cracks cutting the particles' shape functions.
         self.cracks = list(cracks)
+        self._domain: CrackDomain | None = None
         if self.cracks:
-            domain = CrackDomain.from_particles(particles)
+            domain = self._domain = CrackDomain.from_particles(particles)
             for crack in self.cracks:
                 place_crack(crack, domain)
             raise_on_all_ranks(
@@ -510,6 +547,9 @@ class EFGElasticity:
             multipliers=lam,
             timings={"setup": extra["setup"], "assemble": extra["assemble"], "solve": solve},
             num_multipliers=mlayout.size_global,
+            material=self.linear_material,
+            cracks=self.cracks,
+            domain=self._domain,
         )
 
     def _solve_finite_strain(

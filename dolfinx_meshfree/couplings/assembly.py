@@ -150,13 +150,13 @@ def essential_conditions(
     msh = V.mesh
     deg = problem.quadrature_degree
     fe_bc, patch_bc = [], []
-    for facets, fn in problem.dirichlet:
+    for facets, fn, *components in problem.dirichlet:  # components: patch facets only
         f_fe, f_p = split_facets(problem, facets)
         if also_strong is not None:
             f_fe = np.concatenate([f_fe, also_strong(f_p)])
         fe_bc.append((f_fe, fn))
-        patch_bc.append((f_p, fn))
-    dq = [facet_quadrature(msh, f, deg) for f, _ in patch_bc]
+        patch_bc.append((f_p, fn, *components))
+    dq = [facet_quadrature(msh, c[0], deg) for c in patch_bc]
     dtabs = [raise_on_all_ranks(comm, lambda d=d: problem.mls.tabulate(d.points, 0)) for d in dq]
     gdim = msh.geometry.dim
     ubc = dolfinx.fem.Function(V)

@@ -238,10 +238,35 @@ class CoupledElasticity:
         patch = self.patch
         attach_cracks(self.mls, patch.cracks, patch.crack_method, patch=patch)
 
-    def add_dirichlet(self, facets: np.ndarray, value: VectorFunction) -> None:
+    def add_dirichlet(
+        self, facets: np.ndarray, value: VectorFunction, components: tuple[int, ...] | None = None
+    ) -> None:
         """``u = value(x)`` on owned exterior facets (FE side: strongly; patch side: multipliers).
-        ``value`` maps points (m, gdim) to (m, gdim)."""
-        self.dirichlet.append((np.asarray(facets, dtype=np.int32), value))
+        ``value`` maps points (m, gdim) to (m, gdim). ``components`` (patch facets only: one
+        constant multiplier per facet and component) constrains only those components, e.g.
+        to remove the rigid motions of a traction problem with three scalar conditions."""
+        facets = np.asarray(facets, dtype=np.int32)
+        if components is None:
+            self.dirichlet.append((facets, value))
+            return
+        gdim = self.V.mesh.geometry.dim
+        outside = facets[~np.isin(facets, self.patch.exterior_facets)]
+
+        def check() -> tuple[int, ...]:
+            c = tuple(components)
+            if not c or len(set(c)) != len(c) or any(k not in range(gdim) for k in c):
+                raise ValueError(
+                    f"components={components!r} must be distinct indices in 0..{gdim - 1}"
+                )
+            if outside.size:
+                raise ValueError(
+                    f"components={components!r} is supported on exterior facets of the patch "
+                    f"only; {outside.size} facet(s) are not (e.g. facet {int(outside[0])}): "
+                    "constrain all components there, or use patch facets"
+                )
+            return c
+
+        self.dirichlet.append((facets, value, raise_on_all_ranks(self.patch.comm, check)))
 
     def add_traction(self, facets: np.ndarray, traction: Callable) -> None:
         """Traction ``traction(x, n)`` (m, gdim) on owned exterior facets, on either side."""

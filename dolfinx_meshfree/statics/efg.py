@@ -287,7 +287,8 @@ def facet_multipliers(
     ``i`` runs over the ``gdim`` components (edges in 2D, triangles or quadrilaterals in 3D).
 
     Args:
-        conditions: ``(facets, ubar)`` pairs; ``quadratures``/``tables``: their facet quadrature
+        conditions: ``(facets, ubar)`` pairs, or ``(facets, ubar, components)`` triples that
+            constrain only the given components (e.g. ``(1,)``: a roller); ``quadratures``/``tables``: their facet quadrature
             and the particle shape functions there; ``scale``: ``s``.
 
     Returns:
@@ -297,23 +298,25 @@ def facet_multipliers(
     comm = particles.comm
     gdim = particles.gdim
     dof_map = particles.petsc_dofs(gdim).ravel()
-    nfac = [np.unique(d.entities).size for d in quadratures]
-    mlayout = Layout.from_local(comm, gdim * int(sum(nfac)))
+    comps = [tuple(c[2]) if len(c) > 2 else tuple(range(gdim)) for c in conditions]
+    nrows = [np.unique(d.entities).size * len(c) for d, c in zip(quadratures, comps, strict=True)]
+    mlayout = Layout.from_local(comm, int(sum(nrows)))
     g_rows, g_cols, g_vals, r_rows, r_vals = [], [], [], [], []
-    offset = mlayout.start // gdim
-    for (_, fn), d, tab in zip(conditions, quadratures, tables, strict=True):
+    offset = mlayout.start
+    for cond, d, tab, cs in zip(conditions, quadratures, tables, comps, strict=True):
+        fn, m = cond[1], len(cs)
         _, facet_id = np.unique(d.entities, return_inverse=True)
         ubar = raise_on_all_ranks(
             comm, lambda fn=fn, d=d: _vector_values(fn, (d.points,), len(d), "dirichlet", gdim)
         )
         coo = tab.values.tocoo()
-        for c in range(gdim):
-            g_rows.append(gdim * (offset + facet_id[coo.row]) + c)
+        for k, c in enumerate(cs):
+            g_rows.append(offset + m * facet_id[coo.row] + k)
             g_cols.append(dof_map[gdim * coo.col + c])
             g_vals.append(scale * d.weights[coo.row] * coo.data)
-            r_rows.append(gdim * (offset + facet_id) + c)
+            r_rows.append(offset + m * facet_id + k)
             r_vals.append(scale * d.weights * ubar[:, c])
-        offset += int(facet_id.max()) + 1 if facet_id.size else 0
+        offset += m * (int(facet_id.max()) + 1) if facet_id.size else 0
     G = sp.csr_matrix(
         (_cat(g_vals, float), (_cat(g_rows, np.int64), _cat(g_cols, np.int64))),
         shape=(mlayout.size_global, gdim * particles.num_particles),
@@ -395,7 +398,7 @@ class EFGElasticity:
             raise_on_all_ranks(
                 particles.comm, lambda: attach_cracks(self.mls, self.cracks, crack_method)
             )
-        self._dirichlet: list[tuple[np.ndarray, VectorFunction]] = []
+        self._dirichlet: list[tuple[np.ndarray, VectorFunction, tuple[int, ...]]] = []
         self._tractions: list[tuple[np.ndarray, TractionFunction]] = []
         self._body: VectorFunction | None = None
         self._setup_time = time.perf_counter() - t0
@@ -405,12 +408,29 @@ class EFGElasticity:
         """The particles' communicator."""
         return self.particles.comm
 
-    def add_dirichlet(self, facets: np.ndarray, value: VectorFunction) -> None:
+    def add_dirichlet(
+        self, facets: np.ndarray, value: VectorFunction, components: tuple[int, ...] | None = None
+    ) -> None:
         """Impose ``u = value(x)`` on owned exterior facets by Lagrange multipliers.
 
-        ``value`` maps points (m, gdim) to displacements (m, gdim).
+        ``value`` maps points (m, gdim) to displacements (m, gdim); ``components``, if given,
+        constrains only those components (e.g. ``(1,)``: a roller; one constant multiplier
+        per facet and component: its resultant reaction).
         """
-        self._dirichlet.append((np.asarray(facets, dtype=np.int32), value))
+        gdim = self.particles.gdim
+
+        def check() -> tuple[int, ...]:
+            if components is None:
+                return tuple(range(gdim))
+            c = tuple(components)
+            if not c or len(set(c)) != len(c) or any(k not in range(gdim) for k in c):
+                raise ValueError(
+                    f"components={components!r} must be distinct indices in 0..{gdim - 1}"
+                )
+            return c
+
+        comps = raise_on_all_ranks(self.comm, check)
+        self._dirichlet.append((np.asarray(facets, dtype=np.int32), value, comps))
 
     def add_traction(self, facets: np.ndarray, traction: TractionFunction) -> None:
         """Apply ``traction(x, n)`` (m, gdim) on owned exterior facets (``n``: outward normals)."""
@@ -454,8 +474,10 @@ class EFGElasticity:
             P, self.mls, self.linear_material, deg, boundary, tables=tables,
             quadrature=q, boundary_quadrature=bq,
         )  # fmt: skip
-        dq = [fq(f) for f, _ in self._dirichlet]
-        num_facets = comm.allreduce(sum(np.unique(d.entities).size for d in dq))
+        dq = [fq(c[0]) for c in self._dirichlet]
+        num_facets = comm.allreduce(
+            sum(np.unique(d.entities).size * len(c[2]) for d, c in zip(dq, self._dirichlet, strict=True))
+        ) // gdim
         if num_facets > n:
             raise ValueError(
                 f"the Dirichlet conditions have {num_facets} facets, each with {gdim} constant "

@@ -34,6 +34,7 @@ import dolfinx
 import dolfinx_meshfree as mf
 import numpy as np
 from dolfinx_meshfree import _compat
+from mpi4py import MPI
 from sif_common import COMM, owned_cells, write_json
 
 W, H, SIGMA = 1.0, 2.0, 1.0
@@ -66,8 +67,10 @@ def run(method: str, a_over_w: float, h: float) -> dict:
     if method == "efg":
         P = mf.ParticleSet.from_cells(msh, h)
         prob = mf.EFGElasticity(P, MATERIAL, cracks=[crack])
-        pin = (lambda x: np.isclose(x[1], -H / 2) & (x[0] < h + 1e-9), (0, 1))
-        roll = (lambda x: np.isclose(x[1], -H / 2) & (x[0] > W - h - 1e-9), (1,))
+        pin = (mf.boundary_facets(msh, lambda x: np.isclose(x[1], -H / 2) & (x[0] < h + 1e-9)),
+               (0, 1))
+        roll = (mf.boundary_facets(msh, lambda x: np.isclose(x[1], -H / 2) & (x[0] > W - h - 1e-9)),
+                (1,))  # fmt: skip
         sizes = {"particle_dofs": 2 * P.num_particles, "fe_dofs": 0}
     else:
         m = radii[-1] + 3.0 * h
@@ -75,15 +78,19 @@ def run(method: str, a_over_w: float, h: float) -> dict:
         patch = mf.ParticlePatch(msh, cells, h, cracks=[crack])
         V = _compat.vector_function_space(msh)
         prob = mf.CoupledElasticity(V, patch, MATERIAL, coupling=method)
-        lo, hi = y0 - m + 0.5 * h, y0 + m - 0.5 * h  # the patch's left edge, ends excluded
-        pin = (lambda x: np.isclose(x[0], 0.0) & (x[1] < lo + h) & (x[1] > lo - h), (0, 1))
-        roll = (lambda x: np.isclose(x[0], 0.0) & (x[1] > hi - h) & (x[1] < hi + h), (0,))
+        # the lowest and highest facets of the patch's left edge
+        f = patch.exterior_facets
+        mid = msh.geometry.x[_compat.entities_to_geometry(msh, 1, f)][..., :2].mean(axis=1)
+        left = np.isclose(mid[:, 0], 0.0)
+        lo = COMM.allreduce(mid[left, 1].min(initial=np.inf), op=MPI.MIN)
+        hi = COMM.allreduce(mid[left, 1].max(initial=-np.inf), op=MPI.MAX)
+        pin = (f[left & np.isclose(mid[:, 1], lo)], (0, 1))
+        roll = (f[left & np.isclose(mid[:, 1], hi)], (0,))
         sizes = {
             "particle_dofs": 2 * patch.particles.num_particles,
             "fe_dofs": 2 * V.dofmap.index_map.size_global,
         }
-    for where, comps in (pin, roll):
-        facets = mf.boundary_facets(msh, lambda x, w=where: w(x))
+    for facets, comps in (pin, roll):
         if COMM.allreduce(facets.size) == 0:
             raise RuntimeError("no facet for the rigid-motion conditions")
         prob.add_dirichlet(facets, zero, components=comps)

@@ -132,3 +132,53 @@ def test_coupled_crack_is_felt(coupling):
 def test_cracked_patch_refused_by_other_couplings(coupling):
     with pytest.raises(ValueError, match=f"coupling='{coupling}' cannot carry a cracked patch"):
         coupled_error(coupling, [COUPLED_CRACK], UNIAXIAL)
+
+
+# --- stress intensity factors: bad input ------------------------------------------------------
+SHORT = [[0.4, 0.47], [0.6, 0.47]]
+
+
+@pytest.fixture(scope="module")
+def short_crack_solution():
+    msh = unit_square()
+    P = mf.ParticleSet.from_cells(msh, 0.1)
+    crack = mf.Crack(SHORT)
+    prob = mf.EFGElasticity(P, MAT, dilation=2.5, cracks=[crack])
+    prob.add_dirichlet(mf.boundary_facets(msh), field(FACES))
+    return prob.solve(), crack
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"tip": 2}, r"tip=2: the crack has 2 tip\(s\) \[\(0.4, 0.47\), \(0.6, 0.47\)\]"),
+        ({"tip": (0.5, 0.47)}, r"tip=\(0.5, 0.47\) is not a tip of the crack"),
+        ({"tip": 1, "radius": 0.45}, r"radius=0.45: the domain about the tip \(0.6, 0.47\) "
+                                     r"leaves the particle patch .* 0.4 away"),
+        ({"tip": 1, "radius": 0.25}, r"contains \[0.4, 0.47\]"),
+        ({"material": mf.LinearElastic(1.0, 0.3, plane=None)}, "need the 2D LinearElastic"),
+    ],
+)  # fmt: skip
+def test_sif_bad_input(short_crack_solution, kwargs, match):
+    sol, crack = short_crack_solution
+    with pytest.raises(ValueError, match=match):
+        sol.stress_intensity_factors(crack, **kwargs)
+
+
+def test_sif_of_a_crack_not_in_the_model(short_crack_solution):
+    sol, _ = short_crack_solution
+    with pytest.raises(ValueError, match="is not one of the solution's cracks"):
+        sol.stress_intensity_factors(mf.Crack(SHORT))
+
+
+def test_sif_tip_by_coordinates_equals_tip_by_index(short_crack_solution):
+    """Coordinates and index name the same tip; tip 0 points out of the start."""
+    sol, crack = short_crack_solution
+    a = sol.stress_intensity_factors(crack, tip=1, radius=0.15)
+    b = sol.stress_intensity_factors(crack, tip=(0.6, 0.47), radius=0.15)
+    assert np.array_equal(a.K_I, b.K_I) and np.array_equal(a.K_II, b.K_II)
+    c = sol.stress_intensity_factors(crack, tip=0, radius=0.15)
+    assert np.allclose(c.tip, [0.4, 0.47]) and np.allclose(c.direction, [-1.0, 0.0])
+    # the faces are loaded in mode I by sigma_yy: K_I > 0, K_II ~ 0 by symmetry about y = 0.47
+    # up to the grid's asymmetry (rows at 0.4 and 0.5)
+    assert a.K_I.min() > 0 and np.abs(a.K_II).max() < 0.1 * a.K_I.min()

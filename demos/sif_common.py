@@ -8,11 +8,12 @@ from __future__ import annotations
 import json
 import time
 
-import dolfinx
 import dolfinx_meshfree as mf
+from dolfinx_meshfree import _compat
+
+import dolfinx
 import numpy as np
 import ufl
-from dolfinx_meshfree import _compat
 from mpi4py import MPI
 
 COMM = MPI.COMM_WORLD
@@ -85,7 +86,9 @@ def solve(method, msh, h, material, crack, patch_cells=None, dirichlet=None, tra
     if tractions:
         f_all = np.concatenate([f for f, _ in tags])
         order = np.argsort(f_all)
-        mt = dolfinx.mesh.meshtags(msh, 1, f_all[order], np.concatenate([t for _, t in tags])[order])
+        mt = dolfinx.mesh.meshtags(
+            msh, 1, f_all[order], np.concatenate([t for _, t in tags])[order]
+        )
         ds = ufl.Measure("ds", domain=msh, subdomain_data=mt)
         for k, (_, t) in enumerate(tractions):
             L = L + ufl.dot(dolfinx.fem.Constant(msh, np.asarray(t, float)), v) * ds(k + 1)

@@ -30,10 +30,11 @@ import argparse
 import sys
 import time
 
-import dolfinx
 import dolfinx_meshfree as mf
-import numpy as np
 from dolfinx_meshfree import _compat
+
+import dolfinx
+import numpy as np
 from mpi4py import MPI
 from sif_common import COMM, owned_cells, write_json
 
@@ -50,7 +51,7 @@ def run(method: str, a_over_w: float, h: float) -> dict:
     a = a_over_w * W
     y0 = 0.5 * h
     radii = np.asarray(RADII) * min(a, W - a)
-    nx, ny = int(round(W / h)), int(round(H / h))
+    nx, ny = round(W / h), round(H / h)
     msh = dolfinx.mesh.create_rectangle(
         COMM,
         [np.array([0.0, -H / 2]), np.array([W, H / 2])],
@@ -67,8 +68,10 @@ def run(method: str, a_over_w: float, h: float) -> dict:
     if method == "efg":
         P = mf.ParticleSet.from_cells(msh, h)
         prob = mf.EFGElasticity(P, MATERIAL, cracks=[crack])
-        pin = (mf.boundary_facets(msh, lambda x: np.isclose(x[1], -H / 2) & (x[0] < h + 1e-9)),
-               (0, 1))
+        pin = (
+            mf.boundary_facets(msh, lambda x: np.isclose(x[1], -H / 2) & (x[0] < h + 1e-9)),
+            (0, 1),
+        )
         roll = (mf.boundary_facets(msh, lambda x: np.isclose(x[1], -H / 2) & (x[0] > W - h - 1e-9)),
                 (1,))  # fmt: skip
         sizes = {"particle_dofs": 2 * P.num_particles, "fe_dofs": 0}

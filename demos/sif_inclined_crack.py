@@ -24,8 +24,9 @@ import argparse
 import sys
 import time
 
-import dolfinx
 import dolfinx_meshfree as mf
+
+import dolfinx
 import numpy as np
 from sif_common import COMM, RADII, choose_shift, owned_cells, solve, write_json
 
@@ -36,7 +37,7 @@ TARGET = 0.01
 
 def run(method: str, alpha_deg: float, h: float) -> dict:
     alpha = np.deg2rad(alpha_deg)
-    n = int(round(2 * L / h))
+    n = round(2 * L / h)
     msh = dolfinx.mesh.create_rectangle(
         COMM, [np.array([-L, -L]), np.array([L, L])], [n, n], dolfinx.mesh.CellType.quadrilateral
     )

@@ -35,13 +35,13 @@ import scipy.sparse as sp
 from ..approx.crack_cuts import attach_cracks
 from ..approx.mls import MLS
 from ..approx.tables import ShapeTable
+from ..fracture.interaction import StressIntensityFactors
 from ..geometry.crack import Crack, CrackDomain, place_crack
 from ..geometry.cut_cells import (
     cracked_boundary_quadrature,
     cut_cell_quadrature,
     cut_facet_quadrature,
 )
-from ..fracture.interaction import StressIntensityFactors
 from ..geometry.particles import ParticleSet
 from ..geometry.quadrature import (
     QuadraturePoints,
@@ -132,7 +132,8 @@ class EFGSolution:
         **options,
     ) -> StressIntensityFactors:
         """K_I, K_II and J at a tip of ``crack`` by the domain interaction integral on the
-        crack-aware MLS field (collective; see :func:`~dolfinx_meshfree.statics.sifs.solution_sifs`).
+        crack-aware MLS field (collective; see
+        :func:`~dolfinx_meshfree.statics.sifs.solution_sifs`).
 
         Args:
             crack: one of the model's cracks. tip: an index of ``crack.tips`` or its coordinates.
@@ -288,8 +289,9 @@ def facet_multipliers(
 
     Args:
         conditions: ``(facets, ubar)`` pairs, or ``(facets, ubar, components)`` triples that
-            constrain only the given components (e.g. ``(1,)``: a roller); ``quadratures``/``tables``: their facet quadrature
-            and the particle shape functions there; ``scale``: ``s``.
+            constrain only the given components (e.g. ``(1,)``: a roller);
+            ``quadratures``/``tables``: their facet quadrature and the particle shape functions
+            there; ``scale``: ``s``.
 
     Returns:
         ``(G, rows, values, layout)``: G as (M x gdim n) CSR with PETSc particle columns, the rhs
@@ -475,9 +477,15 @@ class EFGElasticity:
             quadrature=q, boundary_quadrature=bq,
         )  # fmt: skip
         dq = [fq(c[0]) for c in self._dirichlet]
-        num_facets = comm.allreduce(
-            sum(np.unique(d.entities).size * len(c[2]) for d, c in zip(dq, self._dirichlet, strict=True))
-        ) // gdim
+        num_facets = (
+            comm.allreduce(
+                sum(
+                    np.unique(d.entities).size * len(c[2])
+                    for d, c in zip(dq, self._dirichlet, strict=True)
+                )
+            )
+            // gdim
+        )
         if num_facets > n:
             raise ValueError(
                 f"the Dirichlet conditions have {num_facets} facets, each with {gdim} constant "

@@ -117,18 +117,18 @@ COUPLED_CRACK = [[0.35, 0.52], [0.65, 0.52]]
 COUPLED_KINKED = [[0.35, 0.45], [0.5, 0.52], [0.65, 0.47]]
 
 
-@pytest.mark.parametrize("coupling", ["lagrange", "edge-to-edge"])
+@pytest.mark.parametrize("coupling", ["lagrange", "edge-to-edge", "bridging"])
 @pytest.mark.parametrize(("crack", "G"), [(COUPLED_CRACK, UNIAXIAL), (COUPLED_KINKED, ROTATION)])
 def test_coupled_patch_test_with_crack(coupling, crack, G):
     assert coupled_error(coupling, [crack], G) <= 1e-10
 
 
-@pytest.mark.parametrize("coupling", ["lagrange", "edge-to-edge"])
+@pytest.mark.parametrize("coupling", ["lagrange", "edge-to-edge", "bridging"])
 def test_coupled_crack_is_felt(coupling):
     assert coupled_error(coupling, [COUPLED_CRACK], FACES) > 1e-5
 
 
-@pytest.mark.parametrize("coupling", ["ramp", "ramp-cubic", "bridging", "master-slave"])
+@pytest.mark.parametrize("coupling", ["ramp", "ramp-cubic", "master-slave"])
 def test_cracked_patch_refused_by_other_couplings(coupling):
     with pytest.raises(ValueError, match=f"coupling='{coupling}' cannot carry a cracked patch"):
         coupled_error(coupling, [COUPLED_CRACK], UNIAXIAL)

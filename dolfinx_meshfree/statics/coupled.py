@@ -63,8 +63,8 @@ __all__ = [
 VectorFunction = Callable[[np.ndarray], np.ndarray]
 
 #: The couplings that carry cracks in the patch (cut MLS weights, cut-cell quadrature, the crack
-#: faces in the consistent integration's boundary): the variational interface couplings.
-CRACK_COUPLINGS: tuple[str, ...] = ("lagrange", "edge-to-edge")
+#: faces in the consistent integration's boundary): the variational couplings.
+CRACK_COUPLINGS: tuple[str, ...] = ("lagrange", "edge-to-edge", "bridging")
 
 
 class CoupledElasticity:

@@ -253,6 +253,7 @@ def crack_rules(
     cracks: list[Crack],
     degree: int,
     boundary: tuple[np.ndarray, np.ndarray | None] | None,
+    cell_rule: bool = True,
 ) -> tuple[QuadraturePoints | None, QuadraturePoints | None]:
     """The cell rule and VCI boundary rule of particles cut by ``cracks`` (Belytschko et al.
     1995, sec. 5.2.2: each side of a crack integrated on its own, the faces traction-free):
@@ -260,12 +261,15 @@ def crack_rules(
     ``boundary = (facets, facet cells)``,
     :func:`~dolfinx_meshfree.geometry.cut_cells.cracked_boundary_quadrature` (its crack-face
     points have ``entities = -1``: they are no mesh facet, e.g. of an interface). ``(None,
-    None)`` without cracks: :func:`particle_stiffness`'s defaults. Collective.
+    None)`` without cracks: :func:`particle_stiffness`'s defaults; the cell rule is ``None``
+    too without ``cell_rule``. Collective.
     """
     if not cracks:
         return None, None
     comm = msh.comm
-    q = raise_on_all_ranks(comm, lambda: cut_cell_quadrature(msh, cells, cracks, degree))
+    q = None
+    if cell_rule:
+        q = raise_on_all_ranks(comm, lambda: cut_cell_quadrature(msh, cells, cracks, degree))
     if boundary is None:
         return q, None
     facets, fcells = boundary

@@ -4,15 +4,17 @@
 # edge (the mouth) along y = y0 (y0 = h/2: half a spacing off the particle rows, so that no
 # particle lies on it), remote tension sigma = 1 as tractions on the top and bottom edges, all
 # other edges free. The rigid motions are removed by three scalar conditions (two components on
-# one facet, one on another: statically determinate, so with self-equilibrated loads their
-# reactions are exactly zero and the plate is free, as Tada's formula assumes).
+# one facet, one on another; pure EFG: on the bottom edge's end facets; coupled: on the left
+# edge's facets next to the crack's mouth, in the patch): statically determinate, so with
+# self-equilibrated loads their reactions are exactly zero and the plate is free, as Tada's
+# formula assumes.
 #
 # Reference: K_I / (sigma sqrt(pi a)) = F(a/W) = 1.12 - 0.231 (a/W) + 10.55 (a/W)^2
 # - 21.72 (a/W)^3 + 30.39 (a/W)^4 (Tada; +-0.5 % for a/W <= 0.6); K_II = 0 by symmetry of the
 # loading about the crack line (up to y0 = h/2).
 #
-# Methods: ``efg`` (particles in the whole plate) or a coupling of ``mf.CRACK_COUPLINGS``
-# (``lagrange``, ``edge-to-edge``): particles in the box from the mouth to
+# Methods: ``efg`` (particles in the whole plate) or a coupling that carries cracks
+# (``lagrange``, ``edge-to-edge``, ``bridging``): particles in the box from the mouth to
 # 3 h past the largest domain radius ahead of, above and below the tip, Q1 elements (same size h)
 # elsewhere. K by the domain interaction integral (``solution.stress_intensity_factors``) over
 # the outer radii 0.4, 0.55, 0.7 x min(a, W - a) (``r1 = r2 / 2``).
@@ -35,7 +37,6 @@ from dolfinx_meshfree import _compat
 
 import dolfinx
 import numpy as np
-from mpi4py import MPI
 from sif_common import COMM, owned_cells, write_json
 
 W, H, SIGMA = 1.0, 2.0, 1.0
@@ -81,14 +82,13 @@ def run(method: str, a_over_w: float, h: float) -> dict:
         patch = mf.ParticlePatch(msh, cells, h, cracks=[crack])
         V = _compat.vector_function_space(msh)
         prob = mf.CoupledElasticity(V, patch, MATERIAL, coupling=method)
-        # the lowest and highest facets of the patch's left edge
+        # the facets of the left edge just below and above the mouth (away from the FE
+        # interface and the bridging band)
         f = patch.exterior_facets
         mid = msh.geometry.x[_compat.entities_to_geometry(msh, 1, f)][..., :2].mean(axis=1)
         left = np.isclose(mid[:, 0], 0.0)
-        lo = COMM.allreduce(mid[left, 1].min(initial=np.inf), op=MPI.MIN)
-        hi = COMM.allreduce(mid[left, 1].max(initial=-np.inf), op=MPI.MAX)
-        pin = (f[left & np.isclose(mid[:, 1], lo)], (0, 1))
-        roll = (f[left & np.isclose(mid[:, 1], hi)], (0,))
+        pin = (f[left & np.isclose(mid[:, 1], y0 - h)], (0, 1))
+        roll = (f[left & np.isclose(mid[:, 1], y0 + h)], (0,))
         sizes = {
             "particle_dofs": 2 * patch.particles.num_particles,
             "fe_dofs": 2 * V.dofmap.index_map.size_global,

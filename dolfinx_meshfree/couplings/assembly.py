@@ -153,7 +153,14 @@ def essential_conditions(
     for facets, fn, *components in problem.dirichlet:  # components: patch facets only
         f_fe, f_p = split_facets(problem, facets)
         if also_strong is not None:
-            f_fe = np.concatenate([f_fe, also_strong(f_p)])
+            strong = also_strong(f_p)
+            if components and comm.allreduce(strong.size):
+                raise ValueError(  # the same on every rank (a reduced count)
+                    f"components={tuple(components[0])} on {comm.allreduce(strong.size)} patch "
+                    "facet(s) where FE nodes are fixed strongly too (the bridging band): those "
+                    "fix all components; choose facets of the patch outside the band"
+                )
+            f_fe = np.concatenate([f_fe, strong])
         fe_bc.append((f_fe, fn))
         patch_bc.append((f_p, fn, *components))
     dq = [facet_quadrature(msh, c[0], deg) for c in patch_bc]

@@ -7,8 +7,9 @@
 # K_I / (sigma sqrt(pi a)) = cos^2 alpha, K_II / (sigma sqrt(pi a)) = sin alpha cos alpha exactly.
 #
 # Methods: ``efg`` (particles everywhere) or a coupling that carries cracks (``lagrange``,
-# ``edge-to-edge``, ``bridging``): particles in the cells within 0.5 a + 6 h of the crack, Q1 elements
-# elsewhere, the model written as UFL forms and DirichletBCs (``mf.CoupledLinearProblem``).
+# ``edge-to-edge``, ``bridging``): particles in the cells within 0.5 a + 6 h of the crack, Q1
+# elements elsewhere, the model written as UFL forms and DirichletBCs
+# (``mf.CoupledLinearProblem``).
 # Particle spacing = cell size = h. The crack centre is shifted by a fraction of h (automatically)
 # so that no particle lies on it. K by the domain interaction integral
 # (``solution.stress_intensity_factors``) at both tips over the domain radii 3, 4, 5 h.

@@ -24,7 +24,7 @@
 # Tada's formula itself is +-0.5 %: a converged P2 FE computation differs from it by -0.24,
 # +0.37, +0.16 % at a/W = 0.2, 0.4, 0.6.
 #
-#     python demos/sif_edge_crack.py --method efg --a-over-w 0.4 [--h 0.025] [--json out.json]
+#     python demos/sif_edge_crack.py --method lagrange --a-over-w 0.4 [--h 0.00625] [--json out.json]
 
 from __future__ import annotations
 
@@ -133,7 +133,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--method", default="efg")
     parser.add_argument("--a-over-w", type=float, default=0.4, dest="a_over_w")
-    parser.add_argument("--h", type=float, default=0.0125, help="particle spacing = cell size")
+    parser.add_argument("--h", type=float, default=0.00625, help="particle spacing = cell size")
     parser.add_argument("--json", default=None)
     parser.add_argument("--quick", action="store_true", help="coarse smoke run (h = 0.1)")
     args = parser.parse_args(argv)

@@ -26,7 +26,7 @@ from ..geometry.stress_points import stress_point_quadrature
 from ..parallel import Layout, raise_on_all_ranks
 from ..physics.body_loads import body_load_vectors
 from ..physics.operators import load_vector
-from ..statics.efg import _vector_values, facet_multipliers
+from ..statics.efg import _vector_values, crack_rules, facet_multipliers
 from ..statics.petsc import BlockSystem, SolverOptions, create_aij, create_vector
 from .base import fe_dof_layout, node_flags
 
@@ -45,6 +45,7 @@ __all__ = [
     "fe_stiffness",
     "fix_fe_rows",
     "particle_rule",
+    "patch_rules",
     "sizes",
     "solve_and_gather",
     "split_facets",
@@ -80,6 +81,32 @@ def particle_rule(problem: CoupledElasticity, integration: str) -> QuadraturePoi
     if integration == "cells":
         return None
     return stress_point_quadrature(problem.patch.particles)
+
+
+def patch_rules(
+    problem: CoupledElasticity, integration: str = "cells"
+) -> tuple[QuadraturePoints | None, QuadraturePoints | None]:
+    """The particle cell rule and VCI boundary rule of the patch (collective): with cracks in
+    the patch, cut cells integrated side by side and the crack faces in the boundary set
+    (:func:`~dolfinx_meshfree.statics.efg.crack_rules`; cells only, a ValueError on every rank
+    for stress points); without, :func:`particle_rule` and ``None`` (the facet rule of
+    ``patch.boundary()``)."""
+    patch = problem.patch
+    if not patch.cracks:
+        return particle_rule(problem, integration), None
+
+    def check() -> None:
+        if integration != "cells":
+            raise ValueError(
+                f"integration={integration!r}: a cracked patch is integrated on its cut cells; "
+                "use integration='cells'"
+            )
+
+    raise_on_all_ranks(patch.comm, check)
+    boundary = patch.boundary() if problem.consistent else None
+    return crack_rules(
+        patch.mesh, patch.particles.cells, patch.cracks, problem.quadrature_degree, boundary
+    )
 
 
 def body_loads(
@@ -123,13 +150,20 @@ def essential_conditions(
     msh = V.mesh
     deg = problem.quadrature_degree
     fe_bc, patch_bc = [], []
-    for facets, fn in problem.dirichlet:
+    for facets, fn, *components in problem.dirichlet:  # components: patch facets only
         f_fe, f_p = split_facets(problem, facets)
         if also_strong is not None:
-            f_fe = np.concatenate([f_fe, also_strong(f_p)])
+            strong = also_strong(f_p)
+            if components and comm.allreduce(strong.size):
+                raise ValueError(  # the same on every rank (a reduced count)
+                    f"components={tuple(components[0])} on {comm.allreduce(strong.size)} patch "
+                    "facet(s) where FE nodes are fixed strongly too (the bridging band): those "
+                    "fix all components; choose facets of the patch outside the band"
+                )
+            f_fe = np.concatenate([f_fe, strong])
         fe_bc.append((f_fe, fn))
-        patch_bc.append((f_p, fn))
-    dq = [facet_quadrature(msh, f, deg) for f, _ in patch_bc]
+        patch_bc.append((f_p, fn, *components))
+    dq = [facet_quadrature(msh, c[0], deg) for c in patch_bc]
     dtabs = [raise_on_all_ranks(comm, lambda d=d: problem.mls.tabulate(d.points, 0)) for d in dq]
     gdim = msh.geometry.dim
     ubc = dolfinx.fem.Function(V)

@@ -28,9 +28,13 @@ from ..approx.fe_dofs import cell_indicator, fe_dof_layout, node_flags
 from ..approx.fe_points import _route, tabulate_in_cells
 from ..approx.mls import MLS
 from ..approx.neighbours import check_points
+from ..fracture.interaction import StressIntensityFactors
+from ..geometry.crack import Crack
 from ..geometry.patch import ParticlePatch
 from ..geometry.quadrature import QuadraturePoints
 from ..parallel import Layout, raise_on_all_ranks
+from ..physics.materials import LinearElastic
+from ..statics.sifs import solution_sifs
 
 if TYPE_CHECKING:  # annotations only: the model imports this module, not the reverse
     from ..statics.coupled import CoupledElasticity
@@ -73,6 +77,36 @@ class CoupledSolution:
     interface: RampInterface | None = None
     #: Finite strain: Newton's record (:class:`~dolfinx_meshfree.NonlinearSolveResult`).
     newton: NonlinearSolveResult | None = None
+    #: The small-strain law of the solve (for :meth:`stress_intensity_factors`).
+    material: LinearElastic | None = None
+
+    def stress_intensity_factors(
+        self,
+        crack: Crack,
+        tip: int | np.ndarray = 0,
+        radius: float | np.ndarray | None = None,
+        material: LinearElastic | None = None,
+        **options,
+    ) -> StressIntensityFactors:
+        """K_I, K_II and J at a tip of a crack of the patch by the domain interaction integral
+        on the crack-aware MLS field (collective; the domains must stay inside the patch, away
+        from the FE interface; see :func:`~dolfinx_meshfree.statics.sifs.solution_sifs`).
+
+        Args:
+            crack: one of ``patch.cracks``. tip: an index of ``crack.tips`` or its coordinates.
+            radius: outer domain radii (default 3, 4, 5 particle spacings, ``r1 = r2 / 2``).
+            material: the law (default: the solve's).
+            options: ``inner``, ``weight``, ``points`` of
+                :func:`~dolfinx_meshfree.interaction_integral`.
+        """
+
+        def grad(x: np.ndarray) -> np.ndarray:
+            return self.mls.tabulate(x).gradient(self.coefficients)
+
+        return solution_sifs(
+            grad, material or self.material, self.patch.cracks, self.patch, crack, tip, radius,
+            **options,
+        )  # fmt: skip
 
     def evaluate_at_quadrature(self, q: QuadraturePoints) -> tuple[np.ndarray, np.ndarray]:
         """Displacement (m, gdim) and gradient (m, gdim, gdim) at quadrature points of local

@@ -62,7 +62,7 @@ from ..approx.fe_points import locate_points, tabulate_in_cells
 from ..geometry.quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
 from ..parallel import Layout, raise_on_all_ranks
 from ..physics.operators import consistent_gradients, load_vector, stiffness_matrix
-from ..statics.efg import _vector_values
+from ..statics.efg import _vector_values, crack_rules
 from ..statics.petsc import SolverOptions, create_aij, create_vector
 from .assembly import (
     append_patch_conditions,
@@ -414,7 +414,7 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
     band = BridgingBand(problem, problem.overlap, problem.band_width)
 
     # particle side: Gauss quadrature on the patch cells, weights times alpha in the band
-    q = cell_quadrature(msh, deg, P.cells)
+    q = crack_rules(msh, P.cells, patch.cracks, deg, None)[0] or cell_quadrature(msh, deg, P.cells)
     w = q.weights.copy()
     b = band.in_band[q.cells]
     w[b] *= band.alpha_at(q.points[b], q.cells[b])
@@ -652,8 +652,12 @@ def _consistent_test_gradients(
     t_fe, t_p, cw = constraint
     coef = _band_multiplier_of_alpha(problem, band, ids, nb, t_fe, cw)
     lam = t_fe @ np.where(ids[:, None] >= 0, coef[np.maximum(ids, 0)], 0.0)
-    bq = facet_quadrature(msh, patch.exterior_facets, deg, patch.exterior_cells)
-    tb = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(bq.points, 0))
+    exterior = (patch.exterior_facets, patch.exterior_cells)
+    bq = crack_rules(msh, patch.particles.cells, patch.cracks, deg, exterior, cell_rule=False)[1]
+    if bq is None:  # no crack
+        bq = facet_quadrature(msh, patch.exterior_facets, deg, patch.exterior_cells)
+    sides = getattr(bq, "sides", None)  # crack faces: one-sided values
+    tb = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(bq.points, 0, sides=sides))
     in_b = band.in_band[bq.cells]
     alpha_b = np.ones(len(bq))
     alpha_b[in_b] = band.alpha_at(bq.points[in_b], bq.cells[in_b])

@@ -54,7 +54,7 @@ from .assembly import (
     fe_active,
     fe_stiffness,
     fix_fe_rows,
-    particle_rule,
+    patch_rules,
     sizes,
     solve_and_gather,
     traction_loads,
@@ -451,6 +451,7 @@ def interface_operators(
     boundary = patch.boundary() if problem.consistent else None
     hook = partial(interface_interpolant, problem) if problem.coupling == "edge-to-edge" else None
     tables: dict = {}
+    q, bq = patch_rules(problem, integration)
     Kp_loc, q, tq, _ = particle_stiffness(
         P,
         problem.mls,
@@ -458,7 +459,8 @@ def interface_operators(
         problem.quadrature_degree,
         boundary,
         hook,
-        quadrature=particle_rule(problem, integration),
+        quadrature=q,
+        boundary_quadrature=bq,
         boundary_normals=partial(projected_normals, problem)
         if problem.coupling == "lagrange"
         else None,
@@ -525,9 +527,10 @@ def interface_system(problem: CoupledElasticity, tables: dict | None = None) -> 
     boundary = patch.boundary() if problem.consistent else None
     hook = partial(interface_interpolant, problem) if problem.coupling == "edge-to-edge" else None
     normals = partial(projected_normals, problem) if problem.coupling == "lagrange" else None
+    q, bq = patch_rules(problem)
     Kp_loc, _, _, kt = particle_stiffness(
         P, problem.mls, problem.material, deg, boundary, hook, boundary_normals=normals,
-        tables=tables, boundary_moments=hook is not None,
+        tables=tables, boundary_moments=hook is not None, quadrature=q, boundary_quadrature=bq,
     )  # fmt: skip
 
     # essential conditions: FE side strongly, patch side by multipliers

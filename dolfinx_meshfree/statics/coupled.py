@@ -24,6 +24,7 @@ import dolfinx
 import numpy as np
 import ufl
 
+from ..approx.crack_cuts import attach_cracks
 from ..approx.mls import MLS
 from ..couplings import COUPLINGS, DEFAULT_DILATION, REGISTRY
 from ..couplings.base import (
@@ -52,6 +53,7 @@ from .petsc import SolverOptions, solver_options
 
 __all__ = [
     "COUPLINGS",
+    "CRACK_COUPLINGS",
     "DEFAULT_DILATION",
     "CoupledElasticity",
     "CoupledSolution",
@@ -59,6 +61,10 @@ __all__ = [
 ]
 
 VectorFunction = Callable[[np.ndarray], np.ndarray]
+
+#: The couplings that carry cracks in the patch (cut MLS weights, cut-cell quadrature, the crack
+#: faces in the consistent integration's boundary): the variational couplings.
+CRACK_COUPLINGS: tuple[str, ...] = ("lagrange", "edge-to-edge", "bridging")
 
 
 class CoupledElasticity:
@@ -206,6 +212,8 @@ class CoupledElasticity:
             ),
         )
         self.mls = self.family.prepare_mls(self.mls, patch)
+        if patch.cracks:
+            raise_on_all_ranks(patch.comm, lambda: self._attach_cracks(coupling))
         self.dirichlet: list[tuple[np.ndarray, VectorFunction]] = []
         self.tractions: list[tuple[np.ndarray, Callable]] = []
         #: The user's bilinear form (set by :class:`~dolfinx_meshfree.CoupledLinearProblem`);
@@ -218,10 +226,47 @@ class CoupledElasticity:
         self.body_forces: list = []
         self.setup_time = time.perf_counter() - t0
 
-    def add_dirichlet(self, facets: np.ndarray, value: VectorFunction) -> None:
+    def _attach_cracks(self, coupling: str) -> None:
+        """Cut the MLS weights by the patch's cracks (Organ, Fleming & Belytschko 1996); only
+        the couplings whose particle side is the plain cracked EFG block can carry them."""
+        if coupling not in CRACK_COUPLINGS:
+            raise ValueError(
+                f"coupling={coupling!r} cannot carry a cracked patch (its particle block is "
+                f"not integrated on cut cells with the crack faces as boundary); use one of "
+                f"{list(CRACK_COUPLINGS)}, or leave the cracks out of the patch"
+            )
+        patch = self.patch
+        attach_cracks(self.mls, patch.cracks, patch.crack_method, patch=patch)
+
+    def add_dirichlet(
+        self, facets: np.ndarray, value: VectorFunction, components: tuple[int, ...] | None = None
+    ) -> None:
         """``u = value(x)`` on owned exterior facets (FE side: strongly; patch side: multipliers).
-        ``value`` maps points (m, gdim) to (m, gdim)."""
-        self.dirichlet.append((np.asarray(facets, dtype=np.int32), value))
+        ``value`` maps points (m, gdim) to (m, gdim). ``components`` (patch facets only: one
+        constant multiplier per facet and component) constrains only those components, e.g.
+        to remove the rigid motions of a traction problem with three scalar conditions."""
+        facets = np.asarray(facets, dtype=np.int32)
+        if components is None:
+            self.dirichlet.append((facets, value))
+            return
+        gdim = self.V.mesh.geometry.dim
+        outside = facets[~np.isin(facets, self.patch.exterior_facets)]
+
+        def check() -> tuple[int, ...]:
+            c = tuple(components)
+            if not c or len(set(c)) != len(c) or any(k not in range(gdim) for k in c):
+                raise ValueError(
+                    f"components={components!r} must be distinct indices in 0..{gdim - 1}"
+                )
+            if outside.size:
+                raise ValueError(
+                    f"components={components!r} is supported on exterior facets of the patch "
+                    f"only; {outside.size} facet(s) are not (e.g. facet {int(outside[0])}): "
+                    "constrain all components there, or use patch facets"
+                )
+            return c
+
+        self.dirichlet.append((facets, value, raise_on_all_ranks(self.patch.comm, check)))
 
     def add_traction(self, facets: np.ndarray, traction: Callable) -> None:
         """Traction ``traction(x, n)`` (m, gdim) on owned exterior facets, on either side."""
@@ -352,7 +397,9 @@ class CoupledElasticity:
         comm = self.patch.comm
         options = raise_on_all_ranks(comm, lambda: solver_options(solver, petsc_options, prefix))
         if isinstance(self.law, LinearElastic):
-            return self.family.solve(self, options)
+            solution = self.family.solve(self, options)
+            solution.material = self.material
+            return solution
         raise_on_all_ranks(comm, lambda: check_load_steps(load_steps))
         V = self.V
         u = dolfinx.fem.Function(V)

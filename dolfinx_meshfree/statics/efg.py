@@ -23,6 +23,7 @@ to round-off; plain Gauss quadrature leaves an integration error of about 1e-6.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -31,8 +32,16 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import scipy.sparse as sp
 
+from ..approx.crack_cuts import attach_cracks
 from ..approx.mls import MLS
 from ..approx.tables import ShapeTable
+from ..fracture.interaction import StressIntensityFactors
+from ..geometry.crack import Crack, CrackDomain, place_crack
+from ..geometry.cut_cells import (
+    cracked_boundary_quadrature,
+    cut_cell_quadrature,
+    cut_facet_quadrature,
+)
 from ..geometry.particles import ParticleSet
 from ..geometry.quadrature import (
     QuadraturePoints,
@@ -52,11 +61,19 @@ from ..physics.operators import (
 from .newton import NewtonOptions
 from .petsc import BlockSystem, SolverOptions, create_aij, create_vector, solver_options
 from .sides import BlockProblem, ParticleSide, solve_load_steps
+from .sifs import solution_sifs
 
 if TYPE_CHECKING:  # annotations only
+    import dolfinx.mesh
     from mpi4py import MPI
 
-__all__ = ["EFGElasticity", "EFGSolution", "facet_multipliers", "particle_stiffness"]
+__all__ = [
+    "EFGElasticity",
+    "EFGSolution",
+    "crack_rules",
+    "facet_multipliers",
+    "particle_stiffness",
+]
 
 VectorFunction = Callable[[np.ndarray], np.ndarray]
 TractionFunction = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -91,6 +108,11 @@ class EFGSolution:
     num_multipliers: int = 0
     #: Finite strain: the Newton record (:class:`~dolfinx_meshfree.NonlinearSolveResult`).
     newton: object | None = None
+    #: The small-strain law of the solve (for :meth:`stress_intensity_factors`).
+    material: LinearElastic | None = None
+    #: The cracks of the model and where they lie (pure EFG: the whole mesh).
+    cracks: list = field(default_factory=list)
+    domain: CrackDomain | None = None
 
     def displacement(self, points: np.ndarray) -> np.ndarray:
         """Displacement (m, gdim) at points (m, gdim); local, no communication."""
@@ -100,6 +122,36 @@ class EFGSolution:
         """Displacement (m, gdim) and its gradient (m, gdim, gdim), ``g[:, i, j] = du_i/dx_j``."""
         t = self.mls.tabulate(points)
         return t.values @ self.coefficients, t.gradient(self.coefficients)
+
+    def stress_intensity_factors(
+        self,
+        crack: Crack,
+        tip: int | np.ndarray = 0,
+        radius: float | np.ndarray | None = None,
+        material: LinearElastic | None = None,
+        **options,
+    ) -> StressIntensityFactors:
+        """K_I, K_II and J at a tip of ``crack`` by the domain interaction integral on the
+        crack-aware MLS field (collective; see
+        :func:`~dolfinx_meshfree.statics.sifs.solution_sifs`).
+
+        Args:
+            crack: one of the model's cracks. tip: an index of ``crack.tips`` or its coordinates.
+            radius: outer domain radii (default 3, 4, 5 particle spacings, ``r1 = r2 / 2``):
+                one result per radius, the path independence report.
+            material: the law (default: the solve's).
+            options: ``inner``, ``weight``, ``points`` of
+                :func:`~dolfinx_meshfree.interaction_integral`.
+        """
+        if self.domain is None:  # the same on every rank
+            raise ValueError(
+                "the model has no cracks: give EFGElasticity(..., cracks=[crack]) to compute "
+                "stress intensity factors"
+            )
+        return solution_sifs(
+            lambda x: self.evaluate(x)[1], material or self.material, self.cracks, self.domain,
+            crack, tip, radius, **options,
+        )  # fmt: skip
 
 
 def particle_stiffness(
@@ -113,6 +165,7 @@ def particle_stiffness(
     boundary_normals: Callable[[QuadraturePoints], np.ndarray] | None = None,
     tables: dict | None = None,
     boundary_moments: bool = False,
+    boundary_quadrature: QuadraturePoints | None = None,
 ) -> tuple[sp.csr_matrix, QuadraturePoints, ShapeTable, dict]:
     """EFG stiffness from this rank's integration cells (``particles.cells``), in PETSc numbering.
 
@@ -131,7 +184,11 @@ def particle_stiffness(
     replaces the cell Gauss rule (``quadrature_degree`` is then not used for it), e.g. the
     particles and stress points of
     :func:`~dolfinx_meshfree.geometry.stress_points.stress_point_quadrature`
-    (Rabczuk, Belytschko & Xiao 2004). Collective (errors are raised on every rank).
+    (Rabczuk, Belytschko & Xiao 2004). ``boundary_quadrature``, if given, replaces the facet
+    rule of ``consistent_boundary``'s facets (e.g. a cracked patch's boundary with both crack
+    faces, :func:`~dolfinx_meshfree.geometry.cut_cells.cracked_boundary_quadrature`; its
+    ``sides`` select the one-sided shape functions on the crack faces). Collective (errors are
+    raised on every rank).
 
     ``tables``, if given, receives ``"quadrature"``, ``"table"`` and ``"test_gradients"`` (the
     VCI-corrected ones when consistent): what a finite-strain solve needs for its internal force.
@@ -154,8 +211,12 @@ def particle_stiffness(
     test_grads = tq.gradients
     if consistent_boundary is not None:
         facets, cells = consistent_boundary
-        bq = facet_quadrature(particles.mesh, facets, quadrature_degree, cells)
-        tb = raise_on_all_ranks(comm, lambda: mls.tabulate(bq.points, derivatives=0))
+        if boundary_quadrature is None:
+            bq = facet_quadrature(particles.mesh, facets, quadrature_degree, cells)
+        else:
+            bq = boundary_quadrature
+        sides = getattr(bq, "sides", None)
+        tb = raise_on_all_ranks(comm, lambda: mls.tabulate(bq.points, derivatives=0, sides=sides))
         bvalues = tb.values if boundary_values is None else boundary_values(bq, tb.values)
         normals = bq.normals if boundary_normals is None else boundary_normals(bq)
         moments = boundary_moments and boundary_values is not None
@@ -186,6 +247,37 @@ def particle_stiffness(
     return Kg, q, tq, timings
 
 
+def crack_rules(
+    msh: dolfinx.mesh.Mesh,
+    cells: np.ndarray,
+    cracks: list[Crack],
+    degree: int,
+    boundary: tuple[np.ndarray, np.ndarray | None] | None,
+    cell_rule: bool = True,
+) -> tuple[QuadraturePoints | None, QuadraturePoints | None]:
+    """The cell rule and VCI boundary rule of particles cut by ``cracks`` (Belytschko et al.
+    1995, sec. 5.2.2: each side of a crack integrated on its own, the faces traction-free):
+    :func:`~dolfinx_meshfree.geometry.cut_cells.cut_cell_quadrature` on ``cells`` and, with
+    ``boundary = (facets, facet cells)``,
+    :func:`~dolfinx_meshfree.geometry.cut_cells.cracked_boundary_quadrature` (its crack-face
+    points have ``entities = -1``: they are no mesh facet, e.g. of an interface). ``(None,
+    None)`` without cracks: :func:`particle_stiffness`'s defaults; the cell rule is ``None``
+    too without ``cell_rule``. Collective.
+    """
+    if not cracks:
+        return None, None
+    comm = msh.comm
+    q = None
+    if cell_rule:
+        q = raise_on_all_ranks(comm, lambda: cut_cell_quadrature(msh, cells, cracks, degree))
+    if boundary is None:
+        return q, None
+    facets, fcells = boundary
+    bq = cracked_boundary_quadrature(msh, facets, cells, cracks, degree, fcells)
+    entities = np.where(bq.sides != 0, -1, bq.entities)
+    return q, dataclasses.replace(bq, entities=entities)
+
+
 def facet_multipliers(
     particles: ParticleSet,
     conditions: list[tuple[np.ndarray, VectorFunction]],
@@ -200,8 +292,10 @@ def facet_multipliers(
     ``i`` runs over the ``gdim`` components (edges in 2D, triangles or quadrilaterals in 3D).
 
     Args:
-        conditions: ``(facets, ubar)`` pairs; ``quadratures``/``tables``: their facet quadrature
-            and the particle shape functions there; ``scale``: ``s``.
+        conditions: ``(facets, ubar)`` pairs, or ``(facets, ubar, components)`` triples that
+            constrain only the given components (e.g. ``(1,)``: a roller);
+            ``quadratures``/``tables``: their facet quadrature and the particle shape functions
+            there; ``scale``: ``s``.
 
     Returns:
         ``(G, rows, values, layout)``: G as (M x gdim n) CSR with PETSc particle columns, the rhs
@@ -210,23 +304,25 @@ def facet_multipliers(
     comm = particles.comm
     gdim = particles.gdim
     dof_map = particles.petsc_dofs(gdim).ravel()
-    nfac = [np.unique(d.entities).size for d in quadratures]
-    mlayout = Layout.from_local(comm, gdim * int(sum(nfac)))
+    comps = [tuple(c[2]) if len(c) > 2 else tuple(range(gdim)) for c in conditions]
+    nrows = [np.unique(d.entities).size * len(c) for d, c in zip(quadratures, comps, strict=True)]
+    mlayout = Layout.from_local(comm, int(sum(nrows)))
     g_rows, g_cols, g_vals, r_rows, r_vals = [], [], [], [], []
-    offset = mlayout.start // gdim
-    for (_, fn), d, tab in zip(conditions, quadratures, tables, strict=True):
+    offset = mlayout.start
+    for cond, d, tab, cs in zip(conditions, quadratures, tables, comps, strict=True):
+        fn, m = cond[1], len(cs)
         _, facet_id = np.unique(d.entities, return_inverse=True)
         ubar = raise_on_all_ranks(
             comm, lambda fn=fn, d=d: _vector_values(fn, (d.points,), len(d), "dirichlet", gdim)
         )
         coo = tab.values.tocoo()
-        for c in range(gdim):
-            g_rows.append(gdim * (offset + facet_id[coo.row]) + c)
+        for k, c in enumerate(cs):
+            g_rows.append(offset + m * facet_id[coo.row] + k)
             g_cols.append(dof_map[gdim * coo.col + c])
             g_vals.append(scale * d.weights[coo.row] * coo.data)
-            r_rows.append(gdim * (offset + facet_id) + c)
+            r_rows.append(offset + m * facet_id + k)
             r_vals.append(scale * d.weights * ubar[:, c])
-        offset += int(facet_id.max()) + 1 if facet_id.size else 0
+        offset += m * (int(facet_id.max()) + 1) if facet_id.size else 0
     G = sp.csr_matrix(
         (_cat(g_vals, float), (_cat(g_rows, np.int64), _cat(g_cols, np.int64))),
         shape=(mlayout.size_global, gdim * particles.num_particles),
@@ -256,6 +352,13 @@ class EFGElasticity:
         consistent: Variationally consistent integration (VCI, Chen, Hillman & Rüter 2013; the
             default: the linear patch test passes to round-off). ``False``: plain Gauss
             quadrature of Belytschko et al. 1995 (patch-test error 1e-4 to 6e-4 at 4 x 4 Gauss).
+        cracks: 2D :class:`~dolfinx_meshfree.Crack` polylines in the particles' cells (checked by
+            :func:`~dolfinx_meshfree.geometry.crack.place_crack`): the MLS weights are cut by
+            them (:func:`~dolfinx_meshfree.approx.crack_cuts.attach_cracks`), cut cells are
+            integrated side by side, the crack faces are traction-free and part of VCI's boundary
+            (:mod:`~dolfinx_meshfree.geometry.cut_cells`).
+        crack_method: ``"diffraction"`` (default) or ``"visibility"`` (Organ, Fleming &
+            Belytschko 1996).
     """
 
     def __init__(
@@ -267,6 +370,8 @@ class EFGElasticity:
         basis: str = "linear",
         quadrature_degree: int = 7,
         consistent: bool = True,
+        cracks: tuple[Crack, ...] | list[Crack] = (),
+        crack_method: str = "diffraction",
     ):
         if particles.mesh is None:
             raise ValueError("EFGElasticity needs particles with a background mesh (mesh=...)")
@@ -289,7 +394,17 @@ class EFGElasticity:
         )
         self.quadrature_degree = quadrature_degree
         self.consistent = bool(consistent)
-        self._dirichlet: list[tuple[np.ndarray, VectorFunction]] = []
+        #: The cracks cutting the particles' shape functions.
+        self.cracks = list(cracks)
+        self._domain: CrackDomain | None = None
+        if self.cracks:
+            domain = self._domain = CrackDomain.from_particles(particles)
+            for crack in self.cracks:
+                place_crack(crack, domain)
+            raise_on_all_ranks(
+                particles.comm, lambda: attach_cracks(self.mls, self.cracks, crack_method)
+            )
+        self._dirichlet: list[tuple[np.ndarray, VectorFunction, tuple[int, ...]]] = []
         self._tractions: list[tuple[np.ndarray, TractionFunction]] = []
         self._body: VectorFunction | None = None
         self._setup_time = time.perf_counter() - t0
@@ -299,12 +414,29 @@ class EFGElasticity:
         """The particles' communicator."""
         return self.particles.comm
 
-    def add_dirichlet(self, facets: np.ndarray, value: VectorFunction) -> None:
+    def add_dirichlet(
+        self, facets: np.ndarray, value: VectorFunction, components: tuple[int, ...] | None = None
+    ) -> None:
         """Impose ``u = value(x)`` on owned exterior facets by Lagrange multipliers.
 
-        ``value`` maps points (m, gdim) to displacements (m, gdim).
+        ``value`` maps points (m, gdim) to displacements (m, gdim); ``components``, if given,
+        constrains only those components (e.g. ``(1,)``: a roller; one constant multiplier
+        per facet and component: its resultant reaction).
         """
-        self._dirichlet.append((np.asarray(facets, dtype=np.int32), value))
+        gdim = self.particles.gdim
+
+        def check() -> tuple[int, ...]:
+            if components is None:
+                return tuple(range(gdim))
+            c = tuple(components)
+            if not c or len(set(c)) != len(c) or any(k not in range(gdim) for k in c):
+                raise ValueError(
+                    f"components={components!r} must be distinct indices in 0..{gdim - 1}"
+                )
+            return c
+
+        comps = raise_on_all_ranks(self.comm, check)
+        self._dirichlet.append((np.asarray(facets, dtype=np.int32), value, comps))
 
     def add_traction(self, facets: np.ndarray, traction: TractionFunction) -> None:
         """Apply ``traction(x, n)`` (m, gdim) on owned exterior facets (``n``: outward normals)."""
@@ -333,12 +465,31 @@ class EFGElasticity:
         gdim = P.gdim
         dof_map = P.petsc_dofs(gdim).ravel()  # original interleaved dof -> PETSc dof
         t0 = time.perf_counter()
+        deg = self.quadrature_degree
         boundary = (boundary_facets(self.mesh), None) if self.consistent else None
+        num_owned = self.mesh.topology.index_map(self.mesh.topology.dim).size_local
+        cells = np.arange(num_owned) if P.cells is None else P.cells
+        q, bq = crack_rules(self.mesh, cells, self.cracks, deg, boundary)
+
+        def fq(f: np.ndarray) -> QuadraturePoints:  # facets split at the cracks' mouths
+            if self.cracks:
+                return cut_facet_quadrature(self.mesh, f, self.cracks, deg)
+            return facet_quadrature(self.mesh, f, deg)
+
         Kg, q, tq, kt = particle_stiffness(
-            P, self.mls, self.linear_material, self.quadrature_degree, boundary, tables=tables
+            P, self.mls, self.linear_material, deg, boundary, tables=tables,
+            quadrature=q, boundary_quadrature=bq,
+        )  # fmt: skip
+        dq = [fq(c[0]) for c in self._dirichlet]
+        num_facets = (
+            comm.allreduce(
+                sum(
+                    np.unique(d.entities).size * len(c[2])
+                    for d, c in zip(dq, self._dirichlet, strict=True)
+                )
+            )
+            // gdim
         )
-        dq = [facet_quadrature(self.mesh, f, self.quadrature_degree) for f, _ in self._dirichlet]
-        num_facets = comm.allreduce(sum(np.unique(d.entities).size for d in dq))
         if num_facets > n:
             raise ValueError(
                 f"the Dirichlet conditions have {num_facets} facets, each with {gdim} constant "
@@ -348,9 +499,7 @@ class EFGElasticity:
                 "boundary has two triangles per vertex) or fewer Dirichlet facets"
             )
         dtabs = [raise_on_all_ranks(comm, lambda d=d: self.mls.tabulate(d.points, 0)) for d in dq]
-        tq_loads = [
-            facet_quadrature(self.mesh, f, self.quadrature_degree) for f, _ in self._tractions
-        ]
+        tq_loads = [fq(f) for f, _ in self._tractions]
         ttabs = [
             raise_on_all_ranks(comm, lambda d=d: self.mls.tabulate(d.points, 0)) for d in tq_loads
         ]
@@ -432,6 +581,9 @@ class EFGElasticity:
             multipliers=lam,
             timings={"setup": extra["setup"], "assemble": extra["assemble"], "solve": solve},
             num_multipliers=mlayout.size_global,
+            material=self.linear_material,
+            cracks=self.cracks,
+            domain=self._domain,
         )
 
     def _solve_finite_strain(

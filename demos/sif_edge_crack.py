@@ -24,7 +24,8 @@
 # Tada's formula itself is +-0.5 %: a converged P2 FE computation differs from it by -0.24,
 # +0.37, +0.16 % at a/W = 0.2, 0.4, 0.6.
 #
-#     python demos/sif_edge_crack.py --method lagrange --a-over-w 0.4 [--h 0.00625] [--json out.json]
+#     python demos/sif_edge_crack.py --method lagrange --a-over-w 0.4 [--h 0.00625] \
+#         [--json out.json]
 
 from __future__ import annotations
 

@@ -160,14 +160,17 @@ class LinearSystem:
         self.fields = list(fields)
         self.blocks: Blocks = dict(blocks or {})
         if matrix_format != "aij":
-            self._reformat(matrix_format)
+            self.store_as(matrix_format)
         self.G: list[PETSc.Mat | None] | None = None
         if constraint is not None and any(g is not None for g in constraint):
             self.G = list(constraint)
 
-    def _reformat(self, fmt: str) -> None:
-        """Replace every stiffness block by its ``fmt`` copy where the fields' dofs are
-        node-interleaved with one block size (the copies are owned and destroyed here)."""
+    def store_as(self, fmt: str) -> None:
+        """Replace every stiffness block by its ``fmt`` copy (``"aij"``: AIJ with the block
+        size set, ``"baij"``) where the fields' dofs are node-interleaved with one block size;
+        the replaced matrices are destroyed (collective). The entries are unchanged."""
+        if fmt not in BLOCK_FORMATS:
+            raise ValueError(f"fmt={fmt!r} is not known; use one of {list(BLOCK_FORMATS)}")
         bs = [f.dofs_per_node() for f in self.fields]
         for k, f in enumerate(self.fields):
             B = blocked(f.K, bs[k], fmt)

@@ -86,12 +86,12 @@ def blocked(A: PETSc.Mat, bs: int, fmt: str = "baij") -> PETSc.Mat | None:
     o_nnz = np.bincount(kb_row[~diag], minlength=nb).astype(PETSc.IntType)
     B = PETSc.Mat().create(comm=comm)
     B.setSizes(A.getSizes(), bsize=bs)
-    if fmt == "baij":
-        B.setType(PETSc.Mat.Type.BAIJ)
-        B.setPreallocationNNZ((d_nnz, o_nnz))  # block counts
-    else:
-        B.setType(PETSc.Mat.Type.AIJ)
-        B.setPreallocationNNZ((np.repeat(d_nnz, bs) * bs, np.repeat(o_nnz, bs) * bs))
+    B.setType(PETSc.Mat.Type.BAIJ if fmt == "baij" else PETSc.Mat.Type.AIJ)
+    if fmt == "aij":  # counts per row, not per block row
+        d_nnz, o_nnz = np.repeat(d_nnz, bs) * bs, np.repeat(o_nnz, bs) * bs
+    # a rank without rows gives scalar counts: petsc4py 3.18 mishandles empty arrays for BAIJ
+    # (the assembly then hangs)
+    B.setPreallocationNNZ((d_nnz, o_nnz) if rl else (0, 0))
     if rl:
         B.setValuesCSR(ai, aj, av)
     B.assemble()

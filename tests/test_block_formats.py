@@ -8,7 +8,9 @@ from __future__ import annotations
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
 from dolfinx_meshfree.dynamics import ExplicitDynamics
+from dolfinx_meshfree.dynamics.builders import build_coupled, build_efg
 from dolfinx_meshfree.dynamics.linalg import blocked
+from dolfinx_meshfree.dynamics.system import LinearSystem
 from dolfinx_meshfree.parallel import Layout
 from dolfinx_meshfree.statics.petsc import (
     SYMMETRY_TOL,
@@ -36,18 +38,23 @@ def rod_mesh(comm, h: float):
                      CELL_TYPES["quadrilateral"])  # fmt: skip
 
 
-def rod(method: str, comm, h: float = 1.25) -> ExplicitDynamics:
-    """The Gaussian-pulse rod: pure EFG, or FE on x < 30 and particles (spacing h / 2) beyond."""
+def rod(method: str, comm, h: float = 1.25, matrix_format: str = "baij") -> ExplicitDynamics:
+    """The Gaussian-pulse rod: pure EFG, or FE on x < 30 and particles (spacing h / 2) beyond,
+    with the stiffness blocks stored as ``matrix_format``."""
     msh = rod_mesh(comm, h)
     if method == "efg":
-        P = mf.ParticleSet.from_cells(msh, h)
-        return ExplicitDynamics.efg(P, STEEL, quadrature_degree=3)
-    n = msh.topology.index_map(2).size_local
-    xc = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], 0].mean(axis=1)
-    patch = mf.ParticlePatch(msh, np.flatnonzero(xc > 30.0), h / 2)
-    V = _compat.vector_function_space(msh)
-    problem = mf.CoupledElasticity(V, patch, STEEL, coupling=method, quadrature_degree=3)
-    return ExplicitDynamics.coupled(problem)
+        model = build_efg(mf.ParticleSet.from_cells(msh, h), STEEL, quadrature_degree=3)
+    else:
+        n = msh.topology.index_map(2).size_local
+        xc = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], 0].mean(axis=1)
+        patch = mf.ParticlePatch(msh, np.flatnonzero(xc > 30.0), h / 2)
+        V = _compat.vector_function_space(msh)
+        model = build_coupled(
+            mf.CoupledElasticity(V, patch, STEEL, coupling=method, quadrature_degree=3)
+        )
+    args = model.arguments()
+    args["system"] = LinearSystem(model.fields, model.blocks, model.constraint, matrix_format)
+    return ExplicitDynamics(**args)
 
 
 def _vec(A: PETSc.Mat, seed: int = 3) -> PETSc.Vec:
@@ -64,7 +71,7 @@ def _vec(A: PETSc.Mat, seed: int = 3) -> PETSc.Vec:
 def test_baij_product_equals_aij(method):
     """Every stiffness block of the rod as BAIJ (2 x 2 blocks): the same matrix (entries, layout)
     and the same products to round-off (measured 1e-17 relative; bound 1e-14)."""
-    dyn = rod(method, MPI.COMM_WORLD)
+    dyn = rod(method, MPI.COMM_WORLD, matrix_format="aij")
     mats = [f.K for f in dyn.system.fields] + list(dyn.system.blocks.values())
     converted = 0
     for A in mats:
@@ -113,14 +120,14 @@ def test_blocked_refuses_split_blocks():
 
 @pytest.mark.parametrize("method", ["efg", "lagrange", "ramp"])
 def test_baij_run_equals_aij_run(method):
-    """40 central-difference steps of the rod with the stiffness blocks as BAIJ give the
-    displacements and velocities of the AIJ run (measured 1e-16 relative; bound 1e-12)."""
+    """40 central-difference steps of the rod with the stiffness blocks as BAIJ (the default)
+    give the displacements and velocities of the run with the assembled AIJ blocks (measured
+    1e-16 relative; bound 1e-12)."""
     states = []
     for fmt in ("aij", "baij"):
-        dyn = rod(method, MPI.COMM_WORLD)
-        if fmt == "baij":
-            dyn.system.store_as("baij")
-            assert dyn.system.fields[-1].K.getType().endswith("baij")
+        dyn = rod(method, MPI.COMM_WORLD, matrix_format=fmt)
+        for f in dyn.system.fields:
+            assert f.K.getType().endswith("baij") == (fmt == "baij")
         dyn.set_initial(velocity=ROD.initial_velocity)
         dt = dyn.stable_time_step()
         dyn.run(40 * dt, dt=dt)
@@ -134,10 +141,16 @@ def test_baij_run_equals_aij_run(method):
         assert diff <= 1e-12 * norm
 
 
-def test_bad_matrix_format():
-    dyn = rod("efg", MPI.COMM_WORLD, h=2.5)
+def test_explicit_dynamics_stores_baij_and_bad_format():
+    """The default of ExplicitDynamics: the particle stiffness as BAIJ (block size 2)."""
+    msh = rod_mesh(MPI.COMM_WORLD, 2.5)
+    dyn = ExplicitDynamics.efg(mf.ParticleSet.from_cells(msh, 2.5), STEEL, quadrature_degree=3)
+    K = dyn.system.fields[0].K
+    assert K.getType().endswith("baij") and K.getBlockSize() == 2
     with pytest.raises(ValueError, match="fmt='dense' is not known"):
         dyn.system.store_as("dense")
+    with pytest.raises(ValueError, match="matrix_format='sbaij' is not known"):
+        LinearSystem(dyn.system.fields, matrix_format="sbaij")
     dyn.destroy()
 
 

@@ -122,7 +122,7 @@ def test_blocked_refuses_split_blocks():
 def test_baij_run_equals_aij_run(method):
     """40 central-difference steps of the rod with the stiffness blocks as BAIJ (the default)
     give the displacements and velocities of the run with the assembled AIJ blocks (measured
-    1e-16 relative; bound 1e-12)."""
+    6e-16 to 9e-15 relative after 40 steps; bound 1e-12)."""
     states = []
     for fmt in ("aij", "baij"):
         dyn = rod(method, MPI.COMM_WORLD, matrix_format=fmt)

@@ -173,10 +173,9 @@ def timed_direct_solves(repeats: int, out: dict):
         for _ in range(repeats):
             for name in ("mumps-lu", "mumps"):
                 parts = original(self, name)
-                rec = out.setdefault(
-                    name, {"factor": np.inf, "factor_cpu": np.inf, "solve": np.inf}
-                )
-                for key in ("factor", "factor_cpu", "solve"):
+                keys = ("check", "factor", "factor_cpu", "solve")
+                rec = out.setdefault(name, dict.fromkeys(keys, np.inf))
+                for key in keys:
                     t = self.comm.tompi4py().allreduce(self.stats[key], op=MPI.MAX)
                     rec[key] = min(rec[key], t)
                 rec.update({k: self.stats[k] for k in ("factorisation", "asymmetry", "memory_mb")})
@@ -208,6 +207,7 @@ def statics(method: str, h: float, consistent: bool, repeats: int, comm) -> dict
         "chosen": auto["factorisation"],
         "factor_lu": lu["factor"],
         "factor_auto": auto["factor"],
+        "symmetry_check_auto": auto["check"],
         "factor_cpu_lu": lu["factor_cpu"],
         "factor_cpu_auto": auto["factor_cpu"],
         "solve_lu": lu["solve"],

@@ -194,16 +194,17 @@ def solve_lu(
         solver: PETSc's factor package (``"mumps"``, ``"petsc"``, ...).
         factorisation: ``"auto"`` or ``"lu"`` (:data:`FACTORISATIONS`).
         stats: Filled (if given) with ``factorisation`` (``"ldlt"`` or ``"lu"``),
-            ``asymmetry``, the seconds of ``factor`` (and its CPU seconds on this rank,
-            ``factor_cpu``) and ``solve`` and, with MUMPS, its
-            ``memory_mb`` (INFOG(22): the memory the factorisation used, summed over ranks).
+            ``asymmetry``, the seconds of its ``check``, of ``factor`` (and its CPU seconds on
+            this rank, ``factor_cpu``) and ``solve`` and, with MUMPS, its ``memory_mb`` (INFOG(22): the memory the factorisation used, summed over ranks).
     """
     if factorisation not in FACTORISATIONS:
         raise ValueError(
             f"factorisation={factorisation!r} is not known; use one of {list(FACTORISATIONS)}"
         )
     mumps = solver == "mumps"
+    tc = time.perf_counter()
     asym = asymmetry(A) if mumps and factorisation == "auto" else None
+    check = time.perf_counter() - tc
     symmetric = asym is not None and asym <= SYMMETRY_TOL
     if symmetric:
         A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
@@ -240,6 +241,7 @@ def solve_lu(
         stats.update(
             factorisation="ldlt" if symmetric else "lu",
             asymmetry=asym,
+            check=check,
             factor=t1 - t0,
             factor_cpu=c1 - c0,
             solve=t2 - t1,

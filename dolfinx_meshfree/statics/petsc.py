@@ -195,7 +195,8 @@ def solve_lu(
         factorisation: ``"auto"`` or ``"lu"`` (:data:`FACTORISATIONS`).
         stats: Filled (if given) with ``factorisation`` (``"ldlt"`` or ``"lu"``),
             ``asymmetry``, the seconds of its ``check``, of ``factor`` (and its CPU seconds on
-            this rank, ``factor_cpu``) and ``solve`` and, with MUMPS, its ``memory_mb`` (INFOG(22): the memory the factorisation used, summed over ranks).
+            this rank, ``factor_cpu``) and ``solve`` and, with MUMPS, its ``memory_mb``
+            (INFOG(22): the memory the factorisation used, summed over ranks).
     """
     if factorisation not in FACTORISATIONS:
         raise ValueError(

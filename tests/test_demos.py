@@ -201,3 +201,22 @@ def test_bench_scaling_smoke(shared_dir):
     MPI.COMM_WORLD.Barrier()
     data = json.loads(out.read_text())
     assert len(data) == len(records) and data[0]["ranks"] == MPI.COMM_WORLD.size
+
+
+def test_bench_blocks_smoke(shared_dir):
+    """demos/bench_blocks.py --small (a smoke run, no timing checked): its tables' records, the
+    factorisation it picks per system (LDL^T for Galerkin, LU for VCI) and that LDL^T and LU agree
+    (measured 3e-14 to 2e-13 relative; bound 1e-10)."""
+    out = shared_dir / "bb.json"
+    records = load_demo("bench_blocks").main(["--small", "--json", str(out)])
+    dyn = [r for r in records if r["kind"] == "dynamics"]
+    assert [r["method"] for r in dyn] == ["fe", "efg", "lagrange"]
+    assert all(r["step_aij"] > 0 and r["step_baij"] > 0 for r in dyn)
+    assert all(r["relative_difference"] <= 1e-12 for r in dyn)  # AIJ and BAIJ models agree
+    stat = [r for r in records if r["kind"] == "statics"]
+    assert len(stat) == 4
+    for r in stat:
+        assert r["chosen"] == ("ldlt" if r["integration"] == "galerkin" else "lu")
+        assert r["relative_difference"] <= 1e-10
+    MPI.COMM_WORLD.Barrier()
+    assert len(json.loads(out.read_text())) == len(records)

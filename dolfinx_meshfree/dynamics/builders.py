@@ -271,7 +271,7 @@ def build_efg(
         forces = [CallableBodyForce(force)]
         return body_load_vectors(forces, None, None, quadrature_degree, (q, tq.values), comm=comm)
 
-    fields = [Field("particles", K, mass, particle_spacing(particles))]
+    fields = [Field("particles", K, mass, particle_spacing(particles), block_size=particles.gdim)]
     system = None
     if law is not material:
         system = NonlinearSystem(fields, [particle_forces(particles, tables, law)], law, constraint)
@@ -463,8 +463,10 @@ def build_coupled(
     if coupling == "bridging":
         fe_cells = np.concatenate([fe_cells, ops.interface.cells])
     fields = [
-        Field("fe", K_fe, mass_fe, fe_spacing(msh, fe_cells), fixed=fixed_fe),
-        Field("particles", K_p, mass_p, particle_spacing(P), points=particle_points),
+        Field("fe", K_fe, mass_fe, fe_spacing(msh, fe_cells), fixed=fixed_fe, block_size=P.gdim),
+        Field(
+            "particles", K_p, mass_p, particle_spacing(P), points=particle_points, block_size=P.gdim
+        ),
     ]
     constraint = None if G_p is None and G_fe is None else [G_fe, G_p]
     # body forces with the functions and weights of the masses: FE weight, particle rule
@@ -630,8 +632,15 @@ def build_hybrid(
         D_loc, dl = particle_conditions(P, [facets[on_p]], [lambda q: ev.tabulate(q.points, 0)])
         constraint = [None, create_aij(comm, D_loc, dl, ops.particle_layout)]
     fields = [
-        Field("fe", ops.K_fe, mass_fe, fe_spacing(msh, patch.fe_cells), fixed=fixed_fe),
-        Field("particles", ops.K_p, mass_p, particle_spacing(P)),
+        Field(
+            "fe",
+            ops.K_fe,
+            mass_fe,
+            fe_spacing(msh, patch.fe_cells),
+            fixed=fixed_fe,
+            block_size=P.gdim,
+        ),
+        Field("particles", ops.K_p, mass_p, particle_spacing(P), block_size=P.gdim),
     ]
     blocks, system = {(0, 1): ops.K_fp, (1, 0): ops.K_pf}, None
     if law is not material:  # FE cells by UFL, the particle energy by the SPH sums of P

@@ -1,0 +1,279 @@
+# # Benchmark: block formats in explicit dynamics, symmetric factorisation in statics
+#
+# Two measurements, each as ratios within one run (absolute seconds on a shared machine are
+# noisy; every time is the best of ``--repeats``):
+#
+# * **Dynamics** (issue 12, item 2): the per-step time of the rod with a Gaussian initial velocity
+#   (``demos/rod_gauss.py``: FE, EFG, lagrange at ``--nodes`` nodes + particles) with the
+#   stiffness blocks in PETSc's AIJ format (as assembled; with i-nodes) and as BAIJ
+#   (``gdim x gdim`` blocks, the default), two models built alike and stepped in turns from the
+#   same state, the CPU time of one product with the particle (or FE) stiffness alone, and the
+#   relative difference of the two models' displacements at the end (round-off).
+# * **Statics**: the cantilever (L = 48, D = 12, Timoshenko–Goodier loads) in pure EFG and with
+#   the lagrange coupling (right half particles), with Galerkin integration (symmetric saddle
+#   point) and with VCI (``consistent=True``, Petrov–Galerkin: not symmetric). The assembled
+#   block system is factorised by MUMPS as LU (``solver="mumps-lu"``) and as LDL^T
+#   (``solver="mumps"`` picks it where the measured asymmetry is round-off): factorisation time
+#   and MUMPS's memory (INFOG(22), MB summed over ranks), and the relative difference of the
+#   two solutions.
+#
+# Prints tables and writes JSON (``--json``); ``--small`` is a smoke run (seconds).
+#
+#     python demos/bench_blocks.py [--nodes 20000] [--h 0.25] [--repeats 3] [--json out.json]
+#     python demos/bench_blocks.py --small
+
+# +
+from __future__ import annotations
+
+import argparse
+import contextlib
+import importlib.util
+import json
+import sys
+import time
+from pathlib import Path
+
+import dolfinx_meshfree as mf
+from dolfinx_meshfree.dynamics.system import LinearSystem
+from dolfinx_meshfree.statics.petsc import BlockSystem
+
+import dolfinx
+import numpy as np
+from mpi4py import MPI
+
+# -
+
+
+def rod_demo():
+    """``demos/rod_gauss.py`` as a module (its ``build`` and ``parse``)."""
+    name = "bench_blocks_rod_gauss"
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(
+            name, Path(__file__).with_name("rod_gauss.py")
+        )
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)
+    return sys.modules[name]
+
+
+def best_product(A, repeats: int, inner: int = 20) -> float:
+    """CPU seconds of one ``A x`` (best of ``repeats`` batches of ``inner``, slowest rank)."""
+    comm = A.getComm().tompi4py()
+    x, y = A.createVecs()
+    x.setRandom()
+    best = np.inf
+    for _ in range(repeats):
+        comm.Barrier()
+        t0 = time.process_time()
+        for _ in range(inner):
+            A.mult(x, y)
+        best = min(best, comm.allreduce(time.process_time() - t0, op=MPI.MAX) / inner)
+    x.destroy()
+    y.destroy()
+    return best
+
+
+@contextlib.contextmanager
+def matrix_format(fmt: str):
+    """While active, explicit models store their stiffness blocks as ``fmt`` (the default of
+    :class:`~dolfinx_meshfree.dynamics.system.LinearSystem` replaced, for this benchmark only)."""
+    init = LinearSystem.__init__
+    saved = init.__defaults__
+    init.__defaults__ = (*saved[:-1], fmt)
+    try:
+        yield
+    finally:
+        init.__defaults__ = saved
+
+
+def dynamics(method: str, nodes: int, steps: int, repeats: int, comm) -> dict:
+    """Per-step time of the rod with the assembled AIJ and with BAIJ stiffness blocks: two
+    models built alike, stepped in turns from the same state; their final displacements."""
+    rg = rod_demo()
+    args = rg.parse(["--nodes", str(nodes)])
+    material = mf.LinearElastic(args.E, 0.0, "strain", rho=args.rho)
+    rod = mf.verification.waves.GaussianPulseRod(
+        E=args.E, rho=args.rho, length=rg.LENGTH, center=args.center
+    )
+    dyns = {}
+    for fmt in ("aij", "baij"):
+        with matrix_format(fmt):
+            dyns[fmt], _ = rg.build(method, args, material, comm)
+        dyns[fmt].set_initial(velocity=rod.initial_velocity)
+    dt = dyns["aij"].stable_time_step()
+    per_step = {"aij": np.inf, "baij": np.inf}
+    product, cpu_step = dict(per_step), dict(per_step)
+    for dyn in dyns.values():
+        dyn.run(dyn.time + 2 * dt, dt=dt)  # warm-up
+    for _ in range(repeats):
+        for fmt, dyn in dyns.items():
+            K = dyn.system.fields[-1].K  # the particle stiffness (FE for pure FE)
+            product[fmt] = min(product[fmt], best_product(K, 2))
+            comm.Barrier()
+            t0 = time.process_time()
+            res = dyn.run(dyn.time + steps * dt, dt=dt, energy_records=2)
+            cpu = comm.allreduce((time.process_time() - t0) / steps, op=MPI.MAX)
+            cpu_step[fmt] = min(cpu_step[fmt], cpu)
+            per_step[fmt] = min(per_step[fmt], comm.allreduce(res.timings["per_step"], op=MPI.MAX))
+    u = {f: np.concatenate([x.array_r for x in d.u]) for f, d in dyns.items()}
+    diff = np.sqrt(comm.allreduce(float(np.sum((u["aij"] - u["baij"]) ** 2))))
+    norm = np.sqrt(comm.allreduce(float(np.sum(u["aij"] ** 2))))
+    dyns["aij"].destroy()
+    dyn = dyns["baij"]
+    sizes = dyn.num_dofs()
+    rec = {
+        "kind": "dynamics",
+        "method": method,
+        "dofs": sizes["fe_dofs"] + sizes["particle_dofs"],
+        "steps": steps,
+        "step_aij": per_step["aij"],
+        "step_baij": per_step["baij"],
+        "cpu_step_aij": cpu_step["aij"],
+        "cpu_step_baij": cpu_step["baij"],
+        "product_aij": product["aij"],
+        "product_baij": product["baij"],
+        "relative_difference": diff / norm,
+        "ranks": comm.size,
+        "dolfinx_version": mf.DOLFINX_VERSION,
+    }
+    dyn.destroy()
+    return rec
+
+
+def cantilever(comm, method: str, h: float, consistent: bool):
+    """The Timoshenko–Goodier cantilever, pure EFG or lagrange (right half particles)."""
+    mat = mf.LinearElastic(3e7, 0.3)
+    beam = mf.TimoshenkoBeam(mat)
+    nx, ny = round(48 / h), round(12 / h)
+    msh = dolfinx.mesh.create_rectangle(
+        comm, [np.array([0, -6.0]), np.array([48.0, 6.0])], [nx, ny],
+        dolfinx.mesh.CellType.quadrilateral,
+    )  # fmt: skip
+    if method == "efg":
+        problem = mf.EFGElasticity(mf.ParticleSet.from_cells(msh, h), mat, consistent=consistent)
+    else:
+        n = msh.topology.index_map(2).size_local
+        xc = msh.geometry.x[mf._compat.geometry_dofmap(msh)[:n], 0].mean(axis=1)
+        patch = mf.ParticlePatch(msh, np.flatnonzero(xc > 24.0), h)
+        V = mf._compat.vector_function_space(msh)
+        problem = mf.CoupledElasticity(V, patch, mat, coupling=method, consistent=consistent)
+    problem.add_dirichlet(mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0)), beam.displacement)
+    problem.add_traction(mf.boundary_facets(msh, lambda x: np.isclose(x[0], 48)), beam.traction)
+    return problem
+
+
+@contextlib.contextmanager
+def timed_direct_solves(repeats: int, out: dict):
+    """While active, every ``BlockSystem.solve`` also factorises its system ``repeats`` times
+    by LU and by the automatic choice (alternating) and records the best of each in ``out``."""
+    original = BlockSystem.solve
+
+    def solve(self, solver="mumps", *args, **kwargs):
+        for _ in range(repeats):
+            for name in ("mumps-lu", "mumps"):
+                parts = original(self, name)
+                keys = ("check", "factor", "factor_cpu", "solve")
+                rec = out.setdefault(name, dict.fromkeys(keys, np.inf))
+                for key in keys:
+                    t = self.comm.tompi4py().allreduce(self.stats[key], op=MPI.MAX)
+                    rec[key] = min(rec[key], t)
+                rec.update({k: self.stats[k] for k in ("factorisation", "asymmetry", "memory_mb")})
+                rec["x"] = np.concatenate(parts)
+        return original(self, solver, *args, **kwargs)
+
+    BlockSystem.solve = solve
+    try:
+        yield
+    finally:
+        BlockSystem.solve = original
+
+
+def statics(method: str, h: float, consistent: bool, repeats: int, comm) -> dict:
+    problem = cantilever(comm, method, h, consistent)
+    out: dict = {}
+    with timed_direct_solves(repeats, out):
+        problem.solve("mumps")
+    lu, auto = out["mumps-lu"], out["mumps"]
+    diff = np.sqrt(comm.allreduce(float(np.sum((lu["x"] - auto["x"]) ** 2))))
+    norm = np.sqrt(comm.allreduce(float(np.sum(lu["x"] ** 2))))
+    return {
+        "kind": "statics",
+        "method": method,
+        "integration": "vci" if consistent else "galerkin",
+        "h": h,
+        "dofs": comm.allreduce(lu["x"].size),
+        "asymmetry": auto["asymmetry"],
+        "chosen": auto["factorisation"],
+        "factor_lu": lu["factor"],
+        "factor_auto": auto["factor"],
+        "symmetry_check_auto": auto["check"],
+        "factor_cpu_lu": lu["factor_cpu"],
+        "factor_cpu_auto": auto["factor_cpu"],
+        "solve_lu": lu["solve"],
+        "solve_auto": auto["solve"],
+        "memory_mb_lu": lu["memory_mb"],
+        "memory_mb_auto": auto["memory_mb"],
+        "relative_difference": diff / norm,
+        "ranks": comm.size,
+        "dolfinx_version": mf.DOLFINX_VERSION,
+    }
+
+
+def main(argv: list[str] | None = None) -> list[dict]:
+    p = argparse.ArgumentParser(description="AIJ vs BAIJ steps, LU vs LDL^T static solves")
+    p.add_argument("--nodes", type=int, default=20000, help="rod: FE nodes + particles (about)")
+    p.add_argument("--steps", type=int, default=40, help="rod: steps per timing")
+    p.add_argument("--methods", nargs="+", default=["fe", "efg", "lagrange"])
+    p.add_argument("--h", type=float, nargs="+", default=[0.25], help="cantilever spacings")
+    p.add_argument("--statics", nargs="+", default=["efg", "lagrange"])
+    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--small", action="store_true", help="smoke run (seconds)")
+    p.add_argument("--json", default=None)
+    args = p.parse_args(argv)
+    if args.small:
+        args.nodes, args.steps, args.h, args.repeats = 600, 3, [2.0], 1
+    comm = MPI.COMM_WORLD
+    recs = [dynamics(m, args.nodes, args.steps, args.repeats, comm) for m in args.methods]
+    for h in args.h:
+        for m in args.statics:
+            for consistent in (False, True):
+                recs.append(statics(m, h, consistent, args.repeats, comm))
+    if comm.rank == 0:
+        print(f"\nRod, per step (wall and CPU) and one stiffness product (CPU), ms, best of "
+              f"{args.repeats}, {comm.size} rank(s)")  # fmt: skip
+        print("| method | dofs | step AIJ | step BAIJ | AIJ/BAIJ | CPU step AIJ | CPU step BAIJ | "
+              "AIJ/BAIJ | product AIJ | product BAIJ | AIJ/BAIJ | rel. diff u |")  # fmt: skip
+        print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+        for r in recs:
+            if r["kind"] == "dynamics":
+                print(
+                    f"| {r['method']} | {r['dofs']} | {1e3 * r['step_aij']:.3f} | "
+                    f"{1e3 * r['step_baij']:.3f} | {r['step_aij'] / r['step_baij']:.2f} | "
+                    f"{1e3 * r['cpu_step_aij']:.3f} | {1e3 * r['cpu_step_baij']:.3f} | "
+                    f"{r['cpu_step_aij'] / r['cpu_step_baij']:.2f} | "
+                    f"{1e3 * r['product_aij']:.3f} | {1e3 * r['product_baij']:.3f} | "
+                    f"{r['product_aij'] / r['product_baij']:.2f} | {r['relative_difference']:.1e} |"
+                )
+        print(f"\nCantilever, MUMPS factorisation (wall and CPU s, best of {args.repeats}) and "
+              "memory (INFOG(22), MB)")  # fmt: skip
+        print("| method | integration | dofs | asymmetry | chosen | LU | auto | LU/auto | "
+              "CPU LU | CPU auto | LU/auto | MB LU | MB auto | rel. diff |")  # fmt: skip
+        print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+        for r in recs:
+            if r["kind"] == "statics":
+                print(
+                    f"| {r['method']} | {r['integration']} | {r['dofs']} | {r['asymmetry']:.1e} | "
+                    f"{r['chosen']} | {r['factor_lu']:.3f} | {r['factor_auto']:.3f} | "
+                    f"{r['factor_lu'] / r['factor_auto']:.2f} | {r['factor_cpu_lu']:.3f} | "
+                    f"{r['factor_cpu_auto']:.3f} | "
+                    f"{r['factor_cpu_lu'] / r['factor_cpu_auto']:.2f} | {r['memory_mb_lu']} | "
+                    f"{r['memory_mb_auto']} | {r['relative_difference']:.1e} |"
+                )
+        if args.json:
+            Path(args.json).write_text(json.dumps(recs, indent=1))
+    return recs
+
+
+if __name__ == "__main__":
+    main()

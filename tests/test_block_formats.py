@@ -1,0 +1,291 @@
+"""Block formats and the symmetric factorisation (issue 12, item 2): BAIJ copies of the
+node-interleaved stiffness multiply like the AIJ originals, explicit runs with BAIJ blocks give the
+AIJ runs' displacements, and MUMPS's LDL^T is used exactly where the assembled system is
+symmetric (measured), giving the LU's solution; serial and 2 ranks."""
+
+from __future__ import annotations
+
+import dolfinx_meshfree as mf
+from dolfinx_meshfree import _compat
+from dolfinx_meshfree.dynamics import ExplicitDynamics
+from dolfinx_meshfree.dynamics.builders import build_coupled, build_efg
+from dolfinx_meshfree.dynamics.linalg import blocked
+from dolfinx_meshfree.dynamics.system import LinearSystem
+from dolfinx_meshfree.parallel import Layout
+from dolfinx_meshfree.statics.petsc import (
+    SYMMETRY_TOL,
+    BlockSystem,
+    asymmetry,
+    create_aij,
+    solve_lu,
+)
+from dolfinx_meshfree.verification.waves import GaussianPulseRod
+
+import dolfinx
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from conftest import CELL_TYPES, rectangle
+from mpi4py import MPI
+from petsc4py import PETSc
+
+ROD = GaussianPulseRod()
+STEEL = mf.LinearElastic(ROD.E, 0.0, "strain", rho=ROD.rho)
+
+
+def rod_mesh(comm, h: float):
+    return rectangle(comm, [0.0, 0.0], [60.0, 5.0], [round(60 / h), round(5 / h)],
+                     CELL_TYPES["quadrilateral"])  # fmt: skip
+
+
+def rod(method: str, comm, h: float = 1.25, matrix_format: str = "baij") -> ExplicitDynamics:
+    """The Gaussian-pulse rod: pure EFG, or FE on x < 30 and particles (spacing h / 2) beyond,
+    with the stiffness blocks stored as ``matrix_format``."""
+    msh = rod_mesh(comm, h)
+    if method == "efg":
+        model = build_efg(mf.ParticleSet.from_cells(msh, h), STEEL, quadrature_degree=3)
+    else:
+        n = msh.topology.index_map(2).size_local
+        xc = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], 0].mean(axis=1)
+        patch = mf.ParticlePatch(msh, np.flatnonzero(xc > 30.0), h / 2)
+        V = _compat.vector_function_space(msh)
+        model = build_coupled(
+            mf.CoupledElasticity(V, patch, STEEL, coupling=method, quadrature_degree=3)
+        )
+    args = model.arguments()
+    args["system"] = LinearSystem(model.fields, model.blocks, model.constraint, matrix_format)
+    return ExplicitDynamics(**args)
+
+
+def _vec(A: PETSc.Mat, seed: int = 3) -> PETSc.Vec:
+    x = A.createVecRight()
+    lo, hi = x.getOwnershipRange()
+    x.array[:] = np.sin(seed * np.arange(lo, hi) + 0.5)  # independent of the rank count
+    return x
+
+
+# --- BAIJ products --------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("method", ["efg", "lagrange"])
+def test_baij_product_equals_aij(method):
+    """Every stiffness block of the rod as BAIJ (2 x 2 blocks): the same matrix (entries, layout)
+    and the same products to round-off (measured 1e-17 relative; bound 1e-14)."""
+    dyn = rod(method, MPI.COMM_WORLD, matrix_format="aij")
+    mats = [f.K for f in dyn.system.fields] + list(dyn.system.blocks.values())
+    converted = 0
+    for A in mats:
+        B = blocked(A, 2, "baij")
+        if B is None:  # only blocks whose ranks own whole 2 x 2 blocks are converted
+            continue
+        converted += 1
+        assert B.getType().endswith("baij") and B.getBlockSize() == 2
+        assert B.getSizes() == A.getSizes()
+        assert B.getOwnershipRange() == A.getOwnershipRange()
+        x = _vec(A)
+        ya, yb = A.createVecLeft(), B.createVecLeft()
+        A.mult(x, ya)
+        B.mult(x, yb)
+        yb.axpy(-1.0, ya)
+        assert yb.norm() <= 1e-14 * ya.norm()
+        yb.axpy(1.0, ya)
+        # the transpose product (the velocity projection's G^T, symmetric K) too
+        A.multTranspose(ya, x)
+        z = x.duplicate()
+        B.multTranspose(ya, z)
+        z.axpy(-1.0, x)
+        assert z.norm() <= 1e-14 * x.norm()
+        B.destroy()
+    # the particle and FE stiffnesses at least (DOLFINx's FE dofs and the particle dofs are
+    # node-interleaved and owned in whole nodes)
+    assert converted >= len(dyn.system.fields)
+    dyn.destroy()
+
+
+def test_blocked_refuses_split_blocks():
+    """A matrix whose rows cannot be cut into whole 2 x 2 blocks on every rank stays AIJ."""
+    comm = MPI.COMM_WORLD
+    n_local = 3  # odd: the blocks of two dofs would straddle ranks (serial: 3 rows)
+    lay = Layout.from_local(comm, n_local)
+    rows = np.arange(lay.start, lay.end)
+    shape = (lay.size_global, lay.size_global)
+    local = sp.csr_matrix((np.full(rows.size, 2.0), (rows, rows)), shape=shape)
+    A = create_aij(comm, local, lay, lay)
+    assert blocked(A, 2) is None
+    assert blocked(A, 1) is None
+    with pytest.raises(ValueError, match="fmt='sbaij' is not known"):
+        blocked(A, 2, "sbaij")
+    A.destroy()
+
+
+@pytest.mark.parametrize("method", ["efg", "lagrange", "ramp"])
+def test_baij_run_equals_aij_run(method):
+    """40 central-difference steps of the rod with the stiffness blocks as BAIJ (the default)
+    give the displacements and velocities of the run with the assembled AIJ blocks (measured
+    6e-16 to 9e-15 relative after 40 steps; bound 1e-12)."""
+    states = []
+    for fmt in ("aij", "baij"):
+        dyn = rod(method, MPI.COMM_WORLD, matrix_format=fmt)
+        for f in dyn.system.fields:
+            assert f.K.getType().endswith("baij") == (fmt == "baij")
+        dyn.set_initial(velocity=ROD.initial_velocity)
+        dt = dyn.stable_time_step()
+        dyn.run(40 * dt, dt=dt)
+        states.append([np.concatenate([x.array_r.copy() for x in vecs]) for vecs in (dyn.u, dyn.v)])
+        dyn.destroy()
+    comm = MPI.COMM_WORLD
+    for a, b in zip(*states, strict=True):
+        diff = np.sqrt(comm.allreduce(float(np.sum((a - b) ** 2))))
+        norm = np.sqrt(comm.allreduce(float(np.sum(a**2))))
+        assert norm > 0.0
+        assert diff <= 1e-12 * norm
+
+
+def test_explicit_dynamics_stores_baij_and_bad_format():
+    """The default of ExplicitDynamics: the particle stiffness as BAIJ (block size 2)."""
+    msh = rod_mesh(MPI.COMM_WORLD, 2.5)
+    dyn = ExplicitDynamics.efg(mf.ParticleSet.from_cells(msh, 2.5), STEEL, quadrature_degree=3)
+    K = dyn.system.fields[0].K
+    assert K.getType().endswith("baij") and K.getBlockSize() == 2
+    with pytest.raises(ValueError, match="fmt='dense' is not known"):
+        dyn.system.store_as("dense")
+    with pytest.raises(ValueError, match="matrix_format='sbaij' is not known"):
+        LinearSystem(dyn.system.fields, matrix_format="sbaij")
+    dyn.destroy()
+
+
+# --- the symmetric factorisation ------------------------------------------------------------------
+
+
+def cantilever(comm, consistent: bool, coupling: str | None = None):
+    mat = mf.LinearElastic(3e7, 0.3)
+    beam = mf.TimoshenkoBeam(mat)
+    msh = dolfinx.mesh.create_rectangle(
+        comm, [np.array([0, -6.0]), np.array([48.0, 6.0])], [24, 6],
+        dolfinx.mesh.CellType.quadrilateral,
+    )  # fmt: skip
+    if coupling is None:
+        problem = mf.EFGElasticity(mf.ParticleSet.from_cells(msh, 2.0), mat, consistent=consistent)
+    else:
+        n = msh.topology.index_map(2).size_local
+        xc = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], 0].mean(axis=1)
+        patch = mf.ParticlePatch(msh, np.flatnonzero(xc > 24.0), 1.0)
+        V = _compat.vector_function_space(msh)
+        problem = mf.CoupledElasticity(V, patch, mat, coupling=coupling, consistent=consistent)
+    problem.add_dirichlet(mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0)), beam.displacement)
+    problem.add_traction(mf.boundary_facets(msh, lambda x: np.isclose(x[0], 48)), beam.traction)
+    return problem, msh
+
+
+def _solve_recording(problem, solver: str, monkeypatch) -> tuple[np.ndarray, dict]:
+    seen: dict = {}
+    original = BlockSystem.solve
+
+    def spy(self, *args, **kwargs):
+        out = original(self, *args, **kwargs)
+        seen.update(self.stats)
+        return out
+
+    monkeypatch.setattr(BlockSystem, "solve", spy)
+    sol = problem.solve(solver)
+    monkeypatch.setattr(BlockSystem, "solve", original)
+    return sol, seen
+
+
+@pytest.mark.parametrize("coupling", [None, "lagrange", "master-slave"])
+def test_ldlt_equals_lu_on_symmetric_systems(coupling, monkeypatch):
+    """Galerkin integration: the saddle point is symmetric to round-off (measured 5e-17 to 6e-17),
+    "mumps" factorises it as LDL^T and gives the LU's solution (measured 3e-13 relative at
+    E = 3e7; bound 1e-10). Nothing is left in PETSc's options database."""
+    problem, msh = cantilever(MPI.COMM_WORLD, consistent=False, coupling=coupling)
+    before = PETSc.Options().getAll()
+    sol_auto, auto = _solve_recording(problem, "mumps", monkeypatch)
+    sol_lu, lu = _solve_recording(problem, "mumps-lu", monkeypatch)
+    assert PETSc.Options().getAll() == before
+    assert auto["factorisation"] == "ldlt" and auto["asymmetry"] <= 1e-15
+    assert lu["factorisation"] == "lu" and lu["asymmetry"] is None
+    x = msh.geometry.x[:, :2]
+    ua, ul = sol_auto.displacement(x), sol_lu.displacement(x)
+    assert np.abs(ua - ul).max() <= 1e-10 * np.abs(ul).max()
+
+
+@pytest.mark.parametrize("coupling", [None, "lagrange"])
+def test_nonsymmetric_systems_are_factorised_by_lu(coupling, monkeypatch):
+    """VCI makes the particle stiffness Petrov-Galerkin: the saddle point is not symmetric
+    (measured asymmetry 3e-5 to 2e-3), so "mumps" keeps the LU (the same solution as
+    "mumps-lu", bit for bit)."""
+    problem, msh = cantilever(MPI.COMM_WORLD, consistent=True, coupling=coupling)
+    sol_auto, auto = _solve_recording(problem, "mumps", monkeypatch)
+    sol_lu, _ = _solve_recording(problem, "mumps-lu", monkeypatch)
+    assert auto["factorisation"] == "lu" and auto["asymmetry"] > 1e3 * SYMMETRY_TOL
+    x = msh.geometry.x[:, :2]
+    assert np.array_equal(sol_auto.displacement(x), sol_lu.displacement(x))
+
+
+def _system(comm, skew: float) -> tuple[PETSc.Mat, PETSc.Vec, np.ndarray, np.ndarray]:
+    """A 2 x 2-block indefinite saddle point ``[[K, G^T + skew E], [G, 0]]`` (40 + 8 rows)
+    distributed over the ranks, its rhs and (every rank) its dense matrix and rhs."""
+    rng = np.random.default_rng(7)
+    n, m = 40, 8
+    K = sp.diags([-1.0, 2.5, -1.0], [-1, 0, 1], shape=(n, n)).toarray()
+    G = rng.standard_normal((m, n))
+    E = rng.standard_normal((n, m))
+    dense = np.block([[K, G.T + skew * E], [G, np.zeros((m, m))]])
+    b = rng.standard_normal(n + m)
+    lay = Layout.from_local(comm, (n + m) // comm.size + ((n + m) % comm.size > comm.rank))
+    rows = np.arange(lay.start, lay.end)
+    local = sp.csr_matrix(dense)[rows]
+    A = create_aij(comm, sp.vstack([sp.csr_matrix((lay.start, n + m)), local,
+                                    sp.csr_matrix((n + m - lay.end, n + m))]).tocsr(),
+                   lay, lay)  # fmt: skip
+    v = A.createVecLeft()
+    v.array[:] = b[rows]
+    return A, v, dense, b
+
+
+@pytest.mark.parametrize("skew", [0.0, 1e-3])
+def test_solve_lu_picks_the_factorisation_by_measured_symmetry(skew):
+    """The automatic choice against a dense solve: the symmetric saddle point by LDL^T, the
+    slightly skewed one (asymmetry ~1e-3) by LU, both to 1e-10; a Cholesky factorisation of
+    the skewed one (what a wrong choice would do) misses the answer by far more, so this test
+    would see it."""
+    comm = MPI.COMM_WORLD
+    A, b, dense, rhs = _system(comm, skew)
+    exact = np.linalg.solve(dense, rhs)
+    lo, hi = A.getOwnershipRange()
+    stats: dict = {}
+    x = solve_lu(A, b, stats=stats)
+    assert stats["factorisation"] == ("ldlt" if skew == 0.0 else "lu")
+    assert stats["asymmetry"] == pytest.approx(asymmetry(A))
+    assert np.abs(x.array_r - exact[lo:hi]).max() <= 1e-10 * np.abs(exact).max()
+    x.destroy()
+    if skew:
+        # the would-be mistake: MUMPS LDL^T of the skewed matrix (it reads one triangle)
+        A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+        ksp = PETSc.KSP().create(A.getComm())
+        ksp.setOptionsPrefix("test_block_formats_chol_")
+        ksp.setOperators(A)
+        ksp.setType(PETSc.KSP.Type.PREONLY)
+        ksp.getPC().setType(PETSc.PC.Type.CHOLESKY)
+        ksp.getPC().setFactorSolverType("mumps")
+        y = A.createVecRight()
+        ksp.solve(b, y)
+        wrong = comm.allreduce(float(np.abs(y.array_r - exact[lo:hi]).max()), op=MPI.MAX)
+        assert wrong > 1e-6 * np.abs(exact).max()
+        ksp.destroy()
+        y.destroy()
+    A.destroy()
+    b.destroy()
+
+
+def test_mumps_lu_shorthand_and_bad_factorisation():
+    comm = MPI.COMM_WORLD
+    A, b, _, _ = _system(comm, 0.0)
+    with pytest.raises(ValueError, match="factorisation='cholesky' is not known"):
+        solve_lu(A, b, factorisation="cholesky")
+    stats: dict = {}
+    solve_lu(A, b, factorisation="lu", stats=stats).destroy()
+    assert stats["factorisation"] == "lu"
+    A.destroy()
+    b.destroy()
+    assert "mumps-lu" in mf.statics.petsc.SHORTHANDS

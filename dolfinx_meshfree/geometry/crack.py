@@ -37,8 +37,10 @@ __all__ = [
     "CRACK_METHODS",
     "Crack",
     "CrackDomain",
+    "gathered_segments",
     "particle_spacing",
     "place_crack",
+    "point_segment_distance",
     "segments_intersect",
     "validate_in_patch",
 ]
@@ -74,7 +76,7 @@ def segments_intersect(p: np.ndarray, q: np.ndarray, a: np.ndarray, b: np.ndarra
     return np.where(collinear, overlap, proper & overlap)
 
 
-def _point_segment_distance(x: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def point_segment_distance(x: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Distance (m, k) from points ``x`` (m, 2) to segments ``a b`` (k, 2)."""
     t = b - a
     r = x[:, None, :] - a[None, :, :]
@@ -209,7 +211,7 @@ class Crack:
         """Distance (m,) from points ``x`` (m, 2) to the crack."""
         x = np.asarray(x, dtype=float).reshape(-1, 2)
         a, b = self.segments
-        return _point_segment_distance(x, a, b).min(axis=1)
+        return point_segment_distance(x, a, b).min(axis=1)
 
     def side(self, x: npt.ArrayLike) -> np.ndarray:
         """Signed side (m,) of points ``x`` w.r.t. the nearest crack segment: ``+1`` left of the
@@ -217,7 +219,7 @@ class Crack:
         the nearest segment's line)."""
         x = np.asarray(x, dtype=float).reshape(-1, 2)
         a, b = self.segments
-        nearest = _point_segment_distance(x, a, b).argmin(axis=1)
+        nearest = point_segment_distance(x, a, b).argmin(axis=1)
         return np.sign(_orient(a[nearest], b[nearest], x)).astype(np.int64)
 
     def crosses(
@@ -366,7 +368,7 @@ class CrackDomain:
         return cls(mesh, cells, particles, boundary_facets(mesh), np.zeros(0, dtype=np.int32))
 
 
-def _gathered_segments(patch: ParticlePatch | CrackDomain, facets: np.ndarray) -> np.ndarray:
+def gathered_segments(patch: ParticlePatch | CrackDomain, facets: np.ndarray) -> np.ndarray:
     """Facets of the 2D patch mesh as segments (k, 2, 2), gathered from every rank (collective)."""
     mesh = patch.mesh
     geo = _compat.entities_to_geometry(mesh, 1, facets).reshape(-1, 2)
@@ -407,8 +409,8 @@ def validate_in_patch(
     if patch.mesh.geometry.dim != 2:
         raise ValueError(f"cracks are 2D; the patch mesh has gdim={patch.mesh.geometry.dim}")
     h = particle_spacing(patch)
-    iface = _gathered_segments(patch, patch.interface_facets)
-    exterior = _gathered_segments(patch, patch.exterior_facets)
+    iface = gathered_segments(patch, patch.interface_facets)
+    exterior = gathered_segments(patch, patch.exterior_facets)
     # samples along the polyline name a point outside the patch (the facet tests below are exact)
     a, b = pts[:-1], pts[1:]
     nsub = np.maximum(1, np.ceil(np.linalg.norm(b - a, axis=1) / (0.25 * h))).astype(int)
@@ -443,7 +445,7 @@ def validate_in_patch(
                 )
         tol = 1e-8 * h
         dist_ext = (
-            _point_segment_distance(pts[[0, -1]], exterior[:, 0], exterior[:, 1]).min(axis=1)
+            point_segment_distance(pts[[0, -1]], exterior[:, 0], exterior[:, 1]).min(axis=1)
             if exterior.size
             else np.full(2, np.inf)
         )
@@ -452,7 +454,7 @@ def validate_in_patch(
             hit = segments_intersect(a, b, exterior[:, 0], exterior[:, 1])
             s_idx, f_idx = np.nonzero(hit)
             for s, f in zip(s_idx, f_idx, strict=True):  # few: the facets at the mouths
-                mid = _point_segment_distance(
+                mid = point_segment_distance(
                     pts[[0, -1]], exterior[f : f + 1, 0], exterior[f : f + 1, 1]
                 )
                 allowed = (s == 0 and mouth[0] and mid[0, 0] <= tol) or (
@@ -480,7 +482,7 @@ def validate_in_patch(
                     "exactly on the boundary, or keep the tip at least h inside"
                 )
             if iface.size:
-                d = _point_segment_distance(tip[None], iface[:, 0], iface[:, 1]).min()
+                d = point_segment_distance(tip[None], iface[:, 0], iface[:, 1]).min()
                 if d < clearance:
                     raise ValueError(
                         f"the crack tip {_fmt(tip)} is {d:.3g} from the FE interface, less than "
@@ -498,7 +500,7 @@ def validate_in_patch(
                     f"diffraction around the tip is undefined there; move the tip a fraction of "
                     f"the spacing along the crack, e.g. to {_fmt(moved)}"
                 )
-        d = _point_segment_distance(x_particles, a, b).min(axis=1)
+        d = point_segment_distance(x_particles, a, b).min(axis=1)
         on = np.flatnonzero(d <= tol)
         if on.size:
             raise ValueError(

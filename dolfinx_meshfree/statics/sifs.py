@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..fracture.interaction import StressIntensityFactors, interaction_integral
-from ..geometry.crack import Crack, _gathered_segments, _point_segment_distance, particle_spacing
+from ..geometry.crack import Crack, gathered_segments, particle_spacing, point_segment_distance
 from ..parallel import raise_on_all_ranks
 from ..physics.materials import LinearElastic
 
@@ -86,8 +86,8 @@ def solution_sifs(
     comm = domain.comm
     segments = np.concatenate(
         [
-            _gathered_segments(domain, domain.exterior_facets),
-            _gathered_segments(domain, domain.interface_facets),
+            gathered_segments(domain, domain.exterior_facets),
+            gathered_segments(domain, domain.interface_facets),
         ]
     )
 
@@ -108,7 +108,7 @@ def solution_sifs(
         x_tip = crack.tips[k]
         r = np.asarray(DEFAULT_RADII) * h if radius is None else np.asarray(radius, float)
         r_out = float(np.max(r))
-        d_bound = float(_point_segment_distance(x_tip[None], segments[:, 0], segments[:, 1]).min())
+        d_bound = float(point_segment_distance(x_tip[None], segments[:, 0], segments[:, 1]).min())
         if r_out >= d_bound:
             raise ValueError(
                 f"radius={r_out:.6g}: the domain about the tip ({x_tip[0]:.6g}, {x_tip[1]:.6g}) "

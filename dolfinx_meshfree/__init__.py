@@ -50,7 +50,13 @@ from .io import DynamicsWriter, ProgressBar, read_particles
 from .physics.constitutive import Material, NeoHookean, SaintVenantKirchhoff
 from .physics.forces import InternalForces
 from .physics.materials import LinearElastic
-from .statics.coupled import COUPLINGS, DEFAULT_DILATION, CoupledElasticity, CoupledSolution
+from .statics.coupled import (
+    COUPLINGS,
+    CRACK_COUPLINGS,
+    DEFAULT_DILATION,
+    CoupledElasticity,
+    CoupledSolution,
+)
 from .statics.efg import EFGElasticity, EFGSolution
 from .statics.fe import FESolution, solve_fe_elasticity, solve_forms
 from .statics.newton import NewtonError, NewtonOptions, NewtonResult
@@ -64,6 +70,7 @@ from .verification.waves import GaussianPulseRod, StepLoadedRod
 
 __all__ = [
     "COUPLINGS",
+    "CRACK_COUPLINGS",
     "CRACK_METHODS",
     "DEFAULT_DILATION",
     "DOLFINX_VERSION",

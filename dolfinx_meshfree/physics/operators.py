@@ -153,8 +153,9 @@ def moment_corrections(
         np.bincount(V.col, wv * np.sum((cell_points[V.row] - centre[V.col]) ** 2, 1), minlength=n),
         op=MPI.SUM,
     )
-    radius = np.sqrt(np.where(mass > 0, second / np.where(mass > 0, mass, 1.0), 1.0))
-    radius = np.where(radius > 0, radius, 1.0)
+    # the spread can be <= 0 where signed MLS functions (e.g. cut by a crack) weigh it: unit scale
+    spread = np.where(mass > 0, second / np.where(mass > 0, mass, 1.0), 1.0)
+    radius = np.sqrt(np.where(spread > 0, spread, 1.0))
 
     def basis(points: np.ndarray, cols: np.ndarray) -> np.ndarray:
         return np.column_stack([np.ones(len(cols)), (points - centre[cols]) / radius[cols, None]])

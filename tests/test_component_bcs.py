@@ -231,3 +231,36 @@ def test_bad_component_input():
         ExplicitDynamics.fe(V, MAT, fixed_facets=[(left, 2)])
     with pytest.raises(ValueError, match="not owned"):
         ExplicitDynamics.fe(V, MAT, fixed_facets=[(np.array([10**6]), (0,))])
+
+
+@pytest.mark.parametrize("coupling", ["lagrange", "bridging"])
+def test_roller_patch_test_at_finite_strain(coupling):
+    """CoupledNonlinearProblem with rollers: F = diag(1.3, 0.8) (u_x = 0.3 x, u_y = -0.2 y) under
+    the dead traction P(F) N on x = 2 and y = 1, u_x = 0 on x = 0 and u_y = 0 on y = 0, the
+    patch cut by both roller planes: the affine field to round-off (neo-Hookean)."""
+    law = mf.NeoHookean(E=1000.0, nu=0.3, plane="strain")
+    msh = box([0.0, 0.0], [2.0, 1.0], [16, 8])
+    V = _compat.vector_function_space(msh)
+    u, v = dolfinx.fem.Function(V), ufl.TestFunction(V)
+    dx = ufl.Measure("dx", domain=msh, metadata={"quadrature_degree": 4})
+    Fu = ufl.Identity(2) + ufl.grad(u)
+    P0 = law.ufl_first_piola(ufl.as_matrix([[1.3, 0.0], [0.0, 0.8]]))
+    rest = mf.boundary_facets(msh, lambda p: np.isclose(p[0], 2.0) | np.isclose(p[1], 1.0))
+    tags = dolfinx.mesh.meshtags(msh, 1, rest, np.full(rest.size, 3, dtype=np.int32))
+    ds = ufl.Measure("ds", domain=msh, subdomain_data=tags)
+    F = ufl.inner(law.ufl_first_piola(Fu), ufl.grad(v)) * dx
+    F -= ufl.dot(ufl.dot(P0, ufl.FacetNormal(msh)), v) * ds(3)
+    bcs = []
+    for i in range(2):
+        facets = mf.boundary_facets(msh, lambda p, i=i: np.isclose(p[i], 0.0))
+        dofs = dolfinx.fem.locate_dofs_topological(V.sub(i), 1, facets)
+        bcs.append(dolfinx.fem.dirichletbc(np.float64(0.0), dofs, V.sub(i)))
+    patch = mf.ParticlePatch(
+        msh, cells_where(msh, lambda m: (m[:, 0] < 1.0) & (m[:, 1] < 0.6)), 0.125
+    )
+    problem = mf.CoupledNonlinearProblem(F, u, bcs, patch, law, coupling=coupling, load_steps=2)
+    result = problem.solve()
+    g = np.stack(np.meshgrid(np.linspace(0, 2, 9), np.linspace(0, 1, 5)), -1).reshape(-1, 2)
+    expected = np.stack([0.3 * g[:, 0], -0.2 * g[:, 1]], axis=1)
+    assert result.converged
+    assert np.abs(problem.solution.displacement(g) - expected).max() <= 1e-10

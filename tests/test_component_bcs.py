@@ -150,6 +150,24 @@ def test_roller_patch_test(coupling, where):
     assert np.abs(sol.displacement(g) - expected).max() <= 1e-10
 
 
+def test_roller_patch_test_pure_efg():
+    """Pure EFG (EFGElasticity.add_dirichlet with components): the roller patch test to
+    round-off, with jittered particles."""
+    msh = box([0.0, 0.0], [2.0, 1.0], [8, 4])
+    P = mf.ParticleSet.from_cells(msh, 0.25, jitter=0.3)
+    problem = mf.EFGElasticity(P, MAT)
+    S = MAT.stress(np.diag([2e-3, -1e-3]))
+    for i in range(2):
+        facets = mf.boundary_facets(msh, lambda p, i=i: np.isclose(p[i], 0.0))
+        problem.add_dirichlet(facets, lambda x: np.zeros((len(x), 2)), components=(i,))
+    rest = mf.boundary_facets(msh, lambda p: np.isclose(p[0], 2.0) | np.isclose(p[1], 1.0))
+    problem.add_traction(rest, lambda x, n: n @ S)
+    sol = problem.solve()
+    g = np.stack(np.meshgrid(np.linspace(0, 2, 9), np.linspace(0, 1, 5)), -1).reshape(-1, 2)
+    expected = np.stack([2e-3 * g[:, 0], -1e-3 * g[:, 1]], axis=1)
+    assert np.abs(sol.displacement(g) - expected).max() <= 1e-10
+
+
 # -- explicit dynamics ---------------------------------------------------------------------------
 
 

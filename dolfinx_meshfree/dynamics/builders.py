@@ -20,8 +20,10 @@ Each coupling enters dynamics through :meth:`CoupledElasticity.operators
   slaves' masses go to their masters; forces by ``T^T`` (eq. 28). The state holds the FE dofs
   and the free particles; evaluation expands the slaves.
 
-Essential conditions (``fixed_facets``: the displacement held at its initial value): FE nodes
-strongly (zero velocity and acceleration), particles by one multiplier per facet and component
+Essential conditions (``fixed_facets``: the displacement held at its initial value, in all
+components or, with ``(facets, components)`` pairs, in some: symmetry planes): FE dofs
+strongly (zero velocity and acceleration), particles by one multiplier per facet and held
+component
 (:mod:`~dolfinx_meshfree.dynamics.conditions`) added to the velocity constraint, so that
 ``int_f v^h = 0`` after every correction (Table I, step 6). On ramp interface cells the particle
 part of the blended functions is constrained in the same way.

@@ -68,7 +68,7 @@ def check_facets(msh: dolfinx.mesh.Mesh, facets: npt.ArrayLike | None) -> np.nda
     return raise_on_all_ranks(msh.comm, check)
 
 
-def _is_pairs(fixed_facets) -> bool:
+def _is_pairs(fixed_facets: object) -> bool:
     """Whether ``fixed_facets`` is a list of ``(facets, components)`` pairs."""
     return (
         isinstance(fixed_facets, list)
@@ -77,7 +77,9 @@ def _is_pairs(fixed_facets) -> bool:
     )
 
 
-def fixed_groups(msh: dolfinx.mesh.Mesh, fixed_facets) -> list[tuple[np.ndarray, tuple[int, ...]]]:
+def fixed_groups(
+    msh: dolfinx.mesh.Mesh, fixed_facets: npt.ArrayLike | list | None
+) -> list[tuple[np.ndarray, tuple[int, ...]]]:
     """``fixed_facets`` as validated ``(facets, components)`` groups (collective checks).
 
     ``fixed_facets``: ``None``, owned exterior facets (all components held), or a list of
@@ -91,7 +93,7 @@ def fixed_groups(msh: dolfinx.mesh.Mesh, fixed_facets) -> list[tuple[np.ndarray,
     groups = []
     for facets, components in fixed_facets:
 
-        def check(components=components) -> tuple[int, ...]:
+        def check(components: object = components) -> tuple[int, ...]:
             c = tuple(np.atleast_1d(components).tolist())
             if not c or len(set(c)) != len(c) or any(k not in range(gdim) for k in c):
                 raise ValueError(

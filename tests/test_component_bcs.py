@@ -119,7 +119,7 @@ def test_half_domain_plane_through_patch(coupling):
     assert np.abs(uh - ue).max() <= 1.02 * np.abs(uf - ue).max()
 
 
-@pytest.mark.parametrize("coupling", ["lagrange", "bridging"])
+@pytest.mark.parametrize("coupling", ["lagrange", "edge-to-edge", "bridging"])
 @pytest.mark.parametrize("where", ["cut", "away"])
 def test_roller_patch_test(coupling, where):
     """u = (a x, b y) with rollers (u_x = 0 on x = 0, u_y = 0 on y = 0) and sigma n on the

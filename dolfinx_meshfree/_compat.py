@@ -261,6 +261,20 @@ def dirichlet_values(bc: _DirichletBC) -> tuple[_np.ndarray, _np.ndarray]:
     dofs = _np.asarray(bc.dof_indices()[0], dtype=_np.int64)
     g = bc.g
     if hasattr(g, "x"):
-        return dofs, _np.asarray(g.x.array)[dofs]
+        gx = _np.asarray(g.x.array)
+        if list(bc.function_space.component()) and g.function_space is not bc.function_space:
+            # bc on V.sub(i) with a Function on the collapsed subspace (the
+            # locate_dofs_topological((V.sub(i), V0), ...) form): its values by V's dof
+            _, collapse_map = bc.function_space.collapse()
+            collapse_map = _np.asarray(collapse_map, dtype=_np.int64)
+            if collapse_map.size != gx.size:
+                raise ValueError(
+                    "a DirichletBC on V.sub(i) has a value Function on a space that is not "
+                    "V.sub(i).collapse()[0]; interpolate the value into that space"
+                )
+            by_dof = _np.zeros(int(collapse_map.max(initial=-1)) + 1)
+            by_dof[collapse_map] = gx
+            return dofs, by_dof[dofs]
+        return dofs, gx[dofs]
     value = _np.atleast_1d(_np.asarray(g.value, dtype=float)).ravel()
     return dofs, value[dofs % value.size]

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 
 import dolfinx
 import numpy as np
+from mpi4py import MPI
 from petsc4py import PETSc
 
 from .. import _compat
@@ -40,10 +41,12 @@ if TYPE_CHECKING:  # annotations only
 __all__ = [
     "append_patch_conditions",
     "body_loads",
+    "component_conditions",
     "essential_conditions",
     "fe_active",
     "fe_stiffness",
     "fix_fe_rows",
+    "fixed_dofs",
     "particle_rule",
     "patch_rules",
     "sizes",
@@ -154,6 +157,8 @@ def essential_conditions(
         f_fe, f_p = split_facets(problem, facets)
         if also_strong is not None:
             strong = also_strong(f_p)
+            if components and _held_by_node(problem, strong, components[0]):
+                strong = strong[:0]  # the FE dofs are held by component already
             if components and comm.allreduce(strong.size):
                 raise ValueError(  # the same on every rank (a reduced count)
                     f"components={tuple(components[0])} on {comm.allreduce(strong.size)} patch "
@@ -180,10 +185,39 @@ def essential_conditions(
         )
         ubc.x.array.reshape(-1, gdim)[flags] = vals
         is_bc |= flags
-    for flags, vals in problem.strong:  # by node (CoupledLinearProblem's DirichletBCs)
+    for flags, vals in problem.strong:  # by node or, (n, gdim) flags, by dof
         ubc.x.array.reshape(-1, gdim)[flags] = vals[flags]
-        is_bc |= flags
+        if flags.ndim == 1:
+            is_bc |= flags
     return fe_bc, patch_bc, dq, dtabs, ubc, is_bc
+
+
+def component_conditions(problem: CoupledElasticity) -> tuple[np.ndarray, np.ndarray]:
+    """The FE dofs held by component (``problem.strong`` entries with (n, gdim) flags, set by
+    :class:`~dolfinx_meshfree.CoupledLinearProblem` for ``DirichletBC``s on ``V.sub(i)``):
+    flags and values, (num local nodes, gdim) each (local)."""
+    gdim = problem.V.mesh.geometry.dim
+    n = problem.V.dofmap.index_map.size_local + problem.V.dofmap.index_map.num_ghosts
+    flags, values = np.zeros((n, gdim), dtype=bool), np.zeros((n, gdim))
+    for f, vals in getattr(problem, "strong", []):
+        if f.ndim == 2:
+            flags |= f
+            values[f] = vals[f]
+    return flags, values
+
+
+def fixed_dofs(problem: CoupledElasticity, is_bc: np.ndarray) -> np.ndarray:
+    """Flags (num local nodes, gdim) of every FE dof fixed strongly: the nodes ``is_bc`` and
+    the dofs held by component (:func:`component_conditions`)."""
+    return is_bc[:, None] | component_conditions(problem)[0]
+
+
+def _held_by_node(problem: CoupledElasticity, facets: np.ndarray, components) -> bool:
+    """Whether the FE nodes of ``facets`` hold ``components`` by dof already (collective)."""
+    V = problem.V
+    flags = node_flags(V, dolfinx.fem.locate_dofs_topological(V, V.mesh.topology.dim - 1, facets))
+    held = component_conditions(problem)[0][flags][:, list(components)].all()
+    return bool(problem.patch.comm.allreduce(int(held), op=MPI.MIN))
 
 
 def fix_fe_rows(
@@ -208,9 +242,14 @@ def fix_fe_rows(
     bs = problem.V.dofmap.index_map_bs
     fixed = np.flatnonzero(fixed_local[:n_owned])
     rows = (bs * l2g[fixed][:, None] + np.arange(bs)).ravel().astype(PETSc.IntType)
-    x_bc = create_vector(
-        problem.patch.comm, fe_layout, rows, np.asarray(values).reshape(-1, bs)[fixed].ravel()
-    )
+    vals = np.asarray(values).reshape(-1, bs)[fixed].ravel()
+    # dofs held by component (DirichletBCs on V.sub(i)) on nodes not fixed whole
+    flags, cvals = component_conditions(problem)
+    flags = flags[:n_owned] & ~np.asarray(fixed_local[:n_owned], dtype=bool)[:, None]
+    node, comp = np.nonzero(flags)
+    rows = np.concatenate([rows, bs * l2g[node] + comp]).astype(PETSc.IntType)
+    vals = np.concatenate([vals, cvals[node, comp]])
+    x_bc = create_vector(problem.patch.comm, fe_layout, rows, vals)
     # rows of dofs that no FE cell supports are empty, diagonal included: add it
     K_fe.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
     zero = K_fe.createVecLeft()

@@ -324,7 +324,8 @@ def fe_constraint_block(
         nodes: (k,) FE node columns: local nodes of ``V`` or, with ``global_nodes``, global nodes
             (which must be local, owned or ghost, on this rank).
         values: (k,) unscaled entries; ``s``: the scaling of the constraint rows.
-        is_bc, ubc: Strong-condition flags (per local node) and values; ``l2g``: local to global
+        is_bc, ubc: Strong-condition flags (per local node, or (node, component) for dofs
+            held by component) and values; ``l2g``: local to global
             node numbers.
 
     Returns:
@@ -339,10 +340,10 @@ def fe_constraint_block(
             raise RuntimeError("FE constraint columns name nodes that are not local to this rank")
     r, v = rows, values
     bs = ubc.function_space.dofmap.index_map_bs
-    bc_col = is_bc[c]
     g_rows, g_vals = [], []
     gfe: tuple[list, list, list] = ([], [], [])
     for comp in range(bs):
+        bc_col = is_bc[c, comp] if is_bc.ndim == 2 else is_bc[c]
         rr = bs * r + comp
         cols = bs * l2g[c] + comp
         # known FE values move to the right-hand side

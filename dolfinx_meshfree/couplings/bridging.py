@@ -71,6 +71,7 @@ from .assembly import (
     fe_active,
     fe_stiffness,
     fix_fe_rows,
+    fixed_dofs,
     sizes,
     solve_and_gather,
     split_facets,
@@ -459,7 +460,13 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
     keep = ids[M_p.row] >= 0
     p_rows = (ids[M_p.row[keep]], M_p.col[keep], M_p.data[keep])
     G_fe, g_rows, g_vals = fe_constraint_block(
-        *fe_rows, False, s, fixed_local, ubc, l2g, (ml.size_global, fe_layout.size_global)
+        *fe_rows,
+        False,
+        s,
+        fixed_dofs(problem, is_bc) | ~active[:, None],
+        ubc,
+        l2g,
+        (ml.size_global, fe_layout.size_global),
     )
     G_p = particle_constraint_block(*p_rows, s, pdofs, (ml.size_global, d * n))
 

@@ -54,6 +54,7 @@ from .assembly import (
     fe_active,
     fe_stiffness,
     fix_fe_rows,
+    fixed_dofs,
     patch_rules,
     sizes,
     solve_and_gather,
@@ -548,7 +549,13 @@ def interface_system(problem: CoupledElasticity, tables: dict | None = None) -> 
     t1 = time.perf_counter()
     K_fe = fe_stiffness(problem)
     G_fe, g_rows, g_vals = fe_constraint_block(
-        *fe_rows[:3], fe_rows[3], s, is_bc, ubc, l2g, (ml.size_global, fe_layout.size_global)
+        *fe_rows[:3],
+        fe_rows[3],
+        s,
+        fixed_dofs(problem, is_bc),
+        ubc,
+        l2g,
+        (ml.size_global, fe_layout.size_global),
     )
     G_p = particle_constraint_block(*p_rows, s, pdofs, (ml.size_global, d * n))
 

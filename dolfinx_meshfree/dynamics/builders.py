@@ -20,8 +20,10 @@ Each coupling enters dynamics through :meth:`CoupledElasticity.operators
   slaves' masses go to their masters; forces by ``T^T`` (eq. 28). The state holds the FE dofs
   and the free particles; evaluation expands the slaves.
 
-Essential conditions (``fixed_facets``: the displacement held at its initial value): FE nodes
-strongly (zero velocity and acceleration), particles by one multiplier per facet and component
+Essential conditions (``fixed_facets``: the displacement held at its initial value, in all
+components or, with ``(facets, components)`` pairs, in some: symmetry planes): FE dofs
+strongly (zero velocity and acceleration), particles by one multiplier per facet and held
+component
 (:mod:`~dolfinx_meshfree.dynamics.conditions`) added to the velocity constraint, so that
 ``int_f v^h = 0`` after every correction (Table I, step 6). On ramp interface cells the particle
 part of the blended functions is constrained in the same way.
@@ -60,7 +62,14 @@ from ..statics.coupled import CoupledElasticity, CouplingOperators
 from ..statics.efg import particle_stiffness
 from ..statics.petsc import create_aij
 from ..statics.sides import BlendedSide
-from .conditions import check_facets, first_cells, fixed_fe_dofs, particle_conditions, stack_rows
+from .conditions import (
+    check_facets,
+    first_cells,
+    fixed_fe_dofs,
+    fixed_groups,
+    particle_conditions,
+    stack_rows,
+)
 from .finite_strain import (
     NonlinearSystem,
     ReducedParticles,
@@ -177,14 +186,14 @@ def build_fe(
     t0 = time.perf_counter()
     msh = V.mesh
     raise_on_all_ranks(msh.comm, lambda: material.check_gdim(msh.geometry.dim, "V's mesh"))
-    facets = check_facets(msh, fixed_facets)
+    groups = fixed_groups(msh, fixed_facets)
     u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
     a = ufl.inner(material.ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx
     K = _compat.assemble_matrix(_compat.create_form(a))
     mass = fe_lumped_mass(V, material.rho)
     n_owned = msh.topology.index_map(msh.topology.dim).size_local
     h = fe_spacing(msh, np.arange(n_owned))
-    fe_field = Field("fe", K, mass, h, fixed=fixed_fe_dofs(V, facets))
+    fe_field = Field("fe", K, mass, h, fixed=fixed_fe_dofs(V, groups))
 
     def body_load(
         force: VectorFunction,
@@ -246,7 +255,7 @@ def build_efg(
     check_particle_mass(particle_mass)
     t0 = time.perf_counter()
     comm = particles.comm
-    facets = check_facets(particles.mesh, fixed_facets)
+    groups = fixed_groups(particles.mesh, fixed_facets)
     mls = raise_on_all_ranks(
         comm, lambda: MLS(particles, weight=weight, dilation=dilation, basis=basis)
     )
@@ -259,8 +268,13 @@ def build_efg(
     K = create_aij(comm, K_loc, pl, pl)
     mass = particle_lumped_mass(particles, tq.values, q.weights, material.rho, particle_mass)
     constraint = None
-    if comm.allreduce(facets.size):
-        D, dl = particle_conditions(particles, [facets], [lambda q: mls.tabulate(q.points, 0)])
+    if groups and comm.allreduce(sum(f.size for f, _ in groups)):
+        D, dl = particle_conditions(
+            particles,
+            [f for f, _ in groups],
+            [lambda q: mls.tabulate(q.points, 0)] * len(groups),
+            [c for _, c in groups],
+        )
         constraint = [create_aij(comm, D, dl, pl)]
 
     def body_load(
@@ -396,7 +410,7 @@ def build_coupled(
     t0 = time.perf_counter()
     V, patch, mls = problem.V, problem.patch, problem.mls
     P, comm, msh = patch.particles, patch.comm, V.mesh
-    facets = check_facets(msh, fixed_facets)
+    held = fixed_groups(msh, fixed_facets)
     ops = problem.operators(integration, slaves)
     rho = material.rho
     fl, pl = ops.fe_layout, ops.particle_layout
@@ -414,23 +428,26 @@ def build_coupled(
     mass_fe.array[:] = mass_fe.array_r * active  # inactive FE dofs: no mass, held at rest
 
     # essential conditions: FE nodes strongly, particles by facet multipliers
-    fixed_fe = fixed_fe_dofs(V, facets)
-    first = first_cells(msh, facets)
-    on_p = patch.in_patch[first]
+    fixed_fe = fixed_fe_dofs(V, held)
     D = dl = None
-    if comm.allreduce(facets.size):
-        groups = [facets[on_p]]
-        tables = [lambda q: mls.tabulate(q.points, 0)]
+    if held and comm.allreduce(sum(f.size for f, _ in held)):
+        groups, tables, comps = [], [], []
         blend = ops.interface if ops.interface_table is not None else None
-        if blend is not None:  # the particle part of the ramp's interface cells
-            n_loc = blend.num_fe_columns
-            groups.append(blend.blended_facets(facets[~on_p]))
-            tables.append(
-                lambda q: ShapeTable(
-                    q.points, blend.table(q.points, q.cells, 0).values[:, n_loc:].tocsr(), []
+        for facets, c in held:
+            on_p = patch.in_patch[first_cells(msh, facets)]
+            groups.append(facets[on_p])
+            tables.append(lambda q: mls.tabulate(q.points, 0))
+            comps.append(c)
+            if blend is not None:  # the particle part of the ramp's interface cells
+                n_loc = blend.num_fe_columns
+                groups.append(blend.blended_facets(facets[~on_p]))
+                tables.append(
+                    lambda q, n_loc=n_loc: ShapeTable(
+                        q.points, blend.table(q.points, q.cells, 0).values[:, n_loc:].tocsr(), []
+                    )
                 )
-            )
-        D_loc, dl = particle_conditions(P, groups, tables)
+                comps.append(c)
+        D_loc, dl = particle_conditions(P, groups, tables, comps)
         if dl.size_global:
             D = create_aij(comm, D_loc, dl, pl)
 

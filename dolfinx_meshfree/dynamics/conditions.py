@@ -1,10 +1,11 @@
-"""Essential conditions of explicit dynamics: facets held at rest.
+"""Essential conditions of explicit dynamics: facets held at rest, in all components or in some
+(symmetry planes, rollers: ``fixed_facets=[(facets, (0,)), ...]``).
 
-FE nodes are held strongly (zero velocity and acceleration: ``M^{-1} = 0``), particles by one
-multiplier per facet and component (:func:`~dolfinx_meshfree.statics.efg.facet_multipliers`) added
-to
-the velocity constraint, so that ``int_f v^h = 0`` after every correction (Rabczuk et al. 2006,
-Table I, step 6; Belytschko et al. 1995, eq. 94–96).
+FE dofs are held strongly (zero velocity and acceleration: ``M^{-1} = 0``), particles by one
+multiplier per facet and held component
+(:func:`~dolfinx_meshfree.statics.efg.facet_multipliers`) added to the velocity constraint, so
+that ``int_f v^h_i = 0`` after every correction (Rabczuk et al. 2006, Table I, step 6;
+Belytschko et al. 1995, eq. 94–96).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ __all__ = [
     "check_facets",
     "first_cells",
     "fixed_fe_dofs",
+    "fixed_groups",
     "particle_conditions",
     "stack_rows",
 ]
@@ -48,6 +50,11 @@ def check_facets(msh: dolfinx.mesh.Mesh, facets: npt.ArrayLike | None) -> np.nda
     def check() -> np.ndarray:
         if facets is None:
             return np.zeros(0, dtype=np.int32)
+        if _is_pairs(facets):
+            raise ValueError(
+                "fixed_facets as (facets, components) pairs is not available with this method; "
+                "pass facets whose nodes are held in all components"
+            )
         f = np.asarray(facets)
         if f.ndim != 1 or (f.size and not np.issubdtype(f.dtype, np.integer)):
             raise ValueError(f"fixed_facets should be a 1D array of facet indices, got {f!r:.80}")
@@ -61,6 +68,44 @@ def check_facets(msh: dolfinx.mesh.Mesh, facets: npt.ArrayLike | None) -> np.nda
     return raise_on_all_ranks(msh.comm, check)
 
 
+def _is_pairs(fixed_facets: object) -> bool:
+    """Whether ``fixed_facets`` is a list of ``(facets, components)`` pairs."""
+    return (
+        isinstance(fixed_facets, list)
+        and len(fixed_facets) > 0
+        and all(isinstance(p, tuple) and len(p) == 2 for p in fixed_facets)
+    )
+
+
+def fixed_groups(
+    msh: dolfinx.mesh.Mesh, fixed_facets: npt.ArrayLike | list | None
+) -> list[tuple[np.ndarray, tuple[int, ...]]]:
+    """``fixed_facets`` as validated ``(facets, components)`` groups (collective checks).
+
+    ``fixed_facets``: ``None``, owned exterior facets (all components held), or a list of
+    ``(facets, components)`` pairs, e.g. ``[(left, (0, 1)), (bottom, (1,))]``: the facets hold
+    only the given components (a symmetry plane: the normal component).
+    """
+    if not _is_pairs(fixed_facets):
+        f = check_facets(msh, fixed_facets)
+        return [(f, tuple(range(msh.geometry.dim)))] if fixed_facets is not None else []
+    gdim = msh.geometry.dim
+    groups = []
+    for facets, components in fixed_facets:
+
+        def check(components: object = components) -> tuple[int, ...]:
+            c = tuple(np.atleast_1d(components).tolist())
+            if not c or len(set(c)) != len(c) or any(k not in range(gdim) for k in c):
+                raise ValueError(
+                    f"fixed_facets has components={components!r}; give distinct component "
+                    f"indices in 0..{gdim - 1}, e.g. (0,) to hold u_x on a symmetry plane x = 0"
+                )
+            return c
+
+        groups.append((check_facets(msh, facets), raise_on_all_ranks(msh.comm, check)))
+    return groups
+
+
 def first_cells(msh: dolfinx.mesh.Mesh, facets: np.ndarray) -> np.ndarray:
     """The first cell of each facet (the only one of an exterior facet)."""
     tdim = msh.topology.dim
@@ -68,8 +113,19 @@ def first_cells(msh: dolfinx.mesh.Mesh, facets: np.ndarray) -> np.ndarray:
     return np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]].astype(np.int64)
 
 
-def fixed_fe_dofs(V: dolfinx.fem.FunctionSpace, facets: np.ndarray) -> np.ndarray:
-    """bool per owned FE dof: a node of one of the facets (on any rank; collective)."""
+def fixed_fe_dofs(
+    V: dolfinx.fem.FunctionSpace,
+    facets: np.ndarray | list[tuple[np.ndarray, tuple[int, ...]]],
+) -> np.ndarray:
+    """bool per owned FE dof: a node of one of the facets (on any rank; collective); with
+    :func:`fixed_groups`' ``(facets, components)`` groups, only the held components."""
+    if isinstance(facets, list):
+        out = np.zeros(V.dofmap.index_map.size_local * V.mesh.geometry.dim, dtype=bool)
+        for f, comps in facets:
+            mask = fixed_fe_dofs(V, f).reshape(-1, V.mesh.geometry.dim)
+            mask[:, [k for k in range(mask.shape[1]) if k not in comps]] = False
+            out |= mask.ravel()
+        return out
     msh = V.mesh
     nodes = dolfinx.fem.locate_dofs_topological(V, msh.topology.dim - 1, facets)
     f = dolfinx.fem.Function(V)
@@ -91,15 +147,18 @@ def particle_conditions(
     particles: ParticleSet,
     facets: Sequence[np.ndarray],
     tables: Sequence[Callable[[QuadraturePoints], ShapeTable]],
+    components: Sequence[tuple[int, ...]] | None = None,
 ) -> tuple[sp.csr_matrix, Layout]:
     """Facet multipliers ``int_f phi_J`` (unit scale) of groups of facets, each with the
-    particle table of its cells (collective)."""
+    particle table of its cells and, optionally, the components it holds (collective)."""
     msh = particles.mesh
     comm = particles.comm
     conds, quads, tabs = [], [], []
-    for f, table in zip(facets, tables, strict=True):
+    if components is None:
+        components = [tuple(range(particles.gdim))] * len(facets)
+    for f, table, comps in zip(facets, tables, components, strict=True):
         q = facet_quadrature(msh, f, 4)
-        conds.append((f, _zero))
+        conds.append((f, _zero, comps))
         quads.append(q)
         tabs.append(raise_on_all_ranks(comm, lambda q=q, table=table: table(q)))
     D, _, _, dl = facet_multipliers(particles, conds, quads, tabs, 1.0)

@@ -184,7 +184,10 @@ class ExplicitDynamics:
     ) -> ExplicitDynamics:
         """Pure FE: DOLFINx's stiffness ``inner(sigma(u), eps(v)) dx`` and row-sum masses.
 
-        ``fixed_facets``: owned exterior facets whose nodes are held at rest (strongly).
+        ``fixed_facets``: owned exterior facets whose nodes are held at rest (strongly), or
+        ``(facets, components)`` pairs holding only some components, e.g.
+        ``[(symmetry_plane, (0,))]`` (every method but the hybrid; particles: one multiplier
+        per facet and held component; :func:`~dolfinx_meshfree.dynamics.conditions.fixed_groups`).
         """
         check_safety(safety)
         return cls._from_model(build_fe(V, material, fixed_facets), safety)

@@ -22,6 +22,7 @@ import numpy as np
 import ufl
 
 from ..couplings import REGISTRY
+from ..couplings.assembly import component_conditions
 from ..couplings.base import CoupledSolution
 from ..physics.constitutive import Material
 from .newton import NewtonOptions
@@ -117,6 +118,17 @@ def solve_finite_strain(
         x.append(v)
     # held FE dofs: the strong values on Dirichlet nodes, 0 on nodes no FE cell carries
     fe.fixed_values = extra["fixed_values"][fe.fixed_local]
+    # and the dofs held by component (DirichletBCs on V.sub(i)) on nodes not held whole
+    flags, values = component_conditions(model)
+    flags = flags[: fe.n_owned // fe.bs].ravel()
+    flags[fe.fixed_local] = False
+    if flags.any():
+        held = np.flatnonzero(flags)
+        fe.hold(
+            np.concatenate([fe.fixed_local, held]),
+            np.concatenate([fe.fixed_values, values.ravel()[held]]),
+            fe.l2g,
+        )
     x[0].array[:] = u.x.array[: fe.n_owned]
     setup = time.perf_counter() - t0
     try:

@@ -178,7 +178,8 @@ class CoupledNonlinearProblem:
             integrals are the FE side (weighted by the FE cells' indicator); its ``u``-free part
             is the dead external load ``-F(0; v)``, split between the FE and particle sides.
         u: The FE unknown (updated in place; the FE part of the solution).
-        bcs: ``DirichletBC`` objects on ``V`` (both components of a node).
+        bcs: ``DirichletBC`` objects on ``V`` or on ``V.sub(i)`` (one component: a symmetry
+            plane or roller, as :class:`~dolfinx_meshfree.CoupledLinearProblem`).
         patch: :class:`~dolfinx_meshfree.ParticlePatch` on ``u``'s mesh.
         material: The particle side's law (:class:`~dolfinx_meshfree.NeoHookean`,
             :class:`~dolfinx_meshfree.SaintVenantKirchhoff` or

@@ -57,6 +57,10 @@ from .petsc import solver_options
 
 __all__ = ["CoupledLinearProblem", "FormBodyForce"]
 
+#: Couplings that hold FE dofs by component (``DirichletBC`` on ``V.sub(i)``): their interface
+#: rows move a held dof's column to the right-hand side one component at a time.
+COMPONENT_COUPLINGS = ("lagrange", "edge-to-edge", "bridging")
+
 #: Relative Frobenius difference above which the form and the material disagree on the patch.
 MATERIAL_TOLERANCE = 1e-8
 
@@ -71,7 +75,10 @@ class CoupledLinearProblem:
     Args:
         a: Bilinear UFL form on the vector P1/Q1 space ``V`` (cell integrals only).
         L: Linear UFL form on ``V`` (cell and exterior-facet integrals).
-        bcs: ``DirichletBC`` objects on ``V`` (all components).
+        bcs: ``DirichletBC`` objects on ``V`` (all components) or on ``V.sub(i)`` (one
+            component, e.g. a symmetry plane or a roller; couplings
+            :data:`COMPONENT_COUPLINGS`): FE dofs held strongly, patch facets whose nodes all
+            hold the component get a multiplier on that component only.
         patch: :class:`~dolfinx_meshfree.ParticlePatch` on ``V``'s mesh.
         material: :class:`~dolfinx_meshfree.LinearElastic` of the particle side; must agree with
             ``a`` on the patch cells.
@@ -138,17 +145,22 @@ class CoupledLinearProblem:
             count.ravel()[dofs] += 1
             values.ravel()[dofs] = vals
         fixed = count.all(axis=1)
-        half = np.flatnonzero((count.any(axis=1) & ~fixed)[: V.dofmap.index_map.size_local])
+        held = count.astype(bool) & ~fixed[:, None]  # dofs held by component (V.sub(i))
+        bad = held.any() and problem.coupling not in COMPONENT_COUPLINGS
 
-        def check_components() -> None:
-            if half.size:
+        def check_coupling() -> None:
+            if bad:
                 raise ValueError(
-                    f"bcs constrain only some components at {half.size} node(s); "
-                    "CoupledLinearProblem supports conditions on all components of a node"
+                    f"bcs on a subspace V.sub(i) with coupling={problem.coupling!r}: conditions "
+                    f"on one component are supported with the couplings "
+                    f"{list(COMPONENT_COUPLINGS)}; constrain all components, or choose one of "
+                    "those couplings"
                 )
 
-        raise_on_all_ranks(patch.comm, check_components)
+        raise_on_all_ranks(patch.comm, check_coupling)
         problem.strong.append((fixed, values))
+        if patch.comm.allreduce(int(held.any()), op=MPI.MAX):
+            problem.strong.append((held, values))
         # exterior facets whose nodes are all constrained, of patch cells (they constrain the
         # particles) and of FE cells with a node on the interface (the nodes are fixed strongly
         # anyway; the ramp's interface cells constrain the particle part of their blended
@@ -170,11 +182,36 @@ class CoupledLinearProblem:
         g.x.scatter_forward()
         if patch.comm.allreduce(bc_facets.size):
             problem.add_dirichlet(bc_facets, lambda x, g=g: evaluate_fe_function(g, x))
+        # patch facets whose nodes all hold component i (and are not fixed whole): a
+        # multiplier on that component only (Belytschko et al. 1995, eq. 2.6 by component)
+        on_component = np.zeros(len(facets), dtype=bool)
+        for i in range(gdim):
+            on_i = count[nodes, i].all(axis=1) & ~on & beside_patch
+            on_component |= on_i
+            if patch.comm.allreduce(int(on_i.sum())):
+                problem.add_dirichlet(
+                    facets[on_i], lambda x, g=g: evaluate_fe_function(g, x), components=(i,)
+                )
         # constrained nodes that neither an FE cell nor a constrained patch facet carries
         active = node_flags(problem.V, _compat.dofmap_array(V)[patch.fe_cells].ravel())
-        on_facet = node_flags(problem.V, nodes[on].ravel())
+        # (a node fixed whole by two component conditions sits on their facets: a corner)
+        on_facet = node_flags(problem.V, nodes[on | on_component].ravel())
         n_owned = V.dofmap.index_map.size_local
-        lone = np.flatnonzero((fixed & ~active & ~on_facet)[:n_owned])
+        on_boundary = node_flags(problem.V, nodes.ravel())
+        lone = np.flatnonzero(((fixed | held.any(axis=1)) & ~active & ~on_facet)[:n_owned])
+        inner = np.flatnonzero((held.any(axis=1) & ~on_boundary)[:n_owned])
+        xi = V.tabulate_dof_coordinates()[inner, :gdim]
+
+        def check_inner() -> None:
+            if inner.size:
+                raise ValueError(
+                    f"bcs on a subspace V.sub(i) hold {inner.size} node(s) off the boundary, "
+                    f"e.g. at {xi[:3].round(6).tolist()} (on the FE-patch interface or "
+                    "inside the body): conditions on one component are supported on exterior "
+                    "facets only (symmetry planes, rollers); locate the dofs on boundary facets"
+                )
+
+        raise_on_all_ranks(patch.comm, check_inner)
         xy = V.tabulate_dof_coordinates()[lone, :gdim]
 
         def check() -> None:
@@ -283,11 +320,11 @@ def _check_arguments(a, L, bcs, patch, material, coupling, options):
     for i, bc in enumerate(bcs):
         if not hasattr(bc, "dof_indices") or not hasattr(bc, "g"):
             raise TypeError(f"bcs[{i}] must be a dolfinx.fem.DirichletBC, got {type(bc).__name__}")
-        if list(bc.function_space.component()):
+        component = list(bc.function_space.component())
+        if len(component) > 1:
             raise ValueError(
-                f"bcs[{i}] constrains component {list(bc.function_space.component())} of V (a "
-                "subspace); CoupledLinearProblem supports conditions on all components of V: "
-                "constrain every component with dirichletbc(value, dofs, V)"
+                f"bcs[{i}] constrains component {component} of a nested subspace; constrain "
+                "V.sub(i) (one displacement component) or V"
             )
     return V
 

@@ -21,7 +21,8 @@ from typing import Any
 import numpy as np
 
 from ..fracture.criteria import equivalent_sif, kink_angle
-from ..geometry.crack import Crack
+from ..geometry.crack import Crack, particle_spacing
+from .sifs import DEFAULT_RADII
 
 __all__ = ["GrowthStep", "QuasiStaticCrackGrowth"]
 
@@ -33,7 +34,7 @@ class GrowthStep:
     Attributes:
         step: 0, 1, ...; tip: the tip (2,) at which K was computed (before the extension);
         direction: the crack direction there; K_I, K_II: means over the integration domains;
-        path_dependence: their spread (``StressIntensityFactors.path_dependence``);
+        radius: the outer domain radii used; path_dependence: their spread (``StressIntensityFactors.path_dependence``);
         theta: kink angle (radians, counterclockwise from ``direction``); K_eq: the equivalent
         SIF; grown: whether the crack was extended after this step; new_tip: the tip after it;
         time_solve: seconds of ``problem.solve()`` (rebuild of the tables, cut cells and
@@ -45,6 +46,7 @@ class GrowthStep:
     direction: np.ndarray
     K_I: float
     K_II: float
+    radius: np.ndarray
     path_dependence: float
     theta: float
     K_eq: float
@@ -56,7 +58,7 @@ class GrowthStep:
     def as_dict(self) -> dict:
         """Plain lists and floats (for JSON)."""
         d = asdict(self)
-        for k in ("tip", "direction", "new_tip"):
+        for k in ("tip", "direction", "new_tip", "radius"):
             d[k] = np.asarray(d[k]).tolist()
         return d
 
@@ -107,8 +109,9 @@ class QuasiStaticCrackGrowth:
             cracks include ``crack`` (with its loads and conditions set).
         crack: the growing crack. increment: ``da`` (> 0). steps: the number of steps (>= 1).
         K_Ic: fracture toughness, or None. tip: the end to grow, 0 or -1 (default: the only
-            tip). radius: outer domain radii of the interaction integral (default: the
-            solution's, 3, 4, 5 particle spacings). sif_options: more keywords of
+            tip). radius: outer domain radii of the interaction integral (default: 3, 4, 5
+            particle spacings, scaled down to 0.9 of the tip segment's length when the
+            increment is shorter: the previous kink must stay outside the domains). sif_options: more keywords of
             ``stress_intensity_factors``.
 
     Example:
@@ -147,6 +150,16 @@ class QuasiStaticCrackGrowth:
         pts = [self.history[0].tip] + [s.new_tip for s in self.history if s.grown]
         return np.array(pts)
 
+    def _radii(self, solution: Any) -> np.ndarray:
+        """The default radii (``DEFAULT_RADII`` x h), scaled down to fit within 0.9 of the tip
+        segment: the interaction integral assumes a straight crack in its domain, so a kink
+        (the previous tip) must stay outside it; an increment ``da >= 5.6 h`` keeps them."""
+        domain = getattr(solution, "domain", None) or solution.patch
+        h = particle_spacing(domain)
+        a, b = self.crack.points[self.end], self.crack.points[1 if self.end == 0 else -2]
+        r = np.asarray(DEFAULT_RADII, float) * h
+        return r * min(1.0, 0.9 * float(np.linalg.norm(a - b)) / r.max())
+
     def step(self) -> GrowthStep:
         """Solve, compute K at the tip, and grow (if the criterion says so). Collective."""
         crack, end = self.crack, self.end
@@ -155,7 +168,8 @@ class QuasiStaticCrackGrowth:
         t0 = time.perf_counter()
         sol = self.problem.solve()
         t1 = time.perf_counter()
-        sif = sol.stress_intensity_factors(crack, tip=tip, radius=self.radius, **self.sif_options)
+        radius = self._radii(sol) if self.radius is None else self.radius
+        sif = sol.stress_intensity_factors(crack, tip=tip, radius=radius, **self.sif_options)
         t2 = time.perf_counter()
         self.solution = sol
         KI, KII = float(sif.K_I.mean()), float(sif.K_II.mean())
@@ -166,7 +180,7 @@ class QuasiStaticCrackGrowth:
             crack.extend(theta, self.increment, tip=end)
         rec = GrowthStep(
             step=len(self.history), tip=tip, direction=direction, K_I=KI, K_II=KII,
-            path_dependence=sif.path_dependence, theta=theta, K_eq=keq, grown=grown,
+            radius=np.atleast_1d(np.asarray(radius, float)), path_dependence=sif.path_dependence, theta=theta, K_eq=keq, grown=grown,
             new_tip=crack.points[end].copy(), time_solve=t1 - t0, time_sifs=t2 - t1,
         )  # fmt: skip
         self.history.append(rec)

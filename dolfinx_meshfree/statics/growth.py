@@ -34,7 +34,8 @@ class GrowthStep:
     Attributes:
         step: 0, 1, ...; tip: the tip (2,) at which K was computed (before the extension);
         direction: the crack direction there; K_I, K_II: means over the integration domains;
-        radius: the outer domain radii used; path_dependence: their spread (``StressIntensityFactors.path_dependence``);
+        radius: the outer domain radii used; path_dependence: the spread of K over them
+        (``StressIntensityFactors.path_dependence``);
         theta: kink angle (radians, counterclockwise from ``direction``); K_eq: the equivalent
         SIF; grown: whether the crack was extended after this step; new_tip: the tip after it;
         time_solve: seconds of ``problem.solve()`` (rebuild of the tables, cut cells and
@@ -111,8 +112,8 @@ class QuasiStaticCrackGrowth:
         K_Ic: fracture toughness, or None. tip: the end to grow, 0 or -1 (default: the only
             tip). radius: outer domain radii of the interaction integral (default: 3, 4, 5
             particle spacings, scaled down to 0.9 of the tip segment's length when the
-            increment is shorter: the previous kink must stay outside the domains). sif_options: more keywords of
-            ``stress_intensity_factors``.
+            increment is shorter: the previous kink must stay outside the domains).
+            sif_options: more keywords of ``stress_intensity_factors``.
 
     Example:
         >>> growth = mf.QuasiStaticCrackGrowth(problem, crack, increment=0.02, steps=5)
@@ -180,7 +181,8 @@ class QuasiStaticCrackGrowth:
             crack.extend(theta, self.increment, tip=end)
         rec = GrowthStep(
             step=len(self.history), tip=tip, direction=direction, K_I=KI, K_II=KII,
-            radius=np.atleast_1d(np.asarray(radius, float)), path_dependence=sif.path_dependence, theta=theta, K_eq=keq, grown=grown,
+            radius=np.atleast_1d(np.asarray(radius, float)),
+            path_dependence=sif.path_dependence, theta=theta, K_eq=keq, grown=grown,
             new_tip=crack.points[end].copy(), time_solve=t1 - t0, time_sifs=t2 - t1,
         )  # fmt: skip
         self.history.append(rec)

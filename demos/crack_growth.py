@@ -119,7 +119,7 @@ def plot(records: list[dict], path: str) -> None:
     ax.set_aspect("equal")
     ax.set_xlabel("x")
     ax.set_ylabel("y")
-    ax.set_title("crack paths (maximum hoop stress, da = %g)" % records[0]["da"])
+    ax.set_title(f"crack paths (maximum hoop stress, da = {records[0]['da']:g})")
     ax.legend(fontsize=7)
     fig.savefig(path, dpi=150, bbox_inches="tight")
     plt.close(fig)
@@ -168,7 +168,8 @@ def main(argv=None) -> int:
         for r in records:
             print(f" {r['method']:10s} h = {r['h']:g}: first kink {r['first_kink_deg']:+.3f} deg "
                   f"(hoop max {r['first_kink_hoop_max_deg']:+.3f}), particles {r['particles']}, "
-                  f"FE dofs {r['fe_dofs']}, mean step {np.mean(r['time_per_step']):.3f} s")  # fmt: skip
+                  f"FE dofs {r['fe_dofs']}, "
+                  f"mean step {np.mean(r['time_per_step']):.3f} s")  # fmt: skip
         print(f" checks: {'met' if ok else 'MISSED'}")
         if args.png:
             plot(records, args.png)

@@ -39,7 +39,8 @@ class GrowthStep:
         theta: kink angle (radians, counterclockwise from ``direction``); K_eq: the equivalent
         SIF; grown: whether the crack was extended after this step; new_tip: the tip after it;
         time_solve: seconds of ``problem.solve()`` (rebuild of the tables, cut cells and
-        operator, assembly, solve); time_sifs: seconds of the interaction integral.
+        operator, assembly, solve); time_sifs: seconds of the interaction integral;
+        timings: the solution's own split of ``time_solve`` (e.g. setup, assemble, solve).
     """
 
     step: int
@@ -55,6 +56,7 @@ class GrowthStep:
     new_tip: np.ndarray
     time_solve: float
     time_sifs: float
+    timings: dict
 
     def as_dict(self) -> dict:
         """Plain lists and floats (for JSON)."""
@@ -184,6 +186,7 @@ class QuasiStaticCrackGrowth:
             radius=np.atleast_1d(np.asarray(radius, float)),
             path_dependence=sif.path_dependence, theta=theta, K_eq=keq, grown=grown,
             new_tip=crack.points[end].copy(), time_solve=t1 - t0, time_sifs=t2 - t1,
+            timings=dict(getattr(sol, "timings", None) or {}),
         )  # fmt: skip
         self.history.append(rec)
         return rec

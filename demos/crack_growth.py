@@ -12,7 +12,10 @@
 # the maximiser of the hoop stress of the computed K's (a 1e-4 rad grid search; the formula is
 # exact, so this checks the criterion's sign and branch) and turns the crack towards the
 # mode-I direction (clockwise); the paths of the two resolutions are compared (max distance of
-# the tips after each step, relative to the final crack length; issue 10's target 1 %, reported).
+# the tips after each step, relative to the final crack length; issue 10's target 1 %). The
+# run exits 1 on a miss. Measured (h = 0.025 vs 0.0125, da = 0.1, 3 steps): EFG 0.17 %;
+# lagrange and bridging 4.4 % (MISSED: their K's at h = 0.0125 differ from EFG's by 2 % on the
+# straight crack and 6 % after the first kink; cause not found, see the growth report).
 # The time of a step is the full rebuild (tables, cut cells, assembly) and the solve.
 #
 #     python demos/crack_growth.py [--methods efg lagrange bridging] [--h 0.025 0.0125]
@@ -33,6 +36,8 @@ from sif_common import COMM, owned_cells, write_json
 
 MATERIAL = mf.LinearElastic(1000.0, 0.3, plane="strain")
 Y0, ANGLE, A = 0.0063, 30.0, 0.3  # Y0: off the particle rows of every demo spacing
+RADII = (0.05, 0.065, 0.08)  # interaction integral domains, below da = 0.1 (the last kink)
+PATH_TARGET = 0.01  # issue 10: paths of the two finest resolutions within 1 % of the length
 
 
 def model(method: str, h: float, width: float = 1.0):
@@ -78,11 +83,11 @@ def model(method: str, h: float, width: float = 1.0):
     return prob, crack, sizes
 
 
-def run(method: str, h: float, steps: int, da: float, width: float = 1.0) -> dict:
+def run(method: str, h: float, steps: int, da: float, width: float = 1.0, radius=None) -> dict:
     t0 = time.perf_counter()
     prob, crack, sizes = model(method, h, width)
     build = time.perf_counter() - t0
-    growth = mf.QuasiStaticCrackGrowth(prob, crack, increment=da, steps=steps)
+    growth = mf.QuasiStaticCrackGrowth(prob, crack, increment=da, steps=steps, radius=radius)
     hist = growth.run()
     s = hist[0]
     grid = np.linspace(-np.pi + 1e-4, np.pi - 1e-4, 62831)
@@ -132,12 +137,18 @@ def main(argv=None) -> int:
     parser.add_argument("--steps", type=int, default=3)
     parser.add_argument("--da", type=float, default=0.1)
     parser.add_argument("--width", type=float, default=1.0, help="plate size (EFG timing)")
+    parser.add_argument(
+        "--radius", nargs="+", type=float, default=None,
+        help="outer domain radii (default: 0.05 0.065 0.08, fixed in the plate so that the "
+        "paths converge with h, below da; --quick: 3, 4, 5 h capped at 0.9 da)",
+    )  # fmt: skip
     parser.add_argument("--json", default=None)
     parser.add_argument("--png", default=None)
     parser.add_argument("--quick", action="store_true", help="smoke run: h = 0.05, 2 steps")
     args = parser.parse_args(argv)
     hs, steps = ([0.05], 2) if args.quick else (args.h, args.steps)
-    records = [run(m, h, steps, args.da, args.width) for m in args.methods for h in hs]
+    radius = args.radius or (None if args.quick else RADII)
+    records = [run(m, h, steps, args.da, args.width, radius) for m in args.methods for h in hs]
     ok = True
     out = {"records": records, "path_difference": {}}
     if COMM.rank == 0:
@@ -161,6 +172,7 @@ def main(argv=None) -> int:
         if len(rs) >= 2:
             d = path_difference(rs[-2], rs[-1])
             out["path_difference"][m] = d
+            ok &= d <= PATH_TARGET
             if COMM.rank == 0:
                 print(f" {m}: path difference h = {rs[-2]['h']:g} vs {rs[-1]['h']:g}: {d:.2%} "
                       "of the crack length (target 1 %)")  # fmt: skip

@@ -15,8 +15,8 @@ Public API (stable names):
   :class:`InternalForces` (``f_int(u)``, ``K_T(u)`` from shape tables);
 * fracture on any 2D field given by its gradient: :func:`interaction_integral` (K_I, K_II, J
   per domain radius), the near-tip :class:`WilliamsField`, :func:`kink_angle` and
-  :func:`equivalent_sif` (maximum hoop stress); exact references :class:`InclinedCentreCrack`
-  and :func:`edge_crack_factor`;
+  :func:`equivalent_sif` (maximum hoop stress), growth by :class:`QuasiStaticCrackGrowth`;
+  exact references :class:`InclinedCentreCrack` and :func:`edge_crack_factor`;
 * output of explicit dynamics: :class:`DynamicsWriter` (XDMF of the FE fields and the particle
   cloud over time), :func:`read_particles`, :class:`ProgressBar`.
 
@@ -59,6 +59,7 @@ from .statics.coupled import (
 )
 from .statics.efg import EFGElasticity, EFGSolution
 from .statics.fe import FESolution, solve_fe_elasticity, solve_forms
+from .statics.growth import GrowthStep, QuasiStaticCrackGrowth
 from .statics.newton import NewtonError, NewtonOptions, NewtonResult
 from .statics.nonlinear import FINITE_STRAIN_COUPLINGS, CoupledNonlinearProblem, FENonlinearProblem
 from .statics.problem import CoupledLinearProblem
@@ -95,6 +96,7 @@ __all__ = [
     "FENonlinearProblem",
     "FESolution",
     "GaussianPulseRod",
+    "GrowthStep",
     "HybridElasticity",
     "InclinedCentreCrack",
     "InternalForces",
@@ -112,6 +114,7 @@ __all__ = [
     "PointsOutsideMeshError",
     "PressurizedBushing",
     "ProgressBar",
+    "QuasiStaticCrackGrowth",
     "SaintVenantKirchhoff",
     "ShapeTable",
     "StaleTableError",

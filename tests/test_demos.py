@@ -220,3 +220,20 @@ def test_bench_blocks_smoke(shared_dir):
         assert r["relative_difference"] <= 1e-10
     MPI.COMM_WORLD.Barrier()
     assert len(json.loads(out.read_text())) == len(records)
+
+
+def test_crack_growth_demo_quick(shared_dir, monkeypatch):
+    """Smoke: demos/crack_growth.py --quick (h = 0.05, 2 steps, efg and lagrange): the first
+    kink maximises the hoop stress and turns the 30 deg crack clockwise (measured -22.53 deg
+    EFG, -22.38 lagrange: 0.15 deg apart; bound 0.5 deg); the JSON has the paths."""
+    monkeypatch.syspath_prepend(str(DEMOS))
+    demo = load_demo("crack_growth")
+    path = shared_dir / "growth.json"
+    assert demo.main(["--quick", "--methods", "efg", "lagrange", "--json", str(path)]) == 0
+    MPI.COMM_WORLD.Barrier()
+    rec = json.loads(path.read_text())["records"]
+    assert [r["method"] for r in rec] == ["efg", "lagrange"]
+    for r in rec:
+        assert len(r["history"]) == 2 and len(r["path"]) == 4
+        assert -30.0 < r["first_kink_deg"] < -12.0
+    assert abs(rec[0]["first_kink_deg"] - rec[1]["first_kink_deg"]) < 0.5

@@ -1,0 +1,197 @@
+# # Quasi-static mixed-mode crack growth from an inclined edge crack (issue 10, item 5)
+#
+# Plate [0, 1] x [-0.5, 0.5] under remote tension sigma_yy = 1 (tractions on the top and bottom
+# edges; rigid motions removed by three scalar conditions, statically determinate), plane strain.
+# An edge crack from (0, Y0) rising at 30 degrees, length a = 0.3, grows by ``da`` per step
+# (``mf.QuasiStaticCrackGrowth``, prescribed increments: K_Ic = None): each step solves, computes
+# K_I, K_II at the tip (domain interaction integral), kinks by the maximum hoop stress angle
+# theta_c = 2 atan[(K_I - sqrt(K_I^2 + 8 K_II^2)) / (4 K_II)] and extends the crack.
+#
+# Methods: ``efg`` (particles everywhere), ``lagrange`` and ``bridging`` (a particle patch around
+# the crack and its path, x < 0.85, y > -0.2; Q1 elements elsewhere). Checks: the first kink is
+# the maximiser of the hoop stress of the computed K's (a 1e-4 rad grid search; the formula is
+# exact, so this checks the criterion's sign and branch) and turns the crack towards the
+# mode-I direction (clockwise); the paths of the two resolutions are compared (max distance of
+# the tips after each step, relative to the final crack length; issue 10's target 1 %). The
+# run exits 1 on a miss. Measured (h = 0.025 vs 0.0125, da = 0.1, 3 steps): EFG 0.17 %;
+# lagrange and bridging 4.4 % (MISSED). Their K's at h = 0.0125 differ from EFG's by 2 % on the
+# straight crack and 6 % after the first kink; not the coupling: pure EFG with the coupled
+# models' rigid-motion conditions (left-edge facets next to the mouth, where component
+# conditions must sit: on patch facets) gives the lagrange K's to 1e-4, and those conditions
+# carry multipliers that grow under refinement (0.08 at h = 0.025, 0.56 at h = 0.0125) instead
+# of vanishing; the EFG conditions at the bottom corners carry 0.04 or less.
+# The time of a step is the full rebuild (tables, cut cells, assembly) and the solve.
+#
+#     python demos/crack_growth.py [--methods efg lagrange bridging] [--h 0.025 0.0125]
+#         [--steps 3] [--da 0.1] [--json F] [--png F] [--quick]
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+import dolfinx_meshfree as mf
+from dolfinx_meshfree import _compat
+
+import dolfinx
+import numpy as np
+from sif_common import COMM, owned_cells, write_json
+
+MATERIAL = mf.LinearElastic(1000.0, 0.3, plane="strain")
+Y0, ANGLE, A = 0.0063, 30.0, 0.3  # Y0: off the particle rows of every demo spacing
+RADII = (0.05, 0.065, 0.08)  # interaction integral domains, below da = 0.1 (the last kink)
+PATH_TARGET = 0.01  # issue 10: paths of the two finest resolutions within 1 % of the length
+
+
+def model(method: str, h: float, width: float = 1.0):
+    """The plate (``width`` x ``width``, centred on y = 0), the crack and the problem."""
+    t = np.deg2rad(ANGLE)
+    crack = mf.Crack([[0.0, Y0], [A * np.cos(t), Y0 + A * np.sin(t)]])
+    n = round(width / h)
+    msh = dolfinx.mesh.create_rectangle(
+        COMM, [np.array([0.0, -width / 2]), np.array([width, width / 2])], [n, n],
+        dolfinx.mesh.CellType.quadrilateral,
+    )  # fmt: skip
+    zero = lambda x: np.zeros((len(x), 2))  # noqa: E731
+    if method == "efg":
+        P = mf.ParticleSet.from_cells(msh, h)
+        prob = mf.EFGElasticity(P, MATERIAL, cracks=[crack])
+        bottom = lambda x: np.isclose(x[1], -width / 2)  # noqa: E731
+        pin = mf.boundary_facets(msh, lambda x: bottom(x) & (x[0] < h + 1e-9))
+        roll = mf.boundary_facets(msh, lambda x: bottom(x) & (x[0] > width - h - 1e-9))
+        comps = ((0, 1), (1,))
+        sizes = {"particles": P.num_particles, "fe_dofs": 0}
+    else:
+        cells = owned_cells(msh, lambda c: (c[:, 0] < 0.85) & (c[:, 1] > -0.2))
+        patch = mf.ParticlePatch(msh, cells, h, cracks=[crack])
+        V = _compat.vector_function_space(msh)
+        prob = mf.CoupledElasticity(V, patch, MATERIAL, coupling=method)
+        f = patch.exterior_facets  # the left edge's facets just below and above the mouth
+        mid = msh.geometry.x[_compat.entities_to_geometry(msh, 1, f)][..., :2].mean(axis=1)
+        left = np.isclose(mid[:, 0], 0.0)
+        pin = f[left & (np.abs(mid[:, 1] - (Y0 - h)) < 0.5 * h)]
+        roll = f[left & (np.abs(mid[:, 1] - (Y0 + h)) < 0.5 * h)]
+        comps = ((0, 1), (0,))
+        sizes = {
+            "particles": patch.particles.num_particles,
+            "fe_dofs": 2 * V.dofmap.index_map.size_global,
+        }
+    for facets, c in zip((pin, roll), comps, strict=True):
+        if COMM.allreduce(facets.size) == 0:
+            raise RuntimeError("no facet for the rigid-motion conditions")
+        prob.add_dirichlet(facets, zero, components=c)
+    for y, s in ((width / 2, 1.0), (-width / 2, -1.0)):
+        top = mf.boundary_facets(msh, lambda x, y=y: np.isclose(x[1], y))
+        prob.add_traction(top, lambda x, n, s=s: np.tile([0.0, s], (len(x), 1)))
+    return prob, crack, sizes
+
+
+def run(method: str, h: float, steps: int, da: float, width: float = 1.0, radius=None) -> dict:
+    t0 = time.perf_counter()
+    prob, crack, sizes = model(method, h, width)
+    build = time.perf_counter() - t0
+    growth = mf.QuasiStaticCrackGrowth(prob, crack, increment=da, steps=steps, radius=radius)
+    hist = growth.run()
+    s = hist[0]
+    grid = np.linspace(-np.pi + 1e-4, np.pi - 1e-4, 62831)
+    best = float(grid[np.argmax(mf.fracture.criteria.hoop_stress_factor(grid, s.K_I, s.K_II))])
+    return {
+        "method": method, "h": h, "da": da, "steps": steps, "width": width,
+        "path": crack.points.tolist(),
+        "history": [r.as_dict() for r in hist],
+        "first_kink_deg": np.rad2deg(s.theta),
+        "first_kink_hoop_max_deg": np.rad2deg(best),
+        "crack_length": crack.length,
+        "time_build": build,
+        "time_per_step": [r.time_solve + r.time_sifs for r in hist],
+        **sizes, "ranks": COMM.size,
+    }  # fmt: skip
+
+
+def path_difference(p: dict, q: dict) -> float:
+    """Max distance of the tips after each step, relative to the final crack length."""
+    a, b = np.asarray(p["path"])[1:], np.asarray(q["path"])[1:]
+    return float(np.linalg.norm(a - b, axis=1).max() / q["crack_length"])
+
+
+def plot(records: list[dict], path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for r in records:
+        p = np.asarray(r["path"])
+        ax.plot(p[:, 0], p[:, 1], "-o", ms=3, label=f"{r['method']}, h = {r['h']:g}")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x")
+    ax.set_ylabel("y")
+    ax.set_title(f"crack paths (maximum hoop stress, da = {records[0]['da']:g})")
+    ax.legend(fontsize=7)
+    fig.savefig(path, dpi=150, bbox_inches="tight")
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--methods", nargs="+", default=["efg", "lagrange", "bridging"])
+    parser.add_argument("--h", nargs="+", type=float, default=[0.025, 0.0125])
+    parser.add_argument("--steps", type=int, default=3)
+    parser.add_argument("--da", type=float, default=0.1)
+    parser.add_argument("--width", type=float, default=1.0, help="plate size (EFG timing)")
+    parser.add_argument(
+        "--radius", nargs="+", type=float, default=None,
+        help="outer domain radii (default: 0.05 0.065 0.08, fixed in the plate so that the "
+        "paths converge with h, below da; --quick: 3, 4, 5 h capped at 0.9 da)",
+    )  # fmt: skip
+    parser.add_argument("--json", default=None)
+    parser.add_argument("--png", default=None)
+    parser.add_argument("--quick", action="store_true", help="smoke run: h = 0.05, 2 steps")
+    args = parser.parse_args(argv)
+    hs, steps = ([0.05], 2) if args.quick else (args.h, args.steps)
+    radius = args.radius or (None if args.quick else RADII)
+    records = [run(m, h, steps, args.da, args.width, radius) for m in args.methods for h in hs]
+    ok = True
+    out = {"records": records, "path_difference": {}}
+    if COMM.rank == 0:
+        print(f"inclined edge crack ({ANGLE:g} deg, a = {A:g}), da = {args.da:g}, {steps} steps")
+        print(" method      h        step  tip                 K_I       K_II      theta[deg]"
+              "  radius   step[s]")  # fmt: skip
+    for r in records:
+        for s in r["history"]:
+            if COMM.rank == 0:
+                print(
+                    f" {r['method']:10s} {r['h']:<8g} {s['step']:4d}  "
+                    f"({s['tip'][0]:.4f}, {s['tip'][1]:.4f})  {s['K_I']:8.5f}  "
+                    f"{s['K_II']:+8.5f}  {np.rad2deg(s['theta']):+8.3f}    "
+                    f"{s['radius'][-1]:.4f}   {s['time_solve'] + s['time_sifs']:.3f}"
+                )
+        # the criterion's branch: the formula's angle maximises the hoop stress (grid 1e-4 rad)
+        kink_ok = abs(r["first_kink_deg"] - r["first_kink_hoop_max_deg"]) < 0.01
+        ok &= kink_ok and r["first_kink_deg"] < 0  # K_II > 0: clockwise, towards mode I
+    for m in args.methods:
+        rs = [r for r in records if r["method"] == m]
+        if len(rs) >= 2:
+            d = path_difference(rs[-2], rs[-1])
+            out["path_difference"][m] = d
+            ok &= d <= PATH_TARGET
+            if COMM.rank == 0:
+                print(f" {m}: path difference h = {rs[-2]['h']:g} vs {rs[-1]['h']:g}: {d:.2%} "
+                      "of the crack length (target 1 %)")  # fmt: skip
+    if COMM.rank == 0:
+        for r in records:
+            print(f" {r['method']:10s} h = {r['h']:g}: first kink {r['first_kink_deg']:+.3f} deg "
+                  f"(hoop max {r['first_kink_hoop_max_deg']:+.3f}), particles {r['particles']}, "
+                  f"FE dofs {r['fe_dofs']}, "
+                  f"mean step {np.mean(r['time_per_step']):.3f} s")  # fmt: skip
+        print(f" checks: {'met' if ok else 'MISSED'}")
+        if args.png:
+            plot(records, args.png)
+    write_json(args.json, out)
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

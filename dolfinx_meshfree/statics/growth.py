@@ -1,0 +1,200 @@
+"""Quasi-static crack growth (issue 10, item 5): solve, K_I and K_II at the tip by the domain
+interaction integral, kink by the maximum hoop stress criterion (Erdogan & Sih 1963;
+:mod:`~dolfinx_meshfree.fracture.criteria`), extend the crack by ``da`` and solve again.
+
+Belytschko et al. (1995), remark after eq. (3.11): the MLS shape functions change as the crack
+grows; the crack's :meth:`~dolfinx_meshfree.Crack.extend` bumps the MLS version and the next
+``problem.solve()`` re-tabulates and re-integrates (a *full* rebuild of the particle side; the
+cost of a step grows with the patch, see the growth demo's timing table).
+
+Works with any problem whose ``solve()`` returns a solution with ``stress_intensity_factors``:
+:class:`~dolfinx_meshfree.EFGElasticity`, :class:`~dolfinx_meshfree.CoupledElasticity` and
+:class:`~dolfinx_meshfree.CoupledLinearProblem` (a coupling of ``CRACK_COUPLINGS``).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from ..fracture.criteria import equivalent_sif, kink_angle
+from ..geometry.crack import Crack, particle_spacing
+from .sifs import DEFAULT_RADII
+
+__all__ = ["GrowthStep", "QuasiStaticCrackGrowth"]
+
+
+@dataclass
+class GrowthStep:
+    """One step of :class:`QuasiStaticCrackGrowth`.
+
+    Attributes:
+        step: 0, 1, ...; tip: the tip (2,) at which K was computed (before the extension);
+        direction: the crack direction there; K_I, K_II: means over the integration domains;
+        radius: the outer domain radii used; path_dependence: the spread of K over them
+        (``StressIntensityFactors.path_dependence``);
+        theta: kink angle (radians, counterclockwise from ``direction``); K_eq: the equivalent
+        SIF; grown: whether the crack was extended after this step; new_tip: the tip after it;
+        time_solve: seconds of ``problem.solve()`` (rebuild of the tables, cut cells and
+        operator, assembly, solve); time_sifs: seconds of the interaction integral;
+        timings: the solution's own split of ``time_solve`` (e.g. setup, assemble, solve).
+    """
+
+    step: int
+    tip: np.ndarray
+    direction: np.ndarray
+    K_I: float
+    K_II: float
+    radius: np.ndarray
+    path_dependence: float
+    theta: float
+    K_eq: float
+    grown: bool
+    new_tip: np.ndarray
+    time_solve: float
+    time_sifs: float
+    timings: dict
+
+    def as_dict(self) -> dict:
+        """Plain lists and floats (for JSON)."""
+        d = asdict(self)
+        for k in ("tip", "direction", "new_tip", "radius"):
+            d[k] = np.asarray(d[k]).tolist()
+        return d
+
+
+def _check(crack: Crack, increment: float, steps: int, K_Ic: float | None, tip: int | None) -> int:
+    """Validate the arguments (local, the same on every rank). Returns the end index to grow."""
+    if not isinstance(crack, Crack):
+        raise ValueError(f"crack={crack!r:.80} should be a dolfinx_meshfree.Crack")
+    if isinstance(increment, bool) or not (
+        isinstance(increment, int | float) and np.isfinite(increment) and increment > 0
+    ):
+        raise ValueError(
+            f"increment={increment!r} must be a positive crack extension da per step "
+            "(e.g. one to two particle spacings)"
+        )
+    if isinstance(steps, bool) or not isinstance(steps, int | np.integer) or steps < 1:
+        raise ValueError(f"steps={steps!r} must be an integer >= 1 (the number of growth steps)")
+    if K_Ic is not None and not (np.isfinite(K_Ic) and K_Ic > 0):
+        raise ValueError(
+            f"K_Ic={K_Ic!r} must be a positive fracture toughness, or None (grow every step)"
+        )
+    ends = crack.tip_ends
+    tips = {e: np.round(crack.points[e], 12).tolist() for e in ends}
+    if tip is None:
+        if len(ends) != 1:
+            raise ValueError(
+                f"the crack has tips at {list(tips.values())}: give tip=0 (start) or tip=-1 (end)"
+            )
+        return ends[0]
+    if isinstance(tip, bool) or tip not in ends:
+        raise ValueError(
+            f"tip={tip!r} is not a tip of the crack; its tips are the ends {tips} "
+            "(0: the start point, -1: the end point; a mouth on the boundary does not grow)"
+        )
+    return int(tip)
+
+
+class QuasiStaticCrackGrowth:
+    """Quasi-static growth of one tip of ``crack`` under the problem's fixed loads.
+
+    Each step: ``problem.solve()``; ``K_I``, ``K_II`` at the tip (mean over the domain radii
+    ``radius``); kink angle ``theta_c = 2 atan[(K_I - sqrt(K_I^2 + 8 K_II^2)) / (4 K_II)]``;
+    if ``K_eq >= K_Ic`` (always when ``K_Ic`` is None: a prescribed-increment path) the crack is
+    extended by ``increment`` in the kinked direction (``crack.extend``), else growth stops.
+
+    Args:
+        problem: an ``EFGElasticity``, ``CoupledElasticity`` or ``CoupledLinearProblem`` whose
+            cracks include ``crack`` (with its loads and conditions set).
+        crack: the growing crack. increment: ``da`` (> 0). steps: the number of steps (>= 1).
+        K_Ic: fracture toughness, or None. tip: the end to grow, 0 or -1 (default: the only
+            tip). radius: outer domain radii of the interaction integral (default: 3, 4, 5
+            particle spacings, scaled down to 0.9 of the tip segment's length when the
+            increment is shorter: the previous kink must stay outside the domains).
+            sif_options: more keywords of ``stress_intensity_factors``.
+
+    Example:
+        >>> growth = mf.QuasiStaticCrackGrowth(problem, crack, increment=0.02, steps=5)
+        >>> history = growth.run()       # list of GrowthStep
+        >>> growth.path                  # the tip positions, (steps + 1, 2)
+    """
+
+    def __init__(
+        self,
+        problem: Any,
+        crack: Crack,
+        increment: float,
+        steps: int,
+        K_Ic: float | None = None,
+        tip: int | None = None,
+        radius: float | np.ndarray | None = None,
+        **sif_options,
+    ) -> None:
+        self.end = _check(crack, increment, steps, K_Ic, tip)
+        if not hasattr(problem, "solve"):
+            raise ValueError(f"problem={problem!r:.80} has no solve()")
+        self.problem, self.crack = problem, crack
+        self.increment, self.steps, self.K_Ic = float(increment), int(steps), K_Ic
+        self.radius, self.sif_options = radius, sif_options
+        #: The record, one :class:`GrowthStep` per step run.
+        self.history: list[GrowthStep] = []
+        #: The last solution.
+        self.solution = None
+
+    @property
+    def path(self) -> np.ndarray:
+        """The tip positions: the initial tip and the tip after each extension, (m, 2)."""
+        if not self.history:
+            return self.crack.points[self.end][None].copy()
+        pts = [self.history[0].tip] + [s.new_tip for s in self.history if s.grown]
+        return np.array(pts)
+
+    def _radii(self, solution: Any) -> np.ndarray:
+        """The default radii (``DEFAULT_RADII`` x h), scaled down to fit within 0.9 of the tip
+        segment: the interaction integral assumes a straight crack in its domain, so a kink
+        (the previous tip) must stay outside it; an increment ``da >= 5.6 h`` keeps them."""
+        domain = getattr(solution, "domain", None) or solution.patch
+        h = particle_spacing(domain)
+        a, b = self.crack.points[self.end], self.crack.points[1 if self.end == 0 else -2]
+        r = np.asarray(DEFAULT_RADII, float) * h
+        return r * min(1.0, 0.9 * float(np.linalg.norm(a - b)) / r.max())
+
+    def step(self) -> GrowthStep:
+        """Solve, compute K at the tip, and grow (if the criterion says so). Collective."""
+        crack, end = self.crack, self.end
+        tip = crack.points[end].copy()
+        direction = crack.tip_direction(end)
+        t0 = time.perf_counter()
+        sol = self.problem.solve()
+        t1 = time.perf_counter()
+        radius = self._radii(sol) if self.radius is None else self.radius
+        sif = sol.stress_intensity_factors(crack, tip=tip, radius=radius, **self.sif_options)
+        t2 = time.perf_counter()
+        self.solution = sol
+        KI, KII = float(sif.K_I.mean()), float(sif.K_II.mean())
+        theta = float(kink_angle(KI, KII))
+        keq = float(equivalent_sif(KI, KII))
+        grown = self.K_Ic is None or keq >= self.K_Ic
+        if grown:
+            crack.extend(theta, self.increment, tip=end)
+        rec = GrowthStep(
+            step=len(self.history), tip=tip, direction=direction, K_I=KI, K_II=KII,
+            radius=np.atleast_1d(np.asarray(radius, float)),
+            path_dependence=sif.path_dependence, theta=theta, K_eq=keq, grown=grown,
+            new_tip=crack.points[end].copy(), time_solve=t1 - t0, time_sifs=t2 - t1,
+            timings=dict(getattr(sol, "timings", None) or {}),
+        )  # fmt: skip
+        self.history.append(rec)
+        return rec
+
+    def run(self) -> list[GrowthStep]:
+        """Run up to ``steps`` steps; stops early at the first step that does not grow
+        (``K_eq < K_Ic``: under fixed loads the crack is stable). Returns :attr:`history`."""
+        for _ in range(self.steps):
+            if not self.step().grown:
+                break
+        return self.history

@@ -42,7 +42,9 @@ LANE_A_DEBS=(python3-dolfinx python3-petsc4py python3-mpi4py python3-scipy
 LANE_A_PYTHON=/usr/bin/python3
 # What pip installs into each venv before `pip install -e .`.
 LANE_A_PIP=(ruff)
-LANE_B_PIP=(dolfinx-solver-real scipy pytest ruff matplotlib tqdm h5py numba)
+# h5py < 3.16: 3.16.0 is built against HDF5 2.0 but runs on the HDF5 1.14 the DOLFINx wheel has
+# already loaded ("Not a datatype" on import; measured 2026-11-30); 3.15.1 works.
+LANE_B_PIP=(dolfinx-solver-real scipy pytest ruff matplotlib tqdm "h5py<3.16" numba)
 
 lane_log() { echo "[lane] $*" >&2; }
 lane_die() {

@@ -8,7 +8,7 @@ import numpy as np
 
 from ..physics.materials import LinearElastic
 
-__all__ = ["effective_modulus", "kolosov_constant", "kolosov_fields"]
+__all__ = ["PotentialField", "effective_modulus", "kolosov_constant", "kolosov_fields"]
 
 
 def _check_2d(material: LinearElastic) -> None:
@@ -72,3 +72,24 @@ def kolosov_fields(
     sigma[:, 1, 1] = 0.5 * (s + d.real)
     sigma[:, 0, 1] = sigma[:, 1, 0] = 0.5 * d.imag
     return np.stack([u.real, u.imag], axis=1), grad, sigma
+
+
+class PotentialField:
+    """Accessors shared by the exact plane fields: a subclass defines ``fields(points)``
+    returning displacement (m, 2), displacement gradient (m, 2, 2) (``[:, i, j] = du_i/dx_j``)
+    and stress (m, 2, 2) at global points (m, 2), in global components."""
+
+    def fields(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        raise NotImplementedError
+
+    def displacement(self, points: np.ndarray) -> np.ndarray:
+        """Displacement (m, 2) at global points (m, 2)."""
+        return self.fields(points)[0]
+
+    def displacement_gradient(self, points: np.ndarray) -> np.ndarray:
+        """Displacement gradient (m, 2, 2), ``[:, i, j] = du_i/dx_j``, at global points."""
+        return self.fields(points)[1]
+
+    def stress(self, points: np.ndarray) -> np.ndarray:
+        """Cauchy stress (m, 2, 2) at global points (m, 2)."""
+        return self.fields(points)[2]

@@ -24,13 +24,13 @@ import numpy as np
 
 from ..physics.materials import LinearElastic
 from .frame import TipFrame
-from .kolosov import kolosov_fields
+from .kolosov import PotentialField, kolosov_fields
 
 __all__ = ["WilliamsField"]
 
 
 @dataclass(frozen=True)
-class WilliamsField:
+class WilliamsField(PotentialField):
     """The near-tip field ``K_I``, ``K_II``, ``T`` (+ higher terms) at a tip, vectorised.
 
     Args:
@@ -87,15 +87,3 @@ class WilliamsField:
             frame.tensors_to_global(grad),
             frame.tensors_to_global(sigma),
         )
-
-    def displacement(self, points: np.ndarray) -> np.ndarray:
-        """Displacement (m, 2) at global points (m, 2)."""
-        return self.fields(points)[0]
-
-    def displacement_gradient(self, points: np.ndarray) -> np.ndarray:
-        """Displacement gradient (m, 2, 2), ``[:, i, j] = du_i/dx_j``, at global points."""
-        return self.fields(points)[1]
-
-    def stress(self, points: np.ndarray) -> np.ndarray:
-        """Cauchy stress (m, 2, 2) at global points (m, 2)."""
-        return self.fields(points)[2]

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..fracture.frame import TipFrame
-from ..fracture.kolosov import kolosov_fields
+from ..fracture.kolosov import PotentialField, kolosov_fields
 from ..physics.materials import LinearElastic
 
 __all__ = ["InclinedCentreCrack", "edge_crack_factor"]
@@ -31,7 +31,7 @@ def edge_crack_factor(a_over_w: float | np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class InclinedCentreCrack:
+class InclinedCentreCrack(PotentialField):
     """Infinite plate with a straight crack of half-length ``a`` centred at ``center``, at angle
     ``alpha`` (radians) to the x axis, under remote uniaxial tension ``sigma`` along y.
 
@@ -125,15 +125,3 @@ class InclinedCentreCrack:
             frame.tensors_to_global(grad),
             frame.tensors_to_global(sigma),
         )
-
-    def displacement(self, points: np.ndarray) -> np.ndarray:
-        """Exact displacement (m, 2) at global points (m, 2)."""
-        return self.fields(points)[0]
-
-    def displacement_gradient(self, points: np.ndarray) -> np.ndarray:
-        """Exact displacement gradient (m, 2, 2) at global points (m, 2)."""
-        return self.fields(points)[1]
-
-    def stress(self, points: np.ndarray) -> np.ndarray:
-        """Exact stress (m, 2, 2) at global points (m, 2)."""
-        return self.fields(points)[2]

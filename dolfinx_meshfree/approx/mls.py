@@ -51,6 +51,7 @@ __all__ = [
     "MLS",
     "MomentMatrixError",
     "PairCut",
+    "TableTransform",
     "pair_distances",
     "polynomial_basis",
 ]
@@ -91,6 +92,9 @@ def pair_distances(dx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 _BASES = {"linear": 1, "quadratic": 2}
+
+#: A table transform ``(x, table, derivatives, sides) -> table``: see :attr:`MLS.table_transforms`.
+TableTransform = Callable[[np.ndarray, ShapeTable, int, np.ndarray | None], ShapeTable]
 
 
 class MomentMatrixError(ValueError):
@@ -208,6 +212,10 @@ class MLS:
         #: crack's visibility or diffraction criterion); ``sides`` is the argument of
         #: :meth:`tabulate`. Call :meth:`changed` after changing the list.
         self.pair_cuts: list[PairCut] = []
+        #: Applied in order to every table :meth:`tabulate` returns,
+        #: ``transform(x, table, derivatives, sides) -> table`` (e.g. the near-tip enrichment of
+        #: :mod:`.tip_enrichment`). Call :meth:`changed` after changing the list.
+        self.table_transforms: list[TableTransform] = []
         #: Changes whenever the shape functions do (:meth:`changed`); tables carry the version
         #: they were built at (:attr:`ShapeTable.version`).
         self.version = 0
@@ -245,8 +253,12 @@ class MLS:
                 )
             sides = np.asarray(sides)
         if self.backend == "numba":
-            return self._tabulate_compiled(x, derivatives, sides)
-        return self._tabulate_numpy(x, derivatives, sides)
+            table = self._tabulate_compiled(x, derivatives, sides)
+        else:
+            table = self._tabulate_numpy(x, derivatives, sides)
+        for transform in self.table_transforms:
+            table = transform(x, table, derivatives, sides)
+        return table
 
     def _apply_cuts(
         self, x: np.ndarray, i: np.ndarray, j: np.ndarray, dx: np.ndarray, dist: np.ndarray,

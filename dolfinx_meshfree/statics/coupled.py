@@ -26,6 +26,7 @@ import ufl
 
 from ..approx.crack_cuts import attach_cracks
 from ..approx.mls import MLS
+from ..approx.tip_enrichment import enrich_tips
 from ..couplings import COUPLINGS, DEFAULT_DILATION, REGISTRY
 from ..couplings.base import (
     CoupledSolution,
@@ -237,6 +238,8 @@ class CoupledElasticity:
             )
         patch = self.patch
         attach_cracks(self.mls, patch.cracks, patch.crack_method, patch=patch)
+        if patch.crack_enrichment:
+            enrich_tips(self.mls, patch.cracks, patch.crack_method)
 
     def add_dirichlet(
         self, facets: np.ndarray, value: VectorFunction, components: tuple[int, ...] | None = None

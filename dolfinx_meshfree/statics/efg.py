@@ -35,6 +35,7 @@ import scipy.sparse as sp
 from ..approx.crack_cuts import attach_cracks
 from ..approx.mls import MLS
 from ..approx.tables import ShapeTable
+from ..approx.tip_enrichment import enrich_tips
 from ..fracture.interaction import StressIntensityFactors
 from ..geometry.crack import Crack, CrackDomain, place_crack
 from ..geometry.cut_cells import (
@@ -359,6 +360,8 @@ class EFGElasticity:
             (:mod:`~dolfinx_meshfree.geometry.cut_cells`).
         crack_method: ``"diffraction"`` (default) or ``"visibility"`` (Organ, Fleming &
             Belytschko 1996).
+        crack_enrichment: Enrich the MLS basis near the crack tips (Fleming et al. 1997,
+            :mod:`~dolfinx_meshfree.approx.tip_enrichment`); ``False`` (default): linear basis.
     """
 
     def __init__(
@@ -372,6 +375,7 @@ class EFGElasticity:
         consistent: bool = True,
         cracks: tuple[Crack, ...] | list[Crack] = (),
         crack_method: str = "diffraction",
+        crack_enrichment: bool = False,
     ):
         if particles.mesh is None:
             raise ValueError("EFGElasticity needs particles with a background mesh (mesh=...)")
@@ -404,6 +408,8 @@ class EFGElasticity:
             raise_on_all_ranks(
                 particles.comm, lambda: attach_cracks(self.mls, self.cracks, crack_method)
             )
+            if crack_enrichment:
+                enrich_tips(self.mls, self.cracks, crack_method)
         self._dirichlet: list[tuple[np.ndarray, VectorFunction, tuple[int, ...]]] = []
         self._tractions: list[tuple[np.ndarray, TractionFunction]] = []
         self._body: VectorFunction | None = None

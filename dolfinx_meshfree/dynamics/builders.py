@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -44,6 +45,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from .. import _compat
+from ..approx.crack_cuts import attach_cracks
 from ..approx.mls import MLS
 from ..approx.tables import ShapeTable
 from ..couplings.bridging import BridgingBand
@@ -51,6 +53,7 @@ from ..couplings.hybrid import HybridElasticity
 from ..couplings.hybrid_finite import HybridForces
 from ..couplings.master_slave_finite import SlaveCorrection
 from ..couplings.ramp import RampInterface
+from ..geometry.crack import Crack, CrackDomain, place_crack
 from ..geometry.particles import ParticleSet
 from ..geometry.patch import ParticlePatch
 from ..geometry.stress_points import check_integration, stress_point_quadrature
@@ -59,7 +62,7 @@ from ..physics.body_loads import CallableBodyForce, body_load_vectors
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic
 from ..statics.coupled import CoupledElasticity, CouplingOperators
-from ..statics.efg import particle_stiffness
+from ..statics.efg import crack_rules, particle_stiffness
 from ..statics.petsc import create_aij
 from ..statics.sides import BlendedSide
 from .conditions import (
@@ -93,7 +96,15 @@ if TYPE_CHECKING:  # annotations only
     from ..geometry.quadrature import QuadraturePoints
     from ..physics.body_loads import VectorFunction
 
-__all__ = ["Model", "build_coupled", "build_efg", "build_fe", "build_hybrid", "check_particle_mass"]
+__all__ = [
+    "Model",
+    "build_coupled",
+    "build_efg",
+    "build_fe",
+    "build_hybrid",
+    "check_crack_options",
+    "check_particle_mass",
+]
 
 
 @dataclass
@@ -171,6 +182,32 @@ def _check_integration(integration: str, gdim: int) -> None:
         )
 
 
+def check_crack_options(
+    cracked: bool, integration: str, finite_strain: bool, comm: MPI.Comm
+) -> None:
+    """Refuse, on every rank, what a cracked particle model cannot carry in explicit dynamics:
+    stress points (a cracked body is integrated on its cut cells,
+    :func:`~dolfinx_meshfree.statics.efg.crack_rules`) and a finite-strain law (not verified
+    with cut cells)."""
+
+    def check() -> None:
+        if not cracked:
+            return
+        if integration != "cells":
+            raise ValueError(
+                f"integration={integration!r}: a cracked particle model is integrated on its cut "
+                "cells in explicit dynamics; use integration='cells'"
+            )
+        if finite_strain:
+            raise ValueError(
+                "a finite-strain material with cracks is not available in explicit dynamics "
+                "(the cut-cell rule is verified at small strain only); use the linear law "
+                "(dolfinx_meshfree.physics.materials.linear_twin(material)) or no cracks"
+            )
+
+    raise_on_all_ranks(comm, check)
+
+
 # -- pure FE, pure EFG -------------------------------------------------------------------------
 
 
@@ -226,6 +263,8 @@ def build_efg(
     particle_mass: str = "row-sum",
     fixed_facets: npt.ArrayLike | None = None,
     integration: str = "cells",
+    cracks: Sequence[Crack] = (),
+    crack_method: str = "diffraction",
 ) -> Model:
     """Pure EFG on the particles' background cells (Belytschko et al. 1995, sec. 5.2):
     :func:`~dolfinx_meshfree.statics.efg.particle_stiffness` and row-sum masses. Collective.
@@ -243,6 +282,14 @@ def build_efg(
             :mod:`~dolfinx_meshfree.geometry.stress_points`); the row-sum masses are then
             ``rho sum_q phi_I(x_q) V_q``.
 
+        cracks: 2D :class:`~dolfinx_meshfree.Crack` polylines in the particles' cells, as in
+            statics (:class:`~dolfinx_meshfree.EFGElasticity`): the MLS weights cut by them
+            (``crack_method``: ``"diffraction"``, the default, or ``"visibility"``; Organ,
+            Fleming & Belytschko 1996), the cut cells integrated side by side
+            (:func:`~dolfinx_meshfree.statics.efg.crack_rules`: Belytschko et al. 1995, sec.
+            5.2.2) for the stiffness, the lumped masses and the body loads alike; the crack
+            faces are traction-free (natural). Small strain and ``integration="cells"`` only.
+
     A finite-strain ``material`` gives the internal force of
     :class:`~dolfinx_meshfree.InternalForces` on the same rule and table.
     """
@@ -250,6 +297,8 @@ def build_efg(
     if particles.mesh is None:
         raise ValueError("explicit EFG needs particles with a background mesh (mesh=...)")
     _check_integration(integration, particles.gdim)
+    cracks = list(cracks)
+    check_crack_options(bool(cracks), integration, law is not material, particles.comm)
     gdim = particles.gdim
     raise_on_all_ranks(particles.comm, lambda: material.check_gdim(gdim, "the particles' mesh"))
     check_particle_mass(particle_mass)
@@ -260,6 +309,12 @@ def build_efg(
         comm, lambda: MLS(particles, weight=weight, dilation=dilation, basis=basis)
     )
     rule = None if integration == "cells" else stress_point_quadrature(particles)
+    if cracks:  # as EFGElasticity: placed, MLS cut, cut cells integrated side by side
+        domain = CrackDomain.from_particles(particles)
+        for crack in cracks:
+            place_crack(crack, domain)
+        raise_on_all_ranks(comm, lambda: attach_cracks(mls, cracks, crack_method))
+        rule = crack_rules(particles.mesh, domain.cells, cracks, quadrature_degree, None)[0]
     tables: dict = {}
     K_loc, q, tq, _ = particle_stiffness(
         particles, mls, material, quadrature_degree, quadrature=rule, tables=tables
@@ -407,6 +462,9 @@ def build_coupled(
     law = problem.material if material is None else material
     material = small_strain(law, coupling)
     _check_twin(law, material, problem.material)
+    check_crack_options(
+        bool(problem.patch.cracks), integration, law is not material, problem.patch.comm
+    )
     t0 = time.perf_counter()
     V, patch, mls = problem.V, problem.patch, problem.mls
     P, comm, msh = patch.particles, patch.comm, V.mesh
@@ -616,6 +674,12 @@ def build_hybrid(
     """
     if not isinstance(problem, HybridElasticity):
         raise TypeError(f"problem must be a HybridElasticity, got {type(problem).__name__}")
+    if problem.patch.cracks:  # the same on every rank: the cracks are global
+        raise ValueError(
+            "the hybrid coupling cannot carry a cracked patch in explicit dynamics (its SPH "
+            "particle sums are not cut by the crack); use a coupling of "
+            "dolfinx_meshfree.CRACK_COUPLINGS or pure EFG (ExplicitDynamics.efg(..., cracks=...))"
+        )
     check_particle_mass(particle_mass, default="volume")
     law = problem.material if material is None else material
     material = small_strain(law, "hybrid")

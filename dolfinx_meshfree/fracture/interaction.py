@@ -20,28 +20,29 @@ tensor-product Gauss–Legendre rule in ``(r, theta)``, ``theta`` in ``(-pi, pi)
 extension, so that no point lies on the crack behind the tip. Independent of any mesh.
 
 Dynamics (``acceleration`` given; Moran & Shih 1987, stationary crack): the momentum balance
-``sigma_ij,j = rho u_i,tt`` makes the divergence of the interaction flux ``rho u_i,tt u^aux_i,1``
-(the auxiliary Williams field is static, ``sigma^aux_ij,j = 0``), so
+``sigma_ij,j = rho u_i,tt`` makes the divergence of the interaction flux ``F_j`` (the bracket
+above) ``rho u_i,tt u^aux_i,1`` (the auxiliary Williams field is static,
+``sigma^aux_ij,j = 0``), and ``int_A (F_j q)_,j dA = I`` (``q = 1`` at the tip, 0 on
+``r = r2``, traction-free straight faces) gives
 
 .. math::
-    I = \int_A \left[\ldots\right] q_{,j}\, dA
-      + \int_A \rho\, \ddot u_i\, u^{aux}_{i,1}\, q\, dA,
-    \qquad
-    J = \int_A \left[\sigma_{ij} u_{i,1} - W \delta_{1j}\right] q_{,j}\, dA
-      + \int_A \rho\, \ddot u_i\, u_{i,1}\, q\, dA
+    I = \\int_A F_j\\, q_{,j}\\, dA + \\int_A \\rho\\, \\ddot u_i\\, u^{aux}_{i,1}\\, q\\, dA,
+    \\qquad
+    J = \\int_A \\left[\\sigma_{ij} u_{i,1} - W \\delta_{1j}\\right] q_{,j}\\, dA
+      + \\int_A \\rho\\, \\ddot u_i\\, u_{i,1}\\, q\\, dA
 
-(plus, with this module's ``q`` decreasing outwards: the signs follow from
-``int_A (F_j q)_,j dA = I`` with ``q = 1`` at the tip and 0 on ``r = r2``). The inertia term has
-``q``, not ``grad q``: it covers the whole disc ``r <= r2``, the inner disc ``r < r1`` by a polar
-rule in ``s = sqrt(r / r1)`` (exact for the ``r^(-1/2)`` of ``u^aux_i,1`` times a smooth field).
-The kinetic energy terms ``T delta_1j`` vanish at a stationary tip and are left out, and so are
-the crack-velocity terms of a moving tip: K of a running crack is not computed here. ``K =
-E' I / 2`` holds at a stationary tip (the static relation).
+(the inertia term with a plus sign for this module's ``q``). It has ``q``, not ``grad q``: it
+covers the whole disc ``r <= r2``, the inner disc ``r < r1`` by a polar rule in
+``s = sqrt(r / r1)`` (exact for the ``r^(-1/2)`` of ``u^aux_i,1`` times a polynomial in
+``sqrt(r)``). The kinetic energy terms ``T delta_1j`` vanish at a stationary tip and are left
+out, and so are the crack-velocity terms of a moving tip: K of a running crack is not computed
+here. ``K = E' I / 2`` holds at a stationary tip (the static relation).
 
 Assumptions (the domain form is exact under them): small strain and the linear elastic law of
 ``material`` (the stress is computed from the displacement gradient); no body force in the
-domain; without ``acceleration``, static equilibrium; traction-free crack faces; the crack straight inside ``r2`` (faces at ``theta = +-pi``;
-a crack that kinks inside the domain, another tip or a boundary within ``r2`` is the caller's to
+domain; without ``acceleration``, static equilibrium; traction-free crack faces; the crack
+straight inside ``r2`` (faces at ``theta = +-pi``; a crack that kinks inside the domain, another
+tip or a boundary within ``r2`` is the caller's to
 avoid); the field's gradient evaluated on the correct side of the crack near ``theta = +-pi``.
 """
 

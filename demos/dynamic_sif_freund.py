@@ -8,16 +8,17 @@
 #     K_I(t) = 2 sigma* sqrt(c_d (t - t0) (1 - 2 nu) / pi) / (1 - nu).
 #
 # The model: the plate ``0 < x < W``, ``-H < y < H``, a crack from the edge ``x = 0`` to the tip
-# ``(a, 0)``, a step traction ``sigma* / 2`` on ``y = +-H`` (the two waves meet on the crack
-# plane: ``sigma_yy = sigma*`` there, and the problem is symmetric: ``K_II = 0``) and rollers
-# (``u_x = 0``) on ``x = 0`` and ``x = W``: the incident wave is then exactly the plane
-# uniaxial-strain wave, and the roller at the mouth mirrors the crack into a centre crack of length ``2 a``. The first waves other than
-# the crack's own reach the tip at ``t0 + min(2a, 2H, 2(W - a)) / c_d`` (the mirrored tip's, the
-# reflection from the loaded edges, the one from the far roller): the valid window. The mesh has
-# an odd number of cells across ``2H``, so the crack (``y = 0``) runs half a spacing from the
-# particle rows. Methods: pure EFG (``efg``) and the couplings of ``CRACK_COUPLINGS`` with the
-# particles in a strip around the crack and FE elsewhere. K is measured by the dynamic
-# interaction integral (``ExplicitDynamics.stress_intensity_factors``) at two domain radii.
+# ``(a, 0)``, a step traction ``sigma* / 2`` on ``y = +-H`` (the two waves meet on the crack plane:
+# ``sigma_yy = sigma*`` there, and the problem is symmetric: ``K_II = 0``) and rollers (``u_x =
+# 0``) on ``x = 0`` and ``x = W``: the incident wave is then exactly the plane uniaxial-strain
+# wave, and the roller at the mouth mirrors the crack into a centre crack of length ``2 a``. The
+# first waves other than the crack's own reach the tip at ``t0 + min(2a, 2H, 2(W - a)) / c_d`` (the
+# mirrored tip's, the reflection from the loaded edges, the one from the far roller): the valid
+# window. The mesh has an odd number of cells across ``2H``, so the crack (``y = 0``) runs half a
+# spacing from the particle rows. Methods: pure EFG (``efg``) and the couplings of
+# ``CRACK_COUPLINGS`` with the particles in a strip around the crack and FE elsewhere. K is
+# measured by the dynamic interaction integral (``ExplicitDynamics.stress_intensity_factors``) at
+# two domain radii.
 #
 #     python demos/dynamic_sif_freund.py --method efg lagrange --cells 41 --json f.json
 

@@ -20,6 +20,15 @@ Each coupling enters dynamics through :meth:`CoupledElasticity.operators
   slaves' masses go to their masters; forces by ``T^T`` (eq. 28). The state holds the FE dofs
   and the free particles; evaluation expands the slaves.
 
+Cracks (2D, small strain, ``integration="cells"``): pure EFG takes them as statics does
+(:class:`~dolfinx_meshfree.EFGElasticity`: placed, the MLS weights cut, diffraction by default),
+and so do the couplings of :data:`~dolfinx_meshfree.CRACK_COUPLINGS` through the patch; the
+particle stiffness, the row-sum masses and the body loads all use the cut-cell rule of
+:func:`~dolfinx_meshfree.statics.efg.crack_rules` (each side of a crack on its own, Belytschko et
+al. 1995, sec. 5.2.2); the faces are traction-free (natural). The ramps and master-slave refuse
+a cracked patch when their static problem is built, the hybrid here; stress points and
+finite-strain laws with cracks are refused (:func:`check_crack_options`).
+
 Essential conditions (``fixed_facets``: the displacement held at its initial value, in all
 components or, with ``(facets, components)`` pairs, in some: symmetry planes): FE dofs
 strongly (zero velocity and acceleration), particles by one multiplier per facet and held

@@ -57,9 +57,9 @@ def current_acceleration(dyn: ExplicitDynamics) -> list[PETSc.Vec]:
 def model_cracks(dyn: ExplicitDynamics) -> tuple[list[Crack], object]:
     """The cracks cutting the model's MLS and where they lie (the patch, or the particles'
     :class:`~dolfinx_meshfree.geometry.crack.CrackDomain` of pure EFG)."""
+    cracks = dyn.evaluator.disc.cracks
     if dyn.patch is not None:
-        return list(dyn.patch.cracks), dyn.patch
-    cracks = [c for cut in getattr(dyn.mls, "pair_cuts", ()) for c in getattr(cut, "cracks", ())]
+        return cracks, dyn.patch
     domain = CrackDomain.from_particles(dyn.particles) if dyn.particles is not None else None
     return cracks, domain
 

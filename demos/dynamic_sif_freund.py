@@ -30,6 +30,7 @@ import sys
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
+from dolfinx_meshfree.dynamics import SIFHistory
 
 import dolfinx
 import numpy as np
@@ -90,13 +91,9 @@ def run(method: str, cells: int, samples: int = 12, comm=MPI.COMM_WORLD) -> dict
     cd = MATERIAL.wave_speed()
     t0, t_end = H / cd, (H + min(2 * A, 2 * H, 2 * (W - A))) / cd
     times = t0 + (t_end - t0) * np.arange(1, samples + 1) / samples
-    rows: list = []
-
-    def record(d, step, t):
-        s = d.stress_intensity_factors(crack, tip=0, radius=np.asarray(RADII) * h)
-        rows.append([t, *s.K_I, *s.K_II])
-
-    result = dyn.run(t_end, outputs=times, on_output=record)
+    history = SIFHistory(crack, tip=0, radius=np.asarray(RADII) * h)
+    result = dyn.run(t_end, outputs=times, on_output=history)
+    rows = [[t, *s.K_I, *s.K_II] for _, t, s in history.records]
     rows = np.asarray(rows)
     exact = freund(rows[:, 0], t0=t0)
     err = (rows[:, 1 : 1 + len(RADII)] - exact[:, None]) / exact[:, None]

@@ -32,7 +32,7 @@ from ..statics.sifs import solution_sifs
 if TYPE_CHECKING:  # annotations only: the facade imports this module
     from .explicit import ExplicitDynamics
 
-__all__ = ["current_acceleration", "dynamic_sifs", "model_cracks"]
+__all__ = ["SIFHistory", "current_acceleration", "dynamic_sifs", "model_cracks"]
 
 
 def current_acceleration(dyn: ExplicitDynamics) -> list[PETSc.Vec]:
@@ -119,3 +119,44 @@ def dynamic_sifs(
         grad, dyn.material, cracks, domain, crack, tip, radius, acceleration=acceleration,
         **options,
     )  # fmt: skip
+
+
+class SIFHistory:
+    """An ``on_output`` callback of :meth:`ExplicitDynamics.run
+    <dolfinx_meshfree.dynamics.explicit.ExplicitDynamics.run>` that records K_I(t), K_II(t) at a
+    stationary tip (:func:`dynamic_sifs` at each output time; collective).
+
+    Example::
+
+        history = SIFHistory(crack, tip=0, radius=[0.1, 0.15])
+        dyn.run(t_end, outputs=np.linspace(0, t_end, 50), on_output=history)
+        history.KI_history()  # [[t, K_I], ...], K_I averaged over the radii
+
+    Args:
+        crack, tip, radius, options: As :func:`dynamic_sifs`.
+
+    Attributes:
+        records: ``(step, time, StressIntensityFactors)`` per output.
+    """
+
+    def __init__(
+        self,
+        crack: Crack,
+        tip: int | Sequence[float] | np.ndarray = 0,
+        radius: float | Sequence | np.ndarray | None = None,
+        **options,
+    ) -> None:
+        self.crack, self.tip, self.radius, self.options = crack, tip, radius, options
+        self.records: list[tuple[int, float, StressIntensityFactors]] = []
+
+    def __call__(self, dyn: ExplicitDynamics, step: int, time: float) -> None:
+        sifs = dynamic_sifs(dyn, self.crack, self.tip, self.radius, **self.options)
+        self.records.append((step, time, sifs))
+
+    def KI_history(self) -> list[list[float]]:
+        """``[[t, K_I], ...]`` with K_I averaged over the domains."""
+        return [[t, float(s.K_I.mean())] for _, t, s in self.records]
+
+    def KII_history(self) -> list[list[float]]:
+        """``[[t, K_II], ...]`` with K_II averaged over the domains."""
+        return [[t, float(s.K_II.mean())] for _, t, s in self.records]

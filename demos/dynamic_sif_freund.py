@@ -42,10 +42,12 @@ SIGMA = 1.0
 H, W, A = 1.0, 2.0, 1.0
 #: Domain radii of the interaction integral, outer radius in particle spacings (r1 = r2 / 2).
 RADII = (4.0, 6.0)
-#: K is compared once the front has crossed the larger domain, ``(t - t0) c_d >= SKIP r2``:
-#: before, the discrete front (smeared over a few spacings) is inside the domain and K is small
-#: (K ~ sqrt(t - t0): below 27 % of its value at the window's end with 81 cells).
-SKIP = 1.0
+#: K is compared after the first ``SKIP`` of the window (``(t - t0) c_d >= 0.2 H``), where K
+#: has grown past a third of its final value: in the first instants the incident front, a step
+#: smeared and ringing from its discrete dispersion after a path of ``H``, is still near the
+#: tip (pure EFG at (t - t0) c_d = 0.13: +5.6 % with 81 cells, +6.9 % with 161; lagrange, whose
+#: front crosses FE cells first: +5.9 %, +1.3 %).
+SKIP = 0.1
 
 
 def freund(t: np.ndarray, material: mf.LinearElastic = MATERIAL, t0: float = 0.0) -> np.ndarray:
@@ -97,7 +99,7 @@ def run(method: str, cells: int, samples: int = 12, comm=MPI.COMM_WORLD) -> dict
     rows = np.asarray(rows)
     exact = freund(rows[:, 0], t0=t0)
     err = (rows[:, 1 : 1 + len(RADII)] - exact[:, None]) / exact[:, None]
-    valid = (rows[:, 0] - t0) * cd >= SKIP * max(RADII) * h
+    valid = rows[:, 0] - t0 >= SKIP * (t_end - t0) * (1.0 - 1e-12)
     return {
         "method": method,
         "cells": cells,
@@ -129,7 +131,7 @@ def report(rec: dict) -> None:
         ks, es = rec["KI"][k], rec["error"][k]
         line = "   ".join(f"{a:8.4f} {b:+7.2%}" for a, b in zip(ks, es, strict=True))
         k2 = max(abs(x) for x in rec["KII"][k]) / rec["K_freund"][k]
-        skip = "" if rec["compared"][k] else "  (not compared: front in the domain)"
+        skip = "" if rec["compared"][k] else "  (not compared: first tenth of the window)"
         print(f"  {(t - rec['t0']) * cd:10.4f} {rec['K_freund'][k]:9.4f}   {line}   {k2:.1e}{skip}")
     print(f"  max error {rec['max_error']:.2%}, energy drift {rec['energy_drift']:.2e}")
 

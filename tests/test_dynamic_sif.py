@@ -102,10 +102,10 @@ def test_bad_acceleration():
 
 # --- Freund -----------------------------------------------------------------------------------
 #: Measured (81 cells across 2H, h = 0.0247, 8 samples over the window, radii 4 h and 6 h,
-#: compared once (t - t0) c_d >= 6 h: all 8 samples, from (t - t0) c_d = 0.24 = 10 h): largest
-#: |error| efg 2.4 %, lagrange 1.7 %: checked against the issue's 5 %. |K_II| / max K_I <=
-#: 3.7e-4 (symmetric problem; check 1e-3). Spread between the radii 0.24 % / 0.59 % of max K_I
-#: (check 1.2 %).
+#: compared after the first tenth of the window: all 8 samples, from (t - t0) c_d = 0.24):
+#: largest |error| efg 2.4 %, lagrange 1.7 %: checked against the issue's 5 %. |K_II| / max K_I
+#: <= 3.7e-4 (symmetric problem; check 1e-3). Spread between the radii 0.24 % / 0.59 % of max
+#: K_I (check 1.2 %).
 FREUND_CELLS = 81
 
 

@@ -290,7 +290,6 @@ def build_efg(
             computed once at t = 0; Rabczuk, Belytschko & Xiao 2004;
             :mod:`~dolfinx_meshfree.geometry.stress_points`); the row-sum masses are then
             ``rho sum_q phi_I(x_q) V_q``.
-
         cracks: 2D :class:`~dolfinx_meshfree.Crack` polylines in the particles' cells, as in
             statics (:class:`~dolfinx_meshfree.EFGElasticity`): the MLS weights cut by them
             (``crack_method``: ``"diffraction"``, the default, or ``"visibility"``; Organ,

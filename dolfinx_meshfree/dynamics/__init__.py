@@ -24,7 +24,10 @@ Rabczuk et al. 2006, sec. 5.3.3 and Table I). The pieces live in modules of one 
 * :mod:`~dolfinx_meshfree.dynamics.builders` (with :mod:`~dolfinx_meshfree.dynamics.conditions`):
   pure FE, pure EFG, every static coupling from :meth:`CoupledElasticity.operators
   <dolfinx_meshfree.CoupledElasticity.operators>` and the hybrid SPH–FE coupling;
-* :mod:`~dolfinx_meshfree.dynamics.results`: :class:`DynamicsResult`.
+* :mod:`~dolfinx_meshfree.dynamics.results`: :class:`DynamicsResult`;
+* :mod:`~dolfinx_meshfree.dynamics.sifs`: dynamic stress intensity factors at a stationary tip
+  (the interaction integral with the inertia term) and :class:`SIFHistory`, an ``on_output``
+  recorder of K_I(t), K_II(t).
 
 Dimension-generic: the mesh's ``gdim`` sets the components (2D: triangles, quadrilaterals; 3D:
 tetrahedra, hexahedra). In 3D ``fe``, ``efg``, ``lagrange``, ``edge-to-edge`` and ``bridging``
@@ -45,6 +48,7 @@ from .finite_strain import FINITE_STRAIN_DYNAMICS, NonlinearSystem
 from .masses import fe_lumped_mass, particle_lumped_mass, table_lumped_mass
 from .methods import DYNAMICS_METHODS, check_method
 from .results import DynamicsResult
+from .sifs import SIFHistory
 from .system import Field, LinearSystem, SemiDiscreteSystem
 
 __all__ = [
@@ -56,6 +60,7 @@ __all__ = [
     "Field",
     "LinearSystem",
     "NonlinearSystem",
+    "SIFHistory",
     "SemiDiscreteSystem",
     "check_method",
     "fe_lumped_mass",

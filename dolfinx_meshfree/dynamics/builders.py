@@ -20,6 +20,15 @@ Each coupling enters dynamics through :meth:`CoupledElasticity.operators
   slaves' masses go to their masters; forces by ``T^T`` (eq. 28). The state holds the FE dofs
   and the free particles; evaluation expands the slaves.
 
+Cracks (2D, small strain, ``integration="cells"``): pure EFG takes them as statics does
+(:class:`~dolfinx_meshfree.EFGElasticity`: placed, the MLS weights cut, diffraction by default),
+and so do the couplings of :data:`~dolfinx_meshfree.CRACK_COUPLINGS` through the patch; the
+particle stiffness, the row-sum masses and the body loads all use the cut-cell rule of
+:func:`~dolfinx_meshfree.statics.efg.crack_rules` (each side of a crack on its own, Belytschko et
+al. 1995, sec. 5.2.2); the faces are traction-free (natural). The ramps and master-slave refuse
+a cracked patch when their static problem is built, the hybrid here; stress points and
+finite-strain laws with cracks are refused (:func:`check_crack_options`).
+
 Essential conditions (``fixed_facets``: the displacement held at its initial value, in all
 components or, with ``(facets, components)`` pairs, in some: symmetry planes): FE dofs
 strongly (zero velocity and acceleration), particles by one multiplier per facet and held
@@ -33,6 +42,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -44,6 +54,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from .. import _compat
+from ..approx.crack_cuts import attach_cracks
 from ..approx.mls import MLS
 from ..approx.tables import ShapeTable
 from ..couplings.bridging import BridgingBand
@@ -51,6 +62,7 @@ from ..couplings.hybrid import HybridElasticity
 from ..couplings.hybrid_finite import HybridForces
 from ..couplings.master_slave_finite import SlaveCorrection
 from ..couplings.ramp import RampInterface
+from ..geometry.crack import Crack, CrackDomain, place_crack
 from ..geometry.particles import ParticleSet
 from ..geometry.patch import ParticlePatch
 from ..geometry.stress_points import check_integration, stress_point_quadrature
@@ -59,7 +71,7 @@ from ..physics.body_loads import CallableBodyForce, body_load_vectors
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic
 from ..statics.coupled import CoupledElasticity, CouplingOperators
-from ..statics.efg import particle_stiffness
+from ..statics.efg import crack_rules, particle_stiffness
 from ..statics.petsc import create_aij
 from ..statics.sides import BlendedSide
 from .conditions import (
@@ -93,7 +105,15 @@ if TYPE_CHECKING:  # annotations only
     from ..geometry.quadrature import QuadraturePoints
     from ..physics.body_loads import VectorFunction
 
-__all__ = ["Model", "build_coupled", "build_efg", "build_fe", "build_hybrid", "check_particle_mass"]
+__all__ = [
+    "Model",
+    "build_coupled",
+    "build_efg",
+    "build_fe",
+    "build_hybrid",
+    "check_crack_options",
+    "check_particle_mass",
+]
 
 
 @dataclass
@@ -171,6 +191,32 @@ def _check_integration(integration: str, gdim: int) -> None:
         )
 
 
+def check_crack_options(
+    cracked: bool, integration: str, finite_strain: bool, comm: MPI.Comm
+) -> None:
+    """Refuse, on every rank, what a cracked particle model cannot carry in explicit dynamics:
+    stress points (a cracked body is integrated on its cut cells,
+    :func:`~dolfinx_meshfree.statics.efg.crack_rules`) and a finite-strain law (not verified
+    with cut cells)."""
+
+    def check() -> None:
+        if not cracked:
+            return
+        if integration != "cells":
+            raise ValueError(
+                f"integration={integration!r}: a cracked particle model is integrated on its cut "
+                "cells in explicit dynamics; use integration='cells'"
+            )
+        if finite_strain:
+            raise ValueError(
+                "a finite-strain material with cracks is not available in explicit dynamics "
+                "(the cut-cell rule is verified at small strain only); use the linear law "
+                "(dolfinx_meshfree.physics.materials.linear_twin(material)) or no cracks"
+            )
+
+    raise_on_all_ranks(comm, check)
+
+
 # -- pure FE, pure EFG -------------------------------------------------------------------------
 
 
@@ -226,6 +272,8 @@ def build_efg(
     particle_mass: str = "row-sum",
     fixed_facets: npt.ArrayLike | None = None,
     integration: str = "cells",
+    cracks: Sequence[Crack] = (),
+    crack_method: str = "diffraction",
 ) -> Model:
     """Pure EFG on the particles' background cells (Belytschko et al. 1995, sec. 5.2):
     :func:`~dolfinx_meshfree.statics.efg.particle_stiffness` and row-sum masses. Collective.
@@ -242,6 +290,13 @@ def build_efg(
             computed once at t = 0; Rabczuk, Belytschko & Xiao 2004;
             :mod:`~dolfinx_meshfree.geometry.stress_points`); the row-sum masses are then
             ``rho sum_q phi_I(x_q) V_q``.
+        cracks: 2D :class:`~dolfinx_meshfree.Crack` polylines in the particles' cells, as in
+            statics (:class:`~dolfinx_meshfree.EFGElasticity`): the MLS weights cut by them
+            (``crack_method``: ``"diffraction"``, the default, or ``"visibility"``; Organ,
+            Fleming & Belytschko 1996), the cut cells integrated side by side
+            (:func:`~dolfinx_meshfree.statics.efg.crack_rules`: Belytschko et al. 1995, sec.
+            5.2.2) for the stiffness, the lumped masses and the body loads alike; the crack
+            faces are traction-free (natural). Small strain and ``integration="cells"`` only.
 
     A finite-strain ``material`` gives the internal force of
     :class:`~dolfinx_meshfree.InternalForces` on the same rule and table.
@@ -250,6 +305,8 @@ def build_efg(
     if particles.mesh is None:
         raise ValueError("explicit EFG needs particles with a background mesh (mesh=...)")
     _check_integration(integration, particles.gdim)
+    cracks = list(cracks)
+    check_crack_options(bool(cracks), integration, law is not material, particles.comm)
     gdim = particles.gdim
     raise_on_all_ranks(particles.comm, lambda: material.check_gdim(gdim, "the particles' mesh"))
     check_particle_mass(particle_mass)
@@ -260,6 +317,12 @@ def build_efg(
         comm, lambda: MLS(particles, weight=weight, dilation=dilation, basis=basis)
     )
     rule = None if integration == "cells" else stress_point_quadrature(particles)
+    if cracks:  # as EFGElasticity: placed, MLS cut, cut cells integrated side by side
+        domain = CrackDomain.from_particles(particles)
+        for crack in cracks:
+            place_crack(crack, domain)
+        raise_on_all_ranks(comm, lambda: attach_cracks(mls, cracks, crack_method))
+        rule = crack_rules(particles.mesh, domain.cells, cracks, quadrature_degree, None)[0]
     tables: dict = {}
     K_loc, q, tq, _ = particle_stiffness(
         particles, mls, material, quadrature_degree, quadrature=rule, tables=tables
@@ -407,6 +470,9 @@ def build_coupled(
     law = problem.material if material is None else material
     material = small_strain(law, coupling)
     _check_twin(law, material, problem.material)
+    check_crack_options(
+        bool(problem.patch.cracks), integration, law is not material, problem.patch.comm
+    )
     t0 = time.perf_counter()
     V, patch, mls = problem.V, problem.patch, problem.mls
     P, comm, msh = patch.particles, patch.comm, V.mesh
@@ -616,6 +682,12 @@ def build_hybrid(
     """
     if not isinstance(problem, HybridElasticity):
         raise TypeError(f"problem must be a HybridElasticity, got {type(problem).__name__}")
+    if problem.patch.cracks:  # the same on every rank: the cracks are global
+        raise ValueError(
+            "the hybrid coupling cannot carry a cracked patch in explicit dynamics (its SPH "
+            "particle sums are not cut by the crack); use a coupling of "
+            "dolfinx_meshfree.CRACK_COUPLINGS or pure EFG (ExplicitDynamics.efg(..., cracks=...))"
+        )
     check_particle_mass(particle_mass, default="volume")
     law = problem.material if material is None else material
     material = small_strain(law, "hybrid")

@@ -69,6 +69,15 @@ class Discretisation:
             return self.mesh.geometry.dim
         return self.particles.gdim
 
+    @property
+    def cracks(self) -> list:
+        """The cracks cutting the particles' approximation (the patch's, or those attached to
+        the MLS of pure EFG); empty without."""
+        if self.patch is not None:
+            return list(self.patch.cracks)
+        cuts = getattr(self.mls, "pair_cuts", ())
+        return [c for cut in cuts for c in getattr(cut, "cracks", ())]
+
     def blended_cells(self) -> np.ndarray | None:
         """bool per local cell: a ramp interface cell or a bridging band cell (else ``None``)."""
         if self.interface is None:

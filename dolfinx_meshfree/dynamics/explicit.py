@@ -34,6 +34,8 @@ from ..approx.mls import MLS
 from ..couplings.bridging import BridgingBand
 from ..couplings.hybrid import HybridElasticity
 from ..couplings.ramp import RampInterface
+from ..fracture.interaction import StressIntensityFactors
+from ..geometry.crack import Crack
 from ..geometry.particles import ParticleSet
 from ..geometry.patch import ParticlePatch
 from ..geometry.quadrature import QuadraturePoints
@@ -50,6 +52,7 @@ from .initial import check_particle_values, initial_values
 from .loads import Amplitude, BodyLoad, ExternalLoads, Traction
 from .results import DynamicsResult
 from .run import integrate
+from .sifs import dynamic_sifs
 from .system import Field, LinearSystem, SemiDiscreteSystem, inverse_masses
 from .time_step import TimeStepBound, check_safety
 
@@ -206,11 +209,13 @@ class ExplicitDynamics:
         fixed_facets: npt.ArrayLike | None = None,
         multiplier_solver: str | None = None,
         integration: str = "cells",
+        cracks: Sequence[Crack] = (),
+        crack_method: str = "diffraction",
     ) -> ExplicitDynamics:
         """Pure EFG on ``particles`` (Belytschko et al. 1995, sec. 5.2), on their background
         cells or (``integration="stress-points"``) at the particles and stress points; fixed
-        facets by facet multipliers on the velocities. Arguments: see
-        :func:`~dolfinx_meshfree.dynamics.builders.build_efg`.
+        facets by facet multipliers on the velocities; ``cracks`` cut the MLS weights and the
+        cells. Arguments: see :func:`~dolfinx_meshfree.dynamics.builders.build_efg`.
         """
         check_safety(safety)
         check_multiplier_solver(multiplier_solver)
@@ -224,6 +229,8 @@ class ExplicitDynamics:
             particle_mass=particle_mass,
             fixed_facets=fixed_facets,
             integration=integration,
+            cracks=cracks,
+            crack_method=crack_method,
         )
         return cls._from_model(model, safety, multiplier_solver)
 
@@ -442,6 +449,15 @@ class ExplicitDynamics:
             exact: ``exact(points (m, gdim), t) -> (m, gdim)``.
         """
         return self.evaluator.relative_error(self.u, exact, self.time, degree)
+
+    def stress_intensity_factors(
+        self, crack: Crack, tip: int | np.ndarray = 0, radius: float | None = None, **options
+    ) -> StressIntensityFactors:
+        """K_I, K_II and J at a stationary tip of ``crack`` at the current state (at an output
+        or after a run) by the interaction integral with the inertia term, from ``d_n`` and the
+        acceleration ``a_n`` (collective): see :func:`~dolfinx_meshfree.dynamics.sifs.dynamic_sifs`.
+        """
+        return dynamic_sifs(self, crack, tip, radius, **options)
 
     def num_dofs(self) -> dict:
         """Active FE dofs, particle dofs (master–slave: the masters) and multipliers (global)."""

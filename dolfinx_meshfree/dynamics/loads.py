@@ -18,6 +18,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from ..approx.fe_points import tabulate_in_cells
+from ..geometry.cut_cells import cut_facet_quadrature
 from ..geometry.quadrature import facet_quadrature
 from ..parallel import raise_on_all_ranks
 from ..physics.operators import load_vector
@@ -71,9 +72,10 @@ class ExternalLoads:
         """``amplitude(t) * traction(x, n)`` on owned exterior facets (collective).
 
         ``traction`` maps points (m, gdim) and outward normals (m, gdim) to tractions (m, gdim),
-        assembled
-        with the FE basis on facets of FE cells and with the MLS functions on facets of particle
-        cells (Belytschko et al. 1995, eq. 4.5). ``amplitude`` defaults to 1 (a step load).
+        assembled with the FE basis on facets of FE cells and with the MLS functions on facets
+        of particle cells (Belytschko et al. 1995, eq. 4.5), split at a crack's mouth (each side
+        on its own, :func:`~dolfinx_meshfree.geometry.cut_cells.cut_facet_quadrature`).
+        ``amplitude`` defaults to 1 (a step load).
 
         Raises:
             ValueError: a facet lies on a ramp interface or bridging band cell (on every rank).
@@ -100,7 +102,10 @@ class ExternalLoads:
         parts = []
         for f in d.fields:
             sel = facets[on_p] if f.name == "particles" else facets[~on_p]
-            q = facet_quadrature(msh, sel, deg)
+            if f.name == "particles" and d.cracks:  # facets split at the cracks' mouths
+                q = cut_facet_quadrature(msh, sel, d.cracks, deg)
+            else:
+                q = facet_quadrature(msh, sel, deg)
             t = raise_on_all_ranks(
                 self.comm, lambda q=q: vector_values(traction, q.points, q.normals)
             )

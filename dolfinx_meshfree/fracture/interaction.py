@@ -19,10 +19,30 @@ The domain is an annulus ``r1 <= r <= r2`` about the tip with ``q = 1`` inside `
 tensor-product Gauss–Legendre rule in ``(r, theta)``, ``theta`` in ``(-pi, pi)`` from the crack's
 extension, so that no point lies on the crack behind the tip. Independent of any mesh.
 
+Dynamics (``acceleration`` given; Moran & Shih 1987, stationary crack): the momentum balance
+``sigma_ij,j = rho u_i,tt`` makes the divergence of the interaction flux ``F_j`` (the bracket
+above) ``rho u_i,tt u^aux_i,1`` (the auxiliary Williams field is static,
+``sigma^aux_ij,j = 0``), and ``int_A (F_j q)_,j dA = I`` (``q = 1`` at the tip, 0 on
+``r = r2``, traction-free straight faces) gives
+
+.. math::
+    I = \\int_A F_j\\, q_{,j}\\, dA + \\int_A \\rho\\, \\ddot u_i\\, u^{aux}_{i,1}\\, q\\, dA,
+    \\qquad
+    J = \\int_A \\left[\\sigma_{ij} u_{i,1} - W \\delta_{1j}\\right] q_{,j}\\, dA
+      + \\int_A \\rho\\, \\ddot u_i\\, u_{i,1}\\, q\\, dA
+
+(the inertia term with a plus sign for this module's ``q``). It has ``q``, not ``grad q``: it
+covers the whole disc ``r <= r2``, the inner disc ``r < r1`` by a polar rule in
+``s = sqrt(r / r1)`` (exact for the ``r^(-1/2)`` of ``u^aux_i,1`` times a polynomial in
+``sqrt(r)``). The kinetic energy terms ``T delta_1j`` vanish at a stationary tip and are left
+out, and so are the crack-velocity terms of a moving tip: K of a running crack is not computed
+here. ``K = E' I / 2`` holds at a stationary tip (the static relation).
+
 Assumptions (the domain form is exact under them): small strain and the linear elastic law of
 ``material`` (the stress is computed from the displacement gradient); no body force in the
-domain; traction-free crack faces; the crack straight inside ``r2`` (faces at ``theta = +-pi``;
-a crack that kinks inside the domain, another tip or a boundary within ``r2`` is the caller's to
+domain; without ``acceleration``, static equilibrium; traction-free crack faces; the crack
+straight inside ``r2`` (faces at ``theta = +-pi``; a crack that kinks inside the domain, another
+tip or a boundary within ``r2`` is the caller's to
 avoid); the field's gradient evaluated on the correct side of the crack near ``theta = +-pi``.
 """
 
@@ -38,7 +58,13 @@ from .frame import TipFrame
 from .kolosov import effective_modulus
 from .williams import WilliamsField
 
-__all__ = ["Q_WEIGHTS", "StressIntensityFactors", "annulus_quadrature", "interaction_integral"]
+__all__ = [
+    "Q_WEIGHTS",
+    "StressIntensityFactors",
+    "annulus_quadrature",
+    "disc_quadrature",
+    "interaction_integral",
+]
 
 #: The weight function ``q(r)`` across the annulus: ``"linear"`` (the plateau of Moran & Shih
 #: 1987: ``q = (r2 - r) / (r2 - r1)``) or ``"smooth"`` (``q = 1 - 3 s^2 + 2 s^3``,
@@ -46,6 +72,7 @@ __all__ = ["Q_WEIGHTS", "StressIntensityFactors", "annulus_quadrature", "interac
 Q_WEIGHTS = ("linear", "smooth")
 
 GradientFunction = Callable[[np.ndarray], np.ndarray]
+VectorFunction = Callable[[np.ndarray], np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -133,6 +160,64 @@ def annulus_quadrature(
     return np.stack([R * np.cos(TH), R * np.sin(TH)], axis=1), W, R
 
 
+def disc_quadrature(
+    r1: float, points: tuple[int, int] = (8, 32)
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Polar rule on the disc ``r < r1`` about the tip with ``r = r1 s^2`` (Gauss–Legendre in
+    ``s`` and ``theta``): ``r^(-1/2)`` times a polynomial in ``sqrt(r)`` integrates exactly.
+
+    Returns:
+        Local points (n, 2), weights (n,) (including the Jacobian ``r dr = 2 r1^2 s^3 ds``),
+        and radii r (n,).
+    """
+    nr, nt = points
+    u, wu = np.polynomial.legendre.leggauss(nr)
+    t, wt = np.polynomial.legendre.leggauss(nt)
+    s = 0.5 * (u + 1.0)
+    r = r1 * s**2
+    th = np.pi * t
+    R, TH = np.meshgrid(r, th, indexing="ij")
+    W = np.outer(0.5 * wu * 2.0 * r1**2 * s**3, np.pi * wt)
+    R, TH, W = R.ravel(), TH.ravel(), W.ravel()
+    return np.stack([R * np.cos(TH), R * np.sin(TH)], axis=1), W, R
+
+
+def _q_value(r: np.ndarray, r1: float, r2: float, weight: str) -> np.ndarray:
+    """q (n,) on the annulus ``r1 <= r <= r2`` (1 inside, 0 outside)."""
+    s = np.clip((r - r1) / (r2 - r1), 0.0, 1.0)
+    return 1.0 - s if weight == "linear" else 1.0 - 3.0 * s**2 + 2.0 * s**3
+
+
+def _inertia_terms(
+    acc: np.ndarray,
+    H: np.ndarray,
+    rho: float,
+    material: LinearElastic,
+    rules: list,
+    discs: list,
+    r1s: np.ndarray,
+    r2s: np.ndarray,
+    weight: str,
+) -> np.ndarray:
+    """``int_A rho u_i,tt (u_i,1, u^aux,I_i,1, u^aux,II_i,1) q dA`` (3, domains) in the tip
+    frame (module docstring), from the acceleration ``acc`` (n, 2) and gradient ``H`` (n, 2, 2)
+    at the annuli's points followed by the inner discs' points."""
+    aux = [WilliamsField(material, *k) for k in ((1.0, 0.0), (0.0, 1.0))]
+    out = np.zeros((3, len(rules)))
+    start, start_in = 0, sum(len(w) for _, w, _ in rules)
+    for k, ((x, w, r), (xd, wd, _)) in enumerate(zip(rules, discs, strict=True)):
+        sl = slice(start, start + len(w))
+        sd = slice(start_in, start_in + len(wd))
+        start, start_in = start + len(w), start_in + len(wd)
+        xq = np.concatenate([x, xd])
+        wq = np.concatenate([w * _q_value(r, r1s[k], r2s[k], weight), wd])
+        aq = np.concatenate([acc[sl], acc[sd]])
+        grads = [np.concatenate([H[sl], H[sd]])] + [f.fields(xq)[1] for f in aux]
+        for m, h in enumerate(grads):
+            out[m, k] = rho * np.sum(wq * np.einsum("qi,qi->q", aq, h[:, :, 0]))
+    return out
+
+
 def _q_gradient(x: np.ndarray, r: np.ndarray, r1: float, r2: float, weight: str) -> np.ndarray:
     """grad q (n, 2) in the tip frame."""
     if weight == "linear":
@@ -154,6 +239,7 @@ def interaction_integral(
     weight: str = "linear",
     points: tuple[int, int] = (8, 32),
     keep_outside: np.ndarray | None = None,
+    acceleration: VectorFunction | None = None,
 ) -> StressIntensityFactors:
     """K_I, K_II and J at a crack tip by the domain interaction integral (module docstring).
 
@@ -176,6 +262,10 @@ def interaction_integral(
         keep_outside: (k, 2) points no domain may contain (``r <= r2``): the crack's other tip,
             its kinks, the corners of the region where the field is valid. A ValueError names
             the first one inside.
+        acceleration: ``acceleration(x)`` -> (m, 2), the field's ``u_,tt`` at global points
+            (m, 2), called once (like ``grad_u``, which then also gets the inner discs'
+            points): the dynamic interaction integral of a stationary tip (module docstring;
+            density ``material.rho``). ``None``: the static integral.
 
     Returns:
         :class:`StressIntensityFactors`, one entry per domain (path independence report).
@@ -201,10 +291,15 @@ def interaction_integral(
             )
     rules = [annulus_quadrature(a, b, points) for a, b in zip(r1s, r2s, strict=True)]
     x_local = np.concatenate([x for x, _, _ in rules])
-    H_global = np.asarray(grad_u(frame.to_global(x_local)), dtype=float)
-    if H_global.shape != (len(x_local), 2, 2):
+    n_annuli, x_eval, discs = len(x_local), x_local, []
+    if acceleration is not None:  # the inertia term also covers the inner discs (q = 1)
+        none = (np.zeros((0, 2)), np.zeros(0), np.zeros(0))
+        discs = [disc_quadrature(a, points) if a > 0 else none for a in r1s]
+        x_eval = np.concatenate([x_local, *(d[0] for d in discs)])
+    H_global = np.asarray(grad_u(frame.to_global(x_eval)), dtype=float)
+    if H_global.shape != (len(x_eval), 2, 2):
         raise ValueError(
-            f"grad_u must return an array of shape ({len(x_local)}, 2, 2), got {H_global.shape}"
+            f"grad_u must return an array of shape ({len(x_eval)}, 2, 2), got {H_global.shape}"
         )
     if not np.all(np.isfinite(H_global)):
         raise ValueError(
@@ -212,6 +307,17 @@ def interaction_integral(
             f"tip {frame.tip.tolist()}"
         )
     H = frame.tensors_to_local(H_global)
+    inertia = None
+    if acceleration is not None:
+        a_global = np.asarray(acceleration(frame.to_global(x_eval)), dtype=float)
+        if a_global.shape != (len(x_eval), 2) or not np.all(np.isfinite(a_global)):
+            raise ValueError(
+                f"acceleration must return finite values of shape ({len(x_eval)}, 2), got "
+                f"shape {a_global.shape}"
+            )
+        acc = a_global @ frame.rotation.T  # to the tip frame
+        inertia = _inertia_terms(acc, H, material.rho, material, rules, discs, r1s, r2s, weight)
+        H = H[:n_annuli]
     sigma = material.stress(H)  # small strain, linear elastic
     eps = 0.5 * (H + np.swapaxes(H, 1, 2))
     aux = [WilliamsField(material, *k).fields(x_local) for k in ((1.0, 0.0), (0.0, 1.0))]
@@ -235,6 +341,10 @@ def interaction_integral(
             )
             flux[:, 0] -= np.einsum("qik,qik->q", s, e_a)
             out[k] = 0.5 * E_prime * np.sum(w * np.einsum("qj,qj->q", flux, dq))
+    if inertia is not None:  # + int rho u_,tt . (u_,1, u^aux_,1) q dA
+        J += inertia[0]
+        KI += 0.5 * E_prime * inertia[1]
+        KII += 0.5 * E_prime * inertia[2]
     return StressIntensityFactors(
         inner=r1s,
         outer=r2s,

@@ -1,0 +1,162 @@
+"""Dynamic stress intensity factors of an explicit model at its current state: the domain
+interaction integral with the inertia term (Moran & Shih 1987; Belytschko et al. 1995, sec.
+5.2.2) at a stationary tip of a crack of the particles
+(:func:`~dolfinx_meshfree.fracture.interaction.interaction_integral` with ``acceleration``).
+
+The displacement is ``d_n`` and the acceleration the one of the equations of motion at ``t_n``,
+``a_n = P M^{-1} (f^ext(t_n) - f^int(d_n))``, ``P`` the correction onto ``G a = 0`` in the mass
+metric (Rabczuk et al. 2006, eq. 94–96; :mod:`~dolfinx_meshfree.dynamics.constraint`): the
+acceleration central differences use between ``v_{n-1/2}`` and ``v_{n+1/2}``. Both fields are
+the crack-aware MLS approximations of their particle coefficients; the domain checks are those of
+statics (:func:`~dolfinx_meshfree.statics.sifs.solution_sifs`: inside the particles, away from
+the exterior boundary, the FE interface and other tips).
+
+Left out: the crack-velocity terms of a moving tip (this is K at a stationary tip; a growing
+crack's K would need them).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+from petsc4py import PETSc
+
+from ..fracture.interaction import StressIntensityFactors
+from ..geometry.crack import Crack, CrackDomain
+from ..parallel import raise_on_all_ranks
+from ..physics.materials import LinearElastic
+from ..statics.sifs import solution_sifs
+
+if TYPE_CHECKING:  # annotations only: the facade imports this module
+    from .explicit import ExplicitDynamics
+
+__all__ = ["SIFHistory", "current_acceleration", "dynamic_sifs", "model_cracks"]
+
+
+def current_acceleration(dyn: ExplicitDynamics) -> list[PETSc.Vec]:
+    """``a_n = P M^{-1} (f^ext(t_n) - f^int(d_n))`` per field at the current state (new vectors
+    the caller destroys; zero on dofs held at rest; collective)."""
+    stepper = dyn.stepper
+    ku = dyn.system.internal_force(stepper.u)
+    acc = [k.duplicate() for k in ku]
+    for k, (f, a) in enumerate(zip(ku, acc, strict=True)):
+        for vecs, amp in stepper.loads.at(dyn.time):
+            if vecs[k] is not None and amp != 0.0:
+                f.axpy(-amp, vecs[k])
+        a.pointwiseMult(stepper.minv[k], f)
+        a.scale(-1.0)
+    if dyn.projection is not None:
+        dyn.projection.correct(acc)
+    for f in ku:
+        f.destroy()
+    return acc
+
+
+def model_cracks(dyn: ExplicitDynamics) -> tuple[list[Crack], object]:
+    """The cracks cutting the model's MLS and where they lie (the patch, or the particles'
+    :class:`~dolfinx_meshfree.geometry.crack.CrackDomain` of pure EFG)."""
+    cracks = dyn.evaluator.disc.cracks
+    if dyn.patch is not None:
+        return cracks, dyn.patch
+    domain = CrackDomain.from_particles(dyn.particles) if dyn.particles is not None else None
+    return cracks, domain
+
+
+def dynamic_sifs(
+    dyn: ExplicitDynamics,
+    crack: Crack,
+    tip: int | Sequence[float] | np.ndarray = 0,
+    radius: float | Sequence | np.ndarray | None = None,
+    **options,
+) -> StressIntensityFactors:
+    """K_I, K_II and J at a stationary tip of ``crack`` at the model's current state (module
+    docstring; collective, the same on every rank).
+
+    Args:
+        dyn: A linear elastic explicit model with cracks (``ExplicitDynamics.efg(...,
+            cracks=...)`` or ``.coupled`` of a cracked patch).
+        crack: One of the model's cracks. tip: An index of ``crack.tips`` or its coordinates.
+        radius: Outer domain radii (default 3, 4, 5 particle spacings, ``r1 = r2 / 2``).
+        options: ``inner``, ``weight``, ``points`` of
+            :func:`~dolfinx_meshfree.interaction_integral`.
+
+    Raises:
+        ValueError: on every rank: no cracks, a finite-strain material, a bad tip or radius.
+    """
+    cracks, domain = model_cracks(dyn)
+
+    def check() -> None:
+        if not cracks or domain is None:
+            raise ValueError(
+                "the model has no cracks: build it with ExplicitDynamics.efg(..., cracks=[crack]) "
+                "or from a CoupledElasticity whose patch has cracks"
+            )
+        if not isinstance(dyn.material, LinearElastic):
+            raise ValueError(
+                f"material={dyn.material!r}: dynamic stress intensity factors need the small-"
+                "strain LinearElastic law (the interaction integral is linear elastic)"
+            )
+
+    raise_on_all_ranks(dyn.comm, check)
+    acc = current_acceleration(dyn)
+    try:
+        u = dyn.evaluator.local_values(dyn.u)[1]
+        a = dyn.evaluator.local_values(acc)[1]
+    finally:
+        for x in acc:
+            x.destroy()
+    mls = dyn.mls
+
+    def grad(x: np.ndarray) -> np.ndarray:
+        return mls.tabulate(x).gradient(u)
+
+    def acceleration(x: np.ndarray) -> np.ndarray:
+        return mls.tabulate(x, 0).values @ a
+
+    return solution_sifs(
+        grad, dyn.material, cracks, domain, crack, tip, radius, acceleration=acceleration,
+        **options,
+    )  # fmt: skip
+
+
+class SIFHistory:
+    """An ``on_output`` callback of :meth:`ExplicitDynamics.run
+    <dolfinx_meshfree.dynamics.explicit.ExplicitDynamics.run>` that records K_I(t), K_II(t) at a
+    stationary tip (:func:`dynamic_sifs` at each output time; collective).
+
+    Example::
+
+        history = SIFHistory(crack, tip=0, radius=[0.1, 0.15])
+        dyn.run(t_end, outputs=np.linspace(0, t_end, 50), on_output=history)
+        history.KI_history()  # [[t, K_I], ...], K_I averaged over the radii
+
+    Args:
+        crack, tip, radius, options: As :func:`dynamic_sifs`.
+
+    Attributes:
+        records: ``(step, time, StressIntensityFactors)`` per output.
+    """
+
+    def __init__(
+        self,
+        crack: Crack,
+        tip: int | Sequence[float] | np.ndarray = 0,
+        radius: float | Sequence | np.ndarray | None = None,
+        **options,
+    ) -> None:
+        self.crack, self.tip, self.radius, self.options = crack, tip, radius, options
+        self.records: list[tuple[int, float, StressIntensityFactors]] = []
+
+    def __call__(self, dyn: ExplicitDynamics, step: int, time: float) -> None:
+        sifs = dynamic_sifs(dyn, self.crack, self.tip, self.radius, **self.options)
+        self.records.append((step, time, sifs))
+
+    def KI_history(self) -> list[list[float]]:
+        """``[[t, K_I], ...]`` with K_I averaged over the domains."""
+        return [[t, float(s.K_I.mean())] for _, t, s in self.records]
+
+    def KII_history(self) -> list[list[float]]:
+        """``[[t, K_II], ...]`` with K_II averaged over the domains."""
+        return [[t, float(s.K_II.mean())] for _, t, s in self.records]

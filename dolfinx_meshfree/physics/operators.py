@@ -14,13 +14,34 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.sparse as sp
 
-from ..approx.tables import strain_operator
+from ..approx.tables import strain_operator, voigt_pairs
+from .assembly_kernel import gradient_form, resolve_backend
 from .materials import LinearElastic
 
 if TYPE_CHECKING:  # annotations only
     from mpi4py import MPI
 
-__all__ = ["consistent_gradients", "load_vector", "moment_corrections", "stiffness_matrix"]
+__all__ = [
+    "consistent_gradients",
+    "load_vector",
+    "moment_corrections",
+    "stiffness_matrix",
+    "voigt_tangent",
+]
+
+
+def voigt_tangent(D: np.ndarray, gdim: int) -> np.ndarray:
+    """The (gdim^2 x gdim^2) tangent ``A[d i + a, d k + b]`` of a Voigt matrix ``D``, with
+    ``B^T D B = G^T A G`` for the strain operator ``B`` of
+    :func:`~dolfinx_meshfree.approx.tables.strain_operator` and the displacement-gradient
+    operator ``G`` (``du_i/dx_a`` at ``d i + a``): ``A = P^T D P`` with ``P[r, d i + a] = 1``
+    where Voigt component ``r`` contains ``du_i/dx_a`` (engineering shears hold both orders)."""
+    pairs = voigt_pairs(gdim)
+    P = np.zeros((len(pairs), gdim * gdim))
+    for r, (i, j) in enumerate(pairs):
+        P[r, gdim * i + j] = 1.0
+        P[r, gdim * j + i] = 1.0
+    return P.T @ D @ P
 
 
 def stiffness_matrix(
@@ -28,6 +49,8 @@ def stiffness_matrix(
     weights: np.ndarray,
     material: LinearElastic,
     trial_gradients: list[sp.csr_matrix] | None = None,
+    node_map: np.ndarray | None = None,
+    backend: str | None = None,
 ) -> sp.csr_matrix:
     """Stiffness ``K = sum_q B_test(x_q)^T D B_trial(x_q) w_q`` (gdim n x gdim n).
 
@@ -35,13 +58,34 @@ def stiffness_matrix(
     must be the law of that dimension). ``trial_gradients`` defaults to ``test_gradients``; they
     differ for variationally consistent integration, which corrects the test functions only
     (Chen, Hillman & Rüter 2013).
+
+    Args:
+        node_map: (n,) the output number of each table column (a permutation of ``range(n)``,
+            e.g. :attr:`~dolfinx_meshfree.ParticleSet.petsc_index`): rows and columns
+            ``gdim node_map[I] + i``. Default: the table's numbering.
+        backend: ``"numba"`` (the default when numba is importable: one compiled pass from the
+            tables to the CSR, :mod:`~dolfinx_meshfree.physics.assembly_kernel`) or ``"scipy"``
+            (the sparse product ``B_test^T (W (x) D) B_trial``, the reference; the default
+            without numba). ``DOLFINX_MESHFREE_ASSEMBLY_BACKEND`` sets the default. They agree to
+            round-off; the numba path keeps the structural zeros of the pattern.
     """
-    material.check_gdim(len(test_gradients), "the shape table")
+    gdim = len(test_gradients)
+    material.check_gdim(gdim, "the shape table")
+    trial = test_gradients if trial_gradients is None else trial_gradients
+    n = test_gradients[0].shape[1]
+    if resolve_backend(backend) == "numba":
+        A = voigt_tangent(material.voigt(), gdim)
+        return gradient_form(test_gradients, trial, weights, A, node_map, n)
     Bt = strain_operator(test_gradients)
     B = Bt if trial_gradients is None else strain_operator(trial_gradients)
     D = material.voigt()
     DW = sp.kron(sp.diags(weights), sp.csr_matrix(D), format="csr")
-    return (Bt.T @ DW @ B).tocsr()
+    K = (Bt.T @ DW @ B).tocsr()
+    if node_map is None:
+        return K
+    dofs = (gdim * np.asarray(node_map)[:, None] + np.arange(gdim)).ravel()
+    K = K.tocoo()
+    return sp.csr_matrix((K.data, (dofs[K.row], dofs[K.col])), shape=(gdim * n, gdim * n))
 
 
 def load_vector(values: sp.csr_matrix, weights: np.ndarray, forces: np.ndarray) -> np.ndarray:

@@ -14,16 +14,20 @@ form: with gradient tables ``g_a(I, q) = dN_I/dx_a (x_q)``,
 strain operators, the unsorted products) dominate memory; here it is one pass from the tables
 to the CSR, block row by block row:
 
-1. the node-to-point transpose of the table pattern, by a counting sort (no comparison sort);
-2. per block row ``I`` (in the output numbering ``node_map``), the union of the supports of the
-   points in ``I``'s support, marked in a stamp array and sorted (one small sort per row): the
-   sparsity pattern, computed once;
+1. the node-to-point transpose of the test table's pattern, by a counting sort (no
+   comparison sort), the columns renumbered by ``node_map`` first;
+2. per block row ``I``, the union of the trial supports of the points in ``I``'s test
+   support, marked in a stamp array and sorted (one small sort per row): the sparsity
+   pattern, computed once;
 3. per block row, the sums over its points straight into the row's (d x d) blocks, written
    as a scalar CSR with interleaved dofs ``d I + i``.
 
-The only temporaries are the transpose (two integers per table entry) and one row's pattern,
-so peak memory is the tables plus the output (a few times the assembled matrix), and each
-entry of the output is written by one row's loop (no duplicates, no scatter-add conflicts).
+The test and trial tables keep their own patterns (each group of ``d`` tables shares one), so
+nothing is copied or gathered; the temporaries are the renumbered columns and the transpose
+(three 32-bit integers per table entry where the sizes allow) and a few (n,) arrays. Peak
+memory is the tables plus about 4 times the output, and each entry of the output is written
+by one row's loop (no duplicates, no scatter-add conflicts). Every array is allocated by
+numpy (so that ``tracemalloc`` sees them).
 """
 
 from __future__ import annotations
@@ -40,6 +44,7 @@ __all__ = [
     "BACKENDS",
     "DEFAULT_BACKEND",
     "assemble_blocks",
+    "block_pattern",
     "gradient_form",
     "resolve_backend",
     "transpose_pattern",
@@ -70,19 +75,10 @@ def resolve_backend(backend: str | None) -> str:
 
 
 @jit
-def transpose_pattern(indptr, indices, n):  # pragma: no cover - compiled
-    """Points of each node's support: CSR ``(tptr, tpoint, tpos)`` over the ``n`` nodes, with
-    the point ``q`` and the table position ``p`` of every entry, points in increasing order
-    (a counting sort of the table's column indices)."""
-    nnz = indices.shape[0]
-    tptr = np.zeros(n + 1, np.int64)
-    for p in range(nnz):
-        tptr[indices[p] + 1] += 1
-    for i in range(n):
-        tptr[i + 1] += tptr[i]
+def _transpose(indptr, indices, tptr, tpoint, tpos):  # pragma: no cover - compiled
+    """Fill ``tpoint``/``tpos`` (the point ``q`` and table position ``p`` of every entry) by
+    node, points in increasing order, given the node pointers ``tptr``."""
     fill = tptr[:-1].copy()
-    tpoint = np.empty(nnz, np.int64)
-    tpos = np.empty(nnz, np.int64)
     for q in range(indptr.shape[0] - 1):
         for p in range(indptr[q], indptr[q + 1]):
             c = indices[p]
@@ -90,70 +86,93 @@ def transpose_pattern(indptr, indices, n):  # pragma: no cover - compiled
             tpoint[k] = q
             tpos[k] = p
             fill[c] = k + 1
+
+
+def _index_type(size: int) -> type:
+    return np.int32 if size < np.iinfo(np.int32).max else np.int64
+
+
+def transpose_pattern(
+    indptr: np.ndarray, indices: np.ndarray, n: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points of each node's support: CSR ``(tptr, tpoint, tpos)`` over the ``n`` nodes, with
+    the point ``q`` and the table position ``p`` of every entry, points in increasing order (a
+    counting sort of the table's column indices, no comparison sort)."""
+    tptr = np.zeros(n + 1, np.int64)
+    np.cumsum(np.bincount(indices, minlength=n), out=tptr[1:])
+    itype = _index_type(max(indices.shape[0], indptr.shape[0]))
+    tpoint = np.empty(indices.shape[0], itype)
+    tpos = np.empty(indices.shape[0], itype)
+    _transpose(indptr, indices, tptr, tpoint, tpos)
     return tptr, tpoint, tpos
 
 
 @jit
-def _block_pattern(indptr, indices, tptr, tpoint, node_map, inverse):  # pragma: no cover
-    """Block rows in the output numbering: ``bptr`` and the sorted output node numbers of the
-    columns, the union over the points of each row node's support."""
+def _block_rows(indptr, indices, tptr, tpoint, stamp, row, bptr, bcols):  # pragma: no cover
+    """Per row node, the union of the (trial) supports ``indptr, indices`` of the points in its
+    (test) support ``tptr, tpoint``. With ``bcols`` empty, count them into ``bptr[1:]``; else
+    write them, sorted, from ``bptr``."""
     n = tptr.shape[0] - 1
-    n_out = inverse.shape[0]
-    stamp = np.full(n, -1, np.int64)
-    bptr = np.zeros(n_out + 1, np.int64)
-    cap = max(16, 4 * indices.shape[0])
-    bcols = np.empty(cap, np.int64)
-    row = np.empty(n, np.int64)
-    for r in range(n_out):
-        node = inverse[r]
+    count = bcols.shape[0] == 0
+    stamp[:] = -1
+    for r in range(n):
         c = 0
-        if node >= 0:
-            for t in range(tptr[node], tptr[node + 1]):
-                q = tpoint[t]
-                for p in range(indptr[q], indptr[q + 1]):
-                    j = indices[p]
-                    if stamp[j] != r:
-                        stamp[j] = r
-                        row[c] = node_map[j]
-                        c += 1
-        start = bptr[r]
-        if start + c > cap:
-            cap = max(2 * cap, start + c)
-            grown = np.empty(cap, np.int64)
-            grown[:start] = bcols[:start]
-            bcols = grown
-        bcols[start : start + c] = np.sort(row[:c])
-        bptr[r + 1] = start + c
-    return bptr, bcols[: bptr[n_out]].copy()
+        for t in range(tptr[r], tptr[r + 1]):
+            q = tpoint[t]
+            for p in range(indptr[q], indptr[q + 1]):
+                j = indices[p]
+                if stamp[j] != r:
+                    stamp[j] = r
+                    row[c] = j
+                    c += 1
+        if count:
+            bptr[r + 1] = c
+        else:
+            bcols[bptr[r] : bptr[r] + c] = np.sort(row[:c])
+
+
+def block_pattern(
+    indptr: np.ndarray, indices: np.ndarray, tptr: np.ndarray, tpoint: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The block sparsity pattern ``(bptr, bcols)``: node ``J`` in row ``I`` when a point has
+    ``I`` in its test support ``(tptr, tpoint)`` (a transpose, :func:`transpose_pattern`) and
+    ``J`` in its trial support ``(indptr, indices)``; two passes over the pairs (count, write)."""
+    n = tptr.shape[0] - 1
+    stamp = np.empty(n, np.int64)
+    row = np.empty(n, indices.dtype)
+    bptr = np.zeros(n + 1, np.int64)
+    _block_rows(indptr, indices, tptr, tpoint, stamp, row, bptr, np.empty(0, indices.dtype))
+    np.cumsum(bptr, out=bptr)
+    bcols = np.empty(bptr[-1], indices.dtype)
+    _block_rows(indptr, indices, tptr, tpoint, stamp, row, bptr, bcols)
+    return bptr, bcols
 
 
 @jit
 def _fill_blocks(
-    indptr,
-    indices,
     test,
-    trial,
-    weights,
-    tangents,
     tptr,
     tpoint,
     tpos,
-    node_map,
-    inverse,
+    indptr,
+    indices,
+    trial,
+    weights,
+    tangents,
     bptr,
     bcols,
     out_indptr,
     out_indices,
     out_data,
+    where,
 ):  # pragma: no cover - compiled
-    """The sums of the module docstring, block row by block row, into the scalar CSR arrays."""
-    d = test.shape[0]
+    """The sums of the module docstring, block row by block row, into the scalar CSR arrays
+    (``where``: (n,) integer workspace)."""  # fmt: skip
+    d = len(test)
     n = tptr.shape[0] - 1
-    n_out = inverse.shape[0]
     per_point = tangents.shape[0] > 1
-    where = np.full(n_out, -1, np.int64)
     W = np.empty((d, d, d))
-    for r in range(n_out):
+    for r in range(n):
         nb = bptr[r + 1] - bptr[r]
         base = d * d * bptr[r]
         for i in range(d):
@@ -161,12 +180,9 @@ def _fill_blocks(
             for kb in range(nb):
                 for k in range(d):
                     out_indices[base + i * nb * d + kb * d + k] = d * bcols[bptr[r] + kb] + k
-        node = inverse[r]
-        if node < 0:
-            continue
         for kb in range(nb):
             where[bcols[bptr[r] + kb]] = kb
-        for t in range(tptr[node], tptr[node + 1]):
+        for t in range(tptr[r], tptr[r + 1]):
             q = tpoint[t]
             p0 = tpos[t]
             A = tangents[q if per_point else 0]
@@ -177,107 +193,131 @@ def _fill_blocks(
                     for b in range(d):
                         s = 0.0
                         for a in range(d):
-                            s += test[a, p0] * A[d * i + a, d * k + b]
+                            s += test[a][p0] * A[d * i + a, d * k + b]
                         W[i, k, b] = w * s
-            for p in range(indptr[q], indptr[q + 1]):
-                kb = where[node_map[indices[p]]]
+            lo, hi = indptr[q], indptr[q + 1]
+            if d == 2:  # unrolled: the inner loop of every 2D assembly
+                w000, w001, w010, w011 = W[0, 0, 0], W[0, 0, 1], W[0, 1, 0], W[0, 1, 1]
+                w100, w101, w110, w111 = W[1, 0, 0], W[1, 0, 1], W[1, 1, 0], W[1, 1, 1]
+                row1 = nb * 2
+                for p in range(lo, hi):
+                    at = base + 2 * where[indices[p]]
+                    g0 = trial[0][p]
+                    g1 = trial[1][p]
+                    out_data[at] += w000 * g0 + w001 * g1
+                    out_data[at + 1] += w010 * g0 + w011 * g1
+                    out_data[at + row1] += w100 * g0 + w101 * g1
+                    out_data[at + row1 + 1] += w110 * g0 + w111 * g1
+                continue
+            for p in range(lo, hi):
+                kb = where[indices[p]]
                 for i in range(d):
                     at = base + i * nb * d + kb * d
                     for k in range(d):
                         s = 0.0
                         for b in range(d):
-                            s += W[i, k, b] * trial[b, p]
+                            s += W[i, k, b] * trial[b][p]
                         out_data[at + k] += s
-    out_indptr[d * n_out] = d * d * bptr[n_out]
-    return n
+    out_indptr[d * n] = d * d * bptr[n]
+
+
+def _renumbered(indices: np.ndarray, node_map: np.ndarray | None, n_out: int) -> np.ndarray:
+    itype = _index_type(n_out)
+    if node_map is None:
+        return np.ascontiguousarray(indices, dtype=itype)
+    return np.asarray(node_map, dtype=itype)[indices]
 
 
 def assemble_blocks(
-    indptr: np.ndarray,
-    indices: np.ndarray,
-    test: np.ndarray,
-    trial: np.ndarray,
+    test_pattern: tuple[np.ndarray, np.ndarray],
+    test: list[np.ndarray],
+    trial_pattern: tuple[np.ndarray, np.ndarray],
+    trial: list[np.ndarray],
     weights: np.ndarray,
     tangents: np.ndarray,
-    num_nodes: int,
+    num_out: int,
     node_map: np.ndarray | None = None,
-    num_out: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """CSR arrays of ``K`` (module docstring) from tables sharing one pattern.
+    """CSR arrays of ``K`` (module docstring) from the test and trial tables.
 
     Args:
-        indptr, indices: the tables' CSR pattern (m + 1,), (nnz,) over ``num_nodes`` columns.
-        test, trial: (d, nnz) test and trial gradient values on that pattern.
+        test_pattern, trial_pattern: ``(indptr, indices)`` CSR patterns of the ``m`` points
+            over the nodes, one for the ``d`` test tables and one for the ``d`` trial tables.
+        test, trial: ``d`` (nnz,) value arrays each, on their pattern.
         weights: (m,) quadrature weights.
         tangents: (1, d^2, d^2) (the same at every point) or (m, d^2, d^2), index ``d i + a``.
-        node_map: output node number of each node (injective into ``range(num_out)``; default
-            the identity): rows and columns ``d node_map[I] + i``.
-        num_out: number of output nodes (default ``num_nodes``).
+        num_out: number of output nodes.
+        node_map: output node number of each table column (injective into
+            ``range(num_out)``; default the identity): rows and columns ``d node_map[I] + i``.
 
     Returns:
         ``(indptr, indices, data)`` of the (d num_out x d num_out) CSR, sorted indices, no
         duplicates (structural zeros of the pattern kept).
     """
-    d = test.shape[0]
-    n_out = num_nodes if num_out is None else num_out
-    if node_map is None:
-        node_map = np.arange(num_nodes, dtype=np.int64)
-    node_map = np.ascontiguousarray(node_map, dtype=np.int64)
-    inverse = np.full(n_out, -1, np.int64)
-    inverse[node_map] = np.arange(num_nodes)
-    indptr = np.ascontiguousarray(indptr, dtype=np.int64)
-    indices = np.ascontiguousarray(indices, dtype=np.int64)
-    tptr, tpoint, tpos = transpose_pattern(indptr, indices, num_nodes)
-    bptr, bcols = _block_pattern(indptr, indices, tptr, tpoint, node_map, inverse)
+    d = len(test)
+    tptr_in = np.ascontiguousarray(test_pattern[0], dtype=np.int64)
+    indptr = np.ascontiguousarray(trial_pattern[0], dtype=np.int64)
+    rows = _renumbered(test_pattern[1], node_map, num_out)
+    tptr, tpoint, tpos = transpose_pattern(tptr_in, rows, num_out)
+    del rows
+    indices = _renumbered(trial_pattern[1], node_map, num_out)
+    bptr, bcols = block_pattern(indptr, indices, tptr, tpoint)
     nnz = d * d * int(bptr[-1])
-    itype = np.int32 if max(nnz, d * n_out) < np.iinfo(np.int32).max else np.int64
-    out_indptr = np.empty(d * n_out + 1, itype)
+    itype = _index_type(max(nnz, d * num_out + 1))
+    out_indptr = np.empty(d * num_out + 1, itype)
     out_indices = np.empty(nnz, itype)
     out_data = np.zeros(nnz)
     _fill_blocks(
-        indptr, indices, np.ascontiguousarray(test, dtype=float),
-        np.ascontiguousarray(trial, dtype=float), np.ascontiguousarray(weights, dtype=float),
-        np.ascontiguousarray(tangents, dtype=float), tptr, tpoint, tpos, node_map, inverse,
-        bptr, bcols, out_indptr, out_indices, out_data,
+        tuple(np.ascontiguousarray(t, dtype=float) for t in test), tptr, tpoint, tpos,
+        indptr, indices, tuple(np.ascontiguousarray(t, dtype=float) for t in trial),
+        np.ascontiguousarray(weights, dtype=float), np.ascontiguousarray(tangents, dtype=float),
+        bptr, bcols, out_indptr, out_indices, out_data, np.empty(num_out, np.int64),
     )  # fmt: skip
     return out_indptr, out_indices, out_data
 
 
 @jit
 def _gather(uptr, uidx, tptr, tidx, tdata, n, out):  # pragma: no cover - compiled
-    """Values of a CSR table (tptr, tidx, tdata) on the wider pattern (uptr, uidx), in place."""
-    where = np.full(n, -1, np.int64)
+    """Add the values of a CSR table (tptr, tidx, tdata) on the pattern (uptr, uidx) into
+    ``out``; False (``out`` then partly written) if an entry of the table is not in it."""
+    pos = np.empty(n, np.int64)
+    row = np.full(n, -1, np.int64)
     for q in range(uptr.shape[0] - 1):
         for p in range(uptr[q], uptr[q + 1]):
-            where[uidx[p]] = p
+            pos[uidx[p]] = p
+            row[uidx[p]] = q
         for p in range(tptr[q], tptr[q + 1]):
-            out[where[tidx[p]]] += tdata[p]
+            c = tidx[p]
+            if row[c] != q:
+                return False
+            out[pos[c]] += tdata[p]
+    return True
 
 
 def _common_pattern(
     tables: list[sp.csr_matrix],
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One CSR pattern for all ``tables`` and their values on it (len(tables), nnz): theirs
-    when they share one (the MLS tables), else the union (e.g. VCI sums that dropped zeros)."""
+) -> tuple[tuple[np.ndarray, np.ndarray], list[np.ndarray]]:
+    """One CSR pattern for a group of tables and their values on it (one (nnz,) array each):
+    the first table's, shared by the others as is (the MLS tables; VCI sums of them), or
+    else, the union of theirs (e.g. a sum that dropped a zero), the values gathered onto it."""
     first = tables[0]
-    same = all(
-        t is first
-        or (np.array_equal(t.indptr, first.indptr) and np.array_equal(t.indices, first.indices))
-        for t in tables
-    )
-    if same:
-        return first.indptr, first.indices, np.stack([t.data for t in tables])
+    if all(
+        np.array_equal(t.indptr, first.indptr) and np.array_equal(t.indices, first.indices)
+        for t in tables[1:]
+    ):
+        return (first.indptr, first.indices), [np.asarray(t.data, dtype=float) for t in tables]
     union = sp.csr_matrix(first.shape)
     for t in tables:
         union = union + sp.csr_matrix((np.ones(t.nnz), t.indices, t.indptr), shape=t.shape)
-    union.sort_indices()
     uptr = union.indptr.astype(np.int64)
     uidx = union.indices.astype(np.int64)
-    values = np.zeros((len(tables), union.nnz))
-    for k, t in enumerate(tables):
+    values = []
+    for t in tables:
+        v = np.zeros(uidx.shape[0])
         _gather(uptr, uidx, t.indptr.astype(np.int64), t.indices.astype(np.int64),
-                np.asarray(t.data, dtype=float), first.shape[1], values[k])  # fmt: skip
-    return uptr, uidx, values
+                np.asarray(t.data, dtype=float), t.shape[1], v)  # fmt: skip
+        values.append(v)
+    return (uptr, uidx), values
 
 
 def gradient_form(
@@ -291,21 +331,25 @@ def gradient_form(
     """``K = sum_q w_q G_test^T A_q G_trial`` (module docstring) as a scipy CSR, compiled.
 
     Args:
-        test_gradients, trial_gradients: ``d`` tables (m x n) each.
+        test_gradients, trial_gradients: ``d`` tables (m x n) each (the same list object for a
+            Galerkin form: its pattern is then used once).
         weights: (m,). tangents: (d^2, d^2), or (m, d^2, d^2) per point.
-        node_map, num_out: output node numbering (see :func:`assemble_blocks`).
+        node_map, num_out: output node numbering (see :func:`assemble_blocks`; default ``n``).
 
     Returns:
         (d num_out x d num_out) CSR with sorted indices and no duplicates.
     """
     d = len(trial_gradients)
     n = trial_gradients[0].shape[1]
-    tables = [sp.csr_matrix(t) for t in (*test_gradients, *trial_gradients)]
-    indptr, indices, values = _common_pattern(tables)
-    A = np.asarray(tangents, dtype=float).reshape(-1, d * d, d * d)
     n_out = n if num_out is None else num_out
+    trial_pattern, trial = _common_pattern([sp.csr_matrix(t) for t in trial_gradients])
+    if test_gradients is trial_gradients:
+        test_pattern, test = trial_pattern, trial
+    else:
+        test_pattern, test = _common_pattern([sp.csr_matrix(t) for t in test_gradients])
+    A = np.asarray(tangents, dtype=float).reshape(-1, d * d, d * d)
     indptr, indices, data = assemble_blocks(
-        indptr, indices, values[:d], values[d:], weights, A, n, node_map, n_out
+        test_pattern, test, trial_pattern, trial, weights, A, n_out, node_map
     )
     K = sp.csr_matrix((data, indices, indptr), shape=(d * n_out, d * n_out))
     K.has_sorted_indices = True

@@ -4,8 +4,9 @@ Both compute ``K = sum_q w_q B_test^T D B_trial`` (Belytschko et al. 1995, eq. 4
 finite-strain tangent ``sum_q w_q G_test^T A_q G`` (Rabczuk, Xiao & Sauer 2006, eq. 34) from
 the same tables, in different summation orders, so they agree to round-off: ``TOL = 1e-12``
 relative to the largest entry is a margin of 200 or more over what is observed (4e-16 to
-5e-15 over these cases). The compiled pattern keeps the structural zeros that scipy drops, so the check is on
-the difference of the two matrices, plus an exact check of the pattern on the scipy side.
+5e-15 over these cases). The compiled pattern keeps the structural zeros that scipy drops, so
+the check is on the difference of the two matrices, plus an exact check of the pattern on the
+scipy side.
 """
 
 import dolfinx_meshfree as mf
@@ -151,5 +152,5 @@ def test_backend_errors(monkeypatch):
     with pytest.raises(ValueError, match=r"backend='fortran'.*use one of \('numba', 'scipy'\)"):
         stiffness_matrix(t.gradients, w, material(2), backend="fortran")
     monkeypatch.setattr(jit, "AVAILABLE", False)  # as without numba
-    with pytest.raises(ValueError, match="needs numba.*backend='scipy'"):
+    with pytest.raises(ValueError, match=r"needs numba.*backend='scipy'"):
         stiffness_matrix(t.gradients, w, material(2), backend="numba")

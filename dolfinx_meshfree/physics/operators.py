@@ -117,6 +117,9 @@ def consistent_gradients(
         \\xi_I = \\frac{\\sum_b N_I n w_b - \\sum_q \\nabla N_I w_q}{\\sum_q N_I w_q}
 
     satisfy it exactly, so the linear patch test passes to round-off with any quadrature.
+    Where the gradients share the values' CSR pattern (the MLS tables) the corrected tables
+    keep it (the same products and sums as the sparse-matrix form, entry by entry, without
+    dropping the entries that happen to cancel to zero).
     Sums run over every rank's cells and boundary facets (collective); the boundary must be the
     whole boundary of the integration domain. Any dimension: ``boundary_normals`` is (nb, gdim)
     with ``gdim = len(cell_gradients)``.
@@ -143,7 +146,23 @@ def consistent_gradients(
             f"({vol[i]:.2e}); its support misses the quadrature: increase the dilation"
         )
     xi = rhs / vol[:, None]
-    return [(g + cell_values @ sp.diags(xi[:, k])).tocsr() for k, g in enumerate(cell_gradients)]
+    V = cell_values.tocsr()
+    if all(_same_pattern(g, V) for g in cell_gradients):  # the MLS tables: one O(nnz) pass
+        return [
+            sp.csr_matrix((g.data + V.data * xi[V.indices, k], V.indices, V.indptr), V.shape)
+            for k, g in enumerate(cell_gradients)
+        ]
+    return [(g + V @ sp.diags(xi[:, k])).tocsr() for k, g in enumerate(cell_gradients)]
+
+
+def _same_pattern(a: sp.spmatrix, b: sp.csr_matrix) -> bool:
+    """Whether ``a`` is a CSR with exactly the pattern (and entry order) of ``b``."""
+    return (
+        sp.isspmatrix_csr(a)
+        and a.nnz == b.nnz
+        and np.array_equal(a.indptr, b.indptr)
+        and np.array_equal(a.indices, b.indices)
+    )
 
 
 def moment_corrections(

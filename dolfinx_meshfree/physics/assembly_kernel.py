@@ -43,7 +43,7 @@ from ..approx.jit import jit
 __all__ = [
     "BACKENDS",
     "DEFAULT_BACKEND",
-    "assemble_blocks",
+    "GradientForm",
     "block_pattern",
     "gradient_form",
     "resolve_backend",
@@ -228,54 +228,6 @@ def _renumbered(indices: np.ndarray, node_map: np.ndarray | None, n_out: int) ->
     return np.asarray(node_map, dtype=itype)[indices]
 
 
-def assemble_blocks(
-    test_pattern: tuple[np.ndarray, np.ndarray],
-    test: list[np.ndarray],
-    trial_pattern: tuple[np.ndarray, np.ndarray],
-    trial: list[np.ndarray],
-    weights: np.ndarray,
-    tangents: np.ndarray,
-    num_out: int,
-    node_map: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """CSR arrays of ``K`` (module docstring) from the test and trial tables.
-
-    Args:
-        test_pattern, trial_pattern: ``(indptr, indices)`` CSR patterns of the ``m`` points
-            over the nodes, one for the ``d`` test tables and one for the ``d`` trial tables.
-        test, trial: ``d`` (nnz,) value arrays each, on their pattern.
-        weights: (m,) quadrature weights.
-        tangents: (1, d^2, d^2) (the same at every point) or (m, d^2, d^2), index ``d i + a``.
-        num_out: number of output nodes.
-        node_map: output node number of each table column (injective into
-            ``range(num_out)``; default the identity): rows and columns ``d node_map[I] + i``.
-
-    Returns:
-        ``(indptr, indices, data)`` of the (d num_out x d num_out) CSR, sorted indices, no
-        duplicates (structural zeros of the pattern kept).
-    """
-    d = len(test)
-    tptr_in = np.ascontiguousarray(test_pattern[0], dtype=np.int64)
-    indptr = np.ascontiguousarray(trial_pattern[0], dtype=np.int64)
-    rows = _renumbered(test_pattern[1], node_map, num_out)
-    tptr, tpoint, tpos = transpose_pattern(tptr_in, rows, num_out)
-    del rows
-    indices = _renumbered(trial_pattern[1], node_map, num_out)
-    bptr, bcols = block_pattern(indptr, indices, tptr, tpoint)
-    nnz = d * d * int(bptr[-1])
-    itype = _index_type(max(nnz, d * num_out + 1))
-    out_indptr = np.empty(d * num_out + 1, itype)
-    out_indices = np.empty(nnz, itype)
-    out_data = np.zeros(nnz)
-    _fill_blocks(
-        tuple(np.ascontiguousarray(t, dtype=float) for t in test), tptr, tpoint, tpos,
-        indptr, indices, tuple(np.ascontiguousarray(t, dtype=float) for t in trial),
-        np.ascontiguousarray(weights, dtype=float), np.ascontiguousarray(tangents, dtype=float),
-        bptr, bcols, out_indptr, out_indices, out_data, np.empty(num_out, np.int64),
-    )  # fmt: skip
-    return out_indptr, out_indices, out_data
-
-
 @jit
 def _gather(uptr, uidx, tptr, tidx, tdata, n, out):  # pragma: no cover - compiled
     """Add the values of a CSR table (tptr, tidx, tdata) on the pattern (uptr, uidx) into
@@ -320,6 +272,64 @@ def _common_pattern(
     return (uptr, uidx), values
 
 
+class GradientForm:
+    """``K = sum_q w_q G_test^T A_q G_trial`` (module docstring) on fixed tables: the
+    renumbered patterns, their transpose and the block pattern are computed here once; each
+    call sums with its weights and tangents (e.g. a new ``A_q = dP/dF`` per Newton iterate).
+
+    Args:
+        test_gradients, trial_gradients: ``d`` tables (m x n) each (the same list object for a
+            Galerkin form: its pattern is then used once). Their values are kept.
+        node_map: (n,) output node number of each table column (injective into
+            ``range(num_out)``; default the identity): rows and columns ``d node_map[I] + i``.
+        num_out: number of output nodes (default ``n``).
+    """
+
+    def __init__(
+        self,
+        test_gradients: list[sp.spmatrix],
+        trial_gradients: list[sp.spmatrix],
+        node_map: np.ndarray | None = None,
+        num_out: int | None = None,
+    ) -> None:
+        self.gdim = len(trial_gradients)
+        self.num_out = trial_gradients[0].shape[1] if num_out is None else num_out
+        trial_pattern, trial = _common_pattern([sp.csr_matrix(t) for t in trial_gradients])
+        if test_gradients is trial_gradients:
+            test_pattern, test = trial_pattern, trial
+        else:
+            test_pattern, test = _common_pattern([sp.csr_matrix(t) for t in test_gradients])
+        self._test = tuple(np.ascontiguousarray(t, dtype=float) for t in test)
+        self._trial = tuple(np.ascontiguousarray(t, dtype=float) for t in trial)
+        rows = _renumbered(test_pattern[1], node_map, self.num_out)
+        tptr = np.ascontiguousarray(test_pattern[0], dtype=np.int64)
+        self._transpose = transpose_pattern(tptr, rows, self.num_out)
+        del rows
+        self._indptr = np.ascontiguousarray(trial_pattern[0], dtype=np.int64)
+        self._indices = _renumbered(trial_pattern[1], node_map, self.num_out)
+        self._bptr, self._bcols = block_pattern(self._indptr, self._indices, *self._transpose[:2])
+
+    def __call__(self, weights: np.ndarray, tangents: np.ndarray) -> sp.csr_matrix:
+        """K for (m,) ``weights`` and (d^2, d^2) or (m, d^2, d^2) ``tangents`` (index
+        ``d i + a``): a (d num_out x d num_out) CSR, sorted indices, no duplicates (the
+        structural zeros of the pattern kept), its own arrays."""
+        d, n_out = self.gdim, self.num_out
+        A = np.ascontiguousarray(tangents, dtype=float).reshape(-1, d * d, d * d)
+        nnz = d * d * int(self._bptr[-1])
+        itype = _index_type(max(nnz, d * n_out + 1))
+        indptr = np.empty(d * n_out + 1, itype)
+        indices = np.empty(nnz, itype)
+        data = np.zeros(nnz)
+        _fill_blocks(
+            self._test, *self._transpose, self._indptr, self._indices, self._trial,
+            np.ascontiguousarray(weights, dtype=float), A, self._bptr, self._bcols,
+            indptr, indices, data, np.empty(n_out, np.int64),
+        )  # fmt: skip
+        K = sp.csr_matrix((data, indices, indptr), shape=(d * n_out, d * n_out))
+        K.has_sorted_indices = True
+        return K
+
+
 def gradient_form(
     test_gradients: list[sp.spmatrix],
     trial_gradients: list[sp.spmatrix],
@@ -328,29 +338,13 @@ def gradient_form(
     node_map: np.ndarray | None = None,
     num_out: int | None = None,
 ) -> sp.csr_matrix:
-    """``K = sum_q w_q G_test^T A_q G_trial`` (module docstring) as a scipy CSR, compiled.
+    """``K = sum_q w_q G_test^T A_q G_trial`` once: :class:`GradientForm` built and called.
 
     Args:
-        test_gradients, trial_gradients: ``d`` tables (m x n) each (the same list object for a
-            Galerkin form: its pattern is then used once).
+        test_gradients, trial_gradients, node_map, num_out: as for :class:`GradientForm`.
         weights: (m,). tangents: (d^2, d^2), or (m, d^2, d^2) per point.
-        node_map, num_out: output node numbering (see :func:`assemble_blocks`; default ``n``).
 
     Returns:
         (d num_out x d num_out) CSR with sorted indices and no duplicates.
     """
-    d = len(trial_gradients)
-    n = trial_gradients[0].shape[1]
-    n_out = n if num_out is None else num_out
-    trial_pattern, trial = _common_pattern([sp.csr_matrix(t) for t in trial_gradients])
-    if test_gradients is trial_gradients:
-        test_pattern, test = trial_pattern, trial
-    else:
-        test_pattern, test = _common_pattern([sp.csr_matrix(t) for t in test_gradients])
-    A = np.asarray(tangents, dtype=float).reshape(-1, d * d, d * d)
-    indptr, indices, data = assemble_blocks(
-        test_pattern, test, trial_pattern, trial, weights, A, n_out, node_map
-    )
-    K = sp.csr_matrix((data, indices, indptr), shape=(d * n_out, d * n_out))
-    K.has_sorted_indices = True
-    return K
+    return GradientForm(test_gradients, trial_gradients, node_map, num_out)(weights, tangents)

@@ -209,6 +209,18 @@ def _fill_blocks(
                     out_data[at + row1] += w100 * g0 + w101 * g1
                     out_data[at + row1 + 1] += w110 * g0 + w111 * g1
                 continue
+            if d == 3:  # the 3D inner loop, the point's three gradients loaded once
+                row1 = nb * 3
+                for p in range(lo, hi):
+                    at = base + 3 * where[indices[p]]
+                    g0 = trial[0][p]
+                    g1 = trial[1][p]
+                    g2 = trial[d - 1][p]  # (a constant index 2 would not type in 2D)
+                    for i in range(3):
+                        ai = at + i * row1
+                        for k in range(3):
+                            out_data[ai + k] += W[i, k, 0] * g0 + W[i, k, 1] * g1 + W[i, k, 2] * g2
+                continue
             for p in range(lo, hi):
                 kb = where[indices[p]]
                 for i in range(d):

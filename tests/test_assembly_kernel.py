@@ -196,3 +196,13 @@ def test_consistent_gradients_same_pattern_path(gdim):
         np.testing.assert_array_equal(f.indptr, t.values.indptr)
         np.testing.assert_array_equal(f.indices, t.values.indices)
         assert abs(f - s).max() <= TOL * np.abs(s.data).max()
+
+
+def test_no_points_gives_empty_matrix():
+    """A rank without integration cells (a patch elsewhere) contributes an empty matrix."""
+    P, _, _ = cloud(2, seed=2)
+    t = mf.MLS(P, dilation=2.0).tabulate(np.zeros((0, 2)))
+    perm = np.arange(len(P))[::-1].copy()
+    for backend in ("scipy", "numba"):
+        K = stiffness_matrix(t.gradients, np.zeros(0), material(2), None, perm, backend)
+        assert K.shape == (2 * len(P), 2 * len(P)) and K.nnz == 0

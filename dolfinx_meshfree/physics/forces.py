@@ -49,6 +49,7 @@ import scipy.sparse as sp
 
 from ..approx.tables import Approximation, ShapeTable, check_current
 from ..parallel import raise_on_all_ranks
+from .assembly_kernel import GradientForm, resolve_backend
 from .constitutive import Material
 
 if TYPE_CHECKING:  # annotations only
@@ -145,6 +146,8 @@ class InternalForces:
         self.gdim = material.gdim
         self._G = gradient_operator(table.gradients)
         self._Gt = self._G if test_gradients is None else gradient_operator(test_gradients)
+        self._test_gradients = table.gradients if test_gradients is None else test_gradients
+        self._form: GradientForm | None = None  # the compiled tangent's pattern, on first use
         if self._Gt.shape != self._G.shape:
             raise ValueError(
                 f"test_gradients give an operator of shape {self._Gt.shape}, the table "
@@ -194,11 +197,22 @@ class InternalForces:
         P = self._call(lambda: self.material.first_piola(F, self.table.points))
         return self._Gt.T @ (self.weights[:, None, None] * P).ravel()
 
-    def tangent(self, u: npt.ArrayLike) -> sp.csr_matrix:
-        """Consistent tangent ``K_T = d f_int/du = sum_q G_test^T A(F_q) G w_q`` (CSR, dn x dn)."""
+    def tangent(self, u: npt.ArrayLike, backend: str | None = None) -> sp.csr_matrix:
+        """Consistent tangent ``K_T = d f_int/du = sum_q G_test^T A(F_q) G w_q`` (CSR, dn x dn).
+
+        ``backend``: as in :func:`~dolfinx_meshfree.physics.operators.stiffness_matrix`
+        (``"numba"``: a :class:`~dolfinx_meshfree.physics.assembly_kernel.GradientForm`, its
+        sparsity pattern computed on the first call and reused; ``"scipy"``: the sparse
+        product, the reference).
+        """
+        backend = resolve_backend(backend)
         F = self.deformation_gradient(u)
         A = self._call(lambda: self.material.tangent(F, self.table.points))
         d2 = self.gdim**2
+        if backend == "numba":
+            if self._form is None:
+                self._form = GradientForm(self._test_gradients, self.table.gradients)
+            return self._form(self.weights, A.reshape(-1, d2, d2))
         blocks = self.weights[:, None, None] * A.reshape(-1, d2, d2)
         n = blocks.shape[0] * d2
         M = sp.csr_matrix((blocks.ravel(), (self._blk_rows, self._blk_cols)), shape=(n, n))

@@ -14,13 +14,34 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.sparse as sp
 
-from ..approx.tables import strain_operator
+from ..approx.tables import strain_operator, voigt_pairs
+from .assembly_kernel import gradient_form, resolve_backend
 from .materials import LinearElastic
 
 if TYPE_CHECKING:  # annotations only
     from mpi4py import MPI
 
-__all__ = ["consistent_gradients", "load_vector", "moment_corrections", "stiffness_matrix"]
+__all__ = [
+    "consistent_gradients",
+    "load_vector",
+    "moment_corrections",
+    "stiffness_matrix",
+    "voigt_tangent",
+]
+
+
+def voigt_tangent(D: np.ndarray, gdim: int) -> np.ndarray:
+    """The (gdim^2 x gdim^2) tangent ``A[d i + a, d k + b]`` of a Voigt matrix ``D``, with
+    ``B^T D B = G^T A G`` for the strain operator ``B`` of
+    :func:`~dolfinx_meshfree.approx.tables.strain_operator` and the displacement-gradient
+    operator ``G`` (``du_i/dx_a`` at ``d i + a``): ``A = P^T D P`` with ``P[r, d i + a] = 1``
+    where Voigt component ``r`` contains ``du_i/dx_a`` (engineering shears hold both orders)."""
+    pairs = voigt_pairs(gdim)
+    P = np.zeros((len(pairs), gdim * gdim))
+    for r, (i, j) in enumerate(pairs):
+        P[r, gdim * i + j] = 1.0
+        P[r, gdim * j + i] = 1.0
+    return P.T @ D @ P
 
 
 def stiffness_matrix(
@@ -28,6 +49,8 @@ def stiffness_matrix(
     weights: np.ndarray,
     material: LinearElastic,
     trial_gradients: list[sp.csr_matrix] | None = None,
+    node_map: np.ndarray | None = None,
+    backend: str | None = None,
 ) -> sp.csr_matrix:
     """Stiffness ``K = sum_q B_test(x_q)^T D B_trial(x_q) w_q`` (gdim n x gdim n).
 
@@ -35,13 +58,34 @@ def stiffness_matrix(
     must be the law of that dimension). ``trial_gradients`` defaults to ``test_gradients``; they
     differ for variationally consistent integration, which corrects the test functions only
     (Chen, Hillman & Rüter 2013).
+
+    Args:
+        node_map: (n,) the output number of each table column (a permutation of ``range(n)``,
+            e.g. :attr:`~dolfinx_meshfree.ParticleSet.petsc_index`): rows and columns
+            ``gdim node_map[I] + i``. Default: the table's numbering.
+        backend: ``"numba"`` (the default when numba is importable: one compiled pass from the
+            tables to the CSR, :mod:`~dolfinx_meshfree.physics.assembly_kernel`) or ``"scipy"``
+            (the sparse product ``B_test^T (W (x) D) B_trial``, the reference; the default
+            without numba). ``DOLFINX_MESHFREE_ASSEMBLY_BACKEND`` sets the default. They agree to
+            round-off; the numba path keeps the structural zeros of the pattern.
     """
-    material.check_gdim(len(test_gradients), "the shape table")
+    gdim = len(test_gradients)
+    material.check_gdim(gdim, "the shape table")
+    trial = test_gradients if trial_gradients is None else trial_gradients
+    n = test_gradients[0].shape[1]
+    if resolve_backend(backend) == "numba":
+        A = voigt_tangent(material.voigt(), gdim)
+        return gradient_form(test_gradients, trial, weights, A, node_map, n)
     Bt = strain_operator(test_gradients)
     B = Bt if trial_gradients is None else strain_operator(trial_gradients)
     D = material.voigt()
     DW = sp.kron(sp.diags(weights), sp.csr_matrix(D), format="csr")
-    return (Bt.T @ DW @ B).tocsr()
+    K = (Bt.T @ DW @ B).tocsr()
+    if node_map is None:
+        return K
+    dofs = (gdim * np.asarray(node_map)[:, None] + np.arange(gdim)).ravel()
+    K = K.tocoo()
+    return sp.csr_matrix((K.data, (dofs[K.row], dofs[K.col])), shape=(gdim * n, gdim * n))
 
 
 def load_vector(values: sp.csr_matrix, weights: np.ndarray, forces: np.ndarray) -> np.ndarray:
@@ -73,6 +117,9 @@ def consistent_gradients(
         \\xi_I = \\frac{\\sum_b N_I n w_b - \\sum_q \\nabla N_I w_q}{\\sum_q N_I w_q}
 
     satisfy it exactly, so the linear patch test passes to round-off with any quadrature.
+    Where the gradients share the values' CSR pattern (the MLS tables) the corrected tables
+    keep it (the same products and sums as the sparse-matrix form, entry by entry, without
+    dropping the entries that happen to cancel to zero).
     Sums run over every rank's cells and boundary facets (collective); the boundary must be the
     whole boundary of the integration domain. Any dimension: ``boundary_normals`` is (nb, gdim)
     with ``gdim = len(cell_gradients)``.
@@ -99,7 +146,23 @@ def consistent_gradients(
             f"({vol[i]:.2e}); its support misses the quadrature: increase the dilation"
         )
     xi = rhs / vol[:, None]
-    return [(g + cell_values @ sp.diags(xi[:, k])).tocsr() for k, g in enumerate(cell_gradients)]
+    V = cell_values.tocsr()
+    if all(_same_pattern(g, V) for g in cell_gradients):  # the MLS tables: one O(nnz) pass
+        return [
+            sp.csr_matrix((g.data + V.data * xi[V.indices, k], V.indices, V.indptr), V.shape)
+            for k, g in enumerate(cell_gradients)
+        ]
+    return [(g + V @ sp.diags(xi[:, k])).tocsr() for k, g in enumerate(cell_gradients)]
+
+
+def _same_pattern(a: sp.spmatrix, b: sp.csr_matrix) -> bool:
+    """Whether ``a`` is a CSR with exactly the pattern (and entry order) of ``b``."""
+    return (
+        sp.isspmatrix_csr(a)
+        and a.nnz == b.nnz
+        and np.array_equal(a.indptr, b.indptr)
+        and np.array_equal(a.indices, b.indices)
+    )
 
 
 def moment_corrections(

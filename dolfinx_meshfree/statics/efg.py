@@ -201,9 +201,7 @@ def particle_stiffness(
     """
     t0 = time.perf_counter()
     comm = particles.comm
-    n = particles.num_particles
     gdim = particles.gdim
-    dof_map = particles.petsc_dofs(gdim).ravel()
     if quadrature is None:
         q = cell_quadrature(particles.mesh, quadrature_degree, particles.cells)
     else:
@@ -242,8 +240,7 @@ def particle_stiffness(
     if tables is not None:
         tables.update(quadrature=q, table=tq, test_gradients=test_grads, approximation=mls)
     t1 = time.perf_counter()
-    K = stiffness_matrix(test_grads, q.weights, material, tq.gradients).tocoo()
-    Kg = sp.csr_matrix((K.data, (dof_map[K.row], dof_map[K.col])), shape=(gdim * n, gdim * n))
+    Kg = stiffness_matrix(test_grads, q.weights, material, tq.gradients, particles.petsc_index)
     timings = {"setup": t1 - t0, "assemble": time.perf_counter() - t1}
     return Kg, q, tq, timings
 

@@ -34,6 +34,7 @@ import numpy as np
 from mpi4py import MPI
 
 from .io import check_prefix
+from .parallel import raise_on_all_ranks
 
 if TYPE_CHECKING:
     from .geometry.particles import ParticleSet
@@ -270,8 +271,7 @@ class SeriesWriter:
             polylines: (m_k, gdim) point arrays, one per polyline (the same on every rank).
         """
         t = float(time)
-        if functions and self._fe is None:
-            raise ValueError("this SeriesWriter has no mesh: pass mesh= to write FE functions")
+        raise_on_all_ranks(self.comm, lambda: self._check(functions, particle_values))
         for name, u in (functions or {}).items():
             copy = self._fe_copies.get(name)
             if copy is None:
@@ -299,6 +299,22 @@ class SeriesWriter:
             segs = np.concatenate(seg) if seg else np.zeros((0, 2), dtype=np.int32)
             self._lines.write(t, xy, None, segs)
         self._first = False
+
+    def _check(self, functions, particle_values) -> None:
+        if functions and self._fe is None:
+            raise ValueError("this SeriesWriter has no mesh: pass mesh= to write FE functions")
+        if particle_values and self._cloud is None:
+            raise ValueError(
+                "this SeriesWriter has no particles: pass particles= to write particle values"
+            )
+        for key, v in (particle_values or {}).items():
+            m = len(np.asarray(v))
+            if m != self._owned.size:
+                raise ValueError(
+                    f"particle_values[{key!r}] has values for {m} of the {self._owned.size} "
+                    f"owned particles of rank {self.comm.rank}: give one row per owned particle, "
+                    "in the order of particles.positions[particles.owned]"
+                )
 
     def close(self) -> None:
         """Close the FE file (collective); the particle and polyline files are complete after

@@ -47,8 +47,14 @@ from ufl.corealg.traversal import unique_pre_traversal
 from .. import _compat
 from ..approx.fe_points import evaluate_fe_function
 from ..couplings.base import facet_nodes, node_flags
+from ..geometry.cut_cells import cut_facet_quadrature
 from ..geometry.patch import ParticlePatch
-from ..geometry.quadrature import QuadraturePoints, boundary_facets, reference_facet_points
+from ..geometry.quadrature import (
+    QuadraturePoints,
+    boundary_facets,
+    facet_quadrature,
+    reference_facet_points,
+)
 from ..parallel import raise_on_all_ranks
 from ..physics.body_loads import BodyForce, accumulate
 from ..physics.materials import LinearElastic
@@ -241,7 +247,8 @@ class CoupledLinearProblem:
                 cell_integrals.append(itg)
             else:
                 facets = np.intersect1d(_integral_entities(itg, msh), boundary_facets(msh))
-                problem.add_traction(facets.astype(np.int32), _FacetLoad(itg, v, facets, deg))
+                load = _FacetLoad(itg, v, facets, deg, self.patch.cracks)
+                problem.add_traction(facets.astype(np.int32), load)
         if cell_integrals:
             problem.body_forces = [FormBodyForce(cell_integrals, v, deg)]
 
@@ -496,15 +503,43 @@ class FormBodyForce(BodyForce):
         return out
 
 
+def _split_points(msh, facets, cracks, degree, c2f, cells):
+    """The Gauss points of the facets that a crack's mouth splits
+    (:func:`~dolfinx_meshfree.geometry.cut_cells.cut_facet_quadrature`) as a rule for
+    :class:`_FacetLoad`: their reference coordinates in the facet's cell (straight facets: the
+    point's position along the facet mapped onto the reference facet), the cells, and the (cell,
+    point) of each; ``None`` when no facet is split (local)."""
+    q = cut_facet_quadrature(msh, facets, cracks, degree)
+    plain = facet_quadrature(msh, facets, degree)
+    if len(q) == len(plain) and np.array_equal(q.points, plain.points):
+        return None
+    tol = 1e-9 * (np.ptp(msh.geometry.x[:, :2], axis=0).max() + 1.0)
+    new = cKDTree(plain.points).query(q.points)[0] > tol
+    pts, ents = q.points[new], q.entities[new]
+    where = np.searchsorted(facets, ents, sorter=np.argsort(facets))
+    idx = np.argsort(facets)[where]
+    c = cells[idx]
+    cell = getattr(basix.CellType, msh.topology.cell_type.name)
+    ref = np.asarray(basix.geometry(cell))
+    ends = np.asarray(basix.topology(cell)[1])[np.argmax(c2f[c] == ents[:, None], axis=1)][:, :2]
+    xc = msh.geometry.x[_compat.geometry_dofmap(msh)[c], :2]  # nodes in reference vertex order
+    a, b = xc[np.arange(c.size), ends[:, 0]], xc[np.arange(c.size), ends[:, 1]]
+    t = np.einsum("ij,ij->i", pts - a, b - a) / np.einsum("ij,ij->i", b - a, b - a)
+    X = ref[ends[:, 0]] + t[:, None] * (ref[ends[:, 1]] - ref[ends[:, 0]])
+    return X, c, np.arange(c.size), np.arange(c.size)
+
+
 class _FacetLoad:
     """Traction ``t(x, n)`` of an exterior-facet integral of ``L``, tabulated at the facet Gauss
-    points of :func:`~dolfinx_meshfree.facet_quadrature` (collective construction).
+    points of :func:`~dolfinx_meshfree.facet_quadrature` and, with ``cracks``, at those of
+    :func:`~dolfinx_meshfree.geometry.cut_cells.cut_facet_quadrature` (the facets a crack's
+    mouth splits; collective construction).
 
     ``t(x, n) = A(x) + B(x) n``: the integrand is evaluated with ``FacetNormal`` replaced by a
     Constant set to 0 and each ``e_i`` (and checked to be affine in n at one more value).
     """
 
-    def __init__(self, itg, v, facets: np.ndarray, degree: int):
+    def __init__(self, itg, v, facets: np.ndarray, degree: int, cracks: Sequence = ()):
         msh = v.ufl_function_space().mesh
         tdim = msh.topology.dim
         d = msh.geometry.dim
@@ -519,9 +554,9 @@ class _FacetLoad:
             isinstance(o, ufl.classes.FacetNormal) for o in unique_pre_traversal(integrand)
         )
         x = ufl.SpatialCoordinate(msh)
-        values = _replace_test_function(integrand, v, msh, nc)
-        expr = _compat.create_expression(
-            ufl.as_vector([values[i] for i in range(d)] + [x[i] for i in range(d)]), X
+        values = ufl.as_vector(
+            [_replace_test_function(integrand, v, msh, nc)[i] for i in range(d)]
+            + [x[i] for i in range(d)]
         )
         # (cell, local facet) of each facet
         msh.topology.create_connectivity(tdim - 1, tdim)
@@ -533,14 +568,30 @@ class _FacetLoad:
         facets = np.asarray(facets, dtype=np.int64)
         cells = np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]]
         local = np.argmax(c2f[cells] == facets[:, None], axis=1)
-        ucells, pos = np.unique(cells, return_inverse=True)
-        cols = (local[:, None] * npts + np.arange(npts)).ravel()
-        rows = np.repeat(pos, npts)
+        # the rules: (reference points, cells evaluated, (cell row, point column) per point)
+        rules = [(X, cells, np.repeat(np.arange(cells.size), npts),
+                  (local[:, None] * npts + np.arange(npts)).ravel())]  # fmt: skip
+        if len(cracks) and facets.size:
+            split = _split_points(msh, facets, cracks, degree, c2f, cells)
+            if split is not None:
+                rules.append(split)
+        # a rank without split points still takes part in the same expressions' compilation
+        num_rules = msh.comm.allreduce(len(rules), op=MPI.MAX)
+        if num_rules > len(rules):
+            rules.append((np.zeros((1, tdim)), cells[:0], np.zeros(0, int), np.zeros(0, int)))
+        evaluators = []
+        for Xr, cr, rows, cols in rules:
+            expr = _compat.create_expression(values, Xr)
+            ucells, pos = np.unique(cr, return_inverse=True)
+            evaluators.append((expr, ucells, pos[rows] if rows.size else rows, cols))
 
         def evaluate(n: np.ndarray) -> np.ndarray:
             nc.value[:] = n
-            vals = _compat.eval_expression(expr, msh, ucells, 2 * d)
-            return vals[rows, cols] if facets.size else np.zeros((0, 2 * d))
+            out = []
+            for expr, ucells, rows, cols in evaluators:
+                vals = _compat.eval_expression(expr, msh, ucells, 2 * d)
+                out.append(vals[rows, cols] if rows.size else np.zeros((0, 2 * d)))
+            return np.concatenate(out)
 
         def tabulate() -> int:
             base = evaluate(np.zeros(d))

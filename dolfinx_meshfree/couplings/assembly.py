@@ -134,11 +134,15 @@ def body_loads(
 ) -> tuple[np.ndarray, np.ndarray]:
     """This coupling's shares of its body forces (collective): the FE loads per owned dof
     (``fe_weight``: the FE energy's weight) and the particle loads (original interleaved
-    order) on the patch cells' Gauss rule, its weights multiplied by ``particle_weights(q)``
+    order) on the patch cells' Gauss rule (cut cells of a cracked patch: side by side, as the
+    stiffness), its weights multiplied by ``particle_weights(q)``
     if given (the bridging band's ``alpha``); see
     :func:`~dolfinx_meshfree.physics.body_loads.body_load_vectors`."""
     msh, comm, deg = problem.V.mesh, problem.patch.comm, problem.quadrature_degree
-    q = cell_quadrature(msh, deg, problem.patch.particles.cells)
+    cells, cracks = problem.patch.particles.cells, problem.patch.cracks
+    # cells a crack cuts: each side on its own (the rule of the stiffness, crack_rules)
+    q = crack_rules(msh, cells, cracks, deg, None)[0] if cracks else None
+    q = cell_quadrature(msh, deg, cells) if q is None else q
     if particle_weights is not None:
         q = QuadraturePoints(q.points, q.weights * particle_weights(q), q.cells)
     table = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(q.points, 0)).values

@@ -250,7 +250,7 @@ class CoupledLinearProblem:
                 load = _FacetLoad(itg, v, facets, deg, self.patch.cracks)
                 problem.add_traction(facets.astype(np.int32), load)
         if cell_integrals:
-            problem.body_forces = [FormBodyForce(cell_integrals, v, deg)]
+            problem.body_forces = [FormBodyForce(cell_integrals, v, deg, bool(self.patch.cracks))]
 
     # -- solve ----------------------------------------------------------------------------------
 
@@ -451,23 +451,26 @@ class FormBodyForce(BodyForce):
         degree: The quadrature degree of the rules :meth:`values` is called with.
     """
 
-    def __init__(self, integrals: list, v, degree: int):
+    def __init__(self, integrals: list, v, degree: int, cut: bool = False):
         msh = v.ufl_function_space().mesh
         self.integrals, self.mesh, self.degree = list(integrals), msh, degree
-        X, _ = _compat.quadrature_rule(msh.topology.cell_type.name, degree)
+        cname = msh.topology.cell_type.name
+        X, _ = _compat.quadrature_rule(cname, degree)
         self.num_points = X.shape[0]
         x = ufl.SpatialCoordinate(msh)
         self.gdim = gdim = msh.geometry.dim
+        # cut cells (a cracked patch): values at the fit rule's points (collective compile)
+        X_fit = _compat.quadrature_rule(cname, 2 * degree + 2)[0] if cut else None
         self._expressions = []
         for itg in self.integrals:
             b = _replace_test_function(itg.integrand(), v, msh)
-            expr = _compat.create_expression(
-                ufl.as_vector([b[i] for i in range(gdim)] + [x[i] for i in range(gdim)]), X, msh
-            )
+            bx = ufl.as_vector([b[i] for i in range(gdim)] + [x[i] for i in range(gdim)])
+            expr = _compat.create_expression(bx, X, msh)
+            fit = None if X_fit is None else _compat.create_expression(bx, X_fit, msh)
             n_cells = msh.topology.index_map(msh.topology.dim)
             on = np.zeros(n_cells.size_local + n_cells.num_ghosts, dtype=bool)
             on[_integral_entities(itg, msh)] = True
-            self._expressions.append((expr, on))
+            self._expressions.append((expr, fit, on))
         self.tol = 1e-9 * (np.ptp(msh.geometry.x[:, :gdim], axis=0).max() + 1.0)
 
     def fe_load(
@@ -483,24 +486,52 @@ class FormBodyForce(BodyForce):
         return accumulate(V, local)
 
     def values(self, q: QuadraturePoints) -> np.ndarray:
-        nq = self.num_points
-        cells = q.cells[::nq]
-        if len(q) % nq or not np.array_equal(np.repeat(cells, nq), q.cells):
-            raise RuntimeError(
-                f"a body load of L was requested at {len(q)} points that are not a cell rule of "
-                f"degree {self.degree} (internal error: quadrature mismatch)"
-            )
-        d = self.gdim
+        """``b`` at the points of a cell rule of ``degree``: the cells whose points are the
+        standard rule's get the integrand there; the others (the pieces of cells a crack cuts,
+        with ``cut=True``) get the polynomial of total degree ``degree`` fitted, by least squares
+        in the cell, to the integrand at the points of the rule of degree ``2 degree + 2``:
+        exact for integrands polynomial to that degree (constant, linear body loads), else an
+        approximation of the rule's order. Local."""
+        nq, d = self.num_points, self.gdim
+        order = np.argsort(q.cells, kind="stable")
+        cells, start, count = np.unique(q.cells[order], return_index=True, return_counts=True)
         out = np.zeros((len(q), d))
-        for expr, on in self._expressions:
-            vals = _compat.eval_expression(expr, self.mesh, cells, 2 * d).reshape(-1, 2 * d)
-            if np.abs(vals[:, d:] - q.points).max(initial=0.0) > self.tol:
+        for expr, fit, on in self._expressions:
+            vals = _compat.eval_expression(expr, self.mesh, cells, 2 * d)  # (cells, nq, 2d)
+            std = np.zeros(cells.size, dtype=bool)
+            full = np.flatnonzero(count == nq)
+            if full.size:
+                idx = order[start[full, None] + np.arange(nq)]
+                std[full] = (np.abs(vals[full, :, d:] - q.points[idx]) <= self.tol).all(axis=(1, 2))
+                take = full[std[full] & on[cells[full]]]
+                out[order[start[take, None] + np.arange(nq)]] += vals[take, :, :d]
+            other = np.flatnonzero(~std)
+            if other.size and fit is None:
                 raise RuntimeError(
                     "a body load of L was requested at points that are not the Gauss points of "
                     f"degree {self.degree} (internal error: quadrature mismatch)"
                 )
-            out += np.where(on[q.cells][:, None], vals[:, :d], 0.0)
+            other = other[on[cells[other]]]
+            if other.size:
+                fv = _compat.eval_expression(fit, self.mesh, cells[other], 2 * d)
+                for k, c in enumerate(other):
+                    idx = order[start[c] : start[c] + count[c]]
+                    out[idx] += _fitted(fv[k, :, d:], fv[k, :, :d], q.points[idx], self.degree)
         return out
+
+
+def _fitted(x: np.ndarray, values: np.ndarray, points: np.ndarray, degree: int) -> np.ndarray:
+    """The least-squares polynomial of total ``degree`` through ``values`` (m, k) at ``x``
+    (m, gdim), evaluated at ``points`` (p, gdim) (coordinates centred and scaled on ``x``)."""
+    c, h = x.mean(axis=0), np.ptp(x, axis=0).max()
+
+    def basis(p: np.ndarray) -> np.ndarray:
+        y = (p - c) / h
+        powers = [e for e in np.ndindex(*(degree + 1,) * y.shape[1]) if sum(e) <= degree]
+        return np.stack([np.prod(y ** np.asarray(e), axis=1) for e in powers], axis=1)
+
+    coef = np.linalg.lstsq(basis(x), values, rcond=None)[0]
+    return basis(points) @ coef
 
 
 def _split_points(msh, facets, cracks, degree, c2f, cells):

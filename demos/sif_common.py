@@ -59,6 +59,53 @@ def owned_cells(msh, predicate) -> np.ndarray:
     return np.flatnonzero(predicate(mid))
 
 
+def coupled_forms(msh, material, tractions=()):
+    """The user's model of the FE side: vector Q1/P1 space ``V``, ``a(u, v) = (sigma(u),
+    eps(v))`` and ``L(v)`` = the constant ``tractions`` (``(facets, (tx, ty))``) on their facets.
+
+    Returns ``(V, a, L)``."""
+    V = _compat.vector_function_space(msh)
+    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+    a = ufl.inner(material.ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx
+    L = ufl.dot(dolfinx.fem.Constant(msh, np.zeros(2)), v) * ufl.dx
+    if tractions:
+        f_all = np.concatenate([f for f, _ in tractions])
+        tag = np.concatenate(
+            [np.full(f.size, k + 1, np.int32) for k, (f, _) in enumerate(tractions)]
+        )
+        order = np.argsort(f_all)
+        mt = dolfinx.mesh.meshtags(msh, 1, f_all[order], tag[order])
+        ds = ufl.Measure("ds", domain=msh, subdomain_data=mt)
+        for k, (_, t) in enumerate(tractions):
+            L = L + ufl.dot(dolfinx.fem.Constant(msh, np.asarray(t, float)), v) * ds(k + 1)
+    return V, a, L
+
+
+def rigid_motion_bcs(V, pin, roll, roll_component: int = 1) -> list:
+    """Three scalar point conditions on FE nodes that remove the rigid motions of a free plate,
+    statically determinate (with self-equilibrated loads their reactions vanish): ``u = 0`` at
+    the boundary node ``pin`` and ``u_i = 0`` (``i = roll_component``) at the boundary node
+    ``roll`` (``DirichletBC`` on ``V`` and on ``V.sub(i)``). Both must be mesh vertices on the
+    boundary, outside the particle patch."""
+    msh = V.mesh
+
+    def vertex(p):
+        return dolfinx.mesh.locate_entities_boundary(
+            msh, 0, lambda x: np.isclose(x[0], p[0]) & np.isclose(x[1], p[1])
+        )
+
+    for p in (pin, roll):
+        if COMM.allreduce(vertex(p).size) == 0:
+            raise ValueError(f"no boundary mesh vertex at {list(p)} for a rigid-motion condition")
+    dofs = dolfinx.fem.locate_dofs_topological(V, 0, vertex(pin))
+    Vi = V.sub(roll_component)
+    dofs_i = dolfinx.fem.locate_dofs_topological(Vi, 0, vertex(roll))
+    return [
+        dolfinx.fem.dirichletbc(np.zeros(2), dofs, V),
+        dolfinx.fem.dirichletbc(np.float64(0.0), dofs_i, Vi),
+    ]
+
+
 def solve(method, msh, h, material, crack, patch_cells=None, dirichlet=None, tractions=()):
     """Solve with particles everywhere (``method="efg"``) or a particle patch of ``patch_cells``
     coupled by ``method`` to Q1 elements in a UFL model; ``dirichlet = (facets, fn)`` on all
@@ -76,22 +123,7 @@ def solve(method, msh, h, material, crack, patch_cells=None, dirichlet=None, tra
         sol = prob.solve()
         sizes = {"particle_dofs": 2 * P.num_particles, "fe_dofs": 0}
         return sol, sizes, time.perf_counter() - t0
-    V = _compat.vector_function_space(msh)
-    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
-    a = ufl.inner(material.ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx
-    L = ufl.dot(dolfinx.fem.Constant(msh, np.zeros(2)), v) * ufl.dx
-    tags = []
-    for k, (facets, _) in enumerate(tractions):
-        tags.append((facets, np.full(facets.size, k + 1, dtype=np.int32)))
-    if tractions:
-        f_all = np.concatenate([f for f, _ in tags])
-        order = np.argsort(f_all)
-        mt = dolfinx.mesh.meshtags(
-            msh, 1, f_all[order], np.concatenate([t for _, t in tags])[order]
-        )
-        ds = ufl.Measure("ds", domain=msh, subdomain_data=mt)
-        for k, (_, t) in enumerate(tractions):
-            L = L + ufl.dot(dolfinx.fem.Constant(msh, np.asarray(t, float)), v) * ds(k + 1)
+    V, a, L = coupled_forms(msh, material, tractions)
     bcs = []
     if dirichlet is not None:
         facets, fn = dirichlet

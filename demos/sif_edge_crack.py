@@ -3,11 +3,12 @@
 # Plate [0, W] x [-H/2, H/2], W = 1, H = 2 W (H/W = 2), an edge crack of length a from the left
 # edge (the mouth) along y = y0 (y0 = h/2: half a spacing off the particle rows, so that no
 # particle lies on it), remote tension sigma = 1 as tractions on the top and bottom edges, all
-# other edges free. The rigid motions are removed by three scalar conditions (two components on
-# one facet, one on another; pure EFG: on the bottom edge's end facets; coupled: on the left
-# edge's facets next to the crack's mouth, in the patch): statically determinate, so with
-# self-equilibrated loads their reactions are exactly zero and the plate is free, as Tada's
-# formula assumes.
+# other edges free. The rigid motions are removed far from the crack by three scalar conditions,
+# statically determinate (pure EFG: u = 0 on the bottom edge's left end facet, u_y = 0 on its
+# right end facet, one constant multiplier per facet and component; coupled, a user's
+# ``CoupledLinearProblem`` with UFL forms: ``DirichletBC``s at the bottom corners, FE nodes,
+# u = 0 at (0, -H/2) and u_y = 0 at (W, -H/2) on ``V.sub(1)``): with self-equilibrated loads
+# their reactions vanish and the plate is free, as Tada's formula assumes.
 #
 # Reference: K_I / (sigma sqrt(pi a)) = F(a/W) = 1.12 - 0.231 (a/W) + 10.55 (a/W)^2
 # - 21.72 (a/W)^3 + 30.39 (a/W)^4 (Tada; +-0.5 % for a/W <= 0.6); K_II = 0 by symmetry of the
@@ -34,11 +35,10 @@ import sys
 import time
 
 import dolfinx_meshfree as mf
-from dolfinx_meshfree import _compat
 
 import dolfinx
 import numpy as np
-from sif_common import COMM, owned_cells, write_json
+from sif_common import COMM, coupled_forms, owned_cells, rigid_motion_bcs, write_json
 
 W, H, SIGMA = 1.0, 2.0, 1.0
 #: Outer domain radii as fractions of the tip's distance to the nearest edge, min(a, W - a):
@@ -63,43 +63,35 @@ def run(method: str, a_over_w: float, h: float) -> dict:
     crack = mf.Crack([[0.0, y0], [a, y0]])
     top = mf.boundary_facets(msh, lambda x: np.isclose(x[1], H / 2))
     bottom = mf.boundary_facets(msh, lambda x: np.isclose(x[1], -H / 2))
-    zero = lambda x: np.zeros((len(x), 2))  # noqa: E731
-    up = lambda x, n: np.tile([0.0, SIGMA], (len(x), 1))  # noqa: E731
-    down = lambda x, n: np.tile([0.0, -SIGMA], (len(x), 1))  # noqa: E731
+    tractions = ((top, (0.0, SIGMA)), (bottom, (0.0, -SIGMA)))  # self-equilibrated
     t0 = time.perf_counter()
     if method == "efg":
         P = mf.ParticleSet.from_cells(msh, h)
         prob = mf.EFGElasticity(P, MATERIAL, cracks=[crack])
-        pin = (
-            mf.boundary_facets(msh, lambda x: np.isclose(x[1], -H / 2) & (x[0] < h + 1e-9)),
-            (0, 1),
-        )
-        roll = (mf.boundary_facets(msh, lambda x: np.isclose(x[1], -H / 2) & (x[0] > W - h - 1e-9)),
-                (1,))  # fmt: skip
+        on_bottom = lambda x: np.isclose(x[1], -H / 2)  # noqa: E731
+        pin = mf.boundary_facets(msh, lambda x: on_bottom(x) & (x[0] < h + 1e-9))
+        roll = mf.boundary_facets(msh, lambda x: on_bottom(x) & (x[0] > W - h - 1e-9))
+        zero = lambda x: np.zeros((len(x), 2))  # noqa: E731
+        for facets, comps in ((pin, (0, 1)), (roll, (1,))):
+            if COMM.allreduce(facets.size) == 0:
+                raise RuntimeError("no facet for the rigid-motion conditions")
+            prob.add_dirichlet(facets, zero, components=comps)
+        for facets, t in tractions:
+            prob.add_traction(facets, lambda x, n, t=t: np.tile(t, (len(x), 1)))
         sizes = {"particle_dofs": 2 * P.num_particles, "fe_dofs": 0}
     else:
+        # a user's model: UFL forms on Q1, DirichletBCs at the bottom corners (FE nodes far
+        # from the crack): u = 0 at (0, -H/2), u_y = 0 at (W, -H/2) on V.sub(1)
         m = radii[-1] + 3.0 * h
         cells = owned_cells(msh, lambda c: (c[:, 0] < a + m) & (np.abs(c[:, 1] - y0) < m))
         patch = mf.ParticlePatch(msh, cells, h, cracks=[crack])
-        V = _compat.vector_function_space(msh)
-        prob = mf.CoupledElasticity(V, patch, MATERIAL, coupling=method)
-        # the facets of the left edge just below and above the mouth (away from the FE
-        # interface and the bridging band)
-        f = patch.exterior_facets
-        mid = msh.geometry.x[_compat.entities_to_geometry(msh, 1, f)][..., :2].mean(axis=1)
-        left = np.isclose(mid[:, 0], 0.0)
-        pin = (f[left & np.isclose(mid[:, 1], y0 - h)], (0, 1))
-        roll = (f[left & np.isclose(mid[:, 1], y0 + h)], (0,))
+        V, form_a, L = coupled_forms(msh, MATERIAL, tractions)
+        bcs = rigid_motion_bcs(V, (0.0, -H / 2), (W, -H / 2))
+        prob = mf.CoupledLinearProblem(form_a, L, bcs, patch, material=MATERIAL, coupling=method)
         sizes = {
             "particle_dofs": 2 * patch.particles.num_particles,
             "fe_dofs": 2 * V.dofmap.index_map.size_global,
         }
-    for facets, comps in (pin, roll):
-        if COMM.allreduce(facets.size) == 0:
-            raise RuntimeError("no facet for the rigid-motion conditions")
-        prob.add_dirichlet(facets, zero, components=comps)
-    prob.add_traction(top, up)
-    prob.add_traction(bottom, down)
     sol = prob.solve()
     seconds = time.perf_counter() - t0
 

@@ -22,6 +22,7 @@ from petsc4py import PETSc
 
 from .. import _compat
 from ..approx.fe_points import tabulate_in_cells
+from ..geometry.cut_cells import cut_facet_quadrature
 from ..geometry.quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
 from ..geometry.stress_points import stress_point_quadrature
 from ..parallel import Layout, raise_on_all_ranks
@@ -48,6 +49,7 @@ __all__ = [
     "fix_fe_rows",
     "fixed_dofs",
     "particle_rule",
+    "patch_facet_rule",
     "patch_rules",
     "sizes",
     "solve_and_gather",
@@ -112,6 +114,18 @@ def patch_rules(
     )
 
 
+def patch_facet_rule(problem: CoupledElasticity, facets: np.ndarray) -> QuadraturePoints:
+    """The rule of patch facets for loads and conditions (local): split where a crack of the
+    patch meets them (its mouth on the exterior boundary), so that each side of the mouth is
+    integrated on its own, as in pure EFG
+    (:func:`~dolfinx_meshfree.geometry.cut_cells.cut_facet_quadrature`; the VCI boundary rule
+    of a cracked patch splits them too); without cracks, the plain facet rule."""
+    msh, deg, cracks = problem.V.mesh, problem.quadrature_degree, problem.patch.cracks
+    if cracks:
+        return cut_facet_quadrature(msh, facets, cracks, deg)
+    return facet_quadrature(msh, facets, deg)
+
+
 def body_loads(
     problem: CoupledElasticity,
     fe_weight: ufl.core.expr.Expr,
@@ -120,11 +134,15 @@ def body_loads(
 ) -> tuple[np.ndarray, np.ndarray]:
     """This coupling's shares of its body forces (collective): the FE loads per owned dof
     (``fe_weight``: the FE energy's weight) and the particle loads (original interleaved
-    order) on the patch cells' Gauss rule, its weights multiplied by ``particle_weights(q)``
+    order) on the patch cells' Gauss rule (cut cells of a cracked patch: side by side, as the
+    stiffness), its weights multiplied by ``particle_weights(q)``
     if given (the bridging band's ``alpha``); see
     :func:`~dolfinx_meshfree.physics.body_loads.body_load_vectors`."""
     msh, comm, deg = problem.V.mesh, problem.patch.comm, problem.quadrature_degree
-    q = cell_quadrature(msh, deg, problem.patch.particles.cells)
+    cells, cracks = problem.patch.particles.cells, problem.patch.cracks
+    # cells a crack cuts: each side on its own (the rule of the stiffness, crack_rules)
+    q = crack_rules(msh, cells, cracks, deg, None)[0] if cracks else None
+    q = cell_quadrature(msh, deg, cells) if q is None else q
     if particle_weights is not None:
         q = QuadraturePoints(q.points, q.weights * particle_weights(q), q.cells)
     table = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(q.points, 0)).values
@@ -151,7 +169,6 @@ def essential_conditions(
     """
     V, comm = problem.V, problem.patch.comm
     msh = V.mesh
-    deg = problem.quadrature_degree
     fe_bc, patch_bc = [], []
     for facets, fn, *components in problem.dirichlet:  # components: patch facets only
         f_fe, f_p = split_facets(problem, facets)
@@ -168,7 +185,7 @@ def essential_conditions(
             f_fe = np.concatenate([f_fe, strong])
         fe_bc.append((f_fe, fn))
         patch_bc.append((f_p, fn, *components))
-    dq = [facet_quadrature(msh, c[0], deg) for c in patch_bc]
+    dq = [patch_facet_rule(problem, c[0]) for c in patch_bc]
     dtabs = [raise_on_all_ranks(comm, lambda d=d: problem.mls.tabulate(d.points, 0)) for d in dq]
     gdim = msh.geometry.dim
     ubc = dolfinx.fem.Function(V)
@@ -281,7 +298,7 @@ def traction_loads(problem: CoupledElasticity) -> tuple[PETSc.Vec, np.ndarray]:
         for comp in range(gdim):
             f_fe_rows.append(gdim * l2g[: fl.shape[0]] + comp)
             f_fe_vals.append(fl[:, comp])
-        q = facet_quadrature(msh, f_p_facets, deg)
+        q = patch_facet_rule(problem, f_p_facets)
         t = raise_on_all_ranks(
             comm, lambda fn=fn, q=q: _vector_values(fn, (q.points, q.normals), len(q), "t", gdim)
         )

@@ -72,6 +72,7 @@ from .assembly import (
     fe_stiffness,
     fix_fe_rows,
     fixed_dofs,
+    patch_facet_rule,
     sizes,
     solve_and_gather,
     split_facets,
@@ -489,7 +490,7 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
         for comp in range(d):
             f_fe_rows.append(d * l2g[: fl.shape[0]] + comp)
             f_fe_vals.append(fl[:, comp])
-        fq = facet_quadrature(msh, f_p_facets, deg)
+        fq = patch_facet_rule(problem, f_p_facets)
         t = raise_on_all_ranks(
             comm,
             lambda fn=fn, fq=fq: _vector_values(fn, (fq.points, fq.normals), len(fq), "t", d),

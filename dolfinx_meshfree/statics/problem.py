@@ -47,8 +47,14 @@ from ufl.corealg.traversal import unique_pre_traversal
 from .. import _compat
 from ..approx.fe_points import evaluate_fe_function
 from ..couplings.base import facet_nodes, node_flags
+from ..geometry.cut_cells import cut_facet_quadrature
 from ..geometry.patch import ParticlePatch
-from ..geometry.quadrature import QuadraturePoints, boundary_facets, reference_facet_points
+from ..geometry.quadrature import (
+    QuadraturePoints,
+    boundary_facets,
+    facet_quadrature,
+    reference_facet_points,
+)
 from ..parallel import raise_on_all_ranks
 from ..physics.body_loads import BodyForce, accumulate
 from ..physics.materials import LinearElastic
@@ -241,9 +247,10 @@ class CoupledLinearProblem:
                 cell_integrals.append(itg)
             else:
                 facets = np.intersect1d(_integral_entities(itg, msh), boundary_facets(msh))
-                problem.add_traction(facets.astype(np.int32), _FacetLoad(itg, v, facets, deg))
+                load = _FacetLoad(itg, v, facets, deg, self.patch.cracks)
+                problem.add_traction(facets.astype(np.int32), load)
         if cell_integrals:
-            problem.body_forces = [FormBodyForce(cell_integrals, v, deg)]
+            problem.body_forces = [FormBodyForce(cell_integrals, v, deg, bool(self.patch.cracks))]
 
     # -- solve ----------------------------------------------------------------------------------
 
@@ -444,23 +451,26 @@ class FormBodyForce(BodyForce):
         degree: The quadrature degree of the rules :meth:`values` is called with.
     """
 
-    def __init__(self, integrals: list, v, degree: int):
+    def __init__(self, integrals: list, v, degree: int, cut: bool = False):
         msh = v.ufl_function_space().mesh
         self.integrals, self.mesh, self.degree = list(integrals), msh, degree
-        X, _ = _compat.quadrature_rule(msh.topology.cell_type.name, degree)
+        cname = msh.topology.cell_type.name
+        X, _ = _compat.quadrature_rule(cname, degree)
         self.num_points = X.shape[0]
         x = ufl.SpatialCoordinate(msh)
         self.gdim = gdim = msh.geometry.dim
+        # cut cells (a cracked patch): values at the fit rule's points (collective compile)
+        X_fit = _compat.quadrature_rule(cname, 2 * degree + 2)[0] if cut else None
         self._expressions = []
         for itg in self.integrals:
             b = _replace_test_function(itg.integrand(), v, msh)
-            expr = _compat.create_expression(
-                ufl.as_vector([b[i] for i in range(gdim)] + [x[i] for i in range(gdim)]), X, msh
-            )
+            bx = ufl.as_vector([b[i] for i in range(gdim)] + [x[i] for i in range(gdim)])
+            expr = _compat.create_expression(bx, X, msh)
+            fit = None if X_fit is None else _compat.create_expression(bx, X_fit, msh)
             n_cells = msh.topology.index_map(msh.topology.dim)
             on = np.zeros(n_cells.size_local + n_cells.num_ghosts, dtype=bool)
             on[_integral_entities(itg, msh)] = True
-            self._expressions.append((expr, on))
+            self._expressions.append((expr, fit, on))
         self.tol = 1e-9 * (np.ptp(msh.geometry.x[:, :gdim], axis=0).max() + 1.0)
 
     def fe_load(
@@ -476,35 +486,91 @@ class FormBodyForce(BodyForce):
         return accumulate(V, local)
 
     def values(self, q: QuadraturePoints) -> np.ndarray:
-        nq = self.num_points
-        cells = q.cells[::nq]
-        if len(q) % nq or not np.array_equal(np.repeat(cells, nq), q.cells):
-            raise RuntimeError(
-                f"a body load of L was requested at {len(q)} points that are not a cell rule of "
-                f"degree {self.degree} (internal error: quadrature mismatch)"
-            )
-        d = self.gdim
+        """``b`` at the points of a cell rule of ``degree``: the cells whose points are the
+        standard rule's get the integrand there; the others (the pieces of cells a crack cuts,
+        with ``cut=True``) get the polynomial of total degree ``degree`` fitted, by least squares
+        in the cell, to the integrand at the points of the rule of degree ``2 degree + 2``:
+        exact for integrands polynomial to that degree (constant, linear body loads), else an
+        approximation of the rule's order. Local."""
+        nq, d = self.num_points, self.gdim
+        order = np.argsort(q.cells, kind="stable")
+        cells, start, count = np.unique(q.cells[order], return_index=True, return_counts=True)
         out = np.zeros((len(q), d))
-        for expr, on in self._expressions:
-            vals = _compat.eval_expression(expr, self.mesh, cells, 2 * d).reshape(-1, 2 * d)
-            if np.abs(vals[:, d:] - q.points).max(initial=0.0) > self.tol:
+        for expr, fit, on in self._expressions:
+            vals = _compat.eval_expression(expr, self.mesh, cells, 2 * d)  # (cells, nq, 2d)
+            std = np.zeros(cells.size, dtype=bool)
+            full = np.flatnonzero(count == nq)
+            if full.size:
+                idx = order[start[full, None] + np.arange(nq)]
+                std[full] = (np.abs(vals[full, :, d:] - q.points[idx]) <= self.tol).all(axis=(1, 2))
+                take = full[std[full] & on[cells[full]]]
+                out[order[start[take, None] + np.arange(nq)]] += vals[take, :, :d]
+            other = np.flatnonzero(~std)
+            if other.size and fit is None:
                 raise RuntimeError(
                     "a body load of L was requested at points that are not the Gauss points of "
                     f"degree {self.degree} (internal error: quadrature mismatch)"
                 )
-            out += np.where(on[q.cells][:, None], vals[:, :d], 0.0)
+            other = other[on[cells[other]]]
+            if other.size:
+                fv = _compat.eval_expression(fit, self.mesh, cells[other], 2 * d)
+                for k, c in enumerate(other):
+                    idx = order[start[c] : start[c] + count[c]]
+                    out[idx] += _fitted(fv[k, :, d:], fv[k, :, :d], q.points[idx], self.degree)
         return out
+
+
+def _fitted(x: np.ndarray, values: np.ndarray, points: np.ndarray, degree: int) -> np.ndarray:
+    """The least-squares polynomial of total ``degree`` through ``values`` (m, k) at ``x``
+    (m, gdim), evaluated at ``points`` (p, gdim) (coordinates centred and scaled on ``x``)."""
+    c, h = x.mean(axis=0), np.ptp(x, axis=0).max()
+
+    def basis(p: np.ndarray) -> np.ndarray:
+        y = (p - c) / h
+        powers = [e for e in np.ndindex(*(degree + 1,) * y.shape[1]) if sum(e) <= degree]
+        return np.stack([np.prod(y ** np.asarray(e), axis=1) for e in powers], axis=1)
+
+    coef = np.linalg.lstsq(basis(x), values, rcond=None)[0]
+    return basis(points) @ coef
+
+
+def _split_points(msh, facets, cracks, degree, c2f, cells):
+    """The Gauss points of the facets that a crack's mouth splits
+    (:func:`~dolfinx_meshfree.geometry.cut_cells.cut_facet_quadrature`) as a rule for
+    :class:`_FacetLoad`: their reference coordinates in the facet's cell (straight facets: the
+    point's position along the facet mapped onto the reference facet), the cells, and the (cell,
+    point) of each; ``None`` when no facet is split (local)."""
+    q = cut_facet_quadrature(msh, facets, cracks, degree)
+    plain = facet_quadrature(msh, facets, degree)
+    if len(q) == len(plain) and np.array_equal(q.points, plain.points):
+        return None
+    tol = 1e-9 * (np.ptp(msh.geometry.x[:, :2], axis=0).max() + 1.0)
+    new = cKDTree(plain.points).query(q.points)[0] > tol
+    pts, ents = q.points[new], q.entities[new]
+    where = np.searchsorted(facets, ents, sorter=np.argsort(facets))
+    idx = np.argsort(facets)[where]
+    c = cells[idx]
+    cell = getattr(basix.CellType, msh.topology.cell_type.name)
+    ref = np.asarray(basix.geometry(cell))
+    ends = np.asarray(basix.topology(cell)[1])[np.argmax(c2f[c] == ents[:, None], axis=1)][:, :2]
+    xc = msh.geometry.x[_compat.geometry_dofmap(msh)[c], :2]  # nodes in reference vertex order
+    a, b = xc[np.arange(c.size), ends[:, 0]], xc[np.arange(c.size), ends[:, 1]]
+    t = np.einsum("ij,ij->i", pts - a, b - a) / np.einsum("ij,ij->i", b - a, b - a)
+    X = ref[ends[:, 0]] + t[:, None] * (ref[ends[:, 1]] - ref[ends[:, 0]])
+    return X, c, np.arange(c.size), np.arange(c.size)
 
 
 class _FacetLoad:
     """Traction ``t(x, n)`` of an exterior-facet integral of ``L``, tabulated at the facet Gauss
-    points of :func:`~dolfinx_meshfree.facet_quadrature` (collective construction).
+    points of :func:`~dolfinx_meshfree.facet_quadrature` and, with ``cracks``, at those of
+    :func:`~dolfinx_meshfree.geometry.cut_cells.cut_facet_quadrature` (the facets a crack's
+    mouth splits; collective construction).
 
     ``t(x, n) = A(x) + B(x) n``: the integrand is evaluated with ``FacetNormal`` replaced by a
     Constant set to 0 and each ``e_i`` (and checked to be affine in n at one more value).
     """
 
-    def __init__(self, itg, v, facets: np.ndarray, degree: int):
+    def __init__(self, itg, v, facets: np.ndarray, degree: int, cracks: Sequence = ()):
         msh = v.ufl_function_space().mesh
         tdim = msh.topology.dim
         d = msh.geometry.dim
@@ -519,9 +585,9 @@ class _FacetLoad:
             isinstance(o, ufl.classes.FacetNormal) for o in unique_pre_traversal(integrand)
         )
         x = ufl.SpatialCoordinate(msh)
-        values = _replace_test_function(integrand, v, msh, nc)
-        expr = _compat.create_expression(
-            ufl.as_vector([values[i] for i in range(d)] + [x[i] for i in range(d)]), X
+        values = ufl.as_vector(
+            [_replace_test_function(integrand, v, msh, nc)[i] for i in range(d)]
+            + [x[i] for i in range(d)]
         )
         # (cell, local facet) of each facet
         msh.topology.create_connectivity(tdim - 1, tdim)
@@ -533,14 +599,30 @@ class _FacetLoad:
         facets = np.asarray(facets, dtype=np.int64)
         cells = np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]]
         local = np.argmax(c2f[cells] == facets[:, None], axis=1)
-        ucells, pos = np.unique(cells, return_inverse=True)
-        cols = (local[:, None] * npts + np.arange(npts)).ravel()
-        rows = np.repeat(pos, npts)
+        # the rules: (reference points, cells evaluated, (cell row, point column) per point)
+        rules = [(X, cells, np.repeat(np.arange(cells.size), npts),
+                  (local[:, None] * npts + np.arange(npts)).ravel())]  # fmt: skip
+        if len(cracks) and facets.size:
+            split = _split_points(msh, facets, cracks, degree, c2f, cells)
+            if split is not None:
+                rules.append(split)
+        # a rank without split points still takes part in the same expressions' compilation
+        num_rules = msh.comm.allreduce(len(rules), op=MPI.MAX)
+        if num_rules > len(rules):
+            rules.append((np.zeros((1, tdim)), cells[:0], np.zeros(0, int), np.zeros(0, int)))
+        evaluators = []
+        for Xr, cr, rows, cols in rules:
+            expr = _compat.create_expression(values, Xr)
+            ucells, pos = np.unique(cr, return_inverse=True)
+            evaluators.append((expr, ucells, pos[rows] if rows.size else rows, cols))
 
         def evaluate(n: np.ndarray) -> np.ndarray:
             nc.value[:] = n
-            vals = _compat.eval_expression(expr, msh, ucells, 2 * d)
-            return vals[rows, cols] if facets.size else np.zeros((0, 2 * d))
+            out = []
+            for expr, ucells, rows, cols in evaluators:
+                vals = _compat.eval_expression(expr, msh, ucells, 2 * d)
+                out.append(vals[rows, cols] if rows.size else np.zeros((0, 2 * d)))
+            return np.concatenate(out)
 
         def tabulate() -> int:
             base = evaluate(np.zeros(d))

@@ -58,6 +58,7 @@ from ..physics.operators import (
     moment_corrections,
     stiffness_matrix,
 )
+from .growth_update import local_update_for
 from .newton import NewtonOptions
 from .petsc import BlockSystem, SolverOptions, create_aij, create_vector, solver_options
 from .sides import BlockProblem, ParticleSide, solve_load_steps
@@ -203,6 +204,32 @@ def particle_stiffness(
     n = particles.num_particles
     gdim = particles.gdim
     dof_map = particles.petsc_dofs(gdim).ravel()
+    # after a crack grew: update the previous stiffness locally (statics/growth_update.py)
+    local = local_update_for(mls)
+    if local is not None and (
+        boundary_values is not None
+        or boundary_moments
+        or quadrature is None
+        or (consistent_boundary is not None and boundary_quadrature is None)
+    ):  # the edge-to-edge interface terms, or rules not from crack_rules: full rebuild
+        local = None
+    key = (
+        id(particles), id(material), quadrature_degree, boundary_normals is not None,
+        None if consistent_boundary is None else np.asarray(consistent_boundary[0]).tobytes(),
+    )  # fmt: skip
+    if local is not None:
+        upd = raise_on_all_ranks(
+            comm,
+            lambda: local.stiffness(
+                particles, material, quadrature, boundary_quadrature, boundary_normals, key, comm
+            ),
+        )
+        if upd is not None:
+            Kg, tq, test_grads, timings = upd
+            if tables is not None:
+                tables.update(quadrature=quadrature, table=tq, test_gradients=test_grads,
+                              approximation=mls)  # fmt: skip
+            return Kg, quadrature, tq, timings
     if quadrature is None:
         q = cell_quadrature(particles.mesh, quadrature_degree, particles.cells)
     else:
@@ -244,6 +271,12 @@ def particle_stiffness(
     K = stiffness_matrix(test_grads, q.weights, material, tq.gradients).tocoo()
     Kg = sp.csr_matrix((K.data, (dof_map[K.row], dof_map[K.col])), shape=(gdim * n, gdim * n))
     timings = {"setup": t1 - t0, "assemble": time.perf_counter() - t1}
+    if local is not None:
+        cb = consistent_boundary is not None
+        local.record(
+            key, q, bq if cb else None, tq, tb.values if cb else None,
+            normals if cb else None, test_grads, Kg, comm,
+        )  # fmt: skip
     return Kg, q, tq, timings
 
 
@@ -266,6 +299,24 @@ def crack_rules(
     """
     if not cracks:
         return None, None
+    local = next((u for u in map(local_update_for, cracks) if u is not None), None)
+    if local is not None:  # after a crack grew: only the cells the new segments cut
+        return local.rules(
+            msh, cells, cracks, degree, boundary, cell_rule,
+            lambda: _crack_rules(msh, cells, cracks, degree, boundary, cell_rule),
+        )  # fmt: skip
+    return _crack_rules(msh, cells, cracks, degree, boundary, cell_rule)
+
+
+def _crack_rules(
+    msh: dolfinx.mesh.Mesh,
+    cells: np.ndarray,
+    cracks: list[Crack],
+    degree: int,
+    boundary: tuple[np.ndarray, np.ndarray | None] | None,
+    cell_rule: bool,
+) -> tuple[QuadraturePoints | None, QuadraturePoints | None]:
+    """:func:`crack_rules` built in full."""
     comm = msh.comm
     q = None
     if cell_rule:

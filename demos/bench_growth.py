@@ -1,0 +1,102 @@
+# # Cost of a crack growth step against the patch size: full rebuild against local update
+#
+# Issue 10, item 5: "each growth step rebuilds only the tables, cells and operator rows that the
+# crack extension changes: the cost of a growth step grows with the particles near the tip, not
+# with the patch". The model of ``demos/crack_growth.py`` (pure EFG; a W x W plate, edge crack at
+# 30 degrees from (0, Y0), a = 0.3, tension on top and bottom) at fixed spacing ``h`` for several
+# plate sizes W: the tip region is the same, only the patch grows. Each size runs the same growth
+# twice in one process, ``update="full"`` and ``update="local"``
+# (:mod:`~dolfinx_meshfree.statics.growth_update`), and reports per step (median over the steps
+# after the first, whose full build both share): setup (crack rules, MLS tables, facet tables),
+# assemble (stiffness update or product, PETSc matrices, loads), solve (MUMPS), SIFs, and the
+# total; the local/full ratio; and the largest difference of K_I, K_II between the two paths
+# (relative to |K|; a full rebuild and the local update must agree to round-off, checked 1e-10,
+# the run exits 1 on a miss). JIT compilation is warmed up first (a small model) and excluded.
+#
+#     python demos/bench_growth.py [--h 0.025] [--widths 1 1.5 2] [--steps 4] [--da 0.1]
+#         [--json F] [--quick]
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+
+import dolfinx_meshfree as mf
+
+import numpy as np
+from crack_growth import model
+from sif_common import COMM, write_json
+
+PARTS = ("setup", "assemble", "solve", "sifs", "total")
+AGREE = 1e-10  # local against full, relative to |K|
+
+
+def run(h: float, width: float, steps: int, da: float, update: str) -> dict:
+    prob, crack, sizes = model("efg", h, width)
+    growth = mf.QuasiStaticCrackGrowth(prob, crack, increment=da, steps=steps, update=update)
+    hist = growth.run()
+    per = {p: [] for p in PARTS}
+    for r in hist[1:]:  # the first step is the full build of both paths
+        for p in ("setup", "assemble", "solve"):
+            per[p].append(r.timings[p])
+        per["sifs"].append(r.time_sifs)
+        per["total"].append(r.time_solve + r.time_sifs)
+    rows = growth.local.last if growth.local is not None else {}
+    return {
+        "update": update, "width": width, "h": h, "particles": sizes["particles"],
+        "K": [[r.K_I, r.K_II] for r in hist],
+        "seconds": {p: COMM.allreduce(statistics.median(v), op=_max()) for p, v in per.items()},
+        "last_update": rows,
+    }  # fmt: skip
+
+
+def _max():
+    from mpi4py import MPI
+
+    return MPI.MAX
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--h", type=float, default=0.025)
+    parser.add_argument("--widths", nargs="+", type=float, default=[1.0, 1.5, 2.0])
+    parser.add_argument("--steps", type=int, default=4)
+    parser.add_argument("--da", type=float, default=0.1)
+    parser.add_argument("--json", default=None)
+    parser.add_argument("--quick", action="store_true", help="h = 0.05, widths 0.8 1, 2 steps")
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.h, args.widths, args.steps = 0.05, [0.8, 1.0], 2
+    run(0.05, 0.8, 2, args.da, "local")  # JIT warm-up, not timed
+    records, ok = [], True
+    for w in args.widths:
+        full = run(args.h, w, args.steps, args.da, "full")
+        local = run(args.h, w, args.steps, args.da, "local")
+        K = np.asarray(full["K"])
+        diff = float(np.abs(np.asarray(local["K"]) - K).max() / np.abs(K).max())
+        ok &= diff < AGREE
+        records.append({"full": full, "local": local, "K_difference": diff})
+    if COMM.rank == 0:
+        print(f"EFG growth step, h = {args.h:g}, da = {args.da:g}, median of steps 2..{args.steps}"
+              f", {COMM.size} rank(s); seconds per step: full / local (ratio)")  # fmt: skip
+        print("| W | particles | " + " | ".join(PARTS) + " | rows re-tabulated | K diff |")
+        print("|---" * (len(PARTS) + 4) + "|")
+        for r in records:
+            f, lo = r["full"]["seconds"], r["local"]["seconds"]
+            cells = " | ".join(f"{f[p]:.3f} / {lo[p]:.3f} ({lo[p] / f[p]:.2f})" for p in PARTS)
+            last = r["local"]["last_update"]
+            tab = f"{last.get('rows', 0)} of {last.get('cell_rows', 0)}"
+            print(f"| {r['full']['width']:g} | {r['full']['particles']} | {cells} | {tab} "
+                  f"| {r['K_difference']:.1e} |")  # fmt: skip
+    write_json(args.json, {"h": args.h, "da": args.da, "steps": args.steps, "ranks": COMM.size,
+                           "runs": records, "agree": AGREE})  # fmt: skip
+    if not ok:
+        if COMM.rank == 0:
+            print(f"MISSED: local and full K differ by more than {AGREE:g}")
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -13,6 +13,20 @@
 # (relative to |K|; a full rebuild and the local update must agree to round-off, checked 1e-10,
 # the run exits 1 on a miss). JIT compilation is warmed up first (a small model) and excluded.
 #
+# Measured (h = 0.025, da = 0.1, 4 steps, serial, a shared 2-core machine; seconds per step,
+# full / local):
+#
+# | W | particles | setup | assemble | solve | total | K diff |
+# |---|---|---|---|---|---|---|
+# | 1 | 1681 | 0.352 / 0.089 | 0.368 / 0.155 | 0.127 / 0.145 | 0.816 / 0.421 (0.52) | 1.3e-13 |
+# | 1.5 | 3721 | 0.547 / 0.112 | 0.778 / 0.142 | 0.307 / 0.327 | 1.607 / 0.594 (0.37) | 1.1e-13 |
+# | 2 | 6561 | 0.927 / 0.152 | 1.554 / 0.146 | 0.625 / 0.582 | 3.096 / 0.851 (0.27) | 2.0e-14 |
+#
+# The update (setup + assemble) goes 0.24 -> 0.30 s while the patch grows 3.9x (full: 0.72 ->
+# 2.48 s); it re-tabulates about 850 of 27k-104k cell rows. What still grows with the patch: the
+# direct solve (MUMPS factorisation), and in the update the copies of the tables' unchanged rows
+# and the PETSc matrix of K (linear, small constants).
+#
 #     python demos/bench_growth.py [--h 0.025] [--widths 1 1.5 2] [--steps 4] [--da 0.1]
 #         [--json F] [--quick]
 
@@ -64,11 +78,11 @@ def main(argv=None) -> int:
     parser.add_argument("--steps", type=int, default=4)
     parser.add_argument("--da", type=float, default=0.1)
     parser.add_argument("--json", default=None)
-    parser.add_argument("--quick", action="store_true", help="h = 0.05, widths 0.8 1, 2 steps")
+    parser.add_argument("--quick", action="store_true", help="h = 0.05, widths 1 1.2, 2 steps")
     args = parser.parse_args(argv)
     if args.quick:
-        args.h, args.widths, args.steps = 0.05, [0.8, 1.0], 2
-    run(0.05, 0.8, 2, args.da, "local")  # JIT warm-up, not timed
+        args.h, args.widths, args.steps = 0.05, [1.0, 1.2], 2
+    run(0.05, 1.0, 2, args.da, "local")  # JIT warm-up, not timed
     records, ok = [], True
     for w in args.widths:
         full = run(args.h, w, args.steps, args.da, "full")

@@ -453,6 +453,8 @@ class LocalUpdate:
         self._stiff = _Stiffness(
             key, q, bq, values, grads, bvalues, normals, test, xi, Kg, len(self.log)
         )
+        # the rules derived before these are no longer needed (they hold whole quadratures)
+        self._derived = {k: v for k, v in self._derived.items() if v[0] is q or v[0] is bq}
         self.last = {
             "mode": "local", "rows": int(redo.size), "boundary_rows": 0 if bq is None else
             int(bredo.size), "particles": int(X.size), "stiffness_rows": int(rows_new.size),

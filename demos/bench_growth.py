@@ -94,13 +94,18 @@ def main(argv=None) -> int:
     if COMM.rank == 0:
         print(f"EFG growth step, h = {args.h:g}, da = {args.da:g}, median of steps 2..{args.steps}"
               f", {COMM.size} rank(s); seconds per step: full / local (ratio)")  # fmt: skip
-        print("| W | particles | " + " | ".join(PARTS) + " | rows re-tabulated | K diff |")
+        print(
+            "| W | particles | "
+            + " | ".join(PARTS)
+            + " | rows re-tabulated, K dofs changed | K diff |"
+        )
         print("|---" * (len(PARTS) + 4) + "|")
         for r in records:
             f, lo = r["full"]["seconds"], r["local"]["seconds"]
             cells = " | ".join(f"{f[p]:.3f} / {lo[p]:.3f} ({lo[p] / f[p]:.2f})" for p in PARTS)
             last = r["local"]["last_update"]
-            tab = f"{last.get('rows', 0)} of {last.get('cell_rows', 0)}"
+            rows, cells_, dofs = (last.get(k, 0) for k in ("rows", "cell_rows", "stiffness_dofs"))
+            tab = f"{rows} of {cells_}, {dofs} dofs"
             print(f"| {r['full']['width']:g} | {r['full']['particles']} | {cells} | {tab} "
                   f"| {r['K_difference']:.1e} |")  # fmt: skip
     write_json(args.json, {"h": args.h, "da": args.da, "steps": args.steps, "ranks": COMM.size,

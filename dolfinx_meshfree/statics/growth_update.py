@@ -458,7 +458,7 @@ class LocalUpdate:
         self.last = {
             "mode": "local", "rows": int(redo.size), "boundary_rows": 0 if bq is None else
             int(bredo.size), "particles": int(X.size), "stiffness_rows": int(rows_new.size),
-            "cell_rows": len(q),
+            "cell_rows": len(q), "stiffness_dofs": int(np.unique(dK.row).size),
         }  # fmt: skip
         return Kg, table, test, {"setup": t1 - t0, "assemble": t2 - t1}
 

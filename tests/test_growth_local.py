@@ -12,6 +12,7 @@ Serial and 2 ranks.
 from __future__ import annotations
 
 import dolfinx_meshfree as mf
+from dolfinx_meshfree import _compat
 from dolfinx_meshfree.approx.crack_cuts import attach_cracks
 from dolfinx_meshfree.statics.growth_update import changed_rows, new_segments
 
@@ -19,6 +20,7 @@ import dolfinx
 import numpy as np
 import pytest
 import scipy.sparse as sp
+import ufl
 from mpi4py import MPI
 from test_crack_growth import H, edge_crack, model
 
@@ -117,10 +119,6 @@ def test_changed_rows_hold_every_row_that_changes(method):
 def user_model(crack: mf.Crack) -> mf.CoupledLinearProblem:
     """A user's UFL model of the unit square pulled apart (u_y = -+1e-3 on the bottom and top
     edges), an interior crack in a particle patch, lagrange coupling."""
-    import ufl
-
-    from dolfinx_meshfree import _compat
-
     msh = dolfinx.mesh.create_unit_square(COMM, 20, 20, dolfinx.mesh.CellType.quadrilateral)
     V = _compat.vector_function_space(msh)
     u, v = ufl.TrialFunction(V), ufl.TestFunction(V)

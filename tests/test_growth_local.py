@@ -141,7 +141,7 @@ def test_local_steps_through_a_users_model():
     step (measured 4.0e-15 and 4.6e-15 relative after the two local steps)."""
     crack = mf.Crack([[0.3, 0.4813], [0.5, 0.4813]])
     g = mf.QuasiStaticCrackGrowth(user_model(crack), crack, increment=0.08, steps=3, tip=-1)
-    for k in range(3):
+    for _ in range(3):
         g.step()
         sol = user_model(mf.Crack(crack.points[:-1])).solve()
         u, ref = g.solution.coefficients, sol.coefficients

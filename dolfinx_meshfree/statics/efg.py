@@ -218,12 +218,8 @@ def particle_stiffness(
         None if consistent_boundary is None else np.asarray(consistent_boundary[0]).tobytes(),
     )  # fmt: skip
     if local is not None:
-        upd = raise_on_all_ranks(
-            comm,
-            lambda: local.stiffness(
-                particles, material, quadrature, boundary_quadrature, boundary_normals, key, comm
-            ),
-        )
+        bq = None if consistent_boundary is None else boundary_quadrature
+        upd = local.stiffness(particles, material, quadrature, bq, boundary_normals, key, comm)
         if upd is not None:
             Kg, tq, test_grads, timings = upd
             if tables is not None:

@@ -67,6 +67,7 @@ from ..geometry.cut_cells import (
     replace_cells,
 )
 from ..geometry.quadrature import QuadraturePoints
+from ..parallel import raise_on_all_ranks
 from ..physics.operators import stiffness_matrix
 
 if TYPE_CHECKING:  # annotations only
@@ -355,7 +356,7 @@ class LocalUpdate:
         """The updated ``(Kg, table, test gradients, timings)`` of
         :func:`~dolfinx_meshfree.statics.efg.particle_stiffness`, or None when a full build is
         needed (the first call, other arguments, a change that is not an extension). Collective
-        (every rank takes the same branch)."""
+        (every rank takes the same branch; a tabulation error is raised on every rank)."""
         from mpi4py import MPI
 
         st = self._stiff
@@ -375,7 +376,7 @@ class LocalUpdate:
         near = changed_rows(q.points[:nk], segs, R)
         added = np.arange(nk, len(q))
         redo = np.concatenate([near, added])
-        tab = mls.tabulate(q.points[redo]) if redo.size else None
+        tab = raise_on_all_ranks(comm, lambda: mls.tabulate(q.points[redo]) if redo.size else None)
         removed = np.flatnonzero(~kq)
         vals_k = st.values[kept]
         grads_k = [g[kept] for g in st.grads]
@@ -393,10 +394,15 @@ class LocalUpdate:
             badd = np.arange(nbk, len(bq))
             bredo = np.concatenate([bnear, badd])
             sides = getattr(bq, "sides", None)
-            btab = (
-                mls.tabulate(bq.points[bredo], 0, None if sides is None else sides[bredo]).values
-                if bredo.size
-                else sp.csr_matrix((0, mls.num_particles))
+            btab = raise_on_all_ranks(
+                comm,
+                lambda: (
+                    mls.tabulate(
+                        bq.points[bredo], 0, None if sides is None else sides[bredo]
+                    ).values
+                    if bredo.size
+                    else sp.csr_matrix((0, mls.num_particles))
+                ),
             )
             bvalues = _splice(st.bvalues[bk], bnear, btab[: bnear.size], btab[bnear.size :])
             if normals_fn is None:

@@ -152,13 +152,19 @@ def _rows(A: sp.csr_matrix, rows: np.ndarray) -> sp.csr_matrix:
     return A[rows] if rows.size else sp.csr_matrix((0, A.shape[1]))
 
 
-def _splice(kept: sp.csr_matrix, at: np.ndarray, replaced: sp.csr_matrix, added: sp.csr_matrix):
-    """Rows ``kept`` with rows ``at`` replaced by ``replaced``, then ``added`` appended."""
-    nk = kept.shape[0]
-    order = np.arange(nk + added.shape[0])
-    order[at] = nk + np.arange(at.size)
-    order[nk:] = nk + at.size + np.arange(added.shape[0])
-    return sp.vstack([kept, replaced, added], format="csr")[order]
+def _splice(
+    A: sp.csr_matrix,
+    kept: np.ndarray,
+    at: np.ndarray,
+    replaced: sp.csr_matrix,
+    added: sp.csr_matrix,
+) -> sp.csr_matrix:
+    """The rows ``kept`` of ``A``, of which those at positions ``at`` replaced by the rows of
+    ``replaced``, then the rows ``added``: one gather."""
+    na = A.shape[0]
+    order = np.concatenate([kept, na + at.size + np.arange(added.shape[0])])
+    order[at] = na + np.arange(at.size)
+    return sp.vstack([A, replaced, added], format="csr")[order]
 
 
 def _columns(*mats: sp.csr_matrix) -> np.ndarray:
@@ -378,13 +384,13 @@ class LocalUpdate:
         redo = np.concatenate([near, added])
         tab = raise_on_all_ranks(comm, lambda: mls.tabulate(q.points[redo]) if redo.size else None)
         removed = np.flatnonzero(~kq)
-        vals_k = st.values[kept]
-        grads_k = [g[kept] for g in st.grads]
         ni = near.size
         tv = tab.values if tab is not None else sp.csr_matrix((0, mls.num_particles))
         tg = tab.gradients if tab is not None else [tv] * gdim
-        values = _splice(vals_k, near, tv[:ni], tv[ni:])
-        grads = [_splice(gk, near, g[:ni], g[ni:]) for gk, g in zip(grads_k, tg, strict=True)]
+        values = _splice(st.values, kept, near, tv[:ni], tv[ni:])
+        grads = [
+            _splice(g0, kept, near, g[:ni], g[ni:]) for g0, g in zip(st.grads, tg, strict=True)
+        ]
         # boundary rows
         xi = st.xi
         if bq is not None:
@@ -404,7 +410,7 @@ class LocalUpdate:
                     else sp.csr_matrix((0, mls.num_particles))
                 ),
             )
-            bvalues = _splice(st.bvalues[bk], bnear, btab[: bnear.size], btab[bnear.size :])
+            bvalues = _splice(st.bvalues, bk, bnear, btab[: bnear.size], btab[bnear.size :])
             if normals_fn is None:
                 normals = bq.normals
             else:  # the hook changes the normals on mesh facets only: keep them, add the faces'
@@ -451,7 +457,7 @@ class LocalUpdate:
         # the test gradients on every row: kept rows, with the changed ones replaced
         at = rows_new[rows_new < nk]  # rows_new is sorted: the kept ones, then all added
         test = [
-            _splice(t[kept], at, tn[: at.size], tn[at.size :])
+            _splice(t, kept, at, tn[: at.size], tn[at.size :])
             for t, tn in zip(st.test, test_new, strict=True)
         ]
         t2 = time.perf_counter()

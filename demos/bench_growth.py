@@ -14,19 +14,20 @@
 # (relative to |K|; a full rebuild and the local update must agree to round-off, checked 1e-10,
 # the run exits 1 on a miss). JIT compilation is warmed up first (a small model) and excluded.
 #
-# Measured (h = 0.025, da = 0.1, 4 steps, serial, a shared 2-core machine; seconds per step,
-# full / local):
+# Measured (h = 0.025, da = 0.1, 4 steps, serial, a shared and loaded 2-core machine; seconds
+# per step, full / local, median of steps 2-4):
 #
-# | W | particles | setup | assemble | solve | total | K diff |
-# |---|---|---|---|---|---|---|
-# | 1 | 1681 | 0.352 / 0.089 | 0.368 / 0.155 | 0.127 / 0.145 | 0.816 / 0.421 (0.52) | 1.3e-13 |
-# | 1.5 | 3721 | 0.547 / 0.112 | 0.778 / 0.142 | 0.307 / 0.327 | 1.607 / 0.594 (0.37) | 1.1e-13 |
-# | 2 | 6561 | 0.927 / 0.152 | 1.554 / 0.146 | 0.625 / 0.582 | 3.096 / 0.851 (0.27) | 2.0e-14 |
+# | W | particles | setup | assemble | update (setup + assemble) | solve | total | K diff |
+# |---|---|---|---|---|---|---|---|
+# | 1 | 1681 | 0.207 / 0.030 | 0.268 / 0.087 | 0.475 / 0.117 | 0.084 / 0.078 | 0.567 / 0.204 | 1.3e-13 |
+# | 1.5 | 3721 | 0.384 / 0.041 | 0.624 / 0.104 | 1.008 / 0.145 | 0.268 / 0.251 | 1.299 / 0.429 | 1.1e-13 |
+# | 2 | 6561 | 0.597 / 0.077 | 1.068 / 0.115 | 1.665 / 0.192 | 0.521 / 0.562 | 2.188 / 0.795 | 2.0e-14 |
 #
-# The update (setup + assemble) goes 0.24 -> 0.30 s while the patch grows 3.9x (full: 0.72 ->
-# 2.48 s); it re-tabulates about 850 of 27k-104k cell rows. What still grows with the patch: the
-# direct solve (MUMPS factorisation), and in the update the copies of the tables' unchanged rows
-# and the PETSc matrix of K (linear, small constants).
+# The local update re-tabulates about 850 cell rows (of 27k-104k) and changes about 110 dofs of K
+# at every size; its time grows 1.6x while the patch grows 3.9x (full: 3.5x): what remains
+# linear are memory copies (the tables' unchanged rows, the sparse sum K_old + dK, the PETSc
+# matrix of K). The direct solve (MUMPS) grows with the patch and is now most of a local step.
+# 2 ranks: local and full agree to 9e-14; the timings were dominated by the machine's load.
 #
 #     python demos/bench_growth.py [--h 0.025] [--widths 1 1.5 2] [--steps 4] [--da 0.1]
 #         [--json F] [--quick]

@@ -17,11 +17,11 @@
 # Measured (h = 0.025, da = 0.1, 4 steps, serial, a shared and loaded 2-core machine; seconds
 # per step, full / local, median of steps 2-4):
 #
-# | W | particles | setup | assemble | update (setup + assemble) | solve | total | K diff |
+# | W | particles | setup | assemble | update (sum) | solve | total | K diff |
 # |---|---|---|---|---|---|---|---|
-# | 1 | 1681 | 0.207 / 0.030 | 0.268 / 0.087 | 0.475 / 0.117 | 0.084 / 0.078 | 0.567 / 0.204 | 1.3e-13 |
-# | 1.5 | 3721 | 0.384 / 0.041 | 0.624 / 0.104 | 1.008 / 0.145 | 0.268 / 0.251 | 1.299 / 0.429 | 1.1e-13 |
-# | 2 | 6561 | 0.597 / 0.077 | 1.068 / 0.115 | 1.665 / 0.192 | 0.521 / 0.562 | 2.188 / 0.795 | 2.0e-14 |
+# | 1 | 1681 | 0.207/0.030 | 0.268/0.087 | 0.475 / 0.117 | 0.084 / 0.078 | 0.567 / 0.204 | 1e-13 |
+# | 1.5 | 3721 | 0.384/0.041 | 0.624/0.104 | 1.008 / 0.145 | 0.268 / 0.251 | 1.299 / 0.429 | 1e-13 |
+# | 2 | 6561 | 0.597/0.077 | 1.068/0.115 | 1.665 / 0.192 | 0.521 / 0.562 | 2.188 / 0.795 | 2e-14 |
 #
 # The local update re-tabulates about 850 cell rows (of 27k-104k) and changes about 110 dofs of K
 # at every size; its time grows 1.6x while the patch grows 3.9x (full: 3.5x): what remains

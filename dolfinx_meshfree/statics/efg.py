@@ -221,8 +221,9 @@ def particle_stiffness(
         bq = None if consistent_boundary is None else boundary_quadrature
         upd = local.stiffness(particles, material, quadrature, bq, boundary_normals, key, comm)
         if upd is not None:
-            Kg, tq, test_grads, timings = upd
+            Kg, tq, test_fn, timings = upd
             if tables is not None:
+                test_grads = test_fn()
                 tables.update(quadrature=quadrature, table=tq, test_gradients=test_grads,
                               approximation=mls)  # fmt: skip
             return Kg, quadrature, tq, timings

@@ -152,33 +152,97 @@ def _rows(A: sp.csr_matrix, rows: np.ndarray) -> sp.csr_matrix:
     return A[rows] if rows.size else sp.csr_matrix((0, A.shape[1]))
 
 
-def _splice(
-    A: sp.csr_matrix,
-    kept: np.ndarray,
-    at: np.ndarray,
-    replaced: sp.csr_matrix,
-    added: sp.csr_matrix,
-) -> sp.csr_matrix:
-    """The rows ``kept`` of ``A``, of which those at positions ``at`` replaced by the rows of
-    ``replaced``, then the rows ``added``: one gather."""
-    na = A.shape[0]
-    order = np.concatenate([kept, na + at.size + np.arange(added.shape[0])])
-    order[at] = na + np.arange(at.size)
-    return sp.vstack([A, replaced, added], format="csr")[order]
+class _Rows:
+    """The rows of a sparse table kept in chunks: row ``i`` of the table is row ``where[i]`` of
+    the chunks stacked. An update appends the changed and added rows as a new chunk and points
+    the table's rows to it: the unchanged rows are never copied (a growth step costs what it
+    changes). ``touching`` finds the rows with entries in given columns through each chunk's
+    transpose (built once per chunk)."""
+
+    def __init__(self, chunks: list, offsets: np.ndarray, where: np.ndarray, csc: list | None):
+        self.chunks, self.offsets, self.where, self.csc = chunks, offsets, where, csc
+        self.ncols = chunks[0].shape[1]
+
+    @classmethod
+    def of(cls, A: sp.csr_matrix, transpose: bool = False) -> _Rows:
+        A = A.tocsr()
+        return cls([A], np.array([0, A.shape[0]]), np.arange(A.shape[0]),
+                   [A.tocsc()] if transpose else None)  # fmt: skip
+
+    def __len__(self) -> int:
+        return self.where.size
+
+    def rows(self, idx: np.ndarray) -> sp.csr_matrix:
+        """The table's rows ``idx`` (CSR, in that order)."""
+        idx = np.asarray(idx, dtype=np.int64)
+        if idx.size == 0:
+            return sp.csr_matrix((0, self.ncols))
+        g = self.where[idx]
+        c = np.searchsorted(self.offsets, g, side="right") - 1
+        parts, order = [], []
+        for k in np.unique(c):
+            sel = np.flatnonzero(c == k)
+            parts.append(self.chunks[k][g[sel] - self.offsets[k]])
+            order.append(sel)
+        M = sp.vstack(parts, format="csr")
+        inv = np.empty(idx.size, dtype=np.int64)
+        inv[np.concatenate(order)] = np.arange(idx.size)
+        return M[inv]
+
+    def full(self) -> sp.csr_matrix:
+        """The whole table (a copy)."""
+        return self.rows(np.arange(len(self)))
+
+    def update(
+        self, kept: np.ndarray, at: np.ndarray, replaced: sp.csr_matrix, added: sp.csr_matrix
+    ) -> _Rows:
+        """The table of rows ``kept``, those at positions ``at`` replaced by ``replaced``, then
+        ``added`` (a new object sharing the chunks)."""
+        new = sp.vstack([replaced, added], format="csr")
+        start = int(self.offsets[-1])
+        where = np.concatenate([self.where[kept], start + at.size + np.arange(added.shape[0])])
+        where[at] = start + np.arange(at.size)
+        return _Rows(
+            [*self.chunks, new], np.append(self.offsets, start + new.shape[0]), where,
+            None if self.csc is None else [*self.csc, new.tocsc()],
+        )  # fmt: skip
+
+    def touching(self, cols: np.ndarray) -> np.ndarray:
+        """The table's rows (sorted) with a stored entry in ``cols``."""
+        hit = [self.offsets[k] + np.unique(t[:, cols].indices) for k, t in enumerate(self.csc)]
+        g = np.concatenate(hit) if hit else np.zeros(0, dtype=np.int64)
+        inv = np.full(int(self.offsets[-1]), -1, dtype=np.int64)
+        inv[self.where] = np.arange(len(self))
+        r = inv[g]
+        return np.unique(r[r >= 0])
+
+
+class _LazyTable(ShapeTable):
+    """A :class:`ShapeTable` whose values and gradients are stacked from their chunks when
+    first read."""
+
+    def __init__(self, points: np.ndarray, values: _Rows, grads: list[_Rows], version: int):
+        self.points, self.version = points, version
+        self._rows = (values, grads)
+        self._built: dict = {}
+
+    @property
+    def values(self) -> sp.csr_matrix:  # type: ignore[override]
+        if "v" not in self._built:
+            self._built["v"] = self._rows[0].full()
+        return self._built["v"]
+
+    @property
+    def gradients(self) -> list[sp.csr_matrix]:  # type: ignore[override]
+        if "g" not in self._built:
+            self._built["g"] = [g.full() for g in self._rows[1]]
+        return self._built["g"]
 
 
 def _columns(*mats: sp.csr_matrix) -> np.ndarray:
     """The columns with a stored entry in any of ``mats``."""
     cols = [m.tocsr().indices for m in mats if m.shape[0]]
     return np.unique(np.concatenate(cols)) if cols else np.zeros(0, dtype=np.int64)
-
-
-def _rows_touching(A: sp.csr_matrix, cols: np.ndarray) -> np.ndarray:
-    """Rows of ``A`` with a stored entry in ``cols``."""
-    mask = np.zeros(A.shape[1], dtype=bool)
-    mask[cols] = True
-    hit = mask[A.indices]
-    return np.flatnonzero(np.add.reduceat(hit, A.indptr[:-1]) * (np.diff(A.indptr) > 0))
 
 
 def _vci_sums(values, grads, w, bvalues, bw, normals) -> tuple[np.ndarray, np.ndarray]:
@@ -208,11 +272,11 @@ class _Stiffness:
     key: tuple
     q: QuadraturePoints
     bq: QuadraturePoints | None
-    values: sp.csr_matrix
-    grads: list[sp.csr_matrix]
-    bvalues: sp.csr_matrix | None
+    values: _Rows
+    grads: list[_Rows]
+    bvalues: _Rows | None
     normals: np.ndarray | None
-    test: list[sp.csr_matrix]
+    test: list[_Rows]
     xi: np.ndarray | None
     Kg: sp.csr_matrix
     seen: int
@@ -358,8 +422,8 @@ class LocalUpdate:
         normals_fn: Callable | None,
         key: tuple,
         comm: MPI.Comm,
-    ) -> tuple[sp.csr_matrix, ShapeTable, list[sp.csr_matrix], dict] | None:
-        """The updated ``(Kg, table, test gradients, timings)`` of
+    ) -> tuple[sp.csr_matrix, ShapeTable, Callable[[], list[sp.csr_matrix]], dict] | None:
+        """The updated ``(Kg, table, test gradients (a function stacking them), timings)`` of
         :func:`~dolfinx_meshfree.statics.efg.particle_stiffness`, or None when a full build is
         needed (the first call, other arguments, a change that is not an extension). Collective
         (every rank takes the same branch; a tabulation error is raised on every rank)."""
@@ -387,10 +451,8 @@ class LocalUpdate:
         ni = near.size
         tv = tab.values if tab is not None else sp.csr_matrix((0, mls.num_particles))
         tg = tab.gradients if tab is not None else [tv] * gdim
-        values = _splice(st.values, kept, near, tv[:ni], tv[ni:])
-        grads = [
-            _splice(g0, kept, near, g[:ni], g[ni:]) for g0, g in zip(st.grads, tg, strict=True)
-        ]
+        values = st.values.update(kept, near, tv[:ni], tv[ni:])
+        grads = [g0.update(kept, near, g[:ni], g[ni:]) for g0, g in zip(st.grads, tg, strict=True)]
         # boundary rows
         xi = st.xi
         if bq is not None:
@@ -410,7 +472,7 @@ class LocalUpdate:
                     else sp.csr_matrix((0, mls.num_particles))
                 ),
             )
-            bvalues = _splice(st.bvalues, bk, bnear, btab[: bnear.size], btab[bnear.size :])
+            bvalues = st.bvalues.update(bk, bnear, btab[: bnear.size], btab[bnear.size :])
             if normals_fn is None:
                 normals = bq.normals
             else:  # the hook changes the normals on mesh facets only: keep them, add the faces'
@@ -418,14 +480,15 @@ class LocalUpdate:
             t1 = time.perf_counter()
             # particles whose VCI constant can change: non-zero on a changed row, old or new
             X = _columns(
-                st.values[np.concatenate([removed, kept[near]])], tv, st.bvalues[bk[bnear]], btab
-            )
+                st.values.rows(np.concatenate([removed, kept[near]])), tv,
+                st.bvalues.rows(bk[bnear]), btab,
+            )  # fmt: skip
             X = np.unique(np.concatenate(comm.allgather(X)))
-            rows_new = np.union1d(_rows_touching(values, X), redo)
-            brows = _rows_touching(bvalues, X)
+            rows_new = np.union1d(values.touching(X), redo)
+            brows = bvalues.touching(X)
             vol, rhs = _vci_sums(
-                values[rows_new], [g[rows_new] for g in grads], q.weights[rows_new],
-                bvalues[brows], bq.weights[brows], normals[brows],
+                values.rows(rows_new), [g.rows(rows_new) for g in grads], q.weights[rows_new],
+                bvalues.rows(brows), bq.weights[brows], normals[brows],
             )  # fmt: skip
             vol = comm.allreduce(vol[X], op=MPI.SUM)
             rhs = comm.allreduce(rhs[X], op=MPI.SUM)
@@ -439,16 +502,17 @@ class LocalUpdate:
         # old rows whose contribution goes: removed, and kept rows that change (new numbering ->
         # old numbering through ``kept``)
         rows_old = np.concatenate([removed, kept[rows_new[rows_new < nk]]])
+        vals_new = values.rows(rows_new)
+        grads_new = [g.rows(rows_new) for g in grads]
         test_new = [
-            (g[rows_new] + (values[rows_new] @ sp.diags(xi[:, k]) if xi is not None else 0))
-            for k, g in enumerate(grads)
+            sp.csr_matrix(g + (vals_new @ sp.diags(xi[:, k]) if xi is not None else 0))
+            for k, g in enumerate(grads_new)
         ]
-        test_new = [sp.csr_matrix(t) for t in test_new]
-        test_old = [t[rows_old] for t in st.test]
+        test_old = [t.rows(rows_old) for t in st.test]
         dK = stiffness_matrix(
-            test_new, q.weights[rows_new], material, [g[rows_new] for g in grads]
+            test_new, q.weights[rows_new], material, grads_new
         ) - stiffness_matrix(
-            test_old, st.q.weights[rows_old], material, [g[rows_old] for g in st.grads]
+            test_old, st.q.weights[rows_old], material, [g.rows(rows_old) for g in st.grads]
         )
         dK = dK.tocoo()
         dof_map = particles.petsc_dofs(gdim).ravel()
@@ -457,11 +521,11 @@ class LocalUpdate:
         # the test gradients on every row: kept rows, with the changed ones replaced
         at = rows_new[rows_new < nk]  # rows_new is sorted: the kept ones, then all added
         test = [
-            _splice(t, kept, at, tn[: at.size], tn[at.size :])
+            t.update(kept, at, tn[: at.size], tn[at.size :])
             for t, tn in zip(st.test, test_new, strict=True)
         ]
         t2 = time.perf_counter()
-        table = ShapeTable(points=q.points, values=values, gradients=grads, version=mls.version)
+        table = _LazyTable(q.points, values, grads, mls.version)
         self._stiff = _Stiffness(
             key, q, bq, values, grads, bvalues, normals, test, xi, Kg, len(self.log)
         )
@@ -472,7 +536,7 @@ class LocalUpdate:
             int(bredo.size), "particles": int(X.size), "stiffness_rows": int(rows_new.size),
             "cell_rows": len(q), "stiffness_dofs": int(np.unique(dK.row).size),
         }  # fmt: skip
-        return Kg, table, test, {"setup": t1 - t0, "assemble": t2 - t1}
+        return Kg, table, lambda: [t.full() for t in test], {"setup": t1 - t0, "assemble": t2 - t1}
 
     def record(
         self,
@@ -499,8 +563,8 @@ class LocalUpdate:
             with np.errstate(divide="ignore", invalid="ignore"):
                 xi = np.where(vol[:, None] != 0, rhs / vol[:, None], 0.0)
         self._stiff = _Stiffness(
-            key, q, bq, table.values.tocsr(), [g.tocsr() for g in table.gradients],
-            None if bvalues is None else bvalues.tocsr(), normals,
-            [t.tocsr() for t in test], xi, Kg.tocsr(), len(self.log),
+            key, q, bq, _Rows.of(table.values, True), [_Rows.of(g) for g in table.gradients],
+            None if bvalues is None else _Rows.of(bvalues, True), normals,
+            [_Rows.of(t) for t in test], xi, Kg.tocsr(), len(self.log),
         )  # fmt: skip
         self.last = {"mode": "full", "cell_rows": len(q)}

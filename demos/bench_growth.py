@@ -14,19 +14,19 @@
 # (relative to |K|; a full rebuild and the local update must agree to round-off, checked 1e-10,
 # the run exits 1 on a miss). JIT compilation is warmed up first (a small model) and excluded.
 #
-# Measured (h = 0.025, da = 0.1, 4 steps, serial, a shared and loaded 2-core machine; seconds
-# per step, full / local, median of steps 2-4):
+# Measured (h = 0.025, da = 0.1, 4 steps, serial, on a shared 2-core machine under a load of 7;
+# seconds per step, full / local, median of steps 2-4):
 #
 # | W | particles | setup | assemble | update (sum) | solve | total | K diff |
 # |---|---|---|---|---|---|---|---|
-# | 1 | 1681 | 0.207/0.030 | 0.268/0.087 | 0.475 / 0.117 | 0.084 / 0.078 | 0.567 / 0.204 | 1e-13 |
-# | 1.5 | 3721 | 0.384/0.041 | 0.624/0.104 | 1.008 / 0.145 | 0.268 / 0.251 | 1.299 / 0.429 | 1e-13 |
-# | 2 | 6561 | 0.597/0.077 | 1.068/0.115 | 1.665 / 0.192 | 0.521 / 0.562 | 2.188 / 0.795 | 2e-14 |
+# | 1 | 1681 | 0.413/0.080 | 0.478/0.160 | 0.891 / 0.240 | 0.172 / 0.180 | 1.128 / 0.460 | 1e-13 |
+# | 1.5 | 3721 | 0.727/0.102 | 1.237/0.182 | 1.964 / 0.284 | 0.505 / 0.551 | 2.541 / 0.892 | 1e-13 |
+# | 2 | 6561 | 1.264/0.106 | 2.225/0.230 | 3.489 / 0.336 | 1.044 / 1.158 | 4.640 / 1.555 | 2e-14 |
 #
 # The local update re-tabulates about 850 cell rows (of 27k-104k) and changes about 110 dofs of K
-# at every size; its time grows 1.6x while the patch grows 3.9x (full: 3.5x): what remains
-# linear are memory copies (the tables' unchanged rows, the sparse sum K_old + dK, the PETSc
-# matrix of K). The direct solve (MUMPS) grows with the patch and is now most of a local step.
+# at every size; its time grows 1.4x while the patch grows 3.9x (full: 3.9x). What remains linear
+# in it: the sparse sum K_old + dK, the PETSc matrix of K, the rules' point arrays (memory
+# copies). The direct solve (MUMPS) grows with the patch and is now most of a local step.
 # 2 ranks: local and full agree to 9e-14; the timings were dominated by the machine's load.
 #
 #     python demos/bench_growth.py [--h 0.025] [--widths 1 1.5 2] [--steps 4] [--da 0.1]

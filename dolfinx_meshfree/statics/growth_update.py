@@ -36,8 +36,11 @@ and the corrected test gradients ``grad N + N xi`` change only on those rows ``Q
 **Stiffness.** ``K = sum_q B_test(x_q)^T D B(x_q) w_q`` (Belytschko et al. 1995, eq. 4.3):
 ``K_new = K_old - sum_{q in Q'_old} (...)_old + sum_{q in Q'_new} (...)_new``, formed by
 :func:`~dolfinx_meshfree.physics.operators.stiffness_matrix` on the rows ``Q'`` only. The cost
-of a step grows with the particles within about three support radii of ``S``; what still grows
-with the patch is copying the tables' unchanged rows, the PETSc matrix, the loads and the solve.
+of a step grows with the particles within about three support radii of ``S``: the tables are
+kept in chunks (the changed rows are appended, the unchanged ones never copied) and stacked only
+when a caller reads them. What still grows with the patch: the sparse sum ``K_old + dK`` and the
+PETSc matrix built from it, the rules' point arrays (memory copies), the facet tables of the
+loads and conditions (on the boundary), and the direct solve (``demos/bench_growth.py``).
 
 Not local (a full rebuild is done instead, silently equal): the edge-to-edge coupling's boundary
 values and moment corrections (``boundary_values``/``boundary_moments`` of

@@ -42,10 +42,13 @@ def particle_stiffness_matrix(prob, tables: dict | None = None) -> sp.csr_matrix
 
 
 @pytest.mark.parametrize(
-    ("method", "consistent"), [("efg", True), ("efg", False), ("lagrange", None)]
+    ("method", "consistent"),
+    [("efg", True), ("efg", False), ("lagrange", None), ("edge-to-edge", None), ("bridging", None)],
 )
 def test_each_local_step_equals_a_model_built_with_the_grown_crack(method, consistent):
-    """``consistent=False``: plain Gauss (no VCI constants to update); None: the default."""
+    """``consistent=False``: plain Gauss (no VCI constants to update); None: the default.
+    Edge-to-edge (interface terms) and bridging (its own stiffness) update only the crack rules
+    locally and rebuild the stiffness (measured 1.5e-12 to 7.4e-12 on u)."""
 
     def build(c: mf.Crack):
         p = model(c, method)
@@ -76,8 +79,9 @@ def test_each_local_step_equals_a_model_built_with_the_grown_crack(method, consi
                 )
             sa, sb = (COMM.allreduce(t["sums"]) for t in (ta, tb))
             assert np.abs(sa - sb).max() < 1e-10 * np.abs(sb).max()
-        if k or method == "efg":  # the last update was local and re-tabulated a part only
-            last = g.local.last  # (this rank's rows; 1 of 2 ranks may hold none)
+        if method in ("efg", "lagrange") and (k or method == "efg"):
+            # the last update of the stiffness was local and re-tabulated a part of the rows
+            last = g.local.last  # (this rank's rows: 1 of 2 ranks may hold none)
             assert last["mode"] == "local"
             rows = COMM.allreduce(last["rows"])
             assert 0 < rows < 0.25 * COMM.allreduce(last["cell_rows"])

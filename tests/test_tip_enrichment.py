@@ -200,3 +200,24 @@ def test_bad_options_and_ill_conditioning_are_refused():
     enrich_tips(mls, [crack], dilation=1.2)  # too small a support for seven functions
     with pytest.raises(MomentMatrixError, match="raise the enrichment's dilation"):
         mls.tabulate(np.array([[0.52, 0.53], [0.47, 0.46]]))
+
+
+def test_local_growth_steps_with_enrichment_equal_a_fresh_model():
+    """The enrichment's ramp moves with the tip: the local update of a growth step
+    (``statics/growth_update.py``) re-tabulates every row within its reach; each step's
+    solution equals a model built from scratch with the crack of that step (check 1e-10)."""
+    from test_crack_growth import H, edge_crack, model
+
+    def build(c: mf.Crack):
+        p = model(c, "efg")
+        enrich_tips(p.mls, [c])
+        return p
+
+    crack = edge_crack(30.0)
+    g = mf.QuasiStaticCrackGrowth(build(crack), crack, increment=2 * H, steps=2)
+    for _ in range(2):
+        g.step()
+        ref = build(mf.Crack(crack.points[:-1])).solve().coefficients
+        u = g.solution.coefficients
+        assert np.abs(u - ref).max() < 1e-10 * np.abs(ref).max()
+    assert g.local.last["mode"] == "local"

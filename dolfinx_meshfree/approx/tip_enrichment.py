@@ -149,6 +149,12 @@ class TipEnrichment:
                 out.append((tip, crack.tip_direction(end), r1, r2, spacing, -1 if end == 0 else 1))
         return out
 
+    def reach(self) -> float:
+        """A bound on the outer ramp radius ``r2`` at any tip (``outer`` times the largest
+        particle spacing): the rows a tip's move can change lie within it of the old and the
+        new tip (:mod:`~dolfinx_meshfree.statics.growth_update`)."""
+        return float(self.outer * self.mls.radii.max() / self.mls.dilation)
+
     def __call__(
         self, x: np.ndarray, table: ShapeTable, derivatives: int, sides: np.ndarray | None
     ) -> ShapeTable:

@@ -59,6 +59,7 @@ from ..physics.operators import (
     moment_corrections,
     stiffness_matrix,
 )
+from .growth_update import local_update_for
 from .newton import NewtonOptions
 from .petsc import BlockSystem, SolverOptions, create_aij, create_vector, solver_options
 from .sides import BlockProblem, ParticleSide, solve_load_steps
@@ -202,6 +203,29 @@ def particle_stiffness(
     t0 = time.perf_counter()
     comm = particles.comm
     gdim = particles.gdim
+    # after a crack grew: update the previous stiffness locally (statics/growth_update.py)
+    local = local_update_for(mls)
+    if local is not None and (
+        boundary_values is not None
+        or boundary_moments
+        or quadrature is None
+        or (consistent_boundary is not None and boundary_quadrature is None)
+    ):  # the edge-to-edge interface terms, or rules not from crack_rules: full rebuild
+        local = None
+    key = (
+        id(particles), id(material), quadrature_degree, boundary_normals is not None,
+        None if consistent_boundary is None else np.asarray(consistent_boundary[0]).tobytes(),
+    )  # fmt: skip
+    if local is not None:
+        bq = None if consistent_boundary is None else boundary_quadrature
+        upd = local.stiffness(particles, material, quadrature, bq, boundary_normals, key, comm)
+        if upd is not None:
+            Kg, tq, test_fn, timings = upd
+            if tables is not None:
+                test_grads = test_fn()
+                tables.update(quadrature=quadrature, table=tq, test_gradients=test_grads,
+                              approximation=mls)  # fmt: skip
+            return Kg, quadrature, tq, timings
     if quadrature is None:
         q = cell_quadrature(particles.mesh, quadrature_degree, particles.cells)
     else:
@@ -242,6 +266,12 @@ def particle_stiffness(
     t1 = time.perf_counter()
     Kg = stiffness_matrix(test_grads, q.weights, material, tq.gradients, particles.petsc_index)
     timings = {"setup": t1 - t0, "assemble": time.perf_counter() - t1}
+    if local is not None:
+        cb = consistent_boundary is not None
+        local.record(
+            key, q, bq if cb else None, tq, tb.values if cb else None,
+            normals if cb else None, test_grads, Kg, comm,
+        )  # fmt: skip
     return Kg, q, tq, timings
 
 
@@ -264,6 +294,24 @@ def crack_rules(
     """
     if not cracks:
         return None, None
+    local = next((u for u in map(local_update_for, cracks) if u is not None), None)
+    if local is not None:  # after a crack grew: only the cells the new segments cut
+        return local.rules(
+            msh, cells, cracks, degree, boundary, cell_rule,
+            lambda: _crack_rules(msh, cells, cracks, degree, boundary, cell_rule),
+        )  # fmt: skip
+    return _crack_rules(msh, cells, cracks, degree, boundary, cell_rule)
+
+
+def _crack_rules(
+    msh: dolfinx.mesh.Mesh,
+    cells: np.ndarray,
+    cracks: list[Crack],
+    degree: int,
+    boundary: tuple[np.ndarray, np.ndarray | None] | None,
+    cell_rule: bool,
+) -> tuple[QuadraturePoints | None, QuadraturePoints | None]:
+    """:func:`crack_rules` built in full."""
     comm = msh.comm
     q = None
     if cell_rule:

@@ -4,8 +4,12 @@ interaction integral, kink by the maximum hoop stress criterion (Erdogan & Sih 1
 
 Belytschko et al. (1995), remark after eq. (3.11): the MLS shape functions change as the crack
 grows; the crack's :meth:`~dolfinx_meshfree.Crack.extend` bumps the MLS version and the next
-``problem.solve()`` re-tabulates and re-integrates (a *full* rebuild of the particle side; the
-cost of a step grows with the patch, see the growth demo's timing table).
+``problem.solve()`` rebuilds the particle side. ``update="local"`` (the default) rebuilds only
+what the extension changes (:mod:`~dolfinx_meshfree.statics.growth_update`: the table rows within
+a support radius of the new segment, the cells it cuts, the VCI constants and stiffness rows of
+the particles there; equal to a full rebuild to round-off); ``update="full"`` rebuilds
+everything (the cost of a step then grows with the patch; ``demos/bench_growth.py`` measures
+both).
 
 Works with any problem whose ``solve()`` returns a solution with ``stress_intensity_factors``:
 :class:`~dolfinx_meshfree.EFGElasticity`, :class:`~dolfinx_meshfree.CoupledElasticity` and
@@ -22,9 +26,13 @@ import numpy as np
 
 from ..fracture.criteria import equivalent_sif, kink_angle
 from ..geometry.crack import Crack, particle_spacing
+from .growth_update import disable_local_update, enable_local_update
 from .sifs import DEFAULT_RADII
 
-__all__ = ["GrowthStep", "QuasiStaticCrackGrowth"]
+__all__ = ["GROWTH_UPDATES", "GrowthStep", "QuasiStaticCrackGrowth"]
+
+#: How a growth step rebuilds the particle side.
+GROWTH_UPDATES = ("local", "full")
 
 
 @dataclass
@@ -115,6 +123,9 @@ class QuasiStaticCrackGrowth:
             tip). radius: outer domain radii of the interaction integral (default: 3, 4, 5
             particle spacings, scaled down to 0.9 of the tip segment's length when the
             increment is shorter: the previous kink must stay outside the domains).
+            update: ``"local"`` (default): after each extension re-tabulate, re-integrate and
+            re-assemble only what it changes; ``"full"``: rebuild the particle side (equal to
+            round-off, 1e-10 checked).
             sif_options: more keywords of ``stress_intensity_factors``.
 
     Example:
@@ -132,11 +143,27 @@ class QuasiStaticCrackGrowth:
         K_Ic: float | None = None,
         tip: int | None = None,
         radius: float | np.ndarray | None = None,
+        update: str = "local",
         **sif_options,
     ) -> None:
         self.end = _check(crack, increment, steps, K_Ic, tip)
         if not hasattr(problem, "solve"):
             raise ValueError(f"problem={problem!r:.80} has no solve()")
+        if update not in GROWTH_UPDATES:
+            raise ValueError(f"update={update!r} is not known; use one of {GROWTH_UPDATES}")
+        self.update = update
+        inner = getattr(problem, "problem", problem)  # CoupledLinearProblem -> CoupledElasticity
+        mls = getattr(inner, "mls", None)
+        cracks = getattr(inner, "cracks", None) or getattr(
+            getattr(inner, "patch", None), "cracks", []
+        )
+        #: The :class:`~dolfinx_meshfree.statics.growth_update.LocalUpdate` (``update="local"``).
+        self.local = None
+        if mls is not None:
+            if update == "local":
+                self.local = enable_local_update(mls, cracks)
+            else:
+                disable_local_update(mls)
         self.problem, self.crack = problem, crack
         self.increment, self.steps, self.K_Ic = float(increment), int(steps), K_Ic
         self.radius, self.sif_options = radius, sif_options

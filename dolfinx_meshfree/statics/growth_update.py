@@ -58,6 +58,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
+from mpi4py import MPI
 
 from .. import _compat
 from ..approx.tables import ShapeTable
@@ -75,7 +76,6 @@ from ..physics.operators import stiffness_matrix
 
 if TYPE_CHECKING:  # annotations only
     import dolfinx.mesh
-    from mpi4py import MPI
 
     from ..approx.mls import MLS
     from ..geometry.particles import ParticleSet
@@ -434,8 +434,6 @@ class LocalUpdate:
         :func:`~dolfinx_meshfree.statics.efg.particle_stiffness`, or None when a full build is
         needed (the first call, other arguments, a change that is not an extension). Collective
         (every rank takes the same branch; a tabulation error is raised on every rank)."""
-        from mpi4py import MPI
-
         st = self._stiff
         ok = st is not None and st.key == key
         segs = self._since(st.seen) if ok else None
@@ -558,8 +556,6 @@ class LocalUpdate:
         comm: MPI.Comm,
     ) -> None:
         """Keep a full build's pieces (collective when consistent: the VCI constants)."""
-        from mpi4py import MPI
-
         xi = None
         if bq is not None:
             vol, rhs = _vci_sums(

@@ -112,6 +112,13 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
         "(eq. 79-81, the paper's)",
     )
     p.add_argument("--cell", choices=("quadrilateral", "triangle"), default="quadrilateral")
+    p.add_argument(
+        "--balance",
+        type=float,
+        default=None,
+        help="redistribute the mesh over the ranks by work (mf.balanced_mesh), a patch cell "
+        "weighing this many FE cells (default: DOLFINx's partition, equal cells per rank)",
+    )
     p.add_argument("--json", default=None, help="write the results as JSON")
     p.add_argument("--probe-in", default=None, help="(m, 2) .npy points to evaluate u at")
     p.add_argument("--probe-out", default=None, help="(m, 2) .npy displacements, from rank 0")
@@ -165,6 +172,13 @@ def make_mesh(comm, args, h: float):
     n = [max(1, round(args.L / h)), max(1, round(args.D / h))]
     corners = [np.array([0.0, -args.D / 2]), np.array([args.L, args.D / 2])]
     return dolfinx.mesh.create_rectangle(comm, corners, n, cell)
+
+
+def patch_weight(args):
+    """``--balance``'s cell weight: the patch cells (centroid in the free-end fraction, as
+    :func:`make_patch` selects them) weigh ``--balance`` FE cells."""
+    start = (1.0 - args.patch_fraction) * args.L
+    return lambda x: np.where(x[0] > start, args.balance, 1.0)
 
 
 def boundaries(msh, args):
@@ -389,6 +403,8 @@ def main(argv: list[str] | None = None) -> list[dict]:
         for h in args.h:
             comm.Barrier()
             msh = make_mesh(comm, args, h)
+            if args.balance is not None and method in mf.COUPLINGS:
+                msh = mf.balanced_mesh(msh, patch_weight(args))
             if method == "fe":
                 errors, sizes, timings, probe = run_fe(msh, args, beam, material)
             elif method == "efg":
@@ -416,6 +432,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
                 "weight": args.weight if method != "fe" else None,
                 "dilation": dilation(args, method) if method != "fe" else None,
                 "consistent": consistent(args, method),
+                "balance": args.balance if method in mf.COUPLINGS else None,
             }
             records.append(rec)
             if probe_points is not None:

@@ -44,6 +44,7 @@ from .fracture.interaction import StressIntensityFactors, interaction_integral
 from .fracture.williams import WilliamsField
 from .geometry.crack import Crack
 from .geometry.particles import ParticleSet
+from .geometry.partition import balanced_mesh, work_per_rank
 from .geometry.patch import PLACEMENTS, ParticlePatch
 from .geometry.quadrature import boundary_facets, cell_quadrature, facet_quadrature
 from .io import DynamicsWriter, ProgressBar, read_particles
@@ -123,6 +124,7 @@ __all__ = [
     "TimoshenkoBeam",
     "WilliamsField",
     "attach_cracks",
+    "balanced_mesh",
     "boundary_facets",
     "cell_quadrature",
     "cubic_spline",
@@ -142,5 +144,6 @@ __all__ = [
     "sph_cubic_spline",
     "tabulate_fe_basis",
     "tabulate_in_cells",
+    "work_per_rank",
 ]
 __version__ = "0.1.0"

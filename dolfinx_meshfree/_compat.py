@@ -24,6 +24,7 @@ import dolfinx as _dolfinx
 import dolfinx.fem as _fem
 import dolfinx.fem.petsc as _fem_petsc
 import dolfinx.geometry as _geometry
+import dolfinx.graph as _graph
 import dolfinx.mesh as _mesh
 import numpy as _np
 
@@ -45,6 +46,7 @@ __all__ = [
     "colliding_cells",
     "create_expression",
     "create_form",
+    "create_mesh_partitioned",
     "dirichlet_values",
     "dofmap_array",
     "entities_to_geometry",
@@ -167,6 +169,39 @@ def entities_to_geometry(msh: _mesh.Mesh, dim: int, entities: _np.ndarray) -> _n
     # Debian's 0.5.2 Python Mesh wraps the C++ mesh in ``_mesh``
     cpp_mesh = getattr(msh, "_mesh", msh)
     return _np.asarray(_cppmesh.entities_to_geometry(cpp_mesh, dim, entities, False))
+
+
+def create_mesh_partitioned(
+    like: _mesh.Mesh,
+    cells: _np.ndarray,
+    x: _np.ndarray,
+    destinations: _typing.Callable[[int], tuple[_np.ndarray, _np.ndarray]],
+    ghosted: bool,
+) -> _mesh.Mesh:
+    """A mesh of ``like``'s cell type and coordinate element from ``cells`` (global node
+    indices, (n, nodes)) and ``x`` ((num_nodes, gdim), in global node order), distributed by
+    ``destinations(nparts) -> (offsets, ranks)``: per input cell (in the order of ``cells``)
+    its owner rank followed by the ranks that ghost it (collective; every rank may pass a part
+    of the cells, e.g. all on rank 0 and none elsewhere). ``ghosted``: whether the ranks include
+    ghosts (facet neighbours; DOLFINx 0.5 needs the ghost mode to match)."""
+    domain = like.ufl_domain()
+    cells = _np.ascontiguousarray(cells, dtype=_np.int64)
+    x = _np.ascontiguousarray(x, dtype=float)
+    if MODERN:
+
+        def partitioner(comm, nparts, cell_types, graphs):
+            offsets, ranks = destinations(nparts)
+            adj = _graph.adjacencylist(ranks.astype(_np.int32), offsets.astype(_np.int32))
+            return getattr(adj, "_cpp_object", adj)
+
+        return _mesh.create_mesh(like.comm, cells, domain, x, partitioner=partitioner)
+
+    def partitioner_05(comm, nparts, tdim, graph, ghost_mode):
+        offsets, ranks = destinations(nparts)
+        return _graph.create_adjacencylist(ranks.astype(_np.int32), offsets.astype(_np.int32))
+
+    mode = _mesh.GhostMode.shared_facet if ghosted else _mesh.GhostMode.none
+    return _mesh.create_mesh(like.comm, cells, x, domain, mode, partitioner_05)
 
 
 def create_form(form: _UFLForm, jit_options: dict | None = None) -> _Form:

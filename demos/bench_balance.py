@@ -1,0 +1,158 @@
+# # Benchmark: work-balanced MPI for coupled models (issue 12, item 3)
+#
+# DOLFINx gives every rank about as many cells; a particle patch cell costs several FE cells and
+# its particles belong to the rank of the cell that contains them, so on a coupled model one rank
+# carries nearly all the particle work and a second rank gains little. ``mf.balanced_mesh``
+# redistributes the same mesh so that every rank carries the same *work* (patch cells weighing
+# ``W`` FE cells). This benchmark measures, on the static cantilever (``demos/cantilever.py``,
+# lagrange coupling, patch at the free end):
+#
+# 1. on rank 0 alone (the others wait): FE and pure EFG at each ``h``; their time ratio is the
+#    measured cost of a patch cell relative to an FE cell, the weight ``W`` used below (unless
+#    ``--weight`` is given), and the coupled model on one rank, the reference of the speed-ups;
+# 2. on all ranks: the coupled model on DOLFINx's partition and on the balanced mesh: the largest
+#    rank's share of the work (``mf.work_per_rank``), times (slowest rank) and the speed-up over
+#    one rank; the L2 errors of the three runs agree (the same discretisation; checked to 1e-8).
+#
+# Run with ``mpirun -n 2 python demos/bench_balance.py`` (one thread per rank:
+# ``OMP_NUM_THREADS=1``); ``--small`` is a CI smoke run (no timing is checked anywhere: the
+# machines are noisy; compare the ratios of one run).
+
+# +
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import pathlib
+import sys
+
+import dolfinx_meshfree as mf
+
+from mpi4py import MPI
+
+# -
+
+
+def load_cantilever():
+    path = pathlib.Path(__file__).resolve().parent / "cantilever.py"
+    spec = importlib.util.spec_from_file_location("demo_cantilever_for_balance", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def run(
+    cantilever, comm, method: str, h: float, fraction: float, weight: float, balance: bool
+) -> dict:
+    """One cantilever run on ``comm`` (the demo's ``main`` runs on MPI.COMM_WORLD, so this goes
+    through its functions: a run on rank 0 alone is possible); patch cells weigh ``weight``,
+    the mesh is balanced by it if ``balance``."""
+    argv = ["--method", method, "--h", str(h), "--patch-fraction", str(fraction)]
+    args = cantilever.parse([*argv, "--balance", str(weight), "--no-check"])
+    material = mf.LinearElastic(args.E, args.nu, args.plane)
+    beam = mf.TimoshenkoBeam(material, L=args.L, D=args.D, P=args.P)
+    msh = cantilever.make_mesh(comm, args, h)
+    share = None
+    if balance:
+        msh = mf.balanced_mesh(msh, cantilever.patch_weight(args))
+    if method == "fe":
+        errors, sizes, timings, _ = cantilever.run_fe(msh, args, beam, material)
+    elif method == "efg":
+        errors, sizes, timings, _ = cantilever.run_efg(msh, args, beam, material, h)
+    else:
+        work = mf.work_per_rank(msh, cantilever.patch_weight(args))
+        share = float(work.max() / work.sum())
+        errors, sizes, timings, _ = cantilever.run_coupled(msh, args, beam, material, h, method)
+    timings = {k: comm.allreduce(v, op=MPI.MAX) for k, v in timings.items()}
+    return {
+        "method": method,
+        "h": h,
+        "patch_fraction": fraction if method in mf.COUPLINGS else None,
+        "ranks": comm.size,
+        "balance": balance,
+        "weight": weight if method in mf.COUPLINGS else None,
+        "largest_work_share": share,
+        "error_l2": errors["l2"],
+        **{f"time_{k}": timings[k] for k in ("setup", "assemble", "solve")},
+        "time_total": timings["setup"] + timings["assemble"] + timings["solve"],
+        **sizes,
+    }
+
+
+def main(argv: list[str] | None = None) -> list[dict]:
+    p = argparse.ArgumentParser(description="work-balanced MPI on the coupled cantilever")
+    p.add_argument("--h", nargs="+", type=float, default=[0.5, 0.25])
+    p.add_argument("--patch-fraction", nargs="+", type=float, default=[0.25, 0.5])
+    p.add_argument("--method", default="lagrange", choices=mf.COUPLINGS)
+    p.add_argument("--weight", type=float, default=None, help="patch cell weight (default: EFG/FE)")
+    p.add_argument("--small", action="store_true", help="CI smoke run")
+    p.add_argument("--json", default=None)
+    args = p.parse_args(argv)
+    if args.small:
+        args.h, args.patch_fraction = [2.0], [0.5]
+    comm = MPI.COMM_WORLD
+    cantilever = load_cantilever()
+    cantilever.warm_jit(
+        cantilever.parse(["--no-check"]),
+        mf.LinearElastic(3e7, 0.3),
+        mf.TimoshenkoBeam(mf.LinearElastic(3e7, 0.3)),
+    )
+    records: list[dict] = []
+    for h in args.h:
+        serial: dict[str, dict] = {}
+        if comm.rank == 0:
+            for method in ("fe", "efg"):
+                serial[method] = run(cantilever, MPI.COMM_SELF, method, h, 1.0, 1.0, False)
+        serial = comm.bcast(serial, root=0)
+        weight = args.weight or serial["efg"]["time_total"] / serial["fe"]["time_total"]
+        records += serial.values()
+        for fraction in args.patch_fraction:
+            one = None
+            if comm.rank == 0:
+                one = run(cantilever, MPI.COMM_SELF, args.method, h, fraction, weight, False)
+            one = comm.bcast(one, root=0)
+            comm.Barrier()
+            default = run(cantilever, comm, args.method, h, fraction, weight, False)
+            comm.Barrier()
+            balanced = run(cantilever, comm, args.method, h, fraction, weight, True)
+            for r in (default, balanced):
+                r["speedup"] = one["time_total"] / r["time_total"]
+            records += [one, default, balanced]
+            errs = [one["error_l2"], default["error_l2"], balanced["error_l2"]]
+            if max(errs) - min(errs) > 1e-8 * max(errs):
+                raise SystemExit(f"the balanced mesh changed the solution: L2 errors {errs}")
+    report(records, comm)
+    if args.json and comm.rank == 0:
+        with open(args.json, "w") as f:
+            json.dump(records, f, indent=1)
+    return records
+
+
+def report(records: list[dict], comm) -> None:
+    if comm.rank != 0:
+        return
+    print(f"coupled cantilever on {comm.size} rank(s), DOLFINx {mf.DOLFINX_VERSION}")
+    head = (
+        f"{'method':9} {'h':>5} {'patch':>5} {'ranks':>5} {'mesh':>9} {'W':>5} {'share':>6} "
+        f"{'L2 error':>9} {'setup s':>8} {'assem s':>8} {'solve s':>8} {'total s':>8} "
+        f"{'speedup':>7}"
+    )
+    print(head)
+    print("-" * len(head))
+    for r in records:
+        mesh = "balanced" if r["balance"] else ("default" if r["ranks"] > 1 else "one rank")
+        frac = "" if r["patch_fraction"] is None else f"{r['patch_fraction']:5.2f}"
+        share = "" if r["largest_work_share"] is None else f"{r['largest_work_share']:6.3f}"
+        w = "" if r.get("weight") is None else f"{r['weight']:5.1f}"
+        speed = "" if r.get("speedup") is None else f"{r['speedup']:7.2f}"
+        print(
+            f"{r['method']:9} {r['h']:5.3g} {frac:>5} {r['ranks']:5d} {mesh:>9} {w:>5} {share:>6} "
+            f"{r['error_l2']:9.2e} {r['time_setup']:8.3f} {r['time_assemble']:8.3f} "
+            f"{r['time_solve']:8.3f} {r['time_total']:8.3f} {speed:>7}"
+        )
+
+
+if __name__ == "__main__":
+    main()

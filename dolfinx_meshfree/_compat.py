@@ -189,14 +189,16 @@ def create_mesh_partitioned(
     x = _np.ascontiguousarray(x, dtype=float)
     if MODERN:
 
-        def partitioner(comm, nparts, cell_types, graphs):
+        def partitioner(comm: object, nparts: int, cell_types: object, graphs: object) -> object:
             offsets, ranks = destinations(nparts)
             adj = _graph.adjacencylist(ranks.astype(_np.int32), offsets.astype(_np.int32))
             return getattr(adj, "_cpp_object", adj)
 
         return _mesh.create_mesh(like.comm, cells, domain, x, partitioner=partitioner)
 
-    def partitioner_05(comm, nparts, tdim, graph, ghost_mode):
+    def partitioner_05(
+        comm: object, nparts: int, tdim: int, graph: object, ghost_mode: object
+    ) -> object:
         offsets, ranks = destinations(nparts)
         return _graph.create_adjacencylist(ranks.astype(_np.int32), offsets.astype(_np.int32))
 

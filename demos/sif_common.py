@@ -106,16 +106,19 @@ def rigid_motion_bcs(V, pin, roll, roll_component: int = 1) -> list:
     ]
 
 
-def solve(method, msh, h, material, crack, patch_cells=None, dirichlet=None, tractions=()):
+def solve(
+    method, msh, h, material, crack, patch_cells=None, dirichlet=None, tractions=(), enrich=False
+):
     """Solve with particles everywhere (``method="efg"``) or a particle patch of ``patch_cells``
     coupled by ``method`` to Q1 elements in a UFL model; ``dirichlet = (facets, fn)`` on all
-    components, ``tractions``: ``(facets, (tx, ty))`` constant tractions.
+    components, ``tractions``: ``(facets, (tx, ty))`` constant tractions; ``enrich``: the
+    near-tip enrichment (``crack_enrichment=True``).
 
     Returns ``(solution, sizes, seconds)``."""
     t0 = time.perf_counter()
     if method == "efg":
         P = mf.ParticleSet.from_cells(msh, h)
-        prob = mf.EFGElasticity(P, material, cracks=[crack])
+        prob = mf.EFGElasticity(P, material, cracks=[crack], crack_enrichment=enrich)
         if dirichlet is not None:
             prob.add_dirichlet(*dirichlet)
         for facets, t in tractions:
@@ -130,7 +133,7 @@ def solve(method, msh, h, material, crack, patch_cells=None, dirichlet=None, tra
         g = dolfinx.fem.Function(V)
         g.interpolate(lambda x: fn(x[:2].T).T)
         bcs.append(dolfinx.fem.dirichletbc(g, dolfinx.fem.locate_dofs_topological(V, 1, facets)))
-    patch = mf.ParticlePatch(msh, patch_cells, h, cracks=[crack])
+    patch = mf.ParticlePatch(msh, patch_cells, h, cracks=[crack], crack_enrichment=enrich)
     sol = mf.CoupledLinearProblem(a, L, bcs, patch, material=material, coupling=method).solve()
     sizes = {
         "particle_dofs": 2 * patch.particles.num_particles,

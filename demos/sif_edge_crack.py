@@ -26,7 +26,11 @@
 # +0.37, +0.16 % at a/W = 0.2, 0.4, 0.6.
 #
 #     python demos/sif_edge_crack.py --method lagrange --a-over-w 0.4 [--h 0.00625] \
-#         [--json out.json]
+#         [--json out.json] [--enrich]
+#
+# ``--enrich``: the MLS basis enriched near the tip (``crack_enrichment=True``, Fleming et al.
+# 1997): at h = 0.05 (1,722 dofs, pure EFG) +0.6 % against Tada where the linear basis gives
+# -3.7 %.
 
 from __future__ import annotations
 
@@ -49,7 +53,7 @@ MATERIAL = mf.LinearElastic(1000.0, 0.3, plane="strain")
 TARGET, PATH_TARGET = 0.01, 0.005
 
 
-def run(method: str, a_over_w: float, h: float) -> dict:
+def run(method: str, a_over_w: float, h: float, enrich: bool = False) -> dict:
     a = a_over_w * W
     y0 = 0.5 * h
     radii = np.asarray(RADII) * min(a, W - a)
@@ -67,7 +71,7 @@ def run(method: str, a_over_w: float, h: float) -> dict:
     t0 = time.perf_counter()
     if method == "efg":
         P = mf.ParticleSet.from_cells(msh, h)
-        prob = mf.EFGElasticity(P, MATERIAL, cracks=[crack])
+        prob = mf.EFGElasticity(P, MATERIAL, cracks=[crack], crack_enrichment=enrich)
         on_bottom = lambda x: np.isclose(x[1], -H / 2)  # noqa: E731
         pin = mf.boundary_facets(msh, lambda x: on_bottom(x) & (x[0] < h + 1e-9))
         roll = mf.boundary_facets(msh, lambda x: on_bottom(x) & (x[0] > W - h - 1e-9))
@@ -84,7 +88,7 @@ def run(method: str, a_over_w: float, h: float) -> dict:
         # from the crack): u = 0 at (0, -H/2), u_y = 0 at (W, -H/2) on V.sub(1)
         m = radii[-1] + 3.0 * h
         cells = owned_cells(msh, lambda c: (c[:, 0] < a + m) & (np.abs(c[:, 1] - y0) < m))
-        patch = mf.ParticlePatch(msh, cells, h, cracks=[crack])
+        patch = mf.ParticlePatch(msh, cells, h, cracks=[crack], crack_enrichment=enrich)
         V, form_a, L = coupled_forms(msh, MATERIAL, tractions)
         bcs = rigid_motion_bcs(V, (0.0, -H / 2), (W, -H / 2))
         prob = mf.CoupledLinearProblem(form_a, L, bcs, patch, material=MATERIAL, coupling=method)
@@ -104,6 +108,7 @@ def run(method: str, a_over_w: float, h: float) -> dict:
         "method": method,
         "h": h,
         "a_over_w": a_over_w,
+        "crack_enrichment": enrich,
         "KI": KI,
         "KII": KII,
         "KI_normalized": KI / scale,
@@ -129,13 +134,19 @@ def main(argv=None) -> int:
     parser.add_argument("--h", type=float, default=0.00625, help="particle spacing = cell size")
     parser.add_argument("--json", default=None)
     parser.add_argument("--quick", action="store_true", help="coarse smoke run (h = 0.1)")
+    parser.add_argument(
+        "--enrich", action="store_true", help="near-tip enrichment (crack_enrichment=True)"
+    )
     args = parser.parse_args(argv)
     h = 0.1 if args.quick else args.h
-    r = run(args.method, args.a_over_w, h)
+    r = run(args.method, args.a_over_w, h, args.enrich)
     err = abs(r["relative_error_KI"])
     ok = err <= TARGET and r["path_dependence"] <= PATH_TARGET
     if COMM.rank == 0:
-        print(f"edge crack, a/W = {args.a_over_w:g}, H/W = 2, method {args.method}, h = {h:g}")
+        print(
+            f"edge crack, a/W = {args.a_over_w:g}, H/W = 2, method {args.method}, h = {h:g}"
+            + (", near-tip enrichment" if args.enrich else "")
+        )
         print(" radius   KI/s√(πa)   KII/s√(πa)")
         s = np.sqrt(np.pi * args.a_over_w * W) * SIGMA
         for rr, k1, k2 in zip(*r["K_per_radius"].values(), strict=True):

@@ -36,7 +36,7 @@ MATERIAL = mf.LinearElastic(1000.0, 0.3, plane="stress")
 TARGET = 0.01
 
 
-def run(method: str, alpha_deg: float, h: float) -> dict:
+def run(method: str, alpha_deg: float, h: float, enrich: bool = False) -> dict:
     alpha = np.deg2rad(alpha_deg)
     n = round(2 * L / h)
     msh = dolfinx.mesh.create_rectangle(
@@ -60,7 +60,14 @@ def run(method: str, alpha_deg: float, h: float) -> dict:
 
     cells = None if method == "efg" else owned_cells(msh, near)
     sol, sizes, seconds = solve(
-        method, msh, h, MATERIAL, crack, cells, dirichlet=(boundary, exact.displacement)
+        method,
+        msh,
+        h,
+        MATERIAL,
+        crack,
+        cells,
+        dirichlet=(boundary, exact.displacement),
+        enrich=enrich,
     )
     t1 = time.perf_counter()
     ref = exact.normalized
@@ -87,6 +94,7 @@ def run(method: str, alpha_deg: float, h: float) -> dict:
         "method": method,
         "h": h,
         "alpha": alpha_deg,
+        "crack_enrichment": enrich,
         "KI": first["KI"],
         "KII": first["KII"],
         "KI_normalized": first["KI_normalized"],
@@ -113,12 +121,18 @@ def main(argv=None) -> int:
     parser.add_argument("--h", type=float, default=0.05, help="particle spacing = cell size")
     parser.add_argument("--json", default=None)
     parser.add_argument("--quick", action="store_true", help="coarse smoke run (h = 0.2)")
+    parser.add_argument(
+        "--enrich", action="store_true", help="near-tip enrichment (crack_enrichment=True)"
+    )
     args = parser.parse_args(argv)
     h = 0.2 if args.quick else args.h
-    r = run(args.method, args.alpha, h)
+    r = run(args.method, args.alpha, h, args.enrich)
     worst = max(max(t["error_KI"], t["error_KII"]) for t in r["tips"])
     if COMM.rank == 0:
-        print(f"inclined centre crack, alpha = {args.alpha:g} deg, method {args.method}, h = {h:g}")
+        print(
+            f"inclined centre crack, alpha = {args.alpha:g} deg, method {args.method}, h = {h:g}"
+            + (", near-tip enrichment" if args.enrich else "")
+        )
         print(" tip              KI/s√(πa)  exact     err      KII/s√(πa) exact     err      path")
         for t in r["tips"]:
             print(

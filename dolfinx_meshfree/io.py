@@ -11,11 +11,11 @@ Files written by :class:`DynamicsWriter` for a prefix ``out/rod``:
   collection of ``Polyvertex`` grids; per output time the particle positions (reference
   configuration, ``XYZ`` with ``z = 0``) and the displacement and velocity *values* at the
   particles (``u_h(x_J)``, ``v_h(x_J)``: the MLS, blended or FE field evaluated there, not the
-  MLS coefficients), as 3-component vectors. DOLFINx has no particle writer in 0.5.2, so rank 0
-  writes the heavy data with h5py (serial HDF5: datasets ``/topology``, ``/geometry`` and
-  ``/step_<k>/displacement``, ``/step_<k>/velocity``) and the XDMF addresses them with
-  ``Format="HDF"`` DataItems (``rod_particles.h5:/step_0/velocity``), which ParaView's XDMF
-  readers read; positions are replicated, the values gathered from the owners of the
+  MLS coefficients), as 3-component vectors, written by
+  :class:`~dolfinx_meshfree.output.CloudSeriesWriter` (rank 0, h5py: datasets
+  ``/step_0/geometry``, ``/step_0/vertices`` and ``/step_<k>/displacement``,
+  ``/step_<k>/velocity``, addressed by ``Format="HDF"`` DataItems, which ParaView's XDMF
+  readers read); positions are replicated, the values gathered from the owners of the
   particles. The HDF5 file is closed and the XML rewritten (atomically) after every output, so
   an interrupted run leaves readable files;
 * ``out/rod_energy.csv``: the :class:`~dolfinx_meshfree.EnergyRecord` at each output (rank 0).
@@ -37,12 +37,12 @@ import dolfinx.io
 import numpy as np
 from mpi4py import MPI
 
-from .parallel import raise_on_all_ranks
+from .output import CloudSeriesWriter, check_prefix, gather_rows
 
 if TYPE_CHECKING:
     from .dynamics import ExplicitDynamics
 
-__all__ = ["DynamicsWriter", "ProgressBar", "check_prefix", "read_particles"]
+__all__ = ["DynamicsWriter", "ProgressBar", "read_particles"]
 
 _ENERGY_KEYS = (
     "step",
@@ -55,50 +55,6 @@ _ENERGY_KEYS = (
     "discrete",
     "residual",
 )
-
-
-# -- the output prefix -------------------------------------------------------------------------
-
-
-def check_prefix(prefix: str | os.PathLike, comm: MPI.Comm) -> pathlib.Path:
-    """Check an output prefix on every rank (collective) and return it as a path.
-
-    The prefix is a path without suffix (``"out/rod"`` gives ``out/rod_fe.xdmf``, ...): it must
-    be the same on every rank, name a file (not end in a separator), and its directory must
-    exist and be writable on every rank.
-
-    Raises:
-        ValueError: on every rank, naming the prefix and the fix.
-    """
-    names = comm.allgather(str(prefix) if isinstance(prefix, str | os.PathLike) else None)
-
-    def check() -> pathlib.Path:
-        if not isinstance(prefix, str | os.PathLike):
-            raise ValueError(
-                f"the output prefix should be a path (str or os.PathLike), got {prefix!r}"
-            )
-        if len(set(names)) != 1:
-            raise ValueError(f"the output prefix must be the same on every rank, got {names}")
-        text = str(prefix)
-        path = pathlib.Path(prefix)
-        if not text or text.endswith(("/", os.sep)) or path.name in ("", ".", ".."):
-            raise ValueError(
-                f"the output prefix {text!r} should name files, e.g. 'out/rod' (which writes "
-                "out/rod_fe.xdmf, out/rod_particles.xdmf, ...)"
-            )
-        folder = path.parent
-        if not folder.is_dir():
-            raise ValueError(
-                f"the directory {str(folder)!r} of the output prefix {text!r} does not exist; "
-                "create it first"
-            )
-        if not os.access(folder, os.W_OK | os.X_OK):
-            raise ValueError(
-                f"the directory {str(folder)!r} of the output prefix {text!r} is not writable"
-            )
-        return path
-
-    return raise_on_all_ranks(comm, check)
 
 
 # -- progress bar ------------------------------------------------------------------------------
@@ -248,21 +204,20 @@ class DynamicsWriter:
         self._with_fe = bool(fe) and dynamics.V is not None
         self._with_particles = bool(particles) and dynamics.particles is not None
         self._with_energy = bool(energy)
-        self._grids: list[tuple[float, str]] = []  # (time, HDF5 group)
         if self._with_fe:
             self.files["fe"] = pathlib.Path(base + "_fe.xdmf")
             self.files["fe_h5"] = pathlib.Path(base + "_fe.h5")
         if self._with_particles:
             self.files["particles"] = pathlib.Path(base + "_particles.xdmf")
             self.files["particles_h5"] = pathlib.Path(base + "_particles.h5")
-            P = dynamics.particles
-            self._positions = np.zeros((P.num_particles, 3))
-            self._positions[:, : P.positions.shape[1]] = P.positions
-            self._owned = np.asarray(P.owned, dtype=np.int64)
+            self._owned = np.asarray(dynamics.particles.owned, dtype=np.int64)
         if self._with_energy:
             self.files["energy"] = pathlib.Path(base + "_energy.csv")
         # rank 0's files first (errors are shared before DOLFINx's collective open)
-        self._rank0(self._start_rank0_files)
+        self._cloud = None
+        if self._with_particles:
+            self._cloud = CloudSeriesWriter(self.files["particles"], self.comm, "particles")
+        self._rank0(self._start_energy_file)
         if self._with_fe:
             self._fe_file = dolfinx.io.XDMFFile(self.comm, str(self.files["fe"]), "w")
             self._fe_file.write_mesh(dynamics.mesh)
@@ -282,77 +237,10 @@ class DynamicsWriter:
         if msg is not None:
             raise ValueError(msg)
 
-    def _start_rank0_files(self) -> None:
-        if self._with_particles:
-            import h5py
-
-            n = self._positions.shape[0]
-            with h5py.File(self.files["particles_h5"], "w") as f:
-                f.create_dataset("topology", data=np.arange(n, dtype=np.int32)[:, None])
-                f.create_dataset("geometry", data=self._positions.astype(np.float64))
-            self._write_particle_xml()
+    def _start_energy_file(self) -> None:
         if self._with_energy:
             with open(self.files["energy"], "w") as f:
                 f.write(",".join(_ENERGY_KEYS) + "\n")
-
-    def _append_particles(self, t: float, u: np.ndarray, v: np.ndarray) -> None:
-        import h5py
-
-        group = f"step_{len(self._grids)}"
-        with h5py.File(self.files["particles_h5"], "a") as f:
-            g = f.create_group(group)
-            g.attrs["time"] = float(t)
-            g.create_dataset("displacement", data=np.asarray(u, dtype=np.float64))
-            g.create_dataset("velocity", data=np.asarray(v, dtype=np.float64))
-        self._grids.append((t, group))
-        self._write_particle_xml()
-
-    def _write_particle_xml(self) -> None:
-        n = self._positions.shape[0]
-        h5 = self.files["particles_h5"].name
-        root = ET.Element("Xdmf", Version="3.0")
-        domain = ET.SubElement(root, "Domain")
-        series = ET.SubElement(
-            domain, "Grid", Name="particles", GridType="Collection", CollectionType="Temporal"
-        )
-
-        def data(parent: ET.Element, path: str, dims: str, number: str) -> None:
-            item = ET.SubElement(
-                parent,
-                "DataItem",
-                Dimensions=dims,
-                NumberType=number,
-                Precision="4" if number == "Int" else "8",
-                Format="HDF",
-            )
-            item.text = f"{h5}:{path}"
-
-        for t, group in self._grids:
-            grid = ET.SubElement(series, "Grid", Name="particles", GridType="Uniform")
-            ET.SubElement(grid, "Time", Value=repr(float(t)))
-            topo = ET.SubElement(
-                grid,
-                "Topology",
-                TopologyType="Polyvertex",
-                NumberOfElements=str(n),
-                NodesPerElement="1",
-            )
-            data(topo, "/topology", f"{n} 1", "Int")
-            geom = ET.SubElement(grid, "Geometry", GeometryType="XYZ")
-            data(geom, "/geometry", f"{n} 3", "Float")
-            for name in ("displacement", "velocity"):
-                att = ET.SubElement(
-                    grid, "Attribute", Name=name, AttributeType="Vector", Center="Node"
-                )
-                data(att, f"/{group}/{name}", f"{n} 3", "Float")
-        ET.indent(root)
-        path = self.files["particles"]
-        tmp = path.with_name(path.name + ".tmp")
-        with open(tmp, "w") as f:
-            f.write('<?xml version="1.0"?>\n<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>\n')
-            f.write(ET.tostring(root, encoding="unicode"))
-            f.write("\n")
-        os.replace(tmp, path)
 
     # -- writing -------------------------------------------------------------------------------
 
@@ -375,22 +263,18 @@ class DynamicsWriter:
         if self._with_fe:
             for f in dyn.fe_functions():
                 self._fe_file.write_function(f, t)
-        values = None
-        if self._with_particles:
-            x = dyn.particles.positions[self._owned]
-            pu, pv = dyn.displacement_at(x), dyn.velocity_at(x)
-            parts = self.comm.gather((self._owned, pu, pv), root=0)
-            if self.comm.rank == 0:
-                n = self._positions.shape[0]
-                values = np.zeros((2, n, 3))
-                for idx, a, b in parts:
-                    values[0, idx, : a.shape[1]] = a
-                    values[1, idx, : b.shape[1]] = b
+        if self._cloud is not None:
+            P = dyn.particles
+            x = P.positions[self._owned]
+            n = P.num_particles
+            u = gather_rows(self.comm, self._owned, dyn.displacement_at(x), n)
+            v = gather_rows(self.comm, self._owned, dyn.velocity_at(x), n)
+            attributes = None if u is None else {"displacement": u, "velocity": v}
+            first = len(self.times) == 1  # positions once: the reference configuration
+            self._cloud.write(t, P.positions if first else None, attributes)
         record = dyn.energy_record
 
         def rank0() -> None:
-            if values is not None:
-                self._append_particles(t, values[0], values[1])
             if self._with_energy and record is not None:
                 with open(self.files["energy"], "a") as f:
                     f.write(",".join(repr(getattr(record, k)) for k in _ENERGY_KEYS) + "\n")

@@ -33,13 +33,55 @@ import dolfinx.io
 import numpy as np
 from mpi4py import MPI
 
-from .io import check_prefix
 from .parallel import raise_on_all_ranks
 
 if TYPE_CHECKING:
     from .geometry.particles import ParticleSet
 
-__all__ = ["CloudSeriesWriter", "SeriesWriter", "gather_rows"]
+__all__ = ["CloudSeriesWriter", "SeriesWriter", "check_prefix", "gather_rows"]
+
+# -- the output prefix -------------------------------------------------------------------------
+
+
+def check_prefix(prefix: str | os.PathLike, comm: MPI.Comm) -> pathlib.Path:
+    """Check an output prefix on every rank (collective) and return it as a path.
+
+    The prefix is a path without suffix (``"out/rod"`` gives ``out/rod_fe.xdmf``, ...): it must
+    be the same on every rank, name a file (not end in a separator), and its directory must
+    exist and be writable on every rank.
+
+    Raises:
+        ValueError: on every rank, naming the prefix and the fix.
+    """
+    names = comm.allgather(str(prefix) if isinstance(prefix, str | os.PathLike) else None)
+
+    def check() -> pathlib.Path:
+        if not isinstance(prefix, str | os.PathLike):
+            raise ValueError(
+                f"the output prefix should be a path (str or os.PathLike), got {prefix!r}"
+            )
+        if len(set(names)) != 1:
+            raise ValueError(f"the output prefix must be the same on every rank, got {names}")
+        text = str(prefix)
+        path = pathlib.Path(prefix)
+        if not text or text.endswith(("/", os.sep)) or path.name in ("", ".", ".."):
+            raise ValueError(
+                f"the output prefix {text!r} should name files, e.g. 'out/rod' (which writes "
+                "out/rod_fe.xdmf, out/rod_particles.xdmf, ...)"
+            )
+        folder = path.parent
+        if not folder.is_dir():
+            raise ValueError(
+                f"the directory {str(folder)!r} of the output prefix {text!r} does not exist; "
+                "create it first"
+            )
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise ValueError(
+                f"the directory {str(folder)!r} of the output prefix {text!r} is not writable"
+            )
+        return path
+
+    return raise_on_all_ranks(comm, check)
 
 
 def gather_rows(comm: MPI.Comm, rows: np.ndarray, values: np.ndarray, n: int) -> np.ndarray | None:
@@ -134,6 +176,8 @@ class CloudSeriesWriter:
             g.attrs["time"] = t
             if points is not None:
                 g.create_dataset("geometry", data=_pad3(points))
+                vertices = np.arange(len(points), dtype=np.int32)[:, None]
+                g.create_dataset("vertices", data=vertices)  # Polyvertex: one per cell
                 self._geometry = (f"/{group}/geometry", len(points))
             if self._geometry is None:
                 raise ValueError("the first output of a CloudSeriesWriter needs points")
@@ -183,6 +227,7 @@ class CloudSeriesWriter:
                     grid, "Topology", TopologyType="Polyvertex", NumberOfElements=str(n),
                     NodesPerElement="1",
                 )  # fmt: skip
+                data(top, geometry.replace("/geometry", "/vertices"), (n, 1), "Int")
             else:
                 top = ET.SubElement(
                     grid, "Topology", TopologyType="Polyline", NumberOfElements=str(topo[1]),

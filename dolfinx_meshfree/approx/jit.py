@@ -18,7 +18,7 @@ import importlib.util
 from collections.abc import Callable
 from typing import Any, TypeVar
 
-__all__ = ["AVAILABLE", "jit"]
+__all__ = ["AVAILABLE", "jit", "num_threads"]
 
 #: True when numba can be imported: the compiled kernels are then the default.
 AVAILABLE: bool = importlib.util.find_spec("numba") is not None
@@ -27,6 +27,11 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 if AVAILABLE:
     import numba as _numba
+
+    def num_threads() -> int:
+        """The threads the compiled paths may use: ``numba.get_num_threads()`` (the number of
+        cores unless ``NUMBA_NUM_THREADS`` or ``numba.set_num_threads`` says otherwise)."""
+        return int(_numba.get_num_threads())
 
     def jit(fn: F) -> F:
         """Compile ``fn`` in nopython mode (cached on disk, numpy error model, no fastmath).
@@ -45,3 +50,7 @@ else:
     def jit(fn: F) -> F:
         """Without numba the function stays plain Python (never called by the default paths)."""
         return fn
+
+    def num_threads() -> int:
+        """One thread without numba."""
+        return 1

@@ -38,6 +38,7 @@ from .mls_kernel import (
     derivative_matrices,
     mls_shape_functions,
     monomial_exponents,
+    tabulate_cells,
 )
 from .neighbours import check_points, pairs_within_support, support_radii
 from .tables import ShapeTable
@@ -282,6 +283,17 @@ class MLS:
         """The compiled path: cell-list pairs, cuts, compiled kernel, chunk by chunk."""
         m, g = x.shape
         self._prepare_compiled()
+        if not self.pair_cuts:  # search and kernel fused, straight into the table
+            counts, j, columns, sus, sus_A = tabulate_cells(
+                self._cells, x, WEIGHT_IDS[self.weight_name], self._exponents, self._dmat,
+                self._scale, bool(derivatives), self.rcond, CHUNK,
+            )  # fmt: skip
+            self._check_counts(counts, x)
+            if sus.size:
+                ratio = np.full(m, np.inf)
+                ratio[sus] = self._eigenvalue_ratio(sus_A)
+                self._check_ratio(ratio, counts, x)
+            return self._table(x, counts, j, columns, derivatives)
         counts = np.empty(m, np.int64)
         out = _GrowingColumns(1 + (g if derivatives else 0), m)
         suspects: list[np.ndarray] = [np.zeros(0, np.int64)]

@@ -61,84 +61,99 @@ def _gap(x: float, a: float, size: float) -> float:
 
 
 @jit
-def _bin_range(xq: np.ndarray, grid: tuple, lev: int, range3: np.ndarray) -> None:
-    """Bins ``range3[0, d] .. range3[1, d]`` of grid ``lev`` within its reach of ``xq``."""
-    lo, size, shape, reach = grid[4][lev], grid[5][lev], grid[6][lev], grid[7][lev]
-    g = grid[4].shape[1]
-    range3[:, :] = 0
-    for d in range(g):
-        a = np.floor((xq[d] - reach - lo[d]) / size)
-        e = np.floor((xq[d] + reach - lo[d]) / size)
-        range3[0, d] = int(min(max(a, 0.0), float(shape[d])))
-        range3[1, d] = int(min(max(e, -1.0), float(shape[d] - 1)))
+def _span(x: float, h: float, lo: float, inv_size: float, bins: int) -> tuple[int, int]:
+    """The bins ``first .. last`` of an axis (``bins`` of ``1 / inv_size`` from ``lo``) that
+    meet ``[x - h, x + h]`` (``first > last`` if none). ``h`` carries a relative margin (the
+    reach's) far above the rounding of the product."""
+    a = np.floor((x - h - lo) * inv_size)
+    e = np.floor((x + h - lo) * inv_size)
+    return int(min(max(a, 0.0), float(bins))), int(min(max(e, -1.0), float(bins - 1)))
 
 
 @jit
 def gather(
     xq: np.ndarray,
     grid: tuple,
+    tmp: np.ndarray,
+    tmp_ss: np.ndarray,
     cand: np.ndarray,
     cdist: np.ndarray,
     key: np.ndarray,
-    range3: np.ndarray,
     store: bool,
 ) -> int:
     """The particles within the support of the point ``xq`` (3,; zero-padded), sorted by index.
 
+    In each grid, the bins within its reach form rows along the last axis whose particles are
+    contiguous in bin order: each row is trimmed to the disc (ball) of the reach and its
+    particles are tested in one loop without branches (the candidates passing the cheap test on
+    squared distances are compacted into ``tmp``), then tested exactly and sorted.
+
     Args:
         xq: The point.
         grid: :attr:`CellList.grid`.
+        tmp, tmp_ss: Work arrays (n + 1,) of ints and floats.
         cand, cdist, key: Outputs (n,): position in bin order, distance and particle index of
             each pair, in increasing particle index.
-        range3: Work array (2, 3) of ints.
         store: Whether to write the outputs (else only count the pairs).
 
     Returns:
         The number of pairs.
     """
-    pts, radii, order, start, los, sizes, shapes, reaches, bin_reach, boff = grid
+    packed, radii, order, start, los, sizes, shapes, reaches, boff = grid
     g = los.shape[1]
+    last = g - 1
     x0, x1, x2 = xq[0], xq[1], xq[2]
-    nc = 0
+    xl = xq[last]
+    nt = 0
     for lev in range(boff.size - 1):
-        _bin_range(xq, grid, lev, range3)
-        lo, size, shape, b0 = los[lev], sizes[lev], shapes[lev], boff[lev]
-        reach2 = reaches[lev] * reaches[lev]
-        for c0 in range(range3[0, 0], range3[1, 0] + 1):
-            g0 = _gap(x0, lo[0] + c0 * size, size)
+        if start[boff[lev]] == start[boff[lev + 1]]:  # an empty grid
+            continue
+        size, reach = sizes[lev], reaches[lev]
+        inv_size = 1.0 / size
+        reach2 = reach * reach
+        s1, s2 = shapes[lev, 1], shapes[lev, 2]
+        # outer axes: 0 (2D, 3D) and 1 (3D); the rows run along the last axis
+        a0, z0 = _span(x0, reach, los[lev, 0], inv_size, shapes[lev, 0]) if g > 1 else (0, 0)
+        a1, z1 = _span(x1, reach, los[lev, 1], inv_size, s1) if g > 2 else (0, 0)
+        lol, sl = los[lev, last], shapes[lev, last]
+        for c0 in range(a0, z0 + 1):
+            g0 = _gap(x0, los[lev, 0] + c0 * size, size) if g > 1 else 0.0
             if g0 > reach2:
                 continue
-            for c1 in range(range3[0, 1], range3[1, 1] + 1):
-                g1 = g0 + (_gap(x1, lo[1] + c1 * size, size) if g > 1 else 0.0)
+            for c1 in range(a1, z1 + 1):
+                g1 = g0 + (_gap(x1, los[lev, 1] + c1 * size, size) if g > 2 else 0.0)
                 if g1 > reach2:
                     continue
-                for c2 in range(range3[0, 2], range3[1, 2] + 1):
-                    g2 = g1 + (_gap(x2, lo[2] + c2 * size, size) if g > 2 else 0.0)
-                    b = b0 + (c0 * shape[1] + c1) * shape[2] + c2
-                    if g2 > bin_reach[b]:  # the bin is beyond the supports of its particles
-                        continue
-                    for s in range(start[b], start[b + 1]):
-                        e0 = x0 - pts[s, 0]
-                        e1 = x1 - pts[s, 1]
-                        e2 = x2 - pts[s, 2]
-                        ss = e0 * e0 + e1 * e1 + e2 * e2
-                        rs = radii[s]
-                        if ss <= rs * rs * (1.0 + 1e-10):  # cheap pre-test, then the exact one
-                            r = np.sqrt(ss)
-                            if r < rs and not store:
-                                nc += 1
-                            elif r < rs:
-                                jj = order[s]  # insertion by particle index
-                                t = nc
-                                while t > 0 and key[t - 1] > jj:
-                                    key[t] = key[t - 1]
-                                    cand[t] = cand[t - 1]
-                                    cdist[t] = cdist[t - 1]
-                                    t -= 1
-                                key[t] = jj
-                                cand[t] = s
-                                cdist[t] = r
-                                nc += 1
+                first, stop = _span(xl, np.sqrt(reach2 - g1), lol, inv_size, sl)
+                if first > stop:
+                    continue
+                base = boff[lev] + (c0 * s1 + c1) * s2
+                for s in range(start[base + first], start[base + stop + 1]):
+                    e0 = x0 - packed[s, 0]
+                    e1 = x1 - packed[s, 1]
+                    e2 = x2 - packed[s, 2]
+                    ss = e0 * e0 + e1 * e1 + e2 * e2
+                    tmp[nt] = s
+                    tmp_ss[nt] = ss
+                    nt += ss <= packed[s, 3]  # the cheap pre-test, then the exact one
+    nc = 0
+    for u in range(nt):
+        s = tmp[u]
+        r = np.sqrt(tmp_ss[u])
+        if r < radii[s] and not store:
+            nc += 1
+        elif r < radii[s]:
+            jj = order[s]  # insertion by particle index
+            t = nc
+            while t > 0 and key[t - 1] > jj:
+                key[t] = key[t - 1]
+                cand[t] = cand[t - 1]
+                cdist[t] = cdist[t - 1]
+                t -= 1
+            key[t] = jj
+            cand[t] = s
+            cdist[t] = r
+            nc += 1
     return nc
 
 
@@ -181,13 +196,14 @@ def _search(
     dx = np.empty((cap, g))
     dist = np.empty(cap)
     ddist = np.empty((cap, g))
+    tmp = np.empty(n + 1, np.int64)
+    tmp_ss = np.empty(n + 1)
     cand = np.empty(n, np.int64)
     cdist = np.empty(n)
     key = np.empty(n, np.int64)
-    range3 = np.zeros((2, 3), np.int64)
     k = 0
     for q in range(m):
-        nc = gather(x[q], grid, cand, cdist, key, range3, True)
+        nc = gather(x[q], grid, tmp, tmp_ss, cand, cdist, key, True)
         if k + nc > cap:  # grow the output
             cap = max(2 * cap, k + nc)
             j2 = np.empty(cap, np.int32)
@@ -263,22 +279,17 @@ class CellList:
             bins[sel] = boff[lev] + local
             boff[lev + 1] = boff[lev] + shapes[lev].prod()
         start, order = _build(bins, int(boff[-1]))
-        self._pts = np.zeros((n, 3))
-        self._pts[:, :g] = pts[order]
-        self._radii = np.ascontiguousarray(radii[order])
-        # squared largest radius per bin, with a margin for the rounding of the bin boundaries
-        bin_reach = np.zeros(start.size - 1)
-        margin = 1e-9 * sizes[level[order]]
-        np.maximum.at(bin_reach, bins[order], self._radii * (1.0 + 1e-6) + margin)
-        #: What the compiled functions take: ``(pts, radii, order, start, lo, size, shape,
-        #: reach, bin_reach, boff)``: the positions (n, 3; zero-padded) and radii in bin order,
-        #: the particle index of each, the first of each bin (nbins + 1,), per grid its corner
-        #: (levels, gdim), bin size, shape (levels, 3) and reach, the squared largest radius
-        #: per bin and the first bin of each grid (levels + 1,).
-        self.grid = (
-            self._pts, self._radii, order, start, los, sizes, shapes, reaches, bin_reach**2,
-            boff,
-        )  # fmt: skip
+        radii = radii[order]
+        packed = np.zeros((n, 4))  # x, y, z and the squared radius of the cheap pre-test
+        packed[:, :g] = pts[order]
+        packed[:, 3] = radii * radii * (1.0 + 1e-10)
+        #: What the compiled functions take: ``(packed, radii, order, start, lo, size, shape,
+        #: reach, boff)``: per particle in bin order, its position (zero-padded) and squared
+        #: radius with a margin (n, 4), radius and index; the first particle of each bin
+        #: (nbins + 1,); per grid its corner (levels, gdim), bin size, shape (levels, 3; padded
+        #: with ones) and reach (its largest radius with a margin for the rounding of the bin
+        #: coordinates); the first bin of each grid (levels + 1,).
+        self.grid = (packed, radii, order, start, los, sizes, shapes, reaches, boff)
         #: Pairs per point of the last query: the capacity guess of the next one.
         self.pairs_per_point = 16.0
 

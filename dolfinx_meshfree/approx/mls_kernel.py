@@ -15,7 +15,7 @@ of ``A_{,k}`` with basis derivatives are products of ``D_k`` and ``A``, summed o
 instead of once per pair. The weights ``w(dist / d_I)`` and ``w_{I,k} = w'(r)/d_I \\, dist_{,k}``
 are evaluated from the (possibly cut) distances and distance gradients of the pairs.
 
-The inverse is a Gauss-Jordan elimination with partial pivoting. For the conditioning check the
+The inverse is computed from the ``L D L^T`` factors of the symmetric ``A``. For the conditioning check the
 kernel returns a lower bound of the eigenvalue ratio of ``A``, ``1 / (tr A \\, tr A^{-1})`` (it is
 within a factor ``m^2`` of the ratio for a symmetric positive definite ``A`` of size m): where the
 bound is above ``rcond`` the point is accepted; elsewhere ``A`` is returned for the exact
@@ -96,34 +96,39 @@ def _weight(kind: int, r: float) -> tuple[float, float]:
 
 @jit.jit
 def _invert(A: np.ndarray, Ainv: np.ndarray, work: np.ndarray) -> None:
-    """``Ainv = A^-1`` by Gauss-Jordan elimination with partial pivoting (inf/nan if singular)."""
+    """``Ainv = A^-1`` of the symmetric ``A`` by its ``L D L^T`` factors (no pivoting: ``A``
+    is positive definite or rejected by the conditioning check; inf/nan if singular)."""
     m = A.shape[0]
-    work[:, :m] = A
-    work[:, m:] = 0.0
-    for a in range(m):
-        work[a, m + a] = 1.0
-    for col in range(m):
-        piv = col
-        big = abs(work[col, col])
-        for r in range(col + 1, m):
-            if abs(work[r, col]) > big:
-                big = abs(work[r, col])
-                piv = r
-        if piv != col:
-            for c in range(2 * m):
-                t = work[col, c]
-                work[col, c] = work[piv, c]
-                work[piv, c] = t
-        inv_p = 1.0 / work[col, col]
-        for c in range(2 * m):
-            work[col, c] *= inv_p
-        for r in range(m):
-            if r != col:
-                f = work[r, col]
-                if f != 0.0:
-                    for c in range(2 * m):
-                        work[r, c] -= f * work[col, c]
-    Ainv[:, :] = work[:, m:]
+    # work[:, :m]: L (unit lower, below the diagonal) and D (on it); work[:, m:]: L^-1
+    for j in range(m):
+        dj = A[j, j]
+        for k in range(j):
+            dj -= work[j, k] * work[j, k] * work[k, k]
+        work[j, j] = dj
+        inv_d = 1.0 / dj
+        for i in range(j + 1, m):
+            acc = A[i, j]
+            for k in range(j):
+                acc -= work[i, k] * work[j, k] * work[k, k]
+            work[i, j] = acc * inv_d
+    for j in range(m):  # X = L^-1 by forward substitution, column j
+        for i in range(m):
+            if i < j:
+                work[i, m + j] = 0.0
+            elif i == j:
+                work[i, m + j] = 1.0
+            else:
+                acc = 0.0
+                for k in range(j, i):
+                    acc -= work[i, k] * work[k, m + j]
+                work[i, m + j] = acc
+    for a in range(m):  # A^-1 = X^T D^-1 X
+        for b in range(a, m):
+            acc = 0.0
+            for k in range(b, m):
+                acc += work[k, m + a] * work[k, m + b] / work[k, k]
+            Ainv[a, b] = acc
+            Ainv[b, a] = acc
 
 
 @jit.jit
@@ -136,7 +141,7 @@ def _workspace(kmax: int, nb: int, g: int) -> tuple:
         np.empty((nb, nb)),  # A
         np.empty((g, nb, nb)),  # sum of dw p p^T
         np.empty((nb, nb)),  # A^-1
-        np.empty((nb, 2 * nb)),  # Gauss-Jordan
+        np.empty((nb, 2 * nb)),  # factors
         np.empty(nb),  # gamma
         np.empty((g, nb)),  # C_k
         np.empty(nb),  # v
@@ -171,8 +176,11 @@ def _point(
     g = len(exponents[0])
     linear = nb == g + 1
     inv_s = 1.0 / s
-    A[:, :] = 0.0
-    dA[:, :, :] = 0.0
+    for a in range(nb):
+        for b in range(nb):
+            A[a, b] = 0.0
+            for d in range(g):
+                dA[d, a, b] = 0.0
     for t in range(cnt):
         inv_rho = 1.0 / rho[t]
         w, dwdr = _weight(kind, dist[t] * inv_rho)
@@ -214,44 +222,40 @@ def _point(
     bound = lb if (tr_inv > 0.0 and lb > 0.0 and lb <= 1.0) else 0.0
     for a in range(nb):
         gamma[a] = Ainv[a, 0]
+    if derivatives:
+        for d in range(g):
+            # full A_,k = sum dw p p^T - (D_k A + A D_k^T) / s; then v = A_,k gamma
+            for a in range(nb):
+                for b in range(nb):
+                    acc = 0.0
+                    for c in range(nb):
+                        acc += D[d, a, c] * A[c, b]
+                    DA[a, b] = acc
+            for a in range(nb):
+                acc = 0.0
+                for b in range(nb):
+                    dab = dA[d, a, b] if b >= a else dA[d, b, a]
+                    acc += (dab - (DA[a, b] + DA[b, a]) * inv_s) * gamma[b]
+                v[a] = acc
+            # C_k = gamma_,k - D_k^T gamma / s, gamma_,k = -A^-1 v
+            for a in range(nb):
+                acc = 0.0
+                dtg = 0.0
+                for b in range(nb):
+                    acc += Ainv[a, b] * v[b]
+                    dtg += D[d, b, a] * gamma[b]
+                C[d, a] = -acc - dtg * inv_s
     for t in range(cnt):
         pg = 0.0
         for a in range(nb):
             pg += P[t, a] * gamma[a]
         phi[o0 + t] = W[t] * pg
-    if not derivatives:
-        return bound
-    for d in range(g):
-        # full A_,k = sum dw p p^T - (D_k A + A D_k^T) / s; then v = A_,k gamma
-        for a in range(nb):
-            for b in range(nb):
-                acc = 0.0
-                for c in range(nb):
-                    acc += D[d, a, c] * A[c, b]
-                DA[a, b] = acc
-        for a in range(nb):
-            acc = 0.0
-            for b in range(nb):
-                dab = dA[d, a, b] if b >= a else dA[d, b, a]
-                acc += (dab - (DA[a, b] + DA[b, a]) * inv_s) * gamma[b]
-            v[a] = acc
-        # C_k = gamma_,k - D_k^T gamma / s, gamma_,k = -A^-1 v
-        for a in range(nb):
-            acc = 0.0
-            dtg = 0.0
-            for b in range(nb):
-                acc += Ainv[a, b] * v[b]
-                dtg += D[d, b, a] * gamma[b]
-            C[d, a] = -acc - dtg * inv_s
-    for t in range(cnt):
-        pg = 0.0
-        for a in range(nb):
-            pg += P[t, a] * gamma[a]
-        for d in range(g):
-            pc = 0.0
-            for a in range(nb):
-                pc += P[t, a] * C[d, a]
-            dphi[d, o0 + t] = W[t] * pc + DW[t, d] * pg
+        if derivatives:
+            for d in range(g):
+                pc = 0.0
+                for a in range(nb):
+                    pc += P[t, a] * C[d, a]
+                dphi[d, o0 + t] = W[t] * pc + DW[t, d] * pg
     return bound
 
 
@@ -320,11 +324,11 @@ def mls_shape_functions(
 @jit.jit
 def count_pairs(x: np.ndarray, grid: tuple, counts: np.ndarray) -> None:
     """The number of pairs of each point ``x`` (m, 3; zero-padded) into ``counts`` (m,)."""
-    range3 = np.zeros((2, 3), np.int64)
-    empty_i = np.empty(0, np.int64)
-    empty_f = np.empty(0)
+    n = grid[1].size
+    tmp, tmp_ss = np.empty(n + 1, np.int64), np.empty(n + 1)
+    empty_i, empty_f = np.empty(0, np.int64), np.empty(0)
     for q in range(x.shape[0]):
-        counts[q] = gather(x[q], grid, empty_i, empty_f, empty_i, range3, False)
+        counts[q] = gather(x[q], grid, tmp, tmp_ss, empty_i, empty_f, empty_i, False)
 
 
 @jit.jit
@@ -365,10 +369,10 @@ def fill_shape_functions(
     n = grid[1].size
     nb = len(exponents)
     g = len(exponents[0])
+    tmp, tmp_ss = np.empty(n + 1, np.int64), np.empty(n + 1)
     cand = np.empty(n, np.int64)
     cdist = np.empty(n)
     key = np.empty(n, np.int64)
-    range3 = np.zeros((2, 3), np.int64)
     kmax = 64
     ws = _workspace(kmax, nb, g)
     dx = np.empty((kmax, g))
@@ -378,7 +382,7 @@ def fill_shape_functions(
     radii = grid[1]
     cap = phi.size
     for q in range(x.shape[0]):
-        nc = gather(x[q], grid, cand, cdist, key, range3, True)
+        nc = gather(x[q], grid, tmp, tmp_ss, cand, cdist, key, True)
         if k + nc > cap:
             return q, k
         if nc > kmax:  # more pairs than ever: grow the scratch

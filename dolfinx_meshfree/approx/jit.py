@@ -33,11 +33,6 @@ if AVAILABLE:
         cores unless ``NUMBA_NUM_THREADS`` or ``numba.set_num_threads`` says otherwise)."""
         return int(_numba.get_num_threads())
 
-    def num_threads() -> int:
-        """The threads the compiled paths may use: ``numba.get_num_threads()`` (the number of
-        cores unless ``NUMBA_NUM_THREADS`` or ``numba.set_num_threads`` says otherwise)."""
-        return int(_numba.get_num_threads())
-
     def jit(fn: F) -> F:
         """Compile ``fn`` in nopython mode (cached on disk, numpy error model, no fastmath).
 
@@ -55,10 +50,6 @@ else:
     def jit(fn: F) -> F:
         """Without numba the function stays plain Python (never called by the default paths)."""
         return fn
-
-    def num_threads() -> int:
-        """One thread without numba."""
-        return 1
 
     def num_threads() -> int:
         """One thread without numba."""

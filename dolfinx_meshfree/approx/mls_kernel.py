@@ -15,11 +15,11 @@ of ``A_{,k}`` with basis derivatives are products of ``D_k`` and ``A``, summed o
 instead of once per pair. The weights ``w(dist / d_I)`` and ``w_{I,k} = w'(r)/d_I \\, dist_{,k}``
 are evaluated from the (possibly cut) distances and distance gradients of the pairs.
 
-The inverse is computed from the ``L D L^T`` factors of the symmetric ``A``. For the conditioning check the
-kernel returns a lower bound of the eigenvalue ratio of ``A``, ``1 / (tr A \\, tr A^{-1})`` (it is
-within a factor ``m^2`` of the ratio for a symmetric positive definite ``A`` of size m): where the
-bound is above ``rcond`` the point is accepted; elsewhere ``A`` is returned for the exact
-``eigvalsh`` check of :class:`~dolfinx_meshfree.approx.mls.MLS`.
+The inverse is computed from the ``L D L^T`` factors of the symmetric ``A`` (no pivoting: ``A``
+is positive definite where it is accepted). For the conditioning check the kernel returns a lower
+bound of the eigenvalue ratio of ``A``, ``1 / (tr A \\, tr A^{-1})`` (it is within a factor
+``m^2`` of the ratio for a symmetric positive definite ``A`` of size m): where the bound is above
+``rcond`` the point is accepted; elsewhere ``A`` is returned for the exact ``eigvalsh`` check of :class:`~dolfinx_meshfree.approx.mls.MLS`.
 """
 
 from __future__ import annotations
@@ -34,8 +34,8 @@ from .kernels import cubic_inner_piece, cubic_outer_piece, gaussian_piece, quart
 
 __all__ = [
     "WEIGHT_IDS",
-    "derivative_matrices",
     "count_pairs",
+    "derivative_matrices",
     "fill_shape_functions",
     "mls_shape_functions",
     "monomial_exponents",
@@ -304,7 +304,12 @@ def mls_shape_functions(
     bound = np.empty(m)
     Aout = np.empty((m, nb, nb))
     ws = _workspace(kmax, nb, g)
-    dxs, dists, ddists, rho = np.empty((kmax, g)), np.empty(kmax), np.empty((kmax, g)), np.empty(kmax)
+    dxs, dists, ddists, rho = (
+        np.empty((kmax, g)),
+        np.empty(kmax),
+        np.empty((kmax, g)),
+        np.empty(kmax),
+    )
     for q in range(m):
         a0 = indptr[q]
         cnt = indptr[q + 1] - a0
@@ -405,7 +410,6 @@ def fill_shape_functions(
         counts[q] = nc
         k += nc
     return x.shape[0], k
-
 
 
 def _grown(a: np.ndarray, n: int, cap: int) -> np.ndarray:

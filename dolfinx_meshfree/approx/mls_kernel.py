@@ -19,7 +19,8 @@ The inverse is computed from the ``L D L^T`` factors of the symmetric ``A`` (no 
 is positive definite where it is accepted). For the conditioning check the kernel returns a lower
 bound of the eigenvalue ratio of ``A``, ``1 / (tr A \\, tr A^{-1})`` (it is within a factor
 ``m^2`` of the ratio for a symmetric positive definite ``A`` of size m): where the bound is above
-``rcond`` the point is accepted; elsewhere ``A`` is returned for the exact ``eigvalsh`` check of :class:`~dolfinx_meshfree.approx.mls.MLS`.
+``rcond`` the point is accepted; elsewhere ``A`` is returned for the exact ``eigvalsh`` check of
+:class:`~dolfinx_meshfree.approx.mls.MLS`.
 """
 
 from __future__ import annotations

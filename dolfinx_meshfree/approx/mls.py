@@ -288,12 +288,7 @@ class MLS:
                 self._cells, x, WEIGHT_IDS[self.weight_name], self._exponents, self._dmat,
                 self._scale, bool(derivatives), self.rcond, CHUNK,
             )  # fmt: skip
-            self._check_counts(counts, x)
-            if sus.size:
-                ratio = np.full(m, np.inf)
-                ratio[sus] = self._eigenvalue_ratio(sus_A)
-                self._check_ratio(ratio, counts, x)
-            return self._table(x, counts, j, columns, derivatives)
+            return self._checked_table(x, counts, sus, sus_A, j, columns, derivatives)
         counts = np.empty(m, np.int64)
         out = _GrowingColumns(1 + (g if derivatives else 0), m)
         suspects: list[np.ndarray] = [np.zeros(0, np.int64)]
@@ -322,13 +317,22 @@ class MLS:
             suspects.append(sus + start)
             suspect_A.append(A[sus])
             out.append(j, [phi, *dphi], stop - start)
+        sus, sus_A = np.concatenate(suspects), np.concatenate(suspect_A)
+        return self._checked_table(x, counts, sus, sus_A, *out.result(), derivatives)
+
+    def _checked_table(
+        self, x: np.ndarray, counts: np.ndarray, sus: np.ndarray, sus_A: np.ndarray,
+        j: np.ndarray, columns: list[np.ndarray], derivatives: int,
+    ) -> ShapeTable:  # fmt: skip
+        """The compiled path's table after its checks: the pair counts, then the exact
+        eigenvalue ratio of the moment matrices ``sus_A`` of the points ``sus`` whose cheap
+        bound was not above ``rcond``."""
         self._check_counts(counts, x)
-        sus = np.concatenate(suspects)
         if sus.size:
-            ratio = np.full(m, np.inf)
-            ratio[sus] = self._eigenvalue_ratio(np.concatenate(suspect_A))
+            ratio = np.full(x.shape[0], np.inf)
+            ratio[sus] = self._eigenvalue_ratio(sus_A)
             self._check_ratio(ratio, counts, x)
-        return self._table(x, counts, *out.result(), derivatives)
+        return self._table(x, counts, j, columns, derivatives)
 
     def _table(
         self, x: np.ndarray, counts: np.ndarray, j: np.ndarray, columns: list[np.ndarray],

@@ -84,3 +84,13 @@ def test_threads_check_conditioning_as_the_numpy_path(monkeypatch):
             mf.MLS(P, dilation=3.5, rcond=rcond, backend=backend).tabulate(x)
         msgs.append(err.value.args[0].split("ratio ")[0] + err.value.args[0].split(")")[1])
     assert msgs[0] == msgs[1]
+
+
+def test_thread_count_is_checked(monkeypatch):
+    monkeypatch.setenv("DOLFINX_MESHFREE_THREADS", "two")
+    with pytest.raises(ValueError, match="DOLFINX_MESHFREE_THREADS='two'"):
+        jit.num_threads()
+    monkeypatch.setenv("DOLFINX_MESHFREE_THREADS", "2")
+    assert jit.num_threads() == 2
+    monkeypatch.delenv("DOLFINX_MESHFREE_THREADS")
+    assert jit.num_threads() == 1

@@ -15,6 +15,7 @@ results.
 from __future__ import annotations
 
 import importlib.util
+import os
 from collections.abc import Callable
 from typing import Any, TypeVar
 
@@ -27,11 +28,6 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 if AVAILABLE:
     import numba as _numba
-
-    def num_threads() -> int:
-        """The threads the compiled paths may use: ``numba.get_num_threads()`` (the number of
-        cores unless ``NUMBA_NUM_THREADS`` or ``numba.set_num_threads`` says otherwise)."""
-        return int(_numba.get_num_threads())
 
     def jit(fn: F) -> F:
         """Compile ``fn`` in nopython mode (cached on disk, numpy error model, no fastmath).
@@ -51,6 +47,15 @@ else:
         """Without numba the function stays plain Python (never called by the default paths)."""
         return fn
 
-    def num_threads() -> int:
-        """One thread without numba."""
-        return 1
+
+def num_threads() -> int:
+    """The threads a compiled path may use (its kernels release the GIL): the environment
+    variable ``DOLFINX_MESHFREE_THREADS``, 1 by default, so that MPI ranks sharing a node's
+    cores are not oversubscribed; ignored without numba."""
+    value = os.environ.get("DOLFINX_MESHFREE_THREADS", "1")
+    if not (value.isdigit() and int(value) >= 1):
+        raise ValueError(
+            f"DOLFINX_MESHFREE_THREADS={value!r} is not a positive integer; set it to the "
+            "number of threads per process (e.g. 2) or unset it (1 thread)"
+        )
+    return int(value) if AVAILABLE else 1

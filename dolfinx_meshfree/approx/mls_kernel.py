@@ -444,9 +444,9 @@ def tabulate_cells(
     straight into the table's buffers.
 
     One thread: one pass, the buffers sized from the pair density of the last query and grown
-    from the density seen so far when full. More threads (``numba.get_num_threads()``, set by
-    ``NUMBA_NUM_THREADS``): a counting pass, then exactly sized buffers filled chunk by chunk in
-    parallel (the kernels release the GIL); the table is the same to the last bit.
+    from the density seen so far when full. More threads (:func:`~.jit.num_threads`, set by
+    ``DOLFINX_MESHFREE_THREADS``): a counting pass, then exactly sized buffers filled chunk by
+    chunk in parallel (the kernels release the GIL); the table is the same to the last bit.
 
     Returns:
         ``(counts, j, columns, suspects, suspect_A)``: pairs per point (m,), the particle index

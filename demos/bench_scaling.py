@@ -82,18 +82,20 @@ def max_difference(a: mf.ShapeTable, b: mf.ShapeTable) -> float:
     return out
 
 
-def set_threads(n: int) -> bool:
-    """Let the compiled path use ``n`` threads (``DOLFINX_MESHFREE_THREADS``)."""
-    os.environ["DOLFINX_MESHFREE_THREADS"] = str(n)
-    return True
+def set_threads(n: int | None) -> None:
+    """Let the compiled path use ``n`` threads (``DOLFINX_MESHFREE_THREADS``; None: unset)."""
+    if n is None:
+        os.environ.pop("DOLFINX_MESHFREE_THREADS", None)
+    else:
+        os.environ["DOLFINX_MESHFREE_THREADS"] = str(n)
 
 
 def bench_mls(sizes_index: str, repeats: int, threads: list[int]) -> list[dict]:
     records = []
     runs = ["numpy"]
     if jit.AVAILABLE:
-        runs += ["numba" if t == 1 else f"numba{t}" for t in threads if set_threads(t)]
-        set_threads(1)
+        runs += ["numba"] + [f"numba{t}" for t in threads if t != 1]  # 1 thread always
+    saved = os.environ.get("DOLFINX_MESHFREE_THREADS")
     for gdim, basis, dilation, sizes, small in CASES:
         for n_side in small if sizes_index == "small" else sizes:
             P, x = particles_and_points(gdim, n_side)
@@ -145,8 +147,7 @@ def bench_mls(sizes_index: str, repeats: int, threads: list[int]) -> list[dict]:
                     ),
                 }
             )
-    if jit.AVAILABLE:
-        set_threads(1)
+    set_threads(None if saved is None else int(saved))
     return records
 
 

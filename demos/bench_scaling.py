@@ -13,7 +13,11 @@
 #    the same element size (particles on the vertices: equal dofs), EFG with each MLS backend;
 #    total time (setup + assembly + solve; FE JIT excluded) and L2 error, and EFG/FE ratios.
 #
-# Run with one thread (``OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1``, as recorded in the JSON);
+#    The compiled path runs on one thread and on two (``--threads``, set through
+#    ``DOLFINX_MESHFREE_THREADS``): per CPU second the figure per core, per wall-clock second the
+#    parallel speed.
+#
+# Run with ``OMP_NUM_THREADS=1`` (as recorded in the JSON);
 # the numbers are machine dependent, compare the ratios of one run. ``--small`` is a smoke run
 # of a few seconds for CI (no timing is checked anywhere). This supersedes the MLS part of
 # ``demos/bench_tabulation.py``.
@@ -78,21 +82,35 @@ def max_difference(a: mf.ShapeTable, b: mf.ShapeTable) -> float:
     return out
 
 
-def bench_mls(sizes_index: str, repeats: int) -> list[dict]:
+def set_threads(n: int | None) -> None:
+    """Let the compiled path use ``n`` threads (``DOLFINX_MESHFREE_THREADS``; None: unset)."""
+    if n is None:
+        os.environ.pop("DOLFINX_MESHFREE_THREADS", None)
+    else:
+        os.environ["DOLFINX_MESHFREE_THREADS"] = str(n)
+
+
+def bench_mls(sizes_index: str, repeats: int, threads: list[int]) -> list[dict]:
     records = []
-    backends = ["numpy", "numba"] if jit.AVAILABLE else ["numpy"]
+    runs = ["numpy"]
+    if jit.AVAILABLE:
+        runs += ["numba"] + [f"numba{t}" for t in threads if t != 1]  # 1 thread always
+    saved = os.environ.get("DOLFINX_MESHFREE_THREADS")
     for gdim, basis, dilation, sizes, small in CASES:
         for n_side in small if sizes_index == "small" else sizes:
             P, x = particles_and_points(gdim, n_side)
             tables, rec = {}, {}
-            for backend in backends:
+            for run in runs:
+                backend = "numpy" if run == "numpy" else "numba"
+                if backend == "numba":
+                    set_threads(int(run[5:] or 1))
                 mls = mf.MLS(P, dilation=dilation, basis=basis, backend=backend)
                 t0 = time.perf_counter()
                 mls.tabulate(x[:8])  # compile or load the cache; builds the cell list
                 first = time.perf_counter() - t0
-                tables[backend] = mls.tabulate(x)
+                tables[run] = mls.tabulate(x)
                 t, cpu = median_time(lambda mls=mls, x=x: mls.tabulate(x), repeats)
-                rec[backend] = {
+                rec[run] = {
                     "time": t,
                     "cpu_time": cpu,
                     "points_per_second": x.shape[0] / t,
@@ -123,8 +141,13 @@ def bench_mls(sizes_index: str, repeats: int) -> list[dict]:
                         else None
                     ),
                     "repeats": repeats,
+                    "max_difference_threads": max(
+                        (max_difference(tables["numba"], tables[r]) for r in runs[2:]),
+                        default=None,
+                    ),
                 }
             )
+    set_threads(None if saved is None else int(saved))
     return records
 
 
@@ -165,10 +188,12 @@ def report(mls: list[dict], static: list[dict]) -> None:
         f"{os.environ.get('OMP_NUM_THREADS', 'unset')}), median of {mls[0]['repeats']}; "
         "first numba call (compile or cache load) excluded"
     )
-    print("points per second of wall-clock time (per CPU second in brackets)")
+    print("points per second of wall-clock time (per CPU second in brackets); numba2: 2 threads")
+    two = "points_per_second_numba2" in mls[0]
     head = (
         f"{'case':>12} {'particles':>9} {'points':>8} {'pairs/pt':>8} {'numpy pts/s':>21} "
-        f"{'numba pts/s':>21} {'speed-up':>8} {'1st call s':>10} {'max diff':>9}"
+        f"{'numba pts/s':>21} {'numba2 pts/s' if two else '':>21} {'speed-up':>8} "
+        f"{'1st call s':>10} {'max diff':>9}"
     )
     print(head)
     print("-" * len(head))
@@ -180,9 +205,14 @@ def report(mls: list[dict], static: list[dict]) -> None:
         diff = nan if r["max_difference"] is None else r["max_difference"]
         numpy = f"{r['points_per_second_numpy']:.3g} ({r['points_per_cpu_second_numpy']:.3g})"
         numba = f"{nb:.3g} ({nb_cpu:.3g})"
+        numba2 = (
+            f"{r['points_per_second_numba2']:.3g} ({r['points_per_cpu_second_numba2']:.3g})"
+            if two
+            else ""
+        )
         print(
             f"{r['gdim']}D {r['basis']:>9} {r['particles']:9d} {r['points']:8d} "
-            f"{r['pairs_per_point']:8.1f} {numpy:>21} {numba:>21} "
+            f"{r['pairs_per_point']:8.1f} {numpy:>21} {numba:>21} {numba2:>21} "
             f"{nb / r['points_per_second_numpy']:8.1f} {first:10.3f} {diff:9.1e}"
         )
     if not static:
@@ -209,9 +239,12 @@ def main(argv: list[str] | None = None) -> list[dict]:
     p.add_argument("--h", nargs="+", type=float, default=[1.0, 0.5], help="static: FE sizes")
     p.add_argument("--no-static", action="store_true", help="only the MLS tabulation")
     p.add_argument("--json", default=None)
+    p.add_argument(
+        "--threads", nargs="+", type=int, default=[1, 2], help="MLS: threads of the compiled path"
+    )
     args = p.parse_args(argv)
     repeats = 1 if args.small else args.repeats
-    mls = bench_mls("small" if args.small else "full", repeats)
+    mls = bench_mls("small" if args.small else "full", repeats, args.threads)
     static = [] if args.no_static else bench_static([3.0] if args.small else args.h)
     comm = MPI.COMM_WORLD
     env = {

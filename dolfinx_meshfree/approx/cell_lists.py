@@ -1,11 +1,14 @@
 """Compiled neighbour search by cell lists, with pairs sorted by point and then by particle.
 
-The particles are binned once into a uniform grid whose bin size is at least the largest
-support radius, so the particles within the support of an evaluation point lie in the
-``3^gdim`` bins around the point's bin. For a chunk of evaluation points the search returns the
-pairs ``|x_i - x_I| < d_I`` grouped by point and, within a point, in increasing particle index:
-the CSR layout of a shape table, with no sort of the whole pair list. The pair set and the
-distances are those of :func:`~dolfinx_meshfree.approx.neighbours.pairs_within_support` and
+The particles are binned into uniform grids: most of them into a grid of bins a fraction of the
+typical support radius wide, the few with a much larger support (near boundaries, in sparse
+regions) into a second, coarser grid, so that a point does not test the particles of the whole
+reach of the largest support. A point visits, in each grid, the bins within that grid's largest
+radius, skipping the bins farther from it than the largest radius of their own particles. For a
+chunk of evaluation points the search returns the pairs ``|x_i - x_I| < d_I`` grouped by point
+and, within a point, in increasing particle index: the CSR layout of a shape table, with no sort
+of the whole pair list. The pair set and the distances are those of
+:func:`~dolfinx_meshfree.approx.neighbours.pairs_within_support` and
 :func:`~dolfinx_meshfree.approx.mls.pair_distances` (same formulas; tested equal).
 """
 
@@ -19,39 +22,31 @@ __all__ = ["CellList", "gather", "pair_data"]
 
 #: At most this many bins per particle (a sparse cloud in a large box gets coarser bins).
 _MAX_BINS_PER_PARTICLE = 4
+#: Bins per support radius of the particles of a grid (bin width: radius / this).
+_BINS_PER_RADIUS = 2.0
+#: The fine grid takes the particles with radii up to this quantile (times :data:`_SPREAD`);
+#: the others go to the coarse grid.
+_QUANTILE = 0.95
+_SPREAD = 1.05
+#: The number of grids (fixed, so that the compiled functions have one signature; the second
+#: may be empty).
+_LEVELS = 2
 
 
 @jit
-def _bin_of(x: np.ndarray, lo: np.ndarray, size: float, shape: np.ndarray, out: np.ndarray) -> None:
-    """Bin coordinates of the point ``x`` (clamped to the grid, padded to 3 dims) into ``out``."""
-    out[:] = 0
-    for d in range(x.size):
-        c = np.floor((x[d] - lo[d]) / size)
-        c = min(max(c, 0.0), float(shape[d] - 1))
-        out[d] = int(c)
-
-
-@jit
-def _build(
-    pts: np.ndarray, lo: np.ndarray, size: float, shape: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Counting sort of the particles by bin: ``(start, order)``; within a bin by index."""
-    n = pts.shape[0]
-    nbins = shape[0] * shape[1] * shape[2]
-    ids = np.empty(n, np.int64)
-    c = np.zeros(3, np.int64)
+def _build(bins: np.ndarray, nbins: int) -> tuple[np.ndarray, np.ndarray]:
+    """Counting sort of the particles by (global) bin: ``(start, order)``; within a bin by index."""
+    n = bins.size
     start = np.zeros(nbins + 1, np.int64)
     for p in range(n):
-        _bin_of(pts[p], lo, size, shape, c)
-        ids[p] = (c[0] * shape[1] + c[1]) * shape[2] + c[2]
-        start[ids[p] + 1] += 1
+        start[bins[p] + 1] += 1
     for b in range(nbins):
         start[b + 1] += start[b]
     fill = start[:-1].copy()
     order = np.empty(n, np.int64)
     for p in range(n):
-        order[fill[ids[p]]] = p
-        fill[ids[p]] += 1
+        order[fill[bins[p]]] = p
+        fill[bins[p]] += 1
     return start, order
 
 
@@ -66,65 +61,99 @@ def _gap(x: float, a: float, size: float) -> float:
 
 
 @jit
+def _span(x: float, h: float, lo: float, inv_size: float, bins: int) -> tuple[int, int]:
+    """The bins ``first .. last`` of an axis (``bins`` of ``1 / inv_size`` from ``lo``) that
+    meet ``[x - h, x + h]`` (``first > last`` if none). ``h`` carries a relative margin (the
+    reach's) far above the rounding of the product."""
+    a = np.floor((x - h - lo) * inv_size)
+    e = np.floor((x + h - lo) * inv_size)
+    return int(min(max(a, 0.0), float(bins))), int(min(max(e, -1.0), float(bins - 1)))
+
+
+@jit
 def gather(
     xq: np.ndarray,
     grid: tuple,
+    tmp: np.ndarray,
+    tmp_ss: np.ndarray,
     cand: np.ndarray,
     cdist: np.ndarray,
     key: np.ndarray,
-    range3: np.ndarray,
+    store: bool,
 ) -> int:
     """The particles within the support of the point ``xq`` (3,; zero-padded), sorted by index.
+
+    In each grid, the bins within its reach form rows along the last axis whose particles are
+    contiguous in bin order: each row is trimmed to the disc (ball) of the reach and its
+    particles are tested in one loop without branches (the candidates passing the cheap test on
+    squared distances are compacted into ``tmp``), then tested exactly and sorted.
 
     Args:
         xq: The point.
         grid: :attr:`CellList.grid`.
+        tmp, tmp_ss: Work arrays (n + 1,) of ints and floats.
         cand, cdist, key: Outputs (n,): position in bin order, distance and particle index of
             each pair, in increasing particle index.
-        range3: Work array (2, 3) of ints.
+        store: Whether to write the outputs (else only count the pairs).
 
     Returns:
         The number of pairs.
     """
-    pts, radii, order, start, lo, size, shape, reach, bin_reach = grid
-    g = lo.size
-    range3[:, :] = 0
-    for d in range(g):
-        a = np.floor((xq[d] - reach - lo[d]) / size)
-        e = np.floor((xq[d] + reach - lo[d]) / size)
-        range3[0, d] = int(min(max(a, 0.0), float(shape[d])))
-        range3[1, d] = int(min(max(e, -1.0), float(shape[d] - 1)))
+    packed, radii, order, start, los, sizes, shapes, reaches, boff = grid
+    g = los.shape[1]
+    last = g - 1
     x0, x1, x2 = xq[0], xq[1], xq[2]
-    nc = 0
-    for c0 in range(range3[0, 0], range3[1, 0] + 1):
-        g0 = _gap(x0, lo[0] + c0 * size, size)
-        for c1 in range(range3[0, 1], range3[1, 1] + 1):
-            g1 = g0 + (_gap(x1, lo[1] + c1 * size, size) if g > 1 else 0.0)
-            for c2 in range(range3[0, 2], range3[1, 2] + 1):
-                g2 = g1 + (_gap(x2, lo[2] + c2 * size, size) if g > 2 else 0.0)
-                b = (c0 * shape[1] + c1) * shape[2] + c2
-                if g2 > bin_reach[b]:  # the bin is beyond the supports of its particles
+    xl = xq[last]
+    nt = 0
+    for lev in range(boff.size - 1):
+        if start[boff[lev]] == start[boff[lev + 1]]:  # an empty grid
+            continue
+        size, reach = sizes[lev], reaches[lev]
+        inv_size = 1.0 / size
+        reach2 = reach * reach
+        s1, s2 = shapes[lev, 1], shapes[lev, 2]
+        # outer axes: 0 (2D, 3D) and 1 (3D); the rows run along the last axis
+        a0, z0 = _span(x0, reach, los[lev, 0], inv_size, shapes[lev, 0]) if g > 1 else (0, 0)
+        a1, z1 = _span(x1, reach, los[lev, 1], inv_size, s1) if g > 2 else (0, 0)
+        lol, sl = los[lev, last], shapes[lev, last]
+        for c0 in range(a0, z0 + 1):
+            g0 = _gap(x0, los[lev, 0] + c0 * size, size) if g > 1 else 0.0
+            if g0 > reach2:
+                continue
+            for c1 in range(a1, z1 + 1):
+                g1 = g0 + (_gap(x1, los[lev, 1] + c1 * size, size) if g > 2 else 0.0)
+                if g1 > reach2:
                     continue
-                for s in range(start[b], start[b + 1]):
-                    e0 = x0 - pts[s, 0]
-                    e1 = x1 - pts[s, 1]
-                    e2 = x2 - pts[s, 2]
+                first, stop = _span(xl, np.sqrt(reach2 - g1), lol, inv_size, sl)
+                if first > stop:
+                    continue
+                base = boff[lev] + (c0 * s1 + c1) * s2
+                for s in range(start[base + first], start[base + stop + 1]):
+                    e0 = x0 - packed[s, 0]
+                    e1 = x1 - packed[s, 1]
+                    e2 = x2 - packed[s, 2]
                     ss = e0 * e0 + e1 * e1 + e2 * e2
-                    rs = radii[s]
-                    if ss <= rs * rs * (1.0 + 1e-10):  # cheap pre-test, then the exact one
-                        r = np.sqrt(ss)
-                        if r < rs:
-                            jj = order[s]  # insertion by particle index
-                            t = nc
-                            while t > 0 and key[t - 1] > jj:
-                                key[t] = key[t - 1]
-                                cand[t] = cand[t - 1]
-                                cdist[t] = cdist[t - 1]
-                                t -= 1
-                            key[t] = jj
-                            cand[t] = s
-                            cdist[t] = r
-                            nc += 1
+                    tmp[nt] = s
+                    tmp_ss[nt] = ss
+                    nt += ss <= packed[s, 3]  # the cheap pre-test, then the exact one
+    nc = 0
+    for u in range(nt):
+        s = tmp[u]
+        r = np.sqrt(tmp_ss[u])
+        if r < radii[s] and not store:
+            nc += 1
+        elif r < radii[s]:
+            jj = order[s]  # insertion by particle index
+            t = nc
+            while t > 0 and key[t - 1] > jj:
+                key[t] = key[t - 1]
+                cand[t] = cand[t - 1]
+                cdist[t] = cdist[t - 1]
+                t -= 1
+            key[t] = jj
+            cand[t] = s
+            cdist[t] = r
+            nc += 1
     return nc
 
 
@@ -160,20 +189,21 @@ def _search(
     """Pairs of the points ``x`` (m, 3; zero-padded) with the particles of ``grid``."""
     m = x.shape[0]
     n = grid[1].size
-    g = grid[4].size
+    g = grid[4].shape[1]
     counts = np.zeros(m, np.int64)
     cap = max(capacity, 16)
     j = np.empty(cap, np.int32)
     dx = np.empty((cap, g))
     dist = np.empty(cap)
     ddist = np.empty((cap, g))
+    tmp = np.empty(n + 1, np.int64)
+    tmp_ss = np.empty(n + 1)
     cand = np.empty(n, np.int64)
     cdist = np.empty(n)
     key = np.empty(n, np.int64)
-    range3 = np.zeros((2, 3), np.int64)
     k = 0
     for q in range(m):
-        nc = gather(x[q], grid, cand, cdist, key, range3)
+        nc = gather(x[q], grid, tmp, tmp_ss, cand, cdist, key, True)
         if k + nc > cap:  # grow the output
             cap = max(2 * cap, k + nc)
             j2 = np.empty(cap, np.int32)
@@ -196,6 +226,16 @@ def _search(
     return counts, j[:k], dx[:k], dist[:k], ddist[:k]
 
 
+def _grid_shape(extent: np.ndarray, size: float, n: int) -> tuple[float, np.ndarray]:
+    """Bin size (``size``, or coarser for a sparse cloud in a large box) and bins per axis."""
+    g = extent.size
+    bins = np.floor(extent / size) + 1
+    if bins.prod() > _MAX_BINS_PER_PARTICLE * n + 64:
+        size *= (bins.prod() / (_MAX_BINS_PER_PARTICLE * n + 64)) ** (1.0 / g)
+        bins = np.floor(extent / size) + 1
+    return size, bins.astype(np.int64)
+
+
 class CellList:
     """Particles binned for repeated support queries (compiled; needs numba).
 
@@ -208,40 +248,50 @@ class CellList:
         if not AVAILABLE:
             raise RuntimeError("CellList needs numba; use neighbours.pairs_within_support")
         pts = np.ascontiguousarray(particles, dtype=float)
+        radii = np.ascontiguousarray(radii, dtype=float)
         n, g = pts.shape
         if n >= np.iinfo(np.int32).max:
             raise ValueError(f"{n} particles do not fit 32-bit column indices")
         self.gdim = g
-        lo = pts.min(axis=0)
-        extent = pts.max(axis=0) - lo
-        # bins of half the largest radius; a point visits the bins within that radius (plus a
-        # margin for the rounding of the bin coordinates)
-        self._reach = float(radii.max()) * (1.0 + 1e-9)
-        size = 0.5 * self._reach
-        bins = np.floor(extent / size) + 1
-        if bins.prod() > _MAX_BINS_PER_PARTICLE * n + 64:
-            size *= (bins.prod() / (_MAX_BINS_PER_PARTICLE * n + 64)) ** (1.0 / g)
-            bins = np.floor(extent / size) + 1
-        shape = np.ones(3, np.int64)
-        shape[:g] = bins.astype(np.int64)
-        self._lo, self._size, self._shape = lo, size, shape
-        self._start, self._order = _build(pts, lo, size, shape)
-        self._pts = np.zeros((n, 3))
-        self._pts[:, :g] = pts[self._order]
-        self._radii = np.ascontiguousarray(radii[self._order], dtype=float)
-        self._pairs_per_point = 16.0  # capacity guess, updated from each query
-        #: What the compiled functions take: ``(pts, radii, order, start, lo, size, shape,
-        #: reach, bin_reach)``, the positions (n, 3; zero-padded) and radii in bin order, the
-        #: particle index of each, the first of each bin (nbins + 1,), the grid's corner, bin
-        #: size and shape (3,), the reach of the search and the squared largest radius per bin.
-        # squared largest radius per bin, with a margin for the rounding of the bin boundaries
-        bin_of = np.repeat(np.arange(self._start.size - 1), np.diff(self._start))
-        bin_reach = np.zeros(self._start.size - 1)
-        np.maximum.at(bin_reach, bin_of, self._radii * (1.0 + 1e-6) + 1e-9 * size)
-        self.grid = (
-            self._pts, self._radii, self._order, self._start, self._lo, self._size,
-            self._shape, self._reach, bin_reach**2,
-        )  # fmt: skip
+        lo = pts.min(axis=0) if n else np.zeros(g)
+        extent = pts.max(axis=0) - lo if n else np.zeros(g)
+        # the fine grid: radii up to a quantile; the coarse one: the rest (maybe none)
+        r_max = float(radii.max()) if n else 1.0
+        r_cut = min(_SPREAD * float(np.quantile(radii, _QUANTILE)), r_max) if n else 1.0
+        level = (radii > r_cut).astype(np.int64)
+        los = np.zeros((_LEVELS, g))
+        sizes = np.ones(_LEVELS)
+        shapes = np.ones((_LEVELS, 3), np.int64)
+        reaches = np.zeros(_LEVELS)
+        boff = np.zeros(_LEVELS + 1, np.int64)
+        bins = np.empty(n, np.int64)
+        for lev, r_top in enumerate((r_cut, r_max)):
+            sel = np.flatnonzero(level == lev)
+            # the reach: the largest radius of the grid (plus a margin for the rounding of
+            # the bin coordinates); bins a fraction of it wide
+            reach = r_top * (1.0 + 1e-9)
+            size, shape = _grid_shape(extent, reach / _BINS_PER_RADIUS, max(sel.size, 1))
+            los[lev], sizes[lev], shapes[lev, :g], reaches[lev] = lo, size, shape, reach
+            c = np.clip(np.floor((pts[sel] - lo) / size), 0, shape - 1).astype(np.int64)
+            local = np.zeros(sel.size, np.int64)
+            for d in range(3):
+                local = local * shapes[lev, d] + (c[:, d] if d < g else 0)
+            bins[sel] = boff[lev] + local
+            boff[lev + 1] = boff[lev] + shapes[lev].prod()
+        start, order = _build(bins, int(boff[-1]))
+        radii = radii[order]
+        packed = np.zeros((n, 4))  # x, y, z and the squared radius of the cheap pre-test
+        packed[:, :g] = pts[order]
+        packed[:, 3] = radii * radii * (1.0 + 1e-10)
+        #: What the compiled functions take: ``(packed, radii, order, start, lo, size, shape,
+        #: reach, boff)``: per particle in bin order, its position (zero-padded) and squared
+        #: radius with a margin (n, 4), radius and index; the first particle of each bin
+        #: (nbins + 1,); per grid its corner (levels, gdim), bin size, shape (levels, 3; padded
+        #: with ones) and reach (its largest radius with a margin for the rounding of the bin
+        #: coordinates); the first bin of each grid (levels + 1,).
+        self.grid = (packed, radii, order, start, los, sizes, shapes, reaches, boff)
+        #: Pairs per point of the last query: the capacity guess of the next one.
+        self.pairs_per_point = 16.0
 
     def pairs(
         self, x: np.ndarray
@@ -255,8 +305,8 @@ class CellList:
         """
         x3 = np.zeros((x.shape[0], 3))
         x3[:, : self.gdim] = x
-        capacity = int(1.1 * self._pairs_per_point * x.shape[0]) + 16
+        capacity = int(1.1 * self.pairs_per_point * x.shape[0]) + 16
         out = _search(x3, self.grid, capacity)
         if x.shape[0]:
-            self._pairs_per_point = max(out[1].size / x.shape[0], 1.0)
+            self.pairs_per_point = max(out[1].size / x.shape[0], 1.0)
         return out

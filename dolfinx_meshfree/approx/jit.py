@@ -15,10 +15,11 @@ results.
 from __future__ import annotations
 
 import importlib.util
+import os
 from collections.abc import Callable
 from typing import Any, TypeVar
 
-__all__ = ["AVAILABLE", "jit"]
+__all__ = ["AVAILABLE", "jit", "num_threads"]
 
 #: True when numba can be imported: the compiled kernels are then the default.
 AVAILABLE: bool = importlib.util.find_spec("numba") is not None
@@ -45,3 +46,16 @@ else:
     def jit(fn: F) -> F:
         """Without numba the function stays plain Python (never called by the default paths)."""
         return fn
+
+
+def num_threads() -> int:
+    """The threads a compiled path may use (its kernels release the GIL): the environment
+    variable ``DOLFINX_MESHFREE_THREADS``, 1 by default, so that MPI ranks sharing a node's
+    cores are not oversubscribed; ignored without numba."""
+    value = os.environ.get("DOLFINX_MESHFREE_THREADS", "1")
+    if not (value.isdigit() and int(value) >= 1):
+        raise ValueError(
+            f"DOLFINX_MESHFREE_THREADS={value!r} is not a positive integer; set it to the "
+            "number of threads per process (e.g. 2) or unset it (1 thread)"
+        )
+    return int(value) if AVAILABLE else 1

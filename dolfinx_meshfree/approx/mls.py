@@ -38,6 +38,7 @@ from .mls_kernel import (
     derivative_matrices,
     mls_shape_functions,
     monomial_exponents,
+    tabulate_cells,
 )
 from .neighbours import check_points, pairs_within_support, support_radii
 from .tables import ShapeTable
@@ -294,6 +295,12 @@ class MLS:
         """The compiled path: cell-list pairs, cuts, compiled kernel, chunk by chunk."""
         m, g = x.shape
         self._prepare_compiled()
+        if not self.pair_cuts:  # search and kernel fused, straight into the table
+            counts, j, columns, sus, sus_A = tabulate_cells(
+                self._cells, x, WEIGHT_IDS[self.weight_name], self._exponents, self._dmat,
+                self._scale, bool(derivatives), self.rcond, CHUNK,
+            )  # fmt: skip
+            return self._checked_table(x, counts, sus, sus_A, j, columns, derivatives)
         counts = np.empty(m, np.int64)
         out = _GrowingColumns(1 + (g if derivatives else 0), m)
         suspects: list[np.ndarray] = [np.zeros(0, np.int64)]
@@ -322,13 +329,22 @@ class MLS:
             suspects.append(sus + start)
             suspect_A.append(A[sus])
             out.append(j, [phi, *dphi], stop - start)
+        sus, sus_A = np.concatenate(suspects), np.concatenate(suspect_A)
+        return self._checked_table(x, counts, sus, sus_A, *out.result(), derivatives)
+
+    def _checked_table(
+        self, x: np.ndarray, counts: np.ndarray, sus: np.ndarray, sus_A: np.ndarray,
+        j: np.ndarray, columns: list[np.ndarray], derivatives: int,
+    ) -> ShapeTable:  # fmt: skip
+        """The compiled path's table after its checks: the pair counts, then the exact
+        eigenvalue ratio of the moment matrices ``sus_A`` of the points ``sus`` whose cheap
+        bound was not above ``rcond``."""
         self._check_counts(counts, x)
-        sus = np.concatenate(suspects)
         if sus.size:
-            ratio = np.full(m, np.inf)
-            ratio[sus] = self._eigenvalue_ratio(np.concatenate(suspect_A))
+            ratio = np.full(x.shape[0], np.inf)
+            ratio[sus] = self._eigenvalue_ratio(sus_A)
             self._check_ratio(ratio, counts, x)
-        return self._table(x, counts, *out.result(), derivatives)
+        return self._table(x, counts, j, columns, derivatives)
 
     def _table(
         self, x: np.ndarray, counts: np.ndarray, j: np.ndarray, columns: list[np.ndarray],

@@ -135,6 +135,9 @@ def run(method: str, nodes: int, t_end: float, check_every: int = 5, comm=MPI.CO
         "kink_angle_deg": kink,
         "mean_angle_deg": mean,
         "initiation_time": growth.initiation.time if growth.initiation else None,
+        "initiation_angle_deg": (
+            float(np.degrees(growth.initiation.theta)) if growth.initiation else None
+        ),
         "KI_history": growth.KI_history(),
         "KII_history": growth.KII_history(),
         "steps": growth.model.step,
@@ -160,7 +163,10 @@ def report(rec: dict) -> None:
             f"{c['K_eq'] / 1e6:9.2f}  {np.degrees(c['theta']):8.2f}   {c['state']}{mark}"
         )
     print(f"  path (mm): {np.round(rec['path'], 2).tolist()}")
-    print(f"  kink angle {rec['kink_angle_deg']} deg, mean angle {rec['mean_angle_deg']} deg")
+    print(
+        f"  kink angle (first segment) {rec['kink_angle_deg']} deg, at initiation "
+        f"{rec['initiation_angle_deg']} deg, mean angle {rec['mean_angle_deg']} deg"
+    )
     print(
         f"  times: setup {rec['time_setup']:.2f} s, steps {rec['time_steps']:.2f} s "
         f"({rec['per_step'] * 1e3:.2f} ms/step), SIFs {rec['time_sifs']:.2f} s, rebuilds "

@@ -57,8 +57,8 @@ from .system import Field, LinearSystem, SemiDiscreteSystem
 
 __all__ = [
     "DYNAMICS_METHODS",
-    "DynamicCrackGrowth",
     "FINITE_STRAIN_DYNAMICS",
+    "DynamicCrackGrowth",
     "DynamicsResult",
     "EnergyRecord",
     "ExplicitDynamics",

@@ -22,7 +22,8 @@
 #   (a slot one spacing wide would not separate the MLS of its two faces). The crack runs half
 #   a spacing off the particle rows.
 # * The MLS weight: the package's quartic spline (``dilation`` 2), not the paper's Gaussian.
-# * No XDMF output; the PNG needs matplotlib.
+# * No XDMF output; the PNG (the particles, the particle box whose border is the FE interface,
+#   the notch and the path; K_I(t), K_II(t)) needs matplotlib.
 #
 # Methods: ``efg`` (particles everywhere) and the couplings of ``CRACK_COUPLINGS``
 # (``lagrange``, ``edge-to-edge``, ``bridging``) with the particles in the box
@@ -148,7 +149,10 @@ def run(method: str, nodes: int, t_end: float, check_every: int = 5, comm=MPI.CO
         "time_crack": tm["rebuild"],
         "time_total": total,
         "per_step": tm["per_step"],
+        "released_energy": [[t, e] for t, e in growth.released],
         "checks": [c.as_dict() for c in growth.history],
+        "_particles": growth.model.particles.positions[:, :2] * 1e3,
+        "_box": [(NOTCH_A - BOX * h) * 1e3, (NOTCH_Y - BOX * h) * 1e3] if method != "efg" else None,
     }
 
 
@@ -186,6 +190,11 @@ def plot(rec: dict, png: str) -> None:
         return
     fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4.5))
     p = np.asarray(rec["path"])
+    x = rec["_particles"]
+    a.plot(x[:, 0], x[:, 1], ".", color="0.6", ms=1, label="particles")
+    if rec["_box"] is not None:  # the particle box; FE outside it
+        x0, y0 = rec["_box"]
+        a.plot([x0, x0, 100], [100, y0, y0], "b-", lw=0.8, label="FE interface")
     a.plot([0, NOTCH_A * 1e3], [NOTCH_Y * 1e3] * 2, "k-", lw=2, label="notch")
     a.plot(p[:, 0], p[:, 1], "r.-", label="crack path")
     a.set(xlim=(0, 100), ylim=(0, 100), aspect="equal", xlabel="x (mm)", ylabel="y (mm)")
@@ -216,7 +225,8 @@ def main(argv=None) -> int:
             report(rec)
         if args.json:
             with open(args.json, "w") as f:
-                json.dump(records, f, indent=1)
+                plain = [{k: v for k, v in r.items() if not k.startswith("_")} for r in records]
+                json.dump(plain, f, indent=1)
         if args.png:
             plot(records[0], args.png)
     return 0

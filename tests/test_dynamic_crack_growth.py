@@ -114,11 +114,14 @@ def test_no_growth_when_K_Ic_is_above_the_peak():
     assert max(c.K_eq for c in g.history) > 0.5 * 1.6  # K was computed (the check can fail)
 
 
-def test_state_carried_over_equals_a_fresh_model():
+@pytest.mark.parametrize("method", ["efg", "lagrange", "bridging"])
+def test_state_carried_over_equals_a_fresh_model(method):
     """The rebuilt model (carry_state) equals a model built from scratch with the grown crack
-    and given the same state: forces to round-off, and 6 more steps to round-off; the old
-    model's forces differ (the check can fail)."""
-    g = growth(K_IC)
+    and given the same state: forces to round-off (measured 0), and 6 more steps to round-off;
+    the coefficients carried to 1.4e-15 (the projection onto the new constraint: round-off);
+    the old model's forces differ by 0.15 - 0.69 of the largest (check 1e-3: the check can
+    fail). The couplings' patch reaches x = 1.6 (the grown tip must stay h from the FE)."""
+    g = growth(K_IC, method=method, **({} if method == "efg" else {"patch_width": 0.6}))
     old = g.model
     old.set_initial(velocity=lambda x: np.stack([0.1 * x[:, 1], 0.05 * x[:, 0] ** 2], axis=1))
     old.run(10 * old.stable_time_step())
@@ -133,7 +136,9 @@ def test_state_carried_over_equals_a_fresh_model():
     fresh.projection.correct(fresh.stepper.u)
     fresh.projection.correct(fresh.stepper.v)
     for a, b in zip(old.stepper.u, new.stepper.u, strict=True):  # the coefficients carried
-        assert np.abs(a.array - b.array).max() <= 1e-14 * max(np.abs(a.array).max(), 1e-300)
+        assert np.abs(a.array - b.array).max(initial=0) <= 1e-13 * np.abs(a.array).max(
+            initial=1e-300
+        )
     assert new.time == old.time and new.step == old.step
     f_new, f_fresh, f_old = (m.system.internal_force(m.stepper.u) for m in (new, fresh, old))
     scale = COMM.allreduce(max(np.abs(f.array).max(initial=0) for f in f_fresh), op=MPI.MAX)

@@ -218,3 +218,24 @@ def test_path_leaving_the_particle_region():
     with pytest.raises(ValueError, match=r"stopped at step \d+, t = .*: the tip at \[1\.0, 0\.0\]"):
         g.run(T_END)
     assert len(g.path) == 1 and g.crack.points.shape == (2, 2)
+
+
+def test_tip_position_follows_speed_times_time():
+    """K_Ic = 0.05, reached as soon as the wave arrives: the tip never arrests and the k-th
+    extension comes at the first check after ``t_init + k segment / speed`` (the excess travel
+    is carried); the crack's length grows by ``k segment`` (measured: 2 extensions, straight to
+    |theta| <= 0.4 deg)."""
+    g = growth(0.05)
+    g.run(T_END)
+    hist = g.history
+    init = g.initiation
+    assert init is not None and all(c.state != "arrested" for c in hist)
+    interval = hist[1].time - hist[0].time
+    ext = [c for c in hist if c.extended]
+    assert len(ext) == int(g.speed * (T_END - init.time) / SEGMENT + 1e-9) >= 2
+    for k, c in enumerate(ext, start=1):
+        due = init.time + k * SEGMENT / g.speed
+        assert due - 1e-12 <= c.time < due + interval
+    steps = np.linalg.norm(np.diff(g.path, axis=0), axis=1)
+    assert np.allclose(steps, SEGMENT, rtol=1e-12)
+    assert max(abs(np.degrees(c.theta)) for c in hist if c.state != "below") <= 1.0

@@ -202,6 +202,8 @@ def test_rayleigh_speed_known_value():
 
 def test_time_step_and_check_interval_refused():
     g = growth(K_IC)
+    with pytest.raises(ValueError, match="t_end="):
+        g.run(float("nan"))
     stable = g.model.stable_time_step()
     g.dt = 1.5 * stable
     with pytest.raises(ValueError, match=r"dt=.* is above the stable time step"):

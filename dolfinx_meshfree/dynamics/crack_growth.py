@@ -303,7 +303,14 @@ class DynamicCrackGrowth:
 
     def run(self, t_end: float) -> list[GrowthCheck]:
         """Run to ``t_end``, checking every ``check_every`` steps (the last chunk may be
-        shorter; a check at the start too). Returns :attr:`history` (collective)."""
+        shorter; a check at the start too). Returns :attr:`history` (collective).
+
+        Raises:
+            ValueError: on every rank: ``t_end`` not a positive number; ``dt`` above the stable
+                step of a (rebuilt) model; ``check_every * dt * speed > segment``; a segment
+                that would leave the particles (naming the step, the time and the tip).
+        """
+        t_end = _positive("t_end", t_end, "the final time")
         if not self.history:
             self.check()
         while self.model.time < t_end * (1.0 - 1e-12):

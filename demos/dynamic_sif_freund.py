@@ -57,16 +57,22 @@ def freund(t: np.ndarray, material: mf.LinearElastic = MATERIAL, t0: float = 0.0
     return 2.0 * SIGMA * np.sqrt(cd * tau * (1.0 - 2.0 * nu) / np.pi) / (1.0 - nu)
 
 
-def build(method: str, cells: int, comm=MPI.COMM_WORLD, patch_width: float = 0.45):
-    """The explicit model, its crack and the spacing. ``cells``: odd number of cells across 2H."""
+def build(
+    method: str, cells: int, comm=MPI.COMM_WORLD, patch_width: float = 0.45, crack=None, msh=None
+):
+    """The explicit model, its crack and the spacing. ``cells``: odd number of cells across 2H;
+    ``crack``: default the edge crack to ``(A, 0)``; ``msh``: default a new mesh (give the same
+    one to rebuild a model with a grown crack)."""
     if cells % 2 != 1:
         raise ValueError(f"cells={cells} must be odd (the crack runs between particle rows)")
     h = 2.0 * H / cells
-    msh = dolfinx.mesh.create_rectangle(
-        comm, [np.array([0.0, -H]), np.array([W, H])], [round(W / h), cells],
-        dolfinx.mesh.CellType.quadrilateral,
-    )  # fmt: skip
-    crack = mf.Crack([[0.0, 0.0], [A, 0.0]])
+    if msh is None:
+        msh = dolfinx.mesh.create_rectangle(
+            comm, [np.array([0.0, -H]), np.array([W, H])], [round(W / h), cells],
+            dolfinx.mesh.CellType.quadrilateral,
+        )  # fmt: skip
+    if crack is None:
+        crack = mf.Crack([[0.0, 0.0], [A, 0.0]])
     if method == "efg":
         P = mf.ParticleSet.from_cells(msh, h)
         make = lambda facets: mf.ExplicitDynamics.efg(  # noqa: E731

@@ -27,7 +27,10 @@ Rabczuk et al. 2006, sec. 5.3.3 and Table I). The pieces live in modules of one 
 * :mod:`~dolfinx_meshfree.dynamics.results`: :class:`DynamicsResult`;
 * :mod:`~dolfinx_meshfree.dynamics.sifs`: dynamic stress intensity factors at a stationary tip
   (the interaction integral with the inertia term) and :class:`SIFHistory`, an ``on_output``
-  recorder of K_I(t), K_II(t).
+  recorder of K_I(t), K_II(t);
+* :mod:`~dolfinx_meshfree.dynamics.crack_growth`: :class:`DynamicCrackGrowth`, dynamic crack
+  growth (initiation, direction and arrest by the maximum hoop stress, a prescribed tip speed,
+  straight segments, the model rebuilt and the state carried over).
 
 Dimension-generic: the mesh's ``gdim`` sets the components (2D: triangles, quadrilaterals; 3D:
 tetrahedra, hexahedra). In 3D ``fe``, ``efg``, ``lagrange``, ``edge-to-edge`` and ``bridging``
@@ -42,6 +45,7 @@ exact solutions of the rod benchmarks in :mod:`~dolfinx_meshfree.verification.wa
 
 from __future__ import annotations
 
+from .crack_growth import DynamicCrackGrowth, GrowthCheck, rayleigh_speed
 from .energy import EnergyRecord
 from .explicit import ExplicitDynamics
 from .finite_strain import FINITE_STRAIN_DYNAMICS, NonlinearSystem
@@ -54,10 +58,12 @@ from .system import Field, LinearSystem, SemiDiscreteSystem
 __all__ = [
     "DYNAMICS_METHODS",
     "FINITE_STRAIN_DYNAMICS",
+    "DynamicCrackGrowth",
     "DynamicsResult",
     "EnergyRecord",
     "ExplicitDynamics",
     "Field",
+    "GrowthCheck",
     "LinearSystem",
     "NonlinearSystem",
     "SIFHistory",
@@ -65,5 +71,6 @@ __all__ = [
     "check_method",
     "fe_lumped_mass",
     "particle_lumped_mass",
+    "rayleigh_speed",
     "table_lumped_mass",
 ]

@@ -1,0 +1,357 @@
+"""Dynamic crack growth in explicit dynamics (issue 11, item 2; Belytschko et al. 1995, sec.
+5.2.2).
+
+Every ``check_every`` steps K_I and K_II at the tip are computed by the dynamic interaction
+integral (:func:`~dolfinx_meshfree.dynamics.sifs.dynamic_sifs`: the inertia term; the
+crack-velocity terms of a moving tip are left out, K is that of a stationary tip at the current
+state). The crack initiates when the maximum hoop stress reaches its critical value,
+``K_eq >= K_Ic`` (:func:`~dolfinx_meshfree.fracture.criteria.equivalent_sif`); the tip then
+travels at the prescribed ``speed`` (the paper: 0.15 c_s; at most the Rayleigh speed) and the
+crack is extended by one straight segment of length ``segment`` each time the tip has travelled
+one segment (the paper's remark: every ``segment / speed`` seconds), in the direction of the
+maximum hoop stress (:func:`~dolfinx_meshfree.fracture.criteria.kink_angle`) at that moment;
+the tip arrests (the partial segment is dropped) at a check where ``K_eq < K_Ic``, and may
+initiate again later.
+
+After each extension the model is rebuilt from scratch by the user's ``build(crack)`` with the
+grown crack (a full rebuild of both sides: tables, cut cells, masses, constraint rows, the
+stable step; the cost is measured in :attr:`DynamicCrackGrowth.timings`) and the state is
+carried over unchanged: the FE dofs and the particle coefficients of ``d_n`` and
+``v_{n-1/2}`` (the particles do not move, only their shape functions change: the remark after
+eq. 3.11), projected onto the new constraint ``G d = 0``, ``G v = 0`` in the mass metric (a
+no-op when the constraint rows did not change), with the step, time and work accounts. The
+energy the rebuild removes (the strain energy of the old minus the new stiffness at the same
+``d_n``: the energy released by the new crack faces) is recorded per extension.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy.optimize import brentq
+
+from ..fracture.criteria import equivalent_sif, kink_angle
+from ..geometry.crack import Crack
+from ..io import ProgressBar
+from ..parallel import raise_on_all_ranks
+from ..physics.materials import LinearElastic
+from .central_difference import advance_to
+from .explicit import ExplicitDynamics
+from .sifs import dynamic_sifs
+
+__all__ = ["DynamicCrackGrowth", "GrowthCheck", "rayleigh_speed"]
+
+Build = Callable[[Crack], ExplicitDynamics]
+
+
+def rayleigh_speed(material: LinearElastic) -> float:
+    """The Rayleigh wave speed ``c_R`` of ``material`` (root of ``(2 - x)^2 = 4 sqrt(1 - k x)
+    sqrt(1 - x)``, ``x = c_R^2 / c_s^2``, ``k = c_s^2 / c_d^2`` of the plane law)."""
+    cs = float(np.sqrt(material.mu / material.rho))
+    k = (cs / material.wave_speed()) ** 2
+
+    def f(x: float) -> float:
+        return (2.0 - x) ** 2 - 4.0 * np.sqrt(1.0 - k * x) * np.sqrt(1.0 - x)
+
+    return cs * float(np.sqrt(brentq(f, 1e-6, 1.0 - 1e-14, xtol=1e-15)))
+
+
+@dataclass
+class GrowthCheck:
+    """One check of :class:`DynamicCrackGrowth`.
+
+    Attributes:
+        step, time: The model's step and time. tip: the tip (2,) at which K was computed.
+        K_I, K_II: means over the domain radii; theta: kink angle (radians, counterclockwise
+        from the tip direction); K_eq: the equivalent SIF; state: ``"below"`` (K_eq < K_Ic,
+        not growing), ``"initiated"``, ``"growing"``, ``"arrested"``; extended: a segment was
+        added at this check (the model rebuilt); new_tip: the tip after it.
+    """
+
+    step: int
+    time: float
+    tip: np.ndarray
+    K_I: float
+    K_II: float
+    theta: float
+    K_eq: float
+    state: str
+    extended: bool
+    new_tip: np.ndarray
+
+    def as_dict(self) -> dict:
+        """Plain lists and floats (for JSON)."""
+        d = asdict(self)
+        d["tip"], d["new_tip"] = self.tip.tolist(), self.new_tip.tolist()
+        return d
+
+
+def _positive(name: str, value: object, what: str) -> float:
+    if isinstance(value, bool) or not (
+        isinstance(value, int | float | np.floating) and np.isfinite(value) and value > 0
+    ):
+        raise ValueError(f"{name}={value!r} must be a positive number ({what})")
+    return float(value)
+
+
+class DynamicCrackGrowth:
+    """Dynamic growth of one tip of ``crack`` in an explicit model (module docstring).
+
+    Args:
+        build: ``build(crack) -> ExplicitDynamics``: the model with ``crack`` among its cracks,
+            its loads and conditions (called once at the start and after every extension with
+            a fresh copy of the grown crack; the same mesh and particles every time).
+        crack: The initial crack (copied: the caller's object is not changed).
+        K_Ic: The fracture toughness (> 0).
+        speed: The prescribed tip speed (> 0, at most the Rayleigh speed
+            :func:`rayleigh_speed`; the paper: ``0.15 c_s``).
+        segment: The length of a straight crack segment (> 0; a few particle spacings, larger
+            than the outer domain radius).
+        check_every: Steps between two evaluations of K (>= 1); ``check_every * dt * speed``
+            must not exceed ``segment``.
+        tip: The end to grow, 0 or -1 (default: the only tip).
+        radius: Outer domain radii of the interaction integral (default that of
+            :func:`~dolfinx_meshfree.dynamics.sifs.dynamic_sifs`).
+        dt: The time step; ``None``: the stable step of each (re)built model. A given ``dt``
+            above the stable step of a rebuilt model is refused (a ``ValueError``).
+        sif_options: More keywords of :func:`~dolfinx_meshfree.dynamics.sifs.dynamic_sifs`.
+
+    Example::
+
+        growth = DynamicCrackGrowth(build, crack, K_Ic=68e6, speed=0.15 * cs, segment=4 * h)
+        growth.run(80e-6)
+        growth.path                  # the crack tip after each extension
+        growth.KI_history()          # [[t, K_I], ...]
+
+    Attributes:
+        model: The current :class:`ExplicitDynamics`. crack: The current crack (the model's).
+        history: One :class:`GrowthCheck` per check. released: ``(time, energy)`` per extension.
+        timings: Seconds in ``steps``, ``sifs``, ``rebuild`` (total), ``rebuilds`` (count),
+            ``per_step``.
+    """
+
+    def __init__(
+        self,
+        build: Build,
+        crack: Crack,
+        K_Ic: float,
+        speed: float,
+        segment: float,
+        check_every: int = 10,
+        tip: int | None = None,
+        radius: float | Sequence[float] | None = None,
+        dt: float | None = None,
+        **sif_options,
+    ) -> None:
+        if not callable(build):
+            raise ValueError(f"build={build!r:.80} must be a callable build(crack) -> model")
+        if not isinstance(crack, Crack):
+            raise ValueError(f"crack={crack!r:.80} should be a dolfinx_meshfree.Crack")
+        self.K_Ic = _positive("K_Ic", K_Ic, "the fracture toughness")
+        self.speed = _positive("speed", speed, "the prescribed crack tip speed")
+        self.segment = _positive("segment", segment, "the length of a crack segment")
+        if isinstance(check_every, bool) or not isinstance(check_every, int) or check_every < 1:
+            raise ValueError(f"check_every={check_every!r} must be an integer >= 1 (steps)")
+        self.dt = None if dt is None else _positive("dt", dt, "the time step")
+        self.check_every, self.radius, self.sif_options = check_every, radius, sif_options
+        self.build = build
+        self.timings = {"steps": 0.0, "sifs": 0.0, "rebuild": 0.0, "rebuilds": 0, "setup": 0.0}
+        tic = time.perf_counter()
+        self.crack = Crack(crack.points.copy())
+        self.model = build(self.crack)
+        self.timings["setup"] = time.perf_counter() - tic
+        comm = self.model.comm
+
+        def check() -> int:
+            if not isinstance(self.model, ExplicitDynamics):
+                raise ValueError(f"build(crack) returned {self.model!r:.80}, not ExplicitDynamics")
+            mat = self.model.material
+            if not isinstance(mat, LinearElastic):
+                raise ValueError(f"material={mat!r}: dynamic growth needs LinearElastic")
+            cr = rayleigh_speed(mat)
+            if self.speed > cr:
+                raise ValueError(
+                    f"speed={self.speed!r} is above the Rayleigh speed c_R={cr:.6g} (c_s="
+                    f"{np.sqrt(mat.mu / mat.rho):.6g}): a mode-I crack cannot run faster; "
+                    f"the paper uses 0.15 c_s"
+                )
+            ends = self.crack.tip_ends
+            if tip is None:
+                if len(ends) != 1:
+                    raise ValueError(f"the crack has tips at ends {ends}: give tip=0 or tip=-1")
+                return ends[0]
+            if isinstance(tip, bool) or tip not in ends:
+                raise ValueError(f"tip={tip!r} is not a tip end of the crack (ends {ends})")
+            return int(tip)
+
+        self.end = raise_on_all_ranks(comm, check)
+        self.history: list[GrowthCheck] = []
+        self.released: list[tuple[float, float]] = []
+        self.path_points: list[np.ndarray] = [self.crack.points[self.end].copy()]
+        self._growing, self._travelled = False, 0.0
+
+    # --- results ------------------------------------------------------------------------------
+    @property
+    def path(self) -> np.ndarray:
+        """The tip positions: the initial tip and the tip after each extension, (m, 2)."""
+        return np.array(self.path_points)
+
+    def KI_history(self) -> list[list[float]]:
+        """``[[t, K_I], ...]`` at every check."""
+        return [[c.time, c.K_I] for c in self.history]
+
+    def KII_history(self) -> list[list[float]]:
+        """``[[t, K_II], ...]`` at every check."""
+        return [[c.time, c.K_II] for c in self.history]
+
+    @property
+    def initiation(self) -> GrowthCheck | None:
+        """The first check at which the crack initiated, or ``None``."""
+        return next((c for c in self.history if c.state == "initiated"), None)
+
+    # --- the loop -----------------------------------------------------------------------------
+    def _time_step(self) -> float:
+        """The step of the current model: ``dt`` (refused above the stable step) or the stable
+        one; ``check_every * dt * speed <= segment`` (collective)."""
+        dyn = self.model
+        stable = dyn.stable_time_step()
+
+        def check() -> float:
+            dt = stable if self.dt is None else self.dt
+            if dt > stable * (1.0 + 1e-12):
+                tipx = np.round(self.crack.points[self.end], 12).tolist()
+                raise ValueError(
+                    f"dt={dt:.6g} is above the stable time step {stable:.6g} of the model "
+                    f"rebuilt at step {dyn.step}, t = {dyn.time:.6g} (tip {tipx}): the masses "
+                    f"changed; pass dt <= {stable:.6g} or dt=None (the stable step of each model)"
+                )
+            if self.check_every * dt * self.speed > self.segment * (1.0 + 1e-12):
+                raise ValueError(
+                    f"check_every={self.check_every} steps of dt={dt:.6g} at speed={self.speed:.6g}"
+                    f" cover {self.check_every * dt * self.speed:.6g}, more than segment="
+                    f"{self.segment:.6g}: lower check_every or lengthen the segment"
+                )
+            return dt
+
+        return raise_on_all_ranks(dyn.comm, check)
+
+    def _advance(self, nsteps: int, dt: float) -> None:
+        dyn = self.model
+        tic = time.perf_counter()
+        advance_to(
+            dyn.stepper, dyn.bound, dyn.time + nsteps * dt, nsteps, dt, (), 1, None,
+            lambda n: ProgressBar(n, dyn.comm, False),
+        )  # fmt: skip
+        self.timings["steps"] += time.perf_counter() - tic
+
+    def check(self) -> GrowthCheck:
+        """K at the tip at the current state, the criterion, and an extension when the tip
+        has travelled one segment (collective)."""
+        dyn, crack, end = self.model, self.crack, self.end
+        tip = crack.points[end].copy()
+        tic = time.perf_counter()
+        sif = dynamic_sifs(dyn, crack, tip, self.radius, **self.sif_options)
+        self.timings["sifs"] += time.perf_counter() - tic
+        KI, KII = float(sif.K_I.mean()), float(sif.K_II.mean())
+        theta, keq = float(kink_angle(KI, KII)), float(equivalent_sif(KI, KII))
+        grows = keq >= self.K_Ic
+        last = self.history[-1].time if self.history else dyn.time
+        if grows and not self._growing:
+            state, self._travelled = "initiated", 0.0
+        elif grows:
+            state = "growing"
+            self._travelled += self.speed * (dyn.time - last)
+        else:
+            state = "arrested" if self._growing else "below"
+        self._growing = grows
+        extended = grows and self._travelled >= self.segment * (1.0 - 1e-9)
+        if extended:
+            self._travelled -= self.segment
+            self._extend(theta)
+        rec = GrowthCheck(
+            step=dyn.step, time=dyn.time, tip=tip, K_I=KI, K_II=KII, theta=theta, K_eq=keq,
+            state=state, extended=extended, new_tip=self.crack.points[self.end].copy(),
+        )  # fmt: skip
+        self.history.append(rec)
+        return rec
+
+    def _extend(self, theta: float) -> None:
+        """Extend the crack by one segment at ``theta`` and rebuild the model, carrying the
+        state over (collective)."""
+        old, crack, end = self.model, self.crack, self.end
+        tip = crack.points[end].copy()
+        tic = time.perf_counter()
+        try:
+            crack.extend(theta, self.segment, tip=end)  # validated in the patch on every rank
+        except ValueError as e:
+            raise ValueError(
+                f"dynamic crack growth stopped at step {old.step}, t = {old.time:.6g}: the tip at "
+                f"{np.round(tip, 12).tolist()} cannot advance by {self.segment:.6g} at "
+                f"{np.degrees(theta):.4g} deg: {e}"
+            ) from e
+        grown = Crack(crack.points.copy())
+        new = self.build(grown)
+        self.released.append((old.time, carry_state(old, new)))
+        old.destroy()
+        self.model, self.crack = new, grown
+        self.path_points.append(grown.points[end].copy())
+        self.timings["rebuild"] += time.perf_counter() - tic
+        self.timings["rebuilds"] += 1
+
+    def run(self, t_end: float) -> list[GrowthCheck]:
+        """Run to ``t_end``, checking every ``check_every`` steps (the last chunk may be
+        shorter; a check at the start too). Returns :attr:`history` (collective).
+
+        Raises:
+            ValueError: on every rank: ``t_end`` not a positive number; ``dt`` above the stable
+                step of a (rebuilt) model; ``check_every * dt * speed > segment``; a segment
+                that would leave the particles (naming the step, the time and the tip).
+        """
+        t_end = _positive("t_end", t_end, "the final time")
+        if not self.history:
+            self.check()
+        while self.model.time < t_end * (1.0 - 1e-12):
+            dt = self._time_step()
+            left = int(np.ceil((t_end - self.model.time) / dt - 1e-9))
+            n = min(self.check_every, left)
+            self._advance(n, min(dt, (t_end - self.model.time) / n) if n == left else dt)
+            self.check()
+        steps = max(1, self.model.step)
+        self.timings["per_step"] = self.timings["steps"] / steps
+        return self.history
+
+
+def carry_state(old: ExplicitDynamics, new: ExplicitDynamics) -> float:
+    """Copy ``d_n``, ``v_{n-1/2}`` (FE dofs and particle coefficients), the step, time and the
+    work accounts of ``old`` into ``new`` (the same mesh and particles), projected onto the new
+    constraint. Returns the strain energy the new stiffness releases at ``d_n`` (collective)."""
+    so, sn = old.stepper, new.stepper
+
+    def check() -> None:
+        for a, b in zip(so.u, sn.u, strict=True):
+            if a.getSize() != b.getSize() or a.getLocalSize() != b.getLocalSize():
+                raise ValueError(
+                    f"the rebuilt model has {b.getSize()} dofs in a field where the old one had "
+                    f"{a.getSize()}: build(crack) must keep the mesh and the particles"
+                )
+
+    raise_on_all_ranks(old.comm, check)
+    for src, dst in ((so.u, sn.u), (so.v, sn.v)):
+        for a, b in zip(src, dst, strict=True):
+            a.copy(b)
+    if new.projection is not None:
+        new.projection.correct(sn.u)
+        new.projection.correct(sn.v)
+    sn.step, sn.time, sn.dt_prev = so.step, so.time, so.dt_prev
+    sn.records, sn.w_ext, sn.w_c = list(so.records), so.w_ext, so.w_c.copy()
+    work = [x.duplicate() for x in so.u]
+    try:
+        before = old.system.strain_energy(so.u, old.system.internal_force(so.u, work))
+        after = new.system.strain_energy(sn.u, new.system.internal_force(sn.u, work))
+    finally:
+        for x in work:
+            x.destroy()
+    return float(before - after)

@@ -89,7 +89,8 @@ def gather_rows(comm: MPI.Comm, rows: np.ndarray, values: np.ndarray, n: int) ->
     rank 0 into an (n, k) array (collective; ``None`` on the other ranks; rows no rank gives are
     zero)."""
     values = np.asarray(values, dtype=np.float64)
-    values = values.reshape(len(values), -1)
+    if values.ndim != 2:  # (m,) scalars or (m, ...) tensors; (0, k) stays as it is
+        values = values.reshape(values.shape[0], int(np.prod(values.shape[1:])))
     parts = comm.gather((np.asarray(rows, dtype=np.int64), values), root=0)
     if comm.rank != 0:
         return None

@@ -118,3 +118,21 @@ def test_series_writer_bad_input(shared_dir):
     with pytest.raises(ValueError, match=r"values for \d+ of the \d+ owned particles"):
         w.write(0.0, particle_values={"u": own[:-1] if COMM.rank == 0 else own})
     w.close()
+
+
+def test_gather_rows_with_a_rank_holding_none():
+    """A rank that owns no rows (a coupled model's particles all on one rank) gathers (0, k) and
+    (0,) arrays; rank 0 gets every row in place (an empty rank once raised there and hung the
+    others in the collective)."""
+    from dolfinx_meshfree.output import gather_rows
+
+    comm = MPI.COMM_WORLD
+    n = 5
+    mine = np.arange(n) if comm.rank == 0 else np.zeros(0, dtype=np.int64)
+    vec = gather_rows(comm, mine, np.column_stack([mine, 2.0 * mine]), n)
+    sca = gather_rows(comm, mine, 3.0 * mine, n)
+    if comm.rank == 0:
+        assert np.array_equal(vec, np.column_stack([np.arange(n), 2.0 * np.arange(n)]))
+        assert np.array_equal(sca[:, 0], 3.0 * np.arange(n))
+    else:
+        assert vec is None and sca is None

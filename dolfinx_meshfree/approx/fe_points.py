@@ -38,6 +38,7 @@ __all__ = [
     "ensure_points_in_mesh",
     "evaluate_fe_function",
     "locate_points",
+    "route_to_owners",
     "tabulate_fe_basis",
     "tabulate_in_cells",
 ]
@@ -210,7 +211,7 @@ def ensure_points_in_mesh(msh: dolfinx.mesh.Mesh, points: npt.ArrayLike) -> np.n
     return x
 
 
-def _route(
+def route_to_owners(
     msh: dolfinx.mesh.Mesh,
     points: np.ndarray,
     compute: Callable[[np.ndarray, np.ndarray], list],
@@ -271,7 +272,7 @@ def tabulate_fe_basis(
             rows.append((l2g[cols], [mm.data[mm.indptr[q] : mm.indptr[q + 1]] for mm in mats]))
         return rows
 
-    rows = _route(msh, x, compute)
+    rows = route_to_owners(msh, x, compute)
     n = imap.size_global
     m = x.shape[0]
     nmat = 1 + (gdim if derivatives else 0)
@@ -306,5 +307,5 @@ def evaluate_fe_function(u: dolfinx.fem.Function, points: npt.ArrayLike) -> np.n
         vals = tabulate_in_cells(V, pts, cells, derivatives=0).values @ local
         return list(vals)
 
-    rows = _route(msh, x, compute)
+    rows = route_to_owners(msh, x, compute)
     return np.array(rows, dtype=float).reshape(-1, bs)

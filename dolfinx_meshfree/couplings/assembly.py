@@ -28,7 +28,8 @@ from ..geometry.stress_points import stress_point_quadrature
 from ..parallel import Layout, raise_on_all_ranks
 from ..physics.body_loads import body_load_vectors
 from ..physics.operators import load_vector
-from ..statics.efg import _vector_values, crack_rules, facet_multipliers
+from ..physics.user_functions import vector_values
+from ..statics.efg import crack_rules, facet_multipliers
 from ..statics.petsc import BlockSystem, SolverOptions, create_aij, create_vector
 from .base import fe_dof_layout, node_flags
 
@@ -198,7 +199,7 @@ def essential_conditions(
         )
         xn = coords[flags]
         vals = raise_on_all_ranks(
-            comm, lambda fn=fn, xn=xn: _vector_values(fn, (xn,), len(xn), "dirichlet", gdim)
+            comm, lambda fn=fn, xn=xn: vector_values(fn, (xn,), len(xn), "dirichlet", gdim)
         )
         ubc.x.array.reshape(-1, gdim)[flags] = vals
         is_bc |= flags
@@ -291,7 +292,7 @@ def traction_loads(problem: CoupledElasticity) -> tuple[PETSc.Vec, np.ndarray]:
         f_fe_facets, f_p_facets = split_facets(problem, facets)
         q = facet_quadrature(msh, f_fe_facets, deg)
         t = raise_on_all_ranks(
-            comm, lambda fn=fn, q=q: _vector_values(fn, (q.points, q.normals), len(q), "t", gdim)
+            comm, lambda fn=fn, q=q: vector_values(fn, (q.points, q.normals), len(q), "t", gdim)
         )
         tab = tabulate_in_cells(V, q.points, q.cells, derivatives=0).values
         fl = load_vector(tab, q.weights, t).reshape(-1, gdim)
@@ -300,7 +301,7 @@ def traction_loads(problem: CoupledElasticity) -> tuple[PETSc.Vec, np.ndarray]:
             f_fe_vals.append(fl[:, comp])
         q = patch_facet_rule(problem, f_p_facets)
         t = raise_on_all_ranks(
-            comm, lambda fn=fn, q=q: _vector_values(fn, (q.points, q.normals), len(q), "t", gdim)
+            comm, lambda fn=fn, q=q: vector_values(fn, (q.points, q.normals), len(q), "t", gdim)
         )
         tab = raise_on_all_ranks(comm, lambda q=q: problem.mls.tabulate(q.points, 0)).values
         f_p += load_vector(tab, q.weights, t)

@@ -25,7 +25,7 @@ from petsc4py import PETSc
 
 from .. import _compat
 from ..approx.fe_dofs import cell_indicator, fe_dof_layout, node_flags
-from ..approx.fe_points import _route, tabulate_in_cells
+from ..approx.fe_points import route_to_owners, tabulate_in_cells
 from ..approx.mls import MLS
 from ..approx.neighbours import check_points
 from ..fracture.interaction import StressIntensityFactors
@@ -148,7 +148,7 @@ class CoupledSolution:
         # points on the interface belong to both sides, which a weak coupling makes differ
         # slightly: take the FE side, whatever the partition
         fe_side = ~self.patch.in_patch
-        return np.array(_route(msh, x, compute, fe_side), dtype=float).reshape(-1, gdim)
+        return np.array(route_to_owners(msh, x, compute, fe_side), dtype=float).reshape(-1, gdim)
 
 
 @dataclass

@@ -62,7 +62,8 @@ from ..approx.fe_points import locate_points, tabulate_in_cells
 from ..geometry.quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
 from ..parallel import Layout, raise_on_all_ranks
 from ..physics.operators import consistent_gradients, load_vector, stiffness_matrix
-from ..statics.efg import _vector_values, crack_rules
+from ..physics.user_functions import vector_values
+from ..statics.efg import crack_rules
 from ..statics.petsc import SolverOptions, create_aij, create_vector
 from .assembly import (
     append_patch_conditions,
@@ -482,7 +483,7 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
         fq = facet_quadrature(msh, f_fe_facets, deg)
         t = raise_on_all_ranks(
             comm,
-            lambda fn=fn, fq=fq: _vector_values(fn, (fq.points, fq.normals), len(fq), "t", d),
+            lambda fn=fn, fq=fq: vector_values(fn, (fq.points, fq.normals), len(fq), "t", d),
         )
         beta = np.where(band.in_band[fq.cells], 1.0 - band.alpha_at(fq.points, fq.cells), 1.0)
         tab = tabulate_in_cells(V, fq.points, fq.cells, derivatives=0).values
@@ -493,7 +494,7 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
         fq = patch_facet_rule(problem, f_p_facets)
         t = raise_on_all_ranks(
             comm,
-            lambda fn=fn, fq=fq: _vector_values(fn, (fq.points, fq.normals), len(fq), "t", d),
+            lambda fn=fn, fq=fq: vector_values(fn, (fq.points, fq.normals), len(fq), "t", d),
         )
         beta = np.where(band.in_band[fq.cells], band.alpha_at(fq.points, fq.cells), 1.0)
         tab = raise_on_all_ranks(comm, lambda fq=fq: problem.mls.tabulate(fq.points, 0)).values

@@ -27,7 +27,8 @@ from ..approx.tables import strain_operator
 from ..geometry.facet_groups import FacetGroups, constraint_rank_check, grouped_facet_quadrature
 from ..geometry.quadrature import QuadraturePoints
 from ..parallel import Layout, raise_on_all_ranks
-from ..statics.efg import _vector_values, facet_multipliers
+from ..physics.user_functions import vector_values
+from ..statics.efg import facet_multipliers
 from ..statics.petsc import create_aij, create_vector
 from .base import CouplingOperators, fe_dof_layout, node_flags
 from .hybrid_discretisation import HybridDiscretisation, global_facets
@@ -78,7 +79,7 @@ def nitsche_terms(
         x = sc.points[on]
         k = sc.owner[on]
         g = raise_on_all_ranks(
-            comm, lambda fn=fn, x=x: _vector_values(fn, (x,), len(x), "dirichlet")
+            comm, lambda fn=fn, x=x: vector_values(fn, (x,), len(x), "dirichlet")
         )
         t = raise_on_all_ranks(comm, lambda x=x: d.evaluator.tabulate(x, 0)).values.tocoo()
         m = on.size
@@ -182,7 +183,7 @@ def strong_conditions(
         flags = node_flags(d.V, dolfinx.fem.locate_dofs_topological(V, msh.topology.dim - 1, f_fe))
         xn = coords[flags]
         vals = raise_on_all_ranks(
-            comm, lambda fn=fn, xn=xn: _vector_values(fn, (xn,), len(xn), "dirichlet")
+            comm, lambda fn=fn, xn=xn: vector_values(fn, (xn,), len(xn), "dirichlet")
         )
         values[flags] = vals
         fixed |= flags

@@ -22,7 +22,7 @@ from ..geometry.quadrature import cell_quadrature, facet_quadrature
 from ..parallel import raise_on_all_ranks
 from ..physics.body_loads import CallableBodyForce, body_load_vectors
 from ..physics.operators import load_vector
-from ..statics.efg import _vector_values
+from ..physics.user_functions import vector_values
 from ..statics.petsc import create_vector
 from .base import cell_indicator, fe_dof_layout
 from .hybrid_discretisation import HybridDiscretisation, global_facets
@@ -62,7 +62,7 @@ def hybrid_loads(
             else:
                 q = facet_quadrature(msh, sel, deg)
             t = raise_on_all_ranks(
-                comm, lambda fn=fn, q=q: _vector_values(fn, (q.points, q.normals), len(q), "t")
+                comm, lambda fn=fn, q=q: vector_values(fn, (q.points, q.normals), len(q), "t")
             )
             if side == "fe":
                 tab = tabulate_in_cells(V, q.points, q.cells, derivatives=0).values

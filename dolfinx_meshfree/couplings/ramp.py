@@ -61,7 +61,8 @@ from ..geometry.patch import ParticlePatch
 from ..geometry.quadrature import boundary_facets, cell_quadrature, facet_quadrature
 from ..parallel import raise_on_all_ranks
 from ..physics.operators import consistent_gradients, load_vector, stiffness_matrix
-from ..statics.efg import _vector_values, particle_stiffness
+from ..physics.user_functions import vector_values
+from ..statics.efg import particle_stiffness
 from ..statics.petsc import SolverOptions, create_aij, create_vector
 from ..statics.sides import BlendedSide
 from .assembly import (
@@ -374,7 +375,7 @@ def ramp_system(problem: CoupledElasticity, tables: dict | None = None) -> tuple
         iq = facet_quadrature(msh, f_i, deg)
         tab = raise_on_all_ranks(comm, lambda iq=iq: blend.table(iq.points, iq.cells, 0))
         ubar = raise_on_all_ranks(
-            comm, lambda fn=fn, iq=iq: _vector_values(fn, (iq.points,), len(iq), "dirichlet")
+            comm, lambda fn=fn, iq=iq: vector_values(fn, (iq.points,), len(iq), "dirichlet")
         )
         # the FE part is known (strong values): constrain the particle part to the rest
         rest = ubar - tab.values[:, :n_loc] @ np.where(is_bc[:, None], u_bc, 0.0)
@@ -435,7 +436,7 @@ def ramp_system(problem: CoupledElasticity, tables: dict | None = None) -> tuple
         for part, use_blend in ((f_fe_facets[~inter], False), (f_fe_facets[inter], True)):
             fq = facet_quadrature(msh, part, deg)
             t = raise_on_all_ranks(
-                comm, lambda fn=fn, fq=fq: _vector_values(fn, (fq.points, fq.normals), len(fq), "t")
+                comm, lambda fn=fn, fq=fq: vector_values(fn, (fq.points, fq.normals), len(fq), "t")
             )
             if use_blend:
                 bt = raise_on_all_ranks(comm, lambda fq=fq: blend.table(fq.points, fq.cells, 0))
@@ -450,7 +451,7 @@ def ramp_system(problem: CoupledElasticity, tables: dict | None = None) -> tuple
                 f_fe_vals.append(fl[:, comp])
         fq = facet_quadrature(msh, f_p_facets, deg)
         t = raise_on_all_ranks(
-            comm, lambda fn=fn, fq=fq: _vector_values(fn, (fq.points, fq.normals), len(fq), "t")
+            comm, lambda fn=fn, fq=fq: vector_values(fn, (fq.points, fq.normals), len(fq), "t")
         )
         bt = raise_on_all_ranks(comm, lambda fq=fq: problem.mls.tabulate(fq.points, 0))
         f_p += load_vector(bt.values, fq.weights, t)

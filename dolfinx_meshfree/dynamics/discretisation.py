@@ -20,7 +20,7 @@ from ..couplings.bridging import BridgingBand
 from ..couplings.ramp import RampInterface
 from ..geometry.particles import ParticleSet
 from ..geometry.patch import ParticlePatch
-from ..statics.efg import _vector_values
+from ..physics import user_functions
 from .system import Field
 
 __all__ = ["Discretisation", "vector_values"]
@@ -31,7 +31,9 @@ VectorFunction = Callable[[np.ndarray], np.ndarray]
 def vector_values(fn: Callable[..., np.ndarray], *args: np.ndarray) -> np.ndarray:
     """``fn(*args)`` as an (m, gdim) float array, ``m, gdim = args[0].shape`` (the points), else
     a ``ValueError``."""
-    return _vector_values(fn, args, args[0].shape[0], "the function", args[0].shape[1])
+    return user_functions.vector_values(
+        fn, args, args[0].shape[0], "the function", args[0].shape[1]
+    )
 
 
 @dataclass

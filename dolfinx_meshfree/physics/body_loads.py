@@ -34,8 +34,8 @@ from .. import _compat
 from ..approx.fe_points import tabulate_in_cells
 from ..geometry.quadrature import QuadraturePoints, cell_quadrature
 from ..parallel import raise_on_all_ranks
-from ..statics.efg import _vector_values
 from .operators import load_vector
+from .user_functions import vector_values
 
 if TYPE_CHECKING:  # annotations only
     import ufl
@@ -77,7 +77,7 @@ class CallableBodyForce(BodyForce):
         self.force = force
 
     def values(self, q: QuadraturePoints) -> np.ndarray:
-        return _vector_values(self.force, (q.points,), len(q), "the body force", q.points.shape[1])
+        return vector_values(self.force, (q.points,), len(q), "the body force", q.points.shape[1])
 
     def fe_load(
         self, V: dolfinx.fem.FunctionSpace, weight: ufl.core.expr.Expr | None, degree: int

@@ -59,6 +59,7 @@ from ..physics.operators import (
     moment_corrections,
     stiffness_matrix,
 )
+from ..physics.user_functions import vector_values
 from .growth_update import local_update_for
 from .newton import NewtonOptions
 from .petsc import BlockSystem, SolverOptions, create_aij, create_vector, solver_options
@@ -83,13 +84,6 @@ TractionFunction = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 def _cat(parts: list, dtype) -> np.ndarray:
     return np.concatenate(parts).astype(dtype) if parts else np.zeros(0, dtype)
-
-
-def _vector_values(fn, args, m: int, name: str, gdim: int = 2) -> np.ndarray:
-    v = np.asarray(fn(*args), dtype=float)
-    if v.shape != (m, gdim):
-        raise ValueError(f"{name} must return an array of shape ({m}, {gdim}), got {v.shape}")
-    return v
 
 
 @dataclass
@@ -359,7 +353,7 @@ def facet_multipliers(
         fn, m = cond[1], len(cs)
         _, facet_id = np.unique(d.entities, return_inverse=True)
         ubar = raise_on_all_ranks(
-            comm, lambda fn=fn, d=d: _vector_values(fn, (d.points,), len(d), "dirichlet", gdim)
+            comm, lambda fn=fn, d=d: vector_values(fn, (d.points,), len(d), "dirichlet", gdim)
         )
         coo = tab.values.tocoo()
         for k, c in enumerate(cs):
@@ -564,14 +558,14 @@ class EFGElasticity:
         for (_, fn), fq, tab in zip(self._tractions, tq_loads, ttabs, strict=True):
             t = raise_on_all_ranks(
                 comm,
-                lambda fn=fn, fq=fq: _vector_values(
+                lambda fn=fn, fq=fq: vector_values(
                     fn, (fq.points, fq.normals), len(fq), "traction", gdim
                 ),
             )
             f_loc += load_vector(tab.values, fq.weights, t)
         if self._body is not None:
             b = raise_on_all_ranks(
-                comm, lambda: _vector_values(self._body, (q.points,), len(q), "body force", gdim)
+                comm, lambda: vector_values(self._body, (q.points,), len(q), "body force", gdim)
             )
             f_loc += load_vector(tq.values, q.weights, b)
         f = create_vector(comm, udofs, dof_map, f_loc)

@@ -2,8 +2,8 @@
 
 Near a crack tip the displacement behaves as ``sqrt(r)`` times functions of the tip angle
 ``theta``; a linear MLS basis resolves it only by refinement (the SIF error of pure EFG falls
-like ``h``: 3.7 % at 1,722 dofs on the edge crack, 0.6 % at 103k). Fleming et al. (1997, eq. 17)
-add to the basis the four functions that span the first term of Williams' expansion,
+like ``h``: 3.7 % at 1,722 dofs on the edge crack, 0.6 % at 103k). Fleming et al. (1997) add
+to the basis the four functions that span the first term of Williams' expansion,
 
 .. math::
     p^T = \\left[1,\\ x,\\ y,\\ \\sqrt r\\cos\\tfrac\\theta2,\\ \\sqrt r\\sin\\tfrac\\theta2,\\
@@ -13,9 +13,8 @@ in the tip frame (``theta = +-pi`` on the crack faces), so that the K_I and K_II
 reproduced exactly. Far from the tip these functions are nearly linear over a support and the
 moment matrix becomes singular (its eigenvalue ratio fell to 4e-19 with the whole plate
 enriched at dilation 2.5), so the enriched approximation is used only near the tip and blended
-into the linear one by a C1 cubic ramp ``R(r)`` (1 inside ``r1``, 0 beyond ``r2``), as Fleming
-et al. blend enriched and unenriched regions (their sec. 4.2, after Belytschko et al. 1995's
-ramp, eq. 4.1 of the coupled FE-EFG paper):
+into the linear one by a C1 cubic ramp ``R(r)`` (1 inside ``r1``, 0 beyond ``r2``), the blend
+of two approximations of Belytschko et al. 1995, eq. (3.12), here of two MLS approximations:
 
 .. math::
     N_I = R\\,N_I^{enr} + (1 - R)\\,N_I^{lin},\\qquad

@@ -76,6 +76,9 @@ def geometry(nodes: int, comm=MPI.COMM_WORLD, slot: bool = True):
     in_slot = (mid[:, 0] < slot_end) & (mid[:, 1] > NOTCH_Y) & (mid[:, 1] < NOTCH_Y + h)
     keep = np.flatnonzero(~in_slot).astype(np.int32)
     msh = dolfinx.mesh.create_submesh(full, 2, keep)[0]
+    # a submesh has no ghost cells in DOLFINx 0.11, which a particle patch on several ranks
+    # needs: the same cells redistributed with facet ghosts (and equal cells per rank)
+    msh = mf.balanced_mesh(msh, lambda x: np.ones(x.shape[1]), ghosted=True)
     return msh, h, slot_end, NOTCH_Y + 0.5 * h
 
 

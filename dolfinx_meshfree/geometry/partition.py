@@ -151,7 +151,9 @@ def work_per_rank(msh: dolfinx.mesh.Mesh, cell_weight: CellWeight) -> np.ndarray
     return np.asarray(msh.comm.allgather(float(w.sum())))
 
 
-def balanced_mesh(msh: dolfinx.mesh.Mesh, cell_weight: CellWeight) -> dolfinx.mesh.Mesh:
+def balanced_mesh(
+    msh: dolfinx.mesh.Mesh, cell_weight: CellWeight, ghosted: bool | None = None
+) -> dolfinx.mesh.Mesh:
     """The same mesh, distributed so that every rank owns cells of equal total ``cell_weight``.
 
     Args:
@@ -162,9 +164,14 @@ def balanced_mesh(msh: dolfinx.mesh.Mesh, cell_weight: CellWeight) -> dolfinx.me
             model: 1 for FE cells and the patch cells' cost relative to an FE cell, e.g.
             ``lambda x: np.where(x[0] > 5.0, 20.0, 1.0)``; ``demos/bench_balance.py`` measures it.
 
+        ghosted: Give the new mesh facet ghosts (DOLFINx's ``shared_facet`` mode, which a
+            particle patch needs on several ranks) or none; ``None``: like ``msh``. E.g. a
+            ``create_submesh`` has no ghosts in DOLFINx 0.11: ``balanced_mesh(sub, w,
+            ghosted=True)`` gives it some.
+
     Returns:
         A new mesh on ``msh.comm`` with the same cells and nodes (cell and node numbering
-        differ), ghosted like ``msh``. On one rank it is a renumbered copy.
+        differ), ghosted as asked. On one rank it is a renumbered copy.
 
     Collective. Everything is gathered on rank 0 to be cut (cells and coordinates: fine for
     meshes that fit one rank's memory, as every DOLFINx mesh generator assumes).
@@ -172,7 +179,9 @@ def balanced_mesh(msh: dolfinx.mesh.Mesh, cell_weight: CellWeight) -> dolfinx.me
     comm, tdim = msh.comm, msh.topology.dim
     cell_name = msh.topology.cell_type.name
     nv = basix.geometry(getattr(basix.CellType, cell_name)).shape[0]
-    ghosted = comm.allreduce(len(msh.topology.index_map(tdim).ghosts) > 0)
+    if ghosted is None:
+        ghosted = comm.allreduce(len(msh.topology.index_map(tdim).ghosts) > 0)
+    ghosted = bool(ghosted)
     gathered = _gathered(msh)
 
     def cut() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

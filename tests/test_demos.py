@@ -259,3 +259,21 @@ def test_crack_growth_demo_quick(shared_dir, monkeypatch):
             len(parts) == 2
             and int(parts[0].find("Topology").get("NumberOfElements")) == r["particles"]
         )
+
+
+def test_bench_balance_smoke():
+    """``bench_balance --small`` (a CI smoke run; no timing is checked): one rank, DOLFINx's
+    partition and the balanced mesh give the same L2 error (the bench exits on a difference
+    above 1e-4 relative), and the balanced mesh's busiest rank carries no more work than on
+    DOLFINx's partition (on 2 ranks: 0.5 against 0.82 measured at h = 0.125)."""
+    records = load_demo("bench_balance").main(["--small"])
+    coupled = [r for r in records if r["patch_fraction"] is not None]
+    assert len(coupled) == 3  # one rank, DOLFINx's partition, balanced
+    if MPI.COMM_WORLD.size == 1:
+        assert all(r["largest_work_share"] == 1.0 for r in coupled)
+        return
+    coupled = [r for r in coupled if r["ranks"] > 1]
+    default = next(r for r in coupled if not r["balance"])
+    balanced = next(r for r in coupled if r["balance"])
+    assert balanced["largest_work_share"] <= default["largest_work_share"] + 1e-12
+    assert balanced["largest_work_share"] < 0.6

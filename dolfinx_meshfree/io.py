@@ -37,7 +37,7 @@ import dolfinx.io
 import numpy as np
 from mpi4py import MPI
 
-from .output import CloudSeriesWriter, check_prefix, gather_rows
+from .output import CloudSeriesWriter, check_prefix, gather_rows, on_rank0
 
 if TYPE_CHECKING:
     from .dynamics import ExplicitDynamics
@@ -225,17 +225,7 @@ class DynamicsWriter:
     # -- rank 0 files --------------------------------------------------------------------------
 
     def _rank0(self, fn: Callable[[], object]) -> None:
-        """Run ``fn`` on rank 0; an ``OSError`` there is raised as a ``ValueError`` on every
-        rank (collective)."""
-        msg = None
-        if self.comm.rank == 0:
-            try:
-                fn()
-            except OSError as e:
-                msg = f"writing the output files of prefix {str(self.prefix)!r} failed: {e}"
-        msg = self.comm.bcast(msg, root=0)
-        if msg is not None:
-            raise ValueError(msg)
+        on_rank0(self.comm, fn, f"writing the output files of prefix {str(self.prefix)!r}")
 
     def _start_energy_file(self) -> None:
         if self._with_energy:

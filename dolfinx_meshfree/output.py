@@ -38,7 +38,7 @@ from .parallel import raise_on_all_ranks
 if TYPE_CHECKING:
     from .geometry.particles import ParticleSet
 
-__all__ = ["CloudSeriesWriter", "SeriesWriter", "check_prefix", "gather_rows"]
+__all__ = ["CloudSeriesWriter", "SeriesWriter", "check_prefix", "gather_rows", "on_rank0"]
 
 # -- the output prefix -------------------------------------------------------------------------
 
@@ -101,6 +101,21 @@ def gather_rows(comm: MPI.Comm, rows: np.ndarray, values: np.ndarray, n: int) ->
     return out
 
 
+def on_rank0(comm: MPI.Comm, fn: Callable[[], object], what: str) -> None:
+    """Run ``fn`` on rank 0 alone (collective): an ``OSError`` or ``ValueError`` there is raised
+    as a ``ValueError`` ``"{what} failed: ..."`` on every rank, so that no rank goes on into a
+    collective call alone."""
+    msg = None
+    if comm.rank == 0:
+        try:
+            fn()
+        except (OSError, ValueError) as e:
+            msg = f"{what} failed: {e}"
+    msg = comm.bcast(msg, root=0)
+    if msg is not None:
+        raise ValueError(msg)
+
+
 def _pad3(x: np.ndarray) -> np.ndarray:
     """Points or vectors (n, d <= 3) as (n, 3) (XDMF's ``XYZ`` and vector attributes)."""
     x = np.asarray(x, dtype=np.float64)
@@ -132,15 +147,7 @@ class CloudSeriesWriter:
         self._rank0(self._start)
 
     def _rank0(self, fn: Callable[[], object]) -> None:
-        msg = None
-        if self.comm.rank == 0:
-            try:
-                fn()
-            except (OSError, ValueError) as e:
-                msg = f"writing {str(self.path)!r} failed: {e}"
-        msg = self.comm.bcast(msg, root=0)
-        if msg is not None:
-            raise ValueError(msg)
+        on_rank0(self.comm, fn, f"writing {str(self.path)!r}")
 
     def _start(self) -> None:
         import h5py

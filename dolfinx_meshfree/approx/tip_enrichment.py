@@ -47,7 +47,7 @@ import scipy.sparse as sp
 from ..geometry.crack import Crack
 from . import batched
 from .crack_cuts import attach_cracks
-from .mls import MLS, MomentMatrixError, pair_distances
+from .mls import MLS, pair_distances
 from .neighbours import pairs_within_support
 from .tables import ShapeTable
 
@@ -192,17 +192,7 @@ class TipEnrichment:
         pI = enriched_basis(e.points, tip, direction, spacing)[0][j]
         q, dq = enriched_basis(x, tip, direction, spacing, None if sides is None else face * sides)
         A = MLS._sum_outer(i, w, pI, pI, m)
-        ratio = MLS._eigenvalue_ratio(A)
-        bad = np.flatnonzero(~(ratio > e.rcond))
-        if bad.size:
-            k = int(bad[0])
-            raise MomentMatrixError(
-                f"the tip-enriched MLS moment matrix is ill-conditioned at {x[k].tolist()} "
-                f"(eigenvalue ratio {ratio[k]:.2e} < rcond={e.rcond:.0e}; "
-                f"{np.count_nonzero(i == k)} particles in support, tip {tip.tolist()}): raise "
-                f"the enrichment's dilation (now {e.dilation}) or lower its outer radius "
-                f"(now {self.outer} spacings)"
-            )
+        e._check_conditioning(A, np.bincount(i, minlength=m), x)  # the MLS's own check
         Ainv = batched.inv(A)
         g = np.einsum("qab,qb->qa", Ainv, q)  # A^-1 p(x)
         phi = w * np.einsum("pa,pa->p", pI, g[i])
@@ -303,6 +293,10 @@ def enrich_tips(
         )
     enriched = MLS(mls.points, weight=mls.weight_name, dilation=dilation, backend="numpy")
     enriched.rcond = mls.rcond
+    enriched._fix = (  # the fix its conditioning check names (MomentMatrixError)
+        f"raise the enrichment's dilation (now {dilation}) or lower its outer radius "
+        f"(now {outer} spacings around the tip)"
+    )
     attach_cracks(enriched, cracks, method)
     transform = TipEnrichment(mls, list(cracks), enriched, float(inner), float(outer))
     mls.table_transforms.append(transform)

@@ -337,11 +337,12 @@ class LocalUpdate:
         ids = changed_rows(x, segments, float(r.max()))
         d = point_segment_distance(x[ids], segments[:, 0], segments[:, 1]).min(axis=1)
         near = ids[d < r[ids]]
-        R = float(r[near].max()) * (1 + 1e-12) if near.size else 0.0
+        R = float(r[near].max()) if near.size else 0.0
         # a table transform with a reach (the near-tip enrichment's ramp, which moves with the
         # tip) changes every row within that reach of the old and the new tip: ends of S
-        reach = [t.reach() for t in self.mls.table_transforms if hasattr(t, "reach")]
-        return max([R, *reach]) * (1 + 1e-12) if segments.shape[0] else R
+        if segments.shape[0]:
+            R = max([R, *(t.reach() for t in self.mls.table_transforms if hasattr(t, "reach"))])
+        return R * (1 + 1e-12)
 
     # -- crack rules ---------------------------------------------------------------------------
     def rules(

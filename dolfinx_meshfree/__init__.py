@@ -42,6 +42,7 @@ from .dynamics import DYNAMICS_METHODS, DynamicsResult, EnergyRecord, ExplicitDy
 from .fracture.criteria import equivalent_sif, kink_angle
 from .fracture.interaction import StressIntensityFactors, interaction_integral
 from .fracture.williams import WilliamsField
+from .geometry.adaptive_quadrature import AdaptiveQuadrature
 from .geometry.crack import Crack
 from .geometry.particles import ParticleSet
 from .geometry.partition import balanced_mesh, work_per_rank
@@ -82,6 +83,7 @@ __all__ = [
     "MLS",
     "PLACEMENTS",
     "SPH",
+    "AdaptiveQuadrature",
     "Approximation",
     "CoupledElasticity",
     "CoupledLinearProblem",

@@ -98,21 +98,22 @@ def patch_rules(
     for stress points); without, :func:`particle_rule` and ``None`` (the facet rule of
     ``patch.boundary()``)."""
     patch = problem.patch
-    if not patch.cracks:
+    if not patch.cracks and patch.quadrature is None:
         return particle_rule(problem, integration), None
 
     def check() -> None:
         if integration != "cells":
             raise ValueError(
-                f"integration={integration!r}: a cracked patch is integrated on its cut cells; "
-                "use integration='cells'"
+                f"integration={integration!r}: a cracked patch (or one with an "
+                "AdaptiveQuadrature) is integrated on its cells; use integration='cells'"
             )
 
     raise_on_all_ranks(patch.comm, check)
     boundary = patch.boundary() if problem.consistent else None
     return crack_rules(
-        patch.mesh, patch.particles.cells, patch.cracks, problem.quadrature_degree, boundary
-    )
+        patch.mesh, patch.particles.cells, patch.cracks, problem.quadrature_degree, boundary,
+        quadrature=patch.quadrature,
+    )  # fmt: skip
 
 
 def patch_facet_rule(problem: CoupledElasticity, facets: np.ndarray) -> QuadraturePoints:
@@ -142,7 +143,8 @@ def body_loads(
     msh, comm, deg = problem.V.mesh, problem.patch.comm, problem.quadrature_degree
     cells, cracks = problem.patch.particles.cells, problem.patch.cracks
     # cells a crack cuts: each side on its own (the rule of the stiffness, crack_rules)
-    q = crack_rules(msh, cells, cracks, deg, None)[0] if cracks else None
+    adaptive = problem.patch.quadrature
+    q = crack_rules(msh, cells, cracks, deg, None, quadrature=adaptive)[0]
     q = cell_quadrature(msh, deg, cells) if q is None else q
     if particle_weights is not None:
         q = QuadraturePoints(q.points, q.weights * particle_weights(q), q.cells)

@@ -417,7 +417,8 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
     band = BridgingBand(problem, problem.overlap, problem.band_width)
 
     # particle side: Gauss quadrature on the patch cells, weights times alpha in the band
-    q = crack_rules(msh, P.cells, patch.cracks, deg, None)[0] or cell_quadrature(msh, deg, P.cells)
+    q = crack_rules(msh, P.cells, patch.cracks, deg, None, quadrature=patch.quadrature)[0]
+    q = q or cell_quadrature(msh, deg, P.cells)
     w = q.weights.copy()
     b = band.in_band[q.cells]
     w[b] *= band.alpha_at(q.points[b], q.cells[b])

@@ -71,6 +71,7 @@ from ..physics.body_loads import CallableBodyForce, body_load_vectors
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic
 from ..statics.coupled import CoupledElasticity, CouplingOperators
+from ..geometry.adaptive_quadrature import AdaptiveQuadrature
 from ..statics.efg import crack_rules, particle_stiffness
 from ..statics.petsc import create_aij
 from ..statics.sides import BlendedSide
@@ -217,6 +218,29 @@ def check_crack_options(
     raise_on_all_ranks(comm, check)
 
 
+def check_quadrature_option(
+    quadrature: AdaptiveQuadrature | None, integration: str, comm: MPI.Comm
+) -> None:
+    """Refuse, on every rank, a ``quadrature`` that is not an
+    :class:`~dolfinx_meshfree.AdaptiveQuadrature` or one combined with stress points."""
+
+    def check() -> None:
+        if quadrature is None:
+            return
+        if not isinstance(quadrature, AdaptiveQuadrature):
+            raise ValueError(
+                f"quadrature={quadrature!r}: give an AdaptiveQuadrature(radius=..., near=..., "
+                "far=...) or None (the uniform rule of quadrature_degree)"
+            )
+        if integration != "cells":
+            raise ValueError(
+                f"quadrature=AdaptiveQuadrature(...) with integration={integration!r}: the "
+                "adaptive rule is a cell rule; use integration='cells'"
+            )
+
+    raise_on_all_ranks(comm, check)
+
+
 # -- pure FE, pure EFG -------------------------------------------------------------------------
 
 
@@ -274,6 +298,7 @@ def build_efg(
     integration: str = "cells",
     cracks: Sequence[Crack] = (),
     crack_method: str = "diffraction",
+    quadrature: AdaptiveQuadrature | None = None,
 ) -> Model:
     """Pure EFG on the particles' background cells (Belytschko et al. 1995, sec. 5.2):
     :func:`~dolfinx_meshfree.statics.efg.particle_stiffness` and row-sum masses. Collective.
@@ -297,6 +322,11 @@ def build_efg(
             (:func:`~dolfinx_meshfree.statics.efg.crack_rules`: Belytschko et al. 1995, sec.
             5.2.2) for the stiffness, the lumped masses and the body loads alike; the crack
             faces are traction-free (natural). Small strain and ``integration="cells"`` only.
+        quadrature: An :class:`~dolfinx_meshfree.AdaptiveQuadrature`: the cells within its
+            radius of a crack tip integrated with its ``near`` degree, the others with ``far``
+            (Belytschko et al. 1995, sec. 5.2.2), for the stiffness, masses and body loads;
+            computed from ``cracks``, so a model rebuilt after an extension moves the zone with
+            the tip. ``None`` (default): the uniform rule of ``quadrature_degree``.
 
     A finite-strain ``material`` gives the internal force of
     :class:`~dolfinx_meshfree.InternalForces` on the same rule and table.
@@ -307,6 +337,7 @@ def build_efg(
     _check_integration(integration, particles.gdim)
     cracks = list(cracks)
     check_crack_options(bool(cracks), integration, law is not material, particles.comm)
+    check_quadrature_option(quadrature, integration, particles.comm)
     gdim = particles.gdim
     raise_on_all_ranks(particles.comm, lambda: material.check_gdim(gdim, "the particles' mesh"))
     check_particle_mass(particle_mass)
@@ -323,6 +354,11 @@ def build_efg(
             place_crack(crack, domain)
         raise_on_all_ranks(comm, lambda: attach_cracks(mls, cracks, crack_method))
         rule = crack_rules(particles.mesh, domain.cells, cracks, quadrature_degree, None)[0]
+    if quadrature is not None:  # after the cracks are placed: their tips are known
+        cells = CrackDomain.from_particles(particles).cells
+        rule = crack_rules(
+            particles.mesh, cells, cracks, quadrature_degree, None, quadrature=quadrature
+        )[0]
     tables: dict = {}
     K_loc, q, tq, _ = particle_stiffness(
         particles, mls, material, quadrature_degree, quadrature=rule, tables=tables

@@ -35,6 +35,7 @@ from ..couplings.bridging import BridgingBand
 from ..couplings.hybrid import HybridElasticity
 from ..couplings.ramp import RampInterface
 from ..fracture.interaction import StressIntensityFactors
+from ..geometry.adaptive_quadrature import AdaptiveQuadrature
 from ..geometry.crack import Crack
 from ..geometry.particles import ParticleSet
 from ..geometry.patch import ParticlePatch
@@ -211,6 +212,7 @@ class ExplicitDynamics:
         integration: str = "cells",
         cracks: Sequence[Crack] = (),
         crack_method: str = "diffraction",
+        quadrature: AdaptiveQuadrature | None = None,
     ) -> ExplicitDynamics:
         """Pure EFG on ``particles`` (Belytschko et al. 1995, sec. 5.2), on their background
         cells or (``integration="stress-points"``) at the particles and stress points; fixed
@@ -231,6 +233,7 @@ class ExplicitDynamics:
             integration=integration,
             cracks=cracks,
             crack_method=crack_method,
+            quadrature=quadrature,
         )
         return cls._from_model(model, safety, multiplier_solver)
 

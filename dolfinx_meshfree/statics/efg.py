@@ -37,6 +37,7 @@ from ..approx.mls import MLS
 from ..approx.tables import ShapeTable
 from ..approx.tip_enrichment import enrich_tips
 from ..fracture.interaction import StressIntensityFactors
+from ..geometry.adaptive_quadrature import AdaptiveQuadrature
 from ..geometry.crack import Crack, CrackDomain, place_crack
 from ..geometry.cut_cells import (
     cracked_boundary_quadrature,
@@ -276,9 +277,13 @@ def crack_rules(
     degree: int,
     boundary: tuple[np.ndarray, np.ndarray | None] | None,
     cell_rule: bool = True,
+    quadrature: AdaptiveQuadrature | None = None,
 ) -> tuple[QuadraturePoints | None, QuadraturePoints | None]:
     """The cell rule and VCI boundary rule of particles cut by ``cracks`` (Belytschko et al.
-    1995, sec. 5.2.2: each side of a crack integrated on its own, the faces traction-free):
+    1995, sec. 5.2.2: each side of a crack integrated on its own, the faces traction-free).
+    ``quadrature``: an :class:`~dolfinx_meshfree.AdaptiveQuadrature` for the cell rule (dense
+    near the tips, coarse elsewhere, ``degree`` then not used for the cells; built in full, even
+    with a local growth update, since its zone moves with the tips); default the uniform rule:
     :func:`~dolfinx_meshfree.geometry.cut_cells.cut_cell_quadrature` on ``cells`` and, with
     ``boundary = (facets, facet cells)``,
     :func:`~dolfinx_meshfree.geometry.cut_cells.cracked_boundary_quadrature` (its crack-face
@@ -286,6 +291,11 @@ def crack_rules(
     None)`` without cracks: :func:`particle_stiffness`'s defaults; the cell rule is ``None``
     too without ``cell_rule``. Collective.
     """
+    if quadrature is not None:  # the zone follows the tips: built in full
+        q = None
+        if cell_rule:
+            q = raise_on_all_ranks(msh.comm, lambda: quadrature.rule(msh, cells, cracks))
+        return q, _crack_rules(msh, cells, cracks, degree, boundary, False)[1] if cracks else None
     if not cracks:
         return None, None
     local = next((u for u in map(local_update_for, cracks) if u is not None), None)

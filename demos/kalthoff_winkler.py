@@ -87,9 +87,10 @@ def _cell_midpoints(msh) -> np.ndarray:
     return msh.geometry.x[_compat.geometry_dofmap(msh)[:n], :2].mean(axis=1)
 
 
-def builder(method: str, msh, h: float):
+def builder(method: str, msh, h: float, quadrature=None):
     """``build(crack) -> ExplicitDynamics``: the model with the crack, the impact traction and
-    the symmetry plane."""
+    the symmetry plane; ``quadrature``: an ``mf.AdaptiveQuadrature`` for the particle cells
+    (``None``: the uniform rule)."""
     impact = mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0.0) & (x[1] <= NOTCH_Y + 1e-12))
     symmetry = mf.boundary_facets(msh, lambda x: np.isclose(x[1], 0.0))
     fixed = [(symmetry, (1,))]
@@ -100,10 +101,14 @@ def builder(method: str, msh, h: float):
     def build(crack: mf.Crack) -> mf.ExplicitDynamics:
         if method == "efg":
             P = mf.ParticleSet.from_cells(msh, h)
-            dyn = mf.ExplicitDynamics.efg(P, MATERIAL, cracks=[crack], fixed_facets=fixed)
+            dyn = mf.ExplicitDynamics.efg(
+                P, MATERIAL, cracks=[crack], fixed_facets=fixed, quadrature=quadrature
+            )
         else:
             V = _compat.vector_function_space(msh)
-            patch = mf.ParticlePatch(msh, np.flatnonzero(box), h, cracks=[crack])
+            patch = mf.ParticlePatch(
+                msh, np.flatnonzero(box), h, cracks=[crack], quadrature=quadrature
+            )
             prob = mf.CoupledElasticity(V, patch, MATERIAL, coupling=method)
             dyn = mf.ExplicitDynamics.coupled(prob, fixed_facets=fixed)
         dyn.add_traction(impact, lambda x, n: np.stack([np.full(len(x), sigma), 0 * x[:, 0]], 1))
@@ -112,13 +117,21 @@ def builder(method: str, msh, h: float):
     return build
 
 
-def run(method: str, nodes: int, t_end: float, check_every: int = 5, comm=MPI.COMM_WORLD):
-    """One run: the growth history, the path and the timings (a JSON-ready dict)."""
+def run(
+    method: str,
+    nodes: int,
+    t_end: float,
+    check_every: int = 5,
+    comm=MPI.COMM_WORLD,
+    quadrature=None,
+):
+    """One run: the growth history, the path and the timings (a JSON-ready dict);
+    ``quadrature(h)``, if given, returns the particle cells' ``mf.AdaptiveQuadrature``."""
     tic = time.perf_counter()
     msh, h, slot_end, yc = geometry(nodes, comm, slot=method != "efg")
     crack = mf.Crack([[slot_end, yc], [NOTCH_A, yc]])
     growth = DynamicCrackGrowth(
-        builder(method, msh, h), crack, K_Ic=K_IC, speed=SPEED, segment=SEGMENT * h,
+        builder(method, msh, h, None if quadrature is None else quadrature(h)), crack, K_Ic=K_IC, speed=SPEED, segment=SEGMENT * h,
         check_every=check_every, radius=np.asarray(RADII) * h,
     )  # fmt: skip
     setup = time.perf_counter() - tic

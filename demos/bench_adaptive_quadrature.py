@@ -125,8 +125,9 @@ def table(records: list[dict]) -> str:
             f"{r[k2]:.2f}"
             for k2 in ("time_setup", "time_steps", "time_sifs", "time_crack", "time_total")
         )
+        dofs = sum(r["dofs"].values())
         rows.append(
-            f"| {r['method']} | {r['quadrature']} | {sum(r['dofs'].values())} | {_f(r['kink_angle_deg'], '.2f')} "
+            f"| {r['method']} | {r['quadrature']} | {dofs} | {_f(r['kink_angle_deg'], '.2f')} "
             f"| {_f(r['mean_angle_deg'], '.2f')} | {k} | {_f(r['K_history_difference'], '.1e')} "
             f"| {r['steps']} | {times} | {_f(r['ratio_to_efg_uniform'], '.3f')} |"
         )
@@ -154,7 +155,8 @@ def main(argv=None) -> int:
         kw.run(method, 21, 2e-6, comm=comm, quadrature=lambda h: mf.AdaptiveQuadrature(8 * h))
     records = run_all(kw, args.nodes, args.t_end, args.radius, args.far, args.method, comm)
     if comm.rank == 0:
-        print(f"Kalthoff–Winkler, {args.nodes} nodes, {args.t_end * 1e6:.0f} us, {comm.size} rank(s)")
+        us = args.t_end * 1e6
+        print(f"Kalthoff–Winkler, {args.nodes} nodes, {us:.0f} us, {comm.size} rank(s)")
         print(table(records))
         if args.json:
             plain = [{k: v for k, v in r.items() if not k.startswith("_")} for r in records]

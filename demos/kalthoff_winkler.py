@@ -131,7 +131,8 @@ def run(
     msh, h, slot_end, yc = geometry(nodes, comm, slot=method != "efg")
     crack = mf.Crack([[slot_end, yc], [NOTCH_A, yc]])
     growth = DynamicCrackGrowth(
-        builder(method, msh, h, None if quadrature is None else quadrature(h)), crack, K_Ic=K_IC, speed=SPEED, segment=SEGMENT * h,
+        builder(method, msh, h, None if quadrature is None else quadrature(h)), crack,
+        K_Ic=K_IC, speed=SPEED, segment=SEGMENT * h,
         check_every=check_every, radius=np.asarray(RADII) * h,
     )  # fmt: skip
     setup = time.perf_counter() - tic

@@ -62,6 +62,7 @@ from ..couplings.hybrid import HybridElasticity
 from ..couplings.hybrid_finite import HybridForces
 from ..couplings.master_slave_finite import SlaveCorrection
 from ..couplings.ramp import RampInterface
+from ..geometry.adaptive_quadrature import AdaptiveQuadrature
 from ..geometry.crack import Crack, CrackDomain, place_crack
 from ..geometry.particles import ParticleSet
 from ..geometry.patch import ParticlePatch
@@ -71,7 +72,6 @@ from ..physics.body_loads import CallableBodyForce, body_load_vectors
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic
 from ..statics.coupled import CoupledElasticity, CouplingOperators
-from ..geometry.adaptive_quadrature import AdaptiveQuadrature
 from ..statics.efg import crack_rules, particle_stiffness
 from ..statics.petsc import create_aij
 from ..statics.sides import BlendedSide

@@ -23,6 +23,7 @@ on the meshes measured (``tests/test_adaptive_quadrature.py``); one point per ce
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -193,9 +194,7 @@ def changed_cells(
     cells = np.asarray(cells, dtype=np.int64)
     changed = np.zeros(cells.size, dtype=bool)
     if quadrature is not None:
-        changed |= quadrature.near_cells(msh, cells, old) != quadrature.near_cells(
-            msh, cells, new
-        )
+        changed |= quadrature.near_cells(msh, cells, old) != quadrature.near_cells(msh, cells, new)
     old_segs = _segment_set(old)
     new_segs = [s for s in _segment_list(new) if s not in old_segs]
     gone = [s for s in _segment_list(old) if s not in set(_segment_list(new))]
@@ -209,7 +208,7 @@ def changed_cells(
 def _segment_list(cracks: Any) -> list[tuple[float, ...]]:
     out = []
     for p in crack_polylines(cracks):
-        for a, b in zip(p[:-1], p[1:], strict=True):
+        for a, b in itertools.pairwise(p):
             out.append((float(a[0]), float(a[1]), float(b[0]), float(b[1])))
     return out
 

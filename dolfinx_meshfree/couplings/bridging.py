@@ -758,7 +758,9 @@ def bridging_operators(problem: CoupledElasticity) -> CouplingOperators:
     fe_layout, l2g = fe_dof_layout(problem.V)
     pl = P.dof_layout(d)
     band = BridgingBand(problem, problem.overlap, problem.band_width)
-    q = cell_quadrature(msh, problem.quadrature_degree, P.cells)
+    deg = problem.quadrature_degree  # cut cells side by side, as bridging_system
+    q = crack_rules(msh, P.cells, patch.cracks, deg, None, quadrature=patch.quadrature)[0]
+    q = q or cell_quadrature(msh, deg, P.cells)
     w = q.weights.copy()
     b = band.in_band[q.cells]
     w[b] *= band.alpha_at(q.points[b], q.cells[b])

@@ -348,16 +348,14 @@ def build_efg(
         comm, lambda: MLS(particles, weight=weight, dilation=dilation, basis=basis)
     )
     rule = None if integration == "cells" else stress_point_quadrature(particles)
-    if cracks:  # as EFGElasticity: placed, MLS cut, cut cells integrated side by side
-        domain = CrackDomain.from_particles(particles)
+    if cracks or quadrature is not None:  # as EFGElasticity: placed, MLS cut, cut cells
+        domain = CrackDomain.from_particles(particles)  # integrated side by side
         for crack in cracks:
             place_crack(crack, domain)
-        raise_on_all_ranks(comm, lambda: attach_cracks(mls, cracks, crack_method))
-        rule = crack_rules(particles.mesh, domain.cells, cracks, quadrature_degree, None)[0]
-    if quadrature is not None:  # after the cracks are placed: their tips are known
-        cells = CrackDomain.from_particles(particles).cells
+        if cracks:
+            raise_on_all_ranks(comm, lambda: attach_cracks(mls, cracks, crack_method))
         rule = crack_rules(
-            particles.mesh, cells, cracks, quadrature_degree, None, quadrature=quadrature
+            particles.mesh, domain.cells, cracks, quadrature_degree, None, quadrature=quadrature
         )[0]
     tables: dict = {}
     K_loc, q, tq, _ = particle_stiffness(

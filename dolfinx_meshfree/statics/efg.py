@@ -411,6 +411,9 @@ class EFGElasticity:
             Belytschko 1996).
         crack_enrichment: Enrich the MLS basis near the crack tips (Fleming et al. 1997,
             :mod:`~dolfinx_meshfree.approx.tip_enrichment`); ``False`` (default): linear basis.
+        quadrature: An :class:`~dolfinx_meshfree.AdaptiveQuadrature`: the cells near the crack
+            tips with its ``near`` degree, the others with ``far`` (Belytschko et al. 1995, sec.
+            5.2.2); ``None`` (default): the uniform rule of ``quadrature_degree``.
     """
 
     def __init__(
@@ -425,9 +428,17 @@ class EFGElasticity:
         cracks: tuple[Crack, ...] | list[Crack] = (),
         crack_method: str = "diffraction",
         crack_enrichment: bool = False,
+        quadrature: AdaptiveQuadrature | None = None,
     ):
         if particles.mesh is None:
             raise ValueError("EFGElasticity needs particles with a background mesh (mesh=...)")
+        if quadrature is not None and not isinstance(quadrature, AdaptiveQuadrature):
+            raise ValueError(
+                f"quadrature={quadrature!r}: give an AdaptiveQuadrature(radius=..., near=..., "
+                "far=...) or None (the uniform rule of quadrature_degree)"
+            )
+        #: The :class:`~dolfinx_meshfree.AdaptiveQuadrature` of the cells, or ``None``.
+        self.adaptive_quadrature = quadrature
         if not isinstance(material, LinearElastic | Material):
             raise TypeError(
                 f"material must be a LinearElastic or a finite-strain Material (NeoHookean, "
@@ -524,7 +535,9 @@ class EFGElasticity:
         boundary = (boundary_facets(self.mesh), None) if self.consistent else None
         num_owned = self.mesh.topology.index_map(self.mesh.topology.dim).size_local
         cells = np.arange(num_owned) if P.cells is None else P.cells
-        q, bq = crack_rules(self.mesh, cells, self.cracks, deg, boundary)
+        q, bq = crack_rules(
+            self.mesh, cells, self.cracks, deg, boundary, quadrature=self.adaptive_quadrature
+        )
 
         def fq(f: np.ndarray) -> QuadraturePoints:  # facets split at the cracks' mouths
             if self.cracks:

@@ -42,7 +42,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .. import _compat
-from .cut_cells import crack_polylines, cut_cell_quadrature
+from .cut_cells import cells_cut_by, crack_polylines, cut_cell_quadrature
 from .quadrature import QuadraturePoints, cell_quadrature
 
 if TYPE_CHECKING:  # annotations only
@@ -200,8 +200,6 @@ def changed_cells(
             is the same object before and after.
         quadrature: The adaptive rule in use, or ``None``.
     """
-    from .cut_cells import cells_cut_by
-
     cells = np.asarray(cells, dtype=np.int64)
     changed = np.zeros(cells.size, dtype=bool)
     if quadrature is not None:

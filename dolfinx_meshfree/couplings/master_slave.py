@@ -496,7 +496,7 @@ def solve_master_slave(
 
 
 def outside_slave_layer(
-    problem, links: MasterSlaveLinks, patch_bc: list, dq: list, dtabs: list
+    problem: CoupledElasticity, links: MasterSlaveLinks, patch_bc: list, dq: list, dtabs: list
 ) -> tuple[list, list, list]:
     """Drop the patch-side Dirichlet facets that lie in the slave layer (both end points within
     it): the slaves there follow the FE boundary, whose nodes carry the condition strongly, and a

@@ -195,8 +195,7 @@ class ExplicitDynamics:
         ``fixed_facets``: owned exterior facets whose nodes are held at rest (strongly), or
         ``(facets, components)`` pairs holding only some components, e.g.
         ``[(symmetry_plane, (0,))]`` (not the hybrid; particles: a multiplier per facet and
-        component; :func:`~dolfinx_meshfree.dynamics.conditions.fixed_groups`); triples
-        ``(facets, components, velocity)`` drive FE nodes (``held`` in the class docstring).
+        component); ``(facets, components, velocity)`` triples drive FE nodes (``held``).
         """
         check_safety(safety)
         return cls._from_model(build_fe(V, material, fixed_facets), safety, None, fixed_facets)

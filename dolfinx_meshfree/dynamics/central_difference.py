@@ -124,12 +124,13 @@ class CentralDifference:
         """``v_n`` at an output time or after a run, else ``v_{n-1/2}``."""
         return self.v_now if self.v_now is not None else self.v
 
-    def residual(self, vel: Sequence[PETSc.Vec] | None = None) -> float:
-        """The relative constraint residual of ``vel`` (default: the current velocities); 0
-        without a constraint (collective)."""
+    def residual(self, vel: Sequence[PETSc.Vec] | None = None, target=None) -> float:
+        """The relative constraint residual of ``vel`` (default: the current velocities; from
+        ``G v = target`` with prescribed values); 0 without a constraint (collective)."""
         if self.projection is None:
             return 0.0
-        return self.projection.residual(vel if vel is not None else self.current_velocity())
+        vel = vel if vel is not None else self.current_velocity()
+        return self.projection.residual(vel, target)
 
     def advance(
         self,
@@ -196,8 +197,10 @@ class CentralDifference:
                     d_held = loads.motion.impose(masses[0], self._work[0], self.v[0], vnew[0],
                                                  tn, dt, gamma)  # fmt: skip
                 # multiplier correction (eq. 94-96): G v_{n+1/2} = 0
+                g = None
                 if self.projection is not None:
-                    self.projection.correct(vnew, imp)
+                    g = None if loads.motion is None else loads.motion.target(tn + 0.5 * dt)
+                    self.projection.correct(vnew, imp, g)
                 # work of the step (see energy.external_work)
                 d_ext, d_c = 0.0, np.zeros(F)
                 if n > 0:
@@ -223,7 +226,7 @@ class CentralDifference:
                         constraint=float((w_c + d_c).sum()),
                         transfer=float((w_c + d_c)[pk[0]]) if pk and G is not None else 0.0,
                         discrete=float(discrete_energy(half, internal, ku, vnew, dt)),
-                        residual=self.residual(vnew),
+                        residual=self.residual(vnew, g),
                     )
                     records.append(rec)
                     if n in out_steps:

@@ -113,10 +113,11 @@ def fixed_groups(
 
 def held_velocities(
     msh: dolfinx.mesh.Mesh, fixed_facets: npt.ArrayLike | list | None
-) -> list[tuple[np.ndarray, tuple[int, ...], Callable]]:
-    """The ``(facets, components, velocity)`` triples of ``fixed_facets``: FE nodes of the
-    facets held at the prescribed ``velocity(t)`` (a number, or one per component) in the
-    given components instead of at rest (collective checks; see
+) -> list[tuple[np.ndarray, tuple[int, ...], Callable | None]]:
+    """The groups of ``fixed_facets`` with their prescribed velocities, when some are given as
+    ``(facets, components, velocity)`` triples: ``velocity(t)`` (a number, or one per
+    component) drives the facets in those components instead of holding them at rest; a
+    pair's velocity is ``None`` (held at rest). Empty without triples (collective checks; see
     :class:`~dolfinx_meshfree.dynamics.prescribed.PrescribedMotion`). E.g. the impact of
     Kalthoff–Winkler: ``[(symmetry, (1,)), (impact, (0,), lambda t: v0 * min(t / t_r, 1))]``.
 
@@ -124,17 +125,15 @@ def held_velocities(
         ValueError: on every rank: a velocity that is not callable; bad facets or components
             (:func:`fixed_groups`).
     """
-    if not _is_pairs(fixed_facets):
+    if not _is_pairs(fixed_facets) or all(len(item) == 2 for item in fixed_facets):
         return []
     groups = fixed_groups(msh, fixed_facets)
     out = []
     for (facets, comps), item in zip(groups, fixed_facets, strict=True):
-        if len(item) < 3:
-            continue
-        velocity = item[2]
+        velocity = item[2] if len(item) == 3 else None
 
         def check(velocity: object = velocity) -> None:
-            if not callable(velocity):
+            if velocity is not None and not callable(velocity):
                 raise ValueError(
                     f"fixed_facets has the velocity {velocity!r:.80}; give a callable "
                     "velocity(t) -> a number or one number per held component"
@@ -143,6 +142,11 @@ def held_velocities(
         raise_on_all_ranks(msh.comm, check)
         out.append((facets, comps, velocity))
     return out
+
+
+def _one(x: np.ndarray) -> np.ndarray:
+    """Unit values (m, gdim) at points (m, gdim): the facets' measures as right-hand side."""
+    return np.ones(x.shape)
 
 
 def first_cells(msh: dolfinx.mesh.Mesh, facets: np.ndarray) -> np.ndarray:
@@ -187,9 +191,13 @@ def particle_conditions(
     facets: Sequence[np.ndarray],
     tables: Sequence[Callable[[QuadraturePoints], ShapeTable]],
     components: Sequence[tuple[int, ...]] | None = None,
-) -> tuple[sp.csr_matrix, Layout]:
+    measures: bool = False,
+) -> tuple[sp.csr_matrix, Layout] | tuple[sp.csr_matrix, Layout, np.ndarray, np.ndarray]:
     """Facet multipliers ``int_f phi_J`` (unit scale) of groups of facets, each with the
-    particle table of its cells and, optionally, the components it holds (collective)."""
+    particle table of its cells and, optionally, the components it holds (collective);
+    ``measures``: also the global rows and ``int_f 1`` of each multiplier (the right-hand side
+    of a unit held value,
+    :func:`~dolfinx_meshfree.statics.efg.facet_multipliers`)."""
     msh = particles.mesh
     comm = particles.comm
     conds, quads, tabs = [], [], []
@@ -197,11 +205,11 @@ def particle_conditions(
         components = [tuple(range(particles.gdim))] * len(facets)
     for f, table, comps in zip(facets, tables, components, strict=True):
         q = facet_quadrature(msh, f, 4)
-        conds.append((f, _zero, comps))
+        conds.append((f, _one if measures else _zero, comps))
         quads.append(q)
         tabs.append(raise_on_all_ranks(comm, lambda q=q, table=table: table(q)))
-    D, _, _, dl = facet_multipliers(particles, conds, quads, tabs, 1.0)
-    return D, dl
+    D, rows, vals, dl = facet_multipliers(particles, conds, quads, tabs, 1.0)
+    return (D, dl, rows, vals) if measures else (D, dl)
 
 
 def stack_rows(

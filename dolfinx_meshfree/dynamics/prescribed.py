@@ -1,10 +1,11 @@
-"""Prescribed (non-zero, time-dependent) velocities of held FE dofs in explicit dynamics.
+"""Prescribed (non-zero, time-dependent) velocities of held dofs in explicit dynamics.
 
-A held FE dof has ``M^{-1} = 0`` (:func:`~dolfinx_meshfree.dynamics.system.inverse_masses`), so
-central differences leave its velocity alone; a prescribed velocity ``vbar(t)`` is imposed by
-setting ``v_{n+1/2} = vbar(t_{n+1/2})`` there after the trial step (Belytschko et al. 1995, eq.
-93), so that ``d_{n+1} = d_n + dt vbar(t_{n+1/2})`` (the midpoint rule of ``int vbar``). The
-reaction that drives the dofs is the force the free equation of motion would need,
+FE nodes: a held FE dof has ``M^{-1} = 0``
+(:func:`~dolfinx_meshfree.dynamics.system.inverse_masses`), so central differences leave its
+velocity alone; a prescribed velocity ``vbar(t)`` is imposed by setting ``v_{n+1/2} =
+vbar(t_{n+1/2})`` there after the trial step (Belytschko et al. 1995, eq. 93), so that
+``d_{n+1} = d_n + dt vbar(t_{n+1/2})`` (the midpoint rule of ``int vbar``). The reaction that
+drives the dofs is the force the free equation of motion would need,
 
 .. math::
     r_n = M (v_{n+1/2} - v_{n-1/2}) / (\\gamma\\, dt) + f^{int}(d_n) - f^{ext}_n
@@ -13,11 +14,16 @@ reaction that drives the dofs is the force the free equation of motion would nee
 work of the energy record (:func:`~dolfinx_meshfree.dynamics.energy.reaction_work`), so the
 discrete energy balance closes to round-off as for a load.
 
+Particles (pure EFG): the facet multipliers of the held facets
+(:mod:`~dolfinx_meshfree.dynamics.conditions`) get the right-hand side ``int_f vbar_i(t)``: the
+velocity correction solves ``G v_{n+1/2} = g(t_{n+1/2})`` (eq. 94–96 with a non-zero
+right-hand side), and the work of its reaction ``-G^T lambda / dt`` is the constraint work of
+the record (:func:`~dolfinx_meshfree.dynamics.energy.constraint_work`).
+
 Given as ``fixed_facets`` triples ``(facets, components, velocity)``
 (:func:`~dolfinx_meshfree.dynamics.conditions.held_velocities`): ``velocity(t)`` a number or one
-number per held component, the same on all the facets' nodes (the impact of a flat projectile,
-the driven end of a bar). FE nodes only: facets of particle cells are refused (a particle's
-held value would need a non-zero right-hand side of the velocity constraint).
+number per held component, the same on all the facets (the impact of a flat projectile, the
+driven end of a bar). Refused: driven facets on particle cells of a coupled model.
 """
 
 from __future__ import annotations
@@ -30,7 +36,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from ..parallel import raise_on_all_ranks
-from .conditions import first_cells, fixed_fe_dofs
+from .conditions import first_cells, fixed_fe_dofs, particle_conditions
 from .discretisation import Discretisation
 from .energy import reaction_work
 
@@ -38,21 +44,21 @@ __all__ = ["HeldVelocity", "PrescribedMotion"]
 
 #: ``(facets, components, velocity(t))``
 #: (:func:`~dolfinx_meshfree.dynamics.conditions.held_velocities`).
-HeldVelocity = tuple[np.ndarray, tuple[int, ...], Callable[[float], float | Sequence[float]]]
+HeldVelocity = tuple[np.ndarray, tuple[int, ...], Callable[[float], float | Sequence[float]] | None]
 
 
 class PrescribedMotion:
-    """The held FE dofs driven at prescribed velocities, and the work of their reactions.
+    """Held dofs driven at prescribed velocities, and the work of their reactions.
 
     Args:
-        disc: The model's spaces (its FE space holds the dofs).
-        held: ``(facets, components, velocity)`` groups (validated facets and components).
+        disc: The model's spaces.
+        held: Every ``fixed_facets`` group ``(facets, components, velocity or None)``, in order
+            (:func:`~dolfinx_meshfree.dynamics.conditions.held_velocities`).
         comm: The communicator.
 
     Raises:
-        ValueError: on every rank: the model has no FE space, or a facet lies on a particle
-            cell (naming its midpoint), or ``velocity(t)`` does not give one number or one per
-            component.
+        ValueError: on every rank: a driven facet on a particle cell of a coupled model
+            (naming its midpoint), or ``velocity(t)`` not one number or one per component.
     """
 
     def __init__(self, disc: Discretisation, held: Sequence[HeldVelocity], comm: MPI.Comm) -> None:
@@ -60,54 +66,104 @@ class PrescribedMotion:
         V, msh = disc.V, disc.mesh
 
         def check() -> None:
-            if V is None:
-                raise ValueError(
-                    "fixed_facets with a velocity (facets, components, velocity) drives FE nodes; "
-                    "this model has none (pure EFG): hold the facets at rest or load them by a "
-                    "traction (add_traction)"
-                )
-            for facets, _, _ in held:
-                if disc.in_patch is None or not facets.size:
+            for facets, _, velocity in held:
+                if V is None or disc.in_patch is None or velocity is None or not facets.size:
                     continue
                 on_p = disc.in_patch[first_cells(msh, facets)]
                 if np.any(on_p):
-                    f = int(facets[np.flatnonzero(on_p)[0]])
-                    fs = np.array([f], dtype=np.int32)
-                    x = dolfinx.mesh.compute_midpoints(msh, msh.topology.dim - 1, fs)[0]
-                    x = x[: msh.geometry.dim]
+                    f = np.array([facets[np.flatnonzero(on_p)[0]]], dtype=np.int32)
+                    x = dolfinx.mesh.compute_midpoints(msh, msh.topology.dim - 1, f)[0]
                     raise ValueError(
-                        f"the facet at {np.round(x, 12).tolist()} with a prescribed velocity lies "
-                        "on a particle cell; prescribed velocities drive FE nodes only: move the "
-                        "particle patch away from the driven facets or load them by a traction"
+                        f"the facet at {np.round(x[: msh.geometry.dim], 12).tolist()} with a "
+                        "prescribed velocity lies on a particle cell of a coupled model; "
+                        "prescribed velocities drive FE nodes (or the particles of pure EFG): "
+                        "move the particle patch away from the driven facets or load them by a "
+                        "traction"
                     )
 
         raise_on_all_ranks(comm, check)
+        self.held = [(f, tuple(c), v) for f, c, v in held]
         gdim = msh.geometry.dim
-        #: per group: the owned FE dofs of each held component and ``velocity``
-        self.groups: list[tuple[list[np.ndarray], Callable]] = []
-        for facets, comps, velocity in held:
-            mask = fixed_fe_dofs(V, facets).reshape(-1, gdim)
-            self.groups.append(([np.flatnonzero(mask[:, c]) * gdim + c for c in comps], velocity))
-        self.components = [tuple(c) for _, c, _ in held]
-        self._dofs = [d for ds, _ in self.groups for d in ds]
+        #: the owned FE dofs of each driven group's components (FE models)
+        self._dofs: list[np.ndarray] = []
+        self.rows: np.ndarray | None = None  # particles: the multipliers' right-hand side
+        if V is not None:
+            for facets, comps, velocity in self.held:
+                if velocity is not None:
+                    mask = fixed_fe_dofs(V, facets).reshape(-1, gdim)
+                    self._dofs += [np.flatnonzero(mask[:, c]) * gdim + c for c in comps]
+        else:
+            self._particle_rows(disc)
         self._held = np.unique(np.concatenate([*self._dofs, np.zeros(0, dtype=np.int64)]))
 
+    def _particle_rows(self, disc: Discretisation) -> None:
+        """The facet multipliers of pure EFG as the builder makes them (the same groups in the
+        same order): per owned row its group, component and ``int_f 1`` (collective)."""
+        mls = disc.mls
+        _, dl, rows, measure = particle_conditions(
+            disc.particles,
+            [f for f, _, _ in self.held],
+            [lambda q: mls.tabulate(q.points, 0)] * len(self.held),
+            [c for _, c, _ in self.held],
+            measures=True,
+        )
+        group, comp = [], []
+        for j, (facets, comps, _) in enumerate(self.held):
+            n = np.unique(facets).size  # one multiplier per facet and component
+            group.append(np.full(n * len(comps), j))
+            comp.append(np.tile(np.arange(len(comps)), n))
+        self.group = np.concatenate([*group, np.zeros(0, dtype=np.int64)])
+        self.comp = np.concatenate([*comp, np.zeros(0, dtype=np.int64)])
+        self.measure = np.zeros(dl.size_local)
+        np.add.at(self.measure, np.asarray(rows) - dl.start, measure)  # one per facet point
+        if self.group.size != dl.size_local:  # the builder's layout, rank by rank
+            raise RuntimeError("the held facets' multipliers do not match the builder's rows")
+        self.rows = np.unique(rows)
+
     def values(self, t: float) -> list[np.ndarray]:
-        """The velocity of each group's components at ``t`` (checked on every rank)."""
+        """The velocity of each group's components at ``t`` (zero for groups held at rest;
+        checked on every rank)."""
 
         def check() -> list[np.ndarray]:
             out = []
-            for (dofs, velocity), comps in zip(self.groups, self.components, strict=True):
+            for _, comps, velocity in self.held:
+                if velocity is None:
+                    out.append(np.zeros(len(comps)))
+                    continue
                 v = np.atleast_1d(np.asarray(velocity(t), dtype=float))
                 if v.shape not in ((1,), (len(comps),)) or not np.all(np.isfinite(v)):
                     raise ValueError(
                         f"velocity({t!r}) gave {v!r:.80}: give one finite number, or one per held "
                         f"component {comps}"
                     )
-                out.append(np.broadcast_to(v, (len(dofs),)))
+                out.append(np.broadcast_to(v, (len(comps),)))
             return out
 
         return raise_on_all_ranks(self.comm, check)
+
+    def target(self, t: float) -> np.ndarray | None:
+        """Pure EFG: the owned rows of ``g(t) = int_f vbar(t)`` of the velocity constraint
+        ``G v = g``; ``None`` for an FE model (collective)."""
+        if self.rows is None:
+            return None
+        vals = self.values(t)
+        table = np.zeros((len(vals), max((v.size for v in vals), default=0)))
+        for j, v in enumerate(vals):
+            table[j, : v.size] = v
+        return self.measure * table[self.group, self.comp]
+
+    def kept(self, G: Sequence[PETSc.Mat | None], vecs: Sequence[PETSc.Vec]) -> np.ndarray | None:
+        """Pure EFG: ``G x`` on the driven rows, 0 elsewhere: the right-hand side that keeps the
+        driven values of ``x`` when it is projected onto a rebuilt constraint (a grown crack);
+        ``None`` for an FE model (collective)."""
+        if self.rows is None:
+            return None
+        gx = G[-1].createVecLeft()
+        G[-1].mult(vecs[-1], gx)
+        driven = np.array([v is not None for _, _, v in self.held])[self.group]
+        out = np.where(driven, gx.array_r, 0.0)
+        gx.destroy()
+        return out
 
     def impose(
         self,
@@ -119,15 +175,19 @@ class PrescribedMotion:
         dt: float,
         gamma: float,
     ) -> float:
-        """Set the held dofs of the FE field's ``v_new`` (``v_{n+1/2}``) to the velocity at
-        ``t + dt/2`` and return the work of the reaction over the step ``n`` (at ``t``), in the
-        form of :func:`~dolfinx_meshfree.dynamics.energy.external_work` (collective).
+        """Set the driven FE dofs of ``v_new`` (``v_{n+1/2}``, the FE field) to the velocity at
+        ``t + dt/2`` and return the work of their reaction over the step ``n`` (at ``t``), in
+        the form of :func:`~dolfinx_meshfree.dynamics.energy.external_work`; 0 for pure EFG
+        (its reaction is a constraint force; collective).
 
         Args:
-            mass: The FE field's lumped masses. residual: ``f^int(d_n) - f^ext_n`` there.
+            mass: The field's lumped masses. residual: ``f^int(d_n) - f^ext_n`` there.
             v_old: ``v_{n-1/2}``. gamma: The step's velocity-update factor (0.5 at ``n = 0``).
         """
-        vals = [x for group in self.values(t + 0.5 * dt) for x in group]
+        if self.rows is not None:
+            return 0.0
+        vals = [x for (_, _, v), g in zip(self.held, self.values(t + 0.5 * dt), strict=True)
+                if v is not None for x in g]  # fmt: skip
         arr = v_new.array
         for d, v in zip(self._dofs, vals, strict=True):
             arr[d] = v

@@ -124,7 +124,9 @@ class CentralDifference:
         """``v_n`` at an output time or after a run, else ``v_{n-1/2}``."""
         return self.v_now if self.v_now is not None else self.v
 
-    def residual(self, vel: Sequence[PETSc.Vec] | None = None, target=None) -> float:
+    def residual(
+        self, vel: Sequence[PETSc.Vec] | None = None, target: np.ndarray | None = None
+    ) -> float:
         """The relative constraint residual of ``vel`` (default: the current velocities; from
         ``G v = target`` with prescribed values); 0 without a constraint (collective)."""
         if self.projection is None:

@@ -276,6 +276,7 @@ def run(
         "checks": [c.as_dict() for c in growth.history],
         "xdmf": {k: str(v) for k, v in writers[0].files.items()} if writers else None,
         "_particles": growth.model.particles.positions[:, :2] * 1e3,
+        "_growth": growth,
         "_box": [(NOTCH_A - BOX * h) * 1e3, (NOTCH_Y - BOX * h) * 1e3] if method != "efg" else None,
     }
 

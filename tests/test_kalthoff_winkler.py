@@ -103,6 +103,15 @@ def test_sif_histories_before_initiation(runs):
     assert d["same_times"] and d["KI"] <= 0.05 and d["KII"] <= 0.13
 
 
+def test_sif_histories_wider_box(runs):
+    """The coupled models' SIF difference comes from the FE interface near the tip: with the
+    particle box from 10 spacings behind and below the tip (default 6) the velocity impact's
+    K_I, K_II are 1.52 %, 3.37 % off efg (16 spacings: 0.79 %, 1.94 %): the 5 % target met."""
+    wide = KW.run("lagrange", NODES, 20e-6, dt=DT, box=10.0)
+    d = KW.sif_difference(wide, runs["efg", "velocity"])
+    assert d["same_times"] and max(d["KI"], d["KII"]) <= 0.05
+
+
 @pytest.mark.xfail(strict=True, reason="velocity impact: K_II 6.35 % off efg before initiation")
 def test_sif_histories_velocity_target(runs):
     d = KW.sif_difference(runs["lagrange", "velocity"], runs["efg", "velocity"])

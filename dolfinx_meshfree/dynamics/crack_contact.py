@@ -1,0 +1,324 @@
+"""Frictionless crack-face contact in explicit dynamics: a one-sided penalty on the normal gap.
+
+The faces of a crack in a particle model are traction-free (natural) while they open; under
+compression they would interpenetrate, since the crack-aware MLS (visibility or diffraction,
+:mod:`~dolfinx_meshfree.approx.crack_cuts`) lets the two sides move independently. This module
+adds the contact of the faces (frictionless, small strain) as a penalty on the normal gap.
+
+Along each crack polyline, sample points ``x_q`` with weights ``w_q`` (Gauss–Legendre points on
+pieces of at most one particle spacing ``h``; points within ``tip_gap * h`` of a tip are left
+out: there the faces meet and the jump vanishes) carry the normal gap
+
+.. math::
+    g_q = n_q \\cdot (u^+(x_q) - u^-(x_q)) = (B d)_q, \\qquad
+    u^\\pm(x_q) = \\sum_J \\phi_J^\\pm(x_q) d_J,
+
+with ``n_q`` the left normal of the segment (pointing to the ``+1`` side of
+:meth:`~dolfinx_meshfree.Crack.side`) and ``phi^±`` the one-sided limits of the crack-aware MLS
+(``MLS.tabulate(..., sides=±1)``). ``g < 0`` is interpenetration. The penalty energy and its
+force (added to the internal force, the sign of ``M a + f^int = f^ext``) are
+
+.. math::
+    E_c = \\tfrac12 \\sum_q k w_q \\min(g_q, 0)^2, \\qquad
+    f_c = \\partial E_c / \\partial d = B^T (k w \\min(B d, 0)),
+
+one-sided: ``f_c = 0`` exactly while every face point is open (``g >= 0``). Central
+differences then conserve ``kinetic + strain + E_c`` (a conservative force; the energy balance
+of :mod:`~dolfinx_meshfree.dynamics.energy` stays closed, :meth:`ContactSystem.strain_energy`
+includes ``E_c``). The penalty stiffens the closed faces: the stable step is bounded with the
+full contact stiffness ``K + k B^T W B`` (every point closed, an upper bound of the tangent of
+any contact state in the PSD order), so the step is safe whatever the state.
+
+The penalty ``k`` (a normal stiffness per unit face area, Pa/m) is ``factor * E / h`` by
+default (:class:`CrackContact`): under a compressive normal stress ``sigma`` the faces then
+penetrate by ``|g| = sigma / k = (sigma / E) h / factor``, i.e. ``1 / factor`` of the elastic
+shortening of a strip of one particle spacing; the contact springs add about ``factor * E`` to
+the particle stiffness of the face particles (measured: see :class:`CrackContact`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Collection, Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+import scipy.sparse as sp
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from .. import _compat
+from ..geometry.crack import Crack, CrackDomain, particle_spacing
+from ..parallel import Layout, raise_on_all_ranks
+from ..statics.petsc import create_aij
+from .system import LinearSystem, SemiDiscreteSystem
+
+if TYPE_CHECKING:  # annotations only
+    from ..approx.mls import MLS
+    from ..geometry.particles import ParticleSet
+    from .builders import Model
+
+__all__ = ["ContactSystem", "CrackContact", "contact_points", "jump_operator", "with_crack_contact"]
+
+
+@dataclasses.dataclass(frozen=True)
+class CrackContact:
+    """Options of frictionless crack-face contact (a penalty on the normal gap).
+
+    Attributes:
+        factor: The penalty ``k = factor * E / h`` (``h`` the particle spacing) when
+            ``penalty`` is ``None``. The default 10 keeps the penetration at 1/10 of the elastic
+            shortening of a one-spacing strip; it lowers the stable step of a cracked model by
+            the factor ``contact_step_ratio`` reported by the demo (measured ~0.5-0.6 on the
+            tests' models: the contact springs are stiffer than the bulk at the faces).
+        penalty: ``k`` itself (Pa/m), or ``None``.
+        points: Gauss–Legendre points per piece of the polylines (pieces at most ``h`` long).
+        tip_gap: Points closer than ``tip_gap * h`` to a tip are left out (the faces meet there).
+    """
+
+    factor: float = 10.0
+    penalty: float | None = None
+    points: int = 2
+    tip_gap: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.factor) and self.factor > 0.0):
+            raise ValueError(f"factor={self.factor!r} must be a positive number (k = factor E/h)")
+        if self.penalty is not None and not (np.isfinite(self.penalty) and self.penalty > 0.0):
+            raise ValueError(f"penalty={self.penalty!r} must be a positive number (Pa/m) or None")
+        if isinstance(self.points, bool) or not (isinstance(self.points, int) and self.points >= 1):
+            raise ValueError(f"points={self.points!r} must be an integer >= 1 (Gauss points)")
+        if not (np.isfinite(self.tip_gap) and self.tip_gap >= 0.0):
+            raise ValueError(f"tip_gap={self.tip_gap!r} must be >= 0 (in particle spacings)")
+
+    def stiffness(self, E: float, h: float) -> float:
+        """``k``: :attr:`penalty`, else ``factor * E / h``."""
+        return float(self.penalty) if self.penalty is not None else self.factor * E / h
+
+
+def contact_points(
+    crack: Crack, h: float, points: int = 2, tip_gap: float = 1.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sample points along a crack polyline (the same on every rank: no communication).
+
+    Each segment is cut into ``ceil(length / h)`` equal pieces, each with ``points``
+    Gauss–Legendre points; points within ``tip_gap * h`` of a tip are dropped.
+
+    Returns:
+        ``(x, n, w)``: points (m, 2), unit left normals (m, 2) (towards the ``+1`` side of
+        :meth:`Crack.side`) and length weights (m,).
+    """
+    xi, wi = np.polynomial.legendre.leggauss(points)
+    xi, wi = 0.5 * (xi + 1.0), 0.5 * wi
+    xs, ns, ws = [], [], []
+    for a, b in zip(*crack.segments, strict=True):
+        t = b - a
+        length = float(np.linalg.norm(t))
+        pieces = max(1, int(np.ceil(length / h - 1e-9)))
+        s = ((np.arange(pieces)[:, None] + xi[None, :]) / pieces).ravel()
+        xs.append(a[None, :] + s[:, None] * t[None, :])
+        ns.append(np.tile(np.array([-t[1], t[0]]) / length, (s.size, 1)))
+        ws.append(np.tile(wi * length / pieces, pieces))
+    x, n, w = np.concatenate(xs), np.concatenate(ns), np.concatenate(ws)
+    keep = np.ones(len(x), dtype=bool)
+    for tip in crack.tips:
+        keep &= np.linalg.norm(x - tip[None, :], axis=1) >= tip_gap * h
+    return x[keep], n[keep], w[keep]
+
+
+def _owned_points(particles: ParticleSet, x: np.ndarray) -> np.ndarray:
+    """bool (m,): the points ``x`` this rank owns: in one of its integration cells, a point
+    on a cell boundary shared by ranks going to the lowest rank (collective)."""
+    msh = particles.mesh
+    comm = particles.comm
+    num_owned = msh.topology.index_map(msh.topology.dim).size_local
+    cells = np.arange(num_owned) if particles.cells is None else particles.cells
+    imap = msh.topology.index_map(msh.topology.dim)
+    mine = np.zeros(imap.size_local + imap.num_ghosts, dtype=bool)
+    mine[cells] = True
+    p3 = np.zeros((len(x), 3))
+    p3[:, :2] = x
+    offsets, arr = _compat.colliding_cells(msh, _compat.bb_tree(msh, msh.topology.dim), p3)
+    hit = np.zeros(len(x), dtype=bool)
+    np.logical_or.at(hit, np.repeat(np.arange(len(x)), np.diff(offsets)), mine[arr])
+    size = comm.size
+    claim = np.where(hit, comm.rank, size).astype(np.int32)
+    owner = np.empty_like(claim)
+    comm.Allreduce(claim, owner, op=MPI.MIN)
+    return owner == comm.rank
+
+
+def jump_operator(
+    particles: ParticleSet, mls: MLS, cracks: Sequence[Crack], h: float, contact: CrackContact
+) -> tuple[PETSc.Mat, np.ndarray]:
+    """The normal-gap operator ``B`` (rows: this rank's sample points; columns: the particle
+    dofs in PETSc order) and the rows' length weights ``w`` (owned rows), collective.
+
+    ``B[q, (J, c)] = n_qc (phi_J^+(x_q) - phi_J^-(x_q))`` (see the module docstring).
+    """
+    gdim = particles.gdim
+    dof_map = particles.petsc_dofs(gdim)
+    rows, cols, vals, weights = [], [], [], []
+    count = 0
+    for crack in cracks:
+        x, n, w = contact_points(crack, h, contact.points, contact.tip_gap)
+        own = _owned_points(particles, x)
+        x, n, w = x[own], n[own], w[own]
+        ones = np.ones(len(x), dtype=np.int64)
+        plus, minus = raise_on_all_ranks(
+            particles.comm,
+            lambda x=x, ones=ones: (
+                (mls.tabulate(x, 0, ones), mls.tabulate(x, 0, -ones)) if len(x) else (None, None)
+            ),
+        )
+        if len(x):
+            jump = (plus.values - minus.values).tocoo()
+            for c in range(gdim):
+                rows.append(count + jump.row)
+                cols.append(dof_map[jump.col, c])
+                vals.append(jump.data * n[jump.row, c])
+        weights.append(w)
+        count += len(x)
+    layout = Layout.from_local(particles.comm, count)
+    cat = lambda parts, dt: np.concatenate([*parts, np.zeros(0, dt)])  # noqa: E731
+    local = sp.csr_matrix(
+        (cat(vals, float), (cat(rows, np.int64) + layout.start, cat(cols, np.int64))),
+        shape=(layout.size_global, gdim * particles.num_particles),
+    )
+    B = create_aij(particles.comm, local, layout, particles.dof_layout(gdim))
+    return B, cat(weights, float)
+
+
+class ContactSystem:
+    """A :class:`~dolfinx_meshfree.dynamics.system.SemiDiscreteSystem` with crack-face contact:
+    the inner system's internal force plus ``f_c = B^T (k w min(B d, 0))`` on one field (the
+    particles), its strain energy plus ``E_c``, its tangent plus the full contact stiffness
+    ``k B^T W B`` (for the stable step). Everything else is the inner system's.
+
+    Args:
+        inner: The system without contact (small strain).
+        B: The normal-gap operator (:func:`jump_operator`) on the columns of field ``field``.
+        kw: ``k w_q`` per owned row of ``B``.
+        field: The index of the particle field.
+    """
+
+    def __init__(self, inner: SemiDiscreteSystem, B: PETSc.Mat, kw: np.ndarray, field: int) -> None:
+        self.inner, self.B, self.field = inner, B, field
+        self.kw = np.asarray(kw, dtype=float)
+        self._gap = B.createVecLeft()
+        self._force = B.createVecRight()
+        self._tangent: PETSc.Mat | None = None
+        self.num_points = B.getSize()[0]
+
+    def __getattr__(self, name: str):  # the inner system's attributes (blocks, shared, ...)
+        if name == "inner":
+            raise AttributeError(name)
+        return getattr(self.inner, name)
+
+    @property
+    def fields(self) -> list:
+        return self.inner.fields
+
+    def mass(self) -> list[PETSc.Vec]:
+        return self.inner.mass()
+
+    def constraints(self) -> list[PETSc.Mat | None] | None:
+        return self.inner.constraints()
+
+    def rebuild(self, changed: Collection[str]) -> bool:
+        return self.inner.rebuild(changed)
+
+    def gap(self, u: Sequence[PETSc.Vec]) -> np.ndarray:
+        """The normal gaps ``g = B d`` at this rank's sample points (a copy)."""
+        self.B.mult(u[self.field], self._gap)
+        return self._gap.array_r.copy()
+
+    def _multipliers(self, u: Sequence[PETSc.Vec]) -> float:
+        """Put ``k w min(g, 0)`` into the gap vector; return this rank's ``E_c``."""
+        self.B.mult(u[self.field], self._gap)
+        closed = np.minimum(self._gap.array_r, 0.0)
+        self._gap.array[:] = self.kw * closed
+        return 0.5 * float(np.dot(self.kw, closed * closed))
+
+    def contact_energy(self, u: Sequence[PETSc.Vec]) -> float:
+        """``E_c = 1/2 sum_q k w_q min(g_q, 0)^2`` (collective, every rank)."""
+        return float(self.B.getComm().tompi4py().allreduce(self._multipliers(u), op=MPI.SUM))
+
+    def internal_force(
+        self, u: Sequence[PETSc.Vec], out: Sequence[PETSc.Vec] | None = None
+    ) -> list[PETSc.Vec]:
+        """The inner force plus ``B^T (k w min(B d, 0))`` (collective)."""
+        y = self.inner.internal_force(u, out)
+        self._multipliers(u)
+        self.B.multTransposeAdd(self._gap, y[self.field], y[self.field])
+        return y
+
+    def strain_energy(self, u: Sequence[PETSc.Vec], f_int: Sequence[PETSc.Vec]) -> float:
+        """The inner system's energy (from ``f_int`` minus the contact force) plus ``E_c``."""
+        energy = self.contact_energy(u)  # leaves k w min(g, 0) in the gap vector
+        self.B.multTranspose(self._gap, self._force)
+        inner_f = list(f_int)
+        inner_f[self.field] = f_int[self.field].copy()
+        inner_f[self.field].axpy(-1.0, self._force)
+        energy += self.inner.strain_energy(u, inner_f)
+        inner_f[self.field].destroy()
+        return energy
+
+    def tangent(self, u: Sequence[PETSc.Vec] | None = None) -> dict:
+        """The inner tangent with ``k B^T W B`` (every point closed) added to the particle
+        block: an upper bound, in the PSD order, of the tangent of any contact state."""
+        blocks = dict(self.inner.tangent(u))
+        if self._tangent is None:
+            scaled = self.B.copy()
+            root = self.B.createVecLeft()
+            root.array[:] = np.sqrt(self.kw)
+            scaled.diagonalScale(L=root)
+            Kc = scaled.transposeMatMult(scaled)
+            K = blocks[self.field, self.field].convert("aij")
+            K.axpy(1.0, Kc, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+            for obj in (scaled, root, Kc):
+                obj.destroy()
+            self._tangent = K
+        blocks[self.field, self.field] = self._tangent
+        return blocks
+
+    def destroy(self) -> None:
+        """Destroy the contact objects and the inner system (collective)."""
+        for obj in (self.B, self._gap, self._force, self._tangent):
+            if obj is not None:
+                obj.destroy()
+        self.inner.destroy()
+
+
+def with_crack_contact(
+    model: Model, cracks: Sequence[Crack], contact: CrackContact | None
+) -> Model:
+    """``model`` with crack-face contact on its particle field (collective): its system becomes
+    a :class:`ContactSystem` around the linear system of its blocks; ``model`` itself when
+    ``contact`` is ``None`` or there is no crack.
+
+    Args:
+        model: A small-strain particle or coupled model (its ``mls`` cut by ``cracks``).
+        cracks: The cracks, placed (pure EFG: the ``cracks`` given; a coupling: its patch's).
+        contact: The options, or ``None``: no contact.
+    """
+    if contact is None or not cracks:
+        return model
+    if not isinstance(contact, CrackContact):
+        raise TypeError(
+            f"crack_contact must be a CrackContact or None, got {type(contact).__name__}: "
+            "use crack_contact=dolfinx_meshfree.dynamics.CrackContact()"
+        )
+    domain = model.patch if model.patch is not None else CrackDomain.from_particles(model.particles)
+    h = particle_spacing(domain)
+    if model.system is not None:
+        raise ValueError(
+            "crack_contact= needs a small-strain model (LinearElastic): its finite-strain system "
+            "is refused with cracks anyway"
+        )
+    field = [f.name for f in model.fields].index("particles")
+    B, w = jump_operator(model.particles, model.mls, cracks, h, contact)
+    k = contact.stiffness(model.material.E, h)
+    inner = LinearSystem(model.fields, model.blocks, model.constraint)
+    system = ContactSystem(inner, B, k * w, field)
+    return dataclasses.replace(model, fields=inner.fields, blocks={}, system=system)

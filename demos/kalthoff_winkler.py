@@ -42,7 +42,7 @@ import time
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
-from dolfinx_meshfree.dynamics import DynamicCrackGrowth
+from dolfinx_meshfree.dynamics import CrackContact, DynamicCrackGrowth
 
 import dolfinx
 import numpy as np
@@ -87,7 +87,7 @@ def _cell_midpoints(msh) -> np.ndarray:
     return msh.geometry.x[_compat.geometry_dofmap(msh)[:n], :2].mean(axis=1)
 
 
-def builder(method: str, msh, h: float):
+def builder(method: str, msh, h: float, contact=None):
     """``build(crack) -> ExplicitDynamics``: the model with the crack, the impact traction and
     the symmetry plane."""
     impact = mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0.0) & (x[1] <= NOTCH_Y + 1e-12))
@@ -100,25 +100,29 @@ def builder(method: str, msh, h: float):
     def build(crack: mf.Crack) -> mf.ExplicitDynamics:
         if method == "efg":
             P = mf.ParticleSet.from_cells(msh, h)
-            dyn = mf.ExplicitDynamics.efg(P, MATERIAL, cracks=[crack], fixed_facets=fixed)
+            dyn = mf.ExplicitDynamics.efg(
+                P, MATERIAL, cracks=[crack], fixed_facets=fixed, crack_contact=contact
+            )
         else:
             V = _compat.vector_function_space(msh)
             patch = mf.ParticlePatch(msh, np.flatnonzero(box), h, cracks=[crack])
             prob = mf.CoupledElasticity(V, patch, MATERIAL, coupling=method)
-            dyn = mf.ExplicitDynamics.coupled(prob, fixed_facets=fixed)
+            dyn = mf.ExplicitDynamics.coupled(prob, fixed_facets=fixed, crack_contact=contact)
         dyn.add_traction(impact, lambda x, n: np.stack([np.full(len(x), sigma), 0 * x[:, 0]], 1))
         return dyn
 
     return build
 
 
-def run(method: str, nodes: int, t_end: float, check_every: int = 5, comm=MPI.COMM_WORLD):
-    """One run: the growth history, the path and the timings (a JSON-ready dict)."""
+def run(method: str, nodes: int, t_end: float, check_every: int = 5, comm=MPI.COMM_WORLD,
+        contact=None):  # fmt: skip
+    """One run: the growth history, the path and the timings (a JSON-ready dict);
+    ``contact``: a :class:`~dolfinx_meshfree.dynamics.CrackContact` of the crack faces."""
     tic = time.perf_counter()
     msh, h, slot_end, yc = geometry(nodes, comm, slot=method != "efg")
     crack = mf.Crack([[slot_end, yc], [NOTCH_A, yc]])
     growth = DynamicCrackGrowth(
-        builder(method, msh, h), crack, K_Ic=K_IC, speed=SPEED, segment=SEGMENT * h,
+        builder(method, msh, h, contact), crack, K_Ic=K_IC, speed=SPEED, segment=SEGMENT * h,
         check_every=check_every, radius=np.asarray(RADII) * h,
     )  # fmt: skip
     setup = time.perf_counter() - tic
@@ -220,9 +224,11 @@ def main(argv=None) -> int:
     parser.add_argument("--check-every", type=int, default=5)
     parser.add_argument("--json", default=None)
     parser.add_argument("--png", default=None)
+    parser.add_argument("--contact", type=float, default=None, help="face contact: k = F E/h")
     args = parser.parse_args(argv)
     comm = MPI.COMM_WORLD
-    records = [run(m, args.nodes, args.t_end, args.check_every, comm) for m in args.method]
+    contact = None if args.contact is None else CrackContact(factor=args.contact)
+    records = [run(m, args.nodes, args.t_end, args.check_every, comm, contact) for m in args.method]
     if comm.rank == 0:
         for rec in records:
             report(rec)

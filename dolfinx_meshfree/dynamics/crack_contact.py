@@ -274,7 +274,7 @@ class ContactSystem:
             root.array[:] = np.sqrt(self.kw)
             scaled.diagonalScale(L=root)
             Kc = scaled.transposeMatMult(scaled)
-            K = blocks[self.field, self.field].convert("aij")
+            K = blocks[self.field, self.field].convert("aij", PETSc.Mat())  # a new matrix
             K.axpy(1.0, Kc, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
             for obj in (scaled, root, Kc):
                 obj.destroy()

@@ -48,6 +48,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from .. import _compat
+from ..fracture.interaction import StressIntensityFactors, _q_value
 from ..geometry.crack import Crack, CrackDomain, particle_spacing
 from ..parallel import Layout, raise_on_all_ranks
 from ..statics.petsc import create_aij
@@ -150,15 +151,16 @@ def _owned_points(particles: ParticleSet, x: np.ndarray) -> np.ndarray:
 
 def jump_operator(
     particles: ParticleSet, mls: MLS, cracks: Sequence[Crack], h: float, contact: CrackContact
-) -> tuple[PETSc.Mat, np.ndarray]:
+) -> tuple[PETSc.Mat, np.ndarray, np.ndarray]:
     """The normal-gap operator ``B`` (rows: this rank's sample points; columns: the particle
-    dofs in PETSc order) and the rows' length weights ``w`` (owned rows), collective.
+    dofs in PETSc order), the rows' points (owned rows, (m, 2)) and their length weights ``w``
+    (m,), collective.
 
     ``B[q, (J, c)] = n_qc (phi_J^+(x_q) - phi_J^-(x_q))`` (see the module docstring).
     """
     gdim = particles.gdim
     dof_map = particles.petsc_dofs(gdim)
-    rows, cols, vals, weights = [], [], [], []
+    rows, cols, vals, weights, where = [], [], [], [], []
     count = 0
     for crack in cracks:
         x, n, w = contact_points(crack, h, contact.points, contact.tip_gap)
@@ -178,6 +180,7 @@ def jump_operator(
                 cols.append(dof_map[jump.col, c])
                 vals.append(jump.data * n[jump.row, c])
         weights.append(w)
+        where.append(x)
         count += len(x)
     layout = Layout.from_local(particles.comm, count)
     cat = lambda parts, dt: np.concatenate([*parts, np.zeros(0, dt)])  # noqa: E731
@@ -186,7 +189,7 @@ def jump_operator(
         shape=(layout.size_global, gdim * particles.num_particles),
     )
     B = create_aij(particles.comm, local, layout, particles.dof_layout(gdim))
-    return B, cat(weights, float)
+    return B, np.concatenate([*where, np.zeros((0, 2))]), cat(weights, float)
 
 
 class ContactSystem:
@@ -200,11 +203,22 @@ class ContactSystem:
         B: The normal-gap operator (:func:`jump_operator`) on the columns of field ``field``.
         kw: ``k w_q`` per owned row of ``B``.
         field: The index of the particle field.
+        points, weights: The rows' points (m, 2) and length weights ``w_q`` (m,) (for the
+            crack-face term of the stress intensity factors, :meth:`face_term`).
     """
 
-    def __init__(self, inner: SemiDiscreteSystem, B: PETSc.Mat, kw: np.ndarray, field: int) -> None:
+    def __init__(
+        self,
+        inner: SemiDiscreteSystem,
+        B: PETSc.Mat,
+        kw: np.ndarray,
+        field: int,
+        points: np.ndarray,
+        weights: np.ndarray,
+    ) -> None:
         self.inner, self.B, self.field = inner, B, field
         self.kw = np.asarray(kw, dtype=float)
+        self.points, self.weights = np.asarray(points, float), np.asarray(weights, float)
         self._gap = B.createVecLeft()
         self._force = B.createVecRight()
         self._tangent: PETSc.Mat | None = None
@@ -282,6 +296,38 @@ class ContactSystem:
         blocks[self.field, self.field] = self._tangent
         return blocks
 
+    def face_term(
+        self, u: Sequence[PETSc.Vec], sifs: StressIntensityFactors, weight: str
+    ) -> np.ndarray:
+        """The crack-face term of the domain interaction integral for the contact pressure
+        ``p = -k min(g, 0) >= 0``: ``Delta K_I = 2 int p(r) q(r) / sqrt(2 pi r) ds`` per domain
+        of ``sifs`` (collective, every rank).
+
+        The domain integral of :func:`~dolfinx_meshfree.interaction_integral` assumes traction-
+        free faces; a normal face traction adds ``-int_faces t . u^aux_,1 q ds``, which for the
+        straight faces behind the tip (``theta = +-pi``) and the auxiliary fields of Williams'
+        expansion is ``2 int p q / sqrt(2 pi r) dr`` for K_I (the weight function of a
+        semi-infinite crack under face pressure; Tada, Paris & Irwin) and 0 for K_II (the
+        auxiliary mode II field has ``u_2,1 = 0`` on the faces; frictionless: no shear
+        traction). The contact points behind the tip within each outer radius count; ``q`` is
+        the integral's weight (``weight``, one of
+        :data:`~dolfinx_meshfree.fracture.interaction.Q_WEIGHTS`).
+        """
+        self.B.mult(u[self.field], self._gap)
+        pressure = -(self.kw / self.weights) * np.minimum(self._gap.array_r, 0.0)
+        d = self.points - sifs.tip[None, :]
+        r = np.linalg.norm(d, axis=1)
+        behind = d @ sifs.direction < 0.0
+        out = np.zeros(len(sifs.outer))
+        for k, (r1, r2) in enumerate(zip(sifs.inner, sifs.outer, strict=True)):
+            on = behind & (r < r2) & (pressure > 0.0)
+            q = _q_value(r[on], r1, r2, weight)
+            out[k] = 2.0 * np.sum(
+                self.weights[on] * pressure[on] * q / np.sqrt(2.0 * np.pi * r[on])
+            )
+        comm = self.B.getComm().tompi4py()
+        return np.asarray(comm.allreduce(out, op=MPI.SUM), dtype=float)
+
     def destroy(self) -> None:
         """Destroy the contact objects and the inner system (collective)."""
         for obj in (self.B, self._gap, self._force, self._tangent):
@@ -317,8 +363,8 @@ def with_crack_contact(
             "is refused with cracks anyway"
         )
     field = [f.name for f in model.fields].index("particles")
-    B, w = jump_operator(model.particles, model.mls, cracks, h, contact)
+    B, x, w = jump_operator(model.particles, model.mls, cracks, h, contact)
     k = contact.stiffness(model.material.E, h)
     inner = LinearSystem(model.fields, model.blocks, model.constraint)
-    system = ContactSystem(inner, B, k * w, field)
+    system = ContactSystem(inner, B, k * w, field, x, w)
     return dataclasses.replace(model, fields=inner.fields, blocks={}, system=system)

@@ -57,9 +57,17 @@ from .system import LinearSystem, SemiDiscreteSystem
 if TYPE_CHECKING:  # annotations only
     from ..approx.mls import MLS
     from ..geometry.particles import ParticleSet
+    from ..physics.materials import LinearElastic
     from .builders import Model
 
-__all__ = ["ContactSystem", "CrackContact", "contact_points", "jump_operator", "with_crack_contact"]
+__all__ = [
+    "ContactSystem",
+    "CrackContact",
+    "contact_points",
+    "face_term",
+    "jump_operator",
+    "with_crack_contact",
+]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -80,7 +88,7 @@ class CrackContact:
     factor: float = 10.0
     penalty: float | None = None
     points: int = 2
-    tip_gap: float = 1.0
+    tip_gap: float = 0.0
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.factor) and self.factor > 0.0):
@@ -98,7 +106,7 @@ class CrackContact:
 
 
 def contact_points(
-    crack: Crack, h: float, points: int = 2, tip_gap: float = 1.0
+    crack: Crack, h: float, points: int = 2, tip_gap: float = 0.0
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Sample points along a crack polyline (the same on every rank: no communication).
 
@@ -151,16 +159,16 @@ def _owned_points(particles: ParticleSet, x: np.ndarray) -> np.ndarray:
 
 def jump_operator(
     particles: ParticleSet, mls: MLS, cracks: Sequence[Crack], h: float, contact: CrackContact
-) -> tuple[PETSc.Mat, np.ndarray, np.ndarray]:
+) -> tuple[PETSc.Mat, np.ndarray, np.ndarray, np.ndarray]:
     """The normal-gap operator ``B`` (rows: this rank's sample points; columns: the particle
-    dofs in PETSc order), the rows' points (owned rows, (m, 2)) and their length weights ``w``
-    (m,), collective.
+    dofs in PETSc order), the rows' points and unit normals (owned rows, (m, 2) each) and their
+    length weights ``w`` (m,), collective.
 
     ``B[q, (J, c)] = n_qc (phi_J^+(x_q) - phi_J^-(x_q))`` (see the module docstring).
     """
     gdim = particles.gdim
     dof_map = particles.petsc_dofs(gdim)
-    rows, cols, vals, weights, where = [], [], [], [], []
+    rows, cols, vals, weights, where, normals = [], [], [], [], [], []
     count = 0
     for crack in cracks:
         x, n, w = contact_points(crack, h, contact.points, contact.tip_gap)
@@ -181,6 +189,7 @@ def jump_operator(
                 vals.append(jump.data * n[jump.row, c])
         weights.append(w)
         where.append(x)
+        normals.append(n)
         count += len(x)
     layout = Layout.from_local(particles.comm, count)
     cat = lambda parts, dt: np.concatenate([*parts, np.zeros(0, dt)])  # noqa: E731
@@ -189,7 +198,13 @@ def jump_operator(
         shape=(layout.size_global, gdim * particles.num_particles),
     )
     B = create_aij(particles.comm, local, layout, particles.dof_layout(gdim))
-    return B, np.concatenate([*where, np.zeros((0, 2))]), cat(weights, float)
+    empty = np.zeros((0, 2))
+    return (
+        B,
+        np.concatenate([*where, empty]),
+        np.concatenate([*normals, empty]),
+        cat(weights, float),
+    )
 
 
 class ContactSystem:
@@ -203,8 +218,8 @@ class ContactSystem:
         B: The normal-gap operator (:func:`jump_operator`) on the columns of field ``field``.
         kw: ``k w_q`` per owned row of ``B``.
         field: The index of the particle field.
-        points, weights: The rows' points (m, 2) and length weights ``w_q`` (m,) (for the
-            crack-face term of the stress intensity factors, :meth:`face_term`).
+        points, normals, weights: The rows' points and unit normals (m, 2) and length weights
+            ``w_q`` (m,).
     """
 
     def __init__(
@@ -214,11 +229,13 @@ class ContactSystem:
         kw: np.ndarray,
         field: int,
         points: np.ndarray,
+        normals: np.ndarray,
         weights: np.ndarray,
     ) -> None:
         self.inner, self.B, self.field = inner, B, field
         self.kw = np.asarray(kw, dtype=float)
-        self.points, self.weights = np.asarray(points, float), np.asarray(weights, float)
+        self.points, self.normals = np.asarray(points, float), np.asarray(normals, float)
+        self.weights = np.asarray(weights, float)
         self._gap = B.createVecLeft()
         self._force = B.createVecRight()
         self._tangent: PETSc.Mat | None = None
@@ -296,44 +313,65 @@ class ContactSystem:
         blocks[self.field, self.field] = self._tangent
         return blocks
 
-    def face_term(
-        self, u: Sequence[PETSc.Vec], sifs: StressIntensityFactors, weight: str
-    ) -> np.ndarray:
-        """The crack-face term of the domain interaction integral for the contact pressure
-        ``p = -k min(g, 0) >= 0``: ``Delta K_I = 2 int p(r) q(r) / sqrt(2 pi r) ds`` per domain
-        of ``sifs`` (collective, every rank).
-
-        The domain integral of :func:`~dolfinx_meshfree.interaction_integral` assumes traction-
-        free faces; a normal face traction adds ``-int_faces t . u^aux_,1 q ds``, which for the
-        straight faces behind the tip (``theta = +-pi``) and the auxiliary fields of Williams'
-        expansion is ``2 int p q / sqrt(2 pi r) dr`` for K_I (the weight function of a
-        semi-infinite crack under face pressure; Tada, Paris & Irwin) and 0 for K_II (the
-        auxiliary mode II field has ``u_2,1 = 0`` on the faces; frictionless: no shear
-        traction). The contact points behind the tip within each outer radius count; ``q`` is
-        the integral's weight (``weight``, one of
-        :data:`~dolfinx_meshfree.fracture.interaction.Q_WEIGHTS`).
-        """
-        self.B.mult(u[self.field], self._gap)
-        pressure = -(self.kw / self.weights) * np.minimum(self._gap.array_r, 0.0)
-        d = self.points - sifs.tip[None, :]
-        r = np.linalg.norm(d, axis=1)
-        behind = d @ sifs.direction < 0.0
-        out = np.zeros(len(sifs.outer))
-        for k, (r1, r2) in enumerate(zip(sifs.inner, sifs.outer, strict=True)):
-            on = behind & (r < r2) & (pressure > 0.0)
-            q = _q_value(r[on], r1, r2, weight)
-            out[k] = 2.0 * np.sum(
-                self.weights[on] * pressure[on] * q / np.sqrt(2.0 * np.pi * r[on])
-            )
-        comm = self.B.getComm().tompi4py()
-        return np.asarray(comm.allreduce(out, op=MPI.SUM), dtype=float)
-
     def destroy(self) -> None:
         """Destroy the contact objects and the inner system (collective)."""
         for obj in (self.B, self._gap, self._force, self._tangent):
             if obj is not None:
                 obj.destroy()
         self.inner.destroy()
+
+
+def face_term(
+    mls: MLS,
+    coefficients: np.ndarray,
+    material: LinearElastic,
+    crack: Crack,
+    sifs: StressIntensityFactors,
+    weight: str = "linear",
+    points: int = 16,
+) -> np.ndarray:
+    """The crack-face term of the domain interaction integral for closed faces: ``Delta K_I``
+    per domain of ``sifs`` (no communication: the coefficients are replicated).
+
+    The domain integral of :func:`~dolfinx_meshfree.interaction_integral` assumes traction-free
+    faces; a normal face pressure ``p`` adds ``-int_faces t . u^aux_,1 q ds``, which on the
+    straight faces behind the tip (``theta = +-pi``) is ``2 int_0^r2 p(r) q(r) / sqrt(2 pi r)
+    dr`` for K_I (the weight function of a semi-infinite crack under face pressure; Tada, Paris
+    & Irwin) and 0 for K_II (the auxiliary mode II field has ``u_2,1 = 0`` on the faces; no
+    shear traction without friction). ``p = -n . sigma n`` is the field's own normal stress
+    (the mean of the two faces' limits) where the faces are closed (``g < 0``), 0 where they
+    are open: consistent with the domain integral of the same field (a uniform stress across
+    closed faces gives K = 0 whatever the penalty; the penalty's ``k |g|`` is too small near the
+    tip, where the jump of the shape functions vanishes). The rule is Gauss in ``s`` with
+    ``r = r2 s^2`` (``points`` points), which removes the ``1/sqrt(r)``.
+
+    Args:
+        mls: The crack-aware approximation. coefficients: Its particle coefficients (n, 2).
+        material: The law. crack: The crack of ``sifs``' tip.
+        sifs: The domain integral's result (tip, direction, radii).
+        weight: ``q``, one of :data:`~dolfinx_meshfree.fracture.interaction.Q_WEIGHTS`.
+    """
+    s, ws = np.polynomial.legendre.leggauss(points)
+    s, ws = 0.5 * (s + 1.0), 0.5 * ws
+    d = np.asarray(sifs.direction, dtype=float)
+    n = np.array([-d[1], d[0]])
+    out = np.zeros(len(sifs.outer))
+    for k, (r1, r2) in enumerate(zip(sifs.inner, sifs.outer, strict=True)):
+        r = r2 * s * s
+        x = sifs.tip[None, :] - r[:, None] * d[None, :]
+        up = crack.side(x + 1e-6 * r2 * n[None, :])  # the side n points to
+        t_up = mls.tabulate(x, 1, up)
+        t_down = mls.tabulate(x, 1, -up)
+        gap = (t_up.values @ coefficients - t_down.values @ coefficients) @ n
+        sigma = 0.5 * (
+            material.stress(t_up.gradient(coefficients))
+            + material.stress(t_down.gradient(coefficients))
+        )
+        p = np.where(gap < 0.0, -np.einsum("i,mij,j->m", n, sigma, n), 0.0)
+        q = _q_value(r, r1, r2, weight)
+        # int_0^r2 f(r) / sqrt(r) dr = 2 sqrt(r2) int_0^1 f(r2 s^2) ds
+        out[k] = 2.0 * 2.0 * np.sqrt(r2) * np.sum(ws * p * q) / np.sqrt(2.0 * np.pi)
+    return out
 
 
 def with_crack_contact(
@@ -363,8 +401,8 @@ def with_crack_contact(
             "is refused with cracks anyway"
         )
     field = [f.name for f in model.fields].index("particles")
-    B, x, w = jump_operator(model.particles, model.mls, cracks, h, contact)
+    B, x, n, w = jump_operator(model.particles, model.mls, cracks, h, contact)
     k = contact.stiffness(model.material.E, h)
     inner = LinearSystem(model.fields, model.blocks, model.constraint)
-    system = ContactSystem(inner, B, k * w, field, x, w)
+    system = ContactSystem(inner, B, k * w, field, x, n, w)
     return dataclasses.replace(model, fields=inner.fields, blocks={}, system=system)

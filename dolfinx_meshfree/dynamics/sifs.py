@@ -13,7 +13,7 @@ the exterior boundary, the FE interface and other tips).
 
 With crack-face contact (:class:`~dolfinx_meshfree.dynamics.crack_contact.ContactSystem`) K_I
 includes the faces' term of the contact pressure
-(:meth:`~dolfinx_meshfree.dynamics.crack_contact.ContactSystem.face_term`); J does not.
+(:func:`~dolfinx_meshfree.dynamics.crack_contact.face_term`); J does not.
 
 Left out: the crack-velocity terms of a moving tip (this is K at a stationary tip; a growing
 crack's K would need them).
@@ -33,7 +33,7 @@ from ..geometry.crack import Crack, CrackDomain
 from ..parallel import raise_on_all_ranks
 from ..physics.materials import LinearElastic
 from ..statics.sifs import solution_sifs
-from .crack_contact import ContactSystem
+from .crack_contact import ContactSystem, face_term
 
 if TYPE_CHECKING:  # annotations only: the facade imports this module
     from .explicit import ExplicitDynamics
@@ -125,8 +125,9 @@ def dynamic_sifs(
         grad, dyn.material, cracks, domain, crack, tip, radius, acceleration=acceleration,
         **options,
     )  # fmt: skip
-    if isinstance(dyn.system, ContactSystem):  # the contact pressure on the faces
-        dK = dyn.system.face_term(dyn.u, sifs, options.get("weight", "linear"))
+    if isinstance(dyn.system, ContactSystem):  # the faces' contact pressure (closed faces)
+        weight = options.get("weight", "linear")
+        dK = face_term(mls, u, dyn.material, crack, sifs, weight)
         sifs = dataclasses.replace(sifs, K_I=sifs.K_I + dK)
     return sifs
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
 from dolfinx_meshfree.dynamics import ContactSystem, CrackContact
-from dolfinx_meshfree.dynamics.crack_contact import contact_points
+from dolfinx_meshfree.dynamics.crack_contact import contact_points, face_term
 
 import dolfinx
 import numpy as np
@@ -24,7 +24,7 @@ import pytest
 import scipy.linalg
 import scipy.sparse as sp
 from mpi4py import MPI
-from test_dynamics_crack import COUPLED_CRACK, INTERIOR, MAT, OPENING, H, C
+from test_dynamics_crack import COUPLED_CRACK, INTERIOR, MAT, OPENING, C, H
 
 COMM = MPI.COMM_WORLD
 CLOSING = -OPENING  # sigma_yy rate -1: the faces pressed together
@@ -56,8 +56,8 @@ def model(method, crack_points, contact=None, comm=COMM):
 
 
 def strained(method, crack_points, G, contact=None, dt=DT, comm=COMM):
-    """T_END in steps of ``dt`` from ``v = C + G x`` with the tractions of the linear field (rate 1):
-    the relative velocity error at X, the displacements at X, the smallest gap (0 without
+    """T_END in steps of ``dt`` from ``v = C + G x`` with the tractions of the linear field
+    (rate 1): the relative velocity error at X, the displacements at X, the smallest gap (0 without
     contact), the energy drift."""
     msh, dyn = model(method, crack_points, contact, comm)
     dyn.set_initial(velocity=lambda x: C + x[:, :2] @ G.T)
@@ -148,8 +148,11 @@ def test_energy_is_conserved_when_the_faces_close_and_open():
         dyn.set_initial(velocity=lambda x: np.stack([0 * x[:, 0], -np.sign(x[:, 1] - 0.47)], 1))
         peak = []
         dt = dyn.stable_time_step()
-        res = dyn.run(400 * dt, dt / div, outputs=np.linspace(0, 400 * dt, 41),
-                      on_output=lambda d, n, t: peak.append(d.system.contact_energy(d.u)))  # fmt: skip
+
+        def record(d, n, t, peak=peak):
+            peak.append(d.system.contact_energy(d.u))
+
+        res = dyn.run(400 * dt, dt / div, outputs=np.linspace(0, 400 * dt, 41), on_output=record)
         total = max(r.kinetic + r.internal for r in res.energies)
         dyn.destroy()
         assert max(peak) > 0.004 * total  # the faces did touch (measured 0.0083)
@@ -176,3 +179,79 @@ def test_stable_step_bounds_the_contact_stiffness():
         true = 2.0 / np.sqrt(scipy.linalg.eigvalsh(0.5 * (S + S.T)).max())
         dyn.destroy()
         assert 0.9 * true <= bound <= true
+
+
+def compressed_sifs(contact, comm=COMM):
+    """K_I, K_II (per domain, radii 0.2 and 0.25 about the right tip) after the compression of
+    :func:`strained`, the face term, and the displacements at X."""
+    msh, dyn = model("efg", INTERIOR, contact, comm)
+    dyn.set_initial(velocity=lambda x: C + x[:, :2] @ CLOSING.T)
+    rate = MAT.stress(np.asarray(CLOSING)[None])[0]
+    dyn.add_traction(mf.boundary_facets(msh), lambda x, n: n @ rate.T, amplitude=lambda t: t)
+    dyn.run(T_END, DT)
+    crack = dyn.evaluator.disc.cracks[0]
+    s = dyn.stress_intensity_factors(crack, tip=1, radius=[0.2, 0.25])
+    dK = np.zeros(2)
+    if contact is not None:
+        coef = dyn.evaluator.local_values(dyn.u)[1]
+        dK = face_term(dyn.mls, coef, dyn.material, crack, s)
+    u = dyn.displacement_at(X)
+    dyn.destroy()
+    return s.K_I, s.K_II, dK, u
+
+
+def test_sifs_of_a_closed_crack_vanish():
+    """A crack closed by compression does not load its tips: the exact K_I is 0 (the uncracked
+    field). Scale K0 = |sigma_yy| sqrt(pi a) (a = 0.24, the half length). Measured K_I / K0:
+    without contact -0.52, -0.52 (the faces overlap); with contact -0.011, -0.008 with the
+    faces' term (check 0.03), -0.70, -0.78 without it (the contact pressure on the faces
+    inside the domain is what the traction-free domain integral misses); K_II / K0 ~1e-3."""
+    K0 = T_END * np.sqrt(np.pi * 0.24)
+    KI_open, _, _, _ = compressed_sifs(None)
+    KI, KII, dK, _ = compressed_sifs(CrackContact())
+    assert np.all(KI_open <= -0.4 * K0)
+    assert np.all(np.abs(KI) <= 0.03 * K0)
+    assert np.all(KI - dK <= -0.5 * K0)
+    assert np.all(np.abs(KII) <= 0.01 * K0)
+
+
+@pytest.mark.skipif(COMM.size == 1, reason="compares 2 ranks with one")
+def test_serial_equals_two_ranks():
+    """Displacements (the contact force on both ranks' sample points) and K_I with the faces'
+    term: serial equals 2 ranks (measured to round-off; checks 1e-12 and 1e-8 relative)."""
+    KI, KII, _, u = compressed_sifs(CrackContact())
+    KI_1, KII_1, _, u_1 = compressed_sifs(CrackContact(), comm=MPI.COMM_SELF)
+    scale = np.abs(u_1).max()
+    assert COMM.allreduce(float(np.abs(u - u_1).max()), op=MPI.MAX) <= 1e-12 * scale
+    assert np.abs(KI - KI_1).max() <= 1e-8 * np.abs(KI_1).max()
+    assert np.abs(KII - KII_1).max() <= 1e-8 * np.abs(KI_1).max()
+
+
+def test_bad_contact_options():
+    for kw, match in (
+        ({"factor": 0.0}, "factor=0.0 must be a positive number"),
+        ({"penalty": -1.0}, "penalty=-1.0 must be a positive number"),
+        ({"points": 0}, "points=0 must be an integer >= 1"),
+        ({"tip_gap": -1.0}, "tip_gap=-1.0 must be >= 0"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            CrackContact(**kw)
+    msh = dolfinx.mesh.create_rectangle(
+        COMM, [np.zeros(2), np.ones(2)], [10, 10], dolfinx.mesh.CellType.quadrilateral
+    )
+    P = mf.ParticleSet.from_cells(msh, H)
+    with pytest.raises(TypeError, match="crack_contact must be a CrackContact or None"):
+        mf.ExplicitDynamics.efg(P, MAT, cracks=[mf.Crack(INTERIOR)], crack_contact=10.0)
+
+
+def test_contact_points_along_a_polyline():
+    """Gauss points on pieces of at most h: the weights sum to the length (to 1e-14); the
+    normals are the segments' left normals; the points near a tip are dropped."""
+    crack = mf.Crack([[0.0, 0.0], [0.35, 0.0], [0.35, 0.2]])
+    x, n, w = contact_points(crack, 0.1, 2, 0.0)
+    assert abs(w.sum() - crack.length) <= 1e-14
+    assert np.allclose(n[x[:, 1] == 0.0], [0.0, 1.0]) and np.allclose(n[x[:, 0] == 0.35], [-1, 0])
+    x1, _, _ = contact_points(crack, 0.1, 2, 1.0)
+    tips = crack.tips
+    assert np.all(np.linalg.norm(x1[:, None] - tips[None], axis=2) >= 0.1)
+    assert len(x1) < len(x)

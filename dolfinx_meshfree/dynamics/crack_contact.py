@@ -52,6 +52,7 @@ from ..fracture.interaction import StressIntensityFactors, _q_value
 from ..geometry.crack import Crack, CrackDomain, particle_spacing
 from ..parallel import Layout, raise_on_all_ranks
 from ..statics.petsc import create_aij
+from .discretisation import Discretisation
 from .system import LinearSystem, SemiDiscreteSystem
 
 if TYPE_CHECKING:  # annotations only
@@ -374,25 +375,25 @@ def face_term(
     return out
 
 
-def with_crack_contact(
-    model: Model, cracks: Sequence[Crack], contact: CrackContact | None
-) -> Model:
+def with_crack_contact(model: Model, contact: CrackContact | None) -> Model:
     """``model`` with crack-face contact on its particle field (collective): its system becomes
     a :class:`ContactSystem` around the linear system of its blocks; ``model`` itself when
-    ``contact`` is ``None`` or there is no crack.
+    ``contact`` is ``None`` or no crack cuts its particles (the patch's cracks, or those
+    attached to the MLS of pure EFG, as :attr:`Discretisation.cracks
+    <dolfinx_meshfree.dynamics.discretisation.Discretisation.cracks>` finds them).
 
     Args:
-        model: A small-strain particle or coupled model (its ``mls`` cut by ``cracks``).
-        cracks: The cracks, placed (pure EFG: the ``cracks`` given; a coupling: its patch's).
+        model: A small-strain particle or coupled model.
         contact: The options, or ``None``: no contact.
     """
-    if contact is None or not cracks:
-        return model
-    if not isinstance(contact, CrackContact):
+    if contact is not None and not isinstance(contact, CrackContact):  # the same on every rank
         raise TypeError(
             f"crack_contact must be a CrackContact or None, got {type(contact).__name__}: "
             "use crack_contact=dolfinx_meshfree.dynamics.CrackContact()"
         )
+    cracks = Discretisation.cracks.fget(model) if contact is not None else []
+    if not cracks:
+        return model
     domain = model.patch if model.patch is not None else CrackDomain.from_particles(model.particles)
     h = particle_spacing(domain)
     if model.system is not None:

@@ -218,8 +218,7 @@ class ExplicitDynamics:
         cells or (``integration="stress-points"``) at the particles and stress points; fixed
         facets by facet multipliers on the velocities; ``cracks`` cut the MLS weights and the
         cells. Arguments: see :func:`~dolfinx_meshfree.dynamics.builders.build_efg`;
-        ``crack_contact``: frictionless contact of the crack faces (a penalty on the normal gap,
-        :mod:`~dolfinx_meshfree.dynamics.crack_contact`), ``None``: none (the faces may overlap).
+        ``crack_contact``: the faces' contact (:mod:`~dolfinx_meshfree.dynamics.crack_contact`).
         """
         check_safety(safety)
         check_multiplier_solver(multiplier_solver)
@@ -236,8 +235,7 @@ class ExplicitDynamics:
             cracks=cracks,
             crack_method=crack_method,
         )
-        model = with_crack_contact(model, list(cracks), crack_contact)
-        return cls._from_model(model, safety, multiplier_solver)
+        return cls._from_model(with_crack_contact(model, crack_contact), safety, multiplier_solver)
 
     @classmethod
     def coupled(
@@ -266,8 +264,7 @@ class ExplicitDynamics:
         check_safety(safety)
         check_multiplier_solver(multiplier_solver)
         model = build_coupled(problem, particle_mass, fixed_facets, integration, slaves, material)
-        model = with_crack_contact(model, list(problem.patch.cracks), crack_contact)
-        return cls._from_model(model, safety, multiplier_solver)
+        return cls._from_model(with_crack_contact(model, crack_contact), safety, multiplier_solver)
 
     @property
     def safety(self) -> float:

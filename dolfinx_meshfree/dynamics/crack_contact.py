@@ -6,8 +6,9 @@ compression they would interpenetrate, since the crack-aware MLS (visibility or 
 adds the contact of the faces (frictionless, small strain) as a penalty on the normal gap.
 
 Along each crack polyline, sample points ``x_q`` with weights ``w_q`` (Gauss–Legendre points on
-pieces of at most one particle spacing ``h``; points within ``tip_gap * h`` of a tip are left
-out: there the faces meet and the jump vanishes) carry the normal gap
+pieces of at most one particle spacing ``h``, up to the tips by default: the jump vanishes at
+a tip, and the faces' term of the stress intensity factors, :func:`face_term`, wants the faces
+closed there too) carry the normal gap
 
 .. math::
     g_q = n_q \\cdot (u^+(x_q) - u^-(x_q)) = (B d)_q, \\qquad
@@ -23,9 +24,10 @@ force (added to the internal force, the sign of ``M a + f^int = f^ext``) are
     f_c = \\partial E_c / \\partial d = B^T (k w \\min(B d, 0)),
 
 one-sided: ``f_c = 0`` exactly while every face point is open (``g >= 0``). Central
-differences then conserve ``kinetic + strain + E_c`` (a conservative force; the energy balance
-of :mod:`~dolfinx_meshfree.dynamics.energy` stays closed, :meth:`ContactSystem.strain_energy`
-includes ``E_c``). The penalty stiffens the closed faces: the stable step is bounded with the
+differences then conserve ``kinetic + strain + E_c`` up to a drift that falls with the step (a
+conservative but non-smooth force: measured 9.6e-4, 1.1e-4, 4.1e-5 at dt, dt/2, dt/4 for faces
+that hit and bounce; round-off while they stay closed or open);
+:meth:`ContactSystem.strain_energy` includes ``E_c``. The penalty stiffens the closed faces: the stable step is bounded with the
 full contact stiffness ``K + k B^T W B`` (every point closed, an upper bound of the tangent of
 any contact state in the PSD order), so the step is safe whatever the state.
 
@@ -33,7 +35,9 @@ The penalty ``k`` (a normal stiffness per unit face area, Pa/m) is ``factor * E 
 default (:class:`CrackContact`): under a compressive normal stress ``sigma`` the faces then
 penetrate by ``|g| = sigma / k = (sigma / E) h / factor``, i.e. ``1 / factor`` of the elastic
 shortening of a strip of one particle spacing; the contact springs add about ``factor * E`` to
-the particle stiffness of the face particles (measured: see :class:`CrackContact`).
+the particle stiffness of the face particles, which lowers the stable step (see
+:class:`CrackContact`). Stress intensity factors with contact:
+:func:`~dolfinx_meshfree.dynamics.sifs.dynamic_sifs` adds :func:`face_term`.
 """
 
 from __future__ import annotations
@@ -78,12 +82,15 @@ class CrackContact:
     Attributes:
         factor: The penalty ``k = factor * E / h`` (``h`` the particle spacing) when
             ``penalty`` is ``None``. The default 10 keeps the penetration at 1/10 of the elastic
-            shortening of a one-spacing strip; it lowers the stable step of a cracked model by
-            the factor ``contact_step_ratio`` reported by the demo (measured ~0.5-0.6 on the
-            tests' models: the contact springs are stiffer than the bulk at the faces).
+            shortening of a one-spacing strip (the accurate choice: the penetration falls like
+            ``1/k``, measured slopes 0.99-1.02); its cost is the stable step, which the bound
+            sees: 0.26x the step without contact on the tests' unit square (factor 1: 0.68x,
+            100: 0.08x), 0.30x in Kalthoff–Winkler (3.3x the steps).
         penalty: ``k`` itself (Pa/m), or ``None``.
         points: Gauss–Legendre points per piece of the polylines (pieces at most ``h`` long).
-        tip_gap: Points closer than ``tip_gap * h`` to a tip are left out (the faces meet there).
+        tip_gap: Points closer than ``tip_gap * h`` to a tip are left out (default 0: none;
+            the faces' term of the SIFs then sees closed faces up to the tip: a compressed
+            crack's K_I/K0 -0.011 against -0.027 with ``tip_gap=1``).
     """
 
     factor: float = 10.0

@@ -27,8 +27,8 @@ one-sided: ``f_c = 0`` exactly while every face point is open (``g >= 0``). Cent
 differences then conserve ``kinetic + strain + E_c`` up to a drift that falls with the step (a
 conservative but non-smooth force: measured 9.6e-4, 1.1e-4, 4.1e-5 at dt, dt/2, dt/4 for faces
 that hit and bounce; round-off while they stay closed or open);
-:meth:`ContactSystem.strain_energy` includes ``E_c``. The penalty stiffens the closed faces: the stable step is bounded with the
-full contact stiffness ``K + k B^T W B`` (every point closed, an upper bound of the tangent of
+:meth:`ContactSystem.strain_energy` includes ``E_c``. The penalty stiffens the closed faces:
+the stable step is bounded with the full contact stiffness ``K + k B^T W B`` (every point closed, an upper bound of the tangent of
 any contact state in the PSD order), so the step is safe whatever the state.
 
 The penalty ``k`` (a normal stiffness per unit face area, Pa/m) is ``factor * E / h`` by

@@ -28,8 +28,9 @@ differences then conserve ``kinetic + strain + E_c`` up to a drift that falls wi
 conservative but non-smooth force: measured 9.6e-4, 1.1e-4, 4.1e-5 at dt, dt/2, dt/4 for faces
 that hit and bounce; round-off while they stay closed or open);
 :meth:`ContactSystem.strain_energy` includes ``E_c``. The penalty stiffens the closed faces:
-the stable step is bounded with the full contact stiffness ``K + k B^T W B`` (every point closed, an upper bound of the tangent of
-any contact state in the PSD order), so the step is safe whatever the state.
+the stable step is bounded with the full contact stiffness ``K + k B^T W B`` (every point
+closed, an upper bound of the tangent of any contact state in the PSD order), so the step is
+safe whatever the state.
 
 The penalty ``k`` (a normal stiffness per unit face area, Pa/m) is ``factor * E / h`` by
 default (:class:`CrackContact`): under a compressive normal stress ``sigma`` the faces then

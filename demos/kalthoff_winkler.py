@@ -16,6 +16,14 @@
 # over ``--rise`` (1 us); ``traction``: the traction ``rho c_d v0``, the load whose plane wave
 # gives the edge the velocity ``v0``.
 #
+# Crack-face contact (``--contact F``, default 10; 0 turns it off): the faces of the crack (the
+# notch in pure EFG, its part inside the particle box in the coupled models) are kept from
+# interpenetrating by a one-sided penalty ``k = F E / h``
+# (:class:`~dolfinx_meshfree.dynamics.CrackContact`). The impact presses the notch's faces
+# together; without contact they interpenetrate, K_I at initiation is about -0.4 K_II and the
+# hoop-stress criterion turns the crack to about 78 deg instead of the 70.5 deg of pure mode
+# II. The penalty lowers the stable step to about 0.3x (about 3x the steps).
+#
 # Energy bookkeeping (printed, ``energy`` in the JSON): kinetic + strain + fracture energy
 # against the external work (the work of the impact: the driving reaction or the traction),
 # with the fracture energy either the strain energy each extension releases (the model's own
@@ -58,7 +66,7 @@ import time
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
-from dolfinx_meshfree.dynamics import DynamicCrackGrowth
+from dolfinx_meshfree.dynamics import CrackContact, DynamicCrackGrowth
 from dolfinx_meshfree.io import DynamicsWriter
 from dolfinx_meshfree.output import CloudSeriesWriter
 
@@ -109,11 +117,17 @@ def _cell_midpoints(msh) -> np.ndarray:
 
 
 def builder(
-    method: str, msh, h: float, impact: str = "velocity", rise: float = RISE, box: float = BOX
+    method: str,
+    msh,
+    h: float,
+    impact: str = "velocity",
+    rise: float = RISE,
+    box: float = BOX,
+    contact: CrackContact | None = None,
 ):
     """``build(crack) -> ExplicitDynamics``: the model with the crack, the impact (``velocity``:
-    the edge driven at ``v0``, ramped over ``rise``; ``traction``: ``rho c_d v0``) and the
-    symmetry plane."""
+    the edge driven at ``v0``, ramped over ``rise``; ``traction``: ``rho c_d v0``), the
+    symmetry plane and the crack faces' ``contact`` (none if ``None``)."""
     if impact not in IMPACTS:
         raise ValueError(f"impact={impact!r} is not known; use one of {IMPACTS}")
     edge = mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0.0) & (x[1] <= NOTCH_Y + 1e-12))
@@ -128,12 +142,14 @@ def builder(
     def build(crack: mf.Crack) -> mf.ExplicitDynamics:
         if method == "efg":
             P = mf.ParticleSet.from_cells(msh, h)
-            dyn = mf.ExplicitDynamics.efg(P, MATERIAL, cracks=[crack], fixed_facets=fixed)
+            dyn = mf.ExplicitDynamics.efg(
+                P, MATERIAL, cracks=[crack], fixed_facets=fixed, crack_contact=contact
+            )
         else:
             V = _compat.vector_function_space(msh)
             patch = mf.ParticlePatch(msh, np.flatnonzero(in_box), h, cracks=[crack])
             prob = mf.CoupledElasticity(V, patch, MATERIAL, coupling=method)
-            dyn = mf.ExplicitDynamics.coupled(prob, fixed_facets=fixed)
+            dyn = mf.ExplicitDynamics.coupled(prob, fixed_facets=fixed, crack_contact=contact)
         if impact == "traction":
             dyn.add_traction(edge, lambda x, n: np.stack([np.full(len(x), sigma), 0 * x[:, 0]], 1))
         return dyn
@@ -226,14 +242,16 @@ def run(
     xdmf_every: int = 5,
     dt: float | None = None,
     box: float = BOX,
+    contact: CrackContact | None = None,
 ):
     """One run: the growth history, the path, the energies and the timings (a JSON-ready
-    dict)."""
+    dict); ``contact``: the crack faces' :class:`~dolfinx_meshfree.dynamics.CrackContact`
+    (``None``: the faces may interpenetrate)."""
     tic = time.perf_counter()
     msh, h, slot_end, yc = geometry(nodes, comm, slot=method != "efg", box=box)
     crack = mf.Crack([[slot_end, yc], [NOTCH_A, yc]])
     growth = DynamicCrackGrowth(
-        builder(method, msh, h, impact, rise, box), crack, K_Ic=K_IC, speed=SPEED,
+        builder(method, msh, h, impact, rise, box, contact), crack, K_Ic=K_IC, speed=SPEED,
         segment=SEGMENT * h, check_every=check_every, radius=np.asarray(RADII) * h, dt=dt,
     )  # fmt: skip
     setup = time.perf_counter() - tic
@@ -253,6 +271,7 @@ def run(
     return {
         "method": method,
         "impact": impact,
+        "contact": None if contact is None else contact.factor,
         "nodes": nodes,
         "h": h,
         "dofs": growth.model.num_dofs(),
@@ -391,6 +410,10 @@ def main(argv=None) -> int:
         "--box", type=float, default=BOX,
         help="the particle box starts this many spacings behind and below the notch tip",
     )  # fmt: skip
+    parser.add_argument(
+        "--contact", type=float, default=10.0, metavar="F",
+        help="crack-face contact, penalty k = F E / h (0: none, the faces may interpenetrate)",
+    )  # fmt: skip
     parser.add_argument("--json", default=None)
     parser.add_argument("--png", default=None)
     parser.add_argument("--xdmf", default=None, metavar="P", help="XDMF prefix")
@@ -399,6 +422,7 @@ def main(argv=None) -> int:
     comm = MPI.COMM_WORLD
     options = {"impact": args.impact, "rise": args.rise, "xdmf": args.xdmf, "dt": args.dt}
     options["box"] = args.box
+    options["contact"] = CrackContact(factor=args.contact) if args.contact > 0 else None
     records = [
         run(m, args.nodes, args.t_end, args.check_every, comm, xdmf_every=args.xdmf_every,
             **options)

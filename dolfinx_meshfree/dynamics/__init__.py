@@ -47,6 +47,7 @@ exact solutions of the rod benchmarks in :mod:`~dolfinx_meshfree.verification.wa
 
 from __future__ import annotations
 
+from .crack_contact import ContactSystem, CrackContact
 from .crack_growth import DynamicCrackGrowth, GrowthCheck, rayleigh_speed
 from .energy import EnergyRecord
 from .explicit import ExplicitDynamics
@@ -60,6 +61,8 @@ from .system import Field, LinearSystem, SemiDiscreteSystem
 __all__ = [
     "DYNAMICS_METHODS",
     "FINITE_STRAIN_DYNAMICS",
+    "ContactSystem",
+    "CrackContact",
     "DynamicCrackGrowth",
     "DynamicsResult",
     "EnergyRecord",

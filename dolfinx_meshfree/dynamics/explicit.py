@@ -46,6 +46,7 @@ from .builders import Model, build_coupled, build_efg, build_fe
 from .central_difference import CentralDifference
 from .conditions import held_velocities
 from .constraint import VelocityProjection, check_multiplier_solver
+from .crack_contact import CrackContact, with_crack_contact
 from .discretisation import Discretisation, VectorFunction
 from .energy import EnergyRecord
 from .evaluation import FieldEvaluator
@@ -216,11 +217,13 @@ class ExplicitDynamics:
         integration: str = "cells",
         cracks: Sequence[Crack] = (),
         crack_method: str = "diffraction",
+        crack_contact: CrackContact | None = None,
     ) -> ExplicitDynamics:
         """Pure EFG on ``particles`` (Belytschko et al. 1995, sec. 5.2), on their background
         cells or (``integration="stress-points"``) at the particles and stress points; fixed
         facets by facet multipliers on the velocities; ``cracks`` cut the MLS weights and the
-        cells. Arguments: see :func:`~dolfinx_meshfree.dynamics.builders.build_efg`.
+        cells. Arguments: see :func:`~dolfinx_meshfree.dynamics.builders.build_efg`;
+        ``crack_contact``: the faces' contact (:mod:`~dolfinx_meshfree.dynamics.crack_contact`).
         """
         check_safety(safety)
         check_multiplier_solver(multiplier_solver)
@@ -237,7 +240,9 @@ class ExplicitDynamics:
             cracks=cracks,
             crack_method=crack_method,
         )
-        return cls._from_model(model, safety, multiplier_solver, fixed_facets)
+        return cls._from_model(
+            with_crack_contact(model, crack_contact), safety, multiplier_solver, fixed_facets
+        )
 
     @classmethod
     def coupled(
@@ -250,6 +255,7 @@ class ExplicitDynamics:
         integration: str = "cells",
         slaves: str = "layer",
         material: Material | None = None,
+        crack_contact: CrackContact | None = None,
     ) -> ExplicitDynamics:
         """A :class:`~dolfinx_meshfree.CoupledElasticity` (any coupling) or a
         :class:`~dolfinx_meshfree.HybridElasticity` in dynamics, from the static problem's
@@ -259,13 +265,15 @@ class ExplicitDynamics:
         points (lagrange, edge-to-edge, master-slave); ``slaves="coincident"``: Johnson's
         coupling (master-slave, Rabczuk et al. 2006, eq. 15–16). ``material``: a finite-strain
         law whose linear twin is the problem's material (every coupling; the hybrid with HA-F).
-        Arguments: see
+        ``crack_contact``: contact of the patch's crack faces, as in :meth:`efg`. Arguments: see
         :func:`~dolfinx_meshfree.dynamics.builders.build_coupled`.
         """
         check_safety(safety)
         check_multiplier_solver(multiplier_solver)
         model = build_coupled(problem, particle_mass, fixed_facets, integration, slaves, material)
-        return cls._from_model(model, safety, multiplier_solver, fixed_facets)
+        return cls._from_model(
+            with_crack_contact(model, crack_contact), safety, multiplier_solver, fixed_facets
+        )
 
     @property
     def safety(self) -> float:

@@ -146,6 +146,7 @@ __all__ = [
     "TIES",
     "MasterSlaveLinks",
     "master_slave_operators",
+    "outside_slave_layer",
     "slave_solve",
     "solve_master_slave",
 ]
@@ -399,7 +400,7 @@ def solve_master_slave(
     links = raise_on_all_ranks(
         comm, lambda: MasterSlaveLinks(problem, is_bc, ubc.x.array.reshape(-1, 2), slaves)
     )
-    patch_bc, dq, dtabs = _outside_slave_layer(problem, links, patch_bc, dq, dtabs)
+    patch_bc, dq, dtabs = outside_slave_layer(problem, links, patch_bc, dq, dtabs)
     T_pf, S_loc, _, g_rows, g_vals, ml = _reduction(
         problem, links, fe_layout, tie, links.is_fixed()
     )
@@ -494,7 +495,9 @@ def solve_master_slave(
     return sol
 
 
-def _outside_slave_layer(problem, links: MasterSlaveLinks, patch_bc, dq, dtabs):
+def outside_slave_layer(
+    problem: CoupledElasticity, links: MasterSlaveLinks, patch_bc: list, dq: list, dtabs: list
+) -> tuple[list, list, list]:
     """Drop the patch-side Dirichlet facets that lie in the slave layer (both end points within
     it): the slaves there follow the FE boundary, whose nodes carry the condition strongly, and a
     multiplier on such a facet over-determines them (the linear patch test then failed by 1.9e2

@@ -46,7 +46,7 @@ from .assembly import (
 from .master_slave import (
     MasterSlaveCoupling,
     MasterSlaveLinks,
-    _outside_slave_layer,
+    outside_slave_layer,
     slave_solve,
 )
 
@@ -247,7 +247,7 @@ def master_slave_system(problem: CoupledElasticity, tables: dict | None = None) 
     links = raise_on_all_ranks(
         comm, lambda: MasterSlaveLinks(problem, is_bc, ubc.x.array.reshape(-1, 2), "layer")
     )
-    patch_bc, dq, dtabs = _outside_slave_layer(problem, links, patch_bc, dq, dtabs)
+    patch_bc, dq, dtabs = outside_slave_layer(problem, links, patch_bc, dq, dtabs)
     sl = links.slaves
     own = np.flatnonzero(P.owner[sl] == comm.rank)
     lay = Layout.from_local(comm, own.size)

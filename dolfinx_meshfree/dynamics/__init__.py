@@ -21,6 +21,8 @@ Rabczuk et al. 2006, sec. 5.3.3 and Table I). The pieces live in modules of one 
 * :mod:`~dolfinx_meshfree.dynamics.loads`, :mod:`~dolfinx_meshfree.dynamics.initial`,
   :mod:`~dolfinx_meshfree.dynamics.evaluation`: tractions and body forces, initial conditions,
   the fields anywhere and their error (eq. 137);
+* :mod:`~dolfinx_meshfree.dynamics.prescribed`: held dofs driven at prescribed velocities
+  (``fixed_facets`` triples ``(facets, components, velocity)``) and the work of their reactions;
 * :mod:`~dolfinx_meshfree.dynamics.builders` (with :mod:`~dolfinx_meshfree.dynamics.conditions`):
   pure FE, pure EFG, every static coupling from :meth:`CoupledElasticity.operators
   <dolfinx_meshfree.CoupledElasticity.operators>` and the hybrid SPH–FE coupling;
@@ -45,6 +47,7 @@ exact solutions of the rod benchmarks in :mod:`~dolfinx_meshfree.verification.wa
 
 from __future__ import annotations
 
+from .crack_contact import ContactSystem, CrackContact
 from .crack_growth import DynamicCrackGrowth, GrowthCheck, rayleigh_speed
 from .energy import EnergyRecord
 from .explicit import ExplicitDynamics
@@ -58,6 +61,8 @@ from .system import Field, LinearSystem, SemiDiscreteSystem
 __all__ = [
     "DYNAMICS_METHODS",
     "FINITE_STRAIN_DYNAMICS",
+    "ContactSystem",
+    "CrackContact",
     "DynamicCrackGrowth",
     "DynamicsResult",
     "EnergyRecord",

@@ -9,7 +9,8 @@ force of the system (``K d`` for a linear one) and ``M`` lumped:
 * ``d_{n+1} = d_n + dt v_{n+1/2}``; ``v_{1/2} = v_0 + dt/2 M^{-1} f_0``; a run continued with
   another step size uses ``(dt_{n-1/2} + dt_{n+1/2}) / 2`` for its first velocity update.
 
-Dofs fixed strongly (FE Dirichlet nodes) have ``M^{-1} = 0``: zero velocity and acceleration.
+Dofs fixed strongly (FE Dirichlet nodes) have ``M^{-1} = 0``: zero velocity and acceleration,
+or a prescribed velocity (:mod:`~dolfinx_meshfree.dynamics.prescribed`).
 The velocity at an output time is ``v_n = (v_{n-1/2} + v_{n+1/2}) / 2``.
 """
 
@@ -123,12 +124,15 @@ class CentralDifference:
         """``v_n`` at an output time or after a run, else ``v_{n-1/2}``."""
         return self.v_now if self.v_now is not None else self.v
 
-    def residual(self, vel: Sequence[PETSc.Vec] | None = None) -> float:
-        """The relative constraint residual of ``vel`` (default: the current velocities); 0
-        without a constraint (collective)."""
+    def residual(
+        self, vel: Sequence[PETSc.Vec] | None = None, target: np.ndarray | None = None
+    ) -> float:
+        """The relative constraint residual of ``vel`` (default: the current velocities; from
+        ``G v = target`` with prescribed values); 0 without a constraint (collective)."""
         if self.projection is None:
             return 0.0
-        return self.projection.residual(vel if vel is not None else self.current_velocity())
+        vel = vel if vel is not None else self.current_velocity()
+        return self.projection.residual(vel, target)
 
     def advance(
         self,
@@ -190,13 +194,19 @@ class CentralDifference:
                             self._work[k].axpy(-an, vecs[k])
                     vnew[k].pointwiseMult(self.minv[k], self._work[k])
                     vnew[k].aypx(-gamma * dt, self.v[k])
+                d_held = 0.0  # held FE dofs driven at prescribed velocities, their reaction's work
+                if loads.motion is not None:
+                    d_held = loads.motion.impose(masses[0], self._work[0], self.v[0], vnew[0],
+                                                 tn, dt, gamma)  # fmt: skip
                 # multiplier correction (eq. 94-96): G v_{n+1/2} = 0
+                g = None
                 if self.projection is not None:
-                    self.projection.correct(vnew, imp)
+                    g = None if loads.motion is None else loads.motion.target(tn + 0.5 * dt)
+                    self.projection.correct(vnew, imp, g)
                 # work of the step (see energy.external_work)
                 d_ext, d_c = 0.0, np.zeros(F)
                 if n > 0:
-                    d_ext = external_work(amps, self.v, vnew, dt)
+                    d_ext = external_work(amps, self.v, vnew, dt) + d_held
                     if G is not None:  # constraint force -G^T lambda / dt
                         d_c = constraint_work(G, imp, self.v, vnew)
                 if n in energy_steps:
@@ -218,7 +228,7 @@ class CentralDifference:
                         constraint=float((w_c + d_c).sum()),
                         transfer=float((w_c + d_c)[pk[0]]) if pk and G is not None else 0.0,
                         discrete=float(discrete_energy(half, internal, ku, vnew, dt)),
-                        residual=self.residual(vnew),
+                        residual=self.residual(vnew, g),
                     )
                     records.append(rec)
                     if n in out_steps:

@@ -1,5 +1,7 @@
 """Essential conditions of explicit dynamics: facets held at rest, in all components or in some
-(symmetry planes, rollers: ``fixed_facets=[(facets, (0,)), ...]``).
+(symmetry planes, rollers: ``fixed_facets=[(facets, (0,)), ...]``), or FE facets driven at a
+prescribed velocity (``(facets, (0,), velocity)`` triples:
+:mod:`~dolfinx_meshfree.dynamics.prescribed`).
 
 FE dofs are held strongly (zero velocity and acceleration: ``M^{-1} = 0``), particles by one
 multiplier per facet and held component
@@ -32,6 +34,7 @@ __all__ = [
     "first_cells",
     "fixed_fe_dofs",
     "fixed_groups",
+    "held_velocities",
     "particle_conditions",
     "stack_rows",
 ]
@@ -69,11 +72,12 @@ def check_facets(msh: dolfinx.mesh.Mesh, facets: npt.ArrayLike | None) -> np.nda
 
 
 def _is_pairs(fixed_facets: object) -> bool:
-    """Whether ``fixed_facets`` is a list of ``(facets, components)`` pairs."""
+    """Whether ``fixed_facets`` is a list of ``(facets, components)`` pairs or
+    ``(facets, components, velocity)`` triples."""
     return (
         isinstance(fixed_facets, list)
         and len(fixed_facets) > 0
-        and all(isinstance(p, tuple) and len(p) == 2 for p in fixed_facets)
+        and all(isinstance(p, tuple) and len(p) in (2, 3) for p in fixed_facets)
     )
 
 
@@ -84,14 +88,15 @@ def fixed_groups(
 
     ``fixed_facets``: ``None``, owned exterior facets (all components held), or a list of
     ``(facets, components)`` pairs, e.g. ``[(left, (0, 1)), (bottom, (1,))]``: the facets hold
-    only the given components (a symmetry plane: the normal component).
+    only the given components (a symmetry plane: the normal component); a third item, a
+    velocity, is dropped here (:func:`held_velocities`).
     """
     if not _is_pairs(fixed_facets):
         f = check_facets(msh, fixed_facets)
         return [(f, tuple(range(msh.geometry.dim)))] if fixed_facets is not None else []
     gdim = msh.geometry.dim
     groups = []
-    for facets, components in fixed_facets:
+    for facets, components, *_ in fixed_facets:
 
         def check(components: object = components) -> tuple[int, ...]:
             c = tuple(np.atleast_1d(components).tolist())
@@ -104,6 +109,44 @@ def fixed_groups(
 
         groups.append((check_facets(msh, facets), raise_on_all_ranks(msh.comm, check)))
     return groups
+
+
+def held_velocities(
+    msh: dolfinx.mesh.Mesh, fixed_facets: npt.ArrayLike | list | None
+) -> list[tuple[np.ndarray, tuple[int, ...], Callable | None]]:
+    """The groups of ``fixed_facets`` with their prescribed velocities, when some are given as
+    ``(facets, components, velocity)`` triples: ``velocity(t)`` (a number, or one per
+    component) drives the facets in those components instead of holding them at rest; a
+    pair's velocity is ``None`` (held at rest). Empty without triples (collective checks; see
+    :class:`~dolfinx_meshfree.dynamics.prescribed.PrescribedMotion`). E.g. the impact of
+    Kalthoff–Winkler: ``[(symmetry, (1,)), (impact, (0,), lambda t: v0 * min(t / t_r, 1))]``.
+
+    Raises:
+        ValueError: on every rank: a velocity that is not callable; bad facets or components
+            (:func:`fixed_groups`).
+    """
+    if not _is_pairs(fixed_facets) or all(len(item) == 2 for item in fixed_facets):
+        return []
+    groups = fixed_groups(msh, fixed_facets)
+    out = []
+    for (facets, comps), item in zip(groups, fixed_facets, strict=True):
+        velocity = item[2] if len(item) == 3 else None
+
+        def check(velocity: object = velocity) -> None:
+            if velocity is not None and not callable(velocity):
+                raise ValueError(
+                    f"fixed_facets has the velocity {velocity!r:.80}; give a callable "
+                    "velocity(t) -> a number or one number per held component"
+                )
+
+        raise_on_all_ranks(msh.comm, check)
+        out.append((facets, comps, velocity))
+    return out
+
+
+def _one(x: np.ndarray) -> np.ndarray:
+    """Unit values (m, gdim) at points (m, gdim): the facets' measures as right-hand side."""
+    return np.ones(x.shape)
 
 
 def first_cells(msh: dolfinx.mesh.Mesh, facets: np.ndarray) -> np.ndarray:
@@ -148,9 +191,13 @@ def particle_conditions(
     facets: Sequence[np.ndarray],
     tables: Sequence[Callable[[QuadraturePoints], ShapeTable]],
     components: Sequence[tuple[int, ...]] | None = None,
-) -> tuple[sp.csr_matrix, Layout]:
+    measures: bool = False,
+) -> tuple[sp.csr_matrix, Layout] | tuple[sp.csr_matrix, Layout, np.ndarray, np.ndarray]:
     """Facet multipliers ``int_f phi_J`` (unit scale) of groups of facets, each with the
-    particle table of its cells and, optionally, the components it holds (collective)."""
+    particle table of its cells and, optionally, the components it holds (collective);
+    ``measures``: also the global rows and ``int_f 1`` of each multiplier (the right-hand side
+    of a unit held value,
+    :func:`~dolfinx_meshfree.statics.efg.facet_multipliers`)."""
     msh = particles.mesh
     comm = particles.comm
     conds, quads, tabs = [], [], []
@@ -158,11 +205,11 @@ def particle_conditions(
         components = [tuple(range(particles.gdim))] * len(facets)
     for f, table, comps in zip(facets, tables, components, strict=True):
         q = facet_quadrature(msh, f, 4)
-        conds.append((f, _zero, comps))
+        conds.append((f, _one if measures else _zero, comps))
         quads.append(q)
         tabs.append(raise_on_all_ranks(comm, lambda q=q, table=table: table(q)))
-    D, _, _, dl = facet_multipliers(particles, conds, quads, tabs, 1.0)
-    return D, dl
+    D, rows, vals, dl = facet_multipliers(particles, conds, quads, tabs, 1.0)
+    return (D, dl, rows, vals) if measures else (D, dl)
 
 
 def stack_rows(

@@ -118,14 +118,22 @@ class VelocityProjection:
         self._counts = np.array(self.comm.allgather(hi - lo))
         self._full = np.zeros(size)
 
-    def correct(self, vel: Sequence[PETSc.Vec], impulse: Sequence[PETSc.Vec] | None = None) -> None:
-        """Project ``vel`` in place onto ``G v = 0``: solve ``S lambda = G v``, then
-        ``v -= M^{-1} G^T lambda``; ``impulse`` receives ``G_f^T lambda`` per field
-        (collective)."""
+    def correct(
+        self,
+        vel: Sequence[PETSc.Vec],
+        impulse: Sequence[PETSc.Vec] | None = None,
+        target: np.ndarray | None = None,
+    ) -> None:
+        """Project ``vel`` in place onto ``G v = 0`` (``G v = target``, the owned rows, for
+        prescribed values: :mod:`~dolfinx_meshfree.dynamics.prescribed`): solve ``S lambda =
+        G v - target``, then ``v -= M^{-1} G^T lambda``; ``impulse`` receives ``G_f^T lambda``
+        per field (collective)."""
         self._gv.set(0.0)
         for g, x in zip(self.G, vel, strict=True):
             if g is not None:
                 g.multAdd(x, self._gv, self._gv)
+        if target is not None:
+            self._gv.array[:] -= target
         if self.ksp is not None:
             self.ksp.solve(self._gv, self._lam)
         else:
@@ -141,14 +149,17 @@ class VelocityProjection:
             self._tmp[k].pointwiseMult(self.minv[k], w)
             x.axpy(-1.0, self._tmp[k])
 
-    def residual(self, vel: Sequence[PETSc.Vec]) -> float:
-        """Relative residual ``|sum_f G_f v_f|_inf / sum_f |G_f|_inf |v_f|_inf`` (collective)."""
+    def residual(self, vel: Sequence[PETSc.Vec], target: np.ndarray | None = None) -> float:
+        """Relative residual ``|sum_f G_f v_f - target|_inf / sum_f |G_f|_inf |v_f|_inf``
+        (collective)."""
         self._gv.set(0.0)
         scale = 0.0
         for g, x, gn in zip(self.G, vel, self._gnorm, strict=True):
             if g is not None:
                 g.multAdd(x, self._gv, self._gv)
                 scale += gn * x.norm(PETSc.NormType.INFINITY)
+        if target is not None:
+            self._gv.array[:] -= target
         r = self._gv.norm(PETSc.NormType.INFINITY)
         return float(r / scale) if scale > 0 else float(r)
 

@@ -342,9 +342,10 @@ def carry_state(old: ExplicitDynamics, new: ExplicitDynamics) -> float:
     for src, dst in ((so.u, sn.u), (so.v, sn.v)):
         for a, b in zip(src, dst, strict=True):
             a.copy(b)
-    if new.projection is not None:
-        new.projection.correct(sn.u)
-        new.projection.correct(sn.v)
+    if new.projection is not None:  # driven rows (prescribed velocities) keep their values
+        held = new.loads.motion
+        for x in (sn.u, sn.v):
+            new.projection.correct(x, target=None if held is None else held.kept(new.G, x))
     sn.step, sn.time, sn.dt_prev = so.step, so.time, so.dt_prev
     sn.records, sn.w_ext, sn.w_c = list(so.records), so.w_ext, so.w_c.copy()
     work = [x.duplicate() for x in so.u]

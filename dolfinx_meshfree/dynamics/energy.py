@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from mpi4py import MPI
 from petsc4py import PETSc
 
 __all__ = [
@@ -23,6 +24,7 @@ __all__ = [
     "discrete_energy",
     "external_work",
     "kinetic_energy",
+    "reaction_work",
 ]
 
 Amplified = Sequence[tuple[Sequence[PETSc.Vec | None], float]]
@@ -36,7 +38,8 @@ class EnergyRecord:
         kinetic: ``1/2 v_n^T M v_n`` with ``v_n = (v_{n-1/2} + v_{n+1/2}) / 2``.
         internal: The strain energy of the system at ``d_n``: ``1/2 d_n^T K d_n`` (linear), the
             stored energy ``sum_q W(F_q) w_q`` (finite strain).
-        external: Work of the external loads, ``sum_k f_k . (d_{k+1} - d_{k-1}) / 2``.
+        external: Work of the external loads, ``sum_k f_k . (d_{k+1} - d_{k-1}) / 2``, and of
+            the reactions of prescribed velocities (:func:`reaction_work`).
         constraint: Net work of the constraint forces ``-G^T lambda / dt`` in the same form
             (zero to round-off, since ``G v = 0``).
         transfer: The constraint work on the particles: the energy that crossed the interface
@@ -130,3 +133,25 @@ def constraint_work(
         if g is not None:
             work[k] = -0.5 * (impulse[k].dot(v_old[k]) + impulse[k].dot(v_new[k]))
     return work
+
+
+def reaction_work(
+    mass: PETSc.Vec,
+    residual: PETSc.Vec,
+    v_old: PETSc.Vec,
+    v_new: PETSc.Vec,
+    held: np.ndarray,
+    dt: float,
+    gamma: float,
+    comm: MPI.Comm,
+) -> float:
+    """Work over a step of the reactions that drive held dofs at prescribed velocities
+    (:mod:`~dolfinx_meshfree.dynamics.prescribed`), in the form of :func:`external_work`:
+    ``r_n . dt (v_{n-1/2} + v_{n+1/2}) / 2`` with ``r_n = M (v_{n+1/2} - v_{n-1/2}) /
+    (gamma dt) + f^int(d_n) - f^ext_n`` on the ``held`` owned dofs of one field (``residual``:
+    ``f^int - f^ext``), the force that eq. 4.4 needs there; it balances the discrete energy
+    exactly (collective)."""
+    m, r = mass.array_r[held], residual.array_r[held]
+    v0, v1 = v_old.array_r[held], v_new.array_r[held]
+    force = m * (v1 - v0) / (gamma * dt) + r
+    return float(comm.allreduce(0.5 * dt * float(force @ (v0 + v1)), op=MPI.SUM))

@@ -45,12 +45,15 @@ from ..physics.materials import LinearElastic
 from ..statics.coupled import CoupledElasticity
 from .builders import Model, build_coupled, build_efg, build_fe
 from .central_difference import CentralDifference
+from .conditions import held_velocities
 from .constraint import VelocityProjection, check_multiplier_solver
+from .crack_contact import CrackContact, with_crack_contact
 from .discretisation import Discretisation, VectorFunction
 from .energy import EnergyRecord
 from .evaluation import FieldEvaluator
 from .initial import check_particle_values, initial_values
 from .loads import Amplitude, BodyLoad, ExternalLoads, Traction
+from .prescribed import HeldVelocity
 from .results import DynamicsResult
 from .run import integrate
 from .sifs import dynamic_sifs
@@ -105,7 +108,8 @@ class ExplicitDynamics:
             :class:`~dolfinx_meshfree.dynamics.finite_strain.NonlinearSystem` for a
             finite-strain material).
         rebound_every: Steps between two checks of the current wave speed of a finite-strain
-            system (a growth above 5 % re-bounds the step, :class:`Rebound`).
+            system (a growth above 5 % re-bounds the step, :class:`Rebound`). held: FE facets
+            driven at prescribed velocities (:mod:`~dolfinx_meshfree.dynamics.prescribed`).
 
     Attributes:
         system: The :class:`~dolfinx_meshfree.dynamics.system.SemiDiscreteSystem`.
@@ -135,6 +139,7 @@ class ExplicitDynamics:
         body_load: BodyLoad | None = None,
         system: SemiDiscreteSystem | None = None,
         rebound_every: int = 10,
+        held: Sequence[HeldVelocity] = (),
     ) -> None:
         check_safety(safety)
         check_multiplier_solver(multiplier_solver)
@@ -161,7 +166,7 @@ class ExplicitDynamics:
             self.projection = VelocityProjection(self.G, self._minv, self.comm, multiplier_solver)
             self.multiplier_solver = self.projection.solver
         self.bound = TimeStepBound(self.system, material, self._minv, self.free, self.comm, safety)
-        self.loads = ExternalLoads(disc, self.free, self.comm, material.rho, body_load)
+        self.loads = ExternalLoads(disc, self.free, self.comm, material.rho, body_load, held)
         self.stepper = CentralDifference(self.system, self._minv, self.loads, self.projection)
         if hasattr(self.system, "wave_speed"):  # bounded at the current state
             self.bound.state = lambda: self.stepper.u
@@ -174,9 +179,10 @@ class ExplicitDynamics:
 
     @classmethod
     def _from_model(
-        cls, model: Model, safety: float, multiplier_solver: str | None = None
+        cls, model: Model, safety: float, multiplier_solver: str | None = None, fixed=None
     ) -> ExplicitDynamics:
-        return cls(**model.arguments(), safety=safety, multiplier_solver=multiplier_solver)
+        args = dict(model.arguments(), held=held_velocities(model.mesh, fixed))
+        return cls(**args, safety=safety, multiplier_solver=multiplier_solver)
 
     @classmethod
     def fe(
@@ -190,11 +196,11 @@ class ExplicitDynamics:
 
         ``fixed_facets``: owned exterior facets whose nodes are held at rest (strongly), or
         ``(facets, components)`` pairs holding only some components, e.g.
-        ``[(symmetry_plane, (0,))]`` (every method but the hybrid; particles: one multiplier
-        per facet and held component; :func:`~dolfinx_meshfree.dynamics.conditions.fixed_groups`).
+        ``[(symmetry_plane, (0,))]`` (not the hybrid; particles: a multiplier per facet and
+        component); ``(facets, components, velocity)`` triples drive FE nodes (``held``).
         """
         check_safety(safety)
-        return cls._from_model(build_fe(V, material, fixed_facets), safety)
+        return cls._from_model(build_fe(V, material, fixed_facets), safety, None, fixed_facets)
 
     @classmethod
     def efg(
@@ -212,12 +218,14 @@ class ExplicitDynamics:
         integration: str = "cells",
         cracks: Sequence[Crack] = (),
         crack_method: str = "diffraction",
+        crack_contact: CrackContact | None = None,
         quadrature: AdaptiveQuadrature | None = None,
     ) -> ExplicitDynamics:
         """Pure EFG on ``particles`` (Belytschko et al. 1995, sec. 5.2), on their background
         cells or (``integration="stress-points"``) at the particles and stress points; fixed
         facets by facet multipliers on the velocities; ``cracks`` cut the MLS weights and the
-        cells. Arguments: see :func:`~dolfinx_meshfree.dynamics.builders.build_efg`.
+        cells. Arguments: see :func:`~dolfinx_meshfree.dynamics.builders.build_efg`;
+        ``crack_contact``: the faces' contact (:mod:`~dolfinx_meshfree.dynamics.crack_contact`).
         """
         check_safety(safety)
         check_multiplier_solver(multiplier_solver)
@@ -235,7 +243,9 @@ class ExplicitDynamics:
             crack_method=crack_method,
             quadrature=quadrature,
         )
-        return cls._from_model(model, safety, multiplier_solver)
+        return cls._from_model(
+            with_crack_contact(model, crack_contact), safety, multiplier_solver, fixed_facets
+        )
 
     @classmethod
     def coupled(
@@ -248,6 +258,7 @@ class ExplicitDynamics:
         integration: str = "cells",
         slaves: str = "layer",
         material: Material | None = None,
+        crack_contact: CrackContact | None = None,
     ) -> ExplicitDynamics:
         """A :class:`~dolfinx_meshfree.CoupledElasticity` (any coupling) or a
         :class:`~dolfinx_meshfree.HybridElasticity` in dynamics, from the static problem's
@@ -257,13 +268,15 @@ class ExplicitDynamics:
         points (lagrange, edge-to-edge, master-slave); ``slaves="coincident"``: Johnson's
         coupling (master-slave, Rabczuk et al. 2006, eq. 15–16). ``material``: a finite-strain
         law whose linear twin is the problem's material (every coupling; the hybrid with HA-F).
-        Arguments: see
+        ``crack_contact``: contact of the patch's crack faces, as in :meth:`efg`. Arguments: see
         :func:`~dolfinx_meshfree.dynamics.builders.build_coupled`.
         """
         check_safety(safety)
         check_multiplier_solver(multiplier_solver)
         model = build_coupled(problem, particle_mass, fixed_facets, integration, slaves, material)
-        return cls._from_model(model, safety, multiplier_solver)
+        return cls._from_model(
+            with_crack_contact(model, crack_contact), safety, multiplier_solver, fixed_facets
+        )
 
     @property
     def safety(self) -> float:

@@ -25,6 +25,7 @@ from ..physics.operators import load_vector
 from ..statics.petsc import create_vector
 from .discretisation import Discretisation, VectorFunction, vector_values
 from .linalg import row_layout
+from .prescribed import HeldVelocity, PrescribedMotion
 
 __all__ = ["Amplitude", "BodyLoad", "ExternalLoads"]
 
@@ -48,6 +49,9 @@ class ExternalLoads:
         body_load: ``body_load(b) -> (fe, particles)``: the consistent loads of a body force
             ``b(x)`` per owned FE dof and per particle dof (original interleaved order, this
             rank's contributions), either ``None`` for a missing field; ``None``: lumped.
+        held: ``(facets, components, velocity)``: FE nodes held at a prescribed velocity
+            (:class:`~dolfinx_meshfree.dynamics.prescribed.PrescribedMotion`, :attr:`motion`;
+            ``None`` without).
     """
 
     def __init__(
@@ -57,9 +61,11 @@ class ExternalLoads:
         comm: MPI.Comm,
         rho: float,
         body_load: BodyLoad | None = None,
+        held: Sequence[HeldVelocity] = (),
     ) -> None:
         self.disc, self.free, self.comm, self.rho = disc, list(free), comm, rho
         self.body_load = body_load
+        self.motion = PrescribedMotion(disc, held, comm) if held else None
         self.loads: list[tuple[list[PETSc.Vec], Amplitude]] = []
 
     def at(self, t: float) -> list[tuple[list[PETSc.Vec], float]]:

@@ -11,12 +11,17 @@ the crack-aware MLS approximations of their particle coefficients; the domain ch
 statics (:func:`~dolfinx_meshfree.statics.sifs.solution_sifs`: inside the particles, away from
 the exterior boundary, the FE interface and other tips).
 
+With crack-face contact (:class:`~dolfinx_meshfree.dynamics.crack_contact.ContactSystem`) K_I
+includes the faces' term of the contact pressure
+(:func:`~dolfinx_meshfree.dynamics.crack_contact.face_term`); J does not.
+
 Left out: the crack-velocity terms of a moving tip (this is K at a stationary tip; a growing
 crack's K would need them).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
@@ -28,6 +33,7 @@ from ..geometry.crack import Crack, CrackDomain
 from ..parallel import raise_on_all_ranks
 from ..physics.materials import LinearElastic
 from ..statics.sifs import solution_sifs
+from .crack_contact import ContactSystem, face_term
 
 if TYPE_CHECKING:  # annotations only: the facade imports this module
     from .explicit import ExplicitDynamics
@@ -115,10 +121,15 @@ def dynamic_sifs(
     def acceleration(x: np.ndarray) -> np.ndarray:
         return mls.tabulate(x, 0).values @ a
 
-    return solution_sifs(
+    sifs = solution_sifs(
         grad, dyn.material, cracks, domain, crack, tip, radius, acceleration=acceleration,
         **options,
     )  # fmt: skip
+    if isinstance(dyn.system, ContactSystem):  # the faces' contact pressure (closed faces)
+        weight = options.get("weight", "linear")
+        dK = face_term(mls, u, dyn.material, crack, sifs, weight)
+        sifs = dataclasses.replace(sifs, K_I=sifs.K_I + dK)
+    return sifs
 
 
 class SIFHistory:

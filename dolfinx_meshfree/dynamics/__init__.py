@@ -20,7 +20,8 @@ Rabczuk et al. 2006, sec. 5.3.3 and Table I). The pieces live in modules of one 
   system, the discrete energy and the work of loads and constraints;
 * :mod:`~dolfinx_meshfree.dynamics.loads`, :mod:`~dolfinx_meshfree.dynamics.initial`,
   :mod:`~dolfinx_meshfree.dynamics.evaluation`: tractions and body forces, initial conditions,
-  the fields anywhere and their error (eq. 137);
+  the fields anywhere and their error (eq. 137); :mod:`~dolfinx_meshfree.dynamics.queries`:
+  what a running model can be asked (the base of :class:`ExplicitDynamics`);
 * :mod:`~dolfinx_meshfree.dynamics.prescribed`: held dofs driven at prescribed velocities
   (``fixed_facets`` triples ``(facets, components, velocity)``) and the work of their reactions;
 * :mod:`~dolfinx_meshfree.dynamics.builders` (with :mod:`~dolfinx_meshfree.dynamics.conditions`):

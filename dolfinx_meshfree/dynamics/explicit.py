@@ -34,12 +34,10 @@ from ..approx.mls import MLS
 from ..couplings.bridging import BridgingBand
 from ..couplings.hybrid import HybridElasticity
 from ..couplings.ramp import RampInterface
-from ..fracture.interaction import StressIntensityFactors
 from ..geometry.adaptive_quadrature import AdaptiveQuadrature
 from ..geometry.crack import Crack
 from ..geometry.particles import ParticleSet
 from ..geometry.patch import ParticlePatch
-from ..geometry.quadrature import QuadraturePoints
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic
 from ..statics.coupled import CoupledElasticity
@@ -49,14 +47,13 @@ from .conditions import held_velocities
 from .constraint import VelocityProjection, check_multiplier_solver
 from .crack_contact import CrackContact, with_crack_contact
 from .discretisation import Discretisation, VectorFunction
-from .energy import EnergyRecord
 from .evaluation import FieldEvaluator
 from .initial import check_particle_values, initial_values
 from .loads import Amplitude, BodyLoad, ExternalLoads, Traction
 from .prescribed import HeldVelocity
+from .queries import StateQueries
 from .results import DynamicsResult
 from .run import integrate
-from .sifs import dynamic_sifs
 from .system import Field, LinearSystem, SemiDiscreteSystem, inverse_masses
 from .time_step import TimeStepBound, check_safety
 
@@ -65,7 +62,7 @@ __all__ = ["ExplicitDynamics"]
 OnOutput = Callable[["ExplicitDynamics", int, float], None]
 
 
-class ExplicitDynamics:
+class ExplicitDynamics(StateQueries):
     """Central-difference explicit dynamics of elasticity, FE, EFG or coupled: small strain
     (:class:`~dolfinx_meshfree.LinearElastic`, ``f^int = K d``) or finite strain, total
     Lagrangian (:class:`~dolfinx_meshfree.NeoHookean`,
@@ -400,80 +397,6 @@ class ExplicitDynamics:
                 unusable ``xdmf`` prefix (on every rank, before any file is written).
         """
         return integrate(self, t_end, dt, force, outputs, energy_records, on_output, xdmf, progress)
-
-    def _current(self) -> list[PETSc.Vec]:
-        """The velocity vectors at the current time (``v_n`` at outputs and after a run)."""
-        return self.stepper.current_velocity()
-
-    def _local_values(self, vecs: list[PETSc.Vec], particles: bool = True) -> tuple:
-        """(FE Function with ghosts or None, particle coefficients (n, gdim) or None)."""
-        return self.evaluator.local_values(vecs, particles)
-
-    def velocity_at(self, points: npt.ArrayLike) -> np.ndarray:
-        """Velocity (m, gdim) at this rank's points, which may lie anywhere in the mesh
-        (collective). Raises :class:`~dolfinx_meshfree.PointsOutsideMeshError` on every rank if
-        a point is outside the body."""
-        return self.evaluator.at_points(self._current(), points)
-
-    def displacement_at(self, points: npt.ArrayLike) -> np.ndarray:
-        """Displacement (m, gdim) at this rank's points, like :meth:`velocity_at` (collective)."""
-        return self.evaluator.at_points(self.u, points)
-
-    def fe_functions(self) -> tuple[dolfinx.fem.Function, dolfinx.fem.Function]:
-        """The FE displacement and velocity at the current time as new DOLFINx Functions named
-        ``"displacement"`` and ``"velocity"`` (ghosts updated; collective). FE nodes outside
-        the FE field (touched by patch cells only) hold zero.
-
-        Raises:
-            ValueError: the model has no FE field (pure EFG).
-        """
-        if self.V is None:
-            raise ValueError("this model has no FE field (pure EFG): no FE functions")
-        u = self.evaluator.fe_function(self.u, "displacement")
-        return u, self.evaluator.fe_function(self._current(), "velocity")
-
-    @property
-    def energy_record(self) -> EnergyRecord | None:
-        """The latest :class:`EnergyRecord` (at an output time: that step's), or ``None``."""
-        records = self.stepper.records
-        return records[-1] if records else None
-
-    def velocity_at_quadrature(self, degree: int = 5) -> tuple[QuadraturePoints, np.ndarray]:
-        """Cell quadrature of degree ``degree`` on the owned cells and the velocity (nq, gdim)
-        there: FE on FE cells, MLS on particle cells, blended on ramp interface and bridging
-        band cells (tables cached; collective)."""
-        return self.evaluator.at_quadrature(self._current(), degree)
-
-    def velocity_error(
-        self, exact: Callable[[np.ndarray, float], np.ndarray], degree: int = 5
-    ) -> float:
-        """Relative L2 velocity error ``|v_h - v| / |v|`` at the current time (Rabczuk et al.
-        2006, eq. 137), integrated on the owned cells (collective, same on every rank).
-
-        Args:
-            exact: ``exact(points (m, gdim), t) -> (m, gdim)``.
-        """
-        return self.evaluator.relative_error(self._current(), exact, self.time, degree)
-
-    def displacement_error(
-        self, exact: Callable[[np.ndarray, float], np.ndarray], degree: int = 5
-    ) -> float:
-        """Relative L2 displacement error ``|u_h - u| / |u|`` at the current time, like
-        :meth:`velocity_error` (collective, same on every rank).
-
-        Args:
-            exact: ``exact(points (m, gdim), t) -> (m, gdim)``.
-        """
-        return self.evaluator.relative_error(self.u, exact, self.time, degree)
-
-    def stress_intensity_factors(
-        self, crack: Crack, tip: int | np.ndarray = 0, radius: float | None = None, **options
-    ) -> StressIntensityFactors:
-        """K_I, K_II and J at a stationary tip of ``crack`` at the current state (at an output
-        or after a run) by the interaction integral with the inertia term, from ``d_n`` and the
-        acceleration ``a_n`` (collective): see :func:`~dolfinx_meshfree.dynamics.sifs.dynamic_sifs`.
-        """
-        return dynamic_sifs(self, crack, tip, radius, **options)
 
     def num_dofs(self) -> dict:
         """Active FE dofs, particle dofs (master–slave: the masters) and multipliers (global)."""

@@ -757,7 +757,8 @@ def bridging_operators(problem: CoupledElasticity) -> CouplingOperators:
     fe_layout, l2g = fe_dof_layout(problem.V)
     pl = P.dof_layout(d)
     band = BridgingBand(problem, problem.overlap, problem.band_width)
-    q = cell_quadrature(msh, problem.quadrature_degree, P.cells)
+    deg = problem.quadrature_degree  # cut cells: each side of a crack on its own (crack_rules)
+    q = crack_rules(msh, P.cells, patch.cracks, deg, None)[0] or cell_quadrature(msh, deg, P.cells)
     w = q.weights.copy()
     b = band.in_band[q.cells]
     w[b] *= band.alpha_at(q.points[b], q.cells[b])

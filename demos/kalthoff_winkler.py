@@ -112,14 +112,17 @@ def builder(method: str, msh, h: float):
     return build
 
 
-def run(method: str, nodes: int, t_end: float, check_every: int = 5, comm=MPI.COMM_WORLD):
+def run(
+    method: str, nodes: int, t_end: float, check_every: int = 5, comm=MPI.COMM_WORLD,
+    update: str = "local",
+):  # fmt: skip
     """One run: the growth history, the path and the timings (a JSON-ready dict)."""
     tic = time.perf_counter()
     msh, h, slot_end, yc = geometry(nodes, comm, slot=method != "efg")
     crack = mf.Crack([[slot_end, yc], [NOTCH_A, yc]])
     growth = DynamicCrackGrowth(
         builder(method, msh, h), crack, K_Ic=K_IC, speed=SPEED, segment=SEGMENT * h,
-        check_every=check_every, radius=np.asarray(RADII) * h,
+        check_every=check_every, radius=np.asarray(RADII) * h, update=update,
     )  # fmt: skip
     setup = time.perf_counter() - tic
     growth.run(t_end)
@@ -146,6 +149,8 @@ def run(method: str, nodes: int, t_end: float, check_every: int = 5, comm=MPI.CO
         "KII_history": growth.KII_history(),
         "steps": growth.model.step,
         "rebuilds": tm["rebuilds"],
+        "update": update,
+        "local_updates": tm["local"],
         "time_setup": setup,
         "time_steps": tm["steps"],
         "time_sifs": tm["sifs"],
@@ -177,7 +182,7 @@ def report(rec: dict) -> None:
     print(
         f"  times: setup {rec['time_setup']:.2f} s, steps {rec['time_steps']:.2f} s "
         f"({rec['per_step'] * 1e3:.2f} ms/step), SIFs {rec['time_sifs']:.2f} s, rebuilds "
-        f"{rec['time_crack']:.2f} s ({rec['rebuilds']}), total {rec['time_total']:.2f} s"
+        f"{rec['time_crack']:.2f} s ({rec['rebuilds']}, {rec['local_updates']} local), total {rec['time_total']:.2f} s"
     )
 
 
@@ -220,9 +225,12 @@ def main(argv=None) -> int:
     parser.add_argument("--check-every", type=int, default=5)
     parser.add_argument("--json", default=None)
     parser.add_argument("--png", default=None)
+    parser.add_argument("--update", choices=["local", "full"], default="local")
     args = parser.parse_args(argv)
     comm = MPI.COMM_WORLD
-    records = [run(m, args.nodes, args.t_end, args.check_every, comm) for m in args.method]
+    records = [
+        run(m, args.nodes, args.t_end, args.check_every, comm, args.update) for m in args.method
+    ]
     if comm.rank == 0:
         for rec in records:
             report(rec)

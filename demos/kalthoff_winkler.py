@@ -182,7 +182,8 @@ def report(rec: dict) -> None:
     print(
         f"  times: setup {rec['time_setup']:.2f} s, steps {rec['time_steps']:.2f} s "
         f"({rec['per_step'] * 1e3:.2f} ms/step), SIFs {rec['time_sifs']:.2f} s, rebuilds "
-        f"{rec['time_crack']:.2f} s ({rec['rebuilds']}, {rec['local_updates']} local), total {rec['time_total']:.2f} s"
+        f"{rec['time_crack']:.2f} s ({rec['rebuilds']}, {rec['local_updates']} local), "
+        f"total {rec['time_total']:.2f} s"
     )
 
 

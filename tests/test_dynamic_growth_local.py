@@ -56,7 +56,7 @@ def _differences(a, b) -> dict:
         x.copy(y)
     fa, fb = a.system.internal_force(a.stepper.u), b.system.internal_force(b.stepper.u)
     out = {
-        "force": _max(np.abs(x.array - y.array).max(initial=0) for x, y in zip(fa, fb))
+        "force": _max(np.abs(x.array - y.array).max(initial=0) for x, y in zip(fa, fb, strict=True))
         / _max(np.abs(y.array).max(initial=0) for y in fb),
         "mass": _max(
             np.abs(f.mass.array - g.mass.array).max(initial=0)
@@ -103,7 +103,11 @@ def test_local_update_equals_a_full_rebuild(method, start):
         # the same state (d_n, v_{n-1/2}), projected onto the fresh constraint
         u0 = [x.copy() for x in dyn.stepper.u]
         diff = _differences(dyn, fresh)
-        for src, dst in ((u0, dyn.stepper.u), (u0, fresh.stepper.u), (dyn.stepper.v, fresh.stepper.v)):
+        for src, dst in (
+            (u0, dyn.stepper.u),
+            (u0, fresh.stepper.u),
+            (dyn.stepper.v, fresh.stepper.v),
+        ):
             for x, y in zip(src, dst, strict=True):
                 x.copy(y)
         if fresh.projection is not None:
@@ -198,6 +202,4 @@ def test_bad_update_options():
         return FR.build("efg", CELLS, COMM, crack=mf.Crack(c.points.copy()), msh=msh)[0]
 
     with pytest.raises(ValueError, match="does not hold the crack it was given"):
-        DynamicCrackGrowth(
-            copying, crack, K_Ic=0.8, speed=0.1, segment=SEG, tip=-1, update="local"
-        )
+        DynamicCrackGrowth(copying, crack, K_Ic=0.8, speed=0.1, segment=SEG, tip=-1, update="local")

@@ -19,13 +19,14 @@ cells whose table rows or rule change near the new segment, then ``M^{-1}``, the
 projection and the stable step; equal to a full rebuild to round-off). Where the change reaches
 a constraint row or a particle load, and with ``update="full"``, the model is rebuilt from
 scratch by the user's ``build(crack)`` with the grown crack (both sides: tables, cut cells,
-masses, constraint rows, the stable step; the cost of either is measured in
-:attr:`DynamicCrackGrowth.timings`) and the state is carried over unchanged: the FE dofs and the particle coefficients of ``d_n`` and
-``v_{n-1/2}`` (the particles do not move, only their shape functions change: the remark after
-eq. 3.11), projected onto the new constraint ``G d = 0``, ``G v = 0`` in the mass metric (a
-no-op when the constraint rows did not change), with the step, time and work accounts. The
-energy the rebuild removes (the strain energy of the old minus the new stiffness at the same
-``d_n``: the energy released by the new crack faces) is recorded per extension.
+masses, constraint rows, the stable step) and the state is carried over unchanged: the FE dofs
+and the particle coefficients of ``d_n`` and ``v_{n-1/2}`` (the particles do not move, only
+their shape functions change: the remark after eq. 3.11), projected onto the new constraint
+``G d = 0``, ``G v = 0`` in the mass metric (a no-op when the constraint rows did not change),
+with the step, time and work accounts. The cost of either is measured in
+:attr:`DynamicCrackGrowth.timings`. The energy an extension removes (the strain energy of the
+old minus the new stiffness at the same ``d_n``: the energy released by the new crack faces)
+is recorded per extension.
 """
 
 from __future__ import annotations
@@ -267,8 +268,8 @@ class DynamicCrackGrowth:
             if dt > stable * (1.0 + 1e-12):
                 tipx = np.round(self.crack.points[self.end], 12).tolist()
                 raise ValueError(
-                    f"dt={dt:.6g} is above the stable time step {stable:.6g} of the model "
-                    f"rebuilt or updated at step {dyn.step}, t = {dyn.time:.6g} (tip {tipx}): the masses "
+                    f"dt={dt:.6g} is above the stable time step {stable:.6g} of the model rebuilt "
+                    f"or updated at step {dyn.step}, t = {dyn.time:.6g} (tip {tipx}): the masses "
                     f"changed; pass dt <= {stable:.6g} or dt=None (the stable step of each model)"
                 )
             if self.check_every * dt * self.speed > self.segment * (1.0 + 1e-12):

@@ -128,18 +128,16 @@ class LocalModelUpdate:
 
         self.k = raise_on_all_ranks(comm, check)
         P = dyn.particles
-        self.cells = (
-            dyn.patch.particles.cells if dyn.patch is not None else domain.cells
-        ).astype(np.int64)
+        self.cells = (dyn.patch.particles.cells if dyn.patch is not None else domain.cells).astype(
+            np.int64
+        )
         msh = dyn.mesh
         self._geo = msh.geometry.x[_compat.entities_to_geometry(msh, 2, self.cells), :2]
         self._mid = self._geo.mean(axis=1)
         self._reach = np.linalg.norm(self._geo - self._mid[:, None], axis=2).max(axis=1)
         self._inv = np.empty(P.num_particles, dtype=np.int64)
         self._inv[P.petsc_index] = np.arange(P.num_particles)
-        self.rule: Rule = lambda cells, cracks: cut_cell_quadrature(
-            msh, cells, cracks, self.degree
-        )
+        self.rule: Rule = lambda cells, cracks: cut_cell_quadrature(msh, cells, cracks, self.degree)
         self.last: dict = {}
         self._check_masses()
 
@@ -225,6 +223,7 @@ class LocalModelUpdate:
             return bool(np.any(_distance(x[ids], segments) < radius + r[ids]))
 
         reasons = []
+
         def columns(A: PETSc.Mat) -> np.ndarray:  # the particles of A's non-zero columns
             _, cols, vals = A.getValuesCSR()
             return self._inv[np.unique(np.asarray(cols)[np.asarray(vals) != 0.0]) // gdim]
@@ -337,7 +336,9 @@ class LocalModelUpdate:
         st = self.dyn.stepper
         work = [x.duplicate() for x in st.u]
         try:
-            return float(self.dyn.system.strain_energy(st.u, self.dyn.system.internal_force(st.u, work)))
+            return float(
+                self.dyn.system.strain_energy(st.u, self.dyn.system.internal_force(st.u, work))
+            )
         finally:
             for x in work:
                 x.destroy()

@@ -207,6 +207,8 @@ def test_dt_above_the_updated_stable_step_is_refused():
 def test_bad_update_options():
     with pytest.raises(ValueError, match="update='bogus' is not known"):
         _growth("bogus")
+    with pytest.raises(ValueError, match="quadrature_degree=0 must be an integer"):
+        _growth("local", quadrature_degree=0)
     with pytest.raises(ValueError, match="quadrature_degree=5"):
         _growth("local", quadrature_degree=5)
     dyn, crack = _model("efg", CRACKS["edge"])

@@ -179,7 +179,13 @@ class DynamicCrackGrowth:
         self.dt = None if dt is None else _positive("dt", dt, "the time step")
         if update not in DYNAMIC_UPDATES:
             raise ValueError(f"update={update!r} is not known; use one of {DYNAMIC_UPDATES}")
-        self.update, self.quadrature_degree = update, quadrature_degree
+        deg = quadrature_degree
+        if isinstance(deg, bool) or not isinstance(deg, int | np.integer) or deg < 1:
+            raise ValueError(
+                f"quadrature_degree={deg!r} must be an integer >= 1 (the degree of the model's "
+                "cell rule; the builders' default is 7)"
+            )
+        self.update, self.quadrature_degree = update, int(deg)
         self.check_every, self.radius, self.sif_options = check_every, radius, sif_options
         self.build = build
         self.timings = {"steps": 0.0, "sifs": 0.0, "rebuild": 0.0, "rebuilds": 0, "setup": 0.0,

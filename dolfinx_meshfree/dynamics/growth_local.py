@@ -97,7 +97,8 @@ class LocalModelUpdate:
         rule: ``rule(cells, cracks) -> QuadraturePoints``: the cell rule of the model on
             ``cells`` (default: the cut-cell rule of ``quadrature_degree``). An adaptive rule
             replaces it and passes the cells whose rule it changed as ``extra_cells``.
-        last: What the last update did (cells, points, seconds), or why it was refused.
+        last: What the last update did (``mode``, cells, points, radius), or why it was
+            refused (``mode="full"``, ``reason``).
 
     Raises:
         ValueError: on every rank: not such a model, or its masses are not the row sums of the

@@ -33,7 +33,8 @@ Rabczuk et al. 2006, sec. 5.3.3 and Table I). The pieces live in modules of one 
   recorder of K_I(t), K_II(t);
 * :mod:`~dolfinx_meshfree.dynamics.crack_growth`: :class:`DynamicCrackGrowth`, dynamic crack
   growth (initiation, direction and arrest by the maximum hoop stress, a prescribed tip speed,
-  straight segments, the model rebuilt and the state carried over).
+  straight segments; the model updated in place near the tip,
+  :mod:`~dolfinx_meshfree.dynamics.growth_local`, or rebuilt with the state carried over).
 
 Dimension-generic: the mesh's ``gdim`` sets the components (2D: triangles, quadrilaterals; 3D:
 tetrahedra, hexahedra). In 3D ``fe``, ``efg``, ``lagrange``, ``edge-to-edge`` and ``bridging``
@@ -53,6 +54,7 @@ from .crack_growth import DynamicCrackGrowth, GrowthCheck, rayleigh_speed
 from .energy import EnergyRecord
 from .explicit import ExplicitDynamics
 from .finite_strain import FINITE_STRAIN_DYNAMICS, NonlinearSystem
+from .growth_local import LocalModelUpdate
 from .masses import fe_lumped_mass, particle_lumped_mass, table_lumped_mass
 from .methods import DYNAMICS_METHODS, check_method
 from .results import DynamicsResult
@@ -71,6 +73,7 @@ __all__ = [
     "Field",
     "GrowthCheck",
     "LinearSystem",
+    "LocalModelUpdate",
     "NonlinearSystem",
     "SIFHistory",
     "SemiDiscreteSystem",

@@ -13,15 +13,20 @@ maximum hoop stress (:func:`~dolfinx_meshfree.fracture.criteria.kink_angle`) at 
 the tip arrests (the partial segment is dropped) at a check where ``K_eq < K_Ic``, and may
 initiate again later.
 
-After each extension the model is rebuilt from scratch by the user's ``build(crack)`` with the
-grown crack (a full rebuild of both sides: tables, cut cells, masses, constraint rows, the
-stable step; the cost is measured in :attr:`DynamicCrackGrowth.timings`) and the state is
-carried over unchanged: the FE dofs and the particle coefficients of ``d_n`` and
-``v_{n-1/2}`` (the particles do not move, only their shape functions change: the remark after
-eq. 3.11), projected onto the new constraint ``G d = 0``, ``G v = 0`` in the mass metric (a
-no-op when the constraint rows did not change), with the step, time and work accounts. The
-energy the rebuild removes (the strain energy of the old minus the new stiffness at the same
-``d_n``: the energy released by the new crack faces) is recorded per extension.
+After each extension the model is updated in place (``update="local"``, the default:
+:mod:`~dolfinx_meshfree.dynamics.growth_local`: the particle stiffness and row-sum masses of the
+cells whose table rows or rule change near the new segment, then ``M^{-1}``, the multiplier
+projection and the stable step; equal to a full rebuild to round-off). Where the change reaches
+a constraint row or a particle load, and with ``update="full"``, the model is rebuilt from
+scratch by the user's ``build(crack)`` with the grown crack (both sides: tables, cut cells,
+masses, constraint rows, the stable step) and the state is carried over unchanged: the FE dofs
+and the particle coefficients of ``d_n`` and ``v_{n-1/2}`` (the particles do not move, only
+their shape functions change: the remark after eq. 3.11), projected onto the new constraint
+``G d = 0``, ``G v = 0`` in the mass metric (a no-op when the constraint rows did not change),
+with the step, time and work accounts. The cost of either is measured in
+:attr:`DynamicCrackGrowth.timings`. The energy an extension removes (the strain energy of the
+old minus the new stiffness at the same ``d_n``: the energy released by the new crack faces)
+is recorded per extension.
 """
 
 from __future__ import annotations
@@ -40,9 +45,13 @@ from ..parallel import raise_on_all_ranks
 from ..physics.materials import LinearElastic
 from .central_difference import advance_to
 from .explicit import ExplicitDynamics
-from .sifs import dynamic_sifs
+from .growth_local import LocalModelUpdate
+from .sifs import dynamic_sifs, model_cracks
 
-__all__ = ["DynamicCrackGrowth", "GrowthCheck", "rayleigh_speed"]
+__all__ = ["DYNAMIC_UPDATES", "DynamicCrackGrowth", "GrowthCheck", "rayleigh_speed"]
+
+#: How an extension updates the model.
+DYNAMIC_UPDATES = ("local", "full")
 
 Build = Callable[[Crack], ExplicitDynamics]
 
@@ -117,6 +126,13 @@ class DynamicCrackGrowth:
             :func:`~dolfinx_meshfree.dynamics.sifs.dynamic_sifs`).
         dt: The time step; ``None``: the stable step of each (re)built model. A given ``dt``
             above the stable step of a rebuilt model is refused (a ``ValueError``).
+        update: ``"local"`` (default): update the model in place near the new segment
+            (:class:`~dolfinx_meshfree.dynamics.growth_local.LocalModelUpdate`; ``build`` must
+            put the crack it is given in the model, which is then extended in place), falling
+            back to a rebuild where the change reaches a constraint row or a particle load;
+            ``"full"``: call ``build`` after every extension.
+        quadrature_degree: The degree of the model's cell rule (``update="local"``; the
+            builders' default 7; checked on the masses around the tip).
         sif_options: More keywords of :func:`~dolfinx_meshfree.dynamics.sifs.dynamic_sifs`.
 
     Example::
@@ -129,8 +145,11 @@ class DynamicCrackGrowth:
     Attributes:
         model: The current :class:`ExplicitDynamics`. crack: The current crack (the model's).
         history: One :class:`GrowthCheck` per check. released: ``(time, energy)`` per extension.
-        timings: Seconds in ``steps``, ``sifs``, ``rebuild`` (total), ``rebuilds`` (count),
-            ``per_step``.
+        timings: Seconds in ``steps``, ``sifs``, ``rebuild`` (total of the extensions,
+            local or full), ``rebuilds`` (count of extensions), ``local`` and ``full`` (counts
+            by kind), ``per_step``.
+        local: The :class:`~dolfinx_meshfree.dynamics.growth_local.LocalModelUpdate` of the
+            current model (``None`` with ``update="full"``).
     """
 
     def __init__(
@@ -144,6 +163,8 @@ class DynamicCrackGrowth:
         tip: int | None = None,
         radius: float | Sequence[float] | None = None,
         dt: float | None = None,
+        update: str = "local",
+        quadrature_degree: int = 7,
         **sif_options,
     ) -> None:
         if not callable(build):
@@ -156,9 +177,19 @@ class DynamicCrackGrowth:
         if isinstance(check_every, bool) or not isinstance(check_every, int) or check_every < 1:
             raise ValueError(f"check_every={check_every!r} must be an integer >= 1 (steps)")
         self.dt = None if dt is None else _positive("dt", dt, "the time step")
+        if update not in DYNAMIC_UPDATES:
+            raise ValueError(f"update={update!r} is not known; use one of {DYNAMIC_UPDATES}")
+        deg = quadrature_degree
+        if isinstance(deg, bool) or not isinstance(deg, int | np.integer) or deg < 1:
+            raise ValueError(
+                f"quadrature_degree={deg!r} must be an integer >= 1 (the degree of the model's "
+                "cell rule; the builders' default is 7)"
+            )
+        self.update, self.quadrature_degree = update, int(deg)
         self.check_every, self.radius, self.sif_options = check_every, radius, sif_options
         self.build = build
-        self.timings = {"steps": 0.0, "sifs": 0.0, "rebuild": 0.0, "rebuilds": 0, "setup": 0.0}
+        self.timings = {"steps": 0.0, "sifs": 0.0, "rebuild": 0.0, "rebuilds": 0, "setup": 0.0,
+                        "local": 0, "full": 0}  # fmt: skip
         tic = time.perf_counter()
         self.crack = Crack(crack.points.copy())
         self.model = build(self.crack)
@@ -188,10 +219,29 @@ class DynamicCrackGrowth:
             return int(tip)
 
         self.end = raise_on_all_ranks(comm, check)
+        self.local: LocalModelUpdate | None = None
+        self._start_local()
         self.history: list[GrowthCheck] = []
         self.released: list[tuple[float, float]] = []
         self.path_points: list[np.ndarray] = [self.crack.points[self.end].copy()]
         self._growing, self._travelled = False, 0.0
+
+    def _start_local(self) -> None:
+        """The local update of the current model (``update="local"``; collective)."""
+        if self.update != "local":
+            return
+        ours = any(c is self.crack for c in model_cracks(self.model)[0])
+
+        def check() -> None:
+            if not ours:
+                raise ValueError(
+                    "update='local': the model built by build(crack) does not hold the crack it "
+                    "was given (the local update extends it in place); put that Crack object in "
+                    "the model, or pass update='full'"
+                )
+
+        raise_on_all_ranks(self.model.comm, check)
+        self.local = LocalModelUpdate(self.model, self.quadrature_degree)
 
     # --- results ------------------------------------------------------------------------------
     @property
@@ -224,8 +274,8 @@ class DynamicCrackGrowth:
             if dt > stable * (1.0 + 1e-12):
                 tipx = np.round(self.crack.points[self.end], 12).tolist()
                 raise ValueError(
-                    f"dt={dt:.6g} is above the stable time step {stable:.6g} of the model "
-                    f"rebuilt at step {dyn.step}, t = {dyn.time:.6g} (tip {tipx}): the masses "
+                    f"dt={dt:.6g} is above the stable time step {stable:.6g} of the model rebuilt "
+                    f"or updated at step {dyn.step}, t = {dyn.time:.6g} (tip {tipx}): the masses "
                     f"changed; pass dt <= {stable:.6g} or dt=None (the stable step of each model)"
                 )
             if self.check_every * dt * self.speed > self.segment * (1.0 + 1e-12):
@@ -282,24 +332,40 @@ class DynamicCrackGrowth:
         """Extend the crack by one segment at ``theta`` and rebuild the model, carrying the
         state over (collective)."""
         old, crack, end = self.model, self.crack, self.end
-        tip = crack.points[end].copy()
         tic = time.perf_counter()
-        try:
-            crack.extend(theta, self.segment, tip=end)  # validated in the patch on every rank
-        except ValueError as e:
-            raise ValueError(
-                f"dynamic crack growth stopped at step {old.step}, t = {old.time:.6g}: the tip at "
-                f"{np.round(tip, 12).tolist()} cannot advance by {self.segment:.6g} at "
-                f"{np.degrees(theta):.4g} deg: {e}"
-            ) from e
-        grown = Crack(crack.points.copy())
-        new = self.build(grown)
-        self.released.append((old.time, carry_state(old, new)))
-        old.destroy()
-        self.model, self.crack = new, grown
-        self.path_points.append(grown.points[end].copy())
+        plan = None
+        if self.local is not None:
+            trial = Crack(crack.points.copy())
+            self._grow(trial, theta)
+            plan = self.local.prepare(trial.points, crack)
+        self._grow(crack, theta)  # validated in the patch on every rank
+        if plan is not None:
+            self.released.append((old.time, self.local.apply(plan)))
+            self.timings["local"] += 1
+        else:
+            grown = Crack(crack.points.copy())
+            new = self.build(grown)
+            self.released.append((old.time, carry_state(old, new)))
+            old.destroy()
+            self.model, self.crack = new, grown
+            self.timings["full"] += 1
+            self._start_local()
+        self.path_points.append(self.crack.points[end].copy())
         self.timings["rebuild"] += time.perf_counter() - tic
         self.timings["rebuilds"] += 1
+
+    def _grow(self, crack: Crack, theta: float) -> None:
+        """``crack.extend`` by one segment at ``theta``, its refusal naming the step, the time
+        and the tip."""
+        tip = crack.points[self.end].copy()
+        try:
+            crack.extend(theta, self.segment, tip=self.end)
+        except ValueError as e:
+            raise ValueError(
+                f"dynamic crack growth stopped at step {self.model.step}, t = "
+                f"{self.model.time:.6g}: the tip at {np.round(tip, 12).tolist()} cannot advance "
+                f"by {self.segment:.6g} at {np.degrees(theta):.4g} deg: {e}"
+            ) from e
 
     def run(self, t_end: float) -> list[GrowthCheck]:
         """Run to ``t_end``, checking every ``check_every`` steps (the last chunk may be

@@ -83,6 +83,7 @@ if TYPE_CHECKING:  # annotations only
 
 __all__ = [
     "LocalUpdate",
+    "change_radius",
     "changed_rows",
     "enable_local_update",
     "local_update_for",
@@ -149,6 +150,22 @@ def changed_rows(points: np.ndarray, segments: np.ndarray, radius: float) -> np.
     cand = np.flatnonzero(np.all((points[:, :2] >= lo) & (points[:, :2] <= hi), axis=1))
     d = point_segment_distance(points[cand, :2], segments[:, 0], segments[:, 1]).min(axis=1)
     return cand[d < radius]
+
+
+def change_radius(mls: MLS, segments: np.ndarray) -> float:
+    """``R_1``: the largest support radius of the particles of ``mls`` whose support reaches
+    ``segments`` (k, 2, 2) (0 when none), times ``1 + 1e-12``: every table row that the new
+    segments change lies within ``R_1`` of them (the module's docstring)."""
+    x, r = mls.points[:, :2], mls.radii
+    ids = changed_rows(x, segments, float(r.max()))
+    d = point_segment_distance(x[ids], segments[:, 0], segments[:, 1]).min(axis=1)
+    near = ids[d < r[ids]]
+    R = float(r[near].max()) if near.size else 0.0
+    # a table transform with a reach (the near-tip enrichment's ramp, which moves with the
+    # tip) changes every row within that reach of the old and the new tip: ends of S
+    if segments.shape[0]:
+        R = max([R, *(t.reach() for t in mls.table_transforms if hasattr(t, "reach"))])
+    return R * (1 + 1e-12)
 
 
 def _rows(A: sp.csr_matrix, rows: np.ndarray) -> sp.csr_matrix:
@@ -331,18 +348,8 @@ class LocalUpdate:
         return np.concatenate(entries) if entries else np.zeros((0, 2, 2))
 
     def radius(self, segments: np.ndarray) -> float:
-        """``R_1``: the largest support radius of the particles whose support reaches
-        ``segments`` (0 when none)."""
-        x, r = self.mls.points[:, :2], self.mls.radii
-        ids = changed_rows(x, segments, float(r.max()))
-        d = point_segment_distance(x[ids], segments[:, 0], segments[:, 1]).min(axis=1)
-        near = ids[d < r[ids]]
-        R = float(r[near].max()) if near.size else 0.0
-        # a table transform with a reach (the near-tip enrichment's ramp, which moves with the
-        # tip) changes every row within that reach of the old and the new tip: ends of S
-        if segments.shape[0]:
-            R = max([R, *(t.reach() for t in self.mls.table_transforms if hasattr(t, "reach"))])
-        return R * (1 + 1e-12)
+        """``R_1`` of :func:`change_radius` for this update's MLS."""
+        return change_radius(self.mls, segments)
 
     # -- crack rules ---------------------------------------------------------------------------
     def rules(

@@ -58,11 +58,18 @@ def freund(t: np.ndarray, material: mf.LinearElastic = MATERIAL, t0: float = 0.0
 
 
 def build(
-    method: str, cells: int, comm=MPI.COMM_WORLD, patch_width: float = 0.45, crack=None, msh=None
+    method: str,
+    cells: int,
+    comm=MPI.COMM_WORLD,
+    patch_width: float = 0.45,
+    crack=None,
+    msh=None,
+    quadrature=None,
 ):
     """The explicit model, its crack and the spacing. ``cells``: odd number of cells across 2H;
     ``crack``: default the edge crack to ``(A, 0)``; ``msh``: default a new mesh (give the same
-    one to rebuild a model with a grown crack)."""
+    one to rebuild a model with a grown crack); ``quadrature``: an ``mf.AdaptiveQuadrature``
+    of the particle cells (default the uniform rule)."""
     if cells % 2 != 1:
         raise ValueError(f"cells={cells} must be odd (the crack runs between particle rows)")
     h = 2.0 * H / cells
@@ -76,14 +83,16 @@ def build(
     if method == "efg":
         P = mf.ParticleSet.from_cells(msh, h)
         make = lambda facets: mf.ExplicitDynamics.efg(  # noqa: E731
-            P, MATERIAL, cracks=[crack], fixed_facets=facets
+            P, MATERIAL, cracks=[crack], fixed_facets=facets, quadrature=quadrature
         )
     else:
         V = _compat.vector_function_space(msh)
         n = msh.topology.index_map(2).size_local
         mid = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], :2].mean(axis=1)
         inside = (np.abs(mid[:, 1]) < patch_width) & (mid[:, 0] < A + patch_width)
-        patch = mf.ParticlePatch(msh, np.flatnonzero(inside), h, cracks=[crack])
+        patch = mf.ParticlePatch(
+            msh, np.flatnonzero(inside), h, cracks=[crack], quadrature=quadrature
+        )
         prob = mf.CoupledElasticity(V, patch, MATERIAL, coupling=method)
         make = lambda facets: mf.ExplicitDynamics.coupled(prob, fixed_facets=facets)  # noqa: E731
     rollers = mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0.0) | np.isclose(x[0], W))

@@ -40,10 +40,10 @@ def _max(values) -> float:
     return COMM.allreduce(max([0.0, *values]), op=MPI.MAX)
 
 
-def _model(method: str, points, msh=None):
+def _model(method: str, points, msh=None, quadrature=None):
     kw = {} if method == "efg" else {"patch_width": 0.9}
     crack = mf.Crack(np.array(points, dtype=float))
-    dyn = FR.build(method, CELLS, COMM, crack=crack, msh=msh, **kw)[0]
+    dyn = FR.build(method, CELLS, COMM, crack=crack, msh=msh, quadrature=quadrature, **kw)[0]
     return dyn, crack
 
 
@@ -129,6 +129,49 @@ def test_local_update_equals_a_full_rebuild(method, start):
         fresh.destroy()
         for x in u0:
             x.destroy()
+    dyn.destroy()
+
+
+@pytest.mark.parametrize("method", ["efg", "lagrange"])
+def test_local_update_with_an_adaptive_rule(method):
+    """With an adaptive rule (dense within 3 spacings of the tip, 2x2 elsewhere) the dense
+    zone moves with the tip: the update re-integrates the cells entering and leaving it
+    (:func:`~dolfinx_meshfree.geometry.adaptive_quadrature.changed_cells`) and equals a fresh
+    model with the same rule after each extension (check 1e-12); the same model updated as if
+    its rule were uniform differs from the fresh one (the check can fail)."""
+    rule = mf.AdaptiveQuadrature(3.0 * H_SPACING)
+    dyn, crack = _model(method, CRACKS["interior"], quadrature=rule)
+    assert dyn.quadrature is rule
+    upd = LocalModelUpdate(dyn)
+    blind, blind_crack = _model(method, CRACKS["interior"], dyn.mesh, quadrature=rule)
+    blind_upd = LocalModelUpdate(blind)
+    blind_upd.quadrature = None  # as if the rule did not move: only the cut cells change
+    for kink in KINKS[:2]:
+        for u, c in ((upd, crack), (blind_upd, blind_crack)):
+            trial = mf.Crack(c.points.copy())
+            trial.extend(kink, SEG, tip=-1)
+            plan = u.prepare(trial.points, c)
+            assert plan is not None, u.last
+            c.extend(kink, SEG, tip=-1)
+            u.apply(plan)
+        fresh, _ = _model(method, crack.points, dyn.mesh, quadrature=rule)
+        assert max(_differences(dyn, fresh).values()) <= 1e-12
+        assert _differences(blind, fresh)["force"] > 1e-6
+        fresh.destroy()
+    dyn.destroy()
+    blind.destroy()
+
+
+def test_adaptive_rule_moving_over_bridging_band_constraints_falls_back():
+    """Bridging ties the patch over its band cells with the cell rule: a dense zone moving onto
+    band cells may change a constraint row, so the update declines (the caller rebuilds)."""
+    rule = mf.AdaptiveQuadrature(3.0 * H_SPACING)
+    dyn, crack = _model("bridging", CRACKS["interior"], quadrature=rule)
+    upd = LocalModelUpdate(dyn)
+    trial = mf.Crack(crack.points.copy())
+    trial.extend(KINKS[0], SEG, tip=-1)
+    assert upd.prepare(trial.points, crack) is None
+    assert upd.last["reason"] == "a constraint row on a cell whose rule changes"
     dyn.destroy()
 
 

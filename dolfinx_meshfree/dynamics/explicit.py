@@ -113,7 +113,11 @@ class ExplicitDynamics(StateQueries):
         projection: The :class:`~dolfinx_meshfree.dynamics.constraint.VelocityProjection`, or
             ``None`` without a constraint.
         u, v: ``d_n`` and ``v_{n-1/2}`` per field (PETSc vectors).
+        quadrature: The particle cells' :class:`~dolfinx_meshfree.AdaptiveQuadrature` (set by
+            :meth:`efg` and :meth:`coupled`), or ``None``: the uniform rule.
     """
+
+    quadrature: AdaptiveQuadrature | None = None
 
     def __init__(
         self,
@@ -176,10 +180,17 @@ class ExplicitDynamics(StateQueries):
 
     @classmethod
     def _from_model(
-        cls, model: Model, safety: float, multiplier_solver: str | None = None, fixed=None
+        cls,
+        model: Model,
+        safety: float,
+        multiplier_solver: str | None = None,
+        fixed=None,
+        quadrature: AdaptiveQuadrature | None = None,
     ) -> ExplicitDynamics:
         args = dict(model.arguments(), held=held_velocities(model.mesh, fixed))
-        return cls(**args, safety=safety, multiplier_solver=multiplier_solver)
+        dyn = cls(**args, safety=safety, multiplier_solver=multiplier_solver)
+        dyn.quadrature = quadrature
+        return dyn
 
     @classmethod
     def fe(
@@ -240,9 +251,8 @@ class ExplicitDynamics(StateQueries):
             crack_method=crack_method,
             quadrature=quadrature,
         )
-        return cls._from_model(
-            with_crack_contact(model, crack_contact), safety, multiplier_solver, fixed_facets
-        )
+        model = with_crack_contact(model, crack_contact)
+        return cls._from_model(model, safety, multiplier_solver, fixed_facets, quadrature)
 
     @classmethod
     def coupled(
@@ -271,9 +281,9 @@ class ExplicitDynamics(StateQueries):
         check_safety(safety)
         check_multiplier_solver(multiplier_solver)
         model = build_coupled(problem, particle_mass, fixed_facets, integration, slaves, material)
-        return cls._from_model(
-            with_crack_contact(model, crack_contact), safety, multiplier_solver, fixed_facets
-        )
+        model = with_crack_contact(model, crack_contact)
+        quadrature = getattr(getattr(problem, "patch", None), "quadrature", None)
+        return cls._from_model(model, safety, multiplier_solver, fixed_facets, quadrature)
 
     @property
     def safety(self) -> float:

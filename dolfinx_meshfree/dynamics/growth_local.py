@@ -49,6 +49,7 @@ from petsc4py import PETSc
 from .. import _compat
 from ..approx.tables import ShapeTable
 from ..couplings.bridging import BridgingBand
+from ..geometry.adaptive_quadrature import changed_cells
 from ..geometry.crack import Crack
 from ..geometry.cut_cells import cut_cell_quadrature
 from ..geometry.quadrature import QuadraturePoints
@@ -138,7 +139,12 @@ class LocalModelUpdate:
         self._reach = np.linalg.norm(self._geo - self._mid[:, None], axis=2).max(axis=1)
         self._inv = np.empty(P.num_particles, dtype=np.int64)
         self._inv[P.petsc_index] = np.arange(P.num_particles)
-        self.rule: Rule = lambda cells, cracks: cut_cell_quadrature(msh, cells, cracks, self.degree)
+        self.quadrature = getattr(dyn, "quadrature", None)
+        if self.quadrature is None:
+            self.rule: Rule = lambda c, cracks: cut_cell_quadrature(msh, c, cracks, self.degree)
+        else:  # the model's adaptive rule: its dense zone moves with the tips
+            adaptive = self.quadrature
+            self.rule = lambda c, cracks: adaptive.rule(msh, c, cracks)
         self.last: dict = {}
         self._check_masses()
 
@@ -212,9 +218,12 @@ class LocalModelUpdate:
         """Local indices of the owned particles in PETSc order."""
         return self.dyn.evaluator.disc.owned_particles()
 
-    def _touched(self, segments: np.ndarray, radius: float) -> str | None:
+    def _touched(self, segments: np.ndarray, radius: float, rule_only: bool = False) -> str | None:
         """Why a constraint row or a particle load may change (a particle ``J`` of it within
-        ``radius + r_J`` of ``segments``), or ``None`` (collective)."""
+        ``radius + r_J`` of ``segments``), or ``None`` (collective). ``rule_only``: only the
+        cell rule changes there (not the shape functions): constraint rows (on facets or at
+        points) and tractions keep, unless bridging ties over band cells or a body force was
+        added (both integrated with the cell rule)."""
         dyn, P = self.dyn, self.dyn.particles
         r, x, gdim = dyn.mls.radii, P.positions[:, :2], P.gdim
 
@@ -230,13 +239,14 @@ class LocalModelUpdate:
             return self._inv[np.unique(np.asarray(cols)[np.asarray(vals) != 0.0]) // gdim]
 
         G = dyn.G[self.k] if dyn.G is not None else None
-        if G is not None:
+        banded = isinstance(dyn.interface, BridgingBand)
+        if G is not None and (banded or not rule_only):
             reasons.append("a constraint row" if near(columns(G)) else None)
         for (_, j), B in dyn.blocks.items():  # the bridging penalty's FE-particle block
             if j == self.k:
                 reasons.append("a coupling block" if near(columns(B)) else None)
         owned = self._owned_particles()
-        for vecs, _ in dyn.loads.loads:
+        for vecs, _ in dyn.loads.loads if dyn.loads.body_forces or not rule_only else ():
             b = vecs[self.k]
             if b is not None:
                 on = np.flatnonzero(b.array_r.reshape(-1, gdim).any(axis=1))
@@ -263,8 +273,21 @@ class LocalModelUpdate:
             self.last = {"mode": "full", "reason": f"{why} within reach of the new segment"}
             return None
         cells = self._cells_near(segs, R)
+        if self.quadrature is not None:  # the cells entering or leaving the dense zone
+            old = [c.points.copy() for c in self.cracks]
+            new = [np.asarray(grown, dtype=float) if c is crack else p
+                   for c, p in zip(self.cracks, old, strict=True)]  # fmt: skip
+            moved = changed_cells(self.dyn.mesh, self.cells, old, new, self.quadrature)
+            extra_cells = moved if extra_cells is None else np.union1d(extra_cells, moved)
         if extra_cells is not None:
-            cells = np.union1d(cells, np.asarray(extra_cells, dtype=np.int64))
+            extra_cells = np.asarray(extra_cells, dtype=np.int64)
+            ends = np.repeat(self._mid[np.isin(self.cells, extra_cells)][:, None], 2, axis=1)
+            reach = self.dyn.comm.allreduce(float(self._reach.max(initial=0.0)), op=MPI.MAX)
+            why = self._touched(ends, reach, rule_only=True)
+            if why is not None:
+                self.last = {"mode": "full", "reason": f"{why} on a cell whose rule changes"}
+                return None
+            cells = np.union1d(cells, extra_cells)
         return Plan(segs, R, cells, self._tabulate(cells))
 
     def apply(self, plan: Plan) -> float:

@@ -67,6 +67,8 @@ class ExternalLoads:
         self.body_load = body_load
         self.motion = PrescribedMotion(disc, held, comm) if held else None
         self.loads: list[tuple[list[PETSc.Vec], Amplitude]] = []
+        #: Body forces among :attr:`loads` (integrated with the cell rule, unlike tractions).
+        self.body_forces = 0
 
     def at(self, t: float) -> list[tuple[list[PETSc.Vec], float]]:
         """The load vectors with their amplitudes at time ``t``."""
@@ -146,6 +148,7 @@ class ExternalLoads:
         a constant ``b``. ``amplitude`` defaults to 1 (a step load).
         """
         d = self.disc
+        self.body_forces += 1
         if self.body_load is not None:
             fe, f_p = self.body_load(force)
             parts = []

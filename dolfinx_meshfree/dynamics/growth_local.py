@@ -343,8 +343,9 @@ class LocalModelUpdate:
             proj = VelocityProjection(dyn.G, st.minv, comm, dyn.projection.solver)
             dyn.projection.destroy()
             dyn.projection = st.projection = proj
-            proj.correct(st.u)
-            proj.correct(st.v)
+            held = dyn.loads.motion  # driven rows (prescribed velocities) keep their values
+            for x in (st.u, st.v):
+                proj.correct(x, target=None if held is None else held.kept(dyn.G, x))
         dyn.bound = TimeStepBound(dyn.system, dyn.material, st.minv, dyn.free, comm, dyn.safety)
         dyn.evaluator._tables.clear()  # the cached quadrature tables of the old approximation
         dyn.loads.body_load = _stale_body_load

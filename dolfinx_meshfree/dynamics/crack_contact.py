@@ -53,7 +53,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from .. import _compat
-from ..fracture.interaction import StressIntensityFactors, _q_value
+from ..fracture.interaction import StressIntensityFactors, q_weight
 from ..geometry.crack import Crack, CrackDomain, particle_spacing
 from ..parallel import Layout, raise_on_all_ranks
 from ..statics.petsc import create_aij
@@ -377,7 +377,7 @@ def face_term(
             + material.stress(t_down.gradient(coefficients))
         )
         p = np.where(gap < 0.0, -np.einsum("i,mij,j->m", n, sigma, n), 0.0)
-        q = _q_value(r, r1, r2, weight)
+        q = q_weight(r, r1, r2, weight)
         # int_0^r2 f(r) / sqrt(r) dr = 2 sqrt(r2) int_0^1 f(r2 s^2) ds
         out[k] = 2.0 * 2.0 * np.sqrt(r2) * np.sum(ws * p * q) / np.sqrt(2.0 * np.pi)
     return out

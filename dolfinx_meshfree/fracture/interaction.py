@@ -64,6 +64,7 @@ __all__ = [
     "annulus_quadrature",
     "disc_quadrature",
     "interaction_integral",
+    "q_weight",
 ]
 
 #: The weight function ``q(r)`` across the annulus: ``"linear"`` (the plateau of Moran & Shih
@@ -182,8 +183,9 @@ def disc_quadrature(
     return np.stack([R * np.cos(TH), R * np.sin(TH)], axis=1), W, R
 
 
-def _q_value(r: np.ndarray, r1: float, r2: float, weight: str) -> np.ndarray:
-    """q (n,) on the annulus ``r1 <= r <= r2`` (1 inside, 0 outside)."""
+def q_weight(r: np.ndarray, r1: float, r2: float, weight: str) -> np.ndarray:
+    """The weight ``q`` (n,) of the domain integral at radii ``r``: 1 inside ``r1``, 0
+    outside ``r2``, across the annulus as ``weight`` (one of :data:`Q_WEIGHTS`)."""
     s = np.clip((r - r1) / (r2 - r1), 0.0, 1.0)
     return 1.0 - s if weight == "linear" else 1.0 - 3.0 * s**2 + 2.0 * s**3
 
@@ -210,7 +212,7 @@ def _inertia_terms(
         sd = slice(start_in, start_in + len(wd))
         start, start_in = start + len(w), start_in + len(wd)
         xq = np.concatenate([x, xd])
-        wq = np.concatenate([w * _q_value(r, r1s[k], r2s[k], weight), wd])
+        wq = np.concatenate([w * q_weight(r, r1s[k], r2s[k], weight), wd])
         aq = np.concatenate([acc[sl], acc[sd]])
         grads = [np.concatenate([H[sl], H[sd]])] + [f.fields(xq)[1] for f in aux]
         for m, h in enumerate(grads):

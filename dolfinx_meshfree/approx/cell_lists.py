@@ -10,6 +10,13 @@ and, within a point, in increasing particle index: the CSR layout of a shape tab
 of the whole pair list. The pair set and the distances are those of
 :func:`~dolfinx_meshfree.approx.neighbours.pairs_within_support` and
 :func:`~dolfinx_meshfree.approx.mls.pair_distances` (same formulas; tested equal).
+
+For the fused MLS path the evaluation points are grouped instead (:meth:`CellList.candidates`):
+the points are binned into a grid of bins about one reach wide (about 16 points each), and the
+particles whose support meets the bounding box of a bin's points are gathered once per bin and
+sorted by index. A point then tests its group's candidates in one branch-free loop over
+contiguous arrays (about twice as many candidates as pairs), and its pairs come sorted: the
+per-point bin walks and insertion sorts of :func:`gather` are paid once per group.
 """
 
 from __future__ import annotations
@@ -28,6 +35,10 @@ _BINS_PER_RADIUS = 2.0
 #: the others go to the coarse grid.
 _QUANTILE = 0.95
 _SPREAD = 1.05
+#: Evaluation points per group sharing one candidate list (:meth:`CellList.candidates`), and
+#: the bounds of the groups' bin size in units of the fine grid's reach.
+_POINTS_PER_GROUP = 16.0
+_GROUP_SIZE = (0.5, 1.0)
 #: The number of grids (fixed, so that the compiled functions have one signature; the second
 #: may be empty).
 _LEVELS = 2
@@ -183,6 +194,128 @@ def pair_data(
 
 
 @jit
+def _box_gap(lo: float, hi: float, a: float, size: float) -> float:
+    """Squared distance between the intervals ``[lo, hi]`` and ``[a, a + size]``."""
+    if hi < a:
+        return (a - hi) * (a - hi)
+    if lo > a + size:
+        return (lo - a - size) * (lo - a - size)
+    return 0.0
+
+
+@jit
+def gather_box(
+    blo: np.ndarray, bhi: np.ndarray, grid: tuple, tmp: np.ndarray, cand: np.ndarray, k: int
+) -> int:
+    """The particles whose support meets the box ``[blo, bhi]`` (3,; zero-padded) into
+    ``cand[k], cand[k + 1], ...`` (positions in bin order), sorted by particle index; as
+    :func:`gather` for a point, with the distance from a particle to the box (a superset of the
+    pairs of every point in the box). ``tmp``: work array (n + 1,). Returns the next free entry."""
+    packed, _, order, start, los, sizes, shapes, reaches, boff = grid
+    g = los.shape[1]
+    last = g - 1
+    nt = 0
+    for lev in range(boff.size - 1):
+        if start[boff[lev]] == start[boff[lev + 1]]:  # an empty grid
+            continue
+        size, reach = sizes[lev], reaches[lev]
+        inv_size = 1.0 / size
+        reach2 = reach * reach
+        s1, s2 = shapes[lev, 1], shapes[lev, 2]
+        if g > 1:
+            a0, _ = _span(blo[0], reach, los[lev, 0], inv_size, shapes[lev, 0])
+            _, z0 = _span(bhi[0], reach, los[lev, 0], inv_size, shapes[lev, 0])
+        else:
+            a0, z0 = 0, 0
+        if g > 2:
+            a1, _ = _span(blo[1], reach, los[lev, 1], inv_size, s1)
+            _, z1 = _span(bhi[1], reach, los[lev, 1], inv_size, s1)
+        else:
+            a1, z1 = 0, 0
+        lol, sl = los[lev, last], shapes[lev, last]
+        for c0 in range(a0, z0 + 1):
+            g0 = _box_gap(blo[0], bhi[0], los[lev, 0] + c0 * size, size) if g > 1 else 0.0
+            if g0 > reach2:
+                continue
+            for c1 in range(a1, z1 + 1):
+                g1 = g0
+                if g > 2:
+                    g1 += _box_gap(blo[1], bhi[1], los[lev, 1] + c1 * size, size)
+                if g1 > reach2:
+                    continue
+                rem = np.sqrt(reach2 - g1)
+                first, _ = _span(blo[last], rem, lol, inv_size, sl)
+                _, stop = _span(bhi[last], rem, lol, inv_size, sl)
+                if first > stop:
+                    continue
+                base = boff[lev] + (c0 * s1 + c1) * s2
+                for s in range(start[base + first], start[base + stop + 1]):
+                    ss = 0.0
+                    for d in range(3):
+                        p = packed[s, d]
+                        e = max(blo[d] - p, p - bhi[d], 0.0)
+                        ss += e * e
+                    tmp[nt] = s
+                    nt += ss <= packed[s, 3]
+    for u in range(nt):  # insertion by particle index (bins are sorted by index: short moves)
+        s = tmp[u]
+        key = order[s]
+        t = k + u
+        while t > k and order[cand[t - 1]] > key:
+            cand[t] = cand[t - 1]
+            t -= 1
+        cand[t] = s
+    return k + nt
+
+
+@jit
+def _candidate_lists(
+    x: np.ndarray, grid: tuple, lo: np.ndarray, size: float, shape: np.ndarray, capacity: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points ``x`` (m, 3; zero-padded) binned by a grid (corner ``lo`` (3,), bins of ``size``,
+    ``shape`` (3,)); per non-empty bin the particles whose support meets the box of its points.
+
+    Returns:
+        ``(group, cstart, cand)``: the bin (group) of each point (m,), the first candidate of
+        each group (groups + 1,) and the candidates (positions in bin order, by particle index).
+    """
+    m = x.shape[0]
+    n = grid[1].size
+    keys = np.empty(m, np.int64)
+    for q in range(m):
+        key = 0
+        for d in range(3):
+            c = int(min(max(np.floor((x[q, d] - lo[d]) / size), 0.0), float(shape[d] - 1)))
+            key = key * shape[d] + c
+        keys[q] = key
+    start, order = _build(keys, int(shape[0] * shape[1] * shape[2]))
+    group = np.empty(m, np.int64)
+    cstart = [0]
+    cand = np.empty(max(capacity, 16), np.int64)
+    tmp = np.empty(n + 1, np.int64)
+    blo, bhi = np.empty(3), np.empty(3)
+    k = 0
+    for b in range(start.size - 1):
+        if start[b] == start[b + 1]:
+            continue
+        blo[:] = np.inf
+        bhi[:] = -np.inf
+        for u in range(start[b], start[b + 1]):
+            q = order[u]
+            group[q] = len(cstart) - 1
+            for d in range(3):
+                blo[d] = min(blo[d], x[q, d])
+                bhi[d] = max(bhi[d], x[q, d])
+        if k + n > cand.size:  # room for every particle
+            grown = np.empty(max(2 * cand.size, k + n), np.int64)
+            grown[:k] = cand[:k]
+            cand = grown
+        k = gather_box(blo, bhi, grid, tmp, cand, k)
+        cstart.append(k)
+    return group, np.array(cstart, dtype=np.int64), cand[:k]
+
+
+@jit
 def _search(
     x: np.ndarray, grid: tuple, capacity: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -292,6 +425,36 @@ class CellList:
         self.grid = (packed, radii, order, start, los, sizes, shapes, reaches, boff)
         #: Pairs per point of the last query: the capacity guess of the next one.
         self.pairs_per_point = 16.0
+
+    def candidates(self, x3: np.ndarray) -> tuple:
+        """The points ``x3`` (m, 3; zero-padded) in groups of nearby points (bins of a grid
+        about the fine grid's reach wide, holding about :data:`_POINTS_PER_GROUP` points), each
+        with the candidate particles of all its points, gathered once: what
+        :func:`~.mls_kernel.fill_shape_functions` takes.
+
+        Returns:
+            ``(group, cstart, cpacked, cradii, ckey)``: the group of each point (m,), the first
+            candidate of each group (groups + 1,), and per candidate its position and squared
+            radius with a margin (ncand, 4), radius and particle index, by index within a group.
+        """
+        m = x3.shape[0]
+        g = self.gdim
+        lo = np.zeros(3)
+        extent = np.zeros(g)
+        if m:
+            lo[:g] = x3[:, :g].min(axis=0)
+            extent = x3[:, :g].max(axis=0) - lo[:g]
+        reach = float(self.grid[7][0])
+        volume = float(np.prod(np.maximum(extent, reach)))
+        size = (volume * _POINTS_PER_GROUP / max(m, 1)) ** (1.0 / g)
+        size = min(max(size, _GROUP_SIZE[0] * reach), _GROUP_SIZE[1] * reach)
+        size, shape = _grid_shape(extent, size, max(m, 1))
+        shape3 = np.ones(3, np.int64)
+        shape3[:g] = shape
+        capacity = int(2.5 * self.pairs_per_point * m / _POINTS_PER_GROUP) + 1024
+        group, cstart, cand = _candidate_lists(x3, self.grid, lo, size, shape3, capacity)
+        packed, radii, order = self.grid[0], self.grid[1], self.grid[2]
+        return group, cstart, packed[cand], radii[cand], order[cand]
 
     def pairs(
         self, x: np.ndarray

@@ -19,7 +19,15 @@ import os
 from collections.abc import Callable
 from typing import Any, TypeVar
 
-__all__ = ["AVAILABLE", "jit", "num_threads"]
+__all__ = [
+    "AVAILABLE",
+    "carray",
+    "default_backend",
+    "jit",
+    "num_threads",
+    "resolve_backend",
+    "stack_pointer",
+]
 
 #: True when numba can be imported: the compiled kernels are then the default.
 AVAILABLE: bool = importlib.util.find_spec("numba") is not None
@@ -41,11 +49,32 @@ if AVAILABLE:
         except RuntimeError:  # "cannot cache function ...: no locator available"
             return _numba.njit(cache=False, error_model="numpy", nogil=True)(fn)
 
+    from numba import carray, types
+    from numba.core import cgutils
+    from numba.extending import intrinsic
+
+    @intrinsic
+    def stack_pointer(typingctx: Any, size: Any) -> Any:
+        """A pointer to ``size`` (an integer literal) float64 on the stack of the compiled
+        function that calls it: with :func:`carray`, a small work array that costs no
+        allocation and no reference counting, and whose entries LLVM keeps in registers when
+        they are indexed by constants (loops over a basis of compile-time size, unrolled)."""
+        if not isinstance(size, types.IntegerLiteral):
+            return None
+        n = size.literal_value
+
+        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+            return cgutils.alloca_once(builder, context.get_value_type(types.float64), size=n)
+
+        return types.CPointer(types.float64)(size), codegen
+
 else:
 
     def jit(fn: F) -> F:
         """Without numba the function stays plain Python (never called by the default paths)."""
         return fn
+
+    carray = stack_pointer = None  # used only inside compiled functions
 
 
 def num_threads() -> int:
@@ -59,3 +88,29 @@ def num_threads() -> int:
             "number of threads per process (e.g. 2) or unset it (1 thread)"
         )
     return int(value) if AVAILABLE else 1
+
+
+def default_backend(env_var: str, fallback: str = "numpy") -> str:
+    """The default backend of a module with a compiled and a reference implementation: the
+    environment variable ``env_var`` if set (e.g. to run a test suite on the reference path),
+    else ``"numba"`` when numba is importable, else ``fallback``."""
+    return os.environ.get(env_var) or ("numba" if AVAILABLE else fallback)
+
+
+def resolve_backend(name: str, env_var: str, backends: tuple[str, ...] = ("numba", "numpy")) -> str:
+    """``name`` checked against ``backends`` (the compiled one first, the reference last).
+
+    Raises:
+        ValueError: An unknown backend (naming ``env_var``, where it may come from), or
+            ``"numba"`` without numba.
+    """
+    if name not in backends:
+        raise ValueError(
+            f"backend={name!r} (argument or {env_var}) is not known; use one of {backends}"
+        )
+    if name == "numba" and not AVAILABLE:
+        raise ValueError(
+            "backend='numba' needs numba, which is not importable: install numba "
+            f"(python3-numba or pip install numba) or use backend={backends[-1]!r}"
+        )
+    return name

@@ -21,7 +21,6 @@ reference, and the fallback without numba) is batched over all points at once (s
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -62,9 +61,7 @@ BACKENDS = ("numba", "numpy")
 #: ``"numba"`` when numba is importable, else the numpy fallback; the environment variable
 #: ``DOLFINX_MESHFREE_MLS_BACKEND`` (``numba`` or ``numpy``) overrides it, e.g. to run a test
 #: suite on the reference path.
-DEFAULT_BACKEND = os.environ.get("DOLFINX_MESHFREE_MLS_BACKEND") or (
-    "numba" if jit.AVAILABLE else "numpy"
-)
+DEFAULT_BACKEND = jit.default_backend("DOLFINX_MESHFREE_MLS_BACKEND")
 #: Evaluation points per chunk of the compiled path (bounds its temporaries).
 CHUNK = 8192
 
@@ -163,17 +160,7 @@ class MLS:
         backend: str | None = None,
     ) -> None:
         backend = DEFAULT_BACKEND if backend is None else backend
-        if backend not in BACKENDS:
-            raise ValueError(
-                f"backend={backend!r} (argument or DOLFINX_MESHFREE_MLS_BACKEND) is not known; "
-                f"use one of {BACKENDS}"
-            )
-        if backend == "numba" and not jit.AVAILABLE:
-            raise ValueError(
-                "backend='numba' needs numba, which is not importable: install numba "
-                "(python3-numba or pip install numba) or use backend='numpy'"
-            )
-        self.backend = backend
+        self.backend = jit.resolve_backend(backend, "DOLFINX_MESHFREE_MLS_BACKEND", BACKENDS)
         positions = getattr(points, "positions", points)
         self.weight_name = weight
         self._weight = get_weight(weight)

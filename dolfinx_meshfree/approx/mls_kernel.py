@@ -7,13 +7,21 @@ by ``s`` (see :mod:`.mls`), ``p_I = p((x_I - x)/s)``:
 .. math::
     A = \\sum_I w_I p_I p_I^T, \\quad A \\gamma = e_1, \\quad \\phi_I = w_I p_I^T \\gamma,
 
-and the derivatives ``A_{,k} = \\sum_I w_{I,k} p_I p_I^T - (D_k A + A D_k^T)/s``,
-``\\gamma_{,k} = -A^{-1} A_{,k} \\gamma`` and
-``\\phi_{I,k} = w_I p_I^T (\\gamma_{,k} - D_k^T \\gamma / s) + w_{I,k} p_I^T \\gamma``, where
-``D_k`` is the constant matrix with ``dp/d\\xi_k = D_k p`` (:func:`derivative_matrices`): the terms
-of ``A_{,k}`` with basis derivatives are products of ``D_k`` and ``A``, summed once per point
-instead of once per pair. The weights ``w(dist / d_I)`` and ``w_{I,k} = w'(r)/d_I \\, dist_{,k}``
-are evaluated from the (possibly cut) distances and distance gradients of the pairs.
+and the derivatives ``\\phi_{I,k} = w_I p_I^T C_k + w_{I,k} p_I^T \\gamma`` with
+``C_k = \\gamma_{,k} - D_k^T \\gamma / s``, where ``D_k`` is the constant matrix with
+``dp/d\\xi_k = D_k p`` (:func:`derivative_matrices`). From ``A_{,k} = \\sum_I w_{I,k} p_I p_I^T
+- (D_k A + A D_k^T)/s`` and ``\\gamma_{,k} = -A^{-1} A_{,k} \\gamma`` with ``A \\gamma = e_1``,
+the terms with ``D_k^T \\gamma`` cancel:
+
+.. math::
+    C_k = A^{-1} u_k, \\quad u_k = D_k e_1 / s - \\sum_I w_{I,k} p_I (p_I^T \\gamma),
+
+so that a point needs the sums of ``A`` (one pass over its pairs), then ``p_I^T \\gamma`` and
+``u_k`` (a second pass, with the values), then the gradients (a third): about half the
+arithmetic of summing every ``A_{,k}``. The weights ``w(dist / d_I)`` and
+``w_{I,k} = w'(r)/d_I \\, dist_{,k}`` are evaluated from the (possibly cut) distances and
+distance gradients of the pairs. The small matrices live on the stack
+(:func:`~.jit.stack_pointer`), where LLVM keeps them in registers.
 
 The inverse is computed from the ``L D L^T`` factors of the symmetric ``A`` (no pivoting: ``A``
 is positive definite where it is accepted). For the conditioning check the kernel returns a lower
@@ -30,7 +38,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from . import jit
-from .cell_lists import CellList, gather, pair_data
+from .cell_lists import CellList
 from .kernels import cubic_inner_piece, cubic_outer_piece, gaussian_piece, quartic_piece
 
 __all__ = [
@@ -96,63 +104,49 @@ def _weight(kind: int, r: float) -> tuple[float, float]:
 
 
 @jit.jit
-def _invert(A: np.ndarray, Ainv: np.ndarray, work: np.ndarray) -> None:
-    """``Ainv = A^-1`` of the symmetric ``A`` by its ``L D L^T`` factors (no pivoting: ``A``
-    is positive definite or rejected by the conditioning check; inf/nan if singular)."""
-    m = A.shape[0]
-    # work[:, :m]: L (unit lower, below the diagonal) and D (on it); work[:, m:]: L^-1
-    for j in range(m):
+def _inverse(A: np.ndarray, Ainv: np.ndarray, nb: int) -> None:
+    """``Ainv = A^-1`` of the symmetric ``nb x nb`` matrix ``A`` by its ``L D L^T`` factors (no
+    pivoting: ``A`` is positive definite or rejected by the conditioning check; inf/nan if
+    singular). The factors live on the stack (``nb <= 8``)."""
+    L = jit.carray(jit.stack_pointer(64), (8, 8))  # unit lower triangle, below the diagonal
+    X = jit.carray(jit.stack_pointer(64), (8, 8))  # L^-1
+    dd = jit.carray(jit.stack_pointer(8), (8,))  # D
+    inv_d = jit.carray(jit.stack_pointer(8), (8,))  # D^-1
+    for j in range(nb):
         dj = A[j, j]
         for k in range(j):
-            dj -= work[j, k] * work[j, k] * work[k, k]
-        work[j, j] = dj
-        inv_d = 1.0 / dj
-        for i in range(j + 1, m):
+            dj -= L[j, k] * L[j, k] * dd[k]
+        dd[j] = dj
+        inv_d[j] = 1.0 / dj
+        for i in range(j + 1, nb):
             acc = A[i, j]
             for k in range(j):
-                acc -= work[i, k] * work[j, k] * work[k, k]
-            work[i, j] = acc * inv_d
-    for j in range(m):  # X = L^-1 by forward substitution, column j
-        for i in range(m):
+                acc -= L[i, k] * L[j, k] * dd[k]
+            L[i, j] = acc * inv_d[j]
+    for j in range(nb):  # X = L^-1 by forward substitution, column j
+        for i in range(nb):
             if i < j:
-                work[i, m + j] = 0.0
+                X[i, j] = 0.0
             elif i == j:
-                work[i, m + j] = 1.0
+                X[i, j] = 1.0
             else:
                 acc = 0.0
                 for k in range(j, i):
-                    acc -= work[i, k] * work[k, m + j]
-                work[i, m + j] = acc
-    for a in range(m):  # A^-1 = X^T D^-1 X
-        for b in range(a, m):
+                    acc -= L[i, k] * X[k, j]
+                X[i, j] = acc
+    for a in range(nb):  # A^-1 = X^T D^-1 X
+        for b in range(a, nb):
             acc = 0.0
-            for k in range(b, m):
-                acc += work[k, m + a] * work[k, m + b] / work[k, k]
+            for k in range(b, nb):
+                acc += X[k, a] * X[k, b] * inv_d[k]
             Ainv[a, b] = acc
             Ainv[b, a] = acc
 
 
 @jit.jit
-def _workspace(kmax: int, nb: int, g: int) -> tuple:
-    """Per-point scratch arrays of :func:`_point` for up to ``kmax`` pairs."""
-    return (
-        np.empty((kmax, nb)),  # P: basis per pair
-        np.empty(kmax),  # W: weight per pair
-        np.empty((kmax, g)),  # DW: weight gradient per pair
-        np.empty((nb, nb)),  # A
-        np.empty((g, nb, nb)),  # sum of dw p p^T
-        np.empty((nb, nb)),  # A^-1
-        np.empty((nb, 2 * nb)),  # factors
-        np.empty(nb),  # gamma
-        np.empty((g, nb)),  # C_k
-        np.empty(nb),  # v
-        np.empty((nb, nb)),  # D_k A
-    )
-
-
-@jit.jit
 def _point(
     cnt: int,
+    a0: int,
     dx: np.ndarray,
     dist: np.ndarray,
     ddist: np.ndarray,
@@ -162,58 +156,63 @@ def _point(
     D: np.ndarray,
     s: float,
     derivatives: bool,
-    ws: tuple,
+    work: np.ndarray,
     phi: np.ndarray,
     dphi: np.ndarray,
     o0: int,
+    Aout: np.ndarray,
+    q: int,
 ) -> float:
-    """Shape functions of one point from its ``cnt`` pairs (rows ``0 .. cnt - 1`` of ``dx``,
-    ``dist``, ``ddist``, ``rho``: the support radius of each pair's particle) into
-    ``phi[o0 ...]`` and ``dphi[:, o0 ...]``; ``ws[3]`` holds ``A`` afterwards. Returns the bound
-    ``1 / (tr A tr A^-1)`` of the eigenvalue ratio (0 where ``A`` is singular or indefinite)."""
-    P, W, DW, A, dA, Ainv, work, gamma, C, v, DA = ws
+    """Shape functions of one point from its ``cnt`` pairs (rows ``a0 ...`` of ``dx``, ``dist``,
+    ``ddist`` and ``rho``, the support radius of each pair's particle) into ``phi[o0 ...]`` and
+    ``dphi[:, o0 ...]``; its moment matrix into ``Aout[q]``. ``work``: scratch (>= cnt,
+    2 + gdim + nb). Returns the bound ``1 / (tr A tr A^-1)`` of the eigenvalue ratio (0 where
+    ``A`` is singular or indefinite).
+
+    Three passes over the pairs: ``A``; then the values and ``u_k``; then the gradients (see
+    the module docstring). The matrices live on the stack (``nb <= 8``, ``gdim <= 3``)."""
     # the basis as a tuple of tuples: its sizes are compile-time constants (loops unrolled)
     nb = len(exponents)
     g = len(exponents[0])
-    linear = nb == g + 1
     inv_s = 1.0 / s
+    A = jit.carray(jit.stack_pointer(64), (8, 8))
+    Ainv = jit.carray(jit.stack_pointer(64), (8, 8))
+    u = jit.carray(jit.stack_pointer(24), (3, 8))
+    C = jit.carray(jit.stack_pointer(24), (3, 8))
+    p = jit.carray(jit.stack_pointer(8), (8,))
+    ip, ig = 1 + g, 1 + g + nb  # columns of work: w, w_,k (g), p_I (nb), p_I^T gamma
     for a in range(nb):
         for b in range(nb):
             A[a, b] = 0.0
-            for d in range(g):
-                dA[d, a, b] = 0.0
-    for t in range(cnt):
-        inv_rho = 1.0 / rho[t]
-        w, dwdr = _weight(kind, dist[t] * inv_rho)
-        W[t] = w
+    for t in range(cnt):  # weights, basis and moment matrix, eq. (3.7a)
+        inv_rho = 1.0 / rho[a0 + t]
+        w, dwdr = _weight(kind, dist[a0 + t] * inv_rho)
         f = dwdr * inv_rho
-        for d in range(g):
-            DW[t, d] = f * ddist[t, d]
-        if linear:
-            P[t, 0] = 1.0
+        if nb == g + 1:
+            p[0] = 1.0
             for d in range(g):
-                P[t, 1 + d] = -dx[t, d] * inv_s
+                p[1 + d] = -dx[a0 + t, d] * inv_s
         else:
             for a in range(nb):
                 val = 1.0
                 for d in range(g):
                     for _ in range(exponents[a][d]):
-                        val *= -dx[t, d] * inv_s
-                P[t, a] = val
+                        val *= -dx[a0 + t, d] * inv_s
+                p[a] = val
+        work[t, 0] = w
+        for d in range(g):
+            work[t, 1 + d] = f * ddist[a0 + t, d]
         for a in range(nb):
-            wa = w * P[t, a]
+            work[t, ip + a] = p[a]
+            wa = w * p[a]
             for b in range(a, nb):
-                A[a, b] += wa * P[t, b]
-        if derivatives:
-            for d in range(g):
-                for a in range(nb):
-                    da = DW[t, d] * P[t, a]
-                    for b in range(a, nb):
-                        dA[d, a, b] += da * P[t, b]
+                A[a, b] += wa * p[b]
     for a in range(nb):
         for b in range(a):
             A[a, b] = A[b, a]
-    _invert(A, Ainv, work)
+        for b in range(nb):
+            Aout[q, a, b] = A[a, b]
+    _inverse(A, Ainv, nb)
     tr_a = 0.0
     tr_inv = 0.0
     for a in range(nb):
@@ -221,42 +220,33 @@ def _point(
         tr_inv += Ainv[a, a]
     lb = 1.0 / (tr_a * tr_inv)
     bound = lb if (tr_inv > 0.0 and lb > 0.0 and lb <= 1.0) else 0.0
-    for a in range(nb):
-        gamma[a] = Ainv[a, 0]
-    if derivatives:
-        for d in range(g):
-            # full A_,k = sum dw p p^T - (D_k A + A D_k^T) / s; then v = A_,k gamma
-            for a in range(nb):
-                for b in range(nb):
-                    acc = 0.0
-                    for c in range(nb):
-                        acc += D[d, a, c] * A[c, b]
-                    DA[a, b] = acc
-            for a in range(nb):
-                acc = 0.0
-                for b in range(nb):
-                    dab = dA[d, a, b] if b >= a else dA[d, b, a]
-                    acc += (dab - (DA[a, b] + DA[b, a]) * inv_s) * gamma[b]
-                v[a] = acc
-            # C_k = gamma_,k - D_k^T gamma / s, gamma_,k = -A^-1 v
-            for a in range(nb):
-                acc = 0.0
-                dtg = 0.0
-                for b in range(nb):
-                    acc += Ainv[a, b] * v[b]
-                    dtg += D[d, b, a] * gamma[b]
-                C[d, a] = -acc - dtg * inv_s
-    for t in range(cnt):
+    for d in range(g):  # u_k = D_k e_1 / s - sum_I w_I,k p_I p_I^T gamma
+        for a in range(nb):
+            u[d, a] = D[d, a, 0] * inv_s
+    for t in range(cnt):  # values, eq. (3.9), gamma = A^-1 e_1
         pg = 0.0
         for a in range(nb):
-            pg += P[t, a] * gamma[a]
-        phi[o0 + t] = W[t] * pg
+            pg += work[t, ip + a] * Ainv[a, 0]
+        phi[o0 + t] = work[t, 0] * pg
+        work[t, ig] = pg
         if derivatives:
+            for d in range(g):
+                wpg = work[t, 1 + d] * pg
+                for a in range(nb):
+                    u[d, a] -= wpg * work[t, ip + a]
+    if derivatives:
+        for d in range(g):  # C_k = A^-1 u_k
+            for a in range(nb):
+                acc = 0.0
+                for b in range(nb):
+                    acc += Ainv[a, b] * u[d, b]
+                C[d, a] = acc
+        for t in range(cnt):  # phi_I,k = w_I p_I^T C_k + w_I,k p_I^T gamma
             for d in range(g):
                 pc = 0.0
                 for a in range(nb):
-                    pc += P[t, a] * C[d, a]
-                dphi[d, o0 + t] = W[t] * pc + DW[t, d] * pg
+                    pc += work[t, ip + a] * C[d, a]
+                dphi[d, o0 + t] = work[t, 0] * pc + work[t, 1 + d] * work[t, ig]
     return bound
 
 
@@ -304,43 +294,61 @@ def mls_shape_functions(
     dphi = np.empty((g if derivatives else 0, dist.size))
     bound = np.empty(m)
     Aout = np.empty((m, nb, nb))
-    ws = _workspace(kmax, nb, g)
-    dxs, dists, ddists, rho = (
-        np.empty((kmax, g)),
-        np.empty(kmax),
-        np.empty((kmax, g)),
-        np.empty(kmax),
-    )
+    work = np.empty((kmax, 2 + g + nb))
+    rho = np.empty(dist.size)
+    for t in range(dist.size):
+        rho[t] = radii[j[t]]
     for q in range(m):
         a0 = indptr[q]
-        cnt = indptr[q + 1] - a0
-        for t in range(cnt):  # the pairs of the point into the scratch of the search path
-            rho[t] = radii[j[a0 + t]]
-            dists[t] = dist[a0 + t]
-            for d in range(g):
-                dxs[t, d] = dx[a0 + t, d]
-                ddists[t, d] = ddist[a0 + t, d]
         bound[q] = _point(
-            cnt, dxs, dists, ddists, rho, kind, exponents, D, s, derivatives, ws, phi, dphi, a0
-        )
-        Aout[q] = ws[3]
+            indptr[q + 1] - a0, a0, dx, dist, ddist, rho, kind, exponents, D, s, derivatives,
+            work, phi, dphi, a0, Aout, q,
+        )  # fmt: skip
     return phi, dphi, bound, Aout
 
 
 @jit.jit
-def count_pairs(x: np.ndarray, grid: tuple, counts: np.ndarray) -> None:
-    """The number of pairs of each point ``x`` (m, 3; zero-padded) into ``counts`` (m,)."""
-    n = grid[1].size
-    tmp, tmp_ss = np.empty(n + 1, np.int64), np.empty(n + 1)
-    empty_i, empty_f = np.empty(0, np.int64), np.empty(0)
+def _candidates_of(
+    xq: np.ndarray, c0: int, c1: int, cpacked: np.ndarray, sel: np.ndarray, ss: np.ndarray
+) -> int:
+    """The candidates ``c0 .. c1 - 1`` of a group passing the cheap test for the point ``xq``
+    (3,) into ``sel`` with their squared distances ``ss``, in order (one loop without
+    branches); their number."""
+    nt = 0
+    x0, x1, x2 = xq[0], xq[1], xq[2]
+    for c in range(c0, c1):
+        e0 = x0 - cpacked[c, 0]
+        e1 = x1 - cpacked[c, 1]
+        e2 = x2 - cpacked[c, 2]
+        r2 = e0 * e0 + e1 * e1 + e2 * e2
+        sel[nt] = c
+        ss[nt] = r2
+        nt += r2 <= cpacked[c, 3]
+    return nt
+
+
+@jit.jit
+def count_pairs(x: np.ndarray, candidates: tuple, counts: np.ndarray) -> None:
+    """The number of pairs of each point ``x`` (m, 3; zero-padded) into ``counts`` (m,)
+    (``candidates``: :meth:`~.cell_lists.CellList.candidates` of these points)."""
+    group, cstart, cpacked, cradii, _ = candidates
+    kmax = 0
+    for gr in range(cstart.size - 1):
+        kmax = max(kmax, cstart[gr + 1] - cstart[gr])
+    sel, ss = np.empty(kmax, np.int64), np.empty(kmax)
     for q in range(x.shape[0]):
-        counts[q] = gather(x[q], grid, tmp, tmp_ss, empty_i, empty_f, empty_i, False)
+        gr = group[q]
+        nt = _candidates_of(x[q], cstart[gr], cstart[gr + 1], cpacked, sel, ss)
+        nc = 0
+        for t in range(nt):
+            nc += np.sqrt(ss[t]) < cradii[sel[t]]
+        counts[q] = nc
 
 
 @jit.jit
 def fill_shape_functions(
     x: np.ndarray,
-    grid: tuple,
+    candidates: tuple,
     k: int,
     j: np.ndarray,
     phi: np.ndarray,
@@ -359,7 +367,8 @@ def fill_shape_functions(
 
     Args:
         x: The points.
-        grid: :attr:`~.cell_lists.CellList.grid`.
+        candidates: :meth:`~.cell_lists.CellList.candidates` of these points: each point tests
+            the candidate particles of its group, sorted by index, so its pairs come sorted.
         k: The first free pair of the buffers.
         j, phi, dphi: Output buffers of the table (capacity,), (capacity,), (gdim, capacity)
             (``dphi`` with no rows without derivatives): particle index, value and gradient
@@ -372,42 +381,38 @@ def fill_shape_functions(
         ``(q, k)``: the points done (``m`` unless the buffers are full: then the caller grows
         them and resumes from point ``q``) and the next free pair.
     """
-    n = grid[1].size
+    group, cstart, cpacked, cradii, ckey = candidates
     nb = len(exponents)
     g = len(exponents[0])
-    tmp, tmp_ss = np.empty(n + 1, np.int64), np.empty(n + 1)
-    cand = np.empty(n, np.int64)
-    cdist = np.empty(n)
-    key = np.empty(n, np.int64)
-    kmax = 64
-    ws = _workspace(kmax, nb, g)
-    dx = np.empty((kmax, g))
-    dist = np.empty(kmax)
-    ddist = np.empty((kmax, g))
-    rho = np.empty(kmax)
-    radii = grid[1]
+    kmax = 1
+    for gr in range(cstart.size - 1):
+        kmax = max(kmax, cstart[gr + 1] - cstart[gr])
+    sel, ss = np.empty(kmax, np.int64), np.empty(kmax)
+    dx, dist, ddist, rho = np.empty((kmax, g)), np.empty(kmax), np.empty((kmax, g)), np.empty(kmax)
+    work = np.empty((kmax, 2 + g + nb))
     cap = phi.size
     for q in range(x.shape[0]):
-        nc = gather(x[q], grid, tmp, tmp_ss, cand, cdist, key, True)
-        if k + nc > cap:
+        gr = group[q]
+        nt = _candidates_of(x[q], cstart[gr], cstart[gr + 1], cpacked, sel, ss)
+        if k + nt > cap:
             return q, k
-        if nc > kmax:  # more pairs than ever: grow the scratch
-            kmax = 2 * nc
-            ws = _workspace(kmax, nb, g)
-            dx = np.empty((kmax, g))
-            dist = np.empty(kmax)
-            ddist = np.empty((kmax, g))
-            rho = np.empty(kmax)
-        pair_data(x[q], grid, nc, cand, cdist, dx, dist, ddist, 0)
-        for t in range(nc):
-            rho[t] = radii[cand[t]]
-            j[k + t] = key[t]
+        nc = 0
+        for t in range(nt):  # the exact test, as pairs_within_support and pair_distances
+            c = sel[t]
+            r = np.sqrt(ss[t])
+            if r < cradii[c]:
+                dist[nc] = r
+                rho[nc] = cradii[c]
+                for d in range(g):
+                    e = x[q, d] - cpacked[c, d]
+                    dx[nc, d] = e
+                    ddist[nc, d] = e / r if r > 0.0 else 0.0
+                j[k + nc] = ckey[c]
+                nc += 1
         bound[q] = _point(
-            nc, dx, dist, ddist, rho, kind, exponents, D, s, derivatives, ws, phi, dphi, k
-        )
-        for a in range(nb):
-            for b in range(nb):
-                Aout[q, a, b] = ws[3][a, b]
+            nc, 0, dx, dist, ddist, rho, kind, exponents, D, s, derivatives, work, phi, dphi, k,
+            Aout, q,
+        )  # fmt: skip
         counts[q] = nc
         k += nc
     return x.shape[0], k
@@ -458,7 +463,12 @@ def tabulate_cells(
     x3 = np.zeros((m, 3))
     x3[:, :g] = x
     counts = np.empty(m, np.int64)
+    cand = cells.candidates(x3)
     starts = list(range(0, m, chunk))
+
+    def part(start: int) -> tuple:  # the candidates of the chunk from point ``start``
+        return (cand[0][start : start + chunk], *cand[1:])
+
     found: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     def fill(start: int, k: int, cols: np.ndarray, j: np.ndarray) -> tuple[int, int]:
@@ -466,7 +476,7 @@ def tabulate_cells(
         bound = np.empty(stop - start)
         A = np.empty((stop - start, nb, nb))
         q, k = fill_shape_functions(
-            x3[start:stop], cells.grid, k, j, cols[0], cols[1:], counts[start:stop], bound, A,
+            x3[start:stop], part(start), k, j, cols[0], cols[1:], counts[start:stop], bound, A,
             kind, exponents, D, s, derivatives,
         )  # fmt: skip
         sus = np.flatnonzero(~(bound[:q] > rcond))
@@ -477,7 +487,7 @@ def tabulate_cells(
     threads = min(jit.num_threads(), len(starts))
     if threads > 1:
         with ThreadPoolExecutor(threads) as pool:
-            list(pool.map(lambda a: count_pairs(x3[a : a + chunk], cells.grid, counts[a:]), starts))
+            list(pool.map(lambda a: count_pairs(x3[a : a + chunk], part(a), counts[a:]), starts))
             offsets = np.concatenate([[0], np.cumsum(counts)])
             k = int(offsets[-1])
             j, cols = np.empty(k, np.int32), np.empty((rows, k))

@@ -13,6 +13,11 @@ sets. Two corrections are offered:
   fields are then exact.
 * ``correction="shepard"``: Shepard-normalised values ``N_I / sum_J N_J`` (partition of unity), with
   the gradient corrected as above.
+
+Two implementations (``backend``), as for :class:`~dolfinx_meshfree.approx.mls.MLS`: ``"numba"``
+(the default when numba is importable: cell lists and a compiled per-point kernel,
+:mod:`.sph_kernel`) and ``"numpy"`` (the reference, and the fallback without numba); they agree
+to round-off (tested to 1e-12).
 """
 
 from __future__ import annotations
@@ -24,17 +29,25 @@ import numpy.typing as npt
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from . import batched
-from .kernels import sph_cubic_spline
+from . import batched, jit
+from .cell_lists import CellList
+from .kernels import cubic_inner_piece, sph_cubic_spline
+from .mls_kernel import count_pairs
 from .neighbours import check_points, pairs_within_support
+from .sph_kernel import CORRECTION_IDS, fill_sph
 from .tables import ShapeTable
 
 if TYPE_CHECKING:  # annotations only
     from ..geometry.particles import ParticleSet
 
-__all__ = ["SPH"]
+__all__ = ["BACKENDS", "DEFAULT_BACKEND", "SPH"]
 
 _CORRECTIONS = (None, "gradient", "shepard")
+#: The implementations of :meth:`SPH.tabulate`.
+BACKENDS = ("numba", "numpy")
+#: ``"numba"`` when numba is importable, else the numpy fallback; the environment variable
+#: ``DOLFINX_MESHFREE_SPH_BACKEND`` (``numba`` or ``numpy``) overrides it.
+DEFAULT_BACKEND = jit.default_backend("DOLFINX_MESHFREE_SPH_BACKEND")
 
 
 class SPH:
@@ -47,6 +60,8 @@ class SPH:
         smoothing_length: ``h_0``; the kernel support is ``2 h_0``. Default: 1.3 times the mean
             distance to the nearest neighbour.
         correction: ``None``, ``"gradient"`` or ``"shepard"``.
+        backend: ``"numba"`` (compiled; the default when numba is importable) or ``"numpy"``
+            (the reference implementation, and the fallback without numba).
     """
 
     def __init__(
@@ -55,7 +70,11 @@ class SPH:
         volumes: npt.ArrayLike | None = None,
         smoothing_length: float | None = None,
         correction: str | None = "gradient",
+        backend: str | None = None,
     ) -> None:
+        backend = DEFAULT_BACKEND if backend is None else backend
+        self.backend = jit.resolve_backend(backend, "DOLFINX_MESHFREE_SPH_BACKEND", BACKENDS)
+        self._cells: CellList | None = None  # built on the first compiled tabulation
         positions = getattr(points, "positions", points)
         if volumes is None:
             volumes = getattr(points, "volumes", None)
@@ -90,20 +109,17 @@ class SPH:
         """Mark the shape functions changed: the version increments (see
         :class:`~dolfinx_meshfree.approx.tables.Approximation`)."""
         self.version += 1
+        self._cells = None
 
     def tabulate(self, x: npt.ArrayLike, derivatives: int = 1) -> ShapeTable:
         """Shape functions and first derivatives at ``x`` (m, gdim); local, no communication."""
         x = check_points(x, self.gdim, "x")
+        if self.backend == "numba":
+            return self._tabulate_compiled(x, derivatives)
         m, n = x.shape[0], self.points.shape[0]
         radii = np.full(n, 2.0 * self.h)
         i, j, dx = pairs_within_support(x, self.points, radii, self._tree)
-        empty = np.flatnonzero(np.bincount(i, minlength=m) == 0)
-        if empty.size:
-            q = int(empty[0])
-            raise ValueError(
-                f"SPH: {empty.size} point(s) have no particle within 2h={2 * self.h:.3g}; first: "
-                f"point {q} at {x[q]}; increase smoothing_length or add particles"
-            )
+        self._check_counts(np.bincount(i, minlength=m), x)
         dist = np.linalg.norm(dx, axis=1)
         W, dWdq = sph_cubic_spline(dist / self.h, self.h, self.gdim)
         vol = self.volumes[j]
@@ -121,6 +137,55 @@ class SPH:
             for k in range(self.gdim):
                 grads.append(sp.csr_matrix((dN[:, k], (i, j)), shape=(m, n)))
         return ShapeTable(points=x, values=values, gradients=grads, version=self.version)
+
+    def _check_counts(self, counts: np.ndarray, x: np.ndarray) -> None:
+        """A point with no particle within ``2h``: ValueError."""
+        empty = np.flatnonzero(counts == 0)
+        if empty.size:
+            q = int(empty[0])
+            raise ValueError(
+                f"SPH: {empty.size} point(s) have no particle within 2h={2 * self.h:.3g}; first: "
+                f"point {q} at {x[q]}; increase smoothing_length or add particles"
+            )
+
+    def _check_singular(self, bad: np.ndarray, x: np.ndarray) -> None:
+        """Points where the gradient correction is singular (``bad``: their indices): ValueError."""
+        if bad.size:
+            q = int(bad[0])
+            raise ValueError(
+                f"SPH gradient correction is singular at {bad.size} point(s); first: point {q} at "
+                f"{x[q]}, whose neighbours are collinear or too few: increase smoothing_length"
+            )
+
+    def _tabulate_compiled(self, x: np.ndarray, derivatives: int) -> ShapeTable:
+        """The compiled path: grouped cell-list candidates, a count pass, then the kernel
+        (:func:`.sph_kernel.fill_sph`) into exactly sized CSR arrays."""
+        m, n, g = x.shape[0], self.points.shape[0], self.gdim
+        if self._cells is None:
+            self._cells = CellList(self.points, np.full(n, 2.0 * self.h))
+        x3 = np.zeros((m, 3))
+        x3[:, :g] = x
+        cand = self._cells.candidates(x3)
+        counts = np.empty(m, np.int64)
+        count_pairs(x3, cand, counts)
+        self._check_counts(counts, x)
+        indptr = np.zeros(m + 1, np.int64)
+        np.cumsum(counts, out=indptr[1:])
+        k = int(indptr[-1])
+        j, N = np.empty(k, np.int32), np.empty(k)
+        dN = np.empty((g if derivatives else 0, k))
+        singular = np.zeros(m, bool)
+        # the kernel's factor 3/2 sigma_d / h^d, from W(0) = factor * w(0) of the reference
+        scale = float(sph_cubic_spline(np.zeros(1), self.h, g)[0][0]) / cubic_inner_piece(0.0)[0]
+        correction = CORRECTION_IDS[self.correction]
+        fill_sph(x3, cand, indptr, self.volumes, self.h, scale, g, correction, bool(derivatives),
+                 j, N, dN, singular)  # fmt: skip
+        self._check_singular(np.flatnonzero(singular), x)
+        mats = [sp.csr_matrix((data, j.copy(), indptr.copy()), shape=(m, n)) for data in [N, *dN]]
+        for a in mats:
+            a.has_sorted_indices = True
+        grads = mats[1:] if derivatives else []
+        return ShapeTable(points=x, values=mats[0], gradients=grads, version=self.version)
 
     def _corrected_gradient(
         self, i: np.ndarray, j: np.ndarray, N: np.ndarray, dN: np.ndarray, x: np.ndarray, m: int
@@ -146,12 +211,6 @@ class SPH:
                 M[:, a, b] = np.bincount(i, weights=dN[:, a] * rel[:, b], minlength=m)
         scale = np.abs(M).max(axis=(1, 2))
         det = np.linalg.det(M)
-        bad = np.flatnonzero(~(np.abs(det) > 1e-10 * scale**gdim))
-        if bad.size:
-            q = int(bad[0])
-            raise ValueError(
-                f"SPH gradient correction is singular at {bad.size} point(s); first: point {q} at "
-                f"{x[q]}, whose neighbours are collinear or too few: increase smoothing_length"
-            )
+        self._check_singular(np.flatnonzero(~(np.abs(det) > 1e-10 * scale**gdim)), x)
         Minv = batched.inv(M)
         return np.einsum("pab,pb->pa", Minv[i], dN - S[i] * Nhat[:, None])

@@ -107,27 +107,41 @@ def to_local_csr(
 
 
 def create_aij(
-    comm: MPI.Comm | PETSc.Comm, local: sp.spmatrix, row_layout: Layout, col_layout: Layout
+    comm: MPI.Comm | PETSc.Comm,
+    local: sp.spmatrix,
+    row_layout: Layout,
+    col_layout: Layout,
+    block_size: int = 1,
 ) -> PETSc.Mat:
     """Distributed AIJ matrix from this rank's contributions in global numbering (collective).
 
     Args:
         local: (global rows x global cols) sparse matrix of this rank's contributions; rows that
-            other ranks own are sent through PETSc's stash and added there.
+            other ranks own are sent through PETSc's stash and added there. A CSR ``local`` with
+            sorted indices and no duplicates is used in place (no copy of its arrays, so that
+            large matrices are held twice at most: here and in PETSc).
+        block_size: the matrix's block size (e.g. ``gdim`` for interleaved displacement dofs:
+            what GAMG aggregates by); the layouts' local sizes must be multiples of it.
     """
     A = local.tocsr()
     A.sum_duplicates()
     A.eliminate_zeros()
     rs, re = row_layout.start, row_layout.end
     cs, ce = col_layout.start, col_layout.end
-    own = A[rs:re]
-    indptr = own.indptr.astype(PETSc.IntType)
-    indices = own.indices.astype(PETSc.IntType)
-    in_diag = (own.indices >= cs) & (own.indices < ce)
-    row_of = np.repeat(np.arange(re - rs), np.diff(own.indptr))
-    d_nnz = np.bincount(row_of[in_diag], minlength=re - rs).astype(PETSc.IntType)
-    o_nnz = np.bincount(row_of[~in_diag], minlength=re - rs).astype(PETSc.IntType)
-    M = PETSc.Mat().createAIJ(size=(row_layout.petsc_sizes(), col_layout.petsc_sizes()), comm=comm)
+    own = A if (rs, re) == (0, A.shape[0]) else A[rs:re]
+    indptr = own.indptr.astype(PETSc.IntType, copy=False)
+    indices = own.indices.astype(PETSc.IntType, copy=False)
+    d_nnz = np.empty(re - rs, PETSc.IntType)
+    step = 1 << 16  # rows at a time: no (nnz,) integer temporaries
+    for lo in range(0, re - rs, step):
+        hi = min(lo + step, re - rs)
+        p0, p1 = own.indptr[lo], own.indptr[hi]
+        cols = own.indices[p0:p1]
+        in_diag = np.concatenate(([0], np.cumsum((cols >= cs) & (cols < ce))))
+        d_nnz[lo:hi] = np.diff(in_diag[own.indptr[lo : hi + 1] - p0])
+    o_nnz = (np.diff(own.indptr) - d_nnz).astype(PETSc.IntType)
+    sizes = (row_layout.petsc_sizes(), col_layout.petsc_sizes())
+    M = PETSc.Mat().createAIJ(size=sizes, bsize=block_size, comm=comm)
     # extra room for entries other ranks add to our rows (interface rows only); PETSc rejects
     # counts above the number of diagonal-block / off-diagonal-block columns
     nd = col_layout.size_local
@@ -136,6 +150,7 @@ def create_aij(
     M.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
     if re > rs:
         M.setValuesCSR(indptr, indices, own.data, addv=PETSc.InsertMode.ADD_VALUES)
+    del own, indptr, indices
     off = A.getnnz(axis=1)
     off[rs:re] = 0
     for r in np.flatnonzero(off):

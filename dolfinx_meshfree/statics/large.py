@@ -31,6 +31,7 @@ evaluation point) and the factors. :func:`solve_large` solves the same model
 from __future__ import annotations
 
 import itertools
+import resource
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -58,6 +59,7 @@ __all__ = [
     "chunked_l2_error",
     "chunked_stiffness",
     "nitsche_terms",
+    "peak_rss_mb",
     "solve_large",
 ]
 
@@ -86,7 +88,7 @@ class IterativeOptions:
     atol: float = 0.0
     max_it: int = 5000
     nitsche: float = 100.0
-    chunk_points: int = 1 << 20
+    chunk_points: int = 1 << 17
     direct: bool = False
     petsc_options: Mapping[str, Any] | None = field(default=None)
     prefix: str | None = None
@@ -103,6 +105,11 @@ class IterativeOptions:
             raise ValueError(f"nitsche={self.nitsche!r} must be > 0 (e.g. 100)")
         if not (isinstance(self.chunk_points, int) and self.chunk_points >= 1):
             raise ValueError(f"chunk_points={self.chunk_points!r} must be an integer >= 1")
+
+
+def peak_rss_mb() -> float:
+    """This process's peak resident memory so far, in MB (``getrusage``; local)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 def _chunks(m: int, size: int):
@@ -170,7 +177,7 @@ def chunked_stiffness(
             )
         xi = rhs / vol[:, None]
         tab += time.perf_counter() - t0
-    K = None
+    stack: list[tuple[sp.csr_matrix, int]] = []  # partial sums, merged like a binary counter
     for s in _chunks(len(q), chunk_points):
         t0 = time.perf_counter()
         t = raise_on_all_ranks(comm, lambda s=s: mls.tabulate(q.points[s]))
@@ -184,12 +191,18 @@ def chunked_stiffness(
         t1 = time.perf_counter()
         Kc = stiffness_matrix(test, q.weights[s], material, t.gradients, particles.petsc_index)
         del t, test
-        K = Kc if K is None else K + Kc
+        stack.append((Kc, 0))
         del Kc
+        while len(stack) > 1 and stack[-1][1] == stack[-2][1]:
+            (a, level), (b, _) = stack.pop(), stack.pop()
+            stack.append((a + b, level + 1))
         tab += t1 - t0
         asm += time.perf_counter() - t1
-    if K is None:
-        K = sp.csr_matrix((gdim * n, gdim * n))
+    t1 = time.perf_counter()
+    K = sp.csr_matrix((gdim * n, gdim * n))
+    while stack:
+        K = K + stack.pop()[0]
+    asm += time.perf_counter() - t1
     return K, q, {"tabulate": tab, "assemble": asm}
 
 
@@ -342,8 +355,9 @@ def solve_large(problem: EFGElasticity, options: IterativeOptions | None = None)
 
     Returns:
         The :class:`~dolfinx_meshfree.statics.efg.EFGSolution` (no multipliers); its
-        ``timings`` hold ``tabulate``, ``assemble``, ``matrix`` (the PETSc copy), ``solve`` and
-        ``iterations`` (0 for the direct solve).
+        ``timings`` hold the seconds of ``tabulate``, ``assemble``, ``matrix`` (the PETSc copy)
+        and ``solve``, the ``iterations`` (0 for the direct solve), the matrix's ``nonzeros``
+        and this rank's ``peak_rss_mb`` after each phase (:func:`peak_rss_mb`).
     """
     options = options or IterativeOptions()
     comm = problem.comm
@@ -363,6 +377,7 @@ def solve_large(problem: EFGElasticity, options: IterativeOptions | None = None)
     K, q, timings = chunked_stiffness(
         P, problem.mls, mat, deg, problem.consistent, options.chunk_points
     )
+    peak = {"assemble": peak_rss_mb()}
     t0 = time.perf_counter()
     conds = problem._dirichlet
     N, f_loc = nitsche_terms(P, problem.mls, mat, conds, deg, options.nitsche)
@@ -383,6 +398,8 @@ def solve_large(problem: EFGElasticity, options: IterativeOptions | None = None)
     del K
     b = create_vector(comm, udofs, P.petsc_dofs(gdim).ravel(), f_loc)
     timings["matrix"] = time.perf_counter() - t0
+    timings["nonzeros"] = int(A.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"])
+    peak["matrix"] = peak_rss_mb()
     t0 = time.perf_counter()
     if options.direct:
         x, its = solve_lu(A, b), 0
@@ -390,6 +407,8 @@ def solve_large(problem: EFGElasticity, options: IterativeOptions | None = None)
         x, its = _krylov(A, b, P, options, symmetric=not problem.consistent)
     timings["solve"] = time.perf_counter() - t0
     timings["iterations"] = its
+    peak["solve"] = peak_rss_mb()
+    timings["peak_rss_mb"] = peak
     owned = np.concatenate(comm.allgather(x.getArray(readonly=True).copy()))
     for obj in (A, b, x):
         obj.destroy()
@@ -407,7 +426,7 @@ def chunked_l2_error(
     exact: Any,
     msh: Any,
     degree: int = 4,
-    chunk_points: int = 1 << 20,
+    chunk_points: int = 1 << 17,
     cells: np.ndarray | None = None,
 ) -> tuple[float, float]:
     """``(|u_h - u|_L2, |u|_L2)`` over this rank's cells (default all owned), summed over the

@@ -20,10 +20,6 @@ import argparse
 import json
 import time
 
-import dolfinx
-import numpy as np
-from mpi4py import MPI
-
 import dolfinx_meshfree as mf
 from dolfinx_meshfree.statics.large import (
     IterativeOptions,
@@ -31,6 +27,10 @@ from dolfinx_meshfree.statics.large import (
     peak_rss_mb,
     solve_large,
 )
+
+import dolfinx
+import numpy as np
+from mpi4py import MPI
 
 
 def run(comm, h: float, args) -> dict:
@@ -46,7 +46,9 @@ def run(comm, h: float, args) -> dict:
     problem = mf.EFGElasticity(
         particles, material, consistent=not args.plain, quadrature_degree=args.degree
     )
-    problem.add_dirichlet(mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0.0)), beam.displacement)
+    problem.add_dirichlet(
+        mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0.0)), beam.displacement
+    )
     problem.add_traction(mf.boundary_facets(msh, lambda x: np.isclose(x[0], L)), beam.traction)
     setup = time.perf_counter() - t0
     rss_setup = peak_rss_mb()

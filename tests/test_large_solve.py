@@ -6,8 +6,6 @@ the conditioning), the linear patch test (exact with VCI and consistent Nitsche 
 Timoshenko beam's exact solution (error and rate), and one rank against two.
 """
 
-from conftest import load_demo
-
 import dolfinx_meshfree as mf
 from dolfinx_meshfree.statics.efg import particle_stiffness
 from dolfinx_meshfree.statics.large import (
@@ -20,6 +18,7 @@ from dolfinx_meshfree.statics.large import (
 import dolfinx
 import numpy as np
 import pytest
+from conftest import load_demo
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -34,7 +33,9 @@ def beam_problem(comm, h: float, consistent: bool = True):
     material = mf.LinearElastic(3e7, 0.3, "stress")
     beam = mf.TimoshenkoBeam(material, L=L, D=D, P=1000.0)
     problem = mf.EFGElasticity(mf.ParticleSet.from_cells(msh, h), material, consistent=consistent)
-    problem.add_dirichlet(mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0.0)), beam.displacement)
+    problem.add_dirichlet(
+        mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0.0)), beam.displacement
+    )
     problem.add_traction(mf.boundary_facets(msh, lambda x: np.isclose(x[0], L)), beam.traction)
     return msh, beam, problem
 

@@ -39,10 +39,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
+from mpi4py import MPI
 from petsc4py import PETSc
 
-from ..geometry.quadrature import QuadraturePoints, boundary_facets, cell_quadrature
-from ..geometry.quadrature import facet_quadrature
+from ..geometry.quadrature import (
+    QuadraturePoints,
+    boundary_facets,
+    cell_quadrature,
+    facet_quadrature,
+)
 from ..parallel import raise_on_all_ranks
 from ..physics.materials import LinearElastic
 from ..physics.operators import load_vector, stiffness_matrix, voigt_tangent
@@ -96,7 +101,9 @@ class IterativeOptions:
     def check(self) -> None:
         """ValueError naming the option, its value and the fix (local)."""
         if self.ksp_type not in (None, "cg", "gmres", "fgmres", "bcgs"):
-            raise ValueError(f"ksp_type={self.ksp_type!r}: use None, 'cg', 'gmres', 'fgmres', 'bcgs'")
+            raise ValueError(
+                f"ksp_type={self.ksp_type!r}: use None, 'cg', 'gmres', 'fgmres', 'bcgs'"
+            )
         if not (0 < self.rtol < 1) or self.atol < 0:
             raise ValueError(f"rtol={self.rtol!r} must lie in (0, 1), atol={self.atol!r} >= 0")
         if not (isinstance(self.max_it, int) and self.max_it >= 1):
@@ -141,8 +148,6 @@ def chunked_stiffness(
         ``(K, q, timings)``: K (gdim n x gdim n) CSR of this rank's contributions in PETSc
         numbering, the cell rule, and the seconds of ``tabulate`` and ``assemble``.
     """
-    from mpi4py import MPI
-
     comm = particles.comm
     gdim, n = particles.gdim, particles.num_particles
     if quadrature is None:
@@ -432,8 +437,6 @@ def chunked_l2_error(
     """``(|u_h - u|_L2, |u|_L2)`` over this rank's cells (default all owned), summed over the
     ranks (collective), with ``exact(x)`` (m, gdim) and a Gauss rule of ``degree``, the
     solution evaluated ``chunk_points`` points at a time."""
-    from mpi4py import MPI
-
     if cells is None:
         cells = np.arange(msh.topology.index_map(msh.topology.dim).size_local)
     q = cell_quadrature(msh, degree, cells)

@@ -52,7 +52,7 @@ def test_chunked_equals_unchunked(consistent, chunk):
     K0, *_ = particle_stiffness(
         P, problem.mls, problem.material, 7, boundary if consistent else None
     )
-    K1, q, timings = chunked_stiffness(P, problem.mls, problem.material, 7, consistent, chunk)
+    K1, q, _ = chunked_stiffness(P, problem.mls, problem.material, 7, consistent, chunk)
     assert len(q) == 16 * msh.topology.index_map(2).size_local
     scale = abs(K0).max()
     assert scale > 0

@@ -119,9 +119,14 @@ def peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def _chunks(m: int, size: int):
-    for lo in range(0, m, size):
-        yield slice(lo, min(lo + size, m))
+def _chunks(m: int, size: int, comm: MPI.Comm | None = None):
+    """Slices of ``range(m)`` of ``size``; with ``comm``, as many on every rank (the last ones
+    empty where a rank has fewer points), for loops with collective calls."""
+    count = -(-m // size)
+    if comm is not None:
+        count = comm.allreduce(count, op=MPI.MAX)
+    for c in range(count):
+        yield slice(min(c * size, m), min((c + 1) * size, m))
 
 
 def chunked_stiffness(
@@ -165,7 +170,7 @@ def chunked_stiffness(
         tb = raise_on_all_ranks(comm, lambda: mls.tabulate(bq.points, derivatives=0))
         vol = np.zeros(n)
         rhs = np.asarray(tb.values.T @ (bq.weights[:, None] * bq.normals[:, :gdim]))
-        for s in _chunks(len(q), chunk_points):
+        for s in _chunks(len(q), chunk_points, comm):
             t = raise_on_all_ranks(comm, lambda s=s: mls.tabulate(q.points[s]))
             vol += t.values.T @ q.weights[s]
             for k in range(gdim):
@@ -183,7 +188,7 @@ def chunked_stiffness(
         xi = rhs / vol[:, None]
         tab += time.perf_counter() - t0
     stack: list[tuple[sp.csr_matrix, int]] = []  # partial sums, merged like a binary counter
-    for s in _chunks(len(q), chunk_points):
+    for s in _chunks(len(q), chunk_points, comm):
         t0 = time.perf_counter()
         t = raise_on_all_ranks(comm, lambda s=s: mls.tabulate(q.points[s]))
         test = t.gradients
@@ -237,9 +242,7 @@ def nitsche_terms(
     comm = particles.comm
     for facets, ubar, comps in conditions:
         bq = facet_quadrature(particles.mesh, facets, quadrature_degree)
-        if len(bq) == 0:
-            continue
-        tb = raise_on_all_ranks(comm, lambda bq=bq: mls.tabulate(bq.points))
+        tb = raise_on_all_ranks(comm, lambda bq=bq: mls.tabulate(bq.points))  # (collective)
         ub = vector_values(ubar, (bq.points,), len(bq), "the Dirichlet value", gdim)
         length = np.bincount(bq.entities, weights=bq.weights)[bq.entities]
         w = bq.weights

@@ -64,14 +64,14 @@ def test_chunked_equals_unchunked(consistent, chunk):
 @pytest.mark.parametrize("consistent", [False, True])
 def test_iterative_equals_direct(consistent):
     """CG (plain Gauss: symmetric) or GMRES (VCI) + GAMG at rtol 1e-10 against MUMPS on the
-    same matrix: measured 2.6e-10 (CG) and 2.1e-9 (GMRES) of the largest coefficient, checked
-    at 1e-8 (the residual tolerance times the conditioning, with a margin of 5)."""
+    same matrix: measured 2.6e-10 (CG) and 2.1e-9 (GMRES; 1.3e-9 on 2 ranks) of the largest
+    coefficient, checked at 5e-9 (the residual tolerance times the conditioning)."""
     _, _, problem = beam_problem(COMM, 1.0, consistent)
     direct = solve_large(problem, IterativeOptions(direct=True))
     it = solve_large(problem, IterativeOptions(rtol=1e-10))
     assert it.timings["iterations"] > 0 and direct.timings["iterations"] == 0
     scale = np.abs(direct.coefficients).max()
-    assert np.abs(it.coefficients - direct.coefficients).max() <= 1e-8 * scale
+    assert np.abs(it.coefficients - direct.coefficients).max() <= 5e-9 * scale
 
 
 def test_patch_test_exact():
@@ -118,9 +118,9 @@ def test_error_and_rate_against_timoshenko():
 @pytest.mark.skipif(COMM.size == 1, reason="compares 2 ranks with one")
 def test_two_ranks_equal_one():
     """The displacement at probe points on 2 ranks equals one rank's: MUMPS to 1e-10 (round-off,
-    measured 1e-13), GAMG to 1e-8 (its tolerance: the aggregates differ)."""
+    measured 1.7e-13), GAMG to 5e-9 (its tolerance, the aggregates differ: measured 9.8e-10)."""
     pts = np.array([[0.5, -5.5, 0.0], [24.0, 0.0, 0.0], [47.5, 5.5, 0.0], [47.9, 0.0, 0.0]])
-    for options, tol in ((IterativeOptions(direct=True), 1e-10), (IterativeOptions(), 1e-8)):
+    for options, tol in ((IterativeOptions(direct=True), 1e-10), (IterativeOptions(), 5e-9)):
         _, _, serial = beam_problem(MPI.COMM_SELF, 1.0)
         _, _, parallel = beam_problem(COMM, 1.0)
         a = solve_large(serial, options).displacement(pts)

@@ -116,7 +116,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
         if args.json:
             with open(args.json, "w") as f:
                 json.dump(records, f, indent=1)
-    # the exact solution is cubic: the error at h = 2 is measured 1.2e-3 (check 1e-2)
+    # relative L2 error: measured 5.7e-4 at h = 2 (check 1e-2), 1.6e-6 to 4.8e-7 at h <= 0.125
     for r in records:
         if not r["l2_error"] < (1e-2 if r["h"] >= 1 else 1e-3):
             raise RuntimeError(f"L2 error {r['l2_error']:.3e} at h = {r['h']} is too large")

@@ -106,7 +106,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
     p.add_argument("--degree", type=int, default=7, help="cell Gauss degree")
     p.add_argument("--plain", action="store_true", help="plain Gauss (no VCI): CG")
     p.add_argument("--direct", action="store_true", help="MUMPS on the same matrix")
-    p.add_argument("--rtol", type=float, default=1e-10)
+    p.add_argument("--rtol", type=float, default=1e-12)
     p.add_argument("--chunk-points", type=int, default=1 << 17)
     p.add_argument("--json", default=None)
     args = p.parse_args(argv)

@@ -79,7 +79,9 @@ class IterativeOptions:
         ksp_type: Krylov method; ``None``: ``"cg"`` when the matrix is symmetric (plain Gauss
             quadrature), ``"gmres"`` with VCI.
         rtol, atol, max_it: Stopping test of the Krylov method, on the unpreconditioned
-            residual norm ``|b - A x| <= max(rtol |b|, atol)``.
+            residual norm ``|b - A x| <= max(rtol |b|, atol)``. The default 1e-12 leaves the
+            cantilever's L2 error as MUMPS's to 4 digits at 100k particles (1e-10: 6e-4
+            relative there, and 2.5 % between 1 and 2 ranks at 300k).
         nitsche: ``beta`` of the Nitsche penalty ``beta E / h`` (``h`` the facet length).
         chunk_points: Quadrature points tabulated at a time.
         direct: Solve the same matrix by MUMPS instead (the reference of the iterative solve).
@@ -89,7 +91,7 @@ class IterativeOptions:
     """
 
     ksp_type: str | None = None
-    rtol: float = 1e-10
+    rtol: float = 1e-12
     atol: float = 0.0
     max_it: int = 5000
     nitsche: float = 100.0

@@ -62,6 +62,7 @@ from .statics.coupled import (
 from .statics.efg import EFGElasticity, EFGSolution
 from .statics.fe import FESolution, solve_fe_elasticity, solve_forms
 from .statics.growth import GrowthStep, QuasiStaticCrackGrowth
+from .statics.large import IterativeOptions, chunked_l2_error, solve_large
 from .statics.newton import NewtonError, NewtonOptions, NewtonResult
 from .statics.nonlinear import FINITE_STRAIN_COUPLINGS, CoupledNonlinearProblem, FENonlinearProblem
 from .statics.problem import CoupledLinearProblem
@@ -103,6 +104,7 @@ __all__ = [
     "HybridElasticity",
     "InclinedCentreCrack",
     "InternalForces",
+    "IterativeOptions",
     "LinearElastic",
     "LinearField",
     "Material",
@@ -129,6 +131,7 @@ __all__ = [
     "balanced_mesh",
     "boundary_facets",
     "cell_quadrature",
+    "chunked_l2_error",
     "cubic_spline",
     "edge_crack_factor",
     "ensure_points_in_mesh",
@@ -143,6 +146,7 @@ __all__ = [
     "read_particles",
     "solve_fe_elasticity",
     "solve_forms",
+    "solve_large",
     "sph_cubic_spline",
     "tabulate_fe_basis",
     "tabulate_in_cells",

@@ -107,27 +107,49 @@ def to_local_csr(
 
 
 def create_aij(
-    comm: MPI.Comm | PETSc.Comm, local: sp.spmatrix, row_layout: Layout, col_layout: Layout
+    comm: MPI.Comm | PETSc.Comm,
+    local: sp.spmatrix,
+    row_layout: Layout,
+    col_layout: Layout,
+    block_size: int = 1,
 ) -> PETSc.Mat:
     """Distributed AIJ matrix from this rank's contributions in global numbering (collective).
 
     Args:
         local: (global rows x global cols) sparse matrix of this rank's contributions; rows that
-            other ranks own are sent through PETSc's stash and added there.
+            other ranks own are sent through PETSc's stash and added there. A CSR ``local`` with
+            sorted indices and no duplicates is used in place (no copy of its arrays, so that
+            large matrices are held twice at most: here and in PETSc).
+        block_size: the matrix's block size (e.g. ``gdim`` for interleaved displacement dofs:
+            what GAMG aggregates by); the layouts' local sizes must be multiples of it.
     """
     A = local.tocsr()
     A.sum_duplicates()
     A.eliminate_zeros()
     rs, re = row_layout.start, row_layout.end
     cs, ce = col_layout.start, col_layout.end
-    own = A[rs:re]
-    indptr = own.indptr.astype(PETSc.IntType)
-    indices = own.indices.astype(PETSc.IntType)
-    in_diag = (own.indices >= cs) & (own.indices < ce)
-    row_of = np.repeat(np.arange(re - rs), np.diff(own.indptr))
-    d_nnz = np.bincount(row_of[in_diag], minlength=re - rs).astype(PETSc.IntType)
-    o_nnz = np.bincount(row_of[~in_diag], minlength=re - rs).astype(PETSc.IntType)
-    M = PETSc.Mat().createAIJ(size=(row_layout.petsc_sizes(), col_layout.petsc_sizes()), comm=comm)
+    own = A if (rs, re) == (0, A.shape[0]) else A[rs:re]
+    indptr = own.indptr.astype(PETSc.IntType, copy=False)
+    indices = own.indices.astype(PETSc.IntType, copy=False)
+    d_nnz = np.empty(re - rs, PETSc.IntType)
+    step = 1 << 16  # rows at a time: no (nnz,) integer temporaries
+    for lo in range(0, re - rs, step):
+        hi = min(lo + step, re - rs)
+        p0, p1 = own.indptr[lo], own.indptr[hi]
+        cols = own.indices[p0:p1]
+        in_diag = np.concatenate(([0], np.cumsum((cols >= cs) & (cols < ce))))
+        d_nnz[lo:hi] = np.diff(in_diag[own.indptr[lo : hi + 1] - p0])
+    o_nnz = (np.diff(own.indptr) - d_nnz).astype(PETSc.IntType)
+    off = A.getnnz(axis=1)
+    off[rs:re] = 0
+    off_rows = np.flatnonzero(off)
+    mpi = comm.tompi4py() if isinstance(comm, PETSc.Comm) else comm
+    if mpi.size > 1:  # room for what other ranks add to our rows: their counts, sent here
+        received = _off_rank_counts(mpi, A[off_rows], off_rows, row_layout, col_layout)
+        d_nnz += received[0]
+        o_nnz += received[1]
+    sizes = (row_layout.petsc_sizes(), col_layout.petsc_sizes())
+    M = PETSc.Mat().createAIJ(size=sizes, bsize=block_size, comm=comm)
     # extra room for entries other ranks add to our rows (interface rows only); PETSc rejects
     # counts above the number of diagonal-block / off-diagonal-block columns
     nd = col_layout.size_local
@@ -136,9 +158,8 @@ def create_aij(
     M.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
     if re > rs:
         M.setValuesCSR(indptr, indices, own.data, addv=PETSc.InsertMode.ADD_VALUES)
-    off = A.getnnz(axis=1)
-    off[rs:re] = 0
-    for r in np.flatnonzero(off):
+    del own, indptr, indices
+    for r in off_rows:
         lo, hi = A.indptr[r], A.indptr[r + 1]
         M.setValues(
             [r],
@@ -148,6 +169,35 @@ def create_aij(
         )
     M.assemble()
     return M
+
+
+def _off_rank_counts(
+    comm: MPI.Comm, rows: sp.csr_matrix, row_ids: np.ndarray, row_layout: Layout, col_layout: Layout
+) -> tuple[np.ndarray, np.ndarray]:
+    """Entries per owned row (diagonal-block, off-diagonal-block columns) that the other ranks
+    add (collective): each rank sends the counts of its ``rows`` (global ``row_ids``, owned
+    elsewhere) to their owners. An upper bound of the new entries, for the preallocation."""
+    ends = np.array(comm.allgather(row_layout.end), dtype=np.int64)
+    col_ranges = np.array(comm.allgather((col_layout.start, col_layout.end)), dtype=np.int64)
+    owner = np.searchsorted(ends, row_ids, side="right")
+    per_row = np.diff(rows.indptr)
+    entry_owner = np.repeat(owner, per_row)
+    lo, hi = col_ranges[entry_owner, 0], col_ranges[entry_owner, 1]
+    diag = np.bincount(
+        np.repeat(np.arange(row_ids.size), per_row),
+        weights=(rows.indices >= lo) & (rows.indices < hi),
+        minlength=row_ids.size,
+    ).astype(np.int64)
+    send = [
+        (row_ids[owner == r], diag[owner == r], per_row[owner == r] - diag[owner == r])
+        for r in range(comm.size)
+    ]
+    d = np.zeros(row_layout.size_local, PETSc.IntType)
+    o = np.zeros(row_layout.size_local, PETSc.IntType)
+    for ids, dc, oc in comm.alltoall(send):
+        np.add.at(d, ids - row_layout.start, dc)
+        np.add.at(o, ids - row_layout.start, oc)
+    return d, o
 
 
 def create_vector(

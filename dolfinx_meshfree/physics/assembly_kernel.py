@@ -32,8 +32,6 @@ numpy (so that ``tracemalloc`` sees them).
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 import scipy.sparse as sp
 
@@ -51,27 +49,15 @@ __all__ = [
 ]
 
 BACKENDS = ("numba", "scipy")
+ENV = "DOLFINX_MESHFREE_ASSEMBLY_BACKEND"
 #: ``"numba"`` when numba is importable, else ``"scipy"`` (the sparse products, the reference the
 #: tests compare with); ``DOLFINX_MESHFREE_ASSEMBLY_BACKEND`` (``numba`` or ``scipy``) overrides it.
-DEFAULT_BACKEND = os.environ.get("DOLFINX_MESHFREE_ASSEMBLY_BACKEND") or (
-    "numba" if _jit.AVAILABLE else "scipy"
-)
+DEFAULT_BACKEND = _jit.default_backend(ENV, "scipy")
 
 
 def resolve_backend(backend: str | None) -> str:
     """The backend to use: ``backend`` or :data:`DEFAULT_BACKEND`, checked (local)."""
-    backend = DEFAULT_BACKEND if backend is None else backend
-    if backend not in BACKENDS:
-        raise ValueError(
-            f"backend={backend!r} (argument or DOLFINX_MESHFREE_ASSEMBLY_BACKEND) is not known; "
-            f"use one of {BACKENDS}"
-        )
-    if backend == "numba" and not _jit.AVAILABLE:
-        raise ValueError(
-            "backend='numba' needs numba, which is not importable: install numba "
-            "(python3-numba or pip install numba) or use backend='scipy'"
-        )
-    return backend
+    return _jit.resolve_backend(DEFAULT_BACKEND if backend is None else backend, ENV, BACKENDS)
 
 
 @jit

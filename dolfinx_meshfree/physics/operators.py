@@ -23,9 +23,11 @@ if TYPE_CHECKING:  # annotations only
 
 __all__ = [
     "consistent_gradients",
+    "corrected_gradients",
     "load_vector",
     "moment_corrections",
     "stiffness_matrix",
+    "vci_constants",
     "voigt_tangent",
 ]
 
@@ -124,8 +126,6 @@ def consistent_gradients(
     whole boundary of the integration domain. Any dimension: ``boundary_normals`` is (nb, gdim)
     with ``gdim = len(cell_gradients)``.
     """
-    from mpi4py import MPI
-
     gdim = len(cell_gradients)
     vol = cell_values.T @ cell_weights
     rhs = np.stack(
@@ -136,23 +136,45 @@ def consistent_gradients(
         ],
         axis=1,
     )
+    xi = vci_constants(vol, rhs, comm)
+    return corrected_gradients(cell_values, cell_gradients, xi)
+
+
+def vci_constants(
+    vol: np.ndarray, rhs: np.ndarray, comm: MPI.Comm, positions: np.ndarray | None = None
+) -> np.ndarray:
+    """The VCI constants ``xi`` (n, gdim) of :func:`consistent_gradients` from this rank's sums
+    ``vol = sum_q N_I w_q`` (n,) and ``rhs = sum_b N_I n w_b - sum_q grad N_I w_q`` (n, gdim),
+    summed over the ranks (collective). A node whose function integrates to about zero is
+    refused (its support misses the quadrature), named by ``positions`` (n, gdim) if given."""
+    from mpi4py import MPI
+
     vol = comm.allreduce(vol, op=MPI.SUM)
     rhs = comm.allreduce(rhs, op=MPI.SUM)
     small = np.abs(vol) <= 1e-14 * np.abs(vol).max()
     if np.any(small):
         i = int(np.flatnonzero(small)[0])
+        who = f"shape function {i}" if positions is None else f"the particle at {positions[i]}"
         raise ValueError(
-            f"consistent integration: shape function {i} integrates to ~0 over the domain "
-            f"({vol[i]:.2e}); its support misses the quadrature: increase the dilation"
+            f"consistent integration: {who} integrates to ~0 over the domain ({vol[i]:.2e}); "
+            "its support misses the quadrature: increase the dilation"
         )
-    xi = rhs / vol[:, None]
-    V = cell_values.tocsr()
-    if all(_same_pattern(g, V) for g in cell_gradients):  # the MLS tables: one O(nnz) pass
+    return rhs / vol[:, None]
+
+
+def corrected_gradients(
+    values: sp.spmatrix, gradients: list[sp.csr_matrix], xi: np.ndarray
+) -> list[sp.csr_matrix]:
+    """``grad^ N_I = grad N_I + xi_I N_I`` (Chen, Hillman & Rüter 2013). Where the gradients
+    share the values' CSR pattern (the MLS tables) the result keeps it (one O(nnz) pass, no
+    entry that happens to cancel is dropped); else sparse sums."""
+    V = values.tocsr()
+    if all(_same_pattern(g, V) for g in gradients):
         return [
             sp.csr_matrix((g.data + V.data * xi[V.indices, k], V.indices, V.indptr), V.shape)
-            for k, g in enumerate(cell_gradients)
+            for k, g in enumerate(gradients)
         ]
-    return [(g + V @ sp.diags(xi[:, k])).tocsr() for k, g in enumerate(cell_gradients)]
+    return [(g + V @ sp.diags(xi[:, k])).tocsr() for k, g in enumerate(gradients)]
 
 
 def _same_pattern(a: sp.spmatrix, b: sp.csr_matrix) -> bool:

@@ -50,10 +50,16 @@ from ..geometry.quadrature import (
 )
 from ..parallel import raise_on_all_ranks
 from ..physics.materials import LinearElastic
-from ..physics.operators import load_vector, stiffness_matrix, voigt_tangent
+from ..physics.operators import (
+    corrected_gradients,
+    load_vector,
+    stiffness_matrix,
+    vci_constants,
+    voigt_tangent,
+)
 from ..physics.user_functions import vector_values
 from .efg import EFGElasticity, EFGSolution
-from .petsc import create_aij, create_vector, solve_lu
+from .petsc import create_aij, create_vector, scoped_options, solve_lu
 
 if TYPE_CHECKING:  # annotations only
     from ..approx.mls import MLS
@@ -177,17 +183,7 @@ def chunked_stiffness(
             vol += t.values.T @ q.weights[s]
             for k in range(gdim):
                 rhs[:, k] -= t.gradients[k].T @ q.weights[s]
-        vol = comm.allreduce(vol, op=MPI.SUM)
-        rhs = comm.allreduce(rhs, op=MPI.SUM)
-        small = np.abs(vol) <= 1e-14 * np.abs(vol).max()
-        if np.any(small):
-            i = int(np.flatnonzero(small)[0])
-            raise ValueError(
-                f"consistent integration: the shape function of the particle at "
-                f"{particles.positions[i]} integrates to ~0 over the domain ({vol[i]:.2e}): "
-                "increase the dilation"
-            )
-        xi = rhs / vol[:, None]
+        xi = vci_constants(vol, rhs, comm, particles.positions)
         tab += time.perf_counter() - t0
     stack: list[tuple[sp.csr_matrix, int]] = []  # partial sums, merged like a binary counter
     for s in _chunks(len(q), chunk_points, comm):
@@ -195,11 +191,7 @@ def chunked_stiffness(
         t = raise_on_all_ranks(comm, lambda s=s: mls.tabulate(q.points[s]))
         test = t.gradients
         if xi is not None:  # grad^ N_I = grad N_I + xi_I N_I on the table's own pattern
-            V = t.values
-            test = [
-                sp.csr_matrix((g.data + V.data * xi[V.indices, k], V.indices, V.indptr), V.shape)
-                for k, g in enumerate(t.gradients)
-            ]
+            test = corrected_gradients(t.values, t.gradients, xi)
         t1 = time.perf_counter()
         Kc = stiffness_matrix(test, q.weights[s], material, t.gradients, particles.petsc_index)
         del t, test
@@ -329,23 +321,11 @@ def _krylov(A: PETSc.Mat, b: PETSc.Vec, particles, options: IterativeOptions, sy
     pc.setType(PETSc.PC.Type.GAMG)
     nullspace, vecs = _rigid_modes(particles, A)
     A.setNearNullSpace(nullspace)
-    db = PETSc.Options()
-    previous = {}
-    for key, value in (options.petsc_options or {}).items():
-        name = f"{prefix}{key}"
-        previous[name] = db.getString(name) if db.hasName(name) else None
-        db.setValue(name, value)
-    try:
+    with scoped_options(prefix, options.petsc_options):
         ksp.setFromOptions()
         x = A.createVecRight()
         ksp.solve(b, x)
         reason, its = ksp.getConvergedReason(), ksp.getIterationNumber()
-    finally:
-        for name, value in previous.items():
-            if value is None:
-                db.delValue(name)
-            else:
-                db.setValue(name, value)
     for obj in (pc, ksp, nullspace, *vecs):
         obj.destroy()
     if reason < 0:

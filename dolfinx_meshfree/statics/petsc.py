@@ -12,9 +12,10 @@ removed again.
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -36,6 +37,7 @@ __all__ = [
     "asymmetry",
     "create_aij",
     "create_vector",
+    "scoped_options",
     "solve_lu",
     "solver_options",
     "to_local_csr",
@@ -312,6 +314,27 @@ def solve_lu(
     return x
 
 
+@contextlib.contextmanager
+def scoped_options(prefix: str, options: Mapping[str, Any] | None) -> Iterator[None]:
+    """Put ``options`` (name -> value) into PETSc's options database under ``prefix`` for the
+    ``with`` block, then restore what the database held under those names (nothing leaks into
+    the global database, also when the block raises)."""
+    db = PETSc.Options()
+    previous = {}
+    for key, value in (options or {}).items():
+        name = f"{prefix}{key}"
+        previous[name] = db.getString(name) if db.hasName(name) else None
+        db.setValue(name, value)
+    try:
+        yield
+    finally:
+        for name, value in previous.items():
+            if value is None:
+                db.delValue(name)
+            else:
+                db.setValue(name, value)
+
+
 class BlockSystem:
     """A square block system as a PETSc MatNest.
 
@@ -509,13 +532,7 @@ class BlockSystem:
         ksp = PETSc.KSP().create(self.comm)
         ksp.setOptionsPrefix(prefix)
         ksp.setOperators(aij)
-        db = PETSc.Options()
-        previous = {}  # what the database held under these names: restored afterwards
-        for key, value in (options.petsc_options or {}).items():
-            name = f"{prefix}{key}"
-            previous[name] = db.getString(name) if db.hasName(name) else None
-            db.setValue(name, value)
-        try:
+        with scoped_options(prefix, options.petsc_options):
             ksp.setFromOptions()
             pc = ksp.getPC()
             ises = []
@@ -526,12 +543,6 @@ class BlockSystem:
             x = aij.createVecRight()
             ksp.solve(b, x)
             reason, its = ksp.getConvergedReason(), ksp.getIterationNumber()
-        finally:
-            for name, value in previous.items():
-                if value is None:
-                    db.delValue(name)
-                else:
-                    db.setValue(name, value)
         self.iterations = {"ksp": its}
         pc.destroy()  # see solve_lu
         ksp.destroy()

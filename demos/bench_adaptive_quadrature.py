@@ -24,26 +24,16 @@
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
-import pathlib
 import sys
 
 import dolfinx_meshfree as mf
 
 import numpy as np
+from bench_common import load_demo
 from mpi4py import MPI
 
 # -
-
-
-def load_kalthoff_winkler():
-    path = pathlib.Path(__file__).resolve().parent / "kalthoff_winkler.py"
-    spec = importlib.util.spec_from_file_location("demo_kalthoff_winkler_for_quadrature", path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
 
 
 def _initiation(rec: dict) -> tuple[float | None, float | None]:
@@ -170,7 +160,7 @@ def main(argv=None) -> int:
     parser.add_argument("--json", default=None)
     args = parser.parse_args(argv)
     comm = MPI.COMM_WORLD
-    kw = load_kalthoff_winkler()
+    kw = load_demo("kalthoff_winkler")
     if args.small:
         args.nodes, args.t_end = 21, 20e-6
     # warm-up (JIT compilation excluded from the timings)

@@ -23,25 +23,14 @@
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
-import pathlib
-import sys
 
 import dolfinx_meshfree as mf
 
+from bench_common import load_demo
 from mpi4py import MPI
 
 # -
-
-
-def load_cantilever():
-    path = pathlib.Path(__file__).resolve().parent / "cantilever.py"
-    spec = importlib.util.spec_from_file_location("demo_cantilever_for_balance", path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
 
 
 def run(
@@ -94,7 +83,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
     if args.small:
         args.h, args.patch_fraction = [2.0], [0.5]
     comm = MPI.COMM_WORLD
-    cantilever = load_cantilever()
+    cantilever = load_demo("cantilever")
     cantilever.warm_jit(
         cantilever.parse(["--no-check"]),
         mf.LinearElastic(3e7, 0.3),

@@ -27,9 +27,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import importlib.util
 import json
-import sys
 import time
 from pathlib import Path
 
@@ -39,22 +37,10 @@ from dolfinx_meshfree.statics.petsc import BlockSystem
 
 import dolfinx
 import numpy as np
+from bench_common import load_demo
 from mpi4py import MPI
 
 # -
-
-
-def rod_demo():
-    """``demos/rod_gauss.py`` as a module (its ``build`` and ``parse``)."""
-    name = "bench_blocks_rod_gauss"
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(
-            name, Path(__file__).with_name("rod_gauss.py")
-        )
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-    return sys.modules[name]
 
 
 def best_product(A, repeats: int, inner: int = 20) -> float:
@@ -90,7 +76,7 @@ def matrix_format(fmt: str):
 def dynamics(method: str, nodes: int, steps: int, repeats: int, comm) -> dict:
     """Per-step time of the rod with the assembled AIJ and with BAIJ stiffness blocks: two
     models built alike, stepped in turns from the same state; their final displacements."""
-    rg = rod_demo()
+    rg = load_demo("rod_gauss")
     args = rg.parse(["--nodes", str(nodes)])
     material = mf.LinearElastic(args.E, 0.0, "strain", rho=args.rho)
     rod = mf.verification.waves.GaussianPulseRod(

@@ -26,11 +26,8 @@
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import os
-import pathlib
-import sys
 import time
 
 import dolfinx_meshfree as mf
@@ -38,6 +35,7 @@ from dolfinx_meshfree.approx import jit
 from dolfinx_meshfree.approx import mls as mls_module
 
 import numpy as np
+from bench_common import load_demo
 from mpi4py import MPI
 
 # -
@@ -169,18 +167,9 @@ def bench_mls(sizes_index: str, repeats: int, threads: list[int]) -> list[dict]:
     return records
 
 
-def load_cantilever():
-    path = pathlib.Path(__file__).resolve().parent / "cantilever.py"
-    spec = importlib.util.spec_from_file_location("demo_cantilever_for_bench", path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
 def bench_static(hs: list[float]) -> list[dict]:
     """FE and EFG (each MLS backend) on the cantilever; EFG/FE time ratios at equal h."""
-    cantilever = load_cantilever()
+    cantilever = load_demo("cantilever")
     h_args = [str(h) for h in hs]
     records = []
     saved = mls_module.DEFAULT_BACKEND

@@ -19,6 +19,7 @@ import dolfinx_meshfree as mf
 from dolfinx_meshfree.approx import jit
 
 import numpy as np
+from bench_common import median_time
 
 # -
 
@@ -32,15 +33,6 @@ def cloud(n_side: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarra
     inner = np.all((P > 0) & (P < 1), axis=1)
     P[inner] += rng.uniform(-0.3, 0.3, (inner.sum(), 2)) / n_side
     return P, np.full(P.shape[0], n_side**-2.0), rng.uniform(0.0, 1.0, (4 * P.shape[0], 2))
-
-
-def cpu_time(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        c0 = time.process_time()
-        fn()
-        times.append(time.process_time() - c0)
-    return float(np.median(times))
 
 
 def main(argv: list[str] | None = None) -> list[dict]:
@@ -62,7 +54,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
                 sph = mf.SPH(P, vol, correction=correction, backend=backend)
                 sph.tabulate(x[:8])  # compile or load the cache
                 tables[backend] = sph.tabulate(x)
-                t = cpu_time(lambda sph=sph, x=x: sph.tabulate(x), repeats)
+                t = median_time(lambda sph=sph, x=x: sph.tabulate(x), repeats, time.process_time)
                 rec[f"points_per_cpu_second_{backend}"] = x.shape[0] / t
             rec["pairs_per_point"] = tables["numpy"].values.nnz / x.shape[0]
             if "numba" in tables:

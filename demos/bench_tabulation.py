@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import time
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
@@ -27,18 +26,10 @@ from dolfinx_meshfree.physics.operators import stiffness_matrix
 import dolfinx
 import numpy as np
 import ufl
+from bench_common import median_time
 from mpi4py import MPI
 
 # -
-
-
-def median_time(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times))
 
 
 def main(argv: list[str] | None = None) -> list[dict]:

@@ -127,7 +127,11 @@ DEMOS = pathlib.Path(__file__).resolve().parents[1] / "demos"
 
 
 def load_demo(name: str, alias: str | None = None):
-    """Import ``demos/<name>.py`` as a module (the demos are scripts, not a package)."""
+    """Import ``demos/<name>.py`` as a module (the demos are scripts, not a package; their
+    folder goes on ``sys.path``, as when one runs, for their shared ``sif_common`` and
+    ``bench_common``)."""
+    if str(DEMOS) not in sys.path:
+        sys.path.append(str(DEMOS))
     spec = importlib.util.spec_from_file_location(alias or f"demo_{name}", DEMOS / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     # registered before it runs: dataclasses look their module up in sys.modules

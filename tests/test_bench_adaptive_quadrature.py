@@ -37,7 +37,7 @@ def test_bench_adaptive_quadrature_small(shared_dir, monkeypatch):
         assert r["K_history_difference"] <= 2.5e-3
     assert runs["efg", "uniform"]["ratio_to_efg_uniform"] == 1.0
     if MPI.COMM_WORLD.size > 1:
-        kw = demo.load_kalthoff_winkler()
+        kw = demo.load_demo("kalthoff_winkler")
         alone = demo.run_all(kw, 21, 20e-6, 8.0, 3, ["efg"], MPI.COMM_SELF)
         for rec in alone:
             ref = runs["efg", rec["quadrature"]]

@@ -213,7 +213,8 @@ def test_changed_cells_are_the_cells_whose_rule_changes():
         ]
         got = changed_cells(msh, cells, [old], [new], aq)
         assert np.array_equal(got, np.array(differ, dtype=got.dtype))
-        assert got.size > 0
+        # some cell changes (on some rank: a partition may leave a rank none)
+        assert COMM.allreduce(got.size, op=MPI.SUM) > 0
 
 
 def _sifs(quadrature, dt=None, comm=COMM):

@@ -57,7 +57,7 @@ from ..fracture.interaction import StressIntensityFactors, q_weight
 from ..geometry.crack import Crack, CrackDomain, particle_spacing
 from ..parallel import Layout, raise_on_all_ranks
 from ..statics.petsc import create_aij
-from .discretisation import Discretisation
+from .discretisation import approximation_cracks
 from .system import LinearSystem, SemiDiscreteSystem
 
 if TYPE_CHECKING:  # annotations only
@@ -387,8 +387,8 @@ def with_crack_contact(model: Model, contact: CrackContact | None) -> Model:
     """``model`` with crack-face contact on its particle field (collective): its system becomes
     a :class:`ContactSystem` around the linear system of its blocks; ``model`` itself when
     ``contact`` is ``None`` or no crack cuts its particles (the patch's cracks, or those
-    attached to the MLS of pure EFG, as :attr:`Discretisation.cracks
-    <dolfinx_meshfree.dynamics.discretisation.Discretisation.cracks>` finds them).
+    attached to the MLS of pure EFG:
+    :func:`~dolfinx_meshfree.dynamics.discretisation.approximation_cracks`).
 
     Args:
         model: A small-strain particle or coupled model.
@@ -399,7 +399,7 @@ def with_crack_contact(model: Model, contact: CrackContact | None) -> Model:
             f"crack_contact must be a CrackContact or None, got {type(contact).__name__}: "
             "use crack_contact=dolfinx_meshfree.dynamics.CrackContact()"
         )
-    cracks = Discretisation.cracks.fget(model) if contact is not None else []
+    cracks = approximation_cracks(model.patch, model.mls) if contact is not None else []
     if not cracks:
         return model
     domain = model.patch if model.patch is not None else CrackDomain.from_particles(model.particles)

@@ -23,7 +23,7 @@ from ..geometry.patch import ParticlePatch
 from ..physics import user_functions
 from .system import Field
 
-__all__ = ["Discretisation", "vector_values"]
+__all__ = ["Discretisation", "approximation_cracks", "vector_values"]
 
 VectorFunction = Callable[[np.ndarray], np.ndarray]
 
@@ -34,6 +34,15 @@ def vector_values(fn: Callable[..., np.ndarray], *args: np.ndarray) -> np.ndarra
     return user_functions.vector_values(
         fn, args, args[0].shape[0], "the function", args[0].shape[1]
     )
+
+
+def approximation_cracks(patch: object | None, mls: object | None) -> list:
+    """The cracks cutting a particle approximation: the patch's (a coupled model), or those
+    attached to the MLS of pure EFG through its pair cuts; empty without."""
+    if patch is not None:
+        return list(patch.cracks)
+    cuts = getattr(mls, "pair_cuts", ())
+    return [c for cut in cuts for c in getattr(cut, "cracks", ())]
 
 
 @dataclass
@@ -73,12 +82,8 @@ class Discretisation:
 
     @property
     def cracks(self) -> list:
-        """The cracks cutting the particles' approximation (the patch's, or those attached to
-        the MLS of pure EFG); empty without."""
-        if self.patch is not None:
-            return list(self.patch.cracks)
-        cuts = getattr(self.mls, "pair_cuts", ())
-        return [c for cut in cuts for c in getattr(cut, "cracks", ())]
+        """The cracks cutting the particles' approximation (:func:`approximation_cracks`)."""
+        return approximation_cracks(self.patch, self.mls)
 
     def blended_cells(self) -> np.ndarray | None:
         """bool per local cell: a ramp interface cell or a bridging band cell (else ``None``)."""

@@ -94,7 +94,9 @@ def test_efg_crack_is_felt():
 
 
 # --- coupled, through a user's UFL model --------------------------------------------------------
-def coupled_error(coupling, crack_points, G):
+def coupled_error(coupling, crack_points, G, left_edge=False):
+    """Max displacement error of a CoupledLinearProblem with the patch [0.1, 0.9]^2, or with
+    ``left_edge`` [0, 0.9] x [0.1, 0.9] (its left side on the exterior boundary)."""
     msh = unit_square()
     V = _compat.vector_function_space(msh)
     u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
@@ -106,7 +108,7 @@ def coupled_error(coupling, crack_points, G):
     bcs = [dolfinx.fem.dirichletbc(g, dolfinx.fem.locate_dofs_topological(V, 1, facets))]
     n = msh.topology.index_map(2).size_local
     mid = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], :2].mean(axis=1)
-    cells = np.flatnonzero((np.abs(mid - 0.5) < 0.4).all(axis=1))
+    cells = np.flatnonzero((np.abs(mid - 0.5) < 0.4).all(axis=1) | (left_edge & (mid[:, 0] < 0.1)))
     patch = mf.ParticlePatch(msh, cells, 0.1, cracks=[mf.Crack(p) for p in crack_points])
     sol = mf.CoupledLinearProblem(a, L, bcs, patch, material=MAT, coupling=coupling).solve()
     x = sample_points()
@@ -126,6 +128,28 @@ def test_coupled_patch_test_with_crack(coupling, crack, G):
 @pytest.mark.parametrize("coupling", ["lagrange", "edge-to-edge", "bridging"])
 def test_coupled_crack_is_felt(coupling):
     assert coupled_error(coupling, [COUPLED_CRACK], FACES) > 1e-5
+
+
+# Edge cracks from the left side of the patch [0, 0.9] x [0.1, 0.9] (cells of 0.1). Bridging's
+# band is the 2 cell layers beside the FE interface (y = 0.1, y = 0.9, x = 0.9), alpha = 0 on
+# the interface and 1 at two layers: INTO_BAND's mouth lies at y = 0.215 (alpha about 0.6),
+# ABOVE_BAND's at y = 0.315; both cross no particle row, their tips are > 0.2 from the interface.
+INTO_BAND = [[0.0, 0.215], [0.45, 0.565]]
+ABOVE_BAND = [[0.0, 0.315], [0.45, 0.665]]
+
+
+def test_bridging_refuses_a_crack_through_its_band():
+    """The band's FE field is not cut by a crack and would bond its faces: refused on every
+    rank, naming a point of the crack in the band."""
+    with pytest.raises(ValueError, match=r"passes through the bridging band at \[0\.0, 0\.215\]"):
+        coupled_error("bridging", [INTO_BAND], ROTATION, left_edge=True)
+
+
+def test_bridging_takes_an_edge_crack_outside_its_band():
+    """The same crack above the band passes the rigid-motion patch test (to round-off); lagrange
+    (no band) takes the crack that bridging refuses."""
+    assert coupled_error("bridging", [ABOVE_BAND], ROTATION, left_edge=True) <= 1e-10
+    assert coupled_error("lagrange", [INTO_BAND], ROTATION, left_edge=True) <= 1e-10
 
 
 @pytest.mark.parametrize("coupling", ["ramp", "ramp-cubic", "master-slave"])

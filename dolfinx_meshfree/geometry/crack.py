@@ -41,6 +41,7 @@ __all__ = [
     "particle_spacing",
     "place_crack",
     "point_segment_distance",
+    "polyline_samples",
     "segments_intersect",
     "validate_in_patch",
 ]
@@ -368,6 +369,17 @@ class CrackDomain:
         return cls(mesh, cells, particles, boundary_facets(mesh), np.zeros(0, dtype=np.int32))
 
 
+def polyline_samples(points: np.ndarray, step: float) -> np.ndarray:
+    """Points along a polyline ``points`` (k, gdim), both ends of every segment included and at
+    most ``step`` apart (local)."""
+    a, b = points[:-1], points[1:]
+    nsub = np.maximum(1, np.ceil(np.linalg.norm(b - a, axis=1) / step)).astype(int)
+    seg = np.repeat(np.arange(a.shape[0]), nsub + 1)
+    start = np.repeat(np.cumsum(nsub + 1) - (nsub + 1), nsub + 1)
+    xi = (np.arange(seg.size) - start) / nsub[seg]
+    return a[seg] + xi[:, None] * (b - a)[seg]
+
+
 def gathered_segments(patch: ParticlePatch | CrackDomain, facets: np.ndarray) -> np.ndarray:
     """Facets of the 2D patch mesh as segments (k, 2, 2), gathered from every rank (collective)."""
     mesh = patch.mesh
@@ -413,11 +425,7 @@ def validate_in_patch(
     exterior = gathered_segments(patch, patch.exterior_facets)
     # samples along the polyline name a point outside the patch (the facet tests below are exact)
     a, b = pts[:-1], pts[1:]
-    nsub = np.maximum(1, np.ceil(np.linalg.norm(b - a, axis=1) / (0.25 * h))).astype(int)
-    seg = np.repeat(np.arange(a.shape[0]), nsub + 1)
-    start = np.repeat(np.cumsum(nsub + 1) - (nsub + 1), nsub + 1)
-    xi = (np.arange(seg.size) - start) / nsub[seg]
-    samples = a[seg] + xi[:, None] * (b - a)[seg]
+    samples = polyline_samples(pts, 0.25 * h)
     num_owned = patch.mesh.topology.index_map(2).size_local
     inside = _points_in_cells(patch.mesh, samples, patch.cells).astype(np.int32)
     inside += _points_in_cells(patch.mesh, samples, np.arange(num_owned)).astype(np.int32)

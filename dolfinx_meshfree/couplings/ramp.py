@@ -622,6 +622,12 @@ def ramp_operators(problem: CoupledElasticity) -> CouplingOperators:
     of eq. 3.15–3.16 (Belytschko et al. 1995). The interface quadrature and its blended table
     give the interface cells' share of the row-sum masses with the same shape functions
     (eq. 4.5). See :class:`~dolfinx_meshfree.couplings.base.CouplingOperators`.
+
+    The four stiffness blocks are assembled as PETSc BAIJ (2 x 2 blocks,
+    :func:`~dolfinx_meshfree.statics.baij.create_baij`), the format explicit dynamics multiplies
+    (no AIJ copy), and ``K_FE`` leaves out the patch cells' zeros that DOLFINx's sparsity
+    stores (about half its entries on the rod): the products are those of the AIJ blocks to the
+    last bit, at less cost.
     """
 
     if problem.consistent:

@@ -626,8 +626,8 @@ def ramp_operators(problem: CoupledElasticity) -> CouplingOperators:
     The four stiffness blocks are assembled as PETSc BAIJ (2 x 2 blocks,
     :func:`~dolfinx_meshfree.statics.baij.create_baij`), the format explicit dynamics multiplies
     (no AIJ copy), and ``K_FE`` leaves out the patch cells' zeros that DOLFINx's sparsity
-    stores (about half its entries on the rod): the products are those of the AIJ blocks to the
-    last bit, at less cost.
+    stores (about half its entries on the rod): the products are those of the AIJ blocks copied
+    to BAIJ (:func:`~dolfinx_meshfree.dynamics.linalg.blocked`) to the last bit, at less cost.
     """
 
     if problem.consistent:

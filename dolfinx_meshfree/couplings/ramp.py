@@ -662,13 +662,13 @@ def ramp_operators(problem: CoupledElasticity) -> CouplingOperators:
     def block(sel: np.ndarray, shape: tuple[int, int]) -> sp.csr_matrix:
         return sp.csr_matrix((Ki.data[sel], (r[sel], c[sel])), shape=shape)
 
-    def baij(local: sp.spmatrix, rows: Layout, cols: Layout) -> PETSc.Mat:
-        return create_baij(comm, local, rows, cols, 2)
+    def baij(local: sp.spmatrix, rows: Layout, cols: Layout, assembled=None) -> PETSc.Mat:
+        return create_baij(comm, local, rows, cols, 2, assembled)
 
     # the stiffness blocks in 2 x 2 blocks, as explicit dynamics multiplies them (no AIJ copy);
     # K_FE without the patch cells' stored zeros of DOLFINx's sparsity (same products)
     K_dolfinx = _fe_stiffness(problem, blend)
-    K_fe = baij(_owned_csr(K_dolfinx, fe_layout) + block(fr & fc, (nfe, nfe)), fe_layout, fe_layout)
+    K_fe = baij(block(fr & fc, (nfe, nfe)), fe_layout, fe_layout, _owned_csr(K_dolfinx, fe_layout))
     K_dolfinx.destroy()
     Kp_loc = Kp_loc + block(~fr & ~fc, (2 * n, 2 * n))
     pure = ~patch.in_patch & ~blend.in_interface

@@ -51,6 +51,7 @@ def create_baij(
     row_layout: Layout,
     col_layout: Layout,
     bs: int,
+    assembled: sp.spmatrix | None = None,
 ) -> PETSc.Mat:
     """Distributed BAIJ matrix (``bs x bs`` blocks) from this rank's contributions in global
     numbering (collective): the entries of
@@ -63,6 +64,10 @@ def create_baij(
             them and added there.
         bs: The block size (the geometric dimension); the layouts' ranges must start and end on
             whole blocks on every rank.
+        assembled: An already assembled matrix's owned rows (global shape, other rows empty),
+            added after the ranks' contributions are summed: ``A + create_aij(local)`` as
+            PETSc's ``A.axpy`` sums it (e.g. DOLFINx's FE stiffness plus the ramps' interface
+            cells).
 
     Raises:
         ValueError: (on every rank) a layout's range of some rank is not made of whole blocks.
@@ -80,6 +85,8 @@ def create_baij(
     A.sum_duplicates()
     own = _owned_rows(mpi, A, row_layout) if mpi.size > 1 else A
     own.sum_duplicates()
+    if assembled is not None:  # (serial: own is every row, the owned ones)
+        own = assembled.tocsr()[row_layout.start : row_layout.end] + own
     own.eliminate_zeros()
     blocks = own.tobsr(blocksize=(bs, bs))
     blocks.sum_duplicates()  # sorted block columns, one entry per block

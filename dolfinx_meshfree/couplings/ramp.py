@@ -662,7 +662,9 @@ def ramp_operators(problem: CoupledElasticity) -> CouplingOperators:
     def block(sel: np.ndarray, shape: tuple[int, int]) -> sp.csr_matrix:
         return sp.csr_matrix((Ki.data[sel], (r[sel], c[sel])), shape=shape)
 
-    def baij(local: sp.spmatrix, rows: Layout, cols: Layout, assembled=None) -> PETSc.Mat:
+    def baij(
+        local: sp.spmatrix, rows: Layout, cols: Layout, assembled: sp.spmatrix | None = None
+    ) -> PETSc.Mat:
         return create_baij(comm, local, rows, cols, 2, assembled)
 
     # the stiffness blocks in 2 x 2 blocks, as explicit dynamics multiplies them (no AIJ copy);

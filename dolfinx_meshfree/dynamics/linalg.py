@@ -62,11 +62,16 @@ def blocked(A: PETSc.Mat, bs: int, fmt: str = "baij") -> PETSc.Mat | None:
         bs: The block size (the geometric dimension).
         fmt: ``"baij"`` (MPIBAIJ/SeqBAIJ) or ``"aij"`` (AIJ with the block size set).
 
-    Returns ``None`` (collectively) when ``bs == 1`` or the row or column ranges of some rank
-    do not start and end on whole blocks; the caller then keeps ``A``.
+    Returns ``None`` (collectively) when ``bs == 1``, the row or column ranges of some rank
+    do not start and end on whole blocks, or ``A`` is stored so already (BAIJ of block size
+    ``bs`` for ``"baij"``, AIJ for ``"aij"``: e.g. the ramps' blocks, assembled as BAIJ); the
+    caller then keeps ``A``.
     """
     if fmt not in BLOCK_FORMATS:
         raise ValueError(f"fmt={fmt!r} is not known; use one of {list(BLOCK_FORMATS)}")
+    is_baij = A.getType() in (PETSc.Mat.Type.SEQBAIJ, PETSc.Mat.Type.MPIBAIJ)
+    if is_baij == (fmt == "baij") and (not is_baij or A.getBlockSize() == bs):
+        return None
     comm = A.getComm()
     (rl, _), (cl, _) = A.getSizes()
     r0, c0 = A.getOwnershipRange()[0], A.getOwnershipRangeColumn()[0]

@@ -141,8 +141,9 @@ class LinearSystem:
             ``"baij"`` (the default): blocks of ``gdim x gdim``
             (:func:`~dolfinx_meshfree.dynamics.linalg.blocked`; also a block between two
             fields when both are node-interleaved), or ``"aij"``: as assembled (PETSc's AIJ
-            with i-nodes). Measured on the rod (41k dofs, 86 entries per particle row, PETSc
-            3.18, one core, ``demos/bench_blocks.py``): BAIJ multiplies the particle stiffness
+            with i-nodes; blocks assembled as BAIJ, the ramps', are copied to AIJ). Measured
+            on the rod (41k dofs, 86 entries per particle row, PETSc 3.18, one core,
+            ``demos/bench_blocks.py``): BAIJ multiplies the particle stiffness
             1.14-1.25x faster (a step of EFG or lagrange 1.2-1.3x), the FE stiffness alike
             (0.95-1.01x); the results agree to round-off (the summation order changes).
     """
@@ -160,16 +161,16 @@ class LinearSystem:
             )
         self.fields = list(fields)
         self.blocks: Blocks = dict(blocks or {})
-        if matrix_format != "aij":
-            self.store_as(matrix_format)
+        self.store_as(matrix_format)
         self.G: list[PETSc.Mat | None] | None = None
         if constraint is not None and any(g is not None for g in constraint):
             self.G = list(constraint)
 
     def store_as(self, fmt: str) -> None:
         """Replace every stiffness block by its ``fmt`` copy (``"aij"``: AIJ with the block
-        size set, ``"baij"``) where the fields' dofs are node-interleaved with one block size;
-        the replaced matrices are destroyed (collective). The entries are unchanged."""
+        size set, ``"baij"``) where the fields' dofs are node-interleaved with one block size
+        and the block is not stored so already (:func:`~dolfinx_meshfree.dynamics.linalg.
+        blocked`); the replaced matrices are destroyed (collective). The entries are unchanged."""
         if fmt not in BLOCK_FORMATS:
             raise ValueError(f"fmt={fmt!r} is not known; use one of {list(BLOCK_FORMATS)}")
         bs = [f.dofs_per_node() for f in self.fields]

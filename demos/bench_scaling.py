@@ -1,6 +1,8 @@
-# # Benchmark: speed and scale (issue 12), first version
+# # Benchmark: speed and scale (issue 12)
 #
-# Two parts, each printed as a table and written to JSON (``--json``, one record per run):
+# Four parts, each printed as a table and written to JSON (``--json``, one record per run),
+# on one rank or, under ``mpirun -n 2``, on every rank with the one-rank reference of each case
+# run on rank 0 alone in the same run (the other ranks wait) for the speed-ups:
 #
 # 1. **MLS tabulation with gradients**, points per second, the numpy reference and the compiled
 #    (numba) path in the same run, for the 2D linear, 2D quadratic and 3D linear bases (quartic
@@ -8,24 +10,46 @@
 #    evaluation points per particle at random inside. Next to the speed, the largest difference
 #    between the two paths (relative to the largest entry, values and gradients): the cost of
 #    speed in accuracy. The first compiled call (compilation, or loading numba's on-disk cache)
-#    is timed separately and excluded; timings are medians of ``--repeats``.
-# 2. **Static cantilever** (``demos/cantilever.py``, Timoshenko beam): pure FE and pure EFG at
-#    the same element size (particles on the vertices: equal dofs), EFG with each MLS backend;
-#    total time (setup + assembly + solve; FE JIT excluded) and L2 error, and EFG/FE ratios.
+#    is timed separately and excluded; timings are medians of ``--repeats``. The compiled path
+#    runs on one thread and on two (``--threads``, set through ``DOLFINX_MESHFREE_THREADS``):
+#    per CPU second the figure per core, per wall-clock second the parallel speed. One rank
+#    only (``--no-mls`` skips it).
+# 2. **EFG's MLS backends** on the cantilever (``demos/cantilever.py``, Timoshenko beam): pure
+#    EFG with the numpy and the compiled path at the smallest ``--h``, the same error
+#    (``--backends``; on in ``--small``).
+# 3. **Static cantilever at equal dofs**: pure FE, pure EFG and the lagrange coupling with the
+#    free-end 25 % and 50 % of the beam in particles (``--patch-fraction``), all with nodes or
+#    particles at spacing ``h`` (equal dofs up to the duplicated interface column), at each
+#    ``--h``: total time (setup + assembly + solve, FE JIT excluded, the slowest rank), the
+#    peak resident memory of the case (the largest rank's, the kernel's high-water mark reset
+#    before each case), the relative L2 error against the exact solution, and the ratio to FE's
+#    time at the same ``h`` in the same run. On several ranks the coupled models run on
+#    ``mf.balanced_mesh`` (a patch cell weighing the EFG/FE time ratio per cell measured on rank
+#    0 at the same ``h``, as ``demos/bench_balance.py`` does; ``--no-balance``: DOLFINx's
+#    partition).
+# 4. **Explicit rod** (``demos/rod_gauss.py``, Gaussian pulse, about ``--nodes`` nodes +
+#    particles, particle : node ratio 4 in the coupled half): the time per step of FE, EFG and
+#    the couplings of ``--rod-methods`` (median of ``--repeats`` runs of ``--steps`` steps after
+#    a warm-up; energy records and outputs are outside the timed loop), its ratio to FE's step,
+#    the peak memory of the build, and the relative L2 velocity error against the exact
+#    (d'Alembert) solution at the end. On several ranks the coupled rods run on
+#    ``mf.balanced_mesh``, a patch cell weighing ``ratio x`` (EFG/FE step) as measured on rank 0.
 #
-#    The compiled path runs on one thread and on two (``--threads``, set through
-#    ``DOLFINX_MESHFREE_THREADS``): per CPU second the figure per core, per wall-clock second the
-#    parallel speed.
-#
-# Run with ``OMP_NUM_THREADS=1`` (as recorded in the JSON);
-# the numbers are machine dependent, compare the ratios of one run. ``--small`` is a smoke run
-# of a few seconds for CI (no timing is checked anywhere). This supersedes the MLS part of
+# Run with ``OMP_NUM_THREADS=1`` (as recorded in the JSON); the numbers are machine dependent:
+# compare the ratios of one run (the load average of the machine is printed with every table).
+# ``--small`` is a smoke run of about a minute for CI (no timing is checked anywhere; the test
+# checks the errors against the exact solutions). This supersedes the MLS part of
 # ``demos/bench_tabulation.py``.
+#
+#     OMP_NUM_THREADS=1 python demos/bench_scaling.py [--h 0.5 0.25 0.125] [--nodes 20000]
+#     OMP_NUM_THREADS=1 mpirun -n 2 python demos/bench_scaling.py --no-mls
+#     python demos/bench_scaling.py --small
 
 # +
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import time
@@ -167,29 +191,7 @@ def bench_mls(sizes_index: str, repeats: int, threads: list[int]) -> list[dict]:
     return records
 
 
-def bench_static(hs: list[float]) -> list[dict]:
-    """FE and EFG (each MLS backend) on the cantilever; EFG/FE time ratios at equal h."""
-    cantilever = load_demo("cantilever")
-    h_args = [str(h) for h in hs]
-    records = []
-    saved = mls_module.DEFAULT_BACKEND
-    try:
-        for backend in ["numpy", "numba"] if jit.AVAILABLE else ["numpy"]:
-            mls_module.DEFAULT_BACKEND = backend
-            methods = ["fe", "efg"] if backend == "numpy" else ["efg"]
-            for r in cantilever.main(["--method", *methods, "--h", *h_args, "--no-check"]):
-                r = {"kind": "static", **r}
-                r["mls_backend"] = backend if r["method"] == "efg" else None
-                records.append(r)
-    finally:
-        mls_module.DEFAULT_BACKEND = saved
-    fe = {r["h"]: r for r in records if r["method"] == "fe"}
-    for r in records:
-        r["time_ratio_to_fe"] = r["time_total"] / fe[r["h"]]["time_total"]
-    return records
-
-
-def report(mls: list[dict], static: list[dict]) -> None:
+def report(mls: list[dict]) -> None:
     print(
         f"MLS tabulation with gradients, quartic weight, 1 rank (OMP_NUM_THREADS="
         f"{os.environ.get('OMP_NUM_THREADS', 'unset')}), median of {mls[0]['repeats']}; "
@@ -232,48 +234,425 @@ def report(mls: list[dict], static: list[dict]) -> None:
             f"{r['pairs_per_point']:8.1f} {numpy:>21} {numba:>21} {srt:>21} {numba2:>21} "
             f"{nb / r['points_per_second_numpy']:8.1f} {first:10.3f} {diff:9.1e}"
         )
+
+
+# ## Peak memory of a case
+#
+# ``getrusage`` gives the process's peak since it started; Linux lets a process reset its
+# high-water mark (``VmHWM``, by writing 5 to ``/proc/self/clear_refs``), so each case gets its
+# own peak. Elsewhere the figure is ``None``.
+
+
+# +
+def _proc_status_mb(key: str) -> float | None:
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith(key + ":"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        return None
+    return None
+
+
+@contextlib.contextmanager
+def peak_memory(comm, out: dict):
+    """Record in ``out`` the peak resident memory (MB) of the block, the largest rank's
+    (``peak_mb``), and its rise over the resident memory at entry (``peak_rise_mb``)."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+        start = _proc_status_mb("VmRSS")
+    except OSError:
+        start = None
+    yield
+    peak = _proc_status_mb("VmHWM") if start is not None else None
+    known = comm.allreduce(peak is not None, op=MPI.LAND)
+    out["peak_mb"] = comm.allreduce(peak, op=MPI.MAX) if known else None
+    out["peak_rise_mb"] = comm.allreduce(peak - start, op=MPI.MAX) if known else None
+
+
+@contextlib.contextmanager
+def default_solver(solver: str | None):
+    """While active, ``CoupledElasticity.solve`` defaults to ``solver`` (``None``: unchanged):
+    ``--solver`` passes through to the coupled problems' ``solver=`` argument."""
+    solve = mf.CoupledElasticity.solve
+    saved = solve.__defaults__
+    if solver is not None:
+        solve.__defaults__ = (solver, *saved[1:])
+    try:
+        yield
+    finally:
+        solve.__defaults__ = saved
+
+
+def load() -> tuple[float, float, float]:
+    """The machine's load average (1, 5, 15 minutes): the machine is shared."""
+    return tuple(round(v, 2) for v in os.getloadavg())
+
+
+def references_then_all(comm, cases: list, run_one, weights_of, key: str) -> list[dict]:
+    """Each case on rank 0 alone (``MPI.COMM_SELF``; the other ranks wait): the one-rank
+    references; then, on several ranks, each case on ``comm`` with the balance weights that
+    ``weights_of(references)`` measures, and its speed-up (the reference's ``key`` over its
+    own). ``run_one(comm, case, weights)`` runs one case (``weights=None``: DOLFINx's
+    partition). Returns the references, then the runs on ``comm`` (none on one rank)."""
+    refs = comm.bcast([run_one(MPI.COMM_SELF, c, None) for c in cases] if comm.rank == 0 else None)
+    if comm.size == 1:
+        return refs
+    weights = weights_of(refs)
+    runs = []
+    for case, ref in zip(cases, refs, strict=True):
+        ref["one_rank_reference"] = True
+        comm.Barrier()
+        r = run_one(comm, case, weights)
+        r["speedup"] = ref[key] / r[key]
+        runs.append(r)
+    return refs + runs
+
+
+def ratios_to_fe(records: list[dict], key: str, group: tuple[str, ...]) -> None:
+    """``<key>_ratio_to_fe``: each record's ``key`` over FE's in the same group (same run)."""
+    fe = {tuple(r[g] for g in group): r[key] for r in records if r["method"] == "fe"}
+    for r in records:
+        ref = fe.get(tuple(r[g] for g in group))
+        r[f"{key}_ratio_to_fe"] = None if ref is None else r[key] / ref
+
+
+# -
+
+
+# ## Static cantilever at equal dofs: FE, EFG, lagrange with 25 % and 50 % patches
+
+
+# +
+def static_case(comm, case: tuple, solver: str | None) -> dict:
+    """One cantilever run on ``comm`` through ``demos/cantilever.py``'s functions (its ``main``
+    runs on MPI.COMM_WORLD); ``case = (method, h, patch fraction, balance weight or None)``."""
+    cantilever = load_demo("cantilever")
+    method, h, fraction, weight = case
+    argv = ["--method", method, "--h", str(h), "--no-check"]
+    argv += ["--patch-fraction", str(fraction or 0.5)]
+    if weight is not None:
+        argv += ["--balance", str(weight)]
+    args = cantilever.parse(argv)
+    material = mf.LinearElastic(args.E, args.nu, args.plane)
+    beam = mf.TimoshenkoBeam(material, L=args.L, D=args.D, P=args.P)
+    mem: dict = {}
+    comm.Barrier()
+    with peak_memory(comm, mem), default_solver(solver):
+        msh = cantilever.make_mesh(comm, args, h)
+        if weight is not None:
+            msh = mf.balanced_mesh(msh, cantilever.patch_weight(args))
+        if method == "fe":
+            errors, sizes, timings, _ = cantilever.run_fe(msh, args, beam, material)
+        elif method == "efg":
+            errors, sizes, timings, _ = cantilever.run_efg(msh, args, beam, material, h)
+        else:
+            errors, sizes, timings, _ = cantilever.run_coupled(msh, args, beam, material, h, method)
+    timings = {k: comm.allreduce(v, op=MPI.MAX) for k, v in timings.items()}
+    return {
+        "kind": "static",
+        "method": method,
+        "patch_fraction": fraction,
+        "h": h,
+        "ranks": comm.size,
+        "balanced": weight is not None,
+        "weight": weight,
+        "solver": solver if method in mf.COUPLINGS else None,
+        "mls_backend": mls_module.DEFAULT_BACKEND if method != "fe" else None,
+        "dofs": sizes["fe_dofs"] + sizes["particle_dofs"],
+        **{k: sizes[k] for k in ("fe_dofs", "particle_dofs", "multiplier_dofs")},
+        "error_l2": errors["l2"],
+        "error_energy": errors["energy"],
+        **{f"time_{k}": timings[k] for k in ("setup", "assemble", "solve")},
+        "time_total": timings["setup"] + timings["assemble"] + timings["solve"],
+        **mem,
+        "load": load(),
+    }
+
+
+def bench_static(
+    comm, hs: list[float], fractions: list[float], balance: bool, solver: str | None
+) -> list[dict]:
+    """FE, EFG and the lagrange coupling per patch fraction at each ``h``: one-rank references
+    on rank 0, then (several ranks) every case on ``comm``, the couplings on the balanced mesh."""
+    cantilever = load_demo("cantilever")
+    material = mf.LinearElastic(3e7, 0.3)
+    cantilever.warm_jit(
+        cantilever.parse(["--method", "fe", "lagrange", "--no-check"]),
+        material,
+        mf.TimoshenkoBeam(material),
+    )
+    cases = [(m, h, None) for h in hs for m in ("fe", "efg")]
+    cases += [("lagrange", h, f) for h in hs for f in fractions]
+
+    def run_one(c, case, weights):
+        weight = weights[case[1]] if weights and case[0] in mf.COUPLINGS else None
+        return static_case(c, (*case, weight), solver)
+
+    def weights_of(refs):  # a patch cell costs EFG's time per cell: the EFG/FE ratio at each h
+        if not balance:
+            return None
+        t = {(r["method"], r["h"]): r["time_total"] for r in refs}
+        return {h: t["efg", h] / t["fe", h] for h in hs}
+
+    records = references_then_all(comm, cases, run_one, weights_of, "time_total")
+    ratios_to_fe(records, "time_total", ("h", "ranks"))
+    ratios_to_fe(records, "dofs", ("h", "ranks"))
+    return records
+
+
+def bench_backends(comm, h: float) -> list[dict]:
+    """Pure EFG on the cantilever with each MLS backend (the same discretisation)."""
+    records = []
+    saved = mls_module.DEFAULT_BACKEND
+    try:
+        for backend in ["numpy", "numba"] if jit.AVAILABLE else ["numpy"]:
+            mls_module.DEFAULT_BACKEND = backend
+            records.append({**static_case(comm, ("efg", h, None, None), None), "kind": "backend"})
+    finally:
+        mls_module.DEFAULT_BACKEND = saved
+    return records
+
+
+# -
+
+
+# ## Explicit rod: time per step
+
+
+# +
+@contextlib.contextmanager
+def balanced_rod(rg, weight: float | None):
+    """While active, ``demos/rod_gauss.py`` builds its rods on ``mf.balanced_mesh``, the
+    particle half's cells weighing ``weight`` FE cells (``None``: DOLFINx's partition)."""
+    original = rg.rod_mesh
+    if weight is not None:
+
+        def rod_mesh(comm, h):
+            cell_weight = lambda x: np.where(x[0] > 0.5 * rg.LENGTH, weight, 1.0)  # noqa: E731
+            return mf.balanced_mesh(original(comm, h), cell_weight)
+
+        rg.rod_mesh = rod_mesh
+    try:
+        yield
+    finally:
+        rg.rod_mesh = original
+
+
+def rank_share(comm, dyn) -> float:
+    """The largest rank's share of the stored stiffness entries (the work of ``K u``)."""
+    nz = sum(f.K.getInfo()["nz_used"] for f in dyn.system.fields)
+    nz += sum(B.getInfo()["nz_used"] for B in getattr(dyn.system, "blocks", {}).values())
+    per_rank = comm.allgather(float(nz))
+    return max(per_rank) / sum(per_rank)
+
+
+def rod_case(comm, case: tuple, steps: int, repeats: int) -> dict:
+    """The rod of ``demos/rod_gauss.py`` (``case = (method, nodes, balance weight or None)``):
+    build, warm-up, the median time per step over ``repeats`` runs of ``steps`` steps (the
+    slowest rank), the velocity error at the end."""
+    rg = load_demo("rod_gauss")
+    method, nodes, weight = case
+    args = rg.parse(["--nodes", str(nodes), "--no-check"])
+    material = mf.LinearElastic(args.E, 0.0, "strain", rho=args.rho)
+    rod = mf.verification.waves.GaussianPulseRod(
+        E=args.E, rho=args.rho, length=rg.LENGTH, center=args.center
+    )
+    mem: dict = {}
+    comm.Barrier()
+    t0 = time.perf_counter()
+    with peak_memory(comm, mem), balanced_rod(rg, weight):
+        dyn, _ = rg.build(method, args, material, comm)
+        dyn.set_initial(velocity=rod.initial_velocity)
+    setup = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
+    dt = dyn.stable_time_step()
+    dyn.run(2 * dt, dt=dt, energy_records=1)  # warm-up
+    per_step = []
+    for _ in range(repeats):
+        comm.Barrier()
+        res = dyn.run(dyn.time + steps * dt, dt=dt, energy_records=1)
+        per_step.append(comm.allreduce(res.timings["per_step"], op=MPI.MAX))
+    sizes = dyn.num_dofs()
+    rec = {
+        "kind": "rod",
+        "method": method,
+        "nodes": nodes,
+        "ranks": comm.size,
+        "balanced": weight is not None,
+        "weight": weight,
+        "dofs": sizes["fe_dofs"] + sizes["particle_dofs"],
+        **sizes,
+        "largest_share": rank_share(comm, dyn),
+        "steps": steps,
+        "repeats": repeats,
+        "dt": dt,
+        "time": dyn.time,
+        "time_setup": setup,
+        "time_per_step": float(np.median(per_step)),
+        "error_velocity": dyn.velocity_error(rod.velocity),
+        "energy_drift": res.energy_drift,
+        **mem,
+        "load": load(),
+    }
+    dyn.destroy()
+    return rec
+
+
+def bench_rod(
+    comm, methods: list[str], nodes: int, steps: int, repeats: int, balance: bool
+) -> list[dict]:
+    """Per-step times of the rod's methods: one-rank references on rank 0, then (several
+    ranks) on ``comm``, the couplings on the balanced mesh (weight from the references)."""
+    rg = load_demo("rod_gauss")
+    args = rg.parse(["--nodes", str(nodes), "--method", *methods, "--no-check"])
+    rg.warm_jit(args, mf.LinearElastic(args.E, 0.0, "strain", rho=args.rho))
+
+    def run_one(c, case, weights):
+        weight = weights if weights is not None and case not in ("fe", "efg") else None
+        return rod_case(c, (case, nodes, weight), steps, repeats)
+
+    def weights_of(refs):  # a patch cell: `ratio` particles at EFG's cost per particle
+        t = {r["method"]: r["time_per_step"] for r in refs}
+        if not balance or not {"fe", "efg"} <= set(t):
+            return None
+        return args.ratio * t["efg"] / t["fe"]
+
+    records = references_then_all(comm, list(methods), run_one, weights_of, "time_per_step")
+    ratios_to_fe(records, "time_per_step", ("nodes", "ranks"))
+    return records
+
+
+# -
+
+
+# ## Tables
+
+
+# +
+def report_static(static: list[dict], backends: list[dict]) -> None:
+    if backends:
+        print(f"\nPure EFG, MLS backends (load {load()})")
+        for r in backends:
+            print(f"  {r['mls_backend']:>6}: h {r['h']:g}, L2 error {r['error_l2']:.6e}, "
+                  f"total {r['time_total']:.3f} s")  # fmt: skip
     if not static:
         return
-    print("\nStatic cantilever, EFG vs FE at equal h (particles on the vertices)")
+    print(
+        f"\nStatic cantilever at equal dofs (spacing h), lagrange patch at the free end; "
+        f"slowest rank's time, FE JIT excluded; peak = largest rank's resident peak (load "
+        f"{load()})"
+    )
     head = (
-        f"{'method':>6} {'backend':>7} {'h':>5} {'dofs':>7} {'L2 error':>9} {'total s':>8} "
-        f"{'x FE':>6}"
+        f"{'method':>8} {'patch':>5} {'h':>6} {'ranks':>5} {'mesh':>8} {'dofs':>7} "
+        f"{'L2 error':>9} {'setup s':>8} {'assem s':>8} {'solve s':>8} {'total s':>8} "
+        f"{'x FE':>6} {'peak MB':>8} {'speedup':>7}"
     )
     print(head)
     print("-" * len(head))
     for r in static:
-        dofs = r["fe_dofs"] + r["particle_dofs"]
+        frac = "" if r["patch_fraction"] is None else f"{r['patch_fraction']:5.2f}"
+        mesh = "balanced" if r["balanced"] else "default"
+        peak = "" if r["peak_mb"] is None else f"{r['peak_mb']:8.0f}"
+        speed = "" if r.get("speedup") is None else f"{r['speedup']:7.2f}"
+        ranks = f"{r['ranks']}" + ("*" if r.get("one_rank_reference") else "")
         print(
-            f"{r['method']:>6} {(r['mls_backend'] or '-'):>7} {r['h']:5.3g} {dofs:7d} "
-            f"{r['error_l2']:9.2e} {r['time_total']:8.3f} {r['time_ratio_to_fe']:6.2f}"
+            f"{r['method']:>8} {frac:>5} {r['h']:6.3g} {ranks:>5} {mesh:>8} {r['dofs']:7d} "
+            f"{r['error_l2']:9.2e} {r['time_setup']:8.3f} {r['time_assemble']:8.3f} "
+            f"{r['time_solve']:8.3f} {r['time_total']:8.3f} {r['time_total_ratio_to_fe']:6.2f} "
+            f"{peak:>8} {speed:>7}"
         )
+    if any(r.get("one_rank_reference") for r in static):
+        print("(ranks 1*: the one-rank reference, on rank 0 alone in the same run)")
 
 
+def report_rod(rod: list[dict]) -> None:
+    if not rod:
+        return
+    print(
+        f"\nExplicit rod (Gaussian pulse), time per step (median of {rod[0]['repeats']} x "
+        f"{rod[0]['steps']} steps, slowest rank), ratio to FE's step (load {load()})"
+    )
+    head = (
+        f"{'method':>9} {'ranks':>5} {'mesh':>8} {'dofs':>7} {'share':>6} {'step ms':>8} "
+        f"{'x FE':>6} {'speedup':>7} {'setup s':>8} {'peak MB':>8} {'v error':>9}"
+    )
+    print(head)
+    print("-" * len(head))
+    for r in rod:
+        mesh = "balanced" if r["balanced"] else "default"
+        peak = "" if r["peak_mb"] is None else f"{r['peak_mb']:8.0f}"
+        speed = "" if r.get("speedup") is None else f"{r['speedup']:7.2f}"
+        ranks = f"{r['ranks']}" + ("*" if r.get("one_rank_reference") else "")
+        print(
+            f"{r['method']:>9} {ranks:>5} {mesh:>8} {r['dofs']:7d} {r['largest_share']:6.3f} "
+            f"{1e3 * r['time_per_step']:8.3f} {r['time_per_step_ratio_to_fe']:6.2f} {speed:>7} "
+            f"{r['time_setup']:8.2f} {peak:>8} {r['error_velocity']:9.2e}"
+        )
+    print("(share: the largest rank's share of the stiffness entries; ranks 1*: the one-rank "
+          "reference on rank 0 alone)")  # fmt: skip
+
+
+# -
+
+
+# ## Driver
+
+
+# +
 def main(argv: list[str] | None = None) -> list[dict]:
-    p = argparse.ArgumentParser(description=__doc__)
-    p.add_argument("--small", action="store_true", help="a smoke run of a few seconds (CI)")
+    p = argparse.ArgumentParser(description="speed and scale (issue 12)")
+    p.add_argument("--small", action="store_true", help="a smoke run of about a minute (CI)")
     p.add_argument("--repeats", type=int, default=3)
-    p.add_argument("--h", nargs="+", type=float, default=[1.0, 0.5], help="static: FE sizes")
-    p.add_argument("--no-static", action="store_true", help="only the MLS tabulation")
+    p.add_argument("--h", nargs="+", type=float, default=[0.5, 0.25, 0.125], help="static sizes")
+    p.add_argument("--patch-fraction", nargs="+", type=float, default=[0.25, 0.5])
+    p.add_argument("--solver", default=None, help="the coupled problems' solve(solver=...)")
+    p.add_argument("--nodes", type=int, default=20000, help="rod: nodes + particles (about)")
+    p.add_argument("--steps", type=int, default=100, help="rod: steps per timed run")
+    p.add_argument("--rod-methods", nargs="+", default=["fe", "efg", "lagrange", "bridging"])
+    p.add_argument("--no-balance", action="store_true", help="DOLFINx's partition everywhere")
+    p.add_argument("--backends", action="store_true", help="EFG with each MLS backend")
+    for part in ("mls", "static", "rod"):
+        p.add_argument(f"--no-{part}", action="store_true", help=f"skip the {part} part")
     p.add_argument("--json", default=None)
     p.add_argument(
         "--threads", nargs="+", type=int, default=[1, 2], help="MLS: threads of the compiled path"
     )
     args = p.parse_args(argv)
-    repeats = 1 if args.small else args.repeats
-    mls = bench_mls("small" if args.small else "full", repeats, args.threads)
-    static = [] if args.no_static else bench_static([3.0] if args.small else args.h)
+    if args.small:
+        args.repeats, args.h, args.nodes, args.steps = 1, [3.0, 1.5], 600, 5
+        args.backends = True
     comm = MPI.COMM_WORLD
+    mls = []
+    if not args.no_mls:  # one rank: the others wait
+        mls = comm.bcast(
+            bench_mls("small" if args.small else "full", args.repeats, args.threads)
+            if comm.rank == 0
+            else None
+        )
+    backends = bench_backends(comm, max(args.h)) if args.backends else []
+    static = []
+    if not args.no_static:
+        static = bench_static(comm, args.h, args.patch_fraction, not args.no_balance, args.solver)
+    rod = []
+    if not args.no_rod:
+        rod = bench_rod(
+            comm, args.rod_methods, args.nodes, args.steps, args.repeats, not args.no_balance
+        )
     env = {
-        "ranks": comm.size,
+        "ranks_total": comm.size,
         "dolfinx_version": mf.DOLFINX_VERSION,
         "numba": jit.AVAILABLE,
         "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS"),
         "NUMBA_NUM_THREADS": os.environ.get("NUMBA_NUM_THREADS"),
     }
-    records = [{**r, **env} for r in mls + static]
+    records = [{**r, **env} for r in mls + backends + static + rod]
     if comm.rank == 0:
-        report(mls, static)
+        if mls:
+            report(mls)
+        report_static(static, backends)
+        report_rod(rod)
         if args.json:
             with open(args.json, "w") as f:
                 json.dump(records, f, indent=1)

@@ -59,6 +59,7 @@ import gc
 import json
 import os
 import time
+from collections.abc import Callable
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree.approx import jit
@@ -302,33 +303,50 @@ def load() -> tuple[float, float, float]:
     return tuple(round(v, 2) for v in os.getloadavg())
 
 
-def references_then_all(comm, cases: list, run_one, weights_of, key: str) -> list[dict]:
-    """Each case on one rank: the references; then, on several ranks, each case on ``comm``
-    with the balance weights that ``weights_of(references)`` measures, and its speed-up (the
-    reference's ``key`` over its own). ``run_one(comm, case, weights)`` runs one case
-    (``weights=None``: DOLFINx's partition). Returns the references, then the runs on ``comm``
-    (none on one rank).
+#: A prepared case: ``run()`` times it once and returns its record; ``close()`` frees it.
+Prepared = tuple[Callable[[], dict], Callable[[], None]]
 
-    On several ranks every rank runs its own copy of each reference at the same time (alone on
-    ``MPI.COMM_SELF``) and the reference's times are the mean over the copies: the reference
-    sees the same load of the machine as the parallel run (one busy process per rank; on an
-    idle machine with a core per rank, the time of a serial run), not a waiting rank that
-    polls (MPI waits spin) beside a lone worker."""
-    refs = [run_one(MPI.COMM_SELF, c, None) for c in cases]
-    if comm.size == 1:
-        return refs
-    for ref in refs:
-        for k in [k for k in ref if k.startswith("time_")]:
-            ref[f"{k}_copies"] = comm.allgather(ref[k])
-            ref[k] = float(np.mean(ref[f"{k}_copies"]))
-        ref["one_rank_reference"] = True
-    weights = weights_of(refs)
-    runs = []
-    for case, ref in zip(cases, refs, strict=True):
-        comm.Barrier()
-        r = run_one(comm, case, weights)
-        r["speedup"] = ref[key] / r[key]
-        runs.append(r)
+
+def in_turns(comm, cases: list, prepare, weights_of, key: str, repeats: int) -> list[dict]:
+    """Each case on one rank (the reference) and, on several ranks, on ``comm``, timed in turns
+    ``repeats`` times, the fastest run of each kept (on a shared machine the least disturbed;
+    the median of ``key`` is recorded too) with the speed-up (the reference's ``key`` over the
+    parallel run's). ``prepare(comm, case, weights)`` returns a :data:`Prepared` case;
+    ``weights_of(references so far)`` the balance weights of the parallel run (``None``:
+    DOLFINx's partition). Returns the references, then the parallel runs (none on one rank).
+
+    On several ranks every rank runs its own copy of the reference at the same time (alone on
+    ``MPI.COMM_SELF``) and the reference's times are the mean over the copies: it sees the same
+    load of the machine as the parallel run, taken in turns with it (on an idle machine with a
+    core per rank: the time of a serial run), not a waiting rank that polls (MPI waits spin)
+    beside a lone worker."""
+    refs: list[dict] = []
+    runs: list[dict] = []
+    for case in cases:
+        prepared = [prepare(MPI.COMM_SELF, case, None)]
+        if comm.size > 1:
+            prepared.append(prepare(comm, case, weights_of(refs)))
+        timed: list[list[dict]] = [[] for _ in prepared]
+        for _ in range(repeats):
+            for (run, _), out in zip(prepared, timed, strict=True):
+                comm.Barrier()
+                out.append(run())
+        for _, close in prepared:
+            close()
+        if comm.size > 1:  # the reference's times: the mean over its copies
+            for r in timed[0]:
+                for k in [k for k in r if k.startswith("time_")]:
+                    r[k] = float(np.mean(comm.allgather(r[k])))
+        best = []  # the fastest run's times, the rest (errors: the same state) the last run's
+        for out in timed:
+            fastest = min(out, key=lambda r: r[key])
+            best.append({**out[-1], **{k: v for k, v in fastest.items() if k.startswith("time_")}})
+            best[-1].update(repeats=repeats, **{f"{key}_median": median_of(out, key)})
+        refs.append(best[0])
+        if comm.size > 1:
+            best[0]["one_rank_reference"] = True
+            best[1]["speedup"] = best[0][key] / best[1][key]
+            runs.append(best[1])
     return refs + runs
 
 
@@ -405,9 +423,9 @@ def bench_static(
     solver: str | None,
     repeats: int,
 ) -> list[dict]:
-    """FE, EFG and the lagrange coupling per patch fraction at each ``h``: one-rank references,
-    then (several ranks) every case on ``comm``, the couplings on the balanced mesh; each case
-    the fastest of ``repeats`` runs (the least disturbed on a shared machine)."""
+    """FE, EFG and the lagrange coupling per patch fraction at each ``h`` (largest first, so
+    that a case's peak memory is not an earlier case's): on one rank and (several ranks) on
+    ``comm``, the couplings on the balanced mesh, in turns (:func:`in_turns`)."""
     cantilever = load_demo("cantilever")
     material = mf.LinearElastic(3e7, 0.3)
     cantilever.warm_jit(
@@ -415,23 +433,19 @@ def bench_static(
         material,
         mf.TimoshenkoBeam(material),
     )
-    cases = [(m, h, f) for h in hs for m, f in [("fe", None), ("efg", None)]]
-    cases += [("lagrange", h, f) for h in hs for f in fractions]
-    cases.sort(key=lambda c: -c[1])  # by size: a case's peak is not an earlier, larger one's
+    cases = []
+    for h in sorted(hs, reverse=True):  # FE and EFG first: the balance weight needs them
+        cases += [("fe", h, None), ("efg", h, None), *(("lagrange", h, f) for f in fractions)]
 
-    def run_one(c, case, weights):
+    def prepare(c, case, weights):
         weight = weights[case[1]] if weights and case[0] in mf.COUPLINGS else None
-        runs = [static_case(c, (*case, weight), solver) for _ in range(repeats)]
-        best = min(runs, key=lambda r: r["time_total"])
-        return {**best, "repeats": repeats, "time_total_median": median_of(runs, "time_total")}
+        return (lambda: static_case(c, (*case, weight), solver)), (lambda: None)
 
     def weights_of(refs):  # a patch cell costs EFG's time per cell: the EFG/FE ratio at each h
-        if not balance:
-            return None
         t = {(r["method"], r["h"]): r["time_total"] for r in refs}
-        return {h: t["efg", h] / t["fe", h] for h in hs}
+        return {h: t["efg", h] / t["fe", h] for h in hs if ("efg", h) in t} if balance else None
 
-    records = references_then_all(comm, cases, run_one, weights_of, "time_total")
+    records = in_turns(comm, cases, prepare, weights_of, "time_total", repeats)
     ratios_to_fe(records, "time_total", ("h", "ranks"))
     ratios_to_fe(records, "dofs", ("h", "ranks"))
     return records
@@ -483,11 +497,11 @@ def rank_share(comm, dyn) -> float:
     return max(per_rank) / sum(per_rank)
 
 
-def rod_case(comm, case: tuple, steps: int, repeats: int) -> dict:
-    """The rod of ``demos/rod_gauss.py`` (``case = (method, nodes, balance weight or None)``):
-    build, warm-up, the time per step (the slowest rank's) of the fastest of ``repeats`` runs of
-    ``steps`` steps (on a shared machine the best run is the one least disturbed by the other
-    processes; the median is recorded too), the velocity error at the end."""
+def rod_case(comm, case: tuple, steps: int) -> Prepared:
+    """The rod of ``demos/rod_gauss.py`` on ``comm`` (``case = (method, nodes, balance weight
+    or None)``), built, set to the pulse and warmed up by 2 steps; each ``run()`` times
+    ``steps`` more steps (the slowest rank's time per step; energy records are outside the
+    timed loop) and gives the velocity error against the exact solution at its end."""
     rg = load_demo("rod_gauss")
     method, nodes, weight = case
     args = rg.parse(["--nodes", str(nodes), "--no-check"])
@@ -504,13 +518,8 @@ def rod_case(comm, case: tuple, steps: int, repeats: int) -> dict:
     setup = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
     dt = dyn.stable_time_step()
     dyn.run(2 * dt, dt=dt, energy_records=1)  # warm-up
-    per_step = []
-    for _ in range(repeats):
-        comm.Barrier()
-        res = dyn.run(dyn.time + steps * dt, dt=dt, energy_records=1)
-        per_step.append(comm.allreduce(res.timings["per_step"], op=MPI.MAX))
     sizes = dyn.num_dofs()
-    rec = {
+    fixed = {
         "kind": "rod",
         "method": method,
         "nodes": nodes,
@@ -521,41 +530,48 @@ def rod_case(comm, case: tuple, steps: int, repeats: int) -> dict:
         **sizes,
         "largest_share": rank_share(comm, dyn),
         "steps": steps,
-        "repeats": repeats,
         "dt": dt,
-        "time": dyn.time,
         "time_setup": setup,
-        "time_per_step": float(np.min(per_step)),
-        "time_per_step_median": float(np.median(per_step)),
-        "error_velocity": dyn.velocity_error(rod.velocity),
-        "energy_drift": res.energy_drift,
         **mem,
-        "load": load(),
     }
-    dyn.destroy()
-    return rec
+
+    def run() -> dict:
+        res = dyn.run(dyn.time + steps * dt, dt=dt, energy_records=1)
+        return {
+            **fixed,
+            "time": dyn.time,
+            "time_per_step": comm.allreduce(res.timings["per_step"], op=MPI.MAX),
+            "error_velocity": dyn.velocity_error(rod.velocity),
+            "energy_drift": res.energy_drift,
+            "load": load(),
+        }
+
+    return run, dyn.destroy
 
 
 def bench_rod(
     comm, methods: list[str], nodes: int, steps: int, repeats: int, balance: bool
 ) -> list[dict]:
-    """Per-step times of the rod's methods: one-rank references on rank 0, then (several
-    ranks) on ``comm``, the couplings on the balanced mesh (weight from the references)."""
+    """Per-step times of the rod's methods on one rank and (several ranks) on ``comm``, in
+    turns (:func:`in_turns`), the couplings on the balanced mesh (weight from the references:
+    a patch cell holds ``ratio`` particles at EFG's cost per particle)."""
     rg = load_demo("rod_gauss")
     args = rg.parse(["--nodes", str(nodes), "--method", *methods, "--no-check"])
     rg.warm_jit(args, mf.LinearElastic(args.E, 0.0, "strain", rho=args.rho))
+    pure = [m for m in methods if m in ("fe", "efg")]  # first: the balance weight needs them
 
-    def run_one(c, case, weights):
-        weight = weights if weights is not None and case not in ("fe", "efg") else None
-        return rod_case(c, (case, nodes, weight), steps, repeats)
+    def prepare(c, method, weight):
+        weight = weight if method not in ("fe", "efg") else None
+        return rod_case(c, (method, nodes, weight), steps)
 
-    def weights_of(refs):  # a patch cell: `ratio` particles at EFG's cost per particle
+    def weights_of(refs):
         t = {r["method"]: r["time_per_step"] for r in refs}
         if not balance or not {"fe", "efg"} <= set(t):
             return None
         return args.ratio * t["efg"] / t["fe"]
 
-    records = references_then_all(comm, list(methods), run_one, weights_of, "time_per_step")
+    cases = pure + [m for m in methods if m not in pure]
+    records = in_turns(comm, cases, prepare, weights_of, "time_per_step", repeats)
     ratios_to_fe(records, "time_per_step", ("nodes", "ranks"))
     return records
 
@@ -616,7 +632,7 @@ def report_rod(rod: list[dict]) -> None:
     head = (
         f"{'method':>9} {'ranks':>5} {'mesh':>8} {'dofs':>7} {'share':>6} {'step ms':>8} "
         f"{'(median)':>8} "
-        f"{'x FE':>6} {'speedup':>7} {'setup s':>8} {'peak MB':>8} {'v error':>9}"
+        f"{'x FE':>6} {'speedup':>7} {'setup s':>8} {'peak MB':>8} {'rise MB':>8} {'v error':>9}"
     )
     print(head)
     print("-" * len(head))
@@ -629,7 +645,8 @@ def report_rod(rod: list[dict]) -> None:
             f"{r['method']:>9} {ranks:>5} {mesh:>8} {r['dofs']:7d} {r['largest_share']:6.3f} "
             f"{1e3 * r['time_per_step']:8.3f} ({1e3 * r['time_per_step_median']:6.3f}) "
             f"{r['time_per_step_ratio_to_fe']:6.2f} {speed:>7} "
-            f"{r['time_setup']:8.2f} {peak:>8} {r['error_velocity']:9.2e}"
+            f"{r['time_setup']:8.2f} {peak:>8} {r['peak_rise_mb'] or 0:8.0f} "
+            f"{r['error_velocity']:9.2e}"
         )
     print("(share: the largest rank's share of the stiffness entries; ranks 1*: the one-rank "
           "reference, a copy on every rank at once, mean time)")  # fmt: skip
@@ -650,8 +667,8 @@ def main(argv: list[str] | None = None) -> list[dict]:
     p.add_argument("--patch-fraction", nargs="+", type=float, default=[0.25, 0.5])
     p.add_argument("--solver", default=None, help="the coupled problems' solve(solver=...)")
     p.add_argument("--nodes", type=int, default=20000, help="rod: nodes + particles (about)")
-    p.add_argument("--steps", type=int, default=50, help="rod: steps per timed run")
-    p.add_argument("--rod-repeats", type=int, default=7, help="rod: timed runs (best taken)")
+    p.add_argument("--steps", type=int, default=10, help="rod: steps per timed run")
+    p.add_argument("--rod-repeats", type=int, default=30, help="rod: timed runs (best taken)")
     p.add_argument("--rod-methods", nargs="+", default=["fe", "efg", "lagrange", "bridging"])
     p.add_argument("--no-balance", action="store_true", help="DOLFINx's partition everywhere")
     p.add_argument("--backends", action="store_true", help="EFG with each MLS backend")

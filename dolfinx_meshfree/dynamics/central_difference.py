@@ -196,11 +196,14 @@ class CentralDifference:
                     at = f"(explicit dynamics: step {n}, t = {tn:.6g})"
                     raise DeformationError(f"{e} {at}") from e
                 for k in range(F):
-                    ku[k].copy(self._work[k])
-                    for vecs, an in amps:
-                        if vecs[k] is not None and an != 0.0:
-                            self._work[k].axpy(-an, vecs[k])
-                    vnew[k].pointwiseMult(self.minv[k], self._work[k])
+                    loaded = [(vecs[k], an) for vecs, an in amps if vecs[k] is not None and an]
+                    residual = ku[k]  # f_int - f_ext (a copy only when loaded or driven)
+                    if loaded or (k == 0 and loads.motion is not None):
+                        residual = self._work[k]
+                        ku[k].copy(residual)
+                        for b, an in loaded:
+                            residual.axpy(-an, b)
+                    vnew[k].pointwiseMult(self.minv[k], residual)
                     vnew[k].aypx(-gamma * dt, self.v[k])
                 d_held = 0.0  # held FE dofs driven at prescribed velocities, their reaction's work
                 if loads.motion is not None:

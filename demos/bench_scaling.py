@@ -3,7 +3,7 @@
 # Four parts, each printed as a table and written to JSON (``--json``, one record per run),
 # on one rank or, under ``mpirun -n 2``, on every rank with the one-rank reference of each case
 # in the same run for the speed-ups (a copy on every rank at once, so that it sees the machine's
-# load as the parallel run does: :func:`references_then_all`):
+# load as the parallel run does: :func:`in_turns`):
 #
 # 1. **MLS tabulation with gradients**, points per second, the numpy reference and the compiled
 #    (numba) path in the same run, for the 2D linear, 2D quadratic and 3D linear bases (quartic
@@ -21,27 +21,30 @@
 # 3. **Static cantilever at equal dofs**: pure FE, pure EFG and the lagrange coupling with the
 #    free-end 25 % and 50 % of the beam in particles (``--patch-fraction``), all with nodes or
 #    particles at spacing ``h`` (equal dofs up to the duplicated interface column), at each
-#    ``--h``: total time (setup + assembly + solve, FE JIT excluded, the slowest rank; the best
-#    of ``--repeats`` runs: on a shared machine the least disturbed one), the
+#    ``--h``: total time (setup + assembly + solve, FE JIT excluded, the slowest rank), the
 #    peak resident memory of the case (the largest rank's, the kernel's high-water mark reset
-#    before each case), the relative L2 error against the exact solution, and the ratio to FE's
-#    time at the same ``h`` in the same run. On several ranks the coupled models run on
-#    ``mf.balanced_mesh`` (a patch cell weighing the EFG/FE time ratio per cell measured by
-#    the references at the same ``h``, as ``demos/bench_balance.py`` does; ``--no-balance``:
-#    DOLFINx's partition).
+#    before each case) and its rise over the memory at the case's start, the relative L2 error
+#    against the exact solution, and the ratio to FE's time at the same ``h`` in the same run.
+#    On several ranks the coupled models run on ``mf.balanced_mesh`` (a patch cell weighing the
+#    EFG/FE time ratio measured by the references at the same ``h``, as
+#    ``demos/bench_balance.py`` does; ``--no-balance``: DOLFINx's partition). ``--solver``
+#    passes through to ``CoupledElasticity.solve(solver=...)``.
 # 4. **Explicit rod** (``demos/rod_gauss.py``, Gaussian pulse, about ``--nodes`` nodes +
 #    particles, particle : node ratio 4 in the coupled half): the time per step of FE, EFG and
-#    the couplings of ``--rod-methods`` (the best of ``--rod-repeats`` runs of ``--steps`` steps
-#    after a warm-up, and their median; energy records and outputs are outside the timed
-#    loop), its ratio to FE's step,
-#    the peak memory of the build, and the relative L2 velocity error against the exact
-#    (d'Alembert) solution at the end. On several ranks the coupled rods run on
-#    ``mf.balanced_mesh``, a patch cell weighing ``ratio x`` (EFG/FE step) as the references
-#    measure it.
+#    the couplings of ``--rod-methods`` (energy records and outputs are outside the timed
+#    loop), its ratio to FE's step, the peak memory of the build, the relative L2 velocity error
+#    against the exact (d'Alembert) solution at the end and the largest rank's share of the
+#    stiffness entries. On several ranks the coupled rods run on ``mf.balanced_mesh``, a patch
+#    cell weighing ``ratio x`` (EFG/FE step) as the references measure it.
+#
+# Timings of parts 3 and 4 are the fastest of ``--repeats`` runs (``--rod-repeats`` runs of
+# ``--steps`` steps), their median recorded too: on a shared machine the fastest run is the one
+# least disturbed by other processes. On several ranks each case's one-rank reference and its
+# parallel run are timed in turns (:func:`in_turns`).
 #
 # Run with ``OMP_NUM_THREADS=1`` (as recorded in the JSON); the numbers are machine dependent:
 # compare the ratios of one run (the load average of the machine is printed with every table).
-# ``--small`` is a smoke run of about a minute for CI (no timing is checked anywhere; the test
+# ``--small`` is a smoke run of about ten seconds for CI (no timing is checked anywhere; the test
 # checks the errors against the exact solutions). This supersedes the MLS part of
 # ``demos/bench_tabulation.py``.
 #

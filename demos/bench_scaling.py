@@ -426,7 +426,7 @@ def bench_static(
     solver: str | None,
     repeats: int,
 ) -> list[dict]:
-    """FE, EFG and the lagrange coupling per patch fraction at each ``h`` (largest first, so
+    """FE, EFG and the lagrange coupling per patch fraction at each ``h`` (coarsest first, so
     that a case's peak memory is not an earlier case's): on one rank and (several ranks) on
     ``comm``, the couplings on the balanced mesh, in turns (:func:`in_turns`)."""
     cantilever = load_demo("cantilever")

@@ -81,13 +81,19 @@ def test_rod_steps_and_errors(records):
     """FE, EFG, lagrange and bridging per-step records; the velocity error against the exact
     d'Alembert solution after the timed steps (600 nodes + particles, 7 steps: measured FE
     1.1e-3, EFG 5.1e-3, lagrange 4.9e-3, bridging 4.6e-3; bound 1e-2), the discrete energy
-    conserved (drift < 1e-9, as demos/rod_gauss.py checks)."""
+    conserved (drift < 1e-9, as demos/rod_gauss.py checks). On several ranks the coupled rods
+    run on the balanced mesh: the largest rank holds at most 55 % of the stiffness entries
+    (measured 50.4 % at this size on 2 ranks; 50.0 % at 20,000 nodes, where DOLFINx's own
+    partition gives one rank 95.2 %)."""
     recs, _ = records
     rod = [r for r in recs if r["kind"] == "rod"]
     for n in {1, MPI.COMM_WORLD.size}:
         runs = {r["method"]: r for r in rod if r["ranks"] == n}
         assert set(runs) == {"fe", "efg", "lagrange", "bridging"}
         assert runs["fe"]["time_per_step_ratio_to_fe"] == 1.0
+        for m in ("lagrange", "bridging"):
+            assert runs[m]["balanced"] == (n > 1)
+            assert n == 1 or runs[m]["largest_share"] <= 0.55
         for r in runs.values():
             assert r["error_velocity"] < 1e-2
             assert r["energy_drift"] < 1e-9

@@ -184,25 +184,6 @@ def test_cooks_membrane_demo(shared_dir):
         assert errs[1] < 0.6 * errs[0] and errs[1] < 0.06
 
 
-def test_bench_scaling_smoke(shared_dir):
-    """``bench_scaling --small`` (a CI smoke run; no timing is checked): it writes its JSON, the
-    compiled and numpy MLS paths agree to 1e-12 relative (measured <= 2e-14), and EFG with
-    either backend has the same cantilever error (measured equal to 1e-13 relative)."""
-    demo = load_demo("bench_scaling")
-    out = shared_dir / "bench.json"
-    records = demo.main(["--small", "--json", str(out)])
-    mls = [r for r in records if r["kind"] == "mls"]
-    cases = {(r["gdim"], r["basis"]) for r in mls}
-    assert cases == {(2, "linear"), (2, "quadratic"), (3, "linear")}
-    for r in mls:
-        assert r["max_difference"] is None or r["max_difference"] <= 1e-12
-    efg = [r for r in records if r["kind"] == "static" and r["method"] == "efg"]
-    assert all(r["error_l2"] == pytest.approx(efg[0]["error_l2"], rel=1e-10) for r in efg)
-    MPI.COMM_WORLD.Barrier()
-    data = json.loads(out.read_text())
-    assert len(data) == len(records) and data[0]["ranks"] == MPI.COMM_WORLD.size
-
-
 def test_bench_blocks_smoke(shared_dir):
     """demos/bench_blocks.py --small (a smoke run, no timing checked): its tables' records, the
     factorisation it picks per system (LDL^T for Galerkin, LU for VCI) and that LDL^T and LU agree

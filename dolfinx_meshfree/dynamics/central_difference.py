@@ -21,6 +21,7 @@ from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from mpi4py import MPI
 from petsc4py import PETSc
 
 from ..io import ProgressBar
@@ -91,6 +92,8 @@ class CentralDifference:
         u, v: ``d_n`` and ``v_{n-1/2}`` (``v_0`` before the first step) per field.
         step, time: The current step and time.
         records: The energy records of every run since :meth:`reset`.
+        w_ext, w_c: This rank's part of the work of the loads and (per field) of the constraint
+            forces since :meth:`reset` (the records hold their sums over the ranks).
     """
 
     def __init__(
@@ -164,6 +167,11 @@ class CentralDifference:
             x.set(0.0)
         records = self.records
         first = len(records)
+        comm = masses[0].getComm().tompi4py()
+        # the works are summed on each rank over its dofs, and over the ranks at the energy
+        # records only (one Allreduce there instead of collective dot products every step);
+        # the held dofs' reaction work, the same on every rank, counts on rank 0
+        held_share = 1.0 if comm.rank == 0 else 0.0
         w_ext, w_c = self.w_ext, self.w_c
         pk = [k for k, f in enumerate(system.fields) if f.name == "particles"]
         t_out = 0.0
@@ -188,11 +196,14 @@ class CentralDifference:
                     at = f"(explicit dynamics: step {n}, t = {tn:.6g})"
                     raise DeformationError(f"{e} {at}") from e
                 for k in range(F):
-                    ku[k].copy(self._work[k])
-                    for vecs, an in amps:
-                        if vecs[k] is not None and an != 0.0:
-                            self._work[k].axpy(-an, vecs[k])
-                    vnew[k].pointwiseMult(self.minv[k], self._work[k])
+                    loaded = [(vecs[k], an) for vecs, an in amps if vecs[k] is not None and an]
+                    residual = ku[k]  # f_int - f_ext (a copy only when loaded or driven)
+                    if loaded or (k == 0 and loads.motion is not None):
+                        residual = self._work[k]
+                        ku[k].copy(residual)
+                        for b, an in loaded:
+                            residual.axpy(-an, b)
+                    vnew[k].pointwiseMult(self.minv[k], residual)
                     vnew[k].aypx(-gamma * dt, self.v[k])
                 d_held = 0.0  # held FE dofs driven at prescribed velocities, their reaction's work
                 if loads.motion is not None:
@@ -206,7 +217,7 @@ class CentralDifference:
                 # work of the step (see energy.external_work)
                 d_ext, d_c = 0.0, np.zeros(F)
                 if n > 0:
-                    d_ext = external_work(amps, self.v, vnew, dt) + d_held
+                    d_ext = external_work(amps, self.v, vnew, dt) + held_share * d_held
                     if G is not None:  # constraint force -G^T lambda / dt
                         d_c = constraint_work(G, imp, self.v, vnew)
                 if n in energy_steps:
@@ -219,14 +230,17 @@ class CentralDifference:
                             vnow[k].scale(0.5)
                     internal = system.strain_energy(self.u, ku)
                     half = kinetic_energy(masses, vnew, self._tmp)
+                    works = np.array([w_ext + d_ext, *(w_c + d_c)])
+                    if comm.size > 1:
+                        comm.Allreduce(MPI.IN_PLACE, works, op=MPI.SUM)
                     rec = EnergyRecord(
                         step=n,
                         time=tn,
                         kinetic=float(kinetic_energy(masses, vnow, self._tmp)),
                         internal=float(internal),
-                        external=float(w_ext + d_ext),
-                        constraint=float((w_c + d_c).sum()),
-                        transfer=float((w_c + d_c)[pk[0]]) if pk and G is not None else 0.0,
+                        external=float(works[0]),
+                        constraint=float(works[1:].sum()),
+                        transfer=float(works[1 + pk[0]]) if pk and G is not None else 0.0,
                         discrete=float(discrete_energy(half, internal, ku, vnew, dt)),
                         residual=self.residual(vnew, g),
                     )

@@ -9,6 +9,12 @@ projected onto the constraint in the mass metric (eq. 94–96):
 ``S = G M^{-1} G^T`` is factorised once (dense Cholesky on every rank, or MUMPS), so each
 correction costs two sparse products with ``G`` and one triangular solve; ``G v`` stays at
 round-off. Dofs with ``M^{-1} = 0`` (held at rest) are not moved.
+
+With the dense factor every rank holds ``G_f``'s columns of its owned dofs (all multiplier
+rows): ``G v`` is the sum over the ranks of their columns' products, one ``Allreduce`` of the
+multipliers per step, and ``G^T lambda`` is local; PETSc's products would exchange ghost
+values four times and gather ``G v`` once (on 2 ranks of a shared machine each exchange can
+cost a time slice).
 """
 
 from __future__ import annotations
@@ -16,6 +22,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+import scipy.sparse
 from mpi4py import MPI
 from petsc4py import PETSc
 from scipy.linalg import LinAlgError, cho_factor, cho_solve
@@ -68,10 +75,19 @@ class VelocityProjection:
         self._work = [m.duplicate() for m in self.minv]
         self._tmp = [m.duplicate() for m in self.minv]
         S = None
+        #: per field, ``G_f`` restricted to the columns of the owned dofs (every row; scipy
+        #: CSR, local column numbers) and its transpose: the dense path's local products
+        self._cols: list[tuple[scipy.sparse.csr_matrix, scipy.sparse.csr_matrix] | None] = []
         for g, mi in zip(self.G, self.minv, strict=True):
             if g is None:
+                self._cols.append(None)
                 continue
             GT = g.transpose(PETSc.Mat())  # (without an argument petsc4py transposes in place)
+            ai, aj, av = GT.getValuesCSR()  # rows: owned dofs, columns: global multipliers
+            gt = scipy.sparse.csr_matrix(
+                (av, aj, ai), shape=(GT.getLocalSize()[0], GT.getSize()[1])
+            )
+            self._cols.append((gt.T.tocsr(), gt))
             GT.diagonalScale(L=mi)
             Sf = g.matMult(GT)
             GT.destroy()
@@ -115,7 +131,6 @@ class VelocityProjection:
                 "act on the same dofs only (e.g. an interface node on a fixed facet whose "
                 "particles are fixed too); fix fewer facets or move the interface"
             ) from e
-        self._counts = np.array(self.comm.allgather(hi - lo))
         self._full = np.zeros(size)
 
     def correct(
@@ -128,19 +143,16 @@ class VelocityProjection:
         prescribed values: :mod:`~dolfinx_meshfree.dynamics.prescribed`): solve ``S lambda =
         G v - target``, then ``v -= M^{-1} G^T lambda``; ``impulse`` receives ``G_f^T lambda``
         per field (collective)."""
+        if self.chol is not None:
+            self._correct_dense(vel, impulse, target)
+            return
         self._gv.set(0.0)
         for g, x in zip(self.G, vel, strict=True):
             if g is not None:
                 g.multAdd(x, self._gv, self._gv)
         if target is not None:
             self._gv.array[:] -= target
-        if self.ksp is not None:
-            self.ksp.solve(self._gv, self._lam)
-        else:
-            self.comm.Allgatherv(self._gv.array_r, [self._full, self._counts])
-            lam = cho_solve(self.chol, self._full)
-            lo, hi = self._lam.getOwnershipRange()
-            self._lam.array[:] = lam[lo:hi]
+        self.ksp.solve(self._gv, self._lam)
         for k, (g, x) in enumerate(zip(self.G, vel, strict=True)):
             if g is None:
                 continue
@@ -148,6 +160,32 @@ class VelocityProjection:
             g.multTranspose(self._lam, w)
             self._tmp[k].pointwiseMult(self.minv[k], w)
             x.axpy(-1.0, self._tmp[k])
+
+    def _correct_dense(
+        self,
+        vel: Sequence[PETSc.Vec],
+        impulse: Sequence[PETSc.Vec] | None,
+        target: np.ndarray | None,
+    ) -> None:
+        """:meth:`correct` with the dense factor: ``G v`` from the owned columns, summed over
+        the ranks in one ``Allreduce``; ``G^T lambda`` and the update local (collective)."""
+        gv = self._full
+        gv[:] = 0.0
+        for cols, x in zip(self._cols, vel, strict=True):
+            if cols is not None:
+                gv += cols[0] @ x.array_r
+        if target is not None:  # the owned rows' targets, once over the ranks
+            lo, hi = self._lam.getOwnershipRange()
+            gv[lo:hi] -= target
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, gv, op=MPI.SUM)
+        lam = cho_solve(self.chol, gv)
+        for k, (cols, x) in enumerate(zip(self._cols, vel, strict=True)):
+            if cols is None:
+                continue
+            w = self._work[k] if impulse is None else impulse[k]
+            w.array[:] = cols[1] @ lam
+            x.array[:] -= self.minv[k].array_r * w.array_r
 
     def residual(self, vel: Sequence[PETSc.Vec], target: np.ndarray | None = None) -> float:
         """Relative residual ``|sum_f G_f v_f - target|_inf / sum_f |G_f|_inf |v_f|_inf``

@@ -106,8 +106,10 @@ def discrete_energy(
 def external_work(
     loads: Amplified, v_old: Sequence[PETSc.Vec], v_new: Sequence[PETSc.Vec], dt: float
 ) -> float:
-    """Work of the loads over a step, ``f_n . (d_{n+1} - d_{n-1}) / 2
-    = dt f_n . (v_{n-1/2} + v_{n+1/2}) / 2``, which balances the discrete energy exactly.
+    """This rank's part of the work of the loads over a step, ``f_n . (d_{n+1} - d_{n-1}) / 2
+    = dt f_n . (v_{n-1/2} + v_{n+1/2}) / 2``, which balances the discrete energy exactly: the
+    owned dofs' sum, not collective (the caller sums over the ranks where it needs the total,
+    once per energy record rather than once per step).
 
     Args:
         loads: ``(vectors per field (None: no load on that field), amplitude at t_n)``.
@@ -116,7 +118,7 @@ def external_work(
     for vecs, amp in loads:
         for b, v0, v1 in zip(vecs, v_old, v_new, strict=True):
             if b is not None and amp != 0.0:
-                work += 0.5 * amp * dt * (b.dot(v0) + b.dot(v1))
+                work += 0.5 * amp * dt * float(b.array_r @ (v0.array_r + v1.array_r))
     return work
 
 
@@ -126,12 +128,13 @@ def constraint_work(
     v_old: Sequence[PETSc.Vec],
     v_new: Sequence[PETSc.Vec],
 ) -> np.ndarray:
-    """Work of the constraint forces ``-G_f^T lambda / dt`` over a step, per field, in the form
-    of :func:`external_work` (``impulse``: ``G_f^T lambda`` per field)."""
+    """This rank's part of the work of the constraint forces ``-G_f^T lambda / dt`` over a
+    step, per field, in the form of :func:`external_work` (``impulse``: ``G_f^T lambda`` per
+    field; not collective, like :func:`external_work`)."""
     work = np.zeros(len(G))
     for k, g in enumerate(G):
         if g is not None:
-            work[k] = -0.5 * (impulse[k].dot(v_old[k]) + impulse[k].dot(v_new[k]))
+            work[k] = -0.5 * float(impulse[k].array_r @ (v_old[k].array_r + v_new[k].array_r))
     return work
 
 

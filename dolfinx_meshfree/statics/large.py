@@ -225,7 +225,9 @@ class HaloMLS:
                     "build the HaloMLS from cells that contain the points"
                 )
             empty = sp.csr_matrix((0, n))
-            return ShapeTable(np.zeros((0, self.gdim)), empty, [empty] * derivatives, self.version)
+            return ShapeTable(
+                np.zeros((0, self.gdim)), empty, [empty] * (self.gdim * derivatives), self.version
+            )
         t = self._mls.tabulate(x, derivatives)
 
         def widen(a: sp.csr_matrix) -> sp.csr_matrix:

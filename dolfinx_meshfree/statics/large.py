@@ -52,6 +52,8 @@ from petsc4py import PETSc
 from scipy.spatial import cKDTree
 
 from .. import _compat
+from ..approx.jit import AVAILABLE as _COMPILED
+from ..approx.jit import jit
 from ..approx.tables import ShapeTable
 from ..geometry.quadrature import (
     QuadraturePoints,
@@ -81,6 +83,7 @@ __all__ = [
     "IterativeOptions",
     "chunked_l2_error",
     "chunked_stiffness",
+    "csr_sum",
     "halo_particles",
     "nitsche_terms",
     "peak_rss_mb",
@@ -255,6 +258,59 @@ def _halo(problem: EFGElasticity, consistent: bool) -> HaloMLS:
     return HaloMLS(problem.mls, idx)
 
 
+@jit
+def _merge_rows(ap, ai, ax, bp, bi, bx, outp, oi, ox, fill):  # pragma: no cover - compiled
+    """Row by row, the sorted merge of two canonical CSR matrices, equal columns summed, zero
+    sums dropped: with ``fill`` False the counts into ``outp[1:]``, else the entries."""
+    for r in range(outp.size - 1):
+        i, ie, j, je = ap[r], ap[r + 1], bp[r], bp[r + 1]
+        k = outp[r] if fill else 0
+        while i < ie or j < je:
+            if j == je or (i < ie and ai[i] < bi[j]):
+                c, v = ai[i], ax[i]
+                i += 1
+            elif i == ie or bi[j] < ai[i]:
+                c, v = bi[j], bx[j]
+                j += 1
+            else:
+                c, v = ai[i], ax[i] + bx[j]
+                i += 1
+                j += 1
+            if v != 0.0:
+                if fill:
+                    oi[k] = c
+                    ox[k] = v
+                k += 1
+        if not fill:
+            outp[r + 1] = k
+
+
+def csr_sum(a: sp.csr_matrix, b: sp.csr_matrix) -> sp.csr_matrix:
+    """``a + b`` as scipy computes it (the same sums, zero sums dropped: equal to the last bit),
+    into arrays of exactly the result's size: the peak is the two operands and the result,
+    where scipy's sum also allocates ``nnz(a) + nnz(b)`` entries and then copies the result to
+    trim it (local). Without numba, scipy's sum."""
+    if a.shape != b.shape:
+        raise ValueError(f"csr_sum of shapes {a.shape} and {b.shape}: give equal shapes")
+    if not _COMPILED:
+        return (a + b).tocsr()
+    a, b = a.tocsr(), b.tocsr()
+    for m in (a, b):
+        if not m.has_canonical_format:
+            m.sum_duplicates()  # in place: sorted indices, no duplicates
+    itype = np.int64 if max(a.nnz + b.nnz, *a.shape) >= np.iinfo(np.int32).max else np.int32
+    outp = np.zeros(a.shape[0] + 1, itype)
+    dummy_i, dummy_x = np.zeros(0, itype), np.zeros(0)
+    args = (a.indptr, a.indices, a.data, b.indptr, b.indices, b.data)
+    _merge_rows(*args, outp, dummy_i, dummy_x, False)
+    np.cumsum(outp, out=outp)
+    oi, ox = np.empty(outp[-1], itype), np.empty(outp[-1])
+    _merge_rows(*args, outp, oi, ox, True)
+    out = sp.csr_matrix((ox, oi, outp), shape=a.shape)
+    out.has_sorted_indices = True
+    return out
+
+
 def chunked_stiffness(
     particles: ParticleSet,
     mls: MLS | HaloMLS,
@@ -317,13 +373,14 @@ def chunked_stiffness(
         del Kc
         while len(stack) > 1 and stack[-1][1] == stack[-2][1]:
             (a, level), (b, _) = stack.pop(), stack.pop()
-            stack.append((a + b, level + 1))
+            stack.append((csr_sum(a, b), level + 1))
+            del a, b
         tab += t1 - t0
         asm += time.perf_counter() - t1
     t1 = time.perf_counter()
     K = sp.csr_matrix((gdim * n, gdim * n))
     while stack:
-        K = K + stack.pop()[0]
+        K = csr_sum(K, stack.pop()[0])
     asm += time.perf_counter() - t1
     return K, q, {"tabulate": tab, "assemble": asm}
 
@@ -500,7 +557,7 @@ def solve_large(problem: EFGElasticity, options: IterativeOptions | None = None)
     t0 = time.perf_counter()
     conds = problem._dirichlet
     N, f_loc = nitsche_terms(P, mls, mat, conds, deg, options.nitsche)
-    K = K + N
+    K = csr_sum(K, N)
     del N
     for facets, fn in problem._tractions:
         fq = facet_quadrature(problem.mesh, facets, deg)

@@ -85,8 +85,10 @@ __all__ = [
     "chunked_stiffness",
     "csr_sum",
     "halo_particles",
+    "joined",
     "nitsche_terms",
     "peak_rss_mb",
+    "row_blocks",
     "solve_large",
 ]
 
@@ -311,6 +313,48 @@ def csr_sum(a: sp.csr_matrix, b: sp.csr_matrix) -> sp.csr_matrix:
     return out
 
 
+#: Rows per block of the partial stiffness sums (:func:`row_blocks`).
+ROW_BLOCK = 1 << 16
+
+
+def row_blocks(a: sp.csr_matrix, size: int = ROW_BLOCK) -> list[sp.csr_matrix]:
+    """The CSR ``a`` cut into blocks of ``size`` rows (copies; local)."""
+    a = a.tocsr()
+    return [a[r : r + size] for r in range(0, max(a.shape[0], 1), size)]
+
+
+def _blocks_sum(a: list[sp.csr_matrix], b: list[sp.csr_matrix]) -> list[sp.csr_matrix]:
+    """Block by block :func:`csr_sum` of two :func:`row_blocks` lists, emptying them as it goes
+    (each input block freed once summed)."""
+    out = []
+    for k in range(len(a)):
+        out.append(csr_sum(a[k], b[k]))
+        a[k] = b[k] = None
+    return out
+
+
+def joined(blocks: list[sp.csr_matrix]) -> sp.csr_matrix:
+    """One CSR of the :func:`row_blocks` ``blocks`` (emptying the list: each block freed once
+    copied into arrays of the result's size; local)."""
+    rows = sum(m.shape[0] for m in blocks)
+    nnz = sum(m.nnz for m in blocks)
+    shape = (rows, blocks[0].shape[1])
+    itype = np.int64 if max(nnz, *shape) >= np.iinfo(np.int32).max else np.int32
+    indptr = np.zeros(rows + 1, itype)
+    indices, data = np.empty(nnz, itype), np.empty(nnz)
+    r = p = 0
+    for k in range(len(blocks)):
+        m = blocks[k]
+        indptr[r + 1 : r + m.shape[0] + 1] = m.indptr[1:] + p
+        indices[p : p + m.nnz] = m.indices
+        data[p : p + m.nnz] = m.data
+        r, p = r + m.shape[0], p + m.nnz
+        blocks[k] = m = None
+    out = sp.csr_matrix((data, indices, indptr), shape=shape)
+    out.has_sorted_indices = True
+    return out
+
+
 def chunked_stiffness(
     particles: ParticleSet,
     mls: MLS | HaloMLS,
@@ -329,12 +373,34 @@ def chunked_stiffness(
     a chunk may end inside a cell. With VCI the chunks are tabulated twice: the sums
     ``sum_q N_I w_q`` and ``sum_q grad N_I w_q`` of the correction
     (:func:`~dolfinx_meshfree.physics.operators.consistent_gradients`) first, then the
-    corrected gradients. Peak memory: one chunk's table, the stiffness and the sum of two.
+    corrected gradients. The partial sums (merged like a binary counter: the chunks' stiffnesses
+    in pairs, the pairs' sums in pairs, ...) are held in blocks of rows (:func:`row_blocks`),
+    summed block by block and joined at the end, each input block freed once summed or copied:
+    the peak is about one stiffness and one chunk's table, not two or three stiffnesses.
 
     Returns:
         ``(K, q, timings)``: K (gdim n x gdim n) CSR of this rank's contributions in PETSc
         numbering, the cell rule, and the seconds of ``tabulate`` and ``assemble``.
     """
+    K, q, timings = _stiffness_blocks(
+        particles, mls, material, quadrature_degree, consistent, chunk_points, quadrature
+    )
+    t0 = time.perf_counter()
+    K = joined(K)
+    timings["assemble"] += time.perf_counter() - t0
+    return K, q, timings
+
+
+def _stiffness_blocks(
+    particles: ParticleSet,
+    mls: MLS | HaloMLS,
+    material: LinearElastic,
+    quadrature_degree: int,
+    consistent: bool,
+    chunk_points: int,
+    quadrature: QuadraturePoints | None = None,
+) -> tuple[list[sp.csr_matrix], QuadraturePoints, dict]:
+    """:func:`chunked_stiffness` as :func:`row_blocks` (collective)."""
     comm = particles.comm
     gdim, n = particles.gdim, particles.num_particles
     if quadrature is None:
@@ -369,18 +435,18 @@ def chunked_stiffness(
         t1 = time.perf_counter()
         Kc = stiffness_matrix(test, q.weights[s], material, t.gradients, particles.petsc_index)
         del t, test
-        stack.append((Kc, 0))
+        stack.append((row_blocks(Kc), 0))
         del Kc
         while len(stack) > 1 and stack[-1][1] == stack[-2][1]:
             (a, level), (b, _) = stack.pop(), stack.pop()
-            stack.append((csr_sum(a, b), level + 1))
+            stack.append((_blocks_sum(a, b), level + 1))
             del a, b
         tab += t1 - t0
         asm += time.perf_counter() - t1
     t1 = time.perf_counter()
-    K = sp.csr_matrix((gdim * n, gdim * n))
+    K = row_blocks(sp.csr_matrix((gdim * n, gdim * n)))
     while stack:
-        K = csr_sum(K, stack.pop()[0])
+        K = _blocks_sum(K, stack.pop()[0])
     asm += time.perf_counter() - t1
     return K, q, {"tabulate": tab, "assemble": asm}
 
@@ -548,7 +614,7 @@ def solve_large(problem: EFGElasticity, options: IterativeOptions | None = None)
     if options.halo:
         mls = raise_on_all_ranks(comm, lambda: _halo(problem, problem.consistent))
     halo_time = time.perf_counter() - t0
-    K, q, timings = chunked_stiffness(P, mls, mat, deg, problem.consistent, options.chunk_points)
+    K, q, timings = _stiffness_blocks(P, mls, mat, deg, problem.consistent, options.chunk_points)
     timings["halo"] = halo_time
     timings["halo_particles"] = len(mls.indices) if options.halo else P.num_particles
     peak = {"assemble": peak_rss_mb()}
@@ -557,7 +623,7 @@ def solve_large(problem: EFGElasticity, options: IterativeOptions | None = None)
     t0 = time.perf_counter()
     conds = problem._dirichlet
     N, f_loc = nitsche_terms(P, mls, mat, conds, deg, options.nitsche)
-    K = csr_sum(K, N)
+    K = joined(_blocks_sum(K, row_blocks(N)))
     del N
     for facets, fn in problem._tractions:
         fq = facet_quadrature(problem.mesh, facets, deg)

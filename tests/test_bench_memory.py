@@ -36,17 +36,19 @@ def test_chunked_volumes_equal_unchunked(monkeypatch):
 
 def test_bench_memory_halo_equals_whole():
     """``bench_memory --small`` with the halo MLS (the default) and with the whole MLS on every
-    rank (``--no-halo``): the same matrix, so the same nonzeros, iterations and L2 error (to
-    1e-12 relative; measured equal). The halo never exceeds the particle set (one rank: all
-    of it) and the record holds a peak after every phase."""
+    rank (``--no-halo``): the same matrix (bit for bit: test_large_solve), so the same nonzeros
+    and L2 error, to 2e-9 relative: on 2 ranks of lane A two runs of the same model differ by
+    up to 7.3e-10 relative (GAMG; 9e-11 with MUMPS), halo or not; 1 rank: within 1e-12. The halo
+    never exceeds the particle set (one rank: all of it) and the record holds a peak after
+    every phase."""
     (halo,) = load_demo("bench_memory").main(["--small"])
     (whole,) = load_demo("bench_memory").main(["--small", "--no-halo"])
     assert whole["halo_particles"] == whole["particles"]
     assert 0 < halo["halo_particles"] <= halo["particles"]
     if COMM.size == 1:
         assert halo["halo_particles"] == halo["particles"]
-    assert halo["nonzeros"] == whole["nonzeros"] and halo["iterations"] == whole["iterations"]
-    assert abs(halo["l2_error"] - whole["l2_error"]) <= 1e-12 * whole["l2_error"]
+    assert halo["nonzeros"] == whole["nonzeros"]
+    assert abs(halo["l2_error"] - whole["l2_error"]) <= 2e-9 * whole["l2_error"]
     phases = {"mesh", "particles", "problem", "assemble", "matrix", "solve", "error"}
     assert set(halo["peak_rss_mb"]) == phases
 

@@ -38,6 +38,7 @@ evaluation point) and the factors. :func:`solve_large` solves the same model
 
 from __future__ import annotations
 
+import ctypes
 import itertools
 import resource
 import time
@@ -88,6 +89,7 @@ __all__ = [
     "joined",
     "nitsche_terms",
     "peak_rss_mb",
+    "release_freed_memory",
     "row_blocks",
     "solve_large",
 ]
@@ -313,6 +315,27 @@ def csr_sum(a: sp.csr_matrix, b: sp.csr_matrix) -> sp.csr_matrix:
     return out
 
 
+def _libc_trim() -> Any:
+    """glibc's ``malloc_trim``, or ``None`` where there is none (not glibc)."""
+    try:
+        return ctypes.CDLL(None).malloc_trim
+    except (OSError, AttributeError):
+        return None
+
+
+_MALLOC_TRIM = _libc_trim()
+
+
+def release_freed_memory() -> None:
+    """Return the C heap's free pages to the system (glibc's ``malloc_trim(0)``; a no-op
+    elsewhere; local). numpy arrays below glibc's mmap threshold (which rises up to 32 MB after
+    large frees) live on the heap, and freed ones stay resident until trimmed: without it the
+    blocks :func:`joined` frees stay resident beside the matrix that replaces them (+0.9 x
+    the stiffness at 300k particles)."""
+    if _MALLOC_TRIM is not None:
+        _MALLOC_TRIM(0)
+
+
 #: Rows per block of the partial stiffness sums (:func:`row_blocks`).
 ROW_BLOCK = 1 << 16
 
@@ -350,6 +373,7 @@ def joined(blocks: list[sp.csr_matrix]) -> sp.csr_matrix:
         data[p : p + m.nnz] = m.data
         r, p = r + m.shape[0], p + m.nnz
         blocks[k] = m = None
+        release_freed_memory()
     out = sp.csr_matrix((data, indices, indptr), shape=shape)
     out.has_sorted_indices = True
     return out
@@ -638,6 +662,7 @@ def solve_large(problem: EFGElasticity, options: IterativeOptions | None = None)
     udofs = P.dof_layout(gdim)
     A = create_aij(comm, K, udofs, udofs, block_size=gdim)
     del K
+    release_freed_memory()
     b = create_vector(comm, udofs, P.petsc_dofs(gdim).ravel(), f_loc)
     timings["matrix"] = time.perf_counter() - t0
     timings["nonzeros"] = int(A.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"])

@@ -4,10 +4,13 @@
 # P = 1000, plane stress) in pure EFG with particles on a regular grid of spacing h, solved by
 # :func:`~dolfinx_meshfree.solve_large`: the stiffness tabulated and assembled in chunks of
 # quadrature points, the clamped end by Nitsche's method, CG or GMRES + GAMG (or MUMPS with
-# ``--direct``). Per size: particles, dofs, nonzeros, the peak resident memory (the largest
-# rank's ``getrusage`` maximum, after each phase: it is a running maximum), the seconds of
-# tabulation, assembly, PETSc copy and solve, the iterations and the relative L2 error against
-# the exact solution (Gauss degree 4, evaluated in chunks). ``--small``: a CI smoke size.
+# ``--direct``). Per size: particles, dofs, nonzeros, the largest rank's halo (the particles its
+# MLS holds, :class:`~dolfinx_meshfree.statics.large.HaloMLS`; ``--no-halo``: all of them), the
+# peak resident memory (the largest rank's ``getrusage`` maximum, after each phase: mesh,
+# particles, problem, assembly, matrix, solve, error; it is a running maximum), the seconds of
+# set-up, halo, tabulation, assembly, PETSc copy and solve, the iterations and the relative L2
+# error against the exact solution (Gauss degree 4, evaluated in chunks). ``--small``: a CI
+# smoke size.
 #
 # Run: ``OMP_NUM_THREADS=1 python demos/bench_memory.py --h 0.0758 0.0438 0.024`` (about
 # 100k, 300k and 1M particles); under ``mpirun -n 2`` for the 2-rank figures. Numba's compile
@@ -40,9 +43,11 @@ def run(comm, h: float, args) -> dict:
     corners = [np.array([0.0, -D / 2]), np.array([L, D / 2])]
     cell = dolfinx.mesh.CellType.quadrilateral
     msh = dolfinx.mesh.create_rectangle(comm, corners, [round(L / h), round(D / h)], cell)
+    peak = {"mesh": peak_rss_mb()}
     material = mf.LinearElastic(3e7, 0.3, "stress")
     beam = mf.TimoshenkoBeam(material, L=L, D=D, P=1000.0)
     particles = mf.ParticleSet.from_cells(msh, h)
+    peak["particles"] = peak_rss_mb()
     problem = mf.EFGElasticity(
         particles, material, consistent=not args.plain, quadrature_degree=args.degree
     )
@@ -51,19 +56,22 @@ def run(comm, h: float, args) -> dict:
     )
     problem.add_traction(mf.boundary_facets(msh, lambda x: np.isclose(x[0], L)), beam.traction)
     setup = time.perf_counter() - t0
-    rss_setup = peak_rss_mb()
-    options = IterativeOptions(rtol=args.rtol, chunk_points=args.chunk_points, direct=args.direct)
+    peak["problem"] = peak_rss_mb()
+    options = IterativeOptions(
+        rtol=args.rtol, chunk_points=args.chunk_points, direct=args.direct, halo=not args.no_halo
+    )
     sol = solve_large(problem, options)
     t1 = time.perf_counter()
     err, ref = chunked_l2_error(sol, beam.displacement, msh, chunk_points=args.chunk_points)
     t = sol.timings
-    peak = {"setup": rss_setup, **t["peak_rss_mb"], "error": peak_rss_mb()}
+    peak.update({**t["peak_rss_mb"], "error": peak_rss_mb()})
     return {
         "h": h,
         "ranks": comm.size,
         "particles": particles.num_particles,
         "dofs": 2 * particles.num_particles,
         "nonzeros": t["nonzeros"],
+        "halo_particles": max(comm.allgather(t["halo_particles"])),
         "quadrature_degree": args.degree,
         "consistent": not args.plain,
         "solver": "mumps" if args.direct else "gamg",
@@ -72,6 +80,7 @@ def run(comm, h: float, args) -> dict:
         "iterations": t["iterations"],
         "l2_error": err / ref,
         "time_setup": setup,
+        "time_halo": max(comm.allgather(t["halo"])),
         "time_tabulate": t["tabulate"],
         "time_assemble": t["assemble"],
         "time_matrix": t["matrix"],
@@ -87,15 +96,18 @@ def run(comm, h: float, args) -> dict:
 
 def report(records: list[dict]) -> None:
     print(
-        f"{'ranks':>5} {'particles':>10} {'dofs':>9} {'nonzeros':>11} {'peak MB':>8} "
-        f"{'tab s':>7} {'asm s':>7} {'mat s':>6} {'solve s':>7} {'its':>5} {'L2 error':>9}"
+        f"{'ranks':>5} {'particles':>10} {'halo':>10} {'dofs':>9} {'nonzeros':>11} "
+        f"{'setup MB':>8} {'peak MB':>8} {'setup s':>7} {'halo s':>6} {'tab s':>7} {'asm s':>7} "
+        f"{'mat s':>6} {'solve s':>7} {'its':>5} {'L2 error':>9}"
     )
     for r in records:
         print(
-            f"{r['ranks']:5d} {r['particles']:10d} {r['dofs']:9d} {r['nonzeros']:11d} "
-            f"{max(r['peak_rss_mb'].values()):8.0f} {r['time_tabulate']:7.2f} "
-            f"{r['time_assemble']:7.2f} {r['time_matrix']:6.2f} {r['time_solve']:7.2f} "
-            f"{r['iterations']:5d} {r['l2_error']:9.3e}"
+            f"{r['ranks']:5d} {r['particles']:10d} {r['halo_particles']:10d} {r['dofs']:9d} "
+            f"{r['nonzeros']:11d} {r['peak_rss_mb']['problem']:8.0f} "
+            f"{max(r['peak_rss_mb'].values()):8.0f} {r['time_setup']:7.2f} "
+            f"{r['time_halo']:6.2f} {r['time_tabulate']:7.2f} {r['time_assemble']:7.2f} "
+            f"{r['time_matrix']:6.2f} {r['time_solve']:7.2f} {r['iterations']:5d} "
+            f"{r['l2_error']:9.3e}"
         )
 
 
@@ -106,6 +118,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
     p.add_argument("--degree", type=int, default=7, help="cell Gauss degree")
     p.add_argument("--plain", action="store_true", help="plain Gauss (no VCI): CG")
     p.add_argument("--direct", action="store_true", help="MUMPS on the same matrix")
+    p.add_argument("--no-halo", action="store_true", help="every rank tabulates by the whole MLS")
     p.add_argument("--rtol", type=float, default=1e-12)
     p.add_argument("--chunk-points", type=int, default=1 << 17)
     p.add_argument("--json", default=None)

@@ -3,15 +3,20 @@
 Oracles: the unchunked stiffness of :func:`particle_stiffness` (the same sums in another
 order: round-off), MUMPS on the same matrix (the iterative solve agrees to its tolerance times
 the conditioning), the linear patch test (exact with VCI and consistent Nitsche terms), the
-Timoshenko beam's exact solution (error and rate), and one rank against two.
+Timoshenko beam's exact solution (error and rate), one rank against two, and the whole MLS
+against each rank's halo MLS (the same tables, so the same matrix).
 """
 
 import dolfinx_meshfree as mf
+from dolfinx_meshfree.geometry.quadrature import cell_quadrature, facet_quadrature
 from dolfinx_meshfree.statics.efg import particle_stiffness
 from dolfinx_meshfree.statics.large import (
+    HaloMLS,
     IterativeOptions,
     chunked_l2_error,
     chunked_stiffness,
+    halo_particles,
+    nitsche_terms,
     solve_large,
 )
 
@@ -160,3 +165,110 @@ def test_bench_memory_smoke():
     assert record["ranks"] == COMM.size and record["iterations"] > 0
     assert record["l2_error"] < 1.2e-3
     assert record["nonzeros"] > 0 and record["peak_rss_mb"]["solve"] > 0
+
+
+def _halo_of(problem, consistent):
+    """The halo as solve_large builds it (integration cells and the cells beside the facets)."""
+    from dolfinx_meshfree.statics.large import _halo
+
+    return _halo(problem, consistent)
+
+
+@pytest.mark.parametrize("consistent", [False, True])
+def test_halo_stiffness_equals_whole(consistent):
+    """The stiffness (chunks of 53 points, VCI in two passes) and Nitsche's terms tabulated by
+    this rank's halo MLS equal the whole MLS's bit for bit (the same pairs summed in the same
+    order: measured 0.0 on 1 and 2 ranks), and so does the solution."""
+    msh, _, problem = beam_problem(COMM, 1.0, consistent)
+    P, mat = problem.particles, problem.material
+    halo = _halo_of(problem, consistent)
+    K0, *_ = chunked_stiffness(P, problem.mls, mat, 7, consistent, 53)
+    K1, *_ = chunked_stiffness(P, halo, mat, 7, consistent, 53)
+    assert K0.nnz > 0 or msh.topology.index_map(2).size_local == 0
+    assert (K1 != K0).nnz == 0
+    N0, f0 = nitsche_terms(P, problem.mls, mat, problem._dirichlet, 7, 100.0)
+    N1, f1 = nitsche_terms(P, halo, mat, problem._dirichlet, 7, 100.0)
+    assert (N1 != N0).nnz == 0 and np.array_equal(f1, f0)
+    a = solve_large(problem, IterativeOptions(direct=True, halo=False)).coefficients
+    b = solve_large(problem, IterativeOptions(direct=True)).coefficients
+    assert np.array_equal(a, b)
+
+
+def test_halo_holds_every_support():
+    """Every particle that the whole MLS uses at this rank's quadrature points (cells and
+    boundary facets) is in the halo: an independent pair search. On 2 ranks the halos are a
+    band beyond the owned parts: their sizes sum to 1.10 n at h = 1 (checked <= 1.25 n); on one
+    rank the halo is every particle."""
+    msh, _, problem = beam_problem(COMM, 1.0)
+    P = problem.particles
+    halo = _halo_of(problem, True)
+    used = [
+        cell_quadrature(msh, 7).points,
+        facet_quadrature(msh, mf.boundary_facets(msh), 7).points,
+    ]
+    for x in used:
+        cols = np.unique(problem.mls.tabulate(x, 0).values.indices)
+        assert np.isin(cols, halo.indices).all()
+    total = COMM.allreduce(len(halo.indices))
+    if COMM.size == 1:
+        assert np.array_equal(halo.indices, np.arange(P.num_particles))
+    else:
+        assert total <= 1.25 * P.num_particles
+
+
+def test_halo_particles_against_brute_force():
+    """halo_particles keeps every particle within its radius of a point of the cells (brute
+    force over a dense sample of the cells: 10 x 10 points each, corners and edges included)
+    and nothing beyond its radius plus the cells' circumradius."""
+    msh = dolfinx.mesh.create_rectangle(
+        MPI.COMM_SELF, [np.array([0.0, 0.0]), np.array([4.0, 2.0])], [8, 4],
+        dolfinx.mesh.CellType.quadrilateral,
+    )  # fmt: skip
+    rng = np.random.default_rng(3)
+    x = rng.uniform([-1.0, -1.0], [5.0, 3.0], (400, 2))
+    r = rng.uniform(0.1, 0.6, 400)
+    cells = np.array([3, 4, 11, 12, 30])
+    idx = halo_particles(x, r, msh, cells)
+    s = np.linspace(0.0, 1.0, 10)
+    ref = np.stack(np.meshgrid(s, s, indexing="ij"), -1).reshape(-1, 2)
+    pts = []
+    for c in cells:  # the cells are axis-aligned rectangles of 0.5 x 0.5
+        nodes = msh.geometry.x[mf._compat.geometry_dofmap(msh)[c], :2]
+        pts.append(nodes.min(axis=0) + ref * (nodes.max(axis=0) - nodes.min(axis=0)))
+    d = np.linalg.norm(x[:, None, :] - np.concatenate(pts)[None], axis=2).min(axis=1)
+    assert np.isin(np.flatnonzero(d < r), idx).all()
+    assert (d[idx] < r[idx] + 2 * np.sqrt(2) * 0.25 + 1e-12).all()  # within d_I + 2 R
+    assert np.all(np.diff(idx) > 0)
+
+
+def test_mls_subset():
+    """MLS.subset: at points whose supports all lie in the subset, its tables are the whole
+    MLS's columns (values and gradients, bit for bit); bad indices and an MLS with pair cuts are
+    refused by a ValueError naming them."""
+    g = np.linspace(0.0, 3.0, 13)
+    pts = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+    mls = mf.MLS(pts, dilation=2.5)
+    x = np.array([[1.1, 1.3], [1.6, 1.45], [1.5, 1.5]])
+    idx = np.flatnonzero(np.linalg.norm(pts - 1.5, axis=1) < 1.5)
+    whole, sub = mls.tabulate(x), mls.subset(idx).tabulate(x)
+    assert whole.values[:, idx].nnz == whole.values.nnz  # the supports lie in the subset
+    for a, b in zip([whole.values, *whole.gradients], [sub.values, *sub.gradients], strict=True):
+        assert np.array_equal(a[:, idx].toarray(), b.toarray())
+    with pytest.raises(ValueError, match="increasing particle indices"):
+        mls.subset(idx[::-1])
+    with pytest.raises(ValueError, match="increasing particle indices"):
+        mls.subset([0, len(pts)])
+    mls.pair_cuts.append(lambda x, i, j, dx, dist, ddist, sides: (i, j, dx, dist, ddist))
+    with pytest.raises(ValueError, match="pair cuts"):
+        mls.subset(idx)
+
+
+def test_halo_mls_refuses_points_without_particles():
+    """A rank whose halo is empty cannot tabulate a point: a ValueError naming the point."""
+    _, _, problem = beam_problem(MPI.COMM_SELF, 4.0)
+    halo = HaloMLS(problem.mls, np.zeros(0, np.int64))
+    empty = halo.tabulate(np.zeros((0, 2)))
+    assert empty.values.shape == (0, problem.particles.num_particles)
+    assert len(empty.gradients) == 2
+    with pytest.raises(ValueError, match=r"\[1\. 2\.\].*no particle"):
+        halo.tabulate(np.array([[1.0, 2.0]]))

@@ -219,6 +219,41 @@ class MLS:
         """Number of particles (columns of every table)."""
         return self.points.shape[0]
 
+    def subset(self, indices: npt.ArrayLike) -> MLS:
+        """The MLS of the particles ``indices`` (increasing) with their support radii and this
+        MLS's weight, basis, scaling length, ``rcond`` and backend (local).
+
+        At a point whose supports (``|x - x_I| < d_I``) all belong to the subset its tables are
+        this MLS's columns ``indices``, to the last bit: the same pairs in the same order, the
+        same sums (eq. (3.7a)-(3.9)). A rank's particles within reach of its evaluation points
+        (a halo) so stand for the whole set (:mod:`~dolfinx_meshfree.statics.large`). Pair cuts
+        and table transforms are not carried over: a subset of an MLS that has any is refused.
+        """
+        idx = np.asarray(indices, dtype=np.int64)
+        n = self.num_particles
+        if (
+            idx.ndim != 1
+            or idx.size == 0
+            or idx[0] < 0
+            or idx[-1] >= n
+            or np.any(np.diff(idx) <= 0)
+        ):
+            raise ValueError(
+                f"indices must be increasing particle indices in [0, {n}), at least one; got "
+                f"shape {idx.shape}" + (f", {idx[0]}..{idx[-1]}" if idx.size else "")
+            )
+        if self.pair_cuts or self.table_transforms:
+            raise ValueError(
+                "subset() of an MLS with pair cuts or table transforms (cracks, enrichment) is "
+                "not supported: tabulate the whole MLS"
+            )
+        sub = MLS(
+            self.points[idx], weight=self.weight_name, dilation=self.dilation, basis=self.basis,
+            radii=self.radii[idx], rcond=self.rcond, backend=self.backend,
+        )  # fmt: skip
+        sub._scale, sub._fix = self._scale, self._fix
+        return sub
+
     def tabulate(
         self, x: npt.ArrayLike, derivatives: int = 1, sides: npt.ArrayLike | None = None
     ) -> ShapeTable:

@@ -29,6 +29,9 @@ if TYPE_CHECKING:  # annotations only
 
 __all__ = ["ParticleSet"]
 
+#: Background cells per chunk of the Voronoi volumes' quadrature (bounds its temporaries).
+_VOLUME_CHUNK_CELLS = 8192
+
 
 def _points_in_cells(msh: dolfinx.mesh.Mesh, points: np.ndarray, cells: np.ndarray) -> np.ndarray:
     """Whether each point lies in one of the given local cells (local, no communication)."""
@@ -209,13 +212,23 @@ class ParticleSet:
         A point equidistant from several particles (on a Voronoi edge: the Gauss points on the
         midlines of a cell whose corners are particles) shares its weight equally among them;
         giving it to whichever the k-d tree returns first made regular-grid volumes uneven."""
-        q = cell_quadrature(msh, 4, cells)
+        if cells is None:
+            cells = np.arange(msh.topology.index_map(msh.topology.dim).size_local)
+        tree = cKDTree(self.positions)
         k = min(8, self.num_particles)
-        dist, idx = cKDTree(self.positions).query(q.points, k=k)
-        dist, idx = dist.reshape(len(q), k), idx.reshape(len(q), k)
-        tied = dist <= dist[:, :1] * (1.0 + 1e-10)
-        share = q.weights[:, None] * tied / tied.sum(axis=1, keepdims=True)
-        v = np.bincount(idx.ravel(), weights=share.ravel(), minlength=self.num_particles)
+        v = np.zeros(self.num_particles)
+        # _VOLUME_CHUNK_CELLS cells at a time: the (points x k) query arrays of all cells at
+        # once were 3.3 KB per particle, the peak of the whole set-up (one chunk: the sums of
+        # the unchunked computation exactly; several: to round-off)
+        for start in range(0, max(len(cells), 1), _VOLUME_CHUNK_CELLS):
+            q = cell_quadrature(msh, 4, cells[start : start + _VOLUME_CHUNK_CELLS])
+            if len(q) == 0:
+                continue
+            dist, idx = tree.query(q.points, k=k)
+            dist, idx = dist.reshape(len(q), k), idx.reshape(len(q), k)
+            tied = dist <= dist[:, :1] * (1.0 + 1e-10)
+            share = q.weights[:, None] * tied / tied.sum(axis=1, keepdims=True)
+            v += np.bincount(idx.ravel(), weights=share.ravel(), minlength=self.num_particles)
         v = self.comm.allreduce(v, op=MPI.SUM)
         return np.maximum(v, 1e-300)
 

@@ -20,7 +20,9 @@
 # LDL^T, the default) and ``"iterative"`` (the augmented Lagrangian by FGMRES + GAMG,
 # ``mf.statics.petsc.BlockSystem``); the table then adds the solver's iterations and the largest
 # difference of the displacement to the MUMPS run on the same mesh and ranks (at 25 x 7 points
-# of the beam, relative to the largest displacement).
+# of the beam, relative to the largest displacement). Every coupled run reports the Gflop that
+# PETSc logged on its busiest rank during the solve (MUMPS's factorisation included): the work,
+# which a machine shared with other jobs does not change, unlike the times.
 #
 # Run with ``mpirun -n 2 python demos/bench_balance.py`` (one thread per rank:
 # ``OMP_NUM_THREADS=1``); ``--small`` is a CI smoke run (no timing is checked anywhere: the
@@ -38,6 +40,7 @@ import dolfinx_meshfree as mf
 import numpy as np
 from bench_common import load_demo
 from mpi4py import MPI
+from petsc4py import PETSc
 
 # -
 
@@ -45,14 +48,17 @@ from mpi4py import MPI
 @contextlib.contextmanager
 def solver_stats():
     """The ``stats`` of every block-system solve inside the block (the solvers' iterations:
-    ``CoupledSolution`` does not carry them), appended to the yielded list."""
+    ``CoupledSolution`` does not carry them) and the floating-point operations PETSc logged on
+    this rank meanwhile (``gflop``; MUMPS's factorisation included: a measure of the work that
+    a loaded machine does not change), appended to the yielded list."""
     seen: list[dict] = []
     system = mf.statics.petsc.BlockSystem
     original = system.solve
 
     def spy(self, *args, **kwargs):
+        flops = PETSc.Log.getFlops()
         out = original(self, *args, **kwargs)
-        seen.append(dict(self.stats))
+        seen.append({**self.stats, "gflop": (PETSc.Log.getFlops() - flops) / 1e9})
         return out
 
     system.solve = spy
@@ -86,7 +92,7 @@ def run(
     material = mf.LinearElastic(args.E, args.nu, args.plane)
     beam = mf.TimoshenkoBeam(material, L=args.L, D=args.D, P=args.P)
     msh = cantilever.make_mesh(comm, args, h)
-    share = iterations = probe = None
+    share = iterations = probe = gflop = None
     if balance:
         msh = mf.balanced_mesh(msh, cantilever.patch_weight(args))
     if method == "fe":
@@ -101,6 +107,7 @@ def run(
                 msh, args, beam, material, h, method, solver=solver
             )
         iterations = stats[-1].get("iterations")
+        gflop = comm.allreduce(stats[-1]["gflop"], op=MPI.MAX)
         probe = u(probe_points(args))
     timings = {k: comm.allreduce(v, op=MPI.MAX) for k, v in timings.items()}
     return {
@@ -113,6 +120,7 @@ def run(
         "largest_work_share": share,
         "solver": solver if method in mf.COUPLINGS else None,
         "iterations": iterations,
+        "solve_gflop_busiest_rank": gflop,
         "error_l2": errors["l2"],
         **{f"time_{k}": timings[k] for k in ("setup", "assemble", "solve")},
         "time_total": timings["setup"] + timings["assemble"] + timings["solve"],
@@ -207,7 +215,7 @@ def report(records: list[dict], comm) -> None:
     head = (
         f"{'method':9} {'h':>5} {'patch':>5} {'solver':>9} {'ranks':>5} {'mesh':>9} {'W':>5} "
         f"{'share':>6} {'L2 error':>9} {'setup s':>8} {'assem s':>8} {'solve s':>8} "
-        f"{'total s':>8} {'speedup':>7} {'its':>5} {'vs MUMPS':>8}"
+        f"{'total s':>8} {'speedup':>7} {'its':>5} {'Gflop':>7} {'vs MUMPS':>8}"
     )
     print(head)
     print("-" * len(head))
@@ -218,13 +226,15 @@ def report(records: list[dict], comm) -> None:
         w = "" if r.get("weight") is None else f"{r['weight']:5.1f}"
         speed = "" if r.get("speedup") is None else f"{r['speedup']:7.2f}"
         its = "" if r.get("iterations") is None else f"{r['iterations']:5d}"
+        gf = r.get("solve_gflop_busiest_rank")
+        gf = "" if gf is None else f"{gf:7.1f}"
         diff = r.get("difference_to_mumps")
         diff = "" if diff is None else f"{diff:8.1e}"
         print(
             f"{r['method']:9} {r['h']:5.3g} {frac:>5} {r['solver'] or '':>9} {r['ranks']:5d} "
             f"{mesh:>9} {w:>5} {share:>6} {r['error_l2']:9.2e} {r['time_setup']:8.3f} "
             f"{r['time_assemble']:8.3f} {r['time_solve']:8.3f} {r['time_total']:8.3f} "
-            f"{speed:>7} {its:>5} {diff:>8}"
+            f"{speed:>7} {its:>5} {gf:>7} {diff:>8}"
         )
 
 

@@ -23,5 +23,6 @@ def test_bench_balance_compares_the_solvers():
         else:  # measured 4.4e-14 and 58 iterations (serial and 2 ranks)
             assert r["difference_to_mumps"] <= 1e-11
             assert 0 < r["iterations"] <= 120
+        assert r["solve_gflop_busiest_rank"] > 0
     # the speed-ups are over the fastest one-rank run: one of them is 1
     assert max(r["speedup"] for r in coupled if r["ranks"] == 1 and not r["balance"]) == 1.0

@@ -9,11 +9,21 @@
 #
 # 1. on rank 0 alone (the others wait): FE and pure EFG at each ``h``; their time ratio is the
 #    measured cost of a patch cell relative to an FE cell, the weight ``W`` used below (unless
-#    ``--weight`` is given), and the coupled model on one rank, the reference of the speed-ups;
+#    ``--weight`` is given: then FE and EFG are not run), and the coupled model on one rank,
+#    the reference of the speed-ups;
 # 2. on all ranks: the coupled model on DOLFINx's partition and on the balanced mesh: the largest
 #    rank's share of the work (``mf.work_per_rank``), times (slowest rank) and the speed-up over
-#    one rank; the L2 errors of the three runs agree (the same discretisation; checked to 1e-4,
-#    the round-off amplification of the error figure).
+#    the fastest one-rank run of the same patch (over the solvers); the L2 errors of all runs
+#    agree (the same discretisation; checked to 1e-4, the round-off amplification of the error
+#    figure).
+#
+# ``--solver mumps iterative`` runs each of these with each solver: ``"mumps"`` (the direct
+# LDL^T, the default) and ``"iterative"`` (the augmented Lagrangian by FGMRES + GAMG,
+# ``mf.statics.petsc.BlockSystem``); the table then adds the solver's iterations and the largest
+# difference of the displacement to the MUMPS run on the same mesh and ranks (at 25 x 7 points
+# of the beam, relative to the largest displacement). Every coupled run reports the Gflop that
+# PETSc logged on its busiest rank during the solve (MUMPS's factorisation included): the work,
+# which a machine shared with other jobs does not change, unlike the times.
 #
 # Run with ``mpirun -n 2 python demos/bench_balance.py`` (one thread per rank:
 # ``OMP_NUM_THREADS=1``); ``--small`` is a CI smoke run (no timing is checked anywhere: the
@@ -23,28 +33,67 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 
 import dolfinx_meshfree as mf
 
+import numpy as np
 from bench_common import load_demo
 from mpi4py import MPI
+from petsc4py import PETSc
 
 # -
 
 
+@contextlib.contextmanager
+def solver_stats():
+    """The ``stats`` of every block-system solve inside the block (the solvers' iterations:
+    ``CoupledSolution`` does not carry them) and the floating-point operations PETSc logged on
+    this rank meanwhile (``gflop``; MUMPS's factorisation included: a measure of the work that
+    a loaded machine does not change), appended to the yielded list."""
+    seen: list[dict] = []
+    system = mf.statics.petsc.BlockSystem
+    original = system.solve
+
+    def spy(self, *args, **kwargs):
+        flops = PETSc.Log.getFlops()
+        out = original(self, *args, **kwargs)
+        seen.append({**self.stats, "gflop": (PETSc.Log.getFlops() - flops) / 1e9})
+        return out
+
+    system.solve = spy
+    try:
+        yield seen
+    finally:
+        system.solve = original
+
+
+def probe_points(args) -> np.ndarray:
+    """25 x 7 points over the beam, where the solvers' displacements are compared."""
+    x, y = np.meshgrid(np.linspace(0.0, args.L, 25), np.linspace(-args.D / 2, args.D / 2, 7))
+    return np.column_stack([x.ravel(), y.ravel()])
+
+
 def run(
-    cantilever, comm, method: str, h: float, fraction: float, weight: float, balance: bool
+    cantilever,
+    comm,
+    method: str,
+    h: float,
+    fraction: float,
+    weight: float,
+    balance: bool,
+    solver: str = "mumps",
 ) -> dict:
     """One cantilever run on ``comm`` (the demo's ``main`` runs on MPI.COMM_WORLD, so this goes
     through its functions: a run on rank 0 alone is possible); patch cells weigh ``weight``,
-    the mesh is balanced by it if ``balance``."""
+    the mesh is balanced by it if ``balance``; the coupled model is solved by ``solver``."""
     argv = ["--method", method, "--h", str(h), "--patch-fraction", str(fraction)]
     args = cantilever.parse([*argv, "--balance", str(weight), "--no-check"])
     material = mf.LinearElastic(args.E, args.nu, args.plane)
     beam = mf.TimoshenkoBeam(material, L=args.L, D=args.D, P=args.P)
     msh = cantilever.make_mesh(comm, args, h)
-    share = None
+    share = iterations = probe = gflop = None
     if balance:
         msh = mf.balanced_mesh(msh, cantilever.patch_weight(args))
     if method == "fe":
@@ -54,7 +103,13 @@ def run(
     else:
         work = mf.work_per_rank(msh, cantilever.patch_weight(args))
         share = float(work.max() / work.sum())
-        errors, sizes, timings, _ = cantilever.run_coupled(msh, args, beam, material, h, method)
+        with solver_stats() as stats:
+            errors, sizes, timings, u = cantilever.run_coupled(
+                msh, args, beam, material, h, method, solver=solver
+            )
+        iterations = stats[-1].get("iterations")
+        gflop = comm.allreduce(stats[-1]["gflop"], op=MPI.MAX)
+        probe = u(probe_points(args))
     timings = {k: comm.allreduce(v, op=MPI.MAX) for k, v in timings.items()}
     return {
         "method": method,
@@ -64,10 +119,14 @@ def run(
         "balance": balance,
         "weight": weight if method in mf.COUPLINGS else None,
         "largest_work_share": share,
+        "solver": solver if method in mf.COUPLINGS else None,
+        "iterations": iterations,
+        "solve_gflop_busiest_rank": gflop,
         "error_l2": errors["l2"],
         **{f"time_{k}": timings[k] for k in ("setup", "assemble", "solve")},
         "time_total": timings["setup"] + timings["assemble"] + timings["solve"],
         **sizes,
+        "probe": probe,
     }
 
 
@@ -76,7 +135,19 @@ def main(argv: list[str] | None = None) -> list[dict]:
     p.add_argument("--h", nargs="+", type=float, default=[0.5, 0.25])
     p.add_argument("--patch-fraction", nargs="+", type=float, default=[0.25, 0.5])
     p.add_argument("--method", default="lagrange", choices=mf.COUPLINGS)
-    p.add_argument("--weight", type=float, default=None, help="patch cell weight (default: EFG/FE)")
+    p.add_argument(
+        "--weight",
+        type=float,
+        default=None,
+        help="patch cell weight (default: EFG/FE, measured; given, FE and EFG are not run)",
+    )
+    p.add_argument(
+        "--solver",
+        nargs="+",
+        default=["mumps"],
+        choices=("mumps", "iterative"),
+        help="the coupled model's solvers (each on one rank, DOLFINx's partition, balanced)",
+    )
     p.add_argument("--small", action="store_true", help="CI smoke run")
     p.add_argument("--json", default=None)
     args = p.parse_args(argv)
@@ -92,30 +163,28 @@ def main(argv: list[str] | None = None) -> list[dict]:
     records: list[dict] = []
     for h in args.h:
         serial: dict[str, dict] = {}
-        if comm.rank == 0:
+        if comm.rank == 0 and args.weight is None:
             for method in ("fe", "efg"):
                 serial[method] = run(cantilever, MPI.COMM_SELF, method, h, 1.0, 1.0, False)
         serial = comm.bcast(serial, root=0)
         weight = args.weight or serial["efg"]["time_total"] / serial["fe"]["time_total"]
         records += serial.values()
         for fraction in args.patch_fraction:
-            one = None
-            if comm.rank == 0:
-                one = run(cantilever, MPI.COMM_SELF, args.method, h, fraction, weight, False)
-            one = comm.bcast(one, root=0)
-            comm.Barrier()
-            default = run(cantilever, comm, args.method, h, fraction, weight, False)
-            comm.Barrier()
-            balanced = run(cantilever, comm, args.method, h, fraction, weight, True)
-            for r in (default, balanced):
-                r["speedup"] = one["time_total"] / r["time_total"]
-            records += [one, default, balanced]
-            errs = [one["error_l2"], default["error_l2"], balanced["error_l2"]]
-            # the same discretisation: only round-off differs, which the L2 error (a difference
-            # of nearly equal numbers) amplifies up to 4e-5 relative at h = 0.25 (a 1e-15
-            # perturbation of K moves it as much); tests/test_partition.py compares displacements
-            if max(errs) - min(errs) > 1e-4 * max(errs):
-                raise SystemExit(f"the balanced mesh changed the solution: L2 errors {errs}")
+            runs = []
+            for solver in args.solver:
+                one = None
+                if comm.rank == 0:
+                    one = run(
+                        cantilever, MPI.COMM_SELF, args.method, h, fraction, weight, False, solver
+                    )
+                one = comm.bcast(one, root=0)
+                comm.Barrier()
+                default = run(cantilever, comm, args.method, h, fraction, weight, False, solver)
+                comm.Barrier()
+                balanced = run(cantilever, comm, args.method, h, fraction, weight, True, solver)
+                runs += [one, default, balanced]
+            compare(runs)
+            records += runs
     report(records, comm)
     if args.json and comm.rank == 0:
         with open(args.json, "w") as f:
@@ -123,14 +192,36 @@ def main(argv: list[str] | None = None) -> list[dict]:
     return records
 
 
+def compare(runs: list[dict]) -> None:
+    """Speed-ups over the fastest one-rank run, displacement differences to the MUMPS run on the
+    same mesh and ranks (``probe`` is dropped); exits if the L2 errors differ (the same
+    discretisation: only round-off and the iterative solver's tolerance differ, which the L2
+    error, a difference of nearly equal numbers, amplifies up to 4e-5 relative at h = 0.25; a
+    1e-15 perturbation of K moves it as much; tests/test_partition.py compares displacements)."""
+    best = min(r["time_total"] for r in runs if r["ranks"] == 1 and not r["balance"])
+    key = lambda r: (r["ranks"], r["balance"])  # noqa: E731
+    reference = {key(r): r["probe"] for r in runs if r["solver"] == "mumps"}
+    for r in runs:
+        r["speedup"] = best / r["time_total"]
+        ref = reference.get(key(r))
+        r["difference_to_mumps"] = (
+            None if ref is None else float(np.abs(r["probe"] - ref).max() / np.abs(ref).max())
+        )
+    for r in runs:
+        del r["probe"]
+    errs = [r["error_l2"] for r in runs]
+    if max(errs) - min(errs) > 1e-4 * max(errs):
+        raise SystemExit(f"the balanced mesh or the solver changed the solution: L2 errors {errs}")
+
+
 def report(records: list[dict], comm) -> None:
     if comm.rank != 0:
         return
     print(f"coupled cantilever on {comm.size} rank(s), DOLFINx {mf.DOLFINX_VERSION}")
     head = (
-        f"{'method':9} {'h':>5} {'patch':>5} {'ranks':>5} {'mesh':>9} {'W':>5} {'share':>6} "
-        f"{'L2 error':>9} {'setup s':>8} {'assem s':>8} {'solve s':>8} {'total s':>8} "
-        f"{'speedup':>7}"
+        f"{'method':9} {'h':>5} {'patch':>5} {'solver':>9} {'ranks':>5} {'mesh':>9} {'W':>5} "
+        f"{'share':>6} {'L2 error':>9} {'setup s':>8} {'assem s':>8} {'solve s':>8} "
+        f"{'total s':>8} {'speedup':>7} {'its':>5} {'Gflop':>7} {'vs MUMPS':>8}"
     )
     print(head)
     print("-" * len(head))
@@ -140,10 +231,16 @@ def report(records: list[dict], comm) -> None:
         share = "" if r["largest_work_share"] is None else f"{r['largest_work_share']:6.3f}"
         w = "" if r.get("weight") is None else f"{r['weight']:5.1f}"
         speed = "" if r.get("speedup") is None else f"{r['speedup']:7.2f}"
+        its = "" if r.get("iterations") is None else f"{r['iterations']:5d}"
+        gf = r.get("solve_gflop_busiest_rank")
+        gf = "" if gf is None else f"{gf:7.1f}"
+        diff = r.get("difference_to_mumps")
+        diff = "" if diff is None else f"{diff:8.1e}"
         print(
-            f"{r['method']:9} {r['h']:5.3g} {frac:>5} {r['ranks']:5d} {mesh:>9} {w:>5} {share:>6} "
-            f"{r['error_l2']:9.2e} {r['time_setup']:8.3f} {r['time_assemble']:8.3f} "
-            f"{r['time_solve']:8.3f} {r['time_total']:8.3f} {speed:>7}"
+            f"{r['method']:9} {r['h']:5.3g} {frac:>5} {r['solver'] or '':>9} {r['ranks']:5d} "
+            f"{mesh:>9} {w:>5} {share:>6} {r['error_l2']:9.2e} {r['time_setup']:8.3f} "
+            f"{r['time_assemble']:8.3f} {r['time_solve']:8.3f} {r['time_total']:8.3f} "
+            f"{speed:>7} {its:>5} {gf:>7} {diff:>8}"
         )
 
 

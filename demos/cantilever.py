@@ -300,7 +300,7 @@ def make_patch(msh, args, h: float) -> mf.ParticlePatch:
     return mf.ParticlePatch(msh, cells, args.particle_spacing or h, placement=args.placement)
 
 
-def run_coupled(msh, args, beam, material, h, coupling, overlap=None):
+def run_coupled(msh, args, beam, material, h, coupling, overlap=None, solver="mumps"):
     t0 = time.perf_counter()
     left, right = boundaries(msh, args)
     patch = make_patch(msh, args, h)
@@ -319,7 +319,7 @@ def run_coupled(msh, args, beam, material, h, coupling, overlap=None):
     problem.add_dirichlet(left, beam.displacement)
     problem.add_traction(right, beam.traction)
     patch_time = time.perf_counter() - t0
-    sol = problem.solve()
+    sol = problem.solve(solver)
     sol.timings["setup"] += patch_time
     errors = mf.error_norms(msh, sol.evaluate_at_quadrature, beam, material)
     return errors, sol.sizes, sol.timings, sol.displacement

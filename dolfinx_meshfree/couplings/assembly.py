@@ -52,6 +52,7 @@ __all__ = [
     "particle_rule",
     "patch_facet_rule",
     "patch_rules",
+    "primal_nodes",
     "sizes",
     "solve_and_gather",
     "split_facets",
@@ -341,6 +342,18 @@ def append_patch_conditions(
     return dl
 
 
+def primal_nodes(problem: CoupledElasticity) -> list[np.ndarray]:
+    """The positions of this rank's owned FE nodes and particles in the order of their PETSc
+    dofs: the rigid-body modes of ``solver="iterative"`` (:class:`BlockSystem`)."""
+    V, P = problem.V, problem.patch.particles
+    gdim = V.mesh.geometry.dim
+    fe = V.tabulate_dof_coordinates()[: V.dofmap.index_map.size_local, :gdim]
+    original = np.empty_like(P.petsc_index)
+    original[P.petsc_index] = np.arange(P.num_particles)
+    start = P.layout.start
+    return [fe, P.positions[original[start : start + P.layout.size_local], :gdim]]
+
+
 def solve_and_gather(
     problem: CoupledElasticity,
     blocks: list[list[PETSc.Mat | None]],
@@ -354,7 +367,7 @@ def solve_and_gather(
     V, P, comm = problem.V, problem.patch.particles, problem.patch.comm
     bs = V.dofmap.index_map_bs
     names = ["fe", "particles"] + [f"multiplier{i}" for i in range(len(blocks) - 2)]
-    system = BlockSystem(blocks, rhs, num_primal=2, names=names)
+    system = BlockSystem(blocks, rhs, num_primal=2, names=names, coordinates=primal_nodes(problem))
     t0 = time.perf_counter()
     parts = system.solve(solver)
     seconds = time.perf_counter() - t0

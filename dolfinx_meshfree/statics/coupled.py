@@ -383,10 +383,15 @@ class CoupledElasticity:
         :class:`~dolfinx_meshfree.statics.newton.NewtonError` with the residual history).
 
         Args:
-            solver: ``"mumps"`` (direct, the default) or ``"fieldsplit"`` (Schur complement,
-                displacements against multipliers, on the augmented Lagrangian; see
-                :class:`~dolfinx_meshfree.statics.petsc.BlockSystem`): shorthands of the two solvers
-                this package tunes; or a :class:`~dolfinx_meshfree.statics.petsc.SolverOptions`.
+            solver: ``"mumps"`` (direct, the default), ``"fieldsplit"`` (Schur complement,
+                displacements against multipliers, on the augmented Lagrangian) or
+                ``"iterative"`` (the augmented Lagrangian by FGMRES with one GAMG V-cycle per
+                iteration and the rigid-body modes, no factorisation: it divides over ranks;
+                see :class:`~dolfinx_meshfree.statics.petsc.BlockSystem`): shorthands of the
+                solvers this package tunes; or a
+                :class:`~dolfinx_meshfree.statics.petsc.SolverOptions` (with ``"iterative"``,
+                its ``petsc_options`` change the shorthand's options, e.g. ``{"ksp_rtol":
+                1e-10}``; see ``statics.petsc.ITERATIVE_DEFAULTS``).
             petsc_options: PETSc options of a KSP on the assembled block system instead, as
                 ``dolfinx.fem.petsc.LinearProblem`` takes them (e.g. ``{"ksp_type": "gmres",
                 "pc_type": "fieldsplit", ...}``; the nest's fields are named ``fe``,

@@ -59,7 +59,7 @@ from ..parallel import raise_on_all_ranks
 from ..physics.body_loads import BodyForce, accumulate
 from ..physics.materials import LinearElastic
 from .coupled import COUPLINGS, CoupledElasticity, CoupledSolution
-from .petsc import solver_options
+from .petsc import SolverOptions, solver_options
 
 __all__ = ["CoupledLinearProblem", "FormBodyForce"]
 
@@ -254,13 +254,15 @@ class CoupledLinearProblem:
 
     # -- solve ----------------------------------------------------------------------------------
 
-    def solve(self, solver: str | None = None) -> CoupledSolution:
+    def solve(self, solver: str | SolverOptions | None = None) -> CoupledSolution:
         """Assemble and solve the coupled system (collective); see
         :meth:`~dolfinx_meshfree.CoupledElasticity.solve`.
 
         Args:
-            solver: A shorthand, ``"mumps"`` or ``"fieldsplit"``, instead of the constructor's
-                ``petsc_options``; default: those options, or ``"mumps"`` without them.
+            solver: A shorthand, ``"mumps"``, ``"fieldsplit"`` or ``"iterative"``, or a
+                :class:`~dolfinx_meshfree.statics.petsc.SolverOptions`, instead of the
+                constructor's ``petsc_options``; default: those options, or ``"mumps"``
+                without them.
         """
         return self.problem.solve(self._solver if solver is None else solver)
 

@@ -168,7 +168,14 @@ def create_aij(
     A.eliminate_zeros()
     rs, re = row_layout.start, row_layout.end
     cs, ce = col_layout.start, col_layout.end
-    own = A if (rs, re) == (0, A.shape[0]) else A[rs:re]
+    if (rs, re) == (0, A.shape[0]):
+        own = A
+    else:  # the owned rows as views of A's arrays (A[rs:re] would copy them: a third matrix)
+        p0, p1 = A.indptr[rs], A.indptr[re]
+        own = sp.csr_matrix(
+            (A.data[p0:p1], A.indices[p0:p1], A.indptr[rs : re + 1] - p0),
+            shape=(re - rs, A.shape[1]),
+        )
     indptr = own.indptr.astype(PETSc.IntType, copy=False)
     indices = own.indices.astype(PETSc.IntType, copy=False)
     d_nnz = np.empty(re - rs, PETSc.IntType)

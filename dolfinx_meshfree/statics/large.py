@@ -73,7 +73,7 @@ from ..physics.operators import (
 )
 from ..physics.user_functions import vector_values
 from .efg import EFGElasticity, EFGSolution
-from .petsc import create_aij, create_vector, scoped_options, solve_lu
+from .petsc import create_aij, create_vector, rigid_body_modes, scoped_options, solve_lu
 
 if TYPE_CHECKING:  # annotations only
     from ..approx.mls import MLS
@@ -543,7 +543,7 @@ def nitsche_terms(
     return N, f
 
 
-def _rigid_modes(particles: ParticleSet, A: PETSc.Mat) -> PETSc.NullSpace:
+def _rigid_modes(particles: ParticleSet, A: PETSc.Mat) -> tuple[PETSc.NullSpace, list]:
     """The rigid-body modes on the owned dofs (2D: two translations and a rotation; 3D: three
     and three), orthonormalised: GAMG's near-nullspace."""
     gdim = particles.gdim
@@ -551,24 +551,11 @@ def _rigid_modes(particles: ParticleSet, A: PETSc.Mat) -> PETSc.NullSpace:
     inv[particles.petsc_index] = np.arange(particles.num_particles)
     start, end = A.getOwnershipRange()
     x = particles.positions[inv[start // gdim : end // gdim], :gdim]
-    modes = []
-    for k in range(gdim):
-        m = np.zeros((x.shape[0], gdim))
-        m[:, k] = 1.0
-        modes.append(m)
-    for a, b in [(0, 1)] if gdim == 2 else [(0, 1), (1, 2), (2, 0)]:
-        m = np.zeros((x.shape[0], gdim))
-        m[:, a], m[:, b] = -x[:, b], x[:, a]
-        modes.append(m)
-    vecs = []
-    for m in modes:
-        v = A.createVecLeft()
-        v.setArray(m.ravel())
-        for u in vecs:  # Gram-Schmidt
-            v.axpy(-v.dot(u), u)
-        v.normalize()
-        vecs.append(v)
-    return PETSc.NullSpace().create(vectors=vecs, comm=A.getComm()), vecs
+    template = A.createVecLeft()
+    try:
+        return rigid_body_modes(x, template)
+    finally:
+        template.destroy()
 
 
 def _krylov(A: PETSc.Mat, b: PETSc.Vec, particles, options: IterativeOptions, symmetric: bool):

@@ -84,9 +84,12 @@ def test_patch_test_3d(coupling, cell_name, perturbed):
     err_u = msh.comm.allreduce(np.abs(u - affine(q.points)).max(initial=0.0), op=MPI.MAX)
     err_g = msh.comm.allreduce(np.abs(grad - G).max(initial=0.0), op=MPI.MAX)
     # measured 2.7e-15 to 1.4e-13 (displacement), 5.6e-14 to 2.7e-12 (gradient; the largest:
-    # lagrange on perturbed tetrahedra)
+    # lagrange on perturbed tetrahedra) serially. On 2 ranks lane A's mesh partition differs from
+    # run to run, and with it MUMPS's pivoting: edge-to-edge on regular tetrahedra gave 1.6e-13 to
+    # 1.07e-11 (displacement) and 5.0e-12 to 1.04e-10 (gradient) over 36 runs, at this stop and
+    # at the previous one alike; hence 2e-10 for the gradient (plain Gauss misses by > 1e-4)
     assert err_u <= 1e-10
-    assert err_g <= 1e-10
+    assert err_g <= 2e-10
     # both sides are there: particles in the patch cells and FE cells beside them
     inside = patch.in_patch[q.cells]
     assert msh.comm.allreduce(int(inside.sum())) > 0

@@ -87,7 +87,7 @@ def test_patch_test_3d(coupling, cell_name, perturbed):
     # lagrange on perturbed tetrahedra) serially. On 2 ranks lane A's mesh partition differs from
     # run to run, and with it MUMPS's pivoting: edge-to-edge on regular tetrahedra gave 1.6e-13 to
     # 1.07e-11 (displacement) and 5.0e-12 to 1.04e-10 (gradient) over 36 runs, at this stop and
-    # at the previous one alike; hence 2e-10 for the gradient (plain Gauss misses by > 1e-4)
+    # at the previous one alike; hence 2e-10 for the gradient (about 2x the worst)
     assert err_u <= 1e-10
     assert err_g <= 2e-10
     # both sides are there: particles in the patch cells and FE cells beside them

@@ -541,14 +541,9 @@ class BlockSystem:
     ) -> PETSc.Vec:
         """``solver="iterative"`` on the (augmented) AIJ system: see the class docstring."""
         p, n = self.num_primal, len(self.blocks)
-        sizes = [v.getLocalSize() for v in rhs]
-        n_primal, n_all = int(sum(sizes[:p])), int(sum(sizes))
         gdim = 1 if self.coordinates is None else int(self.coordinates[0].shape[1])
-        start = aij.getOwnershipRange()[0]
-        idx = np.arange(start, start + n_all, dtype=PETSc.IntType)
-        is_u = PETSc.IS().createGeneral(idx[:n_primal], comm=self.comm)
+        is_u, is_l, n_primal, n_all = self._split_sets(aij, rhs)
         is_u.setBlockSize(gdim)
-        is_l = PETSc.IS().createGeneral(idx[n_primal:], comm=self.comm)
         template = PETSc.Vec().createMPI((n_primal, PETSc.DECIDE), bsize=gdim, comm=self.comm)
         objects: list = [is_u, is_l, template]
         if self.coordinates is not None:
@@ -660,15 +655,21 @@ class BlockSystem:
         owned.append(nest)
         return nest, rhs, owned
 
-    def _fieldsplit(self, aij, b, rhs, inner: str, rtol: float) -> PETSc.Vec:
-        p = self.num_primal
+    def _split_sets(
+        self, aij: PETSc.Mat, rhs: list[PETSc.Vec]
+    ) -> tuple[PETSc.IS, PETSc.IS, int, int]:
+        """The owned rows of the primal fields and of the multipliers in the AIJ system, as
+        index sets ``(is_u, is_l)``, and this rank's primal and total row counts."""
         sizes = [v.getLocalSize() for v in rhs]
+        n_primal, n_all = int(sum(sizes[: self.num_primal])), int(sum(sizes))
         start = aij.getOwnershipRange()[0]
-        n_primal = int(sum(sizes[:p]))
-        n_all = int(sum(sizes))
         idx = np.arange(start, start + n_all, dtype=PETSc.IntType)
         is_u = PETSc.IS().createGeneral(idx[:n_primal], comm=self.comm)
         is_l = PETSc.IS().createGeneral(idx[n_primal:], comm=self.comm)
+        return is_u, is_l, n_primal, n_all
+
+    def _fieldsplit(self, aij, b, rhs, inner: str, rtol: float) -> PETSc.Vec:
+        is_u, is_l = self._split_sets(aij, rhs)[:2]
         ksp = PETSc.KSP().create(self.comm)
         ksp.setOptionsPrefix(f"dolfinx_meshfree_fs_{next(_prefix_counter)}_")
         ksp.setOperators(aij)

@@ -115,6 +115,12 @@ def geometry(nodes: int, comm=MPI.COMM_WORLD, slot: bool = True, box: float = BO
     return msh, h, slot_end, NOTCH_Y + 0.5 * h
 
 
+def particle_box(method: str, box: float) -> float:
+    """How many spacings behind and below the notch tip a coupled model's particles start:
+    ``box``, and for bridging ``OVERLAP`` more, so that its band lies beyond the slot's end."""
+    return box + (OVERLAP if method == "bridging" else 0)
+
+
 def _cell_midpoints(msh) -> np.ndarray:
     n = msh.topology.index_map(2).size_local
     return msh.geometry.x[_compat.geometry_dofmap(msh)[:n], :2].mean(axis=1)
@@ -143,7 +149,7 @@ def builder(
         fixed.append((edge, (0,), lambda t: V0 * min(t / rise, 1.0) if rise > 0 else V0))
     sigma = MATERIAL.rho * MATERIAL.wave_speed() * V0  # the plane wave of edge velocity v0
     mid = _cell_midpoints(msh)
-    reach = box + (OVERLAP if method == "bridging" else 0)  # the band beyond the slot's end
+    reach = particle_box(method, box)
     in_box = (mid[:, 0] > NOTCH_A - reach * h) & (mid[:, 1] > NOTCH_Y - reach * h)
 
     def build(crack: mf.Crack) -> mf.ExplicitDynamics:
@@ -264,7 +270,7 @@ def run(
     near each new segment) or ``"full"`` (rebuild the model after each extension)."""
     tic = time.perf_counter()
     msh, h, slot_end, yc = geometry(nodes, comm, slot=method != "efg", box=box)
-    reach = box + (OVERLAP if method == "bridging" else 0)  # the particle box's corner
+    reach = particle_box(method, box)  # the particle box's corner
     crack = mf.Crack([[slot_end, yc], [NOTCH_A, yc]])
     growth = DynamicCrackGrowth(
         builder(method, msh, h, impact, rise, box, contact, quadrature and quadrature(h)),

@@ -83,7 +83,7 @@ def create_baij(
         )
     A = local.tocsr()
     A.sum_duplicates()
-    own = _owned_rows(mpi, A, row_layout) if mpi.size > 1 else A
+    own = _owned_rows(mpi, A, row_layout)
     own.sum_duplicates()
     if assembled is not None:  # (serial: own is every row, the owned ones)
         own = assembled.tocsr()[row_layout.start : row_layout.end] + own

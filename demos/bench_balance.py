@@ -13,9 +13,9 @@
 #    the reference of the speed-ups;
 # 2. on all ranks: the coupled model on DOLFINx's partition and on the balanced mesh: the largest
 #    rank's share of the work (``mf.work_per_rank``), times (slowest rank) and the speed-up over
-#    the fastest one-rank run of the same patch (over the solvers); the L2 errors of all runs
-#    agree (the same discretisation; checked to 1e-4, the round-off amplification of the error
-#    figure).
+#    the fastest one-rank run of the same patch (over the solvers); the displacements of all
+#    runs agree with the one-rank MUMPS run's (the same discretisation; checked to 1e-7 at the
+#    probe points, column "vs 1 rank").
 #
 # ``--solver mumps iterative`` runs each of these with each solver: ``"mumps"`` (the direct
 # LDL^T, the default) and ``"iterative"`` (the augmented Lagrangian by FGMRES + GAMG,
@@ -192,26 +192,39 @@ def main(argv: list[str] | None = None) -> list[dict]:
     return records
 
 
+#: Largest relative difference of a run's displacement (at the probe points) to the one-rank
+#: MUMPS run's: the same discretisation on other ranks or by the iterative solver differs by
+#: round-off amplified by the conditioning and by the solver's tolerance (measured 1.8e-10 at
+#: h = 0.03125, 300k dofs), a discretisation change by the discretisation error (3e-6).
+SAME_SOLUTION = 1e-7
+
+
 def compare(runs: list[dict]) -> None:
     """Speed-ups over the fastest one-rank run, displacement differences to the MUMPS run on the
-    same mesh and ranks (``probe`` is dropped); exits if the L2 errors differ (the same
-    discretisation: only round-off and the iterative solver's tolerance differ, which the L2
-    error, a difference of nearly equal numbers, amplifies up to 4e-5 relative at h = 0.25; a
-    1e-15 perturbation of K moves it as much; tests/test_partition.py compares displacements)."""
+    same mesh and ranks and to the one-rank MUMPS run (``probe`` is dropped); exits if a run's
+    displacement differs from the one-rank MUMPS run's by more than :data:`SAME_SOLUTION`.
+
+    The L2 errors are printed, not compared: they are differences of nearly equal numbers and
+    amplify round-off (a 1e-15 perturbation of K moves them by 4e-5 relative at h = 0.25; the
+    MUMPS runs on 1 and 2 ranks gave 3.01715e-6 and 3.01751e-6 at h = 0.03125, 1.2e-4 apart)."""
     best = min(r["time_total"] for r in runs if r["ranks"] == 1 and not r["balance"])
     key = lambda r: (r["ranks"], r["balance"])  # noqa: E731
     reference = {key(r): r["probe"] for r in runs if r["solver"] == "mumps"}
+    serial = next((r["probe"] for r in runs if r["solver"] == "mumps" and r["ranks"] == 1), None)
+    relative = lambda a, b: float(np.abs(a - b).max() / np.abs(b).max())  # noqa: E731
     for r in runs:
         r["speedup"] = best / r["time_total"]
         ref = reference.get(key(r))
-        r["difference_to_mumps"] = (
-            None if ref is None else float(np.abs(r["probe"] - ref).max() / np.abs(ref).max())
-        )
+        r["difference_to_mumps"] = None if ref is None else relative(r["probe"], ref)
+        r["difference_to_one_rank"] = None if serial is None else relative(r["probe"], serial)
     for r in runs:
         del r["probe"]
-    errs = [r["error_l2"] for r in runs]
-    if max(errs) - min(errs) > 1e-4 * max(errs):
-        raise SystemExit(f"the balanced mesh or the solver changed the solution: L2 errors {errs}")
+    worst = max((r["difference_to_one_rank"] or 0.0) for r in runs)
+    if worst > SAME_SOLUTION:
+        raise SystemExit(
+            f"the balanced mesh, the ranks or the solver changed the solution: displacements "
+            f"{worst:.1e} from the one-rank MUMPS run's (bound {SAME_SOLUTION:.0e})"
+        )
 
 
 def report(records: list[dict], comm) -> None:
@@ -221,7 +234,7 @@ def report(records: list[dict], comm) -> None:
     head = (
         f"{'method':9} {'h':>5} {'patch':>5} {'solver':>9} {'ranks':>5} {'mesh':>9} {'W':>5} "
         f"{'share':>6} {'L2 error':>9} {'setup s':>8} {'assem s':>8} {'solve s':>8} "
-        f"{'total s':>8} {'speedup':>7} {'its':>5} {'Gflop':>7} {'vs MUMPS':>8}"
+        f"{'total s':>8} {'speedup':>7} {'its':>5} {'Gflop':>7} {'vs MUMPS':>8} {'vs 1 rank':>9}"
     )
     print(head)
     print("-" * len(head))
@@ -236,11 +249,13 @@ def report(records: list[dict], comm) -> None:
         gf = "" if gf is None else f"{gf:7.1f}"
         diff = r.get("difference_to_mumps")
         diff = "" if diff is None else f"{diff:8.1e}"
+        one = r.get("difference_to_one_rank")
+        one = "" if one is None else f"{one:9.1e}"
         print(
             f"{r['method']:9} {r['h']:5.3g} {frac:>5} {r['solver'] or '':>9} {r['ranks']:5d} "
             f"{mesh:>9} {w:>5} {share:>6} {r['error_l2']:9.2e} {r['time_setup']:8.3f} "
             f"{r['time_assemble']:8.3f} {r['time_solve']:8.3f} {r['time_total']:8.3f} "
-            f"{speed:>7} {its:>5} {gf:>7} {diff:>8}"
+            f"{speed:>7} {its:>5} {gf:>7} {diff:>8} {one:>9}"
         )
 
 

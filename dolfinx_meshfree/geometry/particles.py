@@ -126,6 +126,36 @@ def _conforming_layer(
     return np.vstack([grid[keep], on[np.lexsort(on.T)]])
 
 
+def _nearest_shares(tree: cKDTree, points: np.ndarray, gdim: int) -> tuple[np.ndarray, np.ndarray]:
+    """The nearest particles of each point and each one's share of it: ``(idx, share)``, both
+    (points, k); a point equidistant (to 1e-10 relative) from several nearest particles is
+    shared equally among them, the other columns get 0.
+
+    ``k = 2**gdim`` covers the ties of regular grids (a cell centre is equidistant from its
+    ``2**gdim`` corners) at half the cost of a wider query; the rows whose ``k`` neighbours
+    are all tied are queried again with twice ``k`` until they are not (or every particle is
+    in), so no tie is ever cut off."""
+    n = tree.n
+    k = min(2**gdim, n)
+    dist, idx = tree.query(points, k=k)
+    dist, idx = dist.reshape(len(points), k), idx.reshape(len(points), k)
+    tied = dist <= dist[:, :1] * (1.0 + 1e-10)
+    full = np.flatnonzero(tied[:, -1]) if k < n else np.empty(0, dtype=np.int64)
+    if full.size:  # ties beyond k: these rows again, wider, padded back to one width
+        wide = k
+        while True:
+            wide = min(2 * wide, n)
+            d2, i2 = tree.query(points[full], k=wide)
+            d2, i2 = d2.reshape(len(full), wide), i2.reshape(len(full), wide)
+            if wide == n or not np.any(d2[:, -1] <= d2[:, 0] * (1.0 + 1e-10)):
+                break
+        pad = wide - k
+        idx = np.pad(idx, ((0, 0), (0, pad)))
+        tied = np.pad(tied, ((0, 0), (0, pad)))
+        idx[full], tied[full] = i2, d2 <= d2[:, :1] * (1.0 + 1e-10)
+    return idx, tied / tied.sum(axis=1, keepdims=True)
+
+
 class ParticleSet:
     """Particles with positions, volumes and MPI ownership.
 
@@ -215,7 +245,6 @@ class ParticleSet:
         if cells is None:
             cells = np.arange(msh.topology.index_map(msh.topology.dim).size_local)
         tree = cKDTree(self.positions)
-        k = min(8, self.num_particles)
         v = np.zeros(self.num_particles)
         # _VOLUME_CHUNK_CELLS cells at a time: the (points x k) query arrays of all cells at
         # once were 3.3 KB per particle, the peak of the whole set-up (one chunk: the sums of
@@ -224,10 +253,8 @@ class ParticleSet:
             q = cell_quadrature(msh, 4, cells[start : start + _VOLUME_CHUNK_CELLS])
             if len(q) == 0:
                 continue
-            dist, idx = tree.query(q.points, k=k)
-            dist, idx = dist.reshape(len(q), k), idx.reshape(len(q), k)
-            tied = dist <= dist[:, :1] * (1.0 + 1e-10)
-            share = q.weights[:, None] * tied / tied.sum(axis=1, keepdims=True)
+            idx, share = _nearest_shares(tree, q.points, self.gdim)
+            share *= q.weights[:, None]
             v += np.bincount(idx.ravel(), weights=share.ravel(), minlength=self.num_particles)
         v = self.comm.allreduce(v, op=MPI.SUM)
         return np.maximum(v, 1e-300)

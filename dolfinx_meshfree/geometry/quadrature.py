@@ -71,15 +71,31 @@ def cell_quadrature(
     X, w = _compat.quadrature_rule(cname, degree)
     tab = _compat.basix_lagrange_p1(cname).tabulate(1, X)  # (1+tdim, nqr, nv, 1)
     nodes = msh.geometry.x[_compat.geometry_dofmap(msh)[cells], :gdim]  # (nc, nv, gdim)
-    x = np.einsum("qv,cvg->cqg", tab[0, :, :, 0], nodes)
-    J = np.einsum("dqv,cvg->cqgd", tab[1:, :, :, 0], nodes)
-    detJ = np.abs(np.linalg.det(J))
+    x = np.matmul(tab[0, :, :, 0], nodes)  # (nc, nqr, gdim)
+    # J[c, q, g, d] = sum_v dphi_v/dX_d(X_q) x_cvg, as (nc, tdim, nqr, gdim) products
+    J = np.matmul(tab[1:, None, :, :, 0], nodes[None]).transpose(1, 2, 3, 0)
+    detJ = np.abs(_det(J))
     nq = X.shape[0]
     return QuadraturePoints(
         points=x.reshape(-1, gdim),
         weights=(detJ * w[None, :]).ravel(),
         cells=np.repeat(cells, nq),
         entities=np.repeat(cells, nq),
+    )
+
+
+def _det(J: np.ndarray) -> np.ndarray:
+    """Determinants of a stack of square matrices (..., n, n), written out for n = 2, 3 (numpy's
+    LAPACK loop over small matrices took as long as the whole rule), else numpy's."""
+    n = J.shape[-1]
+    if J.shape[-2] != n or n not in (2, 3):
+        return np.linalg.det(J)
+    if n == 2:
+        return J[..., 0, 0] * J[..., 1, 1] - J[..., 0, 1] * J[..., 1, 0]
+    return (
+        J[..., 0, 0] * (J[..., 1, 1] * J[..., 2, 2] - J[..., 1, 2] * J[..., 2, 1])
+        - J[..., 0, 1] * (J[..., 1, 0] * J[..., 2, 2] - J[..., 1, 2] * J[..., 2, 0])
+        + J[..., 0, 2] * (J[..., 1, 0] * J[..., 2, 1] - J[..., 1, 1] * J[..., 2, 0])
     )
 
 

@@ -18,7 +18,7 @@ to the CSR, block row by block row:
    comparison sort), the columns renumbered by ``node_map`` first;
 2. per block row ``I``, the union of the trial supports of the points in ``I``'s test
    support, marked in a stamp array and sorted (one small sort per row): the sparsity
-   pattern, computed once;
+   pattern, computed once, in one pass into a buffer grown as needed;
 3. per block row, the sums over its points straight into the row's (d x d) blocks, written
    as a scalar CSR with interleaved dofs ``d I + i``.
 
@@ -94,14 +94,13 @@ def transpose_pattern(
 
 
 @jit
-def _block_rows(indptr, indices, tptr, tpoint, stamp, row, bptr, bcols):  # pragma: no cover
-    """Per row node, the union of the (trial) supports ``indptr, indices`` of the points in its
-    (test) support ``tptr, tpoint``. With ``bcols`` empty, count them into ``bptr[1:]``; else
-    write them, sorted, from ``bptr``."""
+def _block_rows(indptr, indices, tptr, tpoint, stamp, row, bptr, bcols, start):  # pragma: no cover
+    """Per row node from ``start`` on, the union of the (trial) supports ``indptr, indices`` of
+    the points in its (test) support ``tptr, tpoint``, sorted, written from ``bptr[r]`` (and
+    ``bptr[r + 1]`` set). Returns the first row that did not fit in ``bcols`` (``n``: all did)."""
     n = tptr.shape[0] - 1
-    count = bcols.shape[0] == 0
     stamp[:] = -1
-    for r in range(n):
+    for r in range(start, n):
         c = 0
         for t in range(tptr[r], tptr[r + 1]):
             q = tpoint[t]
@@ -111,10 +110,11 @@ def _block_rows(indptr, indices, tptr, tpoint, stamp, row, bptr, bcols):  # prag
                     stamp[j] = r
                     row[c] = j
                     c += 1
-        if count:
-            bptr[r + 1] = c
-        else:
-            bcols[bptr[r] : bptr[r] + c] = np.sort(row[:c])
+        if bptr[r] + c > bcols.shape[0]:
+            return r
+        bcols[bptr[r] : bptr[r] + c] = np.sort(row[:c])
+        bptr[r + 1] = bptr[r] + c
+    return n
 
 
 def block_pattern(
@@ -122,16 +122,24 @@ def block_pattern(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The block sparsity pattern ``(bptr, bcols)``: node ``J`` in row ``I`` when a point has
     ``I`` in its test support ``(tptr, tpoint)`` (a transpose, :func:`transpose_pattern`) and
-    ``J`` in its trial support ``(indptr, indices)``; two passes over the pairs (count, write)."""
+    ``J`` in its trial support ``(indptr, indices)``.
+
+    One pass over the (row, point, node) triples into a buffer of an estimated size (4 times
+    the mean support per point per row: a row's nodes lie within twice a support radius), grown
+    by half (numpy, here) and the pass resumed where a row did not fit; counting first and
+    writing after took two passes, 0.25 s of the pure EFG cantilever at 75k dofs."""
     n = tptr.shape[0] - 1
     stamp = np.empty(n, np.int64)
     row = np.empty(n, indices.dtype)
     bptr = np.zeros(n + 1, np.int64)
-    _block_rows(indptr, indices, tptr, tpoint, stamp, row, bptr, np.empty(0, indices.dtype))
-    np.cumsum(bptr, out=bptr)
-    bcols = np.empty(bptr[-1], indices.dtype)
-    _block_rows(indptr, indices, tptr, tpoint, stamp, row, bptr, bcols)
-    return bptr, bcols
+    mean_support = indices.shape[0] / max(indptr.shape[0] - 1, 1)
+    bcols = np.empty(max(int(4 * mean_support * n), 1024), indices.dtype)
+    done = 0
+    while (done := _block_rows(indptr, indices, tptr, tpoint, stamp, row, bptr, bcols, done)) < n:
+        grown = np.empty(max(bcols.shape[0] * 3 // 2, int(bptr[done]) + n), indices.dtype)
+        grown[: bptr[done]] = bcols[: bptr[done]]
+        bcols = grown
+    return bptr, bcols[: bptr[n]].copy() if bcols.shape[0] > bptr[n] else bcols
 
 
 @jit

@@ -348,10 +348,7 @@ def primal_nodes(problem: CoupledElasticity) -> list[np.ndarray]:
     V, P = problem.V, problem.patch.particles
     gdim = V.mesh.geometry.dim
     fe = V.tabulate_dof_coordinates()[: V.dofmap.index_map.size_local, :gdim]
-    original = np.empty_like(P.petsc_index)
-    original[P.petsc_index] = np.arange(P.num_particles)
-    start = P.layout.start
-    return [fe, P.positions[original[start : start + P.layout.size_local], :gdim]]
+    return [fe, P.owned_positions()[:, :gdim]]
 
 
 def solve_and_gather(

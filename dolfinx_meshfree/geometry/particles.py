@@ -354,6 +354,12 @@ class ParticleSet:
         _, first = np.unique(key, axis=0, return_index=True)
         return cls(x[first], comm=comm, mesh=mesh, cells=c)
 
+    def owned_positions(self) -> np.ndarray:
+        """Positions (owned particles, gdim) of this rank's particles in the order of their PETSc
+        numbers (owner by owner, original order within a rank: :attr:`owned` is that order), as
+        :class:`~dolfinx_meshfree.statics.petsc.BlockSystem`'s ``coordinates`` take them."""
+        return self.positions[self.owned]
+
     def dof_layout(self, bs: int = 2) -> Layout:
         """PETSc layout of the particles' ``bs`` interleaved dofs (owner by owner)."""
         return Layout(bs * self.layout.size_local, bs * self.num_particles, bs * self.layout.start)

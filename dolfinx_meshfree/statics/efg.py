@@ -598,10 +598,13 @@ class EFGElasticity:
         G = create_aij(comm, Gg, mlayout, udofs)
         GT = create_aij(comm, Gg.T.tocsr(), udofs, mlayout)
         g = create_vector(comm, mlayout, g_rows, g_vals)
+        nodes = [P.owned_positions()]  # solver="iterative": GAMG's block size, rigid modes
         if mlayout.size_global:
-            system = BlockSystem([[K, GT], [G, None]], [f, g], names=["particles", "dirichlet"])
+            system = BlockSystem(
+                [[K, GT], [G, None]], [f, g], names=["particles", "dirichlet"], coordinates=nodes
+            )
         else:
-            system = BlockSystem([[K]], [f], names=["particles"])
+            system = BlockSystem([[K]], [f], names=["particles"], coordinates=nodes)
         assemble = time.perf_counter() - t1 + kt["assemble"]
 
         extra = {"scale": s, "multipliers": mlayout, "setup": setup, "assemble": assemble}

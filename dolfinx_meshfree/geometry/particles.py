@@ -136,23 +136,26 @@ def _nearest_shares(tree: cKDTree, points: np.ndarray, gdim: int) -> tuple[np.nd
     are all tied are queried again with twice ``k`` until they are not (or every particle is
     in), so no tie is ever cut off."""
     n = tree.n
+
+    def nearest(x: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Indices (len(x), k) of the k nearest and which of them tie with the nearest."""
+        dist, idx = tree.query(x, k=k)
+        dist, idx = dist.reshape(len(x), k), idx.reshape(len(x), k)
+        return idx, dist <= dist[:, :1] * (1.0 + 1e-10)
+
     k = min(2**gdim, n)
-    dist, idx = tree.query(points, k=k)
-    dist, idx = dist.reshape(len(points), k), idx.reshape(len(points), k)
-    tied = dist <= dist[:, :1] * (1.0 + 1e-10)
+    idx, tied = nearest(points, k)
     full = np.flatnonzero(tied[:, -1]) if k < n else np.empty(0, dtype=np.int64)
     if full.size:  # ties beyond k: these rows again, wider, padded back to one width
         wide = k
         while True:
             wide = min(2 * wide, n)
-            d2, i2 = tree.query(points[full], k=wide)
-            d2, i2 = d2.reshape(len(full), wide), i2.reshape(len(full), wide)
-            if wide == n or not np.any(d2[:, -1] <= d2[:, 0] * (1.0 + 1e-10)):
+            i2, t2 = nearest(points[full], wide)
+            if wide == n or not t2[:, -1].any():
                 break
-        pad = wide - k
-        idx = np.pad(idx, ((0, 0), (0, pad)))
-        tied = np.pad(tied, ((0, 0), (0, pad)))
-        idx[full], tied[full] = i2, d2 <= d2[:, :1] * (1.0 + 1e-10)
+        idx = np.pad(idx, ((0, 0), (0, wide - k)))
+        tied = np.pad(tied, ((0, 0), (0, wide - k)))
+        idx[full], tied[full] = i2, t2
     return idx, tied / tied.sum(axis=1, keepdims=True)
 
 

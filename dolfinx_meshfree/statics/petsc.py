@@ -263,10 +263,11 @@ def create_vector(
     return v
 
 
-def asymmetry(A: PETSc.Mat) -> float:
-    """``|A - A^T|_F / |A|_F`` of a square assembled matrix, 0 for a zero matrix (collective)."""
+def asymmetry(A: PETSc.Mat, norm: float | None = None) -> float:
+    """``|A - A^T|_F / |A|_F`` of a square assembled matrix, 0 for a zero matrix (collective);
+    ``norm``: ``|A|_F`` where the caller has it."""
     T = A.transpose(PETSc.Mat())  # (without an argument petsc4py transposes in place)
-    norm = A.norm(PETSc.NormType.FROBENIUS)
+    norm = A.norm(PETSc.NormType.FROBENIUS) if norm is None else norm
     T.axpy(-1.0, A, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
     diff = T.norm(PETSc.NormType.FROBENIUS)
     T.destroy()
@@ -297,21 +298,22 @@ def asymmetry_above(A: PETSc.Mat, tol: float) -> tuple[float, bool]:
         ``(value, sampled)``: ``value`` is the asymmetry of :func:`asymmetry` or, where
         ``sampled``, the lower bound that exceeded ``tol``.
     """
-    if A.getSize()[0] >= SAMPLED_SYMMETRY_ROWS:
-        lo, hi = A.getOwnershipRange()
-        n = hi - lo
-        run = max(n // 64, 1)
-        starts = lo + (np.arange(8) * n) // 8
-        rows = np.unique(np.concatenate([np.arange(s, min(s + run, hi)) for s in starts]))
-        index = PETSc.IS().createGeneral(rows.astype(PETSc.IntType), comm=A.getComm())
-        sub = A.createSubMatrix(index, index)
-        part = sub.norm(PETSc.NormType.FROBENIUS) * asymmetry(sub)
-        norm = A.norm(PETSc.NormType.FROBENIUS)
-        sub.destroy()
-        index.destroy()
-        if norm > 0.0 and part / norm > tol:
-            return part / norm, True
-    return asymmetry(A), False
+    if A.getSize()[0] < SAMPLED_SYMMETRY_ROWS:
+        return asymmetry(A), False
+    lo, hi = A.getOwnershipRange()
+    n = hi - lo
+    run = max(n // 64, 1)
+    starts = lo + (np.arange(8) * n) // 8
+    rows = np.unique(np.concatenate([np.arange(s, min(s + run, hi)) for s in starts]))
+    index = PETSc.IS().createGeneral(rows.astype(PETSc.IntType), comm=A.getComm())
+    sub = A.createSubMatrix(index, index)
+    part = sub.norm(PETSc.NormType.FROBENIUS) * asymmetry(sub)
+    sub.destroy()
+    index.destroy()
+    norm = A.norm(PETSc.NormType.FROBENIUS)
+    if norm > 0.0 and part / norm > tol:
+        return part / norm, True
+    return asymmetry(A, norm), False
 
 
 def solve_lu(

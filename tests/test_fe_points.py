@@ -14,7 +14,7 @@ scale is that with a margin; observed: 1e-16–1e-15.
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
-from dolfinx_meshfree.approx.fe_points import locate_points
+from dolfinx_meshfree.approx.fe_points import locate_points, reference_coordinates
 
 import dolfinx
 import numpy as np
@@ -136,6 +136,36 @@ def test_tabulate_in_cells_uses_local_columns(cell_name):
     assert np.abs(table.gradient(local) - G[None]).max(initial=0.0) <= TOL * np.abs(G).max() * NX
     assert abs(area - 2.0) <= 1e-13
     assert mf.tabulate_in_cells(V, q.points, q.cells, derivatives=0).gradients == []
+
+
+@pytest.mark.parametrize("cell_name", sorted(CELL_TYPES))
+@pytest.mark.parametrize("which", ["centres", "mixed"])
+def test_tabulate_in_cells_at_cell_centres(cell_name, which):
+    """The Newton pull-back starts every point at the reference centre and iterates only the
+    points not yet converged: points at the cells' centres converge before any step ("centres",
+    every point; "mixed", every other point among degree-3 quadrature points). The linear field
+    is reproduced either way, and the pulled-back points map onto the physical ones."""
+    msh = distorted_mesh(MPI.COMM_WORLD, cell_name)
+    V, u = linear_function(msh)
+    cells = np.arange(msh.topology.index_map(msh.topology.dim).size_local)
+    element = _compat.basix_lagrange_p1(msh.topology.cell_type.name)
+    centre = np.full((1, 2), 1.0 / 3.0 if cell_name == "triangle" else 0.5)
+    nodes = msh.geometry.x[_compat.geometry_dofmap(msh)[cells], :2]
+    phi = element.tabulate(0, centre)[0, 0, :, 0]
+    pts = np.einsum("v,cvg->cg", phi, nodes)  # the image of the reference centre
+    if which == "mixed":
+        q = mf.cell_quadrature(msh, 3)
+        pts, cells = np.vstack([pts, q.points]), np.concatenate([cells, q.cells])
+        order = np.random.default_rng(0).permutation(len(cells))
+        pts, cells = pts[order], cells[order]
+    table = mf.tabulate_in_cells(V, pts, cells)
+    local = u.x.array.reshape(-1, 2)
+    scale = np.abs(local).max()
+    assert np.abs(table.values @ local - exact(pts)).max(initial=0.0) <= TOL * scale
+    assert np.abs(table.gradient(local) - G[None]).max(initial=0.0) <= TOL * np.abs(G).max() * NX
+    X = reference_coordinates(msh, pts, cells)
+    back = np.einsum("qv,qvg->qg", element.tabulate(0, X)[0, :, :, 0], nodes[cells])
+    assert np.abs(back - pts).max(initial=0.0) <= 1e-13 * 2.0
 
 
 def test_parallel_table_equals_serial_table(rank_rng):

@@ -58,6 +58,61 @@ def _check_space(V: dolfinx.fem.FunctionSpace) -> None:
         )
 
 
+def _pull_back(
+    msh: dolfinx.mesh.Mesh, points: np.ndarray, cells: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Newton pull-back of physical points to the reference cells of their (local) cells.
+
+    Returns the reference coordinates X (m, tdim), the P1/Q1 tabulation at X (1 + tdim, m, nv)
+    and the Jacobians ``J[q, g, d] = dx_g / dX_d`` at X (m, gdim, tdim): the basis and its
+    gradients without tabulating again.
+
+    Every point starts at the reference centre, whose tabulation is one point's broadcast; only
+    the points not yet converged (residual above 1e-13 of their cell's diameter) are iterated
+    and tabulated again, so an affine cell costs one tabulation per point (the step from the
+    centre is exact, the second tabulation both checks it and gives the basis).
+    """
+    element = _compat.basix_lagrange_p1(msh.topology.cell_type.name)
+    gdim, tdim = msh.geometry.dim, msh.topology.dim
+    nodes = msh.geometry.x[_compat.geometry_dofmap(msh)[cells], :gdim]  # (m, nv, gdim)
+    m, nv = nodes.shape[0], nodes.shape[1]
+    centre = np.full((1, tdim), 1.0 / (tdim + 1) if nv == tdim + 1 else 0.5)
+    X = np.repeat(centre, m, axis=0)
+    # the centre's tabulation, broadcast over the points (1 + tdim, 1, nv) until they move
+    tab = element.tabulate(1, centre)[:, :, :, 0]
+    J = np.empty((m, gdim, tdim))
+    hi, lo = nodes[:, 0].copy(), nodes[:, 0].copy()
+    for v in range(1, nv):
+        np.maximum(hi, nodes[:, v], out=hi)
+        np.minimum(lo, nodes[:, v], out=lo)
+    tol = 1e-13 * np.sqrt(np.sum((hi - lo) ** 2, axis=1))  # of the cell's diameter
+    active: slice | np.ndarray = slice(None)  # a slice while every point iterates: no gathers
+    for it in range(20):
+        if it == 1:
+            tab = element.tabulate(1, X)[:, :, :, 0]
+        elif it:
+            tab[:, active] = element.tabulate(1, X[active])[:, :, :, 0]
+        t, xv = (tab, nodes) if it == 0 else (tab[:, active], nodes[active])
+        # x = sum_v phi_v x_v and J[:, g, d] = sum_v dphi_v/dX_d x_v[g], summed over the few
+        # nodes and vectorised over the points (numpy's batched matmul is slower for 2 x 4)
+        x = t[0][:, 0, None] * xv[:, 0]
+        Ja = t[1:, :, 0, None].transpose(1, 2, 0) * xv[:, 0, :, None]
+        for v in range(1, nv):
+            x += t[0][:, v, None] * xv[:, v]
+            Ja += t[1:, :, v, None].transpose(1, 2, 0) * xv[:, v, :, None]
+        J[active] = Ja
+        res = points[active] - x
+        left = np.sum(res**2, axis=1) > tol[active] ** 2
+        if not left.any():
+            break
+        if not left.all():
+            active, Ja, res = np.arange(m)[active][left], Ja[left], res[left]
+        X[active] += np.einsum("qij,qj->qi", batched.inv(Ja), res)
+    if tab.shape[1] != m:  # every point converged at the centre
+        tab = np.repeat(tab, m, axis=1)
+    return X, tab, J
+
+
 def reference_coordinates(
     msh: dolfinx.mesh.Mesh, points: np.ndarray, cells: np.ndarray
 ) -> np.ndarray:
@@ -69,21 +124,7 @@ def reference_coordinates(
     Returns:
         Reference coordinates (m, tdim).
     """
-    element = _compat.basix_lagrange_p1(msh.topology.cell_type.name)
-    gdim = msh.geometry.dim
-    nodes = msh.geometry.x[_compat.geometry_dofmap(msh)[cells], :gdim]  # (m, nv, gdim)
-    m = points.shape[0]
-    X = np.full((m, msh.topology.dim), 1.0 / 3.0 if nodes.shape[1] == 3 else 0.5)
-    diam = np.linalg.norm(nodes.max(axis=1) - nodes.min(axis=1), axis=1) if m else np.zeros(0)
-    for _ in range(20):
-        tab = element.tabulate(1, X)  # (1 + tdim, m, nv, 1)
-        x = np.einsum("qv,qvg->qg", tab[0, :, :, 0], nodes)
-        J = np.einsum("dqv,qvg->qgd", tab[1:, :, :, 0], nodes)
-        res = points - x
-        if m == 0 or np.all(np.linalg.norm(res, axis=1) <= 1e-13 * diam):
-            break
-        X = X + np.einsum("qij,qj->qi", batched.inv(J), res)
-    return X
+    return _pull_back(msh, np.asarray(points, dtype=float), np.asarray(cells))[0]
 
 
 def tabulate_in_cells(
@@ -108,20 +149,25 @@ def tabulate_in_cells(
     if x.shape[0] == 0:  # basix cannot tabulate at no points
         empty = sp.csr_matrix((0, n))
         return ShapeTable(points=x, values=empty, gradients=[empty.copy()] * (gdim * derivatives))
-    element = _compat.basix_lagrange_p1(msh.topology.cell_type.name)
-    X = reference_coordinates(msh, x, cells)
-    tab = element.tabulate(1, X)
+    _, tab, J = _pull_back(msh, x, cells)
     dofs = _compat.dofmap_array(V)[cells]  # (m, nv)
     m, nv = dofs.shape
-    rows = np.repeat(np.arange(m), nv)
-    values = sp.csr_matrix((tab[0, :, :, 0].ravel(), (rows, dofs.ravel())), shape=(m, n))
+    # one row per point holding its cell's nv distinct nodes: the CSR arrays directly, columns
+    # sorted within each row (the canonical CSR that a COO conversion gave)
+    order = np.argsort(dofs, axis=1, kind="stable")
+    indptr = np.arange(0, m * nv + 1, nv)
+    columns = np.take_along_axis(dofs, order, axis=1).ravel()
+
+    def table(data: np.ndarray) -> sp.csr_matrix:
+        data = np.take_along_axis(data, order, axis=1).ravel()
+        return sp.csr_matrix((data, columns, indptr), shape=(m, n))
+
+    values = table(tab[0])
     grads: list[sp.csr_matrix] = []
     if derivatives:
-        nodes = msh.geometry.x[_compat.geometry_dofmap(msh)[cells], :gdim]
-        J = np.einsum("dqv,qvg->qgd", tab[1:, :, :, 0], nodes)
-        dphi = np.einsum("qdg,dqv->qvg", batched.inv(J), tab[1:, :, :, 0])  # J^-T dphi/dX
-        for k in range(gdim):
-            grads.append(sp.csr_matrix((dphi[:, :, k].ravel(), (rows, dofs.ravel())), shape=(m, n)))
+        # J^-T dphi/dX: dphi[q, v, g] = sum_d Jinv[q, d, g] dphi/dX_d[q, v]
+        dphi = np.matmul(tab[1:].transpose(1, 2, 0), batched.inv(J))  # (m, nv, gdim)
+        grads = [table(dphi[:, :, k]) for k in range(gdim)]
     return ShapeTable(points=x, values=values, gradients=grads)
 
 

@@ -12,6 +12,7 @@ from dolfinx_meshfree.dynamics.builders import build_coupled, build_efg
 from dolfinx_meshfree.dynamics.linalg import blocked
 from dolfinx_meshfree.dynamics.system import LinearSystem
 from dolfinx_meshfree.parallel import Layout
+from dolfinx_meshfree.statics import petsc as petsc_module
 from dolfinx_meshfree.statics.petsc import (
     SAMPLED_SYMMETRY_ROWS,
     SYMMETRY_TOL,
@@ -19,6 +20,7 @@ from dolfinx_meshfree.statics.petsc import (
     asymmetry,
     asymmetry_above,
     create_aij,
+    decoupled_rows,
     solve_lu,
 )
 from dolfinx_meshfree.verification.waves import GaussianPulseRod
@@ -316,6 +318,79 @@ def test_asymmetry_above_samples_then_measures_whole():
         assert not sampled and value == asymmetry(A)
         assert (value > 1e3 * SYMMETRY_TOL) == bool(skew)
         A.destroy()
+
+
+def _with_stored_zeros(comm, dense: np.ndarray, zeros: list[tuple[int, int]]) -> PETSc.Mat:
+    """``dense`` as a PETSc AIJ over the ranks, its nonzeros plus explicitly stored zeros at
+    ``zeros`` (as DOLFINx's pattern keeps them where a form's weight vanishes)."""
+    n = dense.shape[0]
+    lay = Layout.from_local(comm, n // comm.size + (n % comm.size > comm.rank))
+    pattern = dense != 0.0
+    for i, j in zeros:
+        pattern[i, j] = True
+    rows = pattern[lay.start : lay.end]
+    indptr = np.concatenate([[0], np.cumsum(rows.sum(axis=1))]).astype(PETSc.IntType)
+    r, c = np.nonzero(rows)
+    A = PETSc.Mat().createAIJ(
+        ((lay.size_local, n), (lay.size_local, n)),
+        csr=(indptr, c.astype(PETSc.IntType), dense[lay.start + r, c]),
+        comm=comm,
+    )
+    return A
+
+
+def test_decoupled_rows_are_solved_apart(monkeypatch):
+    """Rows whose only nonzero, in the row and in the column, is the diagonal (every 5th of 60,
+    with stored zeros beside them) are found on every rank and solved apart; a row that is
+    empty but whose column is not (7), and a column that is empty but whose row is not (13),
+    are not decoupled. The solution equals a dense solve (an independent computation) to
+    1e-12, with the rows solved apart, with none (the share raised above theirs) and for a
+    diagonal matrix (all rows apart)."""
+    comm = MPI.COMM_WORLD
+    rng = np.random.default_rng(11)
+    n = 60
+    dense = rng.standard_normal((n, n)) * (rng.uniform(size=(n, n)) < 0.15)
+    dense += np.diag(8.0 + rng.uniform(size=n))
+    apart = np.arange(0, n, 5)
+    dense[apart, :] = 0.0
+    dense[:, apart] = 0.0
+    dense[apart, apart] = rng.uniform(0.5, 2.0, apart.size) * rng.choice([-1.0, 1.0], apart.size)
+    dense[7, :7], dense[7, 8:] = 0.0, 0.0  # row 7 empty, column 7 not
+    dense[8, 7] = 1.5
+    dense[:13, 13], dense[14:, 13] = 0.0, 0.0  # column 13 empty, row 13 not
+    dense[13, 12] = -2.0
+    zeros = [(i, (i + 1) % n) for i in apart] + [((i + 2) % n, i) for i in apart]
+    A = _with_stored_zeros(comm, dense, zeros)
+    lo, hi = A.getOwnershipRange()
+    rows, diagonal = decoupled_rows(A)
+    mine = apart[(apart >= lo) & (apart < hi)]
+    assert np.array_equal(rows, mine)
+    assert np.array_equal(diagonal, dense[mine, mine])
+    rhs = rng.standard_normal(n)
+    exact = np.linalg.solve(dense, rhs)
+    b = A.createVecLeft()
+    b.setArray(rhs[lo:hi])
+
+    def solved(share: float) -> tuple[float, int]:
+        monkeypatch.setattr(petsc_module, "DECOUPLED_SHARE", share)
+        stats: dict = {}
+        x = solve_lu(A, b, stats=stats)
+        wrong = comm.allreduce(float(np.abs(x.array_r - exact[lo:hi]).max(initial=0.0)), MPI.MAX)
+        x.destroy()
+        return wrong / np.abs(exact).max(), stats["decoupled"]
+
+    assert solved(0.01) == (pytest.approx(0.0, abs=1e-12), apart.size)
+    assert solved(0.5) == (pytest.approx(0.0, abs=1e-12), 0)
+    A.destroy()
+    d = rng.uniform(1.0, 2.0, n)
+    A = _with_stored_zeros(comm, np.diag(d), [(0, 1), (1, 0)])
+    stats: dict = {}
+    monkeypatch.setattr(petsc_module, "DECOUPLED_SHARE", 0.01)
+    x = solve_lu(A, b, stats=stats)
+    assert stats["decoupled"] == n
+    assert np.abs(x.array_r - rhs[lo:hi] / d[lo:hi]).max(initial=0.0) <= 1e-15
+    for obj in (A, b, x):
+        obj.destroy()
 
 
 def test_mumps_lu_shorthand_and_bad_factorisation():

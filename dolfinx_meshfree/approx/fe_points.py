@@ -9,8 +9,9 @@ Two entry points:
   result is correct when a point lies in another rank's part of the mesh. Columns are *global*
   node (block) indices; vector dof ``(node, comp)`` is ``bs * node + comp`` in PETSc numbering.
 
-Reference coordinates are found by a batched Newton iteration on the degree-1 coordinate map,
-basis values by one basix tabulation for all points; gradients by ``J^-T`` (no loop over cells).
+Reference coordinates are found by a batched Newton iteration on the degree-1 coordinate map
+(only the points not yet converged iterate); the basis values and ``J`` are those of the last
+iterate's tabulation, the gradients ``J^-T`` times the reference ones (no loop over cells).
 """
 
 from __future__ import annotations

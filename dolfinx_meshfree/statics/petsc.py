@@ -341,11 +341,9 @@ def decoupled_rows(A: PETSc.Mat) -> tuple[np.ndarray, np.ndarray]:
     rows = np.repeat(np.arange(lo, hi, dtype=PETSc.IntType), np.diff(ai))
     on_diagonal = aj == rows
     off = (av != 0.0) & ~on_diagonal
-    hits = A.createVecRight()
-    hits.set(0.0)
     columns = np.unique(aj[off])
-    hits.setValues(columns, np.ones(columns.size), addv=PETSc.InsertMode.ADD_VALUES)
-    hits.assemble()
+    layout = Layout(hi - lo, A.getSize()[1], lo)
+    hits = create_vector(A.getComm(), layout, columns, np.ones(columns.size))
     in_column = hits.getArray(readonly=True) > 0.0
     hits.destroy()
     in_row = np.bincount(rows[off] - lo, minlength=hi - lo) > 0

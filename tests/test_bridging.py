@@ -244,6 +244,31 @@ def test_band_of_a_physical_width(width, nodes):
     assert np.allclose(np.unique(np.round(values, 12)), nodes)
 
 
+def test_band_of_a_physical_width_decides_ties_under_round_off(monkeypatch):
+    """A width of exactly two cells puts the third node layer at a tie (distance = width). With
+    the distances perturbed by a few ulps, up or down at random per node and rank (what another
+    machine's or rank's round-off does), the band is still the two cell layers (issue 23, item
+    10: an extra layer of cells on 2 ranks of one machine)."""
+    comm = MPI.COMM_WORLD
+    msh = beam_mesh(comm, 1.5)
+    patch = mf.ParticlePatch(msh, cells_right_of(msh, 24.0), 1.5)
+    V = _compat.vector_function_space(msh)
+    mat = mf.LinearElastic(3e7, 0.3)
+    layers = BridgingBand(mf.CoupledElasticity(V, patch, mat, coupling="bridging"), 2)
+    exact = BridgingBand._interface_distance
+    rng = np.random.default_rng(7 + comm.rank)
+
+    def noisy(self, problem, on_interface):
+        d = exact(self, problem, on_interface)
+        return d * (1 + rng.choice([-4, 4], d.size) * np.finfo(float).eps)
+
+    monkeypatch.setattr(BridgingBand, "_interface_distance", noisy)
+    band = BridgingBand(mf.CoupledElasticity(V, patch, mat, coupling="bridging"), 2, 3.0)
+    assert np.array_equal(band.cells, layers.cells)
+    assert np.array_equal(band.in_band_node, layers.in_band_node)
+    assert np.array_equal(band.particles, layers.particles)
+
+
 def test_band_of_a_physical_width_on_a_curved_gmsh_patch():
     """Default options with ``band_width`` on the unstructured triangles of the patch-test demo,
     patch |c - (2, 1)| < 1.1 (an interface following a circle): the linear patch test to

@@ -90,14 +90,55 @@ def test_crossings_side_and_distance_match_brute_force(seed):
     assert np.array_equal(crack.crosses(p, q), expected)
     assert np.array_equal(segments_intersect(p, q, a, b).any(axis=1), expected)
     assert np.abs(crack.distance(p) - _brute_distance(p, a, b)).max() <= 1e-14
-    # side: the sign of the cross product with the nearest segment
-    near = [
-        np.argmin([_brute_distance(x[None], a[k : k + 1], b[k : k + 1])[0] for k in range(3)])
-        for x in p
-    ]
-    t = (b - a)[near]
-    r = p - a[near]
-    assert np.array_equal(crack.side(p), np.sign(t[:, 0] * r[:, 1] - t[:, 1] * r[:, 0]))
+    assert np.array_equal(crack.side(p), _brute_side(p, crack.points))
+
+
+def _brute_side(x, points):
+    """The side of each point, by a rule independent of the pseudo-normal: the side of the
+    nearest segment's line where the nearest point of the polyline is inside a segment; where it
+    is a joint (the points behind a kink, equidistant from both segments) the outside of the
+    turn: -1 when the polyline turns left there, +1 when it turns right (a Python loop)."""
+    a, b = points[:-1], points[1:]
+    out = np.zeros(len(x), dtype=np.int64)
+    for n in range(len(x)):
+        best, where = np.inf, None
+        for k in range(len(a)):
+            t = b[k] - a[k]
+            xi = min(max(np.dot(x[n] - a[k], t) / np.dot(t, t), 0.0), 1.0)
+            d = np.linalg.norm(x[n] - a[k] - xi * t)
+            if d < best * (1 - 1e-12):
+                best, where = d, (k, xi)
+        k, xi = where
+        joint = k if xi == 0.0 and k > 0 else k + 1 if xi == 1.0 and k < len(a) - 1 else None
+        t = b[k] - a[k]
+        r = x[n] - a[k]
+        out[n] = np.sign(t[0] * r[1] - t[1] * r[0])
+        if joint is not None:
+            u, w = b[joint - 1] - a[joint - 1], b[joint] - a[joint]
+            turn = u[0] * w[1] - u[1] * w[0]
+            out[n] = -np.sign(turn) if turn != 0 else out[n]
+    return out
+
+
+@pytest.mark.parametrize("turn", [1, -1])
+def test_side_at_a_kink_is_exact_at_ties(turn):
+    """Points behind a sharp kink (135 degrees) are equidistant from both segments: the nearest
+    point is the joint, where the two segments' lines give opposite signs. The side is the outside
+    of the turn, whichever segment round-off makes nearest (issue 23, item 9): on the extension of
+    the first segment (an exact tie, where that segment's line says 0) and on rays around it."""
+    crack = mf.Crack([[0.0, 0.0], [1.0, 0.0], [0.0, float(turn)]])
+    angles = np.deg2rad(np.linspace(-88.0, 43.0, 60)) * turn
+    s = np.linspace(0.05, 0.6, 7)
+    x = np.array([[1.0, 0.0]]) + np.concatenate(
+        [r * np.column_stack([np.cos(angles), np.sin(angles)]) for r in s]
+    )
+    assert np.all(crack.side(x) == -turn)
+    assert np.all(_brute_side(x, crack.points) == -turn)
+    # the reversed polyline: the same points are on the other side
+    assert np.all(mf.Crack(crack.points[::-1]).side(x) == turn)
+    # and the points inside the angle are on the inside of the turn
+    inside = np.array([[0.5, 0.2 * turn], [0.3, 0.5 * turn], [0.8, 0.1 * turn]])
+    assert np.all(crack.side(inside) == turn)
 
 
 def test_crossings_through_the_tip_and_one_sided_points():

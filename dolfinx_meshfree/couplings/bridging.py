@@ -94,6 +94,7 @@ if TYPE_CHECKING:  # annotations only: the model imports this module
     from ..statics.coupled import CoupledElasticity
 
 __all__ = [
+    "BAND_TIE",
     "CONSTRAINTS",
     "BridgingBand",
     "BridgingSolution",
@@ -105,6 +106,12 @@ __all__ = [
 #: Where the bridging constraint is imposed: by Gauss quadrature over the band cells (the
 #: integral of eq. 52, the default) or at the band particles (eq. 79-81).
 CONSTRAINTS = ("points", "integral")
+
+#: Relative tie tolerance of a band of a physical width: a node whose distance to the interface
+#: is within ``BAND_TIE * band_width`` of the width is at the width (``alpha = 1``, outside the
+#: band). Distances are computed to round-off (about 1e-16 of the width), so exact ties (a width
+#: of whole cells) fall on one side on every rank and in every lane.
+BAND_TIE = 1e-10
 
 
 def check_options(
@@ -185,8 +192,9 @@ class BridgingBand:
       layer index, see the module docstring);
     * ``band_width=w`` (a length): the patch cells with a node closer than ``w`` to the
       interface, ``alpha = min(d / w, 1)`` at the nodes with ``d`` the distance to the interface
-      facets: a band of a physical width whatever the cells, which on a curved, unstructured
-      interface does not narrow or fray under refinement as layers of cells do.
+      facets (``d >= (1 - BAND_TIE) w`` counts as ``d = w``: ties are outside): a band of a
+      physical width whatever the cells, which on a curved, unstructured interface does not
+      narrow or fray under refinement as layers of cells do.
 
     Raises ``ValueError`` on every rank when the patch has no interface or when the band of
     layers is wider than the patch (fewer than ``overlap`` layers of patch cells beside the
@@ -226,7 +234,10 @@ class BridgingBand:
             self.in_band = patch.in_patch & self.in_band_node[dofs[:ncl]].all(axis=1)
         else:
             self.layer = None
-            alpha = np.minimum(self._interface_distance(problem, on_interface) / band_width, 1.0)
+            alpha = self._interface_distance(problem, on_interface) / band_width
+            # a node at the band's width (a tie: a width of whole cells on a uniform mesh) is
+            # outside, whatever the round-off of its distance on this rank
+            alpha = np.where(alpha >= 1.0 - BAND_TIE, 1.0, alpha)
             self.in_band = patch.in_patch & (alpha[dofs[:ncl]] < 1.0).any(axis=1)
             n_cells = msh.topology.index_map(tdim).size_local
             self.in_band_node = node_flags(

@@ -215,13 +215,39 @@ class Crack:
         return point_segment_distance(x, a, b).min(axis=1)
 
     def side(self, x: npt.ArrayLike) -> np.ndarray:
-        """Signed side (m,) of points ``x`` w.r.t. the nearest crack segment: ``+1`` left of the
-        crack direction, ``-1`` right, ``0`` on the segment's line (beyond a tip too: the side of
-        the nearest segment's line)."""
+        """Signed side (m,) of points ``x``: ``+1`` left of the crack direction, ``-1`` right,
+        ``0`` on the crack (beyond a tip too: the side of the end segment's line).
+
+        The side is that of the nearest point of the crack. Where that point is inside a segment
+        it is the side of the segment's line. Where it is a joint of two segments (a polyline
+        vertex: every growth step makes one) the points are equidistant from both segments, and
+        the two lines can disagree behind a kink; there the side is the sign along the vertex's
+        angle-weighted pseudo-normal (Baerentzen & Aanaes 2005; for a 2D polyline, the sum of
+        the two segments' unit left normals), so it does not depend on which of the tied
+        segments round-off makes nearest.
+        """
         x = np.asarray(x, dtype=float).reshape(-1, 2)
         a, b = self.segments
         nearest = point_segment_distance(x, a, b).argmin(axis=1)
-        return np.sign(_orient(a[nearest], b[nearest], x)).astype(np.int64)
+        t = b - a
+        r = x - a[nearest]
+        xi = np.einsum("md,md->m", r, t[nearest]) / np.einsum("kd,kd->k", t, t)[nearest]
+        # the joint with the previous segment (xi <= 0) or with the next one (xi >= 1)
+        k = a.shape[0]
+        joint = np.where(
+            (xi <= 0.0) & (nearest > 0),
+            nearest,
+            np.where((xi >= 1.0) & (nearest < k - 1), nearest + 1, -1),
+        )
+        side = np.sign(_orient(a[nearest], b[nearest], x))
+        at = np.flatnonzero(joint >= 0)
+        if at.size:
+            j = joint[at]
+            unit = t / np.linalg.norm(t, axis=1)[:, None]
+            n = unit[j - 1] + unit[j]  # the bisector of the two directions ...
+            normal = np.stack([-n[:, 1], n[:, 0]], axis=1)  # ... turned left: the pseudo-normal
+            side[at] = np.sign(np.einsum("md,md->m", x[at] - a[j], normal))
+        return side.astype(np.int64)
 
     def crosses(
         self, p: npt.ArrayLike, q: npt.ArrayLike, sides: npt.ArrayLike | None = None

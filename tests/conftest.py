@@ -25,6 +25,90 @@ EPS = float(np.finfo(float).eps)
 SQRT_EPS = float(np.sqrt(EPS))
 
 
+# --- tiers and the 2-rank selection (issue 22) ----------------------------------------------
+#
+# Three markers (registered in pyproject.toml) decide where a test runs:
+#
+# * ``slow``: the slow tier, run only by ``pytest --full`` (``bash .ci/test.sh --full``): tests
+#   whose discriminating power a cheaper default-tier test already carries (each says which);
+# * ``serial``: not run on more than one rank: the test exercises no parallel code path (pure
+#   numpy/numba kernels, closed forms, source checks) and would only run twice as two copies;
+# * ``all_cases``: on more than one rank, every parameter case runs (by default only a covering
+#   subset does, below).
+#
+# On more than one rank a parametrised test runs a covering subset of its cases: the cases in
+# collection order, each kept if it brings a parameter value that no kept case had. Every value
+# of every parameter (each coupling, cell type, dimension, placement ...) then runs in parallel at
+# least once. The parallel code paths (ghosts, ownership, gathers, partition-dependent sums) are
+# chosen by the value of a parameter, not by the product of several: the products are
+# discretisation properties, the same on any number of ranks, and the serial stage runs them all.
+# The selection is computed from the parameter values (or their positions), so it is the same on
+# every rank, which MPI needs.
+
+
+def pytest_addoption(parser):
+    parser.addoption(
+        "--full",
+        action="store_true",
+        default=False,
+        help="run the slow tier too (tests marked slow; the full robustness matrix)",
+    )
+
+
+def _value_key(value):
+    """A key of a parameter value that is the same on every rank: the value itself when it is
+    a plain literal, else ``None`` (the caller falls back to the value's position)."""
+    plain = (str, int, float, bool, type(None))
+    if isinstance(value, plain):
+        return repr(value)
+    if isinstance(value, tuple | list) and all(isinstance(v, plain) for v in value):
+        return repr(tuple(value))
+    return None
+
+
+def covering_subset(items):
+    """The items of one parametrised test to run on more than one rank: in order, each item
+    that brings a (parameter, value) pair no earlier kept item had."""
+    kept, seen = [], set()
+    for item in items:
+        spec = item.callspec
+        pairs = set()
+        for name, index in spec.indices.items():
+            value = spec.params.get(name, getattr(spec, "funcargs", {}).get(name))
+            key = _value_key(value)
+            pairs.add((name, key if key is not None else f"#{index}"))
+        if pairs - seen:
+            kept.append(item)
+            seen |= pairs
+    return kept
+
+
+def pytest_collection_modifyitems(config, items):
+    full = config.getoption("--full")
+    parallel = MPI.COMM_WORLD.size > 1
+    selected, deselected = [], []
+    groups: dict[tuple, list] = {}
+    for item in items:
+        if (not full and item.get_closest_marker("slow")) or (
+            parallel and item.get_closest_marker("serial")
+        ):
+            deselected.append(item)
+            continue
+        if parallel and hasattr(item, "callspec") and not item.get_closest_marker("all_cases"):
+            key = (item.path if hasattr(item, "path") else item.fspath, item.originalname)
+            groups.setdefault(key, []).append(item)
+        selected.append(item)
+    if groups:
+        keep = {id(i) for group in groups.values() for i in covering_subset(group)}
+        dropped = [i for g in groups.values() for i in g if id(i) not in keep]
+        deselected += dropped
+        dropped_ids = {id(i) for i in dropped}
+        selected = [i for i in selected if id(i) not in dropped_ids]
+    if deselected:
+        config.hook.pytest_deselected(items=deselected)
+        items[:] = selected
+
+
 @pytest.fixture(autouse=True)
 def _collect_and_synchronise():
     yield
@@ -128,11 +212,28 @@ DEMOS = pathlib.Path(__file__).resolve().parents[1] / "demos"
 
 def load_demo(name: str, alias: str | None = None):
     """Import ``demos/<name>.py`` as a module (the demos are scripts, not a package; their
-    folder goes on ``sys.path``, as when one runs, for their shared ``sif_common`` and
-    ``bench_common``)."""
+    folder goes on ``sys.path``, as when one runs, for their shared ``sif_common``)."""
     if str(DEMOS) not in sys.path:
         sys.path.append(str(DEMOS))
     spec = importlib.util.spec_from_file_location(alias or f"demo_{name}", DEMOS / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    # registered before it runs: dataclasses look their module up in sys.modules
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+BENCHMARKS = pathlib.Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+def load_benchmark(name: str, alias: str | None = None):
+    """Import ``benchmarks/<name>.py`` as a module (as :func:`load_demo`: ``benchmarks/`` goes
+    on ``sys.path`` for their shared ``harness``, ``demos/`` for the demos they load)."""
+    for folder in (BENCHMARKS, DEMOS):
+        if str(folder) not in sys.path:
+            sys.path.append(str(folder))
+    path = BENCHMARKS / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(alias or f"benchmark_{name}", path)
     module = importlib.util.module_from_spec(spec)
     # registered before it runs: dataclasses look their module up in sys.modules
     sys.modules[spec.name] = module

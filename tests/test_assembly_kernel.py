@@ -9,8 +9,6 @@ the check is on the difference of the two matrices, plus an exact check of the p
 scipy side.
 """
 
-import pathlib
-
 import dolfinx_meshfree as mf
 from dolfinx_meshfree.approx import jit
 from dolfinx_meshfree.geometry.quadrature import boundary_facets
@@ -23,13 +21,13 @@ import dolfinx
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from conftest import load_benchmark
 from mpi4py import MPI
 
 pytestmark = pytest.mark.skipif(not jit.AVAILABLE, reason="numba is not installed")
 
 TOL = 1e-12
 COMM = MPI.COMM_WORLD
-DEMOS = pathlib.Path(__file__).resolve().parents[1] / "demos"
 
 
 def assert_same(a: sp.csr_matrix, b: sp.csr_matrix) -> None:
@@ -161,14 +159,11 @@ def test_backend_errors(monkeypatch):
 
 
 @pytest.mark.skipif(COMM.size > 1, reason="the benchmark spawns serial workers")
-def test_bench_assembly_smoke(monkeypatch):
-    """demos/bench_assembly.py on the coarsest beam (a smoke run; no timing is checked): both
+def test_bench_assembly_smoke():
+    """benchmarks/bench_assembly.py on the coarsest beam (a smoke run; no timing is checked): both
     backends give the same matrix (the demo asserts it), each peak holds at least the output,
     and the compiled peak is below half the scipy one (measured 2.8 / 26.8 MB at h = 1)."""
-    monkeypatch.syspath_prepend(str(DEMOS))
-    import bench_assembly
-
-    records = bench_assembly.main(["--h", "1.0", "--repeats", "1"])
+    records = load_benchmark("bench_assembly").main(["--h", "1.0", "--repeats", "1"])
     by = {r["backend"]: r for r in records}
     assert set(by) == {"scipy", "numba"}
     for r in records:

@@ -1,4 +1,4 @@
-"""Smoke run of ``demos/bench_adaptive_quadrature.py --small`` (Kalthoff–Winkler at 21 nodes,
+"""Smoke run of ``benchmarks/bench_adaptive_quadrature.py --small`` (Kalthoff–Winkler at 21 nodes,
 20 us; serial and 2 ranks; no timing is checked): it writes its JSON with the four runs
 (efg and lagrange, uniform and adaptive) and the issue's keys; the adaptive rule's K_I / K_II
 histories agree with the uniform rule's (measured 1.1e-3 efg, 1.6e-5 lagrange; check 2.5e-3);
@@ -10,7 +10,7 @@ import json
 import pathlib
 
 import numpy as np
-from conftest import load_demo
+from conftest import load_benchmark
 from mpi4py import MPI
 
 DEMOS = pathlib.Path(__file__).resolve().parents[1] / "demos"
@@ -23,13 +23,13 @@ KEYS = (
 
 def test_bench_adaptive_quadrature_small(shared_dir, monkeypatch):
     monkeypatch.syspath_prepend(str(DEMOS))
-    demo = load_demo("bench_adaptive_quadrature")
+    demo = load_benchmark("bench_adaptive_quadrature")
     path = shared_dir / "bench_adaptive_quadrature.json"
     assert demo.main(["--small", "--json", str(path)]) == 0
     MPI.COMM_WORLD.Barrier()
     data = json.loads(path.read_text())
     assert data["ranks"] == MPI.COMM_WORLD.size and data["nodes"] == 21
-    runs = {(r["method"], r["quadrature"]): r for r in data["runs"]}
+    runs = {(r["method"], r["quadrature"]): r for r in data["records"]}
     assert set(runs) == {(m, q) for m in ("efg", "lagrange") for q in ("uniform", "adaptive")}
     for r in runs.values():
         assert all(k in r for k in KEYS)

@@ -1,4 +1,4 @@
-"""``demos/bench_balance.py --small --solver mumps iterative`` (a CI smoke run; no timing is
+"""``benchmarks/bench_balance.py --small --solver mumps iterative`` (a CI smoke run; no timing is
 checked): every solver runs on one rank, on DOLFINx's partition and on the balanced mesh, the
 displacements agree with the one-rank MUMPS run's (the bench exits above 1e-7; checked here to
 1e-10), the iterative solve's
@@ -7,12 +7,12 @@ iterations."""
 
 from __future__ import annotations
 
-from conftest import load_demo
+from conftest import load_benchmark
 from mpi4py import MPI
 
 
 def test_bench_balance_compares_the_solvers():
-    records = load_demo("bench_balance").main(["--small", "--solver", "mumps", "iterative"])
+    records = load_benchmark("bench_balance").main(["--small", "--solver", "mumps", "iterative"])
     coupled = [r for r in records if r["patch_fraction"] is not None]
     assert [r["solver"] for r in coupled] == ["mumps"] * 3 + ["iterative"] * 3
     assert [(r["ranks"] > 1, r["balance"]) for r in coupled] == [

@@ -1,5 +1,5 @@
 """The set-up memory of the large solve: the Voronoi volumes of a particle set in chunks of cells,
-and ``demos/bench_memory.py``'s records with and without the halo MLS.
+and ``benchmarks/bench_memory.py``'s records with and without the halo MLS.
 
 Oracles: the unchunked volumes (the same sums in another grouping: round-off) and the area of the
 cells (the volumes partition it); the bench's whole-MLS run (``--no-halo``), which assembles the
@@ -14,7 +14,7 @@ import dolfinx
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from conftest import load_demo
+from conftest import load_benchmark
 from mpi4py import MPI
 
 COMM = MPI.COMM_WORLD
@@ -42,8 +42,8 @@ def test_bench_memory_halo_equals_whole():
     between runs: 152,273 and 152,341 halo particles at 301,675); 1 rank: within 1e-12. The halo
     never exceeds the particle set (one rank: all of it) and the record holds a peak after
     every phase."""
-    (halo,) = load_demo("bench_memory").main(["--small"])
-    (whole,) = load_demo("bench_memory").main(["--small", "--no-halo"])
+    (halo,) = load_benchmark("bench_memory").main(["--small"])
+    (whole,) = load_benchmark("bench_memory").main(["--small", "--no-halo"])
     assert whole["halo_particles"] == whole["particles"]
     assert 0 < halo["halo_particles"] <= halo["particles"]
     if COMM.size == 1:

@@ -1,4 +1,4 @@
-"""``demos/bench_scaling.py --small``: the CI smoke run of the speed-and-scale benchmark (issue
+"""``benchmarks/bench_scaling.py --small``: the CI smoke run of the speed-and-scale benchmark (issue
 12, item 5). No timing is checked (the machines are shared and noisy); the test checks the
 structure of the records and the accuracy of every run against the exact solutions, and on
 several ranks that the parallel runs reproduce the one-rank references."""
@@ -8,7 +8,7 @@ from __future__ import annotations
 import json
 
 import pytest
-from conftest import load_demo
+from conftest import load_benchmark
 from mpi4py import MPI
 
 #: FE's relative L2 error on the cantilever (docs/benchmarks.md, measured with DOLFINx): h = 3
@@ -21,10 +21,10 @@ def records(tmp_path_factory):
     comm = MPI.COMM_WORLD
     path = comm.bcast(str(tmp_path_factory.mktemp("bench")) if comm.rank == 0 else None)
     out = f"{path}/bench.json"
-    recs = load_demo("bench_scaling").main(["--small", "--json", out])
+    recs = load_benchmark("bench_scaling").main(["--small", "--json", out])
     comm.Barrier()
     with open(out) as f:
-        data = json.load(f)
+        data = json.load(f)["records"]
     return recs, data
 
 
@@ -104,7 +104,7 @@ def test_parallel_runs_reproduce_the_references(records):
     """On several ranks every case also runs on one rank (the references): the same
     discretisation (on the balanced mesh for the couplings) gives the same errors to round-off:
     static to 1e-8 relative (measured 1.1e-9 in lane A: the L2 error, a difference of nearly
-    equal numbers, amplifies round-off; up to 4e-5 at h = 0.25, see demos/bench_balance.py),
+    equal numbers, amplifies round-off; up to 4e-5 at h = 0.25, see benchmarks/bench_balance.py),
     the rod to 1e-12 (measured 2.9e-14)."""
     recs, _ = records
     if MPI.COMM_WORLD.size == 1:

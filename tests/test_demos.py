@@ -10,7 +10,7 @@ import dolfinx_meshfree as mf
 
 import numpy as np
 import pytest
-from conftest import load_demo
+from conftest import load_benchmark, load_demo
 from mpi4py import MPI
 
 DEMOS = pathlib.Path(__file__).resolve().parents[1] / "demos"
@@ -185,11 +185,11 @@ def test_cooks_membrane_demo(shared_dir):
 
 
 def test_bench_blocks_smoke(shared_dir):
-    """demos/bench_blocks.py --small (a smoke run, no timing checked): its tables' records, the
+    """benchmarks/bench_blocks.py --small (a smoke run, no timing checked): its tables' records, the
     factorisation it picks per system (LDL^T for Galerkin, LU for VCI) and that LDL^T and LU agree
     (measured 3e-14 to 2e-13 relative; bound 1e-10)."""
     out = shared_dir / "bb.json"
-    records = load_demo("bench_blocks").main(["--small", "--json", str(out)])
+    records = load_benchmark("bench_blocks").main(["--small", "--json", str(out)])
     dyn = [r for r in records if r["kind"] == "dynamics"]
     assert [r["method"] for r in dyn] == ["fe", "efg", "lagrange"]
     assert all(r["step_aij"] > 0 and r["step_baij"] > 0 for r in dyn)
@@ -200,7 +200,7 @@ def test_bench_blocks_smoke(shared_dir):
         assert r["chosen"] == ("ldlt" if r["integration"] == "galerkin" else "lu")
         assert r["relative_difference"] <= 1e-10
     MPI.COMM_WORLD.Barrier()
-    assert len(json.loads(out.read_text())) == len(records)
+    assert len(json.loads(out.read_text())["records"]) == len(records)
 
 
 def test_crack_growth_demo_quick(shared_dir, monkeypatch):
@@ -247,7 +247,7 @@ def test_bench_balance_smoke():
     partition and the balanced mesh give the same L2 error (the bench exits on a difference
     above 1e-4 relative), and the balanced mesh's busiest rank carries no more work than on
     DOLFINx's partition (on 2 ranks: 0.5 against 0.82 measured at h = 0.125)."""
-    records = load_demo("bench_balance").main(["--small"])
+    records = load_benchmark("bench_balance").main(["--small"])
     coupled = [r for r in records if r["patch_fraction"] is not None]
     assert len(coupled) == 3  # one rank, DOLFINx's partition, balanced
     if MPI.COMM_WORLD.size == 1:

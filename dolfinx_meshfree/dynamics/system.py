@@ -143,7 +143,7 @@ class LinearSystem:
             fields when both are node-interleaved), or ``"aij"``: as assembled (PETSc's AIJ
             with i-nodes; blocks assembled as BAIJ, the ramps', are copied to AIJ). Measured
             on the rod (41k dofs, 86 entries per particle row, PETSc 3.18, one core,
-            ``demos/bench_blocks.py``): BAIJ multiplies the particle stiffness
+            ``benchmarks/bench_blocks.py``): BAIJ multiplies the particle stiffness
             1.14-1.25x faster (a step of EFG or lagrange 1.2-1.3x), the FE stiffness alike
             (0.95-1.01x); the results agree to round-off (the summation order changes).
     """

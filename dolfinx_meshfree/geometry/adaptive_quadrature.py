@@ -26,7 +26,7 @@ What it saves: only what depends on the cell rule, i.e. building the stiffness, 
 and the loads (the MLS tables at the points and the assembly). In explicit dynamics the
 stiffness is assembled once per model, so a step's cost (a sparse product) and the interaction
 integral (its own annulus rule) do not change. Kalthoff–Winkler at 101 nodes
-(``demos/bench_adaptive_quadrature.py``): a rebuild costs about half (pure EFG, radius 8
+(``benchmarks/bench_adaptive_quadrature.py``): a rebuild costs about half (pure EFG, radius 8
 spacings, 2 x 2 far), the whole run 0.67-0.81x; the SIF histories before the first extension
 differ from the uniform rule's by 3.9e-3 (pure EFG: the 2 x 2 rule over the whole plate) and
 1.3e-4 (lagrange: the coarse cells are in the particle box only).

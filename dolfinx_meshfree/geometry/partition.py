@@ -162,7 +162,8 @@ def balanced_mesh(
         cell_weight: Work of a cell as a function of its midpoint (``x`` of shape (gdim, m),
             like DOLFINx's marker functions; returns (m,) positive weights). For a coupled
             model: 1 for FE cells and the patch cells' cost relative to an FE cell, e.g.
-            ``lambda x: np.where(x[0] > 5.0, 20.0, 1.0)``; ``demos/bench_balance.py`` measures it.
+            ``lambda x: np.where(x[0] > 5.0, 20.0, 1.0)``; ``benchmarks/bench_balance.py``
+            measures it.
 
         ghosted: Give the new mesh facet ghosts (DOLFINx's ``shared_facet`` mode, which a
             particle patch needs on several ranks) or none; ``None``: like ``msh``. E.g. a

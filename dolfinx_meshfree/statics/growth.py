@@ -8,7 +8,7 @@ grows; the crack's :meth:`~dolfinx_meshfree.Crack.extend` bumps the MLS version 
 what the extension changes (:mod:`~dolfinx_meshfree.statics.growth_update`: the table rows within
 a support radius of the new segment, the cells it cuts, the VCI constants and stiffness rows of
 the particles there; equal to a full rebuild to round-off); ``update="full"`` rebuilds
-everything (the cost of a step then grows with the patch; ``demos/bench_growth.py`` measures
+everything (the cost of a step then grows with the patch; ``benchmarks/bench_growth.py`` measures
 both).
 
 Works with any problem whose ``solve()`` returns a solution with ``stress_intensity_factors``:

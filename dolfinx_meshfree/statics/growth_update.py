@@ -40,7 +40,7 @@ of a step grows with the particles within about three support radii of ``S``: th
 kept in chunks (the changed rows are appended, the unchanged ones never copied) and stacked only
 when a caller reads them. What still grows with the patch: the sparse sum ``K_old + dK`` and the
 PETSc matrix built from it, the rules' point arrays (memory copies), the facet tables of the
-loads and conditions (on the boundary), and the direct solve (``demos/bench_growth.py``).
+loads and conditions (on the boundary), and the direct solve (``benchmarks/bench_growth.py``).
 
 Not local (a full rebuild is done instead, silently equal): the edge-to-edge coupling's boundary
 values and moment corrections (``boundary_values``/``boundary_moments`` of

@@ -12,7 +12,7 @@
 # error against the exact solution (Gauss degree 4, evaluated in chunks). ``--small``: a CI
 # smoke size.
 #
-# Run: ``OMP_NUM_THREADS=1 python demos/bench_memory.py --h 0.0758 0.0438 0.024`` (about
+# Run: ``OMP_NUM_THREADS=1 python benchmarks/bench_memory.py --h 0.0758 0.0438 0.024`` (about
 # 100k, 300k and 1M particles); under ``mpirun -n 2`` for the 2-rank figures. Numba's compile
 # time is excluded (a small warm-up solve first).
 
@@ -20,7 +20,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import time
 
 import dolfinx_meshfree as mf
@@ -33,6 +32,7 @@ from dolfinx_meshfree.statics.large import (
 
 import dolfinx
 import numpy as np
+from harness import write_json
 from mpi4py import MPI
 
 
@@ -129,9 +129,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
     records = [run(comm, h, args) for h in ([2.0] if args.small else args.h)]
     if comm.rank == 0:
         report(records)
-        if args.json:
-            with open(args.json, "w") as f:
-                json.dump(records, f, indent=1)
+    write_json(args.json, records)
     # relative L2 error: measured 5.7e-4 at h = 2 (check 1e-2), 1.6e-6 to 4.8e-7 at h <= 0.125
     for r in records:
         if not r["l2_error"] < (1e-2 if r["h"] >= 1 else 1e-3):

@@ -17,7 +17,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
@@ -26,7 +25,7 @@ from dolfinx_meshfree.physics.operators import stiffness_matrix
 import dolfinx
 import numpy as np
 import ufl
-from bench_common import median_time
+from harness import median_time, print_table, ratio, write_json
 from mpi4py import MPI
 
 # -
@@ -86,24 +85,20 @@ def main(argv: list[str] | None = None) -> list[dict]:
             f"MLS tabulation vs DOLFINx assembly, 1 rank, DOLFINx {mf.DOLFINX_VERSION}, "
             f"median of {args.repeats}"
         )
-        head = (
-            f"{'h':>5} {'cells':>6} {'quad pts':>8} {'DOLFINx K s':>11} {'MLS tab s':>9} "
-            f"{'MLS pts/s':>10} {'EFG K s':>8} {'FE tab s':>8} {'FE pts/s':>10} "
-            f"{'MLS/DOLFINx':>11}"
-        )
-        print(head)
-        print("-" * len(head))
-        for r in records:
-            print(
-                f"{r['h']:5.3g} {r['cells']:6d} {r['quadrature_points']:8d} "
-                f"{r['time_dolfinx_assemble_K']:11.4f} {r['time_mls_tabulate']:9.4f} "
-                f"{r['mls_points_per_second']:10.3g} {r['time_efg_assemble_K']:8.4f} "
-                f"{r['time_fe_tabulate']:8.4f} {r['fe_points_per_second']:10.3g} "
-                f"{r['time_mls_tabulate'] / r['time_dolfinx_assemble_K']:11.1f}"
-            )
-        if args.json:
-            with open(args.json, "w") as f:
-                json.dump(records, f, indent=1)
+        columns = [
+            ("h", "5.3g"), ("cells", "6d"), ("quad pts", "8d"), ("DOLFINx K s", "11.4f"),
+            ("MLS tab s", "9.4f"), ("MLS pts/s", "10.3g"), ("EFG K s", "8.4f"),
+            ("FE tab s", "8.4f"), ("FE pts/s", "10.3g"), ("MLS/DOLFINx", "11.1f"),
+        ]  # fmt: skip
+        keys = ("h", "cells", "quadrature_points", "time_dolfinx_assemble_K", "time_mls_tabulate",
+                "mls_points_per_second", "time_efg_assemble_K", "time_fe_tabulate",
+                "fe_points_per_second")  # fmt: skip
+        rows = [
+            [*(r[k] for k in keys), ratio(r["time_mls_tabulate"], r["time_dolfinx_assemble_K"])]
+            for r in records
+        ]
+        print_table(columns, rows)
+    write_json(args.json, records)
     return records
 
 

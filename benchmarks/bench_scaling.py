@@ -27,7 +27,7 @@
 #    against the exact solution, and the ratio to FE's time at the same ``h`` in the same run.
 #    On several ranks the coupled models run on ``mf.balanced_mesh`` (a patch cell weighing the
 #    EFG/FE time ratio measured by the references at the same ``h``, as
-#    ``demos/bench_balance.py`` does; ``--no-balance``: DOLFINx's partition). ``--solver``
+#    ``benchmarks/bench_balance.py`` does; ``--no-balance``: DOLFINx's partition). ``--solver``
 #    passes through to ``CoupledElasticity.solve(solver=...)``.
 # 4. **Explicit rod** (``demos/rod_gauss.py``, Gaussian pulse, about ``--nodes`` nodes +
 #    particles, particle : node ratio 4 in the coupled half): the time per step of FE, EFG and
@@ -46,11 +46,11 @@
 # compare the ratios of one run (the load average of the machine is printed with every table).
 # ``--small`` is a smoke run of about ten seconds for CI (no timing is checked anywhere; the test
 # checks the errors against the exact solutions). This supersedes the MLS part of
-# ``demos/bench_tabulation.py``.
+# ``benchmarks/bench_tabulation.py``.
 #
-#     OMP_NUM_THREADS=1 python demos/bench_scaling.py [--h 0.5 0.25 0.125] [--nodes 20000]
-#     OMP_NUM_THREADS=1 mpirun -n 2 python demos/bench_scaling.py --no-mls
-#     python demos/bench_scaling.py --small
+#     OMP_NUM_THREADS=1 python benchmarks/bench_scaling.py [--h 0.5 0.25 0.125] [--nodes 20000]
+#     OMP_NUM_THREADS=1 mpirun -n 2 python benchmarks/bench_scaling.py --no-mls
+#     python benchmarks/bench_scaling.py --small
 
 # +
 from __future__ import annotations
@@ -59,7 +59,6 @@ import argparse
 import contextlib
 import ctypes
 import gc
-import json
 import os
 import time
 from collections.abc import Callable
@@ -69,7 +68,7 @@ from dolfinx_meshfree.approx import jit
 from dolfinx_meshfree.approx import mls as mls_module
 
 import numpy as np
-from bench_common import load_demo
+from harness import load_demo, print_table, ratio, write_json
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -213,38 +212,24 @@ def report(mls: list[dict]) -> None:
         "numba sorted: the same points in spatial order"
     )
     two = "points_per_second_numba2" in mls[0]
-    head = (
-        f"{'case':>12} {'particles':>9} {'points':>8} {'pairs/pt':>8} {'numpy pts/s':>21} "
-        f"{'numba pts/s':>21} {'numba sorted pts/s':>21} {'numba2 pts/s' if two else '':>21} "
-        f"{'speed-up':>8} "
-        f"{'1st call s':>10} {'max diff':>9}"
-    )
-    print(head)
-    print("-" * len(head))
-    for r in mls:
-        nan = float("nan")
-        nb = r.get("points_per_second_numba") or nan
-        nb_cpu = r.get("points_per_cpu_second_numba") or nan
-        first = r["time_first_call_numba"] or nan
-        diff = nan if r["max_difference"] is None else r["max_difference"]
-        numpy = f"{r['points_per_second_numpy']:.3g} ({r['points_per_cpu_second_numpy']:.3g})"
-        numba = f"{nb:.3g} ({nb_cpu:.3g})"
-        srt = (
-            f"{r['points_per_second_numba_sorted']:.3g} "
-            f"({r['points_per_cpu_second_numba_sorted']:.3g})"
-            if "points_per_second_numba_sorted" in r
-            else ""
-        )
-        numba2 = (
-            f"{r['points_per_second_numba2']:.3g} ({r['points_per_cpu_second_numba2']:.3g})"
-            if two
-            else ""
-        )
-        print(
-            f"{r['gdim']}D {r['basis']:>9} {r['particles']:9d} {r['points']:8d} "
-            f"{r['pairs_per_point']:8.1f} {numpy:>21} {numba:>21} {srt:>21} {numba2:>21} "
-            f"{nb / r['points_per_second_numpy']:8.1f} {first:10.3f} {diff:9.1e}"
-        )
+
+    def speeds(r: dict, run: str) -> str | None:  # per second (per CPU second)
+        if f"points_per_second_{run}" not in r:
+            return None
+        return f"{r[f'points_per_second_{run}']:.3g} ({r[f'points_per_cpu_second_{run}']:.3g})"
+
+    runs = ["numpy", "numba", "numba_sorted", *(["numba2"] if two else [])]
+    columns = [("case", "12"), ("particles", "9d"), ("points", "8d"), ("pairs/pt", "8.1f"),
+               *((f"{run.replace('_', ' ')} pts/s", "21") for run in runs),
+               ("speed-up", "8.1f"), ("1st call s", "10.3f"), ("max diff", "9.1e")]  # fmt: skip
+    rows = [
+        [f"{r['gdim']}D {r['basis']:>9}", r["particles"], r["points"], r["pairs_per_point"],
+         *(speeds(r, run) for run in runs),
+         ratio(r.get("points_per_second_numba"), r["points_per_second_numpy"]),
+         r["time_first_call_numba"], r["max_difference"]]
+        for r in mls
+    ]  # fmt: skip
+    print_table(columns, rows)
 
 
 # ## Peak memory of a case
@@ -588,6 +573,12 @@ def bench_rod(
 
 
 # +
+def _ranks_and_mesh(r: dict) -> tuple[str, str]:
+    """The ranks (``1*``: the one-rank reference) and the mesh of a static or rod record."""
+    ranks = f"{r['ranks']}" + ("*" if r.get("one_rank_reference") else "")
+    return ranks, "balanced" if r["balanced"] else "default"
+
+
 def report_static(static: list[dict], backends: list[dict]) -> None:
     if backends:
         print(f"\nPure EFG, MLS backends (load {load()})")
@@ -602,26 +593,17 @@ def report_static(static: list[dict], backends: list[dict]) -> None:
         f"rank's resident peak, rise = above the resident memory at the case's start (load "
         f"{load()})"
     )
-    head = (
-        f"{'method':>8} {'patch':>5} {'h':>6} {'ranks':>5} {'mesh':>8} {'dofs':>7} "
-        f"{'L2 error':>9} {'setup s':>8} {'assem s':>8} {'solve s':>8} {'total s':>8} "
-        f"{'x FE':>6} {'peak MB':>8} {'rise MB':>8} {'speedup':>7}"
-    )
-    print(head)
-    print("-" * len(head))
-    for r in static:
-        frac = "" if r["patch_fraction"] is None else f"{r['patch_fraction']:5.2f}"
-        mesh = "balanced" if r["balanced"] else "default"
-        peak = "" if r["peak_mb"] is None else f"{r['peak_mb']:8.0f}"
-        rise = "" if r["peak_rise_mb"] is None else f"{r['peak_rise_mb']:8.0f}"
-        speed = "" if r.get("speedup") is None else f"{r['speedup']:7.2f}"
-        ranks = f"{r['ranks']}" + ("*" if r.get("one_rank_reference") else "")
-        print(
-            f"{r['method']:>8} {frac:>5} {r['h']:6.3g} {ranks:>5} {mesh:>8} {r['dofs']:7d} "
-            f"{r['error_l2']:9.2e} {r['time_setup']:8.3f} {r['time_assemble']:8.3f} "
-            f"{r['time_solve']:8.3f} {r['time_total']:8.3f} {r['time_total_ratio_to_fe']:6.2f} "
-            f"{peak:>8} {rise:>8} {speed:>7}"
-        )
+    columns = [("method", ">8"), ("patch", "5.2f"), ("h", "6.3g"), ("ranks", "5"),
+               ("mesh", "8"), ("dofs", "7d"), ("L2 error", "9.2e"), ("setup s", "8.3f"),
+               ("assem s", "8.3f"), ("solve s", "8.3f"), ("total s", "8.3f"), ("x FE", "6.2f"),
+               ("peak MB", "8.0f"), ("rise MB", "8.0f"), ("speedup", "7.2f")]  # fmt: skip
+    rows = [
+        [r["method"], r["patch_fraction"], r["h"], *_ranks_and_mesh(r), r["dofs"], r["error_l2"],
+         r["time_setup"], r["time_assemble"], r["time_solve"], r["time_total"],
+         r["time_total_ratio_to_fe"], r["peak_mb"], r["peak_rise_mb"], r.get("speedup")]
+        for r in static
+    ]  # fmt: skip
+    print_table(columns, rows)
     if any(r.get("one_rank_reference") for r in static):
         print("(ranks 1*: the one-rank reference, a copy on every rank at once, mean time)")
 
@@ -634,25 +616,18 @@ def report_rod(rod: list[dict]) -> None:
         f"{rod[0]['steps']} steps, slowest rank; median in brackets), ratio to FE's step "
         f"(load {load()})"
     )
-    head = (
-        f"{'method':>9} {'ranks':>5} {'mesh':>8} {'dofs':>7} {'share':>6} {'step ms':>8} "
-        f"{'(median)':>8} "
-        f"{'x FE':>6} {'speedup':>7} {'setup s':>8} {'peak MB':>8} {'rise MB':>8} {'v error':>9}"
-    )
-    print(head)
-    print("-" * len(head))
-    for r in rod:
-        mesh = "balanced" if r["balanced"] else "default"
-        peak = "" if r["peak_mb"] is None else f"{r['peak_mb']:8.0f}"
-        speed = "" if r.get("speedup") is None else f"{r['speedup']:7.2f}"
-        ranks = f"{r['ranks']}" + ("*" if r.get("one_rank_reference") else "")
-        print(
-            f"{r['method']:>9} {ranks:>5} {mesh:>8} {r['dofs']:7d} {r['largest_share']:6.3f} "
-            f"{1e3 * r['time_per_step']:8.3f} ({1e3 * r['time_per_step_median']:6.3f}) "
-            f"{r['time_per_step_ratio_to_fe']:6.2f} {speed:>7} "
-            f"{r['time_setup']:8.2f} {peak:>8} {r['peak_rise_mb'] or 0:8.0f} "
-            f"{r['error_velocity']:9.2e}"
-        )
+    columns = [("method", ">9"), ("ranks", "5"), ("mesh", "8"), ("dofs", "7d"),
+               ("share", "6.3f"), ("step ms", "8.3f"), ("(median)", "8"), ("x FE", "6.2f"),
+               ("speedup", "7.2f"), ("setup s", "8.2f"), ("peak MB", "8.0f"),
+               ("rise MB", "8.0f"), ("v error", "9.2e")]  # fmt: skip
+    rows = [
+        [r["method"], *_ranks_and_mesh(r), r["dofs"], r["largest_share"],
+         1e3 * r["time_per_step"], f"({1e3 * r['time_per_step_median']:6.3f})",
+         r["time_per_step_ratio_to_fe"], r.get("speedup"), r["time_setup"], r["peak_mb"],
+         r["peak_rise_mb"], r["error_velocity"]]
+        for r in rod
+    ]  # fmt: skip
+    print_table(columns, rows)
     print("(share: the largest rank's share of the stiffness entries; ranks 1*: the one-rank "
           "reference, a copy on every rank at once, mean time)")  # fmt: skip
 
@@ -719,9 +694,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
             report(mls)
         report_static(static, backends)
         report_rod(rod)
-        if args.json:
-            with open(args.json, "w") as f:
-                json.dump(records, f, indent=1)
+    write_json(args.json, records)
     return records
 
 

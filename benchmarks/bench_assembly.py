@@ -11,7 +11,7 @@
 # the size of the assembled matrix (data + indices + indptr). Times are medians of
 # ``--repeats`` after one warm-up call (the numba compile or cache load excluded).
 #
-# Run: ``python demos/bench_assembly.py [--h 1.0 0.5 0.25] [--json out.json]``.
+# Run: ``python benchmarks/bench_assembly.py [--h 1.0 0.5 0.25] [--json out.json]``.
 
 from __future__ import annotations
 
@@ -29,6 +29,7 @@ from dolfinx_meshfree.statics.efg import particle_stiffness
 
 import dolfinx
 import numpy as np
+from harness import print_table, ratio, write_json
 from mpi4py import MPI
 
 
@@ -125,18 +126,15 @@ def main(argv: list[str] | None = None) -> list[dict]:
         f"EFG stiffness assembly, cantilever, {'VCI' if consistent else 'Gauss'}, 1 process, "
         f"median of {args.repeats} (warm); peak = tracemalloc peak of one assembly"
     )
-    head = (
-        f"{'h':>5} {'particles':>9} {'points':>7} {'K nnz':>9} {'K MB':>6} {'backend':>7} "
-        f"{'time s':>8} {'peak MB':>8} {'peak/K':>6}"
-    )
-    print(head)
-    print("-" * len(head))
-    for r in records:
-        print(
-            f"{r['h']:5.3g} {r['particles']:9d} {r['points']:7d} {r['K_nnz']:9d} "
-            f"{r['K_bytes'] / 1e6:6.1f} {r['backend']:>7} {r['time']:8.3f} "
-            f"{r['peak_bytes'] / 1e6:8.1f} {r['peak_bytes'] / r['K_bytes']:6.2f}"
-        )
+    columns = [("h", "5.3g"), ("particles", "9d"), ("points", "7d"), ("K nnz", "9d"),
+               ("K MB", "6.1f"), ("backend", ">7"), ("time s", "8.3f"), ("peak MB", "8.1f"),
+               ("peak/K", "6.2f")]  # fmt: skip
+    rows = [
+        [r["h"], r["particles"], r["points"], r["K_nnz"], r["K_bytes"] / 1e6, r["backend"],
+         r["time"], r["peak_bytes"] / 1e6, ratio(r["peak_bytes"], r["K_bytes"])]
+        for r in records
+    ]  # fmt: skip
+    print_table(columns, rows)
     by = {(r["h"], r["backend"]): r for r in records}
     for h in args.h:
         a, b = by.get((h, "scipy")), by.get((h, "numba"))
@@ -145,9 +143,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
             assert abs(a["K_sum"] - b["K_sum"]) <= 1e-10 * a["K_sum"], (a["K_sum"], b["K_sum"])
             print(f"h = {h}: numba {a['time'] / b['time']:.1f}x faster, "
                   f"{a['peak_bytes'] / max(b['peak_bytes'], 1):.1f}x less peak memory")  # fmt: skip
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump(records, f, indent=1)
+    write_json(args.json, records)
     return records
 
 

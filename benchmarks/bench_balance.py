@@ -25,23 +25,22 @@
 # PETSc logged on its busiest rank during the solve (MUMPS's factorisation included): the work,
 # which a machine shared with other jobs does not change, unlike the times.
 #
-# Run with ``mpirun -n 2 python demos/bench_balance.py`` (one thread per rank:
+# Run with ``mpirun -n 2 python benchmarks/bench_balance.py`` (one thread per rank:
 # ``OMP_NUM_THREADS=1``); ``--small`` is a CI smoke run (no timing is checked anywhere: the
 # machines are noisy; compare the ratios of one run). ``--prefault`` GiB per rank (2 by default)
 # are written once before the first case, so that the first one-rank run does not pay alone for
-# the virtual machine's first touch of fresh memory (``bench_common.prefault_memory``).
+# the virtual machine's first touch of fresh memory (``harness.prefault_memory``).
 
 # +
 from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 
 import dolfinx_meshfree as mf
 
 import numpy as np
-from bench_common import load_demo, prefault_memory
+from harness import load_demo, prefault_memory, print_table, write_json
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -154,7 +153,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
         "--prefault",
         type=float,
         default=2.0,
-        help="GiB per rank written once before the first case (bench_common.prefault_memory)",
+        help="GiB per rank written once before the first case (harness.prefault_memory)",
     )
     p.add_argument("--small", action="store_true", help="CI smoke run")
     p.add_argument("--json", default=None)
@@ -195,9 +194,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
             compare(runs)
             records += runs
     report(records, comm)
-    if args.json and comm.rank == 0:
-        with open(args.json, "w") as f:
-            json.dump(records, f, indent=1)
+    write_json(args.json, records)
     return records
 
 
@@ -240,32 +237,22 @@ def report(records: list[dict], comm) -> None:
     if comm.rank != 0:
         return
     print(f"coupled cantilever on {comm.size} rank(s), DOLFINx {mf.DOLFINX_VERSION}")
-    head = (
-        f"{'method':9} {'h':>5} {'patch':>5} {'solver':>9} {'ranks':>5} {'mesh':>9} {'W':>5} "
-        f"{'share':>6} {'L2 error':>9} {'setup s':>8} {'assem s':>8} {'solve s':>8} "
-        f"{'total s':>8} {'speedup':>7} {'its':>5} {'Gflop':>7} {'vs MUMPS':>8} {'vs 1 rank':>9}"
-    )
-    print(head)
-    print("-" * len(head))
+    columns = [
+        ("method", "<9"), ("h", "5.3g"), ("patch", "5.2f"), ("solver", ">9"), ("ranks", "5d"),
+        ("mesh", ">9"), ("W", "5.1f"), ("share", "6.3f"), ("L2 error", "9.2e"),
+        ("setup s", "8.3f"), ("assem s", "8.3f"), ("solve s", "8.3f"), ("total s", "8.3f"),
+        ("speedup", "7.2f"), ("its", "5d"), ("Gflop", "7.1f"), ("vs MUMPS", "8.1e"),
+        ("vs 1 rank", "9.1e"),
+    ]  # fmt: skip
+    keys = ("method", "h", "patch_fraction", "solver", "ranks", "mesh", "weight",
+            "largest_work_share", "error_l2", "time_setup", "time_assemble", "time_solve",
+            "time_total", "speedup", "iterations", "solve_gflop_busiest_rank",
+            "difference_to_mumps", "difference_to_one_rank")  # fmt: skip
+    rows = []
     for r in records:
         mesh = "balanced" if r["balance"] else ("default" if r["ranks"] > 1 else "one rank")
-        frac = "" if r["patch_fraction"] is None else f"{r['patch_fraction']:5.2f}"
-        share = "" if r["largest_work_share"] is None else f"{r['largest_work_share']:6.3f}"
-        w = "" if r.get("weight") is None else f"{r['weight']:5.1f}"
-        speed = "" if r.get("speedup") is None else f"{r['speedup']:7.2f}"
-        its = "" if r.get("iterations") is None else f"{r['iterations']:5d}"
-        gf = r.get("solve_gflop_busiest_rank")
-        gf = "" if gf is None else f"{gf:7.1f}"
-        diff = r.get("difference_to_mumps")
-        diff = "" if diff is None else f"{diff:8.1e}"
-        one = r.get("difference_to_one_rank")
-        one = "" if one is None else f"{one:9.1e}"
-        print(
-            f"{r['method']:9} {r['h']:5.3g} {frac:>5} {r['solver'] or '':>9} {r['ranks']:5d} "
-            f"{mesh:>9} {w:>5} {share:>6} {r['error_l2']:9.2e} {r['time_setup']:8.3f} "
-            f"{r['time_assemble']:8.3f} {r['time_solve']:8.3f} {r['time_total']:8.3f} "
-            f"{speed:>7} {its:>5} {gf:>7} {diff:>8} {one:>9}"
-        )
+        rows.append([mesh if k == "mesh" else r.get(k) for k in keys])
+    print_table(columns, rows)
 
 
 if __name__ == "__main__":

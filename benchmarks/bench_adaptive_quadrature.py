@@ -18,19 +18,18 @@
 # set-up of the measured tables); ``--impact velocity --contact 10`` gives the demo's defaults.
 # The JIT compile time is excluded (a tiny warm-up run first). ``--small`` is the CI smoke run
 # (21 nodes, 20 us); no timing is checked anywhere (the machines are noisy: compare the ratios
-# of one run). Run: ``OMP_NUM_THREADS=1 python demos/bench_adaptive_quadrature.py --nodes 41``.
+# of one run). Run: ``OMP_NUM_THREADS=1 python benchmarks/bench_adaptive_quadrature.py --nodes 41``.
 
 # +
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
 import dolfinx_meshfree as mf
 
 import numpy as np
-from bench_common import load_demo
+from harness import load_demo, print_table, write_json
 from mpi4py import MPI
 
 # -
@@ -113,20 +112,16 @@ def run_all(
     return records
 
 
-def _f(x, fmt: str) -> str:
-    return "-" if x is None else format(x, fmt)
-
-
-def table(records: list[dict]) -> str:
-    head = (
-        "| method | quadrature | dofs | kink (deg) | mean (deg) | K_I / K_II at init. (MPa m^.5) "
-        "| K diff. | steps | setup / steps / SIFs / rebuild / total (s) | ratio to efg uniform |\n"
-        "|---|---|---|---|---|---|---|---|---|---|"
-    )
-    rows = [head]
+def report(records: list[dict]) -> None:
+    """The runs as a markdown table."""
+    columns = [("method", ""), ("quadrature", ""), ("dofs", "d"), ("kink (deg)", ".2f"),
+               ("mean (deg)", ".2f"), ("K_I / K_II at init. (MPa m^.5)", ""), ("K diff.", ".1e"),
+               ("steps", "d"), ("setup / steps / SIFs / rebuild / total (s)", ""),
+               ("ratio to efg uniform", ".3f")]  # fmt: skip
+    rows = []
     for r in records:
         k = (
-            "-"
+            None
             if r["K_I_initiation"] is None
             else f"{r['K_I_initiation'] / 1e6:.2f} / {r['K_II_initiation'] / 1e6:.2f}"
         )
@@ -134,13 +129,10 @@ def table(records: list[dict]) -> str:
             f"{r[k2]:.2f}"
             for k2 in ("time_setup", "time_steps", "time_sifs", "time_crack", "time_total")
         )
-        dofs = sum(r["dofs"].values())
-        rows.append(
-            f"| {r['method']} | {r['quadrature']} | {dofs} | {_f(r['kink_angle_deg'], '.2f')} "
-            f"| {_f(r['mean_angle_deg'], '.2f')} | {k} | {_f(r['K_history_difference'], '.1e')} "
-            f"| {r['steps']} | {times} | {_f(r['ratio_to_efg_uniform'], '.3f')} |"
-        )
-    return "\n".join(rows)
+        rows.append([r["method"], r["quadrature"], sum(r["dofs"].values()), r["kink_angle_deg"],
+                     r["mean_angle_deg"], k, r["K_history_difference"], r["steps"], times,
+                     r["ratio_to_efg_uniform"]])  # fmt: skip
+    print_table(columns, rows, markdown=True)
 
 
 def main(argv=None) -> int:
@@ -180,18 +172,16 @@ def main(argv=None) -> int:
     if comm.rank == 0:
         us = args.t_end * 1e6
         print(f"Kalthoff–Winkler, {args.nodes} nodes, {us:.0f} us, {comm.size} rank(s)")
-        print(table(records))
-        if args.json:
-            plain = [{k: v for k, v in r.items() if not k.startswith("_")} for r in records]
-            out = {
-                "nodes": args.nodes,
-                "t_end": args.t_end,
-                "ranks": comm.size,
-                "dolfinx": mf.DOLFINX_VERSION,
-                "runs": plain,
-            }
-            with open(args.json, "w") as f:
-                json.dump(out, f, indent=1)
+        report(records)
+        plain = [{k: v for k, v in r.items() if not k.startswith("_")} for r in records]
+        write_json(
+            args.json,
+            plain,
+            nodes=args.nodes,
+            t_end=args.t_end,
+            ranks=comm.size,
+            dolfinx=mf.DOLFINX_VERSION,
+        )
     return 0
 
 

@@ -29,7 +29,7 @@
 # copies). The direct solve (MUMPS) grows with the patch and is now most of a local step.
 # 2 ranks: local and full agree to 9e-14; the timings were dominated by the machine's load.
 #
-#     python demos/bench_growth.py [--h 0.025] [--widths 1 1.5 2] [--steps 4] [--da 0.1]
+#     python benchmarks/bench_growth.py [--h 0.025] [--widths 1 1.5 2] [--steps 4] [--da 0.1]
 #         [--json F] [--quick]
 
 from __future__ import annotations
@@ -41,15 +41,17 @@ import sys
 import dolfinx_meshfree as mf
 
 import numpy as np
-from crack_growth import model
-from sif_common import COMM, write_json
+from harness import load_demo, print_table, write_json
+from mpi4py import MPI
+
+COMM = MPI.COMM_WORLD
 
 PARTS = ("setup", "assemble", "solve", "sifs", "total")
 AGREE = 1e-10  # local against full, relative to |K|
 
 
 def run(h: float, width: float, steps: int, da: float, update: str) -> dict:
-    prob, crack, sizes = model("efg", h, width)
+    prob, crack, sizes = load_demo("crack_growth").model("efg", h, width)
     growth = mf.QuasiStaticCrackGrowth(prob, crack, increment=da, steps=steps, update=update)
     hist = growth.run()
     # EFGSolution.timings["setup"] includes the constructor's (MLS, crack placement), spent once
@@ -64,15 +66,9 @@ def run(h: float, width: float, steps: int, da: float, update: str) -> dict:
     return {
         "update": update, "width": width, "h": h, "particles": sizes["particles"],
         "K": [[r.K_I, r.K_II] for r in hist],
-        "seconds": {p: COMM.allreduce(statistics.median(v), op=_max()) for p, v in per.items()},
+        "seconds": {p: COMM.allreduce(statistics.median(v), op=MPI.MAX) for p, v in per.items()},
         "last_update": rows,
     }  # fmt: skip
-
-
-def _max():
-    from mpi4py import MPI
-
-    return MPI.MAX
 
 
 def main(argv=None) -> int:
@@ -98,22 +94,20 @@ def main(argv=None) -> int:
     if COMM.rank == 0:
         print(f"EFG growth step, h = {args.h:g}, da = {args.da:g}, median of steps 2..{args.steps}"
               f", {COMM.size} rank(s); seconds per step: full / local (ratio)")  # fmt: skip
-        print(
-            "| W | particles | "
-            + " | ".join(PARTS)
-            + " | rows re-tabulated, K dofs changed | K diff |"
-        )
-        print("|---" * (len(PARTS) + 4) + "|")
+        columns = [("W", "g"), ("particles", "d"), *((p, "") for p in PARTS),
+                   ("rows re-tabulated, K dofs changed", ""), ("K diff", ".1e")]  # fmt: skip
+        table = []
         for r in records:
             f, lo = r["full"]["seconds"], r["local"]["seconds"]
-            cells = " | ".join(f"{f[p]:.3f} / {lo[p]:.3f} ({lo[p] / f[p]:.2f})" for p in PARTS)
+            cells = [f"{f[p]:.3f} / {lo[p]:.3f} ({lo[p] / f[p]:.2f})" for p in PARTS]
             last = r["local"]["last_update"]
             rows, cells_, dofs = (last.get(k, 0) for k in ("rows", "cell_rows", "stiffness_dofs"))
-            tab = f"{rows} of {cells_}, {dofs} dofs"
-            print(f"| {r['full']['width']:g} | {r['full']['particles']} | {cells} | {tab} "
-                  f"| {r['K_difference']:.1e} |")  # fmt: skip
-    write_json(args.json, {"h": args.h, "da": args.da, "steps": args.steps, "ranks": COMM.size,
-                           "runs": records, "agree": AGREE})  # fmt: skip
+            table.append([r["full"]["width"], r["full"]["particles"], *cells,
+                          f"{rows} of {cells_}, {dofs} dofs", r["K_difference"]])  # fmt: skip
+        print_table(columns, table, markdown=True)
+    write_json(
+        args.json, records, h=args.h, da=args.da, steps=args.steps, ranks=COMM.size, agree=AGREE
+    )
     if not ok:
         if COMM.rank == 0:
             print(f"MISSED: local and full K differ by more than {AGREE:g}")

@@ -12,14 +12,13 @@
 from __future__ import annotations
 
 import argparse
-import json
 import time
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree.approx import jit
 
 import numpy as np
-from bench_common import median_time
+from harness import median_time, print_table, ratio, write_json
 
 # -
 
@@ -65,23 +64,15 @@ def main(argv: list[str] | None = None) -> list[dict]:
                 )
             records.append(rec)
     print(f"SPH tabulation with gradients, 1 thread, points per CPU second, median of {repeats}")
-    head = (
-        f"{'particles':>9} {'points':>8} {'correction':>10} {'numpy':>9} {'numba':>9} "
-        f"{'x':>5} {'max diff':>9}"
-    )
-    print(head)
-    print("-" * len(head))
+    columns = [("particles", "9d"), ("points", "8d"), ("correction", "10"), ("numpy", "9.3g"),
+               ("numba", "9.3g"), ("x", "5.1f"), ("max diff", "9.1e")]  # fmt: skip
+    rows = []
     for r in records:
-        nb = r.get("points_per_cpu_second_numba", float("nan"))
-        diff = r.get("max_difference", float("nan"))
-        print(
-            f"{r['particles']:9d} {r['points']:8d} {r['correction']!s:>10} "
-            f"{r['points_per_cpu_second_numpy']:9.3g} {nb:9.3g} "
-            f"{nb / r['points_per_cpu_second_numpy']:5.1f} {diff:9.1e}"
-        )
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump(records, f, indent=1)
+        numpy, nb = r["points_per_cpu_second_numpy"], r.get("points_per_cpu_second_numba")
+        rows.append([r["particles"], r["points"], str(r["correction"]), numpy, nb,
+                     ratio(nb, numpy), r.get("max_difference")])  # fmt: skip
+    print_table(columns, rows)
+    write_json(args.json, records)
     return records
 
 

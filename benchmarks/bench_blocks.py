@@ -20,17 +20,15 @@
 #
 # Prints tables and writes JSON (``--json``); ``--small`` is a smoke run (seconds).
 #
-#     python demos/bench_blocks.py [--nodes 20000] [--h 0.25] [--repeats 3] [--json out.json]
-#     python demos/bench_blocks.py --small
+#     python benchmarks/bench_blocks.py [--nodes 20000] [--h 0.25] [--repeats 3] [--json out.json]
+#     python benchmarks/bench_blocks.py --small
 
 # +
 from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import time
-from pathlib import Path
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree.dynamics.system import LinearSystem
@@ -38,7 +36,7 @@ from dolfinx_meshfree.statics.petsc import BlockSystem
 
 import dolfinx
 import numpy as np
-from bench_common import load_demo
+from harness import load_demo, print_table, ratio, write_json
 from mpi4py import MPI
 
 # -
@@ -235,37 +233,35 @@ def main(argv: list[str] | None = None) -> list[dict]:
     if comm.rank == 0:
         print(f"\nRod, per step (wall and CPU) and one stiffness product (CPU), ms, best of "
               f"{args.repeats}, {comm.size} rank(s)")  # fmt: skip
-        print("| method | dofs | step AIJ | step BAIJ | AIJ/BAIJ | CPU step AIJ | CPU step BAIJ | "
-              "AIJ/BAIJ | product AIJ | product BAIJ | AIJ/BAIJ | rel. diff u |")  # fmt: skip
-        print("|---|---|---|---|---|---|---|---|---|---|---|---|")
-        for r in recs:
-            if r["kind"] == "dynamics":
-                print(
-                    f"| {r['method']} | {r['dofs']} | {1e3 * r['step_aij']:.3f} | "
-                    f"{1e3 * r['step_baij']:.3f} | {r['step_aij'] / r['step_baij']:.2f} | "
-                    f"{1e3 * r['cpu_step_aij']:.3f} | {1e3 * r['cpu_step_baij']:.3f} | "
-                    f"{r['cpu_step_aij'] / r['cpu_step_baij']:.2f} | "
-                    f"{1e3 * r['product_aij']:.3f} | {1e3 * r['product_baij']:.3f} | "
-                    f"{r['product_aij'] / r['product_baij']:.2f} | {r['relative_difference']:.1e} |"
-                )
+        timed = {"step": "step", "cpu_step": "CPU step", "product": "product"}
+        columns = [("method", ""), ("dofs", "d")]
+        for label in timed.values():
+            columns += [(f"{label} AIJ", ".3f"), (f"{label} BAIJ", ".3f"), ("AIJ/BAIJ", ".2f")]
+        rows = [
+            [r["method"], r["dofs"],
+             *(v for k in timed for v in (1e3 * r[f"{k}_aij"], 1e3 * r[f"{k}_baij"],
+                                          ratio(r[f"{k}_aij"], r[f"{k}_baij"]))),
+             r["relative_difference"]]
+            for r in recs if r["kind"] == "dynamics"
+        ]  # fmt: skip
+        print_table([*columns, ("rel. diff u", ".1e")], rows, markdown=True)
         print(f"\nCantilever, MUMPS factorisation (wall and CPU s, best of {args.repeats}) and "
               "memory (INFOG(22), MB)")  # fmt: skip
-        print("| method | integration | dofs | asymmetry | chosen | LU | auto | LU/auto | "
-              "CPU LU | CPU auto | LU/auto | MB LU | MB auto | rel. diff |")  # fmt: skip
-        print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-        for r in recs:
-            if r["kind"] == "statics":
-                print(
-                    f"| {r['method']} | {r['integration']} | {r['dofs']} | "
-                    f"{'>= ' if r['asymmetry_sampled'] else ''}{r['asymmetry']:.1e} | "
-                    f"{r['chosen']} | {r['factor_lu']:.3f} | {r['factor_auto']:.3f} | "
-                    f"{r['factor_lu'] / r['factor_auto']:.2f} | {r['factor_cpu_lu']:.3f} | "
-                    f"{r['factor_cpu_auto']:.3f} | "
-                    f"{r['factor_cpu_lu'] / r['factor_cpu_auto']:.2f} | {r['memory_mb_lu']} | "
-                    f"{r['memory_mb_auto']} | {r['relative_difference']:.1e} |"
-                )
-        if args.json:
-            Path(args.json).write_text(json.dumps(recs, indent=1))
+        columns = [("method", ""), ("integration", ""), ("dofs", "d"), ("asymmetry", ""),
+                   ("chosen", ""), ("LU", ".3f"), ("auto", ".3f"), ("LU/auto", ".2f"),
+                   ("CPU LU", ".3f"), ("CPU auto", ".3f"), ("LU/auto", ".2f"), ("MB LU", ""),
+                   ("MB auto", ""), ("rel. diff", ".1e")]  # fmt: skip
+        rows = [
+            [r["method"], r["integration"], r["dofs"],
+             f"{'>= ' if r['asymmetry_sampled'] else ''}{r['asymmetry']:.1e}", r["chosen"],
+             r["factor_lu"], r["factor_auto"], ratio(r["factor_lu"], r["factor_auto"]),
+             r["factor_cpu_lu"], r["factor_cpu_auto"],
+             ratio(r["factor_cpu_lu"], r["factor_cpu_auto"]), r["memory_mb_lu"],
+             r["memory_mb_auto"], r["relative_difference"]]
+            for r in recs if r["kind"] == "statics"
+        ]  # fmt: skip
+        print_table(columns, rows, markdown=True)
+        write_json(args.json, recs)
     return recs
 
 

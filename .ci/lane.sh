@@ -36,7 +36,8 @@ REPO_ROOT="$(cd "$CI_DIR/.." && pwd)"
 # in by python3-mpi4py via mpi-default-bin; it is listed because we call it.
 LANE_A_DEBS=(python3-dolfinx python3-petsc4py python3-mpi4py python3-scipy
              python3-pytest python3-venv libopenblas0 openmpi-bin python3-matplotlib
-             python3-tqdm python3-h5py python3-numba)
+             python3-tqdm python3-h5py python3-numba python3-pytest-xdist python3-sphinx
+             python3-myst-parser)
 # Lane a must use Debian's interpreter: the python3 first on PATH may be a
 # pyenv one that cannot see the Debian DOLFINx.
 LANE_A_PYTHON=/usr/bin/python3
@@ -44,7 +45,7 @@ LANE_A_PYTHON=/usr/bin/python3
 LANE_A_PIP=(ruff)
 # h5py < 3.16: 3.16.0 is built against HDF5 2.0 but runs on the HDF5 1.14 the DOLFINx wheel has
 # already loaded ("Not a datatype" on import; measured 2026-11-30); 3.15.1 works.
-LANE_B_PIP=(dolfinx-solver-real scipy pytest ruff matplotlib tqdm "h5py<3.16" numba)
+LANE_B_PIP=(dolfinx-solver-real scipy pytest pytest-xdist ruff matplotlib tqdm "h5py<3.16" numba)
 
 lane_log() { echo "[lane] $*" >&2; }
 lane_die() {

@@ -1,23 +1,26 @@
 #!/usr/bin/env bash
-# .ci/test.sh [--lane a|b] [--serial|--parallel] [extra pytest args...]
+# .ci/test.sh [--lane a|b] [--serial|--parallel] [--full] [extra pytest args...]
 #
-# Runs the test suite in one lane (see .ci/lane.sh): first serially, then as
-# one MPI job of 2 ranks under the lane's own launcher. Default: lane a, both.
-# Anything not recognised (or everything after `--`) is passed to pytest,
-# after the `tests` directory.
+# Runs the test suite in one lane (see .ci/lane.sh): first serially (on every core through
+# pytest-xdist), then as one MPI job of 2 ranks under the lane's own launcher. Default: lane a,
+# both runs, the default tier. --full adds the slow tier (tests marked slow, the whole
+# robustness matrix). On 2 ranks the tests marked serial are left out and a parametrised test
+# runs a covering subset of its cases (tests/conftest.py says why). Anything not recognised (or
+# everything after `--`) is passed to pytest, after the `tests` directory.
 #
+# Each run prints its time and the tests that took 30 s or more (no run fails on a time).
 # Exit status is non-zero if any run fails. pytest's exit code 5 ("no tests
 # collected") counts as a failure, like any other non-zero code.
 #
-# Environment: TEST_TIMEOUT (seconds per pytest run, default 1800; the serial lane-A run,
-# which holds the full robustness matrix, takes about 8 minutes) so that a
-# deadlocked MPI test cannot eat the whole CI budget.
+# Environment: TEST_TIMEOUT (seconds per pytest run, default 2700) so that a deadlocked MPI
+# test cannot eat the whole CI budget; TEST_WORKERS (serial run's xdist workers, default
+# "auto" = one per core; 0 runs in one process).
 set -euo pipefail
 
 # shellcheck source-path=SCRIPTDIR source=lane.sh
 source "$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)/lane.sh"
 
-usage() { sed -n '2,14p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,18p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; }
 
 lane=a
 serial=1
@@ -29,6 +32,7 @@ while (($#)); do
         --lane=*) lane=${1#--lane=}; shift ;;
         --serial) serial=1; parallel=0; shift ;;
         --parallel) serial=0; parallel=1; shift ;;
+        --full) extra+=(--full); shift ;;
         -h|--help) usage; exit 0 ;;
         --) shift; extra+=("$@"); break ;;
         *) extra+=("$1"); shift ;;
@@ -58,13 +62,21 @@ run_pytest() {
     ((rc == 0)) || failed+=("$label")
 }
 
+# the default tier's slow tests, printed by every run (pytest's durations report)
+report=(--durations=0 --durations-min=30)
+workers=${TEST_WORKERS:-auto}
+xdist=()
+if [[ $workers != 0 ]] && "$PY" -c 'import xdist' >/dev/null 2>&1; then
+    xdist=(-n "$workers")
+fi
 if ((serial)); then
-    run_pytest "serial" "$PY" -m pytest -q tests "${extra[@]}"
+    run_pytest "serial" "$PY" -m pytest -q "${xdist[@]}" "${report[@]}" tests "${extra[@]}"
 fi
 if ((parallel)); then
     # --color=no: OpenMPI gives ranks a pty, so pytest would emit ANSI colour
     # codes into the CI log (a later --color in the extra args still wins).
-    run_pytest "2 ranks" "${LAUNCHER[@]}" -n 2 "$PY" "${PYMPI[@]}" -m pytest -q --color=no tests "${extra[@]}"
+    run_pytest "2 ranks" "${LAUNCHER[@]}" -n 2 "$PY" "${PYMPI[@]}" -m pytest -q --color=no \
+        "${report[@]}" tests "${extra[@]}"
 fi
 
 if ((${#failed[@]})); then

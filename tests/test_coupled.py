@@ -160,12 +160,40 @@ def test_parallel_equals_serial(rank_rng, consistent):
     assert np.abs(a - b).max() <= 1e-10 * np.abs(b).max()
 
 
+def test_cells_from_locate_entities_with_ghosts():
+    """``dolfinx.mesh.locate_entities`` lists ghost cells too (issue 23, item 6: refused on 2
+    ranks). The patch from it is the patch of the owned cells alone; a ghost cell named only on
+    a rank that does not own it joins the patch on its owner."""
+    comm = MPI.COMM_WORLD
+    msh = square(comm)
+    n = msh.topology.index_map(2).size_local
+    located = dolfinx.mesh.locate_entities(msh, 2, lambda x: x[0] >= 1.0 - 1e-12)
+    owned = cells_right_of(msh, 1.0)
+    assert np.array_equal(located[located < n], owned)
+    a = mf.ParticlePatch(msh, located, 1 / 3)
+    b = mf.ParticlePatch(msh, owned, 1 / 3)
+    assert np.array_equal(a.cells, b.cells)
+    assert np.array_equal(a.in_patch, b.in_patch)
+    assert np.array_equal(a.particles.positions, b.particles.positions)
+    # the ghosts alone: the owners get exactly the ghosted part of the patch
+    ghosts = located[located >= n]
+    assert comm.size == 1 or comm.allreduce(ghosts.size) > 0  # the case of the issue is here
+    c = mf.ParticlePatch(msh, ghosts, 1 / 3) if comm.allreduce(ghosts.size) else None
+    if c is not None:
+        imap = msh.topology.index_map(2)
+        named = np.concatenate(comm.allgather(np.asarray(imap.ghosts)[ghosts - n]))
+        start = imap.local_range[0]
+        assert np.array_equal(c.cells, np.flatnonzero(np.isin(np.arange(n) + start, named)))
+        assert comm.allreduce(c.cells.size) > 0
+
+
 def test_bad_input_on_every_rank():
     comm = MPI.COMM_WORLD
     msh = square(comm)
     n = msh.topology.index_map(2).size_local
-    with pytest.raises(ValueError, match="not owned cells"):
-        mf.ParticlePatch(msh, np.array([n + 5]) if comm.rank == 0 else np.zeros(0, int), 0.3)
+    n_local = n + msh.topology.index_map(2).num_ghosts
+    with pytest.raises(ValueError, match="not cells of the mesh on this rank"):
+        mf.ParticlePatch(msh, np.array([n_local + 5]) if comm.rank == 0 else np.zeros(0, int), 0.3)
     with pytest.raises(ValueError, match="patch is empty"):
         mf.ParticlePatch(msh, np.zeros(0, dtype=np.int64), 0.3)
     with pytest.raises(ValueError, match="spacing"):

@@ -40,7 +40,9 @@ class ParticlePatch:
     Args:
         mesh: The user's mesh (2D or 3D, degree-1 geometry, ghosted across facets in
             parallel; in 3D the placements are ``"grid"`` and ``"vertices"``).
-        cells: Owned local indices of the cells to replace (each rank its own).
+        cells: Local indices of the cells to replace, owned or ghost (as
+            ``dolfinx.mesh.locate_entities`` gives them on each rank): a cell named on any rank
+            joins the patch, on the rank that owns it (:attr:`cells` are then owned cells).
         spacing: Particle spacing of ``placement="conforming"`` or ``"grid"`` (any positive value;
             0.5 to 1.5 times the element size is the tested range). Must be ``None`` with
             ``placement="vertices"``.
@@ -120,23 +122,31 @@ class ParticlePatch:
             if c.ndim != 1 or (c.size and not np.issubdtype(c.dtype, np.integer)):
                 raise ValueError(f"cells should be a 1D array of cell indices, got {c!r:.80}")
             c = c.astype(np.int64)
-            if c.size and (c.min() < 0 or c.max() >= num_owned):
-                bad = c[(c < 0) | (c >= num_owned)]
+            if c.size and (c.min() < 0 or c.max() >= num_local):
+                bad = c[(c < 0) | (c >= num_local)]
                 raise ValueError(
-                    f"cells has {bad.size} index(es) that are not owned cells of the mesh "
-                    f"(valid: 0..{num_owned - 1} on this rank), e.g. {bad[:5].tolist()}"
+                    f"cells has {bad.size} index(es) that are not cells of the mesh on this rank "
+                    f"(valid: 0..{num_local - 1}, owned and ghost cells, as "
+                    f"dolfinx.mesh.locate_entities returns them), e.g. {bad[:5].tolist()}"
                 )
             return np.unique(c)
 
-        c = raise_on_all_ranks(comm, check)
+        given = raise_on_all_ranks(comm, check)
+        # Ghost cells are accepted (dolfinx.mesh.locate_entities lists them on every rank that
+        # sees them): a ghost cell given on any rank joins the patch on its owner, through a DG0
+        # marker summed into the owners; the patch is the union of what the ranks name.
+        Q = _compat.scalar_function_space(mesh, "DG", 0)
+        marker = dolfinx.fem.Function(Q)
+        dof_of_cell = _compat.dofmap_array(Q)[:, 0]
+        marker.x.array[:] = 0.0
+        marker.x.array[dof_of_cell[given]] = 1.0
+        _compat.scatter_reverse_add(marker)
+        c = np.flatnonzero(marker.x.array[dof_of_cell[:num_owned]] > 0.5).astype(np.int64)
         if comm.allreduce(c.size) == 0:
             raise ValueError("the patch is empty: cells names no cell on any rank")
         self.mesh = mesh
         self.cells = c
-        # patch membership of ghost cells, through a DG0 function
-        Q = _compat.scalar_function_space(mesh, "DG", 0)
-        marker = dolfinx.fem.Function(Q)
-        dof_of_cell = _compat.dofmap_array(Q)[:, 0]
+        # patch membership of ghost cells, through the same marker
         marker.x.array[:] = 0.0
         marker.x.array[dof_of_cell[c]] = 1.0
         marker.x.scatter_forward()

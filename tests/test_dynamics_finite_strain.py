@@ -57,6 +57,36 @@ def rotation(theta: float) -> np.ndarray:
     return np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
 
 
+# --- the law of the model is the law of its dynamics ------------------------------------------
+
+
+@pytest.mark.parametrize("method", ["lagrange", "edge-to-edge", "bridging"])
+def test_dynamics_run_the_law_the_model_was_built_with(method):
+    """``CoupledElasticity(V, patch, NeoHookean(...))`` then ``ExplicitDynamics.coupled(problem)``
+    with no ``material=``: the dynamics are at finite strain (issue 23, item 2: they ran the
+    linear twin, and a spinning plate kept its initial velocity). Checked by what the law does,
+    not by a flag: a finite rigid rotation is force-free for the neo-Hookean law (<= 1e-12 of
+    the stiffness times |u|) and not for the linear one (>= 1e-2); ``material=problem.material``
+    (the linear twin) is the explicit way to small-strain dynamics, and gives that force."""
+    msh = mesh()
+    problem = patch_problem(msh, method, material=NH)
+    assert problem.law is NH and problem.material == mf.physics.materials.linear_twin(NH)
+    R = rotation(0.9)
+    forces = {}
+    for name, options in (("default", {}), ("linear", {"material": problem.material})):
+        dyn = ExplicitDynamics.coupled(problem, **options)
+        dyn.set_initial(displacement=lambda x: x[:, :2] @ (R - np.eye(2)).T)
+        assert dyn.material is (NH if name == "default" else problem.material)
+        assert isinstance(dyn.system, NonlinearSystem if name == "default" else LinearSystem)
+        f = dyn.system.internal_force(dyn.u)
+        scale = max(K.norm() for K in dyn.system.tangent().values())
+        size = max(x.norm() for x in dyn.u)
+        forces[name] = max(g.norm() for g in f) / size
+        dyn.destroy()
+    assert forces["default"] <= 1e-12 * scale, forces
+    assert forces["linear"] >= 1e-2 * scale, forces
+
+
 # --- rigid motions --------------------------------------------------------------------------------
 
 

@@ -477,7 +477,9 @@ def build_coupled(
             (:class:`~dolfinx_meshfree.dynamics.finite_strain.NonlinearSystem`; every coupling
             of :data:`~dolfinx_meshfree.dynamics.finite_strain.FINITE_STRAIN_DYNAMICS`: the
             ramps' interface cells blended, master-slave's links rotating, the bridging
-            penalty linear). ``None``: the problem's material.
+            penalty linear). ``None``: the law the problem was built with
+            (``CoupledElasticity(V, patch, NeoHookean(...))`` runs finite-strain dynamics);
+            ``material=problem.material`` (its linear twin) asks for small-strain dynamics.
     """
     if isinstance(problem, HybridElasticity):  # the hybrid SPH-FE coupling: its own builder
         if (integration, slaves) != ("cells", "layer"):
@@ -501,7 +503,8 @@ def build_coupled(
             f"particle_mass='volume' is not available with coupling={coupling!r}: its particle "
             "masses follow the weighted/blended shape functions; use particle_mass='row-sum'"
         )
-    law = problem.material if material is None else material
+    # the law the model was built with, unless the caller names another (issue 23, item 2)
+    law = getattr(problem, "law", problem.material) if material is None else material
     material = small_strain(law, coupling)
     _check_twin(law, material, problem.material)
     check_crack_options(

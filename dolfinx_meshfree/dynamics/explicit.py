@@ -274,7 +274,9 @@ class ExplicitDynamics(StateQueries):
         :meth:`add_body_force`. ``integration="stress-points"``: Lagrangian-kernel stress
         points (lagrange, edge-to-edge, master-slave); ``slaves="coincident"``: Johnson's
         coupling (master-slave, Rabczuk et al. 2006, eq. 15–16). ``material``: a finite-strain
-        law whose linear twin is the problem's material (every coupling; the hybrid with HA-F).
+        law whose linear twin is the problem's material (every coupling; the hybrid with HA-F);
+        ``None``: the law the problem was built with (a ``CoupledElasticity`` built on a
+        ``NeoHookean`` runs at finite strain), ``problem.material`` its small-strain twin.
         ``crack_contact``: contact of the patch's crack faces, as in :meth:`efg`. Arguments: see
         :func:`~dolfinx_meshfree.dynamics.builders.build_coupled`.
         """
@@ -310,9 +312,10 @@ class ExplicitDynamics(StateQueries):
         (collective, computed once): see :mod:`~dolfinx_meshfree.dynamics.time_step`.
 
         Returns:
-            ``{"courant": h_min / c, "spectral": 2 / omega_bound, "critical": the same (the
-            guard), "omega_bound": ..., "gershgorin": 2 / (the row-sum bound with y = 1),
-            "h_min": ..., "wave_speed": ...}``.
+            A dict with the keys ``"courant"`` (``h_min / c``), ``"spectral"``
+            (``2 / omega_bound``), ``"critical"`` (the same, the guard), ``"omega_bound"``,
+            ``"gershgorin"`` (``2 /`` the row-sum bound with ``y = 1``), ``"h_min"`` and
+            ``"wave_speed"``.
         """
         return self.bound.critical(iterations)
 

@@ -271,6 +271,36 @@ def test_bad_density(rho):
         mf.LinearElastic(210000.0, 0.0, "strain", rho=rho)
 
 
+@pytest.mark.parametrize("method", ["fe", "efg", "lagrange"])
+def test_dynamics_warns_on_a_law_without_density(method):
+    """A law built without ``rho`` takes the default 1.0 (statics does not use it); explicit
+    dynamics on it warns on every rank, naming the fix (issue 23, item 4), and a law with a
+    density (1.0 given explicitly too) runs without a warning. The density was used as given:
+    the stable step scales as sqrt(rho) (a 100x density, 10x the step, to 1e-12)."""
+    import warnings
+
+    from dolfinx_meshfree.dynamics.time_step import DefaultDensityWarning
+
+    comm = MPI.COMM_WORLD
+    law = mf.LinearElastic(ROD.E, 0.0, "strain")
+    assert not law.density_given and law.rho == 1.0
+    assert law == mf.LinearElastic(ROD.E, 0.0, "strain", rho=1.0)  # the same law
+    with pytest.warns(DefaultDensityWarning, match=r"without a density.*pass rho="):
+        dyn = build(method, comm, 2.5, material=law)
+    dt1 = dyn.stable_time_step()
+    dyn.destroy()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DefaultDensityWarning)
+        for rho in (1.0, 100.0):
+            dyn = build(method, comm, 2.5, material=mf.LinearElastic(ROD.E, 0.0, "strain", rho=rho))
+            dt = dyn.stable_time_step()
+            dyn.destroy()
+            assert dt == pytest.approx(dt1 * np.sqrt(rho), rel=1e-12)
+    # the finite-strain laws and the linear twin of a law without density keep "not given"
+    assert not mf.physics.materials.linear_twin(mf.NeoHookean(1.0, 0.3)).density_given
+    assert mf.physics.materials.linear_twin(mf.NeoHookean(1.0, 0.3, rho=2.0)).density_given
+
+
 def test_unknown_method_and_coupling():
     with pytest.raises(ValueError, match=r"method='sph' is not available.*'lagrange'"):
         check_method("sph")

@@ -74,11 +74,17 @@ class GrowthCheck:
     """One check of :class:`DynamicCrackGrowth`.
 
     Attributes:
-        step, time: The model's step and time. tip: the tip (2,) at which K was computed.
-        K_I, K_II: means over the domain radii; theta: kink angle (radians, counterclockwise
-        from the tip direction); K_eq: the equivalent SIF; state: ``"below"`` (K_eq < K_Ic,
-        not growing), ``"initiated"``, ``"growing"``, ``"arrested"``; extended: a segment was
-        added at this check (the model rebuilt); new_tip: the tip after it.
+        step: The model's step.
+        time: The model's time.
+        tip: The tip (2,) at which K was computed.
+        K_I: Mean over the domain radii.
+        K_II: Mean over the domain radii.
+        theta: Kink angle (radians, counterclockwise from the tip direction).
+        K_eq: The equivalent SIF.
+        state: ``"below"`` (K_eq < K_Ic, not growing), ``"initiated"``, ``"growing"``,
+            ``"arrested"``.
+        extended: A segment was added at this check (the model rebuilt).
+        new_tip: The tip after it.
     """
 
     step: int
@@ -252,7 +258,7 @@ class DynamicCrackGrowth:
     # --- results ------------------------------------------------------------------------------
     @property
     def path(self) -> np.ndarray:
-        """The tip positions: the initial tip and the tip after each extension, (m, 2)."""
+        """The tip positions (m, 2), the initial tip and the tip after each extension."""
         return np.array(self.path_points)
 
     def KI_history(self) -> list[list[float]]:

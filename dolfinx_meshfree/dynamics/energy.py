@@ -64,13 +64,13 @@ class EnergyRecord:
 
     @property
     def total(self) -> float:
-        """``kinetic + internal - external - constraint``: constant up to an O(dt^2)
+        """``kinetic + internal - external - constraint``, constant up to an O(dt^2)
         oscillation (the averaged velocity ``v_n`` is not the conserved one)."""
         return self.kinetic + self.internal - self.external - self.constraint
 
     @property
     def balance(self) -> float:
-        """``discrete - external - constraint``: constant to round-off (linear problems)."""
+        """``discrete - external - constraint``, constant to round-off (linear problems)."""
         return self.discrete - self.external - self.constraint
 
 

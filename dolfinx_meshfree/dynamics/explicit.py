@@ -55,7 +55,7 @@ from .queries import StateQueries
 from .results import DynamicsResult
 from .run import integrate
 from .system import Field, LinearSystem, SemiDiscreteSystem, inverse_masses
-from .time_step import TimeStepBound, check_safety
+from .time_step import TimeStepBound, check_safety, warn_default_density
 
 __all__ = ["ExplicitDynamics"]
 
@@ -144,6 +144,7 @@ class ExplicitDynamics(StateQueries):
     ) -> None:
         check_safety(safety)
         check_multiplier_solver(multiplier_solver)
+        warn_default_density(material)
         if system is None:
             system = LinearSystem(fields, blocks, constraint)
         self.system = system

@@ -6,8 +6,8 @@ from ..statics.coupled import COUPLINGS
 
 __all__ = ["DYNAMICS_METHODS", "check_method"]
 
-#: Methods available in explicit dynamics: pure FE, pure EFG, every static coupling and the
-#: hybrid SPH-FE coupling (:class:`~dolfinx_meshfree.couplings.hybrid.HybridElasticity`).
+#: Methods available in explicit dynamics (pure FE, pure EFG, every static coupling and the
+#: hybrid SPH-FE coupling, :class:`~dolfinx_meshfree.couplings.hybrid.HybridElasticity`).
 DYNAMICS_METHODS = ("fe", "efg", *COUPLINGS, "hybrid")
 
 

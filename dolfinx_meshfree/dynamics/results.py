@@ -14,8 +14,9 @@ class DynamicsResult:
     """What :meth:`ExplicitDynamics.run <dolfinx_meshfree.ExplicitDynamics.run>` did.
 
     Attributes:
-        dt: The time step (the last one, if a finite-strain run lowered it). steps: Number of
-            steps taken. time: The final time.
+        dt: The time step (the last one, if a finite-strain run lowered it).
+        steps: Number of steps taken.
+        time: The final time.
         energies: :class:`~dolfinx_meshfree.dynamics.energy.EnergyRecord` at this run's energy
             steps (outputs included; a run continued with another step size starts a new level
             of the discrete energy).
@@ -52,7 +53,7 @@ class DynamicsResult:
 
     @property
     def energy_oscillation(self) -> float:
-        """The same for :attr:`EnergyRecord.total` (kinetic energy at integer steps): an O(dt^2)
+        """The same for :attr:`EnergyRecord.total` (kinetic energy at integer steps), an O(dt^2)
         oscillation of the averaged velocities, not a drift."""
         return self._relative_change("total")
 

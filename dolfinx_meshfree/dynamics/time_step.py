@@ -23,6 +23,7 @@ of a stiffening material or a rebuilt approximation).
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -33,7 +34,34 @@ from ..physics.materials import LinearElastic
 from .linalg import absolute
 from .system import SemiDiscreteSystem
 
-__all__ = ["Rebound", "TimeStepBound", "check_safety", "frequency_bound"]
+__all__ = [
+    "DefaultDensityWarning",
+    "Rebound",
+    "TimeStepBound",
+    "check_safety",
+    "frequency_bound",
+    "warn_default_density",
+]
+
+
+class DefaultDensityWarning(UserWarning):
+    """Explicit dynamics runs on a law built without ``rho`` (the default density 1.0)."""
+
+
+def warn_default_density(material: object) -> None:
+    """Warn (on every rank, no collective call) when ``material`` was built without ``rho``:
+    the density sets the time scale of explicit dynamics and its stable step (``dt ~ h
+    sqrt(rho / E)``), so a steel model in SI units with the default 1.0 runs sqrt(7850) = 89
+    times too fast without a word (issue 23, item 4). Statics does not use the density."""
+    if not getattr(material, "density_given", True):
+        warnings.warn(
+            f"material={material!r} was built without a density: explicit dynamics uses "
+            f"rho={material.rho} (the default), which sets the time scale and the stable step; "
+            f"pass rho= to the law (e.g. {type(material).__name__}(..., rho=7850.0) for steel in "
+            "SI units)",
+            DefaultDensityWarning,
+            stacklevel=3,
+        )
 
 
 def check_safety(safety: float) -> float:

@@ -32,6 +32,7 @@ import numpy.typing as npt
 import ufl
 
 from ..approx import batched
+from .materials import DEFAULT_DENSITY
 
 __all__ = [
     "PLANES",
@@ -159,9 +160,12 @@ class _Hyperelastic:
     E: float
     nu: float
     plane: str | None = "stress"  # the default of LinearElastic, so that swapping laws keeps it
-    rho: float = 1.0
+    rho: float | None = None  # None: DEFAULT_DENSITY, and dynamics warns (see LinearElastic)
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "density_given", self.rho is not None)
+        if self.rho is None:
+            object.__setattr__(self, "rho", DEFAULT_DENSITY)
         lame_parameters(self.E, self.nu, self.rho, self.plane)
 
     @property

@@ -163,7 +163,7 @@ class InternalForces:
 
     @property
     def num_dofs(self) -> int:
-        """``d n``: interleaved dofs of the table's nodes."""
+        """Interleaved dofs of the table's nodes (``d n``)."""
         return self._G.shape[1]
 
     def _call(self, fn: Callable[[], _T]) -> _T:

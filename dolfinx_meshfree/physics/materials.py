@@ -11,7 +11,12 @@ import ufl
 if TYPE_CHECKING:  # annotations only
     from .constitutive import Material
 
-__all__ = ["LinearElastic", "linear_twin"]
+__all__ = ["DEFAULT_DENSITY", "LinearElastic", "linear_twin"]
+
+#: The density of a law built without ``rho``: enough for statics, which does not use it; explicit
+#: dynamics warns when it runs on it (issue 23, item 4: a steel model in SI units got a time
+#: scale sqrt(7850) too fast without a word).
+DEFAULT_DENSITY = 1.0
 
 
 @dataclass(frozen=True)
@@ -21,15 +26,23 @@ class LinearElastic:
     Args:
         E: Young's modulus (> 0). nu: Poisson's ratio (-1 < nu < 0.5). plane: ``"stress"`` or
             ``"strain"`` for a 2D mesh, ``None`` for a 3D mesh (the solvers check it against the
-            mesh with :meth:`check_gdim`). rho: Mass density (used by dynamics; > 0).
+            mesh with :meth:`check_gdim`). rho: Mass density (used by dynamics; > 0);
+            ``None`` (not given): :data:`DEFAULT_DENSITY`, and explicit dynamics warns that
+            the density was not given (it sets the time scale).
+
+    Attributes:
+        density_given: Whether ``rho`` was given (``False``: the default was taken).
     """
 
     E: float
     nu: float
     plane: str | None = "stress"
-    rho: float = 1.0
+    rho: float | None = None
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "density_given", self.rho is not None)
+        if self.rho is None:
+            object.__setattr__(self, "rho", DEFAULT_DENSITY)
         if not (np.isfinite(self.E) and self.E > 0):
             raise ValueError(f"E={self.E} must be a positive number")
         if not (np.isfinite(self.nu) and -1.0 < self.nu < 0.5):
@@ -43,7 +56,7 @@ class LinearElastic:
 
     @property
     def gdim(self) -> int:
-        """Dimension of the law: 2 with ``plane="stress"|"strain"``, 3 with ``plane=None``."""
+        """Dimension of the law, 2 with ``plane="stress"|"strain"``, 3 with ``plane=None``."""
         return 3 if self.plane is None else 2
 
     def check_gdim(self, gdim: int, where: str = "the mesh") -> None:
@@ -153,4 +166,5 @@ def linear_twin(material: Material) -> LinearElastic:
     stiffness of a finite-strain model at ``u = 0``, and its checks, use it."""
     if isinstance(material, LinearElastic):
         return material
-    return LinearElastic(material.E, material.nu, plane=material.plane, rho=material.rho)
+    rho = material.rho if getattr(material, "density_given", True) else None
+    return LinearElastic(material.E, material.nu, plane=material.plane, rho=rho)

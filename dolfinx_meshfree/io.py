@@ -295,8 +295,9 @@ def read_particles(path: str | os.PathLike) -> dict[str, np.ndarray]:
     """Read a particle XDMF file written by :class:`DynamicsWriter` (any process, no MPI).
 
     Returns:
-        ``{"times": (k,), "positions": (k, n, 3), "displacement": (k, n, 3), "velocity":
-        (k, n, 3)}`` for the ``k`` output times of ``n`` particles.
+        A dict with the arrays ``"times"`` ``(k,)``, ``"positions"`` ``(k, n, 3)``,
+        ``"displacement"`` ``(k, n, 3)`` and ``"velocity"`` ``(k, n, 3)`` for the ``k`` output
+        times of ``n`` particles.
     """
     import h5py
 

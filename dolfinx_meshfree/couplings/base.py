@@ -72,10 +72,10 @@ class CoupledSolution:
     patch: ParticlePatch
     timings: dict[str, float] = field(default_factory=dict)
     sizes: dict[str, int] = field(default_factory=dict)
-    #: Ramp couplings: the :class:`~dolfinx_meshfree.couplings.ramp.RampInterface` (blended
-    #: interface cells).
+    #: For the ramp couplings, the :class:`~dolfinx_meshfree.couplings.ramp.RampInterface`
+    #: (blended interface cells).
     interface: RampInterface | None = None
-    #: Finite strain: Newton's record (:class:`~dolfinx_meshfree.NonlinearSolveResult`).
+    #: At finite strain, Newton's record (:class:`~dolfinx_meshfree.NonlinearSolveResult`).
     newton: NonlinearSolveResult | None = None
     #: The small-strain law of the solve (for :meth:`stress_intensity_factors`).
     material: LinearElastic | None = None

@@ -185,7 +185,7 @@ class Crack:
 
     @property
     def tip_ends(self) -> list[int]:
-        """Indices (0: start, -1: end) of the end points that are tips."""
+        """Indices of the end points that are tips (0 the start, -1 the end)."""
         return [e for e, t in zip((0, -1), self.is_tip, strict=True) if t]
 
     @property

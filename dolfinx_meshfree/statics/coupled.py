@@ -191,7 +191,7 @@ class CoupledElasticity:
         self.V, self.patch, self.coupling = V, patch, coupling
         #: The small-strain law of the linear blocks (``law`` itself when it is linear).
         self.material = linear_twin(material)
-        #: The law given: :class:`~dolfinx_meshfree.LinearElastic` (one linear solve) or a
+        #: The law given, :class:`~dolfinx_meshfree.LinearElastic` (one linear solve) or a
         #: finite-strain :class:`~dolfinx_meshfree.physics.constitutive.Material` (Newton).
         self.law = material
         self.quadrature_degree = quadrature_degree
@@ -222,8 +222,8 @@ class CoupledElasticity:
         self.form: ufl.Form | None = None
         # set by CoupledLinearProblem: strong conditions by node (flags, values)
         self.strong: list[tuple[np.ndarray, np.ndarray]] = []
-        #: Body forces (:mod:`~dolfinx_meshfree.physics.body_loads`): :meth:`set_body_force`, or the
-        #: cell integrals of a CoupledLinearProblem's ``L``.
+        #: Body forces (:mod:`~dolfinx_meshfree.physics.body_loads`) from :meth:`set_body_force`
+        #: or the cell integrals of a CoupledLinearProblem's ``L``.
         self.body_forces: list = []
         self.setup_time = time.perf_counter() - t0
 

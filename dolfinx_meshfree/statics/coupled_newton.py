@@ -40,7 +40,7 @@ __all__ = [
     "solve_finite_strain",
 ]
 
-#: Couplings available at finite strain: those whose family assembles its block system apart
+#: Couplings available at finite strain, those whose family assembles its block system apart
 #: from solving it (``system``); the others refuse with a clear error.
 FINITE_STRAIN_COUPLINGS = tuple(name for name, cls in REGISTRY.items() if hasattr(cls, "system"))
 

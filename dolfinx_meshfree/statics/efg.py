@@ -103,11 +103,11 @@ class EFGSolution:
     multipliers: np.ndarray
     timings: dict = field(default_factory=dict)
     num_multipliers: int = 0
-    #: Finite strain: the Newton record (:class:`~dolfinx_meshfree.NonlinearSolveResult`).
+    #: At finite strain, the Newton record (:class:`~dolfinx_meshfree.NonlinearSolveResult`).
     newton: object | None = None
     #: The small-strain law of the solve (for :meth:`stress_intensity_factors`).
     material: LinearElastic | None = None
-    #: The cracks of the model and where they lie (pure EFG: the whole mesh).
+    #: The cracks of the model and where they lie (pure EFG, the whole mesh).
     cracks: list = field(default_factory=list)
     domain: CrackDomain | None = None
 

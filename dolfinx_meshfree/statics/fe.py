@@ -80,7 +80,7 @@ def solve_fe_elasticity(
 
 def solve_forms(a: ufl.Form, L: ufl.Form, bcs: Sequence = ()) -> FESolution:
     """A linear model solved as written for DOLFINx: ``a`` and ``L`` (UFL forms on one space),
-    ``DirichletBC``s lifted into the right-hand side, and the MUMPS LU of
+    ``DirichletBC`` objects lifted into the right-hand side, and the MUMPS LU of
     :func:`~dolfinx_meshfree.statics.petsc.solve_lu` (collective). The reference that the coupled
     runs
     are measured against."""

@@ -40,15 +40,22 @@ class GrowthStep:
     """One step of :class:`QuasiStaticCrackGrowth`.
 
     Attributes:
-        step: 0, 1, ...; tip: the tip (2,) at which K was computed (before the extension);
-        direction: the crack direction there; K_I, K_II: means over the integration domains;
-        radius: the outer domain radii used; path_dependence: the spread of K over them
-        (``StressIntensityFactors.path_dependence``);
-        theta: kink angle (radians, counterclockwise from ``direction``); K_eq: the equivalent
-        SIF; grown: whether the crack was extended after this step; new_tip: the tip after it;
-        time_solve: seconds of ``problem.solve()`` (rebuild of the tables, cut cells and
-        operator, assembly, solve); time_sifs: seconds of the interaction integral;
-        timings: the solution's own split of ``time_solve`` (e.g. setup, assemble, solve).
+        step: 0, 1, ...
+        tip: The tip (2,) at which K was computed (before the extension).
+        direction: The crack direction there.
+        K_I: Mean over the integration domains.
+        K_II: Mean over the integration domains.
+        radius: The outer domain radii used.
+        path_dependence: The spread of K over them
+            (``StressIntensityFactors.path_dependence``).
+        theta: Kink angle (radians, counterclockwise from ``direction``).
+        K_eq: The equivalent SIF.
+        grown: Whether the crack was extended after this step.
+        new_tip: The tip after it.
+        time_solve: Seconds of ``problem.solve()`` (rebuild of the tables, cut cells and
+            operator, assembly, solve).
+        time_sifs: Seconds of the interaction integral.
+        timings: The solution's own split of ``time_solve`` (e.g. setup, assemble, solve).
     """
 
     step: int
@@ -174,7 +181,7 @@ class QuasiStaticCrackGrowth:
 
     @property
     def path(self) -> np.ndarray:
-        """The tip positions: the initial tip and the tip after each extension, (m, 2)."""
+        """The tip positions (m, 2), the initial tip and the tip after each extension."""
         if not self.history:
             return self.crack.points[self.end][None].copy()
         pts = [self.history[0].tip] + [s.new_tip for s in self.history if s.grown]

@@ -66,7 +66,7 @@ class InclinedCentreCrack(PotentialField):
 
     @property
     def frame(self) -> TipFrame:
-        """The crack's frame: origin at the centre, ``e1`` along the crack."""
+        """The crack's frame (origin at the centre, ``e1`` along the crack)."""
         return TipFrame(np.asarray(self.center), np.array([np.cos(self.alpha), np.sin(self.alpha)]))
 
     @property
@@ -97,7 +97,8 @@ class InclinedCentreCrack(PotentialField):
 
     @property
     def normalized(self) -> tuple[float, float]:
-        """``K_I, K_II`` over ``sigma sqrt(pi a)``: ``cos^2 alpha``, ``sin alpha cos alpha``."""
+        """``K_I, K_II`` over ``sigma sqrt(pi a)``, i.e. ``cos^2 alpha`` and
+        ``sin alpha cos alpha``."""
         c, s = np.cos(self.alpha), np.sin(self.alpha)
         return c * c, s * c
 

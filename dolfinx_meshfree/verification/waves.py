@@ -76,7 +76,8 @@ class GaussianPulseRod:
 
     @property
     def transit_time(self) -> float:
-        """``L / c``: the pulse is back at its initial position (Rabczuk's t1 = 0.011563 ms)."""
+        """``L / c``, when the pulse is back at its initial position (Rabczuk's t1 = 0.011563
+        ms)."""
         return self.length / self.wave_speed
 
     def _images(self, y: np.ndarray, antiderivative: bool) -> np.ndarray:

@@ -26,6 +26,9 @@ import dolfinx_meshfree as mf
 import numpy as np
 import pytest
 
+# serial: no parallel code path here (tests/conftest.py, the tiers)
+pytestmark = pytest.mark.serial
+
 RNG = np.random.default_rng(20261130)
 
 

@@ -18,6 +18,9 @@ from dolfinx_meshfree.couplings.base import Coupling
 
 import pytest
 
+# serial: no parallel code path here (tests/conftest.py, the tiers)
+pytestmark = pytest.mark.serial
+
 ROOT = pathlib.Path(mf.__file__).resolve().parent
 PKG = ROOT.name
 #: "About 400 lines" (issue 9): the largest class today is ExplicitDynamics (392).

@@ -5,7 +5,11 @@ from dolfinx_meshfree.approx import jit
 import pytest
 from conftest import load_benchmark
 
-pytestmark = pytest.mark.skipif(not jit.AVAILABLE, reason="numba is not installed")
+# serial: no parallel code path here (tests/conftest.py, the tiers)
+pytestmark = [
+    pytest.mark.skipif(not jit.AVAILABLE, reason="numba is not installed"),
+    pytest.mark.serial,
+]
 
 
 def test_bench_sph_small(tmp_path):

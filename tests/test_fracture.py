@@ -36,6 +36,9 @@ from dolfinx_meshfree.verification.crack_fields import InclinedCentreCrack, edge
 import numpy as np
 import pytest
 
+# serial: no parallel code path here (tests/conftest.py, the tiers)
+pytestmark = pytest.mark.serial
+
 RNG = np.random.default_rng(20261130)
 PLANES = ("stress", "strain")
 

@@ -36,6 +36,9 @@ import pytest
 import ufl
 from mpi4py import MPI
 
+# serial: no parallel code path here (tests/conftest.py, the tiers)
+pytestmark = pytest.mark.serial
+
 
 def _p2_gradient(uh: dolfinx.fem.Function):
     """grad u_h (m, 2, 2) at points of the (serial) mesh, from the P2 basis of basix."""

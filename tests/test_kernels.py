@@ -14,6 +14,9 @@ import pytest
 from conftest import EPS, SQRT_EPS
 from scipy import integrate
 
+# serial: no parallel code path here (tests/conftest.py, the tiers)
+pytestmark = pytest.mark.serial
+
 R = np.array([0.0, 0.25, 0.5, 0.75, 1.0, 1.2, 3.0])
 
 # eq. (3.10a): exp(-(r/0.4)^2) for r <= 1

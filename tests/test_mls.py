@@ -23,6 +23,9 @@ import pytest
 import scipy.sparse as sp
 from conftest import EPS, SQRT_EPS
 
+# serial: no parallel code path here (tests/conftest.py, the tiers)
+pytestmark = pytest.mark.serial
+
 TOL = 1e6 * EPS
 WEIGHT_NAMES = ["gaussian", "cubic", "quartic"]
 ORIGIN = np.array([3.0, -1.0])  # away from 0 so that the basis shift matters

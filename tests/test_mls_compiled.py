@@ -20,7 +20,11 @@ from dolfinx_meshfree.approx.neighbours import pairs_within_support
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.skipif(not jit.AVAILABLE, reason="numba is not installed")
+# serial: no parallel code path here (tests/conftest.py, the tiers)
+pytestmark = [
+    pytest.mark.skipif(not jit.AVAILABLE, reason="numba is not installed"),
+    pytest.mark.serial,
+]
 
 TOL = 1e-12
 WEIGHTS = ["gaussian", "cubic", "quartic"]

@@ -15,6 +15,9 @@ import pytest
 import scipy.sparse as sp
 from conftest import EPS
 
+# serial: no parallel code path here (tests/conftest.py, the tiers)
+pytestmark = pytest.mark.serial
+
 TOL = 1e6 * EPS
 ORIGIN = np.array([3.0, -1.0])
 SIZE = np.array([2.0, 1.0])

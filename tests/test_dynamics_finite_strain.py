@@ -237,6 +237,36 @@ def test_stable_step_is_rebounded_downward_as_the_material_stiffens():
     dyn.destroy()
 
 
+def test_a_rebound_at_the_last_step_keeps_the_last_output(monkeypatch):
+    """A re-bound check that fires at the run's last step (issue 23, item 3: 300 steps with
+    rebound_every = 10) must not drop the output there: the run still ends at t_end with every
+    output and energy record, the same as a run whose checks never fire. The check is forced to
+    fire at the last step (and only there), where no step is left to take."""
+    from dolfinx_meshfree.dynamics import time_step
+
+    def run(fire_at):
+        dyn = build("lagrange")
+        dyn.rebound_every = 1
+        dyn.set_initial(velocity=lambda x: 0.05 * np.column_stack([-x[:, 1], x[:, 0]]))
+        monkeypatch.setattr(
+            time_step.Rebound, "__call__", lambda self, n: fire_at is not None and n == fire_at
+        )
+        result = dyn.run(1.0, outputs=[0.5, 1.0])
+        v = dyn.velocity_at(np.array([[0.3, 0.2]]))
+        dyn.destroy()
+        return result, v
+
+    plain, v_plain = run(None)
+    last = plain.steps
+    fired, v_fired = run(last)
+    assert fired.steps == last and fired.time == pytest.approx(1.0, rel=1e-14)
+    assert len(plain.outputs) == 2 and plain.outputs[-1][1] == pytest.approx(1.0, rel=1e-14)
+    assert fired.outputs == plain.outputs
+    assert len(fired.energies) == len(plain.energies)
+    assert fired.energies[-1].time == pytest.approx(1.0, rel=1e-14)
+    assert np.array_equal(v_fired, v_plain)
+
+
 # --- what is refused ------------------------------------------------------------------------------
 
 

@@ -153,10 +153,11 @@ class CentralDifference:
         current; closes ``progress``. Collective.
 
         The state stays ``(d_N, v_{N-1/2})`` for a next run; ``v_N`` is kept for evaluation.
-        ``stop(n)``, if given, is asked before each step ``n > n0`` (collective, the same answer
-        on every rank): ``True`` ends the run there, in the state ``(d_n, v_{n-1/2})``
-        (:attr:`Stepped.steps` tells how many steps were taken), e.g. to continue with a smaller
-        step (:class:`~dolfinx_meshfree.dynamics.time_step.Rebound`).
+        ``stop(n)``, if given, is asked before each step ``n0 < n < n0 + nsteps`` (collective, the
+        same answer on every rank; not at ``N = n0 + nsteps``, where no step is taken and
+        ``v_N`` and its outputs are recorded): ``True`` ends the run there, in the state
+        ``(d_n, v_{n-1/2})`` (:attr:`Stepped.steps` tells how many steps were taken), e.g. to
+        continue with a smaller step (:class:`~dolfinx_meshfree.dynamics.time_step.Rebound`).
         """
         system, loads, G = self.system, self.loads, self.system.constraints()
         masses = system.mass()
@@ -181,7 +182,9 @@ class CentralDifference:
         stopped = False
         try:
             for n in range(n0, n0 + nsteps + 1):
-                if stop is not None and n > n0 and stop(n):
+                # asked before each step taken: not at N, where the run only records v_N and
+                # its outputs (a stop there lost the last output, issue 23, item 3)
+                if stop is not None and n0 < n < n0 + nsteps and stop(n):
                     stopped = True
                     break  # the state is (d_n, v_{n-1/2})
                 tn = t0 + (n - n0) * dt

@@ -45,7 +45,7 @@ from .fracture.williams import WilliamsField
 from .geometry.adaptive_quadrature import AdaptiveQuadrature
 from .geometry.crack import Crack
 from .geometry.particles import ParticleSet
-from .geometry.partition import balanced_mesh, work_per_rank
+from .geometry.partition import PartitionImbalanceWarning, balanced_mesh, work_per_rank
 from .geometry.patch import PLACEMENTS, ParticlePatch
 from .geometry.quadrature import boundary_facets, cell_quadrature, facet_quadrature
 from .io import DynamicsWriter, ProgressBar, read_particles
@@ -116,6 +116,7 @@ __all__ = [
     "NonlinearSolveResult",
     "ParticlePatch",
     "ParticleSet",
+    "PartitionImbalanceWarning",
     "PointsOutsideMeshError",
     "PressurizedBushing",
     "ProgressBar",

@@ -17,6 +17,7 @@ any ``MeshTags`` on the returned mesh (tags located geometrically carry over; ce
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 
 import basix
@@ -26,7 +27,30 @@ import numpy as np
 from .. import _compat
 from ..parallel import raise_on_all_ranks
 
-__all__ = ["CellWeight", "balanced_mesh", "coordinate_bisection", "work_per_rank"]
+__all__ = [
+    "IMBALANCE_WARN",
+    "PATCH_CELL_WORK",
+    "CellWeight",
+    "PartitionImbalanceWarning",
+    "balanced_mesh",
+    "coordinate_bisection",
+    "warn_imbalance",
+    "work_per_rank",
+]
+
+#: Work of a patch cell relative to an FE cell in a coupled static solve (particles at about the
+#: element size, quadrature and MLS tables, the particle block's 86 entries per row against 18):
+#: the weight that balanced the busiest rank's flops in issue 12's benchmark
+#: (``benchmarks/bench_balance.py --weight 7``).
+PATCH_CELL_WORK = 7.0
+
+#: The busiest rank's estimated work over the mean above which a coupled model warns.
+IMBALANCE_WARN = 1.5
+
+
+class PartitionImbalanceWarning(UserWarning):
+    """A coupled model's particle work sits on a few ranks (the mesh partition ignores it)."""
+
 
 #: ``cell_weight(x) -> w``: the work of the cells whose midpoints are the columns of ``x``
 #: ((gdim, m), as DOLFINx's marker functions take them), ``w`` (m,) positive and finite.
@@ -208,3 +232,30 @@ def balanced_mesh(
         return offsets, ranks
 
     return _compat.create_mesh_partitioned(msh, cells, X, destinations, ghosted)
+
+
+def warn_imbalance(
+    msh: dolfinx.mesh.Mesh, in_patch: np.ndarray, weight: float = PATCH_CELL_WORK
+) -> np.ndarray:
+    """Warn (:class:`PartitionImbalanceWarning`, the same on every rank) when the estimated work
+    of a coupled model, ``1`` per owned FE cell and ``weight`` per owned patch cell, is more than
+    :data:`IMBALANCE_WARN` times the mean on the busiest rank: DOLFINx partitions the mesh by
+    cells alone, so a patch that lies in one rank's part puts the particle work there (issue
+    23, item 15: a user's mesh on 2 ranks solved in 3.7 s against 1.7 s serially). The message
+    gives the one-line fix, :func:`balanced_mesh`. Returns the work per rank (collective)."""
+    comm, tdim = msh.comm, msh.topology.dim
+    n = msh.topology.index_map(tdim).size_local
+    patch_cells = int(np.count_nonzero(in_patch[:n]))
+    work = np.asarray(comm.allgather(float(n - patch_cells) + weight * patch_cells))
+    if comm.size > 1 and work.max() > IMBALANCE_WARN * work.mean():
+        shares = ", ".join(f"{100 * w / work.sum():.0f} %" for w in work)
+        warnings.warn(
+            f"the coupled model's work is unevenly spread over the {comm.size} ranks (estimated "
+            f"shares {shares}, with a patch cell counted as {weight:g} FE cells): the mesh "
+            "partition ignores the particles. Rebalance the mesh before building the patch: "
+            "msh = mf.balanced_mesh(msh, lambda x: np.where(<x in the patch>, "
+            f"{weight:g}, 1.0)), then locate the patch cells on the new mesh",
+            PartitionImbalanceWarning,
+            stacklevel=3,
+        )
+    return work

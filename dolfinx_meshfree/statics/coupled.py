@@ -37,6 +37,7 @@ from ..couplings.base import (
 from ..couplings.bridging import check_options
 from ..couplings.lagrange import interface_particles
 from ..couplings.master_slave import SLAVES
+from ..geometry.partition import warn_imbalance
 from ..geometry.patch import ParticlePatch
 from ..geometry.stress_points import check_integration
 from ..parallel import raise_on_all_ranks
@@ -187,6 +188,7 @@ class CoupledElasticity:
                 "the patch covers the whole mesh: no FE cells are left to couple to; solve with "
                 "EFGElasticity, or leave some cells out of the patch"
             )
+        warn_imbalance(V.mesh, patch.in_patch)
         t0 = time.perf_counter()
         self.V, self.patch, self.coupling = V, patch, coupling
         #: The small-strain law of the linear blocks (``law`` itself when it is linear).

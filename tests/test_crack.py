@@ -351,14 +351,41 @@ def test_patch_decides_tips_and_mouths(left_patch_mesh):
 
 
 @pytest.mark.parametrize(
+    "points",
+    [
+        [[0, 0.5], [0.3, 0.5]],  # along a particle row, the tip on a particle: both refusals
+        [[0, 0.52], [0.3, 0.5]],  # the tip on a particle
+        [[0, 0.5], [0.35, 0.5]],  # on a particle row
+        [[0.1, 0.2], [0.3, 0.4]],  # an inner crack on a diagonal of the grid, tips on particles
+    ],
+)
+def test_the_refusal_names_a_crack_that_is_accepted(left_patch_mesh, points):
+    """A crack in the way of particles is refused with one piece of advice: a position of the
+    crack clear of every particle (issue 23, item 8: moving the tip as advised left 25
+    particles on the crack line, the next refusal). The advised crack is accepted by the patch."""
+    import ast
+    import re
+
+    msh, cells = left_patch_mesh
+    patch = mf.ParticlePatch(msh, cells, spacing=H)
+    with pytest.raises(ValueError, match="is clear of every particle") as info:
+        patch.add_crack(mf.Crack(points))
+    advised = ast.literal_eval(re.search(r"the crack at (\[\[.*?\]\])", str(info.value)).group(1))
+    assert np.abs(np.asarray(advised) - np.asarray(points, float)).max() <= 0.5 * H
+    crack = mf.Crack(advised)
+    patch.add_crack(crack)
+    assert patch.cracks == [crack]
+
+
+@pytest.mark.parametrize(
     ("points", "match"),
     [
         ([[0, 0.52], [0.8, 0.52]], r"\(0.625, 0.52\) lies in an FE cell"),
         ([[-0.1, 0.52], [0.3, 0.52]], r"\(-0.1, 0.52\) lies outside the mesh"),
         ([[0, 0.52], [0.55, 0.52]], r"tip \(0.55, 0.52\) is 0.05 from the FE interface"),
-        ([[0, 0.52], [0.3, 0.5]], r"tip \(0.3, 0.5\) is on the particle .* e.g. to \(0.32"),
+        ([[0, 0.52], [0.3, 0.5]], r"tip \(0.3, 0.5\) is on the particle .*is clear of every"),
         ([[0.03, 0.52], [0.3, 0.52]], r"tip \(0.03, 0.52\) is 0.03 from the patch's exterior"),
-        ([[0, 0.5], [0.35, 0.5]], r"particle\(s\) lie on the crack, e.g. at \(0, 0.5\)"),
+        ([[0, 0.5], [0.35, 0.5]], r"particle\(s\) lie on the crack, e.g. at \(0, 0.5\).*clear"),
         ([[0, 0.52], [0.3, 0.52], [0.3, 0.0]], "no tip and would split the body"),
     ],
 )

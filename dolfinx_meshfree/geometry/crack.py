@@ -524,27 +524,103 @@ def validate_in_patch(
                         "crack's influence would reach the FE side; shorten the crack or enlarge "
                         "the patch ahead of the tip"
                     )
-            dp = np.linalg.norm(x_particles - tip, axis=1)
-            k = int(dp.argmin())
-            if dp[k] <= tol:
-                t = pts[1] - pts[0] if e == 0 else pts[-1] - pts[-2]
-                moved = tip + (0.25 * h if e == 1 else -0.25 * h) * t / np.linalg.norm(t)
-                raise ValueError(
-                    f"the crack tip {_fmt(tip)} is on the particle at {_fmt(x_particles[k])}: the "
-                    f"diffraction around the tip is undefined there; move the tip a fraction of "
-                    f"the spacing along the crack, e.g. to {_fmt(moved)}"
+        tip_hits, on = _particle_conflicts(pts, mouth, x_particles, tol)
+        if tip_hits or on.size:
+            # one piece of advice for both conflicts: a position of the crack that is checked
+            # clear of every particle here (issue 23, item 8: moving the tip as advised left
+            # particles on the crack line, the next refusal)
+            what = []
+            for e, k in tip_hits:
+                what.append(
+                    f"the crack tip {_fmt(pts[-e])} is on the particle at {_fmt(x_particles[k])} "
+                    "(the diffraction around the tip is undefined there)"
                 )
-        d = point_segment_distance(x_particles, a, b).min(axis=1)
-        on = np.flatnonzero(d <= tol)
-        if on.size:
-            raise ValueError(
-                f"{on.size} particle(s) lie on the crack, e.g. at {_fmt(x_particles[on[0]])}: a "
-                "particle on a crack face has no side; shift the crack by a fraction of the "
-                f"spacing h={h:.3g} (e.g. h/4) off the particle rows"
+            if on.size:
+                what.append(
+                    f"{on.size} particle(s) lie on the crack, e.g. at {_fmt(x_particles[on[0]])} "
+                    "(a particle on a crack face has no side)"
+                )
+            clear = _clear_position(pts, mouth, x_particles, tol, h, exterior, iface, clearance)
+            fix = (
+                "shift the crack by a fraction of the spacing h="
+                f"{h:.3g} off the particle rows and its tip(s) off the particles"
+                if clear is None
+                else f"the crack at {[[float(f'{v:.6g}') for v in p] for p in clear[0]]} "
+                f"({clear[1]}) is clear of every particle: use it, or any position a fraction "
+                f"of the spacing h={h:.3g} off the particle rows and the particles"
             )
+            raise ValueError("; ".join(what) + f": {fix}")
         return [not mouth[0], not mouth[1]]
 
     return raise_on_all_ranks(comm, check)
+
+
+def _particle_conflicts(
+    pts: np.ndarray, mouth: np.ndarray, x_particles: np.ndarray, tol: float
+) -> tuple[list[tuple[int, int]], np.ndarray]:
+    """The particles in the way of a crack polyline ``pts``: ``(end, particle)`` for each tip
+    (an end that is not a mouth) on a particle, and the particles on the crack's segments (within
+    ``tol``). Local (the particle positions are on every rank)."""
+    tips = []
+    for e in (0, 1):
+        if not mouth[e]:
+            dp = np.linalg.norm(x_particles - pts[-e], axis=1)
+            k = int(dp.argmin())
+            if dp[k] <= tol:
+                tips.append((e, k))
+    d = point_segment_distance(x_particles, pts[:-1], pts[1:]).min(axis=1)
+    return tips, np.flatnonzero(d <= tol)
+
+
+def _clear_position(
+    pts: np.ndarray,
+    mouth: np.ndarray,
+    x_particles: np.ndarray,
+    tol: float,
+    h: float,
+    exterior: np.ndarray,
+    iface: np.ndarray,
+    clearance: float,
+) -> tuple[np.ndarray, str] | None:
+    """The nearest of a few moves of the crack (the whole crack shifted normal to its first
+    segment by 0, +-h/4, +-h/3, +-0.4 h; each tip moved along its end segment by 0, +-h/4) after
+    which no particle is in its way, its mouths are still on the exterior boundary and its tips
+    keep their distances to the boundary (``h``) and the FE interface (``clearance``); ``None``
+    if none is. Returns the polyline and a description of the move. Local."""
+    t0 = pts[1] - pts[0]
+    normal = np.array([-t0[1], t0[0]]) / np.linalg.norm(t0)
+    moves = []
+    for shift in (0.0, 0.25, -0.25, 1 / 3, -1 / 3, 0.4, -0.4):
+        for along in (0.0, 0.25, -0.25):
+            if shift == 0.0 and along == 0.0:
+                continue
+            moves.append((abs(shift) + abs(along), shift, along))
+    for _, shift, along in sorted(moves, key=lambda m: m[0]):
+        cand = pts + shift * h * normal
+        for e in (0, 1):
+            if not mouth[e] and along:
+                end = cand[-e] - cand[1 if e == 0 else -2]
+                cand[-e] = cand[-e] + along * h * end / np.linalg.norm(end)
+        if exterior.size:
+            d_ext = point_segment_distance(cand[[0, -1]], exterior[:, 0], exterior[:, 1]).min(1)
+        else:
+            d_ext = np.full(2, np.inf)
+        if np.any((d_ext <= tol) != mouth) or np.any(d_ext[~mouth] < h):
+            continue
+        if iface.size:
+            tips = cand[[0, -1]][~mouth]
+            d_if = point_segment_distance(tips, iface[:, 0], iface[:, 1]).min(axis=1)
+            if np.any(d_if < clearance):
+                continue
+        tip_hits, on = _particle_conflicts(cand, mouth, x_particles, tol)
+        if not tip_hits and not on.size:
+            words = []
+            if shift:
+                words.append(f"shifted {shift * h:+.3g} normal to its first segment")
+            if along:
+                words.append(f"its tip(s) moved {along * h:+.3g} along the crack")
+            return cand, " and ".join(words)
+    return None
 
 
 def place_crack(crack: Crack, domain: ParticlePatch | CrackDomain) -> None:

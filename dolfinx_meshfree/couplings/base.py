@@ -150,6 +150,116 @@ class CoupledSolution:
         fe_side = ~self.patch.in_patch
         return np.array(route_to_owners(msh, x, compute, fe_side), dtype=float).reshape(-1, gdim)
 
+    def as_function(self, V: dolfinx.fem.FunctionSpace | None = None) -> dolfinx.fem.Function:
+        """The coupled displacement field as a DOLFINx Function on ``V`` (collective), for
+        ``XDMFFile``, UFL post-processing and plotting: ``u`` itself is zero inside the patch.
+
+        The value at each node (dof coordinate) of ``V``:
+
+        * a node of an FE cell (a cell not in the patch), interface nodes included: the FE side,
+          as :meth:`displacement` takes it: ``u`` itself on its own space (for another ``V``,
+          ``u`` interpolated); in a ramp coupling's interface cells the blended field
+          ``(1 - R) u_FE + R u_P`` (on the interface, where ``R = 1``, the particle field);
+        * a node whose cells all lie in the patch: the particle field there,
+          ``mls.tabulate(x).values @ coefficients`` (the MLS field is not interpolating: these
+          are not the coefficients). Bridging: so also in the band's interior nodes, where the
+          solution is the energy-weighted ``(1 - alpha) u_FE + alpha u_P`` that the two fields
+          make up to the coupling error; the band's FE field is ``u`` itself.
+
+        The nodes of ``V`` take the values of the field, so a ``V`` of a higher degree than the
+        FE space interpolates its piecewise-linear FE part exactly (a P2 space holds the P1 field
+        and the particle field at its nodes). The choice is made per node from the whole mesh,
+        so every partition gives the same values to round-off (a node on cells owned by several
+        ranks takes the mean of their evaluations of the same continuous field); ghost values
+        are up to date.
+
+        Args:
+            V: A vector space of ``gdim`` components on the solution's mesh whose dofs are point
+                values (Lagrange, continuous or discontinuous, any degree); ``None``: the
+                solution's own FE space (``u.function_space``).
+
+        Returns:
+            A new Function on ``V`` named ``"displacement"``.
+        """
+        U = self.u.function_space
+        V = U if V is None else V
+        msh = U.mesh
+        gdim, tdim = msh.geometry.dim, msh.topology.dim
+        coordinates = raise_on_all_ranks(msh.comm, lambda: _point_value_nodes(V, msh))
+        n_nodes = coordinates.shape[0]
+        n_cells = msh.topology.index_map(tdim).size_local
+        cell_nodes = _compat.dofmap_array(V)[:n_cells]
+        fe_cells = np.flatnonzero(~self.patch.in_patch[:n_cells])
+        blended = np.zeros(n_cells, dtype=bool)
+        if self.interface is not None:  # the ramps' interface cells
+            blended = self.interface.in_interface[:n_cells]
+        # one owned FE cell per node of this rank's FE cells, a pure FE cell where there is one
+        cell_of = np.full(n_nodes, -1, dtype=np.int64)
+        for group in (fe_cells[blended[fe_cells]], fe_cells[~blended[fe_cells]]):
+            cell_of[cell_nodes[group].ravel()] = np.repeat(group, cell_nodes.shape[1])
+        nodes = np.flatnonzero(cell_of >= 0)
+        values = np.zeros((n_nodes, gdim))
+        exact = np.zeros(nodes.size, dtype=bool)
+        if V is U:  # the FE function itself at its own nodes of pure FE cells
+            exact = ~blended[cell_of[nodes]]
+            values[nodes[exact]] = self.u.x.array.reshape(-1, gdim)[nodes[exact]]
+        rest = nodes[~exact]
+
+        def fe_side() -> np.ndarray:
+            if rest.size == 0:
+                return np.zeros((0, gdim))
+            q = QuadraturePoints(coordinates[rest], np.zeros(rest.size), cell_of[rest])
+            return self.evaluate_at_quadrature(q)[0]
+
+        values[rest] = raise_on_all_ranks(msh.comm, fe_side)
+        # sum the evaluations of every rank that owns FE cells at a node, count them
+        acc = dolfinx.fem.Function(V)
+        count = dolfinx.fem.Function(V)
+        acc.x.array[:] = 0.0
+        count.x.array[:] = 0.0
+        acc.x.array.reshape(-1, gdim)[nodes] = values[nodes]
+        count.x.array.reshape(-1, gdim)[nodes] = 1.0
+        _compat.scatter_reverse_add(acc)
+        _compat.scatter_reverse_add(count)
+        n_owned = V.dofmap.index_map.size_local
+        c = count.x.array.reshape(-1, gdim)[:n_owned, 0]
+        fe_node = c > 0.5
+        out = acc  # reused: its owned entries hold the sums
+        owned = out.x.array.reshape(-1, gdim)[:n_owned]
+        owned[fe_node] /= c[fe_node, None]
+        inner = np.flatnonzero(~fe_node)
+
+        def particle_side() -> np.ndarray:
+            if inner.size == 0:
+                return np.zeros((0, gdim))
+            return self.mls.tabulate(coordinates[inner], 0).values @ self.coefficients
+
+        owned[inner] = raise_on_all_ranks(msh.comm, particle_side)
+        out.x.scatter_forward()
+        out.name = "displacement"
+        return out
+
+
+def _point_value_nodes(V: dolfinx.fem.FunctionSpace, msh: dolfinx.mesh.Mesh) -> np.ndarray:
+    """The coordinates (local nodes, gdim) of the nodes of a vector space on ``msh`` whose dofs
+    are point values (:meth:`CoupledSolution.as_function`); a ValueError otherwise."""
+    gdim = msh.geometry.dim
+    if V.mesh is not msh:
+        raise ValueError("V must be a function space on the solution's mesh")
+    bs = V.dofmap.index_map_bs
+    if bs != gdim:
+        raise ValueError(
+            f"V must be a vector space of {gdim} components (the displacement's), like "
+            f"_compat.vector_function_space(mesh, degree); this space has block size {bs}"
+        )
+    try:
+        x = V.tabulate_dof_coordinates()
+    except RuntimeError as e:
+        raise ValueError(
+            f"V's dofs must be point values (a Lagrange space, continuous or discontinuous): {e}"
+        ) from e
+    return np.ascontiguousarray(x[:, :gdim])
+
 
 @dataclass
 class CouplingOperators:

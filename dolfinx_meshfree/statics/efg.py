@@ -29,6 +29,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+import dolfinx.fem
 import numpy as np
 import scipy.sparse as sp
 
@@ -119,6 +120,51 @@ class EFGSolution:
         """Displacement (m, gdim) and its gradient (m, gdim, gdim), ``g[:, i, j] = du_i/dx_j``."""
         t = self.mls.tabulate(points)
         return t.values @ self.coefficients, t.gradient(self.coefficients)
+
+    def as_function(self, V: dolfinx.fem.FunctionSpace) -> dolfinx.fem.Function:
+        """The particle displacement field as a DOLFINx Function on ``V`` (collective), for
+        ``XDMFFile``, UFL post-processing and plotting: at every node (dof coordinate) of ``V``
+        the MLS field there, ``mls.tabulate(x).values @ coefficients`` (not the coefficients:
+        MLS is not interpolating). Each rank evaluates its owned nodes; ghost values are up to
+        date.
+
+        Args:
+            V: A vector space of ``gdim`` components on the background mesh (or any mesh inside
+                the particles' supports) whose dofs are point values (Lagrange, continuous or
+                discontinuous, any degree), e.g. ``_compat.vector_function_space(mesh, 1)``.
+
+        Returns:
+            A new Function on ``V`` named ``"displacement"``.
+        """
+        msh = V.mesh
+        gdim = self.coefficients.shape[1]
+
+        def evaluate() -> np.ndarray:
+            bs = V.dofmap.index_map_bs
+            if msh.geometry.dim != gdim or bs != gdim:
+                raise ValueError(
+                    f"V must be a vector space of {gdim} components (the displacement's) on a "
+                    f"{gdim}D mesh, like _compat.vector_function_space(mesh, degree); this space "
+                    f"has block size {bs} on a {msh.geometry.dim}D mesh"
+                )
+            try:
+                x = V.tabulate_dof_coordinates()[: V.dofmap.index_map.size_local, :gdim]
+            except RuntimeError as e:
+                raise ValueError(
+                    "V's dofs must be point values (a Lagrange space, continuous or "
+                    f"discontinuous): {e}"
+                ) from e
+            if x.shape[0] == 0:
+                return np.zeros((0, gdim))
+            return self.mls.tabulate(np.ascontiguousarray(x), 0).values @ self.coefficients
+
+        owned = raise_on_all_ranks(msh.comm, evaluate)
+        out = dolfinx.fem.Function(V)
+        out.x.array[:] = 0.0
+        out.x.array[: owned.size] = owned.ravel()
+        out.x.scatter_forward()
+        out.name = "displacement"
+        return out
 
     def stress_intensity_factors(
         self,

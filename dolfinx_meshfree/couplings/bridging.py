@@ -37,6 +37,16 @@ Essential conditions: strongly on FE nodes of Dirichlet facets of FE and band ce
 piecewise-constant facet multipliers on the particles of Dirichlet facets of patch cells (band
 included: both discretisations live there). Constraint rows are scaled by ``s = E``.
 
+Stair steps of a slanted or curved interface (issue 23, item 7): a band cell whose nodes all
+lie on the interface has ``alpha = 0`` throughout, i.e. the weights ``beta_FE = 1``,
+``beta_P = 0`` of ``Omega_FE - Omega_int`` (eq. 47-48). It is FE territory: the constraint
+(eq. 52, 57) and the multiplier nodes leave it out (``BridgingBand.tied``). A particle whose
+support meets the patch's quadrature only in such cells has no energy, no load and no constraint
+(eq. 61-62 vanish for it, eq. 56 is empty): it is held at 0 (:func:`_held_particles`) instead of
+leaving the system singular or the VCI dividing by its zero ``alpha``-weighted integral (the
+refusal "shape function ... integrates to ~0" of a 32 x 16 model with a slanted patch at
+spacing h/2). The linear patch test stays exact.
+
 Variationally consistent integration (``consistent=True``, the default of
 :class:`~dolfinx_meshfree.CoupledElasticity`): the particle test gradients are corrected under the
 weight ``alpha`` so that the linear patch test passes to round-off on any mesh, with either
@@ -48,7 +58,7 @@ from __future__ import annotations
 
 import numbers
 import time
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import dolfinx
 import numpy as np
@@ -200,6 +210,13 @@ class BridgingBand:
     layers is wider than the patch (fewer than ``overlap`` layers of patch cells beside the
     interface).
 
+    The overlapping subdomain proper, where the constraint of eq. 52 and 57 ties the two fields,
+    is the band without the cells where ``alpha`` vanishes identically (``tied``): a patch cell
+    whose nodes all lie on the interface (a stair step of a slanted or curved interface, FE
+    cells on three sides) has ``beta_FE = 1`` and ``beta_P = 0`` there (eq. 47-48), the
+    weights of ``Omega_FE - Omega_int``, so it is FE territory and no part of ``Omega_int``.
+    Where no such cell exists, ``tied`` is ``in_band``.
+
     Attributes:
         layer: Node layer index per local node (``overlap + 1`` beyond the band or off it);
             ``None`` for a band of a width.
@@ -208,9 +225,17 @@ class BridgingBand:
             1 elsewhere).
         in_band: bool per local cell (owned and ghost): a band cell.
         cells: Owned band cells (local indices).
-        particles: Indices of the band particles (in closed band cells), on every rank.
+        tied: bool per local cell: a band cell where ``alpha`` is not identically 0 (a node
+            with ``alpha > 0``): the cells of the constraint.
+        tied_cells: Owned ``tied`` cells (local indices).
+        tied_node: bool per local node: a node of a ``tied`` cell (the multiplier nodes).
+        particles: Indices of the band particles (in closed ``tied`` cells: the points of
+            ``constraint="points"``), on every rank.
         local_particles: The band particles this rank handles, with ``local_cells``, the owned
             cell each lies in (each band particle is handled by exactly one rank).
+        held: Indices of the particles held at 0 because ``alpha = 0`` on their whole support
+            (:func:`_held_particles`), on every rank; set by the assembly of the static system
+            (empty until then).
     """
 
     def __init__(self, problem, overlap: int, band_width: float | None = None):
@@ -246,9 +271,14 @@ class BridgingBand:
             self.alpha = np.where(self.in_band_node, alpha, 1.0)
         n_cells = msh.topology.index_map(tdim).size_local
         self.cells = np.flatnonzero(self.in_band[:n_cells]).astype(np.int32)
+        # Omega_int proper: the band cells with a node where alpha > 0 (the P1/Q1 alpha >= 0
+        # vanishes identically on a cell exactly when it vanishes at all its nodes)
+        self.tied = self.in_band & (self.alpha[dofs[:ncl]] > 0.0).any(axis=1)
+        self.tied_cells = np.flatnonzero(self.tied[:n_cells]).astype(np.int32)
+        self.tied_node = node_flags(problem.V, dofs[:n_cells][self.tied[:n_cells]].ravel())
 
-        # band particles: those where the band indicator (P1 interpolant of in_band_node) is 1,
-        # each handled by the lowest rank that owns a cell containing it
+        # band particles: those where the indicator of the tied cells (P1 interpolant of
+        # tied_node) is 1, each handled by the lowest rank that owns a cell containing it
         x = patch.particles.positions
         cells = locate_points(msh, x)
         claim = np.where(cells >= 0, comm.rank, comm.size).astype(np.int32)
@@ -256,11 +286,12 @@ class BridgingBand:
         comm.Allreduce(claim, owner, op=MPI.MIN)
         mine = np.flatnonzero(owner == comm.rank)
         t = tabulate_in_cells(V, x[mine], cells[mine], derivatives=0).values
-        indicator = t @ self.in_band_node.astype(float)
+        indicator = t @ self.tied_node.astype(float)
         keep = indicator >= 1.0 - 1e-10
         self.local_particles = mine[keep]
         self.local_cells = cells[mine][keep]
         self.particles = np.sort(np.concatenate(comm.allgather(self.local_particles)))
+        self.held = np.zeros(0, dtype=np.int64)
         self._refuse_bonded_cracks(patch)
 
     def _refuse_bonded_cracks(self, patch) -> None:
@@ -349,10 +380,11 @@ class BridgingBand:
         return a, np.stack([g @ self.alpha for g in t.gradients], axis=1)
 
     def numbering(self, problem: CoupledElasticity) -> tuple[np.ndarray, Layout]:
-        """Global multiplier (block) number of each local band node (-1 elsewhere); collective."""
+        """Global multiplier (block) number of each local node of the tied cells (-1
+        elsewhere); collective."""
         V, comm = self.V, problem.patch.comm
         n_owned = V.dofmap.index_map.size_local
-        mine = np.flatnonzero(self.in_band_node[:n_owned])
+        mine = np.flatnonzero(self.tied_node[:n_owned])
         layout = Layout.from_local(comm, mine.size)
         num = dolfinx.fem.Function(V)
         num.x.array[:] = 0.0
@@ -470,6 +502,7 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
     b = band.in_band[q.cells]
     w[b] *= band.alpha_at(q.points[b], q.cells[b])
     tq = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(q.points))
+    held = band.held = _held_particles(problem, q, w, tq)  # alpha = 0 on their support
 
     # essential conditions: strongly on FE nodes of FE and band facets, multipliers on patch facets
     _, patch_bc, dq, dtabs, ubc, is_bc = essential_conditions(
@@ -489,7 +522,7 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
     test = None
     if problem.consistent:
         test = _consistent_test_gradients(
-            problem, band, q, w, tq, (t_fe, t_p, cw), ids, ml.size_global // d
+            problem, band, q, w, tq, (t_fe, t_p, cw), ids, ml.size_global // d, held
         )
     setup = problem.setup_time + time.perf_counter() - t0
     if tables is not None:
@@ -505,6 +538,9 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
     Kq = stiffness_matrix(test or tq.gradients, w, problem.material, tq.gradients).tocoo()
     dof_map = pdofs.ravel()
     Kp_loc = sp.csr_matrix((Kq.data, (dof_map[Kq.row], dof_map[Kq.col])), shape=(d * n, d * n))
+    hold = _hold_block(problem, held, dof_map, d * n)
+    if hold is not None:
+        Kp_loc = Kp_loc + hold
     keep = ids[M_fe.row] >= 0
     fe_rows = (ids[M_fe.row[keep]], M_fe.col[keep], M_fe.data[keep])
     keep = ids[M_p.row] >= 0
@@ -574,13 +610,17 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
         K_pf = K_fp.T.tocsr()
         lift = fixed_dof[A12.row]
         np.add.at(f_p, A12.col[lift], -A12.data[lift] * x_fix[A12.row[lift]])
+    fe_body = None
+    if problem.body_forces:  # weighted by beta_FE and beta_P like the tractions (eq. 49)
+        fe_body, p_body = _body_loads(problem, band)
+        f_p += p_body
+    dirichlet = [(t.values, dw.weights) for t, dw in zip(dtabs, dq, strict=True)]
+    _refuse_held_in_equations(problem, held, (t_p, cw), dirichlet, f_p)
     b_fe = create_vector(
         comm, fe_layout, cat([*f_fe_rows, np.zeros(0, np.int64)]), cat([*f_fe_vals, []])
     )
-    if problem.body_forces:  # weighted by beta_FE and beta_P like the tractions (eq. 49)
-        fe_body, p_body = _body_loads(problem, band)
+    if fe_body is not None:
         b_fe.array[:] += fe_body
-        f_p += p_body
 
     loads = (b_fe.copy(), f_p.copy())
     K_fe = _fe_stiffness(problem, band)
@@ -589,9 +629,12 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
     if K_ff is not None:
         K_pen = create_aij(comm, K_ff, fe_layout, fe_layout)
         K_fe.axpy(1.0, K_pen, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-        K_pen_p = create_aij(comm, A22g, pl, pl)
+        K_pen_p = create_aij(comm, A22g if hold is None else A22g + hold, pl, pl)
         mats += [K_pen, K_pen_p]
         constant_diagonal = [K_pen, K_pen_p]
+    elif hold is not None:  # the held particles' identity rows stay in a Newton tangent
+        constant_diagonal[1] = create_aij(comm, hold, pl, pl)
+        mats.append(constant_diagonal[1])
     x_bc = fix_fe_rows(problem, K_fe, b_fe, fixed_local, x_fix)
     Kp = create_aij(comm, Kp_loc, pl, pl)
     b_p = create_vector(comm, pl, pdofs.ravel(), f_p)
@@ -662,7 +705,8 @@ def _band_multiplier_of_alpha(problem, band: BridgingBand, ids: np.ndarray, nb: 
     straight layers); on unstructured bands it is its projection. The band node mass matrix is
     small (band nodes only): it is gathered and solved on every rank. Collective."""
     V, comm = problem.V, problem.patch.comm
-    q = cell_quadrature(V.mesh, problem.quadrature_degree, band.cells)
+    # grad(alpha) = 0 on the band cells outside the tied ones: the tied cells carry it all
+    q = cell_quadrature(V.mesh, problem.quadrature_degree, band.tied_cells)
     t = tabulate_in_cells(V, q.points, q.cells, derivatives=1)
     grad_alpha = np.stack([g @ band.alpha for g in t.gradients], axis=1)
     rhs = t.values.T @ (q.weights[:, None] * grad_alpha)
@@ -685,7 +729,15 @@ def _band_multiplier_of_alpha(problem, band: BridgingBand, ids: np.ndarray, nb: 
 
 
 def _consistent_test_gradients(
-    problem, band: BridgingBand, q, w: np.ndarray, tq, constraint, ids: np.ndarray, nb: int
+    problem,
+    band: BridgingBand,
+    q,
+    w: np.ndarray,
+    tq,
+    constraint,
+    ids: np.ndarray,
+    nb: int,
+    held: np.ndarray | None = None,
 ) -> list:
     r"""Variationally consistent integration (Chen, Hillman & Rüter 2013) of the particle test
     functions under the energy weight ``alpha`` (eq. 46): corrected gradients with
@@ -703,7 +755,9 @@ def _consistent_test_gradients(
     the alpha-weighted facet multipliers: the linear patch test passes to round-off on any mesh,
     with either constraint. (With ``grad(alpha)`` itself in the band term, a piecewise constant
     field outside the continuous multiplier space on unstructured bands, it missed by 1.6e-3.)
-    Collective."""
+    The ``held`` particles (:func:`_held_particles`: ``alpha = 0`` on their whole support, so
+    both sides of the equation above vanish for them) are left uncorrected; any other particle
+    whose function integrates to ~0 is refused by its coordinates. Collective."""
     patch, comm = problem.patch, problem.patch.comm
     msh, deg = problem.V.mesh, problem.quadrature_degree
     t_fe, t_p, cw = constraint
@@ -728,7 +782,106 @@ def _consistent_test_gradients(
             np.concatenate([bq.weights * alpha_b, cw]),
             np.concatenate([bq.normals, -lam]),
             comm,
+            positions=patch.particles.positions,
+            inactive=None if held is None else np.isin(np.arange(tq.values.shape[1]), held),
         ),
+    )
+
+
+def _held_particles(problem, q: QuadraturePoints, w: np.ndarray, tq) -> np.ndarray:
+    r"""The particles that carry no energy: their shape function vanishes at every quadrature
+    point of the patch where the particle weight ``beta_P`` is positive, though not at all of
+    them (indices, increasing, the same on every rank; collective).
+
+    A particle's internal and external forces (eq. 61-62, with ``K_P`` of eq. 78)
+
+    .. math::
+        f^{int}_J = \int_{\Omega_P} \beta^P \nabla\phi_J \cdot \sigma, \qquad
+        f^{ext}_J = \int_{\Omega_P} \beta^P \phi_J b + \int_{\Gamma_t} \beta^P \phi_J \bar t
+
+    vanish identically when ``beta_P = alpha = 0`` on its whole support: a particle beside a
+    band cell whose nodes all lie on the interface (a stair step of a slanted interface), whose
+    support reaches the patch's quadrature only there. Such a cell is not in ``Omega_int``
+    (:class:`BridgingBand`, ``tied``), so the constraint (eq. 52, 57) does not see the particle
+    either: its row and column of eq. 68 are empty, and its coefficient is not part of the
+    discrete problem. It is held at 0 (an identity row, :func:`_hold_block`), which leaves
+    every other unknown as it was: its shape function is 0 wherever the particle field has a
+    weight at a quadrature point, and where it is not (its stair-step cells), the solution is
+    ``(1 - alpha) u_FE + alpha u_P = u_FE`` (:class:`BridgingSolution`). VCI cannot
+    correct it (its ``alpha``-weighted integral, the denominator of the correction, is 0) and
+    need not: its test gradients enter no sum, so :func:`_consistent_test_gradients` skips it.
+
+    A particle whose support holds no quadrature point at all is not held but refused by the
+    consistent integration (its support misses the quadrature: a dilation too small).
+    ``w``: the quadrature weights times ``alpha`` in the band (eq. 46), ``tq``: the MLS table
+    at ``q``. Absolute values: no cancellation can make a particle look empty.
+    """
+    comm = problem.patch.comm
+    a = abs(tq.values.tocsr())
+    weighted = comm.allreduce(np.asarray(a.T @ w).ravel(), op=MPI.SUM)
+    plain = comm.allreduce(np.asarray(a.T @ q.weights).ravel(), op=MPI.SUM)
+    return np.flatnonzero((weighted == 0.0) & (plain > 0.0))
+
+
+def _hold_block(problem, held: np.ndarray, dof_map: np.ndarray, size: int) -> sp.csr_matrix | None:
+    """``s I`` on the dofs of the held particles (:func:`_held_particles`), from the ranks that
+    own them (PETSc numbering, ``s = E``: the scale of the constraint rows), or ``None``."""
+    if held.size == 0:
+        return None
+    P = problem.patch.particles
+    d = P.gdim
+    mine = held[np.isin(held, P.owned)]
+    dofs = dof_map[(d * mine[:, None] + np.arange(d)).ravel()]
+    return sp.csr_matrix(
+        (np.full(dofs.size, float(problem.material.E)), (dofs, dofs)), shape=(size, size)
+    )
+
+
+def _refuse_held_in_equations(
+    problem, held: np.ndarray, constraint: tuple, facets: list, loads: np.ndarray
+) -> None:
+    """Refuse, on every rank, a held particle (:func:`_held_particles`) that an equation still
+    sees although no quadrature point of the cells with ``alpha > 0`` does: a point of the band
+    constraint (``constraint="points"``: a band particle on the interface), a point of a
+    Dirichlet facet with a positive weight, or a traction. Its coefficient would then enter
+    that equation with no stiffness of its own (a condition on the multipliers that the exact
+    solution does not meet, or a load that no stiffness carries), and no VCI can make it
+    consistent (its ``alpha``-weighted integral is 0). ``constraint``: ``(values, weights)`` of
+    the constraint points, ``facets``: such pairs for the Dirichlet facets (MLS values at this
+    rank's points, weights), ``loads``: this rank's particle loads (interleaved). Collective."""
+    if held.size == 0:
+        return
+    comm, P = problem.patch.comm, problem.patch.particles
+    d = P.gdim
+
+    def reach(pairs: list[tuple[Any, np.ndarray]]) -> np.ndarray:
+        out = np.zeros(held.size)
+        for values, weights in pairs:
+            if values.shape[0]:
+                out += np.asarray(abs(values.tocsc()[:, held]).T @ np.abs(weights)).ravel()
+        return out
+
+    seen = np.stack(
+        [reach([constraint]), reach(facets), np.abs(loads.reshape(-1, d)[held]).sum(axis=1)]
+    )
+    seen = comm.allreduce(seen, op=MPI.SUM)  # the same on every rank
+    hit = seen > 0.0
+    bad = np.flatnonzero(hit.any(axis=0))
+    if bad.size == 0:
+        return
+    k = bad[0]
+    what = ["a point of the band constraint", "a Dirichlet facet with alpha > 0", "a traction"]
+    what = " and ".join(w for w, h in zip(what, hit[:, k], strict=True) if h)
+    others = f" (and {bad.size - 1} other particle(s) like it)" if bad.size > 1 else ""
+    x = np.round(P.positions[held[k]], 12).tolist()
+    raise ValueError(
+        f"coupling='bridging': the particle at {x}{others} has alpha = 0 at every quadrature "
+        "point of its support (it lies beside band cells whose nodes are all on the interface, "
+        f"where the particle weight alpha of eq. 46 vanishes), but {what} reaches it: its "
+        "coefficient would enter that equation with no stiffness of its own; "
+        f"increase the dilation (now {getattr(problem.mls, 'dilation', '?')}) so that its "
+        "support reaches the band's interior"
+        + (", or use constraint='integral'" if hit[0, k] and problem.constraint == "points" else "")
     )
 
 
@@ -748,8 +901,9 @@ def _constraint_tables(
     problem, band: BridgingBand
 ) -> tuple[sp.csr_matrix, sp.csr_matrix, np.ndarray]:
     """FE basis and particle functions where the band is tied, and the weights there: the band
-    particles with weight 1 (``constraint="points"``, eq. 79-81), or the Gauss points of the band
-    cells with their quadrature weights (``constraint="integral"``, eq. 52). Collective.
+    particles with weight 1 (``constraint="points"``, eq. 79-81), or the Gauss points of the
+    band's ``tied`` cells (``alpha`` not identically 0: ``Omega_int``) with their quadrature
+    weights (``constraint="integral"``, eq. 52). Collective.
 
     The point constraints determine the multipliers on the band nodes only if the band particles
     do (``sum_L N_k(x_L) N_a(x_L)`` regular): a band node without a band particle in its support,
@@ -757,7 +911,7 @@ def _constraint_tables(
     """
     V, comm, P = problem.V, problem.patch.comm, problem.patch.particles
     if problem.constraint == "integral":
-        q = cell_quadrature(V.mesh, problem.quadrature_degree, band.cells)
+        q = cell_quadrature(V.mesh, problem.quadrature_degree, band.tied_cells)
         points, cells, weights = q.points, q.cells, q.weights
     else:
         points = P.positions[band.local_particles]
@@ -769,9 +923,9 @@ def _constraint_tables(
     if problem.constraint == "points":
         seen = node_flags(problem.V, np.unique(t_fe.indices))
         n_owned = V.dofmap.index_map.size_local
-        blind = int(np.sum((band.in_band_node & ~seen)[:n_owned]))
+        blind = int(np.sum((band.tied_node & ~seen)[:n_owned]))
         blind = comm.allreduce(blind)
-        nodes = comm.allreduce(int(np.sum(band.in_band_node[:n_owned])))
+        nodes = comm.allreduce(int(np.sum(band.tied_node[:n_owned])))
         if blind or band.particles.size < nodes:
             raise ValueError(
                 f"the bridging band has {nodes} FE nodes but {band.particles.size} particles "
@@ -813,6 +967,18 @@ def bridging_operators(problem: CoupledElasticity) -> CouplingOperators:
     w[b] *= band.alpha_at(q.points[b], q.cells[b])
     qa = QuadraturePoints(q.points, w, q.cells)
     tq = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(q.points))
+    held = _held_particles(problem, q, w, tq)
+    if held.size:  # the same on every rank (reduced sums)
+        x = np.round(P.positions[held[0]], 12).tolist()
+        raise ValueError(
+            f"explicit dynamics with coupling='bridging': the particle at {x}"
+            + (f" (and {held.size - 1} other particle(s) like it)" if held.size > 1 else "")
+            + " has alpha = 0 on its whole support (it lies beside band cells whose nodes are "
+            "all on the interface), so its lumped mass (eq. 89) would be 0; the "
+            "statics hold such particles, the central differences cannot yet: increase the "
+            f"dilation (now {getattr(problem.mls, 'dilation', '?')}) so that every support "
+            "reaches the band's interior, or smooth the patch's staircase"
+        )
     active = fe_active(problem, np.concatenate([patch.fe_cells, band.cells]))
 
     ids, ml = band.numbering(problem)

@@ -107,6 +107,8 @@ def consistent_gradients(
     boundary_weights: np.ndarray,
     boundary_normals: np.ndarray,
     comm: MPI.Comm,
+    positions: np.ndarray | None = None,
+    inactive: np.ndarray | None = None,
 ) -> list[sp.csr_matrix]:
     """Variationally consistent integration (VCI) of test-function gradients.
 
@@ -124,7 +126,8 @@ def consistent_gradients(
     dropping the entries that happen to cancel to zero).
     Sums run over every rank's cells and boundary facets (collective); the boundary must be the
     whole boundary of the integration domain. Any dimension: ``boundary_normals`` is (nb, gdim)
-    with ``gdim = len(cell_gradients)``.
+    with ``gdim = len(cell_gradients)``. ``positions`` and ``inactive``: see
+    :func:`vci_constants`.
     """
     gdim = len(cell_gradients)
     vol = cell_values.T @ cell_weights
@@ -136,30 +139,48 @@ def consistent_gradients(
         ],
         axis=1,
     )
-    xi = vci_constants(vol, rhs, comm)
+    xi = vci_constants(vol, rhs, comm, positions, inactive)
     return corrected_gradients(cell_values, cell_gradients, xi)
 
 
 def vci_constants(
-    vol: np.ndarray, rhs: np.ndarray, comm: MPI.Comm, positions: np.ndarray | None = None
+    vol: np.ndarray,
+    rhs: np.ndarray,
+    comm: MPI.Comm,
+    positions: np.ndarray | None = None,
+    inactive: np.ndarray | None = None,
 ) -> np.ndarray:
     """The VCI constants ``xi`` (n, gdim) of :func:`consistent_gradients` from this rank's sums
     ``vol = sum_q N_I w_q`` (n,) and ``rhs = sum_b N_I n w_b - sum_q grad N_I w_q`` (n, gdim),
-    summed over the ranks (collective). A node whose function integrates to about zero is
-    refused (its support misses the quadrature), named by ``positions`` (n, gdim) if given."""
+    summed over the ranks (collective).
+
+    A node whose function integrates to about zero is refused on every rank (its support misses
+    the quadrature), named by its coordinates when ``positions`` (n, gdim) is given. Nodes
+    flagged in ``inactive`` (n,) bool are left uncorrected (``xi = 0``) and never refused:
+    nodes the caller removes from the system because the integration weights vanish on their
+    whole support (the bridging band where ``alpha = 0``), whose test gradients enter no sum."""
     from mpi4py import MPI
 
     vol = comm.allreduce(vol, op=MPI.SUM)
     rhs = comm.allreduce(rhs, op=MPI.SUM)
-    small = np.abs(vol) <= 1e-14 * np.abs(vol).max()
+    active = np.ones(vol.size, dtype=bool) if inactive is None else ~np.asarray(inactive, bool)
+    scale = np.abs(vol[active]).max(initial=0.0)
+    small = active & (np.abs(vol) <= 1e-14 * scale)
     if np.any(small):
         i = int(np.flatnonzero(small)[0])
-        who = f"shape function {i}" if positions is None else f"the particle at {positions[i]}"
-        raise ValueError(
-            f"consistent integration: {who} integrates to ~0 over the domain ({vol[i]:.2e}); "
-            "its support misses the quadrature: increase the dilation"
+        who = (
+            f"shape function {i}"
+            if positions is None
+            else f"the shape function of the particle at {np.round(positions[i], 12).tolist()}"
         )
-    return rhs / vol[:, None]
+        raise ValueError(
+            f"consistent integration: {who} integrates to {vol[i]:.2e} over the domain (the "
+            f"largest integrates to {scale:.2e}): its support misses the quadrature; increase "
+            "the dilation (or the quadrature degree)"
+        )
+    xi = np.zeros_like(rhs)
+    xi[active] = rhs[active] / vol[active, None]
+    return xi
 
 
 def corrected_gradients(

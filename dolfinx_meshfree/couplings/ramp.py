@@ -577,6 +577,7 @@ def _consistent_stiffness(
             np.concatenate([bp.weights, bi.weights]),
             np.concatenate([bp.normals, bi.normals]),
             comm,
+            mls.points,
         ),
     )
     m = len(qp)

@@ -169,9 +169,11 @@ def vci_constants(
     if np.any(small):
         i = int(np.flatnonzero(small)[0])
         who = (
-            f"shape function {i}"
-            if positions is None
-            else f"the shape function of the particle at {np.round(positions[i], 12).tolist()}"
+            f"the shape function of the particle at {np.round(positions[i], 12).tolist()}"
+            if positions is not None and i < len(positions)
+            else f"shape function {i} (an enrichment function past the particles)"
+            if positions is not None
+            else f"shape function {i}"
         )
         raise ValueError(
             f"consistent integration: {who} integrates to {vol[i]:.2e} over the domain (the "

@@ -294,6 +294,7 @@ def particle_stiffness(
                 bq.weights,
                 normals,
                 comm,
+                mls.points,
             ),
         )
         if moments:

@@ -360,12 +360,3 @@ def test_more_dirichlet_facets_than_particles_is_refused():
     problem.add_dirichlet(mf.boundary_facets(msh), affine)
     with pytest.raises(ValueError, match="108 facets, each with 3 constant multipliers, more than"):
         problem.solve()
-
-
-def test_conforming_particle_layer_is_refused_in_3d():
-    """The boundary-conforming layer places particles along segments (2D facets) only."""
-    msh = unit_cube(MPI.COMM_WORLD, 2, "hexahedron")
-    with pytest.raises(ValueError, match=r"border= .* got gdim=3"):
-        mf.ParticleSet.from_cells(msh, 0.25, border=np.zeros((1, 4, 3)))
-    with pytest.raises(ValueError, match="placement='grid' or 'vertices'"):
-        mf.ParticlePatch(msh, np.arange(msh.topology.index_map(3).size_local), spacing=0.25)

@@ -22,6 +22,7 @@ from .. import _compat
 from ..approx.fe_points import locate_points
 from ..approx.neighbours import check_points
 from ..parallel import Layout, raise_on_all_ranks
+from .placement_3d import check_border_3d, conforming_layer_3d, distance_to_facets
 from .quadrature import cell_quadrature
 
 if TYPE_CHECKING:  # annotations only
@@ -280,33 +281,37 @@ class ParticleSet:
         the cells. ``jitter`` moves each interior point by up to ``jitter * spacing`` at random
         (an irregular particle set; boundary points stay on the boundary).
 
-        ``border``: this rank's facets (k, 2, gdim) (segments; (k, 1, gdim) in 1D) of the border
+        ``border``: this rank's facets (k, 2, gdim) (segments; (k, 1, gdim) in 1D; in 3D
+        triangles (k, 3, 3) or quadrilaterals (k, 4, 3) in DOLFINx's vertex order) of the border
         of the cells (e.g. :meth:`ParticlePatch.boundary`). Then particles also sit on every
         border vertex and along every border facet at about the spacing
-        (``max(1, round(length / spacing))`` intervals), and grid points closer than half a
+        (``max(1, round(length / spacing))`` intervals; in 3D along every border edge and on a
+        lattice inside every border facet, ``ceil(length / spacing)`` subdivisions, plus the
+        centroid of a cell left without a particle off the border, see
+        :mod:`~dolfinx_meshfree.geometry.placement_3d`), and grid points closer than half a
         spacing to the border are dropped: every border facet carries particles at its ends
         whatever the spacing and whatever the shape of the border (slanted, curved), so the
         MLS moment matrices stay well-conditioned up to the border, and the FE nodes of the
         border (the interface nodes that the ramp couplings need, Belytschko et al. 1995,
-        sec. 3.2) are particles. When the border lies on grid lines and the spacing divides the
-        facets (the grid already has those particles) the set is the grid's. Collective.
+        sec. 3.2) are particles. When the border lies on grid lines (planes) and the spacing
+        divides the facets (the grid already has those particles) the set is the grid's.
+        The set does not depend on the partition. Collective.
         """
         comm = mesh.comm
         gdim = mesh.geometry.dim
 
-        def check() -> None:
+        def check() -> np.ndarray | None:
             if not (isinstance(spacing, int | float) and np.isfinite(spacing) and spacing > 0):
                 raise ValueError(f"spacing={spacing!r} must be a positive number")
             if not (0.0 <= jitter < 0.5):
                 raise ValueError(f"jitter={jitter} must lie in [0, 0.5)")
-            if border is not None and gdim > 2:
-                raise ValueError(
-                    f"border= (a boundary-conforming layer) is implemented on 1D and 2D meshes, "
-                    f"got gdim={gdim}: leave border out (a plain grid) or use from_vertices; "
-                    "for a ParticlePatch, placement='grid' or 'vertices'"
-                )
+            if border is None:
+                return None
+            if gdim == 3:
+                return check_border_3d(border)
+            return _check_border(border, gdim)
 
-        raise_on_all_ranks(comm, check)
+        mine = raise_on_all_ranks(comm, check)  # this rank's border facets, checked
         c = _owned_cells(mesh, cells)
         nodes = mesh.geometry.x[_compat.geometry_dofmap(mesh)[c], :gdim].reshape(-1, gdim)
         lo = nodes.min(axis=0) if nodes.size else np.full(gdim, np.inf)
@@ -318,9 +323,12 @@ class ParticleSet:
         grid = np.stack(np.meshgrid(*axes, indexing="xy"), axis=-1).reshape(-1, gdim)
         step = (hi - lo) / np.asarray(counts)
         tol = 1e-9 * float(step.max())
-        if border is not None:
-            segments = np.concatenate(comm.allgather(_check_border(border, gdim)))
-            on_border = _distance_to_segments(grid, segments, tol) <= tol
+        if mine is not None:  # every rank's border facets
+            segments = np.concatenate(comm.allgather(mine))
+            if gdim == 3:
+                on_border = distance_to_facets(grid, segments, tol) <= tol
+            else:
+                on_border = _distance_to_segments(grid, segments, tol) <= tol
         else:
             segments, on_border = None, np.zeros(grid.shape[0], dtype=bool)
         if jitter > 0.0:
@@ -332,7 +340,9 @@ class ParticleSet:
         inside = _points_in_cells(mesh, grid, c).astype(np.int8)
         comm.Allreduce(MPI.IN_PLACE, inside, op=MPI.MAX)
         x = grid[inside.astype(bool)]
-        if segments is not None:
+        if segments is not None and gdim == 3:
+            x = conforming_layer_3d(mesh, c, x, segments, spacing, tol)
+        elif segments is not None:
             x = _conforming_layer(x, segments, spacing, tol)
         return cls(x, comm=comm, mesh=mesh, cells=c)
 

@@ -38,8 +38,8 @@ class ParticlePatch:
     """Cells of ``mesh`` to be modelled with particles.
 
     Args:
-        mesh: The user's mesh (2D or 3D, degree-1 geometry, ghosted across facets in
-            parallel; in 3D the placements are ``"grid"`` and ``"vertices"``).
+        mesh: The user's mesh (1D, 2D or 3D, degree-1 geometry, ghosted across facets in
+            parallel).
         cells: Local indices of the cells to replace, owned or ghost (as
             ``dolfinx.mesh.locate_entities`` gives them on each rank): a cell named on any rank
             joins the patch, on the rank that owns it (:attr:`cells` are then owned cells).
@@ -55,7 +55,14 @@ class ParticlePatch:
             whatever the cells and spacing: the border has particles at its ends however it is
             shaped (slanted, staircase, curved), and the interface nodes are particles, as the
             ramp couplings need (Belytschko et al. 1995, sec. 3.2). When the border lies on the
-            grid lines and the spacing divides the element size it is the grid itself.
+            grid lines and the spacing divides the element size it is the grid itself. In 3D
+            (tetrahedra, hexahedra) the layer covers the border's triangles or quadrilaterals:
+            particles on their vertices, along their edges and on a lattice inside each, at
+            about the spacing, and a particle at the centroid of a cell left without one off the
+            border (:mod:`~dolfinx_meshfree.geometry.placement_3d`); the same particles on any
+            number of ranks. The 3D couplings (lagrange, edge-to-edge, bridging) pass the patch
+            test with it at 0.5 to 0.75 times the element size; at the element size and above
+            the border facets carry only their vertices (see the 3D guide).
             ``"grid"``: the grid alone, clipped to the cells (the earlier default; near a border
             off the grid lines it can leave too few particles). ``"vertices"``: one particle at
             every vertex of the patch cells (:meth:`ParticleSet.from_vertices`).
@@ -195,7 +202,8 @@ class ParticlePatch:
             if placement == "conforming":
                 facets = self.boundary()[0]
                 geo = _compat.entities_to_geometry(mesh, tdim - 1, facets)
-                border = mesh.geometry.x[geo.reshape(-1, tdim)]
+                # (facets, nodes per facet, 3): end points, triangles or quadrilaterals
+                border = mesh.geometry.x[geo]
             self.particles = ParticleSet.from_cells(
                 mesh, spacing, c, jitter=jitter, seed=seed, border=border
             )

@@ -40,7 +40,11 @@ from .approx.tables import Approximation, ShapeTable, StaleTableError
 from .couplings.hybrid import HYBRID_VARIANTS, HybridElasticity
 from .dynamics import DYNAMICS_METHODS, DynamicsResult, EnergyRecord, ExplicitDynamics
 from .fracture.criteria import equivalent_sif, kink_angle
-from .fracture.interaction import StressIntensityFactors, interaction_integral
+from .fracture.interaction import (
+    SIFReliabilityWarning,
+    StressIntensityFactors,
+    interaction_integral,
+)
 from .fracture.williams import WilliamsField
 from .geometry.adaptive_quadrature import AdaptiveQuadrature
 from .geometry.crack import Crack
@@ -121,6 +125,7 @@ __all__ = [
     "PressurizedBushing",
     "ProgressBar",
     "QuasiStaticCrackGrowth",
+    "SIFReliabilityWarning",
     "SaintVenantKirchhoff",
     "ShapeTable",
     "StaleTableError",

@@ -195,6 +195,9 @@ def test_sif_of_a_crack_not_in_the_model(short_crack_solution):
         sol.stress_intensity_factors(mf.Crack(SHORT))
 
 
+# a single domain of 1.5 spacings (the tips are 2 spacings apart): the reliability warning
+# (J vs K 17 %) is expected; this test is about naming the tip
+@pytest.mark.filterwarnings("ignore::dolfinx_meshfree.fracture.interaction.SIFReliabilityWarning")
 def test_sif_tip_by_coordinates_equals_tip_by_index(short_crack_solution):
     """Coordinates and index name the same tip; tip 0 points out of the start."""
     sol, crack = short_crack_solution

@@ -22,18 +22,41 @@ of two approximations of Belytschko et al. 1995, eq. (3.12), here of two MLS app
     + \\nabla R\\,(N_I^{enr} - N_I^{lin}).
 
 Both reproduce linear fields, so the blend does (the linear patch test and VCI are unchanged).
-The enriched MLS uses its own, larger supports (``dilation`` 3 by default: seven basis
+The enriched MLS uses its own, larger supports (``dilation`` 4 by default: seven basis
 functions) cut by the same cracks; in the general form ``phi_I = w_I p(x_I)^T A^{-1} p(x)``
 (eq. 3.9 of Belytschko et al. 1995) with ``dphi_I = dw_I p_I^T A^{-1} p + w_I p_I^T A^{-1}
 (dp - dA A^{-1} p)``. Defaults ``r1 = 2 h``, ``r2 = 4 h`` (``h`` the particle spacing at the
-tip) keep the enriched moment matrices' eigenvalue ratio at 7.8e-9 at every ``h``; ``r2`` is
-capped at 0.9 of the tip segment's length so that the branch cut of ``sqrt`` (behind the tip,
-along the last segment) stays on the crack.
+tip); ``r2`` is capped at 0.9 of the tip segment's length so that the branch cut of ``sqrt``
+(behind the tip, along the last segment) stays on the crack.
 
-Measured on the single edge crack (a/W = 0.4, pure EFG, K_I against the converged P2 FE value):
-1,722 dofs -4.07 % -> +0.23 %; 6,642 dofs -1.8 % -> +0.14 %; 26,082 dofs -0.9 % -> +0.11 %;
-on the inclined centre crack (exact K, both tips, h = 0.1, 3,362 dofs) the worst error falls
-from 9.9e-3 to 1.6e-3 (``tests/test_tip_enrichment.py``).
+Support size (issue 23, item 1). With dilation 3 (the earlier default) an edge crack passing
+0.05 to 0.15 spacing from a particle row gave K_I off by -7 % to +70 % over the default domains
+(a/W = 0.3, lagrange, spacings 0.0125 and 0.00625, the tip on or between particle columns; -12 %
+over domains of 3 to 5 spacings), with a spread over large domains as low as 0.03 %: nothing
+showed it. Cause: a point next to the crack face on the far side from that row sees, on its
+side, the rows about 1 and 2 spacings away, the third at the edge of a support of 3 spacings
+(weight ~0); the branch functions have terms quadratic across the face
+(``sqrt(r) cos(theta/2) sin(theta)`` grows like ``y^2`` there), which two rows cannot determine,
+so in the ramp ``2 h < r < 4 h`` the enriched moment matrices came near singular (eigenvalue
+ratio 4.3e-10), the shape functions large and steep (``sum |phi_I|`` up to 54,
+``h sum |grad phi_I|`` up to 754, against 5 and 35 at half a spacing's offset), and the
+stiffness of that band under-integrated: one cut cell held 15x more energy at Gauss degree 30
+than at the default 7, a spurious mode (raising the degree to 12 or 20 moved K_I from +71 % to
+-2.3 % and +3.1 %: no convergence); a larger linear dilation (3) did not help, the visibility
+criterion was worse. Dilation 4 puts the third row at 3/4 of the support: at offsets of 0.05
+and 0.1 spacing the eigenvalue ratio is >= 1.4e-7, ``sum |phi_I|`` <= 5.4, ``h sum |grad
+phi_I|`` <= 47, and K_I is within 0.83 % of Tada's value at every offset from 0.05 to 0.95
+spacing and every tip position (66 cases over two spacings; ``tests/test_sif_reliability.py``,
+``tests/test_tip_enrichment.py``); on a grid the enriched moment matrices' eigenvalue ratio
+rose from 3.5e-9 to 2.3e-7 and the round-off of the reproduced linear gradients fell from
+2.3e-8 to 1.4e-10. Where dilation 3 worked, K moves by 0.06 % to 0.14 % (below).
+
+Measured on the single edge crack (a/W = 0.4, the crack half a spacing off the rows, pure EFG,
+K_I against the converged P2 FE value), linear -> enriched: 1,722 dofs -4.07 % -> +0.29 %
+(dilation 3: +0.23 %); 6,642 dofs -2.05 % -> +0.28 % (+0.14 %); 26,082 dofs -1.00 % ->
++0.18 % (+0.11 %); on the inclined centre crack (exact K, both tips, h = 0.1, 3,362 dofs) the
+worst error falls from 9.9e-3 to 1.8e-3 (EFG; lagrange 1.9e-3, bridging 1.9e-3; 1.6e-3 to
+1.7e-3 with dilation 3; ``tests/test_tip_enrichment.py``).
 """
 
 from __future__ import annotations
@@ -271,7 +294,7 @@ def enrich_tips(
     mls: MLS,
     cracks: Sequence[Crack],
     method: str = "diffraction",
-    dilation: float = 3.0,
+    dilation: float = 4.0,
     inner: float = 2.0,
     outer: float = 4.0,
 ) -> TipEnrichment:
@@ -281,11 +304,13 @@ def enrich_tips(
 
     Args:
         dilation: Support dilation of the enriched MLS (seven basis functions need more
-            particles than three: 3.0 measured well conditioned, 2.5 singular).
+            particles than three: 2.5 is singular, 3.0 near singular next to a crack face when
+            the crack passes within 0.15 spacing of a particle row, 4.0 well conditioned at
+            every offset; module docstring).
         inner, outer: Ramp radii ``r1 < r2`` in particle spacings at the tip.
     """
     if not (np.isfinite(dilation) and dilation > 0):
-        raise ValueError(f"dilation={dilation!r} must be a positive number (3.0 is the default)")
+        raise ValueError(f"dilation={dilation!r} must be a positive number (4.0 is the default)")
     if not (0 < inner < outer and np.isfinite(outer)):
         raise ValueError(
             f"inner={inner!r}, outer={outer!r}: the ramp radii must satisfy 0 < inner < outer "

@@ -94,7 +94,9 @@ class CoupledSolution:
 
         Args:
             crack: one of ``patch.cracks``. tip: an index of ``crack.tips`` or its coordinates.
-            radius: outer domain radii (default 3, 4, 5 particle spacings, ``r1 = r2 / 2``).
+            radius: outer domain radii (default 8, 10, 12, 14, 16 particle spacings,
+                ``r1 = r2 / 2``, shrunk together to fit the patch:
+                ``statics.sifs.DOMAIN_RADII``).
             material: the law (default: the solve's).
             options: ``inner``, ``weight``, ``points`` of
                 :func:`~dolfinx_meshfree.interaction_integral`.

@@ -13,7 +13,15 @@ the exterior boundary, the FE interface and other tips).
 
 With crack-face contact (:class:`~dolfinx_meshfree.dynamics.crack_contact.ContactSystem`) K_I
 includes the faces' term of the contact pressure
-(:func:`~dolfinx_meshfree.dynamics.crack_contact.face_term`); J does not.
+(:func:`~dolfinx_meshfree.dynamics.crack_contact.face_term`, on the probe domain too); J does
+not (``J_comparable=False``: the J–K mismatch is not measured).
+
+Reliability: the results carry the figures of
+:class:`~dolfinx_meshfree.fracture.interaction.StressIntensityFactors` (domain dependence with the
+near-tip probe, J–K mismatch) and the default domains of statics, but no warning is issued: K(t)
+passes through zero (before the waves reach the tip, at load reversals), where figures relative
+to ``|K|`` mean nothing; read ``sifs.reliable`` / ``sifs.summary()`` where K is established, or
+call ``sifs.warn()``.
 
 Left out: the crack-velocity terms of a moving tip (this is K at a stationary tip; a growing
 crack's K would need them).
@@ -84,9 +92,11 @@ def dynamic_sifs(
         dyn: A linear elastic explicit model with cracks (``ExplicitDynamics.efg(...,
             cracks=...)`` or ``.coupled`` of a cracked patch).
         crack: One of the model's cracks. tip: An index of ``crack.tips`` or its coordinates.
-        radius: Outer domain radii (default 3, 4, 5 particle spacings, ``r1 = r2 / 2``).
+        radius: Outer domain radii (default 8, 10, 12, 14, 16 particle spacings, ``r1 = r2 / 2``,
+            shrunk to fit: :func:`~dolfinx_meshfree.statics.sifs.default_domains`).
         options: ``inner``, ``weight``, ``points`` of
-            :func:`~dolfinx_meshfree.interaction_integral`.
+            :func:`~dolfinx_meshfree.interaction_integral` (``points`` default 16 x 64 in 4
+            panels with the default domains).
 
     Raises:
         ValueError: on every rank: no cracks, a finite-strain material, a bad tip or radius.
@@ -122,13 +132,18 @@ def dynamic_sifs(
         return mls.tabulate(x, 0).values @ a
 
     sifs = solution_sifs(
-        grad, dyn.material, cracks, domain, crack, tip, radius, acceleration=acceleration,
-        **options,
+        grad, dyn.material, cracks, domain, crack, tip, radius, check=False,
+        acceleration=acceleration, **options,
     )  # fmt: skip
     if isinstance(dyn.system, ContactSystem):  # the faces' contact pressure (closed faces)
         weight = options.get("weight", "linear")
-        dK = face_term(mls, u, dyn.material, crack, sifs, weight)
-        sifs = dataclasses.replace(sifs, K_I=sifs.K_I + dK)
+
+        def with_faces(s: StressIntensityFactors) -> StressIntensityFactors:
+            dK = face_term(mls, u, dyn.material, crack, s, weight)
+            return dataclasses.replace(s, K_I=s.K_I + dK, J_comparable=False)
+
+        probe = None if sifs.probe is None else with_faces(sifs.probe)
+        sifs = dataclasses.replace(with_faces(sifs), probe=probe)
     return sifs
 
 

@@ -180,7 +180,9 @@ class EFGSolution:
 
         Args:
             crack: one of the model's cracks. tip: an index of ``crack.tips`` or its coordinates.
-            radius: outer domain radii (default 3, 4, 5 particle spacings, ``r1 = r2 / 2``):
+            radius: outer domain radii (default 8, 10, 12, 14, 16 particle spacings,
+                ``r1 = r2 / 2``, shrunk together to fit the patch:
+                ``statics.sifs.DOMAIN_RADII``):
                 one result per radius, the path independence report.
             material: the law (default: the solve's).
             options: ``inner``, ``weight``, ``points`` of

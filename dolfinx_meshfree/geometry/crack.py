@@ -13,6 +13,7 @@ loop per pair.
 
 from __future__ import annotations
 
+import warnings
 import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -35,8 +36,10 @@ if TYPE_CHECKING:  # annotations only
 
 __all__ = [
     "CRACK_METHODS",
+    "NEAR_ROW",
     "Crack",
     "CrackDomain",
+    "CrackPlacementWarning",
     "gathered_segments",
     "particle_spacing",
     "place_crack",
@@ -44,6 +47,7 @@ __all__ = [
     "polyline_samples",
     "segments_intersect",
     "validate_in_patch",
+    "warn_near_particle_rows",
 ]
 
 #: Crack criteria of the MLS weights (the first is the default; see ``approx/crack_cuts.py``).
@@ -623,6 +627,39 @@ def _clear_position(
     return None
 
 
+#: A crack placed closer than this (times the particle spacing) to a particle biases its SIFs.
+NEAR_ROW = 0.1
+
+
+class CrackPlacementWarning(UserWarning):
+    """A crack placed a few hundredths of a spacing off particles: its SIFs are biased."""
+
+
+def warn_near_particle_rows(crack: Crack, domain: ParticlePatch | CrackDomain) -> None:
+    """Warn (:class:`CrackPlacementWarning`, the same on every rank: the particles are on every
+    rank) when particles lie within ``NEAR_ROW`` spacings of the crack as it is placed. Such a
+    particle is on one face and its neighbours across the crack barely see it: with the linear
+    basis K_I is 1 to 2.7 % low at 0.05 spacing, and it stays so under refinement, while the
+    domains agree with each other (issue 23, item 1: the reliability figures cannot see it).
+    The message names the particle and a position of the crack half a spacing off. Growth
+    (:meth:`Crack.extend`) is not checked: its path is the physics'."""
+    h = particle_spacing(domain)
+    x = domain.particles.positions[:, :2]
+    d = point_segment_distance(x, crack.points[:-1], crack.points[1:]).min(axis=1)
+    near = np.flatnonzero(d < NEAR_ROW * h)
+    if near.size:
+        k = near[np.argmin(d[near])]
+        warnings.warn(
+            f"{near.size} particle(s) lie within {NEAR_ROW:g} spacing of the crack, the nearest "
+            f"{_fmt(x[k])} at {d[k]:.3g} (spacing h={h:.3g}): the stress intensity factors are "
+            "biased by 1 to 3 % there (the particles across the crack barely see it) and "
+            "refinement does not remove it; place the crack about half a spacing off the "
+            "particle rows",
+            CrackPlacementWarning,
+            stacklevel=3,
+        )
+
+
 def place_crack(crack: Crack, domain: ParticlePatch | CrackDomain) -> None:
     """Put ``crack`` into ``domain`` (collective): :func:`validate_in_patch` (a ``ValueError`` on
     every rank), its tips and mouths set from it, and every later :meth:`Crack.extend` checked
@@ -631,4 +668,5 @@ def place_crack(crack: Crack, domain: ParticlePatch | CrackDomain) -> None:
         raise ValueError(f"crack should be a dolfinx_meshfree.Crack, got {crack!r:.80}")
     is_tip = validate_in_patch(crack, domain)
     crack.set_mouths(not is_tip[0], not is_tip[1])
+    warn_near_particle_rows(crack, domain)
     crack._validators.append(lambda c, pts: validate_in_patch(c, domain, pts))

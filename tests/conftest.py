@@ -109,6 +109,16 @@ def pytest_collection_modifyitems(config, items):
         items[:] = selected
 
 
+def pytest_collection_finish(session):
+    """Freeze what collection made (the modules, DOLFINx, numba, UFL: about 1e5 objects) out of
+    the cyclic garbage collector: the ``gc.collect()`` after every test then scans only what
+    the test made (measured 0.1 s per collection before, under 1 ms after, over some 1,800
+    tests per run). The PETSc objects of the tests are made later and are still collected
+    deterministically."""
+    gc.collect()
+    gc.freeze()
+
+
 @pytest.fixture(autouse=True)
 def _collect_and_synchronise():
     yield

@@ -22,11 +22,9 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import datetime
-import importlib.metadata
 import json
 import os
 import pathlib
-import platform
 import shlex
 import subprocess
 import sys
@@ -131,54 +129,16 @@ RUNS_BY_NAME = {run.name: run for run in RUNS}
 # -- running -----------------------------------------------------------------------------------
 
 
-def _first_value(path: str, key: str) -> str | None:
-    """The value of the first ``key: value`` line of a ``/proc`` file (None if absent)."""
-    try:
-        with open(path) as f:
-            for line in f:
-                name, _, value = line.partition(":")
-                if name.strip() == key:
-                    return value.strip()
-    except OSError:
-        return None
-    return None
-
-
-def _version(package: str) -> str | None:
-    try:
-        return importlib.metadata.version(package)
-    except importlib.metadata.PackageNotFoundError:
-        return None
-
-
 def machine() -> dict:
-    """What ran the demos, not which host (no hostname); the keys of the benchmarks' harness
-    (``benchmarks/harness.py::machine``) where they overlap."""
-    mem_kb = _first_value("/proc/meminfo", "MemTotal")
-    affinity = getattr(os, "sched_getaffinity", None)
-    try:  # the versions the demos see: this interpreter is the one that runs them
-        import dolfinx
-        from petsc4py import PETSc
+    """What ran the demos, not which host: ``machine()`` of ``benchmarks/harness.py`` (one
+    description for the benchmarks and the results pages), imported here only when demos are
+    run (it loads DOLFINx and MPI; rendering the pages does not)."""
+    bench = str(ROOT / "benchmarks")
+    if bench not in sys.path:
+        sys.path.insert(0, bench)
+    from harness import machine as describe
 
-        dolfinx_version = dolfinx.__version__
-        petsc_version = ".".join(str(v) for v in PETSc.Sys.getVersion())
-    except ImportError:
-        dolfinx_version = petsc_version = None
-    return {
-        "cpu": _first_value("/proc/cpuinfo", "model name") or platform.processor() or None,
-        "cores": os.cpu_count(),
-        "cores_available": len(affinity(0)) if affinity else os.cpu_count(),
-        "memory_gib": None if mem_kb is None else round(int(mem_kb.split()[0]) / 2**20, 2),
-        "os": platform.platform(),
-        "python": platform.python_version(),
-        "dolfinx": dolfinx_version,
-        "petsc": petsc_version,
-        "numba": _version("numba"),
-        "threads": {
-            k: os.environ.get(k)
-            for k in ("OMP_NUM_THREADS", "NUMBA_NUM_THREADS", "DOLFINX_MESHFREE_THREADS")
-        },
-    }
+    return describe()
 
 
 def _interpreter() -> str:

@@ -39,6 +39,7 @@ __all__ = [
     "ensure_points_in_mesh",
     "evaluate_fe_function",
     "locate_points",
+    "point_value_nodes",
     "route_to_owners",
     "tabulate_fe_basis",
     "tabulate_in_cells",
@@ -356,3 +357,28 @@ def evaluate_fe_function(u: dolfinx.fem.Function, points: npt.ArrayLike) -> np.n
 
     rows = route_to_owners(msh, x, compute)
     return np.array(rows, dtype=float).reshape(-1, bs)
+
+
+def point_value_nodes(
+    V: dolfinx.fem.FunctionSpace, gdim: int, mesh: dolfinx.mesh.Mesh | None = None
+) -> np.ndarray:
+    """The coordinates (local nodes, owned then ghost, ``gdim``) of the nodes of a vector space
+    whose dofs are point values, for exporting a field as a Function on ``V``; a ``ValueError``
+    naming the fix when ``V`` is not a vector space of ``gdim`` components on a ``gdim``-D mesh
+    (on ``mesh``, if given) or its dofs are not point values (local)."""
+    if mesh is not None and V.mesh is not mesh:
+        raise ValueError("V must be a function space on the solution's mesh")
+    bs, dim = V.dofmap.index_map_bs, V.mesh.geometry.dim
+    if bs != gdim or dim != gdim:
+        raise ValueError(
+            f"V must be a vector space of {gdim} components (the displacement's) on a {gdim}D "
+            f"mesh, like _compat.vector_function_space(mesh, degree); this space has block size "
+            f"{bs} on a {dim}D mesh"
+        )
+    try:
+        x = V.tabulate_dof_coordinates()
+    except RuntimeError as e:
+        raise ValueError(
+            f"V's dofs must be point values (a Lagrange space, continuous or discontinuous): {e}"
+        ) from e
+    return np.ascontiguousarray(x[:, :gdim])

@@ -25,7 +25,7 @@ from petsc4py import PETSc
 
 from .. import _compat
 from ..approx.fe_dofs import cell_indicator, fe_dof_layout, node_flags
-from ..approx.fe_points import route_to_owners, tabulate_in_cells
+from ..approx.fe_points import point_value_nodes, route_to_owners, tabulate_in_cells
 from ..approx.mls import MLS
 from ..approx.neighbours import check_points
 from ..fracture.interaction import StressIntensityFactors
@@ -187,7 +187,7 @@ class CoupledSolution:
         V = U if V is None else V
         msh = U.mesh
         gdim, tdim = msh.geometry.dim, msh.topology.dim
-        coordinates = raise_on_all_ranks(msh.comm, lambda: _point_value_nodes(V, msh))
+        coordinates = raise_on_all_ranks(msh.comm, lambda: point_value_nodes(V, gdim, msh))
         n_nodes = coordinates.shape[0]
         n_cells = msh.topology.index_map(tdim).size_local
         cell_nodes = _compat.dofmap_array(V)[:n_cells]
@@ -240,27 +240,6 @@ class CoupledSolution:
         out.x.scatter_forward()
         out.name = "displacement"
         return out
-
-
-def _point_value_nodes(V: dolfinx.fem.FunctionSpace, msh: dolfinx.mesh.Mesh) -> np.ndarray:
-    """The coordinates (local nodes, gdim) of the nodes of a vector space on ``msh`` whose dofs
-    are point values (:meth:`CoupledSolution.as_function`); a ValueError otherwise."""
-    gdim = msh.geometry.dim
-    if V.mesh is not msh:
-        raise ValueError("V must be a function space on the solution's mesh")
-    bs = V.dofmap.index_map_bs
-    if bs != gdim:
-        raise ValueError(
-            f"V must be a vector space of {gdim} components (the displacement's), like "
-            f"_compat.vector_function_space(mesh, degree); this space has block size {bs}"
-        )
-    try:
-        x = V.tabulate_dof_coordinates()
-    except RuntimeError as e:
-        raise ValueError(
-            f"V's dofs must be point values (a Lagrange space, continuous or discontinuous): {e}"
-        ) from e
-    return np.ascontiguousarray(x[:, :gdim])
 
 
 @dataclass

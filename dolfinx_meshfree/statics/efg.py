@@ -34,6 +34,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..approx.crack_cuts import attach_cracks
+from ..approx.fe_points import point_value_nodes
 from ..approx.mls import MLS
 from ..approx.tables import ShapeTable
 from ..approx.tip_enrichment import enrich_tips
@@ -140,23 +141,10 @@ class EFGSolution:
         gdim = self.coefficients.shape[1]
 
         def evaluate() -> np.ndarray:
-            bs = V.dofmap.index_map_bs
-            if msh.geometry.dim != gdim or bs != gdim:
-                raise ValueError(
-                    f"V must be a vector space of {gdim} components (the displacement's) on a "
-                    f"{gdim}D mesh, like _compat.vector_function_space(mesh, degree); this space "
-                    f"has block size {bs} on a {msh.geometry.dim}D mesh"
-                )
-            try:
-                x = V.tabulate_dof_coordinates()[: V.dofmap.index_map.size_local, :gdim]
-            except RuntimeError as e:
-                raise ValueError(
-                    "V's dofs must be point values (a Lagrange space, continuous or "
-                    f"discontinuous): {e}"
-                ) from e
+            x = point_value_nodes(V, gdim)[: V.dofmap.index_map.size_local]
             if x.shape[0] == 0:
                 return np.zeros((0, gdim))
-            return self.mls.tabulate(np.ascontiguousarray(x), 0).values @ self.coefficients
+            return self.mls.tabulate(x, 0).values @ self.coefficients
 
         owned = raise_on_all_ranks(msh.comm, evaluate)
         out = dolfinx.fem.Function(V)

@@ -32,7 +32,7 @@ import numpy.typing as npt
 import ufl
 
 from ..approx import batched
-from .materials import DEFAULT_DENSITY
+from .materials import resolve_density
 
 __all__ = [
     "PLANES",
@@ -160,12 +160,10 @@ class _Hyperelastic:
     E: float
     nu: float
     plane: str | None = "stress"  # the default of LinearElastic, so that swapping laws keeps it
-    rho: float | None = None  # None: DEFAULT_DENSITY, and dynamics warns (see LinearElastic)
+    rho: float | None = None  # None: DEFAULT_DENSITY, dynamics warns (resolve_density)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "density_given", self.rho is not None)
-        if self.rho is None:
-            object.__setattr__(self, "rho", DEFAULT_DENSITY)
+        resolve_density(self)
         lame_parameters(self.E, self.nu, self.rho, self.plane)
 
     @property

@@ -11,12 +11,21 @@ import ufl
 if TYPE_CHECKING:  # annotations only
     from .constitutive import Material
 
-__all__ = ["DEFAULT_DENSITY", "LinearElastic", "linear_twin"]
+__all__ = ["DEFAULT_DENSITY", "LinearElastic", "linear_twin", "resolve_density"]
 
 #: The density of a law built without ``rho``: enough for statics, which does not use it; explicit
 #: dynamics warns when it runs on it (issue 23, item 4: a steel model in SI units got a time
 #: scale sqrt(7850) too fast without a word).
 DEFAULT_DENSITY = 1.0
+
+
+def resolve_density(law: object) -> None:
+    """Set ``law.density_given`` (whether ``rho`` was given) and ``law.rho`` to
+    :data:`DEFAULT_DENSITY` when it was not: the ``__post_init__`` step that every law (frozen
+    dataclasses: linear and finite-strain) shares."""
+    object.__setattr__(law, "density_given", law.rho is not None)
+    if law.rho is None:
+        object.__setattr__(law, "rho", DEFAULT_DENSITY)
 
 
 @dataclass(frozen=True)
@@ -40,9 +49,7 @@ class LinearElastic:
     rho: float | None = None
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "density_given", self.rho is not None)
-        if self.rho is None:
-            object.__setattr__(self, "rho", DEFAULT_DENSITY)
+        resolve_density(self)
         if not (np.isfinite(self.E) and self.E > 0):
             raise ValueError(f"E={self.E} must be a positive number")
         if not (np.isfinite(self.nu) and -1.0 < self.nu < 0.5):

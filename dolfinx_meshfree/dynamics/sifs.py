@@ -83,6 +83,7 @@ def dynamic_sifs(
     crack: Crack,
     tip: int | Sequence[float] | np.ndarray = 0,
     radius: float | Sequence | np.ndarray | None = None,
+    probe: bool = True,
     **options,
 ) -> StressIntensityFactors:
     """K_I, K_II and J at a stationary tip of ``crack`` at the model's current state (module
@@ -97,6 +98,8 @@ def dynamic_sifs(
         options: ``inner``, ``weight``, ``points`` of
             :func:`~dolfinx_meshfree.interaction_integral` (``points`` default 16 x 64 in 4
             panels with the default domains).
+        probe: Evaluate the near-tip probe of the reliability figures (``False`` for a caller
+            that uses K only: :func:`~dolfinx_meshfree.statics.sifs.solution_sifs`).
 
     Raises:
         ValueError: on every rank: no cracks, a finite-strain material, a bad tip or radius.
@@ -132,7 +135,7 @@ def dynamic_sifs(
         return mls.tabulate(x, 0).values @ a
 
     sifs = solution_sifs(
-        grad, dyn.material, cracks, domain, crack, tip, radius, check=False,
+        grad, dyn.material, cracks, domain, crack, tip, radius, check=False, probe=probe,
         acceleration=acceleration, **options,
     )  # fmt: skip
     if isinstance(dyn.system, ContactSystem):  # the faces' contact pressure (closed faces)

@@ -158,6 +158,7 @@ def solution_sifs(
     tip: int | Sequence[float] | np.ndarray = 0,
     radius: float | Sequence | np.ndarray | None = None,
     check: bool = True,
+    probe: bool = True,
     **options,
 ) -> StressIntensityFactors:
     """K_I, K_II and J at a tip of ``crack`` from the gradient ``grad_u`` of a solved field
@@ -174,6 +175,10 @@ def solution_sifs(
             to fit (:func:`default_domains`).
         check: issue a :class:`~dolfinx_meshfree.fracture.interaction.SIFReliabilityWarning`
             when the figures exceed their limits (the same on every rank).
+        probe: evaluate the near-tip probe (``False``: ``domain_dependence`` is the spread over
+            the domains alone; for callers that use K only, e.g. the growth criterion checked
+            every few steps of explicit dynamics: beside three domains the probe's two annuli
+            are 2/5 of the interaction integral's points).
         options: ``inner``, ``weight``, ``points`` and ``panels`` (with the default domains
             :data:`DEFAULT_POINTS` in :data:`DEFAULT_PANELS` panels; with an explicit
             ``radius``, ``interaction_integral``'s 8 x 32 in one panel, as before),
@@ -225,26 +230,26 @@ def solution_sifs(
                     f"interface is {d_bound:.6g} away); use radii below {d_bound:.6g} or enlarge "
                     "the patch"
                 )
-        probe = np.asarray(PROBE, dtype=float) * h
-        if not probe[:, 1].max() < min(d_bound, d_keep):
-            probe = np.zeros((0, 2))
-        return pairs, probe, x_tip, crack.tip_direction(end), keep
+        near = np.asarray(PROBE, dtype=float) * h
+        if not near[:, 1].max() < min(d_bound, d_keep):
+            near = np.zeros((0, 2))
+        return pairs, near, x_tip, crack.tip_direction(end), keep
 
-    pairs, probe, x_tip, direction, keep = raise_on_all_ranks(comm, check_input)
+    pairs, near_pairs, x_tip, direction, keep = raise_on_all_ranks(comm, check_input)
     out = raise_on_all_ranks(
         comm,
         lambda: interaction_integral(
             grad_u, material, x_tip, direction, pairs, keep_outside=keep, **options
         ),
     )
-    if len(probe):
+    if probe and len(near_pairs):
         # the probe is a reliability figure: a field that cannot be evaluated there (a singular
         # MLS fit near the crack face) is reported as a reliability problem, the result stands
         try:
             near = raise_on_all_ranks(
                 comm,
                 lambda: interaction_integral(
-                    grad_u, material, x_tip, direction, probe, keep_outside=keep, **options
+                    grad_u, material, x_tip, direction, near_pairs, keep_outside=keep, **options
                 ),
             )
             out = dataclasses.replace(out, probe=near)

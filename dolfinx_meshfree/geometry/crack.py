@@ -641,8 +641,8 @@ def warn_near_particle_rows(crack: Crack, domain: ParticlePatch | CrackDomain) -
     particle is on one face and its neighbours across the crack barely see it: with the linear
     basis K_I is 1 to 2.7 % low at 0.05 spacing, and it stays so under refinement, while the
     domains agree with each other (issue 23, item 1: the reliability figures cannot see it).
-    The message names the particle and a position of the crack half a spacing off. Growth
-    (:meth:`Crack.extend`) is not checked: its path is the physics'."""
+    The message names the nearest particle and the fix (the crack about half a spacing off the
+    rows). Growth (:meth:`Crack.extend`) is not checked: its path is the physics'."""
     h = particle_spacing(domain)
     x = domain.particles.positions[:, :2]
     d = point_segment_distance(x, crack.points[:-1], crack.points[1:]).min(axis=1)

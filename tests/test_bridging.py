@@ -223,6 +223,18 @@ def test_band_wider_than_the_patch():
         problem.solve()
 
 
+def cantilever_bands(comm):
+    """``band_of(width)``: the bridging band (2 layers, or ``width``) of the cantilever (h = 1.5)
+    with its patch right of x = 24, built afresh at each call on one mesh and patch."""
+    msh = beam_mesh(comm, 1.5)
+    patch = mf.ParticlePatch(msh, cells_right_of(msh, 24.0), 1.5)
+    V = _compat.vector_function_space(msh)
+    mat = mf.LinearElastic(3e7, 0.3)
+    return lambda width: BridgingBand(
+        mf.CoupledElasticity(V, patch, mat, coupling="bridging"), 2, width
+    )
+
+
 @pytest.mark.parametrize(("width", "nodes"), [(3.0, [0, 0.5, 1]), (2.25, [0, 1 / 1.5, 1])])
 def test_band_of_a_physical_width(width, nodes):
     """``band_width``: the patch cells with a node closer than the width to the interface x = 24
@@ -230,12 +242,8 @@ def test_band_of_a_physical_width(width, nodes):
     cells gives the band of two cell layers exactly; 1.5 cells gives the same cells with alpha
     2/3 on the middle nodes."""
     comm = MPI.COMM_WORLD
-    msh = beam_mesh(comm, 1.5)
-    patch = mf.ParticlePatch(msh, cells_right_of(msh, 24.0), 1.5)
-    V = _compat.vector_function_space(msh)
-    mat = mf.LinearElastic(3e7, 0.3)
-    layers = BridgingBand(mf.CoupledElasticity(V, patch, mat, coupling="bridging"), 2)
-    band = BridgingBand(mf.CoupledElasticity(V, patch, mat, coupling="bridging"), 2, width)
+    band_of = cantilever_bands(comm)
+    layers, band = band_of(None), band_of(width)
     assert band.layer is None
     assert np.array_equal(band.cells, layers.cells)
     assert np.array_equal(band.in_band_node, layers.in_band_node)
@@ -252,11 +260,8 @@ def test_band_of_a_physical_width_decides_ties_under_round_off(monkeypatch):
     machine's or rank's round-off does), the band is still the two cell layers (issue 23, item
     10: an extra layer of cells on 2 ranks of one machine)."""
     comm = MPI.COMM_WORLD
-    msh = beam_mesh(comm, 1.5)
-    patch = mf.ParticlePatch(msh, cells_right_of(msh, 24.0), 1.5)
-    V = _compat.vector_function_space(msh)
-    mat = mf.LinearElastic(3e7, 0.3)
-    layers = BridgingBand(mf.CoupledElasticity(V, patch, mat, coupling="bridging"), 2)
+    band_of = cantilever_bands(comm)
+    layers = band_of(None)
     exact = BridgingBand._interface_distance
     rng = np.random.default_rng(7 + comm.rank)
 
@@ -265,7 +270,7 @@ def test_band_of_a_physical_width_decides_ties_under_round_off(monkeypatch):
         return d * (1 + rng.choice([-4, 4], d.size) * np.finfo(float).eps)
 
     monkeypatch.setattr(BridgingBand, "_interface_distance", noisy)
-    band = BridgingBand(mf.CoupledElasticity(V, patch, mat, coupling="bridging"), 2, 3.0)
+    band = band_of(3.0)
     assert np.array_equal(band.cells, layers.cells)
     assert np.array_equal(band.in_band_node, layers.in_band_node)
     assert np.array_equal(band.particles, layers.particles)

@@ -64,14 +64,20 @@ def solve_affine(cell_name, coupling, perturbed, n=4, comm=MPI.COMM_WORLD):
     else:
         patch = half_patch(msh, n, jitter=0.3 if perturbed else 0.0)
     problem = coupled(msh, patch, coupling)
-    if perturbed:  # the displacement on the FE side, sigma n on the patch's exterior facets
+    impose_affine(msh, patch, problem, fe_side=perturbed)
+    return msh, patch, problem.solve()
+
+
+def impose_affine(msh, patch, problem, fe_side: bool) -> None:
+    """The affine field's conditions: its displacement on the whole boundary, or (``fe_side``)
+    on the FE side's boundary and its traction sigma n on the patch's exterior facets."""
+    if fe_side:
         fe_facets, patch_facets = split_boundary(msh, patch)
         sigma = MATERIAL.stress(G[None])[0]
         problem.add_dirichlet(fe_facets, affine)
         problem.add_traction(patch_facets, lambda x, nrm: nrm @ sigma.T)
     else:
         problem.add_dirichlet(mf.boundary_facets(msh), affine)
-    return msh, patch, problem.solve()
 
 
 @pytest.mark.parametrize("perturbed", [False, True])

@@ -29,7 +29,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 from scipy.spatial import cKDTree
-from test_couplings_3d import coupled, split_boundary
+from test_couplings_3d import coupled, impose_affine
 from test_efg_3d import MATERIAL, G, affine, unit_cube
 from test_placement_robust import moment_matrices_are_well_conditioned
 
@@ -189,13 +189,7 @@ def patch_test_errors(msh, problem, dirichlet: str, patch) -> tuple[float, float
     """Largest errors of the displacement and its gradient at the Gauss points of all cells;
     ``dirichlet``: "everywhere" (the affine field on the whole boundary) or "fe" (on the FE
     side's boundary, the traction sigma n on the patch's)."""
-    if dirichlet == "fe":
-        fe_facets, patch_facets = split_boundary(msh, patch)
-        sigma = MATERIAL.stress(G[None])[0]
-        problem.add_dirichlet(fe_facets, affine)
-        problem.add_traction(patch_facets, lambda x, nrm: nrm @ sigma.T)
-    else:
-        problem.add_dirichlet(mf.boundary_facets(msh), affine)
+    impose_affine(msh, patch, problem, fe_side=dirichlet == "fe")
     q = mf.cell_quadrature(msh, 2)
     u, grad = problem.solve().evaluate_at_quadrature(q)
     comm = msh.comm

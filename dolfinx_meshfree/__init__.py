@@ -71,7 +71,7 @@ from .statics.newton import NewtonError, NewtonOptions, NewtonResult
 from .statics.nonlinear import FINITE_STRAIN_COUPLINGS, CoupledNonlinearProblem, FENonlinearProblem
 from .statics.problem import CoupledLinearProblem
 from .statics.sides import NonlinearSolveResult
-from .verification.analytic import LinearField, PressurizedBushing, TimoshenkoBeam
+from .verification.analytic import KirschPlate, LinearField, PressurizedBushing, TimoshenkoBeam
 from .verification.crack_fields import InclinedCentreCrack, edge_crack_factor
 from .verification.errors import error_norms
 from .verification.waves import GaussianPulseRod, StepLoadedRod
@@ -109,6 +109,7 @@ __all__ = [
     "InclinedCentreCrack",
     "InternalForces",
     "IterativeOptions",
+    "KirschPlate",
     "LinearElastic",
     "LinearField",
     "Material",

@@ -234,6 +234,68 @@ def test_bushing_boundary_conditions_and_hoop_stress(bushing):
     assert np.sign(ur[0]) == np.sign(p)  # an internal pressure pushes the bore outwards
 
 
+# -- Kirsch plate: a circular hole under remote uniaxial tension ---------------------------------
+
+KIRSCH = [
+    mf.KirschPlate(mf.LinearElastic(1000.0, 0.3, "strain")),
+    mf.KirschPlate(mf.LinearElastic(210.0, 0.25, "stress"), a=1.5, sigma=-2.0),
+]
+
+
+def kirsch_points(plate, m=200, r=None):
+    t = RNG.uniform(0.0, 2.0 * np.pi, m)
+    rr = RNG.uniform(1.05 * plate.a, 4.0 * plate.a, m) if r is None else np.full(m, r)
+    return rr[:, None] * np.column_stack([np.cos(t), np.sin(t)])
+
+
+@pytest.mark.parametrize("plate", KIRSCH, ids=["strain", "stress"])
+def test_kirsch_gradient_and_equilibrium(plate):
+    x = kirsch_points(plate)
+    grad = plate.displacement_gradient(x)
+    # the a^4 / r^3 terms: third derivatives about 60 |u| / a^2 near the hole; d = 1e-4 a errs
+    # by some 1e-7 |grad|; bound 1e-6 relative
+    d = 1e-4 * plate.a
+    assert np.abs(fd_gradient(plate.displacement, x, d) - grad).max() <= 1e-6 * np.abs(grad).max()
+    np.testing.assert_allclose(plate.stress(x), hooke(plate.material, grad), rtol=1e-12,
+                               atol=1e-12 * abs(plate.sigma))  # fmt: skip
+
+    def sigma(y):
+        return hooke(plate.material, plate.displacement_gradient(y))
+
+    # truncation ~ d^2 |sigma'''| ~ 120 d^2 |sigma| / a^3 plus round-off; bound 1e-5 |sigma| / a
+    div = fd_divergence(sigma, x, d)
+    assert np.abs(div).max() <= 1e-5 * abs(plate.sigma) / plate.a
+
+
+@pytest.mark.parametrize("plate", KIRSCH, ids=["strain", "stress"])
+def test_kirsch_hole_far_field_and_symmetry(plate):
+    a, s0 = plate.a, plate.sigma
+    # the hole is free of traction (outward normal of the plate there: -e_r)
+    x = kirsch_points(plate, 60, r=a)
+    e_r, e_t = polar_frame(x)
+    s = hooke(plate.material, plate.displacement_gradient(x))
+    assert np.abs(np.einsum("mij,mj->mi", s, -e_r)).max() <= 1e-12 * abs(s0)
+    # hoop stress on the hole: sigma (1 - 2 cos 2t); 3 sigma at the top (0, a), -sigma at (a, 0)
+    t = np.arctan2(x[:, 1], x[:, 0])
+    hoop = np.einsum("mi,mij,mj->m", e_t, s, e_t)
+    np.testing.assert_allclose(hoop, s0 * (1 - 2 * np.cos(2 * t)), rtol=0, atol=1e-12 * abs(s0))
+    top = hooke(plate.material, plate.displacement_gradient(np.array([[0.0, a]])))[0]
+    np.testing.assert_allclose(top, [[3 * s0, 0], [0, 0]], rtol=0, atol=1e-12 * abs(s0))
+    # far away the stress tends to the remote one: the disturbance decays like (a / r)^2
+    far = kirsch_points(plate, 60, r=1e3 * a)
+    s_far = hooke(plate.material, plate.displacement_gradient(far))
+    np.testing.assert_allclose(s_far, np.broadcast_to([[s0, 0], [0, 0]], s_far.shape), rtol=0,
+                               atol=1e-5 * abs(s0))  # fmt: skip
+    # symmetric about both axes: u_y = 0 on y = 0, u_x = 0 on x = 0, mirrored elsewhere
+    r = RNG.uniform(a, 4 * a, 20)
+    u_scale = np.abs(plate.displacement(kirsch_points(plate, 30))).max()
+    assert np.abs(plate.displacement(np.column_stack([r, 0 * r]))[:, 1]).max() <= 1e-14 * u_scale
+    assert np.abs(plate.displacement(np.column_stack([0 * r, r]))[:, 0]).max() <= 1e-14 * u_scale
+    x = kirsch_points(plate, 30)
+    np.testing.assert_allclose(plate.displacement(x * [-1, 1]), plate.displacement(x) * [-1, 1],
+                               rtol=0, atol=1e-14 * u_scale)  # fmt: skip
+
+
 # -- rods: Gaussian pulse (Rabczuk et al. 2006, sec. 6.2.1) and step wave (Belytschko 1995) -----
 
 RODS = [

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dolfinx_meshfree as mf  # (first: lane B's MPI)
 from dolfinx_meshfree import _compat
+from dolfinx_meshfree.approx import neighbours
 from dolfinx_meshfree.geometry import placement_3d
 
 import dolfinx
@@ -169,15 +170,24 @@ def test_moment_matrices_are_well_conditioned_3d(cell, shape, spacing):
 
 def test_the_check_fails_without_the_centroids_and_with_the_grid(monkeypatch):
     """The slanted patch has parts one cell thick: at 0.75 h their border lattices (step h / 2,
-    supports 2 x h / 2) do not reach across, and the grid has no plane between them."""
+    supports 2 x h / 2) do not reach across, and the grid has no plane between them. Eq. 3.11's
+    plain radii (``SPREAD = 0``) are needed to see it: the spread condition of
+    :func:`~dolfinx_meshfree.approx.neighbours.support_radii` widens the supports of the
+    lattice particles whose neighbours all lie in their own plane, so that they reach across
+    (the same patch without the centroids then passes: the last check)."""
     comm = MPI.COMM_WORLD
     with monkeypatch.context() as m:
         m.setattr(placement_3d, "_hollow_centroids", lambda mesh, cells, inner: np.empty((0, 3)))
         msh, patch = patch_of(comm, "hexahedron", "slanted", 0.75)
-    with pytest.raises(ValueError, match="moment matrix is"):
-        moment_matrices_are_well_conditioned(
-            comm, lagrange_mls(msh, patch), gauss_points(msh, patch), RCOND
-        )
+    with monkeypatch.context() as m:
+        m.setattr(neighbours, "SPREAD", 0.0)
+        with pytest.raises(ValueError, match="moment matrix is"):
+            moment_matrices_are_well_conditioned(
+                comm, lagrange_mls(msh, patch), gauss_points(msh, patch), RCOND
+            )
+    moment_matrices_are_well_conditioned(
+        comm, lagrange_mls(msh, patch), gauss_points(msh, patch), RCOND
+    )
     msh, patch = patch_of(comm, "tetrahedron", "ball", 0.75, placement="grid")
     with pytest.raises(ValueError, match="moment matrix is"):
         moment_matrices_are_well_conditioned(

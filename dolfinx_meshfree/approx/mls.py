@@ -181,7 +181,7 @@ class MLS:
         self.dilation = float(dilation)
         self._fix = f"increase dilation (now {self.dilation})"
         if radii is None:
-            self.radii = support_radii(self.points, self.dilation, self.num_basis)
+            self.radii = support_radii(self.points, self.dilation, self.num_basis, self._weight)
         else:
             r = np.asarray(radii, dtype=float)
             if r.shape != (self.points.shape[0],) or not np.all(r > 0):

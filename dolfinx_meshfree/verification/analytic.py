@@ -8,7 +8,7 @@ import numpy as np
 
 from ..physics.materials import LinearElastic
 
-__all__ = ["LinearField", "PressurizedBushing", "TimoshenkoBeam"]
+__all__ = ["KirschPlate", "LinearField", "PressurizedBushing", "TimoshenkoBeam"]
 
 
 @dataclass(frozen=True)
@@ -149,3 +149,74 @@ class PressurizedBushing:
         c1, c2 = self.constants
         lam, mu = self.material.lmbda, self.material.mu
         return 2 * (lam + mu) * c1 + 2 * mu * c2 / np.asarray(r, dtype=float) ** 2
+
+
+@dataclass(frozen=True)
+class KirschPlate:
+    """Kirsch's infinite plate with a circular hole of radius ``a`` at the origin under a remote
+    uniaxial stress ``sigma`` along x; 2D linear elasticity, plane stress or plane strain by the
+    material's ``kappa`` (``3 - 4 nu`` in plane strain, ``(3 - nu) / (1 + nu)`` in plane
+    stress). In polar coordinates (Barber, Elasticity, sec. 8.4.1), with ``mu`` the shear
+    modulus:
+
+    ``u_r = sigma / (8 mu) [r (kappa - 1 + 2 cos 2t) + 2 a^2 / r (1 + (1 + kappa) cos 2t)
+    - 2 a^4 / r^3 cos 2t]``,
+    ``u_t = -sigma / (8 mu) [2 r + 2 (kappa - 1) a^2 / r + 2 a^4 / r^3] sin 2t``.
+
+    The hoop stress at the top of the hole, ``sigma_xx(0, a)``, is ``3 sigma``
+    (:meth:`stress`). The field is symmetric about both axes (``u_y = 0`` on ``y = 0``,
+    ``u_x = 0`` on ``x = 0``), so a quarter plate with those conditions models it.
+    """
+
+    material: LinearElastic
+    a: float = 1.0
+    sigma: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.a) and self.a > 0):
+            raise ValueError(f"a={self.a} must be a positive hole radius")
+        if not np.isfinite(self.sigma):
+            raise ValueError(f"sigma={self.sigma} must be finite")
+
+    @property
+    def kappa(self) -> float:
+        nu = self.material.nu
+        return 3.0 - 4.0 * nu if self.material.plane == "strain" else (3.0 - nu) / (1.0 + nu)
+
+    def _polar(self, x: np.ndarray) -> tuple[np.ndarray, ...]:
+        """``r, t`` and ``u_r, u_t`` with their derivatives in ``r`` and ``t``."""
+        x = np.asarray(x, dtype=float)[:, :2]
+        r, t = np.hypot(x[:, 0], x[:, 1]), np.arctan2(x[:, 1], x[:, 0])
+        k, a, c = self.kappa, self.a, self.sigma / (8.0 * self.material.mu)
+        c2, s2 = np.cos(2 * t), np.sin(2 * t)
+        ur = c * (r * (k - 1 + 2 * c2) + 2 * a**2 / r * (1 + (1 + k) * c2) - 2 * a**4 / r**3 * c2)
+        dur_dr = c * (
+            (k - 1 + 2 * c2) - 2 * a**2 / r**2 * (1 + (1 + k) * c2) + 6 * a**4 / r**4 * c2
+        )
+        dur_dt = c * (-4 * r * s2 - 4 * a**2 / r * (1 + k) * s2 + 4 * a**4 / r**3 * s2)
+        g = 2 * r + 2 * (k - 1) * a**2 / r + 2 * a**4 / r**3
+        dg = 2 - 2 * (k - 1) * a**2 / r**2 - 6 * a**4 / r**4
+        ut, dut_dr, dut_dt = -c * g * s2, -c * dg * s2, -2 * c * g * c2
+        return r, t, ur, ut, dur_dr, dur_dt, dut_dr, dut_dt
+
+    def displacement(self, x: np.ndarray) -> np.ndarray:
+        """Exact displacement (m, 2) at points (m, 2) (outside the hole)."""
+        _, t, ur, ut, *_ = self._polar(x)
+        cos, sin = np.cos(t), np.sin(t)
+        return np.stack([ur * cos - ut * sin, ur * sin + ut * cos], axis=1)
+
+    def displacement_gradient(self, x: np.ndarray) -> np.ndarray:
+        """Exact gradient ``du_i/dx_j`` (m, 2, 2): the polar gradient
+        ``[[u_r,r, (u_r,t - u_t) / r], [u_t,r, (u_t,t + u_r) / r]]`` rotated to x, y."""
+        r, t, ur, ut, dur_dr, dur_dt, dut_dr, dut_dt = self._polar(x)
+        polar = np.empty((r.size, 2, 2))
+        polar[:, 0, 0], polar[:, 0, 1] = dur_dr, (dur_dt - ut) / r
+        polar[:, 1, 0], polar[:, 1, 1] = dut_dr, (dut_dt + ur) / r
+        cos, sin = np.cos(t), np.sin(t)
+        rot = np.empty((r.size, 2, 2))
+        rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1] = cos, -sin, sin, cos
+        return np.einsum("mik,mkl,mjl->mij", rot, polar, rot)
+
+    def stress(self, x: np.ndarray) -> np.ndarray:
+        """Exact stress (m, 2, 2) (Kirsch 1898; Barber, eq. 8.68-8.70 rotated to x, y)."""
+        return self.material.stress(self.displacement_gradient(x))

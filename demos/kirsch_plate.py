@@ -47,7 +47,6 @@ import dolfinx_meshfree as mf  # first: it loads the right MPI for the dolfinx_s
 from dolfinx_meshfree import _compat
 
 import dolfinx
-import dolfinx.fem.petsc
 import numpy as np
 import ufl
 from mpi4py import MPI
@@ -113,10 +112,7 @@ def run(method: str, n: int, args) -> dict:
     t0 = time.perf_counter()
     particles, support = 0, 0.0
     if method == "fe":
-        opts = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
-        uh = dolfinx.fem.petsc.LinearProblem(a, L, bcs, petsc_options=opts).solve()
-        uh.x.scatter_forward()
-        values = uh.x.array.reshape(-1, 2)
+        values = mf.solve_forms(a, L, bcs).u.x.array.reshape(-1, 2)  # as written for DOLFINx
 
         def evaluate(q):
             t = mf.tabulate_in_cells(V, q.points, q.cells)

@@ -69,6 +69,7 @@ if TYPE_CHECKING:  # annotations only
 __all__ = [
     "ContactSystem",
     "CrackContact",
+    "FaceTerm",
     "contact_points",
     "face_term",
     "jump_operator",
@@ -360,27 +361,65 @@ def face_term(
         sifs: The domain integral's result (tip, direction, radii).
         weight: ``q``, one of :data:`~dolfinx_meshfree.fracture.interaction.Q_WEIGHTS`.
     """
-    s, ws = np.polynomial.legendre.leggauss(points)
-    s, ws = 0.5 * (s + 1.0), 0.5 * ws
-    d = np.asarray(sifs.direction, dtype=float)
-    n = np.array([-d[1], d[0]])
-    out = np.zeros(len(sifs.outer))
-    for k, (r1, r2) in enumerate(zip(sifs.inner, sifs.outer, strict=True)):
-        r = r2 * s * s
-        x = sifs.tip[None, :] - r[:, None] * d[None, :]
-        up = crack.side(x + 1e-6 * r2 * n[None, :])  # the side n points to
-        t_up = mls.tabulate(x, 1, up)
-        t_down = mls.tabulate(x, 1, -up)
-        gap = (t_up.values @ coefficients - t_down.values @ coefficients) @ n
-        sigma = 0.5 * (
-            material.stress(t_up.gradient(coefficients))
-            + material.stress(t_down.gradient(coefficients))
-        )
-        p = np.where(gap < 0.0, -np.einsum("i,mij,j->m", n, sigma, n), 0.0)
-        q = q_weight(r, r1, r2, weight)
-        # int_0^r2 f(r) / sqrt(r) dr = 2 sqrt(r2) int_0^1 f(r2 s^2) ds
-        out[k] = 2.0 * 2.0 * np.sqrt(r2) * np.sum(ws * p * q) / np.sqrt(2.0 * np.pi)
-    return out
+    term = FaceTerm(mls, crack, sifs.tip, sifs.direction, sifs.inner, sifs.outer, weight, points)
+    return term(coefficients, material)
+
+
+class FaceTerm:
+    """:func:`face_term` with its shape functions tabulated once: the two faces' MLS values
+    and gradients at the rule's points behind one tip (local). The term is not linear in the
+    field (a face pair counts where it is closed), but the gap and the pressure at the points
+    are: a call is a few products. The tables belong to one MLS version (:meth:`current`).
+
+    Args:
+        mls: The crack-aware approximation. crack: The crack of the tip.
+        tip, direction: The tip and the crack's tangent ahead of it.
+        inner, outer: The domains' radii (k,). weight, points: As :func:`face_term`.
+    """
+
+    def __init__(
+        self,
+        mls: MLS,
+        crack: Crack,
+        tip: np.ndarray,
+        direction: np.ndarray,
+        inner: np.ndarray,
+        outer: np.ndarray,
+        weight: str = "linear",
+        points: int = 16,
+    ) -> None:
+        s, ws = np.polynomial.legendre.leggauss(points)
+        s, ws = 0.5 * (s + 1.0), 0.5 * ws
+        d = np.asarray(direction, dtype=float)
+        self.normal = np.array([-d[1], d[0]])
+        self.mls, self.version = mls, mls.version
+        self.domains = []
+        for r1, r2 in zip(inner, outer, strict=True):
+            r = r2 * s * s
+            x = np.asarray(tip, dtype=float)[None, :] - r[:, None] * d[None, :]
+            up = crack.side(x + 1e-6 * r2 * self.normal[None, :])  # the side n points to
+            q = q_weight(r, r1, r2, weight)
+            # int_0^r2 f(r) / sqrt(r) dr = 2 sqrt(r2) int_0^1 f(r2 s^2) ds
+            factor = 2.0 * 2.0 * np.sqrt(r2) * ws * q / np.sqrt(2.0 * np.pi)
+            self.domains.append((mls.tabulate(x, 1, up), mls.tabulate(x, 1, -up), factor))
+
+    def current(self, mls: MLS) -> bool:
+        """Whether the tables apply to ``mls`` as it is now (the same object, same version)."""
+        return mls is self.mls and mls.version == self.version
+
+    def __call__(self, coefficients: np.ndarray, material: LinearElastic) -> np.ndarray:
+        """``Delta K_I`` (k,) of the particle coefficients (n, 2)."""
+        n = self.normal
+        out = np.zeros(len(self.domains))
+        for k, (t_up, t_down, factor) in enumerate(self.domains):
+            gap = (t_up.values @ coefficients - t_down.values @ coefficients) @ n
+            sigma = 0.5 * (
+                material.stress(t_up.gradient(coefficients))
+                + material.stress(t_down.gradient(coefficients))
+            )
+            p = np.where(gap < 0.0, -np.einsum("i,mij,j->m", n, sigma, n), 0.0)
+            out[k] = np.sum(factor * p)
+        return out
 
 
 def with_crack_contact(model: Model, contact: CrackContact | None) -> Model:

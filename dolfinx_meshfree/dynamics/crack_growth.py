@@ -316,7 +316,9 @@ class DynamicCrackGrowth:
         tip = crack.points[end].copy()
         tic = time.perf_counter()
         # the criterion uses K only: no near-tip probe (the reliability figures' extra annuli)
-        sif = dynamic_sifs(dyn, crack, tip, self.radius, probe=False, **self.sif_options)
+        sif = dynamic_sifs(
+            dyn, crack, tip, self.radius, probe=False, j_integral=False, **self.sif_options
+        )
         self.timings["sifs"] += time.perf_counter() - tic
         KI, KII = float(sif.K_I.mean()), float(sif.K_II.mean())
         theta, keq = float(kink_angle(KI, KII)), float(equivalent_sif(KI, KII))

@@ -30,18 +30,19 @@ crack's K would need them).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from petsc4py import PETSc
 
-from ..fracture.interaction import StressIntensityFactors
+from ..fracture.interaction import StressIntensityFactors, interaction_rule
 from ..geometry.crack import Crack, CrackDomain
 from ..parallel import raise_on_all_ranks
 from ..physics.materials import LinearElastic
-from ..statics.sifs import solution_sifs
-from .crack_contact import ContactSystem, face_term
+from ..statics.sif_functional import SIFFunctional
+from ..statics.sifs import sif_domains, solution_sifs
+from .crack_contact import ContactSystem, FaceTerm, face_term
 
 if TYPE_CHECKING:  # annotations only: the facade imports this module
     from .explicit import ExplicitDynamics
@@ -84,6 +85,7 @@ def dynamic_sifs(
     tip: int | Sequence[float] | np.ndarray = 0,
     radius: float | Sequence | np.ndarray | None = None,
     probe: bool = True,
+    j_integral: bool = True,
     **options,
 ) -> StressIntensityFactors:
     """K_I, K_II and J at a stationary tip of ``crack`` at the model's current state (module
@@ -100,6 +102,12 @@ def dynamic_sifs(
             panels with the default domains).
         probe: Evaluate the near-tip probe of the reliability figures (``False`` for a caller
             that uses K only: :func:`~dolfinx_meshfree.statics.sifs.solution_sifs`).
+        j_integral: Also compute J (and the J–K mismatch). ``False``: K only, by the linear
+            functionals of :class:`~dolfinx_meshfree.statics.sif_functional.SIFFunctional`,
+            kept on the model and rebuilt when the tip, the domains or the MLS change (its
+            version: a crack grew, particles moved): a check is the acceleration and a few
+            dot products (J is ``nan``, ``J_comparable=False``). The K's equal the full
+            integral's to round-off.
 
     Raises:
         ValueError: on every rank: no cracks, a finite-strain material, a bad tip or radius.
@@ -119,6 +127,8 @@ def dynamic_sifs(
             )
 
     raise_on_all_ranks(dyn.comm, check)
+    if not j_integral:
+        return _functional_sifs(dyn, cracks, domain, crack, tip, radius, probe, options)
     acc = current_acceleration(dyn)
     try:
         u = dyn.evaluator.local_values(dyn.u)[1]
@@ -147,6 +157,103 @@ def dynamic_sifs(
 
         probe = None if sifs.probe is None else with_faces(sifs.probe)
         sifs = dataclasses.replace(with_faces(sifs), probe=probe)
+    return sifs
+
+
+def _exact(x: object) -> object:
+    """A key for a tip or radius argument that tells any two different values apart (the
+    bytes of arrays, not their printed digits)."""
+    if x is None or isinstance(x, int | np.integer):
+        return x
+    a = np.asarray(x, dtype=float)
+    return a.shape, a.tobytes()
+
+
+def _kept(dyn: ExplicitDynamics, key: tuple, build: Callable[[], Any]) -> Any:
+    """What ``build`` makes for ``key`` (the checked domains, a
+    :class:`~dolfinx_meshfree.statics.sif_functional.SIFFunctional`, a
+    :class:`~dolfinx_meshfree.dynamics.crack_contact.FaceTerm`), kept on the model with the MLS
+    and its version at the time, rebuilt when missing or made for another MLS or an older
+    version of it (a crack grew, the particles moved): never stale."""
+    kept = dyn.__dict__.setdefault("_sif_tables", {})
+    entry = kept.get(key)
+    if entry is None or entry[0] is not dyn.mls or entry[1] != dyn.mls.version:
+        entry = (dyn.mls, dyn.mls.version, build())
+        kept[key] = entry
+    return entry[2]
+
+
+def _functional_sifs(
+    dyn: ExplicitDynamics,
+    cracks: list[Crack],
+    domain: object,
+    crack: Crack,
+    tip: int | Sequence[float] | np.ndarray,
+    radius: float | Sequence | np.ndarray | None,
+    probe: bool,
+    options: dict,
+) -> StressIntensityFactors:
+    """:func:`dynamic_sifs` with ``j_integral=False``: K by kept linear functionals (and the
+    crack faces' contact term by kept tables). Only the tables of this check are kept: those
+    of a tip that moved are dropped."""
+    material, mls = dyn.material, dyn.mls
+    where = (id(crack), crack.points.tobytes(), _exact(tip), _exact(radius),
+             repr(sorted(options.items())))  # fmt: skip
+    plan = _kept(
+        dyn, ("domains", *where),
+        lambda: sif_domains(material, cracks, domain, crack, tip, radius, **options),
+    )  # fmt: skip
+    opts = plan.options
+    contact = isinstance(dyn.system, ContactSystem)
+    used = [("domains", *where)]
+
+    def tables(pairs: np.ndarray) -> tuple[SIFFunctional, FaceTerm | None]:
+        key = (id(crack), plan.tip.tobytes(), plan.direction.tobytes(), pairs.tobytes(),
+               repr(sorted(opts.items())))  # fmt: skip
+
+        def functional() -> SIFFunctional:
+            rule = interaction_rule(
+                material, plan.tip, plan.direction, pairs, keep_outside=plan.keep,
+                dynamic=True, **opts,
+            )  # fmt: skip
+            return SIFFunctional(mls, rule)
+
+        def faces() -> FaceTerm:
+            w = opts.get("weight", "linear")
+            return FaceTerm(mls, crack, plan.tip, plan.direction, pairs[:, 0], pairs[:, 1], w)
+
+        used.extend([key, ("faces", *key)])
+        f = raise_on_all_ranks(dyn.comm, lambda: _kept(dyn, key, functional))
+        if not contact:
+            return f, None
+        return f, raise_on_all_ranks(dyn.comm, lambda: _kept(dyn, ("faces", *key), faces))
+
+    main = tables(plan.pairs)
+    near = tables(plan.near) if probe and len(plan.near) else None
+    kept = dyn.__dict__["_sif_tables"]
+    for key in [k for k in kept if k not in used]:
+        del kept[key]
+    acc = current_acceleration(dyn)
+    try:
+        u = dyn.evaluator.local_values(dyn.u)[1]
+        a = dyn.evaluator.local_values(acc)[1]
+    finally:
+        for x in acc:
+            x.destroy()
+
+    def result(f: SIFFunctional, faces: FaceTerm | None) -> StressIntensityFactors:
+        KI, KII = f(u, a)
+        if faces is not None:  # the faces' contact pressure (closed faces); J has no such term
+            KI = KI + faces(u, material)
+        rule = f.rule
+        return StressIntensityFactors(
+            inner=rule.inner, outer=rule.outer, K_I=KI, K_II=KII, J=np.full(KI.size, np.nan),
+            E_prime=rule.E_prime, tip=rule.tip, direction=rule.direction, J_comparable=False,
+        )  # fmt: skip
+
+    sifs = result(*main)
+    if near is not None:
+        sifs = dataclasses.replace(sifs, probe=result(*near))
     return sifs
 
 

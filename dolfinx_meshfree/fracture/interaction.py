@@ -79,11 +79,13 @@ __all__ = [
     "DOMAIN_DEPENDENCE_LIMIT",
     "ENERGY_MISMATCH_LIMIT",
     "Q_WEIGHTS",
+    "InteractionRule",
     "SIFReliabilityWarning",
     "StressIntensityFactors",
     "annulus_quadrature",
     "disc_quadrature",
     "interaction_integral",
+    "interaction_rule",
     "q_weight",
 ]
 
@@ -451,6 +453,20 @@ def _inertia_terms(
     return out
 
 
+def _k_density(
+    sigma: np.ndarray, H: np.ndarray, h_aux: np.ndarray, s_aux: np.ndarray, dq: np.ndarray
+) -> np.ndarray:
+    """The interaction integrand per point (n,), before the quadrature weights:
+    ``[sigma_ij u^aux_i,1 + sigma^aux_ij u_i,1 - sigma_ik eps^aux_ik delta_1j] q_,j`` (tip
+    frame; module docstring), linear in the field's ``sigma`` and ``H = grad u``."""
+    e_a = 0.5 * (h_aux + np.swapaxes(h_aux, 1, 2))
+    flux = np.einsum("qij,qi->qj", sigma, h_aux[:, :, 0]) + np.einsum(
+        "qij,qi->qj", s_aux, H[:, :, 0]
+    )
+    flux[:, 0] -= np.einsum("qik,qik->q", sigma, e_a)
+    return np.einsum("qj,qj->q", flux, dq)
+
+
 def _q_gradient(x: np.ndarray, r: np.ndarray, r1: float, r2: float, weight: str) -> np.ndarray:
     """grad q (n, 2) in the tip frame."""
     if weight == "linear":
@@ -459,6 +475,45 @@ def _q_gradient(x: np.ndarray, r: np.ndarray, r1: float, r2: float, weight: str)
         s = (r - r1) / (r2 - r1)
         dq = 6.0 * s * (s - 1.0) / (r2 - r1)
     return (dq / r)[:, None] * x
+
+
+def _domains(
+    tip: Sequence[float] | np.ndarray,
+    direction: Sequence[float] | np.ndarray,
+    radius: float | Sequence | np.ndarray,
+    inner: float,
+    weight: str,
+    points: tuple[int, int],
+    panels: int,
+    keep_outside: np.ndarray | None,
+    dynamic: bool,
+) -> tuple[TipFrame, np.ndarray, np.ndarray, list, list]:
+    """The checked domains of :func:`interaction_integral` (its arguments): the tip frame, the
+    radii r1, r2 (k,), the annuli's rules and (``dynamic``: the inertia term also covers the
+    inner discs, ``q = 1``) the discs' rules (tip frame)."""
+    frame = TipFrame(np.asarray(tip), np.asarray(direction))
+    r1s, r2s = _radii(radius, inner)
+    if weight not in Q_WEIGHTS:
+        raise ValueError(f"weight={weight!r} must be one of {Q_WEIGHTS}")
+    if len(points) != 2 or min(points) < 1 or any(int(p) != p for p in points):
+        raise ValueError(f"points={points!r} must be two positive integers (n_r, n_theta)")
+    if keep_outside is not None:
+        pts = np.asarray(keep_outside, dtype=float).reshape(-1, 2)
+        dist = np.linalg.norm(pts - frame.tip, axis=1)
+        inside = dist <= r2s.max()
+        if np.any(inside):
+            k = int(np.argmax(inside))
+            raise ValueError(
+                f"the domain of radius {float(r2s.max())} about the tip {frame.tip.tolist()} "
+                f"contains {pts[k].tolist()} (at distance {dist[k]:.6g}); use a radius below "
+                f"{dist.min():.6g}"
+            )
+    rules = [annulus_quadrature(a, b, points, panels) for a, b in zip(r1s, r2s, strict=True)]
+    discs = []
+    if dynamic:
+        none = (np.zeros((0, 2)), np.zeros(0), np.zeros(0))
+        discs = [disc_quadrature(a, points, panels) if a > 0 else none for a in r1s]
+    return frame, r1s, r2s, rules, discs
 
 
 def interaction_integral(
@@ -508,32 +563,14 @@ def interaction_integral(
     Returns:
         :class:`StressIntensityFactors`, one entry per domain (path independence report).
     """
-    frame = TipFrame(np.asarray(tip), np.asarray(direction))
+    dynamic = acceleration is not None
+    frame, r1s, r2s, rules, discs = _domains(
+        tip, direction, radius, inner, weight, points, panels, keep_outside, dynamic
+    )
     E_prime = effective_modulus(material)
-    r1s, r2s = _radii(radius, inner)
-    if weight not in Q_WEIGHTS:
-        raise ValueError(f"weight={weight!r} must be one of {Q_WEIGHTS}")
-    if len(points) != 2 or min(points) < 1 or any(int(p) != p for p in points):
-        raise ValueError(f"points={points!r} must be two positive integers (n_r, n_theta)")
-
-    if keep_outside is not None:
-        pts = np.asarray(keep_outside, dtype=float).reshape(-1, 2)
-        dist = np.linalg.norm(pts - frame.tip, axis=1)
-        inside = dist <= r2s.max()
-        if np.any(inside):
-            k = int(np.argmax(inside))
-            raise ValueError(
-                f"the domain of radius {float(r2s.max())} about the tip {frame.tip.tolist()} "
-                f"contains {pts[k].tolist()} (at distance {dist[k]:.6g}); use a radius below "
-                f"{dist.min():.6g}"
-            )
-    rules = [annulus_quadrature(a, b, points, panels) for a, b in zip(r1s, r2s, strict=True)]
     x_local = np.concatenate([x for x, _, _ in rules])
-    n_annuli, x_eval, discs = len(x_local), x_local, []
-    if acceleration is not None:  # the inertia term also covers the inner discs (q = 1)
-        none = (np.zeros((0, 2)), np.zeros(0), np.zeros(0))
-        discs = [disc_quadrature(a, points, panels) if a > 0 else none for a in r1s]
-        x_eval = np.concatenate([x_local, *(d[0] for d in discs)])
+    n_annuli = len(x_local)
+    x_eval = np.concatenate([x_local, *(d[0] for d in discs)]) if discs else x_local
     H_global = np.asarray(grad_u(frame.to_global(x_eval)), dtype=float)
     if H_global.shape != (len(x_eval), 2, 2):
         raise ValueError(
@@ -572,13 +609,7 @@ def interaction_integral(
         flux[:, 0] -= 0.5 * np.einsum("qij,qij->q", s, e)
         J[k] = np.sum(w * np.einsum("qj,qj->q", flux, dq))
         for out, (_, h_aux, s_aux) in zip((KI, KII), aux, strict=True):
-            h_a, s_a = h_aux[sl], s_aux[sl]
-            e_a = 0.5 * (h_a + np.swapaxes(h_a, 1, 2))
-            flux = np.einsum("qij,qi->qj", s, h_a[:, :, 0]) + np.einsum(
-                "qij,qi->qj", s_a, h[:, :, 0]
-            )
-            flux[:, 0] -= np.einsum("qik,qik->q", s, e_a)
-            out[k] = 0.5 * E_prime * np.sum(w * np.einsum("qj,qj->q", flux, dq))
+            out[k] = 0.5 * E_prime * np.sum(w * _k_density(s, h, h_aux[sl], s_aux[sl], dq))
     if inertia is not None:  # + int rho u_,tt . (u_,1, u^aux_,1) q dA
         J += inertia[0]
         KI += 0.5 * E_prime * inertia[1]
@@ -592,4 +623,122 @@ def interaction_integral(
         E_prime=E_prime,
         tip=frame.tip,
         direction=frame.direction,
+    )
+
+
+@dataclass(frozen=True)
+class InteractionRule:
+    """K_I and K_II of :func:`interaction_integral` as linear functionals of the field's global
+    gradient at :attr:`gradient_points` and (dynamics) its acceleration at
+    :attr:`acceleration_points` (:func:`interaction_rule`):
+
+    ``K_m[k] = sum_q gradient_weights[m, k, q] : grad u(x_q)
+    + sum_q acceleration_weights[m, k, q] . u_tt(x_q)``,  ``m = 0`` (K_I), ``1`` (K_II).
+
+    The weights hold ``E' / 2``, the quadrature weights, ``q`` and ``grad q``, the auxiliary
+    Williams fields and the rotation to the tip frame. A model tabulates its shape functions at
+    the points once per tip (:class:`~dolfinx_meshfree.statics.sif_functional.SIFFunctional`):
+    a check is then a few dot products.
+    """
+
+    inner: np.ndarray
+    outer: np.ndarray
+    E_prime: float
+    tip: np.ndarray
+    direction: np.ndarray
+    gradient_points: np.ndarray
+    gradient_weights: np.ndarray
+    acceleration_points: np.ndarray | None = None
+    acceleration_weights: np.ndarray | None = None
+
+    def evaluate(
+        self, grad_u: GradientFunction, acceleration: VectorFunction | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``(K_I, K_II)`` (k,) each, of the field given as :func:`interaction_integral`'s
+        callables (the acceleration is required exactly when the rule is dynamic)."""
+        if (acceleration is None) != (self.acceleration_weights is None):
+            raise ValueError(
+                "acceleration must be given exactly when the rule is dynamic "
+                f"(interaction_rule(..., dynamic={self.acceleration_weights is not None}))"
+            )
+        H = np.asarray(grad_u(self.gradient_points), dtype=float)
+        K = np.einsum("mkqij,qij->mk", self.gradient_weights, H)
+        if acceleration is not None:
+            a = np.asarray(acceleration(self.acceleration_points), dtype=float)
+            K = K + np.einsum("mkqi,qi->mk", self.acceleration_weights, a)
+        return K[0], K[1]
+
+
+def interaction_rule(
+    material: LinearElastic,
+    tip: Sequence[float] | np.ndarray,
+    direction: Sequence[float] | np.ndarray,
+    radius: float | Sequence | np.ndarray,
+    *,
+    inner: float = 0.5,
+    weight: str = "linear",
+    points: tuple[int, int] = (8, 32),
+    panels: int = 1,
+    keep_outside: np.ndarray | None = None,
+    dynamic: bool = False,
+) -> InteractionRule:
+    """The interaction integral's K_I and K_II as weights on the field's gradient (and, with
+    ``dynamic``, its acceleration) at the integral's points: :class:`InteractionRule`.
+
+    The arguments and their checks are those of :func:`interaction_integral` (``dynamic``: the
+    integral with ``acceleration``). The integrand is linear in ``grad u`` (the stress of the
+    linear elastic law) and the inertia term in ``u_tt``: the weights are the integrand of
+    :func:`interaction_integral` evaluated with unit gradients, rotated to global components.
+    J, quadratic in ``grad u``, has no such rule.
+    """
+    frame, r1s, r2s, rules, discs = _domains(
+        tip, direction, radius, inner, weight, points, panels, keep_outside, dynamic
+    )
+    E_prime = effective_modulus(material)
+    x_local = np.concatenate([x for x, _, _ in rules])
+    aux = [WilliamsField(material, *k).fields(x_local) for k in ((1.0, 0.0), (0.0, 1.0))]
+    n, k_count = len(x_local), len(rules)
+    C = np.zeros((2, k_count, n, 2, 2))  # on the gradient in the tip frame
+    start = 0
+    for k, (x, w, r) in enumerate(rules):
+        sl = slice(start, start + len(w))
+        start += len(w)
+        dq = _q_gradient(x, r, r1s[k], r2s[k], weight)
+        for i in range(2):
+            for j in range(2):
+                unit = np.zeros((len(w), 2, 2))
+                unit[:, i, j] = 1.0
+                sigma = material.stress(unit)
+                for m, (_, h_aux, s_aux) in enumerate(aux):
+                    dens = _k_density(sigma, unit, h_aux[sl], s_aux[sl], dq)
+                    C[m, k, sl, i, j] = 0.5 * E_prime * w * dens
+    weights = frame.tensors_to_global(C)  # Q^T C Q: the same functional of the global gradient
+    acc_points, acc_weights = None, None
+    if dynamic:
+        x_acc = np.concatenate([x_local, *(d[0] for d in discs)])
+        A = np.zeros((2, k_count, len(x_acc), 2))  # rho u^aux_i,1 (w q) per point, tip frame
+        start, start_in = 0, n
+        for k, ((x, w, r), (xd, wd, _)) in enumerate(zip(rules, discs, strict=True)):
+            sl = slice(start, start + len(w))
+            sd = slice(start_in, start_in + len(wd))
+            start, start_in = start + len(w), start_in + len(wd)
+            wq = np.concatenate([w * q_weight(r, r1s[k], r2s[k], weight), wd])
+            xq = np.concatenate([x, xd])
+            for m, f in enumerate(WilliamsField(material, *kk) for kk in ((1.0, 0.0), (0.0, 1.0))):
+                h = f.fields(xq)[1]
+                coef = 0.5 * E_prime * material.rho * wq[:, None] * h[:, :, 0]
+                A[m, k, sl] = coef[: len(w)]
+                A[m, k, sd] = coef[len(w) :]
+        acc_points = frame.to_global(x_acc)
+        acc_weights = frame.vectors_to_global(A)  # c_local . (Q a) = (c_local Q) . a
+    return InteractionRule(
+        inner=r1s,
+        outer=r2s,
+        E_prime=E_prime,
+        tip=frame.tip,
+        direction=frame.direction,
+        gradient_points=frame.to_global(x_local),
+        gradient_weights=weights,
+        acceleration_points=acc_points,
+        acceleration_weights=acc_weights,
     )

@@ -76,8 +76,10 @@ __all__ = [
     "DOMAIN_RADII",
     "MIN_OUTER",
     "PROBE",
+    "SIFDomains",
     "default_domains",
     "resolve_tip",
+    "sif_domains",
     "solution_sifs",
     "warn_on_all_ranks",
 ]
@@ -149,6 +151,91 @@ def default_domains(h: float, fit: float, inner: float = 0.5) -> np.ndarray:
     return np.stack([inner * r2, r2], axis=1)
 
 
+@dataclasses.dataclass(frozen=True)
+class SIFDomains:
+    """The checked integration domains at one tip (:func:`sif_domains`).
+
+    Attributes:
+        pairs: ``(r1, r2)`` (k, 2) of the domains. near: the probe's (k', 2) (empty when it
+            does not fit). tip, direction: the tip and the crack's tangent ahead of it.
+        keep: points no domain may contain (the crack's other points, other cracks).
+        options: :func:`~dolfinx_meshfree.fracture.interaction.interaction_integral`'s keywords
+            (``inner``, ``weight``, ``points``, ``panels``, with the defaults applied).
+    """
+
+    pairs: np.ndarray
+    near: np.ndarray
+    tip: np.ndarray
+    direction: np.ndarray
+    keep: np.ndarray
+    options: dict
+
+
+def sif_domains(
+    material: LinearElastic | None,
+    cracks: Sequence[Crack],
+    domain: ParticlePatch | CrackDomain,
+    crack: Crack,
+    tip: int | Sequence[float] | np.ndarray = 0,
+    radius: float | Sequence | np.ndarray | None = None,
+    **options,
+) -> SIFDomains:
+    """The integration domains of :func:`solution_sifs` at a tip, checked (collective: the
+    patch boundary is gathered; a ``ValueError`` on every rank for a bad material, crack, tip
+    or radius). Arguments as :func:`solution_sifs` (``options`` without ``acceleration``)."""
+    comm = domain.comm
+    segments = np.concatenate(
+        [
+            gathered_segments(domain, domain.exterior_facets),
+            gathered_segments(domain, domain.interface_facets),
+        ]
+    )
+    options = dict(options)
+    inner = options.pop("inner", 0.5)
+    if radius is None and "points" not in options:  # explicit radii keep the caller's rule
+        options.update(points=DEFAULT_POINTS, panels=options.get("panels", DEFAULT_PANELS))
+
+    def check_input() -> SIFDomains:
+        if not isinstance(material, LinearElastic) or material.plane not in ("stress", "strain"):
+            raise ValueError(
+                f"material={material!r}: stress intensity factors need the 2D LinearElastic law "
+                "of the solve (plane='stress' or 'strain'); pass material=..."
+            )
+        if not any(crack is c for c in cracks):
+            raise ValueError(
+                f"crack={crack!r:.120} is not one of the solution's cracks; pass the Crack "
+                "object given to the model"
+            )
+        h = particle_spacing(domain)
+        k = resolve_tip(crack, tip, h)
+        end = crack.tip_ends[k]
+        x_tip = crack.tips[k]
+        d_bound = float(point_segment_distance(x_tip[None], segments[:, 0], segments[:, 1]).min())
+        own = np.delete(crack.points, 0 if end == 0 else len(crack.points) - 1, axis=0)
+        others = [c.points for c in cracks if c is not crack]
+        keep = np.concatenate([own, *others])
+        d_keep = float(np.linalg.norm(keep - x_tip, axis=1).min()) if len(keep) else np.inf
+        if radius is None:
+            pairs = default_domains(h, min(d_bound, d_keep), inner)
+        else:
+            r1, r2 = _radii(radius, inner)
+            pairs = np.stack([r1, r2], axis=1)
+            r_out = float(r2.max())
+            if r_out >= d_bound:
+                raise ValueError(
+                    f"radius={r_out:.6g}: the domain about the tip ({x_tip[0]:.6g}, "
+                    f"{x_tip[1]:.6g}) leaves the particle patch (its exterior boundary or the FE "
+                    f"interface is {d_bound:.6g} away); use radii below {d_bound:.6g} or enlarge "
+                    "the patch"
+                )
+        near = np.asarray(PROBE, dtype=float) * h
+        if not near[:, 1].max() < min(d_bound, d_keep):
+            near = np.zeros((0, 2))
+        return SIFDomains(pairs, near, x_tip, crack.tip_direction(end), keep, options)
+
+    return raise_on_all_ranks(comm, check_input)
+
+
 def solution_sifs(
     grad_u: Callable[[np.ndarray], np.ndarray],
     material: LinearElastic | None,
@@ -186,70 +273,25 @@ def solution_sifs(
             :func:`~dolfinx_meshfree.fracture.interaction.interaction_integral`.
     """
     comm = domain.comm
-    segments = np.concatenate(
-        [
-            gathered_segments(domain, domain.exterior_facets),
-            gathered_segments(domain, domain.interface_facets),
-        ]
-    )
     options = dict(options)
-    inner = options.pop("inner", 0.5)
-    if radius is None and "points" not in options:  # explicit radii keep the caller's rule
-        options.update(points=DEFAULT_POINTS, panels=options.get("panels", DEFAULT_PANELS))
-
-    def check_input() -> tuple:
-        if not isinstance(material, LinearElastic) or material.plane not in ("stress", "strain"):
-            raise ValueError(
-                f"material={material!r}: stress intensity factors need the 2D LinearElastic law "
-                "of the solve (plane='stress' or 'strain'); pass material=..."
-            )
-        if not any(crack is c for c in cracks):
-            raise ValueError(
-                f"crack={crack!r:.120} is not one of the solution's cracks; pass the Crack "
-                "object given to the model"
-            )
-        h = particle_spacing(domain)
-        k = resolve_tip(crack, tip, h)
-        end = crack.tip_ends[k]
-        x_tip = crack.tips[k]
-        d_bound = float(point_segment_distance(x_tip[None], segments[:, 0], segments[:, 1]).min())
-        own = np.delete(crack.points, 0 if end == 0 else len(crack.points) - 1, axis=0)
-        others = [c.points for c in cracks if c is not crack]
-        keep = np.concatenate([own, *others])
-        d_keep = float(np.linalg.norm(keep - x_tip, axis=1).min()) if len(keep) else np.inf
-        if radius is None:
-            pairs = default_domains(h, min(d_bound, d_keep), inner)
-        else:
-            r1, r2 = _radii(radius, inner)
-            pairs = np.stack([r1, r2], axis=1)
-            r_out = float(r2.max())
-            if r_out >= d_bound:
-                raise ValueError(
-                    f"radius={r_out:.6g}: the domain about the tip ({x_tip[0]:.6g}, "
-                    f"{x_tip[1]:.6g}) leaves the particle patch (its exterior boundary or the FE "
-                    f"interface is {d_bound:.6g} away); use radii below {d_bound:.6g} or enlarge "
-                    "the patch"
-                )
-        near = np.asarray(PROBE, dtype=float) * h
-        if not near[:, 1].max() < min(d_bound, d_keep):
-            near = np.zeros((0, 2))
-        return pairs, near, x_tip, crack.tip_direction(end), keep
-
-    pairs, near_pairs, x_tip, direction, keep = raise_on_all_ranks(comm, check_input)
+    acceleration = options.pop("acceleration", None)
+    plan = sif_domains(material, cracks, domain, crack, tip, radius, **options)
+    options = dict(plan.options, acceleration=acceleration)
+    x_tip, direction, keep = plan.tip, plan.direction, plan.keep
     out = raise_on_all_ranks(
         comm,
         lambda: interaction_integral(
-            grad_u, material, x_tip, direction, pairs, keep_outside=keep, **options
+            grad_u, material, x_tip, direction, plan.pairs, keep_outside=keep, **options
         ),
     )
-    if probe and len(near_pairs):
+    if probe and len(plan.near):
         # the probe is a reliability figure: a field that cannot be evaluated there (a singular
         # MLS fit near the crack face) is reported as a reliability problem, the result stands
         try:
             near = raise_on_all_ranks(
                 comm,
                 lambda: interaction_integral(
-                    grad_u, material, x_tip, direction, near_pairs, keep_outside=keep, **options
+                    grad_u, material, x_tip, direction, plan.near, keep_outside=keep, **options
                 ),
             )
             out = dataclasses.replace(out, probe=near)

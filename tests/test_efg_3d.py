@@ -166,10 +166,14 @@ def solve_affine(cell_name, perturbed, placement, traction=False, consistent=Tru
     return msh, facets, particles, problem.solve()
 
 
+#: (Particles at the vertices with Dirichlet data on particle facets are refused since issue 23:
+#: the facets carry particles only at their vertices, tests/test_multiplier_facets.py; the
+#: perturbed hexahedra's vertices passed this patch test, with the multiplier block nearly
+#: singular, sigma_min / sigma_max 1.4e-4, and gave 1.15 relative L2 error on the quadratic
+#: field.)
 PATCH_CASES = [
     ("hexahedron", False, "half"),
     ("hexahedron", True, "half"),
-    ("hexahedron", True, "vertices"),
     ("tetrahedron", False, "half"),
     ("tetrahedron", True, "half"),
 ]
@@ -192,14 +196,9 @@ def test_patch_test_3d(cell_name, perturbed, placement, traction):
     lam = sol.multipliers.reshape(-1, 3)
     assert lam.shape == (first.size, 3)
     assert sol.num_multipliers == 3 * msh.comm.allreduce(facets.size)
-    # measured 1e-14 to 1e-13 relative with particles at h / 2 and with the traction case; with
-    # Dirichlet data on the whole boundary and particles at the perturbed vertices the multiplier
-    # block is nearly singular (sigma_min / sigma_max 1.4e-4: the remnant of the checkerboard
-    # mode, see test_multipliers_at_regular_hexahedron_vertices_have_full_rank), which amplifies
-    # round-off with the pivot order: measured 8e-11 / 2e-10 serial, 8.8e-9 / 1.6e-8 on 2 ranks
-    # (numpy / compiled MLS tables); bound 1e-8 elsewhere, 4e-8 (2x the largest) for that case
-    ill = placement == "vertices" and not traction
-    bound = (4e-8 if ill else 1e-8) * np.abs(sigma).max()
+    # measured 1e-14 to 1e-13 relative with particles at h / 2 and with the traction case; bound
+    # 1e-8
+    bound = 1e-8 * np.abs(sigma).max()
     assert np.abs(lam + q.normals[first] @ sigma.T).max(initial=0.0) <= bound
     if perturbed:  # the particles are irregular
         spacing = 0.5 / 3 if placement == "half" else 1.0 / 3

@@ -29,7 +29,7 @@ from ..parallel import Layout, raise_on_all_ranks
 from ..physics.body_loads import body_load_vectors
 from ..physics.operators import load_vector
 from ..physics.user_functions import vector_values
-from ..statics.efg import crack_rules, facet_multipliers
+from ..statics.efg import check_multiplier_facets, crack_rules, facet_multipliers
 from ..statics.petsc import BlockSystem, SolverOptions, create_aij, create_vector
 from .base import fe_dof_layout, node_flags
 
@@ -329,6 +329,7 @@ def append_patch_conditions(
     field 1, the particles) to ``blocks``/``rhs``; new PETSc objects go to ``mats``."""
     P, comm = problem.patch.particles, problem.patch.comm
     pl = P.dof_layout(P.gdim)
+    check_multiplier_facets(P, dq, "Dirichlet conditions on the patch's exterior facets")
     Gd, d_rows, d_vals, dl = facet_multipliers(P, patch_bc, dq, dtabs, problem.material.E)
     if dl.size_global:
         D = create_aij(comm, Gd, dl, pl)

@@ -32,7 +32,10 @@ from typing import TYPE_CHECKING, Any
 import dolfinx.fem
 import numpy as np
 import scipy.sparse as sp
+from mpi4py import MPI
+from scipy.spatial import cKDTree
 
+from .. import _compat
 from ..approx.crack_cuts import attach_cracks
 from ..approx.fe_points import point_value_nodes
 from ..approx.mls import MLS
@@ -71,11 +74,11 @@ from .sifs import solution_sifs
 
 if TYPE_CHECKING:  # annotations only
     import dolfinx.mesh
-    from mpi4py import MPI
 
 __all__ = [
     "EFGElasticity",
     "EFGSolution",
+    "check_multiplier_facets",
     "crack_rules",
     "facet_multipliers",
     "particle_stiffness",
@@ -365,6 +368,101 @@ def _crack_rules(
     return q, dataclasses.replace(bq, entities=entities)
 
 
+def _facet_particles(
+    particles: ParticleSet, facets: np.ndarray, tol: float = 1e-8
+) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
+    """The particles on each of the given local facets of a 3D mesh (closed: vertices and
+    edges included; indices into the particle set), whether a facet has one off its vertices
+    (f,), and the facets' centroids (f, 3)."""
+    msh = particles.mesh
+    corners = msh.geometry.x[_compat.entities_to_geometry(msh, 2, facets)]  # (f, 3 or 4, 3)
+    if corners.shape[1] == 4:  # a quadrilateral's vertices in DOLFINx order: 0-1-3-2
+        tris = [corners[:, [0, 1, 3]], corners[:, [0, 3, 2]]]
+    else:
+        tris = [corners]
+    centroids = corners.mean(axis=1)
+    size = np.linalg.norm(corners - centroids[:, None], axis=2).max(axis=1)
+    x = particles.positions
+    on, off_vertices = [], np.zeros(len(facets), dtype=bool)
+    for k, near in enumerate(cKDTree(x).query_ball_point(centroids, size * (1 + 1e-9))):
+        near = np.asarray(near, dtype=np.int64)
+        hit = np.zeros(near.size, dtype=bool)
+        p = x[near]
+        for t in tris:
+            a, b, c = t[k]
+            n = np.cross(b - a, c - a)
+            area2 = float(n @ n)
+            in_plane = np.abs((p - a) @ n) <= tol * size[k] * np.sqrt(area2)
+            w_a = np.cross(c - b, p - b) @ n / area2  # barycentric coordinates
+            w_b = np.cross(a - c, p - c) @ n / area2
+            hit |= in_plane & (np.minimum(np.minimum(w_a, w_b), 1.0 - w_a - w_b) >= -tol)
+        on.append(near[hit])
+        gap = np.linalg.norm(x[near[hit]][:, None] - corners[k][None], axis=2).min(axis=1)
+        off_vertices[k] = bool(np.any(gap > tol * size[k]))
+    return on, off_vertices, centroids
+
+
+def _facets_of(quadratures: list[QuadraturePoints]) -> np.ndarray:
+    """The local facets of facet quadratures (their entities; -1, a cut piece, left out)."""
+    local = [np.unique(d.entities[d.entities >= 0]) for d in quadratures]
+    return np.concatenate(local).astype(np.int32) if local else np.zeros(0, np.int32)
+
+
+def check_multiplier_facets(
+    particles: ParticleSet, quadratures: list[QuadraturePoints], what: str
+) -> None:
+    """Refuse piecewise-constant multipliers on 3D facets that carry too few particles
+    (collective; a ``ValueError`` on every rank, naming a facet by its centroid).
+
+    A facet's share of particles counts each particle on it once, divided among the constrained
+    facets it lies on (a vertex of six triangles gives each 1/6, a particle on an edge 1/2, one
+    inside 1). In 2D a boundary of ``n`` edges has ``n + 1`` vertices, and one multiplier per
+    edge is stable with particles at the vertices. In 3D the facets' vertices alone give a share
+    of 1 per facet of a structured surface, as do the vertices and the diagonals' midpoints of a
+    triangulated one (the default placement at a spacing of the element size): the saddle
+    point is then singular (a checkerboard mode on quadrilaterals, as Q1-P0 pressures) or
+    nearly so, and the solution can be wrong without an error. Measured on the unit cube with 4
+    cells, a quadratic field on the whole boundary (relative L2 errors): pure EFG at the
+    hexahedra's vertices 0.52 (n = 3) and 1.15 (perturbed), against 8.7e-3 with particles at
+    h / 2; the couplings at spacing h: tetrahedra lagrange 4.4e-2, edge-to-edge 0.26 to 0.52,
+    bridging 96, hexahedra lagrange 3.2 in one run and 1.7e-2 in another (round-off picks the
+    null mode), against 1.3e-2 to 1.9e-2 at 0.75 h, where the shares are 2 and more. The rule:
+    the median share over the constrained facets must exceed 1, and at least half of them must
+    carry a particle off their vertices (a small structured boundary has shares above 1 from
+    its edges and corners alone, and still the checkerboard mode). Checked by the static
+    solves (pure EFG and the couplings); explicit dynamics' ``fixed_facets`` hold velocities
+    (zero or uniform: data the singular multipliers satisfy; the 3D standing wave with
+    particles at the vertices measured right) and are not checked.
+    """
+    comm = particles.comm
+    if particles.gdim != 3 or particles.mesh is None:  # the same on every rank
+        return
+    facets = np.unique(_facets_of(quadratures))
+    on, off, centroids = raise_on_all_ranks(comm, lambda: _facet_particles(particles, facets))
+    count = np.zeros(particles.num_particles)
+    for idx in on:
+        np.add.at(count, idx, 1.0)
+    comm.Allreduce(MPI.IN_PLACE, count, op=MPI.SUM)
+    share = np.array([np.sum(1.0 / count[idx]) for idx in on])
+    shares = np.concatenate(comm.allgather(share))
+    with_off = comm.allreduce(int(off.sum()))
+    if shares.size == 0 or (np.median(shares) > 1.0 + 1e-9 and 2 * with_off >= shares.size):
+        return
+    low = (share <= 1.0 + 1e-9) | ~off
+    c = next(g for g in comm.allgather(centroids[low][:1]) if len(g))[0]
+    raise ValueError(
+        f"{what}: the {shares.size} constrained facets carry a median share of "
+        f"{np.median(shares):.3g} particle(s) each, {with_off} of them one off their vertices "
+        f"(e.g. the facet centred at ({c[0]:.6g}, {c[1]:.6g}, {c[2]:.6g}): particles at its "
+        "vertices and edges only, shared with its neighbours). Piecewise-constant multipliers "
+        "on such facets make a singular or nearly singular saddle point in 3D, whose solution "
+        "can be wrong without an error (a checkerboard mode on quadrilaterals, too many "
+        "multipliers on triangles). Use a particle spacing below the element size there (e.g. "
+        "ParticlePatch(mesh, cells, spacing=0.75 * h), ParticleSet.from_cells(mesh, h / 2)), "
+        "or give the condition on the FE side or as a traction"
+    )
+
+
 def facet_multipliers(
     particles: ParticleSet,
     conditions: list[tuple[np.ndarray, VectorFunction]],
@@ -603,6 +701,7 @@ class EFGElasticity:
                 "finer spacing, e.g. ParticleSet.from_cells(mesh, h / 2) on tetrahedra, whose "
                 "boundary has two triangles per vertex) or fewer Dirichlet facets"
             )
+        check_multiplier_facets(P, dq, "Dirichlet conditions on particle facets")
         dtabs = [raise_on_all_ranks(comm, lambda d=d: self.mls.tabulate(d.points, 0)) for d in dq]
         tq_loads = [fq(f) for f, _ in self._tractions]
         ttabs = [

@@ -47,7 +47,13 @@ from .crack_contact import ContactSystem, FaceTerm, face_term
 if TYPE_CHECKING:  # annotations only: the facade imports this module
     from .explicit import ExplicitDynamics
 
-__all__ = ["SIFHistory", "current_acceleration", "dynamic_sifs", "model_cracks"]
+__all__ = [
+    "SIFHistory",
+    "current_acceleration",
+    "dynamic_sifs",
+    "model_cracks",
+    "particle_state",
+]
 
 
 def current_acceleration(dyn: ExplicitDynamics) -> list[PETSc.Vec]:
@@ -67,6 +73,19 @@ def current_acceleration(dyn: ExplicitDynamics) -> list[PETSc.Vec]:
     for f in ku:
         f.destroy()
     return acc
+
+
+def particle_state(dyn: ExplicitDynamics) -> tuple[np.ndarray, np.ndarray]:
+    """The particle coefficients (n, gdim) of the displacement ``d_n`` and of the acceleration
+    ``a_n`` (:func:`current_acceleration`), replicated on every rank (collective)."""
+    acc = current_acceleration(dyn)
+    try:
+        u = dyn.evaluator.local_values(dyn.u)[1]
+        a = dyn.evaluator.local_values(acc)[1]
+    finally:
+        for x in acc:
+            x.destroy()
+    return u, a
 
 
 def model_cracks(dyn: ExplicitDynamics) -> tuple[list[Crack], object]:
@@ -129,13 +148,7 @@ def dynamic_sifs(
     raise_on_all_ranks(dyn.comm, check)
     if not j_integral:
         return _functional_sifs(dyn, cracks, domain, crack, tip, radius, probe, options)
-    acc = current_acceleration(dyn)
-    try:
-        u = dyn.evaluator.local_values(dyn.u)[1]
-        a = dyn.evaluator.local_values(acc)[1]
-    finally:
-        for x in acc:
-            x.destroy()
+    u, a = particle_state(dyn)
     mls = dyn.mls
 
     def grad(x: np.ndarray) -> np.ndarray:
@@ -233,13 +246,7 @@ def _functional_sifs(
     kept = dyn.__dict__["_sif_tables"]
     for key in [k for k in kept if k not in used]:
         del kept[key]
-    acc = current_acceleration(dyn)
-    try:
-        u = dyn.evaluator.local_values(dyn.u)[1]
-        a = dyn.evaluator.local_values(acc)[1]
-    finally:
-        for x in acc:
-            x.destroy()
+    u, a = particle_state(dyn)
 
     def result(f: SIFFunctional, faces: FaceTerm | None) -> StressIntensityFactors:
         KI, KII = f(u, a)

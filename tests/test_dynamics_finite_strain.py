@@ -264,7 +264,11 @@ def test_a_rebound_at_the_last_step_keeps_the_last_output(monkeypatch):
     assert fired.outputs == plain.outputs
     assert len(fired.energies) == len(plain.energies)
     assert fired.energies[-1].time == pytest.approx(1.0, rel=1e-14)
-    assert np.array_equal(v_fired, v_plain)
+    if MPI.COMM_WORLD.size == 1:
+        assert np.array_equal(v_fired, v_plain)
+    else:  # on 2 ranks two builds of the same model are not bitwise alike: measured 0 in 14
+        # of 18 runs, up to 9.4e-16 relative in the others (one CI run failed on it)
+        np.testing.assert_allclose(v_fired, v_plain, rtol=1e-12, atol=0)
 
 
 # --- what is refused ------------------------------------------------------------------------------

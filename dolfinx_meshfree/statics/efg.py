@@ -424,7 +424,7 @@ def check_multiplier_facets(
     nearly so, and the solution can be wrong without an error. Measured on the unit cube with 4
     cells, a quadratic field on the whole boundary (relative L2 errors): pure EFG at the
     hexahedra's vertices 0.52 (n = 3) and 1.15 (perturbed), against 8.7e-3 with particles at
-    h / 2; the couplings at spacing h: tetrahedra lagrange 4.4e-2, edge-to-edge 0.26 to 0.52,
+    h / 2; the couplings at spacing h: tetrahedra lagrange 4.4e-2, edge-to-edge 0.086 to 0.52,
     bridging 96, hexahedra lagrange 3.2 in one run and 1.7e-2 in another (round-off picks the
     null mode), against 1.3e-2 to 1.9e-2 at 0.75 h, where the shares are 2 and more. The rule:
     the median share over the constrained facets must exceed 1, and at least half of them must

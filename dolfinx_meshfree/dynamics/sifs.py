@@ -210,7 +210,9 @@ def _functional_sifs(
     crack faces' contact term by kept tables). Only the tables of this check are kept: those
     of a tip that moved are dropped."""
     material, mls = dyn.material, dyn.mls
-    where = (id(crack), crack.points.tobytes(), _exact(tip), _exact(radius),
+    # the domains depend on this crack, the others (their points are kept out), the tip, the
+    # radii and the options; the patch's boundary changes only with the MLS (a new model)
+    where = (id(crack), *(c.points.tobytes() for c in cracks), _exact(tip), _exact(radius),
              repr(sorted(options.items())))  # fmt: skip
     plan = _kept(
         dyn, ("domains", *where),

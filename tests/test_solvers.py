@@ -8,12 +8,13 @@ solution must not change, which the direct solve checks independently.
 from __future__ import annotations
 
 import dolfinx_meshfree as mf
-from dolfinx_meshfree.statics.petsc import BlockSystem
+from dolfinx_meshfree.statics.petsc import BlockSystem, mumps_failure, solve_lu
 
 import dolfinx
 import numpy as np
 import pytest
 from mpi4py import MPI
+from petsc4py import PETSc
 
 
 def cantilever(comm):
@@ -230,3 +231,20 @@ def test_bad_solver_arguments_are_named():
         problem.solve(petsc_options=["ksp_type", "cg"])
     with pytest.raises(ValueError, match="prefix=' ' must be"):
         problem.solve(petsc_options={}, prefix=" ")
+
+
+def test_a_singular_system_is_named_by_mumps_code():
+    """A numerically singular matrix (a zero pivot stored explicitly): MUMPS's INFOG(1) = -10,
+    reported as numerically singular with the usual fix; the workspace codes are not called a
+    singular system (they were, before: every failure had the same message)."""
+    A = PETSc.Mat().createAIJ([2, 2], nnz=2, comm=PETSc.COMM_SELF)
+    A.setValues([0, 1], [0, 1], [[1.0, 0.0], [0.0, 0.0]])
+    A.assemble()
+    b = A.createVecLeft()
+    b.set(1.0)
+    with pytest.raises(RuntimeError, match=r"INFOG\(1\)=-10\): the system is numerically singular"):
+        solve_lu(A, b)
+    assert "workspace was too small" in mumps_failure(-9)
+    assert "singular" in mumps_failure(None)
+    A.destroy()
+    b.destroy()

@@ -30,6 +30,7 @@ __all__ = [
     "DECOUPLED_SHARE",
     "FACTORISATIONS",
     "ITERATIVE_DEFAULTS",
+    "MUMPS_FAILURES",
     "SAMPLED_SYMMETRY_ROWS",
     "SHORTHANDS",
     "SYMMETRY_TOL",
@@ -40,6 +41,7 @@ __all__ = [
     "create_aij",
     "create_vector",
     "decoupled_rows",
+    "mumps_failure",
     "rigid_body_modes",
     "scoped_options",
     "solve_lu",
@@ -492,10 +494,40 @@ def _factorise_and_solve(
     if reason < 0:
         raise RuntimeError(
             f"the {solver} {'LDL^T' if symmetric else 'LU'} solve failed (KSP reason {reason}, "
-            f"MUMPS INFOG(1)={info}); the system is singular: check that the boundary "
-            "conditions remove rigid-body motions"
+            f"MUMPS INFOG(1)={info}): {mumps_failure(info if mumps else None)}"
         )
     return x
+
+
+#: MUMPS's failures (INFOG(1) < 0, MUMPS users' guide, sec. "Error diagnostics") and what
+#: they usually mean for the systems built here.
+MUMPS_FAILURES = {
+    -6: "the system is structurally singular: check that the boundary conditions remove "
+    "rigid-body motions",
+    -10: "the system is numerically singular: check that the boundary conditions remove "
+    "rigid-body motions, and that no multiplier is left without a constraint",
+    -13: "MUMPS could not allocate its memory: the system is too large for this machine",
+}
+
+
+def mumps_failure(info: int | None) -> str:
+    """What MUMPS's error ``INFOG(1) = info`` means here (no longer every failure called a
+    singular system: ``-9`` is a workspace too small, which a nearly singular saddle point
+    with many delayed pivots also causes); ``None``: another solver failed."""
+    if info is None or info == 0:
+        return (
+            "the system may be singular: check that the boundary conditions remove rigid-body "
+            "motions"
+        )
+    if info in MUMPS_FAILURES:
+        return MUMPS_FAILURES[info]
+    if info in (-8, -9, -11, -12, -14, -15, -17, -20):
+        return (
+            "MUMPS's workspace was too small (100 % extra requested, ICNTL(14)): the "
+            "factorisation needed far more pivoting than planned, as a singular or nearly "
+            "singular system (e.g. a saddle point with dependent multipliers) does"
+        )
+    return "see the MUMPS users' guide for this INFOG(1); the system may be singular"
 
 
 @contextlib.contextmanager

@@ -369,7 +369,7 @@ class FaceTerm:
     """:func:`face_term` with its shape functions tabulated once: the two faces' MLS values
     and gradients at the rule's points behind one tip (local). The term is not linear in the
     field (a face pair counts where it is closed), but the gap and the pressure at the points
-    are: a call is a few products. The tables belong to one MLS version (:meth:`current`).
+    are: a call is a few products. The tables belong to one MLS version (the caller keeps it).
 
     Args:
         mls: The crack-aware approximation. crack: The crack of the tip.
@@ -392,7 +392,6 @@ class FaceTerm:
         s, ws = 0.5 * (s + 1.0), 0.5 * ws
         d = np.asarray(direction, dtype=float)
         self.normal = np.array([-d[1], d[0]])
-        self.mls, self.version = mls, mls.version
         self.domains = []
         for r1, r2 in zip(inner, outer, strict=True):
             r = r2 * s * s
@@ -402,10 +401,6 @@ class FaceTerm:
             # int_0^r2 f(r) / sqrt(r) dr = 2 sqrt(r2) int_0^1 f(r2 s^2) ds
             factor = 2.0 * 2.0 * np.sqrt(r2) * ws * q / np.sqrt(2.0 * np.pi)
             self.domains.append((mls.tabulate(x, 1, up), mls.tabulate(x, 1, -up), factor))
-
-    def current(self, mls: MLS) -> bool:
-        """Whether the tables apply to ``mls`` as it is now (the same object, same version)."""
-        return mls is self.mls and mls.version == self.version
 
     def __call__(self, coefficients: np.ndarray, material: LinearElastic) -> np.ndarray:
         """``Delta K_I`` (k,) of the particle coefficients (n, 2)."""

@@ -15,10 +15,10 @@ their coefficients. :class:`SIFFunctional` tabulates ``phi_J`` and its gradient 
 points once and keeps the weight vectors (on the particles whose supports reach the domains):
 a check is then two dot products per domain. The vectors belong to one tip position, one set
 of domains and one version of the MLS (:attr:`~dolfinx_meshfree.MLS.version`, which changes
-when a crack grows or the particles move): :meth:`SIFFunctional.current` says whether they still
-apply, and a caller that keeps them (:func:`~dolfinx_meshfree.dynamics.sifs.dynamic_sifs` with
-``j_integral=False``) rebuilds them when it does not. J is quadratic in the field and has no
-such functional.
+when a crack grows or the particles move): a caller that keeps them
+(:func:`~dolfinx_meshfree.dynamics.sifs.dynamic_sifs` with ``j_integral=False``) keeps the MLS
+and its version beside them and rebuilds them when either changed. J is quadratic in the field
+and has no such functional.
 """
 
 from __future__ import annotations
@@ -56,13 +56,12 @@ class SIFFunctional:
 
     Attributes:
         rule: The rule (tip, direction, radii, ``E'``).
-        version: The MLS version the vectors were tabulated at.
         columns: Coefficient indices (p,) with a nonzero weight (the particles whose supports
             reach the domains).
     """
 
     def __init__(self, mls: MLS, rule: InteractionRule) -> None:
-        self.rule, self.mls, self.version = rule, mls, mls.version
+        self.rule = rule
         m, k = rule.gradient_weights.shape[:2]
         grads = mls.tabulate(rule.gradient_points).gradients
         wu = _weights(grads, rule.gradient_weights.reshape(m * k, *rule.gradient_weights.shape[2:]))
@@ -83,10 +82,6 @@ class SIFFunctional:
     def dynamic(self) -> bool:
         """Whether K holds the inertia term (the rule was built with ``dynamic=True``)."""
         return self.on_acceleration is not None
-
-    def current(self, mls: MLS) -> bool:
-        """Whether the vectors apply to ``mls`` as it is now (the same object, same version)."""
-        return mls is self.mls and mls.version == self.version
 
     def __call__(
         self, u: np.ndarray, acceleration: np.ndarray | None = None

@@ -370,10 +370,11 @@ def _crack_rules(
 
 def _facet_particles(
     particles: ParticleSet, facets: np.ndarray, tol: float = 1e-8
-) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
-    """The particles on each of the given local facets of a 3D mesh (closed: vertices and
-    edges included; indices into the particle set), whether a facet has one off its vertices
-    (f,), and the facets' centroids (f, 3)."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The (facet, particle) pairs of the given local facets of a 3D mesh and the particles on
+    them (closed: vertices and edges included; positions in ``facets``, indices into the
+    particle set), whether a facet has a particle off its vertices (f,), and the facets'
+    centroids (f, 3)."""
     msh = particles.mesh
     corners = msh.geometry.x[_compat.entities_to_geometry(msh, 2, facets)]  # (f, 3 or 4, 3)
     if corners.shape[1] == 4:  # a quadrilateral's vertices in DOLFINx order: 0-1-3-2
@@ -383,23 +384,23 @@ def _facet_particles(
     centroids = corners.mean(axis=1)
     size = np.linalg.norm(corners - centroids[:, None], axis=2).max(axis=1)
     x = particles.positions
-    on, off_vertices = [], np.zeros(len(facets), dtype=bool)
-    for k, near in enumerate(cKDTree(x).query_ball_point(centroids, size * (1 + 1e-9))):
-        near = np.asarray(near, dtype=np.int64)
-        hit = np.zeros(near.size, dtype=bool)
-        p = x[near]
-        for t in tris:
-            a, b, c = t[k]
-            n = np.cross(b - a, c - a)
-            area2 = float(n @ n)
-            in_plane = np.abs((p - a) @ n) <= tol * size[k] * np.sqrt(area2)
-            w_a = np.cross(c - b, p - b) @ n / area2  # barycentric coordinates
-            w_b = np.cross(a - c, p - c) @ n / area2
-            hit |= in_plane & (np.minimum(np.minimum(w_a, w_b), 1.0 - w_a - w_b) >= -tol)
-        on.append(near[hit])
-        gap = np.linalg.norm(x[near[hit]][:, None] - corners[k][None], axis=2).min(axis=1)
-        off_vertices[k] = bool(np.any(gap > tol * size[k]))
-    return on, off_vertices, centroids
+    near = cKDTree(x).query_ball_point(centroids, size * (1 + 1e-9))
+    k = np.repeat(np.arange(len(facets)), [len(n) for n in near])
+    j = np.concatenate([np.asarray(n, dtype=np.int64) for n in near] or [np.zeros(0, np.int64)])
+    p, hit = x[j], np.zeros(j.size, dtype=bool)
+    for t in tris:
+        a, b, c = t[k, 0], t[k, 1], t[k, 2]
+        n = np.cross(b - a, c - a)
+        area2 = np.einsum("pi,pi->p", n, n)
+        in_plane = np.abs(np.einsum("pi,pi->p", p - a, n)) <= tol * size[k] * np.sqrt(area2)
+        w_a = np.einsum("pi,pi->p", np.cross(c - b, p - b), n) / area2  # barycentric
+        w_b = np.einsum("pi,pi->p", np.cross(a - c, p - c), n) / area2
+        hit |= in_plane & (np.minimum(np.minimum(w_a, w_b), 1.0 - w_a - w_b) >= -tol)
+    k, j = k[hit], j[hit]
+    gap = np.linalg.norm(x[j][:, None] - corners[k], axis=2).min(axis=1)
+    off_vertices = np.zeros(len(facets), dtype=bool)
+    off_vertices[k[gap > tol * size[k]]] = True
+    return k, j, off_vertices, centroids
 
 
 def _facets_of(quadratures: list[QuadraturePoints]) -> np.ndarray:
@@ -440,12 +441,10 @@ def check_multiplier_facets(
     if particles.gdim != 3 or particles.mesh is None:  # the same on every rank
         return
     facets = np.unique(_facets_of(quadratures))
-    on, off, centroids = raise_on_all_ranks(comm, lambda: _facet_particles(particles, facets))
-    count = np.zeros(particles.num_particles)
-    for idx in on:
-        np.add.at(count, idx, 1.0)
+    k, j, off, centroids = raise_on_all_ranks(comm, lambda: _facet_particles(particles, facets))
+    count = np.bincount(j, minlength=particles.num_particles).astype(float)
     comm.Allreduce(MPI.IN_PLACE, count, op=MPI.SUM)
-    share = np.array([np.sum(1.0 / count[idx]) for idx in on])
+    share = np.bincount(k, weights=1.0 / count[j], minlength=facets.size)
     shares = np.concatenate(comm.allgather(share))
     with_off = comm.allreduce(int(off.sum()))
     if shares.size == 0 or (np.median(shares) > 1.0 + 1e-9 and 2 * with_off >= shares.size):

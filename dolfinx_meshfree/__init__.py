@@ -55,11 +55,13 @@ from .geometry.quadrature import boundary_facets, cell_quadrature, facet_quadrat
 from .io import DynamicsWriter, ProgressBar, read_particles
 from .physics.constitutive import Material, NeoHookean, SaintVenantKirchhoff
 from .physics.forces import InternalForces
+from .physics.inelastic import J2Plasticity, RankineDamage
 from .physics.materials import LinearElastic
 from .statics.coupled import (
     COUPLINGS,
     CRACK_COUPLINGS,
     DEFAULT_DILATION,
+    STATE_COUPLINGS,
     CoupledElasticity,
     CoupledSolution,
 )
@@ -69,6 +71,13 @@ from .statics.growth import GrowthStep, QuasiStaticCrackGrowth
 from .statics.large import IterativeOptions, chunked_l2_error, solve_large
 from .statics.newton import NewtonError, NewtonOptions, NewtonResult
 from .statics.nonlinear import FINITE_STRAIN_COUPLINGS, CoupledNonlinearProblem, FENonlinearProblem
+from .statics.path_following import (
+    DisplacementControl,
+    PathError,
+    PathOptions,
+    PathResult,
+    follow_path,
+)
 from .statics.problem import CoupledLinearProblem
 from .statics.sides import NonlinearSolveResult
 from .verification.analytic import KirschPlate, LinearField, PressurizedBushing, TimoshenkoBeam
@@ -88,6 +97,7 @@ __all__ = [
     "MLS",
     "PLACEMENTS",
     "SPH",
+    "STATE_COUPLINGS",
     "AdaptiveQuadrature",
     "Approximation",
     "CoupledElasticity",
@@ -95,6 +105,7 @@ __all__ = [
     "CoupledNonlinearProblem",
     "CoupledSolution",
     "Crack",
+    "DisplacementControl",
     "DynamicsResult",
     "DynamicsWriter",
     "EFGElasticity",
@@ -109,6 +120,7 @@ __all__ = [
     "InclinedCentreCrack",
     "InternalForces",
     "IterativeOptions",
+    "J2Plasticity",
     "KirschPlate",
     "LinearElastic",
     "LinearField",
@@ -122,10 +134,14 @@ __all__ = [
     "ParticlePatch",
     "ParticleSet",
     "PartitionImbalanceWarning",
+    "PathError",
+    "PathOptions",
+    "PathResult",
     "PointsOutsideMeshError",
     "PressurizedBushing",
     "ProgressBar",
     "QuasiStaticCrackGrowth",
+    "RankineDamage",
     "SIFReliabilityWarning",
     "SaintVenantKirchhoff",
     "ShapeTable",
@@ -146,6 +162,7 @@ __all__ = [
     "error_norms",
     "evaluate_fe_function",
     "facet_quadrature",
+    "follow_path",
     "gaussian",
     "interaction_integral",
     "kink_angle",

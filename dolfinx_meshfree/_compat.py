@@ -54,6 +54,7 @@ __all__ = [
     "function_petsc_vec",
     "geometry_dofmap",
     "quadrature_rule",
+    "quadrature_space",
     "refine",
     "scalar_function_space",
     "scatter_reverse_add",
@@ -131,6 +132,26 @@ def quadrature_rule(cell_name: str, degree: int) -> tuple[_np.ndarray, _np.ndarr
         else:
             pts, wts = _basix.make_quadrature(gj, cell, degree)
     return _np.asarray(pts, dtype=float), _np.asarray(wts, dtype=float)
+
+
+def quadrature_space(msh: _mesh.Mesh, degree: int, size: int) -> _fem.FunctionSpace:
+    """A space of ``size`` values at each point of basix's default quadrature rule of ``degree``
+    on every cell (a "Quadrature" element): one dof block of ``size`` per point, cell ``c``'s
+    points in the order of :func:`quadrature_rule`'s default rule. Forms that use it must
+    integrate with ``metadata={"quadrature_degree": degree, "quadrature_scheme": "default"}``."""
+    if MODERN:
+        import basix.ufl as _basix_ufl
+
+        element = _basix_ufl.quadrature_element(
+            msh.basix_cell(), value_shape=(size,), degree=degree
+        )
+        return _fem.functionspace(msh, element)
+    import ufl as _ufl
+
+    element = _ufl.VectorElement(
+        "Quadrature", msh.ufl_cell(), degree=degree, dim=size, quad_scheme="default"
+    )
+    return _fem.FunctionSpace(msh, element)
 
 
 def bb_tree(msh: _mesh.Mesh, dim: int) -> _geometry.BoundingBoxTree:

@@ -276,7 +276,7 @@ def test_efg_rejects_bad_options_on_every_rank():
     with pytest.raises(ValueError, match="weight='gauss'"):
         mf.EFGElasticity(particles, mat, weight="gauss")
     with pytest.raises(
-        TypeError, match=r"material must be a LinearElastic or a finite-strain .*got dict"
+        TypeError, match=r"material must be a LinearElastic, a finite-strain .*got dict"
     ):
         mf.EFGElasticity(particles, {"E": 3e7, "nu": 0.3})
     with pytest.raises(ValueError, match="quadrature_degree=0"):

@@ -26,6 +26,7 @@ __all__ = [
     "QuadraturePoints",
     "boundary_facets",
     "cell_quadrature",
+    "cell_sizes",
     "facet_quadrature",
     "reference_facet_points",
 ]
@@ -82,6 +83,27 @@ def cell_quadrature(
         cells=np.repeat(cells, nq),
         entities=np.repeat(cells, nq),
     )
+
+
+#: The factor that turns a cell's volume into the side of the square or cube it stands for: a
+#: triangle is half a square, a tetrahedron a sixth of a cube.
+_CELL_FILL = {"triangle": 0.5, "quadrilateral": 1.0, "tetrahedron": 1.0 / 6.0, "hexahedron": 1.0}
+
+
+def cell_sizes(msh: dolfinx.mesh.Mesh, cells: npt.ArrayLike) -> np.ndarray:
+    """The size ``h`` of local ``cells``: the side of the square (cube) whose area (volume) the
+    cell fills, ``(|c| / f)^(1/tdim)`` with ``f`` 1 for quadrilaterals and hexahedra, 1/2 for
+    triangles and 1/6 for tetrahedra (so that the cells of a structured mesh of squares split in
+    simplices have the squares' side). The crack band width of a law that softens (Bazant & Oh
+    1983) on a cell or a particle rule's cell."""
+    cells = np.asarray(cells, dtype=np.int64)
+    if cells.size == 0:
+        return np.zeros(0)
+    unique, inverse = np.unique(cells, return_inverse=True)
+    q = cell_quadrature(msh, 1, unique)
+    volume = np.bincount(np.searchsorted(unique, q.cells), weights=q.weights, minlength=unique.size)
+    fill = _CELL_FILL[msh.topology.cell_type.name]
+    return ((volume / fill) ** (1.0 / msh.topology.dim))[inverse]
 
 
 def _det(J: np.ndarray) -> np.ndarray:

@@ -44,6 +44,7 @@ from ..parallel import raise_on_all_ranks
 from ..physics.body_loads import CallableBodyForce
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic, linear_twin
+from ..physics.state import is_stateful
 from .coupled_newton import (
     FE_LAW_DEGREE,
     FINITE_STRAIN_COUPLINGS,
@@ -57,12 +58,17 @@ __all__ = [
     "COUPLINGS",
     "CRACK_COUPLINGS",
     "DEFAULT_DILATION",
+    "STATE_COUPLINGS",
     "CoupledElasticity",
     "CoupledSolution",
     "CouplingOperators",
 ]
 
 VectorFunction = Callable[[np.ndarray], np.ndarray]
+
+#: The couplings that carry a law with internal state (damage, plasticity): those whose FE and
+#: particle sides are apart (no blended interface cells, no rotating links).
+STATE_COUPLINGS: tuple[str, ...] = ("lagrange", "edge-to-edge", "bridging")
 
 #: The couplings that carry cracks in the patch (cut MLS weights, cut-cell quadrature, the crack
 #: faces in the consistent integration's boundary): the variational couplings.
@@ -110,6 +116,10 @@ class CoupledElasticity:
             traction that VCI's identity assumes: with VCI it loses the exact rigid-body motion
             (2e-5 to 4e-4 instead of 3e-14, tests/test_master_slave.py). ``False``: the papers'
             plain Gauss quadrature.
+        particle_band: With a law that softens (:class:`~dolfinx_meshfree.RankineDamage`): the
+            crack band width of the particle points, in sizes of their integration cells.
+            Default (``None``): the MLS dilation, about one support radius, the narrowest band
+            a smooth MLS field localises in; 1.0 makes it the FE cells' band (their size).
         overlap, penalty, constraint: ``coupling="bridging"`` (bridging domain, Rabczuk et al.
             2006, sec. 5.3, see :mod:`~dolfinx_meshfree.couplings.bridging`): band width in cell
             layers (>= 1), the augmented-Lagrangian penalty ``p >= 0``, and where the band is tied:
@@ -149,6 +159,7 @@ class CoupledElasticity:
         constraint: str = "integral",
         band_width: float | None = None,
         corner_angle: float | None = None,
+        particle_band: float | None = None,
     ):
         if coupling not in REGISTRY:
             raise ValueError(
@@ -161,6 +172,18 @@ class CoupledElasticity:
                 f"corner_angle={corner_angle!r} must be None (multipliers continuous along the "
                 "interface, the default) or an angle in degrees between 0 and 90"
             )
+        if particle_band is not None and not (
+            isinstance(particle_band, int | float)
+            and np.isfinite(particle_band)
+            and particle_band > 0
+        ):
+            raise ValueError(
+                f"particle_band={particle_band!r} must be a positive number (the crack band of a "
+                "particle point in its integration cell's sizes), or None (the MLS dilation)"
+            )
+        #: A law that softens: the crack band of a particle point in integration-cell sizes
+        #: (``None``: the MLS dilation, :class:`~dolfinx_meshfree.statics.sides.ParticleSide`).
+        self.particle_band = particle_band
         family = REGISTRY[coupling]
         check_dimension(V.mesh, coupling, family.dimensions, family.missing_3d)
         if corner_angle is not None and V.mesh.geometry.dim != 2:
@@ -169,10 +192,17 @@ class CoupledElasticity:
                 "(a polyline); it is not defined on a 3D interface: leave it None (multipliers "
                 "continuous along the interface)"
             )
-        if not isinstance(material, LinearElastic | Material):
+        if not isinstance(material, LinearElastic | Material) and not is_stateful(material):
             raise TypeError(
-                f"material must be a LinearElastic or a finite-strain Material (NeoHookean, "
-                f"SaintVenantKirchhoff), got {type(material).__name__}"
+                f"material must be a LinearElastic, a finite-strain Material (NeoHookean, "
+                f"SaintVenantKirchhoff) or a law with state (RankineDamage, J2Plasticity), got "
+                f"{type(material).__name__}"
+            )
+        if is_stateful(material) and coupling not in STATE_COUPLINGS:
+            raise ValueError(
+                f"material={type(material).__name__} has internal state, which coupling="
+                f"{coupling!r} does not carry yet (its interface cells blend the two fields, "
+                f"with no state store there); use one of {list(STATE_COUPLINGS)}"
             )
         if not isinstance(material, LinearElastic) and coupling not in FINITE_STRAIN_COUPLINGS:
             raise ValueError(
@@ -415,9 +445,11 @@ class CoupledElasticity:
         u = dolfinx.fem.Function(V)
         u.x.array[:] = 0.0
         d = V.mesh.geometry.dim
-        dx = ufl.Measure("dx", domain=V.mesh, metadata={"quadrature_degree": FE_LAW_DEGREE})
-        F = ufl.Identity(d) + ufl.grad(u)
-        F_int = ufl.inner(self.law.ufl_first_piola(F), ufl.grad(ufl.TestFunction(V))) * dx
+        F_int = None  # a law with state: the FE cells' quadrature-point stress (FEStateLaw)
+        if not is_stateful(self.law):
+            dx = ufl.Measure("dx", domain=V.mesh, metadata={"quadrature_degree": FE_LAW_DEGREE})
+            F = ufl.Identity(d) + ufl.grad(u)
+            F_int = ufl.inner(self.law.ufl_first_piola(F), ufl.grad(ufl.TestFunction(V))) * dx
         out = solve_finite_strain(
             self, F_int, u, self.law, load_steps, newton or NewtonOptions(), options
         )

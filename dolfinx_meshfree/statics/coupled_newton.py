@@ -24,10 +24,20 @@ import ufl
 from ..couplings import REGISTRY
 from ..couplings.assembly import component_conditions
 from ..couplings.base import CoupledSolution
+from ..geometry.quadrature import cell_quadrature, cell_sizes
+from ..parallel import raise_on_all_ranks
 from ..physics.constitutive import Material
+from ..physics.state import StatefulLaw, is_stateful
 from .newton import NewtonOptions
 from .petsc import SolverOptions, create_vector
-from .sides import BlockProblem, FESide, NonlinearSolveResult, ParticleSide, solve_load_steps
+from .sides import (
+    BlockProblem,
+    FESide,
+    NonlinearSolveResult,
+    ParticleSide,
+    particle_band_factor,
+    solve_load_steps,
+)
 
 if TYPE_CHECKING:  # annotations only
     from .coupled import CoupledElasticity
@@ -35,7 +45,10 @@ if TYPE_CHECKING:  # annotations only
 __all__ = [
     "FE_LAW_DEGREE",
     "FINITE_STRAIN_COUPLINGS",
+    "BlockModel",
     "FiniteStrainSolve",
+    "build_block_problem",
+    "check_bands",
     "check_load_steps",
     "solve_finite_strain",
 ]
@@ -65,41 +78,105 @@ class FiniteStrainSolve:
     state: list[np.ndarray]
 
 
-def solve_finite_strain(
+def check_bands(
+    msh: dolfinx.mesh.Mesh, law: StatefulLaw, in_patch: np.ndarray, factor: float
+) -> None:
+    """Check the crack band of every owned cell against ``law`` (local): its size
+    (:func:`~dolfinx_meshfree.geometry.quadrature.cell_sizes`), times ``factor`` on the patch
+    cells (``in_patch``); a band the law refuses (local snap-back) is named by the cell's
+    midpoint."""
+    n = msh.topology.index_map(msh.topology.dim).size_local
+    cells = np.arange(n, dtype=np.int64)
+    q = cell_quadrature(msh, 1, cells)
+    mid = np.zeros((n, msh.geometry.dim))
+    np.add.at(mid, q.cells, q.points * q.weights[:, None])
+    volume = np.bincount(q.cells, weights=q.weights, minlength=n)
+    band = cell_sizes(msh, cells) * np.where(in_patch[:n], factor, 1.0)
+    law.check_band(band, mid / np.maximum(volume, 1e-300)[:, None])
+
+
+@dataclass
+class BlockModel:
+    """A coupled model's block problem at finite strain (or with a law with state), ready for
+    Newton: what :func:`build_block_problem` returns. :meth:`finish` turns a state into the
+    coupled solution and frees the PETSc objects."""
+
+    model: CoupledElasticity
+    problem: BlockProblem
+    x: list
+    fe: FESide
+    particles: ParticleSide
+    extra: dict
+    objects: list
+    setup: float
+
+    def solution(self, timings: dict | None = None) -> CoupledSolution:
+        """The coupled solution at the current ``x`` (collective)."""
+        P = self.model.patch.particles
+        self.fe.set_state(self.x[0])
+        coeffs = self.particles.coefficients(self.x[1]).reshape(-1, P.gdim)
+        solution = CoupledSolution(
+            u=self.fe.u,
+            coefficients=coeffs,
+            mls=self.model.mls,
+            patch=self.model.patch,
+            timings=timings or {"setup": self.setup},
+            interface=self.extra.get("interface"),
+        )
+        if "links" in self.extra:  # master-slave: the slaves' links, as the linear solution has
+            solution.links = self.extra["links"]
+        return solution
+
+    def state(self) -> list[np.ndarray]:
+        """Copies of every block field (the start of a later solve)."""
+        return [v.getArray(readonly=True).copy() for v in self.x]
+
+    def destroy(self) -> None:
+        self.problem.destroy()
+        for obj in [*self.objects, *self.x]:
+            obj.destroy()
+
+
+def build_block_problem(
     model: CoupledElasticity,
-    F_int: ufl.Form,
+    F_int: ufl.Form | None,
     u: dolfinx.fem.Function,
-    material: Material,
-    load_steps: int,
-    newton: NewtonOptions,
-    solver: SolverOptions,
+    material: Material | StatefulLaw,
     state: list[np.ndarray] | None = None,
-) -> FiniteStrainSolve:
-    """Newton over ``load_steps`` on ``model``'s block system (collective).
+) -> BlockModel:
+    """The block problem of ``model`` (collective): the family's linear system, its stiffness
+    blocks replaced by the FE and particle sides (and the shared sides of the ramps and
+    master-slave), the start ``x`` (``state``, or ``u`` and zeros).
 
     Args:
-        model: The coupled model (space, patch, MLS, loads, essential conditions); its
-            ``material`` is the linear twin of ``material`` (the constant blocks).
-        F_int: The FE internal force ``F(u; v) - F(0; v)`` (cell integrals; weighted by the FE
-            cells' indicator here).
-        u: The FE unknown (updated in place).
-        material: The particle side's finite-strain law.
-        load_steps, newton, solver: Load steps, Newton options, the linear solver.
-        state: The block fields of a previous solve (the start), or ``None`` (``u`` and zeros).
-
-    Raises:
-        NewtonError: when a step does not converge (with the residual history).
+        model: The coupled model.
+        F_int: The FE internal force (``None`` with a law with state: the FE cells then use
+            :class:`~dolfinx_meshfree.statics.fe_state.FEStateLaw`).
+        u: The FE unknown.
+        material: The particle side's law (finite-strain, or with state).
+        state: The block fields of a previous solve, or ``None``.
     """
     P = model.patch.particles
     t0 = time.perf_counter()
+    if is_stateful(material) and material.needs_band:  # on every rank, before the assembly
+        factor = particle_band_factor(model.mls, getattr(model, "particle_band", None))
+
+        def check() -> None:
+            check_bands(model.V.mesh, material, model.patch.in_patch, factor)
+
+        raise_on_all_ranks(model.patch.comm, check)
     tables: dict = {}
     blocks, rhs, mats, extra = model.family.system(model, tables)
     b_fe, f_p = extra["loads"]  # the external load, not lifted
     comm = model.patch.comm
     f_p = create_vector(comm, P.dof_layout(P.gdim), P.petsc_dofs(P.gdim).ravel(), f_p)
     loads = [b_fe, f_p, *rhs[2:]]
-    fe = FESide(F_int, u, extra["fe_cells"], extra["fixed"], extra["fe_weight"])
-    particles = ParticleSide(P, tables, material)
+    stateful = is_stateful(material)
+    fe = FESide(
+        F_int, u, extra["fe_cells"], extra["fixed"], extra["fe_weight"],
+        law=material if stateful else None,
+    )  # fmt: skip
+    particles = ParticleSide(P, tables, material, getattr(model, "particle_band", None))
     constant = [list(row) for row in blocks]
     constant[0][0], constant[1][1] = extra["constant_diagonal"]
     names = ["fe", "particles"] + [f"multiplier{i}" for i in range(len(blocks) - 2)]
@@ -129,25 +206,48 @@ def solve_finite_strain(
             np.concatenate([fe.fixed_values, values.ravel()[held]]),
             fe.l2g,
         )
-    x[0].array[:] = u.x.array[: fe.n_owned]
-    setup = time.perf_counter() - t0
+    if state is None:
+        x[0].array[:] = u.x.array[: fe.n_owned]
+    objects = [*mats, extra["x_bc"], *rhs, f_p]
+    return BlockModel(model, problem, x, fe, particles, extra, objects, time.perf_counter() - t0)
+
+
+def solve_finite_strain(
+    model: CoupledElasticity,
+    F_int: ufl.Form | None,
+    u: dolfinx.fem.Function,
+    material: Material | StatefulLaw,
+    load_steps: int,
+    newton: NewtonOptions,
+    solver: SolverOptions,
+    state: list[np.ndarray] | None = None,
+) -> FiniteStrainSolve:
+    """Newton over ``load_steps`` on ``model``'s block system (collective).
+
+    Args:
+        model: The coupled model (space, patch, MLS, loads, essential conditions); its
+            ``material`` is the linear twin of ``material`` (the constant blocks).
+        F_int: The FE internal force ``F(u; v) - F(0; v)`` (cell integrals; weighted by the FE
+            cells' indicator here); ``None`` with a law with state.
+        u: The FE unknown (updated in place).
+        material: The particle side's finite-strain law, or a law with state (small strain,
+            its state committed at every converged load step,
+            :mod:`~dolfinx_meshfree.physics.state`).
+        load_steps, newton, solver: Load steps, Newton options, the linear solver.
+        state: The block fields of a previous solve (the start), or ``None`` (``u`` and zeros).
+
+    Raises:
+        NewtonError: when a step does not converge (with the residual history).
+    """
+    t0 = time.perf_counter()
+    built = build_block_problem(model, F_int, u, material, state)
     try:
-        result = solve_load_steps(problem, x, load_steps, newton, solver)
+        result = solve_load_steps(built.problem, built.x, load_steps, newton, solver)
+        new_state = built.state()
+        solution = built.solution(
+            {"setup": built.setup, "newton": time.perf_counter() - t0 - built.setup}
+        )
+        solution.states = built.problem.states
     finally:
-        problem.destroy()
-    fe.set_state(x[0])
-    new_state = [v.getArray(readonly=True).copy() for v in x]
-    coeffs = particles.coefficients(x[1]).reshape(-1, P.gdim)
-    solution = CoupledSolution(
-        u=u,
-        coefficients=coeffs,
-        mls=model.mls,
-        patch=model.patch,
-        timings={"setup": setup, "newton": time.perf_counter() - t0 - setup},
-        interface=extra.get("interface"),
-    )
-    if "links" in extra:  # master-slave: the slaves' links, as the linear solution has
-        solution.links = extra["links"]
-    for obj in [*mats, extra["x_bc"], *rhs, f_p, *x]:
-        obj.destroy()
+        built.destroy()
     return FiniteStrainSolve(result, solution, new_state)

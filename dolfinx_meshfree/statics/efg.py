@@ -65,6 +65,7 @@ from ..physics.operators import (
     moment_corrections,
     stiffness_matrix,
 )
+from ..physics.state import is_stateful
 from ..physics.user_functions import vector_values
 from .growth_update import local_update_for
 from .newton import NewtonOptions
@@ -575,10 +576,11 @@ class EFGElasticity:
             )
         #: The :class:`~dolfinx_meshfree.AdaptiveQuadrature` of the cells, or ``None``.
         self.adaptive_quadrature = quadrature
-        if not isinstance(material, LinearElastic | Material):
+        if not isinstance(material, LinearElastic | Material) and not is_stateful(material):
             raise TypeError(
-                f"material must be a LinearElastic or a finite-strain Material (NeoHookean, "
-                f"SaintVenantKirchhoff), got {type(material).__name__}"
+                f"material must be a LinearElastic, a finite-strain Material (NeoHookean, "
+                f"SaintVenantKirchhoff) or a law with state (RankineDamage, J2Plasticity), got "
+                f"{type(material).__name__}"
             )
         if not (isinstance(quadrature_degree, int) and quadrature_degree >= 1):
             raise ValueError(f"quadrature_degree={quadrature_degree!r} must be an integer >= 1")

@@ -46,6 +46,7 @@ from ..geometry.patch import ParticlePatch
 from ..parallel import raise_on_all_ranks
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic, linear_twin
+from ..physics.state import check_stateless
 from .coupled import CoupledElasticity, CoupledSolution
 from .coupled_newton import FINITE_STRAIN_COUPLINGS, check_load_steps, solve_finite_strain
 from .newton import NewtonOptions
@@ -219,6 +220,10 @@ class CoupledNonlinearProblem:
                     f"(its family has no finite-strain system); use one of "
                     f"{list(FINITE_STRAIN_COUPLINGS)}"
                 )
+            check_stateless(
+                material,
+                "CoupledNonlinearProblem (the FE side is the user's UFL residual)",
+            )
             if not isinstance(material, Material):
                 raise TypeError(
                     f"material must follow the Material protocol, got {type(material).__name__}"

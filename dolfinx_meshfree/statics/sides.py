@@ -32,9 +32,12 @@ from .. import _compat
 from ..approx.fe_dofs import cell_indicator, fe_dof_layout
 from ..approx.tables import ShapeTable
 from ..geometry.particles import ParticleSet
+from ..geometry.quadrature import cell_sizes
 from ..parallel import Layout
 from ..physics.constitutive import Material
 from ..physics.forces import InternalForces
+from ..physics.state import BoundLaw, PointState, StatefulLaw, is_stateful
+from .fe_state import FEStateLaw
 from .newton import NewtonError, NewtonOptions, NewtonResult, newton
 from .petsc import SolverOptions, create_aij, create_vector
 
@@ -49,6 +52,7 @@ __all__ = [
     "ParticleSide",
     "cell_part",
     "on_cells",
+    "particle_band_factor",
     "particle_coefficients",
     "solve_load_steps",
     "split_residual",
@@ -150,15 +154,32 @@ class FESide:
         cells: np.ndarray | None,
         fixed: np.ndarray,
         weight: ufl.core.expr.Expr | None = None,
+        law: StatefulLaw | None = None,
     ) -> None:
         V = u.function_space
         self.u, self.V = u, V
-        # on the FE cells only (``cells``: flags of the owned cells): a weight 0 on the patch
-        # cells would still evaluate the law there, on an FE field that means nothing (NaN at
-        # finite strain)
-        Fw = cell_part(F_int, weight) if cells is None else on_cells(F_int, V.mesh, cells, weight)
-        self._R = _compat.create_form(Fw)
-        self._J = _compat.create_form(ufl.derivative(Fw, u, ufl.TrialFunction(V)))
+        #: The law with state on the FE cells (:class:`~dolfinx_meshfree.statics.fe_state.
+        #: FEStateLaw`), whose stress and tangent are updated before every assembly; ``None``:
+        #: ``F_int`` is the whole FE internal force.
+        self.state_law: FEStateLaw | None = None
+        if law is not None:
+            n = V.mesh.topology.index_map(V.mesh.topology.dim).size_local
+            owned = np.ones(n, bool) if cells is None else np.asarray(cells[:n], bool)
+            self.state_law = FEStateLaw(u, law, np.flatnonzero(owned), weight)
+            forms = (self.state_law.residual_form, self.state_law.jacobian_form)
+            R, J = (f if cells is None else on_cells(f, V.mesh, cells) for f in forms)
+        else:
+            # on the FE cells only (``cells``: flags of the owned cells): a weight 0 on the patch
+            # cells would still evaluate the law there, on an FE field that means nothing (NaN
+            # at finite strain)
+            R = (
+                cell_part(F_int, weight)
+                if cells is None
+                else on_cells(F_int, V.mesh, cells, weight)
+            )
+            J = ufl.derivative(R, u, ufl.TrialFunction(V))
+        self._R = _compat.create_form(R)
+        self._J = _compat.create_form(J)
         self.layout, l2g = fe_dof_layout(V)
         self.l2g = l2g
         n_owned = V.dofmap.index_map.size_local
@@ -185,6 +206,13 @@ class FESide:
     def set_state(self, x: PETSc.Vec) -> None:
         self.u.x.array[: self.n_owned] = x.getArray(readonly=True)
         self.u.x.scatter_forward()
+        if self.state_law is not None:
+            self.state_law.update()
+
+    @property
+    def states(self) -> list[PointState]:
+        """The state stores of this side (committed when a load step converges)."""
+        return [] if self.state_law is None else [self.state_law.state]
 
     def internal_force(self, x: PETSc.Vec) -> PETSc.Vec:
         self.set_state(x)
@@ -214,13 +242,39 @@ def particle_coefficients(particles: ParticleSet, x: PETSc.Vec) -> np.ndarray:
     return owned.reshape(-1, particles.gdim)[particles.petsc_index].ravel()
 
 
+def particle_band_factor(approximation: object, band_factor: float | None) -> float:
+    """The crack band of a particle point in integration-cell sizes: ``band_factor`` if
+    given, else the MLS dilation (1 without one)."""
+    if band_factor is not None:
+        return float(band_factor)
+    return float(getattr(approximation, "dilation", 1.0))
+
+
 class ParticleSide:
     """The particle field: ``f_int`` and ``K_T`` on the patch quadrature, in PETSc numbering."""
 
-    def __init__(self, particles: ParticleSet, tables: dict, material: Material) -> None:
+    def __init__(
+        self,
+        particles: ParticleSet,
+        tables: dict,
+        material: Material | StatefulLaw,
+        band_factor: float | None = None,
+    ) -> None:
         q, tq = tables["quadrature"], tables["table"]
         self.P, self.comm = particles, particles.comm
         weights = tables.get("weights", q.weights)  # the bridging band's alpha w_q
+        #: The state store of a law with state at the patch quadrature, else ``None``. The
+        #: crack band of a particle point is ``band_factor`` times its integration cell's size;
+        #: by default (:func:`particle_band_factor`) the MLS dilation: a smooth MLS field does not
+        #: localise in a band narrower than about one support radius.
+        self.state: PointState | None = None
+        if is_stateful(material):
+            band = None
+            if material.needs_band:
+                factor = particle_band_factor(tables.get("approximation"), band_factor)
+                band = factor * cell_sizes(particles.mesh, q.cells)
+            self.state = PointState(material, q.points, band)
+            material = BoundLaw(self.state)
         self.forces = InternalForces(
             tq,
             weights,
@@ -232,6 +286,11 @@ class ParticleSide:
         self.gdim = particles.gdim
         self.dof_map = particles.petsc_dofs(self.gdim).ravel()
         self.layout = particles.dof_layout(self.gdim)
+
+    @property
+    def states(self) -> list[PointState]:
+        """The state stores of this side (committed when a load step converges)."""
+        return [] if self.state is None else [self.state]
 
     def coefficients(self, x: PETSc.Vec) -> np.ndarray:
         """All particle coefficients, interleaved in original order, on every rank."""
@@ -400,6 +459,28 @@ class BlockProblem:
                 blocks[i][j] = K
         return blocks
 
+    @property
+    def states(self) -> list[PointState]:
+        """The state stores of the sides' laws with state (empty for hyperelastic laws)."""
+        return [st for side in [*self.sides, *self.shared] for st in getattr(side, "states", [])]
+
+    def commit(self, x: Sequence[PETSc.Vec]) -> None:
+        """Commit the state at the converged ``x``: one more evaluation there (the last one of
+        Newton may have been a rejected line-search trial), then every store's trial state
+        becomes its committed one. Nothing happens without a law with state."""
+        states = self.states
+        if not states:
+            return
+        for r in self.residual(x):
+            r.destroy()
+        for st in states:
+            st.commit()
+
+    def restore(self) -> None:
+        """Drop the trial states (a cut step)."""
+        for st in self.states:
+            st.restore()
+
     def destroy(self) -> None:
         for M in self._owned:
             M.destroy()
@@ -416,11 +497,13 @@ def solve_load_steps(
 ) -> NonlinearSolveResult:
     """Newton over the load factor ``t`` from 0 to 1 in ``load_steps`` equal steps (collective).
 
+    A converged step commits the state of the laws with state (:meth:`BlockProblem.commit`).
     A step whose Newton iterations do not converge is cut in half, from the last converged
-    state, up to ``max_cuts`` times below the nominal step (a slender body under a large load
-    step can fall into a cycle of full Newton steps); after a converged cut step the increment
-    grows back towards the nominal one. Raises :class:`~dolfinx_meshfree.statics.newton.NewtonError`
-    when even the smallest step does not converge: no unconverged state is returned.
+    state (laws' state included), up to ``max_cuts`` times below the nominal step (a slender
+    body under a large load step can fall into a cycle of full Newton steps); after a converged
+    cut step the increment grows back towards the nominal one. Raises
+    :class:`~dolfinx_meshfree.statics.newton.NewtonError` when even the smallest step does not
+    converge: no unconverged state is returned.
     """
     steps: list[NewtonResult] = []
     nominal = 1.0 / load_steps
@@ -435,12 +518,14 @@ def solve_load_steps(
             for v, w in zip(x, saved, strict=True):
                 w.copy(v)
                 w.destroy()
+            problem.restore()
             if cuts == max_cuts:
                 raise
             cuts, dt = cuts + 1, 0.5 * dt
             continue
         for w in saved:
             w.destroy()
+        problem.commit(x)
         t = t_new
         if cuts:  # grow back after a cut step converged
             cuts, dt = cuts - 1, 2.0 * dt

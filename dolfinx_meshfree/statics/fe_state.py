@@ -1,0 +1,128 @@
+"""A law with state on the FE cells: stress and tangent as quadrature-point functions.
+
+The FE side of a coupled model stays a DOLFINx form; what changes is where the stress comes from.
+A law with internal state (:mod:`~dolfinx_meshfree.physics.inelastic`) has no UFL expression, so
+its stress ``sigma_q`` and consistent tangent ``C_q`` (Voigt) live in "Quadrature" element
+functions, one value per quadrature point of every FE cell, and the forms read them:
+
+.. math::
+    R(v) = \\int \\chi\\, \\sigma_q \\cdot \\varepsilon(v)\\, dx, \\qquad
+    J(\\delta u, v) = \\int \\chi\\, (C_q\\, \\varepsilon(\\delta u)) \\cdot \\varepsilon(v)\\, dx
+
+with the integral taken on the same points (``quadrature_scheme="default"``), ``chi`` the FE cells'
+indicator (times the bridging band's ``1 - alpha``). Before every assembly :meth:`FEStateLaw.update`
+evaluates ``eps(u)`` at the points (a compiled ``dolfinx.fem.Expression``), runs the law from the
+committed state (:class:`~dolfinx_meshfree.physics.state.PointState`) and writes ``sigma_q`` and
+``C_q``. This is the quadrature-function route of the FEniCSx plasticity demos; it works with
+DOLFINx 0.5 and current DOLFINx alike, where ``dolfinx-external-operator`` needs current DOLFINx
+only (lane B), and it puts the FE and particle points under one state store.
+"""
+
+from __future__ import annotations
+
+import dolfinx
+import numpy as np
+import ufl
+
+from .. import _compat
+from ..geometry.quadrature import cell_quadrature, cell_sizes
+from ..physics.state import PointState, StatefulLaw
+
+__all__ = ["FE_STATE_DEGREE", "FEStateLaw", "ufl_voigt_strain"]
+
+#: Quadrature degree of a law with state on P1/Q1 cells: 2 x 2 Gauss on quadrilaterals (full
+#: integration of Q1), 3 points on triangles, 4 on tetrahedra, 2 x 2 x 2 on hexahedra.
+FE_STATE_DEGREE = 2
+
+
+def ufl_voigt_strain(w: ufl.core.expr.Expr, d: int) -> ufl.core.expr.Expr:
+    """The engineering Voigt strain of a vector field ``w`` in UFL (order of
+    :func:`~dolfinx_meshfree.approx.tables.voigt_pairs`)."""
+    e = ufl.sym(ufl.grad(w))
+    if d == 2:
+        return ufl.as_vector([e[0, 0], e[1, 1], 2 * e[0, 1]])
+    return ufl.as_vector([e[0, 0], e[1, 1], e[2, 2], 2 * e[1, 2], 2 * e[0, 2], 2 * e[0, 1]])
+
+
+class FEStateLaw:
+    """A :class:`~dolfinx_meshfree.physics.state.StatefulLaw` on the owned FE cells ``cells``.
+
+    Args:
+        u: The FE displacement (vector P1/Q1).
+        law: The law.
+        cells: Local indices of the owned cells it acts on (the FE cells of a coupled model).
+        weight: An extra factor of the integrand (the bridging band's ``1 - alpha``), or ``None``.
+        degree: Quadrature degree (:data:`FE_STATE_DEGREE`).
+
+    Attributes:
+        state: The :class:`~dolfinx_meshfree.physics.state.PointState` of the cells' points
+            (``len(cells) * points per cell``, cell by cell); the band width of each is its
+            cell's size (:func:`~dolfinx_meshfree.geometry.quadrature.cell_sizes`).
+        weights: The points' quadrature weights times ``weight`` (for energies).
+    """
+
+    def __init__(
+        self,
+        u: dolfinx.fem.Function,
+        law: StatefulLaw,
+        cells: np.ndarray,
+        weight: ufl.core.expr.Expr | None = None,
+        degree: int = FE_STATE_DEGREE,
+    ) -> None:
+        V = u.function_space
+        msh = V.mesh
+        d = msh.geometry.dim
+        nv = d * (d + 1) // 2
+        self.u, self.law, self.d, self.nv = u, law, d, nv
+        self.cells = np.asarray(cells, dtype=np.int32)
+        X, _ = _compat.quadrature_rule(msh.topology.cell_type.name, degree)
+        self.num_points = X.shape[0]
+        self._strain = _compat.create_expression(ufl_voigt_strain(u, d), X, msh)
+        self.stress = dolfinx.fem.Function(_compat.quadrature_space(msh, degree, nv))
+        self.tangent = dolfinx.fem.Function(_compat.quadrature_space(msh, degree, nv * nv))
+        self.stress.x.array[:] = 0.0
+        self.tangent.x.array[:] = 0.0
+        dofs = _compat.dofmap_array(self.stress.function_space)
+        self._dofs = dofs[self.cells].ravel()  # point dofs, cell by cell
+        q = cell_quadrature(msh, degree, self.cells)
+        if q.points.shape[0] != self._dofs.size:  # the rule of the spaces and this one differ
+            raise RuntimeError("the FE state's quadrature does not match its quadrature space")
+        self.points, self.weights = q.points, q.weights
+        if weight is not None:  # the bridging band's 1 - alpha, in the energies too
+            factor = _compat.create_expression(weight, X, msh)
+            self.weights = self.weights * _compat.eval_expression(
+                factor, msh, self.cells, 1
+            ).reshape(-1)
+        band = cell_sizes(msh, self.cells).repeat(self.num_points) if law.needs_band else None
+        self.state = PointState(law, self.points, band)
+        dxq = ufl.Measure(
+            "dx",
+            domain=msh,
+            metadata={"quadrature_degree": degree, "quadrature_scheme": "default"},
+        )
+        v, du = ufl.TestFunction(V), ufl.TrialFunction(V)
+        C = ufl.as_matrix([[self.tangent[nv * i + j] for j in range(nv)] for i in range(nv)])
+        r = ufl.inner(self.stress, ufl_voigt_strain(v, d))
+        j = ufl.inner(ufl.dot(C, ufl_voigt_strain(du, d)), ufl_voigt_strain(v, d))
+        if weight is not None:
+            r, j = weight * r, weight * j
+        #: The residual and Jacobian forms (before restriction to the cells).
+        self.residual_form = r * dxq
+        self.jacobian_form = j * dxq
+
+    def strain(self) -> np.ndarray:
+        """The Voigt strain (points, nv) of the current ``u`` at the cells' points."""
+        msh = self.u.function_space.mesh
+        return _compat.eval_expression(self._strain, msh, self.cells, self.nv).reshape(-1, self.nv)
+
+    def update(self) -> None:
+        """Run the law at the current ``u`` from the committed state and write ``sigma_q`` and
+        ``C_q`` (local: each rank its own cells)."""
+        stress, tangent = self.state.evaluate(self.strain())
+        nv = self.nv
+        self.stress.x.array.reshape(-1, nv)[self._dofs] = stress
+        self.tangent.x.array.reshape(-1, nv * nv)[self._dofs] = tangent.reshape(-1, nv * nv)
+
+    def dissipated(self, trial: bool = False) -> float:
+        """Energy dissipated on this rank's cells (committed state unless ``trial``)."""
+        return self.state.dissipated(self.weights, trial)

@@ -1,0 +1,435 @@
+"""Path following by indirect displacement control: through the peak of a softening response.
+
+Load control cannot pass a limit point, and the displacement of the loaded point cannot pass a
+snap-back. Indirect displacement control (de Borst 1987, "Computation of post-bifurcation and
+post-failure behavior of strain-softening solids", Comput. Struct. 25; Crisfield 1991,
+*Non-linear Finite Element Analysis of Solids and Structures*, vol. 1, sec. 9.3) makes the load
+factor ``t`` an unknown and prescribes instead a quantity that grows monotonically through the
+failure: a crack mouth opening (CMOD), a crack mouth sliding (CMSD), an elongation across the band
+where the material softens:
+
+.. math::
+    R(x, t) = f_{int}(x) - t\\, q = 0, \\qquad g(x) = \\tau_k,
+
+with ``g`` linear in the displacements (:class:`DisplacementControl`: ``sum_k c_k . u(X_k)``)
+and ``q = -dR/dt`` (external loads, prescribed values of held dofs, constraint right-hand
+sides: ``R`` is affine in ``t``). Each Newton iteration solves ``J da = -R`` and ``J db = q``
+and takes ``dt = (tau_k - g(x) - g(da)) / g(db)``, ``x += da + dt db`` (the bordered update,
+Crisfield 1991, eq. 9.37-9.40).
+
+The control increment adapts (:class:`PathOptions`): it grows after a step that converged in few
+iterations and is halved, from the last converged state (laws' state included), when a step
+does not converge; after ``max_cuts`` halvings the path cannot be followed and
+:class:`PathError` names the step, the control value and the load factor.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import dolfinx
+import numpy as np
+import numpy.typing as npt
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from ..couplings.base import CoupledSolution
+from ..parallel import raise_on_all_ranks
+from ..physics.state import is_stateful, voigt_strain
+from .coupled_newton import FE_LAW_DEGREE, BlockModel, build_block_problem
+from .petsc import BlockSystem, SolverOptions, solver_options
+from .sides import BlockProblem
+
+if TYPE_CHECKING:  # annotations only
+    from .coupled import CoupledElasticity
+
+__all__ = ["DisplacementControl", "PathError", "PathOptions", "PathResult", "follow_path"]
+
+
+class PathError(RuntimeError):
+    """The equilibrium path could not be followed (the step, control value and load factor are
+    in the message); ``result`` holds the path up to the last converged step."""
+
+    def __init__(self, message: str, result: PathResult):
+        super().__init__(message)
+        self.result = result
+
+
+@dataclass(frozen=True)
+class DisplacementControl:
+    """The controlled quantity ``g = sum_k c_k . u(X_k)``: a weighted sum of displacement
+    components at points of the body (FE or particle side; a point on the interface is taken on
+    the FE side).
+
+    Args:
+        points: (k, gdim) reference coordinates.
+        directions: (k, gdim) the vectors ``c_k``.
+
+    Example: the opening of a crack mouth between ``(a, 0)`` and ``(b, 0)`` across a vertical
+    crack, ``u_x(b) - u_x(a)``: ``DisplacementControl([[a, 0], [b, 0]], [[-1, 0], [1, 0]])``.
+    """
+
+    points: npt.ArrayLike
+    directions: npt.ArrayLike
+
+    def check(self, gdim: int) -> tuple[np.ndarray, np.ndarray]:
+        """The points and directions as (k, gdim) arrays; ValueError on bad input."""
+        p = np.atleast_2d(np.asarray(self.points, dtype=float))
+        c = np.atleast_2d(np.asarray(self.directions, dtype=float))
+        if p.ndim != 2 or p.shape[1] != gdim or p.shape[0] == 0:
+            raise ValueError(
+                f"DisplacementControl points={self.points!r} must be a (k, {gdim}) array of "
+                "points of the body"
+            )
+        if c.shape != p.shape:
+            raise ValueError(
+                f"DisplacementControl directions={self.directions!r} must have the shape of "
+                f"its points {p.shape}: one vector c_k per point"
+            )
+        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(c))) or not np.any(c):
+            raise ValueError(
+                f"DisplacementControl directions={self.directions!r} must be finite and not all "
+                "zero"
+            )
+        return p, c
+
+
+@dataclass(frozen=True)
+class PathOptions:
+    """Options of :func:`follow_path`.
+
+    Args:
+        increment: The first control increment (same units as the control quantity).
+        end: Stop when the control reaches this value.
+        min_load: Stop when, past the peak, the load factor falls below this share of the peak
+            (the body has failed).
+        max_steps: At most this many converged steps.
+        max_it: Newton iterations per step.
+        rtol, atol: Newton stops when ``|R| <= max(atol, rtol |t_peak q|)``.
+        grow: The increment is multiplied by this after a step that converged in at most
+            ``easy`` iterations, up to ``max_increment`` (default ``8 increment``).
+        max_cuts: Halvings of a step's increment before :class:`PathError`.
+    """
+
+    increment: float
+    end: float
+    min_load: float = 0.0
+    max_steps: int = 500
+    max_it: int = 25
+    rtol: float = 1e-9
+    atol: float = 1e-12
+    grow: float = 1.5
+    easy: int = 4
+    max_increment: float | None = None
+    max_cuts: int = 8
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.increment) and self.increment > 0):
+            raise ValueError(f"increment={self.increment!r} must be a positive number")
+        if not (np.isfinite(self.end) and self.end > self.increment):
+            raise ValueError(
+                f"end={self.end!r} must be a number above increment={self.increment!r}: the "
+                "control grows from its start (0) to end"
+            )
+        if not 0.0 <= self.min_load < 1.0:
+            raise ValueError(f"min_load={self.min_load!r} must lie in [0, 1)")
+        for name in ("max_steps", "max_it", "easy", "max_cuts"):
+            value = getattr(self, name)
+            if not (isinstance(value, int) and value >= 1):
+                raise ValueError(f"{name}={value!r} must be an integer >= 1")
+        if not self.grow >= 1.0:
+            raise ValueError(f"grow={self.grow!r} must be >= 1")
+
+
+@dataclass
+class PathResult:
+    """The followed path: per converged step the control value, the load factor, Newton's
+    iterations; the energies; the coupled solution at the end."""
+
+    control: list[float] = field(default_factory=list)
+    load_factor: list[float] = field(default_factory=list)
+    iterations: list[int] = field(default_factory=list)
+    #: External work of the dead loads, ``int t q . dx`` over the free dofs (trapezoidal).
+    external_work: list[float] = field(default_factory=list)
+    #: Recoverable energy ``sum_q W(eps_q, state_q) w_q`` over every point with state.
+    stored_energy: list[float] = field(default_factory=list)
+    #: Energy dissipated, by the laws' own closed forms at the committed states.
+    dissipated_energy: list[float] = field(default_factory=list)
+    cuts: int = 0
+    seconds: float = 0.0
+    solution: CoupledSolution | None = None
+
+    @property
+    def peak(self) -> tuple[float, float]:
+        """``(load factor, control)`` at the peak load."""
+        k = int(np.argmax(self.load_factor))
+        return self.load_factor[k], self.control[k]
+
+
+def _owned(vecs: Sequence[PETSc.Vec]) -> list[np.ndarray]:
+    return [v.getArray(readonly=True).copy() for v in vecs]
+
+
+def _control_function(
+    built: BlockModel, control: DisplacementControl
+) -> Callable[[Sequence[np.ndarray]], float]:
+    """``g`` of block fields given as owned arrays (collective)."""
+    model = built.model
+    P = model.patch.particles
+    points, directions = raise_on_all_ranks(
+        model.patch.comm, lambda: control.check(model.V.mesh.geometry.dim)
+    )
+    u = dolfinx.fem.Function(model.V)
+    n_owned = built.fe.n_owned
+    comm = model.patch.comm
+
+    def g(parts: Sequence[np.ndarray]) -> float:
+        u.x.array[:n_owned] = parts[0]
+        u.x.scatter_forward()
+        owned = np.concatenate(comm.allgather(np.asarray(parts[1])))
+        coeffs = owned.reshape(-1, P.gdim)[P.petsc_index]
+        sol = CoupledSolution(
+            u=u, coefficients=coeffs, mls=model.mls, patch=model.patch,
+            interface=built.extra.get("interface"),
+        )  # fmt: skip
+        return float(np.sum(sol.displacement(points) * directions))
+
+    g.weight = float(np.abs(directions).sum())  # |g(v)| <= weight max|v| (partition of unity)
+    return g
+
+
+def _energies(built: BlockModel) -> tuple[float, float]:
+    """``(stored, dissipated)`` over every point with state (summed over ranks)."""
+    stored = dissipated = 0.0
+    fe = built.fe.state_law
+    if fe is not None:
+        st = fe.state
+        stored += float(fe.law.stored_energy(fe.strain(), st.committed) @ fe.weights)
+        dissipated += st.dissipated(fe.weights)
+    side = built.particles
+    if side.state is not None:
+        forces = side.forces
+        coeffs = side.coefficients(built.x[1])
+        strain = forces.displacement_gradient(coeffs)
+        eps = voigt_strain(strain)
+        stored += float(side.state.law.stored_energy(eps, side.state.committed) @ forces.weights)
+        dissipated += side.state.dissipated(forces.weights)
+    comm = built.model.patch.comm
+    return comm.allreduce(stored), comm.allreduce(dissipated)
+
+
+def _residual(problem: BlockProblem, x: Sequence[PETSc.Vec], t: float) -> tuple[list, float]:
+    problem.t = t
+    r = problem.residual(x)
+    return r, float(np.sqrt(sum(v.norm() ** 2 for v in r)))
+
+
+def _bordered_step(
+    problem: BlockProblem,
+    x: list[PETSc.Vec],
+    t: float,
+    target: float,
+    g: Callable[[Sequence[np.ndarray]], float],
+    q: list[PETSc.Vec],
+    tol: float,
+    options: PathOptions,
+    solver: SolverOptions,
+) -> tuple[float, int]:
+    """Newton on ``R(x, t) = 0, g(x) = target`` from ``(x, t)``; returns ``(t, iterations)``
+    (``x`` updated in place) or raises ``ArithmeticError`` when it does not converge.
+
+    Every update keeps the constraint: ``x += alpha da + beta db`` with ``beta = (gap - alpha
+    g(da)) / g(db)`` holds ``g(x) = target`` for any ``alpha`` (``g`` is linear), so once the
+    first iteration has met it, a backtracking line search on ``|R|`` (Armijo, halving
+    ``alpha`` up to 6 times) damps the loading-unloading switches of a softening law near the
+    peak, where full steps can cycle; when no length decreases ``|R|`` the step fails (and is
+    cut): accepting a step that does not decrease it lets Newton wander onto another branch
+    (one where the whole body softens)."""
+    scale = max(abs(target), 1e-300)
+    comm = x[0].getComm().tompi4py()
+    r, norm = _residual(problem, x, t)
+    for it in range(options.max_it + 1):
+        gap = target - g(_owned(x))
+        if it > 0 and norm <= tol and abs(gap) <= 1e-10 * scale:
+            _destroy_all(r)
+            return t, it
+        if it == options.max_it or not np.isfinite(norm):
+            break
+        blocks = problem.jacobian(x)
+        for v in r:
+            v.scale(-1.0)
+        system = BlockSystem(blocks, r, num_primal=problem.num_primal, names=problem.names)
+        da = system.solve(solver)
+        system.destroy()
+        system = BlockSystem(blocks, q, num_primal=problem.num_primal, names=problem.names)
+        db = system.solve(solver)
+        system.destroy()
+        _destroy_all(r)
+        ga, gb = g(da), g(db)
+        size = comm.allreduce(
+            max((float(np.abs(b).max()) for b in db if b.size), default=0.0), op=MPI.MAX
+        )
+        if not abs(gb) > 1e-10 * size * g.weight:
+            raise ValueError(
+                "the control quantity does not move under the load (dg/dt = 0): choose a "
+                "quantity the load changes, e.g. an opening across the band where the body fails"
+            )
+        start = [v.copy() for v in x]
+        alpha, best = 1.0, None
+        for _ in range(7):
+            beta = (gap - alpha * ga) / gb
+            for xi, x0, a, b in zip(x, start, da, db, strict=True):
+                xi.array[:] = x0.getArray(readonly=True) + alpha * a + beta * b
+            r_try, n_try = _residual(problem, x, t + beta)
+            # the first iteration meets the constraint and may raise |R| from 0: full step
+            if it == 0 or n_try <= (1.0 - 1e-4 * alpha) * norm:
+                best = (alpha, beta, r_try, n_try)
+                break
+            _destroy_all(r_try)
+            alpha *= 0.5
+        if best is None:  # no decrease on this branch: the step is cut
+            for xi, x0 in zip(x, start, strict=True):
+                x0.copy(xi)
+            _destroy_all(start)
+            raise ArithmeticError("no step length decreases the residual")
+        alpha, beta, r, norm = best
+        for xi, x0, a, b in zip(x, start, da, db, strict=True):
+            xi.array[:] = x0.getArray(readonly=True) + alpha * a + beta * b
+        _destroy_all(start)
+        t += beta
+    _destroy_all(r)
+    raise ArithmeticError("not converged")
+
+
+def _destroy_all(objects: Sequence) -> None:
+    for obj in objects:
+        obj.destroy()
+
+
+def follow_path(
+    model: CoupledElasticity,
+    control: DisplacementControl,
+    options: PathOptions,
+    solver: str | SolverOptions = "mumps",
+    on_step: Callable[[int, float, float], None] | None = None,
+) -> PathResult:
+    """Follow the equilibrium path of ``model`` by indirect displacement control (collective).
+
+    The model's loads (tractions, body forces, prescribed displacements) are scaled by the load
+    factor ``t``, an unknown; the control quantity grows by adaptive increments from 0 to
+    ``options.end``. The law may have state (:class:`~dolfinx_meshfree.RankineDamage`,
+    :class:`~dolfinx_meshfree.J2Plasticity`): it is committed at every converged step.
+
+    Args:
+        model: A :class:`~dolfinx_meshfree.CoupledElasticity` (with a law with state, or any law
+            of a coupling of :data:`~dolfinx_meshfree.FINITE_STRAIN_COUPLINGS`).
+        control: The controlled quantity.
+        options: Increments, the end, Newton's tolerances (:class:`PathOptions`).
+        solver: The linear solver of each iteration (two solves per iteration).
+        on_step: Called as ``on_step(step, t, tau)`` after every converged step.
+
+    Returns:
+        The :class:`PathResult`.
+
+    Raises:
+        PathError: a step does not converge after ``options.max_cuts`` halvings (naming the
+            step, the control value and the load factor; the path so far in ``result``).
+        ValueError: a control quantity that does not move under the load.
+    """
+    comm = model.patch.comm
+    solver = raise_on_all_ranks(comm, lambda: solver_options(solver))
+    t0 = time.perf_counter()
+    u = dolfinx.fem.Function(model.V)
+    u.x.array[:] = 0.0
+    F_int = None
+    law = model.law
+    if not is_stateful(law):
+        d = model.V.mesh.geometry.dim
+        dx = ufl.Measure("dx", domain=model.V.mesh, metadata={"quadrature_degree": FE_LAW_DEGREE})
+        F = ufl.Identity(d) + ufl.grad(u)
+        F_int = ufl.inner(law.ufl_first_piola(F), ufl.grad(ufl.TestFunction(model.V))) * dx
+    built = build_block_problem(model, F_int, u, law)
+    problem, x = built.problem, built.x
+    result = PathResult()
+    try:
+        g = _control_function(built, control)
+        # q = R(x, 0) - R(x, 1): the residual is affine in t
+        problem.t = 0.0
+        r0 = problem.residual(x)
+        problem.t = 1.0
+        r1 = problem.residual(x)
+        q = []
+        for a, b in zip(r0, r1, strict=True):
+            a.axpy(-1.0, b)
+            b.destroy()
+            q.append(a)
+        f_free = q[0].getArray(readonly=True).copy()
+        f_free[built.fe.fixed_local] = 0.0  # held dofs: reactions, not dead loads
+        f_ext = [f_free, q[1].getArray(readonly=True).copy()]
+        q_norm = float(np.sqrt(sum(v.norm() ** 2 for v in q)))
+        t, tau, dtau, cuts = 0.0, g(_owned(x)), options.increment, 0
+        max_dtau = options.max_increment or 8.0 * options.increment
+        work, peak = 0.0, 0.0
+        step = 0
+        while tau < options.end - 1e-14 * abs(options.end) and step < options.max_steps:
+            target = min(options.end, tau + dtau)
+            saved = [v.copy() for v in x]
+            tol = max(options.atol, options.rtol * q_norm * max(abs(t), peak, 1e-3))
+            try:
+                t_new, its = _bordered_step(problem, x, t, target, g, q, tol, options, solver)
+            except ArithmeticError:
+                for v, w in zip(x, saved, strict=True):
+                    w.copy(v)
+                    w.destroy()
+                problem.restore()
+                result.cuts += 1
+                if cuts == options.max_cuts:
+                    raise PathError(
+                        f"the path could not be followed at step {step + 1}: from control "
+                        f"{tau:.6g} (load factor {t:.6g}) no increment down to "
+                        f"{dtau:.3g} converged in max_it={options.max_it} Newton iterations; "
+                        "choose a control quantity that grows monotonically through the "
+                        "failure, or a smaller increment",
+                        result,
+                    ) from None
+                cuts, dtau = cuts + 1, 0.5 * dtau
+                continue
+            problem.t = t_new
+            problem.commit(x)
+            dx = [
+                a.getArray(readonly=True) - b.getArray(readonly=True)
+                for a, b in zip(x[:2], saved[:2], strict=True)
+            ]
+            for w in saved:
+                w.destroy()
+            local = 0.5 * (t + t_new) * sum(float(f @ d) for f, d in zip(f_ext, dx, strict=True))
+            work += comm.allreduce(local)
+            t, tau, step = t_new, target, step + 1
+            peak = max(peak, t)
+            stored, dissipated = _energies(built)
+            result.control.append(tau)
+            result.load_factor.append(t)
+            result.iterations.append(its)
+            result.external_work.append(work)
+            result.stored_energy.append(stored)
+            result.dissipated_energy.append(dissipated)
+            if on_step is not None:
+                on_step(step, t, tau)
+            if cuts:
+                cuts -= 1
+            if its <= options.easy:
+                dtau = min(max_dtau, options.grow * dtau)
+            if options.min_load > 0 and peak > 0 and t < options.min_load * peak:
+                break
+        for v in q:
+            v.destroy()
+        result.solution = built.solution()
+        result.solution.states = problem.states
+    finally:
+        built.destroy()
+    result.seconds = time.perf_counter() - t0
+    return result

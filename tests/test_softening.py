@@ -1,0 +1,252 @@
+"""Laws with state in coupled models: the state store, its binding to the force code, the FE
+cells' quadrature-point law, commit at converged steps, and path following past the peak.
+
+The structural checks compare with closed forms: a bar in uniaxial tension (plane stress,
+nu = 0) made of FE cells and a particle patch in the middle carries a uniform strain, which every
+consistent coupling reproduces exactly, so its load-elongation curve is the law's bilinear
+softening curve (Bazant & Oh 1983), ``sigma = E eps`` up to ``f_t``, then linear to 0 at
+``eps_f = 2 G_f / (f_t h)``, with the residual stiffness ``(1 - max_damage) E`` once the damage
+is capped; and the energy it dissipates is ``G_f / h`` per unit volume, less the capped tail
+(written out here, not taken from the law). Path following (indirect displacement control)
+must carry it through the peak to full softening. Every check runs serially and on 2 ranks.
+"""
+
+import dolfinx_meshfree as mf
+from dolfinx_meshfree import _compat
+from dolfinx_meshfree.physics.state import BoundLaw, PointState, tangent_from_voigt, voigt_strain
+
+import dolfinx
+import numpy as np
+import pytest
+import ufl
+from mpi4py import MPI
+
+E, FT, GF = 1000.0, 1.0, 0.02
+L, W = 2.0, 1.0
+
+
+def _bar(n: int, coupling: str, cell: str = "quadrilateral", law=None, notch=None, **options):
+    """The bar, its patch ``0.5 <= x <= 1.5``; ``notch``: a section 10 % narrower there (a
+    Gaussian half a cell wide)."""
+    msh = dolfinx.mesh.create_rectangle(
+        MPI.COMM_WORLD, [[0, 0], [L, W]], [2 * n, n], getattr(dolfinx.mesh.CellType, cell)
+    )
+    if notch is not None:
+        x = msh.geometry.x
+        x[:, 1] *= 1.0 - 0.1 * np.exp(-(((x[:, 0] - notch) / (0.5 / n)) ** 2))
+    V = _compat.vector_function_space(msh)
+    mid = dolfinx.mesh.locate_entities(msh, 2, lambda p: (p[0] > 0.5 - 1e-9) & (p[0] < 1.5 + 1e-9))
+    patch = mf.ParticlePatch(msh, mid, placement="vertices")
+    law = law or mf.RankineDamage(E=E, nu=0.0, ft=FT, Gf=GF, plane="stress")
+    model = mf.CoupledElasticity(V, patch, law, coupling=coupling, **options)
+    left = mf.boundary_facets(msh, lambda p: np.isclose(p[0], 0.0))
+    right = mf.boundary_facets(msh, lambda p: np.isclose(p[0], L))
+    model.add_dirichlet(left, lambda p: np.zeros_like(p))
+    model.add_traction(right, lambda p, nrm: np.tile([1.0, 0.0], (len(p), 1)))
+    return model
+
+
+def _closed_form(eps: np.ndarray, h: float, max_damage: float) -> np.ndarray:
+    """Uniaxial stress of linear softening with the damage capped at ``max_damage``."""
+    eps0, epsf = FT / E, 2.0 * GF / (FT * h)
+    kappa = np.maximum(eps, eps0)
+    D = 1.0 - (eps0 / kappa) * (epsf - kappa) / (epsf - eps0)
+    D = np.clip(np.where(eps <= eps0, 0.0, D), 0.0, max_damage)
+    return (1.0 - D) * E * eps
+
+
+def _capped_dissipation(h: float, max_damage: float) -> float:
+    """Energy per volume dissipated up to the cap: the work up to the strain where ``D`` reaches
+    ``max_damage`` minus the energy stored there (written out from the bilinear curve)."""
+    eps0, epsf = FT / E, 2.0 * GF / (FT * h)
+    # D(k) = max_damage  <=>  (eps0 / k)(epsf - k) / (epsf - eps0) = 1 - max_damage
+    r = (1.0 - max_damage) * (epsf - eps0) / eps0
+    kc = epsf / (1.0 + r)
+    work = 0.5 * FT * eps0 + FT * ((kc - eps0) - 0.5 * (kc - eps0) ** 2 / (epsf - eps0))
+    return work - 0.5 * (1.0 - max_damage) * E * kc**2
+
+
+@pytest.mark.parametrize(
+    "coupling, cell, n",
+    [
+        ("lagrange", "quadrilateral", 4),
+        ("edge-to-edge", "quadrilateral", 4),
+        ("bridging", "triangle", 4),
+        ("lagrange", "triangle", 3),
+    ],
+)
+def test_softening_bar_follows_the_closed_form_through_the_peak(coupling, cell, n):
+    """Path following carries the coupled bar through the peak to full softening: the load
+    factor on the closed-form curve at every step (1e-9 f_t), and the energy dissipated by the
+    laws (FE and particle points) equal to the closed form and to the external work minus the
+    stored energy."""
+    # the particle points' band equal to the FE cells' (their size): one law everywhere, so
+    # that the uniform strain is the solution through the softening
+    model = _bar(n, coupling, cell, particle_band=1.0)
+    h = 1.0 / n  # the cells' size (squares, or halves of them)
+    law = model.law
+    eps_f = 2.0 * GF / (FT * h)
+    end = 1.25 * eps_f * L  # past full softening
+    control = mf.DisplacementControl([[L, 0.5]], [[1.0, 0.0]])
+    options = mf.PathOptions(increment=5e-4, end=end, max_increment=end / 20)
+    res = mf.follow_path(model, control, options)
+    eps = np.array(res.control) / L
+    t = np.array(res.load_factor)
+    assert np.abs(t - _closed_form(eps, h, law.max_damage)).max() < 1e-9 * FT
+    assert eps.min() < FT / E < eps.max()  # the path went through the peak
+    assert t[-1] < 0.05 * FT  # softened to the residual stiffness
+    expected = _capped_dissipation(h, law.max_damage) * L * W
+    assert res.dissipated_energy[-1] == pytest.approx(expected, rel=1e-9)
+    # energy balance, independent of the laws' dissipation: trapezoidal external work (exact on
+    # the piecewise-linear curve but for the step that crosses the peak) minus stored energy
+    balance = res.external_work[-1] - res.stored_energy[-1]
+    assert balance == pytest.approx(res.dissipated_energy[-1], rel=2e-3)
+    # Newton's iterations stay few with the consistent tangent
+    assert max(res.iterations) <= 6
+
+
+def test_load_steps_commit_the_state_and_unloading_is_elastic():
+    """``CoupledElasticity.solve(load_steps=)`` commits the state at every converged step: a
+    bar loaded below the peak (load control cannot pass it) has no damage; the states are kept
+    on the solution."""
+    model = _bar(3, "lagrange", particle_band=1.0)
+    model.tractions = []
+    right = mf.boundary_facets(model.V.mesh, lambda p: np.isclose(p[0], L))
+    model.add_traction(right, lambda p, nrm: np.tile([0.9 * FT, 0.0], (len(p), 1)))
+    sol = model.solve(load_steps=3)
+    states = sol.states
+    assert len(states) == 2  # the FE cells' and the particles'
+    for st in states:
+        kappa = st.committed["kappa"][:, 0]
+        # the committed history: the strain of 0.9 f_t, below eps0 (kappa stays eps0)
+        assert np.allclose(kappa, FT / E, rtol=1e-12)
+        assert np.all(st.committed["damage"] == 0.0)
+    u = sol.displacement(np.array([[L, 0.5]]))
+    assert u[0, 0] == pytest.approx(0.9 * FT / E * L, rel=1e-10)
+
+
+def test_bound_law_tangent_is_the_derivative_of_its_stress():
+    """``BoundLaw`` (a law with state as a Material): ``A = dP/dF`` by central differences in
+    every entry of ``F`` (1e-6), in the loading branch of damage and the plastic branch of J2,
+    and ``P`` symmetric."""
+    rng = np.random.default_rng(3)
+    laws = [
+        (mf.RankineDamage(E=E, nu=0.2, ft=FT, Gf=GF, plane="stress"), 2, 3e-3),
+        (mf.RankineDamage(E=E, nu=0.2, ft=FT, Gf=GF, plane=None), 3, 3e-3),
+        (mf.J2Plasticity(E=E, nu=0.3, sigma_y=FT, H=50.0, plane="strain"), 2, 4e-3),
+    ]
+    for law, d, scale in laws:
+        m = 5
+        H = scale * (np.eye(d)[None] + 0.3 * rng.standard_normal((m, d, d)))
+        band = np.full(m, 0.05) if law.needs_band else None
+        bound = BoundLaw(PointState(law, rng.random((m, d)), band))
+        F = np.eye(d) + H
+        P, A = bound.first_piola(F), bound.tangent(F)
+        assert np.allclose(P, np.swapaxes(P, 1, 2))
+        step = 1e-7 * scale
+        fd = np.zeros_like(A)
+        for k in range(d):
+            for ll in range(d):
+                dF = np.zeros((d, d))
+                dF[k, ll] = step
+                fd[:, :, :, k, ll] = (bound.first_piola(F + dF) - bound.first_piola(F - dF)) / (
+                    2 * step
+                )
+        assert np.abs(fd - A).max() <= 1e-6 * np.abs(A).max(), type(law).__name__
+        # the Voigt round trip of the binding
+        eps = voigt_strain(H)
+        Cv = law.update(eps, law.initial_state(m), band)[1]
+        assert np.allclose(tangent_from_voigt(Cv, d), A)
+
+
+def test_point_state_commits_and_restores():
+    """The committed state changes only at ``commit``; ``restore`` drops the trial state; an
+    evaluation never touches the committed arrays."""
+    law = mf.RankineDamage(E=E, nu=0.0, ft=FT, Gf=GF, plane="stress")
+    st = PointState(law, np.zeros((2, 2)), np.full(2, 0.1))
+    strain = np.array([[5e-3, 0.0, 0.0], [1e-4, 0.0, 0.0]])
+    st.evaluate(strain)
+    assert st.trial["damage"][0, 0] > 0.0
+    assert np.all(st.committed["damage"] == 0.0)
+    st.restore()
+    assert np.all(st.trial["damage"] == 0.0)
+    st.evaluate(strain)
+    st.commit()
+    committed = st.committed["damage"].copy()
+    st.evaluate(0.5 * strain)  # unloading: the damage stays
+    assert np.array_equal(st.trial["damage"], committed)
+    assert np.array_equal(st.committed["damage"], committed)
+
+
+def test_state_is_refused_where_it_is_not_carried():
+    """A law with state is refused, with what to use instead, by the couplings with blended or
+    linked interfaces, by explicit dynamics and by the user-UFL nonlinear problem; never run
+    as if elastic."""
+    law = mf.RankineDamage(E=E, nu=0.0, ft=FT, Gf=GF, plane="stress")
+    msh = dolfinx.mesh.create_rectangle(
+        MPI.COMM_WORLD, [[0, 0], [L, W]], [4, 2], dolfinx.mesh.CellType.quadrilateral
+    )
+    V = _compat.vector_function_space(msh)
+    mid = dolfinx.mesh.locate_entities(msh, 2, lambda p: p[0] < 1.0 + 1e-9)
+    patch = mf.ParticlePatch(msh, mid, placement="vertices")
+    for coupling in ("ramp", "master-slave"):
+        with pytest.raises(ValueError, match=rf"coupling='{coupling}' does not carry"):
+            mf.CoupledElasticity(V, patch, law, coupling=coupling)
+    with pytest.raises(TypeError, match="explicit dynamics does not carry state"):
+        mf.ExplicitDynamics.fe(V, law)
+    with pytest.raises(TypeError, match="explicit dynamics does not carry state"):
+        mf.ExplicitDynamics.coupled(mf.CoupledElasticity(V, patch, law, coupling="lagrange"))
+    u = dolfinx.fem.Function(V)
+    v = ufl.TestFunction(V)
+    F = ufl.inner(ufl.grad(u), ufl.grad(v)) * ufl.dx
+    with pytest.raises(TypeError, match="CoupledNonlinearProblem"):
+        mf.CoupledNonlinearProblem(F, u, [], patch, law)
+    # a band that would snap back locally: cells of 0.5 above 2 E Gf / ft^2 = 0.2
+    weak = mf.RankineDamage(E=E, nu=0.0, ft=FT, Gf=1e-4, plane="stress")
+    with pytest.raises(ValueError, match="snap"):
+        mf.CoupledElasticity(V, patch, weak, coupling="lagrange").solve(load_steps=1)
+
+
+def test_path_following_bad_input():
+    """A control quantity that does not move, and bad options, are refused by name."""
+    with pytest.raises(ValueError, match="increment=-1"):
+        mf.PathOptions(increment=-1, end=1.0)
+    with pytest.raises(ValueError, match=r"end=0\.001"):
+        mf.PathOptions(increment=0.01, end=0.001)
+    model = _bar(2, "lagrange")
+    fixed = mf.DisplacementControl([[0.0, 0.5]], [[1.0, 0.0]])  # on the held end
+    with pytest.raises(ValueError, match="does not move"):
+        mf.follow_path(model, fixed, mf.PathOptions(increment=1e-4, end=1e-3))
+    with pytest.raises(ValueError, match="directions"):
+        mf.follow_path(
+            model,
+            mf.DisplacementControl([[1.0, 0.5]], [[0.0, 0.0]]),
+            mf.PathOptions(increment=1e-4, end=1e-3),
+        )
+
+
+def test_localised_softening_is_objective_in_the_particle_spacing():
+    """A bar that fails in its particle patch (a local damage law, band: the MLS dilation times
+    the cell size, the default): the peak load and the energy dissipated up to the same opening
+    across the band differ between spacings h and h / 2 by less than 0.3 % and 3 % (measured
+    at 4 and 8 cells across: 0.09 % and 1.7 %; the issue's target is 3 % for both)."""
+    out = []
+    for n in (4, 8):
+        xc = 1.0 + 0.5 / n  # mid-cell
+        model = _bar(n, "lagrange", notch=xc)
+        control = mf.DisplacementControl([[xc - 0.3, 0.5], [xc + 0.3, 0.5]], [[-1, 0], [1, 0]])
+        options = mf.PathOptions(increment=2e-4, end=0.05, min_load=0.15, max_increment=4e-3)
+        res = mf.follow_path(model, control, options)
+        out.append(res)
+        # the particle points dissipate it all (the FE cells stay elastic)
+        fe, particles = res.solution.states
+        assert np.all(fe.committed["damage"] == 0.0)
+        assert particles.committed["damage"].max() > 0.99
+        balance = res.external_work[-1] - res.stored_energy[-1]
+        assert balance == pytest.approx(res.dissipated_energy[-1], rel=2e-2)
+    common = min(r.control[-1] for r in out)  # the same opening
+    d1, d2 = (np.interp(common, r.control, r.dissipated_energy) for r in out)
+    p1, p2 = (r.peak[0] for r in out)
+    print(f"peaks {p1:.5f} {p2:.5f}, dissipated at {common:.4f}: {d1:.6f} {d2:.6f}")
+    assert abs(p2 - p1) <= 0.003 * p1
+    assert abs(d2 - d1) <= 0.03 * d1

@@ -287,3 +287,41 @@ def test_roller_patch_test_at_finite_strain(coupling):
     assert result.converged
     # measured 2.2e-16 (both couplings); bound 1e-10
     assert np.abs(problem.solution.displacement(g) - expected).max() <= 1e-10
+
+
+@pytest.mark.parametrize("coupling", ["lagrange", "edge-to-edge", "bridging"])
+@pytest.mark.parametrize("where", ["cut", "away"])
+def test_roller_patch_test_with_callables(coupling, where):
+    """The roller patch test through ``CoupledElasticity.add_dirichlet(..., components=)`` on FE
+    and patch facets alike (rollers u_x = 0 on x = 0 and u_y = 0 on y = 0, tractions sigma n
+    elsewhere): reproduced to round-off."""
+    msh = box([0.0, 0.0], [2.0, 1.0], [16, 8])
+    V = _compat.vector_function_space(msh)
+    if where == "cut":
+        cells = cells_where(msh, lambda m: (m[:, 0] < 1.0) & (m[:, 1] < 0.6))
+    else:
+        cells = cells_where(msh, lambda m: (m[:, 0] > 0.7) & (m[:, 0] < 1.6) & (m[:, 1] > 0.3))
+    patch = mf.ParticlePatch(msh, cells, 0.125)
+    model = mf.CoupledElasticity(V, patch, MAT, coupling=coupling)
+    C = MAT.voigt()
+    s = C @ np.array([2e-3, -1e-3, 0.0])
+    sigma = np.array([[s[0], s[2]], [s[2], s[1]]])
+    for i in range(2):
+        facets = mf.boundary_facets(msh, lambda p, i=i: np.isclose(p[i], 0.0))
+        model.add_dirichlet(facets, lambda x: np.zeros_like(x), components=(i,))
+    rest = mf.boundary_facets(msh, lambda p: np.isclose(p[0], 2.0) | np.isclose(p[1], 1.0))
+    model.add_traction(rest, lambda x, n: n @ sigma)
+    sol = model.solve()
+    g = np.stack(np.meshgrid(np.linspace(0, 2, 9), np.linspace(0, 1, 5)), -1).reshape(-1, 2)
+    expected = np.stack([2e-3 * g[:, 0], -1e-3 * g[:, 1]], axis=1)
+    assert np.abs(sol.displacement(g) - expected).max() <= 1e-10
+
+
+def test_callable_component_condition_refused_on_ramps():
+    msh = box([0.0, 0.0], [2.0, 1.0], [8, 4])
+    V = _compat.vector_function_space(msh)
+    patch = mf.ParticlePatch(msh, cells_where(msh, lambda m: m[:, 0] > 1.0), 0.25)
+    model = mf.CoupledElasticity(V, patch, MAT, coupling="ramp")
+    left = mf.boundary_facets(msh, lambda p: np.isclose(p[0], 0.0))
+    with pytest.raises(ValueError, match="coupling='ramp'"):
+        model.add_dirichlet(left, lambda x: np.zeros_like(x), components=(0,))

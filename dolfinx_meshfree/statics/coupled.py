@@ -23,8 +23,10 @@ from typing import Any
 import dolfinx
 import numpy as np
 import ufl
+from mpi4py import MPI
 
 from ..approx.crack_cuts import attach_cracks
+from ..approx.fe_dofs import node_flags
 from ..approx.mls import MLS
 from ..approx.tip_enrichment import enrich_tips
 from ..couplings import COUPLINGS, DEFAULT_DILATION, REGISTRY
@@ -55,6 +57,7 @@ from .newton import NewtonOptions
 from .petsc import SolverOptions, solver_options
 
 __all__ = [
+    "COMPONENT_COUPLINGS",
     "COUPLINGS",
     "CRACK_COUPLINGS",
     "DEFAULT_DILATION",
@@ -65,6 +68,11 @@ __all__ = [
 ]
 
 VectorFunction = Callable[[np.ndarray], np.ndarray]
+
+#: The couplings that hold single components of FE nodes (a roller, a symmetry plane): those whose
+#: FE block is apart from the interface (the ramps blend the FE nodes of their interface cells
+#: and master-slave links them).
+COMPONENT_COUPLINGS: tuple[str, ...] = ("lagrange", "edge-to-edge", "bridging")
 
 #: The couplings that carry a law with internal state (damage, plasticity): those whose FE and
 #: particle sides are apart (no blended interface cells, no rotating links).
@@ -277,15 +285,20 @@ class CoupledElasticity:
         self, facets: np.ndarray, value: VectorFunction, components: tuple[int, ...] | None = None
     ) -> None:
         """``u = value(x)`` on owned exterior facets (FE side: strongly; patch side: multipliers).
-        ``value`` maps points (m, gdim) to (m, gdim). ``components`` (patch facets only: one
-        constant multiplier per facet and component) constrains only those components, e.g.
-        to remove the rigid motions of a traction problem with three scalar conditions."""
+        ``value`` maps points (m, gdim) to (m, gdim). ``components`` constrains only those
+        components (a roller, a symmetry plane): on FE facets their nodes' components are held
+        strongly (couplings :data:`COMPONENT_COUPLINGS`), on patch facets one constant
+        multiplier per facet and component, e.g. to remove the rigid motions of a traction
+        problem with three scalar conditions. Collective."""
         facets = np.asarray(facets, dtype=np.int32)
         if components is None:
             self.dirichlet.append((facets, value))
             return
         gdim = self.V.mesh.geometry.dim
-        outside = facets[~np.isin(facets, self.patch.exterior_facets)]
+        on_patch = np.isin(facets, self.patch.exterior_facets)
+        outside = facets[~on_patch]
+        comm = self.patch.comm
+        any_outside = comm.allreduce(int(outside.size), op=MPI.MAX) > 0
 
         def check() -> tuple[int, ...]:
             c = tuple(components)
@@ -293,15 +306,32 @@ class CoupledElasticity:
                 raise ValueError(
                     f"components={components!r} must be distinct indices in 0..{gdim - 1}"
                 )
-            if outside.size:
+            if any_outside and self.coupling not in COMPONENT_COUPLINGS:
                 raise ValueError(
-                    f"components={components!r} is supported on exterior facets of the patch "
-                    f"only; {outside.size} facet(s) are not (e.g. facet {int(outside[0])}): "
-                    "constrain all components there, or use patch facets"
+                    f"components={components!r} on FE facets with coupling={self.coupling!r}: "
+                    f"conditions on one component of FE nodes are supported with the couplings "
+                    f"{list(COMPONENT_COUPLINGS)}; constrain all components, or choose one of "
+                    "those couplings"
                 )
             return c
 
-        self.dirichlet.append((facets, value, raise_on_all_ranks(self.patch.comm, check)))
+        c = raise_on_all_ranks(comm, check)
+        if self.coupling in COMPONENT_COUPLINGS:
+            # the FE nodes' components held strongly, by dof, on every facet (as a DirichletBC on
+            # V.sub(i) does): FE facets, and patch facets whose nodes FE cells also carry (the
+            # bridging band)
+            V = self.V
+            fdim = V.mesh.topology.dim - 1
+            nodes = node_flags(V, dolfinx.fem.locate_dofs_topological(V, fdim, facets))
+            flags = np.zeros((nodes.size, gdim), dtype=bool)
+            flags[np.ix_(nodes, list(c))] = True
+            x = V.tabulate_dof_coordinates()[: nodes.size, :gdim]
+            values = np.zeros((nodes.size, gdim))
+            if nodes.any():
+                values[nodes] = np.asarray(value(x[nodes]), dtype=float).reshape(-1, gdim)
+            self.strong.append((flags, values))
+        if comm.allreduce(int(on_patch.sum())):
+            self.dirichlet.append((facets[on_patch], value, c))
 
     def add_traction(self, facets: np.ndarray, traction: Callable) -> None:
         """Traction ``traction(x, n)`` (m, gdim) on owned exterior facets, on either side."""

@@ -110,6 +110,8 @@ class PathOptions:
         max_steps: At most this many converged steps.
         max_it: Newton iterations per step.
         rtol, atol: Newton stops when ``|R| <= max(atol, rtol |t_peak q|)``.
+        stall: Or when no step length decreases ``|R|`` any more and ``|R| <= stall
+            |t_peak q|`` (the round-off floor of a law's non-smooth points).
         grow: The increment is multiplied by this after a step that converged in at most
             ``easy`` iterations, up to ``max_increment`` (default ``8 increment``).
         max_cuts: Halvings of a step's increment before :class:`PathError`.
@@ -122,6 +124,7 @@ class PathOptions:
     max_it: int = 25
     rtol: float = 1e-9
     atol: float = 1e-12
+    stall: float = 1e-4
     grow: float = 1.5
     easy: int = 4
     max_increment: float | None = None
@@ -236,6 +239,7 @@ def _bordered_step(
     g: Callable[[Sequence[np.ndarray]], float],
     q: list[PETSc.Vec],
     tol: float,
+    stall: float,
     options: PathOptions,
     solver: SolverOptions,
 ) -> tuple[float, int]:
@@ -248,7 +252,9 @@ def _bordered_step(
     ``alpha`` up to 6 times) damps the loading-unloading switches of a softening law near the
     peak, where full steps can cycle; when no length decreases ``|R|`` the step fails (and is
     cut): accepting a step that does not decrease it lets Newton wander onto another branch
-    (one where the whole body softens)."""
+    (one where the whole body softens). A residual that stagnates below ``stall`` (the
+    non-smooth points of a law: its damage cap, equal principal stresses) is accepted as
+    converged."""
     scale = max(abs(target), 1e-300)
     comm = x[0].getComm().tompi4py()
     r, norm = _residual(problem, x, t)
@@ -291,10 +297,14 @@ def _bordered_step(
                 break
             _destroy_all(r_try)
             alpha *= 0.5
-        if best is None:  # no decrease on this branch: the step is cut
+        if best is None:  # no decrease on this branch
             for xi, x0 in zip(x, start, strict=True):
                 x0.copy(xi)
             _destroy_all(start)
+            if norm <= stall and abs(gap) <= 1e-10 * scale:  # stagnated near the solution
+                problem.t = t
+                _destroy_all(problem.residual(x))  # the trial state of x again
+                return t, it + 1
             raise ArithmeticError("no step length decreases the residual")
         alpha, beta, r, norm = best
         for xi, x0, a, b in zip(x, start, da, db, strict=True):
@@ -378,9 +388,13 @@ def follow_path(
         while tau < options.end - 1e-14 * abs(options.end) and step < options.max_steps:
             target = min(options.end, tau + dtau)
             saved = [v.copy() for v in x]
-            tol = max(options.atol, options.rtol * q_norm * max(abs(t), peak, 1e-3))
+            ref = q_norm * max(abs(t), peak, 1e-3)
+            tol = max(options.atol, options.rtol * ref)
+            stall = max(tol, options.stall * ref)
             try:
-                t_new, its = _bordered_step(problem, x, t, target, g, q, tol, options, solver)
+                t_new, its = _bordered_step(
+                    problem, x, t, target, g, q, tol, stall, options, solver
+                )
             except ArithmeticError:
                 for v, w in zip(x, saved, strict=True):
                     w.copy(v)

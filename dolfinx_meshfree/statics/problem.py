@@ -58,14 +58,10 @@ from ..geometry.quadrature import (
 from ..parallel import raise_on_all_ranks
 from ..physics.body_loads import BodyForce, accumulate
 from ..physics.materials import LinearElastic
-from .coupled import COUPLINGS, CoupledElasticity, CoupledSolution
+from .coupled import COMPONENT_COUPLINGS, COUPLINGS, CoupledElasticity, CoupledSolution
 from .petsc import SolverOptions, solver_options
 
 __all__ = ["CoupledLinearProblem", "FormBodyForce"]
-
-#: Couplings that hold FE dofs by component (``DirichletBC`` on ``V.sub(i)``): their interface
-#: rows move a held dof's column to the right-hand side one component at a time.
-COMPONENT_COUPLINGS = ("lagrange", "edge-to-edge", "bridging")
 
 #: Relative Frobenius difference above which the form and the material disagree on the patch.
 MATERIAL_TOLERANCE = 1e-8

@@ -162,6 +162,8 @@ class PathResult:
     stored_energy: list[float] = field(default_factory=list)
     #: Energy dissipated, by the laws' own closed forms at the committed states.
     dissipated_energy: list[float] = field(default_factory=list)
+    #: The monitored quantities (``follow_path(monitors=...)``) per converged step, by name.
+    monitors: dict[str, list[float]] = field(default_factory=dict)
     cuts: int = 0
     seconds: float = 0.0
     solution: CoupledSolution | None = None
@@ -326,6 +328,7 @@ def follow_path(
     options: PathOptions,
     solver: str | SolverOptions = "mumps",
     on_step: Callable[[int, float, float], None] | None = None,
+    monitors: dict[str, DisplacementControl] | None = None,
 ) -> PathResult:
     """Follow the equilibrium path of ``model`` by indirect displacement control (collective).
 
@@ -341,6 +344,8 @@ def follow_path(
         options: Increments, the end, Newton's tolerances (:class:`PathOptions`).
         solver: The linear solver of each iteration (two solves per iteration).
         on_step: Called as ``on_step(step, t, tau)`` after every converged step.
+        monitors: Other quantities of the same kind recorded at every converged step (e.g. the
+            deflection under the load), in :attr:`PathResult.monitors` by name.
 
     Returns:
         The :class:`PathResult`.
@@ -367,6 +372,8 @@ def follow_path(
     result = PathResult()
     try:
         g = _control_function(built, control)
+        watch = {k: _control_function(built, c) for k, c in (monitors or {}).items()}
+        result.monitors = {k: [] for k in watch}
         # q = R(x, 0) - R(x, 1): the residual is affine in t
         problem.t = 0.0
         r0 = problem.residual(x)
@@ -431,6 +438,9 @@ def follow_path(
             result.external_work.append(work)
             result.stored_energy.append(stored)
             result.dissipated_energy.append(dissipated)
+            owned = _owned(x)
+            for k, fn in watch.items():
+                result.monitors[k].append(fn(owned))
             if on_step is not None:
                 on_step(step, t, tau)
             if cuts:

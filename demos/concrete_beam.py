@@ -24,6 +24,10 @@
 # that no support restrains the bending: a roller held at one corner node concentrates a reaction
 # that cracks the concrete there.
 #
+# Methods: `lagrange` (the default), `edge-to-edge`, `bridging` (a particle patch of width
+# `--patch-width` around the notch, FE elsewhere) and `efg` (particles at every vertex of the
+# mesh: the reference the couplings are compared with).
+#
 # Self-checks (on by default, `--no-check` skips them):
 #
 # * the first step is elastic and equals the linear-elastic solve of the same model (the same
@@ -59,7 +63,7 @@ import numpy as np
 from mpi4py import MPI
 
 SETUPS = ("three-point-bend",)
-METHODS = mf.STATE_COUPLINGS
+METHODS = ("efg", *mf.COMPONENT_COUPLINGS)  # the supports hold single components
 # -
 
 
@@ -85,11 +89,16 @@ def beam_model(args, law):
     xm = L / 2
     V = _compat.vector_function_space(msh)
     notch = mf.Crack([[xm, 0.0], [xm, args.notch_depth]])
-    cells = dolfinx.mesh.locate_entities(
-        msh, 2, lambda p: np.abs(p[0] - xm) < args.patch_width / 2 + 1e-9 * L
-    )
-    patch = mf.ParticlePatch(msh, cells, placement="vertices", cracks=[notch])
-    model = mf.CoupledElasticity(V, patch, law, coupling=args.method)
+    if args.method == "efg":  # particles everywhere: the reference of the couplings
+        particles = mf.ParticleSet.from_vertices(msh)
+        model = mf.EFGElasticity(particles, law, cracks=[notch])
+    else:
+        cells = dolfinx.mesh.locate_entities(
+            msh, 2, lambda p: np.abs(p[0] - xm) < args.patch_width / 2 + 1e-9 * L
+        )
+        patch = mf.ParticlePatch(msh, cells, placement="vertices", cracks=[notch])
+        particles = patch.particles
+        model = mf.CoupledElasticity(V, patch, law, coupling=args.method)
     a, b = (L - S) / 2, (L + S) / 2  # the supports
     tol = 1e-9 * L
     if a > tol:  # an overhang: the supports are the bottom facets beside x = a and x = b
@@ -107,7 +116,7 @@ def beam_model(args, law):
         msh, lambda p: np.isclose(p[1], D) & (np.abs(p[0] - xm) < width / 2 + tol)
     )
     model.add_traction(top, lambda x, n: np.tile([0.0, -1.0 / width], (len(x), 1)))
-    return model, patch, msh, xm, hx
+    return model, particles, msh, xm, hx
 
 
 # -
@@ -121,7 +130,7 @@ def run(args) -> dict:
     comm = MPI.COMM_WORLD
     law = mf.RankineDamage(E=args.E, nu=args.nu, ft=args.ft, Gf=args.Gf, plane="stress")
     t0 = time.perf_counter()
-    model, patch, msh, xm, hx = beam_model(args, law)
+    model, particles, msh, xm, hx = beam_model(args, law)
     d = hx / 2  # the CMOD: the bottom points half a cell either side of the notch
     cmod = mf.DisplacementControl([[xm - d, 0.0], [xm + d, 0.0]], [[-1.0, 0.0], [1.0, 0.0]])
     deflection = mf.DisplacementControl([[xm - hx / 2, args.depth]], [[0.0, -1.0]])
@@ -136,19 +145,22 @@ def run(args) -> dict:
     B = args.thickness
     load = np.array(path.load_factor) * B  # N
     k = int(np.argmax(load))
-    fe_state, particle_state = path.solution.states
+    *fe_state, particle_state = path.solution.states  # no FE state in pure EFG
     damage = particle_state.committed["damage"][:, 0]
     zone = particle_state.points[damage >= 0.9]
     zone = np.concatenate(comm.allgather(zone)) if comm.size > 1 else zone
-    fe_damage = comm.allreduce(float(fe_state.committed["damage"].max(initial=0.0)), op=MPI.MAX)
+    fe_damage = max([float(st.committed["damage"].max(initial=0.0)) for st in fe_state] + [0.0])
+    fe_damage = comm.allreduce(fe_damage, op=MPI.MAX)
     ligament = (args.depth - args.notch_depth) * B
     n_cells = msh.topology.index_map(2).size_local
     record = {
         "setup": args.setup,
         "method": args.method,
         "h_mm": args.h,
-        "particles": patch.particles.num_particles,
-        "fe_cells": comm.allreduce(int((~patch.in_patch[:n_cells]).sum())),
+        "particles": particles.num_particles,
+        "fe_cells": 0
+        if args.method == "efg"
+        else comm.allreduce(int((~model.patch.in_patch[:n_cells]).sum())),
         "newton_iterations": int(sum(path.iterations)),
         "steps": len(load),
         "cuts": path.cuts,

@@ -58,10 +58,10 @@ from .physics.forces import InternalForces
 from .physics.inelastic import J2Plasticity, RankineDamage
 from .physics.materials import LinearElastic
 from .statics.coupled import (
+    COMPONENT_COUPLINGS,
     COUPLINGS,
     CRACK_COUPLINGS,
     DEFAULT_DILATION,
-    STATE_COUPLINGS,
     CoupledElasticity,
     CoupledSolution,
 )
@@ -72,6 +72,7 @@ from .statics.large import IterativeOptions, chunked_l2_error, solve_large
 from .statics.newton import NewtonError, NewtonOptions, NewtonResult
 from .statics.nonlinear import FINITE_STRAIN_COUPLINGS, CoupledNonlinearProblem, FENonlinearProblem
 from .statics.path_following import (
+    ArcLength,
     DisplacementControl,
     PathError,
     PathOptions,
@@ -86,6 +87,7 @@ from .verification.errors import error_norms
 from .verification.waves import GaussianPulseRod, StepLoadedRod
 
 __all__ = [
+    "COMPONENT_COUPLINGS",
     "COUPLINGS",
     "CRACK_COUPLINGS",
     "CRACK_METHODS",
@@ -97,9 +99,9 @@ __all__ = [
     "MLS",
     "PLACEMENTS",
     "SPH",
-    "STATE_COUPLINGS",
     "AdaptiveQuadrature",
     "Approximation",
+    "ArcLength",
     "CoupledElasticity",
     "CoupledLinearProblem",
     "CoupledNonlinearProblem",

@@ -34,6 +34,19 @@ def test_reduced_three_point_bend(tmp_path):
     assert 4 * ft * B * lig**2 / (6 * S) < r["peak_load_N"] < 2 * ft * B * lig**2 / S
 
 
+def test_coupled_peak_matches_pure_efg():
+    """The issue's coupling target, at h = 25 mm: the lagrange coupling's peak load within 0.5 %
+    of pure EFG's on the same particles and mesh (measured 0.22 %; issue target 2 %), and its
+    damage zone within two particle spacings of EFG's (its mean x)."""
+    efg = demo.main(["--h", "25", "--method", "efg", "--end-cmod", "0.3"])
+    lag = demo.main(["--h", "25", "--method", "lagrange", "--end-cmod", "0.3"])
+    assert abs(lag["peak_load_N"] - efg["peak_load_N"]) <= 0.005 * efg["peak_load_N"]
+    ze = np.asarray(efg["damage_zone"]).reshape(-1, 2)
+    zl = np.asarray(lag["damage_zone"]).reshape(-1, 2)
+    assert abs(ze[:, 0].mean() - zl[:, 0].mean()) <= 2 * 25.0
+    assert abs(ze[:, 1].max() - zl[:, 1].max()) <= 2 * 25.0
+
+
 def test_bad_options():
     with pytest.raises(SystemExit):
         demo.main(["--notch-width", "5"])

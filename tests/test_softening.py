@@ -73,6 +73,8 @@ def _capped_dissipation(h: float, max_damage: float) -> float:
         ("edge-to-edge", "quadrilateral", 4),
         ("bridging", "triangle", 4),
         ("lagrange", "triangle", 3),
+        ("ramp", "quadrilateral", 4),
+        ("ramp-cubic", "triangle", 3),
     ],
 )
 def test_softening_bar_follows_the_closed_form_through_the_peak(coupling, cell, n):
@@ -179,19 +181,16 @@ def test_point_state_commits_and_restores():
 
 
 def test_state_is_refused_where_it_is_not_carried():
-    """A law with state is refused, with what to use instead, by the couplings with blended or
-    linked interfaces, by explicit dynamics and by the user-UFL nonlinear problem; never run
-    as if elastic."""
+    """A law with state is refused, with what to use instead, by explicit dynamics and by the
+    user-UFL nonlinear problem (never run as if elastic); a band that would snap back locally
+    is refused, naming the cell."""
     law = mf.RankineDamage(E=E, nu=0.0, ft=FT, Gf=GF, plane="stress")
     msh = dolfinx.mesh.create_rectangle(
-        MPI.COMM_WORLD, [[0, 0], [L, W]], [4, 2], dolfinx.mesh.CellType.quadrilateral
+        MPI.COMM_WORLD, [[0, 0], [L, W]], [8, 4], dolfinx.mesh.CellType.quadrilateral
     )
     V = _compat.vector_function_space(msh)
     mid = dolfinx.mesh.locate_entities(msh, 2, lambda p: p[0] < 1.0 + 1e-9)
     patch = mf.ParticlePatch(msh, mid, placement="vertices")
-    for coupling in ("ramp", "master-slave"):
-        with pytest.raises(ValueError, match=rf"coupling='{coupling}' does not carry"):
-            mf.CoupledElasticity(V, patch, law, coupling=coupling)
     with pytest.raises(TypeError, match="explicit dynamics does not carry state"):
         mf.ExplicitDynamics.fe(V, law)
     with pytest.raises(TypeError, match="explicit dynamics does not carry state"):
@@ -201,7 +200,13 @@ def test_state_is_refused_where_it_is_not_carried():
     F = ufl.inner(ufl.grad(u), ufl.grad(v)) * ufl.dx
     with pytest.raises(TypeError, match="CoupledNonlinearProblem"):
         mf.CoupledNonlinearProblem(F, u, [], patch, law)
-    # a band that would snap back locally: cells of 0.5 above 2 E Gf / ft^2 = 0.2
+    cracked = mf.ParticlePatch(
+        msh, mid, placement="vertices", cracks=[mf.Crack([[0.0, 0.55], [0.26, 0.55]])]
+    )
+    grow = mf.CoupledElasticity(V, cracked, law, coupling="lagrange")
+    with pytest.raises(TypeError, match="QuasiStaticCrackGrowth"):
+        mf.QuasiStaticCrackGrowth(grow, cracked.cracks[0], increment=0.1, steps=2, K_Ic=1.0)
+    # a band that would snap back locally: cells of 0.25 above 2 E Gf / ft^2 = 0.2
     weak = mf.RankineDamage(E=E, nu=0.0, ft=FT, Gf=1e-4, plane="stress")
     with pytest.raises(ValueError, match="snap"):
         mf.CoupledElasticity(V, patch, weak, coupling="lagrange").solve(load_steps=1)
@@ -250,3 +255,42 @@ def test_localised_softening_is_objective_in_the_particle_spacing():
     print(f"peaks {p1:.5f} {p2:.5f}, dissipated at {common:.4f}: {d1:.6f} {d2:.6f}")
     assert abs(p2 - p1) <= 0.003 * p1
     assert abs(d2 - d1) <= 0.03 * d1
+
+
+def test_arc_length_follows_the_closed_form_and_a_snap_back():
+    """Crisfield's arc length: (1) on the uniform bar it follows the closed-form softening curve
+    (1e-9 f_t) against the end displacement, recorded as a monitor; (2) a bar failing in one
+    band with a brittle law (G_f = 5e-4: its band of width h dissipates less than the rest of
+    the bar releases, 2 E G_f / f_t^2 = 1 < L = 2) snaps back: the end displacement, which
+    cannot control it, decreases along the path, and the arc length carries on past it to
+    full softening with the energy balance (2 %)."""
+    model = _bar(4, "lagrange", particle_band=1.0)
+    end_u = mf.DisplacementControl([[L, 0.5]], [[1.0, 0.0]])
+    h = 0.25
+    eps_f = 2.0 * GF / (FT * h)
+    opts = mf.PathOptions(increment=2e-4, end=2.0, min_load=0.05, max_increment=4e-3)
+    res = mf.follow_path(model, mf.ArcLength(), opts, monitors={"u": end_u})
+    eps = np.array(res.monitors["u"]) / L
+    t = np.array(res.load_factor)
+    assert eps.max() > 0.5 * eps_f and t.min() < 0.1 * FT  # through the softening
+    assert np.abs(t - _closed_form(eps, h, model.law.max_damage)).max() < 1e-9 * FT
+
+    brittle = mf.RankineDamage(E=E, nu=0.0, ft=FT, Gf=5e-4, plane="stress")
+    xc = 1.0 + 0.5 / 4
+    model = _bar(4, "lagrange", law=brittle, notch=xc)
+    res = mf.follow_path(
+        model,
+        mf.ArcLength(),
+        mf.PathOptions(increment=1e-4, end=0.5, min_load=0.1, max_increment=1e-3),
+        monitors={"u": end_u},
+    )
+    u = np.array(res.monitors["u"])
+    k = int(np.argmax(res.load_factor))
+    assert np.any(np.diff(u[k:]) < -1e-3 * u[k])  # the end moves back after the peak
+    assert res.load_factor[-1] < 0.1 * res.load_factor[k]
+    balance = res.external_work[-1] - res.stored_energy[-1]
+    assert balance == pytest.approx(res.dissipated_energy[-1], rel=2e-2)
+    # the end displacement cannot follow it: the step past the peak is refused, by name
+    model = _bar(4, "lagrange", law=brittle, notch=xc)
+    with pytest.raises(mf.PathError, match=r"at step \d+: from control"):
+        mf.follow_path(model, end_u, mf.PathOptions(increment=1e-4, end=0.01, max_increment=1e-3))

@@ -525,7 +525,7 @@ def ramp_system(problem: CoupledElasticity, tables: dict | None = None) -> tuple
         "fe_weight": None,
         "constant_diagonal": [None, None],
         "shared_sides": lambda fe, particles, material: [
-            BlendedSide(fe, particles, ti, qi.weights, material, test)
+            BlendedSide(fe, particles, ti, qi.weights, material, test, quadrature=qi)
         ],
         "state_blocks": [(0, 1), (1, 0)],
         "interface": blend,

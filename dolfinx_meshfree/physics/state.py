@@ -91,8 +91,8 @@ def check_stateless(law: object, where: str) -> None:
         raise TypeError(
             f"{type(getattr(law, 'law', law)).__name__} is a law with internal state (damage, "
             f"plasticity), and {where} does not carry state at its quadrature points; solve it "
-            "with CoupledElasticity(...).solve(load_steps=...) or follow_path(...) on the "
-            "couplings 'lagrange', 'edge-to-edge' or 'bridging'"
+            "with CoupledElasticity(...) or EFGElasticity(...): .solve(load_steps=...), or "
+            "follow_path(...) past a peak"
         )
 
 

@@ -61,7 +61,6 @@ __all__ = [
     "COUPLINGS",
     "CRACK_COUPLINGS",
     "DEFAULT_DILATION",
-    "STATE_COUPLINGS",
     "CoupledElasticity",
     "CoupledSolution",
     "CouplingOperators",
@@ -73,10 +72,6 @@ VectorFunction = Callable[[np.ndarray], np.ndarray]
 #: FE block is apart from the interface (the ramps blend the FE nodes of their interface cells
 #: and master-slave links them).
 COMPONENT_COUPLINGS: tuple[str, ...] = ("lagrange", "edge-to-edge", "bridging")
-
-#: The couplings that carry a law with internal state (damage, plasticity): those whose FE and
-#: particle sides are apart (no blended interface cells, no rotating links).
-STATE_COUPLINGS: tuple[str, ...] = ("lagrange", "edge-to-edge", "bridging")
 
 #: The couplings that carry cracks in the patch (cut MLS weights, cut-cell quadrature, the crack
 #: faces in the consistent integration's boundary): the variational couplings.
@@ -205,12 +200,6 @@ class CoupledElasticity:
                 f"material must be a LinearElastic, a finite-strain Material (NeoHookean, "
                 f"SaintVenantKirchhoff) or a law with state (RankineDamage, J2Plasticity), got "
                 f"{type(material).__name__}"
-            )
-        if is_stateful(material) and coupling not in STATE_COUPLINGS:
-            raise ValueError(
-                f"material={type(material).__name__} has internal state, which coupling="
-                f"{coupling!r} does not carry yet (its interface cells blend the two fields, "
-                f"with no state store there); use one of {list(STATE_COUPLINGS)}"
             )
         if not isinstance(material, LinearElastic) and coupling not in FINITE_STRAIN_COUPLINGS:
             raise ValueError(

@@ -77,6 +77,7 @@ if TYPE_CHECKING:  # annotations only
     import dolfinx.mesh
 
 __all__ = [
+    "EFGBlockModel",
     "EFGElasticity",
     "EFGSolution",
     "check_multiplier_facets",
@@ -796,44 +797,78 @@ class EFGElasticity:
             domain=self._domain,
         )
 
-    def _solve_finite_strain(
-        self, solver: SolverOptions, load_steps: int, options: NewtonOptions | None
-    ) -> EFGSolution:
-        """Newton on ``[[K_T(u), s G^T], [s G, 0]]`` with ``f_int(u) = sum_q B0^T P w_q`` on the
-        cells' quadrature and the stiffness's test gradients (VCI when consistent: a homogeneous
-        deformation is reproduced at any load level). Collective."""
-        P = self.particles
-
-        def check() -> None:
-            if not (isinstance(load_steps, int) and load_steps >= 1):
-                raise ValueError(f"load_steps={load_steps!r} must be an integer >= 1")
-
-        raise_on_all_ranks(self.comm, check)
+    def block_model(self) -> EFGBlockModel:
+        """The block problem of Newton (and of path following): ``[[K_T(u), s G^T], [s G, 0]]``
+        with ``f_int(u) = sum_q B0^T P w_q`` on the cells' quadrature and the stiffness's test
+        gradients, from ``u = 0``. Collective."""
         tables: dict = {}
         system, objects, extra = self.system(tables)
-        side = ParticleSide(P, tables, self.material)
+        side = ParticleSide(self.particles, tables, self.material)
         constant = [list(row) for row in system.blocks]
         constant[0][0] = None
         problem = BlockProblem(system.names, 1, [side], constant, list(system.rhs))
         x = [v.duplicate() for v in system.rhs]
         for v in x:
             v.set(0.0)
+        return EFGBlockModel(self, problem, x, side, extra, [system, *objects])
+
+    def _solve_finite_strain(
+        self, solver: SolverOptions, load_steps: int, options: NewtonOptions | None
+    ) -> EFGSolution:
+        """Newton on :meth:`block_model` over the load steps (VCI when consistent: a homogeneous
+        deformation is reproduced at any load level). Collective."""
+
+        def check() -> None:
+            if not (isinstance(load_steps, int) and load_steps >= 1):
+                raise ValueError(f"load_steps={load_steps!r} must be an integer >= 1")
+
+        raise_on_all_ranks(self.comm, check)
+        built = self.block_model()
         t0 = time.perf_counter()
         try:
-            result = solve_load_steps(problem, x, load_steps, options or NewtonOptions(), solver)
+            result = solve_load_steps(
+                built.problem, built.x, load_steps, options or NewtonOptions(), solver
+            )
+            solution = built.solution()
         finally:
-            problem.destroy()
-        seconds = time.perf_counter() - t0
-        coeffs = side.coefficients(x[0]).reshape(-1, P.gdim)
-        s, mlayout = extra["scale"], extra["multipliers"]
-        lam = x[1].getArray(readonly=True) * s if len(x) > 1 else np.zeros(0)
-        for obj in (system, *objects, *x):
-            obj.destroy()
-        return EFGSolution(
-            mls=self.mls,
+            built.destroy()
+        solution.timings["solve"] = time.perf_counter() - t0
+        solution.newton = result
+        return solution
+
+
+@dataclass
+class EFGBlockModel:
+    """A pure EFG model's block problem (:meth:`EFGElasticity.block_model`): the problem, its
+    state ``x`` (particles, multipliers), the particle side."""
+
+    model: EFGElasticity
+    problem: BlockProblem
+    x: list
+    particles: ParticleSide
+    extra: dict
+    objects: list
+
+    def solution(self) -> EFGSolution:
+        """The solution at the current ``x`` (collective); its ``states`` are the laws'."""
+        P = self.model.particles
+        coeffs = self.particles.coefficients(self.x[0]).reshape(-1, P.gdim)
+        s, mlayout = self.extra["scale"], self.extra["multipliers"]
+        lam = self.x[1].getArray(readonly=True) * s if len(self.x) > 1 else np.zeros(0)
+        solution = EFGSolution(
+            mls=self.model.mls,
             coefficients=coeffs,
             multipliers=lam,
-            timings={"setup": extra["setup"], "assemble": extra["assemble"], "solve": seconds},
+            timings={"setup": self.extra["setup"], "assemble": self.extra["assemble"]},
             num_multipliers=mlayout.size_global,
-            newton=result,
+            material=self.model.linear_material,
+            cracks=self.model.cracks,
+            domain=self.model._domain,
         )
+        solution.states = self.problem.states
+        return solution
+
+    def destroy(self) -> None:
+        self.problem.destroy()
+        for obj in [*self.objects, *self.x]:
+            obj.destroy()

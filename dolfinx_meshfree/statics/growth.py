@@ -26,6 +26,7 @@ import numpy as np
 
 from ..fracture.criteria import equivalent_sif, kink_angle
 from ..geometry.crack import Crack, particle_spacing
+from ..physics.state import check_stateless
 from .growth_update import disable_local_update, enable_local_update
 from .sifs import DEFAULT_RADII
 
@@ -160,6 +161,10 @@ class QuasiStaticCrackGrowth:
             raise ValueError(f"update={update!r} is not known; use one of {GROWTH_UPDATES}")
         self.update = update
         inner = getattr(problem, "problem", problem)  # CoupledLinearProblem -> CoupledElasticity
+        check_stateless(
+            getattr(inner, "law", getattr(inner, "material", None)),
+            "QuasiStaticCrackGrowth (it re-solves from the unloaded state at every crack length)",
+        )
         mls = getattr(inner, "mls", None)
         cracks = getattr(inner, "cracks", None) or getattr(
             getattr(inner, "patch", None), "cracks", []

@@ -39,15 +39,24 @@ from petsc4py import PETSc
 
 from ..couplings.base import CoupledSolution
 from ..parallel import raise_on_all_ranks
+from ..physics.materials import LinearElastic
 from ..physics.state import is_stateful, voigt_strain
 from .coupled_newton import FE_LAW_DEGREE, BlockModel, build_block_problem
+from .efg import EFGBlockModel, EFGElasticity
 from .petsc import BlockSystem, SolverOptions, solver_options
 from .sides import BlockProblem
 
 if TYPE_CHECKING:  # annotations only
     from .coupled import CoupledElasticity
 
-__all__ = ["DisplacementControl", "PathError", "PathOptions", "PathResult", "follow_path"]
+__all__ = [
+    "ArcLength",
+    "DisplacementControl",
+    "PathError",
+    "PathOptions",
+    "PathResult",
+    "follow_path",
+]
 
 
 class PathError(RuntimeError):
@@ -96,6 +105,16 @@ class DisplacementControl:
                 "zero"
             )
         return p, c
+
+
+@dataclass(frozen=True)
+class ArcLength:
+    """Crisfield's cylindrical arc length (Crisfield 1981, "A fast incremental/iterative solution
+    procedure that handles snap-through", Comput. Struct. 13; Crisfield 1991, sec. 9.3.1): every
+    step moves the displacement fields by ``|dx| = dl`` (the Euclidean norm over the FE and
+    particle unknowns), the load factor free; ``PathOptions.increment`` is ``dl`` and ``end`` the
+    total arc length. It follows snap-backs of any quantity, with no control quantity to choose;
+    its arc length is not a physical quantity (record one with ``monitors``)."""
 
 
 @dataclass(frozen=True)
@@ -179,38 +198,57 @@ def _owned(vecs: Sequence[PETSc.Vec]) -> list[np.ndarray]:
     return [v.getArray(readonly=True).copy() for v in vecs]
 
 
+def _particle_field(built: BlockModel | EFGBlockModel) -> int:
+    """The index of the particle field in ``x``: 1 beside the FE field, 0 in pure EFG."""
+    return 0 if isinstance(built, EFGBlockModel) else 1
+
+
+def _comm(built: BlockModel | EFGBlockModel) -> MPI.Comm:
+    return built.model.comm if isinstance(built, EFGBlockModel) else built.model.patch.comm
+
+
 def _control_function(
-    built: BlockModel, control: DisplacementControl
+    built: BlockModel | EFGBlockModel, control: DisplacementControl
 ) -> Callable[[Sequence[np.ndarray]], float]:
     """``g`` of block fields given as owned arrays (collective)."""
-    model = built.model
-    P = model.patch.particles
-    points, directions = raise_on_all_ranks(
-        model.patch.comm, lambda: control.check(model.V.mesh.geometry.dim)
-    )
-    u = dolfinx.fem.Function(model.V)
-    n_owned = built.fe.n_owned
-    comm = model.patch.comm
+    model, comm = built.model, _comm(built)
+    if isinstance(built, EFGBlockModel):
+        P = model.particles
+        points, directions = raise_on_all_ranks(comm, lambda: control.check(P.gdim))
+        values = raise_on_all_ranks(comm, lambda: model.mls.tabulate(points, 0)).values
 
-    def g(parts: Sequence[np.ndarray]) -> float:
-        u.x.array[:n_owned] = parts[0]
-        u.x.scatter_forward()
-        owned = np.concatenate(comm.allgather(np.asarray(parts[1])))
-        coeffs = owned.reshape(-1, P.gdim)[P.petsc_index]
-        sol = CoupledSolution(
-            u=u, coefficients=coeffs, mls=model.mls, patch=model.patch,
-            interface=built.extra.get("interface"),
-        )  # fmt: skip
-        return float(np.sum(sol.displacement(points) * directions))
+        def g(parts: Sequence[np.ndarray]) -> float:
+            owned = np.concatenate(comm.allgather(np.asarray(parts[0])))
+            coeffs = owned.reshape(-1, P.gdim)[P.petsc_index]
+            return float(np.sum((values @ coeffs) * directions))
+
+    else:
+        P = model.patch.particles
+        points, directions = raise_on_all_ranks(
+            comm, lambda: control.check(model.V.mesh.geometry.dim)
+        )
+        u = dolfinx.fem.Function(model.V)
+        n_owned = built.fe.n_owned
+
+        def g(parts: Sequence[np.ndarray]) -> float:
+            u.x.array[:n_owned] = parts[0]
+            u.x.scatter_forward()
+            owned = np.concatenate(comm.allgather(np.asarray(parts[1])))
+            coeffs = owned.reshape(-1, P.gdim)[P.petsc_index]
+            sol = CoupledSolution(
+                u=u, coefficients=coeffs, mls=model.mls, patch=model.patch,
+                interface=built.extra.get("interface"),
+            )  # fmt: skip
+            return float(np.sum(sol.displacement(points) * directions))
 
     g.weight = float(np.abs(directions).sum())  # |g(v)| <= weight max|v| (partition of unity)
     return g
 
 
-def _energies(built: BlockModel) -> tuple[float, float]:
+def _energies(built: BlockModel | EFGBlockModel) -> tuple[float, float]:
     """``(stored, dissipated)`` over every point with state (summed over ranks)."""
     stored = dissipated = 0.0
-    fe = built.fe.state_law
+    fe = getattr(getattr(built, "fe", None), "state_law", None)
     if fe is not None:
         st = fe.state
         stored += float(fe.law.stored_energy(fe.strain(), st.committed) @ fe.weights)
@@ -218,12 +256,18 @@ def _energies(built: BlockModel) -> tuple[float, float]:
     side = built.particles
     if side.state is not None:
         forces = side.forces
-        coeffs = side.coefficients(built.x[1])
-        strain = forces.displacement_gradient(coeffs)
-        eps = voigt_strain(strain)
+        coeffs = side.coefficients(built.x[_particle_field(built)])
+        eps = voigt_strain(forces.displacement_gradient(coeffs))
         stored += float(side.state.law.stored_energy(eps, side.state.committed) @ forces.weights)
         dissipated += side.state.dissipated(forces.weights)
-    comm = built.model.patch.comm
+    for shared in built.problem.shared:  # the ramps' blended cells
+        if getattr(shared, "state", None) is not None:
+            forces = shared.forces
+            H = shared.deformation_gradient(built.x[:2]) - np.eye(forces.gdim)
+            st = shared.state
+            stored += float(st.law.stored_energy(voigt_strain(H), st.committed) @ forces.weights)
+            dissipated += st.dissipated(forces.weights)
+    comm = _comm(built)
     return comm.allreduce(stored), comm.allreduce(dissipated)
 
 
@@ -317,14 +361,86 @@ def _bordered_step(
     raise ArithmeticError("not converged")
 
 
+def _dot(a: Sequence[np.ndarray], b: Sequence[np.ndarray], comm: MPI.Comm) -> float:
+    return comm.allreduce(sum(float(u @ v) for u, v in zip(a, b, strict=True)))
+
+
+def _arc_step(
+    problem: BlockProblem,
+    x: list[PETSc.Vec],
+    t: float,
+    dl: float,
+    previous: list[np.ndarray] | None,
+    q: list[PETSc.Vec],
+    tol: float,
+    stall: float,
+    num_primal: int,
+    options: PathOptions,
+    solver: SolverOptions,
+) -> tuple[float, int, list[np.ndarray]]:
+    """Newton on ``R(x, t) = 0, |Dx| = dl`` (``Dx``: the step's change of the primal fields) from
+    ``(x, t)``; returns ``(t, iterations, Dx)`` or raises ``ArithmeticError``.
+
+    Each iteration: ``J da = -R``, ``J db = q``, ``dx = da + dt db`` with ``dt`` a root of
+    ``|Dx + da + dt db|^2 = dl^2`` (Crisfield 1991, eq. 9.28-9.31), the root whose new ``Dx``
+    turns least from the old; the first (predictor) ``dt = +-dl / |db|``, the sign of the last
+    step's direction (``db . Dx_prev``). Complex roots (the constraint's circle misses the
+    iteration's line) fail the step, which is then cut."""
+    comm = x[0].getComm().tompi4py()
+    r, norm = _residual(problem, x, t)
+    Dx = [np.zeros(v.getLocalSize()) for v in x[:num_primal]]
+    for it in range(options.max_it + 1):
+        # converged; or stagnated near the solution at the last iteration (a law's non-smooth
+        # points: its damage cap, equal principal stresses)
+        if it > 0 and (norm <= tol or (it == options.max_it and norm <= stall)):
+            _destroy_all(r)
+            return t, it, Dx
+        if it == options.max_it or not np.isfinite(norm):
+            break
+        blocks = problem.jacobian(x)
+        for v in r:
+            v.scale(-1.0)
+        system = BlockSystem(blocks, r, num_primal=problem.num_primal, names=problem.names)
+        da = system.solve(solver)
+        system.destroy()
+        system = BlockSystem(blocks, q, num_primal=problem.num_primal, names=problem.names)
+        db = system.solve(solver)
+        system.destroy()
+        _destroy_all(r)
+        a, b = da[:num_primal], db[:num_primal]
+        if it == 0:
+            sign = 1.0
+            if previous is not None and _dot(b, previous, comm) < 0.0:
+                sign = -1.0
+            dt = sign * dl / np.sqrt(_dot(b, b, comm))
+        else:
+            u = [d + e for d, e in zip(Dx, a, strict=True)]
+            c2, c1 = _dot(b, b, comm), 2.0 * _dot(b, u, comm)
+            c0 = _dot(u, u, comm) - dl * dl
+            disc = c1 * c1 - 4.0 * c2 * c0
+            if disc < 0.0:
+                raise ArithmeticError("the arc-length equation has no real root")
+            roots = [(-c1 + sg * np.sqrt(disc)) / (2.0 * c2) for sg in (1.0, -1.0)]
+            # the root whose new Dx makes the smallest angle with the old one
+            turn = [_dot([w + z * e for w, e in zip(u, b, strict=True)], Dx, comm) for z in roots]
+            dt = roots[int(np.argmax(turn))]
+        for xi, d, e in zip(x, da, db, strict=True):
+            xi.array[:] += d + dt * e
+        Dx = [w + d + dt * e for w, d, e in zip(Dx, a, b, strict=True)]
+        t += dt
+        r, norm = _residual(problem, x, t)
+    _destroy_all(r)
+    raise ArithmeticError("not converged")
+
+
 def _destroy_all(objects: Sequence) -> None:
     for obj in objects:
         obj.destroy()
 
 
 def follow_path(
-    model: CoupledElasticity,
-    control: DisplacementControl,
+    model: CoupledElasticity | EFGElasticity,
+    control: DisplacementControl | ArcLength,
     options: PathOptions,
     solver: str | SolverOptions = "mumps",
     on_step: Callable[[int, float, float], None] | None = None,
@@ -339,8 +455,10 @@ def follow_path(
 
     Args:
         model: A :class:`~dolfinx_meshfree.CoupledElasticity` (with a law with state, or any law
-            of a coupling of :data:`~dolfinx_meshfree.FINITE_STRAIN_COUPLINGS`).
-        control: The controlled quantity.
+            of a coupling of :data:`~dolfinx_meshfree.FINITE_STRAIN_COUPLINGS`), or a pure
+            :class:`~dolfinx_meshfree.EFGElasticity` with a law with state or at finite strain.
+        control: The controlled quantity (:class:`DisplacementControl`), or
+            :class:`ArcLength` (Crisfield's cylindrical arc length).
         options: Increments, the end, Newton's tolerances (:class:`PathOptions`).
         solver: The linear solver of each iteration (two solves per iteration).
         on_step: Called as ``on_step(step, t, tau)`` after every converged step.
@@ -355,23 +473,36 @@ def follow_path(
             step, the control value and the load factor; the path so far in ``result``).
         ValueError: a control quantity that does not move under the load.
     """
-    comm = model.patch.comm
+    efg = isinstance(model, EFGElasticity)
+    comm = model.comm if efg else model.patch.comm
     solver = raise_on_all_ranks(comm, lambda: solver_options(solver))
     t0 = time.perf_counter()
-    u = dolfinx.fem.Function(model.V)
-    u.x.array[:] = 0.0
-    F_int = None
-    law = model.law
-    if not is_stateful(law):
-        d = model.V.mesh.geometry.dim
-        dx = ufl.Measure("dx", domain=model.V.mesh, metadata={"quadrature_degree": FE_LAW_DEGREE})
-        F = ufl.Identity(d) + ufl.grad(u)
-        F_int = ufl.inner(law.ufl_first_piola(F), ufl.grad(ufl.TestFunction(model.V))) * dx
-    built = build_block_problem(model, F_int, u, law)
+    if efg:
+        if isinstance(model.material, LinearElastic):
+            raise ValueError(
+                "follow_path needs a law whose response is not linear (a law with state, or a "
+                "finite-strain law): a LinearElastic model's path is a straight line; solve it"
+            )
+        built = model.block_model()
+    else:
+        u = dolfinx.fem.Function(model.V)
+        u.x.array[:] = 0.0
+        F_int = None
+        law = model.law
+        if not is_stateful(law):
+            d = model.V.mesh.geometry.dim
+            dx = ufl.Measure(
+                "dx", domain=model.V.mesh, metadata={"quadrature_degree": FE_LAW_DEGREE}
+            )
+            F = ufl.Identity(d) + ufl.grad(u)
+            F_int = ufl.inner(law.ufl_first_piola(F), ufl.grad(ufl.TestFunction(model.V))) * dx
+        built = build_block_problem(model, F_int, u, law)
     problem, x = built.problem, built.x
+    k_p = _particle_field(built)
     result = PathResult()
+    arc = isinstance(control, ArcLength)
     try:
-        g = _control_function(built, control)
+        g = None if arc else _control_function(built, control)
         watch = {k: _control_function(built, c) for k, c in (monitors or {}).items()}
         result.monitors = {k: [] for k in watch}
         # q = R(x, 0) - R(x, 1): the residual is affine in t
@@ -384,11 +515,13 @@ def follow_path(
             a.axpy(-1.0, b)
             b.destroy()
             q.append(a)
-        f_free = q[0].getArray(readonly=True).copy()
-        f_free[built.fe.fixed_local] = 0.0  # held dofs: reactions, not dead loads
-        f_ext = [f_free, q[1].getArray(readonly=True).copy()]
+        f_ext = [v.getArray(readonly=True).copy() for v in q[: k_p + 1]]  # the primal fields
+        if not efg:
+            f_ext[0][built.fe.fixed_local] = 0.0  # held dofs: reactions, not dead loads
         q_norm = float(np.sqrt(sum(v.norm() ** 2 for v in q)))
-        t, tau, dtau, cuts = 0.0, g(_owned(x)), options.increment, 0
+        t, tau, dtau, cuts = 0.0, 0.0 if arc else g(_owned(x)), options.increment, 0
+        previous: list[np.ndarray] | None = None  # the last arc-length step's direction
+        reason = ""
         max_dtau = options.max_increment or 8.0 * options.increment
         work, peak = 0.0, 0.0
         step = 0
@@ -399,22 +532,39 @@ def follow_path(
             tol = max(options.atol, options.rtol * ref)
             stall = max(tol, options.stall * ref)
             try:
-                t_new, its = _bordered_step(
-                    problem, x, t, target, g, q, tol, stall, options, solver
-                )
-            except ArithmeticError:
+                if arc:
+                    t_new, its, previous_new = _arc_step(
+                        problem, x, t, target - tau, previous, q, tol, stall, k_p + 1, options,
+                        solver,
+                    )  # fmt: skip
+                else:
+                    t_new, its = _bordered_step(
+                        problem, x, t, target, g, q, tol, stall, options, solver
+                    )
+            except ArithmeticError as err:
+                reason = str(err)
                 for v, w in zip(x, saved, strict=True):
                     w.copy(v)
                     w.destroy()
                 problem.restore()
                 result.cuts += 1
                 if cuts == options.max_cuts:
+                    what = "arc length" if arc else "control"
+                    why = (
+                        "the arc-length equation found no real root"
+                        if "root" in reason
+                        else f"Newton did not converge in max_it={options.max_it} iterations"
+                    )
+                    fix = (
+                        "a smaller increment (arc length), or indirect displacement control"
+                        if arc
+                        else "a control quantity that grows monotonically through the failure, "
+                        "or a smaller increment"
+                    )
                     raise PathError(
-                        f"the path could not be followed at step {step + 1}: from control "
-                        f"{tau:.6g} (load factor {t:.6g}) no increment down to "
-                        f"{dtau:.3g} converged in max_it={options.max_it} Newton iterations; "
-                        "choose a control quantity that grows monotonically through the "
-                        "failure, or a smaller increment",
+                        f"the path could not be followed at step {step + 1}: from {what} "
+                        f"{tau:.6g} (load factor {t:.6g}), at every increment down to "
+                        f"{dtau:.3g} {why}; choose {fix}",
                         result,
                     ) from None
                 cuts, dtau = cuts + 1, 0.5 * dtau
@@ -423,13 +573,15 @@ def follow_path(
             problem.commit(x)
             dx = [
                 a.getArray(readonly=True) - b.getArray(readonly=True)
-                for a, b in zip(x[:2], saved[:2], strict=True)
+                for a, b in zip(x[: k_p + 1], saved[: k_p + 1], strict=True)
             ]
             for w in saved:
                 w.destroy()
             local = 0.5 * (t + t_new) * sum(float(f @ d) for f, d in zip(f_ext, dx, strict=True))
             work += comm.allreduce(local)
             t, tau, step = t_new, target, step + 1
+            if arc:
+                previous = previous_new
             peak = max(peak, t)
             stored, dissipated = _energies(built)
             result.control.append(tau)

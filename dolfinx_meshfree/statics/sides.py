@@ -32,7 +32,7 @@ from .. import _compat
 from ..approx.fe_dofs import cell_indicator, fe_dof_layout
 from ..approx.tables import ShapeTable
 from ..geometry.particles import ParticleSet
-from ..geometry.quadrature import cell_sizes
+from ..geometry.quadrature import QuadraturePoints, cell_sizes
 from ..parallel import Layout
 from ..physics.constitutive import Material
 from ..physics.forces import InternalForces
@@ -322,9 +322,10 @@ class BlendedSide:
         fe, particles: The two sides (their state and numbering).
         table: The blended shape functions at this rank's interface quadrature points.
         weights: Their quadrature weights.
-        material: The law of the interface cells.
+        material: The law of the interface cells (a law with state keeps it at these points).
         test_gradients: Test gradients (default: the table's), e.g. VCI-corrected particle
             columns.
+        quadrature: The points (their cells: the crack band of a law with state).
     """
 
     #: The fields (block indices) this side couples.
@@ -336,10 +337,25 @@ class BlendedSide:
         particles: ParticleSide,
         table: ShapeTable,
         weights: np.ndarray,
-        material: Material,
+        material: Material | StatefulLaw,
         test_gradients: Sequence[sp.spmatrix] | None = None,
+        quadrature: QuadraturePoints | None = None,
     ) -> None:
         self.fe, self.particles, self.comm = fe, particles, particles.comm
+        #: The state store of a law with state at the blended points (band: their cells' size,
+        #: as on the FE cells), else ``None``.
+        self.state: PointState | None = None
+        if is_stateful(material):
+            if quadrature is None:
+                raise ValueError(
+                    "a law with state on blended cells needs their quadrature (its cells give the "
+                    "crack band)"
+                )
+            band = None
+            if material.needs_band:
+                band = cell_sizes(fe.V.mesh, quadrature.cells)
+            self.state = PointState(material, quadrature.points, band)
+            material = BoundLaw(self.state)
         self.forces = InternalForces(
             table, weights, material, test_gradients=test_gradients, comm=particles.comm
         )
@@ -349,6 +365,11 @@ class BlendedSide:
         self.dofs = np.concatenate([fe_dofs, particles.dof_map]).astype(np.int64)
         # rows of held FE dofs, ghosts' included (held by their owner's FE side)
         self._held = np.isin(fe_dofs, fe.held_everywhere())
+
+    @property
+    def states(self) -> list[PointState]:
+        """The state stores of this side (committed when a load step converges)."""
+        return [] if self.state is None else [self.state]
 
     def _coefficients(self, xs: Sequence[PETSc.Vec]) -> np.ndarray:
         self.fe.set_state(xs[0])

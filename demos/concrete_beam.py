@@ -98,7 +98,9 @@ def beam_model(args, law):
         )
         patch = mf.ParticlePatch(msh, cells, placement="vertices", cracks=[notch])
         particles = patch.particles
-        model = mf.CoupledElasticity(V, patch, law, coupling=args.method)
+        model = mf.CoupledElasticity(
+            V, patch, law, coupling=args.method, particle_band=args.particle_band
+        )
     a, b = (L - S) / 2, (L + S) / 2  # the supports
     tol = 1e-9 * L
     if a > tol:  # an overhang: the supports are the bottom facets beside x = a and x = b
@@ -246,6 +248,12 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--Gf", type=float, default=0.124, help="N/mm")
     p.add_argument("--h", type=float, default=10.0, help="cell size and particle spacing, mm")
     p.add_argument("--patch-width", type=float, default=200.0, help="mm, centred on the notch")
+    p.add_argument(
+        "--particle-band",
+        type=float,
+        default=None,
+        help="crack band of the particle points in cell sizes (default: the MLS dilation)",
+    )
     p.add_argument("--end-cmod", type=float, default=0.5, help="mm")
     p.add_argument("--min-load", type=float, default=0.1, help="stop below this share of peak")
     p.add_argument("--json", default=None)

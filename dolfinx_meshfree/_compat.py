@@ -40,6 +40,7 @@ __all__ = [
     "MODERN",
     "apply_lifting",
     "assemble_matrix",
+    "assemble_matrix_into",
     "assemble_vector",
     "basix_lagrange_p1",
     "bb_tree",
@@ -244,6 +245,14 @@ def assemble_matrix(
         A = _fem_petsc.assemble_matrix(a, bcs=list(bcs), diagonal=diagonal)
     A.assemble()
     return A
+
+
+def assemble_matrix_into(A: _PETSc.Mat, a: _Form) -> None:
+    """Zero ``A`` and assemble the bilinear form ``a`` into it (its nonzero pattern kept, and
+    entries outside the form's pattern, e.g. an inserted diagonal, kept at zero)."""
+    A.zeroEntries()
+    _fem_petsc.assemble_matrix(A, a)
+    A.assemble()
 
 
 def assemble_vector(L: _Form) -> _PETSc.Vec:

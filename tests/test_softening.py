@@ -294,3 +294,50 @@ def test_arc_length_follows_the_closed_form_and_a_snap_back():
     model = _bar(4, "lagrange", law=brittle, notch=xc)
     with pytest.raises(mf.PathError, match=r"at step \d+: from control"):
         mf.follow_path(model, end_u, mf.PathOptions(increment=1e-4, end=0.01, max_increment=1e-3))
+
+
+@pytest.mark.parametrize("coupling", ["lagrange", "edge-to-edge", "bridging"])
+def test_plastic_bar_reproduces_the_material_point(coupling):
+    """J2 plasticity with hardening in a coupled bar (plane strain, rollers on x = 0 and y = 0,
+    a traction on x = L past yield, in load steps): the strain is uniform, so the end
+    displacements equal those of one material point under the same stress path, solved apart
+    here (sigma_xx = t, sigma_yy = 0 by Newton on the law's update at every load step, committing
+    as the solver does) to 1e-9; the plastic strain committed at every FE and particle point is
+    that point's. A wrong commit (none, or of a rejected trial) or a wrong tangent mapping would
+    show."""
+    law = mf.J2Plasticity(E=E, nu=0.3, sigma_y=FT, H=100.0, plane="strain")
+    msh = dolfinx.mesh.create_rectangle(
+        MPI.COMM_WORLD, [[0, 0], [L, W]], [8, 4], dolfinx.mesh.CellType.quadrilateral
+    )
+    V = _compat.vector_function_space(msh)
+    mid = dolfinx.mesh.locate_entities(msh, 2, lambda p: (p[0] > 0.5 - 1e-9) & (p[0] < 1.5 + 1e-9))
+    patch = mf.ParticlePatch(msh, mid, placement="vertices")
+    model = mf.CoupledElasticity(V, patch, law, coupling=coupling)
+    left = mf.boundary_facets(msh, lambda p: np.isclose(p[0], 0.0))
+    bottom = mf.boundary_facets(msh, lambda p: np.isclose(p[1], 0.0))
+    right = mf.boundary_facets(msh, lambda p: np.isclose(p[0], L))
+    model.add_dirichlet(left, lambda x: np.zeros_like(x), components=(0,))
+    model.add_dirichlet(bottom, lambda x: np.zeros_like(x), components=(1,))
+    traction = 1.6 * FT  # past the uniaxial yield stress of plane strain (~1.0-1.1 sigma_y)
+    model.add_traction(right, lambda x, n: np.tile([traction, 0.0], (len(x), 1)))
+    steps = 4
+    sol = model.solve(load_steps=steps)
+    # the material point: eps = (exx, eyy, 0) with sigma = (t_k, 0, *) at t_k = k / steps
+    state = law.initial_state(1)
+    e = np.zeros(2)
+    for k in range(1, steps + 1):
+        target = np.array([traction * k / steps, 0.0])
+        for _ in range(30):
+            s, C, trial = law.update(np.array([[e[0], e[1], 0.0]]), state)
+            r = s[0, :2] - target
+            if np.abs(r).max() <= 1e-13 * traction:
+                break
+            e -= np.linalg.solve(C[0, :2, :2], r)
+        state = trial
+    assert state["alpha"][0, 0] > 0.0  # it yielded
+    pts = np.array([[L, 0.0], [L, W], [1.0, W]])
+    u = sol.displacement(pts)
+    expected = np.array([[e[0] * L, 0.0], [e[0] * L, e[1] * W], [e[0] * 1.0, e[1] * W]])
+    assert np.abs(u - expected).max() <= 1e-9 * abs(e[0]) * L
+    for st in sol.states:
+        assert np.allclose(st.committed["alpha"], state["alpha"][0, 0], rtol=1e-9)

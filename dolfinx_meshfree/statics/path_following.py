@@ -315,10 +315,7 @@ def _bordered_step(
         for v in r:
             v.scale(-1.0)
         system = BlockSystem(blocks, r, num_primal=problem.num_primal, names=problem.names)
-        da = system.solve(solver)
-        system.destroy()
-        system = BlockSystem(blocks, q, num_primal=problem.num_primal, names=problem.names)
-        db = system.solve(solver)
+        da, db = system.solve_many([q], solver)  # one factorisation, two right-hand sides
         system.destroy()
         _destroy_all(r)
         ga, gb = g(da), g(db)
@@ -401,10 +398,7 @@ def _arc_step(
         for v in r:
             v.scale(-1.0)
         system = BlockSystem(blocks, r, num_primal=problem.num_primal, names=problem.names)
-        da = system.solve(solver)
-        system.destroy()
-        system = BlockSystem(blocks, q, num_primal=problem.num_primal, names=problem.names)
-        db = system.solve(solver)
+        da, db = system.solve_many([q], solver)  # one factorisation, two right-hand sides
         system.destroy()
         _destroy_all(r)
         a, b = da[:num_primal], db[:num_primal]

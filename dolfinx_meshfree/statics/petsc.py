@@ -361,6 +361,7 @@ def solve_lu(
     solver: str = "mumps",
     factorisation: str = "auto",
     stats: dict | None = None,
+    more: Sequence[PETSc.Vec] = (),
 ) -> PETSc.Vec:
     """Solve ``A x = b`` by a parallel direct factorisation (MUMPS by default) on a private KSP.
 
@@ -378,6 +379,9 @@ def solve_lu(
     Args:
         solver: PETSc's factor package (``"mumps"``, ``"petsc"``, ...).
         factorisation: ``"auto"`` or ``"lu"`` (:data:`FACTORISATIONS`).
+        more: Further right-hand sides solved with the same factorisation (path following
+            needs two per iteration); their solutions are in ``stats["more"]`` when ``stats``
+            is given, else returned as ``(x, [x_1, ...])``.
         stats: Filled (if given) with ``factorisation`` (``"ldlt"`` or ``"lu"``),
             ``asymmetry`` (a lower bound where ``asymmetry_sampled``: :func:`asymmetry_above`),
             the seconds of its ``check``, of ``factor`` (and its CPU seconds on this rank,
@@ -393,44 +397,61 @@ def solve_lu(
     tr = time.perf_counter()
     rows, diagonal = decoupled_rows(A)
     count = A.getComm().tompi4py().allreduce(rows.size, op=MPI.SUM)
+
+    def result(xs: list[PETSc.Vec]) -> PETSc.Vec | tuple:
+        if not more:
+            return xs[0]
+        if stats is not None:
+            stats["more"] = xs[1:]
+            return xs[0]
+        return xs[0], xs[1:]
+
     if count == 0 or count < DECOUPLED_SHARE * A.getSize()[0]:
         reduce = time.perf_counter() - tr
-        x = _factorise_and_solve(A, b, solver, factorisation, stats)
+        xs = _factorise_and_solve(A, [b, *more], solver, factorisation, stats)
         if stats is not None:
             stats.update(decoupled=0, reduce=reduce)
-        return x
+        return result(xs)
     lo, hi = A.getOwnershipRange()
-    b_local = b.getArray(readonly=True)
-    values = np.empty(hi - lo)
-    values[rows - lo] = b_local[rows - lo] / diagonal
+    locals_ = [v.getArray(readonly=True) for v in (b, *more)]
+    values = [np.empty(hi - lo) for _ in locals_]
+    for val, loc in zip(values, locals_, strict=True):
+        val[rows - lo] = loc[rows - lo] / diagonal
     if count < A.getSize()[0]:  # else A is diagonal: nothing left to factorise
         rest = np.setdiff1d(np.arange(lo, hi, dtype=PETSc.IntType), rows, assume_unique=True)
         index = PETSc.IS().createGeneral(rest, comm=A.getComm())
         A_rest = A.createSubMatrix(index, index)
-        b_rest = A_rest.createVecLeft()
-        b_rest.setArray(b_local[rest - lo])
+        b_rest = []
+        for loc in locals_:
+            v = A_rest.createVecLeft()
+            v.setArray(loc[rest - lo])
+            b_rest.append(v)
         reduce = time.perf_counter() - tr
         try:
             x_rest = _factorise_and_solve(A_rest, b_rest, solver, factorisation, stats)
         finally:
-            for obj in (A_rest, b_rest, index):
+            for obj in (A_rest, *b_rest, index):
                 obj.destroy()
-        values[rest - lo] = x_rest.getArray(readonly=True)
-        x_rest.destroy()
+        for val, xr in zip(values, x_rest, strict=True):
+            val[rest - lo] = xr.getArray(readonly=True)
+            xr.destroy()
     else:
         reduce = time.perf_counter() - tr
-    x = A.createVecRight()
-    x.setArray(values)
+    xs = []
+    for val in values:
+        x = A.createVecRight()
+        x.setArray(val)
+        xs.append(x)
     if stats is not None:
         stats.update(decoupled=count, reduce=reduce)
-    return x
+    return result(xs)
 
 
 def _factorise_and_solve(
-    A: PETSc.Mat, b: PETSc.Vec, solver: str, factorisation: str, stats: dict | None
-) -> PETSc.Vec:
+    A: PETSc.Mat, bs: Sequence[PETSc.Vec], solver: str, factorisation: str, stats: dict | None
+) -> list[PETSc.Vec]:
     """:func:`solve_lu` on the (reduced) system: the symmetry check, the factorisation and the
-    triangular solves."""
+    triangular solves, one per right-hand side in ``bs``."""
     mumps = solver == "mumps"
     tc = time.perf_counter()
     asym, sampled = (None, False)
@@ -466,13 +487,16 @@ def _factorise_and_solve(
         F.setMumpsCntl(1, 0.1)
         F.setMumpsIcntl(10, 3)
         F.setMumpsCntl(2, 1e-15)
-    x = A.createVecRight()
     t0, c0 = time.perf_counter(), time.process_time()
     ksp.setUp()
     t1, c1 = time.perf_counter(), time.process_time()
-    ksp.solve(b, x)
+    xs, reason = [], 0
+    for b in bs:
+        x = A.createVecRight()
+        ksp.solve(b, x)
+        xs.append(x)
+        reason = min(reason, ksp.getConvergedReason())
     t2 = time.perf_counter()
-    reason = ksp.getConvergedReason()
     F = pc.getFactorMatrix()
     info = F.getMumpsInfog(1) if mumps else 0
     if stats is not None:
@@ -496,7 +520,7 @@ def _factorise_and_solve(
             f"the {solver} {'LDL^T' if symmetric else 'LU'} solve failed (KSP reason {reason}, "
             f"MUMPS INFOG(1)={info}): {mumps_failure(info if mumps else None)}"
         )
-    return x
+    return xs
 
 
 #: MUMPS's failures (INFOG(1) < 0, MUMPS users' guide, sec. "Error diagnostics") and what
@@ -658,6 +682,41 @@ class BlockSystem:
         #: What the last direct solve did (:func:`solve_lu`'s ``stats``), or the iterative one
         #: (its ``seconds``, GAMG set-up included, ``iterations``, the final ``residual``).
         self.stats: dict = {}
+
+    def solve_many(
+        self, more: Sequence[Sequence[PETSc.Vec]], solver: str | SolverOptions = "mumps"
+    ) -> list[list[np.ndarray]]:
+        """Solve for :attr:`rhs` and for every right-hand side in ``more`` (one vector per block
+        row each), sharing one factorisation with the direct solvers (``"mumps"``,
+        ``"mumps-lu"``); other solvers solve them one by one. Returns the owned blocks of each
+        solution, :attr:`rhs`'s first (collective)."""
+        options = solver_options(solver)
+        direct = options.solver in ("mumps", "mumps-lu") and options.petsc_options is None
+        if not direct or not more:
+            out = [self.solve(options)]
+            for rhs in more:
+                other = BlockSystem(self.blocks, rhs, self.num_primal, self.names, self.coordinates)
+                out.append(other.solve(options))
+                other.destroy()
+            return out
+        aij = PETSc.Mat()
+        self.nest.convert("aij", aij)
+        vecs = []
+        for rhs in (self.rhs, *more):
+            b = aij.createVecLeft()
+            b.setArray(np.concatenate([v.getArray(readonly=True) for v in rhs]))
+            vecs.append(b)
+        self.stats = {}
+        factorisation = "lu" if options.solver == "mumps-lu" else "auto"
+        x = solve_lu(aij, vecs[0], factorisation=factorisation, stats=self.stats, more=vecs[1:])
+        sizes = np.cumsum([v.getLocalSize() for v in self.rhs])[:-1]
+        out = []
+        for xi in (x, *self.stats.pop("more")):
+            out.append(np.split(xi.getArray(readonly=True).copy(), sizes))
+            xi.destroy()
+        for obj in (aij, *vecs):
+            obj.destroy()
+        return out
 
     def solve(
         self, solver: str | SolverOptions = "mumps", inner: str = "lu", rtol: float = 1e-12

@@ -180,6 +180,7 @@ class FESide:
             J = ufl.derivative(R, u, ufl.TrialFunction(V))
         self._R = _compat.create_form(R)
         self._J = _compat.create_form(J)
+        self._J_kept: PETSc.Mat | None = None  # the tangent's matrix, its pattern kept
         self.layout, l2g = fe_dof_layout(V)
         self.l2g = l2g
         n_owned = V.dofmap.index_map.size_local
@@ -203,6 +204,12 @@ class FESide:
         self.fixed_local = d
         self.fixed_values = np.asarray(values, dtype=float)
 
+    def destroy(self) -> None:
+        """Free the kept tangent matrix."""
+        if self._J_kept is not None:
+            self._J_kept.destroy()
+            self._J_kept = None
+
     def set_state(self, x: PETSc.Vec) -> None:
         self.u.x.array[: self.n_owned] = x.getArray(readonly=True)
         self.u.x.scatter_forward()
@@ -224,13 +231,22 @@ class FESide:
         return r
 
     def tangent(self, x: PETSc.Vec) -> PETSc.Mat:
+        """``K_T`` (a new matrix the caller owns): assembled into a kept matrix whose pattern
+        has the whole diagonal (room for the identity rows of held dofs on nodes no FE cell
+        carries), then copied: inserting the diagonal into a freshly assembled matrix at every
+        iteration reallocated it (68 ms of the 117 ms tangent at 3,640 cells)."""
         self.set_state(x)
-        J = _compat.assemble_matrix(self._J)
-        J.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
-        diag = J.createVecLeft()
-        diag.set(0.0)
-        J.setDiagonal(diag, addv=PETSc.InsertMode.ADD_VALUES)  # room on empty rows
-        diag.destroy()
+        if self._J_kept is None:
+            J = _compat.assemble_matrix(self._J)
+            J.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+            diag = J.createVecLeft()
+            diag.set(0.0)
+            J.setDiagonal(diag, addv=PETSc.InsertMode.ADD_VALUES)  # room on empty rows
+            diag.destroy()
+            self._J_kept = J
+        else:
+            _compat.assemble_matrix_into(self._J_kept, self._J)
+        J = self._J_kept.copy()
         J.zeroRows(self.fixed_rows, diag=1.0)
         return J
 
@@ -506,6 +522,9 @@ class BlockProblem:
         for M in self._owned:
             M.destroy()
         self._owned = []
+        for side in self.sides:
+            if hasattr(side, "destroy"):
+                side.destroy()
 
 
 def solve_load_steps(

@@ -259,6 +259,7 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--json", default=None)
     p.add_argument("--png", default=None)
     p.add_argument("--no-check", action="store_true")
+    p.add_argument("--quiet", action="store_true", help="print nothing (benchmarks)")
     args = p.parse_args(argv)
     if args.notch_width != 0.0:
         p.error(
@@ -270,7 +271,7 @@ def main(argv: list[str] | None = None) -> dict:
     if not 0 < args.notch_depth < args.depth:
         p.error(f"--notch-depth {args.notch_depth} must lie in (0, --depth {args.depth})")
     r = run(args)
-    if MPI.COMM_WORLD.rank == 0:
+    if MPI.COMM_WORLD.rank == 0 and not args.quiet:
         print(
             f"{r['setup']}: {r['method']}, h = {r['h_mm']:g} mm, {r['particles']} particles, "
             f"{r['fe_cells']} FE cells, {MPI.COMM_WORLD.size} rank(s)"
@@ -286,6 +287,7 @@ def main(argv: list[str] | None = None) -> dict:
         print("   CMOD mm  deflection mm    load N")
         for c, w, f in list(zip(r["cmod"], r["deflection"], r["load"], strict=True))[::step]:
             print(f"  {c:8.4f}  {w:13.4f}  {f:8.1f}")
+    if MPI.COMM_WORLD.rank == 0:
         if args.json:
             with open(args.json, "w") as fh:
                 json.dump(r, fh, indent=1)

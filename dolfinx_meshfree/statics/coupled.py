@@ -316,8 +316,9 @@ class CoupledElasticity:
             flags[np.ix_(nodes, list(c))] = True
             x = V.tabulate_dof_coordinates()[: nodes.size, :gdim]
             values = np.zeros((nodes.size, gdim))
-            if nodes.any():
-                values[nodes] = np.asarray(value(x[nodes]), dtype=float).reshape(-1, gdim)
+            # on every rank, with or without nodes: ``value`` may be collective (a DOLFINx
+            # Function evaluated at points, as CoupledLinearProblem passes)
+            values[nodes] = np.asarray(value(x[nodes]), dtype=float).reshape(-1, gdim)
             self.strong.append((flags, values))
         if comm.allreduce(int(on_patch.sum())):
             self.dirichlet.append((facets[on_patch], value, c))

@@ -24,10 +24,10 @@ import ufl
 from ..couplings import REGISTRY
 from ..couplings.assembly import component_conditions
 from ..couplings.base import CoupledSolution
-from ..geometry.quadrature import cell_quadrature, cell_sizes
 from ..parallel import raise_on_all_ranks
 from ..physics.constitutive import Material
 from ..physics.state import StatefulLaw, is_stateful
+from .fe_state import check_bands
 from .newton import NewtonOptions
 from .petsc import SolverOptions, create_vector
 from .sides import (
@@ -48,7 +48,6 @@ __all__ = [
     "BlockModel",
     "FiniteStrainSolve",
     "build_block_problem",
-    "check_bands",
     "check_load_steps",
     "solve_finite_strain",
 ]
@@ -76,23 +75,6 @@ class FiniteStrainSolve:
     result: NonlinearSolveResult
     solution: CoupledSolution
     state: list[np.ndarray]
-
-
-def check_bands(
-    msh: dolfinx.mesh.Mesh, law: StatefulLaw, in_patch: np.ndarray, factor: float
-) -> None:
-    """Check the crack band of every owned cell against ``law`` (local): its size
-    (:func:`~dolfinx_meshfree.geometry.quadrature.cell_sizes`), times ``factor`` on the patch
-    cells (``in_patch``); a band the law refuses (local snap-back) is named by the cell's
-    midpoint."""
-    n = msh.topology.index_map(msh.topology.dim).size_local
-    cells = np.arange(n, dtype=np.int64)
-    q = cell_quadrature(msh, 1, cells)
-    mid = np.zeros((n, msh.geometry.dim))
-    np.add.at(mid, q.cells, q.points * q.weights[:, None])
-    volume = np.bincount(q.cells, weights=q.weights, minlength=n)
-    band = cell_sizes(msh, cells) * np.where(in_patch[:n], factor, 1.0)
-    law.check_band(band, mid / np.maximum(volume, 1e-300)[:, None])
 
 
 @dataclass

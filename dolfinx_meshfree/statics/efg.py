@@ -67,10 +67,11 @@ from ..physics.operators import (
 )
 from ..physics.state import is_stateful
 from ..physics.user_functions import vector_values
+from .fe_state import check_bands
 from .growth_update import local_update_for
 from .newton import NewtonOptions
 from .petsc import BlockSystem, SolverOptions, create_aij, create_vector, solver_options
-from .sides import BlockProblem, ParticleSide, solve_load_steps
+from .sides import BlockProblem, ParticleSide, particle_band_factor, solve_load_steps
 from .sifs import solution_sifs
 
 if TYPE_CHECKING:  # annotations only
@@ -801,9 +802,14 @@ class EFGElasticity:
         """The block problem of Newton (and of path following): ``[[K_T(u), s G^T], [s G, 0]]``
         with ``f_int(u) = sum_q B0^T P w_q`` on the cells' quadrature and the stiffness's test
         gradients, from ``u = 0``. Collective."""
+        law = self.material
+        if is_stateful(law) and law.needs_band:  # on every rank, before the assembly
+            factor = particle_band_factor(self.mls, None)
+            cells = np.ones(self.mesh.topology.index_map(self.mesh.topology.dim).size_local, bool)
+            raise_on_all_ranks(self.comm, lambda: check_bands(self.mesh, law, cells, factor))
         tables: dict = {}
         system, objects, extra = self.system(tables)
-        side = ParticleSide(self.particles, tables, self.material)
+        side = ParticleSide(self.particles, tables, law)
         constant = [list(row) for row in system.blocks]
         constant[0][0] = None
         problem = BlockProblem(system.names, 1, [side], constant, list(system.rhs))

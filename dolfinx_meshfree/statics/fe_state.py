@@ -28,7 +28,7 @@ from .. import _compat
 from ..geometry.quadrature import cell_quadrature, cell_sizes
 from ..physics.state import PointState, StatefulLaw
 
-__all__ = ["FE_STATE_DEGREE", "FEStateLaw", "ufl_voigt_strain"]
+__all__ = ["FE_STATE_DEGREE", "FEStateLaw", "check_bands", "ufl_voigt_strain"]
 
 #: Quadrature degree of a law with state on P1/Q1 cells: 2 x 2 Gauss on quadrilaterals (full
 #: integration of Q1), 3 points on triangles, 4 on tetrahedra, 2 x 2 x 2 on hexahedra.
@@ -126,3 +126,20 @@ class FEStateLaw:
     def dissipated(self, trial: bool = False) -> float:
         """Energy dissipated on this rank's cells (committed state unless ``trial``)."""
         return self.state.dissipated(self.weights, trial)
+
+
+def check_bands(
+    msh: dolfinx.mesh.Mesh, law: StatefulLaw, in_patch: np.ndarray, factor: float
+) -> None:
+    """Check the crack band of every owned cell against ``law`` (local): its size
+    (:func:`~dolfinx_meshfree.geometry.quadrature.cell_sizes`), times ``factor`` on the patch
+    cells (``in_patch``); a band the law refuses (local snap-back) is named by the cell's
+    midpoint."""
+    n = msh.topology.index_map(msh.topology.dim).size_local
+    cells = np.arange(n, dtype=np.int64)
+    q = cell_quadrature(msh, 1, cells)
+    mid = np.zeros((n, msh.geometry.dim))
+    np.add.at(mid, q.cells, q.points * q.weights[:, None])
+    volume = np.bincount(q.cells, weights=q.weights, minlength=n)
+    band = cell_sizes(msh, cells) * np.where(in_patch[:n], factor, 1.0)
+    law.check_band(band, mid / np.maximum(volume, 1e-300)[:, None])

@@ -402,7 +402,7 @@ class J2Plasticity:
     the equivalent plastic strain (``d alpha = sqrt(2/3) d gamma``); the radial return of Box 3.1
     (trial ``s_tr = 2 mu dev(eps - eps_p)``, ``dgamma = f_tr / (2 mu + 2 H / 3)``, ``n = s_tr /
     ||s_tr||``, ``s = s_tr - 2 mu dgamma n``, ``eps_p += dgamma n``, ``alpha += sqrt(2/3)
-    dgamma``) and the consistent elastoplastic tangent of Box 3.2 (eq. 3.3.13)::
+    dgamma``) and the consistent elastoplastic tangent of Box 3.2::
 
         C_alg = K 1 (x) 1 + 2 mu theta I_dev - 2 mu thetabar n (x) n,
         theta = 1 - 2 mu dgamma / ||s_tr||,   thetabar = 1 / (1 + H / (3 mu)) - (1 - theta),

@@ -14,8 +14,9 @@ where the material softens:
 with ``g`` linear in the displacements (:class:`DisplacementControl`: ``sum_k c_k . u(X_k)``)
 and ``q = -dR/dt`` (external loads, prescribed values of held dofs, constraint right-hand
 sides: ``R`` is affine in ``t``). Each Newton iteration solves ``J da = -R`` and ``J db = q``
-and takes ``dt = (tau_k - g(x) - g(da)) / g(db)``, ``x += da + dt db`` (the bordered update,
-Crisfield 1991, eq. 9.37-9.40).
+with one factorisation and takes ``dt = (tau_k - g(x) - g(da)) / g(db)``, ``x += da + dt db``
+(the bordered update), with a line search that keeps the constraint. :class:`ArcLength` replaces
+the constraint by Crisfield's cylindrical arc length ``|Dx| = dl`` (a quadratic in ``dt``).
 
 The control increment adapts (:class:`PathOptions`): it grows after a step that converged in few
 iterations and is halved, from the last converged state (laws' state included), when a step
@@ -379,7 +380,7 @@ def _arc_step(
     ``(x, t)``; returns ``(t, iterations, Dx)`` or raises ``ArithmeticError``.
 
     Each iteration: ``J da = -R``, ``J db = q``, ``dx = da + dt db`` with ``dt`` a root of
-    ``|Dx + da + dt db|^2 = dl^2`` (Crisfield 1991, eq. 9.28-9.31), the root whose new ``Dx``
+    ``|Dx + da + dt db|^2 = dl^2`` (Crisfield 1991, sec. 9.3.1), the root whose new ``Dx``
     turns least from the old; the first (predictor) ``dt = +-dl / |db|``, the sign of the last
     step's direction (``db . Dx_prev``). Complex roots (the constraint's circle misses the
     iteration's line) fail the step, which is then cut."""

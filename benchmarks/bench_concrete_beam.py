@@ -12,7 +12,7 @@
 #
 # Measured (serial, a shared 2-core machine, `--h 20 10`, CMOD to 0.5 mm):
 #
-# | method | h mm | particles | FE cells | peak N | vs EFG | change | energy J | x GfA | time s | x EFG |
+# | method | h mm | particles | FE cells | peak N | vs EFG | change | J | x GfA | s | x EFG |
 # |---|---|---|---|---|---|---|---|---|---|---|
 # | efg | 20 | 1122 | 0 | 1099.8 | 0 | - | 0.5879 | 0.95 | 8.7 | 1.00 |
 # | lagrange | 20 | 110 | 920 | 1100.9 | +0.10 % | - | 0.5886 | 0.95 | 3.4 | 0.39 |

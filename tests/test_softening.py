@@ -369,3 +369,49 @@ def test_softening_bar_in_3d():
     t = np.array(res.load_factor)
     assert t[-1] < 0.05 * FT
     assert np.abs(t - _closed_form(eps, h, law.max_damage)).max() < 1e-9 * FT
+
+
+def test_a_users_ufl_model_with_a_law_with_state():
+    """The bar written as a DOLFINx user writes it (``a`` the elastic form, ``L`` the traction,
+    a ``DirichletBC``) with ``CoupledLinearProblem(..., material=RankineDamage)``, followed past
+    the peak by ``mf.follow_path(problem.model, ...)``: the closed-form curve to 1e-9 f_t. An
+    ``a`` that is not the law's elastic form on the FE cells is refused (the law acts there)."""
+    n = 4
+    msh = dolfinx.mesh.create_rectangle(
+        MPI.COMM_WORLD, [[0, 0], [L, W]], [2 * n, n], dolfinx.mesh.CellType.quadrilateral
+    )
+    V = _compat.vector_function_space(msh)
+    law = mf.RankineDamage(E=E, nu=0.0, ft=FT, Gf=GF, plane="stress")
+
+    def forms(E_fe: float):
+        u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+        x = ufl.SpatialCoordinate(msh)
+        E_x = ufl.conditional(ufl.And(ufl.gt(x[0], 0.5), ufl.lt(x[0], 1.5)), E, E_fe)
+        elastic = law.elastic()
+        sigma = E_x / E * elastic.ufl_stress(u)
+        a = ufl.inner(sigma, ufl.sym(ufl.grad(v))) * ufl.dx
+        right = mf.boundary_facets(msh, lambda p: np.isclose(p[0], L))
+        tags = dolfinx.mesh.meshtags(msh, 1, right, np.full(right.size, 1, dtype=np.int32))
+        ds = ufl.Measure("ds", domain=msh, subdomain_data=tags)
+        L_form = ufl.inner(dolfinx.fem.Constant(msh, np.array([1.0, 0.0])), v) * ds(1)
+        return a, L_form
+
+    left = mf.boundary_facets(msh, lambda p: np.isclose(p[0], 0.0))
+    bc = dolfinx.fem.dirichletbc(np.zeros(2), dolfinx.fem.locate_dofs_topological(V, 1, left), V)
+    mid = dolfinx.mesh.locate_entities(msh, 2, lambda p: (p[0] > 0.5 - 1e-9) & (p[0] < 1.5 + 1e-9))
+    patch = mf.ParticlePatch(msh, mid, placement="vertices")
+    a, L_form = forms(E)
+    problem = mf.CoupledLinearProblem(a, L_form, [bc], patch, law, particle_band=1.0)
+    h = 1.0 / n
+    eps_f = 2.0 * GF / (FT * h)
+    control = mf.DisplacementControl([[L, 0.5]], [[1.0, 0.0]])
+    options = mf.PathOptions(increment=5e-4, end=1.25 * eps_f * L, max_increment=eps_f * L / 20)
+    res = mf.follow_path(problem.model, control, options)
+    eps = np.array(res.control) / L
+    t = np.array(res.load_factor)
+    assert t[-1] < 0.05 * FT
+    assert np.abs(t - _closed_form(eps, h, law.max_damage)).max() < 1e-9 * FT
+    # a stiffer FE region in a: the law (which acts on the FE cells) does not encode it
+    a2, _ = forms(2.0 * E)
+    with pytest.raises(ValueError, match="on every cell"):
+        mf.CoupledLinearProblem(a2, L_form, [bc], patch, law)

@@ -58,6 +58,7 @@ from ..geometry.quadrature import (
 from ..parallel import raise_on_all_ranks
 from ..physics.body_loads import BodyForce, accumulate
 from ..physics.materials import LinearElastic
+from ..physics.state import is_stateful
 from .coupled import COMPONENT_COUPLINGS, COUPLINGS, CoupledElasticity, CoupledSolution
 from .petsc import SolverOptions, solver_options
 
@@ -83,7 +84,12 @@ class CoupledLinearProblem:
             hold the component get a multiplier on that component only.
         patch: :class:`~dolfinx_meshfree.ParticlePatch` on ``V``'s mesh.
         material: :class:`~dolfinx_meshfree.LinearElastic` of the particle side; must agree with
-            ``a`` on the patch cells.
+            ``a`` on the patch cells. Or a law with state (:class:`~dolfinx_meshfree.RankineDamage`,
+            :class:`~dolfinx_meshfree.J2Plasticity`): then it is the law of every cell, FE cells
+            included, ``a`` must be its elastic form on every cell (checked), ``L`` the
+            reference load, and :meth:`solve` runs Newton in one load step from the unloaded
+            state; past a peak, follow the path: ``mf.follow_path(problem.model, control,
+            options)``.
         coupling: One of :data:`~dolfinx_meshfree.COUPLINGS`.
         petsc_options: PETSc options of the linear solver (a KSP on the assembled block system),
             as ``dolfinx.fem.petsc.LinearProblem`` takes them; default (``None``): MUMPS LU
@@ -129,7 +135,7 @@ class CoupledLinearProblem:
         self.problem = CoupledElasticity(V, patch, material, coupling, **options)
         self.problem.form = a
         self.V, self.patch, self.material = V, patch, material
-        _check_material(self.problem)
+        _check_material(self.problem, everywhere=is_stateful(material))
         self._apply_bcs()
         self._apply_loads()
 
@@ -262,6 +268,12 @@ class CoupledLinearProblem:
         """
         return self.problem.solve(self._solver if solver is None else solver)
 
+    @property
+    def model(self) -> CoupledElasticity:
+        """The coupled model: with a law with state, what :func:`~dolfinx_meshfree.follow_path`
+        takes (``mf.follow_path(problem.model, control, options)``)."""
+        return self.problem
+
 
 # -- checks -------------------------------------------------------------------------------------
 
@@ -270,9 +282,10 @@ def _check_arguments(a, L, bcs, patch, material, coupling, options):
     """Validate the inputs (local; no collective call). Returns ``V``."""
     if not isinstance(patch, ParticlePatch):
         raise TypeError(f"patch must be a ParticlePatch, got {type(patch).__name__}")
-    if not isinstance(material, LinearElastic):
+    if not isinstance(material, LinearElastic) and not is_stateful(material):
         raise TypeError(
-            f"material must be a LinearElastic (the particle side's law), got "
+            f"material must be a LinearElastic (the particle side's law) or a law with state "
+            f"(RankineDamage, J2Plasticity: the law of every cell, a its elastic form), got "
             f"{type(material).__name__}"
         )
     if coupling not in COUPLINGS:
@@ -334,10 +347,18 @@ def _check_arguments(a, L, bcs, patch, material, coupling, options):
     return V
 
 
-def _check_material(problem: CoupledElasticity) -> None:
-    """Compare the user's form with the material's on the patch cells (collective)."""
-    chi = problem.cell_indicator(problem.patch.in_patch)
+def _check_material(problem: CoupledElasticity, everywhere: bool = False) -> None:
+    """Compare the user's form with the material's on the patch cells, or on every cell
+    (``everywhere``: a law with state acts on the FE cells too, so the form must be its elastic
+    law there as well) (collective)."""
+    flags = np.ones_like(problem.patch.in_patch) if everywhere else problem.patch.in_patch
+    chi = problem.cell_indicator(flags)
     material = problem.material
+    where = (
+        "on every cell (a law with state acts on the FE cells too)"
+        if everywhere
+        else ("on the patch cells")
+    )
 
     def stiffness(form: ufl.Form) -> PETSc.Mat:
         return _compat.assemble_matrix(_compat.create_form(form))
@@ -379,7 +400,7 @@ def _check_material(problem: CoupledElasticity) -> None:
         A.destroy()
         B.destroy()
         raise ValueError(
-            f"material={material} disagrees with the bilinear form a on the patch cells (relative "
+            f"material={material} disagrees with the bilinear form a {where} (relative "
             f"difference {rel:.3g} > {MATERIAL_TOLERANCE:g}){hint}; the particle side uses the "
             "material, so pass the law that a encodes there"
         )

@@ -31,7 +31,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from .materials import LinearElastic, resolve_density
+from .materials import LinearElastic, linear_twin, resolve_density
 
 __all__ = ["J2Plasticity", "RankineDamage"]
 
@@ -190,8 +190,7 @@ class RankineDamage:
 
     def elastic(self) -> LinearElastic:
         """The linear elastic twin: the same ``E``, ``nu``, ``plane`` and ``rho``."""
-        rho = self.rho if self.density_given else None
-        return LinearElastic(self.E, self.nu, plane=self.plane, rho=rho)
+        return linear_twin(self)
 
     def initial_state(self, m: int) -> dict[str, np.ndarray]:
         """Virgin state of ``m`` points: ``kappa = eps0``, no damage, no dissipation."""
@@ -491,8 +490,7 @@ class J2Plasticity:
 
     def elastic(self) -> LinearElastic:
         """The linear elastic twin: the same ``E``, ``nu``, ``plane`` and ``rho``."""
-        rho = self.rho if self.density_given else None
-        return LinearElastic(self.E, self.nu, plane=self.plane, rho=rho)
+        return linear_twin(self)
 
     def initial_state(self, m: int) -> dict[str, np.ndarray]:
         """Virgin state of ``m`` points: no plastic strain, ``alpha = 0``, no dissipation."""

@@ -48,9 +48,9 @@ from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic, linear_twin
 from ..physics.state import is_stateful
 from .coupled_newton import (
-    FE_LAW_DEGREE,
     FINITE_STRAIN_COUPLINGS,
     check_load_steps,
+    law_internal_force,
     solve_finite_strain,
 )
 from .newton import NewtonOptions
@@ -461,15 +461,9 @@ class CoupledElasticity:
             solution.material = self.material
             return solution
         raise_on_all_ranks(comm, lambda: check_load_steps(load_steps))
-        V = self.V
-        u = dolfinx.fem.Function(V)
+        u = dolfinx.fem.Function(self.V)
         u.x.array[:] = 0.0
-        d = V.mesh.geometry.dim
-        F_int = None  # a law with state: the FE cells' quadrature-point stress (FEStateLaw)
-        if not is_stateful(self.law):
-            dx = ufl.Measure("dx", domain=V.mesh, metadata={"quadrature_degree": FE_LAW_DEGREE})
-            F = ufl.Identity(d) + ufl.grad(u)
-            F_int = ufl.inner(self.law.ufl_first_piola(F), ufl.grad(ufl.TestFunction(V))) * dx
+        F_int = law_internal_force(self.law, u)
         out = solve_finite_strain(
             self, F_int, u, self.law, load_steps, newton or NewtonOptions(), options
         )

@@ -49,6 +49,7 @@ __all__ = [
     "FiniteStrainSolve",
     "build_block_problem",
     "check_load_steps",
+    "law_internal_force",
     "solve_finite_strain",
 ]
 
@@ -59,6 +60,18 @@ FINITE_STRAIN_COUPLINGS = tuple(name for name, cls in REGISTRY.items() if hasatt
 #: Quadrature degree of a law's UFL internal force on P1/Q1 cells (the estimated degree of a
 #: plane-stress neo-Hookean's thickness stretch would ask for millions of points per cell).
 FE_LAW_DEGREE = 4
+
+
+def law_internal_force(law: Material | StatefulLaw, u: dolfinx.fem.Function) -> ufl.Form | None:
+    """The FE cells' internal force ``int P(I + grad u) : grad v dX`` of a finite-strain law's
+    UFL twin (degree :data:`FE_LAW_DEGREE`); ``None`` for a law with state, whose FE cells use
+    :class:`~dolfinx_meshfree.statics.fe_state.FEStateLaw` instead."""
+    if is_stateful(law):
+        return None
+    V = u.function_space
+    dx = ufl.Measure("dx", domain=V.mesh, metadata={"quadrature_degree": FE_LAW_DEGREE})
+    F = ufl.Identity(V.mesh.geometry.dim) + ufl.grad(u)
+    return ufl.inner(law.ufl_first_piola(F), ufl.grad(ufl.TestFunction(V))) * dx
 
 
 def check_load_steps(load_steps: int) -> None:

@@ -34,15 +34,14 @@ from typing import TYPE_CHECKING
 import dolfinx
 import numpy as np
 import numpy.typing as npt
-import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
 from ..couplings.base import CoupledSolution
 from ..parallel import raise_on_all_ranks
 from ..physics.materials import LinearElastic
-from ..physics.state import is_stateful, voigt_strain
-from .coupled_newton import FE_LAW_DEGREE, BlockModel, build_block_problem
+from ..physics.state import voigt_strain
+from .coupled_newton import BlockModel, build_block_problem, law_internal_force
 from .efg import EFGBlockModel, EFGElasticity
 from .petsc import BlockSystem, SolverOptions, solver_options
 from .sides import BlockProblem
@@ -278,6 +277,25 @@ def _residual(problem: BlockProblem, x: Sequence[PETSc.Vec], t: float) -> tuple[
     return r, float(np.sqrt(sum(v.norm() ** 2 for v in r)))
 
 
+def _newton_directions(
+    problem: BlockProblem,
+    x: Sequence[PETSc.Vec],
+    r: list[PETSc.Vec],
+    q: list[PETSc.Vec],
+    solver: SolverOptions,
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """``J da = -R`` and ``J db = q`` with one factorisation of the tangent at ``x`` (the
+    residual ``r`` is consumed: scaled, then destroyed)."""
+    blocks = problem.jacobian(x)
+    for v in r:
+        v.scale(-1.0)
+    system = BlockSystem(blocks, r, num_primal=problem.num_primal, names=problem.names)
+    da, db = system.solve_many([q], solver)
+    system.destroy()
+    _destroy_all(r)
+    return da, db
+
+
 def _bordered_step(
     problem: BlockProblem,
     x: list[PETSc.Vec],
@@ -312,13 +330,7 @@ def _bordered_step(
             return t, it
         if it == options.max_it or not np.isfinite(norm):
             break
-        blocks = problem.jacobian(x)
-        for v in r:
-            v.scale(-1.0)
-        system = BlockSystem(blocks, r, num_primal=problem.num_primal, names=problem.names)
-        da, db = system.solve_many([q], solver)  # one factorisation, two right-hand sides
-        system.destroy()
-        _destroy_all(r)
+        da, db = _newton_directions(problem, x, r, q, solver)
         ga, gb = g(da), g(db)
         size = comm.allreduce(
             max((float(np.abs(b).max()) for b in db if b.size), default=0.0), op=MPI.MAX
@@ -395,13 +407,7 @@ def _arc_step(
             return t, it, Dx
         if it == options.max_it or not np.isfinite(norm):
             break
-        blocks = problem.jacobian(x)
-        for v in r:
-            v.scale(-1.0)
-        system = BlockSystem(blocks, r, num_primal=problem.num_primal, names=problem.names)
-        da, db = system.solve_many([q], solver)  # one factorisation, two right-hand sides
-        system.destroy()
-        _destroy_all(r)
+        da, db = _newton_directions(problem, x, r, q, solver)
         a, b = da[:num_primal], db[:num_primal]
         if it == 0:
             sign = 1.0
@@ -482,16 +488,7 @@ def follow_path(
     else:
         u = dolfinx.fem.Function(model.V)
         u.x.array[:] = 0.0
-        F_int = None
-        law = model.law
-        if not is_stateful(law):
-            d = model.V.mesh.geometry.dim
-            dx = ufl.Measure(
-                "dx", domain=model.V.mesh, metadata={"quadrature_degree": FE_LAW_DEGREE}
-            )
-            F = ufl.Identity(d) + ufl.grad(u)
-            F_int = ufl.inner(law.ufl_first_piola(F), ufl.grad(ufl.TestFunction(model.V))) * dx
-        built = build_block_problem(model, F_int, u, law)
+        built = build_block_problem(model, law_internal_force(model.law, u), u, model.law)
     problem, x = built.problem, built.x
     k_p = _particle_field(built)
     result = PathResult()

@@ -53,6 +53,7 @@ from .geometry.partition import PartitionImbalanceWarning, balanced_mesh, work_p
 from .geometry.patch import PLACEMENTS, ParticlePatch
 from .geometry.quadrature import boundary_facets, cell_quadrature, facet_quadrature
 from .io import DynamicsWriter, ProgressBar, read_particles
+from .physics.cohesive import LinearCohesive
 from .physics.constitutive import Material, NeoHookean, SaintVenantKirchhoff
 from .physics.forces import InternalForces
 from .physics.inelastic import J2Plasticity, RankineDamage
@@ -124,6 +125,7 @@ __all__ = [
     "IterativeOptions",
     "J2Plasticity",
     "KirschPlate",
+    "LinearCohesive",
     "LinearElastic",
     "LinearField",
     "Material",

@@ -168,14 +168,17 @@ class CrackCut:
             return
         q = int(bad[0])
         tips = np.vstack([c.tips for c in self.cracks])
-        dt = np.linalg.norm(tips - x[q], axis=1)
-        k = int(dt.argmin())
+        where = "a crack that splits the body: particles on both sides of it"
+        if len(tips):
+            dt = np.linalg.norm(tips - x[q], axis=1)
+            k = int(dt.argmin())
+            where = f"the nearest crack tip is at {tips[k]} ({dt[k]:.3g} away)"
         raise MomentMatrixError(
             f"MLS moment matrix is singular at {bad.size} point(s) near a crack ({self.method}); "
             f"first: point {q} at {x[q]} sees {after[q]} of its {before[q]} particle(s) past the "
-            f"crack but the {self.mls.basis} basis needs at least {nb}; the nearest crack tip is "
-            f"at {tips[k]} ({dt[k]:.3g} away): {self.mls._fix} so that enough particles are "
-            "visible around the tip, or add particles near the tip"
+            f"crack but the {self.mls.basis} basis needs at least {nb}; {where}: "
+            f"{self.mls._fix} so that enough particles are visible around the tip, or add "
+            "particles near the tip"
         )
 
 
@@ -200,8 +203,13 @@ def attach_cracks(
     if patch is not None:
         for crack in cut.cracks:
             r = max(
-                float(mls.radii[np.linalg.norm(mls.points - t, axis=1) < mls.radii].max(initial=0))
-                for t in crack.tips
+                (
+                    float(
+                        mls.radii[np.linalg.norm(mls.points - t, axis=1) < mls.radii].max(initial=0)
+                    )
+                    for t in crack.tips
+                ),
+                default=0.0,  # a crack through the body has no tip
             )
             validate_in_patch(crack, patch, clearance=r)
     mls.pair_cuts.append(cut)

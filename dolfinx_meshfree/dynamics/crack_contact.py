@@ -52,9 +52,9 @@ import scipy.sparse as sp
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from .. import _compat
 from ..fracture.interaction import StressIntensityFactors, q_weight
 from ..geometry.crack import Crack, CrackDomain, particle_spacing
+from ..geometry.crack_faces import contact_points, owned_points
 from ..parallel import Layout, raise_on_all_ranks
 from ..statics.petsc import create_aij
 from .discretisation import approximation_cracks
@@ -73,6 +73,7 @@ __all__ = [
     "contact_points",
     "face_term",
     "jump_operator",
+    "owned_points",
     "with_crack_contact",
 ]
 
@@ -115,58 +116,6 @@ class CrackContact:
         return float(self.penalty) if self.penalty is not None else self.factor * E / h
 
 
-def contact_points(
-    crack: Crack, h: float, points: int = 2, tip_gap: float = 0.0
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Sample points along a crack polyline (the same on every rank: no communication).
-
-    Each segment is cut into ``ceil(length / h)`` equal pieces, each with ``points``
-    Gauss–Legendre points; points within ``tip_gap * h`` of a tip are dropped.
-
-    Returns:
-        ``(x, n, w)``: points (m, 2), unit left normals (m, 2) (towards the ``+1`` side of
-        :meth:`Crack.side`) and length weights (m,).
-    """
-    xi, wi = np.polynomial.legendre.leggauss(points)
-    xi, wi = 0.5 * (xi + 1.0), 0.5 * wi
-    xs, ns, ws = [], [], []
-    for a, b in zip(*crack.segments, strict=True):
-        t = b - a
-        length = float(np.linalg.norm(t))
-        pieces = max(1, int(np.ceil(length / h - 1e-9)))
-        s = ((np.arange(pieces)[:, None] + xi[None, :]) / pieces).ravel()
-        xs.append(a[None, :] + s[:, None] * t[None, :])
-        ns.append(np.tile(np.array([-t[1], t[0]]) / length, (s.size, 1)))
-        ws.append(np.tile(wi * length / pieces, pieces))
-    x, n, w = np.concatenate(xs), np.concatenate(ns), np.concatenate(ws)
-    keep = np.ones(len(x), dtype=bool)
-    for tip in crack.tips:
-        keep &= np.linalg.norm(x - tip[None, :], axis=1) >= tip_gap * h
-    return x[keep], n[keep], w[keep]
-
-
-def _owned_points(particles: ParticleSet, x: np.ndarray) -> np.ndarray:
-    """bool (m,): the points ``x`` this rank owns: in one of its integration cells, a point
-    on a cell boundary shared by ranks going to the lowest rank (collective)."""
-    msh = particles.mesh
-    comm = particles.comm
-    num_owned = msh.topology.index_map(msh.topology.dim).size_local
-    cells = np.arange(num_owned) if particles.cells is None else particles.cells
-    imap = msh.topology.index_map(msh.topology.dim)
-    mine = np.zeros(imap.size_local + imap.num_ghosts, dtype=bool)
-    mine[cells] = True
-    p3 = np.zeros((len(x), 3))
-    p3[:, :2] = x
-    offsets, arr = _compat.colliding_cells(msh, _compat.bb_tree(msh, msh.topology.dim), p3)
-    hit = np.zeros(len(x), dtype=bool)
-    np.logical_or.at(hit, np.repeat(np.arange(len(x)), np.diff(offsets)), mine[arr])
-    size = comm.size
-    claim = np.where(hit, comm.rank, size).astype(np.int32)
-    owner = np.empty_like(claim)
-    comm.Allreduce(claim, owner, op=MPI.MIN)
-    return owner == comm.rank
-
-
 def jump_operator(
     particles: ParticleSet, mls: MLS, cracks: Sequence[Crack], h: float, contact: CrackContact
 ) -> tuple[PETSc.Mat, np.ndarray, np.ndarray, np.ndarray]:
@@ -182,7 +131,7 @@ def jump_operator(
     count = 0
     for crack in cracks:
         x, n, w = contact_points(crack, h, contact.points, contact.tip_gap)
-        own = _owned_points(particles, x)
+        own = owned_points(particles, x)
         x, n, w = x[own], n[own], w[own]
         ones = np.ones(len(x), dtype=np.int64)
         plus, minus = raise_on_all_ranks(

@@ -150,6 +150,10 @@ class Crack:
 
     Args:
         points: The polyline's points (k, 2), ``k >= 2``, in order from one end to the other.
+        through: Both ends may lie on the exterior boundary: a crack that splits the body. Its
+            faces must then carry a traction-separation law (``add_cohesive`` of the model),
+            which holds the parts together; a static solve refuses it otherwise (explicit
+            dynamics has no cohesive faces: there the parts come apart).
 
     Attributes:
         points: (k, 2) array of the polyline points (grows with :meth:`extend`).
@@ -165,15 +169,20 @@ class Crack:
         >>> crack.extend(np.deg2rad(-30), 0.05)   # kink 30 degrees clockwise, grow 0.05
     """
 
-    def __init__(self, points: npt.ArrayLike) -> None:
+    def __init__(self, points: npt.ArrayLike, through: bool = False) -> None:
         self.points = _check_polyline(points)
+        if not isinstance(through, bool | np.bool_):
+            raise ValueError(f"through={through!r} must be True or False")
+        #: Whether the crack may split the body (both ends on the exterior boundary).
+        self.through = bool(through)
         self.is_tip = [True, True]
         self.version = 0
         self._listeners: list[Callable[[], Callable[[], None] | None]] = []
         self._validators: list[Callable[[Crack, np.ndarray], None]] = []
 
     def __repr__(self) -> str:
-        return f"Crack({self.points.tolist()!r})"
+        through = ", through=True" if self.through else ""
+        return f"Crack({self.points.tolist()!r}{through})"
 
     # --- geometry -------------------------------------------------------------------------
     @property
@@ -205,10 +214,11 @@ class Crack:
     def set_mouths(self, start: bool, end: bool) -> None:
         """Mark the end points that lie on the exterior boundary (mouths of an edge crack); the
         others are tips. A crack needs at least one tip."""
-        if start and end:
+        if start and end and not self.through:
             raise ValueError(
                 f"both ends {_fmt(self.points[0])} and {_fmt(self.points[-1])} of the crack are on "
-                "the exterior boundary: it has no tip and would split the body; end it inside"
+                "the exterior boundary: it has no tip and would split the body; end it inside, or "
+                "give Crack(..., through=True) and a cohesive law on its faces (add_cohesive)"
             )
         self.is_tip = [not start, not end]
 
@@ -504,10 +514,11 @@ def validate_in_patch(
                         f"at facet {_fmt(exterior[f, 0])}-{_fmt(exterior[f, 1])} away from its "
                         "end points: a crack may only start on the boundary (an edge crack)"
                     )
-        if mouth.all():
+        if mouth.all() and not crack.through:
             raise ValueError(
                 f"both ends {_fmt(pts[0])} and {_fmt(pts[-1])} of the crack are on the exterior "
-                "boundary: it has no tip and would split the body; end it inside the patch"
+                "boundary: it has no tip and would split the body; end it inside the patch, or "
+                "give Crack(..., through=True) and a cohesive law on its faces (add_cohesive)"
             )
         for e in (0, 1):
             if mouth[e]:

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import copy
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import dolfinx
@@ -39,14 +39,17 @@ from ..couplings.base import (
 from ..couplings.bridging import check_options
 from ..couplings.lagrange import interface_particles
 from ..couplings.master_slave import SLAVES
+from ..geometry.crack import Crack
 from ..geometry.partition import warn_imbalance
 from ..geometry.patch import ParticlePatch
 from ..geometry.stress_points import check_integration
 from ..parallel import raise_on_all_ranks
 from ..physics.body_loads import CallableBodyForce
+from ..physics.cohesive import LinearCohesive
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic, linear_twin
 from ..physics.state import is_stateful
+from .cohesive import CohesiveCrack, check_cohesive, check_through
 from .coupled_newton import (
     FINITE_STRAIN_COUPLINGS,
     check_load_steps,
@@ -246,6 +249,8 @@ class CoupledElasticity:
             raise_on_all_ranks(patch.comm, lambda: self._attach_cracks(coupling))
         self.dirichlet: list[tuple[np.ndarray, VectorFunction]] = []
         self.tractions: list[tuple[np.ndarray, Callable]] = []
+        #: The cracks whose faces carry a traction-separation law (:meth:`add_cohesive`).
+        self.cohesive: list[CohesiveCrack] = []
         #: The user's bilinear form (set by :class:`~dolfinx_meshfree.CoupledLinearProblem`);
         #: ``None``: the elasticity form of :attr:`material`.
         self.form: ufl.Form | None = None
@@ -269,6 +274,32 @@ class CoupledElasticity:
         attach_cracks(self.mls, patch.cracks, patch.crack_method, patch=patch)
         if patch.crack_enrichment:
             enrich_tips(self.mls, patch.cracks, patch.crack_method)
+
+    def add_cohesive(
+        self,
+        crack: Crack,
+        law: LinearCohesive,
+        segments: Sequence[int] | None = None,
+        points: int = 3,
+    ) -> None:
+        """Let the faces of ``crack`` (one of the patch's) carry ``law``, a
+        :class:`~dolfinx_meshfree.LinearCohesive`, on the ``segments`` of its polyline (``None``:
+        all; the others stay traction-free, a notch), with ``points`` Gauss points per piece of
+        one spacing (:mod:`~dolfinx_meshfree.statics.cohesive`). The model is then solved by
+        Newton (:meth:`solve`) or past its peak (:func:`~dolfinx_meshfree.follow_path`), the
+        faces' state committed with the bulk's; ``K_0`` defaults to ``30 E / h``. Collective."""
+        args = (crack, law, self.patch.cracks, segments, points, self.V.mesh.geometry.dim)
+
+        def check() -> CohesiveCrack:
+            if self.form is not None and not is_stateful(self.law):
+                raise ValueError(
+                    "a CoupledLinearProblem's own bilinear form cannot carry cohesive faces: "
+                    "Newton would assemble the FE cells from the law, not from your form; give "
+                    "the model CoupledElasticity(V, patch, law) with callables instead"
+                )
+            return check_cohesive(*args)
+
+        self.cohesive.append(raise_on_all_ranks(self.patch.comm, check))
 
     def add_dirichlet(
         self, facets: np.ndarray, value: VectorFunction, components: tuple[int, ...] | None = None
@@ -456,7 +487,8 @@ class CoupledElasticity:
         """
         comm = self.patch.comm
         options = raise_on_all_ranks(comm, lambda: solver_options(solver, petsc_options, prefix))
-        if isinstance(self.law, LinearElastic):
+        raise_on_all_ranks(comm, lambda: check_through(self.patch.cracks, self.cohesive))
+        if isinstance(self.law, LinearElastic) and not self.cohesive:
             solution = self.family.solve(self, options)
             solution.material = self.material
             return solution

@@ -24,9 +24,11 @@ import ufl
 from ..couplings import REGISTRY
 from ..couplings.assembly import component_conditions
 from ..couplings.base import CoupledSolution
+from ..geometry.crack import particle_spacing
 from ..parallel import raise_on_all_ranks
 from ..physics.constitutive import Material
 from ..physics.state import StatefulLaw, is_stateful
+from .cohesive import CohesiveSide
 from .fe_state import check_bands
 from .newton import NewtonOptions
 from .petsc import SolverOptions, create_vector
@@ -180,6 +182,11 @@ def build_block_problem(
     shared = extra["shared_sides"](fe, particles, material) if "shared_sides" in extra else []
     for i, j in extra.get("state_blocks", ()):
         constant[i][j] = None
+    if model.cohesive:  # the cohesive faces of the patch's cracks
+        h = particle_spacing(model.patch)
+        shared += [
+            CohesiveSide(c, particles, model.mls, 1, model.material.E, h) for c in model.cohesive
+        ]
     problem = BlockProblem(names, 2, [fe, particles], constant, loads, shared=shared)
     x = []
     for i, load in enumerate(loads):  # the previous solve's state, or u and zeros

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -43,7 +43,7 @@ from ..approx.tables import ShapeTable
 from ..approx.tip_enrichment import enrich_tips
 from ..fracture.interaction import StressIntensityFactors
 from ..geometry.adaptive_quadrature import AdaptiveQuadrature
-from ..geometry.crack import Crack, CrackDomain, place_crack
+from ..geometry.crack import Crack, CrackDomain, particle_spacing, place_crack
 from ..geometry.cut_cells import (
     cracked_boundary_quadrature,
     cut_cell_quadrature,
@@ -57,6 +57,7 @@ from ..geometry.quadrature import (
     facet_quadrature,
 )
 from ..parallel import Layout, raise_on_all_ranks
+from ..physics.cohesive import LinearCohesive
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic, linear_twin
 from ..physics.operators import (
@@ -67,6 +68,7 @@ from ..physics.operators import (
 )
 from ..physics.state import is_stateful
 from ..physics.user_functions import vector_values
+from .cohesive import CohesiveCrack, CohesiveSide, check_cohesive, check_through
 from .fe_state import check_bands
 from .growth_update import local_update_for
 from .newton import NewtonOptions
@@ -611,6 +613,8 @@ class EFGElasticity:
             if crack_enrichment:
                 enrich_tips(self.mls, self.cracks, crack_method)
         self._dirichlet: list[tuple[np.ndarray, VectorFunction, tuple[int, ...]]] = []
+        #: The cracks whose faces carry a traction-separation law (:meth:`add_cohesive`).
+        self.cohesive: list[CohesiveCrack] = []
         self._tractions: list[tuple[np.ndarray, TractionFunction]] = []
         self._body: VectorFunction | None = None
         self._setup_time = time.perf_counter() - t0
@@ -619,6 +623,25 @@ class EFGElasticity:
     def comm(self) -> MPI.Comm:
         """The particles' communicator."""
         return self.particles.comm
+
+    def add_cohesive(
+        self,
+        crack: Crack,
+        law: LinearCohesive,
+        segments: Sequence[int] | None = None,
+        points: int = 3,
+    ) -> None:
+        """Let the faces of one of the model's cracks carry a traction-separation law, on the
+        segments ``segments`` of its polyline (``None``: all). See
+        :meth:`~dolfinx_meshfree.CoupledElasticity.add_cohesive`."""
+        self.cohesive.append(
+            raise_on_all_ranks(
+                self.comm,
+                lambda: check_cohesive(
+                    crack, law, self.cracks, segments, points, self.mesh.geometry.dim
+                ),
+            )
+        )
 
     def add_dirichlet(
         self, facets: np.ndarray, value: VectorFunction, components: tuple[int, ...] | None = None
@@ -774,7 +797,8 @@ class EFGElasticity:
         """
         comm = self.comm
         solver = raise_on_all_ranks(comm, lambda: solver_options(solver, petsc_options, prefix))
-        if not isinstance(self.material, LinearElastic):
+        raise_on_all_ranks(self.comm, lambda: check_through(self.cracks, self.cohesive))
+        if not isinstance(self.material, LinearElastic) or self.cohesive:
             return self._solve_finite_strain(solver, load_steps, newton)
         P = self.particles
         system, objects, extra = self.system()
@@ -812,7 +836,9 @@ class EFGElasticity:
         side = ParticleSide(self.particles, tables, law)
         constant = [list(row) for row in system.blocks]
         constant[0][0] = None
-        problem = BlockProblem(system.names, 1, [side], constant, list(system.rhs))
+        E, h = self.linear_material.E, particle_spacing(self._domain) if self.cohesive else 0.0
+        cohesive = [CohesiveSide(c, side, self.mls, 0, E, h) for c in self.cohesive]
+        problem = BlockProblem(system.names, 1, [side], constant, list(system.rhs), shared=cohesive)
         x = [v.duplicate() for v in system.rhs]
         for v in x:
             v.set(0.0)

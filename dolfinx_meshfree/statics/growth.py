@@ -165,6 +165,12 @@ class QuasiStaticCrackGrowth:
             getattr(inner, "law", getattr(inner, "material", None)),
             "QuasiStaticCrackGrowth (it re-solves from the unloaded state at every crack length)",
         )
+        if getattr(inner, "cohesive", None):
+            raise ValueError(
+                "QuasiStaticCrackGrowth grows traction-free cracks by K_Ic and re-solves from the "
+                "unloaded state: the model's cohesive faces (add_cohesive) would lose their "
+                "state; follow a cohesive crack with follow_path"
+            )
         mls = getattr(inner, "mls", None)
         cracks = getattr(inner, "cracks", None) or getattr(
             getattr(inner, "patch", None), "cracks", []

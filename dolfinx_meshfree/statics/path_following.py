@@ -41,6 +41,7 @@ from ..couplings.base import CoupledSolution
 from ..parallel import raise_on_all_ranks
 from ..physics.materials import LinearElastic
 from ..physics.state import voigt_strain
+from .cohesive import check_through
 from .coupled_newton import BlockModel, build_block_problem, law_internal_force
 from .efg import EFGBlockModel, EFGElasticity
 from .petsc import BlockSystem, SolverOptions, solver_options
@@ -177,7 +178,9 @@ class PathResult:
     iterations: list[int] = field(default_factory=list)
     #: External work of the dead loads, ``int t q . dx`` over the free dofs (trapezoidal).
     external_work: list[float] = field(default_factory=list)
-    #: Recoverable energy ``sum_q W(eps_q, state_q) w_q`` over every point with state.
+    #: Recoverable energy ``sum_q W(eps_q, state_q) w_q`` over every point with state, the
+    #: cohesive faces' and, with a :class:`~dolfinx_meshfree.LinearElastic` bulk, its strain
+    #: energy ``x . f_int(x) / 2`` (a finite-strain law without state is not counted).
     stored_energy: list[float] = field(default_factory=list)
     #: Energy dissipated, by the laws' own closed forms at the committed states.
     dissipated_energy: list[float] = field(default_factory=list)
@@ -260,15 +263,29 @@ def _energies(built: BlockModel | EFGBlockModel) -> tuple[float, float]:
         eps = voigt_strain(forces.displacement_gradient(coeffs))
         stored += float(side.state.law.stored_energy(eps, side.state.committed) @ forces.weights)
         dissipated += side.state.dissipated(forces.weights)
-    for shared in built.problem.shared:  # the ramps' blended cells
-        if getattr(shared, "state", None) is not None:
+    for shared in built.problem.shared:  # the ramps' blended cells, cohesive faces
+        if hasattr(shared, "energies"):
+            more = shared.energies([built.x[i] for i in shared.fields])
+            stored, dissipated = stored + more[0], dissipated + more[1]
+        elif getattr(shared, "state", None) is not None:
             forces = shared.forces
             H = shared.deformation_gradient(built.x[:2]) - np.eye(forces.gdim)
             st = shared.state
             stored += float(st.law.stored_energy(voigt_strain(H), st.committed) @ forces.weights)
             dissipated += st.dissipated(forces.weights)
     comm = _comm(built)
-    return comm.allreduce(stored), comm.allreduce(dissipated)
+    stored, dissipated = comm.allreduce(stored), comm.allreduce(dissipated)
+    law = built.model.material if isinstance(built, EFGBlockModel) else built.model.law
+    if isinstance(law, LinearElastic):  # an elastic bulk (cohesive faces): 1/2 x . f_int(x)
+        for i, side in enumerate(built.problem.sides):
+            f = side.internal_force(built.x[i])
+            stored += 0.5 * f.dot(built.x[i])
+            f.destroy()
+        for shared in built.problem.shared:  # the ramps' blended cells
+            if hasattr(shared, "strain_energy"):
+                local = shared.strain_energy([built.x[i] for i in shared.fields])
+                stored += comm.allreduce(local)
+    return stored, dissipated
 
 
 def _residual(problem: BlockProblem, x: Sequence[PETSc.Vec], t: float) -> tuple[list, float]:
@@ -478,11 +495,14 @@ def follow_path(
     comm = model.comm if efg else model.patch.comm
     solver = raise_on_all_ranks(comm, lambda: solver_options(solver))
     t0 = time.perf_counter()
+    cracks = model.cracks if efg else model.patch.cracks
+    raise_on_all_ranks(comm, lambda: check_through(cracks, model.cohesive))
     if efg:
-        if isinstance(model.material, LinearElastic):
+        if isinstance(model.material, LinearElastic) and not model.cohesive:
             raise ValueError(
                 "follow_path needs a law whose response is not linear (a law with state, or a "
-                "finite-strain law): a LinearElastic model's path is a straight line; solve it"
+                "finite-strain law) or cohesive cracks (add_cohesive): a LinearElastic model's "
+                "path is a straight line; solve it"
             )
         built = model.block_model()
     else:
@@ -591,6 +611,17 @@ def follow_path(
                 cuts -= 1
             if its <= options.easy:
                 dtau = min(max_dtau, options.grow * dtau)
+            for side in problem.shared:  # a cohesive zone that reached the end of its path
+                end = side.reached_end() if hasattr(side, "reached_end") else None
+                if end is not None:
+                    raise PathError(
+                        f"at step {step} (control {tau:.6g}, load factor {t:.6g}) the faces of "
+                        f"the cohesive crack soften at ({end[0]:.6g}, {end[1]:.6g}), within one "
+                        "particle spacing of the tip of its cohesive path: the crack would run "
+                        "further than the model can follow; extend the crack's polyline (and "
+                        "its cohesive segments) ahead of that tip",
+                        result,
+                    )
             if options.min_load > 0 and peak > 0 and t < options.min_load * peak:
                 break
         for v in q:

@@ -35,9 +35,10 @@
 # that no support restrains the bending: a roller held at one corner node concentrates a reaction
 # that cracks the concrete there.
 #
-# Methods: `lagrange` (the default), `edge-to-edge`, `bridging` (a particle patch of width
-# `--patch-width` around the notch, FE elsewhere) and `efg` (particles at every vertex of the
-# mesh: the reference the couplings are compared with).
+# Methods: `lagrange` (the default), `edge-to-edge`, `bridging`, `ramp`, `ramp-cubic` (a particle
+# patch of width `--patch-width` around the notch, FE elsewhere) and `efg` (particles at every
+# vertex of the mesh: the reference the couplings are compared with). Master–slave is not
+# offered: it carries no crack in its patch.
 #
 # Self-checks (on by default, `--no-check` skips them):
 #

@@ -63,6 +63,7 @@ from .statics.coupled import (
     COUPLINGS,
     CRACK_COUPLINGS,
     DEFAULT_DILATION,
+    STATIC_CRACK_COUPLINGS,
     CoupledElasticity,
     CoupledSolution,
 )
@@ -100,6 +101,7 @@ __all__ = [
     "MLS",
     "PLACEMENTS",
     "SPH",
+    "STATIC_CRACK_COUPLINGS",
     "AdaptiveQuadrature",
     "Approximation",
     "ArcLength",

@@ -184,3 +184,38 @@ def test_refused_where_the_faces_would_be_lost() -> None:
     problem = mf.CoupledLinearProblem(a, L_form, [bc], patch, law)
     with pytest.raises(ValueError, match="own bilinear form"):
         problem.model.add_cohesive(crack2, mf.LinearCohesive(FT, GF))
+
+
+def _clamped_bar(method: str, crack: mf.Crack):
+    """The bar with nu = 0, its left end clamped (the ramps hold no single component on FE
+    facets): the uniaxial field is still the exact solution."""
+    msh = dolfinx.mesh.create_rectangle(
+        MPI.COMM_WORLD, [np.array([0.0, 0.0]), np.array([L, H])], [21, 5],
+        dolfinx.mesh.CellType.quadrilateral,
+    )  # fmt: skip
+    V = _compat.vector_function_space(msh)
+    cells = dolfinx.mesh.locate_entities(msh, 2, lambda p: np.abs(p[0] - L / 2) < 55.0)
+    patch = mf.ParticlePatch(msh, cells, placement="vertices", cracks=[crack])
+    model = mf.CoupledElasticity(V, patch, mf.LinearElastic(E, 0.0, plane="stress"), method)
+    left = mf.boundary_facets(msh, lambda p: np.isclose(p[0], 0.0))
+    right = mf.boundary_facets(msh, lambda p: np.isclose(p[0], L))
+    model.add_dirichlet(left, lambda x: np.zeros_like(x))
+    model.add_traction(right, lambda x, n: np.tile([1.0, 0.0], (len(x), 1)))
+    return model
+
+
+@pytest.mark.parametrize("method", ["ramp", "ramp-cubic"])
+def test_ramps_carry_cracks(method: str) -> None:
+    """The ramps carry a crack in the patch (its cut cells integrated side by side, its faces in
+    VCI's boundary): a crack along the load is not felt (the uniaxial field to 1e-10), and a
+    cohesive crack across the bar splits it as the closed form (4e-7), dissipating G_f H."""
+    along = mf.Crack([[80.0, 25.0], [120.0, 25.0]])
+    sol = _clamped_bar(method, along).solve()
+    x = np.array([[x, y] for x in (10.0, 79.0, 100.0, 121.0, 190.0) for y in (5.0, 24.0, 26.0)])
+    exact = np.stack([x[:, 0] / E, np.zeros(len(x))], axis=1)
+    assert np.abs(sol.displacement(x) - exact).max() <= 1e-10 * L / E
+    across = mf.Crack([[L / 2, 0.0], [L / 2, H]], through=True)
+    model = _clamped_bar(method, across)
+    law = mf.LinearCohesive(FT, GF)
+    model.add_cohesive(across, law)
+    _check_bar(model, law.with_stiffness(E, L / 21), 0.0, _follow(model))

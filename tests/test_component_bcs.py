@@ -240,9 +240,14 @@ def test_bad_component_input():
     a, L, _ = forms(V)
     left = mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0.0))
     patch = mf.ParticlePatch(msh, cells_where(msh, lambda m: m[:, 0] > 0.5), 0.25)
+    # a ramp holds no single component on the FE nodes of its interface cells (x in [0.25, 0.5]
+    # here), whose FE nodes it blends: refused at the solve, naming a node
+    bottom = mf.boundary_facets(msh, lambda x: np.isclose(x[1], 0.0))
+    bcs = [x_held(V, left), x_held(V, bottom)]
+    ramp = mf.CoupledLinearProblem(a, L, bcs, patch, material=MAT, coupling="ramp")
+    with pytest.raises(ValueError, match=r"coupling='ramp'.* FE node \[0\.(25|5), 0\.0\]"):
+        ramp.solve()
     bcs = [x_held(V, left)]
-    with pytest.raises(ValueError, match="coupling='ramp'"):
-        mf.CoupledLinearProblem(a, L, bcs, patch, material=MAT, coupling="ramp")
     # a component condition on interior nodes (the FE-patch interface x = 0.5)
     facets = dolfinx.mesh.locate_entities(msh, 1, lambda x: np.isclose(x[0], 0.5))
     mid = dolfinx.fem.locate_dofs_topological(V.sub(0), 1, facets)
@@ -317,11 +322,16 @@ def test_roller_patch_test_with_callables(coupling, where):
     assert np.abs(sol.displacement(g) - expected).max() <= 1e-10
 
 
-def test_callable_component_condition_refused_on_ramps():
+def test_callable_component_condition_on_ramps():
+    """The ramps hold single components of FE nodes away from their interface cells (the roller
+    patch test to round-off) and refuse one on an interface cell's node, naming it."""
+    test_roller_patch_test_with_callables("ramp", "away")
+    test_roller_patch_test_with_callables("ramp-cubic", "away")
     msh = box([0.0, 0.0], [2.0, 1.0], [8, 4])
     V = _compat.vector_function_space(msh)
     patch = mf.ParticlePatch(msh, cells_where(msh, lambda m: m[:, 0] > 1.0), 0.25)
     model = mf.CoupledElasticity(V, patch, MAT, coupling="ramp")
-    left = mf.boundary_facets(msh, lambda p: np.isclose(p[0], 0.0))
-    with pytest.raises(ValueError, match="coupling='ramp'"):
-        model.add_dirichlet(left, lambda x: np.zeros_like(x), components=(0,))
+    bottom = mf.boundary_facets(msh, lambda p: np.isclose(p[1], 0.0))
+    model.add_dirichlet(bottom, lambda x: np.zeros_like(x), components=(1,))
+    with pytest.raises(ValueError, match=r"FE node \[(0\.75|1\.0), 0\.0\] of an interface cell"):
+        model.solve()

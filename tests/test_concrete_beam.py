@@ -39,6 +39,16 @@ def test_reduced_cohesive(tmp_path):
     assert P_LOW < r["peak_load_N"] < P_HIGH
 
 
+def test_ramp_follows_pure_efg():
+    """The ramp coupling (interface elements, Belytschko et al. 1995) carries the cohesive crack
+    in its patch: its peak within 1.2 % of pure EFG's at h = 25 mm (measured -0.58 %; issue
+    target 2 %), on the same crack path."""
+    efg = demo.main(["--h", "25", "--method", "efg", "--end-cmod", "0.3"])
+    ramp = demo.main(["--h", "25", "--method", "ramp", "--end-cmod", "0.3"])
+    assert abs(ramp["peak_load_N"] / efg["peak_load_N"] - 1.0) <= 0.012
+    assert np.allclose(np.asarray(ramp["path"])[:, 0], 1000.0)
+
+
 def test_reduced_three_point_bend(tmp_path):
     out = tmp_path / "beam.json"
     r = demo.main(["--h", "25", "--json", str(out), "--end-cmod", "0.3", "--crack", "band"])
@@ -77,4 +87,4 @@ def test_bad_options():
     with pytest.raises(SystemExit):
         demo.main(["--notch-depth", "250"])
     with pytest.raises(SystemExit):
-        demo.main(["--method", "ramp"])
+        demo.main(["--method", "master-slave"])  # no crack in its patch

@@ -254,7 +254,7 @@ def test_material_differing_only_off_the_patch_is_accepted():
 @pytest.mark.parametrize(
     "case, match",
     [
-        ("component", r"V.sub\(i\) with coupling='ramp'"),
+        ("component", r"V.sub\(i\) with coupling='master-slave'"),
         ("interior", r"only dx and ds integrals"),
         ("derivative", r"differentiates the test function"),
         ("coupling", r"coupling='glue' is not available"),
@@ -272,7 +272,7 @@ def test_bad_input(model, case, match):
             (V.sub(0), V.sub(0).collapse()[0]), lambda x: np.isclose(x[0], 0)
         )
         bcs = [dolfinx.fem.dirichletbc(dolfinx.fem.Constant(msh, 0.0), dofs[0], V.sub(0))]
-        coupling = "ramp"  # component conditions: lagrange, edge-to-edge, bridging only
+        coupling = "master-slave"  # no component conditions: it links the interface nodes
     elif case == "interior":
         L = L + ufl.avg(v[0]) * ufl.dS
     elif case == "derivative":

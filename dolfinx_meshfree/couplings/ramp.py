@@ -58,17 +58,23 @@ from ..approx.fe_points import tabulate_in_cells
 from ..approx.mls import MLS
 from ..approx.tables import ShapeTable
 from ..geometry.patch import ParticlePatch
-from ..geometry.quadrature import boundary_facets, cell_quadrature, facet_quadrature
+from ..geometry.quadrature import (
+    QuadraturePoints,
+    boundary_facets,
+    cell_quadrature,
+    facet_quadrature,
+)
 from ..parallel import Layout, raise_on_all_ranks
 from ..physics.operators import consistent_gradients, load_vector, stiffness_matrix
 from ..physics.user_functions import vector_values
 from ..statics.baij import create_baij
-from ..statics.efg import particle_stiffness
+from ..statics.efg import crack_rules, particle_stiffness
 from ..statics.petsc import SolverOptions, create_aij, create_vector
 from ..statics.sides import BlendedSide
 from .assembly import (
     append_patch_conditions,
     body_loads,
+    component_conditions,
     essential_conditions,
     fe_active,
     fe_stiffness,
@@ -389,6 +395,7 @@ def ramp_system(problem: CoupledElasticity, tables: dict | None = None) -> tuple
     t0 = time.perf_counter()
 
     blend = RampInterface(problem, cubic=RAMPS[problem.coupling])
+    raise_on_all_ranks(comm, lambda: _refuse_held_components(problem, blend))
     n_loc = blend.num_fe_columns
     # interface cells: the blended table (columns: local FE nodes, then particles)
     qi = cell_quadrature(msh, deg, blend.cells)
@@ -397,7 +404,9 @@ def ramp_system(problem: CoupledElasticity, tables: dict | None = None) -> tuple
     if problem.consistent:
         Kp_loc, kt, test = _consistent_stiffness(problem, blend, qi, ti, tables)
     else:
-        Kp_loc, _, _, kt = particle_stiffness(P, problem.mls, problem.material, deg, tables=tables)
+        Kp_loc, _, _, kt = particle_stiffness(
+            P, problem.mls, problem.material, deg, quadrature=_patch_rule(problem), tables=tables
+        )
 
     # essential conditions: FE nodes strongly; patch facets and the particle part of interface
     # cells' facets by multipliers
@@ -560,6 +569,36 @@ def _body_loads(problem, blend: RampInterface, q, tab: ShapeTable):
     return body_loads(problem, problem.cell_indicator(pure), interface_rule=(q, tab.values))
 
 
+def _refuse_held_components(problem: CoupledElasticity, blend: RampInterface) -> None:
+    """Refuse a single component held (a roller) on an FE node of an interface cell: the blended
+    blocks hold whole nodes only. Local (call on every rank)."""
+    V = problem.V
+    held = component_conditions(problem)[0].any(axis=1)
+    if not held.any():
+        return
+    cells = np.flatnonzero(blend.in_interface).astype(np.int32)
+    tdim = V.mesh.topology.dim
+    nodes = node_flags(V, dolfinx.fem.locate_dofs_topological(V, tdim, cells))
+    bad = np.flatnonzero(held[: nodes.size] & nodes)
+    if bad.size:
+        x = np.round(V.tabulate_dof_coordinates()[bad[0], : V.mesh.geometry.dim], 12) + 0.0
+        raise ValueError(
+            f"coupling={problem.coupling!r}: a single component is held at the FE node "
+            f"{x.tolist()} of an interface cell, whose FE nodes the ramp blends with the "
+            "particles; hold all components there, move the support away from the patch, or use "
+            "coupling='lagrange'"
+        )
+
+
+def _patch_rule(problem: CoupledElasticity) -> QuadraturePoints:
+    """The patch cells' rule: Gauss on each cell, cut cells side by side when the patch has
+    cracks (:func:`~dolfinx_meshfree.statics.efg.crack_rules`). Collective."""
+    patch, msh, deg = problem.patch, problem.V.mesh, problem.quadrature_degree
+    cells = patch.particles.cells
+    q = crack_rules(msh, cells, patch.cracks, deg, None)[0] if patch.cracks else None
+    return cell_quadrature(msh, deg, cells) if q is None else q
+
+
 def _consistent_stiffness(
     problem, blend: RampInterface, q, tab: ShapeTable, tables: dict | None = None
 ):
@@ -584,14 +623,19 @@ def _consistent_stiffness(
     msh, deg, mls = problem.V.mesh, problem.quadrature_degree, problem.mls
     n_loc = blend.num_fe_columns
     t0 = time.perf_counter()
-    qp = cell_quadrature(msh, deg, P.cells)
+    qp = _patch_rule(problem)
     tp = raise_on_all_ranks(comm, lambda: mls.tabulate(qp.points))
-    # the boundary: exterior facets of patch cells (phi) and of interface cells (R phi)
+    # the boundary: exterior facets of patch cells (phi), with the faces of the patch's cracks
+    # (one-sided values), and of interface cells (R phi)
     ext = boundary_facets(msh)
     ext_i = ext[blend.in_interface[_first_cells(msh, ext)]]
-    bp = facet_quadrature(msh, patch.exterior_facets, deg, patch.exterior_cells)
+    exterior = (patch.exterior_facets, patch.exterior_cells)
+    bp = crack_rules(msh, P.cells, patch.cracks, deg, exterior, cell_rule=False)[1]
+    if bp is None:  # no crack
+        bp = facet_quadrature(msh, patch.exterior_facets, deg, patch.exterior_cells)
     bi = facet_quadrature(msh, ext_i, deg)
-    vp = raise_on_all_ranks(comm, lambda: mls.tabulate(bp.points, 0)).values
+    sides = getattr(bp, "sides", None)
+    vp = raise_on_all_ranks(comm, lambda: mls.tabulate(bp.points, 0, sides=sides)).values
     vi = raise_on_all_ranks(comm, lambda: blend.table(bi.points, bi.cells, 0)).values[:, n_loc:]
     particle = slice(n_loc, None)
     values = sp.vstack([tp.values, tab.values[:, particle]]).tocsr()
@@ -676,6 +720,7 @@ def ramp_operators(problem: CoupledElasticity) -> CouplingOperators:
     fe_layout, l2g = fe_dof_layout(problem.V)
     pl = P.dof_layout()
     blend = RampInterface(problem, cubic=RAMPS[problem.coupling])
+    raise_on_all_ranks(comm, lambda: _refuse_held_components(problem, blend))
     n_loc = blend.num_fe_columns
     tables: dict = {}  # the patch cells' rule, table and test gradients (finite strain)
     Kp_loc, pq, ptab, _ = particle_stiffness(

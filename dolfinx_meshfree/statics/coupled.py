@@ -64,6 +64,7 @@ __all__ = [
     "COUPLINGS",
     "CRACK_COUPLINGS",
     "DEFAULT_DILATION",
+    "STATIC_CRACK_COUPLINGS",
     "CoupledElasticity",
     "CoupledSolution",
     "CouplingOperators",
@@ -72,13 +73,25 @@ __all__ = [
 VectorFunction = Callable[[np.ndarray], np.ndarray]
 
 #: The couplings that hold single components of FE nodes (a roller, a symmetry plane): those whose
-#: FE block is apart from the interface (the ramps blend the FE nodes of their interface cells
-#: and master-slave links them).
-COMPONENT_COUPLINGS: tuple[str, ...] = ("lagrange", "edge-to-edge", "bridging")
+#: FE block is apart from the interface, and the ramps away from their interface cells (whose FE
+#: nodes they blend: a component held there is refused, naming the node); master-slave links the
+#: interface FE nodes to its slaves.
+COMPONENT_COUPLINGS: tuple[str, ...] = (
+    "lagrange",
+    "edge-to-edge",
+    "bridging",
+    "ramp",
+    "ramp-cubic",
+)
 
 #: The couplings that carry cracks in the patch (cut MLS weights, cut-cell quadrature, the crack
 #: faces in the consistent integration's boundary): the variational couplings.
 CRACK_COUPLINGS: tuple[str, ...] = ("lagrange", "edge-to-edge", "bridging")
+
+#: The couplings that carry cracks in statics: :data:`CRACK_COUPLINGS` and the ramps, whose patch
+#: cells are cut and whose interface elements the crack keeps away from (a tip at least a support
+#: radius from the FE interface). Explicit dynamics keeps :data:`CRACK_COUPLINGS`.
+STATIC_CRACK_COUPLINGS: tuple[str, ...] = (*CRACK_COUPLINGS, "ramp", "ramp-cubic")
 
 
 class CoupledElasticity:
@@ -264,11 +277,11 @@ class CoupledElasticity:
     def _attach_cracks(self, coupling: str) -> None:
         """Cut the MLS weights by the patch's cracks (Organ, Fleming & Belytschko 1996); only
         the couplings whose particle side is the plain cracked EFG block can carry them."""
-        if coupling not in CRACK_COUPLINGS:
+        if coupling not in STATIC_CRACK_COUPLINGS:
             raise ValueError(
                 f"coupling={coupling!r} cannot carry a cracked patch (its particle block is "
                 f"not integrated on cut cells with the crack faces as boundary); use one of "
-                f"{list(CRACK_COUPLINGS)}, or leave the cracks out of the patch"
+                f"{list(STATIC_CRACK_COUPLINGS)}, or leave the cracks out of the patch"
             )
         patch = self.patch
         attach_cracks(self.mls, patch.cracks, patch.crack_method, patch=patch)

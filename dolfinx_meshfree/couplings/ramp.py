@@ -595,7 +595,7 @@ def _patch_rule(problem: CoupledElasticity) -> QuadraturePoints:
     cracks (:func:`~dolfinx_meshfree.statics.efg.crack_rules`). Collective."""
     patch, msh, deg = problem.patch, problem.V.mesh, problem.quadrature_degree
     cells = patch.particles.cells
-    q = crack_rules(msh, cells, patch.cracks, deg, None)[0] if patch.cracks else None
+    q = crack_rules(msh, cells, patch.cracks, deg, None)[0]  # None without cracks
     return cell_quadrature(msh, deg, cells) if q is None else q
 
 

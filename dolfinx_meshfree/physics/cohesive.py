@@ -46,14 +46,13 @@ from typing import ClassVar
 
 import numpy as np
 
+from .inelastic import _positive
+
 __all__ = ["LinearCohesive"]
 
 
 def _check_positive(name: str, value: float, fix: str) -> None:
-    if not (isinstance(value, int | float | np.floating) and np.isfinite(value) and value > 0):
-        raise ValueError(
-            f"LinearCohesive: {name}={value!r} must be a positive finite number; {fix}"
-        )
+    _positive("LinearCohesive", name, value, fix)
 
 
 @dataclass(frozen=True)

@@ -172,27 +172,15 @@ class CohesiveSide:
             lambda: (mls.tabulate(x, 0, ones), mls.tabulate(x, 0, -ones)) if m else (None, None),
         )
         N = particles.P.num_particles
+        self.B = sp.csr_matrix((0, gdim * N))
         if m:
-            jump = (plus.values - minus.values).tocsr()
-            # local rows (q, a): a = 0 the normal opening n.[u], a = 1 the sliding s.[u], with
-            # s = (n_y, -n_x) the segment's direction; columns: the interleaved coefficients
+            # rows (q, a): a = 0 the normal opening n.[u], a = 1 the sliding s.[u], with
+            # s = (n_y, -n_x) the segment's direction: the rotation R_q of each point's global
+            # jump (the one-sided difference, times the identity per component; columns: the
+            # interleaved coefficients)
             frame = np.stack([n, np.stack([n[:, 1], -n[:, 0]], axis=1)], axis=1)  # (m, 2, 2)
-            blocks = [
-                sp.diags(frame[:, a, c]) @ jump for a in range(gdim) for c in range(gdim)
-            ]  # block (a, c): rows q, columns J
-            rows, cols, vals = [], [], []
-            for a in range(gdim):
-                for c in range(gdim):
-                    b = blocks[a * gdim + c].tocoo()
-                    rows.append(gdim * b.row + a)
-                    cols.append(gdim * b.col + c)
-                    vals.append(b.data)
-            self.B = sp.csr_matrix(
-                (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                shape=(gdim * m, gdim * N),
-            )
-        else:
-            self.B = sp.csr_matrix((0, gdim * N))
+            jump = sp.kron(plus.values - minus.values, sp.identity(gdim))
+            self.B = (sp.block_diag(list(frame)) @ jump).tocsr()
         #: The state of the face points (the largest effective opening).
         self.state = PointState(self.law, x)
 
@@ -206,8 +194,7 @@ class CohesiveSide:
         return (self.B @ d).reshape(-1, self.side.gdim)
 
     def _evaluate(self, xs: Sequence[PETSc.Vec]) -> tuple[np.ndarray, np.ndarray]:
-        t, D = self.state.evaluate(self.jump(xs))
-        return t, D
+        return self.state.evaluate(self.jump(xs))
 
     def internal_force(self, xs: Sequence[PETSc.Vec]) -> list[PETSc.Vec]:
         """``[f_c]`` on the particle field (collective)."""

@@ -58,6 +58,7 @@ from .physics.constitutive import Material, NeoHookean, SaintVenantKirchhoff
 from .physics.forces import InternalForces
 from .physics.inelastic import J2Plasticity, RankineDamage
 from .physics.materials import LinearElastic
+from .statics.cohesive_growth import CohesiveGrowth
 from .statics.coupled import (
     COMPONENT_COUPLINGS,
     COUPLINGS,
@@ -105,6 +106,7 @@ __all__ = [
     "AdaptiveQuadrature",
     "Approximation",
     "ArcLength",
+    "CohesiveGrowth",
     "CoupledElasticity",
     "CoupledLinearProblem",
     "CoupledNonlinearProblem",

@@ -64,7 +64,7 @@ def _follow(model, end: float = 0.08, steps: int = 100, control=None):
     return mf.follow_path(model, control, options)
 
 
-def _check_bar(model, law: mf.LinearCohesive, theta: float, path) -> None:
+def _check_bar(model, law: mf.LinearCohesive, theta: float, path, tol: float = 4e-7) -> None:
     sigma, u = np.array(path.load_factor), np.array(path.control)
     peak = int(np.argmax(sigma))
     expected = sigma * L / E + _closed_form_openings(law, sigma * np.cos(theta))
@@ -76,7 +76,7 @@ def _check_bar(model, law: mf.LinearCohesive, theta: float, path) -> None:
     allowed[2, peak + 1 :] = True
     # measured 4e-9 to 1.8e-7: Newton's tolerance, the penalty K_0 amplifying the residual
     err = np.where(allowed, np.abs(u - expected), np.inf).min(axis=0).max() / u.max()
-    assert err < 4e-7, f"end displacement against the closed form: {err:.3g}"
+    assert err < tol, f"end displacement against the closed form: {err:.3g}"
     # the peak: f_t / cos(theta), reached within one step of the path
     assert sigma[peak] <= FT / np.cos(theta) * (1 + 1e-9)
     assert sigma[peak] >= 0.9 * FT / np.cos(theta)
@@ -97,6 +97,19 @@ def test_bar_splits_as_the_closed_form(method: str) -> None:
     path = _follow(model)
     h = L / 21
     _check_bar(model, law.with_stiffness(E, h), 0.0, path)
+
+
+def test_master_slave_bar_splits_as_the_closed_form() -> None:
+    """Master-slave with the rollers of the other bars (the bottom one holds u_y on two of its
+    interface nodes, carried to the slaves): the closed form within its own error, which is not
+    round-off (Gauss quadrature and the slaves' mismatch on the interface miss the uniform bar's
+    end displacement by 0.27 % without a crack); measured 3.0e-4 of the final end displacement
+    along the path, bound 6e-4; G_f H dissipated as for the others."""
+    crack = mf.Crack([[L / 2, 0.0], [L / 2, H]], through=True)
+    model, _ = _bar("master-slave", crack)
+    law = mf.LinearCohesive(FT, GF)
+    model.add_cohesive(crack, law)
+    _check_bar(model, law.with_stiffness(E, L / 21), 0.0, _follow(model), tol=6e-4)
 
 
 def test_inclined_crack_mixed_mode_on_triangles() -> None:

@@ -49,6 +49,17 @@ def test_ramp_follows_pure_efg():
     assert np.allclose(np.asarray(ramp["path"])[:, 0], 1000.0)
 
 
+def test_master_slave_follows_pure_efg():
+    """Master-slave carries the cohesive crack in its patch (cut cells, Gauss quadrature): its
+    peak within 1.5 % of pure EFG's at h = 20 mm (measured -0.76 %; issue target 2 %), on the
+    same crack path. At h = 25 mm its first step fails the demo's 5 % check (5.1 %, see the
+    demo's header)."""
+    efg = demo.main(["--h", "20", "--method", "efg", "--end-cmod", "0.3"])
+    ms = demo.main(["--h", "20", "--method", "master-slave", "--end-cmod", "0.3"])
+    assert abs(ms["peak_load_N"] / efg["peak_load_N"] - 1.0) <= 0.015
+    assert np.allclose(np.asarray(ms["path"])[:, 0], 1000.0)
+
+
 def test_reduced_three_point_bend(tmp_path):
     out = tmp_path / "beam.json"
     r = demo.main(["--h", "25", "--json", str(out), "--end-cmod", "0.3", "--crack", "band"])
@@ -86,5 +97,3 @@ def test_bad_options():
         demo.main(["--notch-width", "5"])
     with pytest.raises(SystemExit):
         demo.main(["--notch-depth", "250"])
-    with pytest.raises(SystemExit):
-        demo.main(["--method", "master-slave"])  # no crack in its patch

@@ -254,7 +254,6 @@ def test_material_differing_only_off_the_patch_is_accepted():
 @pytest.mark.parametrize(
     "case, match",
     [
-        ("component", r"V.sub\(i\) with coupling='master-slave'"),
         ("interior", r"only dx and ds integrals"),
         ("derivative", r"differentiates the test function"),
         ("coupling", r"coupling='glue' is not available"),
@@ -267,13 +266,7 @@ def test_material_differing_only_off_the_patch_is_accepted():
 def test_bad_input(model, case, match):
     msh, V, a, L, v, bcs, patch = model
     coupling, material = "lagrange", MAT
-    if case == "component":
-        dofs = dolfinx.fem.locate_dofs_geometrical(
-            (V.sub(0), V.sub(0).collapse()[0]), lambda x: np.isclose(x[0], 0)
-        )
-        bcs = [dolfinx.fem.dirichletbc(dolfinx.fem.Constant(msh, 0.0), dofs[0], V.sub(0))]
-        coupling = "master-slave"  # no component conditions: it links the interface nodes
-    elif case == "interior":
+    if case == "interior":
         L = L + ufl.avg(v[0]) * ufl.dS
     elif case == "derivative":
         L = L + ufl.div(v) * ufl.dx

@@ -127,11 +127,13 @@ from ..parallel import Layout, raise_on_all_ranks
 from ..statics.efg import facet_multipliers, particle_stiffness
 from ..statics.petsc import BlockSystem, SolverOptions, create_aij, create_vector
 from .assembly import (
+    component_conditions,
     essential_conditions,
     fe_active,
     fe_stiffness,
     fix_fe_rows,
-    particle_rule,
+    fixed_dofs,
+    patch_rules,
     traction_loads,
 )
 from .base import CoupledSolution, CouplingDefaults, CouplingOperators, fe_dof_layout
@@ -149,6 +151,7 @@ __all__ = [
     "outside_slave_layer",
     "slave_solve",
     "solve_master_slave",
+    "strong_dofs",
 ]
 
 #: ``slaves="band"``: particles within ``SLAVE_LAYER`` times the particle spacing of Gamma_I.
@@ -175,7 +178,9 @@ class MasterSlaveLinks:
 
     Args:
         problem: The :class:`~dolfinx_meshfree.CoupledElasticity`.
-        is_bc, ubc: Strong-condition flags and values per local FE node.
+        is_bc, ubc: Strong-condition flags, per local FE node (n,) or per node and component
+            (n, 2) (a roller: :func:`~dolfinx_meshfree.couplings.assembly.fixed_dofs`), and
+            values (n, 2).
         slaves: ``"layer"``: the particles on Gamma_I when every interface FE node carries
             one, else the first particle layer, the particles nearest to some stretch of
             Gamma_I (eq. 17–28); ``"band"``: the particles within ``SLAVE_LAYER`` spacings of
@@ -192,8 +197,8 @@ class MasterSlaveLinks:
         distance: Distance of each particle to the interface.
         width: The largest link length of a slave (``"layer"``) or the distance criterion.
         edges: (m, 2, 2) end points of the interface edges, ``nodes`` (m, 2) their global FE
-            nodes, ``fixed`` (m, 2) whether a node carries a strong condition and ``values``
-            (m, 2, 2) the strong values.
+            nodes, ``fixed`` (m, 2, 2) whether a node's component carries a strong condition
+            and ``values`` (m, 2, 2) the strong values.
         rows: Per slave, ``(global FE nodes (k,), weights (k, 2, 2))``: ``u_P = sum_k
             weights[k] @ u[nodes[k]]``.
     """
@@ -215,7 +220,9 @@ class MasterSlaveLinks:
         coords = V.tabulate_dof_coordinates()[:, :2]
         ends = np.zeros((facets.size, 2, 2))
         nodes = np.zeros((facets.size, 2), dtype=np.int64)
-        fixed = np.zeros((facets.size, 2), dtype=bool)
+        flags = np.asarray(is_bc, dtype=bool)
+        flags = np.repeat(flags[:, None], 2, axis=1) if flags.ndim == 1 else flags
+        fixed = np.zeros((facets.size, 2, 2), dtype=bool)
         values = np.zeros((facets.size, 2, 2))
         if facets.size:
             ends = msh.geometry.x[_compat.entities_to_geometry(msh, fdim, facets), :2]
@@ -225,12 +232,12 @@ class MasterSlaveLinks:
                 d = np.linalg.norm(coords[dofs] - ends[:, k][:, None, :], axis=2)
                 local = dofs[np.arange(facets.size), np.argmin(d, axis=1)]
                 nodes[:, k] = l2g[local]
-                fixed[:, k] = is_bc[local]
+                fixed[:, k] = flags[local]
                 values[:, k] = ubc[local]
         gathered = comm.allgather((ends, nodes, fixed, values))
         self.edges = np.concatenate([g[0] for g in gathered]).reshape(-1, 2, 2)
         self.nodes = np.concatenate([g[1] for g in gathered]).reshape(-1, 2)
-        self.fixed = np.concatenate([g[2] for g in gathered]).reshape(-1, 2)
+        self.fixed = np.concatenate([g[2] for g in gathered]).reshape(-1, 2, 2)
         self.values = np.concatenate([g[3] for g in gathered]).reshape(-1, 2, 2)
         if self.edges.shape[0] == 0:
             raise ValueError("master-slave coupling: the patch has no interface with the FE cells")
@@ -326,14 +333,12 @@ class MasterSlaveLinks:
         dist = np.linalg.norm(r - s[..., None] * t[None], axis=2).min(axis=1, initial=np.inf)
         return dist <= self.width
 
-    def is_fixed(self) -> dict[int, np.ndarray]:
-        """Strong values of the interface nodes that carry one, by global node."""
-        out = {}
-        for e in range(self.nodes.shape[0]):
-            for k in range(2):
-                if self.fixed[e, k]:
-                    out[int(self.nodes[e, k])] = self.values[e, k]
-        return out
+    def is_fixed(self) -> dict[int, float]:
+        """Strong values of the interface FE dofs that carry one, by global FE dof (``2 node +
+        component``): whole nodes and single components (a roller) alike."""
+        e, k, c = np.nonzero(self.fixed)
+        dofs = 2 * self.nodes[e, k] + c
+        return dict(zip(dofs.tolist(), self.values[e, k, c].tolist(), strict=True))
 
 
 def _first_layer(tree: cKDTree, x: np.ndarray, a: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -391,15 +396,18 @@ def solve_master_slave(
     t0 = time.perf_counter()
 
     boundary = patch.boundary() if problem.consistent else None
-    Kp_loc, _, _, kt = particle_stiffness(P, problem.mls, problem.material, deg, boundary)
+    q, bq = patch_rules(problem)  # cut cells and crack faces with cracks
+    Kp_loc, _, _, kt = particle_stiffness(
+        P, problem.mls, problem.material, deg, boundary, quadrature=q, boundary_quadrature=bq
+    )
 
-    # essential conditions: FE side strongly, patch side by multipliers
+    # essential conditions: FE side strongly (whole nodes or components), patch side by
+    # multipliers
     _, patch_bc, dq, dtabs, ubc, is_bc = essential_conditions(problem)
     active = fe_active(problem)
+    held, held_values = strong_dofs(problem, is_bc, ubc)
 
-    links = raise_on_all_ranks(
-        comm, lambda: MasterSlaveLinks(problem, is_bc, ubc.x.array.reshape(-1, 2), slaves)
-    )
+    links = raise_on_all_ranks(comm, lambda: MasterSlaveLinks(problem, held, held_values, slaves))
     patch_bc, dq, dtabs = outside_slave_layer(problem, links, patch_bc, dq, dtabs)
     T_pf, S_loc, _, g_rows, g_vals, ml = _reduction(
         problem, links, fe_layout, tie, links.is_fixed()
@@ -495,6 +503,18 @@ def solve_master_slave(
     return sol
 
 
+def strong_dofs(
+    problem: CoupledElasticity, is_bc: np.ndarray, ubc: dolfinx.fem.Function
+) -> tuple[np.ndarray, np.ndarray]:
+    """The FE dofs held strongly, (n, 2) flags per local node and component (whole nodes
+    ``is_bc`` and single components, :func:`~dolfinx_meshfree.couplings.assembly.fixed_dofs`),
+    and their values (n, 2) (local): what :class:`MasterSlaveLinks` carries to the slaves
+    through ``g`` instead of linking them to a held dof."""
+    values = component_conditions(problem)[1]
+    u = ubc.x.array.reshape(-1, 2)
+    return fixed_dofs(problem, is_bc), np.where(is_bc[:, None], u, values)
+
+
 def outside_slave_layer(
     problem: CoupledElasticity, links: MasterSlaveLinks, patch_bc: list, dq: list, dtabs: list
 ) -> tuple[list, list, list]:
@@ -507,20 +527,20 @@ def outside_slave_layer(
     fdim = msh.topology.dim - 1
     comm = problem.patch.comm
     out_bc, out_q, out_t = [], [], []
-    for (facets, fn), q, tab in zip(patch_bc, dq, dtabs, strict=True):
+    for (facets, fn, *components), q, tab in zip(patch_bc, dq, dtabs, strict=True):
         if facets.size:
             ends = msh.geometry.x[_compat.entities_to_geometry(msh, fdim, facets), :2]
             inside = links.in_layer(ends.reshape(-1, 2)).reshape(-1, 2).all(axis=1)
         else:
             inside = np.zeros(0, dtype=bool)
         if not comm.allreduce(bool(inside.any()), op=MPI.LOR):
-            out_bc.append((facets, fn))
+            out_bc.append((facets, fn, *components))
             out_q.append(q)
             out_t.append(tab)
             continue
         kept = facets[~inside]
         fq = facet_quadrature(msh, kept, problem.quadrature_degree)
-        out_bc.append((kept, fn))
+        out_bc.append((kept, fn, *components))
         out_q.append(fq)
         out_t.append(raise_on_all_ranks(comm, lambda fq=fq: problem.mls.tabulate(fq.points, 0)))
     return out_bc, out_q, out_t
@@ -558,14 +578,16 @@ def master_slave_operators(
     pl = P.dof_layout()
     boundary = patch.boundary() if problem.consistent else None
     tables: dict = {}  # the particle rule, table and test gradients (finite strain)
+    q, bq = patch_rules(problem, integration)
     Kp_loc, q, tq, _ = particle_stiffness(
         P,
         problem.mls,
         problem.material,
         problem.quadrature_degree,
         boundary,
-        quadrature=particle_rule(problem, integration),
+        quadrature=q,
         tables=tables,
+        boundary_quadrature=bq,
     )
     no_bc = np.zeros(l2g.size, dtype=bool)
     links = raise_on_all_ranks(
@@ -598,8 +620,9 @@ def _reduction(problem, links: MasterSlaveLinks, fe_layout: Layout, tie: str | N
 
     Every slave ``P`` has a target ``w_P = W_P u_FE + g_P``: the motion of its link (eq. 17-27),
     ``W_P`` from :attr:`MasterSlaveLinks.rows`, ``g_P`` the part carried by strong FE values
-    (``known``: value by global FE node). ``tie="coefficients"`` (the paper's) sets the slave's
-    nodal parameter to it, ``u_P = w_P``. ``tie="values"`` sets the slave's MLS *value* to it,
+    (``known``: value by global FE dof, :meth:`MasterSlaveLinks.is_fixed`).
+    ``tie="coefficients"`` (the paper's) sets the slave's nodal parameter to it, ``u_P = w_P``.
+    ``tie="values"`` sets the slave's MLS *value* to it,
     ``u^h(x_P) = sum_J phi_J(x_P) u_J = w_P`` (eq. 3.3 of Belytschko et al. 1995): with
     ``Phi_SS``, ``Phi_SM`` the slaves' shape functions at the slaves and at the masters,
     ``u_S = Phi_SS^{-1} (w_S - Phi_SM u_M)``. MLS is not interpolating, so the two differ: a
@@ -639,13 +662,14 @@ def _reduction(problem, links: MasterSlaveLinks, fe_layout: Layout, tie: str | N
     g = np.zeros(2 * sl.size)
     for k, (nodes, weights) in enumerate(links.rows):
         for node, w in zip(nodes, weights, strict=True):
-            u = known.get(int(node))
-            if u is not None:
-                g[2 * k : 2 * k + 2] += w @ u
-                continue
-            for i in range(2):
-                for j in range(2):
-                    if w[i, j] != 0.0:
+            for j in range(2):
+                u = known.get(int(2 * node + j))
+                for i in range(2):
+                    if w[i, j] == 0.0:
+                        continue
+                    if u is not None:
+                        g[2 * k + i] += w[i, j] * u
+                    else:
                         wr.append(2 * k + i)
                         wc.append(2 * node + j)
                         wv.append(w[i, j])

@@ -41,6 +41,7 @@ from .assembly import (
     fe_active,
     fe_stiffness,
     fix_fe_rows,
+    patch_rules,
     traction_loads,
 )
 from .master_slave import (
@@ -48,6 +49,7 @@ from .master_slave import (
     MasterSlaveLinks,
     outside_slave_layer,
     slave_solve,
+    strong_dofs,
 )
 
 if TYPE_CHECKING:  # annotations only: the model imports this module
@@ -239,14 +241,15 @@ def master_slave_system(problem: CoupledElasticity, tables: dict | None = None) 
     pdofs = P.petsc_dofs(2)
     pl = P.dof_layout()
     boundary = patch.boundary() if problem.consistent else None
+    q, bq = patch_rules(problem)  # cut cells and crack faces with cracks
     Kp_loc, _, _, kt = particle_stiffness(
-        P, problem.mls, problem.material, problem.quadrature_degree, boundary, tables=tables
-    )
+        P, problem.mls, problem.material, problem.quadrature_degree, boundary, tables=tables,
+        quadrature=q, boundary_quadrature=bq,
+    )  # fmt: skip
     _, patch_bc, dq, dtabs, ubc, is_bc = essential_conditions(problem)
     active = fe_active(problem)
-    links = raise_on_all_ranks(
-        comm, lambda: MasterSlaveLinks(problem, is_bc, ubc.x.array.reshape(-1, 2), "layer")
-    )
+    held, held_values = strong_dofs(problem, is_bc, ubc)
+    links = raise_on_all_ranks(comm, lambda: MasterSlaveLinks(problem, held, held_values, "layer"))
     patch_bc, dq, dtabs = outside_slave_layer(problem, links, patch_bc, dq, dtabs)
     sl = links.slaves
     own = np.flatnonzero(P.owner[sl] == comm.rank)

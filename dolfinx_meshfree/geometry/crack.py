@@ -178,7 +178,7 @@ class Crack:
         self.is_tip = [True, True]
         self.version = 0
         self._listeners: list[Callable[[], Callable[[], None] | None]] = []
-        self._validators: list[Callable[[Crack, np.ndarray], None]] = []
+        self._validators: list[Callable[[Crack, np.ndarray], list[bool] | None]] = []
 
     def __repr__(self) -> str:
         through = ", through=True" if self.through else ""
@@ -326,7 +326,8 @@ class Crack:
 
         Returns nothing; ``version`` increments and listeners (an MLS cut by the crack) are told.
         Validators (a patch the crack is attached to) check the new geometry first: on an error
-        the crack is unchanged.
+        the crack is unchanged; an end they find on the exterior boundary becomes a mouth (a
+        ``through`` crack grown to the boundary splits the body), before the listeners hear.
         """
         ends = self.tip_ends
         if tip is None:
@@ -361,9 +362,13 @@ class Crack:
         new = self.points[tip] + length * direction
         pts = np.vstack([self.points, new]) if tip == -1 else np.vstack([new, self.points])
         pts = _check_polyline(pts, "the extended crack")
-        for validate in self._validators:
-            validate(self, pts)
+        is_tip = None
+        for validate in self._validators:  # a patch's: its tips and mouths on the new polyline
+            found = validate(self, pts)
+            is_tip = found if found is not None else is_tip
         self.points = pts
+        if is_tip is not None:  # an end that reached the exterior boundary is a mouth now
+            self.is_tip = [bool(t) for t in is_tip]
         self.version += 1
         for ref in list(self._listeners):
             fn = ref()

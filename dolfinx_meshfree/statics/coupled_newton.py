@@ -174,6 +174,20 @@ def build_block_problem(
         law=material if stateful else None,
     )  # fmt: skip
     particles = ParticleSide(P, tables, material, getattr(model, "particle_band", None))
+    # held FE dofs (before the shared sides, which leave their rows out): the strong values on
+    # Dirichlet nodes, 0 on nodes no FE cell carries
+    fe.fixed_values = extra["fixed_values"][fe.fixed_local]
+    # and the dofs held by component (DirichletBCs on V.sub(i)) on nodes not held whole
+    flags, values = component_conditions(model)
+    flags = flags[: fe.n_owned // fe.bs].ravel()
+    flags[fe.fixed_local] = False
+    if flags.any():
+        held = np.flatnonzero(flags)
+        fe.hold(
+            np.concatenate([fe.fixed_local, held]),
+            np.concatenate([fe.fixed_values, values.ravel()[held]]),
+            fe.l2g,
+        )
     constant = [list(row) for row in blocks]
     constant[0][0], constant[1][1] = extra["constant_diagonal"]
     names = ["fe", "particles"] + [f"multiplier{i}" for i in range(len(blocks) - 2)]
@@ -195,19 +209,6 @@ def build_block_problem(
         if state is not None and state[i].size == load.getLocalSize():
             v.array[:] = state[i]
         x.append(v)
-    # held FE dofs: the strong values on Dirichlet nodes, 0 on nodes no FE cell carries
-    fe.fixed_values = extra["fixed_values"][fe.fixed_local]
-    # and the dofs held by component (DirichletBCs on V.sub(i)) on nodes not held whole
-    flags, values = component_conditions(model)
-    flags = flags[: fe.n_owned // fe.bs].ravel()
-    flags[fe.fixed_local] = False
-    if flags.any():
-        held = np.flatnonzero(flags)
-        fe.hold(
-            np.concatenate([fe.fixed_local, held]),
-            np.concatenate([fe.fixed_values, values.ravel()[held]]),
-            fe.l2g,
-        )
     if state is None:
         x[0].array[:] = u.x.array[: fe.n_owned]
     objects = [*mats, extra["x_bc"], *rhs, f_p]

@@ -36,12 +36,15 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 from petsc4py import PETSc
+from scipy.spatial import cKDTree
 
+from ..approx.mls import MomentMatrixError
 from ..couplings.base import CoupledSolution
 from ..parallel import raise_on_all_ranks
 from ..physics.materials import LinearElastic
 from ..physics.state import voigt_strain
-from .cohesive import check_through
+from .cohesive import CohesiveSide, check_through
+from .cohesive_growth import CohesiveGrowth, grow_once
 from .coupled_newton import BlockModel, build_block_problem, law_internal_force
 from .efg import EFGBlockModel, EFGElasticity
 from .petsc import BlockSystem, SolverOptions, solver_options
@@ -189,6 +192,10 @@ class PathResult:
     cuts: int = 0
     seconds: float = 0.0
     solution: CoupledSolution | None = None
+    #: The growths of cracks that find their path (``follow_path(growth=...)``): ``(step,
+    #: control, new tip)`` each, the tip a point on the exterior boundary once the crack
+    #: splits the body.
+    extensions: list[tuple[int, float, list[float]]] = field(default_factory=list)
 
     @property
     def peak(self) -> tuple[float, float]:
@@ -451,6 +458,94 @@ def _arc_step(
     raise ArithmeticError("not converged")
 
 
+def _check_growth(
+    model: CoupledElasticity | EFGElasticity,
+    efg: bool,
+    growths: Sequence[CohesiveGrowth],
+    control: DisplacementControl | ArcLength,
+    cracks: Sequence,
+) -> None:
+    """Refuse what growing cracks cannot carry (local; call on every rank)."""
+    if not growths:
+        return
+    if not all(isinstance(gr, CohesiveGrowth) for gr in growths):
+        raise TypeError("growth must be a CohesiveGrowth or a sequence of them")
+    if isinstance(control, ArcLength):
+        raise ValueError(
+            "growth needs indirect displacement control (DisplacementControl): after a crack "
+            "grew, equilibrium is found again at the same control value, which ArcLength has not"
+        )
+    law = model.material if efg else model.law
+    if not isinstance(law, LinearElastic):
+        raise ValueError(
+            f"growth with a {type(law).__name__} bulk: a growing crack changes the cut cells' "
+            "quadrature, and the bulk's state would have to be carried to the new points; only "
+            "an elastic bulk (LinearElastic, the fictitious crack model) grows cracks here"
+        )
+    for gr in growths:
+        gr.check(model.cohesive, cracks)
+
+
+def _grow(
+    built: BlockModel | EFGBlockModel,
+    growths: Sequence[CohesiveGrowth],
+    model: CoupledElasticity | EFGElasticity,
+    efg: bool,
+) -> tuple[list[float], np.ndarray] | None:
+    """Grow the first crack of ``growths`` whose softening front nears its tip (collective):
+    its new end point and the refitted particle coefficients, or ``None`` when none grew. The
+    model's cohesive record follows."""
+    sides = [s for s in built.problem.shared if isinstance(s, CohesiveSide)]
+    domain = model._domain if efg else model.patch
+    for gr in growths:
+        side = next(s for s in sides if s.cohesive.crack is gr.crack)
+        end = gr.crack.tip_ends[0] if gr.crack.tip_ends else None
+        # collective; its errors (a crack leaving the patch) are raised on every rank
+        coefficients = built.solution().coefficients
+        fitted = grow_once(gr, side, model.mls, coefficients, model.material, domain, side.h)
+        if fitted is not None:
+            k = next(i for i, c in enumerate(model.cohesive) if c.crack is gr.crack)
+            model.cohesive[k] = gr.extended(model.cohesive[k], end)
+            return gr.crack.points[end].tolist(), fitted
+    return None
+
+
+def _rebuild(
+    model: CoupledElasticity | EFGElasticity,
+    built: BlockModel | EFGBlockModel,
+    efg: bool,
+    u: dolfinx.fem.Function | None,
+) -> BlockModel | EFGBlockModel:
+    """The block model of ``model`` after a crack grew (collective): the fields of ``built``
+    carried over, the cohesive faces' committed states carried point by point (the old face
+    points keep their positions; new ones start bonded); ``built`` is destroyed once the new
+    model is built (on an error it is left to the caller)."""
+    state = _owned(built.x)
+    comm = _comm(built)
+    old = {}
+    for side in built.problem.shared:
+        if isinstance(side, CohesiveSide):
+            pts = np.concatenate(comm.allgather(side.points)).reshape(-1, 2)
+            kap = np.concatenate(comm.allgather(side.state.committed["kappa"][:, 0]))
+            old[id(side.cohesive.crack)] = (pts, kap, side.h)
+    if efg:
+        new = model.block_model()
+        for v, a in zip(new.x, state, strict=True):
+            v.array[:] = a
+    else:
+        new = build_block_problem(model, law_internal_force(model.law, u), u, model.law, state)
+    built.destroy()
+    for side in new.problem.shared:
+        if isinstance(side, CohesiveSide) and id(side.cohesive.crack) in old:
+            pts, kap, h = old[id(side.cohesive.crack)]
+            if len(side.points) and len(pts):
+                dist, k = cKDTree(pts).query(side.points)
+                same = dist <= 1e-9 * h
+                side.state.committed["kappa"][same, 0] = kap[k[same]]
+            side.state.restore()
+    return new
+
+
 def _destroy_all(objects: Sequence) -> None:
     for obj in objects:
         obj.destroy()
@@ -463,6 +558,7 @@ def follow_path(
     solver: str | SolverOptions = "mumps",
     on_step: Callable[[int, float, float], None] | None = None,
     monitors: dict[str, DisplacementControl] | None = None,
+    growth: CohesiveGrowth | Sequence[CohesiveGrowth] | None = None,
 ) -> PathResult:
     """Follow the equilibrium path of ``model`` by indirect displacement control (collective).
 
@@ -482,6 +578,12 @@ def follow_path(
         on_step: Called as ``on_step(step, t, tau)`` after every converged step.
         monitors: Other quantities of the same kind recorded at every converged step (e.g. the
             deflection under the load), in :attr:`PathResult.monitors` by name.
+        growth: Cohesive cracks that find their path
+            (:class:`~dolfinx_meshfree.statics.cohesive_growth.CohesiveGrowth`): after a
+            converged step a crack whose softening front nears its tip grows, the model is
+            rebuilt on it (the faces' states carried) and brought back to equilibrium at the same
+            control value, then checked again. With an elastic bulk and indirect displacement
+            control; :attr:`PathResult.extensions` records each growth.
 
     Returns:
         The :class:`PathResult`.
@@ -497,6 +599,8 @@ def follow_path(
     t0 = time.perf_counter()
     cracks = model.cracks if efg else model.patch.cracks
     raise_on_all_ranks(comm, lambda: check_through(cracks, model.cohesive))
+    growths = [] if growth is None else [growth] if isinstance(growth, CohesiveGrowth) else growth
+    raise_on_all_ranks(comm, lambda: _check_growth(model, efg, growths, control, cracks))
     if efg:
         if isinstance(model.material, LinearElastic) and not model.cohesive:
             raise ValueError(
@@ -504,7 +608,7 @@ def follow_path(
                 "finite-strain law) or cohesive cracks (add_cohesive): a LinearElastic model's "
                 "path is a straight line; solve it"
             )
-        built = model.block_model()
+        built, u = model.block_model(), None
     else:
         u = dolfinx.fem.Function(model.V)
         u.x.array[:] = 0.0
@@ -592,6 +696,65 @@ def follow_path(
             local = 0.5 * (t + t_new) * sum(float(f @ d) for f, d in zip(f_ext, dx, strict=True))
             work += comm.allreduce(local)
             t, tau, step = t_new, target, step + 1
+            for _ in range(max((gr.max_extensions for gr in growths), default=0) + 1):
+                grown = _grow(built, growths, model, efg)
+                if grown is None:
+                    break
+                grown, fitted = grown
+                result.extensions.append((step, tau, grown))
+                # the model on the longer crack, the faces' states carried, the particle field
+                # refitted across the new segment, back to equilibrium at the same control value
+                # (the work of the load on the way recorded)
+                old = _owned(x)
+                try:
+                    built = _rebuild(model, built, efg, u)
+                except MomentMatrixError as err:  # raised on every rank
+                    raise PathError(
+                        f"at step {step} (control {tau:.6g}, load factor {t:.6g}) the crack grew "
+                        f"to {grown} and the MLS cannot be evaluated beside it ({err}); choose a "
+                        "finer particle spacing or a larger dilation",
+                        result,
+                    ) from None
+                problem, x = built.problem, built.x
+                side = built.particles
+                lo, hi = x[k_p].getOwnershipRange()
+                mine = (side.dof_map >= lo) & (side.dof_map < hi)
+                x[k_p].array[side.dof_map[mine] - lo] = fitted[mine]
+                g = _control_function(built, control)
+                watch = {k: _control_function(built, c) for k, c in (monitors or {}).items()}
+                problem.t = t
+                try:
+                    t_new, its_g = _bordered_step(
+                        problem, x, t, tau, g, q, tol, stall, options, solver
+                    )
+                except ArithmeticError as err:
+                    raise PathError(
+                        f"at step {step} (control {tau:.6g}, load factor {t:.6g}) the crack grew "
+                        f"to {grown} and no equilibrium was found at the same control value "
+                        f"({err}); choose a smaller increment or a larger CohesiveGrowth.ahead",
+                        result,
+                    ) from None
+                its += its_g
+                problem.t = t_new
+                problem.commit(x)
+                dx = [
+                    a.getArray(readonly=True) - b
+                    for a, b in zip(x[: k_p + 1], old[: k_p + 1], strict=True)
+                ]
+                local = (
+                    0.5 * (t + t_new) * sum(float(f @ d) for f, d in zip(f_ext, dx, strict=True))
+                )
+                work += comm.allreduce(local)
+                t = t_new
+            else:
+                raise PathError(
+                    f"at step {step} (control {tau:.6g}, load factor {t:.6g}) the crack grew "
+                    f"{len(result.extensions)} times and its softening front still reaches "
+                    "within CohesiveGrowth.ahead of the tip: the crack runs at a constant control "
+                    "value (a snap-back this control cannot follow); choose a control that grows "
+                    "through the failure, or a smaller increment",
+                    result,
+                )
             if arc:
                 previous = previous_new
             peak = max(peak, t)

@@ -59,7 +59,7 @@ from ..parallel import raise_on_all_ranks
 from ..physics.body_loads import BodyForce, accumulate
 from ..physics.materials import LinearElastic
 from ..physics.state import is_stateful
-from .coupled import COMPONENT_COUPLINGS, COUPLINGS, CoupledElasticity, CoupledSolution
+from .coupled import COUPLINGS, CoupledElasticity, CoupledSolution
 from .petsc import SolverOptions, solver_options
 
 __all__ = ["CoupledLinearProblem", "FormBodyForce"]
@@ -79,7 +79,7 @@ class CoupledLinearProblem:
         a: Bilinear UFL form on the vector P1/Q1 space ``V`` (cell integrals only).
         L: Linear UFL form on ``V`` (cell and exterior-facet integrals).
         bcs: ``DirichletBC`` objects on ``V`` (all components) or on ``V.sub(i)`` (one
-            component, e.g. a symmetry plane or a roller; couplings
+            component, e.g. a symmetry plane or a roller; every coupling,
             :data:`COMPONENT_COUPLINGS`): FE dofs held strongly, patch facets whose nodes all
             hold the component get a multiplier on that component only.
         patch: :class:`~dolfinx_meshfree.ParticlePatch` on ``V``'s mesh.
@@ -154,18 +154,6 @@ class CoupledLinearProblem:
             values.ravel()[dofs] = vals
         fixed = count.all(axis=1)
         held = count.astype(bool) & ~fixed[:, None]  # dofs held by component (V.sub(i))
-        bad = held.any() and problem.coupling not in COMPONENT_COUPLINGS
-
-        def check_coupling() -> None:
-            if bad:
-                raise ValueError(
-                    f"bcs on a subspace V.sub(i) with coupling={problem.coupling!r}: conditions "
-                    f"on one component are supported with the couplings "
-                    f"{list(COMPONENT_COUPLINGS)}; constrain all components, or choose one of "
-                    "those couplings"
-                )
-
-        raise_on_all_ranks(patch.comm, check_coupling)
         problem.strong.append((fixed, values))
         if patch.comm.allreduce(int(held.any()), op=MPI.MAX):
             problem.strong.append((held, values))

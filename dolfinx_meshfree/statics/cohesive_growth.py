@@ -1,0 +1,366 @@
+"""A cohesive crack that finds its path: its bonded tip kept ahead of the softening zone, each new
+segment normal to the largest principal stress at the front.
+
+The faces of :class:`~dolfinx_meshfree.LinearCohesive` are intrinsic: bonded by the penalty
+``K_0`` until the normal traction reaches ``f_t``. A bonded stretch of crack is therefore (up to
+the penalty's few per cent of stiffening, :mod:`~dolfinx_meshfree.statics.cohesive`) the uncut
+body, and its faces carry no state while they stay on the elastic branch. The crack is grown
+ahead of where the material fails, not where it has failed:
+
+* **when:** after every converged step of :func:`~dolfinx_meshfree.follow_path`, the *front* is
+  the face point nearest the tip whose faces have softened (``kappa > w_0``: the normal traction
+  has reached ``f_t``, a stress criterion at the faces, not averaged); when it comes within
+  ``ahead`` particle spacings of the tip, the crack grows by ``step`` spacings;
+* **where:** normal to the largest principal stress averaged about the front with the Gaussian
+  weight ``exp(-r^2 / (2 l^2))``, ``l = radius`` spacings, over the disc ``r <= 3 l`` (the
+  nonlocal direction of Wells & Sluys 2001, "A new method for modelling cohesive cracks using
+  finite elements", IJNME 50, sec. 4.1, there with ``l = 3`` element sizes), leaving out the
+  points within ``clearance`` spacings of the crack: beside the cut the one-sided fields carry a
+  stress parallel to the crack that is not there (in the notched beam at its peak, 1.3 mm from
+  the crack, ``sigma_yy`` 4.15 MPa against ``sigma_xx`` 3.03, falling to 0.3 against 1.85 at
+  25 mm: with it the averaged direction turned a mode I crack sideways). At the front, not at
+  the tip: ahead of a bending beam's process zone the bulk is in compression;
+* **to the boundary:** an extension that would end within one spacing of the exterior boundary
+  (a tip must stay a spacing inside) runs straight to it: the crack then splits the body (it
+  must be ``Crack(..., through=True)``) and stops growing.
+
+So new faces are inserted where the bulk is still below ``f_t`` (the tip ``ahead`` spacings in
+front of the softening zone; an extension at the front itself inserts faces already past ``w_0``,
+and the crack runs through the body in one step), the bulk stays elastic, and the faces already
+there keep their state: the model is rebuilt on the longer crack, the faces' states carried
+point by point (their positions do not change; the new ones start bonded), the coefficients of
+the particles whose supports the new segment cuts refitted to the field before it grew
+(:class:`_FieldFit`), and the model brought back to equilibrium at the same control value. A
+bulk law with state would need its state carried to the new cut cells' quadrature: refused.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+from mpi4py import MPI
+
+from ..geometry.crack import Crack, gathered_segments, point_segment_distance
+from ..geometry.particles import _points_in_cells
+from ..parallel import raise_on_all_ranks
+from .cohesive import CohesiveCrack, CohesiveSide
+
+if TYPE_CHECKING:  # annotations only
+    from ..approx.mls import MLS
+    from ..geometry.crack import CrackDomain
+    from ..geometry.patch import ParticlePatch
+    from ..physics.materials import LinearElastic
+
+__all__ = [
+    "CohesiveGrowth",
+    "arc_length",
+    "grow_once",
+    "principal_direction",
+    "ray_to_boundary",
+    "softening_front",
+]
+
+
+@dataclass(frozen=True)
+class CohesiveGrowth:
+    """Let a cohesive crack find its path in :func:`~dolfinx_meshfree.follow_path` (module
+    docstring). The crack's faces must carry a law (``add_cohesive``) on the segment that ends at
+    its tip; the segments added are cohesive too.
+
+    Args:
+        crack: The crack (one of the model's, with one tip).
+        ahead: Particle spacings kept between the softening front and the tip (> ``step``).
+        step: The length of one extension, in particle spacings.
+        radius: The Gaussian averaging length ``l`` of the direction, in particle spacings.
+        max_extensions: Extensions allowed after one step of the path (a crack that would run
+            further at one control value is a snap-back the control cannot follow: PathError).
+        clearance: Particle spacings about the crack left out of the average (its faces' near
+            field, module docstring); 0 keeps every point.
+    """
+
+    crack: Crack
+    ahead: float = 3.0
+    step: float = 1.0
+    radius: float = 1.0
+    max_extensions: int = 20
+    clearance: float = 1.5
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.crack, Crack):
+            raise TypeError(f"crack must be a Crack, got {type(self.crack).__name__}")
+        for name in ("ahead", "step", "radius"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
+                raise ValueError(f"{name}={v!r} must be a positive number of particle spacings")
+        if self.ahead <= self.step:
+            raise ValueError(
+                f"ahead={self.ahead!r} must exceed step={self.step!r}: after an extension the "
+                "tip must still be ahead of the softening front"
+            )
+        c = self.clearance
+        if isinstance(c, bool) or not (isinstance(c, int | float) and np.isfinite(c) and c >= 0):
+            raise ValueError(f"clearance={c!r} must be a number of particle spacings >= 0")
+        n = self.max_extensions
+        if isinstance(n, bool) or not (isinstance(n, int) and n >= 1):
+            raise ValueError(f"max_extensions={n!r} must be an integer >= 1")
+
+    def check(self, cohesive: Sequence[CohesiveCrack], cracks: Sequence[Crack]) -> int:
+        """The index in ``cohesive`` of this crack's faces; ValueError naming what is missing."""
+        if not any(self.crack is c for c in cracks):
+            raise ValueError(
+                f"CohesiveGrowth: {self.crack!r} is not one of the model's cracks; pass the Crack "
+                "object given to the ParticlePatch (or EFGElasticity)"
+            )
+        k = next((i for i, c in enumerate(cohesive) if c.crack is self.crack), None)
+        if k is None:
+            raise ValueError(
+                f"CohesiveGrowth: {self.crack!r} carries no traction-separation law; add one with "
+                "model.add_cohesive(crack, LinearCohesive(...)) before following the path"
+            )
+        if len(self.crack.tip_ends) != 1:
+            raise ValueError(
+                f"CohesiveGrowth: {self.crack!r} has {len(self.crack.tip_ends)} tips; a growing "
+                "crack has one (an edge crack from a notch)"
+            )
+        segs = cohesive[k].segments
+        last = 0 if self.crack.tip_ends[0] == 0 else len(self.crack.points) - 2
+        if segs is not None and last not in segs:
+            raise ValueError(
+                f"CohesiveGrowth: the segment {last} of {self.crack!r} at its tip is not cohesive "
+                f"(segments={segs}); the crack grows from faces that carry the law"
+            )
+        return k
+
+    def extended(self, cohesive: CohesiveCrack, end: int) -> CohesiveCrack:
+        """``cohesive`` after the crack grew by one segment at ``end`` (0: a segment prepended,
+        -1: appended), which carries the law too."""
+        if cohesive.segments is None:
+            return cohesive
+        if end == 0:
+            segs = (0, *(s + 1 for s in cohesive.segments))
+        else:
+            segs = (*cohesive.segments, len(self.crack.points) - 2)
+        return replace(cohesive, segments=tuple(sorted(set(segs))))
+
+
+def softening_front(side: CohesiveSide, tip: np.ndarray) -> np.ndarray | None:
+    """The face point of ``side`` nearest ``tip`` whose faces have softened (committed ``kappa >
+    w_0``: the normal traction reached ``f_t``), or ``None`` (collective, the same on every
+    rank)."""
+    kappa = side.state.committed["kappa"][:, 0]
+    soft = side.points[kappa > side.law.w_0]
+    mine = soft[np.argmin(np.linalg.norm(soft - tip, axis=1))] if len(soft) else None
+    found = [p for p in side.comm.allgather(mine) if p is not None]
+    if not found:
+        return None
+    found = np.asarray(found)
+    return found[np.argmin(np.linalg.norm(found - tip, axis=1))]
+
+
+def arc_length(crack: Crack, x: np.ndarray, end: int) -> tuple[np.ndarray, np.ndarray]:
+    """Arc length along ``crack`` from its end ``end`` (0 or -1) towards the other end... of
+    the nearest point of the polyline to each of ``x`` (m, 2), and the unit direction of the
+    segment it lies on, pointing to the end ``end`` (local)."""
+    pts = crack.points if end == -1 else crack.points[::-1]
+    a, b = pts[:-1], pts[1:]
+    t = b - a
+    seg_len = np.linalg.norm(t, axis=1)
+    k = point_segment_distance(x, a, b).argmin(axis=1)
+    xi = np.clip(np.einsum("md,md->m", x - a[k], t[k]) / seg_len[k] ** 2, 0.0, 1.0)
+    start = np.concatenate([[0.0], np.cumsum(seg_len)])[:-1]
+    s = start[k] + xi * seg_len[k]
+    return s, t[k] / seg_len[k][:, None]
+
+
+def principal_direction(
+    mls: MLS,
+    coefficients: np.ndarray,
+    material: LinearElastic,
+    centre: np.ndarray,
+    length: float,
+    along: np.ndarray,
+    domain: ParticlePatch | CrackDomain | None = None,
+    crack: Crack | None = None,
+    clearance: float = 0.0,
+) -> np.ndarray:
+    """The unit direction normal to the largest principal stress averaged about ``centre``
+    (Gaussian weight of length ``length`` over the disc of radius ``3 length``; polar rule of 8
+    rings x 24 rays), oriented with ``along``; ``along`` itself where the averaged stress is
+    compressive all round (a front next to a beam's compression zone: no tension to turn to).
+    The points within ``clearance`` of ``crack`` are left out; with ``domain`` (collective), so
+    are those outside its cells (beyond the body's edge, or on the FE side); without, local. The
+    same on every rank for replicated coefficients.
+    """
+    r = (np.arange(8) + 0.5) / 8 * 3.0 * length
+    a = (np.arange(24) + 0.5) / 24 * 2.0 * np.pi  # symmetric under reflections in x and y
+    R, A = np.meshgrid(r, a, indexing="ij")
+    x = centre + np.stack([R * np.cos(A), R * np.sin(A)], axis=-1).reshape(-1, 2)
+    w = (np.exp(-0.5 * (R / length) ** 2) * R).ravel()
+    if crack is not None:  # the faces' near field (a spurious parallel stress) left out
+        far = crack.distance(x) >= clearance
+        x, w = x[far], w[far]
+    if domain is not None:
+        inside = _points_in_cells(domain.mesh, x, domain.cells).astype(np.int32)
+        domain.comm.Allreduce(MPI.IN_PLACE, inside, op=MPI.MAX)
+        x, w = x[inside > 0], w[inside > 0]
+    grad = mls.tabulate(x).gradient(coefficients)
+    sigma = np.einsum("q,qij->ij", w, material.stress(grad)) / w.sum()
+    vals, vecs = np.linalg.eigh(0.5 * (sigma + sigma.T))
+    if vals.max() <= 0.0:  # compressed all round: no tension to turn to; straight on
+        return along / np.linalg.norm(along)
+    n = vecs[:, np.argmax(vals)]
+    d = np.array([-n[1], n[0]])
+    return d if d @ along >= 0 else -d
+
+
+def ray_to_boundary(
+    domain: ParticlePatch | CrackDomain, start: np.ndarray, direction: np.ndarray
+) -> float:
+    """Distance from ``start`` along ``direction`` to the nearest exterior facet it meets
+    (``inf`` if none; collective)."""
+    seg = gathered_segments(domain, domain.exterior_facets)
+    a, b = seg[:, 0], seg[:, 1]
+    t = b - a
+    # start + s d = a + u t: [d, -t] (s, u) = a - start, by Cramer's rule
+    det = direction[1] * t[:, 0] - direction[0] * t[:, 1]
+    rhs = a - start
+    ok = np.abs(det) > 1e-14 * np.linalg.norm(t, axis=1)
+    safe = np.where(ok, det, 1.0)
+    s = np.where(ok, (rhs[:, 1] * t[:, 0] - rhs[:, 0] * t[:, 1]) / safe, -1.0)
+    u = np.where(ok, (direction[0] * rhs[:, 1] - direction[1] * rhs[:, 0]) / safe, -1.0)
+    hit = ok & (s > 0) & (u >= -1e-12) & (u <= 1 + 1e-12)
+    return float(s[hit].min()) if hit.any() else np.inf
+
+
+def grow_once(
+    growth: CohesiveGrowth,
+    side: CohesiveSide,
+    mls: MLS,
+    coefficients: np.ndarray,
+    material: LinearElastic,
+    domain: ParticlePatch | CrackDomain,
+    h: float,
+) -> np.ndarray | None:
+    """Extend ``growth.crack`` by one step when its softening front is within ``ahead`` spacings
+    of the tip (collective): the particle coefficients refitted to the field before it grew
+    (:class:`_FieldFit`), or ``None`` when it did not grow. A crack that would leave the patch
+    raises the validator's ValueError (every rank)."""
+    crack = growth.crack
+    if not crack.tip_ends:
+        return None
+    end = crack.tip_ends[0]
+    tip = crack.points[end]
+    front = softening_front(side, tip)
+    if front is None or np.linalg.norm(front - tip) >= growth.ahead * h:
+        return None
+    comm = side.comm
+    along = arc_length(crack, front[None], end)[1][0]  # the crack's direction at the front
+    d = raise_on_all_ranks(
+        comm,
+        lambda: principal_direction(
+            mls, coefficients, material, front, growth.radius * h, along, domain, crack,
+            growth.clearance * h,
+        ),
+    )  # fmt: skip
+    length = growth.step * h
+    to_edge = ray_to_boundary(domain, tip, d)
+    through = to_edge <= length + h  # run to the boundary (a tip stays h inside): it splits
+
+    def check() -> None:
+        if through and not crack.through:
+            raise ValueError(
+                f"the growing crack {crack!r} reaches the exterior boundary at "
+                f"{(tip + to_edge * d).round(6).tolist()}: it would split the body; give "
+                "Crack(..., through=True) so that its cohesive faces hold the parts together"
+            )
+
+    raise_on_all_ranks(comm, check)
+    if not through:
+        _check_interface_clearance(mls, domain, tip + length * d)
+    new_end = tip + (to_edge if through else length) * d
+    fit = _FieldFit(mls, coefficients, crack, tip, new_end, domain, h)
+    crack.extend(d, to_edge if through else length, tip=end)  # through: the end is a mouth
+    return fit.refit(comm)
+
+
+class _FieldFit:
+    """The particle coefficients after a crack grew, fitted to the field before it grew.
+
+    The new segment cuts the supports of the particles around it: with the same coefficients the
+    one-sided fields on its two sides differ, a jump the new bonded faces (penalty ``K_0 = 30 E /
+    h``) would turn into large forces, and Newton, started there, lost the path when the crack
+    split a plate. The coefficients of the particles whose supports meet the new segment are
+    instead refitted, by least squares at points of their supports off the crack, to the field
+    before it grew, which is continuous there: the new faces start bonded with (nearly) no jump.
+    Built before :meth:`Crack.extend`, :meth:`refit` after it.
+    """
+
+    def __init__(
+        self,
+        mls: MLS,
+        coefficients: np.ndarray,
+        crack: Crack,
+        a: np.ndarray,
+        b: np.ndarray,
+        domain: ParticlePatch | CrackDomain,
+        h: float,
+    ) -> None:
+        self.mls, self.crack, self.h = mls, crack, h
+        self.c = np.asarray(coefficients, dtype=float).reshape(mls.num_particles, -1)
+        self.a, self.b = a, b
+        self.affected = np.flatnonzero(
+            point_segment_distance(mls.points[:, :2], a[None], b[None])[:, 0] < mls.radii
+        )
+        lo = np.minimum(a, b) - 2.0 * mls.radii.max()
+        hi = np.maximum(a, b) + 2.0 * mls.radii.max()
+        n = np.maximum(2, np.ceil((hi - lo) / (0.5 * h)).astype(int) + 1)
+        gx, gy = np.meshgrid(np.linspace(lo[0], hi[0], n[0]), np.linspace(lo[1], hi[1], n[1]))
+        x = np.stack([gx.ravel(), gy.ravel()], axis=1)
+        pa = mls.points[self.affected, :2]
+        near = np.zeros(len(x), dtype=bool)
+        for p, r in zip(pa, mls.radii[self.affected], strict=True):
+            near |= np.linalg.norm(x - p, axis=1) < r
+        off = point_segment_distance(x, a[None], b[None])[:, 0] > 0.05 * h
+        x = x[near & off & (crack.distance(x) > 0.05 * h)]
+        inside = _points_in_cells(domain.mesh, x, domain.cells).astype(np.int32)
+        domain.comm.Allreduce(MPI.IN_PLACE, inside, op=MPI.MAX)
+        self.x = x[inside > 0]
+        self.u_old = mls.tabulate(self.x, 0).values @ self.c if len(self.x) else None
+
+    def refit(self, comm: MPI.Comm) -> np.ndarray:
+        """The coefficients (interleaved, original order, the same on every rank) after the
+        crack grew: those of the affected particles refitted (collective)."""
+        c = self.c.copy()
+        if comm.rank == 0 and self.affected.size and len(self.x) >= self.affected.size:
+            phi = self.mls.tabulate(self.x, 0).values.tocsc()
+            rest = np.setdiff1d(np.arange(self.c.shape[0]), self.affected)
+            rhs = self.u_old - phi[:, rest] @ self.c[rest]
+            c[self.affected] = np.linalg.lstsq(phi[:, self.affected].toarray(), rhs, rcond=None)[0]
+        return comm.bcast(c.ravel(), root=0)
+
+
+def _check_interface_clearance(
+    mls: MLS, domain: ParticlePatch | CrackDomain, tip: np.ndarray
+) -> None:
+    """Refuse a new tip closer to the FE interface than the largest support radius of the
+    particles around it (as :func:`~dolfinx_meshfree.attach_cracks` does for the given tips: the
+    cut would change shape functions the FE side cannot follow). Collective."""
+    iface = gathered_segments(domain, domain.interface_facets)
+    if not iface.size:
+        return
+    near = np.linalg.norm(mls.points - tip, axis=1) < mls.radii
+    r = float(mls.radii[near].max(initial=0.0))
+    d = float(point_segment_distance(tip[None], iface[:, 0], iface[:, 1]).min())
+
+    def check() -> None:
+        if d < r:
+            raise ValueError(
+                f"the growing crack's next tip {tip.round(6).tolist()} would be {d:.3g} from the "
+                f"FE interface, less than the support radius {r:.3g} there: the crack would leave "
+                "what the particle patch can carry; enlarge the patch along the crack's path"
+            )
+
+    raise_on_all_ranks(domain.comm, check)

@@ -43,6 +43,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from mpi4py import MPI
 
+from ..approx.mls import MomentMatrixError
 from ..geometry.crack import Crack, gathered_segments, point_segment_distance
 from ..geometry.particles import _points_in_cells
 from ..parallel import raise_on_all_ranks
@@ -161,9 +162,9 @@ def softening_front(side: CohesiveSide, tip: np.ndarray) -> np.ndarray | None:
 
 
 def arc_length(crack: Crack, x: np.ndarray, end: int) -> tuple[np.ndarray, np.ndarray]:
-    """Arc length along ``crack`` from its end ``end`` (0 or -1) towards the other end... of
-    the nearest point of the polyline to each of ``x`` (m, 2), and the unit direction of the
-    segment it lies on, pointing to the end ``end`` (local)."""
+    """For each of ``x`` (m, 2): the arc length of the nearest point of the polyline, measured
+    from the end opposite ``end`` (0 or -1: the tip), and the unit direction of the segment it
+    lies on, pointing towards ``end`` (local)."""
     pts = crack.points if end == -1 else crack.points[::-1]
     a, b = pts[:-1], pts[1:]
     t = b - a
@@ -282,6 +283,7 @@ def grow_once(
         _check_interface_clearance(mls, domain, tip + length * d)
     new_end = tip + (to_edge if through else length) * d
     fit = _FieldFit(mls, coefficients, crack, tip, new_end, domain, h)
+    fit.before()
     crack.extend(d, to_edge if through else length, tip=end)  # through: the end is a mouth
     return fit.refit(comm)
 
@@ -328,18 +330,35 @@ class _FieldFit:
         inside = _points_in_cells(domain.mesh, x, domain.cells).astype(np.int32)
         domain.comm.Allreduce(MPI.IN_PLACE, inside, op=MPI.MAX)
         self.x = x[inside > 0]
-        self.u_old = mls.tabulate(self.x, 0).values @ self.c if len(self.x) else None
 
     def refit(self, comm: MPI.Comm) -> np.ndarray:
         """The coefficients (interleaved, original order, the same on every rank) after the
-        crack grew: those of the affected particles refitted (collective)."""
+        crack grew: those of the affected particles refitted on rank 0 and broadcast
+        (collective). Where the MLS cannot be evaluated at a fitting point (a moment matrix
+        too ill-conditioned beside a kink of the crack) the coefficients are left as they were:
+        the re-equilibration then starts from them, and fails with a PathError if it must."""
         c = self.c.copy()
         if comm.rank == 0 and self.affected.size and len(self.x) >= self.affected.size:
-            phi = self.mls.tabulate(self.x, 0).values.tocsc()
-            rest = np.setdiff1d(np.arange(self.c.shape[0]), self.affected)
-            rhs = self.u_old - phi[:, rest] @ self.c[rest]
-            c[self.affected] = np.linalg.lstsq(phi[:, self.affected].toarray(), rhs, rcond=None)[0]
+            try:
+                phi = self.mls.tabulate(self.x, 0).values.tocsc()
+            except MomentMatrixError:
+                phi = None
+            if phi is not None:
+                rest = np.setdiff1d(np.arange(self.c.shape[0]), self.affected)
+                rhs = self.u_old - phi[:, rest] @ self.c[rest]
+                A = phi[:, self.affected].toarray()
+                c[self.affected] = np.linalg.lstsq(A, rhs, rcond=None)[0]
         return comm.bcast(c.ravel(), root=0)
+
+    def before(self) -> None:
+        """The field before the crack grows at the fitting points (local; call it before
+        :meth:`Crack.extend`). Where the MLS cannot be evaluated, nothing is refitted."""
+        self.u_old = None
+        if len(self.x):
+            try:
+                self.u_old = self.mls.tabulate(self.x, 0).values @ self.c
+            except MomentMatrixError:
+                self.x = self.x[:0]
 
 
 def _check_interface_clearance(

@@ -12,12 +12,12 @@
 #   ligament to the top edge as a crack (`mf.Crack(..., through=True)`) whose faces carry
 #   `mf.LinearCohesive`: bonded until the normal traction reaches f_t, then linear softening to
 #   zero at w_c = 2 G_f / f_t, closed by contact in compression. The path of a mode I crack in
-#   this beam is known (straight up from the notch) and given by default; `--path found` starts the cohesive crack as a bonded stretch of
-#   four spacings above the notch and lets it grow (`mf.CohesiveGrowth`: the tip kept three
-#   spacings ahead of where the faces reach f_t, each new segment normal to the averaged
-#   principal stress there); it finds the mode I path, vertical to 1e-3 h, with the given path's
-#   peak within 1 % (`tests/test_cohesive_growth.py`; measured at h = 20 and 10 mm in
-#   `benchmarks/bench_concrete_beam.py --path found`).
+#   this beam is known (straight up from the notch) and given by default; `--path found` starts
+#   the cohesive crack as a bonded stretch of four spacings above the notch and lets it grow
+#   (`mf.CohesiveGrowth`: the tip kept three spacings ahead of where the faces reach f_t, each new
+#   segment normal to the averaged principal stress at the front); it finds the mode I path,
+#   vertical to 1e-3 h, with the given path's peak within 1 % (`tests/test_cohesive_growth.py`;
+#   measured at h = 20 and 10 mm in `benchmarks/bench_concrete_beam.py --path found`).
 # * `band`: `mf.RankineDamage` in the bulk, isotropic damage driven by the largest principal
 #   effective stress, linear softening regularised by the crack band (Bažant & Oh 1983); it acts
 #   on the FE cells and the particles alike.

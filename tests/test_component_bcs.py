@@ -300,6 +300,16 @@ def test_roller_patch_test_with_callables(coupling, where):
     """The roller patch test through ``CoupledElasticity.add_dirichlet(..., components=)`` on FE
     and patch facets alike (rollers u_x = 0 on x = 0 and u_y = 0 on y = 0, tractions sigma n
     elsewhere): reproduced to round-off."""
+    sol = _roller_model(coupling, where, MAT).solve()
+    g = np.stack(np.meshgrid(np.linspace(0, 2, 9), np.linspace(0, 1, 5)), -1).reshape(-1, 2)
+    expected = np.stack([2e-3 * g[:, 0], -1e-3 * g[:, 1]], axis=1)
+    assert np.abs(sol.displacement(g) - expected).max() <= 1e-10
+
+
+def _roller_model(coupling: str, where: str, law) -> mf.CoupledElasticity:
+    """The roller patch test's model on [0, 2] x [0, 1] (16 x 8 cells): rollers u_x = 0 on
+    x = 0 and u_y = 0 on y = 0 through ``add_dirichlet(..., components=)``, the tractions of
+    u = (2e-3 x, -1e-3 y) elsewhere; the patch cut by both planes or away from them."""
     msh = box([0.0, 0.0], [2.0, 1.0], [16, 8])
     V = _compat.vector_function_space(msh)
     if where == "cut":
@@ -307,19 +317,15 @@ def test_roller_patch_test_with_callables(coupling, where):
     else:
         cells = cells_where(msh, lambda m: (m[:, 0] > 0.7) & (m[:, 0] < 1.6) & (m[:, 1] > 0.3))
     patch = mf.ParticlePatch(msh, cells, 0.125)
-    model = mf.CoupledElasticity(V, patch, MAT, coupling=coupling)
-    C = MAT.voigt()
-    s = C @ np.array([2e-3, -1e-3, 0.0])
+    model = mf.CoupledElasticity(V, patch, law, coupling=coupling)
+    s = MAT.voigt() @ np.array([2e-3, -1e-3, 0.0])
     sigma = np.array([[s[0], s[2]], [s[2], s[1]]])
     for i in range(2):
         facets = mf.boundary_facets(msh, lambda p, i=i: np.isclose(p[i], 0.0))
         model.add_dirichlet(facets, lambda x: np.zeros_like(x), components=(i,))
     rest = mf.boundary_facets(msh, lambda p: np.isclose(p[0], 2.0) | np.isclose(p[1], 1.0))
     model.add_traction(rest, lambda x, n: n @ sigma)
-    sol = model.solve()
-    g = np.stack(np.meshgrid(np.linspace(0, 2, 9), np.linspace(0, 1, 5)), -1).reshape(-1, 2)
-    expected = np.stack([2e-3 * g[:, 0], -1e-3 * g[:, 1]], axis=1)
-    assert np.abs(sol.displacement(g) - expected).max() <= 1e-10
+    return model
 
 
 def test_callable_component_condition_on_ramps():
@@ -347,27 +353,12 @@ def test_master_slave_holds_components(where):
     agree to round-off (measured 8e-15, 1.2e-14; bound 1e-10), and both hold the rollers exactly.
     Master-slave does not pass the patch test (its slaves' mismatch on the interface): the
     uniform field within 2 % (measured 0.95 %, 1.07 %)."""
-    msh = box([0.0, 0.0], [2.0, 1.0], [16, 8])
-    V = _compat.vector_function_space(msh)
-    if where == "cut":
-        cells = cells_where(msh, lambda m: (m[:, 0] < 1.0) & (m[:, 1] < 0.6))
-    else:
-        cells = cells_where(msh, lambda m: (m[:, 0] > 0.7) & (m[:, 0] < 1.6) & (m[:, 1] > 0.3))
-    s = MAT.voigt() @ np.array([2e-3, -1e-3, 0.0])
-    sigma = np.array([[s[0], s[2]], [s[2], s[1]]])
     j2 = mf.J2Plasticity(E=MAT.E, nu=MAT.nu, sigma_y=1e6, H=10.0, plane="strain")
     g = np.stack(np.meshgrid(np.linspace(0, 2, 9), np.linspace(0, 1, 5)), -1).reshape(-1, 2)
-    x = V.tabulate_dof_coordinates()[:, :2]
     solutions = []
     for law in (MAT, j2):
-        patch = mf.ParticlePatch(msh, cells, 0.125)
-        model = mf.CoupledElasticity(V, patch, law, coupling="master-slave")
-        for i in range(2):
-            facets = mf.boundary_facets(msh, lambda p, i=i: np.isclose(p[i], 0.0))
-            model.add_dirichlet(facets, lambda x: np.zeros_like(x), components=(i,))
-        rest = mf.boundary_facets(msh, lambda p: np.isclose(p[0], 2.0) | np.isclose(p[1], 1.0))
-        model.add_traction(rest, lambda x, n: n @ sigma)
-        sol = model.solve()
+        sol = _roller_model("master-slave", where, law).solve()
+        x = sol.u.function_space.tabulate_dof_coordinates()[:, :2]
         u = sol.u.x.array.reshape(-1, 2)
         for i in range(2):
             assert np.all(u[np.isclose(x[:, i], 0.0), i] == 0.0)

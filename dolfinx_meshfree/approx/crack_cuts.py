@@ -39,7 +39,13 @@ from .mls import MLS, MomentMatrixError
 if TYPE_CHECKING:  # annotations only
     from ..geometry.patch import ParticlePatch
 
-__all__ = ["CRACK_METHODS", "CrackCut", "attach_cracks", "diffraction_distance"]
+__all__ = [
+    "CRACK_METHODS",
+    "CrackCut",
+    "attach_cracks",
+    "diffraction_distance",
+    "support_radius_at",
+]
 
 
 def diffraction_distance(
@@ -182,6 +188,12 @@ class CrackCut:
         )
 
 
+def support_radius_at(mls: MLS, x: np.ndarray) -> float:
+    """The largest support radius of the particles whose supports cover the point ``x`` (0 if
+    none): how far a cut at ``x`` changes the shape functions (local)."""
+    return float(mls.radii[np.linalg.norm(mls.points - x, axis=1) < mls.radii].max(initial=0))
+
+
 def attach_cracks(
     mls: MLS,
     cracks: Sequence[Crack],
@@ -202,15 +214,8 @@ def attach_cracks(
     cut = CrackCut(mls, cracks, method, exponent)
     if patch is not None:
         for crack in cut.cracks:
-            r = max(
-                (
-                    float(
-                        mls.radii[np.linalg.norm(mls.points - t, axis=1) < mls.radii].max(initial=0)
-                    )
-                    for t in crack.tips
-                ),
-                default=0.0,  # a crack through the body has no tip
-            )
+            # a crack through the body has no tip
+            r = max((support_radius_at(mls, t) for t in crack.tips), default=0.0)
             validate_in_patch(crack, patch, clearance=r)
     mls.pair_cuts.append(cut)
     for crack in cut.cracks:

@@ -178,9 +178,8 @@ class MasterSlaveLinks:
 
     Args:
         problem: The :class:`~dolfinx_meshfree.CoupledElasticity`.
-        is_bc, ubc: Strong-condition flags, per local FE node (n,) or per node and component
-            (n, 2) (a roller: :func:`~dolfinx_meshfree.couplings.assembly.fixed_dofs`), and
-            values (n, 2).
+        is_bc, ubc: Strong-condition flags per local FE node and component (n, 2) (whole nodes
+            and rollers: :func:`strong_dofs`) and their values (n, 2).
         slaves: ``"layer"``: the particles on Gamma_I when every interface FE node carries
             one, else the first particle layer, the particles nearest to some stretch of
             Gamma_I (eq. 17–28); ``"band"``: the particles within ``SLAVE_LAYER`` spacings of
@@ -220,8 +219,6 @@ class MasterSlaveLinks:
         coords = V.tabulate_dof_coordinates()[:, :2]
         ends = np.zeros((facets.size, 2, 2))
         nodes = np.zeros((facets.size, 2), dtype=np.int64)
-        flags = np.asarray(is_bc, dtype=bool)
-        flags = np.repeat(flags[:, None], 2, axis=1) if flags.ndim == 1 else flags
         fixed = np.zeros((facets.size, 2, 2), dtype=bool)
         values = np.zeros((facets.size, 2, 2))
         if facets.size:
@@ -232,7 +229,7 @@ class MasterSlaveLinks:
                 d = np.linalg.norm(coords[dofs] - ends[:, k][:, None, :], axis=2)
                 local = dofs[np.arange(facets.size), np.argmin(d, axis=1)]
                 nodes[:, k] = l2g[local]
-                fixed[:, k] = flags[local]
+                fixed[:, k] = is_bc[local]
                 values[:, k] = ubc[local]
         gathered = comm.allgather((ends, nodes, fixed, values))
         self.edges = np.concatenate([g[0] for g in gathered]).reshape(-1, 2, 2)
@@ -589,7 +586,7 @@ def master_slave_operators(
         tables=tables,
         boundary_quadrature=bq,
     )
-    no_bc = np.zeros(l2g.size, dtype=bool)
+    no_bc = np.zeros((l2g.size, 2), dtype=bool)
     links = raise_on_all_ranks(
         comm, lambda: MasterSlaveLinks(problem, no_bc, np.zeros((l2g.size, 2)), slaves)
     )

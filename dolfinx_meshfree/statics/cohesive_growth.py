@@ -36,13 +36,14 @@ bulk law with state would need its state carried to the new cut cells' quadratur
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 from mpi4py import MPI
 
+from ..approx.crack_cuts import support_radius_at
 from ..approx.mls import MomentMatrixError
 from ..geometry.crack import Crack, gathered_segments, point_segment_distance
 from ..geometry.particles import _points_in_cells
@@ -57,7 +58,7 @@ if TYPE_CHECKING:  # annotations only
 
 __all__ = [
     "CohesiveGrowth",
-    "arc_length",
+    "direction_at",
     "grow_once",
     "principal_direction",
     "ray_to_boundary",
@@ -161,19 +162,21 @@ def softening_front(side: CohesiveSide, tip: np.ndarray) -> np.ndarray | None:
     return found[np.argmin(np.linalg.norm(found - tip, axis=1))]
 
 
-def arc_length(crack: Crack, x: np.ndarray, end: int) -> tuple[np.ndarray, np.ndarray]:
-    """For each of ``x`` (m, 2): the arc length of the nearest point of the polyline, measured
-    from the end opposite ``end`` (0 or -1: the tip), and the unit direction of the segment it
-    lies on, pointing towards ``end`` (local)."""
+def direction_at(crack: Crack, x: np.ndarray, end: int) -> np.ndarray:
+    """The unit direction (2,) of the crack's segment nearest the point ``x``, pointing towards
+    its end ``end`` (0 or -1: the tip) (local)."""
     pts = crack.points if end == -1 else crack.points[::-1]
     a, b = pts[:-1], pts[1:]
-    t = b - a
-    seg_len = np.linalg.norm(t, axis=1)
-    k = point_segment_distance(x, a, b).argmin(axis=1)
-    xi = np.clip(np.einsum("md,md->m", x - a[k], t[k]) / seg_len[k] ** 2, 0.0, 1.0)
-    start = np.concatenate([[0.0], np.cumsum(seg_len)])[:-1]
-    s = start[k] + xi * seg_len[k]
-    return s, t[k] / seg_len[k][:, None]
+    k = int(point_segment_distance(x[None], a, b)[0].argmin())
+    t = b[k] - a[k]
+    return t / np.linalg.norm(t)
+
+
+def _inside(domain: ParticlePatch | CrackDomain, x: np.ndarray) -> np.ndarray:
+    """Whether each of ``x`` lies in a cell of ``domain`` on some rank (collective)."""
+    inside = _points_in_cells(domain.mesh, x, domain.cells).astype(np.int32)
+    domain.comm.Allreduce(MPI.IN_PLACE, inside, op=MPI.MAX)
+    return inside > 0
 
 
 def principal_direction(
@@ -204,9 +207,8 @@ def principal_direction(
         far = crack.distance(x) >= clearance
         x, w = x[far], w[far]
     if domain is not None:
-        inside = _points_in_cells(domain.mesh, x, domain.cells).astype(np.int32)
-        domain.comm.Allreduce(MPI.IN_PLACE, inside, op=MPI.MAX)
-        x, w = x[inside > 0], w[inside > 0]
+        inside = _inside(domain, x)
+        x, w = x[inside], w[inside]
     grad = mls.tabulate(x).gradient(coefficients)
     sigma = np.einsum("q,qij->ij", w, material.stress(grad)) / w.sum()
     vals, vecs = np.linalg.eigh(0.5 * (sigma + sigma.T))
@@ -240,14 +242,15 @@ def grow_once(
     growth: CohesiveGrowth,
     side: CohesiveSide,
     mls: MLS,
-    coefficients: np.ndarray,
+    coefficients: Callable[[], np.ndarray],
     material: LinearElastic,
     domain: ParticlePatch | CrackDomain,
     h: float,
 ) -> np.ndarray | None:
     """Extend ``growth.crack`` by one step when its softening front is within ``ahead`` spacings
     of the tip (collective): the particle coefficients refitted to the field before it grew
-    (:class:`_FieldFit`), or ``None`` when it did not grow. A crack that would leave the patch
+    (:class:`_FieldFit`), or ``None`` when it did not grow. ``coefficients()`` gives the current
+    ones, replicated (called only when the crack grows). A crack that would leave the patch
     raises the validator's ValueError (every rank)."""
     crack = growth.crack
     if not crack.tip_ends:
@@ -258,11 +261,12 @@ def grow_once(
     if front is None or np.linalg.norm(front - tip) >= growth.ahead * h:
         return None
     comm = side.comm
-    along = arc_length(crack, front[None], end)[1][0]  # the crack's direction at the front
+    c = coefficients()
+    along = direction_at(crack, front, end)  # the crack's direction at the front
     d = raise_on_all_ranks(
         comm,
         lambda: principal_direction(
-            mls, coefficients, material, front, growth.radius * h, along, domain, crack,
+            mls, c, material, front, growth.radius * h, along, domain, crack,
             growth.clearance * h,
         ),
     )  # fmt: skip
@@ -282,8 +286,7 @@ def grow_once(
     if not through:
         _check_interface_clearance(mls, domain, tip + length * d)
     new_end = tip + (to_edge if through else length) * d
-    fit = _FieldFit(mls, coefficients, crack, tip, new_end, domain, h)
-    fit.before()
+    fit = _FieldFit(mls, c, crack, tip, new_end, domain, h)
     crack.extend(d, to_edge if through else length, tip=end)  # through: the end is a mouth
     return fit.refit(comm)
 
@@ -294,10 +297,11 @@ class _FieldFit:
     The new segment cuts the supports of the particles around it: with the same coefficients the
     one-sided fields on its two sides differ, a jump the new bonded faces (penalty ``K_0 = 30 E /
     h``) would turn into large forces, and Newton, started there, lost the path when the crack
-    split a plate. The coefficients of the particles whose supports meet the new segment are
-    instead refitted, by least squares at points of their supports off the crack, to the field
-    before it grew, which is continuous there: the new faces start bonded with (nearly) no jump.
-    Built before :meth:`Crack.extend`, :meth:`refit` after it.
+    split a plate. The coefficients of the particles whose supports meet the new segment ``a b``
+    are instead refitted, by least squares at points of their supports off the crack, to the
+    field before it grew, which is continuous there: the new faces start bonded with (nearly) no
+    jump. Built before :meth:`Crack.extend` (collective: the points in the domain; the old field
+    there, local), :meth:`refit` after it.
     """
 
     def __init__(
@@ -310,26 +314,31 @@ class _FieldFit:
         domain: ParticlePatch | CrackDomain,
         h: float,
     ) -> None:
-        self.mls, self.crack, self.h = mls, crack, h
+        self.mls = mls
         self.c = np.asarray(coefficients, dtype=float).reshape(mls.num_particles, -1)
-        self.a, self.b = a, b
         self.affected = np.flatnonzero(
             point_segment_distance(mls.points[:, :2], a[None], b[None])[:, 0] < mls.radii
         )
-        lo = np.minimum(a, b) - 2.0 * mls.radii.max()
-        hi = np.maximum(a, b) + 2.0 * mls.radii.max()
+        # a grid of h / 2 over the new segment's neighbourhood: the points in the supports of
+        # the affected particles, off the crack and its new segment, in the domain
+        pad = 2.0 * mls.radii.max()
+        lo, hi = np.minimum(a, b) - pad, np.maximum(a, b) + pad
         n = np.maximum(2, np.ceil((hi - lo) / (0.5 * h)).astype(int) + 1)
         gx, gy = np.meshgrid(np.linspace(lo[0], hi[0], n[0]), np.linspace(lo[1], hi[1], n[1]))
         x = np.stack([gx.ravel(), gy.ravel()], axis=1)
-        pa = mls.points[self.affected, :2]
-        near = np.zeros(len(x), dtype=bool)
-        for p, r in zip(pa, mls.radii[self.affected], strict=True):
-            near |= np.linalg.norm(x - p, axis=1) < r
+        pa, ra = mls.points[self.affected, :2], mls.radii[self.affected]
+        near = (np.linalg.norm(x[:, None, :] - pa[None], axis=2) < ra[None]).any(axis=1)
         off = point_segment_distance(x, a[None], b[None])[:, 0] > 0.05 * h
         x = x[near & off & (crack.distance(x) > 0.05 * h)]
-        inside = _points_in_cells(domain.mesh, x, domain.cells).astype(np.int32)
-        domain.comm.Allreduce(MPI.IN_PLACE, inside, op=MPI.MAX)
-        self.x = x[inside > 0]
+        self.x = x[_inside(domain, x)]
+        # the field before the crack grows; where the MLS cannot be evaluated, nothing is
+        # refitted (the same on every rank)
+        self.u_old = None
+        if len(self.x):
+            try:
+                self.u_old = mls.tabulate(self.x, 0).values @ self.c
+            except MomentMatrixError:
+                self.x = self.x[:0]
 
     def refit(self, comm: MPI.Comm) -> np.ndarray:
         """The coefficients (interleaved, original order, the same on every rank) after the
@@ -350,16 +359,6 @@ class _FieldFit:
                 c[self.affected] = np.linalg.lstsq(A, rhs, rcond=None)[0]
         return comm.bcast(c.ravel(), root=0)
 
-    def before(self) -> None:
-        """The field before the crack grows at the fitting points (local; call it before
-        :meth:`Crack.extend`). Where the MLS cannot be evaluated, nothing is refitted."""
-        self.u_old = None
-        if len(self.x):
-            try:
-                self.u_old = self.mls.tabulate(self.x, 0).values @ self.c
-            except MomentMatrixError:
-                self.x = self.x[:0]
-
 
 def _check_interface_clearance(
     mls: MLS, domain: ParticlePatch | CrackDomain, tip: np.ndarray
@@ -370,8 +369,7 @@ def _check_interface_clearance(
     iface = gathered_segments(domain, domain.interface_facets)
     if not iface.size:
         return
-    near = np.linalg.norm(mls.points - tip, axis=1) < mls.radii
-    r = float(mls.radii[near].max(initial=0.0))
+    r = support_radius_at(mls, tip)
     d = float(point_segment_distance(tip[None], iface[:, 0], iface[:, 1]).min())
 
     def check() -> None:

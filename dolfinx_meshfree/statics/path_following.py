@@ -458,6 +458,21 @@ def _arc_step(
     raise ArithmeticError("not converged")
 
 
+def _work(
+    f_ext: Sequence[np.ndarray],
+    x: Sequence[PETSc.Vec],
+    before: Sequence[np.ndarray],
+    t: float,
+    t_new: float,
+    comm: MPI.Comm,
+) -> float:
+    """The work of the dead loads ``t q`` from ``before`` to ``x`` (the primal fields), by the
+    trapezoidal rule in ``t`` (collective)."""
+    dx = [a.getArray(readonly=True) - b for a, b in zip(x, before, strict=True)]
+    local = sum(float(f @ d) for f, d in zip(f_ext, dx, strict=True))
+    return comm.allreduce(0.5 * (t + t_new) * local)
+
+
 def _check_growth(
     model: CoupledElasticity | EFGElasticity,
     efg: bool,
@@ -497,11 +512,14 @@ def _grow(
     model's cohesive record follows."""
     sides = [s for s in built.problem.shared if isinstance(s, CohesiveSide)]
     domain = model._domain if efg else model.patch
+
+    def coefficients() -> np.ndarray:  # gathered only when a crack grows
+        return built.solution().coefficients
+
     for gr in growths:
         side = next(s for s in sides if s.cohesive.crack is gr.crack)
         end = gr.crack.tip_ends[0] if gr.crack.tip_ends else None
         # collective; its errors (a crack leaving the patch) are raised on every rank
-        coefficients = built.solution().coefficients
         fitted = grow_once(gr, side, model.mls, coefficients, model.material, domain, side.h)
         if fitted is not None:
             k = next(i for i, c in enumerate(model.cohesive) if c.crack is gr.crack)
@@ -687,14 +705,10 @@ def follow_path(
                 continue
             problem.t = t_new
             problem.commit(x)
-            dx = [
-                a.getArray(readonly=True) - b.getArray(readonly=True)
-                for a, b in zip(x[: k_p + 1], saved[: k_p + 1], strict=True)
-            ]
+            before = _owned(saved[: k_p + 1])
             for w in saved:
                 w.destroy()
-            local = 0.5 * (t + t_new) * sum(float(f @ d) for f, d in zip(f_ext, dx, strict=True))
-            work += comm.allreduce(local)
+            work += _work(f_ext, x[: k_p + 1], before, t, t_new, comm)
             t, tau, step = t_new, target, step + 1
             for _ in range(max((gr.max_extensions for gr in growths), default=0) + 1):
                 grown = _grow(built, growths, model, efg)
@@ -737,14 +751,7 @@ def follow_path(
                 its += its_g
                 problem.t = t_new
                 problem.commit(x)
-                dx = [
-                    a.getArray(readonly=True) - b
-                    for a, b in zip(x[: k_p + 1], old[: k_p + 1], strict=True)
-                ]
-                local = (
-                    0.5 * (t + t_new) * sum(float(f @ d) for f, d in zip(f_ext, dx, strict=True))
-                )
-                work += comm.allreduce(local)
+                work += _work(f_ext, x[: k_p + 1], old[: k_p + 1], t, t_new, comm)
                 t = t_new
             else:
                 raise PathError(

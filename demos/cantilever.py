@@ -32,6 +32,7 @@
 #     python demos/cantilever.py --method fe efg --h 3 1.5 1 0.75 0.5 [--json out.json]
 #     mpirun -n 2 python demos/cantilever.py --method efg --h 1
 #     python demos/cantilever.py --method efg --h 1 --probe-in pts.npy --probe-out u.npy
+#     python demos/cantilever.py --method fe efg lagrange --h 0.25 --integration smoothed
 
 # +
 from __future__ import annotations
@@ -96,6 +97,14 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
         default=None,
         help="variationally consistent integration (default: the library's, on for EFG and the "
         "variational couplings, off for master-slave); --no-consistent: the papers' plain Gauss",
+    )
+    p.add_argument(
+        "--integration",
+        choices=mf.INTEGRATIONS,
+        default=None,
+        help="the particle integration of EFG and of the couplings that take the smoothed ones "
+        "(mf.SMOOTHED_COUPLINGS; the others keep their default): 'vci' (the default), "
+        "'smoothed' (symmetric and consistent: LDL^T), 'smoothed-subcells', 'gauss'",
     )
     p.add_argument("--overlap", type=int, default=2, help="bridging: band width in cells")
     p.add_argument(
@@ -235,13 +244,24 @@ def dilation(args, method: str) -> float:
 
 def consistent(args, method: str) -> bool | None:
     """Whether a method runs with consistent integration: ``--consistent`` /
-    ``--no-consistent``, or the library's default (on for EFG and the variational couplings, off
-    for master-slave); ``None`` for FE."""
+    ``--no-consistent``, ``--integration``, or the library's default (on for EFG and the
+    variational couplings, off for master-slave); ``None`` for FE."""
     if method == "fe":
         return None
     if args.consistent is not None:
         return args.consistent
+    if args.integration is not None and method in ("efg", *mf.SMOOTHED_COUPLINGS):
+        return args.integration != "gauss"
     return method != "master-slave"
+
+
+def integration(args, method: str) -> str | None:
+    """The particle integration a method runs with (``None`` for FE and the hybrid)."""
+    if method in ("fe", "hybrid"):
+        return None
+    if args.integration is not None and method in ("efg", *mf.SMOOTHED_COUPLINGS):
+        return args.integration
+    return "vci" if consistent(args, method) else "gauss"
 
 
 def particle_options(args, method: str) -> dict:
@@ -253,6 +273,8 @@ def particle_options(args, method: str) -> dict:
     }
     if args.consistent is not None:  # else the library's default
         options["consistent"] = args.consistent
+    if args.integration is not None and method in ("efg", *mf.SMOOTHED_COUPLINGS):
+        options["integration"] = args.integration
     return options
 
 
@@ -432,6 +454,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
                 "weight": args.weight if method != "fe" else None,
                 "dilation": dilation(args, method) if method != "fe" else None,
                 "consistent": consistent(args, method),
+                "integration": integration(args, method),
                 "balance": args.balance if method in mf.COUPLINGS else None,
             }
             records.append(rec)

@@ -37,6 +37,8 @@
 # ``--integration stress-points`` integrates the particle stiffness of ``efg``, ``lagrange``,
 # ``edge-to-edge`` and ``master-slave`` at the particles and the stress points between them
 # (Rabczuk, Belytschko & Xiao 2004, Lagrangian kernel) instead of the background cells;
+# ``--integration smoothed`` integrates ``efg``, ``lagrange`` and ``master-slave`` with strains
+# smoothed over the cells (symmetric and consistent: ``dolfinx_meshfree.geometry.smoothing``);
 # ``--slaves coincident`` runs master-slave as Johnson's coupling, the particles on the interface
 # fixed to the FE nodes they sit on (Rabczuk et al. 2006, eq. 15-16; particle spacing ``h / k``
 # as for the ramps).
@@ -55,7 +57,7 @@
 #
 #     python demos/rod_gauss.py [--method fe efg lagrange ...] [--nodes 20000] [--ratio 4]
 #         [--center 30] [--t-end 0.023126] [--json out.json] [--probe-in P.npy --probe-out V.npy]
-#         [--sweep 1 2 4 8] [--transits 10] [--integration cells|stress-points]
+#         [--sweep 1 2 4 8] [--transits 10] [--integration cells|stress-points|smoothed]
 #         [--slaves layer|coincident]
 #     mpirun -n 2 python demos/rod_gauss.py --nodes 2000
 
@@ -137,10 +139,11 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     )
     p.add_argument(
         "--integration",
-        choices=("cells", "stress-points"),
+        choices=("cells", "stress-points", "smoothed"),
         default="cells",
         help="particle stiffness of efg, lagrange, edge-to-edge, master-slave: background cells "
-        "or stress points (Lagrangian kernel)",
+        "(Gauss), stress points (Lagrangian kernel) or smoothed strains (symmetric and "
+        "consistent: efg, lagrange, master-slave)",
     )
     p.add_argument(
         "--slaves",
@@ -189,9 +192,10 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     if args.sweep is not None and not all(np.isfinite(r) and r >= 1 for r in args.sweep):
         p.error(f"--sweep ratios must be >= 1, got {args.sweep}")
     if args.integration != "cells":
-        bad = [
-            m for m in args.method if m not in ("efg", "lagrange", "edge-to-edge", "master-slave")
-        ]
+        able = ("fe", "efg", *mf.SMOOTHED_COUPLINGS)
+        if args.integration == "stress-points":
+            able = ("fe", "efg", "lagrange", "edge-to-edge", "master-slave")
+        bad = [m for m in args.method if m not in able]
         if bad:
             p.error(f"--integration {args.integration} is not available for {bad}")
     if args.overlap < 1:
@@ -281,6 +285,7 @@ def build(method: str, args, material, comm):
     dilation = args.dilation
     if dilation is None:
         dilation = mf.DEFAULT_DILATION[method]
+    smoothed = args.integration == "smoothed"  # the problem's own integration
     problem = mf.CoupledElasticity(
         V,
         patch,
@@ -290,9 +295,10 @@ def build(method: str, args, material, comm):
         dilation=dilation,
         quadrature_degree=degree_for(per_cell),
         overlap=args.overlap,
+        **({"integration": "smoothed"} if smoothed else {}),
     )
     options = {}
-    if method in ("lagrange", "edge-to-edge", "master-slave"):
+    if method in ("lagrange", "edge-to-edge", "master-slave") and not smoothed:
         options["integration"] = args.integration
     if method == "master-slave":
         options["slaves"] = getattr(args, "slaves", "layer")
@@ -316,8 +322,9 @@ def variant_label(method: str, args, variant: str | None = None) -> str | None:
     if method == "master-slave" and johnson(args):
         parts.append("coincident")
     if method in ("efg", "lagrange", "edge-to-edge", "master-slave"):
-        if getattr(args, "integration", "cells") != "cells":
-            parts.append("stress-pts")
+        integration = getattr(args, "integration", "cells")
+        if integration != "cells":
+            parts.append({"stress-points": "stress-pts"}.get(integration, integration))
     return " ".join(parts) or None
 
 

@@ -52,6 +52,7 @@ from .geometry.particles import ParticleSet
 from .geometry.partition import PartitionImbalanceWarning, balanced_mesh, work_per_rank
 from .geometry.patch import PLACEMENTS, ParticlePatch
 from .geometry.quadrature import boundary_facets, cell_quadrature, facet_quadrature
+from .geometry.smoothing import INTEGRATIONS
 from .io import DynamicsWriter, ProgressBar, read_particles
 from .physics.cohesive import LinearCohesive
 from .physics.constitutive import Material, NeoHookean, SaintVenantKirchhoff
@@ -64,6 +65,7 @@ from .statics.coupled import (
     COUPLINGS,
     CRACK_COUPLINGS,
     DEFAULT_DILATION,
+    SMOOTHED_COUPLINGS,
     STATIC_CRACK_COUPLINGS,
     CoupledElasticity,
     CoupledSolution,
@@ -99,8 +101,10 @@ __all__ = [
     "DYNAMICS_METHODS",
     "FINITE_STRAIN_COUPLINGS",
     "HYBRID_VARIANTS",
+    "INTEGRATIONS",
     "MLS",
     "PLACEMENTS",
+    "SMOOTHED_COUPLINGS",
     "SPH",
     "STATIC_CRACK_COUPLINGS",
     "AdaptiveQuadrature",

@@ -24,6 +24,7 @@ from .. import _compat
 from ..approx.fe_points import tabulate_in_cells
 from ..geometry.cut_cells import cut_facet_quadrature
 from ..geometry.quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
+from ..geometry.smoothing import STABILISATION, smoothing_rule
 from ..geometry.stress_points import stress_point_quadrature
 from ..parallel import Layout, raise_on_all_ranks
 from ..physics.body_loads import body_load_vectors
@@ -91,15 +92,27 @@ def particle_rule(problem: CoupledElasticity, integration: str) -> QuadraturePoi
 
 
 def patch_rules(
-    problem: CoupledElasticity, integration: str = "cells"
+    problem: CoupledElasticity, integration: str = "cells", facet_degree: int | None = None
 ) -> tuple[QuadraturePoints | None, QuadraturePoints | None]:
     """The particle cell rule and VCI boundary rule of the patch (collective): with cracks in
     the patch, cut cells integrated side by side and the crack faces in the boundary set
     (:func:`~dolfinx_meshfree.statics.efg.crack_rules`; cells only, a ValueError on every rank
-    for stress points); without, :func:`particle_rule` and ``None`` (the facet rule of
+    for stress points); with a smoothed ``problem.integration`` and ``integration="cells"``,
+    the :func:`~dolfinx_meshfree.geometry.smoothing.smoothing_rule` of the patch cells
+    (``facet_degree``: that of the loads' facet rule, default the quadrature degree; explicit
+    dynamics gives :data:`~dolfinx_meshfree.geometry.quadrature.DYNAMIC_FACET_DEGREE`) and
+    ``None``; otherwise :func:`particle_rule` and ``None`` (the facet rule of
     ``patch.boundary()``)."""
     patch = problem.patch
     if not patch.cracks and patch.quadrature is None:
+        smoothed = getattr(problem, "integration", "vci") in STABILISATION
+        if smoothed and integration == "cells":
+            beta = STABILISATION[problem.integration]
+            msh, deg = patch.mesh, problem.quadrature_degree
+            return raise_on_all_ranks(
+                patch.comm,
+                lambda: smoothing_rule(msh, patch.particles.cells, deg, beta, facet_degree),
+            ), None
         return particle_rule(problem, integration), None
 
     def check() -> None:

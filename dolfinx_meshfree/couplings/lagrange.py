@@ -44,7 +44,8 @@ from scipy.spatial import cKDTree
 
 from .. import _compat
 from ..approx.fe_points import tabulate_fe_basis, tabulate_in_cells
-from ..geometry.quadrature import QuadraturePoints, facet_quadrature
+from ..geometry.quadrature import DYNAMIC_FACET_DEGREE, QuadraturePoints, facet_quadrature
+from ..geometry.smoothing import STABILISATION, value_rule
 from ..parallel import Layout, raise_on_all_ranks
 from ..statics.efg import particle_stiffness
 from ..statics.petsc import SolverOptions, create_aij, create_vector
@@ -343,6 +344,43 @@ def projected_normals(problem: CoupledElasticity, bq: QuadraturePoints) -> np.nd
     return normals
 
 
+def check_smoothed_interface(problem: CoupledElasticity) -> None:
+    """Refuse a smoothed integration of the Lagrange coupling where its multipliers cannot
+    carry ``sigma n`` (collective; the error on every rank).
+
+    The smoothed strains give the particles the interface force ``int phi_J sigma n``; the
+    multipliers pass ``int phi_J sigma Pi n`` (:func:`projected_normals`). Where the
+    interface turns at a node whose multiplier is continuous (``corner_angle=None``), ``Pi n
+    != n`` and the linear patch test misses (9e-4 relative L2 on a staircase of cells, against
+    9e-16 with ``corner_angle=30``): refused, naming the first turning point. VCI carries
+    ``Pi n`` in its test gradients instead."""
+    if problem.coupling != "lagrange" or problem.integration not in STABILISATION:
+        return
+    patch = problem.patch
+    iq = facet_quadrature(
+        patch.mesh, patch.interface_facets, problem.quadrature_degree, patch.interface_patch_cells
+    )
+    gap = np.linalg.norm(projected_normals(problem, iq) - iq.normals, axis=1)
+    worst = float(gap.max(initial=0.0))
+    where = iq.points[int(np.argmax(gap))].tolist() if gap.size else None
+    worst_all = problem.patch.comm.allreduce(worst, op=MPI.MAX)
+    if worst_all > 1e-10:
+        points = [w for w, g in problem.patch.comm.allgather((where, worst)) if g == worst_all]
+        fix = (
+            f"give corner_angle={CORNER_ANGLE} (one multiplier per side where it turns) or "
+            "integration='vci'"
+            if patch.mesh.geometry.dim == 2
+            else "give integration='vci' (a 3D interface that is not planar keeps continuous "
+            "multipliers)"
+        )
+        raise ValueError(
+            f"integration={problem.integration!r} with coupling='lagrange': the interface turns "
+            f"(near {np.round(points[0], 6).tolist()}) where its multipliers are continuous, "
+            f"so they pass sigma Pi n (off n by {worst_all:.2e}) and the linear patch test "
+            f"would miss; {fix}"
+        )
+
+
 def interface_interpolant(
     problem: CoupledElasticity, bq: QuadraturePoints, values: sp.csr_matrix
 ) -> sp.csr_matrix:
@@ -452,7 +490,8 @@ def interface_operators(
     boundary = patch.boundary() if problem.consistent else None
     hook = partial(interface_interpolant, problem) if problem.coupling == "edge-to-edge" else None
     tables: dict = {}
-    q, bq = patch_rules(problem, integration)
+    check_smoothed_interface(problem)
+    q, bq = patch_rules(problem, integration, DYNAMIC_FACET_DEGREE)
     Kp_loc, q, tq, _ = particle_stiffness(
         P,
         problem.mls,
@@ -468,6 +507,8 @@ def interface_operators(
         boundary_moments=hook is not None,
         tables=tables,
     )
+    # masses and body loads: a smoothing rule's cell Gauss rule
+    mq, mvalues = raise_on_all_ranks(comm, lambda: value_rule(problem.mls, q, tq))
     if problem.coupling == "lagrange":
         fe_rows, p_rows, ml = lagrange_rows(problem)
     else:
@@ -486,8 +527,8 @@ def interface_operators(
         K_p=create_aij(comm, Kp_loc, pl, pl),
         fe_weight=problem.cell_indicator(~patch.in_patch),
         fe_active=fe_active(problem),
-        particle_quadrature=q,
-        particle_table=tq.values.tocsr(),
+        particle_quadrature=mq,
+        particle_table=mvalues.tocsr(),
         fe_layout=fe_layout,
         particle_layout=pl,
         G_fe=create_aij(comm, G_fe, ml, fe_layout),
@@ -528,6 +569,7 @@ def interface_system(problem: CoupledElasticity, tables: dict | None = None) -> 
     boundary = patch.boundary() if problem.consistent else None
     hook = partial(interface_interpolant, problem) if problem.coupling == "edge-to-edge" else None
     normals = partial(projected_normals, problem) if problem.coupling == "lagrange" else None
+    check_smoothed_interface(problem)
     q, bq = patch_rules(problem)
     Kp_loc, _, _, kt = particle_stiffness(
         P, problem.mls, problem.material, deg, boundary, hook, boundary_normals=normals,

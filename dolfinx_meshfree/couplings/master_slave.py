@@ -121,7 +121,8 @@ from petsc4py import PETSc
 from scipy.spatial import cKDTree
 
 from .. import _compat
-from ..geometry.quadrature import facet_quadrature
+from ..geometry.quadrature import DYNAMIC_FACET_DEGREE, facet_quadrature
+from ..geometry.smoothing import value_rule
 from ..geometry.stress_points import check_integration
 from ..parallel import Layout, raise_on_all_ranks
 from ..statics.efg import facet_multipliers, particle_stiffness
@@ -575,7 +576,7 @@ def master_slave_operators(
     pl = P.dof_layout()
     boundary = patch.boundary() if problem.consistent else None
     tables: dict = {}  # the particle rule, table and test gradients (finite strain)
-    q, bq = patch_rules(problem, integration)
+    q, bq = patch_rules(problem, integration, DYNAMIC_FACET_DEGREE)
     Kp_loc, q, tq, _ = particle_stiffness(
         P,
         problem.mls,
@@ -586,6 +587,8 @@ def master_slave_operators(
         tables=tables,
         boundary_quadrature=bq,
     )
+    # masses and body loads: a smoothing rule's cell Gauss rule
+    mq, mvalues = raise_on_all_ranks(comm, lambda: value_rule(problem.mls, q, tq))
     no_bc = np.zeros((l2g.size, 2), dtype=bool)
     links = raise_on_all_ranks(
         comm, lambda: MasterSlaveLinks(problem, no_bc, np.zeros((l2g.size, 2)), slaves)
@@ -597,8 +600,8 @@ def master_slave_operators(
         K_p=create_aij(comm, Kp_loc, pl, pl),
         fe_weight=problem.cell_indicator(~patch.in_patch),
         fe_active=fe_active(problem),
-        particle_quadrature=q,
-        particle_table=tq.values.tocsr(),
+        particle_quadrature=mq,
+        particle_table=mvalues.tocsr(),
         fe_layout=fe_layout,
         particle_layout=pl,
         reduction=(

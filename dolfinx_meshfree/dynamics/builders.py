@@ -66,6 +66,8 @@ from ..geometry.adaptive_quadrature import AdaptiveQuadrature
 from ..geometry.crack import Crack, CrackDomain, place_crack
 from ..geometry.particles import ParticleSet
 from ..geometry.patch import ParticlePatch
+from ..geometry.quadrature import DYNAMIC_FACET_DEGREE
+from ..geometry.smoothing import STABILISATION, smoothing_rule, value_rule
 from ..geometry.stress_points import check_integration, stress_point_quadrature
 from ..parallel import raise_on_all_ranks
 from ..physics.body_loads import CallableBodyForce, body_load_vectors
@@ -309,10 +311,14 @@ def build_efg(
         particle_mass: ``"row-sum"`` (eq. 4.5) or ``"volume"`` (``rho V_I``).
         fixed_facets: Owned exterior facets held at rest, by facet multipliers on the
             velocities (one per facet and component, corrected each step like eq. 94–96).
-        integration: ``"cells"`` (the Gauss rule of ``quadrature_degree``) or
-            ``"stress-points"``: the particles and the stress points between them, with their
-            volumes and MLS functions of the reference configuration (Lagrangian kernel,
-            computed once at t = 0; Rabczuk, Belytschko & Xiao 2004;
+        integration: ``"cells"`` (the Gauss rule of ``quadrature_degree``), ``"smoothed"``
+            (strains smoothed over each cell, stabilised by the Gauss points' strains:
+            symmetric and consistent, so that the linear patch test is exact in dynamics too,
+            :func:`~dolfinx_meshfree.geometry.smoothing.smoothing_rule`; masses and body loads
+            on the Gauss rule; small strain, no cracks) or ``"stress-points"``: the particles
+            and the stress points between them, with their volumes and MLS functions of the
+            reference configuration (Lagrangian kernel, computed once at t = 0; Rabczuk,
+            Belytschko & Xiao 2004;
             :mod:`~dolfinx_meshfree.geometry.stress_points`); the row-sum masses are then
             ``rho sum_q phi_I(x_q) V_q``.
         cracks: 2D :class:`~dolfinx_meshfree.Crack` polylines in the particles' cells, as in
@@ -347,7 +353,23 @@ def build_efg(
     mls = raise_on_all_ranks(
         comm, lambda: MLS(particles, weight=weight, dilation=dilation, basis=basis)
     )
-    rule = None if integration == "cells" else stress_point_quadrature(particles)
+    if integration == "smoothed" and law is not material:  # the same on every rank
+        raise ValueError(
+            "integration='smoothed' in explicit dynamics is small-strain: its stabilisation is "
+            "a linear elastic term; use integration='cells' with a finite-strain law"
+        )
+    rule = None
+    if integration == "stress-points":
+        rule = stress_point_quadrature(particles)
+    elif integration == "smoothed":
+        msh = particles.mesh
+        cells = particles.cells
+        if cells is None:
+            cells = np.arange(msh.topology.index_map(msh.topology.dim).size_local)
+        beta = STABILISATION["smoothed"]
+        rule = raise_on_all_ranks(
+            comm, lambda: smoothing_rule(msh, cells, quadrature_degree, beta, DYNAMIC_FACET_DEGREE)
+        )
     if cracks or quadrature is not None:  # as EFGElasticity: placed, MLS cut, cut cells
         domain = CrackDomain.from_particles(particles)  # integrated side by side
         for crack in cracks:
@@ -363,7 +385,8 @@ def build_efg(
     )
     pl = particles.dof_layout(particles.gdim)
     K = create_aij(comm, K_loc, pl, pl)
-    mass = particle_lumped_mass(particles, tq.values, q.weights, material.rho, particle_mass)
+    q, values = raise_on_all_ranks(comm, lambda: value_rule(mls, q, tq))  # masses, loads
+    mass = particle_lumped_mass(particles, values, q.weights, material.rho, particle_mass)
     constraint = None
     if groups and comm.allreduce(sum(f.size for f, _ in groups)):
         D, dl = particle_conditions(
@@ -380,7 +403,7 @@ def build_efg(
         np.ndarray | None, np.ndarray | None
     ]:  # int phi_J b on the particle rule (cells or stress points)
         forces = [CallableBodyForce(force)]
-        return body_load_vectors(forces, None, None, quadrature_degree, (q, tq.values), comm=comm)
+        return body_load_vectors(forces, None, None, quadrature_degree, (q, values), comm=comm)
 
     fields = [Field("particles", K, mass, particle_spacing(particles), block_size=particles.gdim)]
     system = None
@@ -510,6 +533,12 @@ def build_coupled(
     check_crack_options(
         bool(problem.patch.cracks), integration, law is not material, problem.patch.comm
     )
+    if STABILISATION.get(getattr(problem, "integration", "vci"), 0.0) > 0.0 and law is not material:
+        raise ValueError(  # the same on every rank
+            f"a problem built with integration={problem.integration!r} runs at small strain in "
+            "explicit dynamics: its stabilisation is a linear elastic term; build the problem "
+            "with integration='vci' for a finite-strain law"
+        )
     t0 = time.perf_counter()
     V, patch, mls = problem.V, problem.patch, problem.mls
     P, comm, msh = patch.particles, patch.comm, V.mesh

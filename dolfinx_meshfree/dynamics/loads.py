@@ -19,7 +19,7 @@ from petsc4py import PETSc
 
 from ..approx.fe_points import tabulate_in_cells
 from ..geometry.cut_cells import cut_facet_quadrature
-from ..geometry.quadrature import facet_quadrature
+from ..geometry.quadrature import DYNAMIC_FACET_DEGREE, facet_quadrature
 from ..parallel import raise_on_all_ranks
 from ..physics.operators import load_vector
 from ..statics.petsc import create_vector
@@ -90,7 +90,7 @@ class ExternalLoads:
         """
         d = self.disc
         msh, gdim = d.mesh, d.gdim
-        deg = 4
+        deg = DYNAMIC_FACET_DEGREE
         facets = np.asarray(facets, dtype=np.int32)
         msh.topology.create_connectivity(msh.topology.dim - 1, msh.topology.dim)
         f2c = msh.topology.connectivity(msh.topology.dim - 1, msh.topology.dim)

@@ -23,6 +23,7 @@ if TYPE_CHECKING:  # annotations only
     import dolfinx.mesh
 
 __all__ = [
+    "DYNAMIC_FACET_DEGREE",
     "QuadraturePoints",
     "boundary_facets",
     "cell_quadrature",
@@ -30,6 +31,12 @@ __all__ = [
     "facet_quadrature",
     "reference_facet_points",
 ]
+
+#: The exactness degree of the facet rule of tractions in explicit dynamics (3 Gauss points on
+#: a segment). The smoothed particle integration of a dynamic model uses it on the cells'
+#: facets, so that the particles' boundary terms and the tractions share one rule (the patch
+#: test, :mod:`~dolfinx_meshfree.geometry.smoothing`).
+DYNAMIC_FACET_DEGREE = 4
 
 
 @dataclass

@@ -52,8 +52,10 @@ if TYPE_CHECKING:  # annotations only
 
 __all__ = ["INTEGRATIONS", "check_integration", "stress_point_quadrature"]
 
-#: Particle integration in explicit dynamics: background cells (Gauss) or stress points.
-INTEGRATIONS = ("cells", "stress-points")
+#: Particle integration in explicit dynamics: background cells (Gauss), stress points, or
+#: strains smoothed over the cells and stabilised (symmetric and consistent,
+#: :mod:`~dolfinx_meshfree.geometry.smoothing`; pure EFG, small strain).
+INTEGRATIONS = ("cells", "stress-points", "smoothed")
 
 
 def check_integration(integration: str) -> str:

@@ -41,6 +41,7 @@ from ..couplings.master_slave import SLAVES
 from ..geometry.crack import Crack
 from ..geometry.partition import warn_imbalance
 from ..geometry.patch import ParticlePatch
+from ..geometry.smoothing import STABILISATION, resolve_integration
 from ..geometry.stress_points import check_integration
 from ..parallel import raise_on_all_ranks
 from ..physics.body_loads import CallableBodyForce
@@ -63,10 +64,13 @@ __all__ = [
     "COUPLINGS",
     "CRACK_COUPLINGS",
     "DEFAULT_DILATION",
+    "SMOOTHED_COUPLINGS",
     "STATIC_CRACK_COUPLINGS",
     "CoupledElasticity",
     "CoupledSolution",
     "CouplingOperators",
+    "check_angle_and_band",
+    "coupled_integration",
 ]
 
 VectorFunction = Callable[[np.ndarray], np.ndarray]
@@ -86,6 +90,70 @@ CRACK_COUPLINGS: tuple[str, ...] = ("lagrange", "edge-to-edge", "bridging")
 #: keeps away from (a tip at least a support radius from the FE interface). Explicit dynamics
 #: keeps :data:`CRACK_COUPLINGS`.
 STATIC_CRACK_COUPLINGS: tuple[str, ...] = (*CRACK_COUPLINGS, "ramp", "ramp-cubic", "master-slave")
+
+#: The couplings whose patch takes the smoothed integrations
+#: (:mod:`~dolfinx_meshfree.geometry.smoothing`): those whose particle block is the plain EFG
+#: block. Lagrange's interface receives ``int phi_J sigma n``, the smoothing's own boundary term
+#: (exact on a straight interface; where the interface turns the multipliers carry ``sigma Pi
+#: n``). Edge-to-edge (its interface values are the interpolant of the particle functions), the
+#: bridging band (weights ``alpha``) and the ramps (blended functions) integrate their interface
+#: with their own terms, which the smoothing does not carry.
+SMOOTHED_COUPLINGS: tuple[str, ...] = ("lagrange", "master-slave")
+
+
+def check_angle_and_band(corner_angle: float | None, particle_band: float | None) -> None:
+    """Refuse a ``corner_angle`` outside (0, 90) degrees or a ``particle_band`` that is not a
+    positive number (local, the same on every rank); ``None`` passes for both."""
+    if corner_angle is not None and not (
+        isinstance(corner_angle, (int, float)) and 0.0 < corner_angle < 90.0
+    ):
+        raise ValueError(
+            f"corner_angle={corner_angle!r} must be None (multipliers continuous along the "
+            "interface, the default) or an angle in degrees between 0 and 90"
+        )
+    if particle_band is not None and not (
+        isinstance(particle_band, int | float) and np.isfinite(particle_band) and particle_band > 0
+    ):
+        raise ValueError(
+            f"particle_band={particle_band!r} must be a positive number (the crack band of a "
+            "particle point in its integration cell's sizes), or None (the MLS dilation)"
+        )
+
+
+def coupled_integration(
+    consistent: bool | None,
+    integration: str | None,
+    coupling: str,
+    patch: ParticlePatch,
+    material: LinearElastic | Material,
+) -> str:
+    """The integration of a coupled model's patch (local, the same on every rank): ``integration``
+    or, without it, ``consistent`` or the coupling's default
+    (:func:`~dolfinx_meshfree.geometry.smoothing.resolve_integration`). A smoothed one is refused
+    with a coupling outside :data:`SMOOTHED_COUPLINGS`, a cracked patch or one with an adaptive
+    quadrature, or, when stabilised, a law that is not linear."""
+    if consistent is None and integration is None:
+        consistent = REGISTRY[coupling].consistent_default
+    integration = resolve_integration(consistent, integration)
+    if integration not in STABILISATION:
+        return integration
+    if coupling not in SMOOTHED_COUPLINGS:
+        raise ValueError(
+            f"integration={integration!r} with coupling={coupling!r}: the smoothing does not carry "
+            f"its interface terms; use one of {list(SMOOTHED_COUPLINGS)}, or integration='vci'"
+        )
+    if patch.cracks or patch.quadrature is not None:
+        raise ValueError(
+            f"integration={integration!r} does not integrate cut cells yet: give "
+            "integration='vci' with a cracked patch or an adaptive quadrature"
+        )
+    if STABILISATION[integration] > 0.0 and not isinstance(material, LinearElastic):
+        raise ValueError(
+            f"integration={integration!r} is stabilised by a linear elastic term that Newton's "
+            f"point-by-point internal force does not carry yet ({type(material).__name__}): give "
+            "integration='vci' or 'smoothed-subcells'"
+        )
+    return integration
 
 
 class CoupledElasticity:
@@ -129,6 +197,10 @@ class CoupledElasticity:
             traction that VCI's identity assumes: with VCI it loses the exact rigid-body motion
             (2e-5 to 4e-4 instead of 3e-14, tests/test_master_slave.py). ``False``: the papers'
             plain Gauss quadrature.
+        integration: ``"vci"``, ``"smoothed"``, ``"smoothed-subcells"`` or ``"gauss"`` (see
+            :class:`~dolfinx_meshfree.EFGElasticity`; ``None``: from ``consistent``). The
+            smoothed ones with :data:`SMOOTHED_COUPLINGS`, no crack and no adaptive
+            quadrature; ``"smoothed"`` with the linear law only.
         particle_band: With a law that softens (:class:`~dolfinx_meshfree.RankineDamage`): the
             crack band width of the particle points, in sizes of their integration cells.
             Default (``None``): the MLS dilation, about one support radius, the narrowest band
@@ -173,27 +245,13 @@ class CoupledElasticity:
         band_width: float | None = None,
         corner_angle: float | None = None,
         particle_band: float | None = None,
+        integration: str | None = None,
     ):
         if coupling not in REGISTRY:
             raise ValueError(
                 f"coupling={coupling!r} is not available; choose one of {list(COUPLINGS)}"
             )
-        if corner_angle is not None and not (
-            isinstance(corner_angle, (int, float)) and 0.0 < corner_angle < 90.0
-        ):
-            raise ValueError(
-                f"corner_angle={corner_angle!r} must be None (multipliers continuous along the "
-                "interface, the default) or an angle in degrees between 0 and 90"
-            )
-        if particle_band is not None and not (
-            isinstance(particle_band, int | float)
-            and np.isfinite(particle_band)
-            and particle_band > 0
-        ):
-            raise ValueError(
-                f"particle_band={particle_band!r} must be a positive number (the crack band of a "
-                "particle point in its integration cell's sizes), or None (the MLS dilation)"
-            )
+        check_angle_and_band(corner_angle, particle_band)
         #: A law that softens: the crack band of a particle point in integration-cell sizes
         #: (``None``: the MLS dilation, :class:`~dolfinx_meshfree.statics.sides.ParticleSide`).
         self.particle_band = particle_band
@@ -237,8 +295,10 @@ class CoupledElasticity:
         self.corner_angle = None if corner_angle is None else float(corner_angle)
         #: The coupling family (:mod:`~dolfinx_meshfree.couplings`).
         self.family = REGISTRY[coupling]()
-        default = self.family.consistent_default
-        self.consistent = default if consistent is None else bool(consistent)
+        #: One of :data:`~dolfinx_meshfree.geometry.smoothing.INTEGRATIONS` (``consistent``:
+        #: VCI corrects the patch's test gradients).
+        self.integration = coupled_integration(consistent, integration, coupling, patch, material)
+        self.consistent = self.integration == "vci"
         self.overlap, self.penalty, self.constraint, self.band_width = check_options(
             overlap, penalty, constraint, band_width
         )
@@ -432,6 +492,8 @@ class CoupledElasticity:
                 symmetric (rod of tests/test_dynamic_couplings.py, two transits: energy drift
                 1.4e-3 to 3.1e-3 instead of 1e-14, velocity error unchanged to 3 %, master-slave
                 +47 %). ``True``: VCI for lagrange, edge-to-edge, bridging and master-slave.
+                A problem built with ``integration="smoothed"`` keeps its smoothed stiffness,
+                symmetric and consistent (:mod:`~dolfinx_meshfree.geometry.smoothing`).
 
         Raises:
             ValueError: on every rank, for an unknown or unsupported option.

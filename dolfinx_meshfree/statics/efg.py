@@ -56,6 +56,15 @@ from ..geometry.quadrature import (
     cell_quadrature,
     facet_quadrature,
 )
+from ..geometry.smoothing import (
+    STABILISATION,
+    SmoothingRule,
+    resolve_integration,
+    smoothed_table,
+    smoothing_rule,
+    stiffness_rows,
+    value_rule,
+)
 from ..parallel import Layout, raise_on_all_ranks
 from ..physics.cohesive import LinearCohesive
 from ..physics.constitutive import Material
@@ -248,6 +257,7 @@ def particle_stiffness(
         boundary_values is not None
         or boundary_moments
         or quadrature is None
+        or isinstance(quadrature, SmoothingRule)
         or (consistent_boundary is not None and boundary_quadrature is None)
     ):  # the edge-to-edge interface terms, or rules not from crack_rules: full rebuild
         local = None
@@ -269,7 +279,11 @@ def particle_stiffness(
         q = cell_quadrature(particles.mesh, quadrature_degree, particles.cells)
     else:
         q = quadrature
-    tq = raise_on_all_ranks(comm, lambda: mls.tabulate(q.points))
+    if isinstance(q, SmoothingRule):  # smoothed strains: symmetric and consistent as they are
+        tq = raise_on_all_ranks(comm, lambda: smoothed_table(mls, q))
+        consistent_boundary = None
+    else:
+        tq = raise_on_all_ranks(comm, lambda: mls.tabulate(q.points))
     test_grads = tq.gradients
     if consistent_boundary is not None:
         facets, cells = consistent_boundary
@@ -304,7 +318,11 @@ def particle_stiffness(
     if tables is not None:
         tables.update(quadrature=q, table=tq, test_gradients=test_grads, approximation=mls)
     t1 = time.perf_counter()
-    Kg = stiffness_matrix(test_grads, q.weights, material, tq.gradients, particles.petsc_index)
+    if isinstance(q, SmoothingRule):  # symmetric
+        rows, weights = raise_on_all_ranks(comm, lambda: stiffness_rows(mls, q, tq))
+        Kg = stiffness_matrix(rows, weights, material, None, particles.petsc_index)
+    else:
+        Kg = stiffness_matrix(test_grads, q.weights, material, tq.gradients, particles.petsc_index)
     timings = {"setup": t1 - t0, "assemble": time.perf_counter() - t1}
     if local is not None:
         cb = consistent_boundary is not None
@@ -543,6 +561,13 @@ class EFGElasticity:
         consistent: Variationally consistent integration (VCI, Chen, Hillman & Rüter 2013; the
             default: the linear patch test passes to round-off). ``False``: plain Gauss
             quadrature of Belytschko et al. 1995 (patch-test error 1e-4 to 6e-4 at 4 x 4 Gauss).
+        integration: ``"vci"`` (the default, as ``consistent=True``), ``"gauss"`` (as
+            ``consistent=False``), ``"smoothed"`` (strains smoothed over each cell and
+            stabilised by the point strains, :mod:`~dolfinx_meshfree.geometry.smoothing`:
+            symmetric and consistent, so that ``solver="mumps"`` factorises by LDL^T) or
+            ``"smoothed-subcells"`` (smoothed over sub-cells, not stabilised: the plain
+            variant). The smoothed ones: linear elasticity (and, subcells only, the laws
+            integrated point by point), not with cracks or an adaptive quadrature yet.
         cracks: 2D :class:`~dolfinx_meshfree.Crack` polylines in the particles' cells (checked by
             :func:`~dolfinx_meshfree.geometry.crack.place_crack`): the MLS weights are cut by
             them (:func:`~dolfinx_meshfree.approx.crack_cuts.attach_cracks`), cut cells are
@@ -565,12 +590,21 @@ class EFGElasticity:
         dilation: float = 2.0,
         basis: str = "linear",
         quadrature_degree: int = 7,
-        consistent: bool = True,
+        consistent: bool | None = None,
         cracks: tuple[Crack, ...] | list[Crack] = (),
         crack_method: str = "diffraction",
         crack_enrichment: bool = False,
         quadrature: AdaptiveQuadrature | None = None,
+        integration: str | None = None,
     ):
+        integration = raise_on_all_ranks(
+            particles.comm, lambda: resolve_integration(consistent, integration)
+        )
+        if integration in STABILISATION and (cracks or quadrature is not None):
+            raise ValueError(
+                f"integration={integration!r} does not integrate cut cells yet: give "
+                "integration='vci' (the default) with cracks or an adaptive quadrature"
+            )
         if particles.mesh is None:
             raise ValueError("EFGElasticity needs particles with a background mesh (mesh=...)")
         if quadrature is not None and not isinstance(quadrature, AdaptiveQuadrature):
@@ -599,7 +633,10 @@ class EFGElasticity:
             particles.comm, lambda: MLS(particles, weight=weight, dilation=dilation, basis=basis)
         )
         self.quadrature_degree = quadrature_degree
-        self.consistent = bool(consistent)
+        #: One of :data:`~dolfinx_meshfree.geometry.smoothing.INTEGRATIONS`.
+        self.integration = integration
+        #: VCI corrects the test gradients (``integration == "vci"``).
+        self.consistent = integration == "vci"
         #: The cracks cutting the particles' shape functions.
         self.cracks = list(cracks)
         self._domain: CrackDomain | None = None
@@ -701,6 +738,9 @@ class EFGElasticity:
         q, bq = crack_rules(
             self.mesh, cells, self.cracks, deg, boundary, quadrature=self.adaptive_quadrature
         )
+        if self.integration in STABILISATION:
+            beta = STABILISATION[self.integration]
+            q = raise_on_all_ranks(comm, lambda: smoothing_rule(self.mesh, cells, deg, beta))
 
         def fq(f: np.ndarray) -> QuadraturePoints:  # facets split at the cracks' mouths
             if self.cracks:
@@ -751,10 +791,12 @@ class EFGElasticity:
             )
             f_loc += load_vector(tab.values, fq.weights, t)
         if self._body is not None:
+            # a smoothing rule's loads on the cells' Gauss rule
+            bq, bvalues = raise_on_all_ranks(comm, lambda: value_rule(self.mls, q, tq))
             b = raise_on_all_ranks(
-                comm, lambda: vector_values(self._body, (q.points,), len(q), "body force", gdim)
+                comm, lambda: vector_values(self._body, (bq.points,), len(bq), "body force", gdim)
             )
-            f_loc += load_vector(tq.values, q.weights, b)
+            f_loc += load_vector(bvalues, bq.weights, b)
         f = create_vector(comm, udofs, dof_map, f_loc)
 
         s = self.material.E
@@ -827,6 +869,13 @@ class EFGElasticity:
         with ``f_int(u) = sum_q B0^T P w_q`` on the cells' quadrature and the stiffness's test
         gradients, from ``u = 0``. Collective."""
         law = self.material
+        if STABILISATION.get(self.integration, 0.0) > 0.0:  # the same on every rank
+            raise ValueError(
+                f"integration={self.integration!r} is stabilised by a linear elastic term that "
+                "Newton's point-by-point internal force does not carry yet: give "
+                "integration='vci' (the default) or 'smoothed-subcells' with a finite-strain "
+                "law, a law with state or cohesive faces"
+            )
         if is_stateful(law) and law.needs_band:  # on every rank, before the assembly
             factor = particle_band_factor(self.mls, None)
             cells = np.ones(self.mesh.topology.index_map(self.mesh.topology.dim).size_local, bool)

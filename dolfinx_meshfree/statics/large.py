@@ -23,6 +23,9 @@ evaluation point) and the factors. :func:`solve_large` solves the same model
   (``h`` the facet size; consistent, so the linear patch test still passes), which keeps the
   system a single positive definite matrix (symmetric without VCI; VCI's Petrov-Galerkin
   test gradients make it slightly unsymmetric);
+* with ``integration="smoothed"`` (:mod:`~dolfinx_meshfree.geometry.smoothing`), chunks of
+  cells whose smoothing domains and Gauss points stay inside the chunk: consistent and
+  symmetric, so that CG solves it;
 * solved by CG (symmetric) or GMRES (with VCI) preconditioned by smoothed-aggregation AMG
   (PETSc GAMG) with the rigid-body modes as near-nullspace, or by MUMPS on the same matrix
   (``direct=True``, the reference);
@@ -62,6 +65,7 @@ from ..geometry.quadrature import (
     cell_quadrature,
     facet_quadrature,
 )
+from ..geometry.smoothing import STABILISATION, smoothed_table, smoothing_rule, stiffness_rows
 from ..parallel import raise_on_all_ranks
 from ..physics.materials import LinearElastic
 from ..physics.operators import (
@@ -423,15 +427,18 @@ def _stiffness_blocks(
     consistent: bool,
     chunk_points: int,
     quadrature: QuadraturePoints | None = None,
+    smoothing: float | None = None,
 ) -> tuple[list[sp.csr_matrix], QuadraturePoints, dict]:
-    """:func:`chunked_stiffness` as :func:`row_blocks` (collective)."""
+    """:func:`chunked_stiffness` as :func:`row_blocks` (collective); ``smoothing``: the
+    stabilisation of a smoothed integration (:func:`_smoothed_chunk`), ``None``: Gauss points
+    (VCI when ``consistent``)."""
     comm = particles.comm
     gdim, n = particles.gdim, particles.num_particles
+    cells = particles.cells
+    if cells is None:
+        msh = particles.mesh
+        cells = np.arange(msh.topology.index_map(msh.topology.dim).size_local)
     if quadrature is None:
-        cells = particles.cells
-        if cells is None:
-            msh = particles.mesh
-            cells = np.arange(msh.topology.index_map(msh.topology.dim).size_local)
         quadrature = cell_quadrature(particles.mesh, quadrature_degree, cells)
     q = quadrature
     tab = asm = 0.0
@@ -450,15 +457,29 @@ def _stiffness_blocks(
         xi = vci_constants(vol, rhs, comm, particles.positions)
         tab += time.perf_counter() - t0
     stack: list[tuple[sp.csr_matrix, int]] = []  # partial sums, merged like a binary counter
-    for s in _chunks(len(q), chunk_points, comm):
+    per_cell = max(len(q) // max(len(cells), 1), 1)
+    chunks = (
+        _chunks(len(q), chunk_points, comm)
+        if smoothing is None
+        else _chunks(len(cells), max(chunk_points // per_cell, 1), comm)
+    )
+    for s in chunks:
         t0 = time.perf_counter()
-        t = raise_on_all_ranks(comm, lambda s=s: mls.tabulate(q.points[s]))
-        test = t.gradients
-        if xi is not None:  # grad^ N_I = grad N_I + xi_I N_I on the table's own pattern
-            test = corrected_gradients(t.values, t.gradients, xi)
+        if smoothing is None:
+            t = raise_on_all_ranks(comm, lambda s=s: mls.tabulate(q.points[s]))
+            test, trial, weights = t.gradients, t.gradients, q.weights[s]
+            if xi is not None:  # grad^ N_I = grad N_I + xi_I N_I on the table's own pattern
+                test = corrected_gradients(t.values, t.gradients, xi)
+        else:  # the cells' smoothing domains, stabilised by their Gauss points
+            t = None
+            test, weights = raise_on_all_ranks(
+                comm,
+                lambda s=s: _smoothed_chunk(particles, mls, cells[s], quadrature_degree, smoothing),
+            )
+            trial = test
         t1 = time.perf_counter()
-        Kc = stiffness_matrix(test, q.weights[s], material, t.gradients, particles.petsc_index)
-        del t, test
+        Kc = stiffness_matrix(test, weights, material, trial, particles.petsc_index)
+        del t, test, trial
         stack.append((row_blocks(Kc), 0))
         del Kc
         while len(stack) > 1 and stack[-1][1] == stack[-2][1]:
@@ -473,6 +494,20 @@ def _stiffness_blocks(
         K = _blocks_sum(K, stack.pop()[0])
     asm += time.perf_counter() - t1
     return K, q, {"tabulate": tab, "assemble": asm}
+
+
+def _smoothed_chunk(
+    particles: ParticleSet,
+    mls: MLS | HaloMLS,
+    cells: np.ndarray,
+    degree: int,
+    stabilisation: float,
+) -> tuple[list[sp.csr_matrix], np.ndarray]:
+    """The stiffness rows and weights of the smoothed integration of ``cells`` (local; see
+    :func:`~dolfinx_meshfree.geometry.smoothing.stiffness_rows`): a chunk of cells whose
+    smoothing domains and Gauss points stay inside it."""
+    rule = smoothing_rule(particles.mesh, cells, degree, stabilisation)
+    return stiffness_rows(mls, rule, smoothed_table(mls, rule))
 
 
 def nitsche_terms(
@@ -625,7 +660,10 @@ def solve_large(problem: EFGElasticity, options: IterativeOptions | None = None)
     if options.halo:
         mls = raise_on_all_ranks(comm, lambda: _halo(problem, problem.consistent))
     halo_time = time.perf_counter() - t0
-    K, q, timings = _stiffness_blocks(P, mls, mat, deg, problem.consistent, options.chunk_points)
+    beta = STABILISATION.get(problem.integration)
+    K, q, timings = _stiffness_blocks(
+        P, mls, mat, deg, problem.consistent, options.chunk_points, smoothing=beta
+    )
     timings["halo"] = halo_time
     timings["halo_particles"] = len(mls.indices) if options.halo else P.num_particles
     peak = {"assemble": peak_rss_mb()}

@@ -48,12 +48,7 @@ def _case(demo, args, method: str, integration: str | None, h: float) -> dict:
     material = mf.LinearElastic(dargs.E, dargs.nu, dargs.plane)
     beam = mf.TimoshenkoBeam(material, L=dargs.L, D=dargs.D, P=dargs.P)
     msh = demo.make_mesh(comm, dargs, h)
-    if method == "fe":
-        errors, sizes, timings, _ = demo.run_fe(msh, dargs, beam, material)
-    elif method == "efg":
-        errors, sizes, timings, _ = demo.run_efg(msh, dargs, beam, material, h)
-    else:
-        errors, sizes, timings, _ = demo.run_coupled(msh, dargs, beam, material, h, method)
+    errors, sizes, timings, _ = demo.run_method(msh, dargs, beam, material, h, method)
     timings = {k: comm.allreduce(timings[k], op=MPI.MAX) for k in ("setup", "assemble", "solve")}
     dofs = sum(sizes.get(k, 0) for k in ("fe_dofs", "particle_dofs"))
     return {"errors": errors, "timings": timings, "dofs": dofs}

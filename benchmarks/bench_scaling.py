@@ -376,12 +376,7 @@ def static_case(comm, case: tuple, solver: str | None) -> dict:
         msh = cantilever.make_mesh(comm, args, h)
         if weight is not None:
             msh = mf.balanced_mesh(msh, cantilever.patch_weight(args))
-        if method == "fe":
-            errors, sizes, timings, _ = cantilever.run_fe(msh, args, beam, material)
-        elif method == "efg":
-            errors, sizes, timings, _ = cantilever.run_efg(msh, args, beam, material, h)
-        else:
-            errors, sizes, timings, _ = cantilever.run_coupled(msh, args, beam, material, h, method)
+        errors, sizes, timings, _ = cantilever.run_method(msh, args, beam, material, h, method)
     timings = {k: comm.allreduce(v, op=MPI.MAX) for k, v in timings.items()}
     return {
         "kind": "static",

@@ -65,12 +65,7 @@ def cantilever(method: str, size: float, small: bool) -> tuple[dict, float]:
     comm.Barrier()
     t0 = time.perf_counter()
     msh = demo.make_mesh(comm, args, size)
-    if name == "fe":
-        errors, *_ = demo.run_fe(msh, args, beam, material)
-    elif name == "efg":
-        errors, *_ = demo.run_efg(msh, args, beam, material, size)
-    else:
-        errors, *_ = demo.run_coupled(msh, args, beam, material, size, name)
+    errors, *_ = demo.run_method(msh, args, beam, material, size, name)
     seconds = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
     return {"L2": errors["l2"], "energy": errors["energy"]}, seconds
 

@@ -371,6 +371,18 @@ def run_hybrid(msh, args, beam, material, h):
     return errors, sizes, sol.timings, sol.displacement
 
 
+def run_method(msh, args, beam, material, h: float, method: str):
+    """One method on ``msh``: :func:`run_fe`, :func:`run_efg`, :func:`run_hybrid` or
+    :func:`run_coupled` (collective). Returns their ``(errors, sizes, timings, probe)``."""
+    if method == "fe":
+        return run_fe(msh, args, beam, material)
+    if method == "efg":
+        return run_efg(msh, args, beam, material, h)
+    if method == "hybrid":
+        return run_hybrid(msh, args, beam, material, h)
+    return run_coupled(msh, args, beam, material, h, method)
+
+
 def warm_jit(args, material, beam):
     """Compile the FE forms once on a tiny mesh so that timings exclude JIT compilation.
 
@@ -427,14 +439,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
             msh = make_mesh(comm, args, h)
             if args.balance is not None and method in mf.COUPLINGS:
                 msh = mf.balanced_mesh(msh, patch_weight(args))
-            if method == "fe":
-                errors, sizes, timings, probe = run_fe(msh, args, beam, material)
-            elif method == "efg":
-                errors, sizes, timings, probe = run_efg(msh, args, beam, material, h)
-            elif method == "hybrid":
-                errors, sizes, timings, probe = run_hybrid(msh, args, beam, material, h)
-            else:
-                errors, sizes, timings, probe = run_coupled(msh, args, beam, material, h, method)
+            errors, sizes, timings, probe = run_method(msh, args, beam, material, h, method)
             # the slowest rank's times
             timings = {k: comm.allreduce(v, op=MPI.MAX) for k, v in timings.items()}
             rec = {

@@ -169,14 +169,8 @@ def run_case(args, comm, method: str, h: float, material, beam) -> dict:
     for k in range(args.repeat):
         comm.Barrier()
         msh = cantilever.make_mesh(comm, args, h)
-        if method == "fe":
-            errors, sizes, timings, _ = cantilever.run_fe(msh, args, beam, material)
-        elif method == "efg":
-            errors, sizes, timings, _ = cantilever.run_efg(msh, args, beam, material, h)
-        elif method == "hybrid":  # the static hybrid SPH-FE coupling, K u = f
-            errors, sizes, timings, _ = cantilever.run_hybrid(msh, args, beam, material, h)
-        else:
-            errors, sizes, timings, _ = cantilever.run_coupled(msh, args, beam, material, h, method)
+        # (hybrid: the static hybrid SPH-FE coupling, K u = f)
+        errors, sizes, timings, _ = cantilever.run_method(msh, args, beam, material, h, method)
         timings = {t: comm.allreduce(v, op=MPI.MAX) for t, v in timings.items()}
         times["time_setup"].append(timings["setup"])
         times["time_assemble"].append(timings["assemble"])

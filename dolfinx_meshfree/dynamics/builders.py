@@ -67,7 +67,7 @@ from ..geometry.crack import Crack, CrackDomain, place_crack
 from ..geometry.particles import ParticleSet
 from ..geometry.patch import ParticlePatch
 from ..geometry.quadrature import DYNAMIC_FACET_DEGREE
-from ..geometry.smoothing import STABILISATION, smoothing_rule, value_rule
+from ..geometry.smoothing import STABILISATION, refuse_smoothed, smoothing_rule, value_rule
 from ..geometry.stress_points import check_integration, stress_point_quadrature
 from ..parallel import raise_on_all_ranks
 from ..physics.body_loads import CallableBodyForce, body_load_vectors
@@ -353,19 +353,12 @@ def build_efg(
     mls = raise_on_all_ranks(
         comm, lambda: MLS(particles, weight=weight, dilation=dilation, basis=basis)
     )
-    if integration == "smoothed" and law is not material:  # the same on every rank
-        raise ValueError(
-            "integration='smoothed' in explicit dynamics is small-strain: its stabilisation is "
-            "a linear elastic term; use integration='cells' with a finite-strain law"
-        )
+    refuse_smoothed(integration, nonlinear=law is not material, fix="integration='cells'")
     rule = None
     if integration == "stress-points":
         rule = stress_point_quadrature(particles)
     elif integration == "smoothed":
-        msh = particles.mesh
-        cells = particles.cells
-        if cells is None:
-            cells = np.arange(msh.topology.index_map(msh.topology.dim).size_local)
+        msh, cells = particles.mesh, particles.integration_cells()
         beta = STABILISATION["smoothed"]
         rule = raise_on_all_ranks(
             comm, lambda: smoothing_rule(msh, cells, quadrature_degree, beta, DYNAMIC_FACET_DEGREE)
@@ -533,12 +526,11 @@ def build_coupled(
     check_crack_options(
         bool(problem.patch.cracks), integration, law is not material, problem.patch.comm
     )
-    if STABILISATION.get(getattr(problem, "integration", "vci"), 0.0) > 0.0 and law is not material:
-        raise ValueError(  # the same on every rank
-            f"a problem built with integration={problem.integration!r} runs at small strain in "
-            "explicit dynamics: its stabilisation is a linear elastic term; build the problem "
-            "with integration='vci' for a finite-strain law"
-        )
+    refuse_smoothed(  # the same on every rank
+        getattr(problem, "integration", "vci"),
+        nonlinear=law is not material,
+        fix="a problem built with integration='vci'",
+    )
     t0 = time.perf_counter()
     V, patch, mls = problem.V, problem.patch, problem.mls
     P, comm, msh = patch.particles, patch.comm, V.mesh

@@ -409,8 +409,7 @@ class CrackDomain:
         """Pure EFG: the particles' integration cells (every owned cell by default), the mesh's
         exterior facets, no interface."""
         mesh = particles.mesh
-        num_owned = mesh.topology.index_map(mesh.topology.dim).size_local
-        cells = np.arange(num_owned) if particles.cells is None else particles.cells
+        cells = particles.integration_cells()
         return cls(mesh, cells, particles, boundary_facets(mesh), np.zeros(0, dtype=np.int32))
 
 

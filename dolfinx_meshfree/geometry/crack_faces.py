@@ -66,8 +66,7 @@ def owned_points(particles: ParticleSet, x: np.ndarray) -> np.ndarray:
     on a cell boundary shared by ranks going to the lowest rank (collective)."""
     msh = particles.mesh
     comm = particles.comm
-    num_owned = msh.topology.index_map(msh.topology.dim).size_local
-    cells = np.arange(num_owned) if particles.cells is None else particles.cells
+    cells = particles.integration_cells()
     imap = msh.topology.index_map(msh.topology.dim)
     mine = np.zeros(imap.size_local + imap.num_ghosts, dtype=bool)
     mine[cells] = True

@@ -235,6 +235,13 @@ class ParticleSet:
     def num_particles(self) -> int:
         return self.positions.shape[0]
 
+    def integration_cells(self) -> np.ndarray:
+        """The local cells the particles are integrated on (int64): :attr:`cells`, or every
+        owned cell of the mesh when it is ``None`` (local; needs a mesh)."""
+        if self.cells is not None:
+            return self.cells
+        return np.arange(self.mesh.topology.index_map(self.mesh.topology.dim).size_local)
+
     @property
     def gdim(self) -> int:
         return self.positions.shape[1]

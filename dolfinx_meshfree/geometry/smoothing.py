@@ -51,6 +51,7 @@ __all__ = [
     "INTEGRATIONS",
     "STABILISATION",
     "SmoothingRule",
+    "refuse_smoothed",
     "resolve_integration",
     "smoothed_gradients",
     "smoothed_table",
@@ -89,6 +90,33 @@ def resolve_integration(consistent: bool | None, integration: str | None) -> str
             "integration= ('vci' and the smoothed ones are consistent, 'gauss' is not)"
         )
     return integration
+
+
+def refuse_smoothed(
+    integration: str,
+    cracked: bool = False,
+    nonlinear: bool = False,
+    fix: str = "integration='vci' (the default)",
+) -> None:
+    """Refuse a smoothed ``integration`` where it cannot run yet (local, the same on every
+    rank): on cut cells (``cracked``: cracks or an adaptive quadrature) and, the stabilised
+    one, with a law integrated point by point (``nonlinear``: a finite-strain law, a law with
+    state, cohesive faces), whose internal force does not carry the linear elastic
+    stabilisation. ``fix``: what the message offers instead."""
+    if integration not in STABILISATION:
+        return
+    if cracked:
+        raise ValueError(
+            f"integration={integration!r} does not integrate cut cells yet: give {fix} with "
+            "cracks or an adaptive quadrature"
+        )
+    if nonlinear and STABILISATION[integration] > 0.0:
+        raise ValueError(
+            f"integration={integration!r} is small-strain: it is stabilised by a linear elastic "
+            "term that the point-by-point internal force of a finite-strain law, a law with "
+            f"state or cohesive faces does not carry yet; give {fix} (in statics also "
+            "'smoothed-subcells')"
+        )
 
 
 @dataclass

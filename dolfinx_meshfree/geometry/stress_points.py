@@ -68,13 +68,6 @@ def check_integration(integration: str) -> str:
     return integration
 
 
-def _owned_cells(particles: ParticleSet) -> np.ndarray:
-    msh = particles.mesh
-    if particles.cells is not None:
-        return np.asarray(particles.cells, dtype=np.int64)
-    return np.arange(msh.topology.index_map(msh.topology.dim).size_local, dtype=np.int64)
-
-
 def _cell_of(msh: dolfinx.mesh.Mesh, points: np.ndarray, cells: np.ndarray) -> np.ndarray:
     """A cell among ``cells`` (local) containing each point, or -1 (local, no communication)."""
     m = points.shape[0]
@@ -153,7 +146,7 @@ def stress_point_quadrature(
     comm = particles.comm
     x = particles.positions
     n = x.shape[0]
-    cells = _owned_cells(particles)
+    cells = particles.integration_cells()
     d, _ = cKDTree(x).query(x, k=2) if n > 1 else (np.ones((n, 2)), None)
     s = float(np.median(d[:, 1]))
     pts = x

@@ -41,7 +41,7 @@ from ..couplings.master_slave import SLAVES
 from ..geometry.crack import Crack
 from ..geometry.partition import warn_imbalance
 from ..geometry.patch import ParticlePatch
-from ..geometry.smoothing import STABILISATION, resolve_integration
+from ..geometry.smoothing import STABILISATION, refuse_smoothed, resolve_integration
 from ..geometry.stress_points import check_integration
 from ..parallel import raise_on_all_ranks
 from ..physics.body_loads import CallableBodyForce
@@ -142,17 +142,11 @@ def coupled_integration(
             f"integration={integration!r} with coupling={coupling!r}: the smoothing does not carry "
             f"its interface terms; use one of {list(SMOOTHED_COUPLINGS)}, or integration='vci'"
         )
-    if patch.cracks or patch.quadrature is not None:
-        raise ValueError(
-            f"integration={integration!r} does not integrate cut cells yet: give "
-            "integration='vci' with a cracked patch or an adaptive quadrature"
-        )
-    if STABILISATION[integration] > 0.0 and not isinstance(material, LinearElastic):
-        raise ValueError(
-            f"integration={integration!r} is stabilised by a linear elastic term that Newton's "
-            f"point-by-point internal force does not carry yet ({type(material).__name__}): give "
-            "integration='vci' or 'smoothed-subcells'"
-        )
+    refuse_smoothed(
+        integration,
+        cracked=bool(patch.cracks) or patch.quadrature is not None,
+        nonlinear=not isinstance(material, LinearElastic),
+    )
     return integration
 
 

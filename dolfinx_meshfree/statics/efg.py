@@ -59,6 +59,7 @@ from ..geometry.quadrature import (
 from ..geometry.smoothing import (
     STABILISATION,
     SmoothingRule,
+    refuse_smoothed,
     resolve_integration,
     smoothed_table,
     smoothing_rule,
@@ -600,11 +601,7 @@ class EFGElasticity:
         integration = raise_on_all_ranks(
             particles.comm, lambda: resolve_integration(consistent, integration)
         )
-        if integration in STABILISATION and (cracks or quadrature is not None):
-            raise ValueError(
-                f"integration={integration!r} does not integrate cut cells yet: give "
-                "integration='vci' (the default) with cracks or an adaptive quadrature"
-            )
+        refuse_smoothed(integration, cracked=bool(cracks) or quadrature is not None)
         if particles.mesh is None:
             raise ValueError("EFGElasticity needs particles with a background mesh (mesh=...)")
         if quadrature is not None and not isinstance(quadrature, AdaptiveQuadrature):
@@ -733,8 +730,7 @@ class EFGElasticity:
         t0 = time.perf_counter()
         deg = self.quadrature_degree
         boundary = (boundary_facets(self.mesh), None) if self.consistent else None
-        num_owned = self.mesh.topology.index_map(self.mesh.topology.dim).size_local
-        cells = np.arange(num_owned) if P.cells is None else P.cells
+        cells = P.integration_cells()
         q, bq = crack_rules(
             self.mesh, cells, self.cracks, deg, boundary, quadrature=self.adaptive_quadrature
         )
@@ -869,13 +865,7 @@ class EFGElasticity:
         with ``f_int(u) = sum_q B0^T P w_q`` on the cells' quadrature and the stiffness's test
         gradients, from ``u = 0``. Collective."""
         law = self.material
-        if STABILISATION.get(self.integration, 0.0) > 0.0:  # the same on every rank
-            raise ValueError(
-                f"integration={self.integration!r} is stabilised by a linear elastic term that "
-                "Newton's point-by-point internal force does not carry yet: give "
-                "integration='vci' (the default) or 'smoothed-subcells' with a finite-strain "
-                "law, a law with state or cohesive faces"
-            )
+        refuse_smoothed(self.integration, nonlinear=True)  # the same on every rank
         if is_stateful(law) and law.needs_band:  # on every rank, before the assembly
             factor = particle_band_factor(self.mls, None)
             cells = np.ones(self.mesh.topology.index_map(self.mesh.topology.dim).size_local, bool)

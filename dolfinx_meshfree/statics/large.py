@@ -434,10 +434,7 @@ def _stiffness_blocks(
     (VCI when ``consistent``)."""
     comm = particles.comm
     gdim, n = particles.gdim, particles.num_particles
-    cells = particles.cells
-    if cells is None:
-        msh = particles.mesh
-        cells = np.arange(msh.topology.index_map(msh.topology.dim).size_local)
+    cells = particles.integration_cells()
     if quadrature is None:
         quadrature = cell_quadrature(particles.mesh, quadrature_degree, cells)
     q = quadrature

@@ -59,7 +59,7 @@ from .physics.constitutive import Material, NeoHookean, SaintVenantKirchhoff
 from .physics.forces import InternalForces
 from .physics.inelastic import J2Plasticity, RankineDamage
 from .physics.materials import LinearElastic
-from .statics.cohesive_growth import CohesiveGrowth
+from .statics.cohesive_growth import CohesiveGrowth, initiation_direction
 from .statics.coupled import (
     COMPONENT_COUPLINGS,
     COUPLINGS,
@@ -176,6 +176,7 @@ __all__ = [
     "facet_quadrature",
     "follow_path",
     "gaussian",
+    "initiation_direction",
     "interaction_integral",
     "kink_angle",
     "quartic",

@@ -321,6 +321,29 @@ def test_unloading_is_secant_and_reloading_follows_it(beta):
         np.testing.assert_allclose(t_eff, _envelope(we), rtol=1e-12)
 
 
+@pytest.mark.parametrize("d", [2, 3])
+def test_secant_stiffness_maps_the_jump_to_the_traction(d):
+    """The secant stiffness (path following's fallback tangent) times the jump is the traction,
+    at points bonded, softening, unloading, past w_c and closed, from committed states of every
+    kind: diag(s, beta^2 s) with s = T(kappa) / kappa of the envelope re-derived here (K_0 in
+    compression); symmetric and positive definite."""
+    beta = 0.7
+    law = _law(shear=beta)
+    rng = np.random.default_rng(3)
+    m = 40
+    committed = {"kappa": rng.choice([0.0, 0.5 * W0, 2 * W0, 0.3 * WC, 1.5 * WC], m)[:, None]}
+    jump = rng.normal(size=(m, d)) * rng.choice([0.2 * W0, 0.1 * WC, 0.5 * WC], m)[:, None]
+    t, _, trial = law.update(jump, committed)
+    S = law.secant_stiffness(jump, committed)
+    np.testing.assert_allclose(np.einsum("mij,mj->mi", S, jump), t, rtol=1e-12, atol=1e-14 * FT)
+    kappa = trial["kappa"][:, 0]
+    s = np.where(kappa > 0, _envelope(kappa) / np.where(kappa > 0, kappa, 1.0), K0)
+    s = np.maximum(s, RES * FT / WC)
+    np.testing.assert_allclose(S[:, 1, 1], beta**2 * s, rtol=1e-12)
+    np.testing.assert_allclose(S[:, 0, 0], np.where(jump[:, 0] >= 0, s, K0), rtol=1e-12)
+    assert np.all(np.linalg.eigvalsh(S) > 0) and np.allclose(S, S.transpose(0, 2, 1))
+
+
 # --- 4. compression: penalty contact, no damage from it ---------------------------------------
 
 

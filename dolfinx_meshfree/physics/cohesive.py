@@ -226,6 +226,22 @@ class LinearCohesive:
             D += g[:, None, None] * Mw[:, :, None] * Mw[:, None, :]
         return t, D, {"kappa": kappa[:, None].copy()}
 
+    def secant_stiffness(self, jump: np.ndarray, state: dict[str, np.ndarray]) -> np.ndarray:
+        """The secant stiffness ``(m, d, d)`` at the jump from the committed state: the tangent of
+        :meth:`update` without its loading term, ``diag(s or K_0, beta^2 s)`` at the trial
+        ``kappa``. Positive definite (``s`` has its floor) where the consistent tangent of a
+        softening point is not; Newton with it converges slowly but from further away (the
+        fallback of :func:`~dolfinx_meshfree.follow_path` after a crack grew)."""
+        w, _, w_eff = self._parts(jump)
+        m, d = w.shape
+        kappa = np.maximum(np.asarray(state["kappa"], dtype=float).reshape(m), w_eff)
+        s, _ = self._secant(kappa)
+        D = np.zeros((m, d, d))
+        D[:, 0, 0] = np.where(w[:, 0] >= 0.0, s, self.K0)
+        for k in range(1, d):
+            D[:, k, k] = self.shear**2 * s
+        return D
+
     # -- energies -----------------------------------------------------------------------------
 
     def stored_energy(self, jump: np.ndarray, state: dict[str, np.ndarray]) -> np.ndarray:

@@ -203,9 +203,15 @@ class CohesiveSide:
         side = self.side
         return [create_vector(self.comm, side.layout, side.dof_map, f)]
 
+    #: The tangent is the law's secant stiffness (:meth:`LinearCohesive.secant_stiffness`)
+    #: instead of its consistent tangent: set by path following's fallback after a crack grew.
+    secant: bool = False
+
     def tangent(self, xs: Sequence[PETSc.Vec]) -> dict[tuple[int, int], PETSc.Mat]:
         """``{(0, 0): K_c}`` (collective)."""
         _, D = self._evaluate(xs)
+        if self.secant:
+            D = self.law.secant_stiffness(self.jump(xs), self.state.committed)
         D = sp.block_diag(list(D * self.weights[:, None, None]), format="csr") if len(D) else None
         side = self.side
         n = side.dof_map.size

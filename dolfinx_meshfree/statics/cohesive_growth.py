@@ -21,8 +21,12 @@ ahead of where the material fails, not where it has failed:
   25 mm: with it the averaged direction turned a mode I crack sideways). At the front, not at
   the tip: ahead of a bending beam's process zone the bulk is in compression;
 * **to the boundary:** an extension that would end within one spacing of the exterior boundary
-  (a tip must stay a spacing inside) runs straight to it: the crack then splits the body (it
-  must be ``Crack(..., through=True)``) and stops growing.
+  (a tip must stay a spacing inside; along the ray or across it) runs to the edge's nearest point
+  ahead, meeting the traction-free edge at a right angle as a crack normal to the principal
+  stress does there (:func:`_to_free_edge`). The crack then splits the body (it must be
+  ``Crack(..., through=True)``) and stops growing.
+* **out of a notch:** :func:`initiation_direction` gives the first (bonded) segment's direction
+  from the linear-elastic solution, by the same average about the notch's tip.
 
 So new faces are inserted where the bulk is still below ``f_t`` (the tip ``ahead`` spacings in
 front of the softening zone; an extension at the front itself inserts faces already past ``w_0``,
@@ -45,21 +49,26 @@ from mpi4py import MPI
 
 from ..approx.crack_cuts import support_radius_at
 from ..approx.mls import MomentMatrixError
-from ..geometry.crack import Crack, gathered_segments, point_segment_distance
+from ..geometry.crack import Crack, gathered_segments, particle_spacing, point_segment_distance
 from ..geometry.particles import _points_in_cells
 from ..parallel import raise_on_all_ranks
 from .cohesive import CohesiveCrack, CohesiveSide
 
 if TYPE_CHECKING:  # annotations only
+    import numpy.typing as npt
+
     from ..approx.mls import MLS
+    from ..couplings.base import CoupledSolution
     from ..geometry.crack import CrackDomain
     from ..geometry.patch import ParticlePatch
     from ..physics.materials import LinearElastic
+    from .efg import EFGSolution
 
 __all__ = [
     "CohesiveGrowth",
     "direction_at",
     "grow_once",
+    "initiation_direction",
     "principal_direction",
     "ray_to_boundary",
     "softening_front",
@@ -219,6 +228,68 @@ def principal_direction(
     return d if d @ along >= 0 else -d
 
 
+def initiation_direction(
+    solution: EFGSolution | CoupledSolution,
+    crack: Crack,
+    tip: int | npt.ArrayLike = 0,
+    radius: float | None = None,
+    clearance: float | None = None,
+) -> np.ndarray:
+    """The direction of a cohesive crack's first segment out of a notch: normal to the largest
+    principal stress of a linear-elastic ``solution`` averaged about the notch's tip with the
+    Gaussian weight of :class:`CohesiveGrowth`'s extensions (:func:`principal_direction`; the
+    faces' near field left out), oriented away from the notch (collective).
+
+    Under proportional loading the linear-elastic field is the cohesive model's before anything
+    softens, so this is where the stress criterion first sends the crack. Build the crack from it
+    before following the path: ``notch + [tip + lead * d]`` with the bonded lead of
+    ``CohesiveGrowth.ahead + 1`` spacings (``demos/concrete_beam.py --setup arrea-ingraffea``).
+
+    Args:
+        solution: a linear-elastic solve (``model.solve()``) of the model with ``crack`` the notch
+            alone (pure EFG or coupled; the tip in the particles).
+        crack: the notch (one of the solved model's cracks).
+        tip: an index of ``crack.tips`` or its coordinates.
+        radius: the Gaussian averaging length (default: :class:`CohesiveGrowth`'s, 1 spacing).
+        clearance: the distance about the notch left out (default: 1.5 spacings).
+
+    Returns:
+        The unit direction (2,).
+    """
+    domain = solution.patch if hasattr(solution, "patch") else solution.domain
+    cracks = solution.patch.cracks if hasattr(solution, "patch") else solution.cracks
+    if not any(crack is c for c in cracks):
+        raise ValueError(
+            f"initiation_direction: {crack!r} is not one of the solved model's cracks; pass the "
+            "Crack object the model was built with"
+        )
+    tips = crack.tips
+    if isinstance(tip, int | np.integer):
+        if not 0 <= tip < len(tips):
+            raise ValueError(f"tip={tip} must index crack.tips ({len(tips)} of them)")
+        x = tips[tip]
+    else:
+        x = np.asarray(tip, dtype=float).reshape(-1)
+        k = np.linalg.norm(tips - x, axis=1).argmin() if len(tips) else -1
+        if k < 0 or np.linalg.norm(tips[k] - x) > 1e-9 * max(1.0, np.linalg.norm(x)):
+            raise ValueError(
+                f"tip={x.tolist()} is not a tip of {crack!r} (its tips: {tips.tolist()})"
+            )
+        x = tips[k]
+    end = crack.tip_ends[list(map(tuple, tips)).index(tuple(x))]
+    h = particle_spacing(domain)
+    l_avg = CohesiveGrowth.radius * h if radius is None else float(radius)
+    clear = CohesiveGrowth.clearance * h if clearance is None else float(clearance)
+    along = direction_at(crack, x, end)
+    return raise_on_all_ranks(
+        domain.comm,
+        lambda: principal_direction(
+            solution.mls, solution.coefficients, solution.material, x, l_avg, along, domain,
+            crack, clear,
+        ),
+    )  # fmt: skip
+
+
 def ray_to_boundary(
     domain: ParticlePatch | CrackDomain, start: np.ndarray, direction: np.ndarray
 ) -> float:
@@ -272,7 +343,11 @@ def grow_once(
     )  # fmt: skip
     length = growth.step * h
     to_edge = ray_to_boundary(domain, tip, d)
-    through = to_edge <= length + h  # run to the boundary (a tip stays h inside): it splits
+    # run to the boundary when the new tip would end within h of it (a tip stays h inside),
+    # along the ray or across it (a ray that meets the edge at a slant): the crack splits the body
+    seg = gathered_segments(domain, domain.exterior_facets)
+    gap = point_segment_distance((tip + length * d)[None], seg[:, 0], seg[:, 1]).min()
+    through = to_edge <= length + h or gap < h
 
     def check() -> None:
         if through and not crack.through:
@@ -283,12 +358,35 @@ def grow_once(
             )
 
     raise_on_all_ranks(comm, check)
-    if not through:
+    if through:  # to the nearest point of the edge ahead: the crack meets it at a right angle
+        d, length = _to_free_edge(tip, d, to_edge, seg)
+    else:
         _check_interface_clearance(mls, domain, tip + length * d)
-    new_end = tip + (to_edge if through else length) * d
-    fit = _FieldFit(mls, c, crack, tip, new_end, domain, h)
-    crack.extend(d, to_edge if through else length, tip=end)  # through: the end is a mouth
+    fit = _FieldFit(mls, c, crack, tip, tip + length * d, domain, h)
+    crack.extend(d, length, tip=end)  # through: the end is a mouth
     return fit.refit(comm)
+
+
+def _to_free_edge(
+    tip: np.ndarray, d: np.ndarray, to_edge: float, seg: np.ndarray
+) -> tuple[np.ndarray, float]:
+    """The last stretch of a crack that runs through to the exterior boundary ``seg`` (k, 2, 2):
+    to the boundary point nearest ``tip`` if it lies ahead (``d``), else along ``d`` for
+    ``to_edge``. A traction-free edge is a principal plane whose normal stress vanishes, so the
+    largest principal stress next to it is tangential and a crack normal to it meets the edge at
+    a right angle. Along the ray, a slanted meeting left a wedge between the crack and the edge
+    whose points saw too few particles for the MLS (the shear beam's curved path at h = 20 mm,
+    60 degrees from the normal: a singular moment matrix at the mouth). Returns the unit
+    direction and the length (local)."""
+    a, b = seg[:, 0], seg[:, 1]
+    t = b - a
+    xi = np.clip(np.einsum("kd,kd->k", tip - a, t) / np.einsum("kd,kd->k", t, t), 0.0, 1.0)
+    p = a + xi[:, None] * t
+    dist = np.linalg.norm(p - tip, axis=1)
+    k = int(dist.argmin())
+    if dist[k] == 0.0 or (p[k] - tip) @ d <= 0.0:  # the nearest edge is behind: along the ray
+        return d, to_edge
+    return (p[k] - tip) / dist[k], float(dist[k])
 
 
 class _FieldFit:

@@ -96,9 +96,9 @@ def test_initiation_direction_bad_input():
     solution, notch = _notched_plate(np.diag([1.0, 0.0]))
     with pytest.raises(ValueError, match="not one of the solved model's cracks"):
         mf.initiation_direction(solution, mf.Crack([[103.0, 0.0], [103.0, 40.0]]))
-    with pytest.raises(ValueError, match=r"tip=1 must index crack.tips \(1 of them\)"):
+    with pytest.raises(ValueError, match=r"tip=1: the crack has 1 tip\(s\) \[\(103, 40\)\]"):
         mf.initiation_direction(solution, notch, tip=1)
-    with pytest.raises(ValueError, match=r"tip=\[103.0, 0.0\] is not a tip"):
+    with pytest.raises(ValueError, match=r"tip=\(103, 0\) is not a tip of the crack"):
         mf.initiation_direction(solution, notch, tip=[103.0, 0.0])
 
 

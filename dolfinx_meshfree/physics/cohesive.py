@@ -206,18 +206,13 @@ class LinearCohesive:
         not used (the interface of :class:`~dolfinx_meshfree.physics.state.PointState`)."""
         K0 = self.K0
         w, Mw, w_eff = self._parts(jump)
-        m, d = w.shape
-        kappa_old = np.asarray(state["kappa"], dtype=float).reshape(m)
+        kappa_old = np.asarray(state["kappa"], dtype=float).reshape(len(w))
         kappa = np.maximum(kappa_old, w_eff)
         s, ds = self._secant(kappa)
         t = s[:, None] * Mw
         opening = w[:, 0] >= 0.0
         t[:, 0] = np.where(opening, s * w[:, 0], K0 * w[:, 0])
-        diag = np.empty((m, d))
-        diag[:, 0] = np.where(opening, s, K0)
-        diag[:, 1:] = (self.shear**2 * s)[:, None]
-        D = np.zeros((m, d, d))
-        D[:, np.arange(d), np.arange(d)] = diag
+        D = self._secant_matrix(w, s)
         # loading (on or beyond the loading surface, past the peak, below the cap): the secant
         # moves with w_eff, d t / d w += ds/dkappa (M w)(M w)^T / w_eff
         loading = (w_eff >= kappa_old) & (ds != 0.0) & (w_eff > 0.0)
@@ -233,13 +228,17 @@ class LinearCohesive:
         softening point is not; Newton with it converges slowly but from further away (the
         fallback of :func:`~dolfinx_meshfree.follow_path` after a crack grew)."""
         w, _, w_eff = self._parts(jump)
+        kappa = np.maximum(np.asarray(state["kappa"], dtype=float).reshape(len(w)), w_eff)
+        return self._secant_matrix(w, self._secant(kappa)[0])
+
+    def _secant_matrix(self, w: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """``diag(s or K_0 (closed), beta^2 s, ...)`` (m, d, d) at the jumps ``w`` (m, d)."""
         m, d = w.shape
-        kappa = np.maximum(np.asarray(state["kappa"], dtype=float).reshape(m), w_eff)
-        s, _ = self._secant(kappa)
+        diag = np.empty((m, d))
+        diag[:, 0] = np.where(w[:, 0] >= 0.0, s, self.K0)
+        diag[:, 1:] = (self.shear**2 * s)[:, None]
         D = np.zeros((m, d, d))
-        D[:, 0, 0] = np.where(w[:, 0] >= 0.0, s, self.K0)
-        for k in range(1, d):
-            D[:, k, k] = self.shear**2 * s
+        D[:, np.arange(d), np.arange(d)] = diag
         return D
 
     # -- energies -----------------------------------------------------------------------------

@@ -209,9 +209,10 @@ class CohesiveSide:
 
     def tangent(self, xs: Sequence[PETSc.Vec]) -> dict[tuple[int, int], PETSc.Mat]:
         """``{(0, 0): K_c}`` (collective)."""
-        _, D = self._evaluate(xs)
+        jump = self.jump(xs)
+        _, D = self.state.evaluate(jump)
         if self.secant:
-            D = self.law.secant_stiffness(self.jump(xs), self.state.committed)
+            D = self.law.secant_stiffness(jump, self.state.committed)
         D = sp.block_diag(list(D * self.weights[:, None, None]), format="csr") if len(D) else None
         side = self.side
         n = side.dof_map.size

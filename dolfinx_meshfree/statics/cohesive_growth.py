@@ -53,6 +53,7 @@ from ..geometry.crack import Crack, gathered_segments, particle_spacing, point_s
 from ..geometry.particles import _points_in_cells
 from ..parallel import raise_on_all_ranks
 from .cohesive import CohesiveCrack, CohesiveSide
+from .sifs import resolve_tip
 
 if TYPE_CHECKING:  # annotations only
     import numpy.typing as npt
@@ -263,21 +264,9 @@ def initiation_direction(
             f"initiation_direction: {crack!r} is not one of the solved model's cracks; pass the "
             "Crack object the model was built with"
         )
-    tips = crack.tips
-    if isinstance(tip, int | np.integer):
-        if not 0 <= tip < len(tips):
-            raise ValueError(f"tip={tip} must index crack.tips ({len(tips)} of them)")
-        x = tips[tip]
-    else:
-        x = np.asarray(tip, dtype=float).reshape(-1)
-        k = np.linalg.norm(tips - x, axis=1).argmin() if len(tips) else -1
-        if k < 0 or np.linalg.norm(tips[k] - x) > 1e-9 * max(1.0, np.linalg.norm(x)):
-            raise ValueError(
-                f"tip={x.tolist()} is not a tip of {crack!r} (its tips: {tips.tolist()})"
-            )
-        x = tips[k]
-    end = crack.tip_ends[list(map(tuple, tips)).index(tuple(x))]
     h = particle_spacing(domain)
+    k = resolve_tip(crack, tip, h)
+    x, end = crack.tips[k], crack.tip_ends[k]
     l_avg = CohesiveGrowth.radius * h if radius is None else float(radius)
     clear = CohesiveGrowth.clearance * h if clearance is None else float(clearance)
     along = direction_at(crack, x, end)
@@ -295,7 +284,11 @@ def ray_to_boundary(
 ) -> float:
     """Distance from ``start`` along ``direction`` to the nearest exterior facet it meets
     (``inf`` if none; collective)."""
-    seg = gathered_segments(domain, domain.exterior_facets)
+    return _ray(gathered_segments(domain, domain.exterior_facets), start, direction)
+
+
+def _ray(seg: np.ndarray, start: np.ndarray, direction: np.ndarray) -> float:
+    """:func:`ray_to_boundary` on gathered exterior segments ``seg`` (k, 2, 2) (local)."""
     a, b = seg[:, 0], seg[:, 1]
     t = b - a
     # start + s d = a + u t: [d, -t] (s, u) = a - start, by Cramer's rule
@@ -342,10 +335,10 @@ def grow_once(
         ),
     )  # fmt: skip
     length = growth.step * h
-    to_edge = ray_to_boundary(domain, tip, d)
+    seg = gathered_segments(domain, domain.exterior_facets)
+    to_edge = _ray(seg, tip, d)
     # run to the boundary when the new tip would end within h of it (a tip stays h inside),
     # along the ray or across it (a ray that meets the edge at a slant): the crack splits the body
-    seg = gathered_segments(domain, domain.exterior_facets)
     gap = point_segment_distance((tip + length * d)[None], seg[:, 0], seg[:, 1]).min()
     through = to_edge <= length + h or gap < h
 

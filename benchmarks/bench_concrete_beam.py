@@ -71,9 +71,12 @@ def run(
     crack: str,
     path: str = "given",
     setup: str = "three-point-bend",
+    notch_depth: float | None = None,
 ) -> dict:
     demo = load_demo("concrete_beam")
     extra = ["--path", path] if crack == "cohesive" else []
+    if notch_depth is not None:
+        extra += ["--notch-depth", str(notch_depth)]
     if setup == "three-point-bend":  # the patch: the notch tip's supports stay inside it
         extra += ["--patch-width", str(max(200.0, 10 * h))]
     return demo.main(
@@ -160,6 +163,13 @@ def main(argv: list[str] | None = None) -> list[dict]:
         choices=["three-point-bend", "arrea-ingraffea"],
         help="arrea-ingraffea: the four-point shear beam, its crack path found (mixed mode)",
     )
+    p.add_argument(
+        "--notch-depth",
+        type=float,
+        default=None,
+        help="mm (three-point-bend; 0: an unnotched beam, its crack started where "
+        "mf.initiation_site finds it with --path found)",
+    )
     p.add_argument("--json", default=None)
     p.add_argument("--png", default=None, help="curves and crack paths at the finest h")
     args = p.parse_args(argv)
@@ -170,12 +180,13 @@ def main(argv: list[str] | None = None) -> list[dict]:
         args.end_cmod = 0.2 if shear else 0.5
     coarse = max(args.h)
     for m in args.methods:  # warm the JIT caches (forms, kernels)
-        run(m, coarse, 0.02 if not shear else 0.005, args.crack, args.path, args.setup)
+        run(m, coarse, 0.02 if not shear else 0.005, args.crack, args.path, args.setup,
+            args.notch_depth)  # fmt: skip
     records = []
     for h in sorted(args.h, reverse=True):
         base = None
         for m in args.methods:
-            r = run(m, h, args.end_cmod, args.crack, args.path, args.setup)
+            r = run(m, h, args.end_cmod, args.crack, args.path, args.setup, args.notch_depth)
             c = r["control"]
             r = {k: v for k, v in r.items() if k not in (c, "load", "deflection", "cmod")} | {
                 "curve": {c: r[c], "load": r["load"]}
@@ -203,6 +214,8 @@ def main(argv: list[str] | None = None) -> list[dict]:
         r["peak_change"] = None if prev is None else r["peak_load_N"] / prev["peak_load_N"] - 1
     if COMM.rank == 0:
         what = "four-point shear" if shear else "three-point bend"
+        if args.notch_depth is not None:
+            what += f", notch {args.notch_depth:g} mm"
         control = "CMSD" if shear else "CMOD"
         print(
             f"concrete beam ({what}, {args.crack} crack, path {args.path}), "
@@ -215,12 +228,16 @@ def main(argv: list[str] | None = None) -> list[dict]:
             ("x GfA", "5.2f"), *off, ("Newton", "6d"), ("time s", "7.1f"),
             ("x EFG", "5.2f"),
         ]  # fmt: skip
+        started = any("initiation" in r for r in records)  # where and when the crack started
+        if started:
+            columns += [("start N", "8.1f"), ("margin", "6.3f")]
         rows = [
             [r["method"], r["h_mm"], r["particles"], r["fe_cells"], r["peak_load_N"],
              r["peak_vs_efg"], r["peak_change"], r["dissipated_energy_J"],
              r["energy_ratio_to_Gf_area"], r["path_offset_mm"],
              *([r["path_offset_all_mm"]] if shear else []), r["newton_iterations"],
-             r["time_total"], r["time_vs_efg"]]
+             r["time_total"], r["time_vs_efg"],
+             *([r["initiation"]["load_N"], r["initiation"]["margin"]] if started else [])]
             for r in records
         ]  # fmt: skip
         print_table(columns, rows, markdown=True)

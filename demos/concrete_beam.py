@@ -34,6 +34,15 @@
 # smeared and cohesive crack models: span 2000 mm, depth 200 mm, thickness 50 mm, notch 100 mm,
 # E = 30,000 MPa, nu = 0.2, f_t = 3.33 MPa, G_f = 0.124 N/mm. Units: mm, MPa, N/mm, N.
 #
+# `--notch-depth 0`: the same beam without a notch. With `--path found` nothing says where the
+# crack is: `mf.initiation_site` finds where it starts from the linear-elastic solve (the bulk is
+# elastic until the first crack, so under proportional loading the crack starts where the
+# averaged largest principal stress is highest, at f_t over it): the bottom of mid-span, at the
+# load printed (2851 N at h = 25 mm; Euler-Bernoulli's stress averaged alike gives 2836 N). The
+# crack then grows from a bonded stretch of four spacings there. With `--path given`, a cohesive
+# crack through the whole depth at mid-span. Both peak within 0.21 % of each other at h = 25 and
+# 20 mm (`tests/test_cohesive_growth.py`).
+#
 # The supports hold the vertical displacement of the beam's end faces (shear supports, free to
 # rotate) and the horizontal displacement of the top edge at mid-span (the symmetry line), so
 # that no support restrains the bending: a roller held at one corner node concentrates a reaction
@@ -87,10 +96,12 @@
 #
 # Printed and in the JSON: the load–CMOD and load–deflection curves (the shear beam: load–CMSD
 # and load–CMOD), the peak load, the control at the peak (`cmod_at_peak_mm`,
-# `cmsd_at_peak_mm`), the dissipated energy (J) and its ratio to G_f times the crack's area
-# (its path beyond the notch, bonded lead included; the ligament for `band`: a reliability
-# figure, not a check: the crack is not fully open at the end; with `band` a smooth MLS field
-# spreads the damage over about one support radius, so this ratio runs above 1 in the tail),
+# `cmsd_at_peak_mm`), the unnotched beam's `initiation` (the site, the load at which its averaged
+# stress reaches f_t, the margin to the runner-up), the dissipated energy (J) and its ratio to
+# G_f times the crack's area (its path beyond the notch, bonded lead included; the ligament for
+# `band`: a reliability figure, not a check: the crack is not fully open at the end; with `band`
+# a smooth MLS field spreads the damage over about one support radius, so this ratio runs above
+# 1 in the tail),
 # the crack path (`path`: the face points past f_t, or the particle points with damage
 # >= 0.9; and `crack_polyline`, the crack's points in mm, the bonded lead included), the counts
 # of particles, FE cells and Newton iterations, the time.
@@ -100,6 +111,7 @@
 #     python demos/concrete_beam.py [--h 10] [--method lagrange] [--json beam.json] [--png beam.png]
 #     mpirun -n 2 python demos/concrete_beam.py --h 20
 #     python demos/concrete_beam.py --setup arrea-ingraffea [--h 10] [--method efg] [--png s.png]
+#     python demos/concrete_beam.py --notch-depth 0 --path found --end 0.3  # unnotched
 
 # +
 from __future__ import annotations
@@ -135,12 +147,14 @@ def particles_cracks(model) -> list:
     return model.cracks if isinstance(model, mf.EFGElasticity) else model.patch.cracks
 
 
-def beam_model(args, law, cohesive=None, lead=None):
+def beam_model(args, law, cohesive=None, lead=None, crack=None):
     """Mesh, patch with the notch, the coupled model, its supports and its reference load (1 N
     per mm of thickness, at mid-span or split between the shear beam's two load points). With a
     ``cohesive`` law: the notch goes on up to the top edge as a crack through the beam whose
     ligament faces carry the law (Hillerborg's fictitious crack: they are bonded until f_t); a
-    path that is found starts with a bonded ``lead`` (the unit direction out of the notch)."""
+    path that is found starts with a bonded ``lead`` (the unit direction out of the notch).
+    Without a notch (``--notch-depth 0``): no crack, or the given vertical path up the middle,
+    or ``crack``, the bonded stretch from the initiation site (``mf.initiation_site``)."""
     S, D = args.span, args.depth
     L = args.length or S
     nx = round(L / args.h)
@@ -155,7 +169,11 @@ def beam_model(args, law, cohesive=None, lead=None):
     hx = L / nx
     xm = L / 2
     V = _compat.vector_function_space(msh)
-    if cohesive is None:
+    if crack is not None:  # an unnotched beam's crack from where it starts
+        notch = crack
+    elif args.notch_depth == 0.0:  # unnotched: no crack, or the mode I path through the middle
+        notch = None if cohesive is None else mf.Crack([[xm, 0.0], [xm, D]], through=True)
+    elif cohesive is None:
         notch = mf.Crack([[xm, 0.0], [xm, args.notch_depth]])
     elif args.path == "found":  # a bonded lead out of the notch, grown as the faces soften
         tip = np.array([xm, args.notch_depth])
@@ -165,19 +183,21 @@ def beam_model(args, law, cohesive=None, lead=None):
         notch = mf.Crack([[xm, 0.0], [xm, args.notch_depth], [xm, D]], through=True)
     if args.method == "efg":  # particles everywhere: the reference of the couplings
         particles = mf.ParticleSet.from_vertices(msh)
-        model = mf.EFGElasticity(particles, law, cracks=[notch])
+        model = mf.EFGElasticity(particles, law, cracks=[] if notch is None else [notch])
     else:
         x0, x1 = patch_range(args, xm)
         cells = dolfinx.mesh.locate_entities(
             msh, 2, lambda p: (p[0] > x0 - 1e-9 * L) & (p[0] < x1 + 1e-9 * L)
         )
-        patch = mf.ParticlePatch(msh, cells, placement="vertices", cracks=[notch])
+        patch = mf.ParticlePatch(
+            msh, cells, placement="vertices", cracks=[] if notch is None else [notch]
+        )
         particles = patch.particles
         model = mf.CoupledElasticity(
             V, patch, law, coupling=args.method, particle_band=args.particle_band
         )
-    if cohesive is not None:
-        model.add_cohesive(notch, cohesive, segments=[1])  # the notch itself is traction-free
+    if cohesive is not None:  # the notch itself is traction-free; an unnotched crack cohesive
+        model.add_cohesive(notch, cohesive, segments=[1] if args.notch_depth > 0 else None)
     if args.setup == "three-point-bend":
         three_point_supports(model, msh, args, L, hx, xm)
     else:
@@ -257,8 +277,19 @@ def run(args) -> dict:
     # principal stress averaged about the notch tip (mf.initiation_direction)
     twin, *_ = beam_model(args, elastic)
     linear = twin.solve()
-    lead = None
-    if cohesive is not None and args.path == "found":
+    lead = site = start = None
+    if cohesive is not None and args.path == "found" and args.notch_depth == 0.0:
+        # no notch: the crack starts where the averaged principal stress of the linear solve is
+        # highest (the bulk is elastic until then), a bonded stretch of AHEAD + 1 spacings
+        radius = args.growth_radius
+        site = mf.initiation_site(linear, args.ft, radius=radius)
+        if not site.on_edge or abs(site.point[1]) > 1e-9 * args.depth:
+            raise ValueError(
+                f"the crack starts at {site.point.round(3).tolist()} mm, not on the bottom edge: "
+                "the demo's control (the opening of a crack mouth at the bottom) does not apply"
+            )
+        start = site.crack(lead=(AHEAD + 1) * args.h)
+    elif cohesive is not None and args.path == "found":
         lead = (
             np.array([0.0, 1.0])
             if args.setup == "three-point-bend"
@@ -266,14 +297,15 @@ def run(args) -> dict:
                 linear, particles_cracks(twin)[0], radius=args.growth_radius
             )
         )
-    model, particles, msh, xm, hx = beam_model(args, law, cohesive, lead)
+    model, particles, msh, xm, hx = beam_model(args, law, cohesive, lead, start)
     growth = None
     if cohesive is not None and args.path == "found":
         (crack,) = particles_cracks(model)
         radius = 1.0 if args.growth_radius is None else args.growth_radius / hx
         growth = mf.CohesiveGrowth(crack, ahead=AHEAD, radius=radius)
-    d = hx / 2  # the CMOD: the bottom points half a cell either side of the notch
-    mouth = [[xm - d, 0.0], [xm + d, 0.0]]
+    d = hx / 2  # the CMOD: the bottom points half a cell either side of the notch (or the site)
+    xc = xm if site is None else float(site.point[0])
+    mouth = [[xc - d, 0.0], [xc + d, 0.0]]
     cmod = mf.DisplacementControl(mouth, [[-1.0, 0.0], [1.0, 0.0]])
     if args.setup == "three-point-bend":  # controlled by the opening; the deflection monitored
         control = cmod
@@ -281,8 +313,10 @@ def run(args) -> dict:
     else:  # the shear beam: controlled by the sliding (the right face up against the left)
         control = mf.DisplacementControl(mouth, [[0.0, -1.0], [0.0, 1.0]])
         monitors = {"cmod": cmod}
+    # the first step elastic: without a notch the mouth opens little before the faces soften
+    # (at h = 10 mm a first CMOD of end / 250 took the load past f_t at the bottom face)
     options = mf.PathOptions(
-        increment=args.end_cmod / 250,
+        increment=args.end_cmod / (250 if args.notch_depth > 0 else 1000),
         end=args.end_cmod,
         min_load=args.min_load,
         max_increment=args.end_cmod / 25,
@@ -307,8 +341,8 @@ def run(args) -> dict:
     # beam; the ligament for a given path), the ligament for the crack band
     ligament = (args.depth - args.notch_depth) * B
     if cohesive is not None:
-        q = particles_cracks(model)[0].points
-        ligament = float(np.linalg.norm(np.diff(q[1:], axis=0), axis=1).sum()) * B
+        q = particles_cracks(model)[0].points[1 if args.notch_depth > 0 else 0 :]
+        ligament = float(np.linalg.norm(np.diff(q, axis=0), axis=1).sum()) * B
     n_cells = msh.topology.index_map(2).size_local
     record = {
         "setup": args.setup,
@@ -339,6 +373,14 @@ def run(args) -> dict:
         "length_mm": args.length or args.span,
         "depth_mm": args.depth,
     }
+    if site is not None:  # where and at which load the crack started, and the runner-up
+        record["initiation"] = {
+            "point_mm": site.point.tolist(),
+            "direction": site.direction.tolist(),
+            "load_N": site.load_factor * B,
+            "margin": site.margin,
+            "runner_up_mm": None if site.runner_up is None else site.runner_up.tolist(),
+        }
     # the first step against the linear-elastic solve of the same model
     pts, dirs = control.check(2)
     g = float(np.sum(linear.displacement(pts) * dirs))  # the control per unit load factor
@@ -538,8 +580,10 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
         )
     if args.length is not None and args.length < args.span:
         p.error(f"--length {args.length} must be at least --span {args.span}")
-    if not 0 < args.notch_depth < args.depth:
-        p.error(f"--notch-depth {args.notch_depth} must lie in (0, --depth {args.depth})")
+    if not 0 <= args.notch_depth < args.depth:
+        p.error(f"--notch-depth {args.notch_depth} must lie in [0, --depth {args.depth})")
+    if args.notch_depth == 0 and args.setup != "three-point-bend":
+        p.error("--notch-depth 0 (an unnotched beam) is for --setup three-point-bend")
     return args
 
 
@@ -568,6 +612,13 @@ def main(argv: list[str] | None = None) -> dict:
                 f"  {row[0]:8.4f}"
                 + "".join(f"  {v:13.4f}" for v in row[1:-1])
                 + f"  {row[-1]:8.1f}"
+            )
+        if "initiation" in r:
+            s = r["initiation"]
+            print(
+                f"the crack starts at ({s['point_mm'][0]:.1f}, {s['point_mm'][1]:.1f}) mm at "
+                f"{s['load_N']:.1f} N (the averaged principal stress of the linear solve reaches "
+                f"f_t); margin to the runner-up {s['margin']:.3g}"
             )
         if r["crack_polyline"]:
             q = np.asarray(r["crack_polyline"])

@@ -60,6 +60,7 @@ from .physics.forces import InternalForces
 from .physics.inelastic import J2Plasticity, RankineDamage
 from .physics.materials import LinearElastic
 from .statics.cohesive_growth import CohesiveGrowth, initiation_direction
+from .statics.cohesive_initiation import InitiationSite, initiation_site
 from .statics.coupled import (
     COMPONENT_COUPLINGS,
     COUPLINGS,
@@ -129,6 +130,7 @@ __all__ = [
     "GrowthStep",
     "HybridElasticity",
     "InclinedCentreCrack",
+    "InitiationSite",
     "InternalForces",
     "IterativeOptions",
     "J2Plasticity",
@@ -177,6 +179,7 @@ __all__ = [
     "follow_path",
     "gaussian",
     "initiation_direction",
+    "initiation_site",
     "interaction_integral",
     "kink_angle",
     "quartic",

@@ -130,6 +130,8 @@ class EFGSolution:
     #: The cracks of the model and where they lie (pure EFG, the whole mesh).
     cracks: list = field(default_factory=list)
     domain: CrackDomain | None = None
+    #: The particles (pure EFG's model), where a solve has them.
+    particles: ParticleSet | None = None
 
     def displacement(self, points: np.ndarray) -> np.ndarray:
         """Displacement (m, gdim) at points (m, gdim); local, no communication."""
@@ -858,6 +860,7 @@ class EFGElasticity:
             material=self.linear_material,
             cracks=self.cracks,
             domain=self._domain,
+            particles=self.particles,
         )
 
     def block_model(self) -> EFGBlockModel:
@@ -935,6 +938,7 @@ class EFGBlockModel:
             material=self.model.linear_material,
             cracks=self.model.cracks,
             domain=self.model._domain,
+            particles=self.model.particles,
         )
         solution.states = self.problem.states
         return solution

@@ -584,10 +584,10 @@ def _grow(
 
     for gr in growths:
         side = next(s for s in sides if s.cohesive.crack is gr.crack)
-        end = gr.crack.tip_ends[0] if gr.crack.tip_ends else None
         # collective; its errors (a crack leaving the patch) are raised on every rank
-        fitted = grow_once(gr, side, model.mls, coefficients, model.material, domain, side.h)
-        if fitted is not None:
+        grown = grow_once(gr, side, model.mls, coefficients, model.material, domain, side.h)
+        if grown is not None:
+            end, fitted = grown
             k = next(i for i, c in enumerate(model.cohesive) if c.crack is gr.crack)
             model.cohesive[k] = gr.extended(model.cohesive[k], end)
             return gr.crack.points[end].tolist(), fitted

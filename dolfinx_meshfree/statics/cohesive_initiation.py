@@ -1,0 +1,351 @@
+"""Where a cohesive crack starts in a body without a notch: the stress criterion of issue 24
+(the largest principal stress, averaged over a stated radius, reaches ``f_t``), applied to a
+linear-elastic solve.
+
+Before the first crack the bulk of the fictitious crack model (Hillerborg, Modéer & Petersson
+1976) is linear elastic, so under proportional loading its stress is the linear-elastic solve's
+times the load factor ``t``. The crack therefore starts where the averaged largest principal
+stress of that solve, ``sigma_1``, is highest, at ``t = f_t / sigma_1``, and runs normal to it.
+The average is :class:`~dolfinx_meshfree.CohesiveGrowth`'s (the Gaussian weight ``exp(-r^2 /
+(2 l^2))`` over the disc ``r <= 3 l`` in the body: Wells & Sluys 2001, IJNME 50, sec. 4.1), so
+that the crack starts by the rule it then grows by.
+
+:func:`initiation_site` searches the particles' cells: their midpoints (a crack inside the body,
+with two tips) and the midpoints of their exterior facets (an edge crack: a traction-free edge is
+where bending and stress concentrations put the largest stress). Its :meth:`InitiationSite.crack`
+is the first, bonded stretch of the crack (``Crack(..., through=True)``: its faces carry the
+law); follow the path with :class:`~dolfinx_meshfree.CohesiveGrowth` on it. The FE side of a
+coupled model is screened too: where its averaged stress exceeds the particles' largest, the
+crack would start where the FE side cannot carry it, and the search is refused, naming the point.
+A ``margin`` to the best candidate away from the site says how clear the choice is.
+
+Scope: the *first* crack of a body whose bulk is elastic (the linear solve is its field until
+then). A second crack that starts once the first has softened (multiple cracking) needs the
+search during the path and a crack added to a built model: not built. Nor is the switch from a
+damaging bulk to a crack (issue 24).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import dolfinx
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..geometry.crack import Crack, CrackDomain, gathered_segments, particle_spacing
+from ..geometry.quadrature import QuadraturePoints, boundary_facets
+from ..parallel import raise_on_all_ranks
+from ..physics.materials import LinearElastic
+from .cohesive_growth import CohesiveGrowth, _inside, _polar_rule
+
+if TYPE_CHECKING:  # annotations only
+    from collections.abc import Callable, Sequence
+
+    from ..couplings.base import CoupledSolution
+    from ..geometry.patch import ParticlePatch
+    from .efg import EFGSolution
+
+__all__ = ["InitiationSite", "initiation_site"]
+
+#: Candidates whose screened stress is highest, averaged exactly (each side of the runner-up's
+#: separation): the screen is a coarse average of the cell midpoints' stresses.
+_SHORTLIST = 16
+
+
+@dataclass(frozen=True)
+class InitiationSite:
+    """Where and when the first cohesive crack starts (:func:`initiation_site`).
+
+    Attributes:
+        point: (2,) the site: a midpoint of an exterior facet (``on_edge``) or of a cell.
+        direction: (2,) unit, normal to the averaged largest principal stress (into the body
+            for an edge site).
+        stress: the averaged largest principal stress at ``point`` of the solve.
+        load_factor: ``f_t / stress``: the factor on the solve's load at which the crack starts.
+        on_edge: whether the site lies on the exterior boundary (an edge crack, one tip).
+        runner_up: (2,) the best candidate at least ``separation`` from ``point``, or ``None``.
+        margin: ``1 - stress(runner_up) / stress``: near 0, another place starts a crack at
+            nearly the same load, and which one wins is for the discretisation or the round-off
+            to decide (a uniform bar): restrict ``region`` to choose. ``1.0`` without a runner-up.
+        spacing: the particle spacing ``h`` of the model.
+    """
+
+    point: np.ndarray
+    direction: np.ndarray
+    stress: float
+    load_factor: float
+    on_edge: bool
+    runner_up: np.ndarray | None
+    margin: float
+    spacing: float
+
+    def crack(self, lead: float | None = None) -> Crack:
+        """The crack's first, bonded stretch (``through=True``: its faces must carry a law):
+        from the edge point ``lead`` along :attr:`direction` (an edge crack, one tip), or
+        ``lead`` each way from an interior site (two tips). Default ``lead``: ``(ahead + 1)``
+        spacings of :class:`~dolfinx_meshfree.CohesiveGrowth`'s default ``ahead``, so that the
+        tip is ahead of the faces that soften first. Add it to a model (the ``ParticlePatch``'s
+        or ``EFGElasticity``'s ``cracks``), ``model.add_cohesive(crack, law)`` on all its
+        segments, then ``follow_path(..., growth=CohesiveGrowth(crack))``."""
+        lead = (CohesiveGrowth.ahead + 1.0) * self.spacing if lead is None else lead
+        if isinstance(lead, bool) or not (
+            isinstance(lead, int | float) and np.isfinite(lead) and lead > 0
+        ):
+            raise ValueError(f"lead={lead!r} must be a positive length (the bonded stretch)")
+        p, d = self.point, self.direction
+        start = p if self.on_edge else p - lead * d
+        return Crack([start, p + lead * d], through=True)
+
+
+def initiation_site(
+    solution: EFGSolution | CoupledSolution,
+    ft: float,
+    region: Callable[[np.ndarray], np.ndarray] | None = None,
+    radius: float | None = None,
+    separation: float | None = None,
+) -> InitiationSite:
+    """Where the first cohesive crack starts in a linear-elastic ``solution``: the candidate
+    (a midpoint of a particle cell or of its exterior facets) of the highest averaged largest
+    principal stress (module docstring). Collective; the same on every rank.
+
+    Args:
+        solution: a linear-elastic solve (``model.solve()``) under the reference load the path
+            will scale (pure EFG or coupled); the body may have cracks (their faces' near field,
+            1.5 spacings, is left out of the averages and the candidates).
+        ft: the tensile strength (the cohesive law's ``ft``) for the load factor.
+        region: ``region(x)`` (m, 2) -> (m,) bool: the candidates allowed (default: all).
+        radius: the Gaussian averaging length ``l`` (default: :class:`CohesiveGrowth`'s, one
+            spacing; give the one the growth will use).
+        separation: the least distance of the runner-up from the site (default ``6 l``).
+
+    Returns:
+        The :class:`InitiationSite`.
+
+    Raises:
+        ValueError: ``ft``, ``radius`` or ``separation`` not positive; no candidate in
+            ``region``; no tension anywhere (the load does not start a crack).
+    """
+    for name, v in (("ft", ft), ("radius", radius), ("separation", separation)):
+        if v is None and name != "ft":
+            continue
+        if isinstance(v, bool) or not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
+            raise ValueError(f"initiation_site: {name}={v!r} must be a positive number")
+    if region is not None and not callable(region):
+        raise TypeError(f"initiation_site: region must be a callable on points, got {region!r}")
+    if not isinstance(solution.material, LinearElastic):
+        raise ValueError(
+            f"initiation_site: the solution's law is {type(solution.material).__name__}, not "
+            "LinearElastic: the site is found from a linear-elastic solve (the bulk before the "
+            "first crack); solve the model with mf.LinearElastic"
+        )
+    coupled = hasattr(solution, "patch")
+    domain = solution.patch if coupled else solution.domain
+    if domain is None and getattr(solution, "particles", None) is not None:  # EFG, no crack
+        domain = CrackDomain.from_particles(solution.particles)
+    if domain is None:
+        raise ValueError(
+            "initiation_site: the solution does not say where its particles are; pass the "
+            "solution of model.solve() (EFGElasticity or CoupledElasticity)"
+        )
+    cracks = list(solution.patch.cracks if coupled else solution.cracks)
+    comm = domain.comm
+    if domain.mesh.geometry.dim != 2:
+        raise ValueError(
+            f"initiation_site: cracks are 2D; the mesh has gdim={domain.mesh.geometry.dim}"
+        )
+    h = particle_spacing(domain)
+    l_avg = CohesiveGrowth.radius * h if radius is None else float(radius)
+    sep = 6.0 * l_avg if separation is None else float(separation)
+    clear = CohesiveGrowth.clearance * h
+
+    # the candidates (replicated): the midpoints of the cells and of the exterior facets of the
+    # whole body, the particles' (where the crack may start) and the FE side's (checked below)
+    mid, sig_mid, in_particles = _cell_midpoint_stresses(solution, domain, coupled)
+    msh = domain.mesh
+    facets = boundary_facets(msh) if coupled else domain.exterior_facets
+    edge = gathered_segments(domain, facets).mean(axis=1)
+    edge_particles = np.concatenate(comm.allgather(np.isin(facets, domain.exterior_facets))).astype(
+        bool
+    )
+    x = np.concatenate([mid, edge])
+    on_edge = np.arange(len(x)) >= len(mid)
+    particle = np.concatenate([in_particles, edge_particles])
+    keep = np.ones(len(x), dtype=bool)
+    mask = None
+    if region is not None:
+        mask = np.asarray(region(x.copy()), dtype=bool).reshape(-1)
+
+    def check_region() -> None:
+        if mask is not None and mask.shape != (len(x),):
+            raise ValueError(
+                f"initiation_site: region returned shape {mask.shape} for {len(x)} points; it must "
+                "return one bool per point"
+            )
+
+    raise_on_all_ranks(comm, check_region)
+    if mask is not None:
+        keep &= mask
+    distance = _CrackDistance(cracks)
+    if cracks:
+        keep &= distance(x) >= clear
+    n_cand = int((keep & particle).sum())
+
+    def check_candidates() -> None:
+        if n_cand == 0:
+            raise ValueError(
+                "initiation_site: no candidate point: region selects none of the particle cells' "
+                "midpoints or exterior facets (away from the cracks); widen region"
+            )
+
+    raise_on_all_ranks(comm, check_candidates)
+
+    # the screen: a Gaussian average of the stresses at the cell midpoints
+    use = np.ones(len(mid), dtype=bool) if not cracks else distance(mid) >= clear
+    screened = _screen(x, mid[use], sig_mid[use], l_avg)
+    fe = np.flatnonzero(keep & ~particle)
+    fe_best = fe[np.argmax(screened[fe])] if fe.size else None
+    keep &= particle
+    p_best = np.flatnonzero(keep)[np.argmax(screened[keep])]
+
+    def check_fe() -> None:
+        if fe_best is not None and screened[fe_best] > screened[p_best]:
+            raise ValueError(
+                f"initiation_site: the averaged principal stress at "
+                f"{x[fe_best].round(6).tolist()} on the FE side ({screened[fe_best]:.6g}, "
+                f"screened) exceeds the particles' largest ({screened[p_best]:.6g} at "
+                f"{x[p_best].round(6).tolist()}): the crack would start outside the patch, where "
+                "the FE side cannot carry it; add the cells around that point to the patch (or "
+                "exclude it with region)"
+            )
+
+    raise_on_all_ranks(comm, check_fe)
+    order = np.flatnonzero(keep)[np.argsort(-screened[keep], kind="stable")]
+    first = order[:_SHORTLIST]
+    sigma = _averaged(solution, x[first], l_avg, domain, distance if cracks else None, clear)
+    s1 = np.linalg.eigvalsh(0.5 * (sigma + sigma.transpose(0, 2, 1)))[:, -1]
+    k = int(np.argmax(s1))
+    best, s_best = first[k], float(s1[k])
+
+    def check_tension() -> None:
+        if not s_best > 0.0:
+            raise ValueError(
+                f"initiation_site: the largest averaged principal stress is {s_best:.6g} <= 0 at "
+                f"{x[best].round(6).tolist()}: the load compresses the whole region, no crack "
+                "starts under it; check the load's sign"
+            )
+
+    raise_on_all_ranks(comm, check_tension)
+    far = order[np.linalg.norm(x[order] - x[best], axis=1) >= sep][:_SHORTLIST]
+    runner, margin = None, 1.0
+    if far.size:
+        sig_far = _averaged(solution, x[far], l_avg, domain, distance if cracks else None, clear)
+        s_far = np.linalg.eigvalsh(0.5 * (sig_far + sig_far.transpose(0, 2, 1)))[:, -1]
+        j = int(np.argmax(s_far))
+        runner, margin = x[far[j]].copy(), float(1.0 - s_far[j] / s_best)
+    _, vecs = np.linalg.eigh(0.5 * (sigma[k] + sigma[k].T))
+    n = vecs[:, -1]
+    d = np.array([-n[1], n[0]])
+    if on_edge[best]:  # into the body
+        probe = x[best] + 0.25 * h * np.stack([d, -d])
+        inside = _inside(domain, probe)
+        if not inside[0] and inside[1]:
+            d = -d
+    elif d[1] < -1e-12 or (abs(d[1]) <= 1e-12 and d[0] < 0.0):
+        d = -d  # a fixed orientation (upwards, else rightwards): the same crack every run
+    return InitiationSite(
+        point=x[best].copy(),
+        direction=d,
+        stress=s_best,
+        load_factor=float(ft) / s_best,
+        on_edge=bool(on_edge[best]),
+        runner_up=runner,
+        margin=margin,
+        spacing=h,
+    )
+
+
+class _CrackDistance:
+    """Distance (m,) of points to the nearest of ``cracks`` (a Crack's ``distance``)."""
+
+    def __init__(self, cracks: Sequence[Crack]) -> None:
+        self.cracks = list(cracks)
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        d = np.full(len(x), np.inf)
+        for c in self.cracks:
+            d = np.minimum(d, c.distance(x))
+        return d
+
+    distance = __call__  # the interface of Crack.distance, for principal-stress averages
+
+
+def _cell_midpoint_stresses(
+    solution: EFGSolution | CoupledSolution,
+    domain: ParticlePatch | CrackDomain,
+    coupled: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The midpoints (m, 2) of the owned cells (pure EFG: the particles' cells; coupled: every
+    cell), the solution's stress (m, 2, 2) there (FE in FE cells, particles in patch cells) and
+    whether each is a particle cell, gathered from every rank (collective)."""
+    msh = domain.mesh
+    n_own = msh.topology.index_map(2).size_local
+    if coupled:
+        cells = np.arange(n_own, dtype=np.int32)
+        particle = np.asarray(solution.patch.in_patch[:n_own], dtype=bool)
+    else:
+        cells = domain.cells[domain.cells < n_own].astype(np.int32)
+        particle = np.ones(len(cells), dtype=bool)
+    mid = dolfinx.mesh.compute_midpoints(msh, 2, cells)[:, :2]
+    if not len(mid):
+        grad = np.zeros((0, 2, 2))
+    elif coupled:
+        q = QuadraturePoints(mid, np.ones(len(mid)), cells)
+        grad = solution.evaluate_at_quadrature(q)[1]
+    else:
+        grad = solution.mls.tabulate(mid).gradient(solution.coefficients)
+    sig = solution.material.stress(grad) if len(mid) else grad
+    comm = domain.comm
+    return (
+        np.concatenate(comm.allgather(mid)).reshape(-1, 2),
+        np.concatenate(comm.allgather(sig)).reshape(-1, 2, 2),
+        np.concatenate(comm.allgather(particle)).astype(bool),
+    )
+
+
+def _screen(x: np.ndarray, y: np.ndarray, sig: np.ndarray, length: float) -> np.ndarray:
+    """The largest principal stress (m,) of the Gaussian average (length ``length``, disc of
+    ``3 length``) of the stresses ``sig`` at the points ``y`` about each of ``x`` (local)."""
+    tree = cKDTree(y)
+    out = np.full(len(x), -np.inf)
+    for i, near in enumerate(tree.query_ball_point(x, 3.0 * length)):
+        if not near:
+            continue
+        w = np.exp(-0.5 * (np.linalg.norm(y[near] - x[i], axis=1) / length) ** 2)
+        s = np.einsum("q,qij->ij", w, sig[near]) / w.sum()
+        out[i] = np.linalg.eigvalsh(0.5 * (s + s.T))[-1]
+    return out
+
+
+def _averaged(
+    solution: EFGSolution | CoupledSolution,
+    centres: np.ndarray,
+    length: float,
+    domain: ParticlePatch | CrackDomain,
+    cracks: _CrackDistance | None,
+    clearance: float,
+) -> np.ndarray:
+    """The averaged stress (k, 2, 2) about each of ``centres`` by the rule of
+    :func:`~dolfinx_meshfree.statics.cohesive_growth.principal_direction` (collective: the
+    points in the domain)."""
+    xs, ws = zip(*(_polar_rule(c, length) for c in centres), strict=True)
+    owner = np.repeat(np.arange(len(centres)), [len(p) for p in xs])
+    x, w = np.concatenate(xs), np.concatenate(ws)
+    keep = np.ones(len(x), dtype=bool) if cracks is None else cracks(x) >= clearance
+    keep[keep] = _inside(domain, x[keep])
+    x, w, owner = x[keep], w[keep], owner[keep]
+    sig = solution.material.stress(solution.mls.tabulate(x).gradient(solution.coefficients))
+    out = np.zeros((len(centres), 2, 2))
+    np.add.at(out, owner, w[:, None, None] * sig)
+    return out / np.bincount(owner, weights=w, minlength=len(centres))[:, None, None]

@@ -60,7 +60,7 @@ from .physics.forces import InternalForces
 from .physics.inelastic import J2Plasticity, RankineDamage
 from .physics.materials import LinearElastic
 from .statics.cohesive_growth import CohesiveGrowth, initiation_direction
-from .statics.cohesive_initiation import InitiationSite, initiation_site
+from .statics.cohesive_initiation import BulkStrengthWarning, InitiationSite, initiation_site
 from .statics.coupled import (
     COMPONENT_COUPLINGS,
     COUPLINGS,
@@ -111,6 +111,7 @@ __all__ = [
     "AdaptiveQuadrature",
     "Approximation",
     "ArcLength",
+    "BulkStrengthWarning",
     "CohesiveGrowth",
     "CoupledElasticity",
     "CoupledLinearProblem",

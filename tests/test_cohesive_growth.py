@@ -12,6 +12,7 @@ symmetric beam; the last stretch to a free edge against the edge's normal; bad i
 from __future__ import annotations
 
 import sys
+import warnings
 from pathlib import Path
 
 import dolfinx_meshfree as mf
@@ -349,6 +350,8 @@ def test_initiation_site_bad_input():
         mf.initiation_site(solution, FT, region=[1, 2])
     with pytest.raises(ValueError, match=r"region returned shape \(1,\)"):
         mf.initiation_site(solution, FT, region=lambda x: np.ones(1, dtype=bool))
+    with pytest.raises(ValueError, match=r"returned shape \(2,\) .* not as DOLFINx markers"):
+        mf.initiation_site(solution, FT, region=lambda x: x[1] > 40.0)  # DOLFINx's layout
     with pytest.raises(ValueError, match="region selects none"):
         mf.initiation_site(solution, FT, region=lambda x: x[:, 0] > 1e3)
     with pytest.raises(ValueError, match=r"principal stress is -1 <= 0 .* compresses"):
@@ -482,3 +485,37 @@ def test_a_nearly_isotropic_stress_does_not_turn_the_crack():
     assert q[-1, 1] == pytest.approx(200.0, abs=1e-9)
     start = [runs[h]["initiation"]["load_N"] for h in ("20", "10")]
     assert abs(start[1] / start[0] - 1.0) <= 0.005
+
+
+# ## A further crack: the bulk's strength away from the cracks (PathResult.bulk_stress)
+
+
+def test_a_crack_in_the_wrong_place_is_not_silent():
+    """The unnotched beam (h = 25 mm, lagrange) with its cohesive crack given 300 mm off
+    mid-span, where beam theory's bottom stress is 0.7 of mid-span's: the bulk at mid-span
+    reaches f_t first. follow_path warns (BulkStrengthWarning) at a step where the crack's faces
+    have not yet softened (no energy dissipated), naming a point within two spacings of the
+    bottom of mid-span, and records the bulk's stress per step."""
+    ns = demo.parse(["--h", "25", "--notch-depth", "0", "--patch-offset", "300"])
+    elastic = mf.LinearElastic(ns.E, ns.nu, plane="stress")
+    crack = mf.Crack([[1300.0, 0.0], [1300.0, 200.0]], through=True)
+    model, _, _, _, hx = demo.beam_model(ns, elastic, None, None, crack)
+    model.add_cohesive(crack, mf.LinearCohesive(ft=ns.ft, Gf=ns.Gf))
+    cmod = mf.DisplacementControl([[1300 - hx / 2, 0.0], [1300 + hx / 2, 0.0]], [[-1, 0], [1, 0]])
+    options = mf.PathOptions(increment=2e-4, end=0.004, max_increment=4e-4, min_load=0.1)
+    with pytest.warns(mf.BulkStrengthWarning, match=r"reaches 1\.[0-9]+ f_t at \((9|10)"):
+        path = mf.follow_path(model, cmod, options)
+    first = next(k for k, s in enumerate(path.bulk_stress) if s > ns.ft)
+    assert path.dissipated_energy[first] == 0.0
+    assert np.linalg.norm(np.subtract(path.bulk_point[first], [1000.0, 0.0])) <= 2 * 25.0
+    assert len(path.bulk_stress) == len(path.load_factor)
+
+
+def test_the_notched_beam_stays_below_the_bulk_strength():
+    """Petersson's notched beam (h = 25 mm, lagrange, the crack given up the ligament): the bulk
+    three spacings or more from the crack stays below f_t over the whole path (measured 0.24 f_t),
+    and follow_path says nothing."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", mf.BulkStrengthWarning)
+        r = demo.main(["--h", "25", "--end-cmod", "0.3", "--quiet"])
+    assert 0.0 < r["bulk_stress_ratio"] <= 0.5

@@ -47,11 +47,17 @@ if TYPE_CHECKING:  # annotations only
     from ..geometry.patch import ParticlePatch
     from .efg import EFGSolution
 
-__all__ = ["InitiationSite", "initiation_site"]
+__all__ = ["BulkStrengthWarning", "InitiationSite", "bulk_stress_peak", "initiation_site"]
 
 #: Candidates whose screened stress is highest, averaged exactly (each side of the runner-up's
 #: separation): the screen is a coarse average of the cell midpoints' stresses.
 _SHORTLIST = 16
+
+
+class BulkStrengthWarning(UserWarning):
+    """The elastic bulk of a cohesive-crack model reached ``f_t`` away from its cracks: a
+    further crack would start there, which the model does not follow (:func:`bulk_stress_peak`;
+    :attr:`~dolfinx_meshfree.PathResult.bulk_stress`)."""
 
 
 @dataclass(frozen=True)
@@ -115,7 +121,8 @@ def initiation_site(
             will scale (pure EFG or coupled); the body may have cracks (their faces' near field,
             1.5 spacings, is left out of the averages and the candidates).
         ft: the tensile strength (the cohesive law's ``ft``) for the load factor.
-        region: ``region(x)`` (m, 2) -> (m,) bool: the candidates allowed (default: all).
+        region: ``region(x)`` (m, 2) -> (m,) bool: the candidates allowed (default: all); the
+            points are rows, ``x[:, 1] > 40.0`` (not DOLFINx's marker layout).
         radius: the Gaussian averaging length ``l`` (default: :class:`CohesiveGrowth`'s, one
             spacing; give the one the growth will use).
         separation: the least distance of the runner-up from the site (default ``6 l``).
@@ -172,6 +179,9 @@ def initiation_site(
     x = np.concatenate([mid, edge])
     on_edge = np.arange(len(x)) >= len(mid)
     particle = np.concatenate([in_particles, edge_particles])
+    # by coordinates: equal candidates (a symmetric body) are chosen alike on any partition
+    by = np.lexsort((x[:, 1], x[:, 0]))
+    x, on_edge, particle = x[by], on_edge[by], particle[by]
     keep = np.ones(len(x), dtype=bool)
     mask = None
     if region is not None:
@@ -180,8 +190,9 @@ def initiation_site(
     def check_region() -> None:
         if mask is not None and mask.shape != (len(x),):
             raise ValueError(
-                f"initiation_site: region returned shape {mask.shape} for {len(x)} points; it must "
-                "return one bool per point"
+                f"initiation_site: region returned shape {mask.shape} for {len(x)} points; it "
+                "gets the points as rows (m, 2), x[:, 0] and x[:, 1], not as DOLFINx markers do "
+                "(x[0], x[1]), and must return one bool per point"
             )
 
     raise_on_all_ranks(comm, check_region)
@@ -266,6 +277,37 @@ def initiation_site(
     )
 
 
+def bulk_stress_peak(
+    solution: EFGSolution | CoupledSolution,
+    clearance: float | None = None,
+    material: LinearElastic | None = None,
+) -> tuple[np.ndarray, float]:
+    """The largest averaged largest principal stress of ``solution`` away from its cracks (by
+    ``clearance``, default three spacings: the process zone and the tips' fields left out),
+    FE side included, and where: the screen of :func:`initiation_site` (the Gaussian average of
+    the cells' midpoint stresses, length one spacing) over the midpoints of every cell and
+    exterior facet (``material``: the bulk's law, default the solution's). Above ``f_t`` a crack
+    would start there (collective)."""
+    coupled = hasattr(solution, "patch")
+    domain = solution.patch if coupled else solution.domain
+    if domain is None:
+        domain = CrackDomain.from_particles(solution.particles)
+    cracks = list(solution.patch.cracks if coupled else solution.cracks)
+    h = particle_spacing(domain)
+    clear = 3.0 * h if clearance is None else float(clearance)
+    mid, sig_mid, _ = _cell_midpoint_stresses(solution, domain, coupled, material)
+    facets = boundary_facets(domain.mesh) if coupled else domain.exterior_facets
+    x = np.concatenate([mid, gathered_segments(domain, facets).mean(axis=1)])
+    x = x[np.lexsort((x[:, 1], x[:, 0]))]
+    distance = _CrackDistance(cracks)
+    use = distance(mid) >= CohesiveGrowth.clearance * h if cracks else slice(None)
+    screened = _screen(x, mid[use], sig_mid[use], CohesiveGrowth.radius * h)
+    if cracks:
+        screened[distance(x) < clear] = -np.inf
+    k = int(np.argmax(screened))
+    return x[k].copy(), float(screened[k])
+
+
 class _CrackDistance:
     """Distance (m,) of points to the nearest of ``cracks`` (a Crack's ``distance``)."""
 
@@ -285,6 +327,7 @@ def _cell_midpoint_stresses(
     solution: EFGSolution | CoupledSolution,
     domain: ParticlePatch | CrackDomain,
     coupled: bool,
+    material: LinearElastic | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The midpoints (m, 2) of the owned cells (pure EFG: the particles' cells; coupled: every
     cell), the solution's stress (m, 2, 2) there (FE in FE cells, particles in patch cells) and
@@ -305,7 +348,8 @@ def _cell_midpoint_stresses(
         grad = solution.evaluate_at_quadrature(q)[1]
     else:
         grad = solution.mls.tabulate(mid).gradient(solution.coefficients)
-    sig = solution.material.stress(grad) if len(mid) else grad
+    law = solution.material if material is None else material
+    sig = law.stress(grad) if len(mid) else grad
     comm = domain.comm
     return (
         np.concatenate(comm.allgather(mid)).reshape(-1, 2),
@@ -317,14 +361,20 @@ def _cell_midpoint_stresses(
 def _screen(x: np.ndarray, y: np.ndarray, sig: np.ndarray, length: float) -> np.ndarray:
     """The largest principal stress (m,) of the Gaussian average (length ``length``, disc of
     ``3 length``) of the stresses ``sig`` at the points ``y`` about each of ``x`` (local)."""
-    tree = cKDTree(y)
     out = np.full(len(x), -np.inf)
-    for i, near in enumerate(tree.query_ball_point(x, 3.0 * length)):
-        if not near:
-            continue
-        w = np.exp(-0.5 * (np.linalg.norm(y[near] - x[i], axis=1) / length) ** 2)
-        s = np.einsum("q,qij->ij", w, sig[near]) / w.sum()
-        out[i] = np.linalg.eigvalsh(0.5 * (s + s.T))[-1]
+    if not len(x) or not len(y):
+        return out
+    near = cKDTree(y).query_ball_point(x, 3.0 * length)
+    counts = np.fromiter((len(n) for n in near), dtype=np.int64, count=len(x))
+    rows = np.repeat(np.arange(len(x)), counts)
+    cols = np.fromiter((j for n in near for j in n), dtype=np.int64, count=int(counts.sum()))
+    w = np.exp(-0.5 * (np.linalg.norm(y[cols] - x[rows], axis=1) / length) ** 2)
+    s = np.zeros((len(x), 2, 2))
+    np.add.at(s, rows, w[:, None, None] * sig[cols])
+    total = np.bincount(rows, weights=w, minlength=len(x))
+    some = counts > 0
+    s = s[some] / total[some, None, None]
+    out[some] = np.linalg.eigvalsh(0.5 * (s + s.transpose(0, 2, 1)))[:, -1]
     return out
 
 

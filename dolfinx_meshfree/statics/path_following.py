@@ -27,6 +27,7 @@ does not converge; after ``max_cuts`` halvings the path cannot be followed and
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
@@ -45,6 +46,7 @@ from ..physics.materials import LinearElastic
 from ..physics.state import voigt_strain
 from .cohesive import CohesiveSide, check_through
 from .cohesive_growth import CohesiveGrowth, grow_once
+from .cohesive_initiation import BulkStrengthWarning, bulk_stress_peak
 from .coupled_newton import BlockModel, build_block_problem, law_internal_force
 from .efg import EFGBlockModel, EFGElasticity
 from .petsc import BlockSystem, SolverOptions, solver_options
@@ -196,6 +198,12 @@ class PathResult:
     #: control, new tip)`` each, the tip a point on the exterior boundary once the crack
     #: splits the body.
     extensions: list[tuple[int, float, list[float]]] = field(default_factory=list)
+    #: With cohesive cracks in an elastic bulk: per converged step, the largest averaged largest
+    #: principal stress of the bulk three spacings or more from every crack (FE side included;
+    #: :func:`~dolfinx_meshfree.statics.cohesive_initiation.bulk_stress_peak`) and where. Above
+    #: the faces' ``f_t`` a further crack would start there, which the model does not follow.
+    bulk_stress: list[float] = field(default_factory=list)
+    bulk_point: list[list[float]] = field(default_factory=list)
 
     @property
     def peak(self) -> tuple[float, float]:
@@ -700,6 +708,10 @@ def follow_path(
     problem, x = built.problem, built.x
     k_p = _particle_field(built)
     result = PathResult()
+    law = model.material if efg else model.law
+    watch_bulk = bool(model.cohesive) and isinstance(law, LinearElastic)  # cohesive: 2D
+    ft_bulk = min((c.law.ft for c in model.cohesive), default=np.inf)
+    warned = False
     arc = isinstance(control, ArcLength)
     try:
         g = None if arc else _control_function(built, control)
@@ -841,6 +853,22 @@ def follow_path(
             owned = _owned(x)
             for k, fn in watch.items():
                 result.monitors[k].append(fn(owned))
+            if watch_bulk:  # where a further crack would start: the bulk's stress off the cracks
+                point, stress = bulk_stress_peak(built.solution(), material=law)
+                result.bulk_stress.append(stress)
+                result.bulk_point.append(point.tolist())
+                if stress > ft_bulk and not warned:  # the same on every rank
+                    warned = True
+                    warnings.warn(
+                        f"at step {step} (control {tau:.6g}, load factor {t:.6g}) the bulk's "
+                        f"averaged largest principal stress reaches {stress / ft_bulk:.3g} f_t "
+                        f"at ({point[0]:.6g}, {point[1]:.6g}), three spacings or more from "
+                        "every crack: a further crack would start there, which this model does "
+                        "not follow (it carries the cracks it was given or grew); the path "
+                        "beyond this step is that of those cracks alone (PathResult.bulk_stress)",
+                        BulkStrengthWarning,
+                        stacklevel=2,
+                    )
             if on_step is not None:
                 on_step(step, t, tau)
             if cuts:

@@ -248,13 +248,20 @@ def initiation_site(
             )
 
     raise_on_all_ranks(comm, check_tension)
+    # the runner-up: the best of the screen's first candidates `separation` or more from the
+    # site; one that averages higher (the screen ranked them otherwise) is the site instead
     far = order[np.linalg.norm(x[order] - x[best], axis=1) >= sep][:_SHORTLIST]
-    runner, margin = None, 1.0
     if far.size:
         sig_far = _averaged(solution, x[far], l_avg, domain, distance if cracks else None, clear)
-        s_far = np.linalg.eigvalsh(0.5 * (sig_far + sig_far.transpose(0, 2, 1)))[:, -1]
-        j = int(np.argmax(s_far))
-        runner, margin = x[far[j]].copy(), float(1.0 - s_far[j] / s_best)
+        first, sigma = np.concatenate([first, far]), np.concatenate([sigma, sig_far])
+        s1 = np.linalg.eigvalsh(0.5 * (sigma + sigma.transpose(0, 2, 1)))[:, -1]
+        k = int(np.argmax(s1))
+        best, s_best = first[k], float(s1[k])
+    apart = np.linalg.norm(x[first] - x[best], axis=1) >= sep
+    runner, margin = None, 1.0
+    if apart.any():
+        j = int(np.flatnonzero(apart)[np.argmax(s1[apart])])
+        runner, margin = x[first[j]].copy(), float(1.0 - s1[j] / s_best)
     _, vecs = np.linalg.eigh(0.5 * (sigma[k] + sigma[k].T))
     n = vecs[:, -1]
     d = np.array([-n[1], n[0]])

@@ -680,6 +680,11 @@ def follow_path(
     Returns:
         The :class:`PathResult`.
 
+    Warns:
+        BulkStrengthWarning: with cohesive cracks in an elastic bulk, once the bulk's averaged
+            principal stress three spacings or more from every crack passes ``f_t``
+            (:attr:`PathResult.bulk_stress`): a further crack would start there.
+
     Raises:
         PathError: a step does not converge after ``options.max_cuts`` halvings (naming the
             step, the control value and the load factor; the path so far in ``result``).

@@ -147,16 +147,12 @@ def initiation_site(
             "LinearElastic: the site is found from a linear-elastic solve (the bulk before the "
             "first crack); solve the model with mf.LinearElastic"
         )
-    coupled = hasattr(solution, "patch")
-    domain = solution.patch if coupled else solution.domain
-    if domain is None and getattr(solution, "particles", None) is not None:  # EFG, no crack
-        domain = CrackDomain.from_particles(solution.particles)
+    coupled, domain, cracks = _body(solution)
     if domain is None:
         raise ValueError(
             "initiation_site: the solution does not say where its particles are; pass the "
             "solution of model.solve() (EFGElasticity or CoupledElasticity)"
         )
-    cracks = list(solution.patch.cracks if coupled else solution.cracks)
     comm = domain.comm
     if domain.mesh.geometry.dim != 2:
         raise ValueError(
@@ -167,21 +163,9 @@ def initiation_site(
     sep = 6.0 * l_avg if separation is None else float(separation)
     clear = CohesiveGrowth.clearance * h
 
-    # the candidates (replicated): the midpoints of the cells and of the exterior facets of the
-    # whole body, the particles' (where the crack may start) and the FE side's (checked below)
-    mid, sig_mid, in_particles = _cell_midpoint_stresses(solution, domain, coupled)
-    msh = domain.mesh
-    facets = boundary_facets(msh) if coupled else domain.exterior_facets
-    edge = gathered_segments(domain, facets).mean(axis=1)
-    edge_particles = np.concatenate(comm.allgather(np.isin(facets, domain.exterior_facets))).astype(
-        bool
-    )
-    x = np.concatenate([mid, edge])
-    on_edge = np.arange(len(x)) >= len(mid)
-    particle = np.concatenate([in_particles, edge_particles])
-    # by coordinates: equal candidates (a symmetric body) are chosen alike on any partition
-    by = np.lexsort((x[:, 1], x[:, 0]))
-    x, on_edge, particle = x[by], on_edge[by], particle[by]
+    # the candidates: the particles' (where the crack may start) and the FE side's (checked
+    # below)
+    x, on_edge, particle, mid, sig_mid = _candidates(solution, domain, coupled)
     keep = np.ones(len(x), dtype=bool)
     mask = None
     if region is not None:
@@ -295,17 +279,10 @@ def bulk_stress_peak(
     the cells' midpoint stresses, length one spacing) over the midpoints of every cell and
     exterior facet (``material``: the bulk's law, default the solution's). Above ``f_t`` a crack
     would start there (collective)."""
-    coupled = hasattr(solution, "patch")
-    domain = solution.patch if coupled else solution.domain
-    if domain is None:
-        domain = CrackDomain.from_particles(solution.particles)
-    cracks = list(solution.patch.cracks if coupled else solution.cracks)
+    coupled, domain, cracks = _body(solution)
     h = particle_spacing(domain)
     clear = 3.0 * h if clearance is None else float(clearance)
-    mid, sig_mid, _ = _cell_midpoint_stresses(solution, domain, coupled, material)
-    facets = boundary_facets(domain.mesh) if coupled else domain.exterior_facets
-    x = np.concatenate([mid, gathered_segments(domain, facets).mean(axis=1)])
-    x = x[np.lexsort((x[:, 1], x[:, 0]))]
+    x, _, _, mid, sig_mid = _candidates(solution, domain, coupled, material)
     distance = _CrackDistance(cracks)
     use = distance(mid) >= CohesiveGrowth.clearance * h if cracks else slice(None)
     screened = _screen(x, mid[use], sig_mid[use], CohesiveGrowth.radius * h)
@@ -327,7 +304,39 @@ class _CrackDistance:
             d = np.minimum(d, c.distance(x))
         return d
 
-    distance = __call__  # the interface of Crack.distance, for principal-stress averages
+
+def _body(
+    solution: EFGSolution | CoupledSolution,
+) -> tuple[bool, ParticlePatch | CrackDomain | None, list[Crack]]:
+    """Whether ``solution`` is coupled, where its particles lie (a pure EFG model without a
+    crack: from its particles; ``None`` when the solution does not say) and its cracks."""
+    coupled = hasattr(solution, "patch")
+    domain = solution.patch if coupled else solution.domain
+    if domain is None and getattr(solution, "particles", None) is not None:
+        domain = CrackDomain.from_particles(solution.particles)
+    return coupled, domain, list(solution.patch.cracks if coupled else solution.cracks)
+
+
+def _candidates(
+    solution: EFGSolution | CoupledSolution,
+    domain: ParticlePatch | CrackDomain,
+    coupled: bool,
+    material: LinearElastic | None = None,
+) -> tuple[np.ndarray, ...]:
+    """The candidate sites, replicated and ordered by their coordinates (equal candidates of a
+    symmetric body are then chosen alike on any partition): the midpoints (m, 2) of the cells
+    and of the exterior facets of the whole body, whether each is on an edge and whether in the
+    particles; and the cells' midpoints and stresses (:func:`_cell_midpoint_stresses`)
+    (collective)."""
+    mid, sig_mid, in_particles = _cell_midpoint_stresses(solution, domain, coupled, material)
+    facets = boundary_facets(domain.mesh) if coupled else domain.exterior_facets
+    edge = gathered_segments(domain, facets).mean(axis=1)
+    edge_particles = np.concatenate(domain.comm.allgather(np.isin(facets, domain.exterior_facets)))
+    x = np.concatenate([mid, edge])
+    on_edge = np.arange(len(x)) >= len(mid)
+    particle = np.concatenate([in_particles, edge_particles.astype(bool)])
+    by = np.lexsort((x[:, 1], x[:, 0]))
+    return x[by], on_edge[by], particle[by], mid, sig_mid
 
 
 def _cell_midpoint_stresses(

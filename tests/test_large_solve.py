@@ -178,7 +178,10 @@ def _halo_of(problem, consistent):
 def test_halo_stiffness_equals_whole(consistent):
     """The stiffness (chunks of 53 points, VCI in two passes) and Nitsche's terms tabulated by
     this rank's halo MLS equal the whole MLS's bit for bit (the same pairs summed in the same
-    order: measured 0.0 on 1 and 2 ranks), and so does the solution."""
+    order: measured 0.0 on 1 and 2 ranks), and so does the solution to round-off: MUMPS's
+    parallel factorisation assembles its contribution blocks in the order they arrive, so two
+    solves of the same system on 2 ranks may differ in the last bits (once in CI, on a loaded
+    machine; 0.0 otherwise)."""
     msh, _, problem = beam_problem(COMM, 1.0, consistent)
     P, mat = problem.particles, problem.material
     halo = _halo_of(problem, consistent)
@@ -191,7 +194,7 @@ def test_halo_stiffness_equals_whole(consistent):
     assert (N1 != N0).nnz == 0 and np.array_equal(f1, f0)
     a = solve_large(problem, IterativeOptions(direct=True, halo=False)).coefficients
     b = solve_large(problem, IterativeOptions(direct=True)).coefficients
-    assert np.array_equal(a, b)
+    assert np.abs(a - b).max() <= 1e-12 * np.abs(a).max()
 
 
 def test_halo_holds_every_support():

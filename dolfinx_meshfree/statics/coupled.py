@@ -41,6 +41,7 @@ from ..couplings.master_slave import SLAVES
 from ..geometry.crack import Crack
 from ..geometry.partition import warn_imbalance
 from ..geometry.patch import ParticlePatch
+from ..geometry.quadrature import particle_quadrature_degree
 from ..geometry.smoothing import STABILISATION, refuse_smoothed, resolve_integration
 from ..geometry.stress_points import check_integration
 from ..parallel import raise_on_all_ranks
@@ -182,7 +183,10 @@ class CoupledElasticity:
             ``DEFAULT_DILATION[coupling]``: 2.0 (Belytschko et al. 1995), but 2.5 for the ramp
             couplings, whose particle functions must also cover the interface cells up to their
             FE-side edge, which d_max = 2 leaves to collinear particles only.
-        quadrature_degree: Gauss degree on cells and facets.
+        quadrature_degree: Gauss degree on cells and facets. ``None`` (default): the lowest odd
+            degree from 7 with 15 Gauss points per patch particle or more
+            (:func:`~dolfinx_meshfree.geometry.quadrature.particle_quadrature_degree`): 7 with
+            particles at the vertices, 15 (8 x 8) at ``h / 2`` on quadrilaterals; 7 with cracks.
         consistent: Variationally consistent integration on the patch (VCI, Chen, Hillman &
             Rüter 2013, over the patch boundary, interface included): the linear patch test
             passes to round-off. Default (``None``): on for every variational coupling, off for
@@ -231,7 +235,7 @@ class CoupledElasticity:
         weight: str = "quartic",
         dilation: float | None = None,
         basis: str = "linear",
-        quadrature_degree: int = 7,
+        quadrature_degree: int | None = None,
         consistent: bool | None = None,
         overlap: int = 2,
         penalty: float = 0.0,
@@ -285,7 +289,9 @@ class CoupledElasticity:
         #: The law given, :class:`~dolfinx_meshfree.LinearElastic` (one linear solve) or a
         #: finite-strain :class:`~dolfinx_meshfree.physics.constitutive.Material` (Newton).
         self.law = material
-        self.quadrature_degree = quadrature_degree
+        self.quadrature_degree = particle_quadrature_degree(
+            V.mesh, patch.cells, patch.particles.positions, quadrature_degree, bool(patch.cracks)
+        )
         self.corner_angle = None if corner_angle is None else float(corner_angle)
         #: The coupling family (:mod:`~dolfinx_meshfree.couplings`).
         self.family = REGISTRY[coupling]()

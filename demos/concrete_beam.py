@@ -101,6 +101,10 @@
 # 0.97 (h = 20 mm, at the bottom under the inner load); the unnotched beam 0.98, 1.03 and 1.13 at
 # h = 25, 20 and 10 mm (beside the mid-span crack at the peak: by this criterion a second crack
 # would start there, which the usual single-crack analysis of this beam leaves out).
+# `--further-cracks` starts them (`mf.CrackInitiation`, multiple cracking; JSON `further_cracks`):
+# the unnotched beam, pure EFG at h = 20 mm, starts two pairs at step 8 and 11 (79 and 158 mm
+# either side of mid-span, before the peak); with lagrange its patch is too narrow for them and
+# the warning says so.
 #
 # Printed and in the JSON: the load–CMOD and load–deflection curves (the shear beam: load–CMSD
 # and load–CMOD), the peak load, the control at the peak (`cmod_at_peak_mm`,
@@ -329,7 +333,12 @@ def run(args) -> dict:
         min_load=args.min_load,
         max_increment=args.end_cmod / 25,
     )
-    path = mf.follow_path(model, control, options, monitors=monitors, growth=growth)
+    initiation = None
+    if args.further_cracks:  # multiple cracking: start a crack where the bulk passes f_t
+        initiation = mf.CrackInitiation(mf.LinearCohesive(ft=args.ft, Gf=args.Gf))
+    path = mf.follow_path(
+        model, control, options, monitors=monitors, growth=growth, initiation=initiation
+    )
     seconds = time.perf_counter() - t0
     B = args.thickness
     load = np.array(path.load_factor) * B  # N
@@ -339,9 +348,10 @@ def run(args) -> dict:
         damage = particle_state.committed["damage"][:, 0]
         zone = particle_state.points[damage >= 0.9]
         fe_damage = max([float(st.committed["damage"].max(initial=0.0)) for st in fe_state] + [0.0])
-    else:  # the face points that have passed f_t: the process zone and the open crack
-        (faces,) = path.solution.states
-        zone = faces.points[faces.committed["kappa"][:, 0] > faces.law.w_0]
+    else:  # the face points that have passed f_t: the process zones and the open cracks
+        zone = np.concatenate(
+            [f.points[f.committed["kappa"][:, 0] > f.law.w_0] for f in path.solution.states]
+        ).reshape(-1, 2)
         fe_damage = 0.0  # the bulk is elastic
     zone = np.concatenate(comm.allgather(zone)) if comm.size > 1 else zone
     fe_damage = comm.allreduce(fe_damage, op=MPI.MAX)
@@ -385,6 +395,11 @@ def run(args) -> dict:
         j = int(np.argmax(path.bulk_stress))
         record["bulk_stress_ratio"] = float(path.bulk_stress[j] / args.ft)
         record["bulk_point_mm"] = path.bulk_point[j]
+    if args.further_cracks:  # the cracks that started during the path: step and first stretch
+        record["further_cracks"] = [
+            {"step": step, "control_mm": c, "first_stretch_mm": stretch}
+            for step, c, stretch in path.initiations
+        ]
     if site is not None:  # where and at which load the crack started, and the runner-up
         record["initiation"] = {
             "point_mm": site.point.tolist(),
@@ -526,6 +541,12 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
         "(mf.CohesiveGrowth: normal to the averaged principal stress ahead of the tip); "
         "default: given (three-point-bend), found (arrea-ingraffea)",
     )
+    p.add_argument(
+        "--further-cracks",
+        action="store_true",
+        help="cohesive, found path: start further cracks where the bulk's averaged stress "
+        "passes f_t (mf.CrackInitiation, multiple cracking; JSON further_cracks)",
+    )
     p.add_argument("--span", type=float, help="mm, between the supports")
     p.add_argument("--length", type=float, help="mm (default: the span)")
     p.add_argument("--depth", type=float, help="mm")
@@ -596,6 +617,11 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
         p.error(f"--notch-depth {args.notch_depth} must lie in [0, --depth {args.depth})")
     if args.notch_depth == 0 and args.setup != "three-point-bend":
         p.error("--notch-depth 0 (an unnotched beam) is for --setup three-point-bend")
+    if args.further_cracks and (args.crack != "cohesive" or args.path != "found"):
+        p.error(
+            "--further-cracks starts cohesive cracks beside a growing one: give --crack "
+            "cohesive --path found"
+        )
     return args
 
 
@@ -637,6 +663,12 @@ def main(argv: list[str] | None = None) -> dict:
             print(
                 f"the bulk three spacings or more from the crack: at most {ratio:.3f} f_t, at "
                 f"({b[0]:.1f}, {b[1]:.1f}) mm (above 1 a further crack would start)"
+            )
+        for c in r.get("further_cracks", []):
+            a, b = c["first_stretch_mm"]
+            print(
+                f"a further crack started at step {c['step']}: from ({a[0]:.1f}, {a[1]:.1f}) "
+                f"to ({b[0]:.1f}, {b[1]:.1f}) mm"
             )
         if r["crack_polyline"]:
             q = np.asarray(r["crack_polyline"])

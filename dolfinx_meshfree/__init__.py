@@ -71,6 +71,7 @@ from .statics.coupled import (
     CoupledElasticity,
     CoupledSolution,
 )
+from .statics.crack_initiation import CrackInitiation
 from .statics.efg import EFGElasticity, EFGSolution
 from .statics.fe import FESolution, solve_fe_elasticity, solve_forms
 from .statics.growth import GrowthStep, QuasiStaticCrackGrowth
@@ -118,6 +119,7 @@ __all__ = [
     "CoupledNonlinearProblem",
     "CoupledSolution",
     "Crack",
+    "CrackInitiation",
     "DisplacementControl",
     "DynamicsResult",
     "DynamicsWriter",

@@ -180,3 +180,7 @@ def test_bad_options():
         demo.main(["--setup", "arrea-ingraffea", "--load-split", "0.5", "0.6"])
     with pytest.raises(SystemExit):
         demo.main(["--setup", "arrea-ingraffea", "--loads", "458", "1400"])
+    with pytest.raises(SystemExit):  # further cracks beside a growing cohesive crack only
+        demo.main(["--further-cracks", "--path", "given"])
+    with pytest.raises(SystemExit):
+        demo.main(["--further-cracks", "--crack", "band"])

@@ -20,9 +20,10 @@ crack would start where the FE side cannot carry it, and the search is refused, 
 A ``margin`` to the best candidate away from the site says how clear the choice is.
 
 Scope: the *first* crack of a body whose bulk is elastic (the linear solve is its field until
-then). A second crack that starts once the first has softened (multiple cracking) needs the
-search during the path and a crack added to a built model: not built. Nor is the switch from a
-damaging bulk to a crack (issue 24).
+then). A further crack that starts once the first has softened (multiple cracking) is found
+during the path, from the bulk's stress at each converged step (:func:`bulk_stress_peak`,
+:func:`site_at`; :class:`~dolfinx_meshfree.CrackInitiation`). The switch from a damaging bulk to
+a crack (issue 24) is not built.
 """
 
 from __future__ import annotations
@@ -34,7 +35,13 @@ import dolfinx
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..geometry.crack import Crack, CrackDomain, gathered_segments, particle_spacing
+from ..geometry.crack import (
+    Crack,
+    CrackDomain,
+    gathered_segments,
+    particle_spacing,
+    point_segment_distance,
+)
 from ..geometry.quadrature import QuadraturePoints, boundary_facets
 from ..parallel import raise_on_all_ranks
 from ..physics.materials import LinearElastic
@@ -43,11 +50,19 @@ from .cohesive_growth import CohesiveGrowth, _inside, _polar_rule
 if TYPE_CHECKING:  # annotations only
     from collections.abc import Callable, Sequence
 
+    import numpy.typing as npt
+
     from ..couplings.base import CoupledSolution
     from ..geometry.patch import ParticlePatch
     from .efg import EFGSolution
 
-__all__ = ["BulkStrengthWarning", "InitiationSite", "bulk_stress_peak", "initiation_site"]
+__all__ = [
+    "BulkStrengthWarning",
+    "InitiationSite",
+    "bulk_stress_peak",
+    "initiation_site",
+    "site_at",
+]
 
 #: Candidates whose screened stress is highest, averaged exactly (each side of the runner-up's
 #: separation): the screen is a coarse average of the cell midpoints' stresses.
@@ -246,19 +261,9 @@ def initiation_site(
     if apart.any():
         j = int(np.flatnonzero(apart)[np.argmax(s1[apart])])
         runner, margin = x[first[j]].copy(), float(1.0 - s1[j] / s_best)
-    _, vecs = np.linalg.eigh(0.5 * (sigma[k] + sigma[k].T))
-    n = vecs[:, -1]
-    d = np.array([-n[1], n[0]])
-    if on_edge[best]:  # into the body
-        probe = x[best] + 0.25 * h * np.stack([d, -d])
-        inside = _inside(domain, probe)
-        if not inside[0] and inside[1]:
-            d = -d
-    elif d[1] < -1e-12 or (abs(d[1]) <= 1e-12 and d[0] < 0.0):
-        d = -d  # a fixed orientation (upwards, else rightwards): the same crack every run
     return InitiationSite(
         point=x[best].copy(),
-        direction=d,
+        direction=_crack_direction(sigma[k], x[best], bool(on_edge[best]), domain, h),
         stress=s_best,
         load_factor=float(ft) / s_best,
         on_edge=bool(on_edge[best]),
@@ -266,6 +271,60 @@ def initiation_site(
         margin=margin,
         spacing=h,
     )
+
+
+def site_at(
+    solution: EFGSolution | CoupledSolution,
+    point: npt.ArrayLike,
+    ft: float,
+    material: LinearElastic | None = None,
+) -> InitiationSite:
+    """The :class:`InitiationSite` of a crack that starts at ``point`` (a candidate of
+    :func:`bulk_stress_peak`: a midpoint of a cell or of an exterior facet) in ``solution``:
+    normal to the averaged largest principal stress there (:func:`initiation_site`'s average,
+    the faces' near field of the solution's cracks left out), into the body from an edge
+    (collective; ``material``: the bulk's law, default the solution's). ``runner_up`` is
+    ``None``: nothing else is searched."""
+    coupled, domain, cracks = _body(solution)
+    h = particle_spacing(domain)
+    x = np.asarray(point, dtype=float).reshape(2)
+    facets = boundary_facets(domain.mesh) if coupled else domain.exterior_facets
+    edge = gathered_segments(domain, facets)
+    on_edge = bool(point_segment_distance(x[None], edge[:, 0], edge[:, 1]).min() <= 1e-9 * h)
+    distance = _CrackDistance(cracks) if cracks else None
+    clear = CohesiveGrowth.clearance * h
+    length = CohesiveGrowth.radius * h
+    sigma = _averaged(solution, x[None], length, domain, distance, clear, material)[0]
+    stress = float(np.linalg.eigvalsh(0.5 * (sigma + sigma.T))[-1])
+    return InitiationSite(
+        point=x.copy(),
+        direction=_crack_direction(sigma, x, on_edge, domain, h),
+        stress=stress,
+        load_factor=float(ft) / stress if stress > 0.0 else np.inf,
+        on_edge=on_edge,
+        runner_up=None,
+        margin=1.0,
+        spacing=h,
+    )
+
+
+def _crack_direction(
+    sigma: np.ndarray, x: np.ndarray, on_edge: bool, domain: ParticlePatch | CrackDomain, h: float
+) -> np.ndarray:
+    """The unit direction (2,) normal to the largest principal stress of ``sigma`` (2, 2) at
+    ``x``: into the body from an edge point, else upwards (else rightwards), so that the same
+    crack comes out of every run (collective)."""
+    _, vecs = np.linalg.eigh(0.5 * (sigma + sigma.T))
+    n = vecs[:, -1]
+    d = np.array([-n[1], n[0]])
+    if on_edge:  # into the body
+        probe = x + 0.25 * h * np.stack([d, -d])
+        inside = _inside(domain, probe)
+        if not inside[0] and inside[1]:
+            d = -d
+    elif d[1] < -1e-12 or (abs(d[1]) <= 1e-12 and d[0] < 0.0):
+        d = -d  # a fixed orientation (upwards, else rightwards): the same crack every run
+    return d
 
 
 def bulk_stress_peak(
@@ -401,17 +460,19 @@ def _averaged(
     domain: ParticlePatch | CrackDomain,
     cracks: _CrackDistance | None,
     clearance: float,
+    material: LinearElastic | None = None,
 ) -> np.ndarray:
     """The averaged stress (k, 2, 2) about each of ``centres`` by the rule of
     :func:`~dolfinx_meshfree.statics.cohesive_growth.principal_direction` (collective: the
-    points in the domain)."""
+    points in the domain; ``material``: default the solution's)."""
     xs, ws = zip(*(_polar_rule(c, length) for c in centres), strict=True)
     owner = np.repeat(np.arange(len(centres)), [len(p) for p in xs])
     x, w = np.concatenate(xs), np.concatenate(ws)
     keep = np.ones(len(x), dtype=bool) if cracks is None else cracks(x) >= clearance
     keep[keep] = _inside(domain, x[keep])
     x, w, owner = x[keep], w[keep], owner[keep]
-    sig = solution.material.stress(solution.mls.tabulate(x).gradient(solution.coefficients))
+    law = solution.material if material is None else material
+    sig = law.stress(solution.mls.tabulate(x).gradient(solution.coefficients))
     out = np.zeros((len(centres), 2, 2))
     np.add.at(out, owner, w[:, None, None] * sig)
     return out / np.bincount(owner, weights=w, minlength=len(centres))[:, None, None]

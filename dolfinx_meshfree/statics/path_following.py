@@ -45,14 +45,16 @@ from ..parallel import raise_on_all_ranks
 from ..physics.materials import LinearElastic
 from ..physics.state import voigt_strain
 from .cohesive import CohesiveSide, check_through
-from .cohesive_growth import CohesiveGrowth, grow_once
-from .cohesive_initiation import BulkStrengthWarning, bulk_stress_peak
+from .cohesive_growth import CohesiveGrowth, _inside, grow_once
+from .cohesive_initiation import BulkStrengthWarning, bulk_stress_peak, site_at
 from .coupled_newton import BlockModel, build_block_problem, law_internal_force
+from .crack_initiation import CrackInitiation, first_stretch, insert_crack
 from .efg import EFGBlockModel, EFGElasticity
 from .petsc import BlockSystem, SolverOptions, solver_options
 from .sides import BlockProblem
 
 if TYPE_CHECKING:  # annotations only
+    from ..geometry.crack import Crack
     from .coupled import CoupledElasticity
 
 __all__ = [
@@ -204,6 +206,9 @@ class PathResult:
     #: the faces' ``f_t`` a further crack would start there, which the model does not follow.
     bulk_stress: list[float] = field(default_factory=list)
     bulk_point: list[list[float]] = field(default_factory=list)
+    #: The cracks that started during the path (``follow_path(initiation=...)``): ``(step,
+    #: control, first stretch)`` each, the stretch's end points.
+    initiations: list[tuple[int, float, list[list[float]]]] = field(default_factory=list)
 
     @property
     def peak(self) -> tuple[float, float]:
@@ -575,6 +580,38 @@ def _check_growth(
         gr.check(model.cohesive, cracks)
 
 
+def _check_initiation(
+    model: CoupledElasticity | EFGElasticity,
+    efg: bool,
+    initiation: CrackInitiation | None,
+    control: DisplacementControl | ArcLength,
+) -> None:
+    """Refuse what cracks that start during the path cannot carry (local; every rank)."""
+    if initiation is None:
+        return
+    if not isinstance(initiation, CrackInitiation):
+        raise TypeError(f"initiation must be a CrackInitiation, got {type(initiation).__name__}")
+    if isinstance(control, ArcLength):
+        raise ValueError(
+            "initiation needs indirect displacement control (DisplacementControl): a crack that "
+            "starts is brought to equilibrium at the same control value, which ArcLength has not"
+        )
+    law = model.material if efg else model.law
+    if not isinstance(law, LinearElastic) or not model.cohesive:
+        raise ValueError(
+            "initiation starts further cohesive cracks in an elastic bulk beside the model's "
+            f"cohesive ones: the model needs a LinearElastic law (it has "
+            f"{type(law).__name__}) and a crack with add_cohesive"
+        )
+    enriched = model.mls.table_transforms if efg else model.patch.crack_enrichment
+    if enriched:
+        raise ValueError(
+            "initiation with crack_enrichment: a crack that starts would need its tips enriched "
+            "as the model was built; build the model without crack_enrichment (cohesive tips "
+            "carry no singularity)"
+        )
+
+
 def _grow(
     built: BlockModel | EFGBlockModel,
     growths: Sequence[CohesiveGrowth],
@@ -638,6 +675,119 @@ def _rebuild(
     return new
 
 
+class _Changed:
+    """Bring a model whose cracks changed (one grew, or one started) back to equilibrium at the
+    same control value: rebuilt on them (the faces' states carried), the particle field set to
+    the refitted one, re-equilibrated; :meth:`apply` returns the new built model, the load
+    factor, Newton's iterations and the work of the load on the way (collective)."""
+
+    def __init__(
+        self,
+        model: CoupledElasticity | EFGElasticity,
+        efg: bool,
+        u: dolfinx.fem.Function | None,
+        control: DisplacementControl,
+        monitors: dict[str, DisplacementControl] | None,
+        q: list[PETSc.Vec],
+        f_ext: list[np.ndarray],
+        tol: float,
+        stall: float,
+        options: PathOptions,
+        solver: SolverOptions,
+    ) -> None:
+        self.model, self.efg, self.u, self.control, self.monitors = model, efg, u, control, monitors
+        self.q, self.f_ext, self.tol, self.stall = q, f_ext, tol, stall
+        self.options, self.solver = options, solver
+        self.g: Callable[[list[np.ndarray]], float] | None = None
+        self.watch: dict[str, Callable[[list[np.ndarray]], float]] = {}
+
+    def apply(
+        self,
+        built: BlockModel | EFGBlockModel,
+        fitted: np.ndarray,
+        t: float,
+        tau: float,
+        step: int,
+        what: str,
+        result: PathResult,
+    ) -> tuple[BlockModel | EFGBlockModel, float, int, float]:
+        k_p = _particle_field(built)
+        old = _owned(built.x)
+        comm = _comm(built)
+        try:
+            built = _rebuild(self.model, built, self.efg, self.u)
+        except MomentMatrixError as err:  # raised on every rank
+            raise PathError(
+                f"at step {step} (control {tau:.6g}, load factor {t:.6g}) {what} and the MLS "
+                f"cannot be evaluated beside it ({err}); choose a finer particle spacing or a "
+                "larger dilation",
+                result,
+            ) from None
+        problem, x = built.problem, built.x
+        side = built.particles
+        lo, hi = x[k_p].getOwnershipRange()
+        mine = (side.dof_map >= lo) & (side.dof_map < hi)
+        x[k_p].array[side.dof_map[mine] - lo] = fitted[mine]
+        self.g = _control_function(built, self.control)
+        self.watch = {k: _control_function(built, c) for k, c in (self.monitors or {}).items()}
+        problem.t = t
+        try:
+            t_new, its = _reequilibrate(
+                problem, x, t, tau, self.g, self.q, self.tol, self.stall, self.options,
+                self.solver,
+            )  # fmt: skip
+        except ArithmeticError as err:
+            raise PathError(
+                f"at step {step} (control {tau:.6g}, load factor {t:.6g}) {what} and no "
+                f"equilibrium was found at the same control value ({err}); choose a smaller "
+                "increment or a larger CohesiveGrowth.ahead",
+                result,
+            ) from None
+        problem.t = t_new
+        problem.commit(x)
+        work = _work(self.f_ext, x[: k_p + 1], old[: k_p + 1], t, t_new, comm)
+        return built, t_new, its, work
+
+
+def _start_crack(
+    built: BlockModel | EFGBlockModel,
+    model: CoupledElasticity | EFGElasticity,
+    efg: bool,
+    initiation: CrackInitiation,
+    growths: list[CohesiveGrowth],
+    point: np.ndarray,
+) -> tuple[Crack | None, np.ndarray | None, str]:
+    """Start a crack at the bulk's peak ``point`` (:mod:`.crack_initiation`): ``(crack,
+    refitted coefficients, "")``, or ``(None, None, why)`` (collective)."""
+    solution = built.solution()
+    coupled = not efg
+    domain = model._domain if efg else model.patch
+    cracks = list(model.cracks if efg else model.patch.cracks)
+    if coupled and not _inside(domain, np.asarray(point, dtype=float)[None])[0]:
+        return (
+            None,
+            None,
+            (
+                "it lies on the FE side of the coupled model, which cannot carry a crack: add the "
+                "cells around it to the patch"
+            ),
+        )
+    site = site_at(solution, point, initiation.law.ft, model.material if efg else model.law)
+    clearance = float(model.mls.radii.max()) if coupled else 0.0
+    crack, why = first_stretch(initiation, site, domain, cracks, coupled, clearance)
+    if crack is None:
+        return None, None, why
+    try:  # its checks raise on every rank alike
+        c = solution.coefficients
+        fitted = insert_crack(model, efg, crack, initiation.law, c, site.spacing)
+    except ValueError as err:  # the crack's checks, raised on every rank: not started
+        first = crack.points.round(6).tolist()
+        return None, None, f"its first stretch {first} is refused ({err})"
+    template = growths[0] if growths else CohesiveGrowth(crack)
+    growths.append(replace(template, crack=crack))
+    return crack, fitted, ""
+
+
 def _destroy_all(objects: Sequence) -> None:
     for obj in objects:
         obj.destroy()
@@ -651,6 +801,7 @@ def follow_path(
     on_step: Callable[[int, float, float], None] | None = None,
     monitors: dict[str, DisplacementControl] | None = None,
     growth: CohesiveGrowth | Sequence[CohesiveGrowth] | None = None,
+    initiation: CrackInitiation | None = None,
 ) -> PathResult:
     """Follow the equilibrium path of ``model`` by indirect displacement control (collective).
 
@@ -676,6 +827,11 @@ def follow_path(
             rebuilt on it (the faces' states carried) and brought back to equilibrium at the same
             control value, then checked again. With an elastic bulk and indirect displacement
             control; :attr:`PathResult.extensions` records each growth.
+        initiation: Start further cohesive cracks where the bulk's averaged largest principal
+            stress passes ``f_t`` (:class:`~dolfinx_meshfree.CrackInitiation`, multiple
+            cracking: :mod:`~dolfinx_meshfree.statics.crack_initiation`); each then grows like
+            the first of ``growth``. :attr:`PathResult.initiations` records them. With an
+            elastic bulk, cohesive cracks and indirect displacement control.
 
     Returns:
         The :class:`PathResult`.
@@ -683,7 +839,8 @@ def follow_path(
     Warns:
         BulkStrengthWarning: with cohesive cracks in an elastic bulk, once the bulk's averaged
             principal stress three spacings or more from every crack passes ``f_t``
-            (:attr:`PathResult.bulk_stress`): a further crack would start there.
+            (:attr:`PathResult.bulk_stress`) and no crack is started there (no ``initiation``,
+            or it says why not): a further crack would start there.
 
     Raises:
         PathError: a step does not converge after ``options.max_cuts`` halvings (naming the
@@ -697,7 +854,9 @@ def follow_path(
     cracks = model.cracks if efg else model.patch.cracks
     raise_on_all_ranks(comm, lambda: check_through(cracks, model.cohesive))
     growths = [] if growth is None else [growth] if isinstance(growth, CohesiveGrowth) else growth
+    growths = list(growths)  # cracks that start during the path add theirs
     raise_on_all_ranks(comm, lambda: _check_growth(model, efg, growths, control, cracks))
+    raise_on_all_ranks(comm, lambda: _check_initiation(model, efg, initiation, control))
     if efg:
         if isinstance(model.material, LinearElastic) and not model.cohesive:
             raise ValueError(
@@ -802,40 +961,14 @@ def follow_path(
                 # the model on the longer crack, the faces' states carried, the particle field
                 # refitted across the new segment, back to equilibrium at the same control value
                 # (the work of the load on the way recorded)
-                old = _owned(x)
-                try:
-                    built = _rebuild(model, built, efg, u)
-                except MomentMatrixError as err:  # raised on every rank
-                    raise PathError(
-                        f"at step {step} (control {tau:.6g}, load factor {t:.6g}) the crack grew "
-                        f"to {grown} and the MLS cannot be evaluated beside it ({err}); choose a "
-                        "finer particle spacing or a larger dilation",
-                        result,
-                    ) from None
-                problem, x = built.problem, built.x
-                side = built.particles
-                lo, hi = x[k_p].getOwnershipRange()
-                mine = (side.dof_map >= lo) & (side.dof_map < hi)
-                x[k_p].array[side.dof_map[mine] - lo] = fitted[mine]
-                g = _control_function(built, control)
-                watch = {k: _control_function(built, c) for k, c in (monitors or {}).items()}
-                problem.t = t
-                try:
-                    t_new, its_g = _reequilibrate(
-                        problem, x, t, tau, g, q, tol, stall, options, solver
-                    )
-                except ArithmeticError as err:
-                    raise PathError(
-                        f"at step {step} (control {tau:.6g}, load factor {t:.6g}) the crack grew "
-                        f"to {grown} and no equilibrium was found at the same control value "
-                        f"({err}); choose a smaller increment or a larger CohesiveGrowth.ahead",
-                        result,
-                    ) from None
-                its += its_g
-                problem.t = t_new
-                problem.commit(x)
-                work += _work(f_ext, x[: k_p + 1], old[: k_p + 1], t, t_new, comm)
-                t = t_new
+                state = _Changed(
+                    model, efg, u, control, monitors, q, f_ext, tol, stall, options, solver
+                )
+                built, t, its_g, work_g = state.apply(
+                    built, fitted, t, tau, step, f"the crack grew to {grown}", result
+                )
+                problem, x, g, watch = built.problem, built.x, state.g, state.watch
+                its, work = its + its_g, work + work_g
             else:
                 raise PathError(
                     f"at step {step} (control {tau:.6g}, load factor {t:.6g}) the crack grew "
@@ -845,6 +978,30 @@ def follow_path(
                     "through the failure, or a smaller increment",
                     result,
                 )
+            bulk = None
+            if watch_bulk:  # where a further crack would start: the bulk's stress off the cracks
+                bulk = bulk_stress_peak(built.solution(), material=law)
+            why = ""  # why a further crack was not started
+            while (
+                initiation is not None
+                and bulk is not None
+                and bulk[1] > initiation.law.ft
+                and len(result.initiations) < initiation.max_cracks
+            ):
+                crack, fitted, why = _start_crack(built, model, efg, initiation, growths, bulk[0])
+                if crack is None:
+                    break
+                result.initiations.append((step, tau, crack.points.tolist()))
+                state = _Changed(
+                    model, efg, u, control, monitors, q, f_ext, tol, stall, options, solver
+                )
+                built, t, its_g, work_g = state.apply(
+                    built, fitted, t, tau, step,
+                    f"a crack started at {crack.points.round(6).tolist()}", result,
+                )  # fmt: skip
+                problem, x, g, watch = built.problem, built.x, state.g, state.watch
+                its, work = its + its_g, work + work_g
+                bulk = bulk_stress_peak(built.solution(), material=law)
             if arc:
                 previous = previous_new
             peak = max(peak, t)
@@ -858,19 +1015,29 @@ def follow_path(
             owned = _owned(x)
             for k, fn in watch.items():
                 result.monitors[k].append(fn(owned))
-            if watch_bulk:  # where a further crack would start: the bulk's stress off the cracks
-                point, stress = bulk_stress_peak(built.solution(), material=law)
+            if bulk is not None:
+                point, stress = bulk
                 result.bulk_stress.append(stress)
                 result.bulk_point.append(point.tolist())
-                if stress > ft_bulk and not warned:  # the same on every rank
+                ft_new = ft_bulk if initiation is None else initiation.law.ft
+                if stress > ft_new and not warned:  # the same on every rank
                     warned = True
+                    if initiation is None:
+                        why = (
+                            "this model does not start it (it carries the cracks it was given "
+                            "or grew; follow_path(initiation=CrackInitiation(law)) starts it)"
+                        )
+                    elif not why:
+                        why = f"CrackInitiation.max_cracks={initiation.max_cracks} have started"
+                    else:
+                        why = f"no crack is started there: {why}"
                     warnings.warn(
                         f"at step {step} (control {tau:.6g}, load factor {t:.6g}) the bulk's "
-                        f"averaged largest principal stress reaches {stress / ft_bulk:.3g} f_t "
+                        f"averaged largest principal stress reaches {stress / ft_new:.3f} f_t "
                         f"at ({point[0]:.6g}, {point[1]:.6g}), three spacings or more from "
-                        "every crack: a further crack would start there, which this model does "
-                        "not follow (it carries the cracks it was given or grew); the path "
-                        "beyond this step is that of those cracks alone (PathResult.bulk_stress)",
+                        f"every crack: a further crack would start there; {why}. The path "
+                        "beyond this step is that of the cracks the model carries "
+                        "(PathResult.bulk_stress)",
                         BulkStrengthWarning,
                         stacklevel=2,
                     )

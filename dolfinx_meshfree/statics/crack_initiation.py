@@ -116,13 +116,14 @@ def first_stretch(
     gap = init.gap * h
 
     def far(x: np.ndarray, seg: np.ndarray, distance: float) -> bool:
-        return (
-            not len(seg) or point_segment_distance(x[None], seg[:, 0], seg[:, 1]).min() >= distance
-        )
+        """Whether every point of ``x`` (m, 2) is ``distance`` or more from the segments."""
+        if not len(seg):
+            return True
+        return bool(point_segment_distance(x, seg[:, 0], seg[:, 1]).min() >= distance)
 
     def clear(x: np.ndarray) -> bool:
-        """Whether the point ``x`` keeps a spacing from the body's edges, ``gap`` from the
-        other cracks and ``interface_clearance`` from the FE interface."""
+        """Whether the points ``x`` (m, 2) keep a spacing from the body's edges, ``gap`` from
+        the other cracks and ``interface_clearance`` from the FE interface."""
         return far(x, edge, h) and far(x, other, gap) and far(x, iface, interface_clearance)
 
     def reach(d: np.ndarray) -> float:
@@ -137,7 +138,7 @@ def first_stretch(
             length = min(length, _ray(iface, start, d) - interface_clearance)
         while length >= h:
             probe = np.arange(min(1.5 * h, length), length + 1e-12 * h, 0.25 * h)
-            if all(clear(p + s * d) for s in probe):
+            if clear(p + probe[:, None] * d):
                 break
             length -= 0.5 * h
         return float(length)

@@ -561,11 +561,11 @@ class EFGElasticity:
             (``plane="stress"|"strain"`` in 2D, ``plane=None`` in 3D).
         weight, dilation, basis: MLS options (see :class:`~dolfinx_meshfree.MLS`).
         quadrature_degree: Degree of the cell Gauss rule (7: 4 x 4 points on quadrilaterals,
-            4 x 4 x 4 on hexahedra). ``None`` (default): the lowest odd degree from 7 with 12
+            4 x 4 x 4 on hexahedra). ``None`` (default): the lowest odd degree from 7 with 15
             Gauss points per particle or more
             (:func:`~dolfinx_meshfree.geometry.quadrature.particle_quadrature_degree`): 7 with
             particles at the vertices, 15 (8 x 8) with particles at ``h / 2`` on
-            quadrilaterals, where VCI on 4 x 4 points stalls.
+            quadrilaterals, where VCI on 4 x 4 points stalls; 7 with cracks.
         consistent: Variationally consistent integration (VCI, Chen, Hillman & Rüter 2013; the
             default: the linear patch test passes to round-off). ``False``: plain Gauss
             quadrature of Belytschko et al. 1995 (patch-test error 1e-4 to 6e-4 at 4 x 4 Gauss).

@@ -203,7 +203,8 @@ class PathResult:
     #: With cohesive cracks in an elastic bulk: per converged step, the largest averaged largest
     #: principal stress of the bulk three spacings or more from every crack (FE side included;
     #: :func:`~dolfinx_meshfree.statics.cohesive_initiation.bulk_stress_peak`) and where. Above
-    #: the faces' ``f_t`` a further crack would start there, which the model does not follow.
+    #: the faces' ``f_t`` a further crack would start there (``follow_path(initiation=...)``
+    #: starts it; else the model does not follow it).
     bulk_stress: list[float] = field(default_factory=list)
     bulk_point: list[list[float]] = field(default_factory=list)
     #: The cracks that started during the path (``follow_path(initiation=...)``): ``(step,
@@ -675,78 +676,61 @@ def _rebuild(
     return new
 
 
-class _Changed:
-    """Bring a model whose cracks changed (one grew, or one started) back to equilibrium at the
-    same control value: rebuilt on them (the faces' states carried), the particle field set to
-    the refitted one, re-equilibrated; :meth:`apply` returns the new built model, the load
-    factor, Newton's iterations and the work of the load on the way (collective)."""
-
-    def __init__(
-        self,
-        model: CoupledElasticity | EFGElasticity,
-        efg: bool,
-        u: dolfinx.fem.Function | None,
-        control: DisplacementControl,
-        monitors: dict[str, DisplacementControl] | None,
-        q: list[PETSc.Vec],
-        f_ext: list[np.ndarray],
-        tol: float,
-        stall: float,
-        options: PathOptions,
-        solver: SolverOptions,
-    ) -> None:
-        self.model, self.efg, self.u, self.control, self.monitors = model, efg, u, control, monitors
-        self.q, self.f_ext, self.tol, self.stall = q, f_ext, tol, stall
-        self.options, self.solver = options, solver
-        self.g: Callable[[list[np.ndarray]], float] | None = None
-        self.watch: dict[str, Callable[[list[np.ndarray]], float]] = {}
-
-    def apply(
-        self,
-        built: BlockModel | EFGBlockModel,
-        fitted: np.ndarray,
-        t: float,
-        tau: float,
-        step: int,
-        what: str,
-        result: PathResult,
-    ) -> tuple[BlockModel | EFGBlockModel, float, int, float]:
-        k_p = _particle_field(built)
-        old = _owned(built.x)
-        comm = _comm(built)
-        try:
-            built = _rebuild(self.model, built, self.efg, self.u)
-        except MomentMatrixError as err:  # raised on every rank
-            raise PathError(
-                f"at step {step} (control {tau:.6g}, load factor {t:.6g}) {what} and the MLS "
-                f"cannot be evaluated beside it ({err}); choose a finer particle spacing or a "
-                "larger dilation",
-                result,
-            ) from None
-        problem, x = built.problem, built.x
-        side = built.particles
-        lo, hi = x[k_p].getOwnershipRange()
-        mine = (side.dof_map >= lo) & (side.dof_map < hi)
-        x[k_p].array[side.dof_map[mine] - lo] = fitted[mine]
-        self.g = _control_function(built, self.control)
-        self.watch = {k: _control_function(built, c) for k, c in (self.monitors or {}).items()}
-        problem.t = t
-        try:
-            t_new, its = _reequilibrate(
-                problem, x, t, tau, self.g, self.q, self.tol, self.stall, self.options,
-                self.solver,
-            )  # fmt: skip
-        except ArithmeticError as err:
-            raise PathError(
-                f"at step {step} (control {tau:.6g}, load factor {t:.6g}) {what} and no "
-                f"equilibrium was found at the same control value ({err}); choose a smaller "
-                "increment or a larger CohesiveGrowth.ahead",
-                result,
-            ) from None
-        problem.t = t_new
-        problem.commit(x)
-        work = _work(self.f_ext, x[: k_p + 1], old[: k_p + 1], t, t_new, comm)
-        return built, t_new, its, work
+def _reequilibrated(
+    model: CoupledElasticity | EFGElasticity,
+    efg: bool,
+    u: dolfinx.fem.Function | None,
+    built: BlockModel | EFGBlockModel,
+    fitted: np.ndarray,
+    control: DisplacementControl,
+    monitors: dict[str, DisplacementControl] | None,
+    q: list[PETSc.Vec],
+    f_ext: list[np.ndarray],
+    t: float,
+    tau: float,
+    tol: float,
+    stall: float,
+    options: PathOptions,
+    solver: SolverOptions,
+    event: str,
+    result: PathResult,
+) -> tuple[BlockModel | EFGBlockModel, float, int, float, Callable, dict[str, Callable]]:
+    """``model`` brought back to equilibrium at the control value ``tau`` after its cracks
+    changed (one grew, or one started: ``event``, the errors' opening words): rebuilt on them (the
+    faces' states carried), the particle field set to the refitted ``fitted``, re-equilibrated.
+    Returns the new built model, the load factor, Newton's iterations, the work of the load on
+    the way, and the control and monitor functions on the new model (collective)."""
+    k_p = _particle_field(built)
+    old = _owned(built.x)
+    comm = _comm(built)
+    try:
+        built = _rebuild(model, built, efg, u)
+    except MomentMatrixError as err:  # raised on every rank
+        raise PathError(
+            f"{event} and the MLS cannot be evaluated beside it ({err}); choose a finer particle "
+            "spacing or a larger dilation",
+            result,
+        ) from None
+    problem, x = built.problem, built.x
+    side = built.particles
+    lo, hi = x[k_p].getOwnershipRange()
+    mine = (side.dof_map >= lo) & (side.dof_map < hi)
+    x[k_p].array[side.dof_map[mine] - lo] = fitted[mine]
+    g = _control_function(built, control)
+    watch = {k: _control_function(built, c) for k, c in (monitors or {}).items()}
+    problem.t = t
+    try:
+        t_new, its = _reequilibrate(problem, x, t, tau, g, q, tol, stall, options, solver)
+    except ArithmeticError as err:
+        raise PathError(
+            f"{event} and no equilibrium was found at the same control value ({err}); choose a "
+            "smaller increment or a larger CohesiveGrowth.ahead",
+            result,
+        ) from None
+    problem.t = t_new
+    problem.commit(x)
+    work = _work(f_ext, x[: k_p + 1], old[: k_p + 1], t, t_new, comm)
+    return built, t_new, its, work, g, watch
 
 
 def _start_crack(
@@ -961,13 +945,12 @@ def follow_path(
                 # the model on the longer crack, the faces' states carried, the particle field
                 # refitted across the new segment, back to equilibrium at the same control value
                 # (the work of the load on the way recorded)
-                state = _Changed(
-                    model, efg, u, control, monitors, q, f_ext, tol, stall, options, solver
-                )
-                built, t, its_g, work_g = state.apply(
-                    built, fitted, t, tau, step, f"the crack grew to {grown}", result
-                )
-                problem, x, g, watch = built.problem, built.x, state.g, state.watch
+                event = f"at step {step} (control {tau:.6g}, load factor {t:.6g}) the crack grew "
+                built, t, its_g, work_g, g, watch = _reequilibrated(
+                    model, efg, u, built, fitted, control, monitors, q, f_ext, t, tau, tol,
+                    stall, options, solver, f"{event}to {grown}", result,
+                )  # fmt: skip
+                problem, x = built.problem, built.x
                 its, work = its + its_g, work + work_g
             else:
                 raise PathError(
@@ -992,14 +975,15 @@ def follow_path(
                 if crack is None:
                     break
                 result.initiations.append((step, tau, crack.points.tolist()))
-                state = _Changed(
-                    model, efg, u, control, monitors, q, f_ext, tol, stall, options, solver
+                event = (
+                    f"at step {step} (control {tau:.6g}, load factor {t:.6g}) a crack started "
+                    f"at {crack.points.round(6).tolist()}"
                 )
-                built, t, its_g, work_g = state.apply(
-                    built, fitted, t, tau, step,
-                    f"a crack started at {crack.points.round(6).tolist()}", result,
+                built, t, its_g, work_g, g, watch = _reequilibrated(
+                    model, efg, u, built, fitted, control, monitors, q, f_ext, t, tau, tol,
+                    stall, options, solver, event, result,
                 )  # fmt: skip
-                problem, x, g, watch = built.problem, built.x, state.g, state.watch
+                problem, x = built.problem, built.x
                 its, work = its + its_g, work + work_g
                 bulk = bulk_stress_peak(built.solution(), material=law)
             if arc:

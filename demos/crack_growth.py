@@ -26,12 +26,21 @@
 # their multipliers grew under refinement, 0.08 -> 0.56, those at the bottom corners of EFG
 # shrink, 0.063 -> 0.038.)
 # The time of a step is the full rebuild (tables, cut cells, assembly) and the solve.
+# ``--adaptive-patch K`` (issue 25): each coupled method runs again on a patch that starts as the
+# cells within K spacings of the crack (``mf.cells_near``) and grows about the tip before each
+# extension (``mf.NearTips(K)``; K = 0: the SIF domains' radius plus 2 spacings); its path is
+# checked against the large fixed patch's (target 1 % of the crack length) and the times are
+# compared in the same run. Measured (``--methods lagrange bridging --h 0.0125 0.00625 0.003125
+# --adaptive-patch 0``): path differences 2.0e-4, 4.3e-5, 1.1e-5 (lagrange) and 1.9e-4, 3.3e-5,
+# 7.3e-6 (bridging); time 0.76x, 0.62x, 0.37x and 0.60x, 0.42x, 0.46x the fixed patch's (one
+# run; the FE side, solved whole at every step, bounds the gain). JSON per adaptive record:
+# ``conversions`` (the growth events) and ``particles_final``.
 # ``--xdmf P``: per step, the FE displacement (coupled), the particle cloud with the
 # displacement at the particles, and the crack the step solved with
 # (``dolfinx_meshfree.output.SeriesWriter``; files P_<method>_h<h>_{fe,particles,cracks}.xdmf).
 #
 #     python demos/crack_growth.py [--methods efg lagrange bridging] [--h 0.025 0.0125]
-#         [--steps 3] [--da 0.1] [--json F] [--png F] [--xdmf P] [--quick]
+#         [--steps 3] [--da 0.1] [--adaptive-patch K] [--json F] [--png F] [--xdmf P] [--quick]
 
 from __future__ import annotations
 
@@ -53,8 +62,17 @@ RADII = (0.05, 0.065, 0.08)  # interaction integral domains, below da = 0.1 (the
 PATH_TARGET = 0.01  # issue 10: paths of the two finest resolutions within 1 % of the length
 
 
-def model(method: str, h: float, width: float = 1.0):
-    """The plate (``width`` x ``width``, centred on y = 0), the crack and the problem."""
+def adaptive_radius(h: float, k: float, radius) -> float:
+    """The patch's radius about the tips with ``--adaptive-patch k`` (``k = 0``: the SIF
+    domains' outer radius plus 2 spacings, ``mf.NearTips()``'s default)."""
+    if k:
+        return k * h
+    return (max(radius) if radius else 5.0 * h) + 2.0 * h
+
+
+def model(method: str, h: float, width: float = 1.0, adaptive: float | None = None):
+    """The plate (``width`` x ``width``, centred on y = 0), the crack and the problem; with
+    ``adaptive`` (a radius), the coupled patch starts as the cells within it of the crack."""
     t = np.deg2rad(ANGLE)
     crack = mf.Crack([[0.0, Y0], [A * np.cos(t), Y0 + A * np.sin(t)]])
     n = round(width / h)
@@ -85,7 +103,10 @@ def model(method: str, h: float, width: float = 1.0):
     else:
         # a user's model: UFL forms, dolfinx DirichletBCs at the bottom corners (FE nodes, far
         # from the crack): u = 0 at (0, -w/2), u_y = 0 at (w, -w/2) (V.sub(1))
-        cells = owned_cells(msh, lambda c: (c[:, 0] < 0.85) & (c[:, 1] > -0.2))
+        if adaptive is None:
+            cells = owned_cells(msh, lambda c: (c[:, 0] < 0.85) & (c[:, 1] > -0.2))
+        else:  # the cells near the initial crack; NearTips grows the patch ahead of the tip
+            cells = mf.cells_near(msh, crack.points, adaptive)
         patch = mf.ParticlePatch(msh, cells, h, cracks=[crack])
         V, a, L = coupled_forms(msh, MATERIAL, tractions)
         bcs = rigid_motion_bcs(V, (0.0, -width / 2), (width, -width / 2))
@@ -98,35 +119,53 @@ def model(method: str, h: float, width: float = 1.0):
 
 
 def run(
-    method: str, h: float, steps: int, da: float, width: float = 1.0, radius=None, xdmf=None
+    method: str,
+    h: float,
+    steps: int,
+    da: float,
+    width: float = 1.0,
+    radius=None,
+    xdmf=None,
+    adaptive: float | None = None,
 ) -> dict:
     t0 = time.perf_counter()
-    prob, crack, sizes = model(method, h, width)
+    r0 = None if adaptive is None else adaptive_radius(h, adaptive, radius)
+    prob, crack, sizes = model(method, h, width, r0)
     build = time.perf_counter() - t0
-    growth = mf.QuasiStaticCrackGrowth(prob, crack, increment=da, steps=steps, radius=radius)
-    writer = None
-    if xdmf:
-        patch = getattr(prob, "patch", None)
-        particles = patch.particles if patch is not None else prob.particles
-        writer = SeriesWriter(
-            f"{xdmf}_{method}_h{h:g}", comm=COMM, mesh=None if patch is None else prob.V.mesh,
-            particles=particles, polylines=True,
-        )  # fmt: skip
+    adapt = None if adaptive is None else mf.NearTips(adaptive or None)
+    growth = mf.QuasiStaticCrackGrowth(
+        prob, crack, increment=da, steps=steps, radius=radius, adapt=adapt
+    )
+    writer = particles = None
     for _ in range(steps):  # growth.run(), with the output of each step
         solved = crack.points.copy()  # the crack of this step's solution
         grown = growth.step().grown
+        coupled = hasattr(prob, "patch")
+        solved_on = growth.solution.patch.particles if coupled else prob.particles
+        if xdmf and solved_on is not particles:  # the first step, or the patch grew
+            if writer is not None:
+                writer.close()  # a grown patch: a new particle series from this step
+            particles, step = solved_on, len(growth.history) - 1
+            writer = SeriesWriter(
+                f"{xdmf}_{method}{'_adaptive' if adaptive is not None else ''}_h{h:g}"
+                + (f"_s{step}" if step else ""),
+                comm=COMM, mesh=prob.V.mesh if coupled else None,
+                particles=particles, polylines=True,
+            )  # fmt: skip
         if writer is not None:
             write_step(writer, growth, solved)
         if not grown:
             break
     if writer is not None:
         writer.close()
+    total = time.perf_counter() - t0
     hist = growth.history
     s = hist[0]
     grid = np.linspace(-np.pi + 1e-4, np.pi - 1e-4, 62831)
     best = float(grid[np.argmax(mf.fracture.criteria.hoop_stress_factor(grid, s.K_I, s.K_II))])
     return {
-        "method": method, "h": h, "da": da, "steps": steps, "width": width,
+        "method": method + ("+adaptive" if adaptive is not None else ""),
+        "h": h, "da": da, "steps": steps, "width": width,
         "path": crack.points.tolist(),
         "history": [r.as_dict() for r in hist],
         "first_kink_deg": np.rad2deg(s.theta),
@@ -134,6 +173,10 @@ def run(
         "crack_length": crack.length,
         "time_build": build,
         "time_per_step": [r.time_solve + r.time_sifs for r in hist],
+        "time_total": total,
+        "conversions": [e.as_dict() for e in growth.events],
+        "particles_final": growth.problem.patch.particles.num_particles
+        if hasattr(growth.problem, "patch") else sizes["particles"],
         **sizes, "ranks": COMM.size,
     }  # fmt: skip
 
@@ -193,6 +236,12 @@ def main(argv=None) -> int:
         help="XDMF per growth step: P_<method>_h<h>_fe.xdmf (FE displacement, coupled models), "
         "..._particles.xdmf (particle positions and displacement), ..._cracks.xdmf (the crack)",
     )  # fmt: skip
+    parser.add_argument(
+        "--adaptive-patch", type=float, default=None, metavar="K",
+        help="also run each coupled method with a patch that starts as the cells within K "
+        "spacings of the crack and grows K spacings about the tip (mf.NearTips(K)); K = 0: the "
+        "SIF domains' radius plus 2 spacings (mf.NearTips()); compared with the large patch",
+    )  # fmt: skip
     parser.add_argument("--quick", action="store_true", help="smoke run: h = 0.05, 2 steps")
     args = parser.parse_args(argv)
     hs, steps = ([0.05], 2) if args.quick else (args.h, args.steps)
@@ -200,6 +249,11 @@ def main(argv=None) -> int:
     records = [
         run(m, h, steps, args.da, args.width, radius, args.xdmf) for m in args.methods for h in hs
     ]
+    if args.adaptive_patch is not None:
+        records += [
+            run(m, h, steps, args.da, args.width, radius, args.xdmf, args.adaptive_patch)
+            for m in args.methods if m != "efg" for h in hs
+        ]  # fmt: skip
     ok = True
     out = {"records": records, "path_difference": {}}
     if COMM.rank == 0:
@@ -235,6 +289,24 @@ def main(argv=None) -> int:
             if r["method"] != "efg" and ref:
                 d = path_difference(r, ref[0])
                 print(f" {r['method']} vs efg, h = {r['h']:g}: path difference {d:.2e}")
+    for r in records:  # the adaptive patch against the large fixed one (issue 25: 1 %)
+        if not r["method"].endswith("+adaptive"):
+            continue
+        base = r["method"].removesuffix("+adaptive")
+        q = next(e for e in records if e["method"] == base and e["h"] == r["h"])
+        d = path_difference(r, q)
+        out["path_difference"][f"{r['method']} vs fixed h={r['h']:g}"] = d
+        ok &= d <= PATH_TARGET
+        if COMM.rank == 0:
+            ev = r["conversions"]
+            print(
+                f" {r['method']} h = {r['h']:g}: path difference to the fixed patch {d:.2e} of "
+                f"the crack length (target 1 %); particles {r['particles_final']} at the end "
+                f"(fixed {q['particles']}), {len(ev)} growth event(s) "
+                f"(cells added {[e['cells_added'] for e in ev]}, rebuilds "
+                f"{sum(e['time_rebuild'] for e in ev):.2f} s); time {r['time_total']:.2f} s "
+                f"against {q['time_total']:.2f} s: {r['time_total'] / q['time_total']:.2f}x"
+            )
     if COMM.rank == 0:
         for r in records:
             print(f" {r['method']:10s} h = {r['h']:g}: first kink {r['first_kink_deg']:+.3f} deg "

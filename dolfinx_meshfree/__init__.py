@@ -51,6 +51,7 @@ from .geometry.crack import Crack
 from .geometry.particles import ParticleSet
 from .geometry.partition import PartitionImbalanceWarning, balanced_mesh, work_per_rank
 from .geometry.patch import PLACEMENTS, ParticlePatch
+from .geometry.patch_criteria import CellsWhere, FieldAbove, NearTips, cells_near
 from .geometry.quadrature import boundary_facets, cell_quadrature, facet_quadrature
 from .geometry.smoothing import INTEGRATIONS
 from .io import DynamicsWriter, ProgressBar, read_particles
@@ -74,7 +75,7 @@ from .statics.coupled import (
 from .statics.crack_initiation import CrackInitiation
 from .statics.efg import EFGElasticity, EFGSolution
 from .statics.fe import FESolution, solve_fe_elasticity, solve_forms
-from .statics.growth import GrowthStep, QuasiStaticCrackGrowth
+from .statics.growth import GrowthStep, PatchCriterionWarning, QuasiStaticCrackGrowth
 from .statics.large import IterativeOptions, chunked_l2_error, solve_large
 from .statics.newton import NewtonError, NewtonOptions, NewtonResult
 from .statics.nonlinear import FINITE_STRAIN_COUPLINGS, CoupledNonlinearProblem, FENonlinearProblem
@@ -113,6 +114,7 @@ __all__ = [
     "Approximation",
     "ArcLength",
     "BulkStrengthWarning",
+    "CellsWhere",
     "CohesiveGrowth",
     "CoupledElasticity",
     "CoupledLinearProblem",
@@ -129,6 +131,7 @@ __all__ = [
     "ExplicitDynamics",
     "FENonlinearProblem",
     "FESolution",
+    "FieldAbove",
     "GaussianPulseRod",
     "GrowthStep",
     "HybridElasticity",
@@ -143,6 +146,7 @@ __all__ = [
     "LinearField",
     "Material",
     "MomentMatrixError",
+    "NearTips",
     "NeoHookean",
     "NewtonError",
     "NewtonOptions",
@@ -151,6 +155,7 @@ __all__ = [
     "ParticlePatch",
     "ParticleSet",
     "PartitionImbalanceWarning",
+    "PatchCriterionWarning",
     "PathError",
     "PathOptions",
     "PathResult",
@@ -171,6 +176,7 @@ __all__ = [
     "balanced_mesh",
     "boundary_facets",
     "cell_quadrature",
+    "cells_near",
     "chunked_l2_error",
     "cubic_spline",
     "edge_crack_factor",

@@ -204,7 +204,8 @@ def test_bench_blocks_smoke(shared_dir):
 
 
 def test_crack_growth_demo_quick(shared_dir, monkeypatch):
-    """Smoke: demos/crack_growth.py --quick (h = 0.05, 2 steps, efg and lagrange): the first
+    """Smoke: demos/crack_growth.py --quick (h = 0.05, 2 steps, efg, lagrange and lagrange on
+    a patch grown about the tip, --adaptive-patch 0): the first
     kink maximises the hoop stress and turns the 30 deg crack clockwise (measured -22.526 deg
     EFG, -22.510 lagrange, the rigid motions removed far from the crack: 0.016 deg apart;
     bound 0.05 deg); the JSON has the paths; --xdmf writes one output per step, whose crack
@@ -216,11 +217,23 @@ def test_crack_growth_demo_quick(shared_dir, monkeypatch):
     monkeypatch.syspath_prepend(str(DEMOS))
     demo = load_demo("crack_growth")
     path = shared_dir / "growth.json"
-    argv = ["--quick", "--methods", "efg", "lagrange", "--json", str(path)]
+    argv = ["--quick", "--methods", "efg", "lagrange", "--adaptive-patch", "0", "--json", str(path)]
     assert demo.main([*argv, "--xdmf", str(shared_dir / "g")]) == 0
     MPI.COMM_WORLD.Barrier()
-    rec = json.loads(path.read_text())["records"]
-    assert [r["method"] for r in rec] == ["efg", "lagrange"]
+    out = json.loads(path.read_text())
+    rec = out["records"]
+    assert [r["method"] for r in rec] == ["efg", "lagrange", "lagrange+adaptive"]
+    # the patch grown about the tip (issue 25): one event, more particles than it started with,
+    # the path 7.5e-5 of the crack length from the fixed patch's (bound 1.5e-4); each patch's
+    # particles in a series of their own
+    adaptive = rec.pop()
+    assert len(adaptive["conversions"]) == 1
+    assert adaptive["particles_final"] > adaptive["history"][0]["particles"]
+    assert out["path_difference"]["lagrange+adaptive vs fixed h=0.05"] <= 1.5e-4
+    for suffix in ("", "_s1"):
+        assert pathlib.Path(
+            f"{shared_dir}/g_lagrange_adaptive_h0.05{suffix}_particles.xdmf"
+        ).exists()
     for r in rec:
         assert len(r["history"]) == 2 and len(r["path"]) == 4
         assert -30.0 < r["first_kink_deg"] < -12.0

@@ -82,10 +82,12 @@ def segments_intersect(p: np.ndarray, q: np.ndarray, a: np.ndarray, b: np.ndarra
 
 
 def point_segment_distance(x: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Distance (m, k) from points ``x`` (m, 2) to segments ``a b`` (k, 2)."""
+    """Distance (m, k) from points ``x`` (m, 2) to segments ``a b`` (k, 2); a segment of zero
+    length is its point."""
     t = b - a
     r = x[:, None, :] - a[None, :, :]
-    xi = np.clip(np.einsum("mkd,kd->mk", r, t) / np.einsum("kd,kd->k", t, t), 0.0, 1.0)
+    tt = np.einsum("kd,kd->k", t, t)
+    xi = np.clip(np.einsum("mkd,kd->mk", r, t) / np.where(tt > 0, tt, 1.0), 0.0, 1.0)
     return np.linalg.norm(r - xi[..., None] * t[None], axis=-1)
 
 
@@ -178,7 +180,8 @@ class Crack:
         self.is_tip = [True, True]
         self.version = 0
         self._listeners: list[Callable[[], Callable[[], None] | None]] = []
-        self._validators: list[Callable[[Crack, np.ndarray], list[bool] | None]] = []
+        # (the domain, its check): a patch's validator, removed by :meth:`release`
+        self._validators: list[tuple[object, Callable[[Crack, np.ndarray], list[bool] | None]]] = []
 
     def __repr__(self) -> str:
         through = ", through=True" if self.through else ""
@@ -363,7 +366,7 @@ class Crack:
         pts = np.vstack([self.points, new]) if tip == -1 else np.vstack([new, self.points])
         pts = _check_polyline(pts, "the extended crack")
         is_tip = None
-        for validate in self._validators:  # a patch's: its tips and mouths on the new polyline
+        for _, validate in self._validators:  # a patch's: its tips and mouths on the new polyline
             found = validate(self, pts)
             is_tip = found if found is not None else is_tip
         self.points = pts
@@ -379,6 +382,20 @@ class Crack:
         """Call ``fn()`` after every change (weakly held when ``fn`` is a bound method)."""
         ref = weakref.WeakMethod(fn) if hasattr(fn, "__self__") else (lambda: fn)
         self._listeners.append(ref)  # type: ignore[arg-type]
+
+    def release(self, *owners: object) -> None:
+        """Detach the crack from ``owners`` (patches or domains it was placed in, objects whose
+        bound methods listen): their validators and listeners are dropped, so that a model
+        rebuilt around the crack (a grown patch) is the only one that checks and hears later
+        :meth:`extend` calls."""
+        ids = {id(o) for o in owners}
+        self._validators = [(d, f) for d, f in self._validators if id(d) not in ids]
+        kept = []
+        for ref in self._listeners:
+            fn = ref()
+            if fn is not None and id(getattr(fn, "__self__", None)) not in ids:
+                kept.append(ref)
+        self._listeners = kept
 
 
 # --- the crack in a patch ---------------------------------------------------------------------
@@ -684,4 +701,4 @@ def place_crack(crack: Crack, domain: ParticlePatch | CrackDomain) -> None:
     is_tip = validate_in_patch(crack, domain)
     crack.set_mouths(not is_tip[0], not is_tip[1])
     warn_near_particle_rows(crack, domain)
-    crack._validators.append(lambda c, pts: validate_in_patch(c, domain, pts))
+    crack._validators.append((domain, lambda c, pts: validate_in_patch(c, domain, pts)))

@@ -100,6 +100,12 @@ class ParticlePatch:
         quadrature: AdaptiveQuadrature | None = None,
     ) -> None:
         comm = mesh.comm
+        # what :meth:`grown` builds the larger patch with
+        self._options = {
+            "spacing": spacing, "jitter": jitter, "seed": seed, "placement": placement,
+            "crack_method": crack_method, "crack_enrichment": crack_enrichment,
+            "quadrature": quadrature,
+        }  # fmt: skip
         if quadrature is not None and not isinstance(quadrature, AdaptiveQuadrature):
             raise ValueError(
                 f"quadrature={quadrature!r}: give an AdaptiveQuadrature(radius=..., near=..., "
@@ -221,6 +227,19 @@ class ParticlePatch:
         tips and mouths; later :meth:`Crack.extend` calls are checked the same way."""
         place_crack(crack, self)
         self.cracks.append(crack)
+
+    def grown(self, cells: npt.ArrayLike) -> ParticlePatch:
+        """A new patch of this patch's cells and ``cells`` (local indices, owned or ghost, as
+        for the constructor), with the same spacing, placement, jitter and crack options
+        (collective). Its particles are placed afresh, as at build time: the grid's points
+        stay where they were, the conforming layer moves to the new border. The cracks are
+        not carried over: a model rebuilt on it places them (:meth:`add_crack`) after
+        :meth:`Crack.release` from this patch."""
+        extra = np.asarray(cells)
+        if extra.ndim != 1 or (extra.size and not np.issubdtype(extra.dtype, np.integer)):
+            raise ValueError(f"cells should be a 1D array of cell indices, got {extra!r:.80}")
+        union = np.union1d(self.cells, extra.astype(np.int64))
+        return ParticlePatch(self.mesh, union, **self._options)
 
     @property
     def comm(self) -> MPI.Comm:

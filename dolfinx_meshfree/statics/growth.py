@@ -19,6 +19,7 @@ Works with any problem whose ``solve()`` returns a solution with ``stress_intens
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -26,11 +27,18 @@ import numpy as np
 
 from ..fracture.criteria import equivalent_sif, kink_angle
 from ..geometry.crack import Crack, particle_spacing
+from ..geometry.patch_criteria import GrowthContext, NearTips
 from ..physics.state import check_stateless
 from .growth_update import disable_local_update, enable_local_update
+from .patch_growth import PatchEvent, PatchGrowth
 from .sifs import DEFAULT_RADII
 
-__all__ = ["GROWTH_UPDATES", "GrowthStep", "QuasiStaticCrackGrowth"]
+__all__ = ["GROWTH_UPDATES", "GrowthStep", "PatchCriterionWarning", "QuasiStaticCrackGrowth"]
+
+
+class PatchCriterionWarning(UserWarning):
+    """A patch criterion that named no cell in a whole run."""
+
 
 #: How a growth step rebuilds the particle side.
 GROWTH_UPDATES = ("local", "full")
@@ -57,6 +65,7 @@ class GrowthStep:
             operator, assembly, solve).
         time_sifs: Seconds of the interaction integral.
         timings: The solution's own split of ``time_solve`` (e.g. setup, assemble, solve).
+        particles: The number of particles of the model solved (grows with ``adapt``).
     """
 
     step: int
@@ -73,6 +82,7 @@ class GrowthStep:
     time_solve: float
     time_sifs: float
     timings: dict
+    particles: int = 0
 
     def as_dict(self) -> dict:
         """Plain lists and floats (for JSON)."""
@@ -134,6 +144,17 @@ class QuasiStaticCrackGrowth:
             update: ``"local"`` (default): after each extension re-tabulate, re-integrate and
             re-assemble only what it changes; ``"full"``: rebuild the particle side (equal to
             round-off, 1e-10 checked).
+            adapt: A patch that grows during the run (issue 25): a criterion
+            (:class:`~dolfinx_meshfree.NearTips`, :class:`~dolfinx_meshfree.FieldAbove`,
+            :class:`~dolfinx_meshfree.CellsWhere`) or a list of them, asked before the first
+            solve and before each extension (with the tip the extension will make);
+            the FE cells they name become particles and the model is rebuilt on the larger
+            patch (:class:`~dolfinx_meshfree.statics.patch_growth.PatchGrowth`; records in
+            :attr:`events`, the current model in :attr:`problem`). ``problem`` must then be
+            a :class:`~dolfinx_meshfree.CoupledLinearProblem`. ``NearTips(spacings=k)``
+            must keep the SIF domains and their one-spacing clearance inside the patch
+            (refused otherwise, naming the tip); ``NearTips()`` picks that radius. Default
+            ``None``: the patch is fixed.
             sif_options: more keywords of ``stress_intensity_factors``.
 
     Example:
@@ -152,6 +173,7 @@ class QuasiStaticCrackGrowth:
         tip: int | None = None,
         radius: float | np.ndarray | None = None,
         update: str = "local",
+        adapt: Any = None,
         **sif_options,
     ) -> None:
         self.end = _check(crack, increment, steps, K_Ic, tip)
@@ -183,6 +205,15 @@ class QuasiStaticCrackGrowth:
             else:
                 disable_local_update(mls)
         self.problem, self.crack = problem, crack
+        #: The :class:`~dolfinx_meshfree.statics.patch_growth.PatchGrowth` (``adapt``), or None.
+        self.adaptive = None
+        if adapt is not None:
+            self.adaptive = PatchGrowth(problem, adapt, "QuasiStaticCrackGrowth")
+            if all(c is not crack for c in problem.patch.cracks):
+                raise ValueError(
+                    "the crack is not one of the patch's cracks (ParticlePatch(..., cracks=[...]) "
+                    "or patch.add_crack): the grown patch could not carry it"
+                )
         self.increment, self.steps, self.K_Ic = float(increment), int(steps), K_Ic
         self.radius, self.sif_options = radius, sif_options
         #: The record, one :class:`GrowthStep` per step run.
@@ -198,25 +229,62 @@ class QuasiStaticCrackGrowth:
         pts = [self.history[0].tip] + [s.new_tip for s in self.history if s.grown]
         return np.array(pts)
 
-    def _radii(self, solution: Any) -> np.ndarray:
+    @property
+    def events(self) -> list[PatchEvent]:
+        """The patch's growth events (``adapt``; empty for a fixed patch)."""
+        return [] if self.adaptive is None else self.adaptive.events
+
+    def _radii(self, domain: Any) -> np.ndarray:
         """The default radii (``DEFAULT_RADII`` x h), scaled down to fit within 0.9 of the tip
         segment: the interaction integral assumes a straight crack in its domain, so a kink
         (the previous tip) must stay outside it; an increment ``da >= 5.6 h`` keeps them."""
-        domain = getattr(solution, "domain", None) or solution.patch
         h = particle_spacing(domain)
         a, b = self.crack.points[self.end], self.crack.points[1 if self.end == 0 else -2]
         r = np.asarray(DEFAULT_RADII, float) * h
         return r * min(1.0, 0.9 * float(np.linalg.norm(a - b)) / r.max())
 
+    def _outer_radius(self) -> float:
+        """The SIF domains' outer radius at the current tip."""
+        r = self._radii(self.problem.patch) if self.radius is None else self.radius
+        return float(np.max(r))
+
+    def _grow_patch(self, step: int, extra_tip: np.ndarray | None) -> None:
+        """Ask the criteria with every tip (and the tip the coming extension makes); on an
+        event, the model is the rebuilt one from now on (collective)."""
+        patch = self.problem.patch
+        tips = [c.tips for c in patch.cracks if len(c.tips)]
+        if extra_tip is not None:
+            tips.append(extra_tip[None])
+        tips = np.concatenate(tips) if tips else np.zeros((0, 2))
+        sif_radius = self._outer_radius()
+        h = particle_spacing(patch)
+        for c in self.adaptive.criteria:
+            if isinstance(c, NearTips) and c.radius(h, sif_radius) < sif_radius + h:
+                k = int(np.ceil(sif_radius / h + 1.0))
+                raise ValueError(
+                    f"{c!r} keeps the FE interface {c.radius(h, sif_radius):.4g} from the tip "
+                    f"at {np.round(tips[-1], 6).tolist()}: inside the SIF domains' outer "
+                    f"radius {sif_radius:.4g} plus one spacing (h = {h:.4g}); give spacings "
+                    f">= {k}, or NearTips() (the domains plus 2 spacings)"
+                )
+        ctx = GrowthContext(step, tips, self.solution, sif_radius, self.increment)
+        if self.adaptive.grow(ctx, self.local) is not None:
+            self.problem = self.adaptive.problem
+            if self.update == "local":
+                self.local = self.adaptive.local_update(self.problem.patch.cracks)
+
     def step(self) -> GrowthStep:
         """Solve, compute K at the tip, and grow (if the criterion says so). Collective."""
         crack, end = self.crack, self.end
+        if self.adaptive is not None and not self.history:
+            self._grow_patch(-1, None)
         tip = crack.points[end].copy()
         direction = crack.tip_direction(end)
         t0 = time.perf_counter()
         sol = self.problem.solve()
         t1 = time.perf_counter()
-        radius = self._radii(sol) if self.radius is None else self.radius
+        domain = getattr(sol, "domain", None) or sol.patch
+        radius = self._radii(domain) if self.radius is None else self.radius
         sif = sol.stress_intensity_factors(crack, tip=tip, radius=radius, **self.sif_options)
         t2 = time.perf_counter()
         self.solution = sol
@@ -225,6 +293,11 @@ class QuasiStaticCrackGrowth:
         keq = float(equivalent_sif(KI, KII))
         grown = self.K_Ic is None or keq >= self.K_Ic
         if grown:
+            if self.adaptive is not None:  # the patch carries the new tip before it is made
+                c, s = np.cos(theta), np.sin(theta)
+                t = direction
+                d = np.array([c * t[0] - s * t[1], s * t[0] + c * t[1]])
+                self._grow_patch(len(self.history), tip + self.increment * d)
             crack.extend(theta, self.increment, tip=end)
         rec = GrowthStep(
             step=len(self.history), tip=tip, direction=direction, K_I=KI, K_II=KII,
@@ -232,14 +305,24 @@ class QuasiStaticCrackGrowth:
             path_dependence=sif.path_dependence, theta=theta, K_eq=keq, grown=grown,
             new_tip=crack.points[end].copy(), time_solve=t1 - t0, time_sifs=t2 - t1,
             timings=dict(getattr(sol, "timings", None) or {}),
+            particles=int(domain.particles.num_particles),
         )  # fmt: skip
         self.history.append(rec)
         return rec
 
     def run(self) -> list[GrowthStep]:
         """Run up to ``steps`` steps; stops early at the first step that does not grow
-        (``K_eq < K_Ic``: under fixed loads the crack is stable). Returns :attr:`history`."""
+        (``K_eq < K_Ic``: under fixed loads the crack is stable). Returns :attr:`history`.
+        With ``adapt``, a :class:`PatchCriterionWarning` when no criterion named any cell in the
+        whole run (the patch never needed growing: is the criterion the intended one?)."""
         for _ in range(self.steps):
             if not self.step().grown:
                 break
+        if self.adaptive is not None and not self.adaptive.selected:
+            warnings.warn(
+                f"QuasiStaticCrackGrowth: the criteria {[repr(c) for c in self.adaptive.criteria]}"
+                f" named no cell in {len(self.history)} step(s); the patch stayed as given",
+                PatchCriterionWarning,
+                stacklevel=2,
+            )
         return self.history

@@ -132,6 +132,8 @@ class CoupledLinearProblem:
             comm, lambda: solver_options("mumps", petsc_options, petsc_options_prefix)
         )
         self.a, self.L, self.bcs = a, L, bcs
+        self.coupling, self._options = coupling, dict(options)
+        self._petsc = (petsc_options, petsc_options_prefix)
         self.problem = CoupledElasticity(V, patch, material, coupling, **options)
         self.problem.form = a
         self.V, self.patch, self.material = V, patch, material
@@ -255,6 +257,17 @@ class CoupledLinearProblem:
                 without them.
         """
         return self.problem.solve(self._solver if solver is None else solver)
+
+    def with_patch(self, patch: ParticlePatch) -> CoupledLinearProblem:
+        """The same model (forms, conditions, material, coupling, options, solver) on another
+        patch of the same mesh (collective): what a patch that grows during a run rebuilds
+        (:class:`~dolfinx_meshfree.QuasiStaticCrackGrowth` with ``adapt``). The patch's cracks
+        are the ones it was given (``patch.add_crack``)."""
+        options, prefix = self._petsc
+        return CoupledLinearProblem(
+            self.a, self.L, self.bcs, patch, self.material, self.coupling, options, prefix,
+            **self._options,
+        )  # fmt: skip
 
     @property
     def model(self) -> CoupledElasticity:

@@ -1,0 +1,334 @@
+"""Where a particle patch grows during a run (issue 25, item 2): small criterion objects that name
+the FE cells which must become particles.
+
+"Model only what a scene needs": the particles belong where the physics needs them (a crack tip,
+a failing material), finite elements everywhere else. Belytschko et al. (1995), sec. 6, grew
+their refinement ahead of the crack; Rabczuk et al. (2006), sec. 1 and 5.5, cite adaptively
+generated EFG domains for crack growth (Karutz) and the conversion of elements into particles
+(Sauer). A criterion answers one question at a time: which owned cells must be particles now.
+A driver (:class:`~dolfinx_meshfree.QuasiStaticCrackGrowth` with ``adapt``) asks it between
+steps, adds the cells it names to the patch (:meth:`ParticlePatch.grown`) and rebuilds the model.
+The patch only grows: cells never return to FE (no shrinking back).
+
+Three criteria, each a :class:`PatchCriterion`:
+
+* :class:`NearTips`: every cell within ``k`` particle spacings of a crack tip (the tips after the
+  coming extension included), so that the SIF domains and the tip's supports stay in the
+  particles;
+* :class:`FieldAbove`: the FE cells where a field of the last solution passes a threshold (the
+  largest principal stress or strain at the cell midpoint, or a user's function of the
+  displacement gradient);
+* :class:`CellsWhere`: a user's callable on the cell midpoints.
+
+:func:`cells_near` gives the cells within a distance of points or a polyline, e.g. the initial
+patch around a crack.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+
+import dolfinx
+import numpy as np
+import numpy.typing as npt
+
+from .. import _compat
+from .crack import _orient, particle_spacing, point_segment_distance, segments_intersect
+from .quadrature import QuadraturePoints
+
+if TYPE_CHECKING:  # annotations only
+    from .patch import ParticlePatch
+
+__all__ = [
+    "PATCH_FIELDS",
+    "CellsWhere",
+    "FieldAbove",
+    "GrowthContext",
+    "NearTips",
+    "PatchCriterion",
+    "cells_near",
+]
+
+#: The named fields of :class:`FieldAbove`.
+PATCH_FIELDS = ("max_principal_stress", "max_principal_strain")
+
+#: Spacings that :class:`NearTips` keeps beyond the SIF domains by default (the domains'
+#: clearance from the FE interface, one spacing, and one more).
+SIF_MARGIN = 2.0
+
+
+@dataclass
+class GrowthContext:
+    """What a criterion may read at a step.
+
+    Attributes:
+        step: The driver's step (0 before the first solve).
+        tips: (k, 2) the crack tips the patch must carry: every tip of the patch's cracks and
+            the tip that the coming extension will make.
+        solution: The last solution, or ``None`` before the first solve.
+        sif_radius: The outer radius of the SIF domains the driver will use, or ``None``.
+        increment: The crack's growth per step (``da``), or ``None``.
+    """
+
+    step: int
+    tips: np.ndarray
+    solution: Any = None
+    sif_radius: float | None = None
+    increment: float | None = None
+
+
+@runtime_checkable
+class PatchCriterion(Protocol):
+    """A rule naming the cells that must be particles (write your own: one method)."""
+
+    def select(self, patch: ParticlePatch, context: GrowthContext) -> np.ndarray:
+        """Bool per owned cell of ``patch.mesh``: ``True`` where the cell must be a particle
+        cell (patch cells may be named or not: only the FE cells named join). Local: the same
+        answer on every number of ranks, no collective call needed (one is allowed)."""
+        ...
+
+
+def _cell_edges(msh: dolfinx.mesh.Mesh) -> np.ndarray:
+    """The owned cells' edges (cells, facets per cell, 2 ends, 2) of a 2D mesh."""
+    tdim = msh.topology.dim
+    n_own = msh.topology.index_map(tdim).size_local
+    msh.topology.create_connectivity(tdim, tdim - 1)
+    msh.topology.create_connectivity(tdim - 1, tdim)  # entities_to_geometry in DOLFINx 0.10+
+    c2f = msh.topology.connectivity(tdim, tdim - 1)
+    offsets = np.asarray(c2f.offsets)
+    per = int(offsets[1] - offsets[0]) if n_own else 3
+    facets = np.asarray(c2f.array)[: offsets[n_own]].reshape(n_own, per)
+    geo = _compat.entities_to_geometry(msh, tdim - 1, facets.ravel().astype(np.int32))
+    return msh.geometry.x[geo][:, :, :2].reshape(n_own, per, 2, 2)
+
+
+def cells_near(mesh: dolfinx.mesh.Mesh, points: npt.ArrayLike, distance: float) -> np.ndarray:
+    """Owned cells of a 2D ``mesh`` within ``distance`` of ``points`` (exact: the distance from
+    the cell, as a polygon, to the points).
+
+    Args:
+        mesh: A 2D mesh (triangles or quadrilaterals, convex cells).
+        points: (k, 2) points, or a polyline given as ``Crack.points`` with ``k >= 2`` (then the
+            distance to its segments).
+        distance: >= 0.
+
+    Returns:
+        Sorted local indices of owned cells (int32), e.g. for ``ParticlePatch(mesh, cells, h)``.
+    """
+    if mesh.geometry.dim != 2 or mesh.topology.dim != 2:
+        raise ValueError(
+            f"cells_near works on 2D meshes (cracks are 2D); this mesh has gdim="
+            f"{mesh.geometry.dim}: select 3D cells with dolfinx.mesh.locate_entities"
+        )
+    p = np.asarray(points, dtype=float)
+    if p.ndim == 1:
+        p = p[None]
+    if p.ndim != 2 or p.shape[1] < 2 or not len(p) or not np.all(np.isfinite(p)):
+        raise ValueError(f"points should be (k, 2) finite coordinates, got {p!r:.80}")
+    if not (np.isfinite(distance) and distance >= 0):
+        raise ValueError(f"distance={distance!r} must be a finite number >= 0")
+    p = p[:, :2]
+    edges = _cell_edges(mesh)
+    if not len(edges):
+        return np.zeros(0, dtype=np.int32)
+    e0, e1 = edges[:, :, 0].reshape(-1, 2), edges[:, :, 1].reshape(-1, 2)
+    a, b = (p[:-1], p[1:]) if len(p) > 1 else (p, p)
+    # a prefilter: cells whose bounding box is within the distance of the points' box
+    lo, hi = edges.min(axis=(1, 2)), edges.max(axis=(1, 2))
+    plo, phi = p.min(axis=0) - distance, p.max(axis=0) + distance
+    cand = np.flatnonzero(np.all((hi >= plo) & (lo <= phi), axis=1))
+    if not cand.size:
+        return np.zeros(0, dtype=np.int32)
+    per = edges.shape[1]
+    idx = (cand[:, None] * per + np.arange(per)).ravel()
+    E0, E1 = e0[idx], e1[idx]
+    d = np.minimum(
+        point_segment_distance(E0, a, b).min(axis=1), point_segment_distance(E1, a, b).min(axis=1)
+    )  # a cell vertex to the polyline
+    d = np.minimum(d, point_segment_distance(p, E0, E1).min(axis=0))  # a point to a cell edge
+    d = np.where(segments_intersect(E0, E1, a, b).any(axis=1), 0.0, d)
+    near = d.reshape(-1, per).min(axis=1) <= distance
+    # a point strictly inside a cell (no edge within the distance): same side as the midpoint
+    mid = edges[cand].reshape(len(cand), -1, 2).mean(axis=1)
+    c0, c1 = edges[cand, :, 0], edges[cand, :, 1]  # (c, per, 2)
+    s_mid = _orient(c0, c1, mid[:, None, :])  # (c, per)
+    s_pts = _orient(c0[:, :, None], c1[:, :, None], p[None, None])  # (c, per, k)
+    inside = np.all(s_pts * s_mid[:, :, None] >= 0, axis=1).any(axis=1)
+    return np.sort(cand[near | inside]).astype(np.int32)
+
+
+class NearTips:
+    """Every cell within ``spacings`` particle spacings of a crack tip.
+
+    When a cell within that radius of a tip is still FE, the patch grows to the radius plus
+    ``reserve`` crack increments, so that the next ``reserve`` extensions need no rebuild (each
+    growth of the patch rebuilds the model).
+
+    Args:
+        spacings: The radius in particle spacings ``h`` of the patch. ``None`` (default): the
+            driver's SIF domains' outer radius plus ``SIF_MARGIN`` (2) spacings, so that the
+            domains keep their one-spacing clearance from the FE interface at every tip (the
+            default domains of :class:`~dolfinx_meshfree.QuasiStaticCrackGrowth`, 5 spacings:
+            7 spacings).
+        reserve: Increments ``da`` of extra radius taken when the patch must grow (>= 0;
+            default 1: a rebuild every other step; 0: the least particles, a rebuild at every
+            step the tip nears the interface).
+    """
+
+    name = "NearTips"
+
+    def __init__(self, spacings: float | None = None, reserve: float = 1.0) -> None:
+        if isinstance(reserve, bool) or not (
+            isinstance(reserve, int | float | np.integer | np.floating)
+            and np.isfinite(reserve)
+            and reserve >= 0
+        ):
+            raise ValueError(
+                f"reserve={reserve!r} must be a number of crack increments >= 0 (extra radius "
+                "taken when the patch must grow; 0: none)"
+            )
+        self.reserve = float(reserve)
+        if spacings is not None and (
+            isinstance(spacings, bool)
+            or not isinstance(spacings, int | float | np.integer | np.floating)
+            or not np.isfinite(spacings)
+            or spacings <= 0
+        ):
+            raise ValueError(
+                f"spacings={spacings!r} must be a positive number of particle spacings, or None "
+                "(the SIF domains' radius plus 2 spacings)"
+            )
+        self.spacings = None if spacings is None else float(spacings)
+
+    def __repr__(self) -> str:
+        return f"NearTips(spacings={self.spacings!r}, reserve={self.reserve:g})"
+
+    def radius(self, h: float, sif_radius: float | None) -> float:
+        """The radius about each tip: ``spacings * h``, or the default."""
+        if self.spacings is not None:
+            return self.spacings * h
+        if sif_radius is None:
+            raise ValueError(
+                "NearTips(spacings=None) takes its radius from the SIF domains; this driver "
+                "has none: give spacings"
+            )
+        return float(sif_radius) + SIF_MARGIN * h
+
+    def select(self, patch: ParticlePatch, context: GrowthContext) -> np.ndarray:
+        n_own = patch.mesh.topology.index_map(2).size_local
+        out = np.zeros(n_own, dtype=bool)
+        r = self.radius(particle_spacing(patch), context.sif_radius)
+        tips = np.atleast_2d(context.tips)
+        for tip in tips:
+            out[cells_near(patch.mesh, tip[None, :2], r)] = True
+        extra = self.reserve * (context.increment or 0.0)
+        fe = out & ~patch.in_patch[:n_own]
+        if extra > 0 and patch.comm.allreduce(int(fe.any())):  # must grow: take the reserve
+            for tip in tips:
+                out[cells_near(patch.mesh, tip[None, :2], r + extra)] = True
+        return out
+
+
+def _midpoints(patch: ParticlePatch) -> tuple[np.ndarray, np.ndarray]:
+    """The owned FE cells and their midpoints (m, gdim)."""
+    msh = patch.mesh
+    tdim = msh.topology.dim
+    cells = np.asarray(patch.fe_cells, dtype=np.int32)
+    mid = dolfinx.mesh.compute_midpoints(msh, tdim, cells)[:, : msh.geometry.dim]
+    return cells, mid
+
+
+class FieldAbove:
+    """The FE cells where a field of the last solution, at the cell midpoint, passes
+    ``threshold``.
+
+    Args:
+        field: ``"max_principal_stress"`` (the solution's material law on the displacement
+            gradient; Rankine), ``"max_principal_strain"``, or a callable ``field(x, grad)``
+            of the midpoints (m, gdim) and the displacement gradients (m, gdim, gdim) returning
+            (m,) values (e.g. a damage or ``det F`` indicator).
+        threshold: The value above which (``>=``) a cell joins the patch.
+
+    Before the first solve it names no cell.
+    """
+
+    name = "FieldAbove"
+
+    def __init__(
+        self, field: str | Callable[[np.ndarray, np.ndarray], np.ndarray], threshold: float
+    ) -> None:
+        if not callable(field) and field not in PATCH_FIELDS:
+            raise ValueError(
+                f"field={field!r} is not known; use one of {list(PATCH_FIELDS)} or a callable "
+                "field(x, grad) -> (m,) values"
+            )
+        if isinstance(threshold, bool) or not np.isfinite(threshold):
+            raise ValueError(f"threshold={threshold!r} must be a finite number")
+        self.field, self.threshold = field, float(threshold)
+
+    def __repr__(self) -> str:
+        name = self.field if isinstance(self.field, str) else getattr(self.field, "__name__", "?")
+        return f"FieldAbove({name!r}, threshold={self.threshold:g})"
+
+    def values(self, patch: ParticlePatch, solution: Any) -> tuple[np.ndarray, np.ndarray]:
+        """The owned FE cells and the field at their midpoints."""
+        cells, mid = _midpoints(patch)
+        if not len(cells):
+            return cells, np.zeros(0)
+        q = QuadraturePoints(mid, np.ones(len(mid)), cells)
+        grad = np.asarray(solution.evaluate_at_quadrature(q)[1])
+        if callable(self.field):
+            v = np.asarray(self.field(mid, grad), dtype=float)
+            if v.shape != (len(mid),):
+                raise ValueError(
+                    f"the field callable returned shape {v.shape} for {len(mid)} midpoints; it "
+                    "must return one value per point"
+                )
+            return cells, v
+        if self.field == "max_principal_stress":
+            t = np.asarray(solution.material.stress(grad))
+        else:
+            t = 0.5 * (grad + np.swapaxes(grad, 1, 2))
+        return cells, np.linalg.eigvalsh(0.5 * (t + np.swapaxes(t, 1, 2)))[:, -1]
+
+    def select(self, patch: ParticlePatch, context: GrowthContext) -> np.ndarray:
+        out = np.zeros(patch.mesh.topology.index_map(patch.mesh.topology.dim).size_local, bool)
+        if context.solution is None:
+            return out
+        cells, v = self.values(patch, context.solution)
+        out[cells[v >= self.threshold]] = True
+        return out
+
+
+class CellsWhere:
+    """The cells whose midpoint ``fn`` marks.
+
+    Args:
+        fn: ``fn(x) -> bool (m,)`` of the owned cells' midpoints ``x`` (m, gdim), as
+            ``dolfinx.mesh.locate_entities`` markers take them (but by point rows).
+    """
+
+    name = "CellsWhere"
+
+    def __init__(self, fn: Callable[[np.ndarray], np.ndarray]) -> None:
+        if not callable(fn):
+            raise ValueError(f"fn={fn!r:.80} must be a callable fn(x) -> bool per midpoint")
+        self.fn = fn
+
+    def __repr__(self) -> str:
+        return f"CellsWhere({getattr(self.fn, '__name__', '?')})"
+
+    def select(self, patch: ParticlePatch, context: GrowthContext) -> np.ndarray:
+        msh = patch.mesh
+        tdim = msh.topology.dim
+        n_own = msh.topology.index_map(tdim).size_local
+        mid = dolfinx.mesh.compute_midpoints(msh, tdim, np.arange(n_own, dtype=np.int32))
+        marked = np.asarray(self.fn(mid[:, : msh.geometry.dim]))
+        if marked.shape != (n_own,):
+            raise ValueError(
+                f"CellsWhere's fn returned shape {marked.shape} for {n_own} midpoints; it must "
+                "return one bool per point"
+            )
+        return marked.astype(bool)

@@ -148,10 +148,15 @@ class Model:
     timings: dict = field(default_factory=dict)
     body_load: BodyLoad | None = None
     system: NonlinearSystem | None = None
+    #: ``(quadrature, MLS table)`` of the particle masses (a coupled model without blended or
+    #: weighted particle functions), what a conversion fits the new particles on.
+    mass_rule: tuple | None = None
 
     def arguments(self) -> dict:
         """The attributes as keyword arguments of ``ExplicitDynamics`` (no copies)."""
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        return {
+            f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "mass_rule"
+        }
 
 
 def _check_material(material: LinearElastic) -> None:
@@ -645,6 +650,7 @@ def build_coupled(
         timings={"setup": time.perf_counter() - t0, "operators": ops.timings["operators"]},
         body_load=body_load,
         system=system,
+        mass_rule=p_rule if ops.interface_table is None and ops.reduction is None else None,
     )
 
 

@@ -34,6 +34,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 from scipy.optimize import brentq
@@ -47,6 +48,7 @@ from .central_difference import advance_to
 from .crack_contact import ContactSystem
 from .explicit import ExplicitDynamics
 from .growth_local import LocalModelUpdate
+from .patch_conversion import ConvertingPatch
 from .sifs import dynamic_sifs, model_cracks
 
 __all__ = ["DYNAMIC_UPDATES", "DynamicCrackGrowth", "GrowthCheck", "rayleigh_speed"]
@@ -142,6 +144,16 @@ class DynamicCrackGrowth:
             ``"full"``: call ``build`` after every extension.
         quadrature_degree: The degree of the model's cell rule (``update="local"``; the
             builders' default 7; checked on the masses around the tip).
+        adapt: A patch that grows during the run (issue 25): ``mf.NearTips(spacings=k)`` (or
+            ``mf.CellsWhere``, or a list), asked before the first step and before each
+            extension with the tip the extension will make. The FE cells it names become
+            particles: ``build(crack, cells=cells)`` rebuilds the model on the larger patch
+            (``cells``: this rank's patch cells, for ``mf.ParticlePatch(mesh, cells, ...)``)
+            and the state is carried over by
+            :func:`~dolfinx_meshfree.dynamics.patch_conversion.convert` (mass and momentum
+            conserved, the energy change recorded in :attr:`conversions` and counted in
+            :attr:`released`). Coupled models whose particle functions are the MLS alone
+            (lagrange, edge-to-edge). Default ``None``: the patch is fixed.
         sif_options: More keywords of :func:`~dolfinx_meshfree.dynamics.sifs.dynamic_sifs`.
 
     Example::
@@ -174,6 +186,7 @@ class DynamicCrackGrowth:
         dt: float | None = None,
         update: str = "local",
         quadrature_degree: int = 7,
+        adapt: Any = None,
         **sif_options,
     ) -> None:
         if not callable(build):
@@ -228,6 +241,12 @@ class DynamicCrackGrowth:
             return int(tip)
 
         self.end = raise_on_all_ranks(comm, check)
+        #: The :class:`~dolfinx_meshfree.dynamics.patch_conversion.ConvertingPatch` (``adapt``).
+        self.adaptive = None
+        if adapt is not None:
+            r = None if radius is None else float(np.max(radius))
+            self.adaptive = ConvertingPatch(adapt, self.model, build, r, self.segment)
+        self.timings["conversions"] = 0
         self.local: LocalModelUpdate | None = None
         self._start_local()
         self.history: list[GrowthCheck] = []
@@ -346,8 +365,13 @@ class DynamicCrackGrowth:
     def _extend(self, theta: float) -> None:
         """Extend the crack by one segment at ``theta`` and rebuild the model, carrying the
         state over (collective)."""
-        old, crack, end = self.model, self.crack, self.end
         tic = time.perf_counter()
+        if self.adaptive is not None and self._convert(theta):  # grown and extended at once
+            self.path_points.append(self.crack.points[self.end].copy())
+            self.timings["rebuild"] += time.perf_counter() - tic
+            self.timings["rebuilds"] += 1
+            return
+        old, crack, end = self.model, self.crack, self.end
         plan = None
         if self.local is not None:
             trial = Crack(crack.points.copy())
@@ -359,7 +383,10 @@ class DynamicCrackGrowth:
             self.timings["local"] += 1
         else:
             grown = Crack(crack.points.copy())
-            new = self.build(grown)
+            if self.adaptive is None:
+                new = self.build(grown)
+            else:  # the grown patch's cells
+                new = self.build(grown, cells=old.patch.cells)
             self.released.append((old.time, carry_state(old, new)))
             old.destroy()
             self.model, self.crack = new, grown
@@ -368,6 +395,37 @@ class DynamicCrackGrowth:
         self.path_points.append(self.crack.points[end].copy())
         self.timings["rebuild"] += time.perf_counter() - tic
         self.timings["rebuilds"] += 1
+
+    def _convert(self, theta: float | None) -> bool:
+        """``adapt``: grow the patch where the criteria say (about the tips and, with ``theta``,
+        the tip that the coming extension will make), rebuild the model on it (with that
+        extension: one rebuild for both) and carry the state
+        (:func:`~dolfinx_meshfree.dynamics.patch_conversion.convert`). The energy the event
+        changes (the extension's release and the conversion's) joins :attr:`released`.
+        Returns whether it happened (collective)."""
+        crack, end = self.crack, self.end
+        new_tip = extend = None
+        if theta is not None:
+            t, c, s = crack.tip_direction(end), np.cos(theta), np.sin(theta)
+            d = np.array([c * t[0] - s * t[1], s * t[0] + c * t[1]])
+            new_tip = crack.points[end] + self.segment * d
+            extend = lambda grown: self._grow(grown, theta)  # noqa: E731
+        out = self.adaptive.grow(self.model, crack, new_tip, extend)
+        if out is None:
+            return False
+        old = self.model
+        self.model, self.crack = out
+        self.released.append((old.time, -self.adaptive.conversions[-1].energy_change))
+        old.destroy()
+        self.timings["conversions"] += 1
+        self._start_local()
+        return True
+
+    @property
+    def conversions(self) -> list:
+        """The :class:`~dolfinx_meshfree.dynamics.patch_conversion.Conversion` records
+        (``adapt``; empty for a fixed patch)."""
+        return [] if self.adaptive is None else self.adaptive.conversions
 
     def _grow(self, crack: Crack, theta: float) -> None:
         """``crack.extend`` by one segment at ``theta``, its refusal naming the step, the time
@@ -393,6 +451,10 @@ class DynamicCrackGrowth:
         """
         t_end = _positive("t_end", t_end, "the final time")
         if not self.history:
+            if self.adaptive is not None:  # the patch about the initial tip
+                tic = time.perf_counter()
+                self._convert(None)
+                self.timings["rebuild"] += time.perf_counter() - tic
             self.check()
         while self.model.time < t_end * (1.0 - 1e-12):
             dt = self._time_step()

@@ -118,6 +118,9 @@ class ExplicitDynamics(StateQueries):
     """
 
     quadrature: AdaptiveQuadrature | None = None
+    #: ``(quadrature, MLS table)`` of the particle masses (set by :meth:`coupled` for couplings
+    #: whose particle functions are the MLS alone): what a conversion fits new particles on.
+    mass_rule: tuple | None = None
 
     def __init__(
         self,
@@ -191,6 +194,7 @@ class ExplicitDynamics(StateQueries):
         args = dict(model.arguments(), held=held_velocities(model.mesh, fixed))
         dyn = cls(**args, safety=safety, multiplier_solver=multiplier_solver)
         dyn.quadrature = quadrature
+        dyn.mass_rule = model.mass_rule
         return dyn
 
     @classmethod

@@ -48,6 +48,7 @@ __all__ = [
     "GrowthContext",
     "NearTips",
     "PatchCriterion",
+    "as_criteria",
     "cells_near",
 ]
 
@@ -88,6 +89,22 @@ class PatchCriterion(Protocol):
         cell (patch cells may be named or not: only the FE cells named join). Local: the same
         answer on every number of ranks, no collective call needed (one is allowed)."""
         ...
+
+
+def as_criteria(adapt: Any) -> list[PatchCriterion]:
+    """``adapt`` (one criterion or a sequence) as a list of criteria (a local check, the same
+    on every rank: a ``TypeError`` or ``ValueError`` naming the fix)."""
+    items = list(adapt) if isinstance(adapt, list | tuple) else [adapt]
+    for c in items:
+        if not isinstance(c, PatchCriterion):
+            raise TypeError(
+                f"adapt={c!r:.80} is not a patch criterion: give mf.NearTips(...), "
+                "mf.FieldAbove(...), mf.CellsWhere(...), a list of them, or an object with "
+                "select(patch, context) -> bool per owned cell"
+            )
+    if not items:
+        raise ValueError("adapt=[] names no criterion; leave it out for a fixed patch")
+    return items
 
 
 def _cell_edges(msh: dolfinx.mesh.Mesh) -> np.ndarray:
@@ -175,11 +192,22 @@ class NearTips:
         reserve: Increments ``da`` of extra radius taken when the patch must grow (>= 0;
             default 1: a rebuild every other step; 0: the least particles, a rebuild at every
             step the tip nears the interface).
+        region: ``region(x) -> bool`` of the cells' midpoints (m, gdim): only these cells may
+            be named (e.g. the cells beyond a slot of the mesh, across which the particles of
+            both faces would see each other: the MLS knows cracks, not gaps); ``None``: all.
     """
 
     name = "NearTips"
 
-    def __init__(self, spacings: float | None = None, reserve: float = 1.0) -> None:
+    def __init__(
+        self,
+        spacings: float | None = None,
+        reserve: float = 1.0,
+        region: Callable[[np.ndarray], np.ndarray] | None = None,
+    ) -> None:
+        if region is not None and not callable(region):
+            raise ValueError(f"region={region!r:.80} must be a callable region(x) -> bool or None")
+        self.region = region
         if isinstance(reserve, bool) or not (
             isinstance(reserve, int | float | np.integer | np.floating)
             and np.isfinite(reserve)
@@ -203,7 +231,8 @@ class NearTips:
         self.spacings = None if spacings is None else float(spacings)
 
     def __repr__(self) -> str:
-        return f"NearTips(spacings={self.spacings!r}, reserve={self.reserve:g})"
+        region = "" if self.region is None else ", region=..."
+        return f"NearTips(spacings={self.spacings!r}, reserve={self.reserve:g}{region})"
 
     def radius(self, h: float, sif_radius: float | None) -> float:
         """The radius about each tip: ``spacings * h``, or the default."""
@@ -216,18 +245,48 @@ class NearTips:
             )
         return float(sif_radius) + SIF_MARGIN * h
 
+    def cells(
+        self,
+        mesh: dolfinx.mesh.Mesh,
+        tips: npt.ArrayLike,
+        h: float,
+        sif_radius: float | None = None,
+    ) -> np.ndarray:
+        """The owned cells within the radius of ``tips`` ((k, 2) or (2,)) in the region, for
+        the first patch (``h``: the particle spacing it will have)."""
+        tips = np.atleast_2d(np.asarray(tips, dtype=float))
+        r = self.radius(h, sif_radius)
+        near = np.unique(np.concatenate([cells_near(mesh, t[None, :2], r) for t in tips]))
+        if self.region is None or not near.size:
+            return near.astype(np.int32)
+        mid = dolfinx.mesh.compute_midpoints(mesh, 2, near.astype(np.int32))
+        return near[np.asarray(self.region(mid[:, : mesh.geometry.dim]), dtype=bool)].astype(
+            np.int32
+        )
+
     def select(self, patch: ParticlePatch, context: GrowthContext) -> np.ndarray:
         n_own = patch.mesh.topology.index_map(2).size_local
         out = np.zeros(n_own, dtype=bool)
         r = self.radius(particle_spacing(patch), context.sif_radius)
         tips = np.atleast_2d(context.tips)
+        allowed = np.ones(n_own, dtype=bool)
+        if self.region is not None:
+            mid = dolfinx.mesh.compute_midpoints(patch.mesh, 2, np.arange(n_own, dtype=np.int32))
+            allowed = np.asarray(self.region(mid[:, : patch.mesh.geometry.dim]), dtype=bool)
+            if allowed.shape != (n_own,):
+                raise ValueError(
+                    f"NearTips' region returned shape {allowed.shape} for {n_own} midpoints; it "
+                    "must return one bool per point"
+                )
         for tip in tips:
             out[cells_near(patch.mesh, tip[None, :2], r)] = True
+        out &= allowed
         extra = self.reserve * (context.increment or 0.0)
         fe = out & ~patch.in_patch[:n_own]
         if extra > 0 and patch.comm.allreduce(int(fe.any())):  # must grow: take the reserve
             for tip in tips:
                 out[cells_near(patch.mesh, tip[None, :2], r + extra)] = True
+            out &= allowed
         return out
 
 

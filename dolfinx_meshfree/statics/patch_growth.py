@@ -27,7 +27,7 @@ import numpy as np
 
 from ..geometry.crack import CrackPlacementWarning
 from ..geometry.patch import ParticlePatch
-from ..geometry.patch_criteria import GrowthContext, PatchCriterion
+from ..geometry.patch_criteria import GrowthContext, PatchCriterion, as_criteria
 from ..parallel import raise_on_all_ranks
 from .growth_update import disable_local_update, enable_local_update
 from .problem import CoupledLinearProblem
@@ -64,21 +64,6 @@ class PatchEvent:
         return asdict(self)
 
 
-def _criteria(adapt: Any) -> list[PatchCriterion]:
-    """``adapt`` as a list of criteria (local check, the same on every rank)."""
-    items = list(adapt) if isinstance(adapt, Sequence) else [adapt]
-    for c in items:
-        if not isinstance(c, PatchCriterion):
-            raise TypeError(
-                f"adapt={c!r:.80} is not a patch criterion: give mf.NearTips(...), "
-                "mf.FieldAbove(...), mf.CellsWhere(...), a list of them, or an object with "
-                "select(patch, context) -> bool per owned cell"
-            )
-    if not items:
-        raise ValueError("adapt=[] names no criterion; leave it out for a fixed patch")
-    return items
-
-
 class PatchGrowth:
     """Grows the patch of a :class:`~dolfinx_meshfree.CoupledLinearProblem` between steps.
 
@@ -111,7 +96,7 @@ class PatchGrowth:
                     f"{driver}(adapt=...) grows the patch of a CoupledLinearProblem, got a "
                     f"{kind}: {why}"
                 )
-            return _criteria(adapt)
+            return as_criteria(adapt)
 
         if comm is None:
             self.criteria = check()

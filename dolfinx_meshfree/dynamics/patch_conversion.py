@@ -1,0 +1,396 @@
+"""Cells that become particles during an explicit run: the state carried from a model to the
+model rebuilt on a larger patch (issue 25, item 1 in dynamics).
+
+Rabczuk et al. (2006), sec. 5.5, cite the adaptive conversion of elements into particles (Sauer)
+as the purpose of a coupled model; Belytschko et al. (1995), sec. 6, grew their refinement ahead
+of a running crack. The old model (``d_n``, ``v_{n-1/2}`` on FE nodes and particles) and the new
+one share the mesh and the FE space; the new patch holds the old one and the converted cells,
+and its particles are placed afresh. :func:`convert` carries the state over:
+
+* **FE dofs**: copied; those inside the new patch (no FE cell left around them) are zeroed and,
+  massless, held at rest as the builders hold them;
+* **particles**: the new coefficients are the ``L2`` projection of the old field (FE on the
+  converted cells, the old particles elsewhere, blended as the old model evaluates it) onto the
+  new particles' MLS space, with the rule and the ``rho``-weighted table of the new particle
+  masses:
+
+  .. math:: \\Phi^T W \\Phi \\, d = \\Phi^T W \\, u_{old}(x_q),
+
+  solved by MUMPS (a private KSP) for each component of ``d_n`` and ``v_{n-1/2}``;
+* the constraint rows of the new interface are then met in the mass metric (the projection of
+  :mod:`~dolfinx_meshfree.dynamics.constraint`), as after a rebuild at a crack extension;
+* the step, the time and the work accounts are carried unchanged.
+
+**Conservation.** With row-sum lumping, ``sum_I M_II v_I = rho sum_q w_q v^h(x_q)`` (the MLS and
+the FE functions are partitions of unity). Summing the rows of the projection gives the same
+for the new particles: ``rho sum_q w_q v_new(x_q) = rho sum_q w_q v_old(x_q)``. On the old patch
+cells the new rule is the old one (same cells, same rule), on the converted cells it integrates
+the bilinear FE field exactly, and the FE nodes lose exactly the converted cells' share. So the
+total mass and the linear momentum are conserved to round-off and the projection's residual (the
+interface rows of the constraint projection sum to zero over the dofs: ``sum_i N_i = sum_I
+phi_I = 1``); both are measured at every conversion, not assumed. A held particle row (an
+essential condition on the patch) would exchange momentum with its support: that component is
+then a reaction, as in the run itself.
+
+**Energy.** The projection is the best fit in the consistent mass metric, so the kinetic energy
+can only drop by what the new space cannot represent (and by the difference of consistent and
+lumped masses); the strain energy changes as the stiffness of the new particles differs from the
+FE stiffness they replace. Both changes are recorded (:class:`Conversion`), not hidden: the
+energy balance of a run counts them as energy the conversion removed.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+from petsc4py import PETSc
+
+from ..couplings.bridging import BridgingBand
+from ..geometry.crack import Crack
+from ..geometry.patch_criteria import FieldAbove, GrowthContext, NearTips, as_criteria
+from ..parallel import raise_on_all_ranks
+from ..statics.petsc import create_aij, create_vector
+from .energy import kinetic_energy
+from .explicit import ExplicitDynamics
+from .linalg import mumps_lu
+
+__all__ = ["Conversion", "ConvertingPatch", "convert", "momentum", "total_mass"]
+
+
+@dataclass
+class Conversion:
+    """One conversion of FE cells into particles during an explicit run.
+
+    Attributes:
+        step, time: The model's step and time.
+        cells_added: Cells that joined the patch (global count).
+        particles_before, particles_after: Particle counts.
+        mass_error: ``|M_new - M_old| / M_old`` of the total mass (every field's lumped masses
+            summed, per component).
+        momentum_error: ``|p_new - p_old| / (sum_i M_ii |v_i|)`` of the linear momentum of
+            ``v_{n-1/2}`` (the largest over the components; the scale is the momentum the
+            masses could carry at the same speeds, so a body at rest in the mean is measured too).
+        momentum_correction: The momentum the uniform particle velocity restored, on the
+            same scale (round-off for a conversion alone; where a crack extension is made in
+            the same rebuild, the cells it cuts change their rule, and the old field, smooth
+            there, is integrated by the new rule: 1e-9 measured on Kalthoff-Winkler).
+        kinetic_change, strain_change: The new minus the old kinetic energy (of ``v_{n-1/2}``)
+            and strain energy (of ``d_n``).
+        energy_change: Their sum.
+        time_rebuild: Seconds of the new model's build and the transfer.
+        by: The criteria that named the cells.
+        rebuild: ``"full"`` (every table and operator rebuilt).
+    """
+
+    step: int
+    time: float
+    cells_added: int
+    particles_before: int
+    particles_after: int
+    mass_error: float
+    momentum_error: float
+    momentum_correction: float
+    kinetic_change: float
+    strain_change: float
+    energy_change: float
+    time_rebuild: float = 0.0
+    by: list[str] = field(default_factory=list)
+    rebuild: str = "full"
+
+    def as_dict(self) -> dict:
+        """Plain values (for JSON)."""
+        return asdict(self)
+
+
+def total_mass(dyn: ExplicitDynamics) -> float:
+    """The model's total mass: every field's lumped masses summed, per component (collective)."""
+    gdim = dyn.mesh.geometry.dim
+    local = math.fsum(math.fsum(f.mass.array_r) for f in dyn.fields)  # exact sums: the check
+    return math.fsum(dyn.comm.allgather(local)) / gdim  # measures the masses, not the adding
+
+
+def momentum(dyn: ExplicitDynamics, v: list[PETSc.Vec] | None = None) -> tuple[np.ndarray, float]:
+    """``(p, scale)``: the linear momentum ``sum_i M_ii v_i`` per component of ``v`` (default
+    ``v_{n-1/2}``) and ``sum_i M_ii |v_i|`` (collective)."""
+    gdim = dyn.mesh.geometry.dim
+    v = dyn.stepper.v if v is None else v
+    parts: list[list[float]] = [[] for _ in range(gdim)]
+    scale = 0.0
+    for f, x in zip(dyn.fields, v, strict=True):
+        mv = (f.mass.array_r * x.array_r).reshape(-1, gdim)
+        for k in range(gdim):
+            parts[k].append(math.fsum(mv[:, k]))
+        scale += float(np.abs(mv).sum())
+    gathered = dyn.comm.allgather([math.fsum(pk) for pk in parts])
+    p = np.array([math.fsum(g[k] for g in gathered) for k in range(gdim)])
+    return p, float(dyn.comm.allreduce(scale))
+
+
+def _strain_energy(dyn: ExplicitDynamics) -> float:
+    work = [x.duplicate() for x in dyn.stepper.u]
+    try:
+        return float(
+            dyn.system.strain_energy(dyn.stepper.u, dyn.system.internal_force(dyn.stepper.u, work))
+        )
+    finally:
+        for x in work:
+            x.destroy()
+
+
+def _kinetic(dyn: ExplicitDynamics) -> float:
+    work = [x.duplicate() for x in dyn.stepper.v]
+    try:
+        return kinetic_energy([f.mass for f in dyn.fields], dyn.stepper.v, work)
+    finally:
+        for x in work:
+            x.destroy()
+
+
+def _check(old: ExplicitDynamics, new: ExplicitDynamics) -> None:
+    """The two models must be a coupled model and its rebuild on a larger patch."""
+    names = [f.name for f in new.fields]
+    if names != ["fe", "particles"] or [f.name for f in old.fields] != names:
+        raise ValueError(
+            "a conversion carries a coupled model (FE and particle fields) to a coupled model; "
+            f"got fields {[f.name for f in old.fields]} -> {names}"
+        )
+    if new.mass_rule is None or isinstance(new.interface, BridgingBand):
+        raise ValueError(
+            "conversion of cells into particles needs particle functions that are the MLS alone "
+            "(lagrange, edge-to-edge): bridging's band, the ramps' blended cells and "
+            "master-slave's reduction are not carried yet"
+        )
+    if old.V is not new.V and old.V.mesh is not new.V.mesh:
+        raise ValueError("the rebuilt model must live on the old model's mesh")
+    if old.u[0].getSize() != new.u[0].getSize():
+        raise ValueError(
+            f"the rebuilt model has {new.u[0].getSize()} FE dofs, the old one "
+            f"{old.u[0].getSize()}: build the new model on the same FE space"
+        )
+    n_own = old.mesh.topology.index_map(old.mesh.topology.dim).size_local
+    lost = old.in_patch[:n_own] & ~new.in_patch[:n_own]
+    if lost.any():
+        raise ValueError(
+            f"{int(lost.sum())} particle cell(s) of the old patch are FE cells in the new one: a "
+            "conversion only adds cells to the patch"
+        )
+
+
+def _fit(old: ExplicitDynamics, new: ExplicitDynamics) -> None:
+    """The new particle coefficients of ``d_n`` and ``v_{n-1/2}``: the L2 projection of the old
+    fields on the new mass rule (module docstring)."""
+    q, table = new.mass_rule
+    P = new.particles
+    comm, gdim = new.comm, P.gdim
+    n = P.num_particles
+    w = np.asarray(q.weights, dtype=float)
+    perm = P.petsc_index
+    M = (table.T.multiply(w[None, :]) @ table).tocoo()
+    M = sp.coo_matrix((M.data, (perm[M.row], perm[M.col])), shape=(n, n))
+    layout = P.dof_layout(1)
+    A = create_aij(comm, M, layout, layout)
+    ksp = mumps_lu(A)
+    x = A.createVecLeft()
+    try:
+        for src, dst in ((old.stepper.u, new.stepper.u), (old.stepper.v, new.stepper.v)):
+            values = np.asarray(old.evaluator.at_cells(src, q)).reshape(-1, gdim)
+            out = dst[1].array.reshape(-1, gdim)
+            for k in range(gdim):
+                rhs = np.asarray(table.T @ (w * values[:, k])).ravel()
+                nz = np.flatnonzero(rhs)  # this rank's quadrature reaches these particles
+                b = create_vector(comm, layout, perm[nz], rhs[nz])
+                ksp.solve(b, x)
+                reason = ksp.getConvergedReason()
+                b.destroy()
+                if reason < 0:
+                    raise RuntimeError(
+                        f"the conversion's projection onto the new particles failed (KSP reason "
+                        f"{reason}): the new particles' consistent mass is singular"
+                    )
+                out[:, k] = x.array_r
+    finally:
+        x.destroy()
+        ksp.destroy()
+        A.destroy()
+
+
+def _restore_momentum(new: ExplicitDynamics, p0: np.ndarray) -> float:
+    """Add the uniform velocity ``delta = (p0 - p) / M_P`` to the free particle dofs (the MLS
+    being a partition of unity, the particle field shifts by ``delta``), so that the momentum is
+    ``p0``; returns ``max |delta M_P|`` (collective)."""
+    gdim = new.mesh.geometry.dim
+    p = momentum(new)[0]
+    free = new.free[1].reshape(-1, gdim)
+    m = new.fields[1].mass.array_r.reshape(-1, gdim) * free
+    mp = np.array([math.fsum(g[k] for g in new.comm.allgather(m.sum(axis=0))) for k in range(gdim)])
+    delta = np.where(mp > 0, (p0 - p) / np.where(mp > 0, mp, 1.0), 0.0)
+    v = new.stepper.v[1].array.reshape(-1, gdim)
+    v += free * delta[None, :]
+    return float(np.abs(delta * mp).max())
+
+
+def convert(old: ExplicitDynamics, new: ExplicitDynamics, cells_added: int = 0) -> Conversion:
+    """Carry the state of ``old`` into ``new``, its rebuild on a larger patch (module docstring;
+    collective). Returns the :class:`Conversion` record; ``old`` is left as it was."""
+    raise_on_all_ranks(old.comm, lambda: _check(old, new))
+    so, sn = old.stepper, new.stepper
+    mass0, (p0, scale) = total_mass(old), momentum(old)
+    kin0, strain0 = _kinetic(old), _strain_energy(old)
+    for src, dst in ((so.u, sn.u), (so.v, sn.v)):
+        src[0].copy(dst[0])
+        dst[0].array[~new.active[0]] = 0.0  # inside the new patch: massless, at rest
+    _fit(old, new)
+    correction = _restore_momentum(new, p0) / scale if scale > 0 else 0.0
+    if new.projection is not None:  # the new interface rows (and driven rows keep their values)
+        held = new.loads.motion
+        for x in (sn.u, sn.v):
+            new.projection.correct(x, target=None if held is None else held.kept(new.G, x))
+    sn.step, sn.time, sn.dt_prev = so.step, so.time, so.dt_prev
+    sn.records, sn.w_ext, sn.w_c = list(so.records), so.w_ext, so.w_c.copy()
+    mass1, (p1, _) = total_mass(new), momentum(new)
+    kin1, strain1 = _kinetic(new), _strain_energy(new)
+    return Conversion(
+        step=so.step, time=so.time, cells_added=int(cells_added),
+        particles_before=old.particles.num_particles, particles_after=new.particles.num_particles,
+        mass_error=abs(mass1 - mass0) / mass0,
+        momentum_error=float(np.abs(p1 - p0).max() / scale) if scale > 0 else 0.0,
+        momentum_correction=correction,
+        kinetic_change=kin1 - kin0, strain_change=strain1 - strain0,
+        energy_change=(kin1 - kin0) + (strain1 - strain0),
+    )  # fmt: skip
+
+
+class ConvertingPatch:
+    """The patch of a :class:`~dolfinx_meshfree.dynamics.DynamicCrackGrowth` that grows during
+    the run (its ``adapt``): before the first step and before each extension (with the tip the
+    extension will make), the criteria name the FE cells that must be particles; the model is
+    then rebuilt by ``build(crack, cells)`` on the larger patch and the state carried over
+    (:func:`convert`).
+
+    Args:
+        adapt: One criterion or a list (:class:`~dolfinx_meshfree.NearTips`,
+            :class:`~dolfinx_meshfree.CellsWhere`; :class:`~dolfinx_meshfree.FieldAbove` reads a
+            static solution and is refused here).
+        model: The first model (``build(crack)``), checked for what a conversion needs.
+        build: The user's builder, which must take ``cells`` (the patch's local cells).
+        sif_radius: The SIF domains' outer radius, if given (``NearTips()``'s default radius).
+        increment: The crack segment (``NearTips``' reserve is counted in segments).
+
+    Attributes:
+        conversions: One :class:`Conversion` per growth of the patch.
+    """
+
+    def __init__(
+        self,
+        adapt: Any,
+        model: ExplicitDynamics,
+        build: Any,
+        sif_radius: float | None = None,
+        increment: float | None = None,
+    ) -> None:
+        def check() -> list:
+            items = as_criteria(adapt)
+            for c in items:
+                if isinstance(c, FieldAbove):
+                    raise TypeError(
+                        f"{c!r} reads a static solution's stress; in explicit dynamics give "
+                        "mf.NearTips(...) or mf.CellsWhere(...)"
+                    )
+                if isinstance(c, NearTips) and c.spacings is None and sif_radius is None:
+                    raise ValueError(
+                        "NearTips() takes its radius from the SIF domains, and the dynamic "
+                        "growth's default domains fit the room they find: give "
+                        "NearTips(spacings=k) (e.g. the domains' outer radius in spacings plus "
+                        "2) or the growth's radius"
+                    )
+            try:
+                params = inspect.signature(build).parameters
+            except (TypeError, ValueError):
+                params = {}
+            if "cells" not in params and not any(
+                p.kind == inspect.Parameter.VAR_KEYWORD for p in params.values()
+            ):
+                raise TypeError(
+                    "adapt= rebuilds the model on a larger patch by build(crack, cells=...): "
+                    "give build a cells argument (the patch's local cells, for "
+                    "mf.ParticlePatch(mesh, cells, ...))"
+                )
+            if (
+                model.patch is None
+                or model.mass_rule is None
+                or isinstance(model.interface, BridgingBand)
+            ):
+                raise ValueError(
+                    "adapt= converts FE cells of a coupled model whose particle functions are "
+                    "the MLS alone (lagrange, edge-to-edge); pure EFG has no FE cell, and "
+                    "bridging's band, the ramps' blended cells and master-slave's reduction are "
+                    "not carried yet"
+                )
+            return items
+
+        self.criteria = raise_on_all_ranks(model.comm, check)
+        self.build, self.sif_radius, self.increment = build, sif_radius, increment
+        self.conversions: list[Conversion] = []
+
+    def grow(
+        self,
+        model: ExplicitDynamics,
+        crack: Crack,
+        new_tip: np.ndarray | None = None,
+        extend: Any = None,
+    ) -> tuple[ExplicitDynamics, Crack] | None:
+        """Ask the criteria (the tips of the model's cracks and ``new_tip``); when FE cells
+        must be particles: the model rebuilt on the larger patch with a copy of ``crack``
+        (extended by ``extend(copy)`` if given: the extension that asked for the growth, made
+        in the same rebuild) and the state converted. Returns ``(model, crack)`` or ``None``
+        (collective)."""
+        patch = model.patch
+        comm, msh = model.comm, model.mesh
+        n_own = msh.topology.index_map(msh.topology.dim).size_local
+        tips = [c.tips for c in patch.cracks if len(c.tips)]
+        if new_tip is not None:
+            tips.append(np.asarray(new_tip)[None])
+        tips = np.concatenate(tips) if tips else np.zeros((0, 2))
+        ctx = GrowthContext(model.step, tips, None, self.sif_radius, self.increment)
+
+        def ask() -> tuple[np.ndarray, list[str]]:
+            want, by = np.zeros(n_own, dtype=bool), []
+            for c in self.criteria:
+                sel = np.asarray(c.select(patch, ctx))
+                if sel.shape != (n_own,) or sel.dtype != bool:
+                    raise ValueError(
+                        f"{c!r}.select returned {sel.dtype} of shape {sel.shape}; it must "
+                        f"return a bool per owned cell ({n_own} here)"
+                    )
+                new = sel & ~patch.in_patch[:n_own]
+                if comm.allreduce(int(new.sum())):
+                    by.append(repr(c))
+                want |= new
+            return want, by
+
+        want, by = raise_on_all_ranks(comm, ask)
+        added = comm.allreduce(int(want.sum()))
+        if not added:
+            return None
+        total = msh.topology.index_map(msh.topology.dim).size_global
+        if comm.allreduce(patch.cells.size) + added >= total:
+            raise ValueError(  # the same on every rank (global counts)
+                f"the criteria {by} would turn the whole mesh ({total} cells) into particles at "
+                f"step {model.step}: use pure EFG, or a criterion that names fewer cells"
+            )
+        tic = time.perf_counter()
+        grown = Crack(crack.points.copy(), through=crack.through)
+        if extend is not None:
+            extend(grown)
+        cells = np.union1d(patch.cells, np.flatnonzero(want)).astype(np.int32)
+        new = self.build(grown, cells=cells)
+        record = convert(model, new, added)
+        record.time_rebuild, record.by = time.perf_counter() - tic, by
+        self.conversions.append(record)
+        return new, grown

@@ -35,6 +35,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .. import _compat
+from ..parallel import raise_on_all_ranks
 from .crack import _orient, particle_spacing, point_segment_distance, segments_intersect
 from .quadrature import QuadraturePoints
 
@@ -50,6 +51,7 @@ __all__ = [
     "PatchCriterion",
     "as_criteria",
     "cells_near",
+    "named_cells",
 ]
 
 #: The named fields of :class:`FieldAbove`.
@@ -105,6 +107,49 @@ def as_criteria(adapt: Any) -> list[PatchCriterion]:
     if not items:
         raise ValueError("adapt=[] names no criterion; leave it out for a fixed patch")
     return items
+
+
+def named_cells(
+    criteria: list[PatchCriterion], patch: ParticlePatch, context: GrowthContext, driver: str
+) -> tuple[np.ndarray, list[str], bool]:
+    """Ask ``criteria`` (collective): the owned FE cells that must become particles (bool per
+    owned cell), the criteria that named any (their ``repr``) and whether any named a cell at
+    all (patch cells included). A criterion's answer of the wrong kind, and a patch that would
+    take the whole mesh, are refused on every rank (naming the criteria and the fix)."""
+    msh = patch.mesh
+    comm = patch.comm
+    cmap = msh.topology.index_map(msh.topology.dim)
+    n_own = cmap.size_local
+    answers = [np.asarray(c.select(patch, context)) for c in criteria]  # may be collective
+
+    def check() -> None:
+        for c, sel in zip(criteria, answers, strict=True):
+            if sel.shape != (n_own,) or sel.dtype != bool:
+                raise ValueError(
+                    f"{c!r}.select returned {sel.dtype} of shape {sel.shape}; it must return a "
+                    f"bool per owned cell ({n_own} here)"
+                )
+
+    raise_on_all_ranks(comm, check)
+    fe = ~np.asarray(patch.in_patch[:n_own], dtype=bool)
+    counts = comm.allreduce(np.array([[int((s & fe).sum()), int(s.sum())] for s in answers]))
+    want = np.zeros(n_own, dtype=bool)
+    for sel in answers:
+        want |= sel & fe
+    by = [repr(c) for c, n in zip(criteria, counts, strict=True) if n[0]]
+    added = comm.allreduce(int(want.sum()))
+    total, in_patch = cmap.size_global, comm.allreduce(int(np.asarray(patch.cells).size))
+
+    def check_size() -> None:
+        if added and in_patch + added >= total:
+            raise ValueError(
+                f"{driver}: the criteria {by} would turn the whole mesh ({total} cells) into "
+                f"particles at step {context.step}: use pure EFG, or a criterion that names "
+                "fewer cells (a smaller radius or a higher threshold)"
+            )
+
+    raise_on_all_ranks(comm, check_size)
+    return want, by, bool(counts[:, 1].sum()) if len(answers) else False
 
 
 def _cell_edges(msh: dolfinx.mesh.Mesh) -> np.ndarray:

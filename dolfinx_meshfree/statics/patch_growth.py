@@ -27,7 +27,7 @@ import numpy as np
 
 from ..geometry.crack import CrackPlacementWarning
 from ..geometry.patch import ParticlePatch
-from ..geometry.patch_criteria import GrowthContext, PatchCriterion, as_criteria
+from ..geometry.patch_criteria import GrowthContext, PatchCriterion, as_criteria, named_cells
 from ..parallel import raise_on_all_ranks
 from .growth_update import disable_local_update, enable_local_update
 from .problem import CoupledLinearProblem
@@ -115,44 +115,12 @@ class PatchGrowth:
         model (collective). ``local``: the old model's local update, released with it. Returns
         the event, or ``None``."""
         patch = self.patch
-        comm, msh = patch.comm, patch.mesh
-        tdim = msh.topology.dim
-        cmap = msh.topology.index_map(tdim)
-        n_own = cmap.size_local
-
-        def ask() -> tuple[np.ndarray, list[str]]:
-            want = np.zeros(n_own, dtype=bool)
-            by = []
-            for c in self.criteria:
-                sel = np.asarray(c.select(patch, context))
-                if sel.shape != (n_own,) or sel.dtype != bool:
-                    raise ValueError(
-                        f"{c!r}.select returned {sel.dtype} of shape {sel.shape}; it must "
-                        f"return a bool per owned cell ({n_own} here)"
-                    )
-                new = sel & ~patch.in_patch[:n_own]
-                if comm.allreduce(int(new.sum())):
-                    by.append(repr(c))
-                self.selected |= bool(comm.allreduce(int(sel.sum())))
-                want |= new
-            return want, by
-
-        want, by = ask()
+        comm = patch.comm
+        want, by, named = named_cells(self.criteria, patch, context, self.driver)
+        self.selected |= named
         added = comm.allreduce(int(want.sum()))
         if added == 0:
             return None
-        total, in_patch = cmap.size_global, comm.allreduce(patch.cells.size)
-
-        def check_size() -> None:
-            if in_patch + added >= total:
-                raise ValueError(
-                    f"{self.driver}: the criteria {by} would turn the whole mesh ({total} cells) "
-                    "into particles at step "
-                    f"{context.step}: use pure EFG (mf.EFGElasticity), or a criterion that "
-                    "names fewer cells (a smaller radius or a higher threshold)"
-                )
-
-        raise_on_all_ranks(comm, check_size)
         t0 = time.perf_counter()
         before = patch.particles.num_particles
         grown = patch.grown(np.flatnonzero(want))

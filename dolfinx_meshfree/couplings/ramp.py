@@ -723,9 +723,10 @@ def ramp_operators(problem: CoupledElasticity) -> CouplingOperators:
     raise_on_all_ranks(comm, lambda: _refuse_held_components(problem, blend))
     n_loc = blend.num_fe_columns
     tables: dict = {}  # the patch cells' rule, table and test gradients (finite strain)
-    Kp_loc, pq, ptab, _ = particle_stiffness(
-        P, problem.mls, problem.material, problem.quadrature_degree, tables=tables
-    )
+    Kp_loc, pq, ptab, _ = particle_stiffness(  # cut cells side by side (as in statics)
+        P, problem.mls, problem.material, problem.quadrature_degree,
+        quadrature=_patch_rule(problem), tables=tables,
+    )  # fmt: skip
     active = fe_active(problem) & ~blend.on_gamma
     q = cell_quadrature(msh, problem.quadrature_degree, blend.cells)
     tab = raise_on_all_ranks(comm, lambda: blend.table(q.points, q.cells))

@@ -387,6 +387,13 @@ def with_crack_contact(model: Model, contact: CrackContact | None) -> Model:
         return model
     domain = model.patch if model.patch is not None else CrackDomain.from_particles(model.particles)
     h = particle_spacing(domain)
+    if model.reduction is not None:  # the same on every rank
+        raise ValueError(
+            "crack_contact= is not available with coupling='master-slave': its particle field "
+            "holds the masters only (the slaves follow the FE nodes), and the faces' jump "
+            "operator acts on every particle; use coupling='lagrange' or 'edge-to-edge' for a "
+            "cracked patch with contact, or crack_contact=None"
+        )
     if model.system is not None:
         raise ValueError(
             "crack_contact= needs a small-strain model (LinearElastic): its finite-strain system "

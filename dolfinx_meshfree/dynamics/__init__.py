@@ -49,6 +49,7 @@ exact solutions of the rod benchmarks in :mod:`~dolfinx_meshfree.verification.wa
 
 from __future__ import annotations
 
+from .adaptive_run import AdaptiveRun
 from .crack_contact import ContactSystem, CrackContact
 from .crack_growth import DynamicCrackGrowth, GrowthCheck, rayleigh_speed
 from .energy import EnergyRecord
@@ -57,6 +58,7 @@ from .finite_strain import FINITE_STRAIN_DYNAMICS, NonlinearSystem
 from .growth_local import LocalModelUpdate
 from .masses import fe_lumped_mass, particle_lumped_mass, table_lumped_mass
 from .methods import DYNAMICS_METHODS, check_method
+from .patch_conversion import Conversion
 from .results import DynamicsResult
 from .sifs import SIFHistory
 from .system import Field, LinearSystem, SemiDiscreteSystem
@@ -64,7 +66,9 @@ from .system import Field, LinearSystem, SemiDiscreteSystem
 __all__ = [
     "DYNAMICS_METHODS",
     "FINITE_STRAIN_DYNAMICS",
+    "AdaptiveRun",
     "ContactSystem",
+    "Conversion",
     "CrackContact",
     "DynamicCrackGrowth",
     "DynamicsResult",

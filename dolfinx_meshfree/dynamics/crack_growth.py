@@ -145,7 +145,8 @@ class DynamicCrackGrowth:
         quadrature_degree: The degree of the model's cell rule (``update="local"``; the
             builders' default 7; checked on the masses around the tip).
         adapt: A patch that grows during the run (issue 25): ``mf.NearTips(spacings=k)`` (or
-            ``mf.CellsWhere``, or a list), asked before the first step and before each
+            ``mf.FieldAbove`` on the current displacement, ``mf.CellsWhere``, or a list), asked
+            before the first step and before each
             extension with the tip the extension will make. The FE cells it names become
             particles: ``build(crack, cells=cells)`` rebuilds the model on the larger patch
             (``cells``: this rank's patch cells, for ``mf.ParticlePatch(mesh, cells, ...)``)
@@ -404,17 +405,23 @@ class DynamicCrackGrowth:
         changes (the extension's release and the conversion's) joins :attr:`released`.
         Returns whether it happened (collective)."""
         crack, end = self.crack, self.end
-        new_tip = extend = None
+        new_tip = None
         if theta is not None:
             t, c, s = crack.tip_direction(end), np.cos(theta), np.sin(theta)
             d = np.array([c * t[0] - s * t[1], s * t[0] + c * t[1]])
             new_tip = crack.points[end] + self.segment * d
-            extend = lambda grown: self._grow(grown, theta)  # noqa: E731
-        out = self.adaptive.grow(self.model, crack, new_tip, extend)
-        if out is None:
+        grown = Crack(crack.points.copy(), through=crack.through)
+
+        def rebuild(cells: np.ndarray) -> ExplicitDynamics:
+            if theta is not None:  # the extension that asked for the growth, in one rebuild
+                self._grow(grown, theta)
+            return self.build(grown, cells=cells)
+
+        new = self.adaptive.grow(self.model, rebuild, new_tip)
+        if new is None:
             return False
         old = self.model
-        self.model, self.crack = out
+        self.model, self.crack = new, grown
         self.released.append((old.time, -self.adaptive.conversions[-1].energy_change))
         old.destroy()
         self.timings["conversions"] += 1

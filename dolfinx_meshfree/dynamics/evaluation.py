@@ -96,15 +96,19 @@ class FieldEvaluator:
             sol.band = d.interface
         return sol.displacement(points)
 
-    def at_cells(self, vecs: Sequence[PETSc.Vec], q: QuadraturePoints) -> np.ndarray:
-        """The field at points of this rank's local cells ``q.cells`` (m, gdim): no search
-        and no routing, FE in FE cells and the particles in patch cells (a coupled model
-        without blended cells: lagrange, edge-to-edge). Collective (the coefficients are
-        gathered)."""
+    def solution(self, vecs: Sequence[PETSc.Vec]) -> CoupledSolution:
+        """The field of ``vecs`` as a :class:`~dolfinx_meshfree.CoupledSolution` of this rank
+        (its ``evaluate_at_quadrature`` at points of local cells: no search, no routing) of a
+        coupled model without blended cells (lagrange, edge-to-edge). Collective (the
+        coefficients are gathered)."""
         d = self.disc
         fe, coeffs = self.local_values(vecs)
-        sol = CoupledSolution(u=fe, coefficients=coeffs, mls=d.mls, patch=d.patch)
-        return sol.evaluate_at_quadrature(q)[0]
+        return CoupledSolution(u=fe, coefficients=coeffs, mls=d.mls, patch=d.patch)
+
+    def at_cells(self, vecs: Sequence[PETSc.Vec], q: QuadraturePoints) -> np.ndarray:
+        """The field at points of this rank's local cells ``q.cells`` (m, gdim), as
+        :meth:`solution` evaluates it (collective)."""
+        return self.solution(vecs).evaluate_at_quadrature(q)[0]
 
     def fe_function(self, vecs: Sequence[PETSc.Vec], name: str) -> dolfinx.fem.Function:
         """The FE field of ``vecs`` as a new Function named ``name`` (ghosts updated)."""

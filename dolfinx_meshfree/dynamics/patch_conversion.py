@@ -56,9 +56,7 @@ import scipy.sparse as sp
 from petsc4py import PETSc
 
 from ..couplings.bridging import BridgingBand
-from ..geometry.crack import Crack
 from ..geometry.patch_criteria import (
-    FieldAbove,
     GrowthContext,
     NearTips,
     as_criteria,
@@ -285,8 +283,8 @@ class ConvertingPatch:
 
     Args:
         adapt: One criterion or a list (:class:`~dolfinx_meshfree.NearTips`,
-            :class:`~dolfinx_meshfree.CellsWhere`; :class:`~dolfinx_meshfree.FieldAbove` reads a
-            static solution and is refused here).
+            :class:`~dolfinx_meshfree.FieldAbove` on the current displacement,
+            :class:`~dolfinx_meshfree.CellsWhere`).
         model: The first model (``build(crack)``), checked for what a conversion needs.
         build: The user's builder, which must take ``cells`` (the patch's local cells).
         sif_radius: The SIF domains' outer radius, if given (``NearTips()``'s default radius).
@@ -307,11 +305,6 @@ class ConvertingPatch:
         def check() -> list:
             items = as_criteria(adapt)
             for c in items:
-                if isinstance(c, FieldAbove):
-                    raise TypeError(
-                        f"{c!r} reads a static solution's stress; in explicit dynamics give "
-                        "mf.NearTips(...) or mf.CellsWhere(...)"
-                    )
                 if isinstance(c, NearTips) and c.spacings is None and sif_radius is None:
                     raise ValueError(
                         "NearTips() takes its radius from the SIF domains, and the dynamic "
@@ -351,32 +344,29 @@ class ConvertingPatch:
     def grow(
         self,
         model: ExplicitDynamics,
-        crack: Crack,
+        rebuild: Any,
         new_tip: np.ndarray | None = None,
-        extend: Any = None,
-    ) -> tuple[ExplicitDynamics, Crack] | None:
-        """Ask the criteria (the tips of the model's cracks and ``new_tip``); when FE cells
-        must be particles: the model rebuilt on the larger patch with a copy of ``crack``
-        (extended by ``extend(copy)`` if given: the extension that asked for the growth, made
-        in the same rebuild) and the state converted. Returns ``(model, crack)`` or ``None``
-        (collective)."""
+        driver: str = "DynamicCrackGrowth",
+    ) -> ExplicitDynamics | None:
+        """Ask the criteria (with the tips of the model's cracks and ``new_tip``, and the
+        model's current state for field criteria); when FE cells must be particles:
+        ``rebuild(cells)``, the model on the larger patch, and the state converted. Returns the
+        new model or ``None`` (collective)."""
         patch, comm = model.patch, model.comm
         tips = [c.tips for c in patch.cracks if len(c.tips)]
         if new_tip is not None:
             tips.append(np.asarray(new_tip)[None])
         tips = np.concatenate(tips) if tips else np.zeros((0, 2))
-        ctx = GrowthContext(model.step, tips, None, self.sif_radius, self.increment)
-        want, by, _ = named_cells(self.criteria, patch, ctx, "DynamicCrackGrowth")
+        state = model.evaluator.solution(model.u)
+        state.material = model.material
+        ctx = GrowthContext(model.step, tips, state, self.sif_radius, self.increment)
+        want, by, _ = named_cells(self.criteria, patch, ctx, driver)
         added = comm.allreduce(int(want.sum()))
         if not added:
             return None
         tic = time.perf_counter()
-        grown = Crack(crack.points.copy(), through=crack.through)
-        if extend is not None:
-            extend(grown)
-        cells = np.union1d(patch.cells, np.flatnonzero(want)).astype(np.int32)
-        new = self.build(grown, cells=cells)
+        new = rebuild(np.union1d(patch.cells, np.flatnonzero(want)).astype(np.int32))
         record = convert(model, new, added)
         record.time_rebuild, record.by = time.perf_counter() - tic, by
         self.conversions.append(record)
-        return new, grown
+        return new

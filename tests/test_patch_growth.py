@@ -251,3 +251,27 @@ def test_criterion_that_never_selects_warns():
             )  # fmt: skip
             g.run()
     assert not g.events and g.problem is problem
+
+
+def test_criteria_combine():
+    """A list of criteria: a cell joins when any names it. NearTips() about the tip with a
+    CellsWhere block far from the crack (x > 0.8, y > 0.3): the first event records both, the
+    block is in the patch at the end, and the path is NearTips() alone's to 5.7e-6 of the crack
+    length (checked 1.2e-5: the block only moves the coupling far from the tip)."""
+    h = 0.05
+    block = mf.CellsWhere(lambda x: (x[:, 0] > 0.8) & (x[:, 1] > 0.3))
+    runs = []
+    for adapt in (mf.NearTips(), [mf.NearTips(), block]):
+        problem, crack = plate(h, cells=near_crack(max(RADII) + 2 * h))
+        g = grow(problem, crack, steps=2, adapt=adapt)
+        runs.append((g, crack))
+    (_, c1), (g2, c2) = runs
+    assert any("CellsWhere" in b for b in g2.events[0].by)
+    assert any("NearTips" in b for e in g2.events for b in e.by)
+    patch = g2.problem.patch
+    n_own = patch.mesh.topology.index_map(2).size_local
+    mid = dolfinx.mesh.compute_midpoints(patch.mesh, 2, np.arange(n_own, dtype=np.int32))
+    named = (mid[:, 0] > 0.8) & (mid[:, 1] > 0.3)
+    assert np.all(patch.in_patch[:n_own][named])
+    d = np.linalg.norm(c1.points - c2.points, axis=1).max() / c1.length
+    assert d <= 1.2e-5

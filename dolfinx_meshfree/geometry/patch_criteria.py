@@ -67,10 +67,12 @@ class GrowthContext:
     """What a criterion may read at a step.
 
     Attributes:
-        step: The driver's step (0 before the first solve).
+        step: The driver's step (statics: -1 before the first solve; dynamics: the model's
+            step).
         tips: (k, 2) the crack tips the patch must carry: every tip of the patch's cracks and
             the tip that the coming extension will make.
-        solution: The last solution, or ``None`` before the first solve.
+        solution: Statics: the last solution, or ``None`` before the first solve; dynamics:
+            the running displacement (a ``CoupledSolution`` with the model's material).
         sif_radius: The outer radius of the SIF domains the driver will use, or ``None``.
         increment: The crack's growth per step (``da``), or ``None``.
     """

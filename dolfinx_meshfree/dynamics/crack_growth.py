@@ -46,9 +46,10 @@ from ..parallel import raise_on_all_ranks
 from ..physics.materials import LinearElastic
 from .central_difference import advance_to
 from .crack_contact import ContactSystem
+from .energy import strain_energy
 from .explicit import ExplicitDynamics
 from .growth_local import LocalModelUpdate
-from .patch_conversion import ConvertingPatch
+from .patch_conversion import ConvertingPatch, carry_clock
 from .sifs import dynamic_sifs, model_cracks
 
 __all__ = ["DYNAMIC_UPDATES", "DynamicCrackGrowth", "GrowthCheck", "rayleigh_speed"]
@@ -492,17 +493,5 @@ def carry_state(old: ExplicitDynamics, new: ExplicitDynamics) -> float:
     for src, dst in ((so.u, sn.u), (so.v, sn.v)):
         for a, b in zip(src, dst, strict=True):
             a.copy(b)
-    if new.projection is not None:  # driven rows (prescribed velocities) keep their values
-        held = new.loads.motion
-        for x in (sn.u, sn.v):
-            new.projection.correct(x, target=None if held is None else held.kept(new.G, x))
-    sn.step, sn.time, sn.dt_prev = so.step, so.time, so.dt_prev
-    sn.records, sn.w_ext, sn.w_c = list(so.records), so.w_ext, so.w_c.copy()
-    work = [x.duplicate() for x in so.u]
-    try:
-        before = old.system.strain_energy(so.u, old.system.internal_force(so.u, work))
-        after = new.system.strain_energy(sn.u, new.system.internal_force(sn.u, work))
-    finally:
-        for x in work:
-            x.destroy()
-    return float(before - after)
+    carry_clock(old, new)
+    return strain_energy(old.system, so.u) - strain_energy(new.system, sn.u)

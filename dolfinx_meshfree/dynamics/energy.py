@@ -25,6 +25,7 @@ __all__ = [
     "external_work",
     "kinetic_energy",
     "reaction_work",
+    "strain_energy",
 ]
 
 Amplified = Sequence[tuple[Sequence[PETSc.Vec | None], float]]
@@ -84,6 +85,17 @@ def kinetic_energy(
         w.pointwiseMult(x, x)
         energy += 0.5 * m.dot(w)
     return energy
+
+
+def strain_energy(system: object, u: Sequence[PETSc.Vec]) -> float:
+    """The strain energy of ``system`` at the dofs ``u`` (scratch vectors made and destroyed;
+    collective)."""
+    work = [x.duplicate() for x in u]
+    try:
+        return float(system.strain_energy(u, system.internal_force(u, work)))
+    finally:
+        for x in work:
+            x.destroy()
 
 
 def discrete_energy(

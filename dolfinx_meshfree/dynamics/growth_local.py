@@ -59,6 +59,7 @@ from ..physics.operators import stiffness_matrix
 from ..statics.growth_update import change_radius, new_segments
 from ..statics.petsc import create_aij
 from .constraint import VelocityProjection
+from .energy import strain_energy
 from .linalg import blocked
 from .masses import particle_lumped_mass
 from .sifs import model_cracks
@@ -358,15 +359,7 @@ class LocalModelUpdate:
         return before - self._energy()
 
     def _energy(self) -> float:
-        st = self.dyn.stepper
-        work = [x.duplicate() for x in st.u]
-        try:
-            return float(
-                self.dyn.system.strain_energy(st.u, self.dyn.system.internal_force(st.u, work))
-            )
-        finally:
-            for x in work:
-                x.destroy()
+        return strain_energy(self.dyn.system, self.dyn.stepper.u)
 
 
 def _distance(x: np.ndarray, segments: np.ndarray) -> np.ndarray:

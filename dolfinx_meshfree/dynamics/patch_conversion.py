@@ -64,11 +64,11 @@ from ..geometry.patch_criteria import (
 )
 from ..parallel import raise_on_all_ranks
 from ..statics.petsc import create_aij, create_vector
-from .energy import kinetic_energy
+from .energy import kinetic_energy, strain_energy
 from .explicit import ExplicitDynamics
 from .linalg import mumps_lu
 
-__all__ = ["Conversion", "ConvertingPatch", "convert", "momentum", "total_mass"]
+__all__ = ["Conversion", "ConvertingPatch", "carry_clock", "convert", "momentum", "total_mass"]
 
 
 @dataclass
@@ -140,15 +140,17 @@ def momentum(dyn: ExplicitDynamics, v: list[PETSc.Vec] | None = None) -> tuple[n
     return p, float(dyn.comm.allreduce(scale))
 
 
-def _strain_energy(dyn: ExplicitDynamics) -> float:
-    work = [x.duplicate() for x in dyn.stepper.u]
-    try:
-        return float(
-            dyn.system.strain_energy(dyn.stepper.u, dyn.system.internal_force(dyn.stepper.u, work))
-        )
-    finally:
-        for x in work:
-            x.destroy()
+def carry_clock(old: ExplicitDynamics, new: ExplicitDynamics) -> None:
+    """After the dofs are carried into ``new``: meet its constraint rows in the mass metric
+    (driven rows keep their prescribed values) and carry the step, the time and the work
+    accounts of ``old`` (collective)."""
+    so, sn = old.stepper, new.stepper
+    if new.projection is not None:
+        held = new.loads.motion
+        for x in (sn.u, sn.v):
+            new.projection.correct(x, target=None if held is None else held.kept(new.G, x))
+    sn.step, sn.time, sn.dt_prev = so.step, so.time, so.dt_prev
+    sn.records, sn.w_ext, sn.w_c = list(so.records), so.w_ext, so.w_c.copy()
 
 
 def _kinetic(dyn: ExplicitDynamics) -> float:
@@ -160,6 +162,16 @@ def _kinetic(dyn: ExplicitDynamics) -> float:
             x.destroy()
 
 
+def _require_mls_patch(model: ExplicitDynamics) -> None:
+    """A conversion needs a coupled model whose particle functions are the MLS alone (local)."""
+    if model.patch is None or model.mass_rule is None or isinstance(model.interface, BridgingBand):
+        raise ValueError(
+            "adapt= converts FE cells of a coupled model whose particle functions are the MLS "
+            "alone (lagrange, edge-to-edge); pure EFG has no FE cell, and bridging's band, the "
+            "ramps' blended cells and master-slave's reduction are not carried yet"
+        )
+
+
 def _check(old: ExplicitDynamics, new: ExplicitDynamics) -> None:
     """The two models must be a coupled model and its rebuild on a larger patch."""
     names = [f.name for f in new.fields]
@@ -168,12 +180,7 @@ def _check(old: ExplicitDynamics, new: ExplicitDynamics) -> None:
             "a conversion carries a coupled model (FE and particle fields) to a coupled model; "
             f"got fields {[f.name for f in old.fields]} -> {names}"
         )
-    if new.mass_rule is None or isinstance(new.interface, BridgingBand):
-        raise ValueError(
-            "conversion of cells into particles needs particle functions that are the MLS alone "
-            "(lagrange, edge-to-edge): bridging's band, the ramps' blended cells and "
-            "master-slave's reduction are not carried yet"
-        )
+    _require_mls_patch(new)
     if old.V is not new.V and old.V.mesh is not new.V.mesh:
         raise ValueError("the rebuilt model must live on the old model's mesh")
     if old.u[0].getSize() != new.u[0].getSize():
@@ -249,20 +256,15 @@ def convert(old: ExplicitDynamics, new: ExplicitDynamics, cells_added: int = 0) 
     raise_on_all_ranks(old.comm, lambda: _check(old, new))
     so, sn = old.stepper, new.stepper
     mass0, (p0, scale) = total_mass(old), momentum(old)
-    kin0, strain0 = _kinetic(old), _strain_energy(old)
+    kin0, strain0 = _kinetic(old), strain_energy(old.system, so.u)
     for src, dst in ((so.u, sn.u), (so.v, sn.v)):
         src[0].copy(dst[0])
         dst[0].array[~new.active[0]] = 0.0  # inside the new patch: massless, at rest
     _fit(old, new)
     correction = _restore_momentum(new, p0) / scale if scale > 0 else 0.0
-    if new.projection is not None:  # the new interface rows (and driven rows keep their values)
-        held = new.loads.motion
-        for x in (sn.u, sn.v):
-            new.projection.correct(x, target=None if held is None else held.kept(new.G, x))
-    sn.step, sn.time, sn.dt_prev = so.step, so.time, so.dt_prev
-    sn.records, sn.w_ext, sn.w_c = list(so.records), so.w_ext, so.w_c.copy()
+    carry_clock(old, new)  # the new interface rows; the step, time and work accounts
     mass1, (p1, _) = total_mass(new), momentum(new)
-    kin1, strain1 = _kinetic(new), _strain_energy(new)
+    kin1, strain1 = _kinetic(new), strain_energy(new.system, sn.u)
     return Conversion(
         step=so.step, time=so.time, cells_added=int(cells_added),
         particles_before=old.particles.num_particles, particles_after=new.particles.num_particles,
@@ -324,17 +326,7 @@ class ConvertingPatch:
                     "give build a cells argument (the patch's local cells, for "
                     "mf.ParticlePatch(mesh, cells, ...))"
                 )
-            if (
-                model.patch is None
-                or model.mass_rule is None
-                or isinstance(model.interface, BridgingBand)
-            ):
-                raise ValueError(
-                    "adapt= converts FE cells of a coupled model whose particle functions are "
-                    "the MLS alone (lagrange, edge-to-edge); pure EFG has no FE cell, and "
-                    "bridging's band, the ramps' blended cells and master-slave's reduction are "
-                    "not carried yet"
-                )
+            _require_mls_patch(model)
             return items
 
         self.criteria = raise_on_all_ranks(model.comm, check)

@@ -51,7 +51,13 @@ from .geometry.crack import Crack
 from .geometry.particles import ParticleSet
 from .geometry.partition import PartitionImbalanceWarning, balanced_mesh, work_per_rank
 from .geometry.patch import PLACEMENTS, ParticlePatch
-from .geometry.patch_criteria import CellsWhere, FieldAbove, NearTips, cells_near
+from .geometry.patch_criteria import (
+    CellsWhere,
+    FieldAbove,
+    NearTips,
+    PatchCriterionWarning,
+    cells_near,
+)
 from .geometry.quadrature import boundary_facets, cell_quadrature, facet_quadrature
 from .geometry.smoothing import INTEGRATIONS
 from .io import DynamicsWriter, ProgressBar, read_particles
@@ -75,7 +81,7 @@ from .statics.coupled import (
 from .statics.crack_initiation import CrackInitiation
 from .statics.efg import EFGElasticity, EFGSolution
 from .statics.fe import FESolution, solve_fe_elasticity, solve_forms
-from .statics.growth import GrowthStep, PatchCriterionWarning, QuasiStaticCrackGrowth
+from .statics.growth import GrowthStep, QuasiStaticCrackGrowth
 from .statics.large import IterativeOptions, chunked_l2_error, solve_large
 from .statics.newton import NewtonError, NewtonOptions, NewtonResult
 from .statics.nonlinear import FINITE_STRAIN_COUPLINGS, CoupledNonlinearProblem, FENonlinearProblem

@@ -185,3 +185,21 @@ def test_parallel_table_equals_serial_table(rank_rng):
             results.append(mf.evaluate_fe_function(u, pts))
         scale = np.abs(results[1]).max()
         assert np.abs(results[0] - results[1]).max() <= 1e-12 * scale
+
+
+def test_point_location_follows_a_moved_mesh():
+    """The bounding-box tree is built once per mesh (the same object on a second call) and
+    again when the mesh's nodes move: after a shift by 0.5 in x, a point that was outside the
+    unit square is found in the cell whose midpoint is 0.1 away, and one left behind is
+    outside (a stale tree would say the opposite)."""
+    msh = dolfinx.mesh.create_unit_square(MPI.COMM_WORLD, 8, 8)
+    tdim = msh.topology.dim
+    assert _compat.bb_tree(msh, tdim) is _compat.bb_tree(msh, tdim)
+    msh.geometry.x[:, 0] += 0.5
+    inside, left = np.array([[1.2, 0.5]]), np.array([[0.2, 0.5]])
+    cells = locate_points(msh, inside)
+    found = MPI.COMM_WORLD.allreduce(int((cells >= 0).sum()))
+    assert found == 1 and MPI.COMM_WORLD.allreduce(int((locate_points(msh, left) >= 0).sum())) == 0
+    if cells[0] >= 0:
+        mid = dolfinx.mesh.compute_midpoints(msh, tdim, cells.astype(np.int32))[0, :2]
+        assert np.linalg.norm(mid - inside[0]) <= 0.1

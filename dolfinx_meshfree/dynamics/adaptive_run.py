@@ -7,7 +7,8 @@ current displacement, e.g. the largest principal stress; ``CellsWhere``; ``NearT
 model's crack tips) which FE cells must be particles. The model is then rebuilt by the user's
 ``build(cells=...)`` on the larger patch and the state carried over
 (:func:`~dolfinx_meshfree.dynamics.patch_conversion.convert`: the new particles take the L2
-projection of the old field; mass and momentum conserved, the energy change recorded).
+projection of the old field, stabilised for the ramps; mass and momentum conserved, the energy
+change recorded).
 :class:`~dolfinx_meshfree.dynamics.DynamicCrackGrowth` does the same about a running crack.
 """
 
@@ -31,8 +32,8 @@ class AdaptiveRun:
     Args:
         build: ``build(cells=None) -> ExplicitDynamics``: the model with its loads and
             conditions, its patch on ``cells`` (this rank's local cells; ``None``: the first
-            patch). A coupled model whose particle functions are the MLS alone (lagrange,
-            edge-to-edge).
+            patch). Any coupling (master-slave at finite strain only with links of length
+            zero).
         adapt: A criterion or a list (a cell joins when any names it).
         check_every: Steps between two checks (>= 1).
         dt: The time step; ``None``: the stable step of each (re)built model.
@@ -84,7 +85,9 @@ class AdaptiveRun:
 
     def run(self, t_end: float) -> ExplicitDynamics:
         """Run to ``t_end`` (collective), checking before the first step and every
-        ``check_every`` steps. Returns the final model.
+        ``check_every`` steps. Returns the final model. A
+        :class:`~dolfinx_meshfree.PatchCriterionWarning` (once) if the criteria have named no
+        cell by then.
 
         Raises:
             ValueError: on every rank: ``t_end`` not after the current time; ``dt`` above the
@@ -111,4 +114,5 @@ class AdaptiveRun:
             self.timings["steps"] += time.perf_counter() - tic
             if self.model.time < t_end * (1.0 - 1e-12):
                 self._check()
+        self.adaptive.finish("AdaptiveRun", f"the run to t = {self.model.time:.6g}")
         return self.model

@@ -148,14 +148,18 @@ class Model:
     timings: dict = field(default_factory=dict)
     body_load: BodyLoad | None = None
     system: NonlinearSystem | None = None
-    #: ``(quadrature, MLS table)`` of the particle masses (a coupled model without blended or
-    #: weighted particle functions), what a conversion fits the new particles on.
+    #: ``(quadrature, MLS table)`` of the particle masses on the patch cells (a coupled model),
+    #: what a conversion fits the new particles on.
     mass_rule: tuple | None = None
+    #: The ramps: ``(quadrature, blended table)`` of the interface cells, columns ``[local FE
+    #: nodes | particles]`` (:meth:`~dolfinx_meshfree.couplings.ramp.RampInterface.table`).
+    blended_rule: tuple | None = None
 
     def arguments(self) -> dict:
         """The attributes as keyword arguments of ``ExplicitDynamics`` (no copies)."""
+        rules = ("mass_rule", "blended_rule")
         return {
-            f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "mass_rule"
+            f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in rules
         }
 
 
@@ -650,7 +654,8 @@ def build_coupled(
         timings={"setup": time.perf_counter() - t0, "operators": ops.timings["operators"]},
         body_load=body_load,
         system=system,
-        mass_rule=p_rule if ops.interface_table is None and ops.reduction is None else None,
+        mass_rule=p_rule,
+        blended_rule=i_rule,
     )
 
 

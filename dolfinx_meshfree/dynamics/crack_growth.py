@@ -154,8 +154,8 @@ class DynamicCrackGrowth:
             and the state is carried over by
             :func:`~dolfinx_meshfree.dynamics.patch_conversion.convert` (mass and momentum
             conserved, the energy change recorded in :attr:`conversions` and counted in
-            :attr:`released`). Coupled models whose particle functions are the MLS alone
-            (lagrange, edge-to-edge). Default ``None``: the patch is fixed.
+            :attr:`released`). Every coupling (master-slave at finite strain only with links of
+            length zero). Default ``None``: the patch is fixed.
         sif_options: More keywords of :func:`~dolfinx_meshfree.dynamics.sifs.dynamic_sifs`.
 
     Example::
@@ -408,9 +408,7 @@ class DynamicCrackGrowth:
         crack, end = self.crack, self.end
         new_tip = None
         if theta is not None:
-            t, c, s = crack.tip_direction(end), np.cos(theta), np.sin(theta)
-            d = np.array([c * t[0] - s * t[1], s * t[0] + c * t[1]])
-            new_tip = crack.points[end] + self.segment * d
+            new_tip = crack.extension_tip(theta, self.segment, end)
         grown = Crack(crack.points.copy(), through=crack.through)
 
         def rebuild(cells: np.ndarray) -> ExplicitDynamics:
@@ -450,7 +448,9 @@ class DynamicCrackGrowth:
 
     def run(self, t_end: float) -> list[GrowthCheck]:
         """Run to ``t_end``, checking every ``check_every`` steps (the last chunk may be
-        shorter; a check at the start too). Returns :attr:`history` (collective).
+        shorter; a check at the start too). Returns :attr:`history` (collective). With
+        ``adapt``, a :class:`~dolfinx_meshfree.PatchCriterionWarning` (once) if the criteria
+        have named no cell by then.
 
         Raises:
             ValueError: on every rank: ``t_end`` not a positive number; ``dt`` above the stable
@@ -472,6 +472,8 @@ class DynamicCrackGrowth:
             self.check()
         steps = max(1, self.model.step)
         self.timings["per_step"] = self.timings["steps"] / steps
+        if self.adaptive is not None:
+            self.adaptive.finish("DynamicCrackGrowth", f"{len(self.history)} check(s)")
         return self.history
 
 

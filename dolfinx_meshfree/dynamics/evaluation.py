@@ -89,21 +89,24 @@ class FieldEvaluator:
         if fe is None:
             x = ensure_points_in_mesh(d.mesh, points)
             return d.mls.tabulate(x, 0).values @ coeffs
-        ramp = d.interface if isinstance(d.interface, RampInterface) else None
-        sol = CoupledSolution(u=fe, coefficients=coeffs, mls=d.mls, patch=d.patch, interface=ramp)
-        if isinstance(d.interface, BridgingBand):
-            sol = BridgingSolution(u=fe, coefficients=coeffs, mls=d.mls, patch=d.patch)
-            sol.band = d.interface
-        return sol.displacement(points)
+        return self._coupled(fe, coeffs).displacement(points)
 
     def solution(self, vecs: Sequence[PETSc.Vec]) -> CoupledSolution:
         """The field of ``vecs`` as a :class:`~dolfinx_meshfree.CoupledSolution` of this rank
-        (its ``evaluate_at_quadrature`` at points of local cells: no search, no routing) of a
-        coupled model without blended cells (lagrange, edge-to-edge). Collective (the
-        coefficients are gathered)."""
+        (its ``evaluate_at_quadrature`` at points of local cells: no search, no routing), the
+        ramps' interface cells and the bridging band blended as the model blends them.
+        Collective (the coefficients are gathered)."""
+        return self._coupled(*self.local_values(vecs))
+
+    def _coupled(self, fe: dolfinx.fem.Function, coeffs: np.ndarray) -> CoupledSolution:
+        """The coupled solution of these values (the ramps' and bridging's blends)."""
         d = self.disc
-        fe, coeffs = self.local_values(vecs)
-        return CoupledSolution(u=fe, coefficients=coeffs, mls=d.mls, patch=d.patch)
+        if isinstance(d.interface, BridgingBand):
+            sol = BridgingSolution(u=fe, coefficients=coeffs, mls=d.mls, patch=d.patch)
+            sol.band = d.interface
+            return sol
+        ramp = d.interface if isinstance(d.interface, RampInterface) else None
+        return CoupledSolution(u=fe, coefficients=coeffs, mls=d.mls, patch=d.patch, interface=ramp)
 
     def at_cells(self, vecs: Sequence[PETSc.Vec], q: QuadraturePoints) -> np.ndarray:
         """The field at points of this rank's local cells ``q.cells`` (m, gdim), as

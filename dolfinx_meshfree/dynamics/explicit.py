@@ -118,9 +118,11 @@ class ExplicitDynamics(StateQueries):
     """
 
     quadrature: AdaptiveQuadrature | None = None
-    #: ``(quadrature, MLS table)`` of the particle masses (set by :meth:`coupled` for couplings
-    #: whose particle functions are the MLS alone): what a conversion fits new particles on.
+    #: ``(quadrature, MLS table)`` of the particle masses on the patch cells (set by
+    #: :meth:`coupled`): what a conversion fits new particles on.
     mass_rule: tuple | None = None
+    #: The ramps' interface cells: ``(quadrature, blended table [local FE nodes | particles])``.
+    blended_rule: tuple | None = None
 
     def __init__(
         self,
@@ -194,7 +196,7 @@ class ExplicitDynamics(StateQueries):
         args = dict(model.arguments(), held=held_velocities(model.mesh, fixed))
         dyn = cls(**args, safety=safety, multiplier_solver=multiplier_solver)
         dyn.quadrature = quadrature
-        dyn.mass_rule = model.mass_rule
+        dyn.mass_rule, dyn.blended_rule = model.mass_rule, model.blended_rule
         return dyn
 
     @classmethod

@@ -2,7 +2,8 @@
 
 Each load is a vector per field and an amplitude ``a(t)``: the force at ``t`` is
 ``a(t) f`` (Belytschko et al. 1995, eq. 4.5). Tractions are assembled with the FE basis on
-facets of FE cells and the particles' functions on facets of particle cells; body forces with
+facets of FE cells, the particles' functions on facets of particle cells and the blended
+functions on the ramps' interface cells and bridging's band; body forces with
 the functions and weights of the masses (:mod:`~dolfinx_meshfree.physics.body_loads`), else lumped.
 Particle forces of master–slave reach the FE nodes and masters through ``T^T`` (Rabczuk et
 al. 2006, eq. 28). Fixed dofs carry no load.
@@ -14,12 +15,14 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 import numpy.typing as npt
+import scipy.sparse as sp
 from mpi4py import MPI
 from petsc4py import PETSc
 
 from ..approx.fe_points import tabulate_in_cells
+from ..couplings.ramp import RampInterface
 from ..geometry.cut_cells import cut_facet_quadrature
-from ..geometry.quadrature import DYNAMIC_FACET_DEGREE, facet_quadrature
+from ..geometry.quadrature import DYNAMIC_FACET_DEGREE, QuadraturePoints, facet_quadrature
 from ..parallel import raise_on_all_ranks
 from ..physics.operators import load_vector
 from ..statics.petsc import create_vector
@@ -80,13 +83,12 @@ class ExternalLoads:
         """``amplitude(t) * traction(x, n)`` on owned exterior facets (collective).
 
         ``traction`` maps points (m, gdim) and outward normals (m, gdim) to tractions (m, gdim),
-        assembled with the FE basis on facets of FE cells and with the MLS functions on facets
-        of particle cells (Belytschko et al. 1995, eq. 4.5), split at a crack's mouth (each side
-        on its own, :func:`~dolfinx_meshfree.geometry.cut_cells.cut_facet_quadrature`).
-        ``amplitude`` defaults to 1 (a step load).
-
-        Raises:
-            ValueError: a facet lies on a ramp interface or bridging band cell (on every rank).
+        assembled with the FE basis on facets of FE cells, with the MLS functions on facets of
+        particle cells (Belytschko et al. 1995, eq. 4.5), split at a crack's mouth (each side
+        on its own, :func:`~dolfinx_meshfree.geometry.cut_cells.cut_facet_quadrature`), and
+        with the blended functions on facets of the ramps' interface cells (eq. 3.15) and of
+        bridging's band (``(1 - alpha) N`` and ``alpha phi``, Rabczuk et al. 2006, eq. 49), as
+        the masses and the stiffness use them. ``amplitude`` defaults to 1 (a step load).
         """
         d = self.disc
         msh, gdim = d.mesh, d.gdim
@@ -96,44 +98,74 @@ class ExternalLoads:
         f2c = msh.topology.connectivity(msh.topology.dim - 1, msh.topology.dim)
         first = np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]]
         blended = d.blended_cells()
-
-        def check() -> None:
-            if blended is not None and np.any(blended[first]):
-                raise ValueError(
-                    f"{int(np.sum(blended[first]))} traction facet(s) lie on ramp interface or "
-                    "bridging band cells, where the load would need the blended functions; load "
-                    "facets of pure FE or particle cells"
-                )
-
-        raise_on_all_ranks(self.comm, check)
+        mixed = blended[first] if blended is not None else np.zeros(facets.size, dtype=bool)
         on_p = d.on_particles(first)
+        fe_dofs = None
+        if d.V is not None:
+            imap = d.V.dofmap.index_map
+            l2g = np.asarray(
+                imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
+            )
+            fe_dofs = (gdim * l2g[:, None] + np.arange(gdim)).ravel()
+
+        def values(q: QuadraturePoints) -> np.ndarray:
+            return raise_on_all_ranks(
+                self.comm, lambda: vector_values(traction, q.points, q.normals)
+            )
+
+        def fe_load(
+            tab: sp.spmatrix, q: QuadraturePoints, t: np.ndarray
+        ) -> tuple[np.ndarray, np.ndarray]:
+            fl = load_vector(tab, q.weights, t)
+            return fe_dofs[: fl.size], fl
+
+        blend_fe = blend_p = None
+        if blended is not None:  # collective: every rank tabulates (maybe no point)
+            q = facet_quadrature(msh, facets[mixed], deg)
+            t = values(q)
+            fe_tab, p_tab = self._blended_tables(q)
+            blend_fe = fe_load(fe_tab, q, t)
+            blend_p = load_vector(p_tab, q.weights, t)
         parts = []
         for f in d.fields:
-            sel = facets[on_p] if f.name == "particles" else facets[~on_p]
-            if f.name == "particles" and d.cracks:  # facets split at the cracks' mouths
-                q = cut_facet_quadrature(msh, sel, d.cracks, deg)
-            else:
-                q = facet_quadrature(msh, sel, deg)
-            t = raise_on_all_ranks(
-                self.comm, lambda q=q: vector_values(traction, q.points, q.normals)
-            )
             if f.name == "fe":
-                imap = d.V.dofmap.index_map
-                l2g = np.asarray(
-                    imap.local_to_global(
-                        np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
-                    )
-                )
+                q = facet_quadrature(msh, facets[~on_p & ~mixed], deg)
                 tab = tabulate_in_cells(d.V, q.points, q.cells, derivatives=0).values
-                fl = load_vector(tab, q.weights, t).reshape(-1, gdim)
-                dofs = gdim * l2g[: fl.shape[0], None] + np.arange(gdim)
-                parts.append((dofs.ravel(), fl.ravel()))
+                rows, vals = fe_load(tab, q, values(q))
+                if blend_fe is not None:
+                    rows, vals = (
+                        np.concatenate([rows, blend_fe[0]]),
+                        np.concatenate([vals, blend_fe[1]]),
+                    )
+                parts.append((rows, vals))
             else:
+                sel = facets[on_p & ~mixed]
+                if d.cracks:  # facets split at the cracks' mouths
+                    q = cut_facet_quadrature(msh, sel, d.cracks, deg)
+                else:
+                    q = facet_quadrature(msh, sel, deg)
+                t = values(q)
                 tab = raise_on_all_ranks(self.comm, lambda q=q: d.mls.tabulate(q.points, 0))
-                parts.append(
-                    (d.particles.petsc_dofs(gdim).ravel(), load_vector(tab.values, q.weights, t))
-                )
+                vals = load_vector(tab.values, q.weights, t)
+                if blend_p is not None:
+                    vals = vals + blend_p
+                parts.append((d.particles.petsc_dofs(gdim).ravel(), vals))
         self._add(parts, amplitude)
+
+    def _blended_tables(self, q: QuadraturePoints) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+        """The FE (points x local nodes) and particle (points x particles) parts of the blended
+        functions at points of the ramps' interface cells or bridging's band cells
+        (collective)."""
+        d = self.disc
+        n_fe = d.V.dofmap.index_map.size_local + d.V.dofmap.index_map.num_ghosts
+        if isinstance(d.interface, RampInterface):  # columns [local FE nodes | particles]
+            t = raise_on_all_ranks(self.comm, lambda: d.interface.table(q.points, q.cells, 0))
+            t = t.values.tocsc()
+            return t[:, :n_fe].tocsr(), t[:, n_fe:].tocsr()
+        a = d.interface.alpha_at(q.points, q.cells)
+        t_fe = tabulate_in_cells(d.V, q.points, q.cells, 0).values
+        t_p = raise_on_all_ranks(self.comm, lambda: d.mls.tabulate(q.points, 0)).values
+        return sp.diags(1.0 - a) @ t_fe, sp.diags(a) @ t_p
 
     def add_body_force(self, force: VectorFunction, amplitude: Amplitude | None = None) -> None:
         """``amplitude(t) * int b . v`` of a body force ``b(x)`` per unit volume (points

@@ -147,6 +147,12 @@ def _check_polyline(points: npt.ArrayLike, name: str = "points") -> np.ndarray:
     return x
 
 
+def _turn(t: np.ndarray, angle: float) -> np.ndarray:
+    """``t`` turned counter-clockwise by ``angle`` radians."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([c * t[0] - s * t[1], s * t[0] + c * t[1]])
+
+
 class Crack:
     """A 2D crack polyline.
 
@@ -213,6 +219,11 @@ class Crack:
         """Unit vector (2,) pointing out of the crack at the end ``end`` (0 or -1)."""
         d = self.points[0] - self.points[1] if end == 0 else self.points[-1] - self.points[-2]
         return d / np.linalg.norm(d)
+
+    def extension_tip(self, angle: float, length: float, end: int) -> np.ndarray:
+        """The point (2,) that :meth:`extend` ``(angle, length, tip=end)`` would add, the crack
+        unchanged (a driver grows the patch about it before the extension is made)."""
+        return self.points[end] + length * _turn(self.tip_direction(end), float(angle))
 
     def set_mouths(self, start: bool, end: bool) -> None:
         """Mark the end points that lie on the exterior boundary (mouths of an edge crack); the
@@ -353,9 +364,7 @@ class Crack:
                 raise ValueError(
                     f"angle_or_direction={float(d)!r} must be a kink angle in (-pi, pi) radians"
                 )
-            t = self.tip_direction(tip)
-            c, s = np.cos(float(d)), np.sin(float(d))
-            direction = np.array([c * t[0] - s * t[1], s * t[0] + c * t[1]])
+            direction = _turn(self.tip_direction(tip), float(d))
         elif d.shape == (2,) and np.all(np.isfinite(d)) and np.linalg.norm(d) > 0:
             direction = d / np.linalg.norm(d)
         else:

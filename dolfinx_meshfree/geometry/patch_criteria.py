@@ -26,6 +26,7 @@ patch around a crack.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
@@ -49,10 +50,28 @@ __all__ = [
     "GrowthContext",
     "NearTips",
     "PatchCriterion",
+    "PatchCriterionWarning",
     "as_criteria",
     "cells_near",
     "named_cells",
 ]
+
+
+class PatchCriterionWarning(UserWarning):
+    """A patch criterion that named no cell in a whole run (statics or dynamics)."""
+
+
+def warn_unused(criteria: list, driver: str, checks: str, stacklevel: int = 3) -> None:
+    """The :class:`PatchCriterionWarning` of a driver whose ``criteria`` never named a cell in
+    ``checks`` (e.g. "12 step(s)"); ``stacklevel`` as ``warnings.warn``'s, counted from the
+    driver's call of this function plus one."""
+    warnings.warn(
+        f"{driver}: the criteria {[repr(c) for c in criteria]} named no cell in {checks}; the "
+        "patch stayed as given (is the criterion the intended one: its radius, its threshold?)",
+        PatchCriterionWarning,
+        stacklevel=stacklevel,
+    )
+
 
 #: The named fields of :class:`FieldAbove`.
 PATCH_FIELDS = ("max_principal_stress", "max_principal_strain")

@@ -19,7 +19,6 @@ Works with any problem whose ``solve()`` returns a solution with ``stress_intens
 from __future__ import annotations
 
 import time
-import warnings
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -27,17 +26,13 @@ import numpy as np
 
 from ..fracture.criteria import equivalent_sif, kink_angle
 from ..geometry.crack import Crack, particle_spacing
-from ..geometry.patch_criteria import GrowthContext, NearTips
+from ..geometry.patch_criteria import GrowthContext, NearTips, warn_unused
 from ..physics.state import check_stateless
 from .growth_update import disable_local_update, enable_local_update
 from .patch_growth import PatchEvent, PatchGrowth
 from .sifs import DEFAULT_RADII
 
-__all__ = ["GROWTH_UPDATES", "GrowthStep", "PatchCriterionWarning", "QuasiStaticCrackGrowth"]
-
-
-class PatchCriterionWarning(UserWarning):
-    """A patch criterion that named no cell in a whole run."""
+__all__ = ["GROWTH_UPDATES", "GrowthStep", "QuasiStaticCrackGrowth"]
 
 
 #: How a growth step rebuilds the particle side.
@@ -294,10 +289,8 @@ class QuasiStaticCrackGrowth:
         grown = self.K_Ic is None or keq >= self.K_Ic
         if grown:
             if self.adaptive is not None:  # the patch carries the new tip before it is made
-                c, s = np.cos(theta), np.sin(theta)
-                t = direction
-                d = np.array([c * t[0] - s * t[1], s * t[0] + c * t[1]])
-                self._grow_patch(len(self.history), tip + self.increment * d)
+                new_tip = crack.extension_tip(theta, self.increment, end)
+                self._grow_patch(len(self.history), new_tip)
             crack.extend(theta, self.increment, tip=end)
         rec = GrowthStep(
             step=len(self.history), tip=tip, direction=direction, K_I=KI, K_II=KII,
@@ -313,16 +306,14 @@ class QuasiStaticCrackGrowth:
     def run(self) -> list[GrowthStep]:
         """Run up to ``steps`` steps; stops early at the first step that does not grow
         (``K_eq < K_Ic``: under fixed loads the crack is stable). Returns :attr:`history`.
-        With ``adapt``, a :class:`PatchCriterionWarning` when no criterion named any cell in the
-        whole run (the patch never needed growing: is the criterion the intended one?)."""
+        With ``adapt``, a :class:`~dolfinx_meshfree.PatchCriterionWarning` when no criterion
+        named any cell in the whole run (the patch never needed growing: is the criterion the
+        intended one?)."""
         for _ in range(self.steps):
             if not self.step().grown:
                 break
         if self.adaptive is not None and not self.adaptive.selected:
-            warnings.warn(
-                f"QuasiStaticCrackGrowth: the criteria {[repr(c) for c in self.adaptive.criteria]}"
-                f" named no cell in {len(self.history)} step(s); the patch stayed as given",
-                PatchCriterionWarning,
-                stacklevel=2,
+            warn_unused(
+                self.adaptive.criteria, "QuasiStaticCrackGrowth", f"{len(self.history)} step(s)"
             )
         return self.history

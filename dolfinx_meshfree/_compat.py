@@ -12,14 +12,12 @@ Every call whose spelling differs between the lanes lives here, behind one expli
 
 from __future__ import annotations
 
-import hashlib as _hashlib
 import importlib.util as _importlib_util
 
 if _importlib_util.find_spec("dolfinx_solver") is not None:  # lane B: load bundled MPICH first
     import dolfinx_solver as _dolfinx_solver  # noqa: F401
 
 import typing as _typing
-import weakref as _weakref
 
 import basix as _basix
 import dolfinx as _dolfinx
@@ -29,6 +27,8 @@ import dolfinx.geometry as _geometry
 import dolfinx.graph as _graph
 import dolfinx.mesh as _mesh
 import numpy as _np
+
+from . import mesh_cache as _mesh_cache
 
 if _typing.TYPE_CHECKING:  # annotations only; the class names are lane B's (0.5.2: *MetaClass)
     from dolfinx.fem import DirichletBC as _DirichletBC
@@ -157,27 +157,14 @@ def quadrature_space(msh: _mesh.Mesh, degree: int, size: int) -> _fem.FunctionSp
     return _fem.FunctionSpace(msh, element)
 
 
-#: Bounding-box trees per mesh: ``{mesh: {dim: (fingerprint of the geometry, tree)}}``.
-_TREES: _weakref.WeakKeyDictionary = _weakref.WeakKeyDictionary()
-
-
 def bb_tree(msh: _mesh.Mesh, dim: int) -> _geometry.BoundingBoxTree:
     """Bounding-box tree of the local entities of dimension ``dim``, built once per mesh and
-    geometry: a tree is kept while the mesh lives and its node coordinates hash the same (a
-    moved mesh gets a new tree). Building one costs about 10 ms at 10,000 cells, and a coupled
-    model's build locates points several times."""
-    x = _np.ascontiguousarray(msh.geometry.x)
-    key = _hashlib.blake2b(x.view(_np.uint8), digest_size=16).digest()
-    try:
-        per_mesh = _TREES.setdefault(msh, {})
-    except TypeError:  # a mesh type without weak references: no cache
-        per_mesh = {}
-    hit = per_mesh.get(dim)
-    if hit is not None and hit[0] == key:
-        return hit[1]
-    tree = _geometry.bb_tree(msh, dim) if MODERN else _geometry.BoundingBoxTree(msh, dim)
-    per_mesh[dim] = (key, tree)
-    return tree
+    geometry (:func:`~dolfinx_meshfree.mesh_cache.cached`)."""
+
+    def build() -> _geometry.BoundingBoxTree:
+        return _geometry.bb_tree(msh, dim) if MODERN else _geometry.BoundingBoxTree(msh, dim)
+
+    return _mesh_cache.cached(msh, ("bb_tree", dim), build)
 
 
 def refine(msh: _mesh.Mesh) -> _mesh.Mesh:

@@ -196,7 +196,7 @@ def test_point_location_follows_a_moved_mesh():
     tdim = msh.topology.dim
     assert _compat.bb_tree(msh, tdim) is _compat.bb_tree(msh, tdim)
     msh.geometry.x[:, 0] += 0.5
-    inside, left = np.array([[1.2, 0.5]]), np.array([[0.2, 0.5]])
+    inside, left = np.array([[1.2, 0.53]]), np.array([[0.2, 0.53]])  # inside a cell
     cells = locate_points(msh, inside)
     found = MPI.COMM_WORLD.allreduce(int((cells >= 0).sum()))
     assert found == 1 and MPI.COMM_WORLD.allreduce(int((locate_points(msh, left) >= 0).sum())) == 0

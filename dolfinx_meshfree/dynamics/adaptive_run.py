@@ -37,6 +37,10 @@ class AdaptiveRun:
         adapt: A criterion or a list (a cell joins when any names it).
         check_every: Steps between two checks (>= 1).
         dt: The time step; ``None``: the stable step of each (re)built model.
+        release_after: Shrinking back: a particle cell that no criterion has named in this
+            many checks in a row returns to FE, unless it belongs to the first patch (the state
+            is carried over as for growth; the nodes it gives back take the field's values).
+            ``None`` (default): the patch only grows.
 
     Attributes:
         model: The current :class:`~dolfinx_meshfree.ExplicitDynamics` (a new object after
@@ -53,7 +57,12 @@ class AdaptiveRun:
     """
 
     def __init__(
-        self, build: Any, adapt: Any, check_every: int = 10, dt: float | None = None
+        self,
+        build: Any,
+        adapt: Any,
+        check_every: int = 10,
+        dt: float | None = None,
+        release_after: int | None = None,
     ) -> None:
         if not callable(build):
             raise ValueError(f"build={build!r:.80} must be a callable build(cells=None) -> model")
@@ -64,7 +73,7 @@ class AdaptiveRun:
         self.model = build()
         if not isinstance(self.model, ExplicitDynamics):
             raise ValueError(f"build() returned {self.model!r:.80}, not ExplicitDynamics")
-        self.adaptive = ConvertingPatch(adapt, self.model, build)
+        self.adaptive = ConvertingPatch(adapt, self.model, build, release_after=release_after)
         self.build, self.check_every, self.dt = build, check_every, dt
         self.timings = {"steps": 0.0, "conversions": 0.0}
 

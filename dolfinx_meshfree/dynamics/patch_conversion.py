@@ -40,6 +40,13 @@ and its particles are placed afresh. :func:`convert` carries the state over:
   ``S^T (M x I) S u_M = S^T Phi^T W (u_old - Phi T_PF u_FE)``. At finite strain with links of
   finite length (``slaves="band"``) the slaves' motion is not linear in the dofs, and the
   conversion is refused;
+* **shrinking back** (``ConvertingPatch(..., release_after=k)``, through
+  :class:`~dolfinx_meshfree.dynamics.AdaptiveRun`): particle cells that no criterion has named
+  for ``k`` checks return to FE; the FE nodes they give back take the old field's values
+  there (linear fields stay exact), the remaining particles are fitted as above. The momentum
+  the nodal values miss (a rough field's lumped integral differs from its integral: up to
+  1.5e-2 of the momentum scale behind a pulse) is restored by a uniform velocity on those
+  nodes, where the difference was made, and recorded;
 * the constraint rows of the new interface are then met in the mass metric (the projection of
   :mod:`~dolfinx_meshfree.dynamics.constraint`), as after a rebuild at a crack extension;
 * the step, the time and the work accounts are carried unchanged.
@@ -92,6 +99,7 @@ from ..geometry.patch_criteria import (
     GrowthContext,
     NearTips,
     as_criteria,
+    cells_near,
     named_cells,
     warn_unused,
 )
@@ -126,6 +134,7 @@ class Conversion:
     Attributes:
         step, time: The model's step and time.
         cells_added: Cells that joined the patch (global count).
+        cells_released: Cells that left it, back to FE (global count).
         particles_before, particles_after: Particle counts.
         mass_error: ``|M_new - M_old| / M_old`` of the total mass (every field's lumped masses
             summed, per component).
@@ -153,6 +162,7 @@ class Conversion:
     step: int
     time: float
     cells_added: int
+    cells_released: int
     particles_before: int
     particles_after: int
     mass_error: float
@@ -233,7 +243,7 @@ def _require_convertible(model: ExplicitDynamics) -> None:
 
 
 def _check(old: ExplicitDynamics, new: ExplicitDynamics) -> None:
-    """The two models must be a coupled model and its rebuild on a larger patch."""
+    """The two models must be a coupled model and its rebuild on another patch."""
     names = [f.name for f in new.fields]
     if names != ["fe", "particles"] or [f.name for f in old.fields] != names:
         raise ValueError(
@@ -247,13 +257,6 @@ def _check(old: ExplicitDynamics, new: ExplicitDynamics) -> None:
         raise ValueError(
             f"the rebuilt model has {new.u[0].getSize()} FE dofs, the old one "
             f"{old.u[0].getSize()}: build the new model on the same FE space"
-        )
-    n_own = old.mesh.topology.index_map(old.mesh.topology.dim).size_local
-    lost = old.in_patch[:n_own] & ~new.in_patch[:n_own]
-    if lost.any():
-        raise ValueError(
-            f"{int(lost.sum())} particle cell(s) of the old patch are FE cells in the new one: a "
-            "conversion only adds cells to the patch"
         )
 
 
@@ -388,17 +391,24 @@ def _values(old: ExplicitDynamics, new: ExplicitDynamics) -> None:
         dst[1].array[:] = np.asarray(old.evaluator.at_cells(src, q)).reshape(-1, gdim).ravel()
 
 
-def _restore_momentum(new: ExplicitDynamics, p0: np.ndarray) -> float:
-    """Add the uniform velocity ``delta = (p0 - p) / M_P`` to the free particle dofs (the MLS
-    being a partition of unity, the particle field shifts by ``delta``), so that the momentum is
-    ``p0``; returns ``max |delta M_P|`` (collective)."""
+def _restore_momentum(
+    new: ExplicitDynamics, p0: np.ndarray, back: np.ndarray | None = None
+) -> float:
+    """Add the uniform velocity ``delta = (p0 - p) / M`` to the free particle dofs (the MLS
+    being a partition of unity, the particle field shifts by ``delta``), or, where cells went
+    back to FE, to the free dofs of the nodes they gave back (``back``: bool per owned FE node;
+    the interpolation there made the difference), so that the momentum is ``p0``; returns
+    ``max |delta M|`` (collective)."""
     gdim = new.mesh.geometry.dim
     p = momentum(new)[0]
-    free = new.free[1].reshape(-1, gdim)
-    m = new.fields[1].mass.array_r.reshape(-1, gdim) * free
-    mp = np.array([math.fsum(g[k] for g in new.comm.allgather(m.sum(axis=0))) for k in range(gdim)])
+    k = 1 if back is None else 0
+    free = new.free[k].reshape(-1, gdim)
+    if back is not None:
+        free = free * back[:, None]
+    m = new.fields[k].mass.array_r.reshape(-1, gdim) * free
+    mp = np.array([math.fsum(g[c] for g in new.comm.allgather(m.sum(axis=0))) for c in range(gdim)])
     delta = np.where(mp > 0, (p0 - p) / np.where(mp > 0, mp, 1.0), 0.0)
-    v = new.stepper.v[1].array.reshape(-1, gdim)
+    v = new.stepper.v[k].array.reshape(-1, gdim)
     v += free * delta[None, :]
     return float(np.abs(delta * mp).max())
 
@@ -408,9 +418,11 @@ def convert(
     new: ExplicitDynamics,
     cells_added: int = 0,
     stabilisation: float | None = None,
+    cells_released: int = 0,
 ) -> Conversion:
-    """Carry the state of ``old`` into ``new``, its rebuild on a larger patch (module docstring;
-    collective). Returns the :class:`Conversion` record; ``old`` is left as it was.
+    """Carry the state of ``old`` into ``new``, its rebuild on another patch (module docstring;
+    collective): a larger one, or one that has given cells back to FE (their nodes take the
+    old field's values). Returns the :class:`Conversion` record; ``old`` is left as it was.
 
     ``stabilisation``: the weight ``lam`` of the particle values in the fit (module docstring);
     default ``RAMP_STABILISATION`` for the ramps, 0 (the plain projection) otherwise.
@@ -431,20 +443,28 @@ def convert(
     so, sn = old.stepper, new.stepper
     mass0, (p0, scale) = total_mass(old), momentum(old)
     kin0, strain0 = _kinetic(old), strain_energy(old.system, so.u)
+    gdim = new.mesh.geometry.dim
+    back = (new.active[0] & ~old.active[0]).reshape(-1, gdim).any(axis=1)  # FE again
+    returned = new.comm.allreduce(int(back.sum()))
+    nodes = new.V.tabulate_dof_coordinates()[: back.size][back, :gdim]
     for src, dst in ((so.u, sn.u), (so.v, sn.v)):
         src[0].copy(dst[0])
         dst[0].array[~new.active[0]] = 0.0  # inside the new patch: massless, at rest
+        if returned:  # the nodes that leave the patch: the old field there (collective)
+            dst[0].array.reshape(-1, gdim)[back] = old.evaluator.at_points(src, nodes)
     if new.reduction is not None:
         _fit_reduced(old, new)
     else:
         _fit(old, new, lam)
-    correction = _restore_momentum(new, p0) / scale if scale > 0 else 0.0
+    correction = _restore_momentum(new, p0, back if returned else None)
+    correction = correction / scale if scale > 0 else 0.0
     p_fit = momentum(new)[0]
     carry_clock(old, new)  # the new interface rows; the step, time and work accounts
     mass1, (p1, _) = total_mass(new), momentum(new)
     kin1, strain1 = _kinetic(new), strain_energy(new.system, sn.u)
     return Conversion(
         step=so.step, time=so.time, cells_added=int(cells_added),
+        cells_released=int(cells_released),
         particles_before=old.particles.num_particles, particles_after=new.particles.num_particles,
         mass_error=abs(mass1 - mass0) / mass0,
         momentum_error=float(np.abs(p1 - p0).max() / scale) if scale > 0 else 0.0,
@@ -470,9 +490,13 @@ class ConvertingPatch:
         build: The user's builder, which must take ``cells`` (the patch's local cells).
         sif_radius: The SIF domains' outer radius, if given (``NearTips()``'s default radius).
         increment: The crack segment (``NearTips``' reserve is counted in segments).
+        release_after: Shrinking back: a particle cell that no criterion has named in this
+            many checks in a row returns to FE (its nodes take the field's values), unless it
+            belongs to the first patch or carries a crack. ``None`` (default): the patch only
+            grows.
 
     Attributes:
-        conversions: One :class:`Conversion` per growth of the patch.
+        conversions: One :class:`Conversion` per change of the patch.
     """
 
     def __init__(
@@ -482,8 +506,18 @@ class ConvertingPatch:
         build: Any,
         sif_radius: float | None = None,
         increment: float | None = None,
+        release_after: int | None = None,
     ) -> None:
         def check() -> list:
+            if release_after is not None and (
+                isinstance(release_after, bool)
+                or not isinstance(release_after, int)
+                or release_after < 1
+            ):
+                raise ValueError(
+                    f"release_after={release_after!r} must be a number of checks >= 1, or None "
+                    "(the patch only grows)"
+                )
             items = as_criteria(adapt)
             for c in items:
                 if isinstance(c, NearTips) and c.spacings is None and sif_radius is None:
@@ -514,6 +548,12 @@ class ConvertingPatch:
         #: Whether any criterion has named a cell (patch cells included) in any check.
         self.selected = False
         self._warned = False
+        self.release_after = release_after
+        n_own = model.mesh.topology.index_map(model.mesh.topology.dim).size_local
+        #: bool per owned cell: the first patch, never released.
+        self.first = np.asarray(model.in_patch[:n_own], dtype=bool).copy()
+        #: per owned cell: the checks since a criterion last named it.
+        self.unnamed = np.zeros(n_own, dtype=np.int64)
 
     def grow(
         self,
@@ -534,17 +574,35 @@ class ConvertingPatch:
         state = model.evaluator.solution(model.u)
         state.material = model.material
         ctx = GrowthContext(model.step, tips, state, self.sif_radius, self.increment)
-        want, by, named = named_cells(self.criteria, patch, ctx, driver)
+        want, by, named, chosen = named_cells(self.criteria, patch, ctx, driver)
         self.selected |= named
+        release = self._released(model, chosen)
         added = comm.allreduce(int(want.sum()))
-        if not added:
+        released = comm.allreduce(int(release.sum()))
+        if not added and not released:
             return None
         tic = time.perf_counter()
-        new = rebuild(np.union1d(patch.cells, np.flatnonzero(want)).astype(np.int32))
-        record = convert(model, new, added)
+        cells = np.union1d(np.setdiff1d(patch.cells, np.flatnonzero(release)), np.flatnonzero(want))
+        new = rebuild(cells.astype(np.int32))
+        record = convert(model, new, added, cells_released=released)
         record.time_rebuild, record.by = time.perf_counter() - tic, by
         self.conversions.append(record)
         return new
+
+    def _released(self, model: ExplicitDynamics, chosen: np.ndarray) -> np.ndarray:
+        """bool per owned cell: particle cells that return to FE at this check
+        (``release_after``): unnamed for that many checks, not in the first patch, not cut by
+        a crack."""
+        self.unnamed += 1
+        self.unnamed[chosen] = 0
+        n_own = self.unnamed.size
+        if self.release_after is None:
+            return np.zeros(n_own, dtype=bool)
+        out = model.in_patch[:n_own] & ~self.first & (self.unnamed >= self.release_after)
+        cut = np.zeros(n_own, dtype=bool)
+        for crack in model.patch.cracks:  # the FE side cannot carry a crack
+            cut[cells_near(model.mesh, crack.points, 0.0)] = True
+        return out & ~cut
 
     def finish(self, driver: str, checks: str) -> None:
         """At the end of a driver's run: a :class:`~dolfinx_meshfree.PatchCriterionWarning`,

@@ -36,6 +36,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .. import _compat
+from ..mesh_cache import cached
 from ..parallel import raise_on_all_ranks
 from .crack import _orient, particle_spacing, point_segment_distance, segments_intersect
 from .quadrature import QuadraturePoints
@@ -132,11 +133,12 @@ def as_criteria(adapt: Any) -> list[PatchCriterion]:
 
 def named_cells(
     criteria: list[PatchCriterion], patch: ParticlePatch, context: GrowthContext, driver: str
-) -> tuple[np.ndarray, list[str], bool]:
+) -> tuple[np.ndarray, list[str], bool, np.ndarray]:
     """Ask ``criteria`` (collective): the owned FE cells that must become particles (bool per
-    owned cell), the criteria that named any (their ``repr``) and whether any named a cell at
-    all (patch cells included). A criterion's answer of the wrong kind, and a patch that would
-    take the whole mesh, are refused on every rank (naming the criteria and the fix)."""
+    owned cell), the criteria that named any (their ``repr``), whether any named a cell at
+    all (patch cells included), and every owned cell named (patch cells included). A
+    criterion's answer of the wrong kind, and a patch that would take the whole mesh, are
+    refused on every rank (naming the criteria and the fix)."""
     msh = patch.mesh
     comm = patch.comm
     cmap = msh.topology.index_map(msh.topology.dim)
@@ -154,9 +156,10 @@ def named_cells(
     raise_on_all_ranks(comm, check)
     fe = ~np.asarray(patch.in_patch[:n_own], dtype=bool)
     counts = comm.allreduce(np.array([[int((s & fe).sum()), int(s.sum())] for s in answers]))
-    want = np.zeros(n_own, dtype=bool)
+    chosen = np.zeros(n_own, dtype=bool)
     for sel in answers:
-        want |= sel & fe
+        chosen |= sel
+    want = chosen & fe
     by = [repr(c) for c, n in zip(criteria, counts, strict=True) if n[0]]
     added = comm.allreduce(int(want.sum()))
     total, in_patch = cmap.size_global, comm.allreduce(int(np.asarray(patch.cells).size))
@@ -170,11 +173,16 @@ def named_cells(
             )
 
     raise_on_all_ranks(comm, check_size)
-    return want, by, bool(counts[:, 1].sum()) if len(answers) else False
+    return want, by, bool(counts[:, 1].sum()) if len(answers) else False, chosen
 
 
 def _cell_edges(msh: dolfinx.mesh.Mesh) -> np.ndarray:
-    """The owned cells' edges (cells, facets per cell, 2 ends, 2) of a 2D mesh."""
+    """The owned cells' edges (cells, facets per cell, 2 ends, 2) of a 2D mesh (built once per
+    mesh and geometry)."""
+    return cached(msh, "cell_edges", lambda: _build_cell_edges(msh))
+
+
+def _build_cell_edges(msh: dolfinx.mesh.Mesh) -> np.ndarray:
     tdim = msh.topology.dim
     n_own = msh.topology.index_map(tdim).size_local
     msh.topology.create_connectivity(tdim, tdim - 1)
@@ -184,7 +192,9 @@ def _cell_edges(msh: dolfinx.mesh.Mesh) -> np.ndarray:
     per = int(offsets[1] - offsets[0]) if n_own else 3
     facets = np.asarray(c2f.array)[: offsets[n_own]].reshape(n_own, per)
     geo = _compat.entities_to_geometry(msh, tdim - 1, facets.ravel().astype(np.int32))
-    return msh.geometry.x[geo][:, :, :2].reshape(n_own, per, 2, 2)
+    edges = msh.geometry.x[geo][:, :, :2].reshape(n_own, per, 2, 2)
+    edges.setflags(write=False)  # shared by every later call
+    return edges
 
 
 def cells_near(mesh: dolfinx.mesh.Mesh, points: npt.ArrayLike, distance: float) -> np.ndarray:

@@ -116,7 +116,7 @@ class PatchGrowth:
         the event, or ``None``."""
         patch = self.patch
         comm = patch.comm
-        want, by, named = named_cells(self.criteria, patch, context, self.driver)
+        want, by, named, _ = named_cells(self.criteria, patch, context, self.driver)
         self.selected |= named
         added = comm.allreduce(int(want.sum()))
         if added == 0:

@@ -583,7 +583,14 @@ class ConvertingPatch:
             return None
         tic = time.perf_counter()
         cells = np.union1d(np.setdiff1d(patch.cells, np.flatnonzero(release)), np.flatnonzero(want))
-        new = rebuild(cells.astype(np.int32))
+        try:
+            new = rebuild(cells.astype(np.int32))
+        except ValueError as e:  # raised on every rank by the build: give it the event
+            raise ValueError(
+                f"{driver}: the model rebuilt on the changed patch ({added} cell(s) added by "
+                f"{by}, {released} released) at step {model.step}, t = {model.time:.6g}, was "
+                f"refused: {e}"
+            ) from e
         record = convert(model, new, added, cells_released=released)
         record.time_rebuild, record.by = time.perf_counter() - tic, by
         self.conversions.append(record)

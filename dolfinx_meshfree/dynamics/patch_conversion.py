@@ -476,11 +476,12 @@ def convert(
 
 
 class ConvertingPatch:
-    """The patch of a :class:`~dolfinx_meshfree.dynamics.DynamicCrackGrowth` that grows during
-    the run (its ``adapt``): before the first step and before each extension (with the tip the
-    extension will make), the criteria name the FE cells that must be particles; the model is
-    then rebuilt by ``build(crack, cells)`` on the larger patch and the state carried over
-    (:func:`convert`).
+    """The patch of a :class:`~dolfinx_meshfree.dynamics.DynamicCrackGrowth` or an
+    :class:`~dolfinx_meshfree.dynamics.AdaptiveRun` that changes during the run (its
+    ``adapt``): at each check (for crack growth: before the first step and before each
+    extension, with the tip the extension will make), the criteria name the FE cells that must
+    be particles; the model is then rebuilt by the user's ``build(..., cells=...)`` on the
+    changed patch and the state carried over (:func:`convert`).
 
     Args:
         adapt: One criterion or a list (:class:`~dolfinx_meshfree.NearTips`,
@@ -563,9 +564,10 @@ class ConvertingPatch:
         driver: str = "DynamicCrackGrowth",
     ) -> ExplicitDynamics | None:
         """Ask the criteria (with the tips of the model's cracks and ``new_tip``, and the
-        model's current state for field criteria); when FE cells must be particles:
-        ``rebuild(cells)``, the model on the larger patch, and the state converted. Returns the
-        new model or ``None`` (collective)."""
+        model's current state for field criteria); when FE cells must be particles, or (with
+        ``release_after``) particle cells go back to FE: ``rebuild(cells)``, the model on the
+        changed patch, and the state converted. Returns the new model or ``None``
+        (collective)."""
         patch, comm = model.patch, model.comm
         tips = [c.tips for c in patch.cracks if len(c.tips)]
         if new_tip is not None:

@@ -44,6 +44,34 @@ def _model(msh, radius, coupling):
     return mf.ExplicitDynamics.coupled(problem)
 
 
+def strip(coupling, amplitude=None):
+    """The 1D rod of mf.StepLoadedRod as a strip (40 x 4 cells, nu = 0), pulled at x = 0 by the
+    traction -1 (times ``amplitude(t)``), fixed at x = 1, its particles first in
+    0.45 < x < 0.55: ``(build(cells=None), x of the owned cells' midpoints)``."""
+    mat = mf.LinearElastic(1.0, 0.0, plane="strain", rho=1.0)
+    msh = dolfinx.mesh.create_rectangle(
+        COMM, [np.array([0, 0]), np.array([1.0, 0.1])], [40, 4], dolfinx.mesh.CellType.quadrilateral
+    )
+    V = _compat.vector_function_space(msh)
+    left = mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0.0))
+    right = mf.boundary_facets(msh, lambda x: np.isclose(x[0], 1.0))
+
+    def build(cells=None):
+        if cells is None:
+            cells = dolfinx.mesh.locate_entities(
+                msh, 2, lambda x: (x[0] > 0.45 - 1e-9) & (x[0] < 0.55 + 1e-9)
+            )
+        patch = mf.ParticlePatch(msh, cells, 0.025)
+        problem = mf.CoupledElasticity(V, patch, mat, coupling=coupling)
+        dyn = mf.ExplicitDynamics.coupled(problem, fixed_facets=[(right, (0,))])
+        dyn.add_traction(left, lambda x, n: np.tile([-1.0, 0.0], (len(x), 1)), amplitude)
+        return dyn
+
+    n_own = msh.topology.index_map(2).size_local
+    x = dolfinx.mesh.compute_midpoints(msh, 2, np.arange(n_own, dtype=np.int32))[:, 0]
+    return build, x
+
+
 @pytest.mark.parametrize(
     "cell_type, coupling",
     [
@@ -326,26 +354,8 @@ def test_adaptive_run_follows_a_wave(coupling):
     particle rule; checked 2e-5). Master-slave: 0.146 against 0.130 (1.12x), correction 2.0e-4
     (the fit's rows are the masters', whose functions miss the slaves' share; checked
     4e-4)."""
-    mat = mf.LinearElastic(1.0, 0.0, plane="strain", rho=1.0)
-    msh = dolfinx.mesh.create_rectangle(
-        COMM, [np.array([0, 0]), np.array([1.0, 0.1])], [40, 4], dolfinx.mesh.CellType.quadrilateral
-    )
-    V = _compat.vector_function_space(msh)
-    left = mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0.0))
-    right = mf.boundary_facets(msh, lambda x: np.isclose(x[0], 1.0))
     rod = mf.StepLoadedRod(sigma0=-1.0)
-
-    def build(cells=None):
-        if cells is None:
-            cells = dolfinx.mesh.locate_entities(
-                msh, 2, lambda x: (x[0] > 0.45 - 1e-9) & (x[0] < 0.55 + 1e-9)
-            )
-        patch = mf.ParticlePatch(msh, cells, 0.025)
-        problem = mf.CoupledElasticity(V, patch, mat, coupling=coupling)
-        dyn = mf.ExplicitDynamics.coupled(problem, fixed_facets=[(right, (0,))])
-        dyn.add_traction(left, lambda x, n: np.tile([-1.0, 0.0], (len(x), 1)))
-        return dyn
-
+    build, x = strip(coupling)
     run = mf.dynamics.AdaptiveRun(build, mf.FieldAbove("max_principal_stress", 0.5), 5)
     dyn = run.run(0.8)
     assert len(run.conversions) >= 5
@@ -356,9 +366,7 @@ def test_adaptive_run_follows_a_wave(coupling):
             <= {"lagrange": 1e-13, "ramp": 6e-3, "bridging": 2e-5, "master-slave": 4e-4}[coupling]
         )
         assert c.momentum_reaction <= 1e-13  # no essential condition on the patch's border
-    n_own = msh.topology.index_map(2).size_local
-    x = dolfinx.mesh.compute_midpoints(msh, 2, np.arange(n_own, dtype=np.int32))[:, 0]
-    inside = dyn.patch.in_patch[:n_own]
+    inside = dyn.patch.in_patch[: x.size]
     front = run.conversions[-1].time  # c = 1
     assert np.all(inside[x < front - 0.05])
     assert not np.any(inside[(x > 0.8 + 0.025) & ~((x > 0.45) & (x < 0.55))])
@@ -379,33 +387,12 @@ def test_a_patch_that_follows_a_pulse():
     at most 1.5e-2 of the momentum scale, checked 3e-2). The velocity's relative L2 error
     against the closed form (two steps of mf.StepLoadedRod) is 0.450, against 0.460 for the
     growing patch and 0.403 for the fixed one (checked within 1.2x of the growing patch's)."""
-    mat = mf.LinearElastic(1.0, 0.0, plane="strain", rho=1.0)
-    msh = dolfinx.mesh.create_rectangle(
-        COMM, [np.array([0, 0]), np.array([1.0, 0.1])], [40, 4], dolfinx.mesh.CellType.quadrilateral
-    )
-    V = _compat.vector_function_space(msh)
-    left = mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0.0))
-    right = mf.boundary_facets(msh, lambda x: np.isclose(x[0], 1.0))
     rod, pulse = mf.StepLoadedRod(sigma0=-1.0), 0.15
 
     def exact(x, t):
         return rod.velocity(x, t) - (rod.velocity(x, t - pulse) if t > pulse else 0.0)
 
-    def build(cells=None):
-        if cells is None:
-            cells = dolfinx.mesh.locate_entities(
-                msh, 2, lambda x: (x[0] > 0.45 - 1e-9) & (x[0] < 0.55 + 1e-9)
-            )
-        patch = mf.ParticlePatch(msh, cells, 0.025)
-        problem = mf.CoupledElasticity(V, patch, mat, coupling="lagrange")
-        dyn = mf.ExplicitDynamics.coupled(problem, fixed_facets=[(right, (0,))])
-        dyn.add_traction(
-            left,
-            lambda x, n: np.tile([-1.0, 0.0], (len(x), 1)),
-            amplitude=lambda t: 1.0 if t < pulse else 0.0,
-        )
-        return dyn
-
+    build, x = strip("lagrange", amplitude=lambda t: 1.0 if t < pulse else 0.0)
     criterion = mf.FieldAbove("max_principal_stress", 0.5)
     following = mf.dynamics.AdaptiveRun(build, criterion, 5, release_after=3)
     dyn = following.run(0.8)
@@ -416,9 +403,7 @@ def test_a_patch_that_follows_a_pulse():
         assert c.mass_error <= 1e-13 and c.momentum_error <= 1e-13
         assert c.momentum_correction <= 3e-2
     assert dyn.particles.num_particles < 0.6 * grown.particles.num_particles
-    n_own = msh.topology.index_map(2).size_local
-    x = dolfinx.mesh.compute_midpoints(msh, 2, np.arange(n_own, dtype=np.int32))[:, 0]
-    inside = dyn.patch.in_patch[:n_own]
+    inside = dyn.patch.in_patch[: x.size]
     assert not np.any(inside[x < 0.3]) and np.all(inside[(x > 0.45) & (x < 0.55)])
     e_following, e_growing = dyn.velocity_error(exact), grown.velocity_error(exact)
     assert e_following <= 1.2 * e_growing

@@ -13,13 +13,17 @@ from dataclasses import dataclass
 
 import dolfinx
 import numpy as np
+import scipy.sparse as sp
+from mpi4py import MPI
 from petsc4py import PETSc
 
+from ..approx.fe_points import tabulate_in_cells
 from ..approx.mls import MLS
 from ..couplings.bridging import BridgingBand
 from ..couplings.ramp import RampInterface
 from ..geometry.particles import ParticleSet
 from ..geometry.patch import ParticlePatch
+from ..parallel import raise_on_all_ranks
 from ..physics import user_functions
 from .system import Field
 
@@ -84,6 +88,23 @@ class Discretisation:
     def cracks(self) -> list:
         """The cracks cutting the particles' approximation (:func:`approximation_cracks`)."""
         return approximation_cracks(self.patch, self.mls)
+
+    def blended_tables(
+        self, points: np.ndarray, cells: np.ndarray, comm: MPI.Comm
+    ) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+        """The FE part (points x local nodes of ``V``) and the particle part (points x
+        particles) of the blended functions at points of local blended cells: the ramps'
+        ``(1 - R) N`` and ``R phi`` (Belytschko et al. 1995, eq. 3.12), bridging's
+        ``(1 - alpha) N`` and ``alpha phi`` (Rabczuk et al. 2006, eq. 49). Collective."""
+        if isinstance(self.interface, RampInterface):  # columns [local FE nodes | particles]
+            t = raise_on_all_ranks(comm, lambda: self.interface.table(points, cells, 0))
+            n_fe = self.V.dofmap.index_map.size_local + self.V.dofmap.index_map.num_ghosts
+            t = t.values.tocsc()
+            return t[:, :n_fe].tocsr(), t[:, n_fe:].tocsr()
+        a = self.interface.alpha_at(points, cells)
+        t_fe = tabulate_in_cells(self.V, points, cells, 0).values
+        t_p = raise_on_all_ranks(comm, lambda: self.mls.tabulate(points, 0)).values
+        return (sp.diags(1.0 - a) @ t_fe).tocsr(), (sp.diags(a) @ t_p).tocsr()
 
     def blended_cells(self) -> np.ndarray | None:
         """bool per local cell: a ramp interface cell or a bridging band cell (else ``None``)."""

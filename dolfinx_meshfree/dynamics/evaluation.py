@@ -155,18 +155,9 @@ class FieldEvaluator:
             t = raise_on_all_ranks(self.comm, lambda: d.mls.tabulate(pts, 0)).values
             add(parts_p, pure_p, t)
         if blended is not None:
-            pts, cells = q.points[mix], q.cells[mix]
-            if hasattr(d.interface, "in_interface"):  # ramp: [FE nodes | particles] columns
-                t = raise_on_all_ranks(self.comm, lambda: d.interface.table(pts, cells, 0))
-                t = t.values.tocsc()
-                add(parts_fe, mix, t[:, :n_fe])
-                add(parts_p, mix, t[:, n_fe:])
-            else:  # bridging band: (1 - alpha) u_FE + alpha u_P
-                a = d.interface.alpha_at(pts, cells)
-                t_fe = tabulate_in_cells(d.V, pts, cells, 0).values
-                t_p = raise_on_all_ranks(self.comm, lambda: d.mls.tabulate(pts, 0)).values
-                add(parts_fe, mix, sp.diags(1.0 - a) @ t_fe)
-                add(parts_p, mix, sp.diags(a) @ t_p)
+            t_fe, t_p = d.blended_tables(q.points[mix], q.cells[mix], self.comm)
+            add(parts_fe, mix, t_fe)
+            add(parts_p, mix, t_p)
 
         def assemble(parts: list, ncols: int) -> sp.csr_matrix | None:
             if not ncols:

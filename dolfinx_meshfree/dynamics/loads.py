@@ -20,7 +20,6 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from ..approx.fe_points import tabulate_in_cells
-from ..couplings.ramp import RampInterface
 from ..geometry.cut_cells import cut_facet_quadrature
 from ..geometry.quadrature import DYNAMIC_FACET_DEGREE, QuadraturePoints, facet_quadrature
 from ..parallel import raise_on_all_ranks
@@ -123,7 +122,7 @@ class ExternalLoads:
         if blended is not None:  # collective: every rank tabulates (maybe no point)
             q = facet_quadrature(msh, facets[mixed], deg)
             t = values(q)
-            fe_tab, p_tab = self._blended_tables(q)
+            fe_tab, p_tab = d.blended_tables(q.points, q.cells, self.comm)
             blend_fe = fe_load(fe_tab, q, t)
             blend_p = load_vector(p_tab, q.weights, t)
         parts = []
@@ -151,21 +150,6 @@ class ExternalLoads:
                     vals = vals + blend_p
                 parts.append((d.particles.petsc_dofs(gdim).ravel(), vals))
         self._add(parts, amplitude)
-
-    def _blended_tables(self, q: QuadraturePoints) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-        """The FE (points x local nodes) and particle (points x particles) parts of the blended
-        functions at points of the ramps' interface cells or bridging's band cells
-        (collective)."""
-        d = self.disc
-        n_fe = d.V.dofmap.index_map.size_local + d.V.dofmap.index_map.num_ghosts
-        if isinstance(d.interface, RampInterface):  # columns [local FE nodes | particles]
-            t = raise_on_all_ranks(self.comm, lambda: d.interface.table(q.points, q.cells, 0))
-            t = t.values.tocsc()
-            return t[:, :n_fe].tocsr(), t[:, n_fe:].tocsr()
-        a = d.interface.alpha_at(q.points, q.cells)
-        t_fe = tabulate_in_cells(d.V, q.points, q.cells, 0).values
-        t_p = raise_on_all_ranks(self.comm, lambda: d.mls.tabulate(q.points, 0)).values
-        return sp.diags(1.0 - a) @ t_fe, sp.diags(a) @ t_p
 
     def add_body_force(self, force: VectorFunction, amplitude: Amplitude | None = None) -> None:
         """``amplitude(t) * int b . v`` of a body force ``b(x)`` per unit volume (points

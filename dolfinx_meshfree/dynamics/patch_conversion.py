@@ -260,6 +260,15 @@ def _check(old: ExplicitDynamics, new: ExplicitDynamics) -> None:
         )
 
 
+def _consistent_mass(
+    rules: list[tuple[sp.csr_matrix, np.ndarray]], perm: np.ndarray, n: int
+) -> sp.coo_matrix:
+    """``sum_r T_r^T W_r T_r`` of rules given as (table, weights), rows and columns in PETSc
+    particle numbering (``perm``; this rank's share)."""
+    M = sum((t.T.multiply(w[None, :]) @ t).tocoo() for t, w in rules).tocoo()
+    return sp.coo_matrix((M.data, (perm[M.row], perm[M.col])), shape=(n, n))
+
+
 def _fit(old: ExplicitDynamics, new: ExplicitDynamics, stabilisation: float) -> None:
     """The new particle coefficients of ``d_n`` and ``v_{n-1/2}``: the L2 projection of the old
     fields on the new mass rule (module docstring); with the ramps, of the old fields less the
@@ -279,8 +288,7 @@ def _fit(old: ExplicitDynamics, new: ExplicitDynamics, stabilisation: float) -> 
             (qi, ti[:, n_loc:].tocsr(), np.asarray(qi.weights, dtype=float), ti[:, :n_loc])
         )
     perm = P.petsc_index
-    M = sum((t.T.multiply(wq[None, :]) @ t).tocoo() for _, t, wq, _ in rules).tocoo()
-    M = sp.coo_matrix((M.data, (perm[M.row], perm[M.col])), shape=(n, n))
+    M = _consistent_mass([(t, wq) for _, t, wq, _ in rules], perm, n)
     layout = P.dof_layout(1)
     lumped = d0 = None
     if stabilisation > 0:
@@ -340,9 +348,9 @@ def _fit_reduced(old: ExplicitDynamics, new: ExplicitDynamics) -> None:
     Tpf, S = new.reduction
     w = np.asarray(q.weights, dtype=float)
     perm = P.petsc_index
-    M = (table.T.multiply(w[None, :]) @ table).tocoo()
-    rows = (gdim * perm[M.row][:, None] + np.arange(gdim)).ravel()
-    cols = (gdim * perm[M.col][:, None] + np.arange(gdim)).ravel()
+    M = _consistent_mass([(table, w)], perm, n)
+    rows = (gdim * M.row[:, None] + np.arange(gdim)).ravel()
+    cols = (gdim * M.col[:, None] + np.arange(gdim)).ravel()
     Mdof = sp.coo_matrix((np.repeat(M.data, gdim), (rows, cols)), shape=(gdim * n, gdim * n))
     layout = P.dof_layout(gdim)
     M_full = create_aij(comm, Mdof, layout, layout)
@@ -446,7 +454,8 @@ def convert(
     gdim = new.mesh.geometry.dim
     back = (new.active[0] & ~old.active[0]).reshape(-1, gdim).any(axis=1)  # FE again
     returned = new.comm.allreduce(int(back.sum()))
-    nodes = new.V.tabulate_dof_coordinates()[: back.size][back, :gdim]
+    if returned:
+        nodes = new.V.tabulate_dof_coordinates()[: back.size][back, :gdim]
     for src, dst in ((so.u, sn.u), (so.v, sn.v)):
         src[0].copy(dst[0])
         dst[0].array[~new.active[0]] = 0.0  # inside the new patch: massless, at rest

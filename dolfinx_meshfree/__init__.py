@@ -60,6 +60,7 @@ from .geometry.patch_criteria import (
 )
 from .geometry.quadrature import boundary_facets, cell_quadrature, facet_quadrature
 from .geometry.smoothing import INTEGRATIONS
+from .geometry.submesh import submesh
 from .io import DynamicsWriter, ProgressBar, read_particles
 from .physics.cohesive import LinearCohesive
 from .physics.constitutive import Material, NeoHookean, SaintVenantKirchhoff
@@ -203,6 +204,7 @@ __all__ = [
     "solve_forms",
     "solve_large",
     "sph_cubic_spline",
+    "submesh",
     "tabulate_fe_basis",
     "tabulate_in_cells",
     "work_per_rank",

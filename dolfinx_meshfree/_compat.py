@@ -49,6 +49,7 @@ __all__ = [
     "colliding_cells",
     "create_expression",
     "create_form",
+    "create_mesh_ghosted",
     "create_mesh_partitioned",
     "dirichlet_values",
     "dofmap_array",
@@ -231,6 +232,24 @@ def create_mesh_partitioned(
 
     mode = _mesh.GhostMode.shared_facet if ghosted else _mesh.GhostMode.none
     return _mesh.create_mesh(like.comm, cells, x, domain, mode, partitioner_05)
+
+
+def create_mesh_ghosted(like: _mesh.Mesh, cells: _np.ndarray, x: _np.ndarray) -> _mesh.Mesh:
+    """A mesh of ``like``'s cell type and coordinate element from ``cells`` (global node
+    indices, (n, nodes)) and ``x`` ((num_nodes, gdim), in global node order), partitioned by
+    DOLFINx's default partitioner with ghost cells across facets (shared_facet), as
+    ``create_rectangle`` makes them (collective; any rank may pass any part of the cells)."""
+    domain = like.ufl_domain()
+    cells = _np.ascontiguousarray(cells, dtype=_np.int64)
+    x = _np.ascontiguousarray(x, dtype=float)
+    if MODERN:
+        partitioner = None
+        if like.comm.size > 1:
+            import dolfinx.cpp as _cpp
+
+            partitioner = _cpp.mesh.create_cell_partitioner(_mesh.GhostMode.shared_facet, 2)
+        return _mesh.create_mesh(like.comm, cells, domain, x, partitioner=partitioner)
+    return _mesh.create_mesh(like.comm, cells, x, domain, _mesh.GhostMode.shared_facet)
 
 
 def create_form(form: _UFLForm, jit_options: dict | None = None) -> _Form:

@@ -271,3 +271,18 @@ def test_bench_balance_smoke():
     balanced = next(r for r in coupled if r["balance"])
     assert balanced["largest_work_share"] <= default["largest_work_share"] + 1e-12
     assert balanced["largest_work_share"] < 0.6
+
+
+def test_bar_impact_demo_table_and_json(shared_dir):
+    """demos/bar_impact.py at 10 cells (fe, ramp): it passes its own checks and writes one row
+    per method with the figures it checked."""
+    out = shared_dir / "bars.json"
+    demo = load_demo("bar_impact")
+    assert demo.main(["--method", "fe", "ramp", "--cells", "10", "--json", str(out)]) == 0
+    MPI.COMM_WORLD.Barrier()
+    data = json.loads(out.read_text())
+    assert [r["method"] for r in data["rows"]] == ["fe", "ramp"]
+    for row in data["rows"]:
+        for key, margin in data["margins"].items():
+            assert abs(row[key]) < margin
+        assert row["parted"] and 0.3 < row["critical"] / row["critical_without"] < 0.5

@@ -50,6 +50,7 @@ exact solutions of the rod benchmarks in :mod:`~dolfinx_meshfree.verification.wa
 from __future__ import annotations
 
 from .adaptive_run import AdaptiveRun
+from .body_contact import BodyContact, BodyContactSystem
 from .crack_contact import ContactSystem, CrackContact
 from .crack_growth import DynamicCrackGrowth, GrowthCheck, rayleigh_speed
 from .energy import EnergyRecord
@@ -67,6 +68,8 @@ __all__ = [
     "DYNAMICS_METHODS",
     "FINITE_STRAIN_DYNAMICS",
     "AdaptiveRun",
+    "BodyContact",
+    "BodyContactSystem",
     "ContactSystem",
     "Conversion",
     "CrackContact",

@@ -121,17 +121,29 @@ class FieldEvaluator:
 
     def quadrature_tables(self, degree: int) -> Tables:
         """Cell quadrature and the maps ``(A_FE, A_P)`` (nq x local FE nodes, nq x particles)
-        from FE nodal values and particle coefficients to the field at its points: FE on FE
-        cells, MLS on particle cells, the ramp's blended functions on interface cells and
-        ``(1 - alpha) N, alpha phi`` on bridging band cells (cached)."""
-        if degree in self._tables:
-            return self._tables[degree]
+        from FE nodal values and particle coefficients to the field at its points
+        (:meth:`point_tables`; cached)."""
+        if degree not in self._tables:
+            q = cell_quadrature(self.disc.mesh, degree)
+            self._tables[degree] = (q, *self.point_tables(q.points, q.cells))
+        return self._tables[degree]
+
+    def point_tables(
+        self, points: np.ndarray, cells: np.ndarray
+    ) -> tuple[sp.csr_matrix | None, sp.csr_matrix | None]:
+        """The maps ``(A_FE, A_P)`` (m x local FE nodes, m x particles; ``None`` for a field
+        the model lacks) from FE nodal values and particle coefficients to the field at points
+        (m, gdim) of this rank's local ``cells`` (m,): FE on FE cells, MLS on particle cells,
+        the ramp's blended functions on interface cells and ``(1 - alpha) N, alpha phi`` on
+        bridging band cells. Collective (the MLS tabulation's errors are raised on every
+        rank)."""
         d = self.disc
-        q = cell_quadrature(d.mesh, degree)
-        nq = len(q)
-        on_p = d.on_particles(q.cells)
+        points = np.asarray(points, dtype=float).reshape(-1, d.gdim)
+        cells = np.asarray(cells, dtype=np.int32)
+        nq = len(cells)
+        on_p = d.on_particles(cells)
         blended = d.blended_cells()
-        mixed = blended[q.cells] if blended is not None else np.zeros(nq, dtype=bool)
+        mixed = blended[cells] if blended is not None else np.zeros(nq, dtype=bool)
         n_fe = d.V.dofmap.index_map.size_local + d.V.dofmap.index_map.num_ghosts if d.V else 0
         n_p = d.particles.num_particles if d.particles is not None else 0
         parts_fe: list = []
@@ -145,17 +157,14 @@ class FieldEvaluator:
         pure_p = np.flatnonzero(on_p & ~mixed)
         mix = np.flatnonzero(mixed)
         if d.V is not None and pure_fe.size:
-            add(
-                parts_fe,
-                pure_fe,
-                tabulate_in_cells(d.V, q.points[pure_fe], q.cells[pure_fe], 0).values,
-            )
+            t = tabulate_in_cells(d.V, points[pure_fe], cells[pure_fe], 0).values
+            add(parts_fe, pure_fe, t)
         if d.mls is not None:
-            pts = q.points[pure_p]
+            pts = points[pure_p]
             t = raise_on_all_ranks(self.comm, lambda: d.mls.tabulate(pts, 0)).values
             add(parts_p, pure_p, t)
         if blended is not None:
-            t_fe, t_p = d.blended_tables(q.points[mix], q.cells[mix], self.comm)
+            t_fe, t_p = d.blended_tables(points[mix], cells[mix], self.comm)
             add(parts_fe, mix, t_fe)
             add(parts_p, mix, t_p)
 
@@ -165,8 +174,7 @@ class FieldEvaluator:
             r, c, v = (np.concatenate([p[i] for p in parts] + [np.zeros(0)]) for i in range(3))
             return sp.csr_matrix((v, (r.astype(np.int64), c.astype(np.int64))), shape=(nq, ncols))
 
-        self._tables[degree] = (q, assemble(parts_fe, n_fe), assemble(parts_p, n_p))
-        return self._tables[degree]
+        return assemble(parts_fe, n_fe), assemble(parts_p, n_p)
 
     def at_quadrature(
         self, vecs: Sequence[PETSc.Vec], degree: int = 5

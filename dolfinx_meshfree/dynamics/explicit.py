@@ -41,6 +41,7 @@ from ..geometry.patch import ParticlePatch
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic
 from ..statics.coupled import CoupledElasticity
+from .body_contact import BodyContact, with_body_contact
 from .builders import Model, build_coupled, build_efg, build_fe
 from .central_difference import CentralDifference
 from .conditions import held_velocities
@@ -368,6 +369,36 @@ class ExplicitDynamics(StateQueries):
         :meth:`ExternalLoads.add_traction
         <dolfinx_meshfree.dynamics.loads.ExternalLoads.add_traction>` (collective)."""
         self.loads.add_traction(facets, traction, amplitude)
+
+    def add_contact(
+        self,
+        surface_a: npt.ArrayLike,
+        surface_b: npt.ArrayLike,
+        contact: BodyContact | None = None,
+    ) -> None:
+        """Frictionless contact between two bodies of the model (2D; node-to-segment penalty,
+        :mod:`~dolfinx_meshfree.dynamics.body_contact`): ``surface_a`` and ``surface_b`` are
+        owned exterior facets (e.g. ``mf.boundary_facets(mesh, marker)``) of two pieces of the
+        mesh that share no vertex, each discretised as the model discretises it (FE, particle
+        or blended cells). The contact force joins the internal force, its penalty energy the
+        strain energy of the energy records, and the stable step is bounded again with the
+        contact's stiffness (:meth:`critical_time_step`). Several pairs may be added.
+        Collective.
+
+        Args:
+            contact: The options (:class:`~dolfinx_meshfree.dynamics.BodyContact`; default:
+                penalty ``E / h``, two-pass).
+
+        Raises:
+            ValueError: facets that are not owned exterior facets, an empty surface, surfaces
+                that share a vertex, a particle whose support reaches both surfaces, a 3D mesh
+                (on every rank).
+        """
+        contact = BodyContact() if contact is None else contact
+        E = getattr(self.material, "E", None)
+        system = with_body_contact(self.system, self.evaluator, E, surface_a, surface_b, contact)
+        self.system = self.stepper.system = self.bound.system = system
+        self.bound.invalidate()
 
     def add_body_force(self, force: VectorFunction, amplitude: Amplitude | None = None) -> None:
         """External load ``amplitude(t) * int b . v`` of a body force ``b(x)`` per unit volume

@@ -1,62 +1,73 @@
-"""Contact between bodies in explicit dynamics (2D): a node-to-segment penalty on the normal gap,
-frictionless, between two surfaces of one model (issue 27, item 2).
+"""Contact between bodies in explicit dynamics, 2D and 3D: a node-to-facet penalty on the normal
+gap, frictionless, between two surfaces of one model (issue 27, item 2).
 
 Two bodies are two pieces of one mesh (cells that share no vertex), each discretised as the
 model discretises it: FE cells, particle cells, blended cells. A contact pair is two sets of
-exterior facets, ``surface_a`` and ``surface_b``. Their vertices ``X_v`` move with the model's
-field there, ``y_v = X_v + u_h(X_v)``: FE nodal values on FE cells, the MLS approximation on
-particle cells, the blended functions on the ramps' interface cells and bridging's band, so
-that ``y = X + A d`` with ``A`` the model's evaluation operator at the vertices
+exterior facets, ``surface_a`` and ``surface_b``: segments in 2D, triangles in 3D (a
+quadrilateral face is split in two along the diagonal from its vertex first in coordinate
+order, the same on every partition). Their vertices ``X_v`` move with the model's field there,
+``y_v = X_v + u_h(X_v)``: FE nodal values on FE cells, the MLS approximation on particle cells,
+the blended functions on the ramps' interface cells and bridging's band, so that ``y = X + A d``
+with ``A`` the model's evaluation operator at the vertices
 (:meth:`~dolfinx_meshfree.dynamics.evaluation.FieldEvaluator.point_tables`; master–slave
 expands its slaves, ``A_P (T_PF d_FE + S d_M)``, Rabczuk et al. 2006, eq. 27).
 
-For a slave vertex ``s`` and a segment ``(a, b)`` of the other surface, at the current positions,
+For a slave vertex ``s`` and a facet of the other surface with vertices ``y_i``, at the current
+positions, the projection ``y_s = sum_i w_i y_i + g n`` gives the facet's weights ``w``
+(``(1 - xi, xi)`` on a segment ``(a, b)``, ``xi = (y_s - y_a) . t / t . t`` with ``t = y_b -
+y_a``; barycentric on a triangle) and the normal gap
 
 .. math::
-    \\xi = \\frac{(y_s - y_a) \\cdot t}{t \\cdot t}, \\quad t = y_b - y_a, \\qquad
-    g = (y_s - y_a - \\xi t) \\cdot n, \\quad n = \\frac{(t_2, -t_1)}{|t|},
+    g = \\Big(y_s - \\sum_i w_i y_i\\Big) \\cdot n, \\qquad
+    n = \\frac{(t_2, -t_1)}{|t|} \\ \\text{(2D)}, \\quad
+    n = \\frac{(y_b - y_a) \\times (y_c - y_a)}{|\\cdot|} \\ \\text{(3D)},
 
-``n`` the segment's outward normal (the segment is oriented at build time so that it points
-away from its cell). The slave is in contact with the segment when ``-depth < g < 0`` and
-``xi`` lies in ``[-0.05, 1.05]``; of several such segments the one with the largest ``g`` (the
-nearest surface) is taken. The penalty energy and its force (the sign of ``M a + f^int =
-f^ext``, added to the internal force) are
+``n`` the facet's outward normal (the facet is oriented at build time so that it points away
+from its cell). The slave is in contact with the facet when ``-depth < g < 0`` and every weight
+is ``>= -0.05`` (beyond the facet the weights are clipped to ``>= 0`` and scaled to sum 1); of
+several such facets the one with the largest ``g`` (the nearest surface) is taken, and of
+facets whose gaps agree within ``TIE * depth`` (a vertex on a vertex or an edge of the other
+surface) the first in a canonical order, so that every partition takes the same. The penalty
+energy and its force (the sign of ``M a + f^int = f^ext``, added to the internal force) are
 
 .. math::
     E_c = \\tfrac12 \\sum_s k_s \\min(g_s, 0)^2, \\qquad
-    f_s = k_s g_s n, \\quad f_a = -(1 - \\xi) k_s g_s n, \\quad f_b = -\\xi k_s g_s n,
+    f_s = k_s g_s n, \\quad f_i = -w_i k_s g_s n,
 
 in the vertices' displacement space, then ``A^T f`` on the dofs. At a closest point inside the
-segment (``0 < xi < 1``), ``∂g/∂y = (n, -(1 - xi) n, -xi n)`` exactly (the variations of ``xi``
-and ``n`` multiply ``t . n = 0`` and ``n . dn = 0``), so the force is the gradient of ``E_c``
-(beyond a segment's end, within the 5 % margin, ``xi`` is clipped and it is not quite):
-central differences conserve ``kinetic + strain + E_c`` up to the non-smoothness of the
-contact's start and end (measured in ``tests/test_body_contact.py``). ``k_s = k w_s``, ``k``
-the penalty per unit area (Pa/m) and ``w_s`` the slave's tributary length (half its two
-segments). With ``two_pass`` (default)
-each surface is slave to the other in turn, so that a coarse surface's segments cannot pass
-between a fine surface's vertices unnoticed, whatever the two meshes' spacings.
+facet, ``∂g/∂y = (n, -w_1 n, ..., -w_d n)`` exactly (the variations of ``w`` and ``n`` multiply
+the facet's tangents' products with ``n``, zero, and ``n . dn = 0``), so the force is the
+gradient of ``E_c`` (beyond the facet, within the 5 % margin, the weights are clipped and it is
+not quite): central differences conserve ``kinetic + strain + E_c`` up to the non-smoothness of
+the contact's start and end (measured in ``tests/test_body_contact.py``). ``k_s = k w_s``,
+``k`` the penalty per unit area (Pa/m) and ``w_s`` the slave's tributary measure (half its two
+segments' lengths; a third of its triangles' areas). With ``two_pass`` (default) each surface
+is slave to the other in turn, so that a coarse surface's facets cannot pass between a fine
+surface's vertices unnoticed, whatever the two meshes' spacings.
 
-The stable step sees the contact (:meth:`BodyContactSystem.tangent`). A closed pair adds
-``k_s b b^T`` with ``b = (1, -(1 - xi), -xi) (x) n``; by Cauchy–Schwarz with weights
-proportional to ``(1, 1 - xi, xi)``, ``b b^T <= 2 diag(1, 1 - xi, xi) (x) I``. Summed over the
-pairs that can close, the contact stiffness in vertex space is at most ``diag(c)`` in the PSD
-order, per pass ``c_s += 2 k_s`` on a slave and ``c_m += 2 k (L_m + 2 l)`` on a master vertex
-(``L_m`` the length of its segments, ``l`` the other surface's longest segment: the slave length
-that can press on them when the faces meet face to face). So the step is bounded with ``K +
-A^T diag(c) A``, safe for every contact state: measured on two bars of 10 cells pressed together,
-the largest frequency of ``M^-1 (K + K_c)`` is 32.0, the bound 56.3, the bound without contact
-22.8 (``tests/test_body_contact.py``).
+The stable step sees the contact (:meth:`BodyContactSystem.tangent`). A closed pair adds ``k_s
+b b^T`` with ``b = (1, -w_1, ..., -w_d) (x) n``; by Cauchy–Schwarz with weights proportional to
+``(1, w_1, ..., w_d)`` (they sum to 2), ``b b^T <= 2 diag(1, w_1, ..., w_d) (x) I``. Summed over
+the pairs that can close, the contact stiffness in vertex space is at most ``diag(c)`` in the
+PSD order, per pass ``c_s += 2 k_s`` on a slave and ``c_m += 2 k P_m`` on a master vertex, ``P_m``
+the slave measure that can press on its facets when the faces meet face to face: the facets'
+length widened by the other surface's longest segment at each end (2D); the facets' area as a
+disc whose radius is widened by the other surface's longest edge (3D). So the step is bounded
+with ``K + A^T diag(c) A``, safe for every contact state. Measured on bars pressed together
+(``tests/test_body_contact.py``): the largest frequency of ``M^-1 (K + K_c)`` is 32.0 (2D,
+10 cells) and 14.1 (3D, 4 hexahedra), the bound 56.3 and 54.2, the bound without contact 22.8
+and 13.1.
 
-The closest points are found by a compiled loop (:func:`closest_points_compiled`, numba) over
-every (slave, segment) pair up to :data:`EVERY_PAIR` pairs, beyond that over the
-:data:`CANDIDATES` nearest segments of a KD-tree (:func:`candidates`); without numba,
-:func:`closest_points` (numpy, the reference) on the KD-tree's candidates.
+The closest points are found by a compiled loop (:func:`closest_points_compiled`,
+:func:`closest_points_compiled_3d`, numba) over every (slave, facet) pair up to
+:data:`EVERY_PAIR` pairs, beyond that over the :data:`CANDIDATES` nearest facets of a KD-tree
+(:func:`candidates`); without numba, :func:`closest_points` (numpy, the reference) on the
+KD-tree's candidates.
 
-Left out: friction, 3D (node-to-face), self-contact, particles of two bodies against each
-other (their MLS supports would have to stop at the bodies' gap: refused when one particle's
-function reaches both surfaces), and contact surfaces that change during a run (an adaptive
-patch rebuilds the model: add the contact in the user's ``build``).
+Left out: friction, self-contact, particles of two bodies against each other (their MLS
+supports would have to stop at the bodies' gap: refused when one particle's function reaches
+both surfaces), and contact surfaces that change during a run (an adaptive patch rebuilds the
+model: add the contact in the user's ``build``).
 """
 
 from __future__ import annotations
@@ -90,20 +101,24 @@ __all__ = [
     "candidates",
     "closest_points",
     "closest_points_compiled",
+    "closest_points_compiled_3d",
     "contact_surfaces",
     "evaluation_operators",
     "vertex_coordinates",
     "with_body_contact",
 ]
 
-#: How far beyond a segment's ends (in fractions of it) a slave still projects onto it.
+#: How far beyond a facet (in its weights) a slave still projects onto it.
 XI_MARGIN = 0.05
-#: Nearest segments (by midpoint) examined per slave vertex.
+#: Nearest facets (by centroid) examined per slave vertex.
 CANDIDATES = 8
-#: Up to this many (slave, segment) pairs the compiled kernel examines every pair (no search:
+#: Up to this many (slave, facet) pairs the compiled kernel examines every pair (no search:
 #: 1.6 us for 21 x 20 pairs, against 100 us for the tree's candidates).
 EVERY_PAIR = 100_000
-#: The candidate array that makes the compiled kernel take every segment.
+#: Gaps within ``TIE * depth`` of the largest are alike: of their facets the first in order is
+#: taken (the same on every partition).
+TIE = 1e-9
+#: The candidate array that makes the compiled kernels take every facet.
 EVERY = np.full((1, 1), -1, dtype=np.int64)
 
 
@@ -113,18 +128,19 @@ class BodyContact:
 
     Attributes:
         factor: The penalty ``k = factor * E / h`` per unit area (Pa/m) when ``penalty`` is
-            ``None``, ``h`` the median length of the surfaces' segments and ``E`` the
+            ``None``, ``h`` the median of the surfaces' facets' longest edges and ``E`` the
             material's Young's modulus: under a contact pressure ``p`` the surfaces
             interpenetrate by ``p / k = (p / E) h / factor`` (two-pass: half that), the elastic
             shortening of one cell at that stress over ``factor``. The default 1 keeps the
             penetration at the cell's own strain and lowers the stable step by the factor
             printed in ``critical_time_step`` (measured on the bars of
-            ``demos/bar_impact.py``: 0.39-0.41x the step without contact).
+            ``demos/bar_impact.py``: 0.39-0.41x the step without contact in 2D, 0.20-0.24x
+            in 3D).
         penalty: ``k`` itself (Pa/m), or ``None``.
-        two_pass: Each surface's vertices against the other's segments (default), or only
-            ``surface_a``'s vertices against ``surface_b``'s segments.
+        two_pass: Each surface's vertices against the other's facets (default), or only
+            ``surface_a``'s vertices against ``surface_b``'s facets.
         depth: The deepest penetration still taken for contact (m); ``None``: the longest
-            segment of the two surfaces. A vertex deeper than that behind a segment is taken to
+            facet edge of the two surfaces. A vertex deeper than that behind a facet is taken to
             be elsewhere (the far side of a thin body).
     """
 
@@ -154,33 +170,57 @@ class ContactSurfaces:
     """The two surfaces of a contact pair, replicated on every rank.
 
     Attributes:
-        points: Reference positions of the surfaces' vertices (nv, 2), in the order of the
+        points: Reference positions of the surfaces' vertices (nv, gdim), in the order of the
             rows of the evaluation operator (each rank's owned vertices in turn).
-        segments: (ns, 2) vertex indices of each segment, ordered so that ``(t_2, -t_1)``
-            points out of its body.
-        body: 0 (``surface_a``) or 1 (``surface_b``) per segment. vertex_body: the same per
+        facets: (nf, gdim) vertex indices of each facet: segments in 2D, triangles in 3D (a
+            quadrilateral face split in two), ordered so that their normal (:func:`normals`)
+            points out of the body.
+        body: 0 (``surface_a``) or 1 (``surface_b``) per facet. vertex_body: the same per
             vertex.
         owned: This rank's rows ``[start, end)`` of the vertices.
     """
 
     points: np.ndarray
-    segments: np.ndarray
+    facets: np.ndarray
     body: np.ndarray
     vertex_body: np.ndarray
     owned: tuple[int, int]
 
-    def lengths(self) -> np.ndarray:
-        """Reference length of each segment."""
-        p = self.points[self.segments]
-        return np.linalg.norm(p[:, 1] - p[:, 0], axis=1)
+    def measures(self) -> np.ndarray:
+        """Reference length (2D) or area (3D) of each facet."""
+        return np.linalg.norm(normals(self.points, self.facets, unit=False), axis=1)
+
+    def sizes(self) -> np.ndarray:
+        """The longest edge of each facet (its length in 2D)."""
+        p = self.points[self.facets]
+        edges = [p[:, (i + 1) % p.shape[1]] - p[:, i] for i in range(p.shape[1])]
+        if p.shape[1] == 2:
+            edges = edges[:1]
+        return np.max([np.linalg.norm(e, axis=1) for e in edges], axis=0)
 
     def tributary(self) -> np.ndarray:
-        """Half the length of the segments at each vertex (the slave's weight ``w_s``)."""
+        """The share of the facets at each vertex (the slave's weight ``w_s``): half the
+        segments' lengths in 2D, a third of the triangles' areas in 3D."""
         w = np.zeros(len(self.points))
-        half = 0.5 * self.lengths()
-        np.add.at(w, self.segments[:, 0], half)
-        np.add.at(w, self.segments[:, 1], half)
+        share = self.measures() / self.facets.shape[1]
+        for i in range(self.facets.shape[1]):
+            np.add.at(w, self.facets[:, i], share)
         return w
+
+
+def normals(points: np.ndarray, facets: np.ndarray, unit: bool = True) -> np.ndarray:
+    """The normal of each facet, ``(t_2, -t_1)`` of a segment ``t = b - a`` (2D) or ``(b - a) x
+    (c - a)`` of a triangle (3D): unit, or of the facet's length (2D) or twice its area
+    (3D) halved to its area."""
+    p = points[facets]
+    if facets.shape[1] == 2:
+        t = p[:, 1] - p[:, 0]
+        n = np.stack([t[:, 1], -t[:, 0]], axis=1)
+    else:
+        n = 0.5 * np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    if unit:
+        n = n / np.linalg.norm(n, axis=1)[:, None]
+    return n
 
 
 def _facets(msh: dolfinx.mesh.Mesh, facets: npt.ArrayLike, name: str) -> np.ndarray:
@@ -222,8 +262,8 @@ def contact_surfaces(
     a local cell of each (collective).
 
     Raises:
-        ValueError: facets that are not owned exterior facets, an empty surface, a 3D mesh,
-            or surfaces that share a vertex (on every rank).
+        ValueError: facets that are not owned exterior facets, an empty surface, a mesh of
+            another dimension than its space, or surfaces that share a vertex (on every rank).
     """
     comm = msh.comm
     tdim, gdim = msh.topology.dim, msh.geometry.dim
@@ -240,23 +280,24 @@ def contact_surfaces(
     segs, bodies = [], []
     for body, facets in enumerate(faces):
         if not facets.size:
-            segs.append(np.zeros((0, 2), dtype=np.int64))
             continue
         v = np.array([f2v.links(f) for f in facets], dtype=np.int32)
         cells = np.array([f2c.links(f)[0] for f in facets], dtype=np.int32)
         mid_c = dolfinx.mesh.compute_midpoints(msh, tdim, cells)[:, :gdim]
-        t = vx[v[:, 1]] - vx[v[:, 0]]
-        outward = 0.5 * (vx[v[:, 0]] + vx[v[:, 1]]) - mid_c
-        flip = t[:, 1] * outward[:, 0] - t[:, 0] * outward[:, 1] < 0.0
+        if v.shape[1] == 4:  # a quadrilateral: two triangles
+            v = _split_quadrilaterals(vx, v)
+            mid_c = np.concatenate([mid_c, mid_c])
+        outward = vx[v].mean(axis=1) - mid_c
+        flip = np.einsum("ij,ij->i", normals(vx, v, unit=False), outward) < 0.0
         v[flip] = v[flip][:, ::-1]
         segs.append(l2g[v])
         bodies.append(np.full(len(v), body))
-    local_segs = np.concatenate(segs)
+    local_segs = np.concatenate([*segs, np.zeros((0, gdim), dtype=np.int64)])
     local_body = np.concatenate([*bodies, np.zeros(0, dtype=int)])
-    all_segs = np.concatenate(comm.allgather(local_segs)).reshape(-1, 2)
+    all_segs = np.concatenate(comm.allgather(local_segs)).reshape(-1, gdim)
     all_body = np.concatenate(comm.allgather(local_body)).astype(np.int8)
     # the owned surface vertices, each rank's rows in turn, sorted by global index: every
-    # owned vertex that any rank's segments name (it may sit only on another rank's facets)
+    # owned vertex that any rank's facets name (it may sit only on another rank's facets)
     named = np.unique(all_segs)
     owned_v = np.flatnonzero(np.isin(l2g[: vmap.size_local], named)).astype(np.int32)
     owned_v = owned_v[np.argsort(l2g[owned_v], kind="stable")]
@@ -265,10 +306,15 @@ def contact_surfaces(
     counts = comm.allgather(len(owned_v))
     start = int(sum(counts[: comm.rank]))
     order = np.argsort(keys, kind="stable")
-    segments = order[np.searchsorted(keys[order], all_segs)]
+    facets = order[np.searchsorted(keys[order], all_segs)]
+    # a canonical order of the facets (by reference centroid: global indices depend on the
+    # partition), which breaks ties between facets alike on every partition
+    centroid = points[facets].mean(axis=1)
+    canonical = np.lexsort(centroid.T[::-1])
+    facets, all_body = facets[canonical], all_body[canonical]
     vertex_body = np.full(len(keys), -1, dtype=np.int8)
     for body in (0, 1):
-        at = np.unique(segments[all_body == body])
+        at = np.unique(facets[all_body == body])
         shared = at[vertex_body[at] == 0] if body == 1 else at[:0]
         if shared.size:
             x = np.round(points[shared[0]], 6).tolist()
@@ -291,8 +337,29 @@ def contact_surfaces(
                 ),
             )
     cells = _vertex_cells(msh, owned_v, np.concatenate(faces), f2c)
-    surf = ContactSurfaces(points, segments, all_body, vertex_body, (start, start + len(owned_v)))
+    surf = ContactSurfaces(points, facets, all_body, vertex_body, (start, start + len(owned_v)))
     return surf, owned_v, cells
+
+
+def _split_quadrilaterals(x: np.ndarray, quads: np.ndarray) -> np.ndarray:
+    """Two triangles per quadrilateral face (local vertex indices (n, 4)): the vertices put in
+    order around the face by angle in its plane, then split along the diagonal from the vertex
+    first in lexicographic order of its coordinates (x, then y, then z), so that every
+    partition of the mesh splits a face alike (global indices depend on the partition).
+    Returns (2 n, 3): the first triangles of every face, then the second ones."""
+    p = x[quads]
+    centre = p.mean(axis=1)
+    normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])  # no three vertices collinear
+    e1 = p[:, 0] - centre
+    e1 /= np.linalg.norm(e1, axis=1)[:, None]
+    e2 = np.cross(normal, e1)
+    rel = p - centre[:, None, :]
+    angle = np.arctan2(np.einsum("nik,nk->ni", rel, e2), np.einsum("nik,nk->ni", rel, e1))
+    around = np.take_along_axis(quads, np.argsort(angle, axis=1), axis=1)
+    q = x[around]  # (n, 4, 3)
+    first = np.array([np.lexsort(c.T[::-1])[0] for c in q], dtype=np.int64)
+    around = np.take_along_axis(around, (first[:, None] + np.arange(4)) % 4, axis=1)
+    return np.concatenate([around[:, [0, 1, 2]], around[:, [0, 2, 3]]])
 
 
 def vertex_coordinates(msh: dolfinx.mesh.Mesh) -> np.ndarray:
@@ -311,10 +378,10 @@ def vertex_coordinates(msh: dolfinx.mesh.Mesh) -> np.ndarray:
 
 
 def _check_dimension(gdim: int, tdim: int) -> None:
-    if gdim != 2 or tdim != 2:
+    if gdim != tdim or gdim not in (2, 3):
         raise ValueError(
-            f"contact between bodies is available in 2D only (this mesh: gdim={gdim}, "
-            f"tdim={tdim}): node-to-face contact in 3D is not built"
+            f"contact between bodies needs a 2D or 3D mesh of its own space's dimension (this "
+            f"mesh: gdim={gdim}, tdim={tdim}): a manifold mesh has no contact surfaces"
         )
 
 
@@ -355,7 +422,7 @@ def evaluation_operators(
     :class:`ContactSurfaces`' order) from the field's dofs (collective)."""
     d = evaluator.disc
     comm = evaluator.comm
-    gdim = 2
+    gdim = d.gdim
     raise_on_all_ranks(comm, lambda: _check_evaluable(evaluator))
     X = vertex_coordinates(d.mesh)[vertices]
     A_fe, A_p = evaluator.point_tables(X, cells)
@@ -365,8 +432,8 @@ def evaluation_operators(
     names = [f.name for f in d.fields]
 
     def expand(table: sp.csr_matrix, cols: np.ndarray) -> sp.csr_matrix:
-        """(vertices x nodes) with node -> dof per component ``cols`` (nodes, 2) into (global
-        rows x global dofs)."""
+        """(vertices x nodes) with node -> dof per component ``cols`` (nodes, gdim) into
+        (global rows x global dofs)."""
         c = table.tocoo()
         r = np.concatenate([gdim * (start + c.row) + k for k in range(gdim)])
         j = np.concatenate([cols[c.col, k] for k in range(gdim)])
@@ -420,66 +487,83 @@ def _check_evaluable(evaluator: FieldEvaluator) -> None:
 
 
 def candidates(
-    y: np.ndarray, slaves: np.ndarray, segs: np.ndarray, depth: float
+    y: np.ndarray, slaves: np.ndarray, facets: np.ndarray, depth: float
 ) -> tuple[np.ndarray, np.ndarray] | None:
-    """The slaves within the master segments' box (widened by ``depth``) and, per slave, the
-    indices of its candidate segments (every segment up to :data:`CANDIDATES` of them, else
-    the :data:`CANDIDATES` nearest by midpoint; ``len(segs)`` marks none); ``None`` when no
-    slave is near."""
-    if not len(slaves) or not len(segs):
+    """The slaves within the master facets' box (widened by ``depth``) and, per slave, the
+    indices of its candidate facets (every facet up to :data:`CANDIDATES` of them, else the
+    :data:`CANDIDATES` nearest by centroid; ``len(facets)`` marks none); ``None`` when no slave
+    is near."""
+    if not len(slaves) or not len(facets):
         return None
-    ya, yb, ys = y[segs[:, 0]], y[segs[:, 1]], y[slaves]
-    lo = np.minimum(ya.min(axis=0), yb.min(axis=0)) - depth
-    hi = np.maximum(ya.max(axis=0), yb.max(axis=0)) + depth
+    corners, ys = y[facets], y[slaves]
+    lo = corners.min(axis=(0, 1)) - depth
+    hi = corners.max(axis=(0, 1)) + depth
     near = np.flatnonzero(np.all((ys >= lo) & (ys <= hi), axis=1))
     if not near.size:
         return None
-    if len(segs) <= CANDIDATES:  # every segment a candidate
-        cand = np.broadcast_to(np.arange(len(segs)), (near.size, len(segs)))
+    if len(facets) <= CANDIDATES:  # every facet a candidate
+        cand = np.broadcast_to(np.arange(len(facets)), (near.size, len(facets)))
     else:
-        reach = depth + float(np.max(np.linalg.norm(yb - ya, axis=1)))
-        _, cand = cKDTree(0.5 * (ya + yb)).query(ys[near], k=CANDIDATES, distance_upper_bound=reach)
+        size = np.linalg.norm(corners - corners[:, :1], axis=2).max()
+        _, cand = cKDTree(corners.mean(axis=1)).query(
+            ys[near], k=CANDIDATES, distance_upper_bound=depth + size
+        )
     return slaves[near], np.ascontiguousarray(cand, dtype=np.int64).reshape(near.size, -1)
 
 
 def closest_points(
     y: np.ndarray,
     slaves: np.ndarray,
-    segs: np.ndarray,
+    facets: np.ndarray,
     cand: np.ndarray,
     k: np.ndarray,
     depth: float,
     margin: float,
     f: np.ndarray,
 ) -> tuple[float, int, float]:
-    """One pass of the penalty (module docstring): each slave's closest penetrated candidate
-    segment, its force added into ``f`` (nv, 2); returns ``E_c``, the pairs and the deepest
-    penetration of the pass. The numpy reference of :func:`closest_points_compiled`."""
-    ya, yb = y[segs[:, 0]], y[segs[:, 1]]
-    valid = cand < len(segs)
+    """One pass of the penalty (module docstring), 2D or 3D: each slave's closest penetrated
+    candidate facet, its force added into ``f`` (nv, gdim); returns ``E_c``, the pairs and the
+    deepest penetration of the pass. The facet's coordinates of the slave's projection are
+    its weights ``w`` (``(1 - xi, xi)`` on a segment, barycentric on a triangle); the slave
+    projects when every weight is ``>= -margin``; beyond the facet the weights are clipped to
+    ``>= 0`` and scaled to sum 1. Of candidate facets whose gaps lie within ``TIE * depth`` of
+    the largest, the first in the facets' order is taken (a vertex on a vertex or an edge of
+    the other surface: its facets' gaps differ by round-off, and their normals by the
+    surface's kink), so that every partition of the mesh takes the same facet. The numpy
+    reference of the compiled kernels."""
+    nf, d = facets.shape
+    valid = cand < nf
     c = np.where(valid, cand, 0)
-    ys = y[slaves][:, None, :]
-    a, t = ya[c], yb[c] - ya[c]
-    tt = t[..., 0] * t[..., 0] + t[..., 1] * t[..., 1]
-    xi = ((ys[..., 0] - a[..., 0]) * t[..., 0] + (ys[..., 1] - a[..., 1]) * t[..., 1]) / tt
-    length = np.sqrt(tt)
-    nx, ny = t[..., 1] / length, -t[..., 0] / length
-    xc = np.clip(xi, 0.0, 1.0)
-    dx, dy = ys[..., 0] - a[..., 0] - xc * t[..., 0], ys[..., 1] - a[..., 1] - xc * t[..., 1]
-    g = dx * nx + dy * ny
-    ok = valid & (g < 0.0) & (g > -depth) & (xi >= -margin) & (xi <= 1.0 + margin)
-    score = np.where(ok, g, -np.inf)
-    best = np.argmax(score, axis=1)
-    hit = np.flatnonzero(np.isfinite(score[np.arange(len(slaves)), best]))
+    corners = y[facets][c]  # (slaves, candidates, d, gdim)
+    a = corners[:, :, 0]
+    r = y[slaves][:, None, :] - a
+    E = corners[:, :, 1:] - a[:, :, None, :]
+    G = np.einsum("...ik,...jk->...ij", E, E)
+    xi = np.linalg.solve(G, np.einsum("...ik,...k->...i", E, r)[..., None])[..., 0]
+    w = np.concatenate([1.0 - xi.sum(axis=-1, keepdims=True), xi], axis=-1)
+    projects = np.all(w >= -margin, axis=-1)
+    wc = np.clip(w, 0.0, None)
+    wc /= wc.sum(axis=-1, keepdims=True)
+    if d == 2:
+        t = E[:, :, 0]
+        n = np.stack([t[..., 1], -t[..., 0]], axis=-1)
+    else:
+        n = np.cross(E[:, :, 0], E[:, :, 1])
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    g = np.einsum("...k,...k->...", r - np.einsum("...i,...ik->...k", wc[..., 1:], E), n)
+    ok = valid & projects & (g < 0.0) & (g > -depth)
+    top = np.where(ok, g, -np.inf).max(axis=1)
+    hit = np.flatnonzero(np.isfinite(top))
     if not hit.size:
         return 0.0, 0, 0.0
-    j = best[hit]
-    s, seg = slaves[hit], segs[c[hit, j]]
-    gs, xs = g[hit, j], xc[hit, j]
-    fs = (k[s] * gs)[:, None] * np.stack([nx[hit, j], ny[hit, j]], axis=1)
+    tied = ok & (g >= top[:, None] - TIE * depth)  # of facets alike, the first in order
+    j = np.argmin(np.where(tied, c, nf), axis=1)[hit]
+    s, fac = slaves[hit], facets[c[hit, j]]
+    gs = g[hit, j]
+    fs = (k[s] * gs)[:, None] * n[hit, j]
     np.add.at(f, s, fs)
-    np.add.at(f, seg[:, 0], -(1.0 - xs)[:, None] * fs)
-    np.add.at(f, seg[:, 1], -xs[:, None] * fs)
+    for i in range(d):
+        np.add.at(f, fac[:, i], -wc[hit, j, i][:, None] * fs)
     return 0.5 * float(np.dot(k[s], gs * gs)), len(hit), float(-gs.min())
 
 
@@ -534,17 +618,113 @@ def closest_points_compiled(
     width = nseg if every else cand.shape[1]
     for i in range(slaves.shape[0]):
         s = slaves[i]
-        best, bj, bxi, bnx, bny = -np.inf, -1, 0.0, 0.0, 0.0
+        top = -np.inf
         for jj in range(width):
             j = jj if every else cand[i, jj]
             if j >= nseg:
                 continue
             g, xc, nx, ny, projects = _gap_to(y, s, segs[j, 0], segs[j, 1], margin)
-            if projects and g < 0.0 and g > -depth and g > best:
-                best, bj, bxi, bnx, bny = g, j, xc, nx, ny
-        if bj < 0:
+            if projects and g < 0.0 and g > -depth and g > top:
+                top = g
+        if top == -np.inf:
             continue
+        best, bj, bxi, bnx, bny = 0.0, nseg, 0.0, 0.0, 0.0
+        for jj in range(width):  # of the facets alike, the first in order
+            j = jj if every else cand[i, jj]
+            if j >= bj:
+                continue
+            g, xc, nx, ny, projects = _gap_to(y, s, segs[j, 0], segs[j, 1], margin)
+            if projects and g < 0.0 and g > -depth and g >= top - TIE * depth:
+                best, bj, bxi, bnx, bny = g, j, xc, nx, ny
         energy += _apply(y, s, segs[bj, 0], segs[bj, 1], best, bxi, bnx, bny, k, f)
+        pairs += 1
+        deepest = max(deepest, -best)
+    return energy, pairs, deepest
+
+
+@jit.jit
+def _gap_to_triangle(
+    y: np.ndarray, s: int, a: int, b: int, c: int, margin: float
+) -> tuple[float, float, float, float, float, float, float, bool]:
+    """``(g, w_a, w_b, w_c, n_x, n_y, n_z, projects)`` of slave ``s`` on the triangle ``(a,
+    b, c)``: the weights of its projection, clipped to ``>= 0`` and scaled to sum 1."""
+    e1 = (y[b, 0] - y[a, 0], y[b, 1] - y[a, 1], y[b, 2] - y[a, 2])
+    e2 = (y[c, 0] - y[a, 0], y[c, 1] - y[a, 1], y[c, 2] - y[a, 2])
+    r = (y[s, 0] - y[a, 0], y[s, 1] - y[a, 1], y[s, 2] - y[a, 2])
+    g11 = e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2]
+    g12 = e1[0] * e2[0] + e1[1] * e2[1] + e1[2] * e2[2]
+    g22 = e2[0] * e2[0] + e2[1] * e2[1] + e2[2] * e2[2]
+    r1 = e1[0] * r[0] + e1[1] * r[1] + e1[2] * r[2]
+    r2 = e2[0] * r[0] + e2[1] * r[1] + e2[2] * r[2]
+    det = g11 * g22 - g12 * g12
+    x1 = (g22 * r1 - g12 * r2) / det
+    x2 = (g11 * r2 - g12 * r1) / det
+    w0, w1, w2 = 1.0 - x1 - x2, x1, x2
+    projects = w0 >= -margin and w1 >= -margin and w2 >= -margin
+    w0, w1, w2 = max(w0, 0.0), max(w1, 0.0), max(w2, 0.0)
+    total = w0 + w1 + w2
+    w0, w1, w2 = w0 / total, w1 / total, w2 / total
+    nx = e1[1] * e2[2] - e1[2] * e2[1]
+    ny = e1[2] * e2[0] - e1[0] * e2[2]
+    nz = e1[0] * e2[1] - e1[1] * e2[0]
+    length = np.sqrt(nx * nx + ny * ny + nz * nz)
+    nx, ny, nz = nx / length, ny / length, nz / length
+    dx = r[0] - w1 * e1[0] - w2 * e2[0]
+    dy = r[1] - w1 * e1[1] - w2 * e2[1]
+    dz = r[2] - w1 * e1[2] - w2 * e2[2]
+    return dx * nx + dy * ny + dz * nz, w0, w1, w2, nx, ny, nz, projects
+
+
+@jit.jit
+def closest_points_compiled_3d(
+    y: np.ndarray,
+    slaves: np.ndarray,
+    facets: np.ndarray,
+    cand: np.ndarray,
+    k: np.ndarray,
+    depth: float,
+    margin: float,
+    f: np.ndarray,
+) -> tuple[float, int, float]:
+    """:func:`closest_points` compiled for triangles (3D), as
+    :func:`closest_points_compiled` for segments."""
+    energy, pairs, deepest = 0.0, 0, 0.0
+    nf = facets.shape[0]
+    every = cand.shape[1] == 1 and cand[0, 0] < 0
+    width = nf if every else cand.shape[1]
+    for i in range(slaves.shape[0]):
+        s = slaves[i]
+        top = -np.inf
+        for jj in range(width):
+            j = jj if every else cand[i, jj]
+            if j >= nf:
+                continue
+            g, w0, w1, w2, nx, ny, nz, projects = _gap_to_triangle(
+                y, s, facets[j, 0], facets[j, 1], facets[j, 2], margin
+            )
+            if projects and g < 0.0 and g > -depth and g > top:
+                top = g
+        if top == -np.inf:
+            continue
+        best, bj = 0.0, nf
+        bw = (0.0, 0.0, 0.0)
+        bn = (0.0, 0.0, 0.0)
+        for jj in range(width):  # of the facets alike, the first in order
+            j = jj if every else cand[i, jj]
+            if j >= bj:
+                continue
+            g, w0, w1, w2, nx, ny, nz, projects = _gap_to_triangle(
+                y, s, facets[j, 0], facets[j, 1], facets[j, 2], margin
+            )
+            if projects and g < 0.0 and g > -depth and g >= top - TIE * depth:
+                best, bj, bw, bn = g, j, (w0, w1, w2), (nx, ny, nz)
+        for q in range(3):
+            fq = k[s] * best * bn[q]
+            f[s, q] += fq
+            f[facets[bj, 0], q] -= bw[0] * fq
+            f[facets[bj, 1], q] -= bw[1] * fq
+            f[facets[bj, 2], q] -= bw[2] * fq
+        energy += 0.5 * k[s] * best * best
         pairs += 1
         deepest = max(deepest, -best)
     return energy, pairs, deepest
@@ -582,13 +762,15 @@ class BodyContactSystem:
         seg_body = surfaces.body
         self._passes = [(0, 1)] + ([(1, 0)] if two_pass else [])
         self._slaves = [np.flatnonzero(surfaces.vertex_body == s) for s, _ in self._passes]
-        self._masters = [surfaces.segments[seg_body == m] for _, m in self._passes]
+        self._masters = [surfaces.facets[seg_body == m] for _, m in self._passes]
         self._contact: dict | None = None  # A_k^T diag(c) A_l per pair of fields
         self._sums: list[PETSc.Mat] = []  # the inner blocks plus those, of the last tangent()
         #: The last evaluated state: ``{"pairs", "penetration", "energy"}`` (every rank).
         self.last: dict = {"pairs": 0, "penetration": 0.0, "energy": 0.0}
         #: The closest-point kernel: compiled (numba) when available, else numpy.
-        self._kernel = closest_points_compiled if jit.AVAILABLE else closest_points
+        self.gdim = surfaces.points.shape[1]
+        compiled = closest_points_compiled if self.gdim == 2 else closest_points_compiled_3d
+        self._kernel = compiled if jit.AVAILABLE else closest_points
         #: Seconds spent in the contact's forces (search, forces, ``A^T f``) since the build.
         self.seconds = 0.0
 
@@ -611,20 +793,21 @@ class BodyContactSystem:
         return self.inner.rebuild(changed)
 
     def positions(self, u: Sequence[PETSc.Vec]) -> np.ndarray:
-        """Current positions ``X + A d`` of every surface vertex (nv, 2), on every rank."""
+        """Current positions ``X + A d`` of every surface vertex (nv, gdim), on every rank."""
         self._y.set(0.0)
         for A, x in zip(self.A, u, strict=True):
             if A is not None:
                 A.multAdd(x, self._y, self._y)
-        disp = np.concatenate(self.comm.allgather(self._y.array_r.copy())).reshape(-1, 2)
+        disp = np.concatenate(self.comm.allgather(self._y.array_r.copy()))
+        disp = disp.reshape(-1, self.gdim)
         return self.surfaces.points + disp
 
     def forces(self, y: np.ndarray) -> tuple[np.ndarray, float, int, float]:
-        """The contact forces on the vertices (nv, 2) at positions ``y``, ``E_c``, the number
+        """The contact forces on the vertices (nv, gdim) at positions ``y``, ``E_c``, the number
         of closed pairs and the deepest penetration (replicated: the same on every rank)."""
         f = np.zeros_like(y)
         energy, pairs, deepest = 0.0, 0, 0.0
-        compiled = self._kernel is closest_points_compiled
+        compiled = self._kernel is not closest_points
         for slaves, segs in zip(self._slaves, self._masters, strict=True):
             if compiled and len(slaves) * len(segs) <= EVERY_PAIR:
                 near, cand = slaves, EVERY  # every pair, compiled: no search
@@ -663,7 +846,7 @@ class BodyContactSystem:
         return y
 
     def contact_force(self, u: Sequence[PETSc.Vec]) -> np.ndarray:
-        """The resultant force (2,) that ``surface_b`` exerts on ``surface_a``'s body at ``u``
+        """The resultant force (gdim,) that ``surface_b`` exerts on ``surface_a``'s body at ``u``
         (every rank)."""
         f, *_ = self.forces(self.positions(u))
         return -f[self.surfaces.vertex_body == 0].sum(axis=0)
@@ -686,17 +869,21 @@ class BodyContactSystem:
         """``c`` per vertex (module docstring): ``diag(c)`` (each component) bounds the contact
         stiffness of any contact state in vertex space, in the PSD order."""
         s = self.surfaces
-        lengths = s.lengths()
-        at_vertex = np.zeros(len(s.points))
-        np.add.at(at_vertex, s.segments[:, 0], lengths)
-        np.add.at(at_vertex, s.segments[:, 1], lengths)
+        measures, sizes = s.measures(), s.sizes()
+        star = np.zeros(len(s.points))  # the length (area) of the facets at each vertex
+        for i in range(s.facets.shape[1]):
+            np.add.at(star, s.facets[:, i], measures)
         c = np.zeros(len(s.points))
         for slave, master in self._passes:
             on_s = s.vertex_body == slave
             c[on_s] += self._k[on_s]
-            longest = float(lengths[s.body == slave].max(initial=0.0))
+            longest = float(sizes[s.body == slave].max(initial=0.0))
             on_m = s.vertex_body == master
-            c[on_m] += self.penalty * (at_vertex[on_m] + 2.0 * longest)
+            if self.gdim == 2:  # the star widened by one slave segment at each end
+                pressing = star[on_m] + 2.0 * longest
+            else:  # the star as a disc, its radius widened by one slave facet
+                pressing = np.pi * (np.sqrt(star[on_m] / np.pi) + longest) ** 2
+            c[on_m] += self.penalty * pressing
         return 2.0 * c
 
     def tangent(self, u: Sequence[PETSc.Vec] | None = None) -> dict:
@@ -706,7 +893,7 @@ class BodyContactSystem:
         if self._contact is None:
             lo, hi = self.surfaces.owned
             root = self._f.duplicate()
-            root.array[:] = np.repeat(np.sqrt(self.bound_stiffness()[lo:hi]), 2)
+            root.array[:] = np.repeat(np.sqrt(self.bound_stiffness()[lo:hi]), self.gdim)
             scaled = {}
             for k, A in enumerate(self.A):
                 if A is not None:
@@ -759,15 +946,15 @@ def with_body_contact(
         )
     d = evaluator.disc
     surfaces, vertices, cells = contact_surfaces(d.mesh, surface_a, surface_b)
-    lengths = surfaces.lengths()
-    h = float(np.median(lengths))
+    sizes = surfaces.sizes()
+    h = float(np.median(sizes))
     if contact.penalty is None and E is None:  # the same on every rank
         raise ValueError(
             "BodyContact(penalty=None) takes k = factor E / h from a material with Young's "
             "modulus E; this material has none: pass BodyContact(penalty=k) in Pa/m"
         )
     k = float(contact.penalty) if contact.penalty is not None else contact.factor * E / h
-    depth = float(contact.depth) if contact.depth is not None else float(lengths.max())
+    depth = float(contact.depth) if contact.depth is not None else float(sizes.max())
     A = evaluation_operators(evaluator, surfaces, vertices, cells, system.mass())
     _check_particles_apart(evaluator, surfaces, vertices, cells)
     return BodyContactSystem(system, surfaces, A, k, contact.two_pass, depth)

@@ -376,13 +376,14 @@ class ExplicitDynamics(StateQueries):
         surface_b: npt.ArrayLike,
         contact: BodyContact | None = None,
     ) -> None:
-        """Frictionless contact between two bodies of the model (2D; node-to-segment penalty,
-        :mod:`~dolfinx_meshfree.dynamics.body_contact`): ``surface_a`` and ``surface_b`` are
-        owned exterior facets (e.g. ``mf.boundary_facets(mesh, marker)``) of two pieces of the
-        mesh that share no vertex, each discretised as the model discretises it (FE, particle
-        or blended cells). The contact force joins the internal force, its penalty energy the
-        strain energy of the energy records, and the stable step is bounded again with the
-        contact's stiffness (:meth:`critical_time_step`). Several pairs may be added.
+        """Frictionless contact between two bodies of the model (2D and 3D; node-to-facet
+        penalty, :mod:`~dolfinx_meshfree.dynamics.body_contact`): ``surface_a`` and
+        ``surface_b`` are owned exterior facets (e.g. ``mf.boundary_facets(mesh, marker)``) of
+        two pieces of the mesh that share no vertex, each discretised as the model discretises
+        it (FE, particle or blended cells). The contact force joins the internal force, its
+        penalty energy the strain energy of the energy records, and the stable step is bounded
+        again with the contact's stiffness (:meth:`critical_time_step`). Several pairs may be
+        added.
         Collective.
 
         Args:
@@ -391,8 +392,8 @@ class ExplicitDynamics(StateQueries):
 
         Raises:
             ValueError: facets that are not owned exterior facets, an empty surface, surfaces
-                that share a vertex, a particle whose support reaches both surfaces, a 3D mesh
-                (on every rank).
+                that share a vertex, a particle whose support reaches both surfaces (on every
+                rank).
         """
         contact = BodyContact() if contact is None else contact
         E = getattr(self.material, "E", None)

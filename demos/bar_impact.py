@@ -12,7 +12,8 @@
 # (``mf.submesh``), the right bar then moved to a gap of 0.02 cells. The contact
 # (``ExplicitDynamics.add_contact``, :mod:`dolfinx_meshfree.dynamics.body_contact`) is a
 # node-to-facet penalty on the normal gap between the bars' facing ends, two-pass, with the
-# penalty ``k = E / h`` per unit area (the default ``BodyContact()``). Each method (``--method``) discretises the bars its way:
+# penalty ``k = E / h`` per unit area (the default ``BodyContact()``). Each method
+# (``--method``) discretises the bars its way:
 #
 # * ``fe``: Q1 elements on both bars;
 # * every coupling of ``mf.dynamics.DYNAMICS_METHODS`` but the hybrid (in 3D: lagrange,
@@ -28,7 +29,9 @@
 # not smooth, so it falls with the step); the stable step with contact against the step
 # without; the steps, the loop's time and the contact's share of it, and the time against FE.
 # The run fails if a figure leaves its stated margin (about 2x what is measured at the default
-# resolution, ``tests/test_body_contact.py``).
+# resolution, ``tests/test_body_contact.py``). At high speed (``--velocity 1060``: v0 / c = 0.2)
+# the couplings fail them, and say so: the particle face tilts and slides off the FE face (the
+# guide's dynamics page, contact between bodies, has the figures; not resolved).
 #
 # Usage:
 #

@@ -485,3 +485,18 @@ def test_quadrilateral_split_whatever_the_vertex_order():
         assert areas.sum() == pytest.approx(area, rel=0.02) and areas.min() > 0.3 * area
         # the diagonal from corner 0 (first in coordinates) to 3, whatever the order
         assert set(tris[0]) & set(tris[1]) == {0, 3}
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known limit (guide, dynamics: contact between bodies): at v0 / c = 0.2 the particle "
+    "face under the penalty's vertex forces tilts and slides off the FE face (exit velocity "
+    "55 % off, FE 1.3 %); it needs the contact to act on the particles, not only at the "
+    "surface's vertices",
+)
+def test_particles_at_the_contact_at_high_speed():
+    """The bars at v0 / c = 0.2 (steel at 1,060 m/s), lagrange: the same figures as at low
+    speed (small strain, so the same up to the contact's geometry)."""
+    r = demo.impact("lagrange", 40, COMM, MAT, L, H, 0.2, None, None, False)
+    figures = demo.figures(r, MAT, L, H, 0.2)
+    assert abs(figures["exit"]) < 0.07 and abs(figures["force"]) < 0.03

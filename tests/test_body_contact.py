@@ -26,7 +26,6 @@ from dolfinx_meshfree.dynamics.body_contact import (
     candidates,
     closest_points,
     closest_points_compiled,
-    closest_points_compiled_3d,
     normals,
 )
 
@@ -382,7 +381,7 @@ def test_compiled_3d_kernel_makes_the_reference_choices():
         out = []
         for kernel, args in (
             (closest_points, numpy_args),
-            (closest_points_compiled_3d, compiled_args),
+            (closest_points_compiled, compiled_args),
         ):
             f = np.zeros_like(y)
             out.append((f, *kernel(y, args[0], tris, args[1], k, 0.05, 0.05, f)))

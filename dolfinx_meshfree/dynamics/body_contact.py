@@ -58,8 +58,8 @@ with ``K + A^T diag(c) A``, safe for every contact state. Measured on bars press
 10 cells) and 14.1 (3D, 4 hexahedra), the bound 56.3 and 54.2, the bound without contact 22.8
 and 13.1.
 
-The closest points are found by a compiled loop (:func:`closest_points_compiled`,
-:func:`closest_points_compiled_3d`, numba) over every (slave, facet) pair up to
+The closest points are found by a compiled loop (:func:`closest_points_compiled`, numba) over
+every (slave, facet) pair up to
 :data:`EVERY_PAIR` pairs, beyond that over the :data:`CANDIDATES` nearest facets of a KD-tree
 (:func:`candidates`); without numba, :func:`closest_points` (numpy, the reference) on the
 KD-tree's candidates.
@@ -74,7 +74,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Collection, Sequence
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import dolfinx
@@ -89,6 +89,7 @@ from .. import _compat
 from ..approx import jit
 from ..parallel import Layout, raise_on_all_ranks
 from ..statics.petsc import create_aij
+from .system import WrappedSystem
 
 if TYPE_CHECKING:  # annotations only
     from .evaluation import FieldEvaluator
@@ -101,7 +102,6 @@ __all__ = [
     "candidates",
     "closest_points",
     "closest_points_compiled",
-    "closest_points_compiled_3d",
     "contact_surfaces",
     "evaluation_operators",
     "vertex_coordinates",
@@ -568,10 +568,11 @@ def closest_points(
 
 
 @jit.jit
-def _gap_to(
+def _gap_to_segment(
     y: np.ndarray, s: int, a: int, b: int, margin: float
-) -> tuple[float, float, float, float, bool]:
-    """``(g, xi clipped, n_x, n_y, projects)`` of slave ``s`` on the segment ``(a, b)``."""
+) -> tuple[float, float, float, float, float, float, float, bool]:
+    """``(g, w_a, w_b, 0, n_x, n_y, 0, projects)`` of slave ``s`` on the segment ``(a, b)``:
+    the weights ``(1 - xi, xi)`` of its projection, ``xi`` clipped to ``[0, 1]``."""
     tx, ty = y[b, 0] - y[a, 0], y[b, 1] - y[a, 1]
     tt = tx * tx + ty * ty
     xi = ((y[s, 0] - y[a, 0]) * tx + (y[s, 1] - y[a, 1]) * ty) / tt
@@ -579,67 +580,7 @@ def _gap_to(
     nx, ny = ty / length, -tx / length
     xc = min(max(xi, 0.0), 1.0)
     g = (y[s, 0] - y[a, 0] - xc * tx) * nx + (y[s, 1] - y[a, 1] - xc * ty) * ny
-    return g, xc, nx, ny, xi >= -margin and xi <= 1.0 + margin
-
-
-@jit.jit
-def _apply(
-    y: np.ndarray, s: int, a: int, b: int, g: float, xc: float, nx: float, ny: float,
-    k: np.ndarray, f: np.ndarray,
-) -> float:  # fmt: skip
-    """Add the pair's forces into ``f``; return its energy."""
-    fx, fy = k[s] * g * nx, k[s] * g * ny
-    f[s, 0] += fx
-    f[s, 1] += fy
-    f[a, 0] -= (1.0 - xc) * fx
-    f[a, 1] -= (1.0 - xc) * fy
-    f[b, 0] -= xc * fx
-    f[b, 1] -= xc * fy
-    return 0.5 * k[s] * g * g
-
-
-@jit.jit
-def closest_points_compiled(
-    y: np.ndarray,
-    slaves: np.ndarray,
-    segs: np.ndarray,
-    cand: np.ndarray,
-    k: np.ndarray,
-    depth: float,
-    margin: float,
-    f: np.ndarray,
-) -> tuple[float, int, float]:
-    """:func:`closest_points` compiled: a loop over the slaves and their candidates (the same
-    choice and the same arithmetic; the forces summed in another order). ``cand`` with one
-    column ``-1`` takes every segment as a candidate of every slave."""
-    energy, pairs, deepest = 0.0, 0, 0.0
-    nseg = segs.shape[0]
-    every = cand.shape[1] == 1 and cand[0, 0] < 0
-    width = nseg if every else cand.shape[1]
-    for i in range(slaves.shape[0]):
-        s = slaves[i]
-        top = -np.inf
-        for jj in range(width):
-            j = jj if every else cand[i, jj]
-            if j >= nseg:
-                continue
-            g, xc, nx, ny, projects = _gap_to(y, s, segs[j, 0], segs[j, 1], margin)
-            if projects and g < 0.0 and g > -depth and g > top:
-                top = g
-        if top == -np.inf:
-            continue
-        best, bj, bxi, bnx, bny = 0.0, nseg, 0.0, 0.0, 0.0
-        for jj in range(width):  # of the facets alike, the first in order
-            j = jj if every else cand[i, jj]
-            if j >= bj:
-                continue
-            g, xc, nx, ny, projects = _gap_to(y, s, segs[j, 0], segs[j, 1], margin)
-            if projects and g < 0.0 and g > -depth and g >= top - TIE * depth:
-                best, bj, bxi, bnx, bny = g, j, xc, nx, ny
-        energy += _apply(y, s, segs[bj, 0], segs[bj, 1], best, bxi, bnx, bny, k, f)
-        pairs += 1
-        deepest = max(deepest, -best)
-    return energy, pairs, deepest
+    return g, 1.0 - xc, xc, 0.0, nx, ny, 0.0, xi >= -margin and xi <= 1.0 + margin
 
 
 @jit.jit
@@ -676,7 +617,18 @@ def _gap_to_triangle(
 
 
 @jit.jit
-def closest_points_compiled_3d(
+def _gap_to_facet(
+    y: np.ndarray, s: int, facets: np.ndarray, j: int, margin: float
+) -> tuple[float, float, float, float, float, float, float, bool]:
+    """The gap, weights, normal and projection test of slave ``s`` on facet ``j`` (a segment
+    or a triangle, by the facets' shape)."""
+    if facets.shape[1] == 2:
+        return _gap_to_segment(y, s, facets[j, 0], facets[j, 1], margin)
+    return _gap_to_triangle(y, s, facets[j, 0], facets[j, 1], facets[j, 2], margin)
+
+
+@jit.jit
+def closest_points_compiled(
     y: np.ndarray,
     slaves: np.ndarray,
     facets: np.ndarray,
@@ -686,10 +638,11 @@ def closest_points_compiled_3d(
     margin: float,
     f: np.ndarray,
 ) -> tuple[float, int, float]:
-    """:func:`closest_points` compiled for triangles (3D), as
-    :func:`closest_points_compiled` for segments."""
+    """:func:`closest_points` compiled, 2D or 3D: a loop over the slaves and their candidates
+    (the same choice and the same arithmetic; the forces summed in another order). ``cand``
+    with one column ``-1`` takes every facet as a candidate of every slave."""
     energy, pairs, deepest = 0.0, 0, 0.0
-    nf = facets.shape[0]
+    nf, d, gdim = facets.shape[0], facets.shape[1], y.shape[1]
     every = cand.shape[1] == 1 and cand[0, 0] < 0
     width = nf if every else cand.shape[1]
     for i in range(slaves.shape[0]):
@@ -699,9 +652,7 @@ def closest_points_compiled_3d(
             j = jj if every else cand[i, jj]
             if j >= nf:
                 continue
-            g, w0, w1, w2, nx, ny, nz, projects = _gap_to_triangle(
-                y, s, facets[j, 0], facets[j, 1], facets[j, 2], margin
-            )
+            g, _, _, _, _, _, _, projects = _gap_to_facet(y, s, facets, j, margin)
             if projects and g < 0.0 and g > -depth and g > top:
                 top = g
         if top == -np.inf:
@@ -713,24 +664,21 @@ def closest_points_compiled_3d(
             j = jj if every else cand[i, jj]
             if j >= bj:
                 continue
-            g, w0, w1, w2, nx, ny, nz, projects = _gap_to_triangle(
-                y, s, facets[j, 0], facets[j, 1], facets[j, 2], margin
-            )
+            g, w0, w1, w2, nx, ny, nz, projects = _gap_to_facet(y, s, facets, j, margin)
             if projects and g < 0.0 and g > -depth and g >= top - TIE * depth:
                 best, bj, bw, bn = g, j, (w0, w1, w2), (nx, ny, nz)
-        for q in range(3):
+        for q in range(gdim):
             fq = k[s] * best * bn[q]
             f[s, q] += fq
-            f[facets[bj, 0], q] -= bw[0] * fq
-            f[facets[bj, 1], q] -= bw[1] * fq
-            f[facets[bj, 2], q] -= bw[2] * fq
+            for v in range(d):
+                f[facets[bj, v], q] -= bw[v] * fq
         energy += 0.5 * k[s] * best * best
         pairs += 1
         deepest = max(deepest, -best)
     return energy, pairs, deepest
 
 
-class BodyContactSystem:
+class BodyContactSystem(WrappedSystem):
     """A :class:`~dolfinx_meshfree.dynamics.system.SemiDiscreteSystem` with contact between
     two bodies (module docstring): the inner system's internal force plus ``A^T f_c``, its
     strain energy plus ``E_c``, its tangent plus the contact bound ``A^T diag(c) A`` (for the
@@ -752,7 +700,8 @@ class BodyContactSystem:
         two_pass: bool,
         depth: float,
     ) -> None:
-        self.inner, self.surfaces, self.A = inner, surfaces, list(operators)
+        super().__init__(inner)
+        self.surfaces, self.A = surfaces, list(operators)
         self.penalty, self.two_pass, self.depth = float(penalty), bool(two_pass), float(depth)
         some = next(A for A in self.A if A is not None)
         self.comm = some.getComm().tompi4py()
@@ -769,28 +718,9 @@ class BodyContactSystem:
         self.last: dict = {"pairs": 0, "penetration": 0.0, "energy": 0.0}
         #: The closest-point kernel: compiled (numba) when available, else numpy.
         self.gdim = surfaces.points.shape[1]
-        compiled = closest_points_compiled if self.gdim == 2 else closest_points_compiled_3d
-        self._kernel = compiled if jit.AVAILABLE else closest_points
+        self._kernel = closest_points_compiled if jit.AVAILABLE else closest_points
         #: Seconds spent in the contact's forces (search, forces, ``A^T f``) since the build.
         self.seconds = 0.0
-
-    def __getattr__(self, name: str):  # the inner system's attributes (blocks, shared, ...)
-        if name == "inner":
-            raise AttributeError(name)
-        return getattr(self.inner, name)
-
-    @property
-    def fields(self) -> list:
-        return self.inner.fields
-
-    def mass(self) -> list[PETSc.Vec]:
-        return self.inner.mass()
-
-    def constraints(self) -> list[PETSc.Mat | None] | None:
-        return self.inner.constraints()
-
-    def rebuild(self, changed: Collection[str]) -> bool:
-        return self.inner.rebuild(changed)
 
     def positions(self, u: Sequence[PETSc.Vec]) -> np.ndarray:
         """Current positions ``X + A d`` of every surface vertex (nv, gdim), on every rank."""

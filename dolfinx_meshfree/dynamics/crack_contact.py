@@ -44,7 +44,7 @@ the particle stiffness of the face particles, which lowers the stable step (see
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Collection, Sequence
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -58,7 +58,7 @@ from ..geometry.crack_faces import contact_points, owned_points
 from ..parallel import Layout, raise_on_all_ranks
 from ..statics.petsc import create_aij
 from .discretisation import approximation_cracks
-from .system import LinearSystem, SemiDiscreteSystem
+from .system import LinearSystem, SemiDiscreteSystem, WrappedSystem
 
 if TYPE_CHECKING:  # annotations only
     from ..approx.mls import MLS
@@ -166,7 +166,7 @@ def jump_operator(
     )
 
 
-class ContactSystem:
+class ContactSystem(WrappedSystem):
     """A :class:`~dolfinx_meshfree.dynamics.system.SemiDiscreteSystem` with crack-face contact:
     the inner system's internal force plus ``f_c = B^T (k w min(B d, 0))`` on one field (the
     particles), its strain energy plus ``E_c``, its tangent plus the full contact stiffness
@@ -191,7 +191,8 @@ class ContactSystem:
         normals: np.ndarray,
         weights: np.ndarray,
     ) -> None:
-        self.inner, self.B, self.field = inner, B, field
+        super().__init__(inner)
+        self.B, self.field = B, field
         self.kw = np.asarray(kw, dtype=float)
         self.points, self.normals = np.asarray(points, float), np.asarray(normals, float)
         self.weights = np.asarray(weights, float)
@@ -199,24 +200,6 @@ class ContactSystem:
         self._force = B.createVecRight()
         self._tangent: PETSc.Mat | None = None
         self.num_points = B.getSize()[0]
-
-    def __getattr__(self, name: str):  # the inner system's attributes (blocks, shared, ...)
-        if name == "inner":
-            raise AttributeError(name)
-        return getattr(self.inner, name)
-
-    @property
-    def fields(self) -> list:
-        return self.inner.fields
-
-    def mass(self) -> list[PETSc.Vec]:
-        return self.inner.mass()
-
-    def constraints(self) -> list[PETSc.Mat | None] | None:
-        return self.inner.constraints()
-
-    def rebuild(self, changed: Collection[str]) -> bool:
-        return self.inner.rebuild(changed)
 
     def gap(self, u: Sequence[PETSc.Vec]) -> np.ndarray:
         """The normal gaps ``g = B d`` at this rank's sample points (a copy)."""

@@ -27,7 +27,7 @@ from petsc4py import PETSc
 
 from .linalg import BLOCK_FORMATS, blocked
 
-__all__ = ["Field", "LinearSystem", "SemiDiscreteSystem", "inverse_masses"]
+__all__ = ["Field", "LinearSystem", "SemiDiscreteSystem", "WrappedSystem", "inverse_masses"]
 
 Blocks = dict[tuple[int, int], PETSc.Mat]
 
@@ -122,6 +122,34 @@ class SemiDiscreteSystem(Protocol):
         constraints changed, so that their consumers (the velocity projection, the stable
         step) rebuild too."""
         ...
+
+
+class WrappedSystem:
+    """A :class:`SemiDiscreteSystem` that adds a term to another one, ``inner`` (crack-face
+    contact, contact between bodies): a subclass overrides the internal force, the strain energy
+    and the tangent; the fields, masses, constraints, rebuild and any other attribute (the
+    blocks, master–slave's shared sides) are the inner system's."""
+
+    def __init__(self, inner: SemiDiscreteSystem) -> None:
+        self.inner = inner
+
+    def __getattr__(self, name: str):  # the inner system's attributes (blocks, shared, ...)
+        if name == "inner":
+            raise AttributeError(name)
+        return getattr(self.inner, name)
+
+    @property
+    def fields(self) -> list[Field]:
+        return self.inner.fields
+
+    def mass(self) -> list[PETSc.Vec]:
+        return self.inner.mass()
+
+    def constraints(self) -> list[PETSc.Mat | None] | None:
+        return self.inner.constraints()
+
+    def rebuild(self, changed: Collection[str]) -> bool:
+        return self.inner.rebuild(changed)
 
 
 class LinearSystem:

@@ -376,8 +376,8 @@ class ExplicitDynamics(StateQueries):
         surface_b: npt.ArrayLike,
         contact: BodyContact | None = None,
     ) -> None:
-        """Frictionless contact between two bodies of the model (2D and 3D; node-to-facet
-        penalty, :mod:`~dolfinx_meshfree.dynamics.body_contact`): ``surface_a`` and
+        """Contact between two bodies of the model (2D and 3D; node-to-facet penalty,
+        frictionless or Coulomb, :mod:`~dolfinx_meshfree.dynamics.body_contact`): ``surface_a`` and
         ``surface_b`` are owned exterior facets (e.g. ``mf.boundary_facets(mesh, marker)``) of
         two pieces of the mesh that share no vertex, each discretised as the model discretises
         it (FE, particle or blended cells). The contact force joins the internal force, its
@@ -388,7 +388,7 @@ class ExplicitDynamics(StateQueries):
 
         Args:
             contact: The options (:class:`~dolfinx_meshfree.dynamics.BodyContact`; default:
-                penalty ``E / h``, two-pass).
+                penalty ``E / h``, two-pass, frictionless).
 
         Raises:
             ValueError: facets that are not owned exterior facets, an empty surface, surfaces

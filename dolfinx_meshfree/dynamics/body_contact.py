@@ -109,6 +109,7 @@ from ..statics.petsc import create_aij
 from .system import WrappedSystem
 
 if TYPE_CHECKING:  # annotations only
+    from ..geometry.particles import ParticleSet
     from .evaluation import FieldEvaluator
     from .system import SemiDiscreteSystem
 
@@ -121,6 +122,7 @@ __all__ = [
     "closest_points_compiled",
     "contact_surfaces",
     "evaluation_operators",
+    "normals",
     "vertex_coordinates",
     "with_body_contact",
 ]
@@ -240,9 +242,9 @@ class ContactSurfaces:
 
 
 def normals(points: np.ndarray, facets: np.ndarray, unit: bool = True) -> np.ndarray:
-    """The normal of each facet, ``(t_2, -t_1)`` of a segment ``t = b - a`` (2D) or ``(b - a) x
-    (c - a)`` of a triangle (3D): unit, or of the facet's length (2D) or twice its area
-    (3D) halved to its area."""
+    """The normal (nf, gdim) of each facet: ``(t_2, -t_1)`` of a segment ``t = b - a`` (2D),
+    ``(b - a) x (c - a) / 2`` of a triangle (3D); unit, or (``unit=False``) with the facet's
+    length (2D) or area (3D) as its norm."""
     p = points[facets]
     if facets.shape[1] == 2:
         t = p[:, 1] - p[:, 0]
@@ -445,20 +447,19 @@ def _field_layout(vec: PETSc.Vec) -> Layout:
 def evaluation_operators(
     evaluator: FieldEvaluator,
     surfaces: ContactSurfaces,
-    vertices: np.ndarray,
-    cells: np.ndarray,
+    tables: tuple[sp.csr_matrix | None, sp.csr_matrix | None],
     masses: Sequence[PETSc.Vec],
 ) -> list[PETSc.Mat]:
-    """``A_k`` per field: the displacement at the owned surface vertices (rows ``2 i + c`` of
-    :class:`ContactSurfaces`' order) from the field's dofs (collective)."""
+    """``A_k`` per field: the displacement at the owned surface vertices (rows ``gdim i + c``
+    of :class:`ContactSurfaces`' order) from the field's dofs, from the vertices' ``tables``
+    (:meth:`~dolfinx_meshfree.dynamics.evaluation.FieldEvaluator.point_tables`; collective)."""
     d = evaluator.disc
     comm = evaluator.comm
     gdim = d.gdim
-    raise_on_all_ranks(comm, lambda: _check_evaluable(evaluator))
-    X = vertex_coordinates(d.mesh)[vertices]
-    A_fe, A_p = evaluator.point_tables(X, cells)
+    A_fe, A_p = tables
     nv_global = len(surfaces.points)
-    rows = Layout(gdim * len(vertices), gdim * nv_global, gdim * surfaces.owned[0])
+    lo, hi = surfaces.owned
+    rows = Layout(gdim * (hi - lo), gdim * nv_global, gdim * lo)
     start = surfaces.owned[0]
     names = [f.name for f in d.fields]
 
@@ -706,8 +707,9 @@ def closest_points_compiled(
 class BodyContactSystem(WrappedSystem):
     """A :class:`~dolfinx_meshfree.dynamics.system.SemiDiscreteSystem` with contact between
     two bodies (module docstring): the inner system's internal force plus ``A^T f_c``, its
-    strain energy plus ``E_c``, its tangent plus the contact bound ``A^T diag(c) A`` (for the
-    stable step). Everything else is the inner system's.
+    strain energy plus the contact's stored energy (and friction's dissipated work), its
+    tangent plus the contact bound ``A^T diag(c) A`` (for the stable step). Everything else is
+    the inner system's.
 
     Args:
         inner: The system without this contact.
@@ -743,8 +745,8 @@ class BodyContactSystem(WrappedSystem):
         self._sums: list[PETSc.Mat] = []  # the inner blocks plus those, of the last tangent()
         #: The last evaluated state: ``{"pairs", "penetration", "energy"}`` (every rank).
         self.last: dict = {"pairs": 0, "penetration": 0.0, "energy": 0.0}
-        #: The closest-point kernel: compiled (numba) when available, else numpy.
         self.gdim = surfaces.points.shape[1]
+        # the closest-point kernel: compiled (numba) when available, else numpy
         self._kernel = closest_points_compiled if jit.AVAILABLE else closest_points
         #: Seconds spent in the contact's forces (search, forces, ``A^T f``) since the build.
         self.seconds = 0.0
@@ -971,6 +973,7 @@ def with_body_contact(
             "contact=dolfinx_meshfree.dynamics.BodyContact()"
         )
     d = evaluator.disc
+    raise_on_all_ranks(evaluator.comm, lambda: _check_evaluable(evaluator))
     surfaces, vertices, cells = contact_surfaces(d.mesh, surface_a, surface_b)
     sizes = surfaces.sizes()
     h = float(np.median(sizes))
@@ -981,20 +984,20 @@ def with_body_contact(
         )
     k = float(contact.penalty) if contact.penalty is not None else contact.factor * E / h
     depth = float(contact.depth) if contact.depth is not None else float(sizes.max())
-    A = evaluation_operators(evaluator, surfaces, vertices, cells, system.mass())
-    _check_particles_apart(evaluator, surfaces, vertices, cells)
+    tables = evaluator.point_tables(vertex_coordinates(d.mesh)[vertices], cells)
+    _check_particles_apart(evaluator, surfaces, tables[1])  # before any PETSc object
+    A = evaluation_operators(evaluator, surfaces, tables, system.mass())
     return BodyContactSystem(system, surfaces, A, k, contact.two_pass, depth, contact.friction)
 
 
 def _check_particles_apart(
-    evaluator: FieldEvaluator, surfaces: ContactSurfaces, vertices: np.ndarray, cells: np.ndarray
+    evaluator: FieldEvaluator, surfaces: ContactSurfaces, A_p: sp.csr_matrix | None
 ) -> None:
-    """Refuse a particle whose function reaches both surfaces (its support joins the bodies)."""
+    """Refuse a particle whose function reaches both surfaces (its support joins the bodies),
+    from the owned vertices' particle table ``A_p`` (on every rank)."""
     d = evaluator.disc
     if d.particles is None:
         return
-    X = vertex_coordinates(d.mesh)[vertices]
-    _, A_p = evaluator.point_tables(X, cells)
     lo, hi = surfaces.owned
     body = surfaces.vertex_body[lo:hi]
     seen = []
@@ -1017,7 +1020,7 @@ def _check_particles_apart(
         )
 
 
-def _particle_position(particles, petsc_index: int, comm: MPI.Comm) -> np.ndarray:
+def _particle_position(particles: ParticleSet, petsc_index: int, comm: MPI.Comm) -> np.ndarray:
     """The position of the particle with this PETSc index (every rank)."""
     at = np.flatnonzero(particles.petsc_index == petsc_index)
     x = particles.positions[at[0]] if at.size else None

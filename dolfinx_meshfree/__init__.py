@@ -65,7 +65,9 @@ from .io import DynamicsWriter, ProgressBar, read_particles
 from .physics.cohesive import LinearCohesive
 from .physics.constitutive import Material, NeoHookean, SaintVenantKirchhoff
 from .physics.forces import InternalForces
+from .physics.hjc import HolmquistJohnsonCook
 from .physics.inelastic import J2Plasticity, RankineDamage
+from .physics.johnson_cook import JohnsonCook
 from .physics.materials import LinearElastic
 from .statics.cohesive_growth import CohesiveGrowth, initiation_direction
 from .statics.cohesive_initiation import BulkStrengthWarning, InitiationSite, initiation_site
@@ -141,12 +143,14 @@ __all__ = [
     "FieldAbove",
     "GaussianPulseRod",
     "GrowthStep",
+    "HolmquistJohnsonCook",
     "HybridElasticity",
     "InclinedCentreCrack",
     "InitiationSite",
     "InternalForces",
     "IterativeOptions",
     "J2Plasticity",
+    "JohnsonCook",
     "KirschPlate",
     "LinearCohesive",
     "LinearElastic",

@@ -44,7 +44,7 @@ from ..parallel import raise_on_all_ranks
 from ..physics.constitutive import DeformationError, Material, check_deformation_gradients
 from ..physics.forces import InternalForces
 from ..physics.materials import LinearElastic, linear_twin
-from ..physics.state import check_stateless
+from ..physics.state import check_not_rate_law, check_stateless
 from ..statics.sides import FESide, ParticleSide
 from .system import Blocks, Field
 
@@ -91,6 +91,7 @@ def small_strain(material: LinearElastic | Material, method: str) -> LinearElast
     """
     if isinstance(material, LinearElastic):
         return material
+    check_not_rate_law(material, "explicit dynamics")
     check_stateless(material, "explicit dynamics")
     if not isinstance(material, Material):
         raise TypeError(

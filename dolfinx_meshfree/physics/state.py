@@ -35,6 +35,7 @@ __all__ = [
     "BoundLaw",
     "PointState",
     "StatefulLaw",
+    "check_not_rate_law",
     "check_stateless",
     "is_stateful",
     "tangent_from_voigt",
@@ -93,6 +94,20 @@ def check_stateless(law: object, where: str) -> None:
             f"plasticity), and {where} does not carry state at its quadrature points; solve it "
             "with CoupledElasticity(...) or EFGElasticity(...): .solve(load_steps=...), or "
             "follow_path(...) past a peak"
+        )
+
+
+def check_not_rate_law(law: object, where: str) -> None:
+    """Refuse a rate-form material point (:class:`~dolfinx_meshfree.HolmquistJohnsonCook`,
+    :class:`~dolfinx_meshfree.JohnsonCook`: state with the deformation gradient ``F``) in code
+    that does not carry its state, naming how to use it."""
+    fields = getattr(law, "state_fields", None)
+    if isinstance(fields, dict) and "F" in fields and hasattr(law, "update"):
+        raise TypeError(
+            f"{type(law).__name__} is a rate-form material point for impact (finite strain, "
+            f"state with F at each point), and {where} does not carry its state: drive it at "
+            "your points with state = law.initial_state(m); sigma, state = law.update(F, dt, "
+            "state) (explicit dynamics with these laws is not built yet)"
         )
 
 

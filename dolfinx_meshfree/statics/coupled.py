@@ -49,7 +49,7 @@ from ..physics.body_loads import CallableBodyForce
 from ..physics.cohesive import LinearCohesive
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic, linear_twin
-from ..physics.state import is_stateful
+from ..physics.state import check_not_rate_law, is_stateful
 from .cohesive import CohesiveCrack, check_cohesive, check_through
 from .coupled_newton import (
     FINITE_STRAIN_COUPLINGS,
@@ -261,6 +261,7 @@ class CoupledElasticity:
                 "(a polyline); it is not defined on a 3D interface: leave it None (multipliers "
                 "continuous along the interface)"
             )
+        check_not_rate_law(material, "CoupledElasticity")
         if not isinstance(material, LinearElastic | Material) and not is_stateful(material):
             raise TypeError(
                 f"material must be a LinearElastic, a finite-strain Material (NeoHookean, "

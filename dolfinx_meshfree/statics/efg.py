@@ -77,7 +77,7 @@ from ..physics.operators import (
     moment_corrections,
     stiffness_matrix,
 )
-from ..physics.state import is_stateful
+from ..physics.state import check_not_rate_law, is_stateful
 from ..physics.user_functions import vector_values
 from .cohesive import CohesiveCrack, CohesiveSide, check_cohesive, check_through
 from .fe_state import check_bands
@@ -618,6 +618,7 @@ class EFGElasticity:
             )
         #: The :class:`~dolfinx_meshfree.AdaptiveQuadrature` of the cells, or ``None``.
         self.adaptive_quadrature = quadrature
+        check_not_rate_law(material, "EFGElasticity")
         if not isinstance(material, LinearElastic | Material) and not is_stateful(material):
             raise TypeError(
                 f"material must be a LinearElastic, a finite-strain Material (NeoHookean, "

@@ -58,7 +58,7 @@ from ..geometry.quadrature import (
 from ..parallel import raise_on_all_ranks
 from ..physics.body_loads import BodyForce, accumulate
 from ..physics.materials import LinearElastic
-from ..physics.state import is_stateful
+from ..physics.state import check_not_rate_law, is_stateful
 from .coupled import COUPLINGS, CoupledElasticity, CoupledSolution
 from .petsc import SolverOptions, solver_options
 
@@ -283,6 +283,7 @@ def _check_arguments(a, L, bcs, patch, material, coupling, options):
     """Validate the inputs (local; no collective call). Returns ``V``."""
     if not isinstance(patch, ParticlePatch):
         raise TypeError(f"patch must be a ParticlePatch, got {type(patch).__name__}")
+    check_not_rate_law(material, "CoupledLinearProblem")
     if not isinstance(material, LinearElastic) and not is_stateful(material):
         raise TypeError(
             f"material must be a LinearElastic (the particle side's law) or a law with state "

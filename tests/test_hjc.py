@@ -358,14 +358,12 @@ def test_fully_damaged_point_carries_no_tension_and_no_shear_without_pressure():
 
 
 def test_solvers_refuse_rate_laws_with_a_way_to_use_them():
-    """The solvers do not carry a rate law's state yet: each says so and how to drive it."""
+    """The static solvers do not carry a rate law's state: they say so and where it runs."""
     msh = dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 4, 4)
     V = _compat.vector_function_space(msh)
     patch = mf.ParticlePatch(msh, np.arange(4, dtype=np.int32), 0.25)
     laws = (dataclasses.replace(LAW, plane="strain"), mf.JohnsonCook.steel_4340(plane="strain"))
     for law in laws:
-        match = rf"{type(law).__name__} is a rate-form .*update"
-        with pytest.raises(TypeError, match=match):
-            mf.ExplicitDynamics.fe(V, law)
+        match = rf"{type(law).__name__} is a rate-form .*ExplicitDynamics.fe.*update"
         with pytest.raises(TypeError, match=match):
             mf.CoupledElasticity(V, patch, law, coupling="lagrange")

@@ -88,6 +88,7 @@ from .conditions import (
 from .finite_strain import (
     NonlinearSystem,
     ReducedParticles,
+    bind_rate_law,
     fe_forces,
     particle_forces,
     small_strain,
@@ -101,6 +102,7 @@ from .masses import (
     table_lumped_mass,
 )
 from .methods import DYNAMICS_METHODS
+from .rate_forms import PointFESide, RateLaw
 from .reduction import free_particle_points, reduce_master_slave
 from .system import Field
 
@@ -263,6 +265,7 @@ def build_fe(
     """Pure FE: DOLFINx's stiffness ``inner(sigma(u), eps(v)) dx``, row-sum masses, fixed
     facets' nodes held strongly; at finite strain the assembled ``int P(F) : grad v dX``
     (:class:`~dolfinx_meshfree.dynamics.finite_strain.NonlinearSystem`). Collective."""
+    material = bind_rate_law(material, "fe")
     law, material = material, small_strain(material, "fe")
     t0 = time.perf_counter()
     msh = V.mesh
@@ -285,7 +288,8 @@ def build_fe(
 
     system = None
     if law is not material:
-        system = NonlinearSystem([fe_field], [fe_forces(V, law)], law)
+        side = PointFESide(V, law) if isinstance(law, RateLaw) else fe_forces(V, law)
+        system = NonlinearSystem([fe_field], [side], law)
     return Model(
         [fe_field],
         law,
@@ -346,6 +350,7 @@ def build_efg(
     A finite-strain ``material`` gives the internal force of
     :class:`~dolfinx_meshfree.InternalForces` on the same rule and table.
     """
+    material = bind_rate_law(material, "efg")
     law, material = material, small_strain(material, "efg")
     if particles.mesh is None:
         raise ValueError("explicit EFG needs particles with a background mesh (mesh=...)")
@@ -530,6 +535,7 @@ def build_coupled(
         )
     # the law the model was built with, unless the caller names another (issue 23, item 2)
     law = getattr(problem, "law", problem.material) if material is None else material
+    bind_rate_law(law, coupling)
     material = small_strain(law, coupling)
     _check_twin(law, material, problem.material)
     check_crack_options(
@@ -759,6 +765,7 @@ def build_hybrid(
         )
     check_particle_mass(particle_mass, default="volume")
     law = problem.material if material is None else material
+    bind_rate_law(law, "hybrid")
     material = small_strain(law, "hybrid")
     if law is not material:
         _check_twin(law, material, problem.material)

@@ -177,6 +177,7 @@ class CentralDifference:
         pk = [k for k, f in enumerate(system.fields) if f.name == "particles"]
         t_out = 0.0
         outs: list[tuple[int, float]] = []
+        set_time = getattr(system, "set_time", None)
         clock = time.perf_counter()
         n = n0
         stopped = False
@@ -193,6 +194,8 @@ class CentralDifference:
                 gamma = 0.5 if n == 0 else (0.5 * (1.0 + self.dt_prev / dt) if n == n0 else 1.0)
                 amps = loads.at(tn)
                 # trial velocities (eq. 93): vbar = v_{n-1/2} + gamma dt M^{-1} (f_ext - f_int)
+                if set_time is not None:  # a rate-form law advances its state to t_n
+                    set_time(tn)
                 try:
                     system.internal_force(self.u, ku)
                 except DeformationError as e:  # finite strain: name the step and stop

@@ -44,8 +44,9 @@ from ..parallel import raise_on_all_ranks
 from ..physics.constitutive import DeformationError, Material, check_deformation_gradients
 from ..physics.forces import InternalForces
 from ..physics.materials import LinearElastic, linear_twin
-from ..physics.state import check_not_rate_law, check_stateless
+from ..physics.state import check_not_rate_law, check_stateless, is_rate_law
 from ..statics.sides import FESide, ParticleSide
+from .rate_forms import RATE_METHODS, RateLaw
 from .system import Blocks, Field
 
 if TYPE_CHECKING:  # annotations only
@@ -57,6 +58,7 @@ __all__ = [
     "NonlinearSystem",
     "ReducedParticles",
     "SharedSide",
+    "bind_rate_law",
     "fe_forces",
     "particle_forces",
     "small_strain",
@@ -77,6 +79,26 @@ FINITE_STRAIN_DYNAMICS = (
 
 #: What the other methods miss at finite strain in explicit dynamics.
 MISSING: dict[str, str] = {}
+
+
+def bind_rate_law(material: object, method: str) -> object:
+    """A rate-form law bound to the state of its points (:class:`~dolfinx_meshfree.dynamics.
+    rate_forms.RateLaw`) for the methods that carry it, else ``material`` itself.
+
+    Raises:
+        ValueError: a rate-form law with a ``method`` not in
+            :data:`~dolfinx_meshfree.dynamics.rate_forms.RATE_METHODS`.
+    """
+    if not is_rate_law(material):
+        return material
+    if method not in RATE_METHODS:
+        raise ValueError(
+            f"material={type(material).__name__} is a rate-form law, which explicit dynamics "
+            f"carries on {list(RATE_METHODS)} only (method={method!r}: a coupled model's sides "
+            "over both fields each need their own points' state, not built yet); use "
+            "ExplicitDynamics.fe(V, law) or .efg(particles, law)"
+        )
+    return RateLaw(material)
 
 
 def small_strain(material: LinearElastic | Material, method: str) -> LinearElastic:
@@ -454,6 +476,12 @@ class NonlinearSystem:
         for shared in self.shared:
             out.append(shared.deformation_gradient([u[i] for i in shared.fields]))
         return np.concatenate(out)
+
+    def set_time(self, t: float) -> None:
+        """The time of the next internal force (the stepper's ``t_n``): a rate-form law advances
+        its state to it (:mod:`~dolfinx_meshfree.dynamics.rate_forms`); nothing for the others."""
+        if isinstance(self.material, RateLaw):
+            self.material.set_time(t)
 
     def wave_speed(self, u: Sequence[PETSc.Vec]) -> float:
         """The largest current Lagrangian wave speed over every quadrature point and rank

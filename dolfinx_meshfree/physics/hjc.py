@@ -207,6 +207,13 @@ class HolmquistJohnsonCook:
         return 3 if self.plane is None else 2
 
     @property
+    def stiffest_bulk_modulus(self) -> float:
+        """``max(K_e, K1)``: the largest bulk modulus short of extreme compaction (the fully
+        dense curve's tangent passes ``K1`` only past ``mu_bar = -2 K2 / (3 K3)``), for the
+        stable-step bound of an explicit run."""
+        return max(self.K_elastic, self.K1)
+
+    @property
     def K_elastic(self) -> float:
         """Region I's bulk modulus ``K_e = P_crush / mu_crush``."""
         return self.p_crush / self.mu_crush

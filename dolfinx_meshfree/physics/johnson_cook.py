@@ -114,6 +114,12 @@ class JohnsonCook:
         """The bulk modulus ``E / (3 (1 - 2 nu))``."""
         return self.E / (3.0 * (1.0 - 2.0 * self.nu))
 
+    @property
+    def stiffest_bulk_modulus(self) -> float:
+        """``K`` (the hypo-elastic pressure's tangent ``K / J`` grows as ``J`` falls; the run's
+        wave-speed check covers it)."""
+        return self.K
+
     def flow_stress(self, plastic_strain: np.ndarray, rate: np.ndarray) -> np.ndarray:
         """``sigma_y = (A + B eps_p^n) (1 + C ln max(rate / eps0, 1))``."""
         ratio = np.maximum(np.asarray(rate, dtype=float) / self.eps0, 1.0)

@@ -37,6 +37,7 @@ __all__ = [
     "StatefulLaw",
     "check_not_rate_law",
     "check_stateless",
+    "is_rate_law",
     "is_stateful",
     "tangent_from_voigt",
     "tensor_from_voigt",
@@ -97,17 +98,24 @@ def check_stateless(law: object, where: str) -> None:
         )
 
 
+def is_rate_law(law: object) -> bool:
+    """Whether ``law`` is a rate-form material point (state with ``F``; ``update(F, dt,
+    state)``)."""
+    fields = getattr(law, "state_fields", None)
+    return isinstance(fields, dict) and "F" in fields and hasattr(law, "update")
+
+
 def check_not_rate_law(law: object, where: str) -> None:
     """Refuse a rate-form material point (:class:`~dolfinx_meshfree.HolmquistJohnsonCook`,
     :class:`~dolfinx_meshfree.JohnsonCook`: state with the deformation gradient ``F``) in code
     that does not carry its state, naming how to use it."""
-    fields = getattr(law, "state_fields", None)
-    if isinstance(fields, dict) and "F" in fields and hasattr(law, "update"):
+    if is_rate_law(law):
         raise TypeError(
             f"{type(law).__name__} is a rate-form material point for impact (finite strain, "
-            f"state with F at each point), and {where} does not carry its state: drive it at "
-            "your points with state = law.initial_state(m); sigma, state = law.update(F, dt, "
-            "state) (explicit dynamics with these laws is not built yet)"
+            f"state with F at each point), and {where} does not carry its state: run it in "
+            "explicit dynamics, ExplicitDynamics.fe(V, law) or .efg(particles, law), or drive "
+            "it at your points with state = law.initial_state(m); sigma, state = "
+            "law.update(F, dt, state)"
         )
 
 

@@ -1,0 +1,189 @@
+"""Rate-form laws (:class:`~dolfinx_meshfree.HolmquistJohnsonCook`,
+:class:`~dolfinx_meshfree.JohnsonCook`) in explicit dynamics: their state at the quadrature
+points, advanced once per step.
+
+A rate-form law integrates its stress from one deformation gradient to the next over the time
+between them (:mod:`~dolfinx_meshfree.physics.objective`), so the explicit loop (Rabczuk et al.
+2006, eq. 86–92: one internal force ``f^int(d_n)`` per step) drives it: the stepper tells the
+system the time ``t_n`` of each force evaluation (``set_time``), and the evaluation at ``d_n``
+advances the state of every point from ``F_{n-1}`` over ``t_n - t_{n-1}`` to ``F_n``. An
+evaluation at the same time and gradients (a run continued from where the last one stopped)
+returns the stress it has; going back in time is refused (the state cannot be undone).
+
+:class:`RateLaw` is the law as the force code sees it (the
+:class:`~dolfinx_meshfree.physics.constitutive.Material` protocol): ``first_piola`` is the nominal
+stress ``J sigma F^{-T}`` (in-plane part in 2D) of the advanced state, ``strain_energy_density``
+the stress work per unit reference volume the state carries (the records' internal energy:
+stored and dissipated together), ``tangent`` the elastic tangent of its stiffest linear twin
+(the law's ``stiffest_bulk_modulus`` and its shear modulus; scaled up if the points' current
+wave speed ever passes the twin's): the stable-step bound of
+:mod:`~dolfinx_meshfree.dynamics.time_step` uses it, so the step is safe after the concrete
+compacts (HJC's fully dense ``K1`` is 5.3 times its elastic ``K_e``: the step is 0.58 of the
+virgin concrete's from the start), and ``wave_speed`` the largest current dilatational speed of
+the points, which the run's re-bound check watches. The FE cells evaluate it at their Gauss points
+with :class:`PointFESide` (it has no UFL form), the particles through
+:class:`~dolfinx_meshfree.statics.sides.ParticleSide` unchanged.
+
+Pure FE and pure particles only: a coupled model has several sides, and sides over both fields,
+each with its own points (not built yet).
+"""
+
+from __future__ import annotations
+
+import dolfinx
+import numpy as np
+import scipy.sparse as sp
+from petsc4py import PETSc
+
+from ..approx.fe_dofs import fe_dof_layout
+from ..approx.fe_points import tabulate_in_cells
+from ..geometry.quadrature import cell_quadrature
+from ..physics.forces import InternalForces
+from ..physics.materials import LinearElastic
+from ..physics.objective import as_3d, nominal_stress
+from ..physics.state import is_rate_law
+from ..statics.petsc import create_aij, create_vector
+
+__all__ = ["RATE_METHODS", "PointFESide", "RateLaw"]
+
+#: The methods of explicit dynamics that carry a rate-form law's state.
+RATE_METHODS = ("fe", "efg")
+
+
+class RateLaw:
+    """A rate-form law bound to the state of one set of points (one side of a model), as a
+    :class:`~dolfinx_meshfree.physics.constitutive.Material` (module docstring).
+
+    The points are the first ``first_piola`` call's (their number fixes the state's size).
+    """
+
+    def __init__(self, law: object) -> None:
+        if not is_rate_law(law):
+            raise TypeError(f"law must be a rate-form law, got {type(law).__name__}")
+        self.law = law
+        self.plane = "strain" if law.gdim == 2 else None
+        self.rho = float(law.rho)
+        K, G = float(law.stiffest_bulk_modulus), float(law.G)
+        #: The stiffest linear twin: masses, the linear stiffness and the stable-step bound.
+        self.twin = LinearElastic(
+            E=9.0 * K * G / (3.0 * K + G),
+            nu=(3.0 * K - 2.0 * G) / (2.0 * (3.0 * K + G)),
+            plane=self.plane,
+            rho=self.rho,
+        )
+        self.E, self.nu = self.twin.E, self.twin.nu
+        self.state: dict[str, np.ndarray] | None = None
+        self.sigma: np.ndarray | None = None
+        #: The time of the state, and the time of the next evaluation (``set_time``).
+        self.time = 0.0
+        self.clock = 0.0
+
+    @property
+    def gdim(self) -> int:
+        return int(self.law.gdim)
+
+    def set_time(self, t: float) -> None:
+        """The time of the next evaluation (the stepper's ``t_n``)."""
+        self.clock = float(t)
+
+    def stress(self, F: np.ndarray) -> np.ndarray:
+        """The Cauchy stress (m, 3, 3) at ``F`` (m, d, d), the state advanced to the clock."""
+        F = np.asarray(F, dtype=float)
+        m = len(F)
+        if self.state is None:
+            self.state = self.law.initial_state(m)
+            self.sigma = np.zeros((m, 3, 3))
+        if m != len(self.state["F"]):
+            raise ValueError(
+                f"{type(self.law).__name__}: {m} points, but its state was made for "
+                f"{len(self.state['F'])}: one RateLaw per set of points"
+            )
+        dt = self.clock - self.time
+        if dt == 0.0:
+            if not np.array_equal(as_3d(F).reshape(m, 9), self.state["F"]):
+                raise ValueError(
+                    f"{type(self.law).__name__}: the deformation changed with no time passing "
+                    f"(t = {self.clock:.6g}): a rate-form law starts from rest, undeformed; give "
+                    "initial velocities, not an initial displacement"
+                )
+            return self.sigma
+        if dt < 0.0:
+            raise ValueError(
+                f"{type(self.law).__name__}: asked for t = {self.clock:.6g} before its state's "
+                f"t = {self.time:.6g}; a rate-form law's state cannot go back: build the model "
+                "again to start over"
+            )
+        self.sigma, self.state = self.law.update(F, dt, self.state)
+        self.time = self.clock
+        return self.sigma
+
+    def first_piola(self, F: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
+        """``J sigma F^{-T}`` (m, d, d) of the advanced state."""
+        d = self.gdim
+        P = nominal_stress(self.stress(F), as_3d(np.asarray(F, dtype=float)))
+        return P[:, :d, :d]
+
+    def tangent(self, F: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
+        """The stiffest twin's elastic tangent (for the stable-step bound), scaled up by
+        ``(c / c_twin)^2`` where the points' current wave speed ``c`` has passed the twin's
+        (extreme compaction), so that a re-bound sees it."""
+        scale = max(1.0, (self.wave_speed() / self.twin.wave_speed()) ** 2)
+        return scale * self.twin.tangent(F, points)
+
+    def strain_energy_density(self, F: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
+        """The stress work per unit reference volume of the state (m,)."""
+        if self.state is None:
+            return np.zeros(len(F))
+        return self.state["work"][:, 0].copy()
+
+    def ufl_first_piola(self, F: object) -> object:
+        raise TypeError(
+            f"{type(self.law).__name__} is a rate-form law: it has no UFL expression (the FE cells "
+            "evaluate it at their points, PointFESide)"
+        )
+
+    def wave_speed(self, F: np.ndarray | None = None) -> float:
+        """The largest current dilatational wave speed of the points (``F`` is not used)."""
+        return float(self.law.wave_speed(self.state))
+
+
+class PointFESide:
+    """The FE field's internal force of a :class:`RateLaw` at the Gauss points of the owned cells
+    (``f^int = sum_q B0^T P w_q`` by :class:`~dolfinx_meshfree.InternalForces` on the FE basis
+    tabulated at the points), in the FE field's PETSc numbering; the interface of
+    :class:`~dolfinx_meshfree.statics.sides.ParticleSide` (collective calls).
+
+    Args:
+        V: The vector P1/Q1 space. law: The bound law. degree: The Gauss rule (2: the P1/Q1
+            stiffness exactly).
+    """
+
+    def __init__(self, V: dolfinx.fem.FunctionSpace, law: RateLaw, degree: int = 2) -> None:
+        msh = V.mesh
+        self.comm = msh.comm
+        self.u = dolfinx.fem.Function(V)
+        self.u.x.array[:] = 0.0
+        self.layout, l2g = fe_dof_layout(V)
+        self.gdim = gdim = msh.geometry.dim
+        self.n_owned = gdim * V.dofmap.index_map.size_local
+        self.dofs = (gdim * np.asarray(l2g)[:, None] + np.arange(gdim)).ravel().astype(np.int64)
+        owned = np.arange(msh.topology.index_map(msh.topology.dim).size_local, dtype=np.int32)
+        q = cell_quadrature(msh, degree, owned)
+        table = tabulate_in_cells(V, q.points, q.cells, derivatives=1)
+        self.forces = InternalForces(table, q.weights, law, comm=self.comm)
+
+    def coefficients(self, x: PETSc.Vec) -> np.ndarray:
+        """The local FE values (owned and ghost nodes, interleaved) of ``x``."""
+        self.u.x.array[: self.n_owned] = x.getArray(readonly=True)
+        self.u.x.scatter_forward()
+        return self.u.x.array
+
+    def internal_force(self, x: PETSc.Vec) -> PETSc.Vec:
+        f = self.forces.internal_force(self.coefficients(x))
+        return create_vector(self.comm, self.layout, self.dofs, f)
+
+    def tangent(self, x: PETSc.Vec) -> PETSc.Mat:
+        K = self.forces.tangent(self.coefficients(x)).tocoo()
+        n = self.layout.size_global
+        Kg = sp.csr_matrix((K.data, (self.dofs[K.row], self.dofs[K.col])), shape=(n, n))
+        return create_aij(self.comm, Kg, self.layout, self.layout)

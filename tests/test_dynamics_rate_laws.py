@@ -86,7 +86,7 @@ def test_elastic_range_is_the_linear_law(method, cell):
     assert e.internal == pytest.approx(e_lin.internal, rel=2e-4)
 
 
-def impact(law, method: str = "fe", comm=COMM, speed: float = 300.0, fraction: float = 1.0):
+def impact(law, method="fe", comm=COMM, speed=300.0, fraction=1.0):
     """A block thrown at ``speed`` against its held end x = 0 for 20 microseconds, at
     ``fraction`` of the stable step."""
     dyn = bar(method, law, comm=comm, fixed=True)
@@ -127,6 +127,7 @@ def test_steel_block_yields_and_keeps_the_balance():
 
 
 def test_serial_equals_two_ranks():
+    """At the stable step."""
     points = np.array([[0.01, 0.01], [0.05, 0.005], [0.09, 0.015]])
     runs = []
     for comm in (COMM, MPI.COMM_SELF):

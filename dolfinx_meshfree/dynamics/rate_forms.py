@@ -19,8 +19,9 @@ stored and dissipated together), ``tangent`` the elastic tangent of its stiffest
 wave speed ever passes the twin's): the stable-step bound of
 :mod:`~dolfinx_meshfree.dynamics.time_step` uses it, so the step is safe after the concrete
 compacts (HJC's fully dense ``K1`` is 5.3 times its elastic ``K_e``: the step is 0.58 of the
-virgin concrete's from the start), and ``wave_speed`` the largest current dilatational speed of
-the points, which the run's re-bound check watches. The FE cells evaluate it at their Gauss points
+virgin concrete's from the start), and ``wave_speed`` the larger of the twin's and the points'
+current dilatational speed, which the run's re-bound check watches (so it re-bounds only when the
+points outrun the twin). The FE cells evaluate it at their Gauss points
 with :class:`PointFESide` (it has no UFL form), the particles through
 :class:`~dolfinx_meshfree.statics.sides.ParticleSide` unchanged.
 
@@ -72,8 +73,11 @@ class RateLaw:
             rho=self.rho,
         )
         self.E, self.nu = self.twin.E, self.twin.nu
+        #: The state of the points (this rank's), their Cauchy stress (m, 3, 3) and reference
+        #: coordinates (m, gdim): ``None`` until the first force.
         self.state: dict[str, np.ndarray] | None = None
         self.sigma: np.ndarray | None = None
+        self.points: np.ndarray | None = None
         #: The time of the state, and the time of the next evaluation (``set_time``).
         self.time = 0.0
         self.clock = 0.0
@@ -86,13 +90,15 @@ class RateLaw:
         """The time of the next evaluation (the stepper's ``t_n``)."""
         self.clock = float(t)
 
-    def stress(self, F: np.ndarray) -> np.ndarray:
-        """The Cauchy stress (m, 3, 3) at ``F`` (m, d, d), the state advanced to the clock."""
+    def stress(self, F: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
+        """The Cauchy stress (m, 3, 3) at ``F`` (m, d, d), the state advanced to the clock;
+        ``points`` (m, gdim), the points' reference coordinates, are kept on the first call."""
         F = np.asarray(F, dtype=float)
         m = len(F)
         if self.state is None:
             self.state = self.law.initial_state(m)
             self.sigma = np.zeros((m, 3, 3))
+            self.points = None if points is None else np.array(points, dtype=float)
         if m != len(self.state["F"]):
             raise ValueError(
                 f"{type(self.law).__name__}: {m} points, but its state was made for "
@@ -120,14 +126,14 @@ class RateLaw:
     def first_piola(self, F: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
         """``J sigma F^{-T}`` (m, d, d) of the advanced state."""
         d = self.gdim
-        P = nominal_stress(self.stress(F), as_3d(np.asarray(F, dtype=float)))
+        P = nominal_stress(self.stress(F, points), as_3d(np.asarray(F, dtype=float)))
         return P[:, :d, :d]
 
     def tangent(self, F: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
         """The stiffest twin's elastic tangent (for the stable-step bound), scaled up by
         ``(c / c_twin)^2`` where the points' current wave speed ``c`` has passed the twin's
         (extreme compaction), so that a re-bound sees it."""
-        scale = max(1.0, (self.wave_speed() / self.twin.wave_speed()) ** 2)
+        scale = max(1.0, (self.points_wave_speed() / self.twin.wave_speed()) ** 2)
         return scale * self.twin.tangent(F, points)
 
     def strain_energy_density(self, F: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
@@ -142,9 +148,15 @@ class RateLaw:
             "evaluate it at their points, PointFESide)"
         )
 
-    def wave_speed(self, F: np.ndarray | None = None) -> float:
-        """The largest current dilatational wave speed of the points (``F`` is not used)."""
+    def points_wave_speed(self) -> float:
+        """The largest current dilatational wave speed of the points."""
         return float(self.law.wave_speed(self.state))
+
+    def wave_speed(self, F: np.ndarray | None = None) -> float:
+        """The speed the stable step is bounded with: the stiffest twin's, or the points'
+        current one where it is larger (``F`` is not used). The run re-bounds only when the
+        points outrun the twin (a compaction past it), not as they stiffen below it."""
+        return max(self.points_wave_speed(), self.twin.wave_speed())
 
 
 class PointFESide:

@@ -102,7 +102,7 @@ from .masses import (
     table_lumped_mass,
 )
 from .methods import DYNAMICS_METHODS
-from .rate_forms import PointFESide, RateLaw
+from .rate_forms import PointFESide, RateLaws
 from .reduction import free_particle_points, reduce_master_slave
 from .system import Field
 
@@ -178,6 +178,18 @@ def _check_twin(law: Material | LinearElastic, twin: LinearElastic, problem: Lin
             f"material={law!r} reduces to {twin!r} at small strain, but the problem's material "
             f"is {problem!r}: build the problem with the linear twin "
             "(dolfinx_meshfree.physics.materials.linear_twin(material))"
+        )
+
+
+def _check_rate_twin(law: RateLaws, problem: LinearElastic) -> None:
+    """A rate-form law's model takes its masses from the problem's material: the densities and
+    planes must agree (its stiffness is not used: the system's tangent is the law's)."""
+    if problem.rho != law.rho or problem.plane != law.plane:
+        raise ValueError(
+            f"material={type(law.law).__name__} (rho={law.rho}, plane={law.plane!r}) but the "
+            f"problem's material has rho={problem.rho}, plane={problem.plane!r}: build the "
+            "problem with a LinearElastic of the same density and plane (its stiffness is not "
+            "used at finite strain)"
         )
 
 
@@ -288,7 +300,7 @@ def build_fe(
 
     system = None
     if law is not material:
-        side = PointFESide(V, law) if isinstance(law, RateLaw) else fe_forces(V, law)
+        side = PointFESide(V, law.bind()) if isinstance(law, RateLaws) else fe_forces(V, law)
         system = NonlinearSystem([fe_field], [side], law)
     return Model(
         [fe_field],
@@ -415,7 +427,9 @@ def build_efg(
     fields = [Field("particles", K, mass, particle_spacing(particles), block_size=particles.gdim)]
     system = None
     if law is not material:
-        system = NonlinearSystem(fields, [particle_forces(particles, tables, law)], law, constraint)
+        side_law = law.bind() if isinstance(law, RateLaws) else law
+        side = particle_forces(particles, tables, side_law)
+        system = NonlinearSystem(fields, [side], law, constraint)
     return Model(
         fields,
         law,
@@ -535,9 +549,12 @@ def build_coupled(
         )
     # the law the model was built with, unless the caller names another (issue 23, item 2)
     law = getattr(problem, "law", problem.material) if material is None else material
-    bind_rate_law(law, coupling)
+    law = bind_rate_law(law, coupling)
     material = small_strain(law, coupling)
-    _check_twin(law, material, problem.material)
+    if isinstance(law, RateLaws):
+        _check_rate_twin(law, problem.material)
+    else:
+        _check_twin(law, material, problem.material)
     check_crack_options(
         bool(problem.patch.cracks), integration, law is not material, problem.patch.comm
     )
@@ -705,6 +722,10 @@ def _finite_strain_system(
             w[b] = 1.0 - band.alpha_at(q.points[b], q.cells[b])
             return w
 
+    if isinstance(law, RateLaws):  # each side its own points' state (module rate_forms)
+        fe = PointFESide(V, law.bind(), cells, weight_at)
+        particles = particle_forces(patch.particles, ops.particle_tables, law.bind())
+        return NonlinearSystem(fields, [fe, particles], law, constraint, (), constant)
     fe = fe_forces(V, law, cells, weight=weight, weight_at=weight_at)
     particles = particle_forces(patch.particles, ops.particle_tables, law)
     sides: list = [fe, particles]

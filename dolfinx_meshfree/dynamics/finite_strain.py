@@ -46,7 +46,7 @@ from ..physics.forces import InternalForces
 from ..physics.materials import LinearElastic, linear_twin
 from ..physics.state import check_not_rate_law, check_stateless, is_rate_law
 from ..statics.sides import FESide, ParticleSide
-from .rate_forms import RATE_METHODS, RateLaw
+from .rate_forms import RATE_METHODS, RateLaws
 from .system import Blocks, Field
 
 if TYPE_CHECKING:  # annotations only
@@ -82,8 +82,8 @@ MISSING: dict[str, str] = {}
 
 
 def bind_rate_law(material: object, method: str) -> object:
-    """A rate-form law bound to the state of its points (:class:`~dolfinx_meshfree.dynamics.
-    rate_forms.RateLaw`) for the methods that carry it, else ``material`` itself.
+    """A rate-form law over the sides of a model (:class:`~dolfinx_meshfree.dynamics.
+    rate_forms.RateLaws`) for the methods that carry it, else ``material`` itself.
 
     Raises:
         ValueError: a rate-form law with a ``method`` not in
@@ -94,11 +94,10 @@ def bind_rate_law(material: object, method: str) -> object:
     if method not in RATE_METHODS:
         raise ValueError(
             f"material={type(material).__name__} is a rate-form law, which explicit dynamics "
-            f"carries on {list(RATE_METHODS)} only (method={method!r}: a coupled model's sides "
-            "over both fields each need their own points' state, not built yet); use "
-            "ExplicitDynamics.fe(V, law) or .efg(particles, law)"
+            f"carries on {list(RATE_METHODS)} only (method={method!r}: its sides over both "
+            "fields do not carry the points' state yet)"
         )
-    return RateLaw(material)
+    return RateLaws(material)
 
 
 def small_strain(material: LinearElastic | Material, method: str) -> LinearElastic:
@@ -113,6 +112,8 @@ def small_strain(material: LinearElastic | Material, method: str) -> LinearElast
     """
     if isinstance(material, LinearElastic):
         return material
+    if isinstance(material, RateLaws):
+        return material.twin
     check_not_rate_law(material, "explicit dynamics")
     check_stateless(material, "explicit dynamics")
     if not isinstance(material, Material):
@@ -480,7 +481,7 @@ class NonlinearSystem:
     def set_time(self, t: float) -> None:
         """The time of the next internal force (the stepper's ``t_n``): a rate-form law advances
         its state to it (:mod:`~dolfinx_meshfree.dynamics.rate_forms`); nothing for the others."""
-        if isinstance(self.material, RateLaw):
+        if isinstance(self.material, RateLaws):
             self.material.set_time(t)
 
     def wave_speed(self, u: Sequence[PETSc.Vec]) -> float:

@@ -25,11 +25,14 @@ points outrun the twin). The FE cells evaluate it at their Gauss points
 with :class:`PointFESide` (it has no UFL form), the particles through
 :class:`~dolfinx_meshfree.statics.sides.ParticleSide` unchanged.
 
-Pure FE and pure particles only: a coupled model has several sides, and sides over both fields,
-each with its own points (not built yet).
+A model's law is a :class:`RateLaws`: one :class:`RateLaw` per side (the FE cells, the particles),
+one clock. The methods of :data:`RATE_METHODS` carry it; the ramps' blended interface cells,
+master–slave's reduced particles and the hybrid's SPH (sides over both fields) do not yet.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import dolfinx
 import numpy as np
@@ -38,17 +41,19 @@ from petsc4py import PETSc
 
 from ..approx.fe_dofs import fe_dof_layout
 from ..approx.fe_points import tabulate_in_cells
-from ..geometry.quadrature import cell_quadrature
+from ..geometry.quadrature import QuadraturePoints, cell_quadrature
 from ..physics.forces import InternalForces
 from ..physics.materials import LinearElastic
 from ..physics.objective import as_3d, nominal_stress
 from ..physics.state import is_rate_law
 from ..statics.petsc import create_aij, create_vector
 
-__all__ = ["RATE_METHODS", "PointFESide", "RateLaw"]
+__all__ = ["RATE_METHODS", "PointFESide", "RateLaw", "RateLaws"]
 
-#: The methods of explicit dynamics that carry a rate-form law's state.
-RATE_METHODS = ("fe", "efg")
+#: The methods of explicit dynamics that carry a rate-form law's state: each side of theirs has
+#: its own points (the ramps' blended cells, master–slave's reduction and the hybrid's SPH do not
+#: carry it yet).
+RATE_METHODS = ("fe", "efg", "lagrange", "edge-to-edge", "bridging")
 
 
 class RateLaw:
@@ -105,6 +110,9 @@ class RateLaw:
                 f"{len(self.state['F'])}: one RateLaw per set of points"
             )
         dt = self.clock - self.time
+        if m == 0:  # a rank with none of this side's points
+            self.time = self.clock
+            return self.sigma
         if dt == 0.0:
             if not np.array_equal(as_3d(F).reshape(m, 9), self.state["F"]):
                 raise ValueError(
@@ -159,6 +167,66 @@ class RateLaw:
         return max(self.points_wave_speed(), self.twin.wave_speed())
 
 
+class RateLaws:
+    """A rate-form law over the sides of one model: a :class:`RateLaw` per side (:meth:`bind`),
+    one clock (:meth:`set_time`); what the system and the user see.
+
+    ``state``, ``sigma`` and ``points`` join the sides' (FE first), so that
+    ``dyn.material.state["damage"]`` holds every point of this rank.
+    """
+
+    def __init__(self, law: object) -> None:
+        first = RateLaw(law)
+        self.law, self.twin, self.members = law, first.twin, [first]
+        self._unbound = True
+        self.rho, self.plane, self.E, self.nu = first.rho, first.plane, first.E, first.nu
+
+    @property
+    def gdim(self) -> int:
+        return int(self.law.gdim)
+
+    def bind(self) -> RateLaw:
+        """The law of one more side (its own points' state)."""
+        if self._unbound:
+            self._unbound = False
+            return self.members[0]
+        member = RateLaw(self.law)
+        member.set_time(self.members[0].clock)
+        self.members.append(member)
+        return member
+
+    def set_time(self, t: float) -> None:
+        """The time of the next internal force, for every side."""
+        for member in self.members:
+            member.set_time(t)
+
+    def wave_speed(self, F: np.ndarray | None = None) -> float:
+        """The largest of the sides' (:meth:`RateLaw.wave_speed`; ``F`` is not used)."""
+        return max(member.wave_speed() for member in self.members)
+
+    def _joined(self, name: str) -> np.ndarray | None:
+        parts = [getattr(m, name) for m in self.members if m.state is not None]
+        return np.concatenate(parts) if parts else None
+
+    @property
+    def state(self) -> dict[str, np.ndarray] | None:
+        """Every side's state fields, joined (this rank's points; ``None`` before a force)."""
+        states = [m.state for m in self.members if m.state is not None]
+        if not states:
+            return None
+        return {k: np.concatenate([s[k] for s in states]) for k in states[0]}
+
+    @property
+    def sigma(self) -> np.ndarray | None:
+        """The points' Cauchy stress (m, 3, 3), joined."""
+        return self._joined("sigma")
+
+    @property
+    def points(self) -> np.ndarray | None:
+        """The points' reference coordinates (m, gdim), joined."""
+        return self._joined("points")
+
+
 class PointFESide:
     """The FE field's internal force of a :class:`RateLaw` at the Gauss points of the owned cells
     (``f^int = sum_q B0^T P w_q`` by :class:`~dolfinx_meshfree.InternalForces` on the FE basis
@@ -166,11 +234,20 @@ class PointFESide:
     :class:`~dolfinx_meshfree.statics.sides.ParticleSide` (collective calls).
 
     Args:
-        V: The vector P1/Q1 space. law: The bound law. degree: The Gauss rule (2: the P1/Q1
-            stiffness exactly).
+        V: The vector P1/Q1 space. law: The bound law. cells: Flags of the local cells it acts on
+            (``None``: every owned cell). weight_at: ``weight_at(q)`` (m,), a factor of the
+            points' weights (the bridging band's ``beta_FE = 1 - alpha``), or ``None``.
+        degree: The Gauss rule (2: the P1/Q1 stiffness exactly).
     """
 
-    def __init__(self, V: dolfinx.fem.FunctionSpace, law: RateLaw, degree: int = 2) -> None:
+    def __init__(
+        self,
+        V: dolfinx.fem.FunctionSpace,
+        law: RateLaw,
+        cells: np.ndarray | None = None,
+        weight_at: Callable[[QuadraturePoints], np.ndarray] | None = None,
+        degree: int = 2,
+    ) -> None:
         msh = V.mesh
         self.comm = msh.comm
         self.u = dolfinx.fem.Function(V)
@@ -179,10 +256,12 @@ class PointFESide:
         self.gdim = gdim = msh.geometry.dim
         self.n_owned = gdim * V.dofmap.index_map.size_local
         self.dofs = (gdim * np.asarray(l2g)[:, None] + np.arange(gdim)).ravel().astype(np.int64)
-        owned = np.arange(msh.topology.index_map(msh.topology.dim).size_local, dtype=np.int32)
-        q = cell_quadrature(msh, degree, owned)
+        n_owned = msh.topology.index_map(msh.topology.dim).size_local
+        owned = np.arange(n_owned) if cells is None else np.flatnonzero(cells[:n_owned])
+        q = cell_quadrature(msh, degree, owned.astype(np.int32))
         table = tabulate_in_cells(V, q.points, q.cells, derivatives=1)
-        self.forces = InternalForces(table, q.weights, law, comm=self.comm)
+        w = q.weights if weight_at is None else q.weights * weight_at(q)
+        self.forces = InternalForces(table, w, law, comm=self.comm)
 
     def coefficients(self, x: PETSc.Vec) -> np.ndarray:
         """The local FE values (owned and ghost nodes, interleaved) of ``x``."""

@@ -367,11 +367,12 @@ class HolmquistJohnsonCook:
     def wave_speed(self, state: dict[str, np.ndarray] | None = None) -> float:
         """The largest dilatational wave speed ``sqrt((K + 4 G / 3) / rho)`` over the points of
         ``state`` (``K`` the larger of the loading tangent and the unloading modulus at the
-        state's ``mu_max``, ``rho = rho_0 (1 + mu)``); at ``state=None`` the virgin one."""
+        state's ``mu_max``, ``rho = rho_0 (1 + mu)``; 0 without points); at ``state=None`` the
+        virgin one."""
         if state is None:
             return float(np.sqrt((self.K_elastic + 4.0 * self.G / 3.0) / self.rho))
         mu_max = state["mu_max"][:, 0]
         K = np.maximum(self.loading_tangent(mu_max), self.unloading_modulus(mu_max))
         F = state["F"].reshape(-1, 3, 3)
         rho = self.rho / np.linalg.det(F)
-        return float(np.max(np.sqrt((K + 4.0 * self.G / 3.0) / rho)))
+        return float(np.max(np.sqrt((K + 4.0 * self.G / 3.0) / rho), initial=0.0))

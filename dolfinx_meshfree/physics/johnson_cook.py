@@ -186,9 +186,10 @@ class JohnsonCook:
 
     def wave_speed(self, state: dict[str, np.ndarray] | None = None) -> float:
         """The dilatational wave speed ``sqrt((K + 4 G / 3) / rho)`` at the reference density,
-        or the largest over the points of ``state`` at their current density ``rho_0 / J``."""
+        or the largest over the points of ``state`` at their current density ``rho_0 / J`` (0
+        without points)."""
         c2 = (self.K + 4.0 * self.G / 3.0) / self.rho
         if state is None:
             return float(np.sqrt(c2))
         J = np.linalg.det(state["F"].reshape(-1, 3, 3))
-        return float(np.sqrt(c2 * np.max(J)))
+        return float(np.sqrt(c2 * np.max(J, initial=0.0)))

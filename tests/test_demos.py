@@ -289,18 +289,19 @@ def test_bar_impact_demo_table_and_json(shared_dir):
 
 
 def test_concrete_impact_demo_table_and_json(shared_dir):
-    """demos/concrete_impact.py at 20 cells, 0.5 and 100 m/s, FE and EFG: it passes its own
-    checks (the 1D elastic stress, the balance, FE against EFG) and writes one row per run."""
+    """demos/concrete_impact.py at 20 cells, 0.5 and 100 m/s, FE, EFG and lagrange: it passes
+    its own checks (the 1D elastic stress, the balance, each against EFG) and writes one row per
+    run."""
     out = shared_dir / "concrete.json"
     demo = load_demo("concrete_impact")
-    argv = ["--cells", "20", "--velocity", "0.5", "100", "--json", str(out)]
+    argv = ["--method", "fe", "efg", "lagrange", "--cells", "20", "--json", str(out)]
     assert demo.main(argv) == 0
     MPI.COMM_WORLD.Barrier()
     rows = json.loads(out.read_text())["rows"]
     assert [(r["method"], r["velocity"]) for r in rows] == [
-        ("fe", 0.5), ("efg", 0.5), ("fe", 100.0), ("efg", 100.0)
-    ]  # fmt: skip
-    for row in rows[:2]:
+        (m, v) for v in (0.5, 100.0) for m in ("fe", "efg", "lagrange")
+    ]
+    for row in rows[:3]:
         assert abs(row["elastic"]["stress_ratio"] - 1.0) < demo.MARGINS["elastic_stress"]
-    for row in rows[2:]:
+    for row in rows[3:]:
         assert row["crushed_depth"] > 0.5 * demo.LENGTH and 0.3 < row["max_damage"] < 1.0

@@ -131,7 +131,7 @@ def test_crushing_impact_fails_the_concrete_and_keeps_the_balance():
     assert largest(dyn, "mu_max") > HJC.mu_plock  # crushed to fully dense
     assert largest(dyn, "mu_plastic") > 0.05
     assert res.energies[-1].internal > 0.1 * res.energies[0].kinetic
-    assert abs(balance(res)) < 1e-3  # measured 4.1e-4
+    assert abs(balance(res)) < 1e-3  # measured 4.2e-4
 
 
 @pytest.mark.parametrize("method", COUPLINGS)
@@ -143,7 +143,7 @@ def test_coupled_crushing_impact(method):
     assert largest(dyn, "damage") == 1.0
     assert largest(dyn, "mu_max") > HJC.mu_plock
     last = res.energies[-1]
-    assert abs(balance(res) - last.constraint / res.energies[0].kinetic) < 2e-3
+    assert abs(balance(res) - last.constraint / res.energies[0].kinetic) < 2.5e-4  # 1.0e-4
 
 
 def test_steel_block_yields_and_keeps_the_balance():

@@ -16,6 +16,7 @@ import dataclasses
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
+from dolfinx_meshfree.dynamics.patch_conversion import convert
 
 import dolfinx
 import numpy as np
@@ -180,6 +181,9 @@ def test_what_does_not_carry_the_state_refuses_it():
     problem = mf.CoupledElasticity(V, patch, other, coupling="lagrange")
     with pytest.raises(ValueError, match=r"rho=2440.0, plane='strain'\) but the problem's mat"):
         mf.ExplicitDynamics.coupled(problem, material=HJC)
+    old, new = bar("lagrange", HJC), bar("lagrange", HJC)
+    with pytest.raises(ValueError, match=r"adapt= with material=HolmquistJohnsonCook.*not carried"):
+        convert(old, new)
     dyn = mf.ExplicitDynamics.fe(V, HJC)
     dyn.set_initial(displacement=lambda x: 1e-6 * x)
     with pytest.raises(ValueError, match=r"a rate-form law starts from rest"):

@@ -109,6 +109,7 @@ from ..statics.petsc import create_aij, create_vector
 from .energy import kinetic_energy, strain_energy
 from .explicit import ExplicitDynamics
 from .linalg import mumps_lu
+from .rate_forms import RateLaws
 
 __all__ = [
     "RAMP_STABILISATION",
@@ -228,11 +229,19 @@ def _kinetic(dyn: ExplicitDynamics) -> float:
 
 
 def _require_convertible(model: ExplicitDynamics) -> None:
-    """A conversion needs a coupled model, with linear slave links for master-slave (local)."""
+    """A conversion needs a coupled model, with linear slave links for master-slave, and no
+    rate-form law (local)."""
     if model.patch is None or model.mass_rule is None:
         raise ValueError(
             "adapt= converts FE cells of a coupled model; pure EFG has no FE cell (its "
             "particles fill the body already)"
+        )
+    if isinstance(model.material, RateLaws):
+        raise ValueError(
+            f"adapt= with material={type(model.material.law).__name__}: a rate-form law's state "
+            "at its points (stress, damage, plastic strain) is not carried into the rebuilt "
+            "model (it would restart from rest: a wrong stress); conversions of such models are "
+            "not built yet"
         )
     if model.reduction is not None and model.evaluator.expand is not None:
         raise ValueError(

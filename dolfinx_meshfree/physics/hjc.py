@@ -63,8 +63,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from .constitutive import check_deformation_gradients
-from .objective import RateStep, as_3d
+from .objective import RateStep, check_step, virgin_state
 
 __all__ = ["HolmquistJohnsonCook"]
 
@@ -297,18 +296,7 @@ class HolmquistJohnsonCook:
     # -------------------------------------------------------------------- the point
     def initial_state(self, m: int) -> dict[str, np.ndarray]:
         """The virgin, stress-free state of ``m`` points (``F = I``)."""
-        state = {name: np.zeros((m, k)) for name, k in self.state_fields.items()}
-        state["F"][:] = _EYE.ravel()
-        return state
-
-    def _check_state(self, state: dict[str, np.ndarray], m: int) -> None:
-        for name, k in self.state_fields.items():
-            if name not in state or np.shape(state[name]) != (m, k):
-                got = np.shape(state[name]) if name in state else "nothing"
-                raise ValueError(
-                    f"HolmquistJohnsonCook: state[{name!r}] should have shape ({m}, {k}), got "
-                    f"{got}; build it with initial_state(m) and pass the state update() returned"
-                )
+        return virgin_state(self.state_fields, m)
 
     def update(
         self,
@@ -321,17 +309,8 @@ class HolmquistJohnsonCook:
         ``(m, d, d)`` reached over a step of length ``dt`` from the committed ``state`` (never
         modified; the new one is made of new arrays). 2D models give the hoop stretch ``r / R``
         of an axisymmetric point in ``hoop`` (``F_zz``), plane strain leaves it ``None``."""
-        F = np.asarray(F, dtype=float)
-        if F.ndim != 3 or F.shape[1:] != (self.gdim, self.gdim):
-            raise ValueError(
-                f"HolmquistJohnsonCook: F should have shape (m, {self.gdim}, {self.gdim}) for "
-                f"plane={self.plane!r}, got {F.shape}"
-            )
-        if not (np.isfinite(dt) and dt > 0):
-            raise ValueError(f"HolmquistJohnsonCook: dt={dt!r} must be a positive time step")
-        m = len(F)
-        self._check_state(state, m)
-        F3, J = check_deformation_gradients(as_3d(F, hoop), 3)
+        F3, J = check_step(self, F, dt, state, hoop)
+        m = len(F3)
         step = RateStep.start(state["F"].reshape(m, 3, 3), F3, state["deviator"].reshape(m, 3, 3))
         s_trial = step.s_rot + 2.0 * self.G * step.e
 

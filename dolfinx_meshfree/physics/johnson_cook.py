@@ -30,8 +30,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from .constitutive import check_deformation_gradients
-from .objective import RateStep, as_3d
+from .objective import RateStep, check_step, virgin_state
 
 __all__ = ["JohnsonCook"]
 
@@ -128,9 +127,7 @@ class JohnsonCook:
 
     def initial_state(self, m: int) -> dict[str, np.ndarray]:
         """The virgin, stress-free state of ``m`` points (``F = I``)."""
-        state = {name: np.zeros((m, k)) for name, k in self.state_fields.items()}
-        state["F"][:] = _EYE.ravel()
-        return state
+        return virgin_state(self.state_fields, m)
 
     def update(
         self,
@@ -142,23 +139,8 @@ class JohnsonCook:
         """``(sigma (m, 3, 3), new state)`` at ``F`` ``(m, d, d)`` after a step ``dt`` from the
         committed ``state`` (never modified); ``hoop`` as in
         :meth:`~dolfinx_meshfree.physics.hjc.HolmquistJohnsonCook.update`."""
-        F = np.asarray(F, dtype=float)
-        if F.ndim != 3 or F.shape[1:] != (self.gdim, self.gdim):
-            raise ValueError(
-                f"JohnsonCook: F should have shape (m, {self.gdim}, {self.gdim}) for "
-                f"plane={self.plane!r}, got {F.shape}"
-            )
-        if not (np.isfinite(dt) and dt > 0):
-            raise ValueError(f"JohnsonCook: dt={dt!r} must be a positive time step")
-        m = len(F)
-        for name, k in self.state_fields.items():
-            if name not in state or np.shape(state[name]) != (m, k):
-                got = np.shape(state[name]) if name in state else "nothing"
-                raise ValueError(
-                    f"JohnsonCook: state[{name!r}] should have shape ({m}, {k}), got {got}; "
-                    "build it with initial_state(m) and pass the state update() returned"
-                )
-        F3, J = check_deformation_gradients(as_3d(F, hoop), 3)
+        F3, J = check_step(self, F, dt, state, hoop)
+        m = len(F3)
         step = RateStep.start(state["F"].reshape(m, 3, 3), F3, state["deviator"].reshape(m, 3, 3))
         s_trial = step.s_rot + 2.0 * self.G * step.e
         q = np.sqrt(1.5 * np.einsum("qij,qij->q", s_trial, s_trial))

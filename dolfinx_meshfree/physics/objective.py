@@ -37,9 +37,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .constitutive import check_deformation_gradients
+
 _EYE = np.eye(3)
 
-__all__ = ["RateStep", "as_3d", "half_rotation", "hughes_winget", "nominal_stress"]
+__all__ = [
+    "RateStep",
+    "as_3d",
+    "check_step",
+    "half_rotation",
+    "hughes_winget",
+    "nominal_stress",
+    "virgin_state",
+]
 
 
 def as_3d(F: np.ndarray, hoop: np.ndarray | None = None) -> np.ndarray:
@@ -159,3 +169,39 @@ def nominal_stress(sigma: np.ndarray, F: np.ndarray) -> np.ndarray:
     return J[:, None, None] * np.linalg.solve(F, np.asarray(sigma).transpose(0, 2, 1)).transpose(
         0, 2, 1
     )
+
+
+def virgin_state(fields: dict[str, int], m: int) -> dict[str, np.ndarray]:
+    """The stress-free state of a rate-form law at ``m`` points: zeros of each field's shape
+    ``(m, k)``, ``F = I``."""
+    state = {name: np.zeros((m, k)) for name, k in fields.items()}
+    state["F"][:] = _EYE.ravel()
+    return state
+
+
+def check_step(
+    law: object,
+    F: np.ndarray,
+    dt: float,
+    state: dict[str, np.ndarray],
+    hoop: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Validate the arguments of a rate-form ``law``'s ``update`` (its ``gdim``, ``plane``,
+    ``state_fields``) and return ``(F3 (m, 3, 3), J (m,))`` (:func:`as_3d`; ``det F > 0``)."""
+    name, d = type(law).__name__, law.gdim
+    F = np.asarray(F, dtype=float)
+    if F.ndim != 3 or F.shape[1:] != (d, d):
+        raise ValueError(
+            f"{name}: F should have shape (m, {d}, {d}) for plane={law.plane!r}, got {F.shape}"
+        )
+    if not (np.isfinite(dt) and dt > 0):
+        raise ValueError(f"{name}: dt={dt!r} must be a positive time step")
+    m = len(F)
+    for field, k in law.state_fields.items():
+        if field not in state or np.shape(state[field]) != (m, k):
+            got = np.shape(state[field]) if field in state else "nothing"
+            raise ValueError(
+                f"{name}: state[{field!r}] should have shape ({m}, {k}), got {got}; build it "
+                "with initial_state(m) and pass the state update() returned"
+            )
+    return check_deformation_gradients(as_3d(F, hoop), 3)

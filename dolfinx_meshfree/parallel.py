@@ -11,13 +11,27 @@ import numpy as np
 if TYPE_CHECKING:  # annotations only
     from mpi4py import MPI
 
-__all__ = ["Layout", "raise_on_all_ranks"]
+__all__ = ["Layout", "owned_indices", "raise_on_all_ranks"]
 
 T = TypeVar("T")
 
 
 class _RemoteError(ValueError):
     """Raised on the ranks where a check passed because it failed on another rank."""
+
+
+def owned_indices(value: object, name: str, kind: str, n_owned: int, fix: str) -> np.ndarray:
+    """``value`` as a 1D integer array of this rank's owned ``kind`` indices (``0..n_owned -
+    1``), else a ``ValueError`` naming ``name``, what it holds and ``fix`` (local: call it
+    inside :func:`raise_on_all_ranks`)."""
+    a = np.asarray(value)
+    if a.ndim != 1 or (a.size and not np.issubdtype(a.dtype, np.integer)):
+        raise ValueError(f"{name} must be a 1D array of {kind} indices, got {a!r:.80}: {fix}")
+    if a.size and (a.min() < 0 or a.max() >= n_owned):
+        raise ValueError(
+            f"{name} names {kind}s that are not owned here (valid 0..{n_owned - 1}): {fix}"
+        )
+    return a
 
 
 def raise_on_all_ranks(comm: MPI.Comm, fn: Callable[[], T]) -> T:

@@ -283,7 +283,7 @@ def test_bad_fixed_facets():
     mat = mf.LinearElastic(1.0, 0.0, "strain", rho=1.0)
     with pytest.raises(ValueError, match="fixed_facets names facets that are not owned"):
         ExplicitDynamics.fe(V, mat, fixed_facets=np.array([10**6]))
-    with pytest.raises(ValueError, match="fixed_facets should be a 1D array"):
+    with pytest.raises(ValueError, match="fixed_facets must be a 1D array"):
         ExplicitDynamics.fe(V, mat, fixed_facets=np.array([[0.5]]))
 
 

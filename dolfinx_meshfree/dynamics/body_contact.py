@@ -104,7 +104,7 @@ from scipy.spatial import cKDTree
 
 from .. import _compat
 from ..approx import jit
-from ..parallel import Layout, raise_on_all_ranks
+from ..parallel import Layout, owned_indices, raise_on_all_ranks
 from ..statics.petsc import create_aij
 from .system import WrappedSystem
 
@@ -264,17 +264,8 @@ def _facets(msh: dolfinx.mesh.Mesh, facets: npt.ArrayLike, name: str) -> np.ndar
     exterior = np.asarray(dolfinx.mesh.exterior_facet_indices(msh.topology))
 
     def check() -> np.ndarray:
-        f = np.asarray(facets)
-        if f.ndim != 1 or (f.size and not np.issubdtype(f.dtype, np.integer)):
-            raise ValueError(
-                f"{name} must be a 1D array of facet indices, got {f!r:.80}: pass owned "
-                "exterior facets, e.g. mf.boundary_facets(mesh, marker)"
-            )
-        if f.size and (f.min() < 0 or f.max() >= n_own):
-            raise ValueError(
-                f"{name} names facets that are not owned here (valid 0..{n_own - 1}): pass "
-                "owned exterior facets, e.g. mf.boundary_facets(mesh, marker)"
-            )
+        fix = "pass owned exterior facets, e.g. mf.boundary_facets(mesh, marker)"
+        f = owned_indices(facets, name, "facet", n_own, fix)
         inner = np.setdiff1d(f, exterior)
         if inner.size:
             x = msh.geometry.x[_compat.entities_to_geometry(msh, tdim - 1, inner[:1])].mean(1)

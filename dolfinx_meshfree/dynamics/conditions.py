@@ -25,7 +25,7 @@ from .. import _compat
 from ..approx.tables import ShapeTable
 from ..geometry.particles import ParticleSet
 from ..geometry.quadrature import QuadraturePoints, facet_quadrature
-from ..parallel import Layout, raise_on_all_ranks
+from ..parallel import Layout, owned_indices, raise_on_all_ranks
 from ..statics.efg import facet_multipliers
 from ..statics.petsc import create_aij
 
@@ -58,15 +58,8 @@ def check_facets(msh: dolfinx.mesh.Mesh, facets: npt.ArrayLike | None) -> np.nda
                 "fixed_facets as (facets, components) pairs is not available with this method; "
                 "pass facets whose nodes are held in all components"
             )
-        f = np.asarray(facets)
-        if f.ndim != 1 or (f.size and not np.issubdtype(f.dtype, np.integer)):
-            raise ValueError(f"fixed_facets should be a 1D array of facet indices, got {f!r:.80}")
-        if f.size and (f.min() < 0 or f.max() >= n_own):
-            raise ValueError(
-                f"fixed_facets names facets that are not owned here (valid 0..{n_own - 1}); "
-                "pass owned exterior facets, e.g. from boundary_facets"
-            )
-        return f.astype(np.int32)
+        fix = "pass owned exterior facets, e.g. from boundary_facets"
+        return owned_indices(facets, "fixed_facets", "facet", n_own, fix).astype(np.int32)
 
     return raise_on_all_ranks(msh.comm, check)
 

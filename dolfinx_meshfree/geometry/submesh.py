@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .. import _compat
-from ..parallel import raise_on_all_ranks
+from ..parallel import owned_indices, raise_on_all_ranks
 
 __all__ = ["submesh"]
 
@@ -32,14 +32,8 @@ def submesh(msh: dolfinx.mesh.Mesh, cells: npt.ArrayLike) -> dolfinx.mesh.Mesh:
     n_own = msh.topology.index_map(tdim).size_local
 
     def check() -> np.ndarray:
-        c = np.asarray(cells)
-        if c.ndim != 1 or (c.size and not np.issubdtype(c.dtype, np.integer)):
-            raise ValueError(f"cells should be a 1D array of cell indices, got {c!r:.80}")
-        if c.size and (c.min() < 0 or c.max() >= n_own):
-            raise ValueError(
-                f"cells names cells that are not owned here (valid 0..{n_own - 1}): pass owned "
-                "cells, e.g. np.flatnonzero(marker(midpoints)) over range(size_local)"
-            )
+        fix = "pass owned cells, e.g. np.flatnonzero(marker(midpoints)) over range(size_local)"
+        c = owned_indices(cells, "cells", "cell", n_own, fix)
         return np.unique(c.astype(np.int32))
 
     kept = raise_on_all_ranks(msh.comm, check)

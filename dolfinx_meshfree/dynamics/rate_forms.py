@@ -56,6 +56,18 @@ __all__ = ["RATE_METHODS", "PointFESide", "RateLaw", "RateLaws"]
 RATE_METHODS = ("fe", "efg", "lagrange", "edge-to-edge", "bridging")
 
 
+def stiffest_twin(law: object) -> LinearElastic:
+    """The linear law of a rate-form ``law``'s ``stiffest_bulk_modulus`` and shear modulus, its
+    density and plane: the masses, the linear stiffness and the stable-step bound."""
+    K, G = float(law.stiffest_bulk_modulus), float(law.G)
+    return LinearElastic(
+        E=9.0 * K * G / (3.0 * K + G),
+        nu=(3.0 * K - 2.0 * G) / (2.0 * (3.0 * K + G)),
+        plane="strain" if law.gdim == 2 else None,
+        rho=float(law.rho),
+    )
+
+
 class RateLaw:
     """A rate-form law bound to the state of one set of points (one side of a model), as a
     :class:`~dolfinx_meshfree.physics.constitutive.Material` (module docstring).
@@ -67,17 +79,14 @@ class RateLaw:
         if not is_rate_law(law):
             raise TypeError(f"law must be a rate-form law, got {type(law).__name__}")
         self.law = law
-        self.plane = "strain" if law.gdim == 2 else None
-        self.rho = float(law.rho)
-        K, G = float(law.stiffest_bulk_modulus), float(law.G)
-        #: The stiffest linear twin: masses, the linear stiffness and the stable-step bound.
-        self.twin = LinearElastic(
-            E=9.0 * K * G / (3.0 * K + G),
-            nu=(3.0 * K - 2.0 * G) / (2.0 * (3.0 * K + G)),
-            plane=self.plane,
-            rho=self.rho,
+        #: The stiffest linear twin (:func:`stiffest_twin`).
+        self.twin = stiffest_twin(law)
+        self.plane, self.rho, self.E, self.nu = (
+            self.twin.plane,
+            self.twin.rho,
+            self.twin.E,
+            self.twin.nu,
         )
-        self.E, self.nu = self.twin.E, self.twin.nu
         #: The state of the points (this rank's), their Cauchy stress (m, 3, 3) and reference
         #: coordinates (m, gdim): ``None`` until the first force.
         self.state: dict[str, np.ndarray] | None = None
@@ -176,10 +185,17 @@ class RateLaws:
     """
 
     def __init__(self, law: object) -> None:
-        first = RateLaw(law)
-        self.law, self.twin, self.members = law, first.twin, [first]
-        self._unbound = True
-        self.rho, self.plane, self.E, self.nu = first.rho, first.plane, first.E, first.nu
+        if not is_rate_law(law):
+            raise TypeError(f"law must be a rate-form law, got {type(law).__name__}")
+        self.law, self.twin = law, stiffest_twin(law)
+        self.members: list[RateLaw] = []
+        self.plane, self.rho, self.E, self.nu = (
+            self.twin.plane,
+            self.twin.rho,
+            self.twin.E,
+            self.twin.nu,
+        )
+        self.clock = 0.0
 
     @property
     def gdim(self) -> int:
@@ -187,22 +203,21 @@ class RateLaws:
 
     def bind(self) -> RateLaw:
         """The law of one more side (its own points' state)."""
-        if self._unbound:
-            self._unbound = False
-            return self.members[0]
         member = RateLaw(self.law)
-        member.set_time(self.members[0].clock)
+        member.set_time(self.clock)
         self.members.append(member)
         return member
 
     def set_time(self, t: float) -> None:
         """The time of the next internal force, for every side."""
+        self.clock = float(t)
         for member in self.members:
             member.set_time(t)
 
     def wave_speed(self, F: np.ndarray | None = None) -> float:
-        """The largest of the sides' (:meth:`RateLaw.wave_speed`; ``F`` is not used)."""
-        return max(member.wave_speed() for member in self.members)
+        """The largest of the sides' (:meth:`RateLaw.wave_speed`; the twin's before any side;
+        ``F`` is not used)."""
+        return max((m.wave_speed() for m in self.members), default=self.twin.wave_speed())
 
     def _joined(self, name: str) -> np.ndarray | None:
         parts = [getattr(m, name) for m in self.members if m.state is not None]

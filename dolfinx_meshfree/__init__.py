@@ -56,6 +56,7 @@ from .geometry.patch_criteria import (
     FieldAbove,
     NearTips,
     PatchCriterionWarning,
+    StateAbove,
     cells_near,
 )
 from .geometry.quadrature import boundary_facets, cell_quadrature, facet_quadrature
@@ -179,6 +180,7 @@ __all__ = [
     "SaintVenantKirchhoff",
     "ShapeTable",
     "StaleTableError",
+    "StateAbove",
     "StepLoadedRod",
     "StressIntensityFactors",
     "TimoshenkoBeam",

@@ -427,7 +427,10 @@ def build_efg(
     fields = [Field("particles", K, mass, particle_spacing(particles), block_size=particles.gdim)]
     system = None
     if law is not material:
-        side_law = law.bind() if isinstance(law, RateLaws) else law
+        side_law = law
+        if isinstance(law, RateLaws):
+            side_law = law.bind()
+            side_law.attach(tables["quadrature"].points, tables["quadrature"].cells)
         side = particle_forces(particles, tables, side_law)
         system = NonlinearSystem(fields, [side], law, constraint)
     return Model(
@@ -724,7 +727,9 @@ def _finite_strain_system(
 
     if isinstance(law, RateLaws):  # each side its own points' state (module rate_forms)
         fe = PointFESide(V, law.bind(), cells, weight_at)
-        particles = particle_forces(patch.particles, ops.particle_tables, law.bind())
+        particle_law, q = law.bind(), ops.particle_tables["quadrature"]
+        particle_law.attach(q.points, q.cells)
+        particles = particle_forces(patch.particles, ops.particle_tables, particle_law)
         return NonlinearSystem(fields, [fe, particles], law, constraint, (), constant)
     fe = fe_forces(V, law, cells, weight=weight, weight_at=weight_at)
     particles = particle_forces(patch.particles, ops.particle_tables, law)

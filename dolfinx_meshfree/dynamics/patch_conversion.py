@@ -47,6 +47,15 @@ and its particles are placed afresh. :func:`convert` carries the state over:
   the nodal values miss (a rough field's lumped integral differs from its integral: up to
   1.5e-2 of the momentum scale behind a pulse) is restored by a uniform velocity on those
   nodes, where the difference was made, and recorded;
+* **a rate-form law's state** (:mod:`~dolfinx_meshfree.dynamics.rate_forms`: stress, damage,
+  plastic strain, compaction, the stress work): every new point takes the state of the nearest
+  old point in its cell (its own side's where that side had points there:
+  :func:`~dolfinx_meshfree.dynamics.rate_forms.carry_state`), so a failing FE cell's particles
+  carry its stress and history, and the points of unchanged cells keep theirs; the new model's
+  first force, at the same time, takes the new field's deformation gradients as the state's
+  (the next increment is the motion's, not the fit's difference). The stress work the records
+  count as internal energy is then integrated on the new rule: its change is in
+  ``strain_change``;
 * the constraint rows of the new interface are then met in the mass metric (the projection of
   :mod:`~dolfinx_meshfree.dynamics.constraint`), as after a rebuild at a crack extension;
 * the step, the time and the work accounts are carried unchanged.
@@ -109,7 +118,7 @@ from ..statics.petsc import create_aij, create_vector
 from .energy import kinetic_energy, strain_energy
 from .explicit import ExplicitDynamics
 from .linalg import mumps_lu
-from .rate_forms import RateLaws
+from .rate_forms import RateLaws, carry_state
 
 __all__ = [
     "RAMP_STABILISATION",
@@ -229,19 +238,11 @@ def _kinetic(dyn: ExplicitDynamics) -> float:
 
 
 def _require_convertible(model: ExplicitDynamics) -> None:
-    """A conversion needs a coupled model, with linear slave links for master-slave, and no
-    rate-form law (local)."""
+    """A conversion needs a coupled model, with linear slave links for master-slave (local)."""
     if model.patch is None or model.mass_rule is None:
         raise ValueError(
             "adapt= converts FE cells of a coupled model; pure EFG has no FE cell (its "
             "particles fill the body already)"
-        )
-    if isinstance(model.material, RateLaws):
-        raise ValueError(
-            f"adapt= with material={type(model.material.law).__name__}: a rate-form law's state "
-            "at its points (stress, damage, plastic strain) is not carried into the rebuilt "
-            "model (it would restart from rest: a wrong stress); conversions of such models are "
-            "not built yet"
         )
     if model.reduction is not None and model.evaluator.expand is not None:
         raise ValueError(
@@ -260,6 +261,11 @@ def _check(old: ExplicitDynamics, new: ExplicitDynamics) -> None:
             f"got fields {[f.name for f in old.fields]} -> {names}"
         )
     _require_convertible(new)
+    if isinstance(old.material, RateLaws) != isinstance(new.material, RateLaws):
+        raise ValueError(
+            "the rebuilt model must have the old one's material: got "
+            f"{type(old.material).__name__} -> {type(new.material).__name__}"
+        )
     if old.V is not new.V and old.V.mesh is not new.V.mesh:
         raise ValueError("the rebuilt model must live on the old model's mesh")
     if old.u[0].getSize() != new.u[0].getSize():
@@ -478,6 +484,12 @@ def convert(
     correction = correction / scale if scale > 0 else 0.0
     p_fit = momentum(new)[0]
     carry_clock(old, new)  # the new interface rows; the step, time and work accounts
+    if isinstance(new.material, RateLaws):  # the points' state, then the new field's F
+        raise_on_all_ranks(new.comm, lambda: carry_state(old.material, new.material))
+        new.system.set_time(so.time)
+        force = new.system.internal_force(sn.u)
+        for x in force:
+            x.destroy()
     mass1, (p1, _) = total_mass(new), momentum(new)
     kin1, strain1 = _kinetic(new), strain_energy(new.system, sn.u)
     return Conversion(

@@ -38,6 +38,7 @@ import dolfinx
 import numpy as np
 import scipy.sparse as sp
 from petsc4py import PETSc
+from scipy.spatial import cKDTree
 
 from ..approx.fe_dofs import fe_dof_layout
 from ..approx.fe_points import tabulate_in_cells
@@ -48,7 +49,14 @@ from ..physics.objective import as_3d, nominal_stress
 from ..physics.state import is_rate_law
 from ..statics.petsc import create_aij, create_vector
 
-__all__ = ["RATE_METHODS", "PointFESide", "RateLaw", "RateLaws"]
+__all__ = [
+    "RATE_METHODS",
+    "PointFESide",
+    "RateLaw",
+    "RateLaws",
+    "carry_state",
+    "nearest_in_cell",
+]
 
 #: The methods of explicit dynamics that carry a rate-form law's state: each side of theirs has
 #: its own points (the ramps' blended cells, master–slave's reduction and the hybrid's SPH do not
@@ -92,9 +100,23 @@ class RateLaw:
         self.state: dict[str, np.ndarray] | None = None
         self.sigma: np.ndarray | None = None
         self.points: np.ndarray | None = None
+        #: The local cell of each point (m,), given by the side that binds the law
+        #: (:meth:`attach`): the state criteria and a conversion's transfer read it.
+        self.cells: np.ndarray | None = None
         #: The time of the state, and the time of the next evaluation (``set_time``).
         self.time = 0.0
         self.clock = 0.0
+        #: Set by a conversion (:func:`carry_state`): the next evaluation at the state's time
+        #: takes its deformation gradient (the new field's) as the state's, the stress kept.
+        self.rebase = False
+
+    def attach(self, points: np.ndarray, cells: np.ndarray) -> None:
+        """The points (m, gdim, reference coordinates) and their local cells (m,), known when
+        the side is built (before any force)."""
+        points, cells = np.asarray(points, dtype=float), np.asarray(cells, dtype=np.int64)
+        if len(points) != len(cells):
+            raise ValueError(f"{len(points)} points but {len(cells)} cells: one cell per point")
+        self.points, self.cells = points.copy(), cells.copy()
 
     @property
     def gdim(self) -> int:
@@ -112,18 +134,23 @@ class RateLaw:
         if self.state is None:
             self.state = self.law.initial_state(m)
             self.sigma = np.zeros((m, 3, 3))
-            self.points = None if points is None else np.array(points, dtype=float)
-        if m != len(self.state["F"]):
+            if self.points is None and points is not None:
+                self.points = np.array(points, dtype=float)
+        made_for = len(self.state["F"]) if self.points is None else len(self.points)
+        if m != len(self.state["F"]) or m != made_for:
             raise ValueError(
                 f"{type(self.law).__name__}: {m} points, but its state was made for "
-                f"{len(self.state['F'])}: one RateLaw per set of points"
+                f"{made_for}: one RateLaw per set of points"
             )
         dt = self.clock - self.time
         if m == 0:  # a rank with none of this side's points
             self.time = self.clock
             return self.sigma
         if dt == 0.0:
-            if not np.array_equal(as_3d(F).reshape(m, 9), self.state["F"]):
+            if self.rebase:  # the first force of a converted model: its field's gradients
+                self.state["F"] = as_3d(F).reshape(m, 9).copy()
+                self.rebase = False
+            elif not np.array_equal(as_3d(F).reshape(m, 9), self.state["F"]):
                 raise ValueError(
                     f"{type(self.law).__name__}: the deformation changed with no time passing "
                     f"(t = {self.clock:.6g}): a rate-form law starts from rest, undeformed; give "
@@ -241,6 +268,100 @@ class RateLaws:
         """The points' reference coordinates (m, gdim), joined."""
         return self._joined("points")
 
+    def state_values(self, name: str) -> tuple[np.ndarray, np.ndarray, float]:
+        """``(cells, values, virgin)``: a scalar state variable ``name`` at every point of this
+        rank whose cell is known (:meth:`RateLaw.attach`; the virgin state before the first
+        force), the points' local cells, and the variable's value in the virgin state.
+
+        Raises:
+            ValueError: ``name`` is not a scalar state variable of the law (the message lists
+                them).
+        """
+        virgin = self.law.initial_state(1)
+        scalars = [k for k, v in virgin.items() if v.reshape(1, -1).shape[1] == 1]
+        if name not in scalars:
+            raise ValueError(
+                f"{name!r} is not a scalar state variable of {type(self.law).__name__}; use one "
+                f"of {scalars}"
+            )
+        cells, values = [np.zeros(0, dtype=np.int64)], [np.zeros(0)]
+        for member in self.members:
+            if member.cells is None:
+                continue
+            m = len(member.cells)
+            state = member.state if member.state is not None else self.law.initial_state(m)
+            cells.append(member.cells)
+            values.append(np.asarray(state[name], dtype=float).reshape(m))
+        return np.concatenate(cells), np.concatenate(values), float(virgin[name].ravel()[0])
+
+
+def nearest_in_cell(
+    src_points: np.ndarray, src_cells: np.ndarray, points: np.ndarray, cells: np.ndarray
+) -> np.ndarray:
+    """For each point (m, gdim) in its local cell (m,): the index of the nearest source point in
+    the same cell, ``-1`` where that cell has none (a k-d tree on the coordinates and the cell
+    index times a length larger than any distance between the points)."""
+    out = np.full(len(points), -1, dtype=np.int64)
+    if not len(points) or not len(src_points):
+        return out
+    both = np.concatenate([src_points, points])
+    far = 4.0 * (float(np.ptp(both, axis=0).max()) + 1.0)
+    tree = cKDTree(np.column_stack([src_points, far * np.asarray(src_cells, dtype=float)]))
+    _, index = tree.query(np.column_stack([points, far * np.asarray(cells, dtype=float)]))
+    same = np.asarray(src_cells)[index] == cells
+    out[same] = index[same]
+    return out
+
+
+def carry_state(old: RateLaws, new: RateLaws) -> np.ndarray:
+    """Carry the state of ``old`` (a model's law, advanced to its last force) into ``new`` (the
+    law of its rebuild on another patch, before any force): every point of ``new`` takes the
+    state and the stress of the nearest point of ``old`` in the same cell, of its own side
+    (FE, particles) where that side had points in the cell, else of any side. Points of a
+    patch cell whose rule is unchanged are the old points, so their state is theirs; a
+    converted FE cell's particles take the state of its Gauss points (the nearest: damage and
+    plastic strain are not smoothed away), a released cell's Gauss points the particles'.
+
+    The state's deformation gradient is then the old field's, not the new one's at the point
+    (the fit differs from the old field by what the new space cannot represent): each member
+    is set to take, at its first force (the conversion's, at the same time), the new field's
+    gradients as the state's, so that the next increment is the motion's and not the fit's
+    difference. Local (this rank's points); returns the indices (into the old members' joined
+    points) that each new point took, ``-1`` where its cell had none.
+    """
+    src = [m for m in old.members if m.state is not None and m.cells is not None]
+    taken = []
+    for k, member in enumerate(new.members):
+        if member.cells is None:
+            raise ValueError("carry_state: the new law's sides must give their points (attach)")
+        m = len(member.cells)
+        member.time = member.clock = new.clock = old.clock
+        if not src:  # the old model never ran a force: the new one starts virgin too
+            taken.append(np.full(m, -1, dtype=np.int64))
+            continue
+        offsets = np.cumsum([0] + [len(s.cells) for s in src])
+        pts = np.concatenate([s.points for s in src])
+        cells = np.concatenate([s.cells for s in src])
+        index = np.full(m, -1, dtype=np.int64)
+        if k < len(old.members) and old.members[k] in src:  # its own side first
+            j = src.index(old.members[k])
+            own = nearest_in_cell(src[j].points, src[j].cells, member.points, member.cells)
+            index[own >= 0] = offsets[j] + own[own >= 0]
+        rest = index < 0
+        index[rest] = nearest_in_cell(pts, cells, member.points[rest], member.cells[rest])
+        if np.any(index < 0):
+            x = member.points[np.flatnonzero(index < 0)[0]]
+            raise ValueError(
+                f"carry_state: the new point at {np.array2string(x, precision=6)} has no old "
+                "point in its cell on this rank; a conversion keeps the cells' ownership"
+            )
+        state = {key: np.concatenate([s.state[key] for s in src]) for key in src[0].state}
+        member.state = {key: value[index].copy() for key, value in state.items()}
+        member.sigma = np.concatenate([s.sigma for s in src])[index].copy()
+        member.rebase = True
+        taken.append(index)
+    return np.concatenate(taken) if taken else np.zeros(0, dtype=np.int64)
+
 
 class PointFESide:
     """The FE field's internal force of a :class:`RateLaw` at the Gauss points of the owned cells
@@ -276,6 +397,7 @@ class PointFESide:
         q = cell_quadrature(msh, degree, owned.astype(np.int32))
         table = tabulate_in_cells(V, q.points, q.cells, derivatives=1)
         w = q.weights if weight_at is None else q.weights * weight_at(q)
+        law.attach(q.points, q.cells)
         self.forces = InternalForces(table, w, law, comm=self.comm)
 
     def coefficients(self, x: PETSc.Vec) -> np.ndarray:

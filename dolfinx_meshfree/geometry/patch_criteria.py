@@ -10,7 +10,7 @@ A driver (:class:`~dolfinx_meshfree.QuasiStaticCrackGrowth` with ``adapt``) asks
 steps, adds the cells it names to the patch (:meth:`ParticlePatch.grown`) and rebuilds the model.
 The patch only grows: cells never return to FE (no shrinking back).
 
-Three criteria, each a :class:`PatchCriterion`:
+Four criteria, each a :class:`PatchCriterion`:
 
 * :class:`NearTips`: every cell within ``k`` particle spacings of a crack tip (the tips after the
   coming extension included), so that the SIF domains and the tip's supports stay in the
@@ -18,6 +18,8 @@ Three criteria, each a :class:`PatchCriterion`:
 * :class:`FieldAbove`: the FE cells where a field of the last solution passes a threshold (the
   largest principal stress or strain at the cell midpoint, or a user's function of the
   displacement gradient);
+* :class:`StateAbove`: the FE cells where a rate-form law's state variable (damage, plastic
+  strain) passes a threshold at any point: failing elements become particles (issue 27);
 * :class:`CellsWhere`: a user's callable on the cell midpoints.
 
 :func:`cells_near` gives the cells within a distance of points or a polyline, e.g. the initial
@@ -52,6 +54,7 @@ __all__ = [
     "NearTips",
     "PatchCriterion",
     "PatchCriterionWarning",
+    "StateAbove",
     "as_criteria",
     "cells_near",
     "named_cells",
@@ -434,6 +437,62 @@ class FieldAbove:
             return out
         cells, v = self.values(patch, context.solution)
         out[cells[v >= self.threshold]] = True
+        return out
+
+
+class StateAbove:
+    """The FE cells where a state variable of a rate-form law (``"damage"``,
+    ``"plastic_strain"``, any scalar of the law's state) passes ``threshold`` at any of the
+    cell's points: failing elements become particles (issue 27, item 4; the state is carried
+    over by the conversion).
+
+    Args:
+        name: The state variable (the error of an unknown name lists the law's scalar ones:
+            ``RateLaws.state_values``).
+        threshold: The value at which (``>=``) a cell joins the patch: above the virgin state's
+            (a threshold at or below it would convert every cell at the start).
+
+    Needs a model whose material is a rate-form law (``HolmquistJohnsonCook``,
+    ``JohnsonCook``); for a hyperelastic one, :class:`FieldAbove`.
+    """
+
+    name = "StateAbove"
+
+    def __init__(self, name: str, threshold: float) -> None:
+        if not isinstance(name, str):
+            raise ValueError(f"name={name!r} must be the name of a state variable, e.g. 'damage'")
+        if isinstance(threshold, bool) or not np.isfinite(threshold):
+            raise ValueError(f"threshold={threshold!r} must be a finite number")
+        self.variable, self.threshold = name, float(threshold)
+
+    def __repr__(self) -> str:
+        return f"StateAbove({self.variable!r}, threshold={self.threshold:g})"
+
+    def select(self, patch: ParticlePatch, context: GrowthContext) -> np.ndarray:
+        n_own = patch.mesh.topology.index_map(patch.mesh.topology.dim).size_local
+        material = getattr(context.solution, "material", None)
+
+        def check() -> tuple[np.ndarray, np.ndarray]:
+            values = getattr(material, "state_values", None)
+            if values is None:
+                raise ValueError(
+                    f"{self!r} reads the state of a rate-form law (HolmquistJohnsonCook, "
+                    f"JohnsonCook); the model's material is {type(material).__name__}: use "
+                    "FieldAbove for a law without state"
+                )
+            cells, v, virgin = values(self.variable)
+            if self.threshold <= virgin:
+                raise ValueError(
+                    f"{self!r}: the threshold is at or below the virgin state's "
+                    f"{self.variable} = {virgin:g}, so every cell would become particles at the "
+                    f"start; give a threshold above {virgin:g}"
+                )
+            return cells, v
+
+        cells, v = raise_on_all_ranks(patch.comm, check)
+        out = np.zeros(n_own, dtype=bool)
+        named = cells[v >= self.threshold]
+        out[named[named < n_own]] = True
         return out
 
 

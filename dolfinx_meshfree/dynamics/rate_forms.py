@@ -313,54 +313,56 @@ def nearest_in_cell(
     return out
 
 
-def carry_state(old: RateLaws, new: RateLaws) -> np.ndarray:
+def carry_state(old: RateLaws, new: RateLaws) -> None:
     """Carry the state of ``old`` (a model's law, advanced to its last force) into ``new`` (the
     law of its rebuild on another patch, before any force): every point of ``new`` takes the
     state and the stress of the nearest point of ``old`` in the same cell, of its own side
     (FE, particles) where that side had points in the cell, else of any side. Points of a
     patch cell whose rule is unchanged are the old points, so their state is theirs; a
     converted FE cell's particles take the state of its Gauss points (the nearest: damage and
-    plastic strain are not smoothed away), a released cell's Gauss points the particles'.
+    plastic strain are not smoothed away), a released cell's Gauss points the particles'. If
+    the old model never ran a force, the new one starts virgin too.
 
     The state's deformation gradient is then the old field's, not the new one's at the point
     (the fit differs from the old field by what the new space cannot represent): each member
     is set to take, at its first force (the conversion's, at the same time), the new field's
     gradients as the state's, so that the next increment is the motion's and not the fit's
-    difference. Local (this rank's points); returns the indices (into the old members' joined
-    points) that each new point took, ``-1`` where its cell had none.
+    difference. Local (this rank's points).
+
+    Raises:
+        ValueError: a new side gave no points (:meth:`RateLaw.attach`), or a new point's cell
+            has no old point on this rank (named by its coordinates).
     """
+    if any(member.cells is None for member in new.members):
+        raise ValueError("carry_state: the new law's sides must give their points (attach)")
+    new.clock = old.clock
+    for member in new.members:
+        member.time = member.clock = old.clock
     src = [m for m in old.members if m.state is not None and m.cells is not None]
-    taken = []
+    if not src:  # the old model never ran a force
+        return
+    offsets = np.cumsum([0] + [len(s.cells) for s in src])
+    points = np.concatenate([s.points for s in src])
+    cells = np.concatenate([s.cells for s in src])
+    state = {key: np.concatenate([s.state[key] for s in src]) for key in src[0].state}
+    sigma = np.concatenate([s.sigma for s in src])
     for k, member in enumerate(new.members):
-        if member.cells is None:
-            raise ValueError("carry_state: the new law's sides must give their points (attach)")
-        m = len(member.cells)
-        member.time = member.clock = new.clock = old.clock
-        if not src:  # the old model never ran a force: the new one starts virgin too
-            taken.append(np.full(m, -1, dtype=np.int64))
-            continue
-        offsets = np.cumsum([0] + [len(s.cells) for s in src])
-        pts = np.concatenate([s.points for s in src])
-        cells = np.concatenate([s.cells for s in src])
-        index = np.full(m, -1, dtype=np.int64)
+        index = np.full(len(member.cells), -1, dtype=np.int64)
         if k < len(old.members) and old.members[k] in src:  # its own side first
             j = src.index(old.members[k])
             own = nearest_in_cell(src[j].points, src[j].cells, member.points, member.cells)
             index[own >= 0] = offsets[j] + own[own >= 0]
         rest = index < 0
-        index[rest] = nearest_in_cell(pts, cells, member.points[rest], member.cells[rest])
+        index[rest] = nearest_in_cell(points, cells, member.points[rest], member.cells[rest])
         if np.any(index < 0):
             x = member.points[np.flatnonzero(index < 0)[0]]
             raise ValueError(
                 f"carry_state: the new point at {np.array2string(x, precision=6)} has no old "
                 "point in its cell on this rank; a conversion keeps the cells' ownership"
             )
-        state = {key: np.concatenate([s.state[key] for s in src]) for key in src[0].state}
-        member.state = {key: value[index].copy() for key, value in state.items()}
-        member.sigma = np.concatenate([s.sigma for s in src])[index].copy()
+        member.state = {key: value[index] for key, value in state.items()}  # copies
+        member.sigma = sigma[index]
         member.rebase = True
-        taken.append(index)
-    return np.concatenate(taken) if taken else np.zeros(0, dtype=np.int64)
 
 
 class PointFESide:

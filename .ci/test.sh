@@ -4,8 +4,11 @@
 # Runs the test suite in one lane (see .ci/lane.sh): first serially (on every core through
 # pytest-xdist), then as one MPI job of 2 ranks under the lane's own launcher. Default: lane a,
 # both runs, the default tier. --full adds the slow tier (tests marked slow, the whole
-# robustness matrix). On 2 ranks the tests marked serial are left out and a parametrised test
-# runs a covering subset of its cases (tests/conftest.py says why). Anything not recognised (or
+# robustness matrix) and runs everything in either lane. On 2 ranks the tests marked serial
+# and heavy are left out and a parametrised test runs a covering subset of its cases
+# (tests/conftest.py says why). Lane b's run is reduced (pytest --reduced): its serial run
+# takes the tests marked serial only, and both runs leave out the heavy tests and run the
+# first case of each parametrised test. Anything not recognised (or
 # everything after `--`) is passed to pytest, after the `tests` directory.
 #
 # Each run prints its time and the tests that took 30 s or more (no run fails on a time).
@@ -20,7 +23,7 @@ set -euo pipefail
 # shellcheck source-path=SCRIPTDIR source=lane.sh
 source "$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)/lane.sh"
 
-usage() { sed -n '2,18p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,20p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; }
 
 lane=a
 serial=1
@@ -69,14 +72,21 @@ xdist=()
 if [[ $workers != 0 ]] && "$PY" -c 'import xdist' >/dev/null 2>&1; then
     xdist=(-n "$workers")
 fi
+# lane b: the version-specific layer under every test function (tests/conftest.py)
+lane_args=() serial_args=()
+if [[ $lane == b && " ${extra[*]} " != *" --full "* ]]; then
+    lane_args=(--reduced)
+    serial_args=(-m serial)
+fi
 if ((serial)); then
-    run_pytest "serial" "$PY" -m pytest -q "${xdist[@]}" "${report[@]}" tests "${extra[@]}"
+    run_pytest "serial" "$PY" -m pytest -q "${xdist[@]}" "${report[@]}" "${serial_args[@]}" \
+        "${lane_args[@]}" tests "${extra[@]}"
 fi
 if ((parallel)); then
     # --color=no: OpenMPI gives ranks a pty, so pytest would emit ANSI colour
     # codes into the CI log (a later --color in the extra args still wins).
     run_pytest "2 ranks" "${LAUNCHER[@]}" -n 2 "$PY" "${PYMPI[@]}" -m pytest -q --color=no \
-        "${report[@]}" tests "${extra[@]}"
+        "${report[@]}" "${lane_args[@]}" tests "${extra[@]}"
 fi
 
 if ((${#failed[@]})); then

@@ -25,16 +25,21 @@ EPS = float(np.finfo(float).eps)
 SQRT_EPS = float(np.sqrt(EPS))
 
 
-# --- tiers and the 2-rank selection (issue 22) ----------------------------------------------
+# --- tiers, the 2-rank selection and lane B's reduced run (issues 22, 27) --------------------
 #
-# Three markers (registered in pyproject.toml) decide where a test runs:
+# Four markers (registered in pyproject.toml) decide where a test runs:
 #
 # * ``slow``: the slow tier, run only by ``pytest --full`` (``bash .ci/test.sh --full``): tests
 #   whose discriminating power a cheaper default-tier test already carries (each says which);
 # * ``serial``: not run on more than one rank: the test exercises no parallel code path (pure
 #   numpy/numba kernels, closed forms, source checks) and would only run twice as two copies;
-# * ``all_cases``: on more than one rank, every parameter case runs (by default only a covering
-#   subset does, below).
+# * ``heavy(twin="tests/<module>.py::<test>")``: a long run (10-35 s: a concrete beam followed
+#   through its peak, a crack grown segment by segment) whose figures are discretisation
+#   properties, the same on any number of ranks and in either lane. It runs in the serial stage
+#   of the reference lane (A) only; on more than one rank and in lane B's reduced run its code
+#   paths are run by the named cheaper ``twin`` (the same feature on a smaller model), which is
+#   checked to exist;
+# * ``all_cases``: on more than one rank, every parameter case runs (not a covering subset).
 #
 # On more than one rank a parametrised test runs a covering subset of its cases: the cases in
 # collection order, each kept if it brings a parameter value that no kept case had. Every value
@@ -44,6 +49,11 @@ SQRT_EPS = float(np.sqrt(EPS))
 # discretisation properties, the same on any number of ranks, and the serial stage runs them all.
 # The selection is computed from the parameter values (or their positions), so it is the same on
 # every rank, which MPI needs.
+#
+# ``--reduced`` (lane B's run, ``.ci/test.sh --lane b``): no heavy test, and each parametrised
+# test runs its first case only. Lane B's job is the version-specific layer (``_compat``, the
+# DOLFINx 0.11 and MPICH stack) under every test function on 2 ranks; the cases' products and
+# the heavy runs are the same discretisation in both lanes and run in lane A.
 
 
 def pytest_addoption(parser):
@@ -52,6 +62,12 @@ def pytest_addoption(parser):
         action="store_true",
         default=False,
         help="run the slow tier too (tests marked slow; the full robustness matrix)",
+    )
+    parser.addoption(
+        "--reduced",
+        action="store_true",
+        default=False,
+        help="lane B's reduced run: no heavy test, each parametrised test's first case only",
     )
 
 
@@ -83,23 +99,50 @@ def covering_subset(items):
     return kept
 
 
+def _check_twins(items):
+    """Every ``heavy`` test names a ``twin`` that was collected (not deselected by a marker):
+    a heavy test left out on 2 ranks or in lane B must leave a cheaper run of its code paths."""
+    ids = {item.nodeid.split("[")[0] for item in items}
+    for item in items:
+        mark = item.get_closest_marker("heavy")
+        if mark is None:
+            continue
+        twin = mark.kwargs.get("twin")
+        if not twin or twin not in ids:
+            raise pytest.UsageError(
+                f"{item.nodeid} is marked heavy with twin={twin!r}, which is not a collected test:"
+                ' name one as "tests/<module>.py::<test>" (the cheaper run of the same code paths)'
+            )
+        twin_item = next(i for i in items if i.nodeid.split("[")[0] == twin)
+        if any(twin_item.get_closest_marker(m) for m in ("heavy", "slow", "serial")):
+            raise pytest.UsageError(f"{item.nodeid}: its twin {twin} must run in every stage")
+
+
 def pytest_collection_modifyitems(config, items):
     full = config.getoption("--full")
+    reduced = config.getoption("--reduced") and not full
     parallel = MPI.COMM_WORLD.size > 1
+    modules = {item.path if hasattr(item, "path") else item.fspath for item in items}
+    if len(modules) > 1 and not config.getoption("keyword") and not config.getoption("markexpr"):
+        _check_twins(items)  # a whole-suite run: a selection (-k, -m, a module) may leave it out
     selected, deselected = [], []
     groups: dict[tuple, list] = {}
     for item in items:
-        if (not full and item.get_closest_marker("slow")) or (
-            parallel and item.get_closest_marker("serial")
+        if (
+            (not full and item.get_closest_marker("slow"))
+            or (parallel and item.get_closest_marker("serial"))
+            or ((parallel or reduced) and not full and item.get_closest_marker("heavy"))
         ):
             deselected.append(item)
             continue
-        if parallel and hasattr(item, "callspec") and not item.get_closest_marker("all_cases"):
-            key = (item.path if hasattr(item, "path") else item.fspath, item.originalname)
-            groups.setdefault(key, []).append(item)
+        if (parallel or reduced) and hasattr(item, "callspec"):
+            if reduced or not item.get_closest_marker("all_cases"):
+                key = (item.path if hasattr(item, "path") else item.fspath, item.originalname)
+                groups.setdefault(key, []).append(item)
         selected.append(item)
     if groups:
-        keep = {id(i) for group in groups.values() for i in covering_subset(group)}
+        pick = (lambda group: group[:1]) if reduced else covering_subset
+        keep = {id(i) for group in groups.values() for i in pick(group)}
         dropped = [i for g in groups.values() for i in g if id(i) not in keep]
         deselected += dropped
         dropped_ids = {id(i) for i in dropped}

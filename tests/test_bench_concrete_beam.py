@@ -13,6 +13,7 @@ pytestmark = pytest.mark.serial
 bench = load_benchmark("bench_concrete_beam")
 
 
+@pytest.mark.heavy(twin="tests/test_concrete_beam.py::test_reduced_cohesive")
 def test_tiny_run(tmp_path, capsys):
     out = tmp_path / "b.json"
     records = bench.main(

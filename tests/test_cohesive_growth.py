@@ -209,6 +209,7 @@ def test_crack_turns_normal_to_the_load(angle, measured):
     assert path.dissipated_energy[-1] > GF * 4 * (L / 20)
 
 
+@pytest.mark.heavy(twin="tests/test_cohesive_growth.py::test_crack_turns_normal_to_the_load")
 def test_found_path_is_the_given_mode_one_path():
     """The notched beam (h = 25 mm, lagrange): grown from a bonded stretch of four spacings, the
     crack runs up the ligament as the path given in advance (every face point past f_t within
@@ -264,6 +265,7 @@ def test_growth_stops_where_the_model_cannot_follow():
         mf.follow_path(model, control, _options(), growth=mf.CohesiveGrowth(crack))
 
 
+@pytest.mark.heavy(twin="tests/test_cohesive_growth.py::test_crack_turns_normal_to_the_load")
 def test_slanted_notch_in_a_beam_on_triangles():
     """A user's model (written from the README): a beam 600 x 150 mm on triangles in three-point
     bending, a lagrange patch around a notch slanted 15 degrees. The crack grows up from the
@@ -421,6 +423,7 @@ def test_initiation_site_of_the_unnotched_beam():
         mf.initiation_site(model.solve(), ns.ft)
 
 
+@pytest.mark.heavy(twin="tests/test_cohesive_growth.py::test_crack_turns_normal_to_the_load")
 def test_unnotched_beam_cracks_where_and_as_the_given_path():
     """The unnotched beam (h = 25 mm, lagrange; demo, `--notch-depth 0 --path found`): the
     crack started at the initiation site grows straight up (every face point past f_t within
@@ -436,6 +439,7 @@ def test_unnotched_beam_cracks_where_and_as_the_given_path():
     assert abs(found["peak_load_N"] / given["peak_load_N"] - 1.0) <= 0.01
 
 
+@pytest.mark.heavy(twin="tests/test_cohesive_growth.py::test_crack_turns_normal_to_the_load")
 def test_a_crack_inside_the_body_grows_both_ways():
     """The unnotched beam with the crack's start kept 40 mm above the bottom (``region``; h =
     20 mm, lagrange): an interior site at (1000, 50) mm, a crack with two tips that grows down

@@ -42,6 +42,7 @@ def test_reduced_cohesive(tmp_path):
     assert P_LOW < r["peak_load_N"] < P_HIGH
 
 
+@pytest.mark.heavy(twin="tests/test_cohesive.py::test_ramps_carry_cracks")
 def test_ramp_follows_pure_efg():
     """The ramp coupling (interface elements, Belytschko et al. 1995) carries the cohesive crack
     in its patch: its peak within 1.2 % of pure EFG's at h = 25 mm (measured -0.58 %; issue
@@ -52,6 +53,7 @@ def test_ramp_follows_pure_efg():
     assert np.allclose(np.asarray(ramp["path"])[:, 0], 1000.0)
 
 
+@pytest.mark.heavy(twin="tests/test_cohesive.py::test_master_slave_bar_splits_as_the_closed_form")
 def test_master_slave_follows_pure_efg():
     """Master-slave carries the cohesive crack in its patch (cut cells, Gauss quadrature): its
     peak within 1.5 % of pure EFG's at h = 20 mm (measured -0.76 %; issue target 2 %), on the
@@ -81,6 +83,7 @@ def test_reduced_three_point_bend(tmp_path):
     assert P_LOW < r["peak_load_N"] < P_HIGH  # measured 1181 N
 
 
+@pytest.mark.heavy(twin="tests/test_concrete_beam.py::test_reduced_three_point_bend")
 def test_coupled_peak_matches_pure_efg():
     """The issue's coupling target, at h = 25 mm with the crack band: the lagrange coupling's
     peak load within 0.5 % of pure EFG's on the same particles and mesh (measured 0.22 %; issue
@@ -112,6 +115,7 @@ def _path_distance(a, b, below: float) -> float:
 SHEAR = ["--setup", "arrea-ingraffea", "--h", "15"]
 
 
+@pytest.mark.heavy(twin="tests/test_cohesive_growth.py::test_crack_turns_normal_to_the_load")
 def test_shear_beam_finds_a_mixed_mode_path(tmp_path):
     """The single-edge-notched beam in four-point shear (the dimensions of Arrea & Ingraffea's,
     lagrange, h = 15 mm, CMSD to 0.2 mm): the demo's own checks pass (first step within 5 % of

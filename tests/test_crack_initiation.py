@@ -90,6 +90,9 @@ def check_support_crack(path, bulk):
     assert path.bulk_stress[4] < FT
 
 
+@pytest.mark.heavy(
+    twin="tests/test_crack_initiation.py::test_a_peak_on_the_fe_side_is_not_started_and_says_so"
+)
 def test_a_crack_starts_over_the_middle_support_efg():
     """Pure EFG: the crack over the support starts (check_support_crack), is one of the model's
     cracks with the law on its faces, and is followed (grows by the notch's CohesiveGrowth
@@ -103,6 +106,9 @@ def test_a_crack_starts_over_the_middle_support_efg():
     np.testing.assert_allclose(new.points[[0, 1]], path.initiations[0][2], atol=1e-12)
 
 
+@pytest.mark.heavy(
+    twin="tests/test_crack_initiation.py::test_a_peak_on_the_fe_side_is_not_started_and_says_so"
+)
 def test_a_crack_starts_in_a_coupled_patch_as_in_efg():
     """A Lagrange-coupled model whose patch holds the notch and the middle support (x in 150
     .. 750 mm): the same crack starts at the same step (check_support_crack), and the load

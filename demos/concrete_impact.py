@@ -35,6 +35,23 @@
 # free sides (``--sides free``: no longer uniaxial, so no 1D check) the couplings fail to within
 # half a cell of EFG. Not resolved.
 #
+# **Particles only where the concrete fails** (``--method lagrange-adaptive``, also
+# ``edge-to-edge-adaptive`` and ``bridging-adaptive``): the run starts with one column of
+# particle cells at the wall and ``mf.dynamics.AdaptiveRun`` turns every FE cell whose damage
+# reaches 0.1 at a Gauss point (``mf.StateAbove("damage", 0.1)``, checked every 5 steps) into
+# particles, which carry its points' state and stress (``dynamics.rate_forms.carry_state``). The
+# row adds the conversions, the particle cells at the end, the largest mass error and momentum
+# correction of a conversion (checked below 1e-13 and, lagrange and edge-to-edge, whose fit
+# conserves momentum by itself, 1e-12) and the kinetic and strain energy
+# the conversions changed (the balance counts them). Its time includes the conversions; ``vs
+# EFG`` then compares whole runs (``s total``), the cost the issue asks about. With free sides
+# the grown models fail to EFG's depth within a cell (300 m/s, 40 cells: 30.8 mm against 31.7),
+# at 1.4-1.9x EFG's time on this bar (half of it the 12-13 full rebuilds). On rollers at
+# 100 m/s they fail the points next to the old interface, where EFG fails none: the fit of the
+# steep field behind the front changes their strain increment by about 5e-3 per step, and HJC
+# fails a point at low pressure after 1 % of plastic strain. The check below names it ("fails
+# concrete where EFG fails none"); a known limit, not resolved (guide: impact materials).
+#
 # Not here yet: the ramps, master–slave and the hybrid (a rate law refuses them), the
 # projectile's contact, the Hanchak slab (issue 27).
 #
@@ -60,7 +77,14 @@ from mpi4py import MPI
 
 LENGTH, HEIGHT, T_END = 0.1, 0.02, 2e-5
 CONCRETE = mf.HolmquistJohnsonCook.concrete_48mpa(plane="strain")
-METHODS = ["fe", "efg", "lagrange", "edge-to-edge", "bridging"]
+COUPLINGS = ["lagrange", "edge-to-edge", "bridging"]
+#: A coupling with "-adaptive": particles grow from the wall where the concrete fails.
+ADAPTIVE = [f"{m}-adaptive" for m in COUPLINGS]
+METHODS = ["fe", "efg", *COUPLINGS, *ADAPTIVE]
+#: The default run (the grown patches fail on rollers at 100 m/s: see the header).
+DEFAULT_METHODS = ["fe", "efg", *COUPLINGS]
+#: Damage at a Gauss point that turns its FE cell into particles (adaptive methods).
+CONVERT_AT = 0.1
 #: Elastic speeds (m/s): the 1D stress check applies.
 ELASTIC = 1.0
 MARGINS = {
@@ -68,6 +92,11 @@ MARGINS = {
     "elastic_stress": 0.02,  # |mean sigma_xx / (-rho c v0) - 1| (measured 0.5 % FE, 1.1 % EFG)
     "crushed_cells": 2.0,  # |method - EFG| crushed depth, in cells (measured up to 0.5)
     "failed_cells": 4.0,  # |method - EFG| failed depth, in cells (measured up to 1.9)
+    "mass": 1e-13,  # a conversion's mass error (round-off: measured up to 2e-16)
+    # the momentum a conversion's fit missed (restored by a uniform velocity), lagrange and
+    # edge-to-edge: their fit conserves it (measured up to 2.5e-16); bridging's band masses
+    # make its fit miss up to 1.8e-5 (reported, not checked)
+    "momentum": 1e-12,
 }
 # -
 
@@ -78,18 +107,18 @@ def wave_speed(law: mf.HolmquistJohnsonCook) -> float:
 
 
 def build(
-    method: str, cells: int, comm=MPI.COMM_WORLD, sides: str = "rollers"
+    method: str,
+    cells: int,
+    comm=MPI.COMM_WORLD,
+    sides: str = "rollers",
+    msh: dolfinx.mesh.Mesh | None = None,
+    patch_cells: np.ndarray | None = None,
 ) -> mf.ExplicitDynamics:
     """The bar in ``cells`` x ``cells / 5`` quadrilaterals, its end x = 0 held, its long sides
-    on rollers (``sides="rollers"``) or free (``"free"``)."""
-    msh = dolfinx.mesh.create_rectangle(
-        comm,
-        [np.zeros(2), np.array([LENGTH, HEIGHT])],
-        [cells, max(1, cells // 5)],
-        dolfinx.mesh.CellType.quadrilateral,
-    )
-    if method not in ("fe", "efg"):  # a patch cell costs about 7 FE cells: share the work
-        msh = mf.balanced_mesh(msh, lambda x: np.where(x[0] < LENGTH / 4, 7.0, 1.0))
+    on rollers (``sides="rollers"``) or free (``"free"``). A coupling's patch: the quarter at
+    the wall, or ``patch_cells`` (this rank's local cells of ``msh``)."""
+    if msh is None:
+        msh = bar_mesh(method, cells, comm)
     wall = mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0.0))
     fixed = [(wall, (0, 1))]
     if sides == "rollers":
@@ -102,14 +131,35 @@ def build(
         particles = mf.ParticleSet.from_cells(msh, LENGTH / cells)
         return mf.ExplicitDynamics.efg(particles, CONCRETE, fixed_facets=fixed)
     V = _compat.vector_function_space(msh)
-    n = msh.topology.index_map(2).size_local
-    xc = msh.geometry.x[_compat.geometry_dofmap(msh)[:n], 0].mean(axis=1)
-    patch = mf.ParticlePatch(msh, np.flatnonzero(xc < LENGTH / 4), LENGTH / cells)
+    if patch_cells is None:
+        patch_cells = np.flatnonzero(cell_midpoints(msh)[:, 0] < LENGTH / 4)
+    patch = mf.ParticlePatch(msh, patch_cells, LENGTH / cells)
     # the problem's law gives the masses only (same density and plane)
     masses = mf.LinearElastic(30e9, 0.2, "strain", rho=CONCRETE.rho)
-    options = {"overlap": 1} if method == "bridging" else {}
-    problem = mf.CoupledElasticity(V, patch, masses, coupling=method, **options)
+    coupling = method.removesuffix("-adaptive")
+    options = {"overlap": 1} if coupling == "bridging" else {}
+    problem = mf.CoupledElasticity(V, patch, masses, coupling=coupling, **options)
     return mf.ExplicitDynamics.coupled(problem, material=CONCRETE, fixed_facets=fixed)
+
+
+def bar_mesh(method: str, cells: int, comm=MPI.COMM_WORLD) -> dolfinx.mesh.Mesh:
+    """The bar's mesh; a coupling's balanced for its patch at the wall (a patch cell costs
+    about 7 FE cells: the work shared between the ranks)."""
+    msh = dolfinx.mesh.create_rectangle(
+        comm,
+        [np.zeros(2), np.array([LENGTH, HEIGHT])],
+        [cells, max(1, cells // 5)],
+        dolfinx.mesh.CellType.quadrilateral,
+    )
+    if method not in ("fe", "efg"):
+        msh = mf.balanced_mesh(msh, lambda x: np.where(x[0] < LENGTH / 4, 7.0, 1.0))
+    return msh
+
+
+def cell_midpoints(msh: dolfinx.mesh.Mesh) -> np.ndarray:
+    """Midpoints (vertex means) of this rank's owned cells."""
+    n = msh.topology.index_map(2).size_local
+    return msh.geometry.x[_compat.geometry_dofmap(msh)[:n]].mean(axis=1)
 
 
 def depth(dyn: mf.ExplicitDynamics, mask: np.ndarray) -> float:
@@ -120,25 +170,66 @@ def depth(dyn: mf.ExplicitDynamics, mask: np.ndarray) -> float:
 
 def impact(method: str, cells: int, v0: float, comm=MPI.COMM_WORLD, sides: str = "rollers") -> dict:
     """One run; its row of figures."""
-    dyn = build(method, cells, comm, sides)
-    dyn.set_initial(velocity=lambda x: np.stack([np.full(len(x), -v0), np.zeros(len(x))], axis=1))
+
+    def thrown(dyn: mf.ExplicitDynamics) -> mf.ExplicitDynamics:
+        dyn.set_initial(velocity=lambda x: np.stack([np.full(len(x), -v0), 0 * x[:, 0]], axis=1))
+        return dyn
+
     t_end = 0.5 * LENGTH / wave_speed(CONCRETE) if v0 <= ELASTIC else T_END
-    res = dyn.run(t_end)
-    first, last = res.energies[0], res.energies[-1]
+    adaptive = method in ADAPTIVE
+    if adaptive:  # one column of particle cells at the wall; the rest grows where D >= 0.1
+        msh = bar_mesh(method, cells, comm)
+        width = 2 if method.startswith("bridging") else 1  # bridging: a column past its band
+        first_column = np.flatnonzero(cell_midpoints(msh)[:, 0] < width * LENGTH / cells)
+
+        n_cells = cells
+
+        def rebuilt(cells: np.ndarray | None = None) -> mf.ExplicitDynamics:
+            on = first_column if cells is None else cells
+            return thrown(build(method, n_cells, comm, sides, msh, on))
+
+        run = mf.dynamics.AdaptiveRun(rebuilt, mf.StateAbove("damage", CONVERT_AT), check_every=5)
+        dyn = run.run(t_end)
+        records, conversions = dyn.stepper.records, run.conversions
+        steps, seconds = dyn.step, run.timings["steps"] + run.timings["conversions"]
+        dt = None
+    else:
+        dyn = thrown(build(method, cells, comm, sides))
+        res = dyn.run(t_end)
+        records, conversions = res.energies, []
+        steps, seconds, dt = res.steps, res.timings["steps"], res.dt
+    first, last = records[0], records[-1]
+    changed = sum(c.energy_change for c in conversions)
     law, comm = dyn.material, dyn.comm
     state = law.state
     row = {
         "method": method,
         "velocity": v0,
-        "steps": res.steps,
-        "dt": res.dt,
-        "seconds_per_step": res.timings["per_step"],
-        "balance": (last.kinetic + last.internal - first.kinetic) / first.kinetic,
+        "steps": steps,
+        "dt": dt,
+        "seconds": seconds,
+        "seconds_per_step": seconds / steps,
+        # the energy the conversions changed (the fit of the new particles) counted as removed
+        "balance": (last.kinetic + last.internal - changed - first.kinetic) / first.kinetic,
         "crushed_depth": depth(dyn, state["mu_plastic"][:, 0] > 0.0),
         "failed_depth": depth(dyn, state["damage"][:, 0] >= 0.99),
         "max_damage": comm.allreduce(float(state["damage"].max(initial=0.0)), op=MPI.MAX),
         "elastic": None,
+        "conversions": None,
     }
+    if adaptive:
+        in_patch = comm.allreduce(int(np.count_nonzero(dyn.in_patch[: law_cells(dyn)])))
+        row["conversions"] = {
+            "count": len(conversions),
+            "particle_cells": in_patch,
+            "cells": comm.allreduce(law_cells(dyn)),
+            "mass_error": max((c.mass_error for c in conversions), default=0.0),
+            "momentum_correction": max((c.momentum_correction for c in conversions), default=0.0),
+            "wall_reaction": max((c.momentum_reaction for c in conversions), default=0.0),
+            "kinetic_change": sum(c.kinetic_change for c in conversions) / first.kinetic,
+            "strain_change": sum(c.strain_change for c in conversions) / first.kinetic,
+            "seconds": run.timings["conversions"],
+        }
     if v0 <= ELASTIC and sides == "rollers":  # uniaxial strain: the 1D solution
         behind = law.points[:, 0] < 0.3 * LENGTH
         local = np.array([law.sigma[behind, 0, 0].sum(), behind.sum()])
@@ -151,6 +242,11 @@ def impact(method: str, cells: int, v0: float, comm=MPI.COMM_WORLD, sides: str =
         }
     dyn.destroy()
     return row
+
+
+def law_cells(dyn: mf.ExplicitDynamics) -> int:
+    """This rank's owned cells."""
+    return dyn.evaluator.disc.mesh.topology.index_map(2).size_local
 
 
 def check(rows: list[dict], cells: int) -> list[str]:
@@ -166,6 +262,13 @@ def check(rows: list[dict], cells: int) -> list[str]:
                 bad.append(f"{name}: not elastic (plastic strain {e['plastic_strain']:.2e})")
             if abs(e["stress_ratio"] - 1.0) > MARGINS["elastic_stress"]:
                 bad.append(f"{name}: sigma_xx / (-rho c v0) = {e['stress_ratio']:.4f}")
+        c = r["conversions"]
+        if c is not None:
+            if c["mass_error"] > MARGINS["mass"]:
+                bad.append(f"{name}: a conversion's mass error {c['mass_error']:.2e}")
+            fit_conserves = not r["method"].startswith("bridging")
+            if fit_conserves and c["momentum_correction"] > MARGINS["momentum"]:
+                bad.append(f"{name}: a conversion's momentum {c['momentum_correction']:.2e}")
     h = LENGTH / cells
     for v0 in sorted({r["velocity"] for r in rows}):
         by = {r["method"]: r for r in rows if r["velocity"] == v0}
@@ -179,12 +282,18 @@ def check(rows: list[dict], cells: int) -> list[str]:
                 gap = abs(r[key] - by["efg"][key]) / h
                 if gap > MARGINS[margin]:
                     bad.append(f"{v0:g} m/s: {method} and EFG {key} {gap:.1f} cells apart")
+            # within the margin in cells, but failed where pure EFG fails nowhere
+            if by["efg"]["failed_depth"] == 0.0 and r["failed_depth"] > 0.0:
+                bad.append(
+                    f"{v0:g} m/s: {method} fails concrete (D >= 0.99) to"
+                    f" {1e3 * r['failed_depth']:.2f} mm where EFG fails none"
+                )
     return bad
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description="A concrete bar (HJC) thrown against a wall")
-    p.add_argument("--method", nargs="+", default=METHODS, choices=METHODS)
+    p.add_argument("--method", nargs="+", default=DEFAULT_METHODS, choices=METHODS)
     p.add_argument("--cells", type=int, default=40, help="cells along the bar")
     p.add_argument("--velocity", nargs="+", type=float, default=[0.5, 100.0])
     p.add_argument("--sides", default="rollers", choices=["rollers", "free"])
@@ -193,27 +302,41 @@ def main(argv=None) -> int:
     rows = [impact(m, args.cells, v, sides=args.sides) for v in args.velocity for m in args.method]
     comm = MPI.COMM_WORLD
     per_step = {(r["method"], r["velocity"]): r["seconds_per_step"] for r in rows}
+    total = {(r["method"], r["velocity"]): r["seconds"] for r in rows}
     if comm.rank == 0:
         print(
             f"HJC concrete bar against a wall, {args.cells} cells, sides {args.sides}, "
             f"{comm.size} rank(s)"
         )
         head = (
-            "method        v0 m/s  steps  s/step  vs FE  vs EFG  balance  crushed mm  failed mm  D"
+            "method               v0 m/s  steps  s/step  vs FE  s total  vs EFG  balance"
+            "  crushed mm  failed mm  D"
         )
         print(head)
         for r in rows:
             v0 = r["velocity"]
             fe = r["seconds_per_step"] / per_step.get(("fe", v0), np.nan)
-            efg = r["seconds_per_step"] / per_step.get(("efg", v0), np.nan)
+            efg = r["seconds"] / total.get(("efg", v0), np.nan)
             print(
-                f"{r['method']:12s} {v0:7g} {r['steps']:6d} {r['seconds_per_step']:7.4f}"
-                f" {fe:5.2f}x {efg:5.2f}x {r['balance']:+9.2e} {1e3 * r['crushed_depth']:10.2f}"
-                f" {1e3 * r['failed_depth']:10.2f} {r['max_damage']:5.3f}"
+                f"{r['method']:20s} {v0:7g} {r['steps']:6d} {r['seconds_per_step']:7.4f}"
+                f" {fe:5.2f}x {r['seconds']:8.3f} {efg:5.2f}x {r['balance']:+9.2e}"
+                f" {1e3 * r['crushed_depth']:10.2f} {1e3 * r['failed_depth']:10.2f}"
+                f" {r['max_damage']:5.3f}"
             )
             if r["elastic"] is not None:
                 ratio = r["elastic"]["stress_ratio"]
                 print(f"        elastic: sigma_xx / (-rho c v0) = {ratio:.4f}")
+            c = r["conversions"]
+            if c is not None:
+                print(
+                    f"        {c['count']} conversions ({c['seconds']:.3f} s): particles on"
+                    f" {c['particle_cells']} of {c['cells']} cells; largest mass error"
+                    f" {c['mass_error']:.1e}; momentum missed by the fit"
+                    f" {c['momentum_correction']:.1e}, the held wall's reaction"
+                    f" {c['wall_reaction']:.1e}; energy"
+                    f" changed: kinetic {c['kinetic_change']:+.2e}, strain"
+                    f" {c['strain_change']:+.2e} of the initial kinetic"
+                )
     bad = check(rows, args.cells)
     if comm.rank == 0:
         if args.json:

@@ -308,13 +308,36 @@ def test_concrete_impact_demo_table_and_json(shared_dir):
 
 
 def test_concrete_impact_demo_couplings_fail_as_efg_with_free_sides(shared_dir):
-    """At 300 m/s with free sides, particles at the wall coupled to FE (lagrange) crush and fail
-    to EFG's depths within the demo's margins (2 and 4 cells; on rollers they do not: the
-    rollers' corner at the interface, documented in the demo)."""
+    """At 300 m/s with free sides, particles at the wall coupled to FE (lagrange), fixed or grown
+    from one column where the damage reaches 0.1 (lagrange-adaptive), crush and fail to EFG's
+    depths within the demo's margins (2 and 4 cells; measured 20 cells: failed to 33.4 mm
+    EFG, 36.1 lagrange, 34.7 adaptive; on rollers they do not: the rollers' corner at the
+    interface, documented in the demo). The adaptive run converts (measured 6 times, 40 of 80
+    cells at the end), its mass exact and its fit's momentum at round-off (the demo's checks)."""
     out = shared_dir / "concrete_free.json"
     demo = load_demo("concrete_impact")
-    argv = ["--method", "efg", "lagrange", "--cells", "20", "--velocity", "300"]
-    assert demo.main([*argv, "--sides", "free", "--json", str(out)]) == 0
+    argv = ["--method", "efg", "lagrange", "lagrange-adaptive", "--cells", "20"]
+    assert demo.main([*argv, "--velocity", "300", "--sides", "free", "--json", str(out)]) == 0
     MPI.COMM_WORLD.Barrier()
     rows = json.loads(out.read_text())["rows"]
     assert all(r["max_damage"] == 1.0 and r["failed_depth"] > 0.2 * demo.LENGTH for r in rows)
+    grown = rows[2]["conversions"]
+    assert grown["count"] >= 3 and grown["cells"] > grown["particle_cells"] > 20
+    # grown against EFG: 1.3 mm apart (a quarter of a cell), checked 2.6 mm
+    assert abs(rows[2]["failed_depth"] - rows[0]["failed_depth"]) <= 2.6e-3
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known limit (guide, impact materials: failing cells become particles): at 100 m/s "
+    "on rollers the points of the old patch next to its interface fail (D = 1 at 4.65 mm) "
+    "within steps of a conversion, where EFG and the fixed couplings fail none (largest D "
+    "0.74, 0.84): the fit of the converted field changes their strain increment by about "
+    "5e-3 per step, and HJC fails a point at low pressure after 1 % plastic strain",
+)
+def test_concrete_impact_demo_conversion_does_not_fail_sound_concrete():
+    """At 100 m/s on rollers nothing fails in EFG; neither may it in the adaptive run."""
+    demo = load_demo("concrete_impact")
+    rows = [demo.impact(m, 20, 100.0) for m in ("efg", "lagrange-adaptive")]
+    assert rows[0]["failed_depth"] == 0.0  # measured: EFG's largest damage 0.74
+    assert demo.check(rows, 20) == []

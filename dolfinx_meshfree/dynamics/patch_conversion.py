@@ -566,7 +566,7 @@ class ConvertingPatch:
                 p.kind == inspect.Parameter.VAR_KEYWORD for p in params.values()
             ):
                 raise TypeError(
-                    "adapt= rebuilds the model on a larger patch by build(crack, cells=...): "
+                    "adapt= rebuilds the model on a larger patch by build(..., cells=...): "
                     "give build a cells argument (the patch's local cells, for "
                     "mf.ParticlePatch(mesh, cells, ...))"
                 )

@@ -7,6 +7,10 @@ Files written by :class:`DynamicsWriter` for a prefix ``out/rod``:
   DOLFINx :class:`~dolfinx.fem.Function` named ``"displacement"`` and ``"velocity"``, one
   temporal collection each, written collectively by DOLFINx's ``XDMFFile`` (HDF5). In a coupled
   model the FE nodes that only patch cells touch hold zero (they carry no mass);
+* with a rate-form law (:class:`~dolfinx_meshfree.HolmquistJohnsonCook`,
+  :class:`~dolfinx_meshfree.JohnsonCook`), in the same file: each scalar state variable
+  (``"damage"``, ``"plastic_strain"``, ...) per cell, the largest over its points, as a DG0
+  function (:func:`~dolfinx_meshfree.state_fields.state_fields`);
 * ``out/rod_particles.xdmf`` (+ ``out/rod_particles.h5``): the particle cloud, one temporal
   collection of ``Polyvertex`` grids; per output time the particle positions (reference
   configuration, ``XYZ`` with ``z = 0``) and the displacement and velocity *values* at the
@@ -38,6 +42,7 @@ import numpy as np
 from mpi4py import MPI
 
 from .output import CloudSeriesWriter, check_prefix, gather_rows, on_rank0
+from .state_fields import state_fields
 
 if TYPE_CHECKING:
     from .dynamics import ExplicitDynamics
@@ -252,6 +257,8 @@ class DynamicsWriter:
         self.times.append(t)
         if self._with_fe:
             for f in dyn.fe_functions():
+                self._fe_file.write_function(f, t)
+            for f in state_fields(dyn):  # a rate-form law's state, the largest per cell
                 self._fe_file.write_function(f, t)
         if self._cloud is not None:
             P = dyn.particles

@@ -12,6 +12,7 @@ import dolfinx_meshfree  # noqa: I001  (must come first: loads lane B's MPI)
 import gc
 import importlib.util
 import pathlib
+import shutil
 import sys
 import tempfile
 
@@ -296,9 +297,12 @@ def load_benchmark(name: str, alias: str | None = None):
 
 @pytest.fixture
 def shared_dir():
-    """A temporary directory whose path is the same on every rank (rank 0 makes it)."""
+    """A temporary directory whose path is the same on every rank (rank 0 makes it, and removes
+    it after the test once every rank is done with it)."""
     comm = MPI.COMM_WORLD
     path = tempfile.mkdtemp() if comm.rank == 0 else None
     path = comm.bcast(path, root=0)
     yield pathlib.Path(path)
     comm.Barrier()
+    if comm.rank == 0:
+        shutil.rmtree(path, ignore_errors=True)

@@ -252,3 +252,61 @@ def test_state_criterion_refusals():
     solution.material = elastic_twin(HJC)
     with pytest.raises(ValueError, match="reads the state of a rate-form law"):
         mf.StateAbove("damage", 0.5).select(patch, ctx)
+
+
+def test_state_field_is_the_damage_per_cell(shared_dir):
+    """mf.dynamics.state_field after the 300 m/s impact (lagrange: FE Gauss points and particle
+    points): per cell the largest, smallest and mean damage of the points that DOLFINx's own
+    point location puts in it (an independent assignment of points to cells); written by
+    DynamicsWriter beside the displacement and read back with h5py (an independent reader), the
+    same values."""
+    h5py = pytest.importorskip("h5py")
+    dyn = bar("lagrange", HJC, fixed=True)
+    dyn.set_initial(velocity=lambda x: np.stack([-300.0 + 0 * x[:, 0], 0 * x[:, 0]], axis=1))
+    dyn.run(1e-5, progress=False)
+    msh = dyn.evaluator.disc.mesh
+    n = msh.topology.index_map(2).size_local
+    points, damage = dyn.material.points, dyn.material.state["damage"][:, 0]
+    most = COMM.allreduce(float(damage.max()), op=MPI.MAX)
+    least = COMM.allreduce(float(damage.min()), op=MPI.MIN)
+    assert most == 1.0 and least < 0.5  # failed at the wall, sound far off
+    p3 = np.ascontiguousarray(np.c_[points, 0 * points[:, 0]])
+    offsets, hits = _compat.colliding_cells(msh, _compat.bb_tree(msh, 2), p3)
+    assert np.all(np.diff(offsets) >= 1)  # every point in a local cell
+    located = hits[offsets[:-1]]
+    fields = {r: mf.dynamics.state_field(dyn, "damage", r) for r in ("max", "min", "mean")}
+    Q = fields["max"].function_space
+    dofs = np.array([Q.dofmap.cell_dofs(c)[0] for c in range(n)])
+    for c in range(n):
+        d = damage[located == c]
+        assert d.size  # every cell has points (Gauss points or the particle rule's)
+        assert fields["max"].x.array[dofs[c]] == d.max()
+        assert fields["min"].x.array[dofs[c]] == d.min()
+        assert fields["mean"].x.array[dofs[c]] == pytest.approx(d.mean(), rel=1e-12)
+    with mf.DynamicsWriter(shared_dir / "impact", dyn, particles=False) as out:
+        out.write()  # the displacement, the velocity and every scalar state variable
+    mine = np.sort(np.concatenate(COMM.allgather(fields["max"].x.array[dofs])))
+    if COMM.rank == 0:
+        with h5py.File(shared_dir / "impact_fe.h5", "r") as f:
+            datasets = {}
+            f.visititems(
+                lambda k, v: (
+                    datasets.update({k: v[()]})
+                    if "damage" in k and isinstance(v, h5py.Dataset)
+                    else None
+                )
+            )
+            names = set(f["Function"].keys())
+        assert len(datasets) == 1, datasets.keys()
+        np.testing.assert_array_equal(np.sort(next(iter(datasets.values())).ravel()), mine)
+        assert {"displacement", "velocity", "damage", "plastic_strain"} <= names
+    COMM.Barrier()
+    with pytest.raises(ValueError, match=r"'crushing' is not a scalar state variable.*damage"):
+        mf.dynamics.state_field(dyn, "crushing")
+    with pytest.raises(ValueError, match=r"reduce='median' must be one of"):
+        mf.dynamics.state_field(dyn, "damage", "median")
+    dyn.destroy()
+    elastic = bar("lagrange", elastic_twin(HJC))
+    with pytest.raises(ValueError, match=r"reads the state of a rate-form law.*LinearElastic"):
+        mf.dynamics.state_field(elastic, "damage")
+    elastic.destroy()

@@ -34,7 +34,10 @@ Rabczuk et al. 2006, sec. 5.3.3 and Table I). The pieces live in modules of one 
 * :mod:`~dolfinx_meshfree.dynamics.crack_growth`: :class:`DynamicCrackGrowth`, dynamic crack
   growth (initiation, direction and arrest by the maximum hoop stress, a prescribed tip speed,
   straight segments; the model updated in place near the tip,
-  :mod:`~dolfinx_meshfree.dynamics.growth_local`, or rebuilt with the state carried over).
+  :mod:`~dolfinx_meshfree.dynamics.growth_local`, or rebuilt with the state carried over);
+* :func:`state_field` (:mod:`~dolfinx_meshfree.state_fields`): a rate-form law's state (damage,
+  plastic strain) per cell as a DG0 function; :class:`~dolfinx_meshfree.DynamicsWriter` writes
+  every such variable beside the displacement.
 
 Dimension-generic: the mesh's ``gdim`` sets the components (2D: triangles, quadrilaterals; 3D:
 tetrahedra, hexahedra). In 3D ``fe``, ``efg``, ``lagrange``, ``edge-to-edge`` and ``bridging``
@@ -49,6 +52,7 @@ exact solutions of the rod benchmarks in :mod:`~dolfinx_meshfree.verification.wa
 
 from __future__ import annotations
 
+from ..state_fields import state_field
 from .adaptive_run import AdaptiveRun
 from .body_contact import BodyContact, BodyContactSystem
 from .crack_contact import ContactSystem, CrackContact
@@ -88,5 +92,6 @@ __all__ = [
     "fe_lumped_mass",
     "particle_lumped_mass",
     "rayleigh_speed",
+    "state_field",
     "table_lumped_mass",
 ]

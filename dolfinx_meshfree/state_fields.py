@@ -1,0 +1,104 @@
+"""A rate-form law's state as a field on the mesh: one value per cell (issue 27: the damage field
+of Rabczuk et al. 2006, Fig. 21, written with the displacement).
+
+The state of :class:`~dolfinx_meshfree.dynamics.rate_forms.RateLaws` lives at points: the FE
+cells' Gauss points and the particle rule's points, each in a cell of the mesh
+(:meth:`~dolfinx_meshfree.dynamics.rate_forms.RateLaw.attach`). :func:`state_field` reduces the
+points of each cell to one value (their largest, smallest or mean) in a piecewise constant (DG0)
+function. The largest is the default: a cell with one failed point is where the material has
+failed (the rule :class:`~dolfinx_meshfree.StateAbove` applies to convert cells).
+:class:`~dolfinx_meshfree.DynamicsWriter` (``dyn.run(..., xdmf=prefix)``) writes every scalar
+state variable of a model with an FE space this way (:func:`state_fields`), beside the
+displacement, in ``{prefix}_fe.xdmf``.
+
+Example (one field, for a plot or DOLFINx's own writers)::
+
+    damage = mf.dynamics.state_field(dyn, "damage")  # a DG0 Function named "damage"
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import dolfinx
+import numpy as np
+
+from . import _compat
+from .parallel import raise_on_all_ranks
+
+if TYPE_CHECKING:  # annotations only
+    from .dynamics.explicit import ExplicitDynamics
+
+__all__ = ["REDUCTIONS", "state_field", "state_fields"]
+
+#: How the points of a cell become its value.
+REDUCTIONS = ("max", "min", "mean")
+
+
+def state_field(model: ExplicitDynamics, name: str, reduce: str = "max") -> dolfinx.fem.Function:
+    """The scalar state variable ``name`` of ``model``'s rate-form law as a DG0 function on its
+    mesh: per cell the ``reduce`` of the values at its points (collective).
+
+    Args:
+        model: An explicit model whose material is a rate-form law
+            (:class:`~dolfinx_meshfree.HolmquistJohnsonCook`,
+            :class:`~dolfinx_meshfree.JohnsonCook`).
+        name: A scalar state variable (``"damage"``, ``"plastic_strain"``, ...).
+        reduce: ``"max"`` (default), ``"min"`` or ``"mean"`` over the cell's points.
+
+    Returns:
+        A new function of the mesh's scalar DG0 space, named ``name``; a cell without points
+        holds the virgin state's value.
+
+    Raises:
+        ValueError: on every rank: a model whose law has no state, an unknown variable (the
+            message lists the law's scalar ones), an unknown ``reduce``.
+    """
+    law = model.material
+    msh = model.evaluator.disc.mesh
+
+    def check() -> tuple[np.ndarray, np.ndarray, float]:
+        if reduce not in REDUCTIONS:
+            raise ValueError(f"reduce={reduce!r} must be one of {REDUCTIONS}")
+        values = getattr(law, "state_values", None)
+        if values is None:
+            raise ValueError(
+                f"state_field reads the state of a rate-form law (HolmquistJohnsonCook, "
+                f"JohnsonCook); this model's material is {type(law).__name__}, which has none"
+            )
+        if msh is None:
+            raise ValueError("state_field needs the model's mesh (a model built on one)")
+        return values(name)
+
+    cells, v, virgin = raise_on_all_ranks(model.comm, check)
+    Q = _compat.scalar_function_space(msh, "DG", 0)
+    tdim = msh.topology.dim
+    n_own = msh.topology.index_map(tdim).size_local
+    own = cells < n_own  # every point's cell is a local cell; ghost cells are filled below
+    cells, v = cells[own], v[own]
+    if reduce == "mean":
+        total = np.bincount(cells, weights=v, minlength=n_own)
+        count = np.bincount(cells, minlength=n_own)
+        per_cell = np.where(count > 0, total / np.maximum(count, 1), virgin)
+    else:
+        fill = -np.inf if reduce == "max" else np.inf
+        per_cell = np.full(n_own, fill)
+        (np.maximum if reduce == "max" else np.minimum).at(per_cell, cells, v)
+        per_cell = np.where(np.isfinite(per_cell), per_cell, virgin)
+    f = dolfinx.fem.Function(Q, name=name)
+    dofs = np.array([Q.dofmap.cell_dofs(c)[0] for c in range(n_own)], dtype=np.int32)
+    f.x.array[dofs] = per_cell
+    f.x.scatter_forward()
+    return f
+
+
+def state_fields(model: ExplicitDynamics) -> list[dolfinx.fem.Function]:
+    """Every scalar state variable of ``model``'s rate-form law as :func:`state_field` (the
+    largest per cell), in the law's order; none for a law without state or a model without
+    a mesh (collective)."""
+    law = model.material
+    if getattr(law, "state_values", None) is None or model.evaluator.disc.mesh is None:
+        return []
+    virgin = law.law.initial_state(1)
+    names = [k for k, v in virgin.items() if np.asarray(v).reshape(1, -1).shape[1] == 1]
+    return [state_field(model, name) for name in names]

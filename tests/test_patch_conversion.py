@@ -103,6 +103,7 @@ def test_linear_fields_carried_exactly(cell_type, coupling):
         assert np.abs(at(pts) - exact).max() <= 1e-12
     assert new.constraint_residual() <= 1e-12
     assert rec.mass_error <= 1e-13 and rec.momentum_error <= 1e-13
+    assert rec.velocity_change <= 1e-12  # the old particles' motion unchanged
     assert total_mass(new) == pytest.approx(1.0, rel=1e-13)  # rho = 1 on the unit square
     assert new.time == old.time and new.step == old.step
 

@@ -24,6 +24,7 @@ import dolfinx
 import numpy as np
 
 from . import _compat
+from .mesh_cache import cached
 from .parallel import raise_on_all_ranks
 
 if TYPE_CHECKING:  # annotations only
@@ -71,9 +72,8 @@ def state_field(model: ExplicitDynamics, name: str, reduce: str = "max") -> dolf
         return values(name)
 
     cells, v, virgin = raise_on_all_ranks(model.comm, check)
-    Q = _compat.scalar_function_space(msh, "DG", 0)
-    tdim = msh.topology.dim
-    n_own = msh.topology.index_map(tdim).size_local
+    Q, dofs = _dg0(msh)
+    n_own = len(dofs)
     own = cells < n_own  # every point's cell is a local cell; ghost cells are filled below
     cells, v = cells[own], v[own]
     if reduce == "mean":
@@ -86,10 +86,20 @@ def state_field(model: ExplicitDynamics, name: str, reduce: str = "max") -> dolf
         (np.maximum if reduce == "max" else np.minimum).at(per_cell, cells, v)
         per_cell = np.where(np.isfinite(per_cell), per_cell, virgin)
     f = dolfinx.fem.Function(Q, name=name)
-    dofs = np.array([Q.dofmap.cell_dofs(c)[0] for c in range(n_own)], dtype=np.int32)
     f.x.array[dofs] = per_cell
     f.x.scatter_forward()
     return f
+
+
+def _dg0(msh: dolfinx.mesh.Mesh) -> tuple[dolfinx.fem.FunctionSpace, np.ndarray]:
+    """The mesh's scalar DG0 space and the dof of each owned cell (built once per mesh)."""
+
+    def build() -> tuple[dolfinx.fem.FunctionSpace, np.ndarray]:
+        Q = _compat.scalar_function_space(msh, "DG", 0)
+        n_own = msh.topology.index_map(msh.topology.dim).size_local
+        return Q, _compat.dofmap_array(Q)[:n_own, 0].copy()
+
+    return cached(msh, ("state_fields", "dg0"), build)
 
 
 def state_fields(model: ExplicitDynamics) -> list[dolfinx.fem.Function]:
@@ -99,6 +109,4 @@ def state_fields(model: ExplicitDynamics) -> list[dolfinx.fem.Function]:
     law = model.material
     if getattr(law, "state_values", None) is None or model.evaluator.disc.mesh is None:
         return []
-    virgin = law.law.initial_state(1)
-    names = [k for k, v in virgin.items() if np.asarray(v).reshape(1, -1).shape[1] == 1]
-    return [state_field(model, name) for name in names]
+    return [state_field(model, name) for name in law.scalar_names()]

@@ -268,6 +268,11 @@ class RateLaws:
         """The points' reference coordinates (m, gdim), joined."""
         return self._joined("points")
 
+    def scalar_names(self) -> list[str]:
+        """The law's scalar state variables, in its order (``"damage"``, ...)."""
+        virgin = self.law.initial_state(1)
+        return [k for k, v in virgin.items() if np.asarray(v).reshape(1, -1).shape[1] == 1]
+
     def state_values(self, name: str) -> tuple[np.ndarray, np.ndarray, float]:
         """``(cells, values, virgin)``: a scalar state variable ``name`` at every point of this
         rank whose cell is known (:meth:`RateLaw.attach`; the virgin state before the first
@@ -278,7 +283,7 @@ class RateLaws:
                 them).
         """
         virgin = self.law.initial_state(1)
-        scalars = [k for k, v in virgin.items() if v.reshape(1, -1).shape[1] == 1]
+        scalars = self.scalar_names()
         if name not in scalars:
             raise ValueError(
                 f"{name!r} is not a scalar state variable of {type(self.law).__name__}; use one "

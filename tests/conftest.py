@@ -165,8 +165,20 @@ def pytest_collection_finish(session):
 
 @pytest.fixture(autouse=True)
 def _collect_and_synchronise():
+    """After each test: collect its garbage (PETSc objects destroyed on every rank at the same
+    point, not whenever each rank's collector happens to run), then freeze what survives.
+
+    What survives a test's collection is alive beyond it (modules, numba and FFCx caches, module
+    fixtures): ``gc.freeze`` moves it to the permanent generation, so that the next test's
+    collection, and every automatic full collection during it, scans only the objects made since.
+    Without it a process that has run a few hundred tests holds millions of tracked objects, and
+    each collection scanned them all: 90 ms a test at the median in the serial run (187 s of its
+    workers' 1,040 s), and the automatic collections inside the tests cost more. A frozen object
+    that later becomes cyclic garbage is not collected (a small leak, no effect on any result).
+    """
     yield
     gc.collect()
+    gc.freeze()
     MPI.COMM_WORLD.Barrier()
 
 

@@ -355,3 +355,28 @@ def test_fe_residual_and_jacobian_match_internal_forces(cls, plane):
         assert err <= 1e-12 * scale, (err, scale)  # measured <= 1e-15 relative
     for obj in (A, Aw, b):
         obj.destroy()
+
+
+@pytest.mark.serial
+@pytest.mark.parametrize("plane", ["stress", "strain", None])
+def test_material_parameters_are_form_arguments_not_literals(plane):
+    """Two parameter sets of a law give UFL forms of one signature, so that FFCx compiles a
+    law's form once, not once per (E, nu) (``physics.materials.ufl_constants``: a float in a
+    form is a literal of the generated C code); the values are still each law's
+    (``test_ufl_first_piola_equals_numpy``)."""
+    d = 3 if plane is None else 2
+    msh = (
+        dolfinx.mesh.create_unit_cube(MPI.COMM_SELF, 1, 1, 1)
+        if d == 3
+        else dolfinx.mesh.create_unit_square(MPI.COMM_SELF, 1, 1)
+    )
+    V = _compat.vector_function_space(msh, 1)
+    u, v, w = ufl.TrialFunction(V), ufl.TestFunction(V), dolfinx.fem.Function(V)
+    F = ufl.Identity(d) + ufl.grad(w)
+    for cls in (mf.LinearElastic, mf.SaintVenantKirchhoff, mf.NeoHookean):
+        laws = [cls(1.0, 0.3, plane), cls(210e3, 0.2, plane)]
+        forms = [ufl.inner(m.ufl_first_piola(F), ufl.grad(v)) * ufl.dx for m in laws]
+        assert forms[0].signature() == forms[1].signature(), cls.__name__
+    linear = [mf.LinearElastic(E, 0.25, plane) for E in (1.0, 3e7)]
+    forms = [ufl.inner(m.ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx for m in linear]
+    assert forms[0].signature() == forms[1].signature()

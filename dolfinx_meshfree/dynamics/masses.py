@@ -70,7 +70,8 @@ def fe_lumped_mass(
         dx = ufl.Measure("dx", domain=msh)
     v = ufl.TestFunction(V)
     ones = dolfinx.fem.Constant(msh, np.ones(msh.geometry.dim))
-    integrand = float(rho) * ufl.dot(ones, v)
+    # rho as a Constant, not a literal: one compiled form for every density (ufl_constants)
+    integrand = dolfinx.fem.Constant(msh, float(rho)) * ufl.dot(ones, v)
     if weight is not None:
         integrand = weight * integrand
     b = _compat.assemble_vector(_compat.create_form(integrand * dx))

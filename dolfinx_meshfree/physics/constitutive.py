@@ -32,7 +32,7 @@ import numpy.typing as npt
 import ufl
 
 from ..approx import batched
-from .materials import resolve_density
+from .materials import resolve_density, ufl_constants
 
 __all__ = [
     "PLANES",
@@ -259,7 +259,8 @@ class SaintVenantKirchhoff(_Hyperelastic):
     def ufl_first_piola(self, F: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
         """``F (lambda tr(E) I + 2 mu E)`` in UFL (``lambda*`` in plane stress)."""
         E = 0.5 * (F.T * F - ufl.Identity(self.gdim))
-        return F * (self.lmbda_2d * ufl.tr(E) * ufl.Identity(self.gdim) + 2.0 * self.mu * E)
+        lmbda, mu = ufl_constants(F, self.lmbda_2d, self.mu)
+        return F * (lmbda * ufl.tr(E) * ufl.Identity(self.gdim) + 2.0 * mu * E)
 
     def wave_speed(self, F: npt.ArrayLike | None = None) -> float:
         """Exact largest Lagrangian wave speed.
@@ -382,7 +383,7 @@ class NeoHookean(_Hyperelastic):
     def ufl_first_piola(self, F: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
         """The same ``P`` in UFL. In plane stress ``ln lambda_3`` is
         :attr:`plane_stress_iterations` Newton steps from the small-strain root, unrolled."""
-        lam, mu = self.lmbda, self.mu
+        lam, mu = ufl_constants(F, self.lmbda, self.mu)
         FinvT = ufl.inv(F).T
         lnJ = ufl.ln(ufl.det(F))
         if self.plane == "stress":

@@ -216,14 +216,23 @@ def test_ldlt_equals_lu_on_symmetric_systems(coupling, monkeypatch):
 @pytest.mark.parametrize("coupling", [None, "lagrange"])
 def test_nonsymmetric_systems_are_factorised_by_lu(coupling, monkeypatch):
     """VCI makes the particle stiffness Petrov-Galerkin: the saddle point is not symmetric
-    (measured asymmetry 3e-5 to 2e-3), so "mumps" keeps the LU (the same solution as
-    "mumps-lu", bit for bit)."""
-    problem, msh = cantilever(MPI.COMM_WORLD, consistent=True, coupling=coupling)
+    (measured asymmetry 3e-5 to 2e-3), so "mumps" keeps the LU: the same solution as
+    "mumps-lu", bit for bit on one rank. On two, MUMPS's factorisation is not bitwise
+    reproducible from one call to the next (its schedule between the ranks is dynamic): the
+    lagrange case differed in the last digits once in a whole 2-rank run of the suite, and not
+    in twelve solves in a row on their own. There the bound is the symmetric test's, 1e-10; an
+    LDL^T of these systems (forced) misses by 1.6e-2 (EFG) and 5.9e-2 (lagrange)."""
+    comm = MPI.COMM_WORLD
+    problem, msh = cantilever(comm, consistent=True, coupling=coupling)
     sol_auto, auto = _solve_recording(problem, "mumps", monkeypatch)
     sol_lu, _ = _solve_recording(problem, "mumps-lu", monkeypatch)
     assert auto["factorisation"] == "lu" and auto["asymmetry"] > 1e3 * SYMMETRY_TOL
     x = msh.geometry.x[:, :2]
-    assert np.array_equal(sol_auto.displacement(x), sol_lu.displacement(x))
+    ua, ul = sol_auto.displacement(x), sol_lu.displacement(x)
+    if comm.size == 1:
+        assert np.array_equal(ua, ul)
+    else:
+        assert np.abs(ua - ul).max() <= 1e-10 * np.abs(ul).max()
 
 
 def _system(comm, skew: float) -> tuple[PETSc.Mat, PETSc.Vec, np.ndarray, np.ndarray]:

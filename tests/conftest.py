@@ -100,15 +100,22 @@ def covering_subset(items):
     return kept
 
 
-def _check_twins(items):
+def _check_twins(items, rootpath):
     """Every ``heavy`` test names a ``twin`` that was collected (not deselected by a marker):
-    a heavy test left out on 2 ranks or in lane B must leave a cheaper run of its code paths."""
+    a heavy test left out on 2 ranks or in lane B must leave a cheaper run of its code paths.
+    A twin in a module that this run did not collect (a run of some modules) is not looked for;
+    a twin missing from its collected module, or in a module that does not exist, is an
+    error."""
     ids = {item.nodeid.split("[")[0] for item in items}
+    collected = {nodeid.split("::")[0] for nodeid in ids}
     for item in items:
         mark = item.get_closest_marker("heavy")
         if mark is None:
             continue
         twin = mark.kwargs.get("twin")
+        module = twin.split("::")[0] if isinstance(twin, str) else ""
+        if module and module not in collected and (rootpath / module).is_file():
+            continue  # its module is not part of this run
         if not twin or twin not in ids:
             raise pytest.UsageError(
                 f"{item.nodeid} is marked heavy with twin={twin!r}, which is not a collected test:"
@@ -123,9 +130,8 @@ def pytest_collection_modifyitems(config, items):
     full = config.getoption("--full")
     reduced = config.getoption("--reduced") and not full
     parallel = MPI.COMM_WORLD.size > 1
-    modules = {item.path if hasattr(item, "path") else item.fspath for item in items}
-    if len(modules) > 1 and not config.getoption("keyword") and not config.getoption("markexpr"):
-        _check_twins(items)  # a whole-suite run: a selection (-k, -m, a module) may leave it out
+    if not config.getoption("keyword") and not config.getoption("markexpr"):
+        _check_twins(items, config.rootpath)  # -k and -m may leave a twin out
     selected, deselected = [], []
     groups: dict[tuple, list] = {}
     for item in items:

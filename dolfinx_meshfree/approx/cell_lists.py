@@ -310,7 +310,7 @@ def _candidate_lists(
             grown = np.empty(max(2 * cand.size, k + n), np.int64)
             grown[:k] = cand[:k]
             cand = grown
-        k = gather_box(blo, bhi, grid, tmp, cand, k)
+        k = gather_box(blo, bhi, grid, tmp, cand, np.int64(k))  # not a literal 0: one compile
         cstart.append(k)
     return group, np.array(cstart, dtype=np.int64), cand[:k]
 
@@ -353,7 +353,7 @@ def _search(
             ddist = ddist2
         for t in range(nc):
             j[k + t] = key[t]
-        pair_data(x[q], grid, nc, cand, cdist, dx, dist, ddist, k)
+        pair_data(x[q], grid, nc, cand, cdist, dx, dist, ddist, np.int64(k))  # one compile
         k += nc
         counts[q] = nc
     return counts, j[:k], dx[:k], dist[:k], ddist[:k]

@@ -409,9 +409,9 @@ def fill_shape_functions(
                     ddist[nc, d] = e / r if r > 0.0 else 0.0
                 j[k + nc] = ckey[c]
                 nc += 1
-        bound[q] = _point(
-            nc, 0, dx, dist, ddist, rho, kind, exponents, D, s, derivatives, work, phi, dphi, k,
-            Aout, q,
+        bound[q] = _point(  # int64 counts, not literal zeros: one compilation, not three
+            np.int64(nc), np.int64(0), dx, dist, ddist, rho, kind, exponents, D, s, derivatives,
+            work, phi, dphi, k, Aout, q,
         )  # fmt: skip
         counts[q] = nc
         k += nc

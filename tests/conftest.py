@@ -176,11 +176,12 @@ def _collect_and_synchronise():
 
     What survives a test's collection is alive beyond it (modules, numba and FFCx caches, module
     fixtures): ``gc.freeze`` moves it to the permanent generation, so that the next test's
-    collection, and every automatic full collection during it, scans only the objects made since.
-    Without it a process that has run a few hundred tests holds millions of tracked objects, and
-    each collection scanned them all: 90 ms a test at the median in the serial run (187 s of its
-    workers' 1,040 s), and the automatic collections inside the tests cost more. A frozen object
-    that later becomes cyclic garbage is not collected (a small leak, no effect on any result).
+    collection scans only the objects made since. Without it a process that has run a few
+    hundred tests holds millions of tracked objects, and each collection scanned them all:
+    measured in lane A's serial run with warm caches, 30 ms a test at the median, 65 s of the
+    two workers' time (90 ms and 187 s in a run with cold caches on a loaded machine); with it,
+    under 5 ms. A frozen object that later becomes cyclic garbage is not collected (a small
+    leak, no effect on any result).
     """
     yield
     gc.collect()

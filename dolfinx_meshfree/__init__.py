@@ -70,6 +70,7 @@ from .physics.hjc import HolmquistJohnsonCook
 from .physics.inelastic import J2Plasticity, RankineDamage
 from .physics.johnson_cook import JohnsonCook
 from .physics.materials import LinearElastic
+from .physics.zones import MaterialZones
 from .statics.cohesive_growth import CohesiveGrowth, initiation_direction
 from .statics.cohesive_initiation import BulkStrengthWarning, InitiationSite, initiation_site
 from .statics.coupled import (
@@ -157,6 +158,7 @@ __all__ = [
     "LinearElastic",
     "LinearField",
     "Material",
+    "MaterialZones",
     "MomentMatrixError",
     "NearTips",
     "NeoHookean",

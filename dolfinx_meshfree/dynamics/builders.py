@@ -183,8 +183,9 @@ def _check_twin(law: Material | LinearElastic, twin: LinearElastic, problem: Lin
 
 def _check_rate_twin(law: RateLaws, problem: LinearElastic) -> None:
     """A rate-form law's model takes its masses from the problem's material: the densities and
-    planes must agree (its stiffness is not used: the system's tangent is the law's)."""
-    if problem.rho != law.rho or problem.plane != law.plane:
+    planes must agree (its stiffness is not used: the system's tangent is the law's). A zoned
+    law (MaterialZones) gives its own densities: the planes must agree."""
+    if (not law.zoned and problem.rho != law.rho) or problem.plane != law.plane:
         raise ValueError(
             f"material={type(law.law).__name__} (rho={law.rho}, plane={law.plane!r}) but the "
             f"problem's material has rho={problem.rho}, plane={problem.plane!r}: build the "
@@ -269,6 +270,27 @@ def check_quadrature_option(
 # -- pure FE, pure EFG -------------------------------------------------------------------------
 
 
+def _fe_density(
+    law: object, material: LinearElastic, V: dolfinx.fem.FunctionSpace
+) -> float | dolfinx.fem.Function:
+    """The FE masses' density: the material's, or the zones' DG0 field (MaterialZones)."""
+    if isinstance(law, RateLaws):
+        return law.fe_density(V)
+    return float(material.rho)
+
+
+def _particle_density(
+    law: object, material: LinearElastic, kind: str, q: QuadraturePoints, particles: ParticleSet
+) -> float | np.ndarray:
+    """The particle masses' density: the material's, or (MaterialZones) per point of the rule
+    ``q`` by its cell (``"row-sum"``) or per particle by its position (``"volume"``)."""
+    if not (isinstance(law, RateLaws) and law.zoned):
+        return float(material.rho)
+    if kind == "volume":
+        return raise_on_all_ranks(particles.comm, lambda: law.density_at(particles.positions))
+    return law.density_at_cells(q.cells)
+
+
 def build_fe(
     V: dolfinx.fem.FunctionSpace,
     material: LinearElastic | Material,
@@ -277,7 +299,7 @@ def build_fe(
     """Pure FE: DOLFINx's stiffness ``inner(sigma(u), eps(v)) dx``, row-sum masses, fixed
     facets' nodes held strongly; at finite strain the assembled ``int P(F) : grad v dX``
     (:class:`~dolfinx_meshfree.dynamics.finite_strain.NonlinearSystem`). Collective."""
-    material = bind_rate_law(material, "fe")
+    material = bind_rate_law(material, "fe", V.mesh)
     law, material = material, small_strain(material, "fe")
     t0 = time.perf_counter()
     msh = V.mesh
@@ -286,7 +308,7 @@ def build_fe(
     u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
     a = ufl.inner(material.ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx
     K = _compat.assemble_matrix(_compat.create_form(a))
-    mass = fe_lumped_mass(V, material.rho)
+    mass = fe_lumped_mass(V, _fe_density(law, material, V))
     n_owned = msh.topology.index_map(msh.topology.dim).size_local
     h = fe_spacing(msh, np.arange(n_owned))
     fe_field = Field("fe", K, mass, h, fixed=fixed_fe_dofs(V, groups))
@@ -362,10 +384,10 @@ def build_efg(
     A finite-strain ``material`` gives the internal force of
     :class:`~dolfinx_meshfree.InternalForces` on the same rule and table.
     """
-    material = bind_rate_law(material, "efg")
-    law, material = material, small_strain(material, "efg")
     if particles.mesh is None:
         raise ValueError("explicit EFG needs particles with a background mesh (mesh=...)")
+    material = bind_rate_law(material, "efg", particles.mesh)
+    law, material = material, small_strain(material, "efg")
     _check_integration(integration, particles.gdim)
     cracks = list(cracks)
     check_crack_options(bool(cracks), integration, law is not material, particles.comm)
@@ -405,7 +427,8 @@ def build_efg(
     pl = particles.dof_layout(particles.gdim)
     K = create_aij(comm, K_loc, pl, pl)
     q, values = raise_on_all_ranks(comm, lambda: value_rule(mls, q, tq))  # masses, loads
-    mass = particle_lumped_mass(particles, values, q.weights, material.rho, particle_mass)
+    rho = _particle_density(law, material, particle_mass, q, particles)
+    mass = particle_lumped_mass(particles, values, q.weights, rho, particle_mass)
     constraint = None
     if groups and comm.allreduce(sum(f.size for f, _ in groups)):
         D, dl = particle_conditions(
@@ -552,7 +575,7 @@ def build_coupled(
         )
     # the law the model was built with, unless the caller names another (issue 23, item 2)
     law = getattr(problem, "law", problem.material) if material is None else material
-    law = bind_rate_law(law, coupling)
+    law = bind_rate_law(law, coupling, problem.V.mesh)
     material = small_strain(law, coupling)
     if isinstance(law, RateLaws):
         _check_rate_twin(law, problem.material)
@@ -575,10 +598,11 @@ def build_coupled(
     fl, pl = ops.fe_layout, ops.particle_layout
 
     # lumped masses (eq. 4.5, 88-89)
-    mass_fe = fe_lumped_mass(V, rho, weight=ops.fe_weight)
+    mass_fe = fe_lumped_mass(V, _fe_density(law, material, V), weight=ops.fe_weight)
     pq = ops.particle_quadrature
+    rho_p = _particle_density(law, material, particle_mass, pq, P)
     mass_p = particle_lumped_mass(
-        P, ops.particle_table, pq.weights, rho, particle_mass, check=ops.interface_table is None
+        P, ops.particle_table, pq.weights, rho_p, particle_mass, check=ops.interface_table is None
     )
     if ops.interface_table is not None:  # ramp: the interface cells' share, same functions
         _add_interface_masses(ops, V, P, rho, mass_fe, mass_p, comm)
@@ -680,9 +704,16 @@ def build_coupled(
         timings={"setup": time.perf_counter() - t0, "operators": ops.timings["operators"]},
         body_load=body_load,
         system=system,
-        mass_rule=p_rule,
+        mass_rule=p_rule if np.ndim(rho_p) == 0 else _density_weighted(p_rule, rho_p),
         blended_rule=i_rule,
     )
+
+
+def _density_weighted(rule: tuple, rho: np.ndarray) -> tuple:
+    """``(quadrature, table)`` with the weights times the points' densities: a conversion's
+    projection in the mass metric of zones of several densities (MaterialZones)."""
+    q, table = rule
+    return dataclasses.replace(q, weights=q.weights * rho), table
 
 
 def _finite_strain_system(

@@ -82,8 +82,10 @@ class ExplicitDynamics(StateQueries):
 
     Args:
         fields: One or two :class:`~dolfinx_meshfree.dynamics.system.Field` (FE first).
-        material: The law (density and wave speed): :class:`~dolfinx_meshfree.LinearElastic`
-            or a finite-strain :class:`~dolfinx_meshfree.physics.constitutive.Material`.
+        material: The law (density and wave speed): :class:`~dolfinx_meshfree.LinearElastic`,
+            a finite-strain :class:`~dolfinx_meshfree.physics.constitutive.Material`, or (from
+            the builders) a rate-form law or :class:`~dolfinx_meshfree.MaterialZones` bound as
+            :class:`~dolfinx_meshfree.dynamics.rate_forms.RateLaws`.
         constraint: The constraint blocks ``G_f`` of each field (``None`` for a field without),
             or ``None``: no constraint.
         safety: Fraction of the critical time step used by default and allowed without

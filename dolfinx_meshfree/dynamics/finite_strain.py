@@ -45,6 +45,7 @@ from ..physics.constitutive import DeformationError, Material, check_deformation
 from ..physics.forces import InternalForces
 from ..physics.materials import LinearElastic, linear_twin
 from ..physics.state import check_not_rate_law, check_stateless, is_rate_law
+from ..physics.zones import MaterialZones
 from ..statics.sides import FESide, ParticleSide
 from .rate_forms import RATE_METHODS, RateLaws
 from .system import Blocks, Field
@@ -81,13 +82,16 @@ FINITE_STRAIN_DYNAMICS = (
 MISSING: dict[str, str] = {}
 
 
-def bind_rate_law(material: object, method: str) -> object:
+def bind_rate_law(material: object, method: str, mesh: dolfinx.mesh.Mesh | None = None) -> object:
     """A rate-form law over the sides of a model (:class:`~dolfinx_meshfree.dynamics.
-    rate_forms.RateLaws`) for the methods that carry it, else ``material`` itself.
+    rate_forms.RateLaws`) for the methods that carry it, else ``material`` itself. A
+    :class:`~dolfinx_meshfree.MaterialZones` law is located on ``mesh`` (the zone of every local
+    cell; collective then).
 
     Raises:
         ValueError: a rate-form law with a ``method`` not in
-            :data:`~dolfinx_meshfree.dynamics.rate_forms.RATE_METHODS`.
+            :data:`~dolfinx_meshfree.dynamics.rate_forms.RATE_METHODS`; zones with no mesh, or
+            a cell in no zone or in two (on every rank).
     """
     if not is_rate_law(material):
         return material
@@ -97,7 +101,12 @@ def bind_rate_law(material: object, method: str) -> object:
             f"carries on {list(RATE_METHODS)} only (method={method!r}: its sides over both "
             "fields do not carry the points' state yet)"
         )
-    return RateLaws(material)
+    if not isinstance(material, MaterialZones):
+        return RateLaws(material)
+    if mesh is None:
+        raise ValueError(f"{material!r} needs the model's mesh to locate its zones")
+    cell_zone = raise_on_all_ranks(mesh.comm, lambda: material.cell_zones(mesh))
+    return RateLaws(material, cell_zone)
 
 
 def small_strain(material: LinearElastic | Material, method: str) -> LinearElastic:

@@ -45,7 +45,7 @@ __all__ = [
 
 def fe_lumped_mass(
     V: dolfinx.fem.FunctionSpace,
-    rho: float,
+    rho: float | dolfinx.fem.Function,
     dx: ufl.Measure | None = None,
     weight: ufl.core.expr.Expr | None = None,
 ) -> PETSc.Vec:
@@ -57,7 +57,8 @@ def fe_lumped_mass(
     consistent mass ``rho weight inner(u, v) dx`` (the P1/Q1 basis is a partition of unity).
 
     Args:
-        V: Vector P1/Q1 space. rho: Density (> 0).
+        V: Vector P1/Q1 space. rho: Density (> 0), a number or a scalar field (a DG0 field of
+            :class:`~dolfinx_meshfree.MaterialZones`' densities).
         dx: The measure (e.g. ``dx(FE_TAG)`` with the patch's cell tags); default: every cell.
         weight: Scalar UFL weight ``beta`` (a DG0 cell indicator, a bridging weight); default 1.
 
@@ -71,7 +72,9 @@ def fe_lumped_mass(
     v = ufl.TestFunction(V)
     ones = dolfinx.fem.Constant(msh, np.ones(msh.geometry.dim))
     # rho as a Constant, not a literal: one compiled form for every density (ufl_constants)
-    integrand = dolfinx.fem.Constant(msh, float(rho)) * ufl.dot(ones, v)
+    if not isinstance(rho, dolfinx.fem.Function):
+        rho = dolfinx.fem.Constant(msh, float(rho))
+    integrand = rho * ufl.dot(ones, v)
     if weight is not None:
         integrand = weight * integrand
     b = _compat.assemble_vector(_compat.create_form(integrand * dx))
@@ -98,7 +101,7 @@ def particle_lumped_mass(
     particles: ParticleSet,
     table_values: sp.csr_matrix | None,
     weights: np.ndarray | None,
-    rho: float,
+    rho: float | np.ndarray,
     kind: str = "row-sum",
     check: bool = True,
 ) -> PETSc.Vec:
@@ -109,7 +112,8 @@ def particle_lumped_mass(
         table_values: (nq x n) MLS values at this rank's cell quadrature points (the table of
             :func:`~dolfinx_meshfree.statics.efg.particle_stiffness`); ``weights``: (nq,) weights
             (bridging: times ``alpha``).
-        rho: Density.
+        rho: Density: a number, or per point (nq,) with ``"row-sum"`` and per particle (n,)
+            with ``"volume"`` (:class:`~dolfinx_meshfree.MaterialZones`).
         kind: ``"row-sum"``: ``M_II = rho sum_q phi_I(x_q) w_q``, the row sums of
             ``rho Phi^T W Phi`` (Belytschko et al. 1995, eq. 4.5); ``"volume"``:
             ``rho V_I`` with the particles' Voronoi volumes.
@@ -129,12 +133,18 @@ def particle_lumped_mass(
     pl = particles.dof_layout(gdim)
     pdofs = particles.petsc_dofs(gdim)
     if kind == "row-sum":
-        local = float(rho) * np.asarray(table_values.T @ weights).ravel()
+        if np.ndim(rho) == 0:
+            local = float(rho) * np.asarray(table_values.T @ weights).ravel()
+        else:  # per point
+            local = np.asarray(table_values.T @ (weights * np.asarray(rho))).ravel()
         m = create_vector(comm, pl, pdofs.ravel(), np.repeat(local, gdim))
     else:
         own = particles.owned
         m = create_vector(
-            comm, pl, pdofs[own].ravel(), np.repeat(float(rho) * particles.volumes[own], gdim)
+            comm,
+            pl,
+            pdofs[own].ravel(),
+            np.repeat((np.asarray(rho, dtype=float) * particles.volumes)[own], gdim),
         )
     if check:
         _check_positive(m, comm, "particle")

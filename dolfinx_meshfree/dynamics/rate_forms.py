@@ -40,6 +40,7 @@ import scipy.sparse as sp
 from petsc4py import PETSc
 from scipy.spatial import cKDTree
 
+from .. import _compat
 from ..approx.fe_dofs import fe_dof_layout
 from ..approx.fe_points import tabulate_in_cells
 from ..geometry.quadrature import QuadraturePoints, cell_quadrature
@@ -47,6 +48,7 @@ from ..physics.forces import InternalForces
 from ..physics.materials import LinearElastic
 from ..physics.objective import as_3d, nominal_stress
 from ..physics.state import is_rate_law
+from ..physics.zones import MaterialZones
 from ..statics.petsc import create_aij, create_vector
 
 __all__ = [
@@ -81,12 +83,23 @@ class RateLaw:
     :class:`~dolfinx_meshfree.physics.constitutive.Material` (module docstring).
 
     The points are the first ``first_piola`` call's (their number fixes the state's size).
+    A :class:`~dolfinx_meshfree.MaterialZones` law takes ``cell_zone``, the zone of every local
+    cell, and needs its points' cells (:meth:`attach`) before the first force.
     """
 
-    def __init__(self, law: object) -> None:
+    def __init__(self, law: object, cell_zone: np.ndarray | None = None) -> None:
         if not is_rate_law(law):
             raise TypeError(f"law must be a rate-form law, got {type(law).__name__}")
+        if isinstance(law, MaterialZones) and cell_zone is None:
+            raise ValueError("a MaterialZones law needs the zone of every cell (cell_zone)")
         self.law = law
+        self.cell_zone = None if cell_zone is None else np.asarray(cell_zone, dtype=np.int64)
+        #: The zone of each point (m,) (a :class:`~dolfinx_meshfree.MaterialZones` law).
+        self.zones: np.ndarray | None = None
+        #: Per zone, its stiffest linear twin (one zone for a single law).
+        self.twins = (
+            [stiffest_twin(z) for z in law.laws] if isinstance(law, MaterialZones) else None
+        )
         #: The stiffest linear twin (:func:`stiffest_twin`).
         self.twin = stiffest_twin(law)
         self.plane, self.rho, self.E, self.nu = (
@@ -117,6 +130,24 @@ class RateLaw:
         if len(points) != len(cells):
             raise ValueError(f"{len(points)} points but {len(cells)} cells: one cell per point")
         self.points, self.cells = points.copy(), cells.copy()
+        if self.cell_zone is not None:
+            if len(cells) and not (cells.min() >= 0 and cells.max() < len(self.cell_zone)):
+                raise ValueError(
+                    f"a point's cell lies outside the {len(self.cell_zone)} local cells whose "
+                    "zones are known; the zones and the points must be of one mesh"
+                )
+            self.zones = self.cell_zone[cells]
+
+    def initial_state(self, m: int) -> dict[str, np.ndarray]:
+        """The virgin state of ``m`` points (a zoned law: of the attached points' zones)."""
+        if not isinstance(self.law, MaterialZones):
+            return self.law.initial_state(m)
+        if self.zones is None or len(self.zones) != m:
+            raise ValueError(
+                f"{self.law!r}: {m} points, but {0 if self.zones is None else len(self.zones)} "
+                "were attached with their cells; a zoned law needs every point's cell (attach)"
+            )
+        return self.law.initial_state(m, self.zones)
 
     @property
     def gdim(self) -> int:
@@ -132,7 +163,7 @@ class RateLaw:
         F = np.asarray(F, dtype=float)
         m = len(F)
         if self.state is None:
-            self.state = self.law.initial_state(m)
+            self.state = self.initial_state(m)
             self.sigma = np.zeros((m, 3, 3))
             if self.points is None and points is not None:
                 self.points = np.array(points, dtype=float)
@@ -177,8 +208,23 @@ class RateLaw:
         """The stiffest twin's elastic tangent (for the stable-step bound), scaled up by
         ``(c / c_twin)^2`` where the points' current wave speed ``c`` has passed the twin's
         (extreme compaction), so that a re-bound sees it."""
-        scale = max(1.0, (self.points_wave_speed() / self.twin.wave_speed()) ** 2)
-        return scale * self.twin.tangent(F, points)
+        if self.twins is None:
+            scale = max(1.0, (self.points_wave_speed() / self.twin.wave_speed()) ** 2)
+            return scale * self.twin.tangent(F, points)
+        F = np.asarray(F, dtype=float)
+        d = self.gdim
+        out = np.zeros((len(F), d, d, d, d))
+        zones = self.zones if self.state is None else self.state["zone"][:, 0].astype(np.int64)
+        for k, (law, twin) in enumerate(zip(self.law.laws, self.twins, strict=True)):
+            idx = np.flatnonzero(zones == k)
+            if not idx.size:
+                continue
+            speed = twin.wave_speed()
+            if self.state is not None:
+                speed = law.wave_speed({n: self.state[n][idx] for n in law.state_fields})
+            scale = max(1.0, (speed / twin.wave_speed()) ** 2)
+            out[idx] = scale * twin.tangent(F[idx])
+        return out
 
     def strain_energy_density(self, F: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
         """The stress work per unit reference volume of the state (m,)."""
@@ -211,10 +257,13 @@ class RateLaws:
     ``dyn.material.state["damage"]`` holds every point of this rank.
     """
 
-    def __init__(self, law: object) -> None:
+    def __init__(self, law: object, cell_zone: np.ndarray | None = None) -> None:
         if not is_rate_law(law):
             raise TypeError(f"law must be a rate-form law, got {type(law).__name__}")
         self.law, self.twin = law, stiffest_twin(law)
+        #: The zone of every local cell of the model's mesh (a
+        #: :class:`~dolfinx_meshfree.MaterialZones` law), else ``None``.
+        self.cell_zone = cell_zone
         self.members: list[RateLaw] = []
         self.plane, self.rho, self.E, self.nu = (
             self.twin.plane,
@@ -228,9 +277,39 @@ class RateLaws:
     def gdim(self) -> int:
         return int(self.law.gdim)
 
+    @property
+    def zoned(self) -> bool:
+        """Whether the law is a :class:`~dolfinx_meshfree.MaterialZones`."""
+        return self.cell_zone is not None
+
+    def density_at_cells(self, cells: np.ndarray) -> float | np.ndarray:
+        """The density of points in the given local cells: the law's, or per point its cell's
+        zone's (a zoned law)."""
+        if self.cell_zone is None:
+            return float(self.rho)
+        return self.law.densities()[self.cell_zone[np.asarray(cells, dtype=np.int64)]]
+
+    def density_at(self, x: np.ndarray) -> float | np.ndarray:
+        """The density at points ``x`` (n, gdim): the law's, or per point its zone's by the
+        markers (a zoned law: particles' ``rho V_I`` masses)."""
+        if self.cell_zone is None:
+            return float(self.rho)
+        return self.law.densities()[self.law.zone_of(x)]
+
+    def fe_density(self, V: dolfinx.fem.FunctionSpace) -> float | dolfinx.fem.Function:
+        """The density of the FE lumped masses: the law's, or a DG0 field of the cells' zones'
+        (a zoned law)."""
+        if self.cell_zone is None:
+            return float(self.rho)
+        V0 = _compat.scalar_function_space(V.mesh, "DG", 0)
+        rho = dolfinx.fem.Function(V0)
+        dofs = _compat.dofmap_array(V0)[:, 0]
+        rho.x.array[dofs] = self.density_at_cells(np.arange(len(dofs)))
+        return rho
+
     def bind(self) -> RateLaw:
         """The law of one more side (its own points' state)."""
-        member = RateLaw(self.law)
+        member = RateLaw(self.law, self.cell_zone)
         member.set_time(self.clock)
         self.members.append(member)
         return member
@@ -294,7 +373,7 @@ class RateLaws:
             if member.cells is None:
                 continue
             m = len(member.cells)
-            state = member.state if member.state is not None else self.law.initial_state(m)
+            state = member.state if member.state is not None else member.initial_state(m)
             cells.append(member.cells)
             values.append(np.asarray(state[name], dtype=float).reshape(m))
         return np.concatenate(cells), np.concatenate(values), float(virgin[name].ravel()[0])

@@ -203,6 +203,35 @@ def test_serial_equals_two_ranks():
     assert np.abs(u - u1).max() <= 1e-12 * np.abs(u1).max()
 
 
+def test_cell_tags_are_the_markers():
+    """Zones by cell tags (1: steel, 2: concrete, as gmsh's physical groups would give them, on
+    the owned cells only: the ghosts take their owner's zone) give the markers' model bit for
+    bit (FE); ``rho V_I`` masses need a particle's zone, which tags cannot give: refused."""
+    msh = rectangle(COMM, [0.0, 0.0], [L, H], [80, 4], CELL_TYPES["quadrilateral"])
+    cells = np.arange(msh.topology.index_map(2).size_local, dtype=np.int32)
+    xc = dolfinx.mesh.compute_midpoints(msh, 2, cells)[:, 0]
+    tags = dolfinx.mesh.meshtags(msh, 2, cells, np.where(xc < X0, 1, 2).astype(np.int32))
+    tagged = mf.MaterialZones([(STEEL, 1), (HJC, 2)], cell_tags=tags)
+    V = _compat.vector_function_space(msh)
+    rollers = mf.boundary_facets(msh, lambda x: np.isclose(x[1], 0.0) | np.isclose(x[1], H))
+    steel = x_below(X0)
+    runs = []
+    for zones in (tagged, ZONES):
+        dyn = mf.ExplicitDynamics.fe(V, zones, fixed_facets=[(rollers, (1,))])
+        dyn.set_initial(velocity=lambda x: np.stack([np.where(steel(x), 1.0, 0.0), 0 * x[:, 0]], 1))
+        dyn.run(6e-6)
+        runs.append(dyn.u[0].array.copy())
+    assert np.abs(runs[0]).max() > 0.0
+    assert np.array_equal(runs[0], runs[1])
+    particles = mf.ParticleSet.from_cells(msh, L / 80)
+    with pytest.raises(ValueError, match=r"zone 0 is the cell tag 1: .* particle_mass='row-sum'"):
+        mf.ExplicitDynamics.efg(particles, tagged, quadrature_degree=3, particle_mass="volume")
+    facets = dolfinx.mesh.meshtags(msh, 1, np.zeros(0, dtype=np.int32), np.zeros(0, np.int32))
+    wrong_dim = mf.MaterialZones([(STEEL, 1), (HJC, 2)], cell_tags=facets)
+    with pytest.raises(ValueError, match=r"cell_tags are of dimension 1, the mesh's cells of 2"):
+        mf.ExplicitDynamics.fe(V, wrong_dim)
+
+
 def test_bad_zones_are_refused_by_name():
     with pytest.raises(ValueError, match=r"at least one"):
         mf.MaterialZones([])
@@ -220,6 +249,16 @@ def test_bad_zones_are_refused_by_name():
     both = mf.MaterialZones([(STEEL, left), (HJC, lambda x: x[0] > 0.03)])
     with pytest.raises(ValueError, match=r"\[0\.0[34][27]5 .* lies in more than one zone"):
         bar("efg", both, n=20)
+    with pytest.raises(TypeError, match=r"zone 0 is the cell tag 1, but no cell_tags"):
+        mf.MaterialZones([(STEEL, 1), (HJC, right)])
+    empty = mf.MaterialZones([(STEEL, left), (HJC, lambda x: x[0] > 2 * L)])
+    with pytest.raises(ValueError, match=r"no zone"):
+        bar("fe", empty, n=20)
+    spare = mf.MaterialZones([(STEEL, lambda x: x[0] < 2 * L), (HJC, lambda x: x[0] > 2 * L)])
+    with pytest.raises(
+        ValueError, match=r"zone 1 \(HolmquistJohnsonCook, a marker\) holds no cell"
+    ):
+        bar("fe", spare, n=20)
     wrong = mf.MaterialZones([(STEEL, lambda x: 1.0), (HJC, right)])
     with pytest.raises(ValueError, match=r"zone 0's marker gave float64 of shape \(\)"):
         bar("fe", wrong, n=20)

@@ -105,8 +105,7 @@ def bind_rate_law(material: object, method: str, mesh: dolfinx.mesh.Mesh | None 
         return RateLaws(material)
     if mesh is None:
         raise ValueError(f"{material!r} needs the model's mesh to locate its zones")
-    cell_zone = raise_on_all_ranks(mesh.comm, lambda: material.cell_zones(mesh))
-    return RateLaws(material, cell_zone)
+    return RateLaws(material, material.cell_zones(mesh))
 
 
 def small_strain(material: LinearElastic | Material, method: str) -> LinearElastic:

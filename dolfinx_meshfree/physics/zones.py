@@ -3,11 +3,13 @@ the concrete slab of Rabczuk, Xiao & Sauer 2006, sec. 6.2.2, are two bodies of o
 model).
 
 A zone is a rate-form law (:class:`~dolfinx_meshfree.JohnsonCook`,
-:class:`~dolfinx_meshfree.HolmquistJohnsonCook`) and a marker, ``marker(x) -> bool`` on points
-``x`` of shape ``(3, n)``, as DOLFINx's ``locate_entities`` takes it. A cell belongs to the
-zone whose marker holds at its midpoint; exactly one must (a cell in none or in two is refused,
-named by its midpoint). Everything a cell carries then follows its zone, so that a model's
-parts agree with each other by construction:
+:class:`~dolfinx_meshfree.HolmquistJohnsonCook`) and where it holds: a marker, ``marker(x) ->
+bool`` on points ``x`` of shape ``(3, n)``, as DOLFINx's ``locate_entities`` takes it (a cell
+belongs to the zone whose marker holds at its midpoint), or a tag of the cell tags (``MeshTags``
+of the cells, e.g. a gmsh physical group read with the mesh). Each owned cell must belong to
+exactly one zone (a cell in none or in two is refused, named by its midpoint), and each zone
+must hold a cell; ghost cells take their owner's zone. Everything a cell carries then follows
+its zone, so that a model's parts agree with each other by construction:
 
 * the state and stress of every quadrature point in the cell (FE Gauss points, the particles'
   cell rule): the law's equations are those of its zone (the state is the union of the zones'
@@ -30,6 +32,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from .. import _compat
 from .state import is_rate_law
 
 __all__ = ["MaterialZones"]
@@ -41,12 +44,13 @@ class MaterialZones:
     """Rate-form laws on zones of one model's cells (module docstring).
 
     Args:
-        zones: ``[(law, marker), ...]``: a rate-form law and ``marker(x)`` (``x`` of shape
-            ``(3, n)``) -> ``n`` booleans, true where the law holds. Every cell's midpoint must
-            lie in exactly one zone.
+        zones: ``[(law, where), ...]``: a rate-form law and where it holds: ``marker(x)`` (``x``
+            of shape ``(3, n)``) -> ``n`` booleans, or an ``int`` tag of ``cell_tags``.
+        cell_tags: The cells' ``MeshTags`` (of the model's mesh), needed by the ``int`` tags.
 
     Raises:
-        TypeError: a law is not a rate-form law, or a marker is not callable.
+        TypeError: a law is not a rate-form law, ``where`` is neither callable nor an ``int``,
+            or a tag is given without ``cell_tags``.
         ValueError: no zone; laws of different dimensions (``plane``); state arrays of one name
             but different sizes.
 
@@ -57,9 +61,12 @@ class MaterialZones:
             (HolmquistJohnsonCook.concrete_48mpa(plane="strain"), lambda x: x[1] < 0.05),
         ])
         dyn = ExplicitDynamics.fe(V, zones)
+        zones = MaterialZones([(steel, 1), (concrete, 2)], cell_tags=cell_tags)  # gmsh groups
     """
 
-    def __init__(self, zones: Sequence[tuple[object, Marker]]) -> None:
+    def __init__(
+        self, zones: Sequence[tuple[object, Marker | int]], cell_tags: object | None = None
+    ) -> None:
         zones = list(zones)
         if not zones:
             raise ValueError("MaterialZones(zones=[]): give at least one (law, marker) pair")
@@ -76,13 +83,20 @@ class MaterialZones:
                     "rate-form laws (JohnsonCook, HolmquistJohnsonCook), whose state explicit "
                     "dynamics carries point by point"
                 )
-            if not callable(marker):
+            tag = isinstance(marker, int | np.integer) and not isinstance(marker, bool)
+            if not (callable(marker) or tag):
                 raise TypeError(
                     f"MaterialZones: zone {k}'s marker is a {type(marker).__name__}; give a "
-                    "callable marker(x) -> bool array, x of shape (3, n)"
+                    "callable marker(x) -> bool array, x of shape (3, n), or an int cell tag"
+                )
+            if tag and cell_tags is None:
+                raise TypeError(
+                    f"MaterialZones: zone {k} is the cell tag {marker}, but no cell_tags were "
+                    "given; pass cell_tags= (the cells' MeshTags)"
                 )
         self.laws: list[object] = [law for law, _ in zones]
-        self.markers: list[Marker] = [marker for _, marker in zones]
+        self.markers: list[Marker | int] = [marker for _, marker in zones]
+        self.cell_tags = cell_tags
         planes = {getattr(law, "plane", None) for law in self.laws}
         if len(planes) > 1:
             raise ValueError(
@@ -134,26 +148,33 @@ class MaterialZones:
 
     # -- zones of points and cells ----------------------------------------------------------
 
-    def zone_of(self, x: np.ndarray) -> np.ndarray:
-        """The zone of each point ``x`` (n, gdim or 3), by the markers (local).
-
-        Raises:
-            ValueError: a marker gives no boolean array of ``n`` values, or a point lies in no
-                zone or in two (named by its coordinates).
-        """
-        x = np.asarray(x, dtype=float).reshape(len(x), -1)
+    def _inside(self, x: np.ndarray, cells: np.ndarray | None) -> np.ndarray:
+        """(zones, n) booleans: which zones hold each point ``x`` (n, 3); a tag zone by the tags
+        of ``cells`` (the points' local cells)."""
         n = len(x)
-        x3 = np.zeros((3, n))
-        x3[: x.shape[1]] = x.T
         inside = np.zeros((len(self.laws), n), dtype=bool)
-        for k, marker in enumerate(self.markers):
-            hit = np.asarray(marker(x3))
-            if hit.shape != (n,) or hit.dtype != bool:
+        for k, where in enumerate(self.markers):
+            if callable(where):
+                hit = np.asarray(where(np.ascontiguousarray(x.T)))
+                if hit.shape != (n,) or hit.dtype != bool:
+                    raise ValueError(
+                        f"MaterialZones: zone {k}'s marker gave {hit.dtype} of shape {hit.shape} "
+                        f"for {n} points; it must return n booleans for x of shape (3, n)"
+                    )
+                inside[k] = hit
+            elif cells is None:
                 raise ValueError(
-                    f"MaterialZones: zone {k}'s marker gave {hit.dtype} of shape {hit.shape} for "
-                    f"{n} points; it must return n booleans for x of shape (3, n)"
+                    f"MaterialZones: zone {k} is the cell tag {where}: a point's zone needs its "
+                    "cell; with cell tags use particle_mass='row-sum' (the default), or markers"
                 )
-            inside[k] = hit
+            else:
+                tagged = np.asarray(self.cell_tags.indices)[
+                    np.asarray(self.cell_tags.values) == where
+                ]
+                inside[k] = np.isin(cells, tagged)
+        return inside
+
+    def _one_zone(self, x: np.ndarray, inside: np.ndarray) -> np.ndarray:
         count = inside.sum(axis=0)
         for bad, what in ((count == 0, "no zone"), (count > 1, "more than one zone")):
             if bad.any():
@@ -161,20 +182,58 @@ class MaterialZones:
                 raise ValueError(
                     f"MaterialZones: the point {np.array2string(x[i], precision=6)} (a cell's "
                     f"midpoint or a particle) lies in {what} ({int(bad.sum())} such on this rank); "
-                    "make the markers cover every cell of the model exactly once"
+                    "make the markers and tags cover every cell of the model exactly once"
                 )
         return np.argmax(inside, axis=0).astype(np.int64)
 
+    def zone_of(self, x: np.ndarray) -> np.ndarray:
+        """The zone of each point ``x`` (n, gdim or 3), by the markers (local).
+
+        Raises:
+            ValueError: a marker gives no boolean array of ``n`` values, a point lies in no
+                zone or in two (named by its coordinates), or a zone is a cell tag.
+        """
+        x = np.asarray(x, dtype=float).reshape(len(x), -1)
+        x3 = np.zeros((len(x), 3))
+        x3[:, : x.shape[1]] = x
+        return self._one_zone(x3, self._inside(x3, None))
+
     def cell_zones(self, msh: object) -> np.ndarray:
-        """The zone of every local cell (owned and ghost) of ``msh``, by its midpoint (local;
-        raises as :meth:`zone_of`)."""
+        """The zone of every local cell of ``msh`` (owned, then ghost: their owner's zone). The
+        owned cells' by their midpoints and tags (raised on every rank as :meth:`zone_of`, or
+        when a zone holds no cell or the tags are not of the cells); collective."""
         import dolfinx
+
+        from ..parallel import raise_on_all_ranks
 
         tdim = msh.topology.dim
         imap = msh.topology.index_map(tdim)
-        cells = np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
-        mid = dolfinx.mesh.compute_midpoints(msh, tdim, cells)
-        return self.zone_of(mid)
+        owned = np.arange(imap.size_local, dtype=np.int32)
+
+        def locate() -> np.ndarray:
+            if self.cell_tags is not None and self.cell_tags.dim != tdim:
+                raise ValueError(
+                    f"MaterialZones: cell_tags are of dimension {self.cell_tags.dim}, the mesh's "
+                    f"cells of {tdim}; give the cells' MeshTags"
+                )
+            mid = dolfinx.mesh.compute_midpoints(msh, tdim, owned)
+            return self._one_zone(mid, self._inside(mid, owned))
+
+        zone = raise_on_all_ranks(msh.comm, locate)
+        counts = msh.comm.allreduce(np.bincount(zone, minlength=len(self.laws)))
+        if np.any(counts == 0):  # the same on every rank
+            k = int(np.flatnonzero(counts == 0)[0])
+            raise ValueError(
+                f"MaterialZones: zone {k} ({type(self.laws[k]).__name__}, "
+                f"{self.markers[k] if isinstance(self.markers[k], int) else 'a marker'}) holds no "
+                "cell of the mesh; check its marker or tag"
+            )
+        V0 = _compat.scalar_function_space(msh, "DG", 0)  # the ghosts: their owner's zone
+        z = dolfinx.fem.Function(V0)
+        dofs = _compat.dofmap_array(V0)[:, 0]
+        z.x.array[dofs[: len(owned)]] = zone
+        z.x.scatter_forward()
+        return np.rint(z.x.array[dofs]).astype(np.int64)
 
     def densities(self) -> np.ndarray:
         """The density of each zone (k,)."""

@@ -30,9 +30,11 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 
+import dolfinx
 import numpy as np
 
 from .. import _compat
+from ..parallel import raise_on_all_ranks
 from .state import is_rate_law
 
 __all__ = ["MaterialZones"]
@@ -198,14 +200,10 @@ class MaterialZones:
         x3[:, : x.shape[1]] = x
         return self._one_zone(x3, self._inside(x3, None))
 
-    def cell_zones(self, msh: object) -> np.ndarray:
+    def cell_zones(self, msh: dolfinx.mesh.Mesh) -> np.ndarray:
         """The zone of every local cell of ``msh`` (owned, then ghost: their owner's zone). The
         owned cells' by their midpoints and tags (raised on every rank as :meth:`zone_of`, or
         when a zone holds no cell or the tags are not of the cells); collective."""
-        import dolfinx
-
-        from ..parallel import raise_on_all_ranks
-
         tdim = msh.topology.dim
         imap = msh.topology.index_map(tdim)
         owned = np.arange(imap.size_local, dtype=np.int32)

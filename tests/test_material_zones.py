@@ -152,6 +152,15 @@ def test_plane_wave_crosses_a_steel_concrete_interface(method):
     # each zone's own law ran: the steel's points have no HJC compaction, the concrete's do
     assert float(state["mu_max"][zone == 0].max(initial=0.0)) == 0.0
     assert COMM.allreduce(float(state["mu_max"][zone == 1].max(initial=0.0)), op=MPI.MAX) > 0.0
+    # per cell, the smallest and the largest zone of its points are the cell's (the output's
+    # DG0 field, mf.dynamics.state_field)
+    msh = dyn.mesh
+    n = msh.topology.index_map(2).size_local
+    xc = dolfinx.mesh.compute_midpoints(msh, 2, np.arange(n, dtype=np.int32))[:, 0]
+    for reduce in ("min", "max"):
+        field = mf.dynamics.state_field(dyn, "zone", reduce=reduce)
+        dofs = _compat.dofmap_array(field.function_space)[:n, 0]
+        assert np.array_equal(field.x.array[dofs], np.where(xc < X0, 0.0, 1.0))
     # a homogeneous model would leave v0 / 2 on both sides: the zones' impedances are seen.
     # Measured (steel, concrete): fe +0.59 %, +0.37 %; efg -0.46 %, +0.20 %; lagrange +0.74 %,
     # +0.37 %

@@ -15,6 +15,7 @@ from __future__ import annotations
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
 from dolfinx_meshfree.dynamics.patch_conversion import total_mass
+from dolfinx_meshfree.dynamics.rate_forms import RateLaws, stiffest_twin
 
 import dolfinx
 import numpy as np
@@ -310,3 +311,30 @@ def test_failing_concrete_becomes_particles_beside_steel():
     assert (
         COMM.allreduce(float(state["plastic_strain"][zone == 0].max(initial=0.0)), op=MPI.MAX) > 0
     )
+
+
+@pytest.mark.serial
+def test_a_soft_zone_outrunning_its_twin_re_bounds_the_step():
+    """The stable step is bounded with each point's own zone's stiffest twin, and the run
+    re-bounds when the model's wave speed grows by 5 %: a zoned law reports the stiffest twin's
+    speed times the largest ratio of a zone's points' speed to its own twin's. The 48 MPa
+    concrete's twin (fully dense K1: 6,550 m/s) is faster than the steel's (5,790 m/s), so a
+    steel point expanded to J = 1.2 (speed sqrt(1.2) times its twin's, 6,340 m/s) stays below
+    the model's twin; it must still raise the reported speed by sqrt(1.2) (the largest of the
+    points' speeds would not) and scale its tangent by 1.2."""
+    law = RateLaws(ZONES, np.array([0, 1]))
+    assert law.E == pytest.approx(STEEL.E, rel=1e-12)  # the contact penalty's: the largest
+    member = law.bind()
+    member.attach(np.zeros((2, 2)), np.array([0, 1]))
+    F = np.tile(np.eye(2), (2, 1, 1))
+    member.stress(F)  # the virgin state at t = 0
+    c = law.twin.wave_speed()
+    steel = stiffest_twin(STEEL)
+    assert c > 1.1 * steel.wave_speed()  # the concrete's twin is the model's
+    assert member.wave_speed() == pytest.approx(c, rel=1e-14)
+    member.state["F"][0] = np.diag([1.2, 1.0, 1.0]).ravel()
+    assert STEEL.wave_speed({k: v[:1] for k, v in member.state.items()}) < c
+    assert member.wave_speed() == pytest.approx(np.sqrt(1.2) * c, rel=1e-12)
+    tangent = member.tangent(F)
+    assert np.allclose(tangent[0], 1.2 * steel.tangent(F[:1])[0], rtol=1e-12, atol=0.0)
+    assert np.allclose(tangent[1], stiffest_twin(HJC).tangent(F[1:])[0], rtol=1e-12, atol=0.0)

@@ -245,8 +245,21 @@ class RateLaw:
     def wave_speed(self, F: np.ndarray | None = None) -> float:
         """The speed the stable step is bounded with: the stiffest twin's, or the points'
         current one where it is larger (``F`` is not used). The run re-bounds only when the
-        points outrun the twin (a compaction past it), not as they stiffen below it."""
-        return max(self.points_wave_speed(), self.twin.wave_speed())
+        points outrun the twin (a compaction past it), not as they stiffen below it. A zoned
+        law: the stiffest twin's speed times the largest ratio of a zone's points' speed to its
+        own twin's (at least 1), so that a soft zone outrunning its twin re-bounds the step
+        even while it stays slower than the stiffest zone."""
+        if self.twins is None:
+            return max(self.points_wave_speed(), self.twin.wave_speed())
+        ratio = 1.0
+        if self.state is not None:
+            zones = self.state["zone"][:, 0].astype(np.int64)
+            for k, (law, twin) in enumerate(zip(self.law.laws, self.twins, strict=True)):
+                idx = np.flatnonzero(zones == k)
+                if idx.size:
+                    sub = {n: self.state[n][idx] for n in law.state_fields}
+                    ratio = max(ratio, law.wave_speed(sub) / twin.wave_speed())
+        return ratio * self.twin.wave_speed()
 
 
 class RateLaws:
@@ -271,6 +284,8 @@ class RateLaws:
             self.twin.E,
             self.twin.nu,
         )
+        if isinstance(law, MaterialZones):  # the contact penalty's modulus: the largest
+            self.E = max(stiffest_twin(zone).E for zone in law.laws)
         self.clock = 0.0
 
     @property

@@ -247,6 +247,8 @@ def test_bad_zones_are_refused_by_name():
         mf.MaterialZones([])
     with pytest.raises(TypeError, match=r"zone 1's law is a LinearElastic; zones take rate-form"):
         mf.MaterialZones([(STEEL, left), (mf.LinearElastic(1.0, 0.3, "strain"), right)])
+    with pytest.raises(TypeError, match=r"zone 0's law is itself a MaterialZones"):
+        mf.MaterialZones([(ZONES, left)])
     with pytest.raises(TypeError, match=r"zone 0's marker is a float"):
         mf.MaterialZones([(STEEL, 0.5)])
     with pytest.raises(ValueError, match=r"planes \['strain', None\]"):

@@ -81,6 +81,11 @@ class MaterialZones:
                     "-> bool array for x of shape (3, n)"
                 )
             law, marker = pair
+            if isinstance(law, MaterialZones):
+                raise TypeError(
+                    f"MaterialZones: zone {k}'s law is itself a MaterialZones; list its "
+                    "(law, marker) pairs in one MaterialZones"
+                )
             if not is_rate_law(law):
                 raise TypeError(
                     f"MaterialZones: zone {k}'s law is a {type(law).__name__}; zones take "

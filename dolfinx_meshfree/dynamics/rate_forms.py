@@ -214,17 +214,20 @@ class RateLaw:
         F = np.asarray(F, dtype=float)
         d = self.gdim
         out = np.zeros((len(F), d, d, d, d))
-        zones = self.zones if self.state is None else self.state["zone"][:, 0].astype(np.int64)
-        for k, (law, twin) in enumerate(zip(self.law.laws, self.twins, strict=True)):
-            idx = np.flatnonzero(zones == k)
-            if not idx.size:
-                continue
-            speed = twin.wave_speed()
-            if self.state is not None:
-                speed = law.wave_speed({n: self.state[n][idx] for n in law.state_fields})
-            scale = max(1.0, (speed / twin.wave_speed()) ** 2)
-            out[idx] = scale * twin.tangent(F[idx])
+        scale = self._zone_ratios() ** 2
+        for k, twin in enumerate(self.twins):
+            idx = np.flatnonzero(self.zones == k)
+            if idx.size:
+                out[idx] = scale[k] * twin.tangent(F[idx])
         return out
+
+    def _zone_ratios(self) -> np.ndarray:
+        """Per zone of a zoned law, its points' current wave speed over its own twin's, at
+        least 1 (1 before the first force and for a zone without points)."""
+        twin_speeds = np.array([twin.wave_speed() for twin in self.twins])
+        if self.state is None:
+            return np.ones(len(self.twins))
+        return np.maximum(1.0, self.law.zone_wave_speeds(self.state) / twin_speeds)
 
     def strain_energy_density(self, F: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
         """The stress work per unit reference volume of the state (m,)."""
@@ -251,15 +254,7 @@ class RateLaw:
         even while it stays slower than the stiffest zone."""
         if self.twins is None:
             return max(self.points_wave_speed(), self.twin.wave_speed())
-        ratio = 1.0
-        if self.state is not None:
-            zones = self.state["zone"][:, 0].astype(np.int64)
-            for k, (law, twin) in enumerate(zip(self.law.laws, self.twins, strict=True)):
-                idx = np.flatnonzero(zones == k)
-                if idx.size:
-                    sub = {n: self.state[n][idx] for n in law.state_fields}
-                    ratio = max(ratio, law.wave_speed(sub) / twin.wave_speed())
-        return ratio * self.twin.wave_speed()
+        return float(self._zone_ratios().max()) * self.twin.wave_speed()
 
 
 class RateLaws:

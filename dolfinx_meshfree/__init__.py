@@ -25,6 +25,7 @@ Importing this package first loads the ``dolfinx_solver`` wheel's MPI when that 
 
 from . import _compat  # noqa: F401  (must come first: loads dolfinx_solver's MPI in lane B)
 from ._compat import DOLFINX_VERSION
+from .approx.body_cuts import BodyCut, separate_bodies
 from .approx.crack_cuts import CRACK_METHODS, attach_cracks
 from .approx.fe_points import (
     PointsOutsideMeshError,
@@ -47,6 +48,7 @@ from .fracture.interaction import (
 )
 from .fracture.williams import WilliamsField
 from .geometry.adaptive_quadrature import AdaptiveQuadrature
+from .geometry.bodies import Bodies, mesh_bodies
 from .geometry.crack import Crack
 from .geometry.particles import ParticleSet
 from .geometry.partition import PartitionImbalanceWarning, balanced_mesh, work_per_rank
@@ -124,6 +126,8 @@ __all__ = [
     "AdaptiveQuadrature",
     "Approximation",
     "ArcLength",
+    "Bodies",
+    "BodyCut",
     "BulkStrengthWarning",
     "CellsWhere",
     "CohesiveGrowth",
@@ -206,8 +210,10 @@ __all__ = [
     "initiation_site",
     "interaction_integral",
     "kink_angle",
+    "mesh_bodies",
     "quartic",
     "read_particles",
+    "separate_bodies",
     "solve_fe_elasticity",
     "solve_forms",
     "solve_large",

@@ -40,7 +40,7 @@ L, H, V0 = 1.0, 0.1, 0.01
 MAT = mf.LinearElastic(1.0, 0.0, "strain", rho=1.0)  # c = 1
 H3 = 0.2  # the 3D bars' square section
 MAT3 = mf.LinearElastic(1.0, 0.0, None, rho=1.0)
-METHODS = ["fe", "lagrange", "ramp", "bridging", "master-slave"]
+METHODS = ["fe", "lagrange", "ramp", "bridging", "master-slave", "efg"]
 demo = load_demo("bar_impact")
 
 
@@ -116,6 +116,8 @@ def block_on_plate(method, comm=COMM, v=(0.5 * V0, -V0)):
     V = _compat.vector_function_space(msh)
     if method == "fe":
         dyn = ExplicitDynamics.fe(V, MAT)
+    elif method == "efg":  # particles at the nodes of both bodies
+        dyn = ExplicitDynamics.efg(mf.ParticleSet.from_vertices(msh), MAT)
     else:
         ncells = msh.topology.index_map(2).size_local
         mid = dolfinx.mesh.compute_midpoints(msh, 2, np.arange(ncells, dtype=np.int32))
@@ -139,14 +141,17 @@ def momentum(dyn, on=None):
     return dyn.comm.allreduce(p)
 
 
-#: measured (n = 20): the force's plateau (the left bar's impulse over 0.2-1.8 L/c) +0.5 / +1.5 /
-#: -0.1 / +1.5 / +1.4 % off rho c v0 H (the ringing about it); the contact's duration -0.09 /
-#: -0.41 / +0.89 / -0.41 / -0.41 h/c off 2 L / c; the mean velocities reversed to 1.9 / 3.2 /
-#: 2.5 / 3.2 / 3.3 % (the energy left in the bars' ringing, falling with h:
-#: test_residual_falls_with_h); the deepest penetration 0.0104 / 0.0129 / 0.0127 / 0.0129 /
-#: 0.0129 h; the balance's drift 4.9e-3 / 5.8e-3 / 4.5e-3 / 4.8e-3 / 5.2e-3 (falling with the
-#: step: test_drift_falls_with_the_step). The margins are the demo's (demo.MARGINS: 3 %, 4 h/c,
-#: 7 %, 0.025 h, 0.012), about 2x these and the demo's own at 40 cells.
+#: measured (n = 20; fe / lagrange / ramp / bridging / master-slave / efg, the last with
+#: particles at the nodes of both bars, each bar's MLS its own): the force's plateau (the left
+#: bar's impulse over 0.2-1.8 L/c) +0.5 / +1.5 / -0.1 / +1.5 / +1.4 / +0.05 % off rho c v0 H (the
+#: ringing about it); the contact's duration -0.09 / -0.41 / +0.89 / -0.41 / -0.41 / +0.89 h/c
+#: off 2 L / c; the mean velocities reversed to 1.9 / 3.2 / 2.5 / 3.2 / 3.3 / 3.5 % (the energy
+#: left in the bars' ringing, falling with h: test_residual_falls_with_h); the deepest
+#: penetration 0.0104 / 0.0129 / 0.0127 / 0.0129 / 0.0129 / 0.0133 h; the balance's drift
+#: 4.9e-3 / 5.8e-3 / 4.5e-3 / 4.8e-3 / 5.2e-3 / 7.5e-3 (falling with the step:
+#: test_drift_falls_with_the_step; efg's 7.5e-3, 2.6e-3, 5.6e-4 at dt, dt/2, dt/4). The margins
+#: are the demo's (demo.MARGINS: 3 %, 4 h/c, 7 %, 0.025 h, 0.012), about 2x these and the
+#: demo's own at 40 cells.
 @pytest.mark.parametrize("method", METHODS)
 def test_head_on_bars_follow_the_1d_wave(method):
     r = impact(method)
@@ -207,11 +212,12 @@ def test_stable_step_bounds_the_closed_contact():
     assert r["ke_after"] > 2.0, r["ke_after"]
 
 
-@pytest.mark.parametrize("method", ["fe", "lagrange"])
+@pytest.mark.parametrize("method", ["fe", "lagrange", "efg"])
 def test_oblique_impact_conserves_momentum(method):
-    """A block on a free plate (triangles): momentum to round-off (measured 1.3e-14, 7e-15),
-    the block bounced, its tangential velocity kept to 0.11 / 0.19 % (frictionless), the
-    deepest penetration 0.0059 / 0.0060 h."""
+    """A block on a free plate (triangles): momentum to round-off (measured 1.3e-14, 7e-15,
+    3.1e-14), the block bounced, its tangential velocity kept to 0.11 / 0.19 / 0.19 %
+    (frictionless), the deepest penetration 0.0059 / 0.0060 / 0.0061 h (fe / lagrange / efg:
+    particles at the nodes of both bodies, each body's MLS its own)."""
     dyn, h, gap = block_on_plate(method)
     p0 = momentum(dyn)
     t_end = gap / V0 + 1.0
@@ -244,7 +250,7 @@ def test_two_ranks_equal_serial():
 
 
 def test_bad_input():
-    msh, h, gap = split_mesh(COMM, 10)
+    msh, _, gap = split_mesh(COMM, 10)
     a = mf.boundary_facets(msh, lambda x: np.isclose(x[0], L))
     b = mf.boundary_facets(msh, lambda x: np.isclose(x[0], L + gap))
     V = _compat.vector_function_space(msh)
@@ -279,12 +285,7 @@ def test_bad_input():
     for bad in bad_options:
         with pytest.raises(ValueError, match=next(iter(bad))):
             BodyContact(**bad)
-    # pure EFG over both bars: the particles' supports join the bodies
-    efg = ExplicitDynamics.efg(mf.ParticleSet.from_cells(msh, h), MAT)
-    with pytest.raises(ValueError, match="reaches both contact surfaces"):
-        efg.add_contact(a, b)
-    for d in (dyn, efg):
-        d.destroy()
+    dyn.destroy()
 
 
 def same_choices(y, slaves, facets, depth=0.05, least=80):
@@ -326,13 +327,19 @@ def test_compiled_kernel_makes_the_reference_choices():
 # --- 3D: node-to-face (triangles; quadrilateral faces split in two) ----------------------------
 
 
-#: measured (10 cells, section 0.2 x 0.2: 2 x 2 cells): the force +0.09 / +1.17 / +1.66 % off
-#: rho c v0 H^2; the exit velocities 2.2 / 4.0 / 5.5 % off; the deepest penetration 0.0147 /
-#: 0.0128 / 0.0148 h; the drift 1.2e-3 / 7.8e-4 / 1.2e-3; the duration +1.58 / +1.38 / +0.68
-#: h/c off 2 L / c; the contact's step 0.21 / 0.24 / 0.21 of the step without.
+#: measured (10 cells, section 0.2 x 0.2: 2 x 2 cells): the force +0.09 / +1.17 / +1.66 /
+#: -1.47 % off rho c v0 H^2; the exit velocities 2.2 / 4.0 / 5.5 / 4.1 % off; the deepest
+#: penetration 0.0147 / 0.0128 / 0.0148 / 0.0167 h; the drift 1.2e-3 / 7.8e-4 / 1.2e-3 /
+#: 2.3e-3 (efg checked 5e-3); the duration +1.58 / +1.38 / +0.68 / +1.35 h/c off 2 L / c; the
+#: contact's step 0.21 / 0.24 / 0.21 / 0.21 of the step without.
 @pytest.mark.parametrize(
     "cell, method",
-    [("hexahedron", "fe"), ("tetrahedron", "fe"), ("hexahedron", "lagrange")],
+    [
+        ("hexahedron", "fe"),
+        ("tetrahedron", "fe"),
+        ("hexahedron", "lagrange"),
+        ("tetrahedron", "efg"),
+    ],
 )
 def test_3d_head_on_bars_follow_the_1d_wave(cell, method):
     r = demo.impact(method, 10, COMM, MAT3, L, H3, V0, None, None, False, cell)
@@ -340,7 +347,7 @@ def test_3d_head_on_bars_follow_the_1d_wave(cell, method):
     assert abs(figures["force"]) < 0.03
     assert abs(figures["exit"]) < 0.11
     assert 0.0 < figures["penetration"] < 0.03
-    assert figures["drift"] < 3e-3
+    assert figures["drift"] < (5e-3 if method == "efg" else 3e-3)
     assert abs(figures["duration_cells"]) < 4.0 and figures["parted"]
     assert 0.15 < r["critical"] / r["critical_without"] < 0.35
 

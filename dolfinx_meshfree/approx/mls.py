@@ -244,8 +244,8 @@ class MLS:
             )
         if self.pair_cuts or self.table_transforms:
             raise ValueError(
-                "subset() of an MLS with pair cuts or table transforms (cracks, enrichment) is "
-                "not supported: tabulate the whole MLS"
+                "subset() of an MLS with pair cuts or table transforms (cracks, enrichment, "
+                "separate bodies) is not supported: tabulate the whole MLS"
             )
         sub = MLS(
             self.points[idx], weight=self.weight_name, dilation=self.dilation, basis=self.basis,

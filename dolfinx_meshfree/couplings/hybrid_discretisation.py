@@ -27,6 +27,7 @@ if TYPE_CHECKING:  # annotations only
     import dolfinx.fem
     import dolfinx.mesh
 
+from ..approx.body_cuts import body_cut
 from ..geometry.patch import ParticlePatch
 from ..geometry.quadrature import QuadraturePoints, cell_quadrature
 from ..parallel import raise_on_all_ranks
@@ -232,6 +233,14 @@ class HybridDiscretisation:
                 self.smoothing_length,
             ),
         )
+        if body_cut(self.sph.points, self.sph.support, msh) is not None:  # alike on every rank
+            raise ValueError(
+                f"the hybrid coupling's SPH sums (support 2 h = {self.sph.support:.4g}) reach "
+                "from one body of the mesh into another: its particles or hybrid points lie "
+                "within 2 h of another body's cells, and the sums would join the bodies (they "
+                "have no cut at the bodies' gap); keep the bodies' patches farther apart, or "
+                "use another coupling (its MLS stops at the gap)"
+            )
         #: The particles' own interpolant: displacement in the patch, loads, masses.
         self.evaluator = raise_on_all_ranks(
             comm, lambda: CorrectedSPH(P.positions, P.volumes, self.smoothing_length)

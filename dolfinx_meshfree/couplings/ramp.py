@@ -216,6 +216,7 @@ class RampInterface:
         # particle part vanishes); there phi is multiplied by a vanishing ramp.
         m = problem.mls
         self._mls = MLS(m.points, m.weight_name, m.dilation, m.basis, radii=m.radii, rcond=0.0)
+        self._mls.pair_cuts = list(m.pair_cuts)  # the bodies' cut (ramps refuse cracks)
         self.num_particles = patch.particles.num_particles
         fdim = msh.topology.dim - 1
         nodes = dolfinx.fem.locate_dofs_topological(V, fdim, patch.interface_facets)

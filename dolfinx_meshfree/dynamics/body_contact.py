@@ -81,10 +81,14 @@ every (slave, facet) pair up to
 (:func:`candidates`); without numba, :func:`closest_points` (numpy, the reference) on the
 KD-tree's candidates.
 
-Left out: self-contact, particles of two bodies against each other (their MLS
-supports would have to stop at the bodies' gap: refused when one particle's function reaches
-both surfaces), and contact surfaces that change during a run (an adaptive patch rebuilds the
-model: add the contact in the user's ``build``).
+Particles of two bodies press on each other like FE: the model's MLS stops at the bodies' gap
+(:mod:`~dolfinx_meshfree.approx.body_cuts`, added whenever supports could cross it), so each
+body's surface moves with its own particles. A particle whose function still reaches both
+surfaces (an approximation without that cut: the hybrid's SPH sums are refused at build time)
+is refused here.
+
+Left out: self-contact, and contact surfaces that change during a run (an adaptive patch
+rebuilds the model: add the contact in the user's ``build``).
 """
 
 from __future__ import annotations
@@ -1004,8 +1008,9 @@ def _check_particles_apart(
             evaluator.comm,
             lambda: _raise(
                 f"the particle at {where.tolist()} reaches both contact surfaces ({both.size} "
-                "such particles): its MLS support joins the two bodies, so they cannot separate "
-                "or press on each other; keep the particles in one body, or make the gap "
+                "such particles): its support joins the two bodies, so they cannot separate "
+                "or press on each other; build the particles' MLS with "
+                "mf.separate_bodies(mls, mesh) (the model's own MLS has it), or make the gap "
                 "between the bodies wider than the particles' support radius"
             ),
         )

@@ -54,6 +54,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from .. import _compat
+from ..approx.body_cuts import separate_bodies
 from ..approx.crack_cuts import attach_cracks
 from ..approx.mls import MLS
 from ..approx.tables import ShapeTable
@@ -401,6 +402,7 @@ def build_efg(
     mls = raise_on_all_ranks(
         comm, lambda: MLS(particles, weight=weight, dilation=dilation, basis=basis)
     )
+    separate_bodies(mls, particles.mesh)
     refuse_smoothed(integration, nonlinear=law is not material, fix="integration='cells'")
     rule = None
     if integration == "stress-points":

@@ -382,11 +382,11 @@ class ExplicitDynamics(StateQueries):
         frictionless or Coulomb, :mod:`~dolfinx_meshfree.dynamics.body_contact`): ``surface_a`` and
         ``surface_b`` are owned exterior facets (e.g. ``mf.boundary_facets(mesh, marker)``) of
         two pieces of the mesh that share no vertex, each discretised as the model discretises
-        it (FE, particle or blended cells). The contact force joins the internal force, its
-        penalty energy the strain energy of the energy records, and the stable step is bounded
-        again with the contact's stiffness (:meth:`critical_time_step`). Several pairs may be
-        added.
-        Collective.
+        it (FE, particle or blended cells; each body's particles are its own: the model's MLS
+        stops at the bodies' gap, :func:`~dolfinx_meshfree.separate_bodies`). The contact
+        force joins the internal force, its penalty energy the strain energy of the energy
+        records, and the stable step is bounded again with the contact's stiffness
+        (:meth:`critical_time_step`). Several pairs may be added. Collective.
 
         Args:
             contact: The options (:class:`~dolfinx_meshfree.dynamics.BodyContact`; default:

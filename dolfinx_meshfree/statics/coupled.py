@@ -24,6 +24,7 @@ import dolfinx
 import numpy as np
 import ufl
 
+from ..approx.body_cuts import separate_bodies
 from ..approx.crack_cuts import attach_cracks
 from ..approx.fe_dofs import node_flags
 from ..approx.mls import MLS
@@ -313,6 +314,7 @@ class CoupledElasticity:
             ),
         )
         self.mls = self.family.prepare_mls(self.mls, patch)
+        separate_bodies(self.mls, V.mesh)
         if patch.cracks:
             raise_on_all_ranks(patch.comm, lambda: self._attach_cracks(coupling))
         self.dirichlet: list[tuple[np.ndarray, VectorFunction]] = []

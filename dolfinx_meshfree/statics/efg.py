@@ -36,6 +36,7 @@ from mpi4py import MPI
 from scipy.spatial import cKDTree
 
 from .. import _compat
+from ..approx.body_cuts import separate_bodies
 from ..approx.crack_cuts import attach_cracks
 from ..approx.fe_points import point_value_nodes
 from ..approx.mls import MLS
@@ -639,6 +640,7 @@ class EFGElasticity:
         self.mls = raise_on_all_ranks(
             particles.comm, lambda: MLS(particles, weight=weight, dilation=dilation, basis=basis)
         )
+        separate_bodies(self.mls, particles.mesh)
         self.quadrature_degree = quadrature_degree
         #: One of :data:`~dolfinx_meshfree.geometry.smoothing.INTEGRATIONS`.
         self.integration = integration

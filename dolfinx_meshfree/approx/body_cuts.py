@@ -133,13 +133,20 @@ class BodyCut:
         order = np.argsort(i, kind="stable") if np.any(np.diff(i) < 0) else slice(None)
         ii, bb = i[order], bj[order]
         starts = np.flatnonzero(np.r_[True, ii[1:] != ii[:-1]])
+        pts = ii[starts]  # increasing point indices
         lo, hi = np.minimum.reduceat(bb, starts), np.maximum.reduceat(bb, starts)
-        mixed = ii[starts][hi > lo]  # increasing point indices
-        if mixed.size == 0:
+        # the points whose body matters: those with particles of two bodies, and those near
+        # a gap cell (a point of one body may see only another body's particles)
+        near = np.zeros(pts.size, dtype=bool)
+        if self._tree is not None:
+            d, _ = self._tree.query(x[pts], distance_upper_bound=self._size * (1.0 + 1e-9))
+            near = np.isfinite(d)
+        ask = (hi > lo) | near
+        pts, lo, hi = pts[ask], lo[ask], hi[ask]
+        if pts.size == 0:
             return i, j, dx, dist, ddist
-        lo, hi = lo[hi > lo], hi[hi > lo]
-        body = self.bodies_at(x[mixed])
-        bad = np.flatnonzero(body < 0)
+        body = self.bodies_at(x[pts])
+        bad = np.flatnonzero((body < 0) & (hi > lo))
         if bad.size:
             q = int(bad[0])
             where = (
@@ -148,13 +155,14 @@ class BodyCut:
                 else "in no cell of either (in a gap between them, or outside the mesh)"
             )
             raise ValueError(
-                f"the point {x[mixed[q]].tolist()} has particles of bodies {int(lo[q])} and "
+                f"the point {x[pts[q]].tolist()} has particles of bodies {int(lo[q])} and "
                 f"{int(hi[q])} in its MLS support but lies {where} ({bad.size} such point(s)): "
                 "evaluate at points inside one body, and leave a gap between bodies that carry "
                 "particles"
             )
-        at = np.minimum(np.searchsorted(mixed, i), mixed.size - 1)
-        keep = (mixed[at] != i) | (bj == body[at])
+        at = np.minimum(np.searchsorted(pts, i), pts.size - 1)
+        # a point outside the gap cells (body -1, its particles all of one body) keeps its pairs
+        keep = (pts[at] != i) | (body[at] < 0) | (bj == body[at])
         self.dropped = int(keep.size - np.count_nonzero(keep))
         return i[keep], j[keep], dx[keep], dist[keep], ddist[keep]
 

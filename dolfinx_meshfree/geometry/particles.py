@@ -22,6 +22,7 @@ from .. import _compat
 from ..approx.fe_points import locate_points
 from ..approx.neighbours import check_points
 from ..parallel import Layout, raise_on_all_ranks
+from .bodies import mesh_bodies
 from .placement_3d import check_border_3d, conforming_layer_3d, distance_to_facets
 from .quadrature import cell_quadrature
 
@@ -160,6 +161,47 @@ def _nearest_shares(tree: cKDTree, points: np.ndarray, gdim: int) -> tuple[np.nd
     return idx, tied / tied.sum(axis=1, keepdims=True)
 
 
+def _body_grid(
+    mesh: dolfinx.mesh.Mesh,
+    c: np.ndarray,
+    spacing: float,
+    jitter: float,
+    seed: int,
+    segments: np.ndarray | None,
+) -> tuple[np.ndarray, float]:
+    """The grid points of :meth:`ParticleSet.from_cells` in this rank's owned cells ``c`` (one
+    body's; any rank may have none) and its tolerance: the box of every rank's ``c`` with
+    ``round(extent / spacing)`` intervals per direction, interior points jittered (not those on
+    the border ``segments``), the points in the cells kept (collective)."""
+    comm = mesh.comm
+    gdim = mesh.geometry.dim
+    nodes = mesh.geometry.x[_compat.geometry_dofmap(mesh)[c], :gdim].reshape(-1, gdim)
+    lo = nodes.min(axis=0) if nodes.size else np.full(gdim, np.inf)
+    hi = nodes.max(axis=0) if nodes.size else np.full(gdim, -np.inf)
+    comm.Allreduce(MPI.IN_PLACE, lo, op=MPI.MIN)
+    comm.Allreduce(MPI.IN_PLACE, hi, op=MPI.MAX)
+    counts = [max(1, round((hi[k] - lo[k]) / spacing)) for k in range(gdim)]
+    axes = [np.linspace(lo[k], hi[k], counts[k] + 1) for k in range(gdim)]
+    grid = np.stack(np.meshgrid(*axes, indexing="xy"), axis=-1).reshape(-1, gdim)
+    step = (hi - lo) / np.asarray(counts)
+    tol = 1e-9 * float(step.max())
+    if jitter > 0.0:
+        if segments is None:
+            on_border = np.zeros(grid.shape[0], dtype=bool)
+        elif gdim == 3:
+            on_border = distance_to_facets(grid, segments, tol) <= tol
+        else:
+            on_border = _distance_to_segments(grid, segments, tol) <= tol
+        rng = np.random.default_rng(seed)
+        interior = np.all((grid > lo + 1e-9 * step) & (grid < hi - 1e-9 * step), axis=1)
+        moves = rng.uniform(-jitter, jitter, (interior.sum(), gdim)) * step
+        moves[on_border[interior]] = 0.0
+        grid[interior] += moves
+    inside = _points_in_cells(mesh, grid, c).astype(np.int8)
+    comm.Allreduce(MPI.IN_PLACE, inside, op=MPI.MAX)
+    return grid[inside.astype(bool)], tol
+
+
 class ParticleSet:
     """Particles with positions, volumes and MPI ownership.
 
@@ -285,8 +327,12 @@ class ParticleSet:
 
         The grid spans the bounding box of the cells with ``round(extent / spacing)`` intervals
         per direction (so its corners are the box's corners) and keeps the points that lie in
-        the cells. ``jitter`` moves each interior point by up to ``jitter * spacing`` at random
-        (an irregular particle set; boundary points stay on the boundary).
+        the cells; on a mesh of several bodies (:func:`~dolfinx_meshfree.mesh_bodies`: a
+        projectile and its target) each body's cells get a grid of their own box, so that a
+        body's particles do not depend on another's cells (nor on a gap between them).
+        ``jitter`` moves each interior point by up to ``jitter * spacing`` at random (an
+        irregular particle set; boundary points stay on the boundary; body ``b``'s seed is
+        ``seed + b``).
 
         ``border``: this rank's facets (k, 2, gdim) (segments; (k, 1, gdim) in 1D; in 3D
         triangles (k, 3, 3) or quadrilaterals (k, 4, 3) in DOLFINx's vertex order) of the border
@@ -320,33 +366,23 @@ class ParticleSet:
 
         mine = raise_on_all_ranks(comm, check)  # this rank's border facets, checked
         c = _owned_cells(mesh, cells)
-        nodes = mesh.geometry.x[_compat.geometry_dofmap(mesh)[c], :gdim].reshape(-1, gdim)
-        lo = nodes.min(axis=0) if nodes.size else np.full(gdim, np.inf)
-        hi = nodes.max(axis=0) if nodes.size else np.full(gdim, -np.inf)
-        comm.Allreduce(MPI.IN_PLACE, lo, op=MPI.MIN)
-        comm.Allreduce(MPI.IN_PLACE, hi, op=MPI.MAX)
-        counts = [max(1, round((hi[k] - lo[k]) / spacing)) for k in range(gdim)]
-        axes = [np.linspace(lo[k], hi[k], counts[k] + 1) for k in range(gdim)]
-        grid = np.stack(np.meshgrid(*axes, indexing="xy"), axis=-1).reshape(-1, gdim)
-        step = (hi - lo) / np.asarray(counts)
-        tol = 1e-9 * float(step.max())
-        if mine is not None:  # every rank's border facets
-            segments = np.concatenate(comm.allgather(mine))
-            if gdim == 3:
-                on_border = distance_to_facets(grid, segments, tol) <= tol
-            else:
-                on_border = _distance_to_segments(grid, segments, tol) <= tol
-        else:
-            segments, on_border = None, np.zeros(grid.shape[0], dtype=bool)
-        if jitter > 0.0:
-            rng = np.random.default_rng(seed)
-            interior = np.all((grid > lo + 1e-9 * step) & (grid < hi - 1e-9 * step), axis=1)
-            moves = rng.uniform(-jitter, jitter, (interior.sum(), gdim)) * step
-            moves[on_border[interior]] = 0.0
-            grid[interior] += moves
-        inside = _points_in_cells(mesh, grid, c).astype(np.int8)
-        comm.Allreduce(MPI.IN_PLACE, inside, op=MPI.MAX)
-        x = grid[inside.astype(bool)]
+        segments = np.concatenate(comm.allgather(mine)) if mine is not None else None
+        # one grid per body of the mesh (its connected pieces: a projectile and its target),
+        # in the box of that body's cells: a body's particles do not depend on another's cells
+        bodies = mesh_bodies(mesh)
+        body = bodies.cell_body[c]
+        present = np.zeros(bodies.count, dtype=np.int8)
+        present[body] = 1
+        comm.Allreduce(MPI.IN_PLACE, present, op=MPI.MAX)
+        grids, tol = [], np.inf
+        for b in np.flatnonzero(present):
+            g, t = _body_grid(mesh, c[body == b], spacing, jitter, seed + int(b), segments)
+            grids.append(g)
+            tol = min(tol, t)
+        x = np.concatenate(grids)
+        if len(grids) > 1:  # bodies that touch share their face's points: one particle each
+            key = np.round(x / tol).astype(np.int64)
+            x = x[np.sort(np.unique(key, axis=0, return_index=True)[1])]
         if segments is not None and gdim == 3:
             x = conforming_layer_3d(mesh, c, x, segments, spacing, tol)
         elif segments is not None:

@@ -8,9 +8,9 @@
 # integrated step by step from its deformation gradients (Jaumann rate), its pressure from the
 # crush-and-lock equation of state, its strength from the pressure, the damage and the rate, its
 # damage from the plastic and crushing strain. ``--method fe`` runs it on Q1 elements, ``efg``
-# on particles (spacing h), and ``lagrange``, ``edge-to-edge`` or ``bridging`` on particles in
-# the quarter of the bar at the wall, where it crushes and fails, coupled to Q1 elements beyond
-# (all through :mod:`dolfinx_meshfree.dynamics.rate_forms`).
+# on particles (spacing h), and ``lagrange``, ``edge-to-edge``, ``bridging``, ``ramp`` or
+# ``ramp-cubic`` on particles in the quarter of the bar at the wall, where it crushes and fails,
+# coupled to Q1 elements beyond (all through :mod:`dolfinx_meshfree.dynamics.rate_forms`).
 #
 # Printed per method and speed: the steps, the step and the loop's time per step; the energy
 # balance ``(kinetic + stress work - initial kinetic) / initial kinetic`` (the wall does no work);
@@ -55,8 +55,18 @@
 # fails a point at low pressure after 1 % of plastic strain. The check below names it ("fails
 # concrete where EFG fails none"); a known limit, not resolved (guide: impact materials).
 #
-# Not here yet: the ramps, master–slave and the hybrid (a rate law refuses them), the
-# projectile's contact, the Hanchak slab (issue 27).
+# **The ramps** (``--method ramp``, ``ramp-cubic``, and their ``-adaptive`` runs; not in the
+# default run): the interface cells' blended points carry their own state. At 0.5 m/s the
+# stress is the 1D solution's within 1.3 % at 40 cells (2.4 % at 20: the check fails there).
+# On rollers at 100 m/s they fail the first row of points at the held wall (to 0.17 mm at 40
+# cells), where EFG fails none: their supports are wider (dilation 2.5), and lagrange at that
+# dilation fails the same row (28 points): the wall held by multipliers on the particles, as
+# above. With free sides at 300 m/s they fail to 30.5 mm (EFG 31.7), grown from the wall to
+# 28.3 mm; a conversion's fit misses up to 2.7e-4 of the momentum (the blended cells are not a
+# partition of unity on the particle side; restored and reported, not checked).
+#
+# Not here yet: master–slave and the hybrid (a rate law refuses them), the Hanchak slab (issue
+# 27). The projectile's contact with a converting target: ``tests/test_bodies.py``.
 #
 # Usage:
 #
@@ -80,12 +90,13 @@ from mpi4py import MPI
 
 LENGTH, HEIGHT, T_END = 0.1, 0.02, 2e-5
 CONCRETE = mf.HolmquistJohnsonCook.concrete_48mpa(plane="strain")
-COUPLINGS = ["lagrange", "edge-to-edge", "bridging"]
+COUPLINGS = ["lagrange", "edge-to-edge", "bridging", "ramp", "ramp-cubic"]
 #: A coupling with "-adaptive": particles grow from the wall where the concrete fails.
 ADAPTIVE = [f"{m}-adaptive" for m in COUPLINGS]
 METHODS = ["fe", "efg", *COUPLINGS, *ADAPTIVE]
-#: The default run (the grown patches fail on rollers at 100 m/s: see the header).
-DEFAULT_METHODS = ["fe", "efg", *COUPLINGS]
+#: The default run (the grown patches fail on rollers at 100 m/s, and the ramps, whose wider
+#: supports (dilation 2.5) strain the points at the held wall: see the header).
+DEFAULT_METHODS = ["fe", "efg", "lagrange", "edge-to-edge", "bridging"]
 #: Damage at a Gauss point that turns its FE cell into particles (adaptive methods).
 CONVERT_AT = 0.1
 #: Elastic speeds (m/s): the 1D stress check applies.
@@ -98,7 +109,8 @@ MARGINS = {
     "mass": 1e-13,  # a conversion's mass error (round-off: measured up to 2e-16)
     # the momentum a conversion's fit missed (restored by a uniform velocity), lagrange and
     # edge-to-edge: their fit conserves it (measured up to 2.5e-16); bridging's band masses
-    # make its fit miss up to 1.8e-5 (reported, not checked)
+    # make its fit miss up to 1.8e-5, the ramps' blended interface cells (not a partition of
+    # unity on the particle side) 2.7e-4 (reported, not checked)
     "momentum": 1e-12,
 }
 # -
@@ -270,7 +282,7 @@ def check(rows: list[dict], cells: int) -> list[str]:
         if c is not None:
             if c["mass_error"] > MARGINS["mass"]:
                 bad.append(f"{name}: a conversion's mass error {c['mass_error']:.2e}")
-            fit_conserves = not r["method"].startswith("bridging")
+            fit_conserves = r["method"].startswith(("lagrange", "edge-to-edge"))
             if fit_conserves and c["momentum_correction"] > MARGINS["momentum"]:
                 bad.append(f"{name}: a conversion's momentum {c['momentum_correction']:.2e}")
     h = LENGTH / cells

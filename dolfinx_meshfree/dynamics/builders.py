@@ -763,11 +763,18 @@ def _finite_strain_system(
         particle_law, q = law.bind(), ops.particle_tables["quadrature"]
         particle_law.attach(q.points, q.cells)
         particles = particle_forces(patch.particles, ops.particle_tables, particle_law)
-        return NonlinearSystem(fields, [fe, particles], law, constraint, (), constant)
+        shared: list = []
+        if ops.interface_table is not None:  # the ramps' interface cells: their own points
+            q, blend = ops.interface_quadrature, ops.interface
+            table = raise_on_all_ranks(patch.comm, lambda: blend.table(q.points, q.cells))
+            blend_law = law.bind()
+            blend_law.attach(q.points, q.cells)
+            shared = [BlendedSide(fe, particles, table, q.weights, blend_law)]
+        return NonlinearSystem(fields, [fe, particles], law, constraint, shared, constant)
     fe = fe_forces(V, law, cells, weight=weight, weight_at=weight_at)
     particles = particle_forces(patch.particles, ops.particle_tables, law)
     sides: list = [fe, particles]
-    shared: list = []
+    shared = []
     if ops.interface_table is not None:
         q, blend = ops.interface_quadrature, ops.interface
         table = raise_on_all_ranks(patch.comm, lambda: blend.table(q.points, q.cells))

@@ -23,10 +23,12 @@ virgin concrete's from the start), and ``wave_speed`` the larger of the twin's a
 current dilatational speed, which the run's re-bound check watches (so it re-bounds only when the
 points outrun the twin). The FE cells evaluate it at their Gauss points
 with :class:`PointFESide` (it has no UFL form), the particles through
-:class:`~dolfinx_meshfree.statics.sides.ParticleSide` unchanged.
+:class:`~dolfinx_meshfree.statics.sides.ParticleSide` unchanged, and the ramps' interface cells
+through :class:`~dolfinx_meshfree.statics.sides.BlendedSide` on their blended table (Belytschko
+et al. 1995, eq. 3.12-3.16) with points of their own.
 
-A model's law is a :class:`RateLaws`: one :class:`RateLaw` per side (the FE cells, the particles),
-one clock. The methods of :data:`RATE_METHODS` carry it; the ramps' blended interface cells,
+A model's law is a :class:`RateLaws`: one :class:`RateLaw` per side (the FE cells, the particles,
+the ramps' blended cells), one clock. The methods of :data:`RATE_METHODS` carry it;
 master–slave's reduced particles and the hybrid's SPH (sides over both fields) do not yet.
 """
 
@@ -61,9 +63,9 @@ __all__ = [
 ]
 
 #: The methods of explicit dynamics that carry a rate-form law's state: each side of theirs has
-#: its own points (the ramps' blended cells, master–slave's reduction and the hybrid's SPH do not
-#: carry it yet).
-RATE_METHODS = ("fe", "efg", "lagrange", "edge-to-edge", "bridging")
+#: its own points, the ramps' blended interface cells too (master–slave's reduction and the
+#: hybrid's SPH do not carry it yet).
+RATE_METHODS = ("fe", "efg", "lagrange", "edge-to-edge", "bridging", "ramp", "ramp-cubic")
 
 
 def stiffest_twin(law: object) -> LinearElastic:
@@ -482,9 +484,12 @@ class PointFESide:
     ) -> None:
         msh = V.mesh
         self.comm = msh.comm
+        self.V = V
         self.u = dolfinx.fem.Function(V)
         self.u.x.array[:] = 0.0
         self.layout, l2g = fe_dof_layout(V)
+        #: The global node of each local node (owned and ghost), as FESide's.
+        self.l2g = np.asarray(l2g)
         self.gdim = gdim = msh.geometry.dim
         self.n_owned = gdim * V.dofmap.index_map.size_local
         self.dofs = (gdim * np.asarray(l2g)[:, None] + np.arange(gdim)).ravel().astype(np.int64)
@@ -501,6 +506,17 @@ class PointFESide:
         self.u.x.array[: self.n_owned] = x.getArray(readonly=True)
         self.u.x.scatter_forward()
         return self.u.x.array
+
+    def set_state(self, x: PETSc.Vec) -> None:
+        """``u`` (owned and ghost values) from ``x``: the FE half of a blended side's
+        coefficients (:class:`~dolfinx_meshfree.statics.sides.BlendedSide`, the ramps'
+        interface cells)."""
+        self.coefficients(x)
+
+    def held_everywhere(self) -> np.ndarray:
+        """No held dof: this side's rows are all kept (explicit dynamics holds its fixed dofs
+        in the stepper), and so are a blended side's."""
+        return np.zeros(0, dtype=np.int64)
 
     def internal_force(self, x: PETSc.Vec) -> PETSc.Vec:
         f = self.forces.internal_force(self.coefficients(x))

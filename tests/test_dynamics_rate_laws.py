@@ -42,7 +42,7 @@ def elastic_twin(law: mf.HolmquistJohnsonCook) -> mf.LinearElastic:
     return mf.LinearElastic(E=9 * K * G / (3 * K + G), nu=nu, plane=plane, rho=law.rho)
 
 
-COUPLINGS = ["lagrange", "edge-to-edge", "bridging", "ramp", "ramp-cubic"]
+COUPLINGS = ["lagrange", "edge-to-edge", "bridging", "ramp", "ramp-cubic", "master-slave"]
 
 
 def bar(method: str, law, comm=COMM, cell: str = "quadrilateral", fixed: bool = False):
@@ -158,9 +158,10 @@ def test_steel_block_yields_and_keeps_the_balance():
     assert 3.0 < balance(res) / balance(half) < 6.0  # measured 4.4
 
 
-@pytest.mark.parametrize("method", ["fe", "ramp"])
+@pytest.mark.parametrize("method", ["fe", "ramp", "master-slave"])
 def test_serial_equals_two_ranks(method):
-    """At the stable step (the ramp: its blended cells' points on both ranks)."""
+    """At the stable step (the ramp: its blended cells' points on both ranks; master–slave:
+    its reduced particles)."""
     points = np.array([[0.01, 0.01], [0.05, 0.005], [0.09, 0.015]])
     runs = []
     for comm in (COMM, MPI.COMM_SELF):
@@ -176,8 +177,8 @@ def test_what_does_not_carry_the_state_refuses_it():
     msh = rectangle(COMM, [0.0, 0.0], [L, H], [8, 2], CELL_TYPES["quadrilateral"])
     V = _compat.vector_function_space(msh)
     patch = mf.ParticlePatch(msh, np.arange(2, dtype=np.int32), L / 8)
-    problem = mf.CoupledElasticity(V, patch, elastic_twin(HJC), coupling="master-slave")
-    with pytest.raises(ValueError, match=r"HolmquistJohnsonCook is a rate-form law.*'master-sl"):
+    problem = mf.HybridElasticity(V, patch, elastic_twin(HJC))
+    with pytest.raises(ValueError, match=r"HolmquistJohnsonCook is a rate-form law.*'hybrid'"):
         mf.ExplicitDynamics.coupled(problem, material=HJC)
     other = mf.LinearElastic(1e9, 0.2, "strain", rho=2000.0)
     problem = mf.CoupledElasticity(V, patch, other, coupling="lagrange")

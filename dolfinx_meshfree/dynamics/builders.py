@@ -764,13 +764,22 @@ def _finite_strain_system(
         particle_law.attach(q.points, q.cells)
         particles = particle_forces(patch.particles, ops.particle_tables, particle_law)
         shared: list = []
+        sides = [fe, particles]
         if ops.interface_table is not None:  # the ramps' interface cells: their own points
             q, blend = ops.interface_quadrature, ops.interface
             table = raise_on_all_ranks(patch.comm, lambda: blend.table(q.points, q.cells))
             blend_law = law.bind()
             blend_law.attach(q.points, q.cells)
             shared = [BlendedSide(fe, particles, table, q.weights, blend_law)]
-        return NonlinearSystem(fields, [fe, particles], law, constraint, shared, constant)
+        elif ops.reduction is not None:  # master-slave: the particles' points, reduced
+            shared, sides = (
+                [ReducedParticles(particles, ops.reduction, _links(problem, ops))],
+                [
+                    fe,
+                    None,
+                ],
+            )
+        return NonlinearSystem(fields, sides, law, constraint, shared, constant)
     fe = fe_forces(V, law, cells, weight=weight, weight_at=weight_at)
     particles = particle_forces(patch.particles, ops.particle_tables, law)
     sides: list = [fe, particles]
@@ -780,11 +789,18 @@ def _finite_strain_system(
         table = raise_on_all_ranks(patch.comm, lambda: blend.table(q.points, q.cells))
         shared = [BlendedSide(fe.side, particles, table, q.weights, law)]
     elif ops.reduction is not None:
-        correction = SlaveCorrection(problem, ops.interface, ops.fe_layout, ops.particle_layout)
-        if not correction.length > 0.0:  # links of length zero: u_P = T u, exactly
-            correction = None
-        shared, sides = [ReducedParticles(particles, ops.reduction, correction)], [fe, None]
+        shared, sides = (
+            [ReducedParticles(particles, ops.reduction, _links(problem, ops))],
+            [fe, None],
+        )
     return NonlinearSystem(fields, sides, law, constraint, shared, constant)
+
+
+def _links(problem: CoupledElasticity, ops: object) -> SlaveCorrection | None:
+    """Master–slave's finite-rotation part of its links, ``None`` for links of length zero
+    (``u_P = T u`` exactly)."""
+    correction = SlaveCorrection(problem, ops.interface, ops.fe_layout, ops.particle_layout)
+    return correction if correction.length > 0.0 else None
 
 
 # -- hybrid SPH-FE ---------------------------------------------------------------------------------

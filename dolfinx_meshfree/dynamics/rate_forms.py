@@ -28,8 +28,9 @@ through :class:`~dolfinx_meshfree.statics.sides.BlendedSide` on their blended ta
 et al. 1995, eq. 3.12-3.16) with points of their own.
 
 A model's law is a :class:`RateLaws`: one :class:`RateLaw` per side (the FE cells, the particles,
-the ramps' blended cells), one clock. The methods of :data:`RATE_METHODS` carry it;
-master–slave's reduced particles and the hybrid's SPH (sides over both fields) do not yet.
+the ramps' blended cells; master–slave's particles, seen through its reduction, Rabczuk et al.
+2006, eq. 27-28), one clock. The methods of :data:`RATE_METHODS` carry it; the hybrid's SPH sums
+(a side over both fields) do not yet.
 """
 
 from __future__ import annotations
@@ -63,9 +64,11 @@ __all__ = [
 ]
 
 #: The methods of explicit dynamics that carry a rate-form law's state: each side of theirs has
-#: its own points, the ramps' blended interface cells too (master–slave's reduction and the
-#: hybrid's SPH do not carry it yet).
-RATE_METHODS = ("fe", "efg", "lagrange", "edge-to-edge", "bridging", "ramp", "ramp-cubic")
+#: its own points, the ramps' blended interface cells and master–slave's reduced particles too
+#: (the hybrid's SPH sums do not carry it yet).
+RATE_METHODS = (
+    "fe", "efg", "lagrange", "edge-to-edge", "bridging", "ramp", "ramp-cubic", "master-slave",
+)  # fmt: skip
 
 
 def stiffest_twin(law: object) -> LinearElastic:

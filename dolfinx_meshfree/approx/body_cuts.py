@@ -101,6 +101,15 @@ class BodyCut:
             self._Tinv = np.linalg.inv(T)
         self.dropped = 0
 
+    def subset(self, indices: np.ndarray) -> BodyCut:
+        """The cut of the particles ``indices`` (:meth:`~dolfinx_meshfree.MLS.subset`: a halo's
+        MLS), the same gap cells."""
+        cut = BodyCut.__new__(BodyCut)
+        cut.__dict__.update(self.__dict__)
+        cut.particle_body = self.particle_body[np.asarray(indices, dtype=np.int64)]
+        cut.dropped = 0
+        return cut
+
     def bodies_at(self, x: np.ndarray) -> np.ndarray:
         """The body of each point (m,) from the gap cells: ``-1`` in none, ``-2`` in cells of
         two bodies (local)."""

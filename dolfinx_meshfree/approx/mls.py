@@ -227,7 +227,8 @@ class MLS:
         this MLS's columns ``indices``, to the last bit: the same pairs in the same order, the
         same sums (eq. (3.7a)-(3.9)). A rank's particles within reach of its evaluation points
         (a halo) so stand for the whole set (:mod:`~dolfinx_meshfree.statics.large`). Pair cuts
-        and table transforms are not carried over: a subset of an MLS that has any is refused.
+        that have a ``subset(indices)`` of their own (the bodies' cut) are carried over; a subset
+        of an MLS with any other cut (a crack's) or a table transform is refused.
         """
         idx = np.asarray(indices, dtype=np.int64)
         n = self.num_particles
@@ -242,16 +243,17 @@ class MLS:
                 f"indices must be increasing particle indices in [0, {n}), at least one; got "
                 f"shape {idx.shape}" + (f", {idx[0]}..{idx[-1]}" if idx.size else "")
             )
-        if self.pair_cuts or self.table_transforms:
+        if self.table_transforms or not all(hasattr(c, "subset") for c in self.pair_cuts):
             raise ValueError(
-                "subset() of an MLS with pair cuts or table transforms (cracks, enrichment, "
-                "separate bodies) is not supported: tabulate the whole MLS"
+                "subset() of an MLS with pair cuts that have no subset of their own (a crack's) "
+                "or table transforms (enrichment) is not supported: tabulate the whole MLS"
             )
         sub = MLS(
             self.points[idx], weight=self.weight_name, dilation=self.dilation, basis=self.basis,
             radii=self.radii[idx], rcond=self.rcond, backend=self.backend,
         )  # fmt: skip
         sub._scale, sub._fix = self._scale, self._fix
+        sub.pair_cuts = [cut.subset(idx) for cut in self.pair_cuts]
         return sub
 
     def tabulate(

@@ -42,7 +42,9 @@ def elastic_twin(law: mf.HolmquistJohnsonCook) -> mf.LinearElastic:
     return mf.LinearElastic(E=9 * K * G / (3 * K + G), nu=nu, plane=plane, rho=law.rho)
 
 
-COUPLINGS = ["lagrange", "edge-to-edge", "bridging", "ramp", "ramp-cubic", "master-slave"]
+COUPLINGS = [
+    "lagrange", "edge-to-edge", "bridging", "ramp", "ramp-cubic", "master-slave", "hybrid",
+]  # fmt: skip
 
 
 def bar(method: str, law, comm=COMM, cell: str = "quadrilateral", fixed: bool = False):
@@ -64,7 +66,10 @@ def bar(method: str, law, comm=COMM, cell: str = "quadrilateral", fixed: bool = 
         patch = mf.ParticlePatch(msh, np.flatnonzero(xc < L / 4), L / 20)
         twin = law if isinstance(law, mf.LinearElastic) else elastic_twin(law)
         options = {"overlap": 1} if method == "bridging" else {}
-        problem = mf.CoupledElasticity(V, patch, twin, coupling=method, **options)
+        if method == "hybrid":
+            problem = mf.HybridElasticity(V, patch, twin, variant="HA-F")
+        else:
+            problem = mf.CoupledElasticity(V, patch, twin, coupling=method, **options)
         return mf.ExplicitDynamics.coupled(problem, material=law, fixed_facets=held)
     particles = mf.ParticleSet.from_cells(msh, L / 20)
     return mf.ExplicitDynamics.efg(particles, law, quadrature_degree=3, fixed_facets=held)
@@ -158,10 +163,10 @@ def test_steel_block_yields_and_keeps_the_balance():
     assert 3.0 < balance(res) / balance(half) < 6.0  # measured 4.4
 
 
-@pytest.mark.parametrize("method", ["fe", "ramp", "master-slave"])
+@pytest.mark.parametrize("method", ["fe", "ramp", "master-slave", "hybrid"])
 def test_serial_equals_two_ranks(method):
     """At the stable step (the ramp: its blended cells' points on both ranks; master–slave:
-    its reduced particles)."""
+    its reduced particles; the hybrid: its SPH sums' points)."""
     points = np.array([[0.01, 0.01], [0.05, 0.005], [0.09, 0.015]])
     runs = []
     for comm in (COMM, MPI.COMM_SELF):
@@ -177,8 +182,10 @@ def test_what_does_not_carry_the_state_refuses_it():
     msh = rectangle(COMM, [0.0, 0.0], [L, H], [8, 2], CELL_TYPES["quadrilateral"])
     V = _compat.vector_function_space(msh)
     patch = mf.ParticlePatch(msh, np.arange(2, dtype=np.int32), L / 8)
-    problem = mf.HybridElasticity(V, patch, elastic_twin(HJC))
-    with pytest.raises(ValueError, match=r"HolmquistJohnsonCook is a rate-form law.*'hybrid'"):
+    with pytest.raises(TypeError, match=r"HolmquistJohnsonCook is a rate-form .* CoupledElastic"):
+        mf.CoupledElasticity(V, patch, HJC, coupling="lagrange")  # statics: no state carried
+    problem = mf.HybridElasticity(V, patch, elastic_twin(HJC), variant="HA-S")
+    with pytest.raises(ValueError, match=r"variant='HA-S': the hybrid coupling at finite strain"):
         mf.ExplicitDynamics.coupled(problem, material=HJC)
     other = mf.LinearElastic(1e9, 0.2, "strain", rho=2000.0)
     problem = mf.CoupledElasticity(V, patch, other, coupling="lagrange")
@@ -187,6 +194,8 @@ def test_what_does_not_carry_the_state_refuses_it():
     old, new = bar("lagrange", HJC), bar("lagrange", elastic_twin(HJC))
     with pytest.raises(ValueError, match=r"must have the old one's material: got RateLaws -> Li"):
         convert(old, new)
+    with pytest.raises(ValueError, match=r"the hybrid's SPH particles are not converted to yet"):
+        convert(bar("hybrid", HJC), bar("hybrid", HJC))
     dyn = mf.ExplicitDynamics.fe(V, HJC)
     dyn.set_initial(displacement=lambda x: 1e-6 * x)
     with pytest.raises(ValueError, match=r"a rate-form law starts from rest"):

@@ -34,7 +34,7 @@ from ..statics.petsc import create_aij, create_vector
 from ..statics.sides import particle_coefficients
 from .base import fe_dof_layout
 from .hybrid_discretisation import HybridDiscretisation
-from .hybrid_strains import energy_tables
+from .hybrid_strains import energy_cells, energy_tables
 
 __all__ = ["HybridForces"]
 
@@ -48,7 +48,8 @@ class HybridForces:
 
     Args:
         d: The hybrid discretisation (:class:`~dolfinx_meshfree.HybridElasticity`).
-        material: The finite-strain law.
+        material: The finite-strain law, or a rate-form law bound to these points
+            (:class:`~dolfinx_meshfree.dynamics.rate_forms.RateLaw`: attached to them here).
         smoothed: Its smoothed gradients and areas, if already computed.
     """
 
@@ -64,6 +65,9 @@ class HybridForces:
         n = self.P.num_particles
         N = d.hybrid.interpolation.shape[1]
         points, grads, test, weights = energy_tables(d, smoothed)
+        attach = getattr(material, "attach", None)
+        if attach is not None:  # a bound rate-form law: its points and their cells
+            attach(points, energy_cells(d))
         table = ShapeTable(points, sp.csr_matrix((points.shape[0], n + N)), grads)
         self.forces = InternalForces(table, weights, material, test_gradients=test, comm=d.comm)
         self.fe_layout, _ = fe_dof_layout(d.V)

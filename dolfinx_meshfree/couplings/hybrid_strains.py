@@ -22,7 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 from mpi4py import MPI
 
-from ..approx.fe_points import tabulate_in_cells
+from ..approx.fe_points import locate_points, tabulate_in_cells
 from ..approx.tables import strain_operator
 from ..geometry.quadrature import QuadraturePoints, facet_quadrature
 from ..parallel import raise_on_all_ranks
@@ -32,6 +32,7 @@ from .hybrid_smoothing import EXTERIOR, INTERIOR
 
 __all__ = [
     "consistent_test_gradients",
+    "energy_cells",
     "energy_tables",
     "particle_energy_matrix",
     "smoothed_gradients",
@@ -158,6 +159,19 @@ def energy_tables(
         shepard = (t.values @ Z).tocsr()
         test = consistent_test_gradients(d, shepard, grads, q.weights)
     return q.points, grads, test, q.weights
+
+
+def energy_cells(d: HybridDiscretisation) -> np.ndarray:
+    """The local cell (m,) of each point of this rank's particle-energy rule (:func:`energy_tables`,
+    in its order): a smoothing cell's cell, a stress point's, an owned particle's (located: it
+    lies in an owned cell of its rank)."""
+    if d.integration == "smoothed":
+        return np.asarray(d.smoothing_cells().cells, dtype=np.int64)
+    q = d.stress_points()
+    cells = np.asarray(q.cells, dtype=np.int64)
+    if np.any(cells < 0):
+        cells = locate_points(d.V.mesh, q.points)
+    return cells
 
 
 def particle_energy_matrix(

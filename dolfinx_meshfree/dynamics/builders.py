@@ -847,10 +847,13 @@ def build_hybrid(
         )
     check_particle_mass(particle_mass, default="volume")
     law = problem.material if material is None else material
-    bind_rate_law(law, "hybrid")
+    law = bind_rate_law(law, "hybrid", problem.V.mesh)
     material = small_strain(law, "hybrid")
     if law is not material:
-        _check_twin(law, material, problem.material)
+        if isinstance(law, RateLaws):
+            _check_rate_twin(law, problem.material)
+        else:
+            _check_twin(law, material, problem.material)
         if problem.variant != "HA-F":
             raise ValueError(
                 f"variant={problem.variant!r}: the hybrid coupling at finite strain is HA-F (the "
@@ -864,10 +867,10 @@ def build_hybrid(
     P, comm, msh = patch.particles, patch.comm, V.mesh
     facets = check_facets(msh, fixed_facets)
     ops = problem.operators()
-    rho = material.rho
-    mass_fe = fe_lumped_mass(V, rho, weight=ops.fe_weight)
+    mass_fe = fe_lumped_mass(V, _fe_density(law, material, V), weight=ops.fe_weight)
     pq = ops.particle_quadrature
-    mass_p = particle_lumped_mass(P, ops.particle_table, pq.weights, rho, particle_mass)
+    rho_p = _particle_density(law, material, particle_mass, pq, P)
+    mass_p = particle_lumped_mass(P, ops.particle_table, pq.weights, rho_p, particle_mass)
     n_owned = V.dofmap.index_map.size_local
     active = np.repeat(ops.fe_active[:n_owned], msh.geometry.dim)
     mass_fe.array[:] = mass_fe.array_r * active
@@ -890,7 +893,14 @@ def build_hybrid(
         Field("particles", ops.K_p, mass_p, particle_spacing(P), block_size=P.gdim),
     ]
     blocks, system = {(0, 1): ops.K_fp, (1, 0): ops.K_pf}, None
-    if law is not material:  # FE cells by UFL, the particle energy by the SPH sums of P
+    if isinstance(law, RateLaws):  # the FE cells' and the particle energy's points, each a state
+        sides = [PointFESide(V, law.bind(), ~patch.in_patch), None]
+        forces = HybridForces(problem, law.bind())
+        system = NonlinearSystem(fields, sides, law, constraint, [forces])
+        for B in blocks.values():
+            B.destroy()
+        blocks = {}
+    elif law is not material:  # FE cells by UFL, the particle energy by the SPH sums of P
         sides = [fe_forces(V, law, ~patch.in_patch), None]
         system = NonlinearSystem(fields, sides, law, constraint, [HybridForces(problem, law)])
         for B in blocks.values():

@@ -248,10 +248,16 @@ def _kinetic(dyn: ExplicitDynamics) -> float:
 
 def _require_convertible(model: ExplicitDynamics) -> None:
     """A conversion needs a coupled model, with linear slave links for master-slave (local)."""
-    if model.patch is None or model.mass_rule is None:
+    if model.patch is None:
         raise ValueError(
             "adapt= converts FE cells of a coupled model; pure EFG has no FE cell (its "
             "particles fill the body already)"
+        )
+    if model.mass_rule is None:
+        raise ValueError(
+            "adapt= converts FE cells of a coupled model with an MLS particle field (every "
+            "coupling of CoupledElasticity); the hybrid's SPH particles are not converted to "
+            "yet: build its patch where the material will fail"
         )
     if model.reduction is not None and model.evaluator.expand is not None:
         raise ValueError(

@@ -29,8 +29,9 @@ et al. 1995, eq. 3.12-3.16) with points of their own.
 
 A model's law is a :class:`RateLaws`: one :class:`RateLaw` per side (the FE cells, the particles,
 the ramps' blended cells; master–slave's particles, seen through its reduction, Rabczuk et al.
-2006, eq. 27-28), one clock. The methods of :data:`RATE_METHODS` carry it; the hybrid's SPH sums
-(a side over both fields) do not yet.
+2006, eq. 27-28; the hybrid's particle energy, its SPH sums of the nominal stress at the points of
+its rule, eq. 125-130, HA-F), one clock. Every method of explicit dynamics carries it
+(:data:`RATE_METHODS`).
 """
 
 from __future__ import annotations
@@ -63,11 +64,12 @@ __all__ = [
     "nearest_in_cell",
 ]
 
-#: The methods of explicit dynamics that carry a rate-form law's state: each side of theirs has
-#: its own points, the ramps' blended interface cells and master–slave's reduced particles too
-#: (the hybrid's SPH sums do not carry it yet).
+#: The methods of explicit dynamics that carry a rate-form law's state (all of them): each side
+#: of theirs has its own points, the ramps' blended interface cells, master–slave's reduced
+#: particles and the hybrid's SPH sums (HA-F) too.
 RATE_METHODS = (
     "fe", "efg", "lagrange", "edge-to-edge", "bridging", "ramp", "ramp-cubic", "master-slave",
+    "hybrid",
 )  # fmt: skip
 
 

@@ -478,14 +478,14 @@ def _add_interface_masses(
     ops: CouplingOperators,
     V: dolfinx.fem.FunctionSpace,
     P: ParticleSet,
-    rho: float,
+    rho: float | np.ndarray,
     mass_fe: PETSc.Vec,
     mass_p: PETSc.Vec,
     comm: MPI.Comm,
 ) -> None:
     """Add the ramp's interface cells' share of the row-sum masses (eq. 4.5 with the blended
     functions, Belytschko et al. 1995, eq. 3.15) and check the particle masses positive
-    (collective)."""
+    (collective). ``rho``: a number, or per interface quadrature point (zones)."""
     imap = V.dofmap.index_map
     l2g = np.asarray(
         imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32))
@@ -596,7 +596,6 @@ def build_coupled(
     P, comm, msh = patch.particles, patch.comm, V.mesh
     held = fixed_groups(msh, fixed_facets)
     ops = problem.operators(integration, slaves)
-    rho = material.rho
     fl, pl = ops.fe_layout, ops.particle_layout
 
     # lumped masses (eq. 4.5, 88-89)
@@ -607,7 +606,9 @@ def build_coupled(
         P, ops.particle_table, pq.weights, rho_p, particle_mass, check=ops.interface_table is None
     )
     if ops.interface_table is not None:  # ramp: the interface cells' share, same functions
-        _add_interface_masses(ops, V, P, rho, mass_fe, mass_p, comm)
+        iq = ops.interface_quadrature
+        rho_i = _particle_density(law, material, "row-sum", iq, P)  # per point by its cell
+        _add_interface_masses(ops, V, P, rho_i, mass_fe, mass_p, comm)
     n_owned = V.dofmap.index_map.size_local
     active = np.repeat(ops.fe_active[:n_owned], msh.geometry.dim)
     mass_fe.array[:] = mass_fe.array_r * active  # inactive FE dofs: no mass, held at rest

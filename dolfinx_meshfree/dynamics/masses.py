@@ -154,7 +154,7 @@ def particle_lumped_mass(
 def table_lumped_mass(
     table_values: sp.csr_matrix,
     weights: np.ndarray,
-    rho: float,
+    rho: float | np.ndarray,
     fe_dofs: np.ndarray,
     fe_layout: Layout,
     particle_dofs: np.ndarray,
@@ -167,6 +167,8 @@ def table_lumped_mass(
 
     Args:
         table_values: (nq x (n_loc + n)) CSR; ``weights``: (nq,).
+        rho: The density: a number, or per point (nq,) (a
+            :class:`~dolfinx_meshfree.MaterialZones` law: each point's cell's zone's).
         fe_dofs: (n_loc, gdim) global FE dofs of the local nodes; ``particle_dofs``: (n, gdim)
             PETSc
             particle dofs.
@@ -175,7 +177,7 @@ def table_lumped_mass(
         ``(FE masses, particle masses)`` (PETSc vectors with the given layouts).
     """
     n_loc, gdim = fe_dofs.shape
-    col = float(rho) * np.asarray(table_values.T @ weights).ravel()
+    col = np.asarray(table_values.T @ (np.asarray(rho, dtype=float) * weights)).ravel()
     m_fe = create_vector(comm, fe_layout, fe_dofs.ravel(), np.repeat(col[:n_loc], gdim))
     m_p = create_vector(comm, particle_layout, particle_dofs.ravel(), np.repeat(col[n_loc:], gdim))
     return m_fe, m_p

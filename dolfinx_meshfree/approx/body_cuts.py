@@ -11,9 +11,11 @@ they reproduce linear fields on it exactly (the consistency conditions of eq. 3.
 body), and vanish on the others.
 
 **Which body a point is in.** A particle's body is the body of the cell it lies in. A point's
-body matters only where its support holds particles of two bodies; such a point lies within
-the largest support radius ``reach`` of a particle of a body that is not its own, hence in one
-of the cells within ``reach`` plus their size of another body's particles: the gap's cells.
+body matters only where its support holds a particle of a body that is not its own (beside
+its own body's, or alone); such a point lies within the largest support radius ``reach`` of
+that particle, hence in one of the cells within ``reach`` plus their size of another body's
+particles: the gap's cells. The points with particles of two bodies in support, and the points
+near a gap cell, are located.
 Those are few (a band along the bodies' facing surfaces); their vertices are gathered on every
 rank, so that the cut locates a point by itself (local: an MLS tabulates without
 communication, at any point of the mesh). A cell is split into simplices (a quadrilateral in
@@ -23,7 +25,9 @@ barycentric coordinates are ``>= -TOL``.
 Refused, by coordinates: a particle in cells of two bodies (the bodies touch there: one particle
 cannot carry both; leave a gap, or place particles in one of them); a point with particles of
 two bodies in support that lies in no gap cell or in cells of two bodies (outside the mesh, or
-where bodies touch).
+where bodies touch); a point whose support holds no particle of its own body (all its pairs
+dropped: the MLS's singular-moment-matrix error names it; it is not extrapolated from the other
+body).
 """
 
 from __future__ import annotations

@@ -56,6 +56,7 @@ from petsc4py import PETSc
 from .. import _compat
 from ..approx.body_cuts import separate_bodies
 from ..approx.crack_cuts import attach_cracks
+from ..approx.fe_points import locate_points
 from ..approx.mls import MLS
 from ..approx.tables import ShapeTable
 from ..couplings.bridging import BridgingBand
@@ -289,7 +290,10 @@ def _particle_density(
         return float(material.rho)
     if kind == "volume":
         return raise_on_all_ranks(particles.comm, lambda: law.density_at(particles.positions))
-    return law.density_at_cells(q.cells)
+    cells = np.asarray(q.cells, dtype=np.int64)
+    if np.any(cells < 0):  # a rule of particles (the hybrid's "particles"): their owned cells
+        cells = locate_points(particles.mesh, q.points)
+    return law.density_at_cells(cells)
 
 
 def build_fe(
@@ -773,13 +777,8 @@ def _finite_strain_system(
             blend_law.attach(q.points, q.cells)
             shared = [BlendedSide(fe, particles, table, q.weights, blend_law)]
         elif ops.reduction is not None:  # master-slave: the particles' points, reduced
-            shared, sides = (
-                [ReducedParticles(particles, ops.reduction, _links(problem, ops))],
-                [
-                    fe,
-                    None,
-                ],
-            )
+            reduced = ReducedParticles(particles, ops.reduction, _links(problem, ops))
+            shared, sides = [reduced], [fe, None]
         return NonlinearSystem(fields, sides, law, constraint, shared, constant)
     fe = fe_forces(V, law, cells, weight=weight, weight_at=weight_at)
     particles = particle_forces(patch.particles, ops.particle_tables, law)
@@ -790,10 +789,8 @@ def _finite_strain_system(
         table = raise_on_all_ranks(patch.comm, lambda: blend.table(q.points, q.cells))
         shared = [BlendedSide(fe.side, particles, table, q.weights, law)]
     elif ops.reduction is not None:
-        shared, sides = (
-            [ReducedParticles(particles, ops.reduction, _links(problem, ops))],
-            [fe, None],
-        )
+        reduced = ReducedParticles(particles, ops.reduction, _links(problem, ops))
+        shared, sides = [reduced], [fe, None]
     return NonlinearSystem(fields, sides, law, constraint, shared, constant)
 
 

@@ -76,8 +76,12 @@
 #
 # **The hybrid** (``--method hybrid``, HA-F: the SPH sums of the nominal stress; ``--sides
 # free`` only, as it holds whole nodes, and ``rho V_I`` particle masses): with free sides at
-# 300 m/s it fails to 30.5 mm (EFG 31.7) at 0.52x EFG's time. Its SPH particles are not
-# converted (no ``hybrid-adaptive``).
+# 300 m/s it fails to 30.5 mm (EFG 31.7) at 0.52x EFG's time. ``hybrid-adaptive`` grows its
+# SPH patch from the wall (Sauer's adaptive conversion, Rabczuk et al. 2006, sec. 5.5): a
+# particle kept by a conversion keeps its values, a new one samples the old field (no fit: SPH
+# particles carry their values); 17 conversions at 40 cells, failed to 30.6 mm, the samples
+# miss up to 3.1e-3 of the momentum (restored and reported, not checked) and change the
+# kinetic energy by -0.43 % of the initial in all (counted in the balance).
 #
 # Not here yet: the Hanchak slab (issue 27). The projectile's contact with a converting target:
 # ``tests/test_bodies.py``.
@@ -106,7 +110,7 @@ LENGTH, HEIGHT, T_END = 0.1, 0.02, 2e-5
 CONCRETE = mf.HolmquistJohnsonCook.concrete_48mpa(plane="strain")
 COUPLINGS = ["lagrange", "edge-to-edge", "bridging", "ramp", "ramp-cubic", "master-slave", "hybrid"]
 #: A coupling with "-adaptive": particles grow from the wall where the concrete fails.
-ADAPTIVE = [f"{m}-adaptive" for m in COUPLINGS if m != "hybrid"]  # (no hybrid conversion)
+ADAPTIVE = [f"{m}-adaptive" for m in COUPLINGS]
 METHODS = ["fe", "efg", *COUPLINGS, *ADAPTIVE]
 #: The default run (the grown patches fail on rollers at 100 m/s, and the ramps, whose wider
 #: supports (dilation 2.5) strain the points at the held wall: see the header).

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
-from dolfinx_meshfree.approx.body_cuts import BodyCut, separate_bodies
+from dolfinx_meshfree.approx.body_cuts import BodyCut, body_cut, separate_bodies
 from dolfinx_meshfree.geometry.bodies import mesh_bodies
 
 import dolfinx
@@ -126,7 +126,11 @@ def static_bars(method, n=10, cell="quadrilateral"):
         cells = np.flatnonzero(np.abs(mid[:, 0] - L) < 0.3 * L)
         V = _compat.vector_function_space(msh)
         patch = mf.ParticlePatch(msh, cells, h)
-        problem = mf.CoupledElasticity(V, patch, material, coupling=method)
+        if method.startswith("hybrid"):
+            variant = method.removeprefix("hybrid-")
+            problem = mf.HybridElasticity(V, patch, material, variant=variant)
+        else:
+            problem = mf.CoupledElasticity(V, patch, material, coupling=method)
     gdim = msh.geometry.dim
 
     def zero(x):
@@ -145,7 +149,8 @@ def static_bars(method, n=10, cell="quadrilateral"):
 @pytest.mark.parametrize(
     "method, cell",
     [("efg", "quadrilateral"), ("lagrange", "quadrilateral"), ("ramp", "triangle"),
-     ("bridging", "triangle"), ("edge-to-edge", "tetrahedron")],
+     ("bridging", "triangle"), ("edge-to-edge", "tetrahedron"), ("hybrid-HA-F", "quadrilateral"),
+     ("hybrid-HA-S", "triangle")],
 )  # fmt: skip
 def test_unloaded_body_stays_put(method, cell):
     """The pulled bar takes u_x = t x / E (exact: a linear field; its end moves 1e-2), the other
@@ -189,18 +194,30 @@ def test_point_beside_only_another_bodys_particles_is_refused():
         mls.tabulate(point)
 
 
-def test_hybrid_refuses_sums_across_bodies():
-    """The hybrid coupling's SPH sums have no cut: a patch whose sums reach from one bar into
-    the other is refused (far from the gap it is built)."""
-    msh, h, _ = bars()
-    V = _compat.vector_function_space(msh)
-    material = mf.LinearElastic(100.0, 0.0, "stress")
-    mid = midpoints(msh)
-    both = mf.ParticlePatch(msh, np.flatnonzero(np.abs(mid[:, 0] - L) < 0.3), h)
-    with pytest.raises(ValueError, match=r"hybrid coupling's SPH sums .* reach from one body"):
-        mf.HybridElasticity(V, both, material)
-    far = np.flatnonzero((mid[:, 0] > 0.2) & (mid[:, 0] < 0.5))
-    mf.HybridElasticity(V, mf.ParticlePatch(msh, far, h), material)
+def test_sph_sums_stop_at_the_gap():
+    """The hybrid's SPH sums carry the same cut (``SPH.pair_cuts``): at points of both bars, also
+    beside the gap, the Shepard values of each point's own body sum to 1, the corrected
+    gradients reproduce linear fields' (``sum_J G_J (x) x_J = I``) to round-off, and the other
+    body's particles are absent; without the cut they are not."""
+    msh, h, gap = bars()
+    particles = mf.ParticleSet.from_vertices(msh)
+    plain = mf.SPH(particles, correction="shepard", smoothing_length=1.3 * h)
+    sph = mf.SPH(particles, correction="shepard", smoothing_length=1.3 * h)
+    cut = body_cut(particles.positions, 2.0 * sph.h, msh)
+    sph.pair_cuts.append(cut)
+    x = np.array([[L - 0.1 * h, 0.05], [L, 0.13], [L + gap, 0.0], [L + gap + 0.1 * h, H]])
+    x = np.vstack([x, [[0.3, 0.1], [1.7, 0.1]]])
+    own = (x[:, 0] > L).astype(int)
+    t = sph.tabulate(x)
+    c = t.values.tocoo()
+    assert np.all(cut.particle_body[c.col] == own[c.row])
+    np.testing.assert_allclose(t.values.sum(axis=1).A1, 1.0, atol=1e-12)
+    P = particles.positions
+    for k in range(2):
+        unit = np.tile(np.eye(2)[k], (len(x), 1))
+        np.testing.assert_allclose(t.gradients[k] @ P, unit, atol=1e-10)
+    joined = plain.tabulate(x[:4]).values.tocoo()
+    assert np.any(cut.particle_body[joined.col] != own[joined.row])
 
 
 def converting_impact(comm=COMM, n=20, v0=300.0):

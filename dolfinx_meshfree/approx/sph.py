@@ -95,6 +95,11 @@ class SPH:
             raise ValueError(f"correction={correction!r} is not known; use one of {_CORRECTIONS}")
         self.correction = correction
         self._tree = cKDTree(self.points)
+        #: Pair cuts applied after the neighbour search, as :attr:`MLS.pair_cuts
+        #: <dolfinx_meshfree.MLS.pair_cuts>` (``sides`` is ``None``), e.g. the bodies' cut of
+        #: :mod:`~dolfinx_meshfree.approx.body_cuts`; with any, the numpy path tabulates (the
+        #: compiled kernel fuses the search). Call :meth:`changed` after changing the list.
+        self.pair_cuts: list = []
         if smoothing_length is None:
             d, _ = self._tree.query(self.points, k=2)
             smoothing_length = 1.3 * float(np.mean(d[:, 1]))
@@ -114,13 +119,20 @@ class SPH:
     def tabulate(self, x: npt.ArrayLike, derivatives: int = 1) -> ShapeTable:
         """Shape functions and first derivatives at ``x`` (m, gdim); local, no communication."""
         x = check_points(x, self.gdim, "x")
-        if self.backend == "numba":
+        if self.backend == "numba" and not self.pair_cuts:
             return self._tabulate_compiled(x, derivatives)
         m, n = x.shape[0], self.points.shape[0]
         radii = np.full(n, 2.0 * self.h)
         i, j, dx = pairs_within_support(x, self.points, radii, self._tree)
-        self._check_counts(np.bincount(i, minlength=m), x)
         dist = np.linalg.norm(dx, axis=1)
+        if self.pair_cuts:
+            ddist = np.zeros_like(dx)  # (unused by the cuts that only drop pairs)
+            for cut in self.pair_cuts:
+                i, j, dx, dist, ddist = cut(x, i, j, dx, dist, ddist, None)
+            if np.any(np.diff(i) < 0):  # back to the order by point
+                o = np.lexsort((j, i))
+                i, j, dx, dist = i[o], j[o], dx[o], dist[o]
+        self._check_counts(np.bincount(i, minlength=m), x)
         W, dWdq = sph_cubic_spline(dist / self.h, self.h, self.gdim)
         vol = self.volumes[j]
         N = vol * W

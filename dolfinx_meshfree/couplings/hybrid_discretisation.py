@@ -233,18 +233,16 @@ class HybridDiscretisation:
                 self.smoothing_length,
             ),
         )
-        if body_cut(self.sph.points, self.sph.support, msh) is not None:  # alike on every rank
-            raise ValueError(
-                f"the hybrid coupling's SPH sums (support 2 h = {self.sph.support:.4g}) reach "
-                "from one body of the mesh into another: its particles or hybrid points lie "
-                "within 2 h of another body's cells, and the sums would join the bodies (they "
-                "have no cut at the bodies' gap); keep the bodies' patches farther apart, or "
-                "use another coupling (its MLS stops at the gap)"
-            )
         #: The particles' own interpolant: displacement in the patch, loads, masses.
         self.evaluator = raise_on_all_ranks(
             comm, lambda: CorrectedSPH(P.positions, P.volumes, self.smoothing_length)
         )
+        # the sums stop at the gaps between the mesh's bodies (a projectile and its target):
+        # each body's sums are over its own particles and hybrid points (approx.body_cuts)
+        cut = body_cut(self.sph.points, self.sph.support, msh)
+        if cut is not None:
+            self.sph.pair_cuts.append(cut)
+            self.evaluator.pair_cuts.append(cut.subset(np.arange(P.num_particles)))
         self._smoothing: SmoothingCells | None = None
         self._setup = time.perf_counter() - t0
 

@@ -102,6 +102,11 @@ class CorrectedSPH:
         return 2.0 * self.h
 
     @property
+    def pair_cuts(self) -> list:
+        """The sums' pair cuts (:attr:`~dolfinx_meshfree.SPH.pair_cuts`): the bodies' cut."""
+        return self._sph.pair_cuts
+
+    @property
     def num_points(self) -> int:
         return self.points.shape[0]
 

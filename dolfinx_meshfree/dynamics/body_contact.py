@@ -81,11 +81,11 @@ every (slave, facet) pair up to
 (:func:`candidates`); without numba, :func:`closest_points` (numpy, the reference) on the
 KD-tree's candidates.
 
-Particles of two bodies press on each other like FE: the model's MLS stops at the bodies' gap
-(:mod:`~dolfinx_meshfree.approx.body_cuts`, added whenever supports could cross it), so each
-body's surface moves with its own particles. A particle whose function still reaches both
-surfaces (an approximation without that cut: the hybrid's SPH sums are refused at build time)
-is refused here.
+Particles of two bodies press on each other like FE: the model's MLS (and the hybrid's SPH
+sums) stops at the bodies' gap (:mod:`~dolfinx_meshfree.approx.body_cuts`, added whenever
+supports could cross it), so each body's surface moves with its own particles. A particle whose
+function still reaches both surfaces (an approximation built by hand without that cut) is
+refused here.
 
 Left out: self-contact, and contact surfaces that change during a run (an adaptive patch
 rebuilds the model: add the contact in the user's ``build``).

@@ -80,7 +80,6 @@ from ..statics.efg import crack_rules, particle_stiffness
 from ..statics.petsc import create_aij
 from ..statics.sides import BlendedSide
 from .conditions import (
-    check_facets,
     first_cells,
     fixed_fe_dofs,
     fixed_groups,
@@ -863,7 +862,7 @@ def build_hybrid(
     t0 = time.perf_counter()
     V, patch = problem.V, problem.patch
     P, comm, msh = patch.particles, patch.comm, V.mesh
-    facets = check_facets(msh, fixed_facets)
+    held = fixed_groups(msh, fixed_facets)  # (facets, components): rollers too
     ops = problem.operators()
     mass_fe = fe_lumped_mass(V, _fe_density(law, material, V), weight=ops.fe_weight)
     pq = ops.particle_quadrature
@@ -872,12 +871,14 @@ def build_hybrid(
     n_owned = V.dofmap.index_map.size_local
     active = np.repeat(ops.fe_active[:n_owned], msh.geometry.dim)
     mass_fe.array[:] = mass_fe.array_r * active
-    fixed_fe = fixed_fe_dofs(V, facets)
-    on_p = patch.in_patch[first_cells(msh, facets)]
+    fixed_fe = fixed_fe_dofs(V, held)
+    on_p = [patch.in_patch[first_cells(msh, facets)] for facets, _ in held]
     constraint = None
-    if comm.allreduce(int(np.sum(on_p))):
+    if comm.allreduce(int(sum(np.sum(p) for p in on_p))):
         ev = problem.evaluator
-        D_loc, dl = particle_conditions(P, [facets[on_p]], [lambda q: ev.tabulate(q.points, 0)])
+        groups = [facets[p] for (facets, _), p in zip(held, on_p, strict=True)]
+        tables = [lambda q: ev.tabulate(q.points, 0)] * len(groups)
+        D_loc, dl = particle_conditions(P, groups, tables, [c for _, c in held])
         constraint = [None, create_aij(comm, D_loc, dl, ops.particle_layout)]
     fields = [
         Field(

@@ -214,7 +214,7 @@ class ExplicitDynamics(StateQueries):
 
         ``fixed_facets``: owned exterior facets whose nodes are held at rest (strongly), or
         ``(facets, components)`` pairs holding only some components, e.g.
-        ``[(symmetry_plane, (0,))]`` (not the hybrid; particles: a multiplier per facet and
+        ``[(symmetry_plane, (0,))]`` (particles, the hybrid's too: a multiplier per facet and
         component); ``(facets, components, velocity)`` triples drive FE nodes (``held``).
         """
         check_safety(safety)

@@ -32,6 +32,7 @@ body).
 
 from __future__ import annotations
 
+import copy
 from itertools import permutations
 
 import dolfinx
@@ -68,6 +69,18 @@ _SIMPLICES = {
     "quadrilateral": _kuhn(2),
     "hexahedron": _kuhn(3),
 }
+
+
+def _range_by(
+    index: np.ndarray, values: np.ndarray, n: int, none: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The smallest and largest of ``values`` per ``index`` in ``0 .. n - 1``: ``(none, -1)``
+    where an index has none."""
+    lo = np.full(n, none, dtype=np.int64)
+    hi = np.full(n, -1, dtype=np.int64)
+    np.minimum.at(lo, index, values)
+    np.maximum.at(hi, index, values)
+    return lo, hi
 
 
 class BodyCut:
@@ -108,8 +121,7 @@ class BodyCut:
     def subset(self, indices: np.ndarray) -> BodyCut:
         """The cut of the particles ``indices`` (:meth:`~dolfinx_meshfree.MLS.subset`: a halo's
         MLS), the same gap cells."""
-        cut = BodyCut.__new__(BodyCut)
-        cut.__dict__.update(self.__dict__)
+        cut = copy.copy(self)
         cut.particle_body = self.particle_body[np.asarray(indices, dtype=np.int64)]
         cut.dropped = 0
         return cut
@@ -126,10 +138,7 @@ class BodyCut:
         lam = np.einsum("pab,pb->pa", self._Tinv[s], x[pt] - self._simplices[s, 0])
         inside = (lam >= -TOL).all(axis=1) & (lam.sum(axis=1) <= 1.0 + TOL)
         pt, b = pt[inside], self._simplex_body[s[inside]]
-        lo = np.full(x.shape[0], np.iinfo(np.int64).max)
-        hi = np.full(x.shape[0], -1)
-        np.minimum.at(lo, pt, b)
-        np.maximum.at(hi, pt, b)
+        lo, hi = _range_by(pt, b, x.shape[0], np.iinfo(np.int64).max)
         out[hi >= 0] = np.where(lo == hi, hi, -2)[hi >= 0]
         return out
 
@@ -215,11 +224,7 @@ def body_cut(x: np.ndarray, reach: float, msh: dolfinx.mesh.Mesh) -> BodyCut | N
     p3[:, :gdim] = x
     offsets, cells = _compat.colliding_cells(msh, _compat.bb_tree(msh, tdim), p3)
     pt = np.repeat(np.arange(n), np.diff(offsets))
-    b = bodies.cell_body[cells].astype(np.int64)
-    lo = np.full(n, bodies.count, dtype=np.int64)
-    hi = np.full(n, -1, dtype=np.int64)
-    np.minimum.at(lo, pt, b)
-    np.maximum.at(hi, pt, b)
+    lo, hi = _range_by(pt, bodies.cell_body[cells].astype(np.int64), n, bodies.count)
     comm.Allreduce(MPI.IN_PLACE, lo, op=MPI.MIN)
     comm.Allreduce(MPI.IN_PLACE, hi, op=MPI.MAX)
     two = np.flatnonzero(lo != hi)

@@ -762,32 +762,25 @@ def _finite_strain_system(
             w[b] = 1.0 - band.alpha_at(q.points[b], q.cells[b])
             return w
 
-    if isinstance(law, RateLaws):  # each side its own points' state (module rate_forms)
-        fe = PointFESide(V, law.bind(), cells, weight_at)
+    rate = isinstance(law, RateLaws)
+    if rate:  # each side its own points' state (module rate_forms)
+        fe = fe_side = PointFESide(V, law.bind(), cells, weight_at)
         particle_law, q = law.bind(), ops.particle_tables["quadrature"]
         particle_law.attach(q.points, q.cells)
-        particles = particle_forces(patch.particles, ops.particle_tables, particle_law)
-        shared: list = []
-        sides = [fe, particles]
-        if ops.interface_table is not None:  # the ramps' interface cells: their own points
-            q, blend = ops.interface_quadrature, ops.interface
-            table = raise_on_all_ranks(patch.comm, lambda: blend.table(q.points, q.cells))
-            blend_law = law.bind()
-            blend_law.attach(q.points, q.cells)
-            shared = [BlendedSide(fe, particles, table, q.weights, blend_law)]
-        elif ops.reduction is not None:  # master-slave: the particles' points, reduced
-            reduced = ReducedParticles(particles, ops.reduction, _links(problem, ops))
-            shared, sides = [reduced], [fe, None]
-        return NonlinearSystem(fields, sides, law, constraint, shared, constant)
-    fe = fe_forces(V, law, cells, weight=weight, weight_at=weight_at)
-    particles = particle_forces(patch.particles, ops.particle_tables, law)
+    else:
+        fe = fe_forces(V, law, cells, weight=weight, weight_at=weight_at)
+        fe_side, particle_law = fe.side, law
+    particles = particle_forces(patch.particles, ops.particle_tables, particle_law)
     sides: list = [fe, particles]
-    shared = []
-    if ops.interface_table is not None:
+    shared: list = []
+    if ops.interface_table is not None:  # the ramps' interface cells on their blended table
         q, blend = ops.interface_quadrature, ops.interface
         table = raise_on_all_ranks(patch.comm, lambda: blend.table(q.points, q.cells))
-        shared = [BlendedSide(fe.side, particles, table, q.weights, law)]
-    elif ops.reduction is not None:
+        blend_law = law.bind() if rate else law  # a rate law: their own points' state
+        if rate:
+            blend_law.attach(q.points, q.cells)
+        shared = [BlendedSide(fe_side, particles, table, q.weights, blend_law)]
+    elif ops.reduction is not None:  # master-slave: the particles through the reduction
         reduced = ReducedParticles(particles, ops.reduction, _links(problem, ops))
         shared, sides = [reduced], [fe, None]
     return NonlinearSystem(fields, sides, law, constraint, shared, constant)
@@ -892,16 +885,13 @@ def build_hybrid(
         Field("particles", ops.K_p, mass_p, particle_spacing(P), block_size=P.gdim),
     ]
     blocks, system = {(0, 1): ops.K_fp, (1, 0): ops.K_pf}, None
-    if isinstance(law, RateLaws):  # the FE cells' and the particle energy's points, each a state
-        sides = [PointFESide(V, law.bind(), ~patch.in_patch), None]
-        forces = HybridForces(problem, law.bind())
-        system = NonlinearSystem(fields, sides, law, constraint, [forces])
-        for B in blocks.values():
-            B.destroy()
-        blocks = {}
-    elif law is not material:  # FE cells by UFL, the particle energy by the SPH sums of P
-        sides = [fe_forces(V, law, ~patch.in_patch), None]
-        system = NonlinearSystem(fields, sides, law, constraint, [HybridForces(problem, law)])
+    if law is not material:  # FE cells by UFL, the particle energy by the SPH sums of P
+        if isinstance(law, RateLaws):  # the FE Gauss points' and the energy's points' states
+            fe, energy_law = PointFESide(V, law.bind(), ~patch.in_patch), law.bind()
+        else:
+            fe, energy_law = fe_forces(V, law, ~patch.in_patch), law
+        forces = HybridForces(problem, energy_law)
+        system = NonlinearSystem(fields, [fe, None], law, constraint, [forces])
         for B in blocks.values():
             B.destroy()
         blocks = {}

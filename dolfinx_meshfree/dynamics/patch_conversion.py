@@ -414,20 +414,23 @@ def _fit_reduced(old: ExplicitDynamics, new: ExplicitDynamics) -> None:
             obj.destroy()
 
 
-def _values(old: ExplicitDynamics, new: ExplicitDynamics) -> None:
+def _values(old: ExplicitDynamics, new: ExplicitDynamics, rows: np.ndarray | None = None) -> None:
     """The new particle coefficients of ``d_n`` and ``v_{n-1/2}``: the old fields at the
     particles (the MLS reproduces linear fields from these values); the cell of a particle on a
-    cell boundary is an old patch cell where there is one."""
+    cell boundary is an old patch cell where there is one. ``rows``: bool per owned particle
+    (PETSc order), the only ones set (default: all). Collective."""
     P = new.particles
     gdim = P.gdim
-    own = P.owned[np.argsort(P.petsc_index[P.owned], kind="stable")]
-    x = P.positions[own]
+    own = new.evaluator.disc.owned_particles()
+    rows = np.ones(own.size, dtype=bool) if rows is None else rows
+    x = P.positions[own[rows]]
     cells = locate_points(new.mesh, x, preferred=old.in_patch)
     if (cells < 0).any():
         raise RuntimeError("an owned particle lies in no owned cell of its rank")
     q = QuadraturePoints(x, np.ones(len(x)), cells.astype(np.int32))
     for src, dst in ((old.stepper.u, new.stepper.u), (old.stepper.v, new.stepper.v)):
-        dst[1].array[:] = np.asarray(old.evaluator.at_cells(src, q)).reshape(-1, gdim).ravel()
+        values = np.asarray(old.evaluator.at_cells(src, q)).reshape(-1, gdim)
+        dst[1].array.reshape(-1, gdim)[rows] = values
 
 
 def _sph_values(old: ExplicitDynamics, new: ExplicitDynamics) -> None:
@@ -436,14 +439,12 @@ def _sph_values(old: ExplicitDynamics, new: ExplicitDynamics) -> None:
     the field at them would smooth it at every conversion: measured, the old particles'
     velocities changed by up to half their speed), a new one takes the old field at its
     position (:func:`_values`). Collective."""
-    _values(old, new)
     P0, P1 = old.particles, new.particles
     gdim = P1.gdim
     scale = float(np.ptp(P1.positions, axis=0).max()) or 1.0
-    tree = cKDTree(P0.positions)
-    own = P1.owned[np.argsort(P1.petsc_index[P1.owned], kind="stable")]  # PETSc order
-    dist, match = tree.query(P1.positions[own])
+    dist, match = cKDTree(P0.positions).query(P1.positions[new.evaluator.disc.owned_particles()])
     kept = dist <= 1e-9 * scale
+    _values(old, new, rows=~kept)
     for src, dst in ((old.stepper.u, new.stepper.u), (old.stepper.v, new.stepper.v)):
         values = np.concatenate(old.comm.allgather(src[1].array_r.copy())).reshape(-1, gdim)
         values = values[P0.petsc_index]  # the old particles' coefficients, original order

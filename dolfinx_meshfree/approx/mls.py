@@ -39,7 +39,7 @@ from .mls_kernel import (
     monomial_exponents,
     tabulate_cells,
 )
-from .neighbours import check_points, pairs_within_support, support_radii
+from .neighbours import check_points, cut_pairs, pairs_within_support, support_radii
 from .tables import ShapeTable
 
 if TYPE_CHECKING:  # annotations only
@@ -285,14 +285,6 @@ class MLS:
             table = transform(x, table, derivatives, sides)
         return table
 
-    def _apply_cuts(
-        self, x: np.ndarray, i: np.ndarray, j: np.ndarray, dx: np.ndarray, dist: np.ndarray,
-        ddist: np.ndarray, sides: np.ndarray | None,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
-        for cut in self.pair_cuts:
-            i, j, dx, dist, ddist = cut(x, i, j, dx, dist, ddist, sides)
-        return i, j, dx, dist, ddist
-
     def _check_counts(self, counts: np.ndarray, x: np.ndarray) -> None:
         """Too few particles in the support of a point: :class:`MomentMatrixError`."""
         nb = self.num_basis
@@ -334,10 +326,7 @@ class MLS:
             c, j, dx, dist, ddist = self._cells.pairs(x[start:stop])
             if self.pair_cuts:
                 i = np.repeat(np.arange(start, stop), c)
-                i, j, dx, dist, ddist = self._apply_cuts(x, i, j, dx, dist, ddist, sides)
-                if np.any(np.diff(i) < 0):  # a cut that reorders: back to the CSR order
-                    o = np.lexsort((j, i))
-                    i, j, dx, dist, ddist = i[o], j[o], dx[o], dist[o], ddist[o]
+                i, j, dx, dist, ddist = cut_pairs(self.pair_cuts, x, i, j, dx, dist, ddist, sides)
                 c = np.bincount(i - start, minlength=stop - start)
                 j = np.ascontiguousarray(j, dtype=np.int32)
                 dx, ddist = np.ascontiguousarray(dx, float), np.ascontiguousarray(ddist, float)
@@ -396,7 +385,7 @@ class MLS:
         n = self.num_particles
         i, j, dx = pairs_within_support(x, self.points, self.radii, self._tree)
         dist, ddist = pair_distances(dx)
-        i, j, dx, dist, ddist = self._apply_cuts(x, i, j, dx, dist, ddist, sides)
+        i, j, dx, dist, ddist = cut_pairs(self.pair_cuts, x, i, j, dx, dist, ddist, sides)
         counts = np.bincount(i, minlength=m)
         self._check_counts(counts, x)
         s = self._scale

@@ -8,7 +8,7 @@ from scipy.spatial import cKDTree
 
 from .kernels import WeightFunction, quartic
 
-__all__ = ["check_points", "pairs_within_support", "support_radii"]
+__all__ = ["check_points", "cut_pairs", "pairs_within_support", "support_radii"]
 
 
 def check_points(x: npt.ArrayLike, gdim: int, name: str = "x") -> np.ndarray:
@@ -179,3 +179,18 @@ def pairs_within_support(
     keep = sdm["v"] < radii[j]
     i, j = i[keep], j[keep]
     return i, j, x[i] - particles[j]
+
+
+def cut_pairs(
+    cuts: list, x: np.ndarray, i: np.ndarray, j: np.ndarray, dx: np.ndarray, dist: np.ndarray,
+    ddist: np.ndarray, sides: np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """The (point, particle) pairs after the pair ``cuts`` in turn (``cut(x, i, j, dx, dist,
+    ddist, sides) -> (i, j, dx, dist, ddist)``: :attr:`~dolfinx_meshfree.MLS.pair_cuts`), put
+    back in the order by point then particle if a cut reordered them."""
+    for cut in cuts:
+        i, j, dx, dist, ddist = cut(x, i, j, dx, dist, ddist, sides)
+    if np.any(np.diff(i) < 0):
+        o = np.lexsort((j, i))
+        i, j, dx, dist, ddist = i[o], j[o], dx[o], dist[o], ddist[o]
+    return i, j, dx, dist, ddist

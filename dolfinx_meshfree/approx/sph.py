@@ -33,7 +33,7 @@ from . import batched, jit
 from .cell_lists import CellList
 from .kernels import cubic_inner_piece, sph_cubic_spline
 from .mls_kernel import count_pairs
-from .neighbours import check_points, pairs_within_support
+from .neighbours import check_points, cut_pairs, pairs_within_support
 from .sph_kernel import CORRECTION_IDS, fill_sph
 from .tables import ShapeTable
 
@@ -125,13 +125,9 @@ class SPH:
         radii = np.full(n, 2.0 * self.h)
         i, j, dx = pairs_within_support(x, self.points, radii, self._tree)
         dist = np.linalg.norm(dx, axis=1)
-        if self.pair_cuts:
-            ddist = np.zeros_like(dx)  # (unused by the cuts that only drop pairs)
-            for cut in self.pair_cuts:
-                i, j, dx, dist, ddist = cut(x, i, j, dx, dist, ddist, None)
-            if np.any(np.diff(i) < 0):  # back to the order by point
-                o = np.lexsort((j, i))
-                i, j, dx, dist = i[o], j[o], dx[o], dist[o]
+        if self.pair_cuts:  # (ddist: the kernel takes the direction from dx)
+            ddist = np.zeros_like(dx)
+            i, j, dx, dist, _ = cut_pairs(self.pair_cuts, x, i, j, dx, dist, ddist, None)
         self._check_counts(np.bincount(i, minlength=m), x)
         W, dWdq = sph_cubic_spline(dist / self.h, self.h, self.gdim)
         vol = self.volumes[j]

@@ -71,7 +71,7 @@ from ..geometry.crack import Crack
 from . import batched
 from .crack_cuts import attach_cracks
 from .mls import MLS, pair_distances
-from .neighbours import pairs_within_support
+from .neighbours import cut_pairs, pairs_within_support
 from .tables import ShapeTable
 
 __all__ = ["TipEnrichment", "enrich_tips", "enriched_basis", "ramp"]
@@ -209,7 +209,7 @@ class TipEnrichment:
         m, n = x.shape[0], e.num_particles
         i, j, dx = pairs_within_support(x, e.points, e.radii, e._tree)
         dist, ddist = pair_distances(dx)
-        i, j, dx, dist, ddist = e._apply_cuts(x, i, j, dx, dist, ddist, sides)
+        i, j, dx, dist, ddist = cut_pairs(e.pair_cuts, x, i, j, dx, dist, ddist, sides)
         rho = e.radii[j]
         w, dwdr = e._weight(dist / rho)
         pI = enriched_basis(e.points, tip, direction, spacing)[0][j]

@@ -288,6 +288,20 @@ def test_bar_impact_demo_table_and_json(shared_dir):
         assert row["parted"] and 0.3 < row["critical"] / row["critical_without"] < 0.5
 
 
+def test_axisymmetric_demo_table_and_json(shared_dir):
+    """demos/axisymmetric.py at its defaults (8 and 16 cells, FE, EFG, lagrange): it passes its own
+    checks (errors and rates against the closed forms, the energy, the plane-strain miss) and
+    writes a row per problem, method and resolution."""
+    out = shared_dir / "axisymmetric.json"
+    demo = load_demo("axisymmetric")
+    assert demo.main(["--json", str(out)]) == 0
+    MPI.COMM_WORLD.Barrier()
+    data = json.loads(out.read_text())
+    assert len(data["rows"]) == 18 and data["plane_strain"]["error"] > 0.5
+    assert [r["method"] for r in data["rods"]] == ["fe", "efg", "lagrange"]
+    assert {r["problem"] for r in data["rows"]} == {"lame", "cylinder", "sphere"}
+
+
 def test_concrete_impact_demo_table_and_json(shared_dir):
     """demos/concrete_impact.py at 20 cells, 0.5 and 100 m/s, FE, EFG and lagrange: it passes
     its own checks (the 1D elastic stress, the balance, each against EFG) and writes one row per

@@ -348,7 +348,9 @@ def test_material_dimension_must_match_the_mesh():
         mf.EFGElasticity(mf.ParticleSet.from_vertices(square), MATERIAL)
     with pytest.raises(ValueError, match=r"grad_u should have shape \(\.\.\., 3, 3\)"):
         MATERIAL.stress(np.zeros((4, 2, 2)))
-    with pytest.raises(ValueError, match="plane='plane' must be 'stress' or 'strain'"):
+    with pytest.raises(
+        ValueError, match="plane='plane' must be 'stress', 'strain' or 'axisymmetric'"
+    ):
         mf.LinearElastic(1000.0, 0.3, plane="plane")
 
 

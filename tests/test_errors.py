@@ -141,7 +141,7 @@ def test_bad_dilation(dilation):
         ({"E": np.nan, "nu": 0.3}, "E=nan"),
         ({"E": 3e7, "nu": 0.3, "rho": 0.0}, "rho=0.0"),
         ({"E": 3e7, "nu": 0.3, "rho": -7800.0}, "rho=-7800.0"),
-        ({"E": 3e7, "nu": 0.3, "plane": "axisymmetric"}, "plane='axisymmetric'"),
+        ({"E": 3e7, "nu": 0.3, "plane": "axisym"}, "plane='axisym'"),
     ],
 )
 def test_bad_material(kwargs, phrase):

@@ -287,12 +287,18 @@ def test_jaumann_simple_shear_closed_form():
 
 
 def test_plane_strain_and_hoop_stretch():
-    """A 2D point with F_zz = 1 (plane strain) or the hoop stretch is the 3D point."""
+    """A 2D point with F_zz = 1 (plane strain) or the hoop stretch (axisymmetric) is the 3D
+    point; a plane-strain law refuses a hoop stretch, an axisymmetric one needs it."""
     F2 = np.array([[[0.97, 0.02], [0.01, 0.99]]])
     s3, _ = drive(LAW, [as_3d(F2)])
     s2, _ = drive(dataclasses.replace(LAW, plane="strain"), [F2])
     assert np.array_equal(s2, s3)
-    axi = dataclasses.replace(LAW, plane="strain")
+    plane = dataclasses.replace(LAW, plane="strain")
+    with pytest.raises(ValueError, match="an axisymmetric law takes the hoop stretch"):
+        plane.update(F2, 1e-6, plane.initial_state(1), hoop=np.array([0.995]))
+    axi = dataclasses.replace(LAW, plane="axisymmetric")
+    with pytest.raises(ValueError, match="an axisymmetric law takes the hoop stretch"):
+        axi.update(F2, 1e-6, axi.initial_state(1))
     sigma, _ = axi.update(F2, 1e-6, axi.initial_state(1), hoop=np.array([0.995]))
     F3 = as_3d(F2)
     F3[0, 2, 2] = 0.995

@@ -27,6 +27,8 @@ from ..geometry.quadrature import QuadraturePoints, cell_quadrature, facet_quadr
 from ..geometry.smoothing import STABILISATION, smoothing_rule
 from ..geometry.stress_points import stress_point_quadrature
 from ..parallel import Layout, raise_on_all_ranks
+from ..physics import axisymmetry
+from ..physics.axisymmetry import revolved_if
 from ..physics.body_loads import body_load_vectors
 from ..physics.operators import load_vector
 from ..physics.user_functions import vector_values
@@ -160,6 +162,9 @@ def body_loads(
     adaptive = problem.patch.quadrature
     q = crack_rules(msh, cells, cracks, deg, None, quadrature=adaptive)[0]
     q = cell_quadrature(msh, deg, cells) if q is None else q
+    q = raise_on_all_ranks(comm, lambda: revolved_if(q, problem.material))
+    if problem.material.axisymmetric:  # the FE cells' loads on the revolved volume too
+        fe_weight = fe_weight * axisymmetry.measure(msh)
     if particle_weights is not None:
         q = QuadraturePoints(q.points, q.weights * particle_weights(q), q.cells)
     table = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(q.points, 0)).values
@@ -203,6 +208,8 @@ def essential_conditions(
         fe_bc.append((f_fe, fn))
         patch_bc.append((f_p, fn, *components))
     dq = [patch_facet_rule(problem, c[0]) for c in patch_bc]
+    # multipliers = reaction tractions (axisymmetric: 2 pi r ds, the axis kept)
+    dq = [raise_on_all_ranks(comm, lambda d=d: revolved_if(d, problem.material, True)) for d in dq]
     dtabs = [raise_on_all_ranks(comm, lambda d=d: problem.mls.tabulate(d.points, 0)) for d in dq]
     gdim = msh.geometry.dim
     ubc = dolfinx.fem.Function(V)
@@ -306,7 +313,7 @@ def traction_loads(problem: CoupledElasticity) -> tuple[PETSc.Vec, np.ndarray]:
     f_p = np.zeros(gdim * problem.patch.particles.num_particles)
     for facets, fn in problem.tractions:
         f_fe_facets, f_p_facets = split_facets(problem, facets)
-        q = facet_quadrature(msh, f_fe_facets, deg)
+        q = revolved_if(facet_quadrature(msh, f_fe_facets, deg), problem.material)
         t = raise_on_all_ranks(
             comm, lambda fn=fn, q=q: vector_values(fn, (q.points, q.normals), len(q), "t", gdim)
         )
@@ -315,7 +322,7 @@ def traction_loads(problem: CoupledElasticity) -> tuple[PETSc.Vec, np.ndarray]:
         for comp in range(gdim):
             f_fe_rows.append(gdim * l2g[: fl.shape[0]] + comp)
             f_fe_vals.append(fl[:, comp])
-        q = patch_facet_rule(problem, f_p_facets)
+        q = revolved_if(patch_facet_rule(problem, f_p_facets), problem.material)
         t = raise_on_all_ranks(
             comm, lambda fn=fn, q=q: vector_values(fn, (q.points, q.normals), len(q), "t", gdim)
         )

@@ -220,6 +220,8 @@ class HybridElasticity(HybridDiscretisation):
         multiplier_length: float = 2.0,
         nitsche: float = 10.0,
     ) -> None:
+        if isinstance(material, LinearElastic):  # the same on every rank
+            material.refuse_axisymmetric("HybridElasticity (the hybrid SPH-FE coupling)")
         super().__init__(
             V,
             patch,

@@ -47,6 +47,7 @@ from ..approx.fe_points import tabulate_fe_basis, tabulate_in_cells
 from ..geometry.quadrature import DYNAMIC_FACET_DEGREE, QuadraturePoints, facet_quadrature
 from ..geometry.smoothing import STABILISATION, value_rule
 from ..parallel import Layout, raise_on_all_ranks
+from ..physics.axisymmetry import revolved_if
 from ..statics.efg import particle_stiffness
 from ..statics.petsc import SolverOptions, create_aij, create_vector
 from .assembly import (
@@ -194,6 +195,7 @@ def lagrange_rows(problem: CoupledElasticity, scale: float = 1.0) -> tuple[tuple
     iq = facet_quadrature(
         V.mesh, patch.interface_facets, problem.quadrature_degree, patch.interface_fe_cells
     )
+    iq = raise_on_all_ranks(comm, lambda: revolved_if(iq, problem.material))  # 2 pi r ds
     t_fe = facet_table(V, iq.points, iq.cells)
     t_p = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(iq.points, 0)).values
     lam, ml = interface_multipliers(problem, iq, t_fe)

@@ -42,7 +42,8 @@ gradient of ``E_c`` (beyond the facet, within the 5 % margin, the weights are cl
 not quite): central differences conserve ``kinetic + strain + E_c`` up to the non-smoothness of
 the contact's start and end (measured in ``tests/test_body_contact.py``). ``k_s = k w_s``,
 ``k`` the penalty per unit area (Pa/m) and ``w_s`` the slave's tributary measure (half its two
-segments' lengths; a third of its triangles' areas). With ``two_pass`` (default) each surface
+segments' lengths; a third of its triangles' areas; in an axisymmetric model the segments'
+revolved shares ``int N_s 2 pi r ds``). With ``two_pass`` (default) each surface
 is slave to the other in turn, so that a coarse surface's facets cannot pass between a fine
 surface's vertices unnoticed, whatever the two meshes' spacings.
 
@@ -222,6 +223,8 @@ class ContactSurfaces:
     body: np.ndarray
     vertex_body: np.ndarray
     owned: tuple[int, int]
+    #: The surfaces are curves of an axisymmetric (r, z) section: their measures revolve.
+    axisymmetric: bool = False
 
     def measures(self) -> np.ndarray:
         """Reference length (2D) or area (3D) of each facet."""
@@ -237,11 +240,18 @@ class ContactSurfaces:
 
     def tributary(self) -> np.ndarray:
         """The share of the facets at each vertex (the slave's weight ``w_s``): half the
-        segments' lengths in 2D, a third of the triangles' areas in 3D."""
+        segments' lengths in 2D, a third of the triangles' areas in 3D; axisymmetric, the
+        revolved share ``int N_s 2 pi r ds = 2 pi L (2 r_s + r_o) / 6`` of each segment
+        (positive on the axis, where ``r_s = 0``)."""
         w = np.zeros(len(self.points))
         share = self.measures() / self.facets.shape[1]
         for i in range(self.facets.shape[1]):
-            np.add.at(w, self.facets[:, i], share)
+            if self.axisymmetric:  # segments: vertex i and the other one
+                r = self.points[self.facets, 0]
+                revolved = 2.0 * np.pi * share * (2.0 * r[:, i] + r[:, 1 - i]) / 3.0
+                np.add.at(w, self.facets[:, i], revolved)
+            else:
+                np.add.at(w, self.facets[:, i], share)
         return w
 
 
@@ -904,6 +914,8 @@ class BodyContactSystem(WrappedSystem):
             on_m = s.vertex_body == master
             if self.gdim == 2:  # the star widened by one slave segment at each end
                 pressing = star[on_m] + 2.0 * longest
+                if s.axisymmetric:  # revolved at the largest radius the widened star reaches
+                    pressing *= 2.0 * np.pi * (s.points[on_m, 0] + star[on_m] + longest)
             else:  # the star as a disc, its radius widened by one slave facet
                 pressing = np.pi * (np.sqrt(star[on_m] / np.pi) + longest) ** 2
             c[on_m] += self.penalty * pressing
@@ -970,6 +982,7 @@ def with_body_contact(
     d = evaluator.disc
     raise_on_all_ranks(evaluator.comm, lambda: _check_evaluable(evaluator))
     surfaces, vertices, cells = contact_surfaces(d.mesh, surface_a, surface_b)
+    surfaces.axisymmetric = d.axisymmetric  # the penalty per unit revolved area
     sizes = surfaces.sizes()
     h = float(np.median(sizes))
     if contact.penalty is None and E is None:  # the same on every rank

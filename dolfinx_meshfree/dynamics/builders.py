@@ -72,6 +72,8 @@ from ..geometry.quadrature import DYNAMIC_FACET_DEGREE
 from ..geometry.smoothing import STABILISATION, refuse_smoothed, smoothing_rule, value_rule
 from ..geometry.stress_points import check_integration, stress_point_quadrature
 from ..parallel import raise_on_all_ranks
+from ..physics import axisymmetry
+from ..physics.axisymmetry import check_half_plane
 from ..physics.body_loads import CallableBodyForce, body_load_vectors
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic
@@ -295,6 +297,52 @@ def _particle_density(
     return law.density_at_cells(cells)
 
 
+def _axisymmetric(material: object) -> bool:
+    return isinstance(material, LinearElastic) and material.axisymmetric
+
+
+def _check_axisymmetric_efg(
+    particles: ParticleSet,
+    integration: str,
+    cracks: Sequence[Crack],
+    quadrature: AdaptiveQuadrature | None,
+    particle_mass: str,
+) -> None:
+    """Refuse what axisymmetric explicit EFG does not revolve (local)."""
+    if integration != "cells" or cracks or quadrature is not None or particle_mass != "row-sum":
+        raise ValueError(
+            f"material plane='axisymmetric' with integration={integration!r}, "
+            f"{len(cracks)} crack(s), quadrature={quadrature!r}, particle_mass="
+            f"{particle_mass!r}: axisymmetric explicit EFG takes integration='cells' and "
+            "particle_mass='row-sum' (the defaults), without cracks or an adaptive quadrature "
+            "(the other options are plane; a row-sum mass that is not positive, a particle on "
+            "the axis near a corner, is cured by a larger dilation)"
+        )
+    check_half_plane(particles.mesh.geometry.x, "the particles' mesh")
+    check_half_plane(particles.positions, "the particles")
+
+
+def _check_axisymmetric_masses(particles: ParticleSet, mass: PETSc.Vec) -> None:
+    """Refuse a row-sum mass that is not positive, naming the particle (collective)."""
+    comm, gdim = particles.comm, particles.gdim
+    local = mass.array_r[::gdim]
+    i = int(np.argmin(local)) if local.size else -1
+    lo = float(local[i]) if local.size else np.inf
+    lo_all = comm.allreduce(lo, op=MPI.MIN)
+    if lo_all > 0.0:
+        return
+    lo_rank = comm.allreduce((lo, comm.rank), op=MPI.MINLOC)[1]
+    where = particles.owned_positions()[i] if comm.rank == lo_rank else None
+    where = comm.bcast(where, root=lo_rank)
+    raise ValueError(
+        f"a lumped particle mass is not positive ({lo_all:.3e}, the particle at "
+        f"{np.round(where, 12).tolist()}): in an axisymmetric model the row sum weighs a "
+        "shape function by 2 pi r, so a particle near the axis, whose negative lobes lie "
+        "farther out than its centre, can weigh less than nothing; raise the dilation (e.g. "
+        "2.5)"
+    )
+
+
 def build_fe(
     V: dolfinx.fem.FunctionSpace,
     material: LinearElastic | Material,
@@ -310,9 +358,16 @@ def build_fe(
     raise_on_all_ranks(msh.comm, lambda: material.check_gdim(msh.geometry.dim, "V's mesh"))
     groups = fixed_groups(msh, fixed_facets)
     u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
-    a = ufl.inner(material.ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx
+    weight = None  # 2 pi r in axisymmetry, for the stiffness, the masses and the body loads
+    if _axisymmetric(material):
+        raise_on_all_ranks(msh.comm, lambda: check_half_plane(msh.geometry.x, "V's mesh"))
+        weight = 2.0 * ufl.pi * axisymmetry.radius(msh)
+        stress, strain = axisymmetry.ufl_stress(u, material), axisymmetry.ufl_strain(v)
+        a = ufl.inner(stress, strain) * weight * ufl.dx
+    else:
+        a = ufl.inner(material.ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx
     K = _compat.assemble_matrix(_compat.create_form(a))
-    mass = fe_lumped_mass(V, _fe_density(law, material, V))
+    mass = fe_lumped_mass(V, _fe_density(law, material, V), weight=weight)
     n_owned = msh.topology.index_map(msh.topology.dim).size_local
     h = fe_spacing(msh, np.arange(n_owned))
     fe_field = Field("fe", K, mass, h, fixed=fixed_fe_dofs(V, groups))
@@ -322,7 +377,7 @@ def build_fe(
     ) -> tuple[
         np.ndarray | None, np.ndarray | None
     ]:  # int N_a b, Gauss degree 4 (as the tractions)
-        return body_load_vectors([CallableBodyForce(force)], V, None, 4)
+        return body_load_vectors([CallableBodyForce(force)], V, weight, 4)
 
     system = None
     if law is not material:
@@ -399,6 +454,12 @@ def build_efg(
     gdim = particles.gdim
     raise_on_all_ranks(particles.comm, lambda: material.check_gdim(gdim, "the particles' mesh"))
     check_particle_mass(particle_mass)
+    if _axisymmetric(material):
+        raise_on_all_ranks(
+            particles.comm,
+            lambda: _check_axisymmetric_efg(particles, integration, cracks, quadrature,
+                                            particle_mass),
+        )  # fmt: skip
     t0 = time.perf_counter()
     comm = particles.comm
     groups = fixed_groups(particles.mesh, fixed_facets)
@@ -433,7 +494,10 @@ def build_efg(
     K = create_aij(comm, K_loc, pl, pl)
     q, values = raise_on_all_ranks(comm, lambda: value_rule(mls, q, tq))  # masses, loads
     rho = _particle_density(law, material, particle_mass, q, particles)
-    mass = particle_lumped_mass(particles, values, q.weights, rho, particle_mass)
+    axi = _axisymmetric(material)
+    mass = particle_lumped_mass(particles, values, q.weights, rho, particle_mass, check=not axi)
+    if axi:
+        _check_axisymmetric_masses(particles, mass)
     constraint = None
     if groups and comm.allreduce(sum(f.size for f, _ in groups)):
         D, dl = particle_conditions(
@@ -598,11 +662,19 @@ def build_coupled(
     V, patch, mls = problem.V, problem.patch, problem.mls
     P, comm, msh = patch.particles, patch.comm, V.mesh
     held = fixed_groups(msh, fixed_facets)
+    if _axisymmetric(material) and particle_mass != "row-sum":  # the same on every rank
+        raise ValueError(
+            f"particle_mass={particle_mass!r}: an axisymmetric model takes particle_mass="
+            "'row-sum' (the particles' Voronoi volumes are not revolved)"
+        )
     ops = problem.operators(integration, slaves)
     fl, pl = ops.fe_layout, ops.particle_layout
+    fe_weight = ops.fe_weight  # the FE energy's weight; axisymmetric: times 2 pi r
+    if _axisymmetric(material):
+        fe_weight = fe_weight * axisymmetry.measure(msh)
 
     # lumped masses (eq. 4.5, 88-89)
-    mass_fe = fe_lumped_mass(V, _fe_density(law, material, V), weight=ops.fe_weight)
+    mass_fe = fe_lumped_mass(V, _fe_density(law, material, V), weight=fe_weight)
     pq = ops.particle_quadrature
     rho_p = _particle_density(law, material, particle_mass, pq, P)
     mass_p = particle_lumped_mass(
@@ -685,7 +757,7 @@ def build_coupled(
     def body_load(force: VectorFunction) -> tuple[np.ndarray | None, np.ndarray | None]:
         forces = [CallableBodyForce(force)]
         deg = problem.quadrature_degree
-        return body_load_vectors(forces, V, ops.fe_weight, deg, p_rule, i_rule, comm)
+        return body_load_vectors(forces, V, fe_weight, deg, p_rule, i_rule, comm)
 
     system = None
     if law is not material:

@@ -65,6 +65,9 @@ class Discretisation:
             (weighted band cells).
         reduction: ``(T_PF, S)`` when the particle field holds master particles only
             (master–slave): the particle coefficients are ``T_PF d_FE + S d_M``.
+        axisymmetric: The mesh is the (r, z) section of a solid of revolution: surface
+            integrals (tractions) take ``2 pi r`` weights
+            (:mod:`~dolfinx_meshfree.physics.axisymmetry`).
     """
 
     fields: Sequence[Field]
@@ -76,6 +79,7 @@ class Discretisation:
     patch: ParticlePatch | None = None
     interface: RampInterface | BridgingBand | None = None
     reduction: tuple[PETSc.Mat, PETSc.Mat] | None = None
+    axisymmetric: bool = False
 
     @property
     def gdim(self) -> int:

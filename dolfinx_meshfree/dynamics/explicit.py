@@ -163,9 +163,11 @@ class ExplicitDynamics(StateQueries):
         self.V, self.mls, self.particles, self.mesh = V, mls, particles, mesh
         self.in_patch, self.patch = in_patch, patch
         self.interface, self.reduction = interface, reduction
+        axisymmetric = getattr(material, "plane", None) == "axisymmetric"  # rate laws' too
         disc = Discretisation(
-            self.system.fields, V, mls, particles, mesh, in_patch, patch, interface, reduction
-        )
+            self.system.fields, V, mls, particles, mesh, in_patch, patch, interface, reduction,
+            axisymmetric,
+        )  # fmt: skip
         self.comm = self.fields[0].mass.getComm().tompi4py()
         self.timings = dict(timings or {})
         t0 = time.perf_counter()

@@ -23,6 +23,7 @@ from ..approx.fe_points import tabulate_in_cells
 from ..geometry.cut_cells import cut_facet_quadrature
 from ..geometry.quadrature import DYNAMIC_FACET_DEGREE, QuadraturePoints, facet_quadrature
 from ..parallel import raise_on_all_ranks
+from ..physics.axisymmetry import revolved
 from ..physics.operators import load_vector
 from ..statics.petsc import create_vector
 from .discretisation import Discretisation, VectorFunction, vector_values
@@ -112,6 +113,9 @@ class ExternalLoads:
                 self.comm, lambda: vector_values(traction, q.points, q.normals)
             )
 
+        def surface(q: QuadraturePoints) -> QuadraturePoints:  # 2 pi r ds in axisymmetry
+            return raise_on_all_ranks(self.comm, lambda: revolved(q)) if d.axisymmetric else q
+
         def fe_load(
             tab: sp.spmatrix, q: QuadraturePoints, t: np.ndarray
         ) -> tuple[np.ndarray, np.ndarray]:
@@ -120,7 +124,7 @@ class ExternalLoads:
 
         blend_fe = blend_p = None
         if blended is not None:  # collective: every rank tabulates (maybe no point)
-            q = facet_quadrature(msh, facets[mixed], deg)
+            q = surface(facet_quadrature(msh, facets[mixed], deg))
             t = values(q)
             fe_tab, p_tab = d.blended_tables(q.points, q.cells, self.comm)
             blend_fe = fe_load(fe_tab, q, t)
@@ -128,7 +132,7 @@ class ExternalLoads:
         parts = []
         for f in d.fields:
             if f.name == "fe":
-                q = facet_quadrature(msh, facets[~on_p & ~mixed], deg)
+                q = surface(facet_quadrature(msh, facets[~on_p & ~mixed], deg))
                 tab = tabulate_in_cells(d.V, q.points, q.cells, derivatives=0).values
                 rows, vals = fe_load(tab, q, values(q))
                 if blend_fe is not None:
@@ -143,6 +147,7 @@ class ExternalLoads:
                     q = cut_facet_quadrature(msh, sel, d.cracks, deg)
                 else:
                     q = facet_quadrature(msh, sel, deg)
+                q = surface(q)
                 t = values(q)
                 tab = raise_on_all_ranks(self.comm, lambda q=q: d.mls.tabulate(q.points, 0))
                 vals = load_vector(tab.values, q.weights, t)

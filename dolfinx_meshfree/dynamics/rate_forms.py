@@ -48,6 +48,7 @@ from .. import _compat
 from ..approx.fe_dofs import fe_dof_layout
 from ..approx.fe_points import tabulate_in_cells
 from ..geometry.quadrature import QuadraturePoints, cell_quadrature
+from ..physics.axisymmetry import revolved
 from ..physics.forces import InternalForces
 from ..physics.materials import LinearElastic
 from ..physics.objective import as_3d, nominal_stress
@@ -80,9 +81,22 @@ def stiffest_twin(law: object) -> LinearElastic:
     return LinearElastic(
         E=9.0 * K * G / (3.0 * K + G),
         nu=(3.0 * K - 2.0 * G) / (2.0 * (3.0 * K + G)),
-        plane="strain" if law.gdim == 2 else None,
+        plane=("axisymmetric" if law.plane == "axisymmetric" else "strain")
+        if law.gdim == 2
+        else None,
         rho=float(law.rho),
     )
+
+
+def elastic_tangent(twin: LinearElastic, m: int) -> np.ndarray:
+    """The isotropic tangent ``C_iJkL = lambda d_iJ d_kL + mu (d_ik d_JL + d_iL d_Jk)`` (m, d,
+    d, d, d) of a twin's Lamé constants, in its plane (the (r, z) block of an axisymmetric
+    twin: its hoop terms are the force operator's, ``InternalForces._hoop_tangent``)."""
+    eye = np.eye(twin.gdim)
+    C = twin.lmbda * np.einsum("ij,kl->ijkl", eye, eye) + twin.mu * (
+        np.einsum("ik,jl->ijkl", eye, eye) + np.einsum("il,jk->ijkl", eye, eye)
+    )
+    return np.broadcast_to(C, (m, *C.shape)).copy()
 
 
 class RateLaw:
@@ -164,9 +178,12 @@ class RateLaw:
         """The time of the next evaluation (the stepper's ``t_n``)."""
         self.clock = float(t)
 
-    def stress(self, F: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
+    def stress(
+        self, F: np.ndarray, points: np.ndarray | None = None, hoop: np.ndarray | None = None
+    ) -> np.ndarray:
         """The Cauchy stress (m, 3, 3) at ``F`` (m, d, d), the state advanced to the clock;
-        ``points`` (m, gdim), the points' reference coordinates, are kept on the first call."""
+        ``points`` (m, gdim), the points' reference coordinates, are kept on the first call;
+        ``hoop`` (m,): an axisymmetric law's hoop stretch ``r / R`` (its ``F_zz``)."""
         F = np.asarray(F, dtype=float)
         m = len(F)
         if self.state is None:
@@ -186,9 +203,9 @@ class RateLaw:
             return self.sigma
         if dt == 0.0:
             if self.rebase:  # the first force of a converted model: its field's gradients
-                self.state["F"] = as_3d(F).reshape(m, 9).copy()
+                self.state["F"] = as_3d(F, hoop).reshape(m, 9).copy()
                 self.rebase = False
-            elif not np.array_equal(as_3d(F).reshape(m, 9), self.state["F"]):
+            elif not np.array_equal(as_3d(F, hoop).reshape(m, 9), self.state["F"]):
                 raise ValueError(
                     f"{type(self.law).__name__}: the deformation changed with no time passing "
                     f"(t = {self.clock:.6g}): a rate-form law starts from rest, undeformed; give "
@@ -201,31 +218,46 @@ class RateLaw:
                 f"t = {self.time:.6g}; a rate-form law's state cannot go back: build the model "
                 "again to start over"
             )
-        self.sigma, self.state = self.law.update(F, dt, self.state)
+        extra = {} if hoop is None else {"hoop": hoop}
+        self.sigma, self.state = self.law.update(F, dt, self.state, **extra)
         self.time = self.clock
         return self.sigma
 
     def first_piola(self, F: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
         """``J sigma F^{-T}`` (m, d, d) of the advanced state."""
+        if self.plane == "axisymmetric":
+            raise ValueError(
+                f"{type(self.law).__name__} is axisymmetric: its forces need the hoop stretch "
+                "(axisymmetric_piola), which this path does not give"
+            )
         d = self.gdim
         P = nominal_stress(self.stress(F, points), as_3d(np.asarray(F, dtype=float)))
         return P[:, :d, :d]
+
+    def axisymmetric_piola(
+        self, F: np.ndarray, points: np.ndarray, hoop: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``J sigma F^{-T}`` of an axisymmetric law at ``F`` (m, 2, 2) and the hoop stretch
+        ``hoop`` (m,): its (r, z) block (m, 2, 2) and its hoop component ``P_tt`` (m,)."""
+        F3 = as_3d(np.asarray(F, dtype=float), hoop)
+        P = nominal_stress(self.stress(F, points, hoop), F3)
+        return P[:, :2, :2], P[:, 2, 2]
 
     def tangent(self, F: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
         """The stiffest twin's elastic tangent (for the stable-step bound), scaled up by
         ``(c / c_twin)^2`` where the points' current wave speed ``c`` has passed the twin's
         (extreme compaction), so that a re-bound sees it."""
+        F = np.asarray(F, dtype=float)
         if self.twins is None:
             scale = max(1.0, (self.points_wave_speed() / self.twin.wave_speed()) ** 2)
-            return scale * self.twin.tangent(F, points)
-        F = np.asarray(F, dtype=float)
+            return scale * elastic_tangent(self.twin, len(F))
         d = self.gdim
         out = np.zeros((len(F), d, d, d, d))
         scale = self._zone_ratios() ** 2
         for k, twin in enumerate(self.twins):
             idx = np.flatnonzero(self.zones == k)
             if idx.size:
-                out[idx] = scale[k] * twin.tangent(F[idx])
+                out[idx] = scale[k] * elastic_tangent(twin, idx.size)
         return out
 
     def _zone_ratios(self) -> np.ndarray:
@@ -501,6 +533,8 @@ class PointFESide:
         n_owned = msh.topology.index_map(msh.topology.dim).size_local
         owned = np.arange(n_owned) if cells is None else np.flatnonzero(cells[:n_owned])
         q = cell_quadrature(msh, degree, owned.astype(np.int32))
+        if law.plane == "axisymmetric":  # 2 pi R w (the hoop terms: InternalForces)
+            q = revolved(q)
         table = tabulate_in_cells(V, q.points, q.cells, derivatives=1)
         w = q.weights if weight_at is None else q.weights * weight_at(q)
         law.attach(q.points, q.cells)

@@ -50,6 +50,7 @@ import scipy.sparse as sp
 from ..approx.tables import Approximation, ShapeTable, check_current
 from ..parallel import raise_on_all_ranks
 from .assembly_kernel import GradientForm, resolve_backend
+from .axisymmetry import hoop_operator
 from .constitutive import Material
 
 if TYPE_CHECKING:  # annotations only
@@ -153,6 +154,11 @@ class InternalForces:
                 f"test_gradients give an operator of shape {self._Gt.shape}, the table "
                 f"{self._G.shape}"
             )
+        #: An axisymmetric material (``plane="axisymmetric"``): the hoop terms join (``weights``
+        #: must then be revolved, ``2 pi R w``; :meth:`_hoop_force`, :meth:`_hoop_tangent`).
+        self.axisymmetric = getattr(material, "plane", None) == "axisymmetric"
+        if self.axisymmetric:
+            self._H = hoop_operator(table.values, table.points)  # u_r / R at every point
         m, d2 = table.shape[0], self.gdim**2
         base = d2 * np.arange(m)[:, None, None]
         r = np.arange(d2)
@@ -194,8 +200,19 @@ class InternalForces:
     def internal_force(self, u: npt.ArrayLike) -> np.ndarray:
         """``f_int = sum_q B0(F_q)^T P(F_q) w_q`` (d n,), interleaved (eq. 34)."""
         F = self.deformation_gradient(u)
+        if self.axisymmetric:
+            return self._hoop_force(F, self._vector(u))
         P = self._call(lambda: self.material.first_piola(F, self.table.points))
         return self._Gt.T @ (self.weights[:, None, None] * P).ravel()
+
+    def _hoop_force(self, F: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """The axisymmetric internal force: ``sum_q (B0^T P + N_I P_tt / R e_r) 2 pi R w_q``
+        with the hoop stretch ``F_tt = 1 + u_r / R`` (Zienkiewicz & Taylor, vol. 1, ch. 5, at
+        finite strain in the total-Lagrangian frame)."""
+        hoop = 1.0 + self._H @ u
+        P, P_tt = self._call(lambda: self.material.axisymmetric_piola(F, self.table.points, hoop))
+        w = self.weights
+        return self._Gt.T @ (w[:, None, None] * P).ravel() + self._H.T @ (w * P_tt)
 
     def tangent(self, u: npt.ArrayLike, backend: str | None = None) -> sp.csr_matrix:
         """Consistent tangent ``K_T = d f_int/du = sum_q G_test^T A(F_q) G w_q`` (CSR, dn x dn).
@@ -216,7 +233,21 @@ class InternalForces:
         blocks = self.weights[:, None, None] * A.reshape(-1, d2, d2)
         n = blocks.shape[0] * d2
         M = sp.csr_matrix((blocks.ravel(), (self._blk_rows, self._blk_cols)), shape=(n, n))
-        return (self._Gt.T @ M @ self._G).tocsr()
+        K = (self._Gt.T @ M @ self._G).tocsr()
+        return K + self._hoop_tangent(A) if self.axisymmetric else K
+
+    def _hoop_tangent(self, A: np.ndarray) -> sp.csr_matrix:
+        """The hoop rows and columns of an isotropic tangent ``A`` (m, 2, 2, 2, 2) at ``F = I``
+        (``lambda = A_rrzz``, ``lambda + 2 mu = A_rrrr``): ``H^T (lambda + 2 mu) H + D_test^T
+        lambda H + H^T lambda D`` with ``D u = du_r/dr + du_z/dz``, weighted by ``w``; what
+        the stable-step bound of a rate-form law needs (its twin's elastic tangent)."""
+        w = self.weights
+        lam, l2m = w * A[:, 0, 0, 1, 1], w * A[:, 0, 0, 0, 0]
+        D, Dt = (op[0::4] + op[3::4] for op in (self._G, self._Gt))
+        H = self._H
+        return (
+            H.T @ sp.diags(l2m) @ H + Dt.T @ sp.diags(lam) @ H + H.T @ sp.diags(lam) @ D
+        ).tocsr()
 
     def strain_energy(self, u: npt.ArrayLike) -> float:
         """Stored energy ``sum_q W(F_q) w_q`` of this rank's points (not summed over ranks)."""

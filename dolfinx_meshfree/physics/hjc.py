@@ -87,8 +87,9 @@ class HolmquistJohnsonCook:
             p_lock, mu_lock: Locking pressure and volumetric strain (``mu_lock = rho_grain / rho
             - 1``, where the voids are gone). D1, D2: Damage constants. K1, K2, K3: The fully dense
             pressure's coefficients. eps0: The reference strain rate of the rate term (1/s in SI).
-            plane: ``None`` (3D) or ``"strain"`` (a 2D model's ``F_zz = 1``); axisymmetric models
-            pass the hoop stretch to :meth:`update`.
+            plane: ``None`` (3D), ``"strain"`` (a 2D model's ``F_zz = 1``) or
+            ``"axisymmetric"`` (the (r, z) section of a solid of revolution: :meth:`update`
+            takes the hoop stretch ``r / R`` as ``F_zz``).
 
     :meth:`concrete_48mpa` gives the published 48 MPa set (SI units).
     """
@@ -155,9 +156,9 @@ class HolmquistJohnsonCook:
         for name in ("A", "B", "C", "D2"):
             if getattr(self, name) < 0:
                 _refuse(name, getattr(self, name), "must be >= 0", "see LS-DYNA MAT_111's ranges")
-        if self.plane not in (None, "strain"):
+        if self.plane not in (None, "strain", "axisymmetric"):
             _refuse(
-                "plane", self.plane, "is not None (3D) or 'strain'",
+                "plane", self.plane, "is not None (3D), 'strain' or 'axisymmetric'",
                 "plane stress has no out-of-plane strain to give the pressure; use 3D, plane "
                 "strain or an axisymmetric model",
             )  # fmt: skip
@@ -202,7 +203,7 @@ class HolmquistJohnsonCook:
     # ----------------------------------------------------------------- derived constants
     @property
     def gdim(self) -> int:
-        """3, or 2 for ``plane="strain"`` (axisymmetric models are 2D with a hoop stretch)."""
+        """3, or 2 for ``plane="strain"`` and ``"axisymmetric"`` (2D with a hoop stretch)."""
         return 3 if self.plane is None else 2
 
     @property

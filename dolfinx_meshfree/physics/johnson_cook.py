@@ -46,8 +46,8 @@ class JohnsonCook:
     Args:
         rho: Reference density. E, nu: Young's modulus and Poisson's ratio. A, B, n: Initial
             yield stress, hardening modulus and exponent (``0 < n <= 1``). C: Strain-rate
-            coefficient. eps0: Reference strain rate (1/s in SI). plane: ``None`` (3D) or
-            ``"strain"`` (2D; axisymmetric models pass the hoop stretch to :meth:`update`).
+            coefficient. eps0: Reference strain rate (1/s in SI). plane: ``None`` (3D),
+            ``"strain"`` (2D) or ``"axisymmetric"`` (2D; :meth:`update` takes the hoop stretch).
     """
 
     rho: float
@@ -92,15 +92,15 @@ class JohnsonCook:
             refuse("nu", "must lie in (-1, 0.5)", "give a Poisson ratio in range")
         if not (isinstance(self.n, int | float) and 0.0 < self.n <= 1.0):
             refuse("n", "must lie in (0, 1]", "the hardening exponent of Johnson and Cook")
-        if self.plane not in (None, "strain"):
+        if self.plane not in (None, "strain", "axisymmetric"):
             refuse(
-                "plane", "is not None (3D) or 'strain'",
+                "plane", "is not None (3D), 'strain' or 'axisymmetric'",
                 "plane stress has no out-of-plane strain; use 3D, plane strain or axisymmetry",
             )  # fmt: skip
 
     @property
     def gdim(self) -> int:
-        """3, or 2 for ``plane="strain"``."""
+        """3, or 2 for ``plane="strain"`` and ``"axisymmetric"``."""
         return 3 if self.plane is None else 2
 
     @property

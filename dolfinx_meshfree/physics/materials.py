@@ -12,7 +12,17 @@ import ufl
 if TYPE_CHECKING:  # annotations only
     from .constitutive import Material
 
-__all__ = ["DEFAULT_DENSITY", "LinearElastic", "linear_twin", "resolve_density", "ufl_constants"]
+#: ``LinearElastic(plane=AXISYMMETRIC)``: the (r, z) section of a solid of revolution.
+AXISYMMETRIC = "axisymmetric"
+
+__all__ = [
+    "AXISYMMETRIC",
+    "DEFAULT_DENSITY",
+    "LinearElastic",
+    "linear_twin",
+    "resolve_density",
+    "ufl_constants",
+]
 
 #: The density of a law built without ``rho``: enough for statics, which does not use it; explicit
 #: dynamics warns when it runs on it (issue 23, item 4: a steel model in SI units got a time
@@ -47,14 +57,18 @@ def ufl_constants(expr: ufl.core.expr.Expr, *values: float) -> tuple:
 
 @dataclass(frozen=True)
 class LinearElastic:
-    """Isotropic linear elasticity: 2D plane stress or plane strain, or 3D (``plane=None``).
+    """Isotropic linear elasticity: 2D plane stress or plane strain, axisymmetric (r, z), or 3D
+    (``plane=None``).
 
     Args:
         E: Young's modulus (> 0). nu: Poisson's ratio (-1 < nu < 0.5). plane: ``"stress"`` or
-            ``"strain"`` for a 2D mesh, ``None`` for a 3D mesh (the solvers check it against the
-            mesh with :meth:`check_gdim`). rho: Mass density (used by dynamics; > 0);
-            ``None`` (not given): :data:`DEFAULT_DENSITY`, and explicit dynamics warns that
-            the density was not given (it sets the time scale).
+            ``"strain"`` for a 2D mesh, ``"axisymmetric"`` for a 2D mesh in the (r, z)
+            half-plane ``x[0] = r >= 0`` (a solid of revolution: the hoop strain ``u_r / r`` and
+            ``2 pi r`` weights, :mod:`~dolfinx_meshfree.physics.axisymmetry`; the paths that
+            take it say so, every other one refuses it by name), ``None`` for a 3D mesh (the
+            solvers check it against the mesh with :meth:`check_gdim`). rho: Mass density
+            (used by dynamics; > 0); ``None`` (not given): :data:`DEFAULT_DENSITY`, and
+            explicit dynamics warns that the density was not given (it sets the time scale).
 
     Attributes:
         density_given: Whether ``rho`` was given (``False``: the default was taken).
@@ -71,17 +85,53 @@ class LinearElastic:
             raise ValueError(f"E={self.E} must be a positive number")
         if not (np.isfinite(self.nu) and -1.0 < self.nu < 0.5):
             raise ValueError(f"nu={self.nu} must lie in (-1, 0.5)")
-        if self.plane not in ("stress", "strain", None):
+        if self.plane not in ("stress", "strain", AXISYMMETRIC, None):
             raise ValueError(
-                f"plane={self.plane!r} must be 'stress' or 'strain' (2D), or None (3D)"
+                f"plane={self.plane!r} must be 'stress', 'strain' or 'axisymmetric' (2D), or "
+                "None (3D)"
             )
         if not (np.isfinite(self.rho) and self.rho > 0):
             raise ValueError(f"rho={self.rho} must be positive (a zero or negative density)")
 
     @property
     def gdim(self) -> int:
-        """Dimension of the law, 2 with ``plane="stress"|"strain"``, 3 with ``plane=None``."""
+        """Dimension of the law's mesh: 2 with ``plane="stress"|"strain"|"axisymmetric"``, 3
+        with ``plane=None``."""
         return 3 if self.plane is None else 2
+
+    @property
+    def axisymmetric(self) -> bool:
+        """Whether the law is the (r, z) section of a solid of revolution."""
+        return self.plane == AXISYMMETRIC
+
+    def refuse_axisymmetric(self, what: str) -> None:
+        """Raise a ValueError naming ``what`` if the law is axisymmetric: the plane operators
+        (:meth:`voigt`, :meth:`stress`, :meth:`ufl_stress` and the finite-strain protocol) have
+        no hoop strain and no ``2 pi r`` weight, so a path built on them would silently solve
+        plane strain."""
+        if self.axisymmetric:
+            raise ValueError(
+                f"material plane='axisymmetric': {what} has no hoop strain u_r / r and no "
+                "2 pi r weights (it would solve plane strain). Axisymmetric models run in "
+                "EFGElasticity, ExplicitDynamics.fe and ExplicitDynamics.efg (linear), and FE "
+                "forms written with dolfinx_meshfree.physics.axisymmetry (ufl_stress, "
+                "ufl_strain, radius); elsewhere use plane='strain' or a 3D model"
+            )
+
+    def axisymmetric_voigt(self) -> np.ndarray:
+        """The (4 x 4) material matrix of an axisymmetric law: ``[s_rr, s_zz, s_rz, s_tt] = D
+        [e_rr, e_zz, gamma_rz, e_tt]`` (the plane Voigt order, then the hoop component; 3D
+        Lamé constants)."""
+        if not self.axisymmetric:
+            raise ValueError(
+                f"axisymmetric_voigt needs plane='axisymmetric', got plane={self.plane!r}"
+            )
+        lam, mu = self.lmbda, self.mu
+        D = np.zeros((4, 4))
+        D[np.ix_([0, 1, 3], [0, 1, 3])] = lam
+        D[[0, 1, 3], [0, 1, 3]] = lam + 2.0 * mu
+        D[2, 2] = mu
+        return D
 
     def check_gdim(self, gdim: int, where: str = "the mesh") -> None:
         """Raise a ValueError unless the law fits a geometric dimension ``gdim`` (local)."""
@@ -118,6 +168,7 @@ class LinearElastic:
         gamma_xy]`` with ``gamma_ij = 2 e_ij`` (the order of
         :func:`~dolfinx_meshfree.approx.tables.voigt_pairs` and of the strain operator).
         """
+        self.refuse_axisymmetric("voigt() (the plane 3 x 3 matrix)")
         lam, mu = self.lmbda, self.mu
         d = self.gdim
         nv = d * (d + 1) // 2
@@ -129,6 +180,7 @@ class LinearElastic:
 
     def stress(self, grad_u: np.ndarray) -> np.ndarray:
         """Cauchy stress (..., d, d) from displacement gradients (..., d, d), d = ``gdim``."""
+        self.refuse_axisymmetric("stress(grad_u)")
         d = self.gdim
         if grad_u.shape[-2:] != (d, d):
             raise ValueError(
@@ -141,6 +193,7 @@ class LinearElastic:
 
     def ufl_stress(self, u: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
         """The same law as a UFL expression, for DOLFINx forms (``u`` of ``gdim`` components)."""
+        self.refuse_axisymmetric("ufl_stress(u)")
         eps = ufl.sym(ufl.grad(u))
         mu, lmbda = ufl_constants(u, self.mu, self.lmbda)
         return 2.0 * mu * eps + lmbda * ufl.tr(eps) * ufl.Identity(self.gdim)
@@ -154,6 +207,7 @@ class LinearElastic:
     # ---------
 
     def _grad_u(self, F: np.ndarray) -> np.ndarray:
+        self.refuse_axisymmetric("the finite-strain protocol (first_piola, tangent)")
         F = np.asarray(F, dtype=float)
         d = self.gdim
         if F.ndim != 3 or F.shape[1:] != (d, d):
@@ -181,6 +235,7 @@ class LinearElastic:
 
     def ufl_first_piola(self, F: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
         """:meth:`ufl_stress` of the displacement gradient ``F - I`` in UFL."""
+        self.refuse_axisymmetric("ufl_first_piola(F)")
         eps = ufl.sym(F - ufl.Identity(self.gdim))
         mu, lmbda = ufl_constants(F, self.mu, self.lmbda)
         return 2.0 * mu * eps + lmbda * ufl.tr(eps) * ufl.Identity(self.gdim)

@@ -196,6 +196,12 @@ def check_step(
         )
     if not (np.isfinite(dt) and dt > 0):
         raise ValueError(f"{name}: dt={dt!r} must be a positive time step")
+    if (getattr(law, "plane", None) == "axisymmetric") != (hoop is not None):
+        raise ValueError(
+            f"{name}: plane={law.plane!r} with hoop={'None' if hoop is None else 'given'}: an "
+            "axisymmetric law takes the hoop stretch r / R of every point (hoop=), a plane or "
+            "3D one none"
+        )
     m = len(F)
     for field, k in law.state_fields.items():
         if field not in state or np.shape(state[field]) != (m, k):

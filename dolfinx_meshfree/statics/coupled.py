@@ -46,6 +46,7 @@ from ..geometry.quadrature import particle_quadrature_degree
 from ..geometry.smoothing import STABILISATION, refuse_smoothed, resolve_integration
 from ..geometry.stress_points import check_integration
 from ..parallel import raise_on_all_ranks
+from ..physics import axisymmetry
 from ..physics.body_loads import CallableBodyForce
 from ..physics.cohesive import LinearCohesive
 from ..physics.constitutive import Material
@@ -150,6 +151,39 @@ def coupled_integration(
         nonlinear=not isinstance(material, LinearElastic),
     )
     return integration
+
+
+def _check_plane(law: LinearElastic, msh: dolfinx.mesh.Mesh, coupling: str) -> None:
+    """The law's dimension against the mesh's; an axisymmetric law only with the couplings of
+    :data:`AXISYMMETRIC_COUPLINGS`, on a section in ``r >= 0`` (collective)."""
+    law.check_gdim(msh.geometry.dim, "V's mesh")
+    if coupling not in AXISYMMETRIC_COUPLINGS:
+        law.refuse_axisymmetric(
+            f"CoupledElasticity (coupling={coupling!r}; axisymmetric: "
+            f"{', '.join(AXISYMMETRIC_COUPLINGS)})"
+        )
+    if law.axisymmetric:
+        x = msh.geometry.x
+        raise_on_all_ranks(msh.comm, lambda: axisymmetry.check_half_plane(x, "V's mesh"))
+
+
+def _material_form(
+    law: LinearElastic, V: dolfinx.fem.FunctionSpace, weight: ufl.core.expr.Expr
+) -> ufl.Form:
+    """``weight inner(sigma(u), eps(v)) dx`` of ``law`` (axisymmetric: the hoop strain and
+    ``2 pi r``)."""
+    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+    dx = ufl.Measure("dx", domain=V.mesh)
+    if law.axisymmetric:
+        stress, strain = axisymmetry.ufl_stress(u, law), axisymmetry.ufl_strain(v)
+        return weight * axisymmetry.measure(V.mesh) * ufl.inner(stress, strain) * dx
+    return weight * ufl.inner(law.ufl_stress(u), ufl.sym(ufl.grad(v))) * dx
+
+
+#: The couplings of an axisymmetric (r, z) model (``plane="axisymmetric"``): their interface,
+#: loads, conditions and masses take the ``2 pi r`` weights
+#: (:mod:`~dolfinx_meshfree.physics.axisymmetry`).
+AXISYMMETRIC_COUPLINGS = ("lagrange",)
 
 
 class CoupledElasticity:
@@ -275,7 +309,7 @@ class CoupledElasticity:
                 f"finite strain (its family has no finite-strain system); use one of "
                 f"{list(FINITE_STRAIN_COUPLINGS)} or material=LinearElastic"
             )
-        linear_twin(material).check_gdim(V.mesh.geometry.dim, "V's mesh")
+        _check_plane(linear_twin(material), V.mesh, coupling)
         if V.mesh is not patch.mesh:
             raise ValueError("V and patch must live on the same mesh object")
         if patch.comm.allreduce(patch.fe_cells.size) == 0:
@@ -454,10 +488,7 @@ class CoupledElasticity:
         user's own measures, subdomain data and metadata are kept.
         """
         if self.form is None:
-            V = self.V
-            u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
-            dx = ufl.Measure("dx", domain=V.mesh)
-            return weight * ufl.inner(self.material.ufl_stress(u), ufl.sym(ufl.grad(v))) * dx
+            return _material_form(self.material, self.V, weight)
         return ufl.Form(
             [itg.reconstruct(integrand=weight * itg.integrand()) for itg in self.form.integrals()]
         )

@@ -69,6 +69,12 @@ from ..geometry.smoothing import (
     value_rule,
 )
 from ..parallel import Layout, raise_on_all_ranks
+from ..physics.axisymmetry import (
+    axisymmetric_gradients,
+    axisymmetric_stiffness,
+    check_half_plane,
+    revolved,
+)
 from ..physics.cohesive import LinearCohesive
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic, linear_twin
@@ -256,6 +262,15 @@ def particle_stiffness(
     t0 = time.perf_counter()
     comm = particles.comm
     gdim = particles.gdim
+    axi = isinstance(material, LinearElastic) and material.axisymmetric
+    if axi:  # the plane paths below would drop the hoop strain: refused by name
+        raise_on_all_ranks(
+            comm,
+            lambda: _check_axisymmetric(
+                boundary_values is not None or boundary_moments,
+                isinstance(quadrature, SmoothingRule) or local_update_for(mls) is not None,
+            ),
+        )
     # after a crack grew: update the previous stiffness locally (statics/growth_update.py)
     local = local_update_for(mls)
     if local is not None and (
@@ -284,6 +299,8 @@ def particle_stiffness(
         q = cell_quadrature(particles.mesh, quadrature_degree, particles.cells)
     else:
         q = quadrature
+    if axi:  # 2 pi r w: every integral below (and the caller's masses and loads) is revolved
+        q = raise_on_all_ranks(comm, lambda: revolved(q))
     if isinstance(q, SmoothingRule):  # smoothed strains: symmetric and consistent as they are
         tq = raise_on_all_ranks(comm, lambda: smoothed_table(mls, q))
         consistent_boundary = None
@@ -297,13 +314,22 @@ def particle_stiffness(
         else:
             bq = boundary_quadrature
         sides = getattr(bq, "sides", None)
+        if axi:  # the boundary terms on the revolved surface (a projection of normals too)
+            bq = raise_on_all_ranks(comm, lambda b=bq: revolved(b))
         tb = raise_on_all_ranks(comm, lambda: mls.tabulate(bq.points, derivatives=0, sides=sides))
         bvalues = tb.values if boundary_values is None else boundary_values(bq, tb.values)
         normals = bq.normals if boundary_normals is None else boundary_normals(bq)
         moments = boundary_moments and boundary_values is not None
+        vci = consistent_gradients
+        if axi:
+
+            def vci(*args: object) -> list[sp.csr_matrix]:  # the arguments below, revolved
+                values, grads, weights, *boundary = args
+                return axisymmetric_gradients(values, grads, q.points, weights, *boundary)
+
         test_grads = raise_on_all_ranks(
             comm,
-            lambda: consistent_gradients(
+            lambda: vci(
                 tq.values,
                 tq.gradients,
                 q.weights,
@@ -326,6 +352,11 @@ def particle_stiffness(
     if isinstance(q, SmoothingRule):  # symmetric
         rows, weights = raise_on_all_ranks(comm, lambda: stiffness_rows(mls, q, tq))
         Kg = stiffness_matrix(rows, weights, material, None, particles.petsc_index)
+    elif axi:
+        Kg = axisymmetric_stiffness(
+            test_grads, tq.values, q.points, q.weights, material, tq.gradients,
+            particles.petsc_index,
+        )  # fmt: skip
     else:
         Kg = stiffness_matrix(test_grads, q.weights, material, tq.gradients, particles.petsc_index)
     timings = {"setup": t1 - t0, "assemble": time.perf_counter() - t1}
@@ -336,6 +367,36 @@ def particle_stiffness(
             normals if cb else None, test_grads, Kg, comm,
         )  # fmt: skip
     return Kg, q, tq, timings
+
+
+def _check_axisymmetric_model(
+    particles: ParticleSet, integration: str, cracks: Sequence, quadrature: object
+) -> None:
+    """Refuse what :class:`EFGElasticity` does not revolve, and a section outside r >= 0."""
+    if cracks or quadrature is not None or integration not in ("vci", "gauss"):
+        raise ValueError(
+            f"material plane='axisymmetric' with integration={integration!r}, "
+            f"{len(cracks)} crack(s), quadrature={quadrature!r}: an axisymmetric model takes "
+            "integration='vci' (the default) or 'gauss', without cracks or an adaptive "
+            "quadrature"
+        )
+    check_half_plane(particles.mesh.geometry.x[:, :2], "the particles' mesh")
+    check_half_plane(particles.positions, "the particles")
+
+
+def _check_axisymmetric(interface_terms: bool, rule: bool) -> None:
+    """Refuse what :func:`particle_stiffness` does not revolve (local)."""
+    if interface_terms:
+        raise ValueError(
+            "material plane='axisymmetric': the edge-to-edge interface terms in consistent "
+            "integration (the particles' interpolant on the interface) are plane; use "
+            "coupling='lagrange' or pure EFG, or plane='strain'"
+        )
+    if rule:
+        raise ValueError(
+            "material plane='axisymmetric' takes the cells' Gauss rule (integration='vci' or "
+            "'gauss', no cracks): smoothed strains and a crack's local updates are plane"
+        )
 
 
 def crack_rules(
@@ -559,7 +620,13 @@ class EFGElasticity:
         particles: Particles with a background mesh (``particles.mesh``); its cells
             (``particles.cells``, default all owned cells) are the integration cells.
         material: :class:`~dolfinx_meshfree.LinearElastic` of the mesh's dimension
-            (``plane="stress"|"strain"`` in 2D, ``plane=None`` in 3D).
+            (``plane="stress"|"strain"`` in 2D, ``plane=None`` in 3D), or
+            ``plane="axisymmetric"``: the mesh is the (r, z) section (``x[0] = r >= 0``) of a
+            solid of revolution (:mod:`~dolfinx_meshfree.physics.axisymmetry`: hoop strain,
+            ``2 pi r`` weights in the stiffness, VCI, tractions and body loads; VCI or Gauss, no
+            cracks; a mesh touching the axis needs its radial component held there,
+            ``add_dirichlet(axis_facets, zero, components=(0,))``; the Dirichlet multipliers are the
+            reaction tractions).
         weight, dilation, basis: MLS options (see :class:`~dolfinx_meshfree.MLS`).
         quadrature_degree: Degree of the cell Gauss rule (7: 4 x 4 points on quadrilaterals,
             4 x 4 x 4 on hexahedra). ``None`` (default): the lowest odd degree from 7 with 15
@@ -627,6 +694,11 @@ class EFGElasticity:
                 f"{type(material).__name__}"
             )
         linear_twin(material).check_gdim(particles.mesh.geometry.dim, "the particles' mesh")
+        if isinstance(material, LinearElastic) and material.axisymmetric:
+            raise_on_all_ranks(
+                particles.comm,
+                lambda: _check_axisymmetric_model(particles, integration, cracks, quadrature),
+            )
         quadrature_degree = particle_quadrature_degree(
             particles.mesh, particles.integration_cells(), particles.positions,
             quadrature_degree, bool(cracks),
@@ -760,6 +832,8 @@ class EFGElasticity:
             quadrature=q, boundary_quadrature=bq,
         )  # fmt: skip
         dq = [fq(c[0]) for c in self._dirichlet]
+        if self.linear_material.axisymmetric:  # multipliers = reaction tractions
+            dq = [raise_on_all_ranks(comm, lambda d=d: revolved(d, constraint=True)) for d in dq]
         num_facets = (
             comm.allreduce(
                 sum(
@@ -780,6 +854,8 @@ class EFGElasticity:
         check_multiplier_facets(P, dq, "Dirichlet conditions on particle facets")
         dtabs = [raise_on_all_ranks(comm, lambda d=d: self.mls.tabulate(d.points, 0)) for d in dq]
         tq_loads = [fq(f) for f, _ in self._tractions]
+        if self.linear_material.axisymmetric:  # tractions on the revolved surface
+            tq_loads = [raise_on_all_ranks(comm, lambda d=d: revolved(d)) for d in tq_loads]
         ttabs = [
             raise_on_all_ranks(comm, lambda d=d: self.mls.tabulate(d.points, 0)) for d in tq_loads
         ]

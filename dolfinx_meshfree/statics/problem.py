@@ -292,6 +292,13 @@ def _check_arguments(a, L, bcs, patch, material, coupling, options):
         )
     if coupling not in COUPLINGS:
         raise ValueError(f"coupling={coupling!r} is not available; choose one of {list(COUPLINGS)}")
+    if getattr(material, "plane", None) == "axisymmetric":
+        raise ValueError(
+            "material plane='axisymmetric': CoupledLinearProblem splits the user's forms into "
+            "loads and conditions per side, and a form that carries its own 2 pi r weight is not "
+            "split yet; build mf.CoupledElasticity(V, patch, material, coupling='lagrange') with "
+            "add_dirichlet / add_traction / set_body_force instead"
+        )
     for name, form, rank in (("a", a, 2), ("L", L, 1)):
         if not isinstance(form, ufl.Form):
             raise TypeError(f"{name} must be a UFL form, got {type(form).__name__}")

@@ -76,6 +76,7 @@ from .physics.zones import MaterialZones
 from .statics.cohesive_growth import CohesiveGrowth, initiation_direction
 from .statics.cohesive_initiation import BulkStrengthWarning, InitiationSite, initiation_site
 from .statics.coupled import (
+    AXISYMMETRIC_COUPLINGS,
     COMPONENT_COUPLINGS,
     COUPLINGS,
     CRACK_COUPLINGS,
@@ -108,6 +109,7 @@ from .verification.errors import error_norms
 from .verification.waves import GaussianPulseRod, StepLoadedRod
 
 __all__ = [
+    "AXISYMMETRIC_COUPLINGS",
     "COMPONENT_COUPLINGS",
     "COUPLINGS",
     "CRACK_COUPLINGS",

@@ -93,9 +93,9 @@ def test_lame_cylinder_converges(method):
 @pytest.mark.parametrize("method", ["fe", "efg", "lagrange"])
 def test_breathing_modes_against_bessel(shape, method):
     """The radial mode of a solid cylinder and the breathing mode of a sphere over two periods:
-    the error at 16 cells and the rate from 8 (measured: cylinder FE 6.5e-3 / 2.09, EFG 5.5e-3 /
-    1.97, lagrange 9.7e-4 / 1.43 (its probe on the interface); sphere FE 1.24e-2 / 1.86, EFG
-    1.61e-2 / 2.03, lagrange 4.4e-3 / 1.80), the discrete energy kept to round-off (1e-15)."""
+    the error at 16 cells and the rate from 8 (measured: cylinder FE 6.5e-3 / 2.09, EFG 2.6e-3 /
+    1.85, lagrange 3.3e-3 / 1.71 (its probe on the interface); sphere FE 1.24e-2 / 1.86, EFG
+    1.43e-2 / 1.50, lagrange 4.5e-3 / 2.00), the discrete energy kept to round-off (1e-15)."""
     coarse, fine = (demo.breathing(shape, method, n) for n in (8, 16))
     margin, (lo, hi) = demo.TARGETS[(shape, method)]
     assert fine["error"] < margin
@@ -112,8 +112,8 @@ def test_breathing_modes_against_bessel(shape, method):
 def test_lagrange_patch_test_is_exact(cell, where):
     """The lagrange coupling in axisymmetry (revolved interface multipliers, their projected
     normals in VCI, revolved loads and conditions): ``u = (a r, b z)`` to round-off with a patch
-    on the axis (quadrilaterals) and one inside the section (triangles): 2e-15 and 3e-15
-    measured, 6e-15 on 2 ranks."""
+    on the axis (quadrilaterals) and one inside the section (triangles): 1.2e-14 and 7.7e-15
+    measured."""
     msh = section(0.0, 1.0, 2.0, 6, 12, cell)
     a, b = 1e-3, -2e-3
     lam, mu = MATERIAL.lmbda, MATERIAL.mu
@@ -164,9 +164,10 @@ def test_fe_forms_and_weights():
 
 
 def test_refusals():
-    """Every path without the hoop strain refuses an axisymmetric law by name; so does a
-    section outside r >= 0 (named by coordinates), and a negative row-sum mass (named by the
-    particle)."""
+    """Every path without the hoop strain refuses an axisymmetric law by name; so do a
+    section outside r >= 0 (named by coordinates), particles on an axis left free (named by a
+    facet: measured, the radial mode then missed by 22 %) and a negative row-sum mass (named by
+    the particle)."""
     msh = section(0.0, 2.0, 1.0, 8, 4, "quadrilateral")
     V = _compat.vector_function_space(msh, 1)
     cells = dolfinx.mesh.locate_entities(msh, 2, lambda x: x[0] > 0.99)
@@ -191,6 +192,15 @@ def test_refusals():
     steel = mf.LinearElastic(E=1.0, nu=0.3, rho=1.0, plane="axisymmetric")
     with pytest.raises(ValueError, match="particle_mass='volume'"):
         mf.ExplicitDynamics.efg(P, steel, particle_mass="volume")
+    axis_free = r"on the axis r = 0 \(e\.g\. at \[0\.0, [0-9.]+\]\) have particles but"
+    free = mf.EFGElasticity(P, MATERIAL)  # the axis left free: refused at the assembly
+    with pytest.raises(ValueError, match=axis_free):
+        free.solve()
+    with pytest.raises(ValueError, match=axis_free):
+        mf.ExplicitDynamics.efg(P, steel)
+    on_axis = demo.patch_of(msh, lambda x: x[0] < 0.6)
+    with pytest.raises(ValueError, match=axis_free):
+        mf.ExplicitDynamics.coupled(mf.CoupledElasticity(V, on_axis, steel, coupling="lagrange"))
     left = section(-1.0, 1.0, 1.0, 4, 2, "triangle")
     with pytest.raises(ValueError, match=r"the point \[-[0-9.]+, [0-9.]+\] has r = x\[0\] < 0"):
         mf.EFGElasticity(mf.ParticleSet.from_cells(left, spacing=0.25), MATERIAL)
@@ -270,9 +280,84 @@ def test_rods_meet_head_on(method):
     m/s. The force holds ``rho c v0 pi R^2`` for ``2 L / c`` and the faces overlap by about
     ``h rho c v0 / E`` (the penalty's closed form), within the demo's margins (about 2x the
     figures measured at 20 cells). FE's overlap checks the revolved tributary areas: with the
-    plane lengths it was 24 times the closed form and the force +545 % (measured by swapping
+    plane lengths it was 59 times the closed form and the force +1275 % (measured by swapping
     them in)."""
     r = demo.rods(method, 20)
     for key, margin in demo.ROD_MARGINS[method].items():
         assert abs(r[key]) < margin, (key, r[key])
     assert r["parted"]
+
+
+@pytest.mark.parametrize("method, margin", [("fe", 0.012), ("efg", 0.028), ("lagrange", 0.016)])
+def test_concrete_cylinder_elastic_wave(method, margin):
+    """A cylinder of HJC concrete (radius 2 cm, length 10 cm, 20 cells along) on rollers
+    (``u_r = 0`` on its side: uniaxial strain) thrown at a wall at 0.5 m/s: the stress behind
+    the front at ``t = L / 2c`` is the 1D ``-rho c v0`` (measured 0.56 %, 1.4 %, 0.80 % off) and
+    the concrete stays undamaged. The rate-form law with the hoop stretch, in FE, EFG and a
+    lagrange patch on the quarter at the wall."""
+    law = mf.HolmquistJohnsonCook.concrete_48mpa(plane="axisymmetric")
+    length, radius, v0 = 0.1, 0.02, 0.5
+    c = float(np.sqrt((law.K_elastic + 4 * law.G / 3) / law.rho))
+    msh = section(0.0, radius, length, 4, 20, "quadrilateral")
+    wall = demo.facets(msh, lambda x: np.isclose(x[1], 0.0))
+    axis = demo.facets(msh, lambda x: np.isclose(x[0], 0.0))
+    side = demo.facets(msh, lambda x: np.isclose(x[0], radius))
+    fixed = [(wall, (0, 1)), (axis, (0,)), (side, (0,))]
+    if method == "fe":
+        dyn = mf.ExplicitDynamics.fe(_compat.vector_function_space(msh), law, fixed_facets=fixed)
+    elif method == "efg":
+        P = mf.ParticleSet.from_cells(msh, length / 20)
+        dyn = mf.ExplicitDynamics.efg(P, law, fixed_facets=fixed)
+    else:
+        patch = demo.patch_of(msh, lambda x: x[1] < length / 4)
+        masses = mf.LinearElastic(30e9, 0.2, "axisymmetric", rho=law.rho)
+        V = _compat.vector_function_space(msh)
+        problem = mf.CoupledElasticity(V, patch, masses, coupling=method)
+        dyn = mf.ExplicitDynamics.coupled(problem, material=law, fixed_facets=fixed)
+    dyn.set_initial(velocity=lambda x: np.column_stack([0.0 * x[:, 0], np.full(len(x), -v0)]))
+    dyn.run(0.5 * length / c)
+    state = dyn.material
+    behind = state.points[:, 1] < 0.3 * length
+    total = COMM.allreduce(np.array([state.sigma[behind, 1, 1].sum(), behind.sum()]))
+    ratio = total[0] / total[1] / (-law.rho * c * v0)
+    assert abs(ratio - 1.0) < margin
+    assert COMM.allreduce(float(state.state["damage"].max(initial=0.0)), op=MPI.MAX) == 0.0
+
+
+def test_conversions_in_axisymmetry():
+    """Failing FE cells become lagrange particles in an axisymmetric model
+    (``dynamics.AdaptiveRun``): the concrete cylinder at 300 m/s with a free side, one row of
+    particle cells at the wall to start. Every conversion keeps the revolved mass exactly and
+    the momentum to round-off (measured: 6 conversions, mass error 0, momentum correction
+    1.6e-16, the same on 2 ranks), and the balance with the conversions counted closes
+    (measured -1.5e-3)."""
+    law = mf.HolmquistJohnsonCook.concrete_48mpa(plane="axisymmetric")
+    length, radius, v0 = 0.1, 0.02, 300.0
+    msh = section(0.0, radius, length, 4, 20, "quadrilateral")
+    wall = demo.facets(msh, lambda x: np.isclose(x[1], 0.0))
+    axis = demo.facets(msh, lambda x: np.isclose(x[0], 0.0))
+    fixed = [(wall, (0, 1)), (axis, (0,))]
+    masses = mf.LinearElastic(30e9, 0.2, "axisymmetric", rho=law.rho)
+    n = msh.topology.index_map(2).size_local
+    mid = dolfinx.mesh.compute_midpoints(msh, 2, np.arange(n, dtype=np.int32))
+    first_row = np.flatnonzero(mid[:, 1] < length / 20)
+
+    def build(cells=None):
+        patch = mf.ParticlePatch(msh, first_row if cells is None else cells, length / 20)
+        V = _compat.vector_function_space(msh)
+        problem = mf.CoupledElasticity(V, patch, masses, coupling="lagrange")
+        dyn = mf.ExplicitDynamics.coupled(problem, material=law, fixed_facets=fixed)
+        dyn.set_initial(velocity=lambda x: np.column_stack([0.0 * x[:, 0], np.full(len(x), -v0)]))
+        return dyn
+
+    run = mf.dynamics.AdaptiveRun(build, mf.StateAbove("damage", 0.1), check_every=5)
+    dyn = run.run(20e-6)
+    conversions = run.conversions
+    assert len(conversions) >= 3
+    assert max(c.mass_error for c in conversions) < 1e-14
+    assert max(c.momentum_correction for c in conversions) < 1e-12
+    records = dyn.stepper.records
+    changed = sum(c.energy_change for c in conversions)
+    first, last = records[0], records[-1]
+    balance = (last.kinetic + last.internal - changed - first.kinetic) / first.kinetic
+    assert abs(balance) < 3e-3

@@ -191,6 +191,9 @@ def essential_conditions(
     """
     V, comm = problem.V, problem.patch.comm
     msh = V.mesh
+    if problem.material.axisymmetric:  # the particles need the axis held
+        groups = [(f, comps[0] if comps else None) for f, _, *comps in problem.dirichlet]
+        axisymmetry.check_axis_held(msh, groups, problem.patch.in_patch, "CoupledElasticity")
     fe_bc, patch_bc = [], []
     for facets, fn, *components in problem.dirichlet:  # components: patch facets only
         f_fe, f_p = split_facets(problem, facets)

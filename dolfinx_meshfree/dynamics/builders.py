@@ -463,6 +463,8 @@ def build_efg(
     t0 = time.perf_counter()
     comm = particles.comm
     groups = fixed_groups(particles.mesh, fixed_facets)
+    if _axisymmetric(material):
+        axisymmetry.check_axis_held(particles.mesh, groups, None, "ExplicitDynamics.efg")
     mls = raise_on_all_ranks(
         comm, lambda: MLS(particles, weight=weight, dilation=dilation, basis=basis)
     )
@@ -662,6 +664,8 @@ def build_coupled(
     V, patch, mls = problem.V, problem.patch, problem.mls
     P, comm, msh = patch.particles, patch.comm, V.mesh
     held = fixed_groups(msh, fixed_facets)
+    if _axisymmetric(material):
+        axisymmetry.check_axis_held(msh, held, patch.in_patch, "ExplicitDynamics.coupled")
     if _axisymmetric(material) and particle_mass != "row-sum":  # the same on every rank
         raise ValueError(
             f"particle_mass={particle_mass!r}: an axisymmetric model takes particle_mass="

@@ -50,7 +50,7 @@ import scipy.sparse as sp
 from ..approx.tables import Approximation, ShapeTable, check_current
 from ..parallel import raise_on_all_ranks
 from .assembly_kernel import GradientForm, resolve_backend
-from .axisymmetry import hoop_operator
+from .axisymmetry import hoop_operator, hoop_table
 from .constitutive import Material
 
 if TYPE_CHECKING:  # annotations only
@@ -103,6 +103,8 @@ class InternalForces:
         approximation: The approximation that tabulated ``table`` (an MLS or SPH): every call
             checks that it has not changed since (its ``version``), and raises
             :class:`~dolfinx_meshfree.approx.tables.StaleTableError` if it has.
+        hoop: An axisymmetric material's hoop table (m x n,
+            :func:`~dolfinx_meshfree.physics.axisymmetry.hoop_table`); default ``N / R``.
 
     All results are this rank's contributions (the quadrature points it was given), unassembled
     across ranks, in the table's column numbering.
@@ -116,6 +118,7 @@ class InternalForces:
         test_gradients: Sequence[sp.spmatrix] | None = None,
         comm: MPI.Comm | None = None,
         approximation: Approximation | None = None,
+        hoop: sp.csr_matrix | None = None,
     ) -> None:
         def check() -> np.ndarray:
             if not isinstance(material, Material):
@@ -157,8 +160,9 @@ class InternalForces:
         #: An axisymmetric material (``plane="axisymmetric"``): the hoop terms join (``weights``
         #: must then be revolved, ``2 pi R w``; :meth:`_hoop_force`, :meth:`_hoop_tangent`).
         self.axisymmetric = getattr(material, "plane", None) == "axisymmetric"
-        if self.axisymmetric:
-            self._H = hoop_operator(table.values, table.points)  # u_r / R at every point
+        if self.axisymmetric:  # u_r / R at every point (or its limit: ``hoop``)
+            table_hoop = hoop_table(table.values, table.points) if hoop is None else hoop
+            self._H = hoop_operator(table_hoop)
         m, d2 = table.shape[0], self.gdim**2
         base = d2 * np.arange(m)[:, None, None]
         r = np.arange(d2)

@@ -63,6 +63,7 @@ from .newton import NewtonOptions
 from .petsc import SolverOptions, solver_options
 
 __all__ = [
+    "AXISYMMETRIC_COUPLINGS",
     "COMPONENT_COUPLINGS",
     "COUPLINGS",
     "CRACK_COUPLINGS",

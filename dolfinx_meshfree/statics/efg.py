@@ -70,9 +70,13 @@ from ..geometry.smoothing import (
 )
 from ..parallel import Layout, raise_on_all_ranks
 from ..physics.axisymmetry import (
+    axis_points,
+    axis_projections,
     axisymmetric_gradients,
     axisymmetric_stiffness,
+    check_axis_held,
     check_half_plane,
+    hoop_table,
     revolved,
 )
 from ..physics.cohesive import LinearCohesive
@@ -307,6 +311,16 @@ def particle_stiffness(
     else:
         tq = raise_on_all_ranks(comm, lambda: mls.tabulate(q.points))
     test_grads = tq.gradients
+    hoop = None  # axisymmetric: u_r / r, the axis offset taken off in its cells (hoop_table)
+    if axi:
+        near = axis_points(particles.mesh, q.cells)
+        on_axis = raise_on_all_ranks(
+            comm, lambda: mls.tabulate(axis_projections(q.points[near]), derivatives=0)
+        ).values
+        axis_values = sp.csr_matrix((len(q), on_axis.shape[1]))
+        if near.any():
+            axis_values = (sp.eye(len(q), format="csr")[:, np.flatnonzero(near)] @ on_axis).tocsr()
+        hoop = raise_on_all_ranks(comm, lambda: hoop_table(tq.values, q.points, axis_values, near))
     if consistent_boundary is not None:
         facets, cells = consistent_boundary
         if boundary_quadrature is None:
@@ -325,7 +339,7 @@ def particle_stiffness(
 
             def vci(*args: object) -> list[sp.csr_matrix]:  # the arguments below, revolved
                 values, grads, weights, *boundary = args
-                return axisymmetric_gradients(values, grads, q.points, weights, *boundary)
+                return axisymmetric_gradients(values, grads, hoop, weights, *boundary)
 
         test_grads = raise_on_all_ranks(
             comm,
@@ -348,15 +362,16 @@ def particle_stiffness(
             test_grads = [(g + c).tocsr() for g, c in zip(test_grads, extra, strict=True)]
     if tables is not None:
         tables.update(quadrature=q, table=tq, test_gradients=test_grads, approximation=mls)
+        if hoop is not None:
+            tables["hoop"] = hoop
     t1 = time.perf_counter()
     if isinstance(q, SmoothingRule):  # symmetric
         rows, weights = raise_on_all_ranks(comm, lambda: stiffness_rows(mls, q, tq))
         Kg = stiffness_matrix(rows, weights, material, None, particles.petsc_index)
     elif axi:
         Kg = axisymmetric_stiffness(
-            test_grads, tq.values, q.points, q.weights, material, tq.gradients,
-            particles.petsc_index,
-        )  # fmt: skip
+            test_grads, hoop, q.weights, material, tq.gradients, particles.petsc_index
+        )
     else:
         Kg = stiffness_matrix(test_grads, q.weights, material, tq.gradients, particles.petsc_index)
     timings = {"setup": t1 - t0, "assemble": time.perf_counter() - t1}
@@ -831,6 +846,9 @@ class EFGElasticity:
             P, self.mls, self.linear_material, deg, boundary, tables=tables,
             quadrature=q, boundary_quadrature=bq,
         )  # fmt: skip
+        if self.linear_material.axisymmetric:  # the particles need the axis held
+            groups = [(f, comps) for f, _, comps in self._dirichlet]
+            check_axis_held(self.mesh, groups, None, "EFGElasticity")
         dq = [fq(c[0]) for c in self._dirichlet]
         if self.linear_material.axisymmetric:  # multipliers = reaction tractions
             dq = [raise_on_all_ranks(comm, lambda d=d: revolved(d, constraint=True)) for d in dq]

@@ -298,6 +298,7 @@ class ParticleSide:
             test_gradients=tables["test_gradients"],
             comm=particles.comm,
             approximation=tables.get("approximation"),
+            hoop=tables.get("hoop"),
         )
         self.gdim = particles.gdim
         self.dof_map = particles.petsc_dofs(self.gdim).ravel()

@@ -180,8 +180,8 @@ def test_refusals():
     u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
     a = ufl.inner(axisymmetry.ufl_stress(u, MATERIAL), axisymmetry.ufl_strain(v)) * ufl.dx
     L = ufl.inner(dolfinx.fem.Constant(msh, np.zeros(2)), v) * ufl.dx
-    with pytest.raises(ValueError, match="CoupledLinearProblem splits"):
-        mf.CoupledLinearProblem(a, L, [], patch, MATERIAL, coupling="lagrange")
+    with pytest.raises(ValueError, match="coupling='bridging'; axisymmetric: lagrange"):
+        mf.CoupledLinearProblem(a, L, [], patch, MATERIAL, coupling="bridging")
     with pytest.raises(ValueError, match="HybridElasticity"):
         mf.HybridElasticity(V, patch, MATERIAL)
     with pytest.raises(ValueError, match="ufl_stress"):
@@ -361,3 +361,55 @@ def test_conversions_in_axisymmetry():
     first, last = records[0], records[-1]
     balance = (last.kinetic + last.internal - changed - first.kinetic) / first.kinetic
     assert abs(balance) < 3e-3
+
+
+def test_user_forms_with_a_patch():
+    """A user's own axisymmetric model (``a`` and ``L`` written with ``2 pi r dx`` and
+    ``2 pi r ds``, ``DirichletBC`` on ``V.sub(i)``) gets a lagrange patch through
+    ``CoupledLinearProblem``: the patch test ``u = (a r, b z)`` holds to round-off (the
+    tractions' ``2 pi r`` is not counted twice), and a body force written in ``L`` gives the
+    displacement of ``CoupledElasticity.set_body_force`` with the same load to round-off (the
+    two load paths are independent: the form's integrand evaluated by DOLFINx against a
+    callable). Measured 6.3e-15 and 2.0e-15 (1.2e-14 and 2.6e-15 on 2 ranks)."""
+    msh = section(0.0, 1.0, 2.0, 6, 12, "triangle")
+    a_, b_ = 1e-3, -2e-3
+    lam, mu = MATERIAL.lmbda, MATERIAL.mu
+    srr, szz = lam * (2 * a_ + b_) + 2 * mu * a_, lam * (2 * a_ + b_) + 2 * mu * b_
+    V = _compat.vector_function_space(msh, 1)
+    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+    rev, dx = axisymmetry.measure(msh), ufl.dx(domain=msh)
+    a = ufl.inner(axisymmetry.ufl_stress(u, MATERIAL), axisymmetry.ufl_strain(v)) * rev * dx
+    outer = demo.facets(msh, lambda x: np.isclose(x[0], 1.0))
+    top = demo.facets(msh, lambda x: np.isclose(x[1], 2.0))
+    facets = np.concatenate([outer, top])
+    order = np.argsort(facets)
+    marks = np.concatenate([np.full(outer.size, 1), np.full(top.size, 2)]).astype(np.int32)
+    tags = dolfinx.mesh.meshtags(msh, 1, facets[order], marks[order])
+    ds = ufl.Measure("ds", domain=msh, subdomain_data=tags)
+    t_outer = dolfinx.fem.Constant(msh, np.array([srr, 0.0]))
+    t_top = dolfinx.fem.Constant(msh, np.array([0.0, szz]))
+    L = ufl.dot(t_outer, v) * rev * ds(1) + ufl.dot(t_top, v) * rev * ds(2)
+    bcs = []
+    for comp, marker in (
+        (0, lambda x: np.isclose(x[0], 0.0)),
+        (1, lambda x: np.isclose(x[1], 0.0)),
+    ):
+        Vi = V.sub(comp)
+        dofs = dolfinx.fem.locate_dofs_topological(Vi, 1, demo.facets(msh, marker))
+        bcs.append(dolfinx.fem.dirichletbc(np.float64(0.0), dofs, Vi))
+    patch = demo.patch_of(msh, lambda x: (x[0] < 0.67) & (x[1] > 0.6) & (x[1] < 1.4))
+    x = np.random.default_rng(2).uniform([0, 0], [1, 2], (200, 2))
+    u_h = mf.CoupledLinearProblem(a, L, bcs, patch, MATERIAL).solve().displacement(x)
+    exact = np.column_stack([a_ * x[:, 0], b_ * x[:, 1]])
+    assert np.abs(u_h - exact).max() < 5e-14 * abs(2 * b_)
+    # a body force in L against the same force given as a callable
+    force = np.array([3.0, -2.0])
+    f = dolfinx.fem.Constant(msh, force)
+    forms = mf.CoupledLinearProblem(a, ufl.dot(f, v) * rev * dx, bcs, patch, MATERIAL).solve()
+    model = mf.CoupledElasticity(V, patch, MATERIAL, coupling="lagrange")
+    zero = lambda y: np.zeros_like(y)  # noqa: E731
+    model.add_dirichlet(demo.facets(msh, lambda y: np.isclose(y[0], 0.0)), zero, components=(0,))
+    model.add_dirichlet(demo.facets(msh, lambda y: np.isclose(y[1], 0.0)), zero, components=(1,))
+    model.set_body_force(lambda y: np.tile(force, (len(y), 1)))
+    u_f, u_c = forms.displacement(x), model.solve().displacement(x)
+    assert np.abs(u_f - u_c).max() < 1e-10 * np.abs(u_c).max()

@@ -75,6 +75,7 @@ __all__ = [
     "CouplingOperators",
     "check_angle_and_band",
     "coupled_integration",
+    "material_stiffness_form",
 ]
 
 VectorFunction = Callable[[np.ndarray], np.ndarray]
@@ -168,11 +169,12 @@ def _check_plane(law: LinearElastic, msh: dolfinx.mesh.Mesh, coupling: str) -> N
         raise_on_all_ranks(msh.comm, lambda: axisymmetry.check_half_plane(x, "V's mesh"))
 
 
-def _material_form(
+def material_stiffness_form(
     law: LinearElastic, V: dolfinx.fem.FunctionSpace, weight: ufl.core.expr.Expr
 ) -> ufl.Form:
-    """``weight inner(sigma(u), eps(v)) dx`` of ``law`` (axisymmetric: the hoop strain and
-    ``2 pi r``)."""
+    """``weight inner(sigma(u), eps(v)) dx`` of ``law`` on ``V`` (axisymmetric: the hoop strain
+    and ``2 pi r``): the FE form of :meth:`CoupledElasticity.fe_form`, and what
+    :class:`~dolfinx_meshfree.CoupledLinearProblem` compares the user's form with."""
     u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
     dx = ufl.Measure("dx", domain=V.mesh)
     if law.axisymmetric:
@@ -489,7 +491,7 @@ class CoupledElasticity:
         user's own measures, subdomain data and metadata are kept.
         """
         if self.form is None:
-            return _material_form(self.material, self.V, weight)
+            return material_stiffness_form(self.material, self.V, weight)
         return ufl.Form(
             [itg.reconstruct(integrand=weight * itg.integrand()) for itg in self.form.integrals()]
         )

@@ -25,9 +25,13 @@ coupled system (:class:`~dolfinx_meshfree.CoupledElasticity`):
   with the bc's P1 interpolant as the prescribed value (Lagrange multipliers, as in
   :func:`~dolfinx_meshfree.statics.efg.facet_multipliers`).
 
+An axisymmetric ``material`` (``plane="axisymmetric"``, coupling ``lagrange``) takes forms that
+carry their own ``2 pi r`` (:mod:`~dolfinx_meshfree.physics.axisymmetry`): the loads taken from
+``L`` are divided by it at their points, since the particle rules are revolved already.
+
 Not supported (each raises a ``ValueError`` naming the fix): non-cell integrals in ``a``, interior
-facet integrals in ``L``, derivatives of the test function in ``L``, conditions on a single
-component (``V.sub(i)``) and constrained nodes strictly inside the patch.
+facet integrals in ``L``, derivatives of the test function in ``L`` and constrained nodes strictly
+inside the patch.
 """
 
 from __future__ import annotations
@@ -56,10 +60,11 @@ from ..geometry.quadrature import (
     reference_facet_points,
 )
 from ..parallel import raise_on_all_ranks
+from ..physics import axisymmetry
 from ..physics.body_loads import BodyForce, accumulate
 from ..physics.materials import LinearElastic
 from ..physics.state import check_not_rate_law, is_stateful
-from .coupled import COUPLINGS, CoupledElasticity, CoupledSolution
+from .coupled import COUPLINGS, CoupledElasticity, CoupledSolution, material_stiffness_form
 from .petsc import SolverOptions, solver_options
 
 __all__ = ["CoupledLinearProblem", "FormBodyForce"]
@@ -233,16 +238,21 @@ class CoupledLinearProblem:
         msh = V.mesh
         v = self.L.arguments()[0]
         deg = problem.quadrature_degree
+        # axisymmetric: the user's integrands carry their 2 pi r, which the couplings' rules
+        # (revolved) must not count twice
+        revolved = problem.material.axisymmetric
         cell_integrals = []
         for itg in self.L.integrals():
             if itg.integral_type() == "cell":
                 cell_integrals.append(itg)
             else:
                 facets = np.intersect1d(_integral_entities(itg, msh), boundary_facets(msh))
-                load = _FacetLoad(itg, v, facets, deg, self.patch.cracks)
+                load = _FacetLoad(itg, v, facets, deg, self.patch.cracks, revolved)
                 problem.add_traction(facets.astype(np.int32), load)
         if cell_integrals:
-            problem.body_forces = [FormBodyForce(cell_integrals, v, deg, bool(self.patch.cracks))]
+            problem.body_forces = [
+                FormBodyForce(cell_integrals, v, deg, bool(self.patch.cracks), revolved)
+            ]
 
     # -- solve ----------------------------------------------------------------------------------
 
@@ -292,13 +302,6 @@ def _check_arguments(a, L, bcs, patch, material, coupling, options):
         )
     if coupling not in COUPLINGS:
         raise ValueError(f"coupling={coupling!r} is not available; choose one of {list(COUPLINGS)}")
-    if getattr(material, "plane", None) == "axisymmetric":
-        raise ValueError(
-            "material plane='axisymmetric': CoupledLinearProblem splits the user's forms into "
-            "loads and conditions per side, and a form that carries its own 2 pi r weight is not "
-            "split yet; build mf.CoupledElasticity(V, patch, material, coupling='lagrange') with "
-            "add_dirichlet / add_traction / set_body_force instead"
-        )
     for name, form, rank in (("a", a, 2), ("L", L, 1)):
         if not isinstance(form, ufl.Form):
             raise TypeError(f"{name} must be a UFL form, got {type(form).__name__}")
@@ -373,9 +376,7 @@ def _check_material(problem: CoupledElasticity, everywhere: bool = False) -> Non
         return _compat.assemble_matrix(_compat.create_form(form))
 
     def material_form(m: LinearElastic) -> ufl.Form:
-        V = problem.V
-        u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
-        return chi * ufl.inner(m.ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx(domain=V.mesh)
+        return material_stiffness_form(m, problem.V, chi)  # axisymmetric: revolved, hoop
 
     A = stiffness(problem.fe_form(chi))
     B = stiffness(material_form(material))
@@ -392,7 +393,7 @@ def _check_material(problem: CoupledElasticity, everywhere: bool = False) -> Non
     if rel > MATERIAL_TOLERANCE:
         other = "strain" if material.plane == "stress" else "stress"
         C = None
-        if material.plane is not None:  # 2D: the other plane law
+        if material.plane in ("stress", "strain"):  # 2D: the other plane law
             C = stiffness(material_form(LinearElastic(E=material.E, nu=material.nu, plane=other)))
         hint = ""
         if C is not None and difference(C) <= MATERIAL_TOLERANCE:
@@ -479,9 +480,12 @@ class FormBodyForce(BodyForce):
         degree: The quadrature degree of the rules :meth:`values` is called with.
     """
 
-    def __init__(self, integrals: list, v, degree: int, cut: bool = False):
+    def __init__(self, integrals: list, v, degree: int, cut: bool = False, revolved: bool = False):
         msh = v.ufl_function_space().mesh
         self.integrals, self.mesh, self.degree = list(integrals), msh, degree
+        #: The integrands carry the ``2 pi r`` of an axisymmetric model: the loads per unit
+        #: volume are theirs over ``2 pi r`` (the couplings' rules and weights are revolved).
+        self.revolved = revolved
         cname = msh.topology.cell_type.name
         X, _ = _compat.quadrature_rule(cname, degree)
         self.num_points = X.shape[0]
@@ -505,6 +509,8 @@ class FormBodyForce(BodyForce):
         self, V: dolfinx.fem.FunctionSpace, weight: ufl.core.expr.Expr | None, degree: int
     ) -> np.ndarray:
         integrals = self.integrals
+        if weight is not None and self.revolved:  # the integrands have their 2 pi r already
+            weight = weight / axisymmetry.measure(self.mesh)
         if weight is not None:
             integrals = [itg.reconstruct(integrand=weight * itg.integrand()) for itg in integrals]
         b = _compat.assemble_vector(_compat.create_form(ufl.Form(integrals)))
@@ -545,6 +551,8 @@ class FormBodyForce(BodyForce):
                 for k, c in enumerate(other):
                     idx = order[start[c] : start[c] + count[c]]
                     out[idx] += _fitted(fv[k, :, d:], fv[k, :, :d], q.points[idx], self.degree)
+        if self.revolved:  # per unit volume (cell Gauss points lie off the axis)
+            out /= 2.0 * np.pi * q.points[:, :1]
         return out
 
 
@@ -598,8 +606,11 @@ class _FacetLoad:
     Constant set to 0 and each ``e_i`` (and checked to be affine in n at one more value).
     """
 
-    def __init__(self, itg, v, facets: np.ndarray, degree: int, cracks: Sequence = ()):
+    def __init__(
+        self, itg, v, facets: np.ndarray, degree: int, cracks: Sequence = (), revolved: bool = False
+    ):
         msh = v.ufl_function_space().mesh
+        self.revolved = revolved  # the integrand's 2 pi r taken off (see FormBodyForce)
         tdim = msh.topology.dim
         d = msh.geometry.dim
         cname = msh.topology.cell_type.name
@@ -687,4 +698,8 @@ class _FacetLoad:
                 f"a traction was requested at {int(np.sum(d > self.tol))} point(s) that are not "
                 "facet Gauss points of its integral (internal error: quadrature degree mismatch)"
             )
-        return self.A[idx] + np.einsum("mij,mj->mi", self.B[idx], n)
+        t = self.A[idx] + np.einsum("mij,mj->mi", self.B[idx], n)
+        if self.revolved:  # per unit area; on the axis the revolved weight is 0 anyway
+            r = np.asarray(x, dtype=float)[:, :1]
+            t = np.where(r > 0.0, t / (2.0 * np.pi * np.where(r > 0.0, r, 1.0)), 0.0)
+        return t

@@ -289,16 +289,16 @@ def test_bar_impact_demo_table_and_json(shared_dir):
 
 
 def test_axisymmetric_demo_table_and_json(shared_dir):
-    """demos/axisymmetric.py at its defaults (8 and 16 cells, FE, EFG, lagrange): it passes its own
-    checks (errors and rates against the closed forms, the energy, the plane-strain miss) and
-    writes a row per problem, method and resolution."""
+    """demos/axisymmetric.py at its defaults (8 and 16 cells, FE, EFG, lagrange, master-slave): it
+    passes its own checks (errors and rates against the closed forms, the energy, the
+    plane-strain miss, the rods) and writes a row per problem, method and resolution."""
     out = shared_dir / "axisymmetric.json"
     demo = load_demo("axisymmetric")
     assert demo.main(["--json", str(out)]) == 0
     MPI.COMM_WORLD.Barrier()
     data = json.loads(out.read_text())
-    assert len(data["rows"]) == 18 and data["plane_strain"]["error"] > 0.5
-    assert [r["method"] for r in data["rods"]] == ["fe", "efg", "lagrange"]
+    assert len(data["rows"]) == 24 and data["plane_strain"]["error"] > 0.5
+    assert [r["method"] for r in data["rods"]] == ["fe", "efg", "lagrange", "master-slave"]
     assert {r["problem"] for r in data["rows"]} == {"lame", "cylinder", "sphere"}
 
 

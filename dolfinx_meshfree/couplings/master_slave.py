@@ -129,6 +129,7 @@ from ..geometry.quadrature import DYNAMIC_FACET_DEGREE, facet_quadrature
 from ..geometry.smoothing import value_rule
 from ..geometry.stress_points import check_integration
 from ..parallel import Layout, raise_on_all_ranks
+from ..physics.axisymmetry import revolved_if
 from ..statics.efg import facet_multipliers, particle_stiffness
 from ..statics.petsc import BlockSystem, SolverOptions, create_aij, create_vector
 from .assembly import (
@@ -542,6 +543,7 @@ def outside_slave_layer(
             continue
         kept = facets[~inside]
         fq = facet_quadrature(msh, kept, problem.quadrature_degree)
+        fq = raise_on_all_ranks(comm, lambda fq=fq: revolved_if(fq, problem.material, True))
         out_bc.append((kept, fn, *components))
         out_q.append(fq)
         out_t.append(raise_on_all_ranks(comm, lambda fq=fq: problem.mls.tabulate(fq.points, 0)))

@@ -186,7 +186,7 @@ def material_stiffness_form(
 #: The couplings of an axisymmetric (r, z) model (``plane="axisymmetric"``): their interface,
 #: loads, conditions and masses take the ``2 pi r`` weights
 #: (:mod:`~dolfinx_meshfree.physics.axisymmetry`).
-AXISYMMETRIC_COUPLINGS = ("lagrange",)
+AXISYMMETRIC_COUPLINGS = ("lagrange", "master-slave")
 
 
 class CoupledElasticity:

@@ -183,8 +183,8 @@ def hoop_table(
     The second form is for approximations that do not vanish on the axis by construction. An MLS
     field held radially on the axis by multipliers leaves ``u_r(0, z)`` small but not zero, and
     ``u_r / r`` at a Gauss point a fraction of a cell from the axis multiplies it: measured 57 %
-    too much hoop strain at the first points of an EFG cylinder (HJC then failed concrete along
-    the whole axis). Taking the offset off is exact for ``u_r = a r + b r^3`` (so for the patch
+    too much hoop strain at the first points of an elastic EFG cylinder of HJC concrete. Taking
+    the offset off is exact for ``u_r = a r + b r^3`` (so for the patch
     test), leaves ``u_r / r`` as it is where ``u_r(0, z) = 0``, and needs the axis held (else a
     uniform ``u_r`` would cost no hoop strain near the axis). FE with the axis held strongly
     needs none.

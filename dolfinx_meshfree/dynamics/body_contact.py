@@ -245,9 +245,9 @@ class ContactSurfaces:
         (positive on the axis, where ``r_s = 0``)."""
         w = np.zeros(len(self.points))
         share = self.measures() / self.facets.shape[1]
+        r = self.points[self.facets, 0]  # segments (axisymmetric): vertex i and the other one
         for i in range(self.facets.shape[1]):
-            if self.axisymmetric:  # segments: vertex i and the other one
-                r = self.points[self.facets, 0]
+            if self.axisymmetric:
                 revolved = 2.0 * np.pi * share * (2.0 * r[:, i] + r[:, 1 - i]) / 3.0
                 np.add.at(w, self.facets[:, i], revolved)
             else:

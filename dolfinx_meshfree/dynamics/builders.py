@@ -73,10 +73,10 @@ from ..geometry.smoothing import STABILISATION, refuse_smoothed, smoothing_rule,
 from ..geometry.stress_points import check_integration, stress_point_quadrature
 from ..parallel import raise_on_all_ranks
 from ..physics import axisymmetry
-from ..physics.axisymmetry import check_half_plane
+from ..physics.axisymmetry import check_half_plane, check_particle_section
 from ..physics.body_loads import CallableBodyForce, body_load_vectors
 from ..physics.constitutive import Material
-from ..physics.materials import LinearElastic
+from ..physics.materials import LinearElastic, is_axisymmetric
 from ..statics.coupled import CoupledElasticity, CouplingOperators
 from ..statics.efg import crack_rules, particle_stiffness
 from ..statics.petsc import create_aij
@@ -297,10 +297,6 @@ def _particle_density(
     return law.density_at_cells(cells)
 
 
-def _axisymmetric(material: object) -> bool:
-    return isinstance(material, LinearElastic) and material.axisymmetric
-
-
 def _check_axisymmetric_efg(
     particles: ParticleSet,
     integration: str,
@@ -318,8 +314,7 @@ def _check_axisymmetric_efg(
             "(the other options are plane; a row-sum mass that is not positive, a particle on "
             "the axis near a corner, is cured by a larger dilation)"
         )
-    check_half_plane(particles.mesh.geometry.x, "the particles' mesh")
-    check_half_plane(particles.positions, "the particles")
+    check_particle_section(particles)
 
 
 def _check_axisymmetric_masses(particles: ParticleSet, mass: PETSc.Vec) -> None:
@@ -359,7 +354,7 @@ def build_fe(
     groups = fixed_groups(msh, fixed_facets)
     u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
     weight = None  # 2 pi r in axisymmetry, for the stiffness, the masses and the body loads
-    if _axisymmetric(material):
+    if is_axisymmetric(material):
         raise_on_all_ranks(msh.comm, lambda: check_half_plane(msh.geometry.x, "V's mesh"))
         weight = 2.0 * ufl.pi * axisymmetry.radius(msh)
         stress, strain = axisymmetry.ufl_stress(u, material), axisymmetry.ufl_strain(v)
@@ -454,7 +449,7 @@ def build_efg(
     gdim = particles.gdim
     raise_on_all_ranks(particles.comm, lambda: material.check_gdim(gdim, "the particles' mesh"))
     check_particle_mass(particle_mass)
-    if _axisymmetric(material):
+    if is_axisymmetric(material):
         raise_on_all_ranks(
             particles.comm,
             lambda: _check_axisymmetric_efg(particles, integration, cracks, quadrature,
@@ -463,7 +458,7 @@ def build_efg(
     t0 = time.perf_counter()
     comm = particles.comm
     groups = fixed_groups(particles.mesh, fixed_facets)
-    if _axisymmetric(material):
+    if is_axisymmetric(material):
         axisymmetry.check_axis_held(particles.mesh, groups, None, "ExplicitDynamics.efg")
     mls = raise_on_all_ranks(
         comm, lambda: MLS(particles, weight=weight, dilation=dilation, basis=basis)
@@ -496,7 +491,7 @@ def build_efg(
     K = create_aij(comm, K_loc, pl, pl)
     q, values = raise_on_all_ranks(comm, lambda: value_rule(mls, q, tq))  # masses, loads
     rho = _particle_density(law, material, particle_mass, q, particles)
-    axi = _axisymmetric(material)
+    axi = is_axisymmetric(material)
     mass = particle_lumped_mass(particles, values, q.weights, rho, particle_mass, check=not axi)
     if axi:
         _check_axisymmetric_masses(particles, mass)
@@ -664,9 +659,9 @@ def build_coupled(
     V, patch, mls = problem.V, problem.patch, problem.mls
     P, comm, msh = patch.particles, patch.comm, V.mesh
     held = fixed_groups(msh, fixed_facets)
-    if _axisymmetric(material):
+    if is_axisymmetric(material):
         axisymmetry.check_axis_held(msh, held, patch.in_patch, "ExplicitDynamics.coupled")
-    if _axisymmetric(material) and particle_mass != "row-sum":  # the same on every rank
+    if is_axisymmetric(material) and particle_mass != "row-sum":  # the same on every rank
         raise ValueError(
             f"particle_mass={particle_mass!r}: an axisymmetric model takes particle_mass="
             "'row-sum' (the particles' Voronoi volumes are not revolved)"
@@ -674,7 +669,7 @@ def build_coupled(
     ops = problem.operators(integration, slaves)
     fl, pl = ops.fe_layout, ops.particle_layout
     fe_weight = ops.fe_weight  # the FE energy's weight; axisymmetric: times 2 pi r
-    if _axisymmetric(material):
+    if is_axisymmetric(material):
         fe_weight = fe_weight * axisymmetry.measure(msh)
 
     # lumped masses (eq. 4.5, 88-89)

@@ -39,7 +39,7 @@ from ..geometry.crack import Crack
 from ..geometry.particles import ParticleSet
 from ..geometry.patch import ParticlePatch
 from ..physics.constitutive import Material
-from ..physics.materials import LinearElastic
+from ..physics.materials import LinearElastic, is_axisymmetric
 from ..statics.coupled import CoupledElasticity
 from .body_contact import BodyContact, with_body_contact
 from .builders import Model, build_coupled, build_efg, build_fe
@@ -163,10 +163,9 @@ class ExplicitDynamics(StateQueries):
         self.V, self.mls, self.particles, self.mesh = V, mls, particles, mesh
         self.in_patch, self.patch = in_patch, patch
         self.interface, self.reduction = interface, reduction
-        axisymmetric = getattr(material, "plane", None) == "axisymmetric"  # rate laws' too
         disc = Discretisation(
             self.system.fields, V, mls, particles, mesh, in_patch, patch, interface, reduction,
-            axisymmetric,
+            is_axisymmetric(material),  # rate laws' too
         )  # fmt: skip
         self.comm = self.fields[0].mass.getComm().tompi4py()
         self.timings = dict(timings or {})

@@ -50,7 +50,7 @@ from ..approx.fe_points import tabulate_in_cells
 from ..geometry.quadrature import QuadraturePoints, cell_quadrature
 from ..physics.axisymmetry import revolved
 from ..physics.forces import InternalForces
-from ..physics.materials import LinearElastic
+from ..physics.materials import AXISYMMETRIC, LinearElastic, is_axisymmetric
 from ..physics.objective import as_3d, nominal_stress
 from ..physics.state import is_rate_law
 from ..physics.zones import MaterialZones
@@ -81,9 +81,7 @@ def stiffest_twin(law: object) -> LinearElastic:
     return LinearElastic(
         E=9.0 * K * G / (3.0 * K + G),
         nu=(3.0 * K - 2.0 * G) / (2.0 * (3.0 * K + G)),
-        plane=("axisymmetric" if law.plane == "axisymmetric" else "strain")
-        if law.gdim == 2
-        else None,
+        plane=(AXISYMMETRIC if is_axisymmetric(law) else "strain") if law.gdim == 2 else None,
         rho=float(law.rho),
     )
 
@@ -225,7 +223,7 @@ class RateLaw:
 
     def first_piola(self, F: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
         """``J sigma F^{-T}`` (m, d, d) of the advanced state."""
-        if self.plane == "axisymmetric":
+        if is_axisymmetric(self):
             raise ValueError(
                 f"{type(self.law).__name__} is axisymmetric: its forces need the hoop stretch "
                 "(axisymmetric_piola), which this path does not give"
@@ -533,7 +531,7 @@ class PointFESide:
         n_owned = msh.topology.index_map(msh.topology.dim).size_local
         owned = np.arange(n_owned) if cells is None else np.flatnonzero(cells[:n_owned])
         q = cell_quadrature(msh, degree, owned.astype(np.int32))
-        if law.plane == "axisymmetric":  # 2 pi R w (the hoop terms: InternalForces)
+        if is_axisymmetric(law):  # 2 pi R w (the hoop terms: InternalForces)
             q = revolved(q)
         table = tabulate_in_cells(V, q.points, q.cells, derivatives=1)
         w = q.weights if weight_at is None else q.weights * weight_at(q)

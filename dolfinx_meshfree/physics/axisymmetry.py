@@ -31,7 +31,8 @@ constant stress with ``sigma_rr = sigma_tt`` (the field ``u = (a r, b z + c)``, 
 axisymmetric patch test) does exact virtual work on a test function ``N_I e_r`` when
 ``sum_q dN_I/dr 2 pi r w_q = sum_b N_I n_r 2 pi r w_b - sum_q N_I 2 pi w_q`` (the divergence
 theorem for ``N_I r e_r``: ``d(r N)/dr = r dN/dr + N``) and on ``N_I e_z`` when
-``sum_q dN_I/dz 2 pi r w_q = sum_b N_I n_z 2 pi r w_b``. :func:`axisymmetric_gradients`
+``sum_q dN_I/dz 2 pi r w_q = sum_b N_I n_z 2 pi r w_b``.
+:func:`~dolfinx_meshfree.physics.operators.consistent_gradients`, given the hoop table,
 corrects the gradients to satisfy both (the hoop term ``N_I / r`` is left as it is: it enters
 the identity through the ``- sum_q N_I 2 pi w_q`` term).
 
@@ -55,19 +56,18 @@ from .._compat import geometry_dofmap as _geometry_dofs
 from ..approx.tables import strain_operator
 from ..geometry.quadrature import QuadraturePoints, boundary_facets
 from ..parallel import raise_on_all_ranks
-from .materials import AXISYMMETRIC, LinearElastic, ufl_constants
-from .operators import corrected_gradients, vci_constants
+from .materials import LinearElastic, is_axisymmetric, ufl_constants
 
 if TYPE_CHECKING:  # annotations only
-    from mpi4py import MPI
+    from ..geometry.particles import ParticleSet
 
 __all__ = [
     "axis_points",
     "axis_projections",
-    "axisymmetric_gradients",
     "axisymmetric_stiffness",
     "check_axis_held",
     "check_half_plane",
+    "check_particle_section",
     "hoop_operator",
     "hoop_table",
     "measure",
@@ -98,6 +98,13 @@ def check_half_plane(points: np.ndarray, where: str) -> None:
             f"{where}: the point {p} has r = x[0] < 0, but an axisymmetric section lies in the "
             "half-plane r >= 0 (x[0] is the radius, x[1] the axis): move the mesh to r >= 0"
         )
+
+
+def check_particle_section(particles: ParticleSet) -> None:
+    """Refuse particles, or their background mesh, outside the half-plane ``r >= 0`` (local;
+    :func:`check_half_plane`)."""
+    check_half_plane(particles.mesh.geometry.x, "the particles' mesh")
+    check_half_plane(particles.positions, "the particles")
 
 
 def check_axis_held(
@@ -268,40 +275,6 @@ def axisymmetric_stiffness(
     return sp.csr_matrix((K.data, (dofs[K.row], dofs[K.col])), shape=(2 * n, 2 * n))
 
 
-def axisymmetric_gradients(
-    cell_values: sp.csr_matrix,
-    cell_gradients: list[sp.csr_matrix],
-    hoop: sp.csr_matrix,
-    cell_weights: np.ndarray,
-    boundary_values: sp.csr_matrix,
-    boundary_weights: np.ndarray,
-    boundary_normals: np.ndarray,
-    comm: MPI.Comm,
-    positions: np.ndarray | None = None,
-) -> list[sp.csr_matrix]:
-    """VCI test gradients ``dN_I + xi_I N_I`` of an axisymmetric model (module docstring).
-
-    ``cell_weights`` and ``boundary_weights`` are revolved (``2 pi r w``); ``hoop`` is the hoop
-    table of the stiffness (:func:`hoop_table`), whose virtual work on ``N_I e_r`` joins the
-    radial identity (``- sum_q hoop_qI 2 pi r w_q``, i.e. ``- sum_q N_I 2 pi w_q`` where the
-    hoop is ``N / r``); the boundary is the whole boundary of the section (facets on the axis
-    included: their revolved weight is 0). Sums run over every rank (collective); see
-    :func:`~dolfinx_meshfree.physics.operators.vci_constants` for the refusals.
-    """
-    vol = cell_values.T @ cell_weights
-    rhs = np.stack(
-        [
-            boundary_values.T @ (boundary_weights * boundary_normals[:, k])
-            - cell_gradients[k].T @ cell_weights
-            for k in range(2)
-        ],
-        axis=1,
-    )
-    rhs[:, 0] -= hoop.T @ cell_weights  # the hoop's share of the virtual work on N_I e_r
-    xi = vci_constants(vol, rhs, comm, positions)
-    return corrected_gradients(cell_values, cell_gradients, xi)
-
-
 def stress(
     material: LinearElastic, points: np.ndarray, u: np.ndarray, grad_u: np.ndarray
 ) -> np.ndarray:
@@ -339,7 +312,7 @@ def revolved_if(
 ) -> QuadraturePoints:
     """:func:`revolved` when ``material`` is axisymmetric (``plane="axisymmetric"``), else
     ``rule`` itself: the one test every integral of a model that may be axisymmetric makes."""
-    if getattr(material, "plane", None) != AXISYMMETRIC:
+    if not is_axisymmetric(material):
         return rule
     return revolved(rule, constraint)
 

@@ -52,6 +52,7 @@ from ..parallel import raise_on_all_ranks
 from .assembly_kernel import GradientForm, resolve_backend
 from .axisymmetry import hoop_operator, hoop_table
 from .constitutive import Material
+from .materials import is_axisymmetric
 
 if TYPE_CHECKING:  # annotations only
     from mpi4py import MPI
@@ -159,10 +160,12 @@ class InternalForces:
             )
         #: An axisymmetric material (``plane="axisymmetric"``): the hoop terms join (``weights``
         #: must then be revolved, ``2 pi R w``; :meth:`_hoop_force`, :meth:`_hoop_tangent`).
-        self.axisymmetric = getattr(material, "plane", None) == "axisymmetric"
+        self.axisymmetric = is_axisymmetric(material)
         if self.axisymmetric:  # u_r / R at every point (or its limit: ``hoop``)
             table_hoop = hoop_table(table.values, table.points) if hoop is None else hoop
             self._H = hoop_operator(table_hoop)
+            # D u = du_r/dr + du_z/dz (trial and test), for the tangent's hoop coupling
+            self._D, self._Dt = (op[0::4] + op[3::4] for op in (self._G, self._Gt))
         m, d2 = table.shape[0], self.gdim**2
         base = d2 * np.arange(m)[:, None, None]
         r = np.arange(d2)
@@ -247,8 +250,7 @@ class InternalForces:
         the stable-step bound of a rate-form law needs (its twin's elastic tangent)."""
         w = self.weights
         lam, l2m = w * A[:, 0, 0, 1, 1], w * A[:, 0, 0, 0, 0]
-        D, Dt = (op[0::4] + op[3::4] for op in (self._G, self._Gt))
-        H = self._H
+        D, Dt, H = self._D, self._Dt, self._H
         return (
             H.T @ sp.diags(l2m) @ H + Dt.T @ sp.diags(lam) @ H + H.T @ sp.diags(lam) @ D
         ).tocsr()

@@ -15,10 +15,18 @@ if TYPE_CHECKING:  # annotations only
 #: ``LinearElastic(plane=AXISYMMETRIC)``: the (r, z) section of a solid of revolution.
 AXISYMMETRIC = "axisymmetric"
 
+
+def is_axisymmetric(law: object) -> bool:
+    """Whether a law (linear, rate-form, zoned, bound) is axisymmetric (``plane=AXISYMMETRIC``):
+    the one test of every path that revolves its integrals or takes the hoop stretch."""
+    return getattr(law, "plane", None) == AXISYMMETRIC
+
+
 __all__ = [
     "AXISYMMETRIC",
     "DEFAULT_DENSITY",
     "LinearElastic",
+    "is_axisymmetric",
     "linear_twin",
     "resolve_density",
     "ufl_constants",
@@ -102,7 +110,7 @@ class LinearElastic:
     @property
     def axisymmetric(self) -> bool:
         """Whether the law is the (r, z) section of a solid of revolution."""
-        return self.plane == AXISYMMETRIC
+        return is_axisymmetric(self)
 
     def refuse_axisymmetric(self, what: str) -> None:
         """Raise a ValueError naming ``what`` if the law is axisymmetric: the plane operators

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .constitutive import check_deformation_gradients
+from .materials import is_axisymmetric
 
 _EYE = np.eye(3)
 
@@ -196,7 +197,7 @@ def check_step(
         )
     if not (np.isfinite(dt) and dt > 0):
         raise ValueError(f"{name}: dt={dt!r} must be a positive time step")
-    if (getattr(law, "plane", None) == "axisymmetric") != (hoop is not None):
+    if is_axisymmetric(law) != (hoop is not None):
         raise ValueError(
             f"{name}: plane={law.plane!r} with hoop={'None' if hoop is None else 'given'}: an "
             "axisymmetric law takes the hoop stretch r / R of every point (hoop=), a plane or "

@@ -109,6 +109,7 @@ def consistent_gradients(
     comm: MPI.Comm,
     positions: np.ndarray | None = None,
     inactive: np.ndarray | None = None,
+    hoop: sp.csr_matrix | None = None,
 ) -> list[sp.csr_matrix]:
     """Variationally consistent integration (VCI) of test-function gradients.
 
@@ -128,6 +129,13 @@ def consistent_gradients(
     whole boundary of the integration domain. Any dimension: ``boundary_normals`` is (nb, gdim)
     with ``gdim = len(cell_gradients)``. ``positions`` and ``inactive``: see
     :func:`vci_constants`.
+
+    ``hoop``: an axisymmetric model's hoop table (m x n,
+    :func:`~dolfinx_meshfree.physics.axisymmetry.hoop_table`), the weights revolved (``2 pi r
+    w``). Its virtual work on ``N_I e_r`` joins the radial identity, ``sum_q dN_I/dr 2 pi r w_q
+    = sum_b N_I n_r 2 pi r w_b - sum_q hoop_qI 2 pi r w_q`` (the divergence theorem for ``N_I r
+    e_r``, ``d(r N)/dr = r dN/dr + N``, where the hoop is ``N / r``), so that the axisymmetric
+    patch test ``u = (a r, b z)`` is exact.
     """
     gdim = len(cell_gradients)
     vol = cell_values.T @ cell_weights
@@ -139,6 +147,8 @@ def consistent_gradients(
         ],
         axis=1,
     )
+    if hoop is not None:  # the hoop's share of the virtual work on N_I e_r
+        rhs[:, 0] -= hoop.T @ cell_weights
     xi = vci_constants(vol, rhs, comm, positions, inactive)
     return corrected_gradients(cell_values, cell_gradients, xi)
 

@@ -72,16 +72,15 @@ from ..parallel import Layout, raise_on_all_ranks
 from ..physics.axisymmetry import (
     axis_points,
     axis_projections,
-    axisymmetric_gradients,
     axisymmetric_stiffness,
     check_axis_held,
-    check_half_plane,
+    check_particle_section,
     hoop_table,
     revolved,
 )
 from ..physics.cohesive import LinearCohesive
 from ..physics.constitutive import Material
-from ..physics.materials import LinearElastic, linear_twin
+from ..physics.materials import LinearElastic, is_axisymmetric, linear_twin
 from ..physics.operators import (
     consistent_gradients,
     load_vector,
@@ -266,7 +265,7 @@ def particle_stiffness(
     t0 = time.perf_counter()
     comm = particles.comm
     gdim = particles.gdim
-    axi = isinstance(material, LinearElastic) and material.axisymmetric
+    axi = is_axisymmetric(material)
     if axi:  # the plane paths below would drop the hoop strain: refused by name
         raise_on_all_ranks(
             comm,
@@ -334,16 +333,9 @@ def particle_stiffness(
         bvalues = tb.values if boundary_values is None else boundary_values(bq, tb.values)
         normals = bq.normals if boundary_normals is None else boundary_normals(bq)
         moments = boundary_moments and boundary_values is not None
-        vci = consistent_gradients
-        if axi:
-
-            def vci(*args: object) -> list[sp.csr_matrix]:  # the arguments below, revolved
-                values, grads, weights, *boundary = args
-                return axisymmetric_gradients(values, grads, hoop, weights, *boundary)
-
         test_grads = raise_on_all_ranks(
             comm,
-            lambda: vci(
+            lambda: consistent_gradients(
                 tq.values,
                 tq.gradients,
                 q.weights,
@@ -352,6 +344,7 @@ def particle_stiffness(
                 normals,
                 comm,
                 mls.points,
+                hoop=hoop,
             ),
         )
         if moments:
@@ -395,8 +388,7 @@ def _check_axisymmetric_model(
             "integration='vci' (the default) or 'gauss', without cracks or an adaptive "
             "quadrature"
         )
-    check_half_plane(particles.mesh.geometry.x[:, :2], "the particles' mesh")
-    check_half_plane(particles.positions, "the particles")
+    check_particle_section(particles)
 
 
 def _check_axisymmetric(interface_terms: bool, rule: bool) -> None:
@@ -709,7 +701,7 @@ class EFGElasticity:
                 f"{type(material).__name__}"
             )
         linear_twin(material).check_gdim(particles.mesh.geometry.dim, "the particles' mesh")
-        if isinstance(material, LinearElastic) and material.axisymmetric:
+        if is_axisymmetric(material):
             raise_on_all_ranks(
                 particles.comm,
                 lambda: _check_axisymmetric_model(particles, integration, cracks, quadrature),

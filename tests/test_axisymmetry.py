@@ -16,8 +16,11 @@ import dataclasses
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
-from dolfinx_meshfree.dynamics.rate_forms import stiffest_twin
+from dolfinx_meshfree.approx import jit
+from dolfinx_meshfree.dynamics.rate_forms import RateLaw, stiffest_twin
+from dolfinx_meshfree.geometry.quadrature import cell_quadrature
 from dolfinx_meshfree.physics import axisymmetry
+from dolfinx_meshfree.physics.forces import InternalForces
 
 import dolfinx
 import numpy as np
@@ -237,12 +240,12 @@ def test_rate_law_point_is_the_3d_law_with_the_hoop_stretch(name):
 ELASTIC_JC = mf.JohnsonCook(rho=1.0, E=1.0, nu=0.3, A=1e6, B=0.0, n=1.0, C=0.0)
 
 
-@pytest.mark.parametrize("method, margin", [("fe", 1.5e-2), ("efg", 8.5e-3)])
+@pytest.mark.parametrize("method, margin", [("fe", 1.5e-2), ("efg", 6e-3)])
 def test_rate_law_radial_mode(method, margin):
     """A rate-form law in axisymmetry (``InternalForces``' hoop terms, the law's hoop stretch):
     the cylinder's radial mode started from its velocity (a rate law starts undeformed) follows
-    ``J1(k r) sin(omega t)`` (measured at 16 cells: FE 7.5e-3, EFG 4.2e-3; plane strain misses
-    it by 223 %), the energy balance to 2.8e-6 / 5.1e-6 (hypo-elastic at strain 1e-3)."""
+    ``J1(k r) sin(omega t)`` (measured at 16 cells: FE 7.3e-3, EFG 2.9e-3; plane strain misses
+    it by 223 %), the energy balance to 2.8e-6 (hypo-elastic at strain 1e-3)."""
     law = dataclasses.replace(ELASTIC_JC, plane="axisymmetric")
     ka = demo.cylinder_wavenumber()
     msh = demo.rectangle(COMM, 0.0, 1.0, demo.SLICE, 16, 4)
@@ -289,13 +292,13 @@ def test_rods_meet_head_on(method):
 
 @pytest.mark.parametrize(
     "method, margin",
-    [("fe", 0.012), ("efg", 0.028), ("lagrange", 0.016), ("master-slave", 2e-6)],
+    [("fe", 0.012), ("efg", 0.03), ("lagrange", 0.016), ("master-slave", 5e-4)],
 )
 def test_concrete_cylinder_elastic_wave(method, margin):
     """A cylinder of HJC concrete (radius 2 cm, length 10 cm, 20 cells along) on rollers
     (``u_r = 0`` on its side: uniaxial strain) thrown at a wall at 0.5 m/s: the stress behind
-    the front at ``t = L / 2c`` is the 1D ``-rho c v0`` (measured 0.56 %, 1.4 %, 0.80 % and
-    7.2e-7 off) and the concrete stays undamaged. The rate-form law with the hoop stretch, in
+    the front at ``t = L / 2c`` is the 1D ``-rho c v0`` (measured 0.62 %, 1.56 %, 0.78 % and
+    0.025 % off) and the concrete stays undamaged. The rate-form law with the hoop stretch, in
     FE, EFG and a lagrange or master–slave patch on the quarter at the wall."""
     law = mf.HolmquistJohnsonCook.concrete_48mpa(plane="axisymmetric")
     length, radius, v0 = 0.1, 0.02, 0.5
@@ -330,9 +333,9 @@ def test_conversions_in_axisymmetry():
     """Failing FE cells become lagrange particles in an axisymmetric model
     (``dynamics.AdaptiveRun``): the concrete cylinder at 300 m/s with a free side, one row of
     particle cells at the wall to start. Every conversion keeps the revolved mass exactly and
-    the momentum to round-off (measured: 6 conversions, mass error 0, momentum correction
+    the momentum to round-off (measured: 7 conversions, mass error 0, momentum correction
     1.6e-16, the same on 2 ranks), and the balance with the conversions counted closes
-    (measured -1.5e-3)."""
+    (measured -1.6e-3)."""
     law = mf.HolmquistJohnsonCook.concrete_48mpa(plane="axisymmetric")
     length, radius, v0 = 0.1, 0.02, 300.0
     msh = section(0.0, radius, length, 4, 20, "quadrilateral")
@@ -423,7 +426,7 @@ def test_zoned_cylinder(method, margin):
     under Johnson–Cook steel, on rollers, at 0.5 m/s. The lumped masses sum to the revolved
     zones' ``pi R^2 L / 2 (rho_c + rho_s)`` to round-off (measured 2e-16 FE, 1.8e-15 EFG), and
     behind the front, before it reaches the steel (``t = 0.45 L / c``), the concrete carries the
-    1D ``-rho c v0`` (measured -0.86 % FE, +2.7 % EFG: the front's smear at that time)."""
+    1D ``-rho c v0`` (measured -0.86 % FE, +2.9 % EFG: the front's smear at that time)."""
     steel = mf.JohnsonCook.steel_4340(plane="axisymmetric")
     hjc = mf.HolmquistJohnsonCook.concrete_48mpa(plane="axisymmetric")
     length, radius, v0 = 0.1, 0.02, 0.5
@@ -450,3 +453,29 @@ def test_zoned_cylinder(method, margin):
     behind = law.points[:, 1] < 0.27 * length
     total = COMM.allreduce(np.array([law.sigma[behind, 1, 1].sum(), behind.sum()]))
     assert abs(total[0] / total[1] / (-hjc.rho * c * v0) - 1.0) < margin
+
+
+@pytest.mark.parametrize("backend", ["scipy", "numba"])
+def test_rate_law_tangent_has_the_hoop_rows(backend):
+    """The tangent of an axisymmetric rate-form law (what the stable step is bounded with) is
+    its twin's axisymmetric stiffness at rest, hoop rows included, on both assembly backends:
+    against :func:`axisymmetric_stiffness` on the same table (an independent assembly), to
+    round-off. The compiled backend returned the plane block alone (13 % of the stiffness
+    missing) until the review of this stop."""
+    if backend == "numba" and not jit.AVAILABLE:
+        pytest.skip("numba is not installed")
+    msh = dolfinx.mesh.create_rectangle(
+        MPI.COMM_SELF, [np.array([0.1, 0.0]), np.array([1.0, 1.0])], [4, 4],
+        dolfinx.mesh.CellType.quadrilateral,
+    )  # fmt: skip
+    mls = mf.MLS(mf.ParticleSet.from_cells(msh, 0.25))
+    law = RateLaw(mf.JohnsonCook.steel_4340(plane="axisymmetric"))
+    q = axisymmetry.revolved(cell_quadrature(msh, 4))
+    table = mls.tabulate(q.points)
+    hoop = axisymmetry.hoop_table(table.values, q.points)
+    expected = axisymmetry.axisymmetric_stiffness(
+        table.gradients, hoop, q.weights, stiffest_twin(law.law)
+    )
+    forces = InternalForces(table, q.weights, law)
+    K = forces.tangent(np.zeros(forces.num_dofs), backend=backend)
+    assert abs(K - expected).max() <= 1e-12 * abs(expected).max()

@@ -236,12 +236,13 @@ class InternalForces:
         if backend == "numba":
             if self._form is None:
                 self._form = GradientForm(self._test_gradients, self.table.gradients)
-            return self._form(self.weights, A.reshape(-1, d2, d2))
-        blocks = self.weights[:, None, None] * A.reshape(-1, d2, d2)
-        n = blocks.shape[0] * d2
-        M = sp.csr_matrix((blocks.ravel(), (self._blk_rows, self._blk_cols)), shape=(n, n))
-        K = (self._Gt.T @ M @ self._G).tocsr()
-        return K + self._hoop_tangent(A) if self.axisymmetric else K
+            K = self._form(self.weights, A.reshape(-1, d2, d2))
+        else:
+            blocks = self.weights[:, None, None] * A.reshape(-1, d2, d2)
+            n = blocks.shape[0] * d2
+            M = sp.csr_matrix((blocks.ravel(), (self._blk_rows, self._blk_cols)), shape=(n, n))
+            K = (self._Gt.T @ M @ self._G).tocsr()
+        return K + self._hoop_tangent(A) if self.axisymmetric else K  # both backends
 
     def _hoop_tangent(self, A: np.ndarray) -> sp.csr_matrix:
         """The hoop rows and columns of an isotropic tangent ``A`` (m, 2, 2, 2, 2) at ``F = I``

@@ -9,6 +9,7 @@ import pathlib
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
 from dolfinx_meshfree.dynamics import ExplicitDynamics, check_method, fe_lumped_mass
+from dolfinx_meshfree.dynamics.constraint import VelocityProjection
 from dolfinx_meshfree.verification.waves import GaussianPulseRod
 
 import numpy as np
@@ -16,6 +17,7 @@ import pytest
 import ufl
 from conftest import CELL_TYPES, fitted_rate, load_demo, rectangle
 from mpi4py import MPI
+from petsc4py import PETSc
 
 DEMOS = pathlib.Path(__file__).resolve().parents[1] / "demos"
 
@@ -364,3 +366,35 @@ def test_rod_gauss_demo_json_and_probe(shared_dir):
     assert np.abs(v - ROD.velocity(pts, records[1]["t_end"])).max() < 0.05
     with pytest.raises(SystemExit):  # argparse: an unknown method
         demo.main(["--method", "sph", "--nodes", "100"])
+
+
+def _projection(rows: list[list[float]], minv: list[float]):
+    """A dense :class:`VelocityProjection` of one field on this rank alone."""
+    G = PETSc.Mat().createAIJ(size=(len(rows), len(minv)), comm=PETSc.COMM_SELF)
+    G.setUp()
+    for i, row in enumerate(rows):
+        G.setValues([i], range(len(row)), row)
+    G.assemble()
+    m = PETSc.Vec().createWithArray(np.array(minv, dtype=float), comm=PETSc.COMM_SELF)
+    return VelocityProjection([G], [m], MPI.COMM_SELF, "dense")
+
+
+def test_redundant_constraints_are_deflated():
+    """``S = G M^-1 G^T`` singular because two rows combine to act on a held dof only (as a
+    bridging band's rows at roller nodes with the roller's rows on the particles): the
+    projection deflates that null direction and gives the projection of the independent
+    constraints, computed by hand. Rows ``v0 + v3``, ``v0 - v3``, ``v1 - v2`` with ``v3`` held
+    (``M^-1 = 0``): ``v0 -> 0`` and ``v1 = v2 ->`` the mass-weighted mean. A negative mass (an
+    indefinite ``S``) is refused."""
+    rows = [[1.0, 0.0, 0.0, 1.0], [1.0, 0.0, 0.0, -1.0], [0.0, 1.0, -1.0, 0.0]]
+    minv = [0.5, 1.0, 0.25, 0.0]  # masses 2, 1, 4; dof 3 held
+    proj = _projection(rows, minv)
+    assert proj.redundant == 1 and proj.chol is None
+    v = PETSc.Vec().createWithArray(np.array([3.0, 1.0, -2.0, 0.0]), comm=PETSc.COMM_SELF)
+    proj.correct([v])
+    mean = (1.0 * 1.0 + 4.0 * -2.0) / 5.0
+    assert np.allclose(v.array, [0.0, mean, mean, 0.0], rtol=0, atol=1e-14)
+    full = _projection([rows[0], rows[2]], minv)  # the same without the redundant row
+    assert full.redundant == 0 and full.chol is not None
+    with pytest.raises(ValueError, match="not positive semi-definite"):
+        _projection(rows, [0.5, -1.0, 0.25, 0.0])

@@ -72,6 +72,7 @@ from ..approx.fe_points import locate_points, tabulate_in_cells
 from ..geometry.crack import particle_spacing, polyline_samples
 from ..geometry.quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
 from ..parallel import Layout, raise_on_all_ranks
+from ..physics.axisymmetry import approximation_hoop, axisymmetric_stiffness, revolved_if
 from ..physics.operators import consistent_gradients, load_vector, stiffness_matrix
 from ..physics.user_functions import vector_values
 from ..statics.efg import crack_rules
@@ -79,6 +80,7 @@ from ..statics.petsc import SolverOptions, create_aij, create_vector
 from .assembly import (
     append_patch_conditions,
     body_loads,
+    component_conditions,
     essential_conditions,
     fe_active,
     fe_stiffness,
@@ -472,6 +474,35 @@ def _body_loads(problem, band: BridgingBand) -> tuple[np.ndarray, np.ndarray]:
     return body_loads(problem, _fe_weight(problem, band), alpha)
 
 
+def _particle_rule(problem, band: BridgingBand) -> tuple:
+    """The particles' rule: Gauss quadrature on the patch cells (cut cells side by side), its
+    weights times ``alpha`` in the band (eq. 46), the MLS table there and, for an axisymmetric
+    law, the hoop table (:func:`~dolfinx_meshfree.physics.axisymmetry.approximation_hoop`;
+    the rule then revolved, ``2 pi r w``, before ``alpha``). Returns ``(q, w, table, hoop)``,
+    ``hoop`` ``None`` in plane models (collective)."""
+    msh, patch, comm = problem.V.mesh, problem.patch, problem.patch.comm
+    deg, P = problem.quadrature_degree, problem.patch.particles
+    q = crack_rules(msh, P.cells, patch.cracks, deg, None, quadrature=patch.quadrature)[0]
+    q = q or cell_quadrature(msh, deg, P.cells)
+    q = raise_on_all_ranks(comm, lambda: revolved_if(q, problem.material))
+    w = q.weights.copy()
+    b = band.in_band[q.cells]
+    w[b] *= band.alpha_at(q.points[b], q.cells[b])
+    tq = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(q.points))
+    hoop = None
+    if problem.material.axisymmetric:
+        hoop = raise_on_all_ranks(comm, lambda: approximation_hoop(problem.mls, msh, q, tq.values))
+    return q, w, tq, hoop
+
+
+def _particle_stiffness(problem, test: list, w: np.ndarray, tq, hoop) -> sp.csr_matrix:
+    """``K_P`` (eq. 78) at the weights ``w`` (``alpha`` in the band), with ``test`` gradients
+    (VCI's or the table's); axisymmetric: with the ``hoop`` rows (local particle numbering)."""
+    if hoop is not None:
+        return axisymmetric_stiffness(test, hoop, w, problem.material, tq.gradients)
+    return stiffness_matrix(test, w, problem.material, tq.gradients)
+
+
 def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> tuple:
     """The bridging-domain block system, assembled, not solved (collective); see
     :func:`~dolfinx_meshfree.couplings.lagrange.interface_system` for ``tables`` and the
@@ -496,12 +527,7 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
     band = BridgingBand(problem, problem.overlap, problem.band_width)
 
     # particle side: Gauss quadrature on the patch cells, weights times alpha in the band
-    q = crack_rules(msh, P.cells, patch.cracks, deg, None, quadrature=patch.quadrature)[0]
-    q = q or cell_quadrature(msh, deg, P.cells)
-    w = q.weights.copy()
-    b = band.in_band[q.cells]
-    w[b] *= band.alpha_at(q.points[b], q.cells[b])
-    tq = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(q.points))
+    q, w, tq, hoop = _particle_rule(problem, band)
     held = band.held = _held_particles(problem, q, w, tq)  # alpha = 0 on their support
 
     # essential conditions: strongly on FE nodes of FE and band facets, multipliers on patch facets
@@ -522,7 +548,7 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
     test = None
     if problem.consistent:
         test = _consistent_test_gradients(
-            problem, band, q, w, tq, (t_fe, t_p, cw), ids, ml.size_global // d, held
+            problem, band, q, w, tq, (t_fe, t_p, cw), ids, ml.size_global // d, held, hoop
         )
     setup = problem.setup_time + time.perf_counter() - t0
     if tables is not None:
@@ -533,9 +559,11 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
             weights=w,
             approximation=problem.mls,
         )
+        if hoop is not None:
+            tables["hoop"] = hoop
 
     t1 = time.perf_counter()
-    Kq = stiffness_matrix(test or tq.gradients, w, problem.material, tq.gradients).tocoo()
+    Kq = _particle_stiffness(problem, test or tq.gradients, w, tq, hoop).tocoo()
     dof_map = pdofs.ravel()
     Kp_loc = sp.csr_matrix((Kq.data, (dof_map[Kq.row], dof_map[Kq.col])), shape=(d * n, d * n))
     hold = _hold_block(problem, held, dof_map, d * n)
@@ -564,7 +592,7 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
         f_fe_facets = np.concatenate(
             [f_fe_facets, f_p_facets[band.in_band[_first_cells(msh, f_p_facets)]]]
         )
-        fq = facet_quadrature(msh, f_fe_facets, deg)
+        fq = revolved_if(facet_quadrature(msh, f_fe_facets, deg), problem.material)
         t = raise_on_all_ranks(
             comm,
             lambda fn=fn, fq=fq: vector_values(fn, (fq.points, fq.normals), len(fq), "t", d),
@@ -575,7 +603,7 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
         for comp in range(d):
             f_fe_rows.append(d * l2g[: fl.shape[0]] + comp)
             f_fe_vals.append(fl[:, comp])
-        fq = patch_facet_rule(problem, f_p_facets)
+        fq = revolved_if(patch_facet_rule(problem, f_p_facets), problem.material)
         t = raise_on_all_ranks(
             comm,
             lambda fn=fn, fq=fq: vector_values(fn, (fq.points, fq.normals), len(fq), "t", d),
@@ -587,7 +615,12 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
 
     # augmented Lagrangian: p G^T G with the pointwise gradients G^FE = N, G^P = -phi (eq. 72-75)
     fe_dof = (d * l2g[:, None] + np.arange(d)).ravel()
-    fixed_dof = np.repeat(fixed_local, d)
+    # every dof held strongly: whole nodes and components (DirichletBCs on V.sub(i), a
+    # component on a facet); with whole nodes only the held component's penalty row stayed
+    # and broke the patch test (2.2e-3, rollers on band nodes)
+    cflags, cvals = component_conditions(problem)
+    fixed_dof = (np.repeat(fixed_local, d).reshape(-1, d) | cflags).ravel()
+    x_held = np.where(np.repeat(is_bc, d), ubc.x.array, np.where(cflags, cvals, 0.0).ravel())
     K_ff = K_fp = K_pf = A22g = None
     if p > 0.0:
         e2 = sp.identity(d, format="csr")
@@ -609,7 +642,7 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
         )
         K_pf = K_fp.T.tocsr()
         lift = fixed_dof[A12.row]
-        np.add.at(f_p, A12.col[lift], -A12.data[lift] * x_fix[A12.row[lift]])
+        np.add.at(f_p, A12.col[lift], -A12.data[lift] * x_held[A12.row[lift]])
     fe_body = None
     if problem.body_forces:  # weighted by beta_FE and beta_P like the tractions (eq. 49)
         fe_body, p_body = _body_loads(problem, band)
@@ -707,6 +740,7 @@ def _band_multiplier_of_alpha(problem, band: BridgingBand, ids: np.ndarray, nb: 
     V, comm = problem.V, problem.patch.comm
     # grad(alpha) = 0 on the band cells outside the tied ones: the tied cells carry it all
     q = cell_quadrature(V.mesh, problem.quadrature_degree, band.tied_cells)
+    q = raise_on_all_ranks(comm, lambda: revolved_if(q, problem.material))  # 2 pi r dx
     t = tabulate_in_cells(V, q.points, q.cells, derivatives=1)
     grad_alpha = np.stack([g @ band.alpha for g in t.gradients], axis=1)
     rhs = t.values.T @ (q.weights[:, None] * grad_alpha)
@@ -738,6 +772,7 @@ def _consistent_test_gradients(
     ids: np.ndarray,
     nb: int,
     held: np.ndarray | None = None,
+    hoop: sp.csr_matrix | None = None,
 ) -> list:
     r"""Variationally consistent integration (Chen, Hillman & Rüter 2013) of the particle test
     functions under the energy weight ``alpha`` (eq. 46): corrected gradients with
@@ -767,6 +802,7 @@ def _consistent_test_gradients(
     bq = crack_rules(msh, patch.particles.cells, patch.cracks, deg, exterior, cell_rule=False)[1]
     if bq is None:  # no crack
         bq = facet_quadrature(msh, patch.exterior_facets, deg, patch.exterior_cells)
+    bq = raise_on_all_ranks(comm, lambda b=bq: revolved_if(b, problem.material))
     sides = getattr(bq, "sides", None)  # crack faces: one-sided values
     tb = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(bq.points, 0, sides=sides))
     in_b = band.in_band[bq.cells]
@@ -784,6 +820,7 @@ def _consistent_test_gradients(
             comm,
             positions=patch.particles.positions,
             inactive=None if held is None else np.isin(np.arange(tq.values.shape[1]), held),
+            hoop=hoop,
         ),
     )
 
@@ -912,6 +949,7 @@ def _constraint_tables(
     V, comm, P = problem.V, problem.patch.comm, problem.patch.particles
     if problem.constraint == "integral":
         q = cell_quadrature(V.mesh, problem.quadrature_degree, band.tied_cells)
+        q = raise_on_all_ranks(comm, lambda: revolved_if(q, problem.material))  # 2 pi r dx
         points, cells, weights = q.points, q.cells, q.weights
     else:
         points = P.positions[band.local_particles]
@@ -959,14 +997,8 @@ def bridging_operators(problem: CoupledElasticity) -> CouplingOperators:
     fe_layout, l2g = fe_dof_layout(problem.V)
     pl = P.dof_layout(d)
     band = BridgingBand(problem, problem.overlap, problem.band_width)
-    deg = problem.quadrature_degree  # cut cells side by side, as bridging_system
-    q = crack_rules(msh, P.cells, patch.cracks, deg, None, quadrature=patch.quadrature)[0]
-    q = q or cell_quadrature(msh, deg, P.cells)
-    w = q.weights.copy()
-    b = band.in_band[q.cells]
-    w[b] *= band.alpha_at(q.points[b], q.cells[b])
+    q, w, tq, hoop = _particle_rule(problem, band)  # as bridging_system
     qa = QuadraturePoints(q.points, w, q.cells)
-    tq = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(q.points))
     held = _held_particles(problem, q, w, tq)
     if held.size:  # the same on every rank (reduced sums)
         x = np.round(P.positions[held[0]], 12).tolist()
@@ -986,9 +1018,9 @@ def bridging_operators(problem: CoupledElasticity) -> CouplingOperators:
     test = None
     if problem.consistent:
         test = _consistent_test_gradients(
-            problem, band, q, w, tq, (t_fe, t_p, cw), ids, ml.size_global // d
+            problem, band, q, w, tq, (t_fe, t_p, cw), ids, ml.size_global // d, hoop=hoop
         )
-    Kq = stiffness_matrix(test or tq.gradients, w, problem.material, tq.gradients).tocoo()
+    Kq = _particle_stiffness(problem, test or tq.gradients, w, tq, hoop).tocoo()
     Kp_loc = sp.csr_matrix((Kq.data, (dof_map[Kq.row], dof_map[Kq.col])), shape=(d * n, d * n))
     M_fe = (t_fe.T @ sp.diags(cw) @ t_fe).tocoo()
     M_p = (t_fe.T @ sp.diags(cw) @ t_p).tocoo()
@@ -1056,6 +1088,7 @@ def bridging_operators(problem: CoupledElasticity) -> CouplingOperators:
             "table": tq,
             "test_gradients": test or tq.gradients,
             "weights": w,
+            **({} if hoop is None else {"hoop": hoop}),
         },
         timings={"operators": time.perf_counter() - t0},
     )

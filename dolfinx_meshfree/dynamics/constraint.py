@@ -34,6 +34,11 @@ __all__ = ["MULTIPLIER_SOLVERS", "VelocityProjection", "check_multiplier_solver"
 #: Factorisations of ``S`` (``None``: automatic, dense up to :data:`DENSE_MAX` multipliers).
 MULTIPLIER_SOLVERS = (None, "dense", "mumps")
 DENSE_MAX = 2000
+#: A pivot ``d`` of ``S``'s Cholesky factor with ``d^2`` below this times ``S``'s largest
+#: diagonal marks a redundant constraint (:meth:`VelocityProjection._deflate`): the two null
+#: directions of a bridging band cut by a roller had 2e-17 and 2e-16 against 3.9 (the next
+#: eigenvalue 1.5e-6).
+REDUNDANT = 1e-12
 
 
 def check_multiplier_solver(solver: str | None) -> str | None:
@@ -72,6 +77,10 @@ class VelocityProjection:
         self.comm = comm
         self.ksp: PETSc.KSP | None = None
         self.chol: tuple | None = None
+        self._pinv: np.ndarray | None = None
+        #: The number of redundant constraints ``S``'s null space holds (dense path,
+        #: :meth:`_deflate`): combinations that act on dofs held at rest only.
+        self.redundant = 0
         self._work = [m.duplicate() for m in self.minv]
         self._tmp = [m.duplicate() for m in self.minv]
         S = None
@@ -123,15 +132,38 @@ class VelocityProjection:
         dense = np.zeros((size, size))
         for r, c, v in parts:
             np.add.at(dense, (r, c), v)
+        self._full = np.zeros(size)
+        scale = float(np.abs(np.diag(dense)).max(initial=0.0))
         try:
             self.chol = cho_factor(dense)
-        except LinAlgError as e:
+            if np.min(np.abs(np.diag(self.chol[0])), initial=np.inf) ** 2 > REDUNDANT * scale:
+                return
+        except LinAlgError:
+            pass
+        self.chol, self.redundant = None, self._deflate(dense, scale, size)
+
+    def _deflate(self, dense: np.ndarray, scale: float, size: int) -> int:
+        """A rank-deficient ``S``: the pseudo-inverse on its range (every rank), or a refusal.
+
+        A null vector ``mu`` of ``S = G M^{-1} G^T`` has ``G^T mu = 0`` on every moving dof:
+        the constraints it combines act only on dofs held at rest (``M^{-1} = 0``), e.g. the
+        bridging band's rows at FE nodes on a roller together with the roller's rows on the
+        particles (a band cut by a symmetry plane). They repeat what the held dofs already
+        satisfy: ``mu . G v = 0`` for every ``v`` that leaves held dofs at rest, so ``S
+        lambda = G v`` is consistent and its least-norm solution corrects ``v`` as the full
+        rank system would. Eigenvalues below :data:`REDUNDANT` times the largest diagonal are
+        that null space; a negative one beyond it (a negative mass) is refused."""
+        w, vecs = np.linalg.eigh(dense)
+        if w.min(initial=0.0) < -REDUNDANT * scale or not np.any(w > REDUNDANT * scale):
             raise ValueError(
-                f"the constraint matrix G M^-1 G^T ({size} rows) is singular: two constraints "
-                "act on the same dofs only (e.g. an interface node on a fixed facet whose "
-                "particles are fixed too); fix fewer facets or move the interface"
-            ) from e
-        self._full = np.zeros(size)
+                f"the constraint matrix G M^-1 G^T ({size} rows) is not positive semi-definite "
+                f"(its smallest eigenvalue {w.min():.3e} against {scale:.3e}): a lumped mass "
+                "is negative or the constraints act on no moving dof; check the masses "
+                "(particle_mass, dilation) and the fixed facets"
+            )
+        keep = w > REDUNDANT * scale
+        self._pinv = (vecs[:, keep] / w[keep]) @ vecs[:, keep].T
+        return int(size - keep.sum())
 
     def correct(
         self,
@@ -143,7 +175,7 @@ class VelocityProjection:
         prescribed values: :mod:`~dolfinx_meshfree.dynamics.prescribed`): solve ``S lambda =
         G v - target``, then ``v -= M^{-1} G^T lambda``; ``impulse`` receives ``G_f^T lambda``
         per field (collective)."""
-        if self.chol is not None:
+        if self.chol is not None or self._pinv is not None:
             self._correct_dense(vel, impulse, target)
             return
         self._gv.set(0.0)
@@ -179,7 +211,7 @@ class VelocityProjection:
             gv[lo:hi] -= target
         if self.comm.size > 1:
             self.comm.Allreduce(MPI.IN_PLACE, gv, op=MPI.SUM)
-        lam = cho_solve(self.chol, gv)
+        lam = cho_solve(self.chol, gv) if self.chol is not None else self._pinv @ gv
         for k, (cols, x) in enumerate(zip(self._cols, vel, strict=True)):
             if cols is None:
                 continue

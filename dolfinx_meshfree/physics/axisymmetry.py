@@ -62,6 +62,7 @@ if TYPE_CHECKING:  # annotations only
     from ..geometry.particles import ParticleSet
 
 __all__ = [
+    "approximation_hoop",
     "axis_points",
     "axis_projections",
     "axisymmetric_stiffness",
@@ -201,6 +202,22 @@ def hoop_table(
         return (sp.diags(1.0 / r) @ values).tocsr()
     near = sp.diags(np.asarray(near_axis, dtype=float))
     return (sp.diags(1.0 / r) @ (values - near @ axis_values)).tocsr()
+
+
+def approximation_hoop(
+    approximation: object, msh: dolfinx.mesh.Mesh, rule: QuadraturePoints, values: sp.csr_matrix
+) -> sp.csr_matrix:
+    """The :func:`hoop_table` of a meshfree ``approximation`` (its ``tabulate(points,
+    derivatives=0)``) at ``rule`` on ``msh``, with ``values`` its functions there: the axis
+    offset taken off at the points of cells that touch the axis (:func:`axis_points`). Local;
+    it tabulates on every rank (an empty set where no cell touches the axis), so callers may
+    wrap it in :func:`~dolfinx_meshfree.parallel.raise_on_all_ranks`."""
+    near = axis_points(msh, rule.cells)
+    on_axis = approximation.tabulate(axis_projections(rule.points[near]), derivatives=0).values
+    axis_values = sp.csr_matrix((len(rule), on_axis.shape[1]))
+    if near.any():
+        axis_values = (sp.eye(len(rule), format="csr")[:, np.flatnonzero(near)] @ on_axis).tocsr()
+    return hoop_table(values, rule.points, axis_values, near)
 
 
 def axis_projections(points: np.ndarray) -> np.ndarray:

@@ -186,7 +186,14 @@ def material_stiffness_form(
 #: The couplings of an axisymmetric (r, z) model (``plane="axisymmetric"``): their interface,
 #: loads, conditions and masses take the ``2 pi r`` weights
 #: (:mod:`~dolfinx_meshfree.physics.axisymmetry`).
-AXISYMMETRIC_COUPLINGS = ("lagrange", "master-slave")
+AXISYMMETRIC_COUPLINGS = (
+    "lagrange",
+    "edge-to-edge",
+    "bridging",
+    "ramp",
+    "ramp-cubic",
+    "master-slave",
+)
 
 
 class CoupledElasticity:
@@ -363,6 +370,10 @@ class CoupledElasticity:
         self.form: ufl.Form | None = None
         # set by CoupledLinearProblem: strong conditions by node (flags, values)
         self.strong: list[tuple[np.ndarray, np.ndarray]] = []
+        #: Conditions by component (:meth:`add_dirichlet` with ``components``): ``(facets,
+        #: value, components)`` on every facet given, FE and patch (the ramps constrain the
+        #: particle part of their interface cells' facets by component with them).
+        self.component_dirichlet: list[tuple[np.ndarray, VectorFunction, tuple[int, ...]]] = []
         #: Body forces (:mod:`~dolfinx_meshfree.physics.body_loads`) from :meth:`set_body_force`
         #: or the cell integrals of a CoupledLinearProblem's ``L``.
         self.body_forces: list = []
@@ -457,6 +468,7 @@ class CoupledElasticity:
         # Function evaluated at points, as CoupledLinearProblem passes)
         values[nodes] = np.asarray(value(x[nodes]), dtype=float).reshape(-1, gdim)
         self.strong.append((flags, values))
+        self.component_dirichlet.append((facets, value, c))
         if comm.allreduce(int(on_patch.sum())):
             self.dirichlet.append((facets[on_patch], value, c))
 

@@ -70,12 +70,10 @@ from ..geometry.smoothing import (
 )
 from ..parallel import Layout, raise_on_all_ranks
 from ..physics.axisymmetry import (
-    axis_points,
-    axis_projections,
+    approximation_hoop,
     axisymmetric_stiffness,
     check_axis_held,
     check_particle_section,
-    hoop_table,
     revolved,
 )
 from ..physics.cohesive import LinearCohesive
@@ -270,7 +268,6 @@ def particle_stiffness(
         raise_on_all_ranks(
             comm,
             lambda: _check_axisymmetric(
-                boundary_values is not None or boundary_moments,
                 isinstance(quadrature, SmoothingRule) or local_update_for(mls) is not None,
             ),
         )
@@ -312,14 +309,9 @@ def particle_stiffness(
     test_grads = tq.gradients
     hoop = None  # axisymmetric: u_r / r, the axis offset taken off in its cells (hoop_table)
     if axi:
-        near = axis_points(particles.mesh, q.cells)
-        on_axis = raise_on_all_ranks(
-            comm, lambda: mls.tabulate(axis_projections(q.points[near]), derivatives=0)
-        ).values
-        axis_values = sp.csr_matrix((len(q), on_axis.shape[1]))
-        if near.any():
-            axis_values = (sp.eye(len(q), format="csr")[:, np.flatnonzero(near)] @ on_axis).tocsr()
-        hoop = raise_on_all_ranks(comm, lambda: hoop_table(tq.values, q.points, axis_values, near))
+        hoop = raise_on_all_ranks(
+            comm, lambda: approximation_hoop(mls, particles.mesh, q, tq.values)
+        )
     if consistent_boundary is not None:
         facets, cells = consistent_boundary
         if boundary_quadrature is None:
@@ -391,14 +383,8 @@ def _check_axisymmetric_model(
     check_particle_section(particles)
 
 
-def _check_axisymmetric(interface_terms: bool, rule: bool) -> None:
+def _check_axisymmetric(rule: bool) -> None:
     """Refuse what :func:`particle_stiffness` does not revolve (local)."""
-    if interface_terms:
-        raise ValueError(
-            "material plane='axisymmetric': the edge-to-edge interface terms in consistent "
-            "integration (the particles' interpolant on the interface) are plane; use "
-            "coupling='lagrange' or pure EFG, or plane='strain'"
-        )
     if rule:
         raise ValueError(
             "material plane='axisymmetric' takes the cells' Gauss rule (integration='vci' or "

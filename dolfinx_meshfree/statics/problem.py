@@ -186,10 +186,12 @@ class CoupledLinearProblem:
         if patch.comm.allreduce(bc_facets.size):
             problem.add_dirichlet(bc_facets, lambda x, g=g: evaluate_fe_function(g, x))
         # patch facets whose nodes all hold component i (and are not fixed whole): a
-        # multiplier on that component only (Belytschko et al. 1995, eq. 2.6 by component)
+        # multiplier on that component only (Belytschko et al. 1995, eq. 2.6 by component);
+        # FE facets with a node on the interface too (the ramps' interface cells: the particle
+        # part of their blended functions held by component there)
         on_component = np.zeros(len(facets), dtype=bool)
         for i in range(gdim):
-            on_i = count[nodes, i].all(axis=1) & ~on & beside_patch
+            on_i = count[nodes, i].all(axis=1) & ~on & (beside_patch | gamma[nodes].any(axis=1))
             on_component |= on_i
             if patch.comm.allreduce(int(on_i.sum())):
                 problem.add_dirichlet(

@@ -370,9 +370,7 @@ class CoupledElasticity:
         self.form: ufl.Form | None = None
         # set by CoupledLinearProblem: strong conditions by node (flags, values)
         self.strong: list[tuple[np.ndarray, np.ndarray]] = []
-        #: Conditions by component (:meth:`add_dirichlet` with ``components``): ``(facets,
-        #: value, components)`` on every facet given, FE and patch (the ramps constrain the
-        #: particle part of their interface cells' facets by component with them).
+        #: ``(facets, value, components)`` of :meth:`add_dirichlet` by component (all facets)
         self.component_dirichlet: list[tuple[np.ndarray, VectorFunction, tuple[int, ...]]] = []
         #: Body forces (:mod:`~dolfinx_meshfree.physics.body_loads`) from :meth:`set_body_force`
         #: or the cell integrals of a CoupledLinearProblem's ``L``.

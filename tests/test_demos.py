@@ -297,12 +297,12 @@ def test_axisymmetric_demo_table_and_json(shared_dir):
     assert demo.main(["--json", str(out)]) == 0
     MPI.COMM_WORLD.Barrier()
     data = json.loads(out.read_text())
-    assert len(data["rows"]) == 3 * 2 * len(demo.METHODS) and data["plane_strain"]["error"] > 0.5
+    assert len(data["rows"]) == 4 * 2 * len(demo.METHODS) and data["plane_strain"]["error"] > 0.5
     assert [r["method"] for r in data["rods"]] == list(demo.METHODS)
     assert {r["method"] for r in data["rows"]} == {
         "fe", "efg", "lagrange", "edge-to-edge", "bridging", "ramp", "master-slave"
     }  # fmt: skip
-    assert {r["problem"] for r in data["rows"]} == {"lame", "cylinder", "sphere"}
+    assert {r["problem"] for r in data["rows"]} == {"lame", "shell", "cylinder", "sphere"}
 
 
 def test_concrete_impact_demo_table_and_json(shared_dir):

@@ -72,7 +72,12 @@ from ..approx.fe_points import locate_points, tabulate_in_cells
 from ..geometry.crack import particle_spacing, polyline_samples
 from ..geometry.quadrature import QuadraturePoints, cell_quadrature, facet_quadrature
 from ..parallel import Layout, raise_on_all_ranks
-from ..physics.axisymmetry import approximation_hoop, axisymmetric_stiffness, revolved_if
+from ..physics.axisymmetry import (
+    approximation_hoop,
+    axisymmetric_stiffness,
+    hoop_table,
+    revolved_if,
+)
 from ..physics.operators import consistent_gradients, load_vector, stiffness_matrix
 from ..physics.user_functions import vector_values
 from ..statics.efg import crack_rules
@@ -477,9 +482,12 @@ def _body_loads(problem, band: BridgingBand) -> tuple[np.ndarray, np.ndarray]:
 def _particle_rule(problem, band: BridgingBand) -> tuple:
     """The particles' rule: Gauss quadrature on the patch cells (cut cells side by side), its
     weights times ``alpha`` in the band (eq. 46), the MLS table there and, for an axisymmetric
-    law, the hoop table (:func:`~dolfinx_meshfree.physics.axisymmetry.approximation_hoop`;
-    the rule then revolved, ``2 pi r w``, before ``alpha``). Returns ``(q, w, table, hoop)``,
-    ``hoop`` ``None`` in plane models (collective)."""
+    law, the hoop tables of the trial strain
+    (:func:`~dolfinx_meshfree.physics.axisymmetry.approximation_hoop`) and of the test
+    functions (the plain ``N / r`` under VCI, whose radial identity is the divergence theorem
+    for ``N r e_r``; else the trial's); the rule then revolved, ``2 pi r w``, before
+    ``alpha``. Returns ``(q, w, table, hoop, test_hoop)``, the hoops ``None`` in plane models
+    (collective)."""
     msh, patch, comm = problem.V.mesh, problem.patch, problem.patch.comm
     deg, P = problem.quadrature_degree, problem.patch.particles
     q = crack_rules(msh, P.cells, patch.cracks, deg, None, quadrature=patch.quadrature)[0]
@@ -489,17 +497,25 @@ def _particle_rule(problem, band: BridgingBand) -> tuple:
     b = band.in_band[q.cells]
     w[b] *= band.alpha_at(q.points[b], q.cells[b])
     tq = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(q.points))
-    hoop = None
+    hoop = test_hoop = None
     if problem.material.axisymmetric:
-        hoop = raise_on_all_ranks(comm, lambda: approximation_hoop(problem.mls, msh, q, tq.values))
-    return q, w, tq, hoop
+        hoop = test_hoop = raise_on_all_ranks(
+            comm, lambda: approximation_hoop(problem.mls, msh, q, tq.values)
+        )
+        if problem.consistent:
+            test_hoop = raise_on_all_ranks(comm, lambda: hoop_table(tq.values, q.points))
+    return q, w, tq, hoop, test_hoop
 
 
-def _particle_stiffness(problem, test: list, w: np.ndarray, tq, hoop) -> sp.csr_matrix:
+def _particle_stiffness(problem, test: list, w: np.ndarray, tq, hoops: tuple) -> sp.csr_matrix:
     """``K_P`` (eq. 78) at the weights ``w`` (``alpha`` in the band), with ``test`` gradients
-    (VCI's or the table's); axisymmetric: with the ``hoop`` rows (local particle numbering)."""
+    (VCI's or the table's); axisymmetric: with the hoop rows, ``hoops = (trial, test)``
+    (:func:`_particle_rule`; local particle numbering)."""
+    hoop, test_hoop = hoops
     if hoop is not None:
-        return axisymmetric_stiffness(test, hoop, w, problem.material, tq.gradients)
+        return axisymmetric_stiffness(
+            test, test_hoop, w, problem.material, tq.gradients, trial_hoop=hoop
+        )
     return stiffness_matrix(test, w, problem.material, tq.gradients)
 
 
@@ -527,7 +543,7 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
     band = BridgingBand(problem, problem.overlap, problem.band_width)
 
     # particle side: Gauss quadrature on the patch cells, weights times alpha in the band
-    q, w, tq, hoop = _particle_rule(problem, band)
+    q, w, tq, hoop, test_hoop = _particle_rule(problem, band)
     held = band.held = _held_particles(problem, q, w, tq)  # alpha = 0 on their support
 
     # essential conditions: strongly on FE nodes of FE and band facets, multipliers on patch facets
@@ -548,7 +564,7 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
     test = None
     if problem.consistent:
         test = _consistent_test_gradients(
-            problem, band, q, w, tq, (t_fe, t_p, cw), ids, ml.size_global // d, held, hoop
+            problem, band, q, w, tq, (t_fe, t_p, cw), ids, ml.size_global // d, held, test_hoop
         )
     setup = problem.setup_time + time.perf_counter() - t0
     if tables is not None:
@@ -560,10 +576,10 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
             approximation=problem.mls,
         )
         if hoop is not None:
-            tables["hoop"] = hoop
+            tables["hoop"], tables["test_hoop"] = hoop, test_hoop
 
     t1 = time.perf_counter()
-    Kq = _particle_stiffness(problem, test or tq.gradients, w, tq, hoop).tocoo()
+    Kq = _particle_stiffness(problem, test or tq.gradients, w, tq, (hoop, test_hoop)).tocoo()
     dof_map = pdofs.ravel()
     Kp_loc = sp.csr_matrix((Kq.data, (dof_map[Kq.row], dof_map[Kq.col])), shape=(d * n, d * n))
     hold = _hold_block(problem, held, dof_map, d * n)
@@ -997,7 +1013,7 @@ def bridging_operators(problem: CoupledElasticity) -> CouplingOperators:
     fe_layout, l2g = fe_dof_layout(problem.V)
     pl = P.dof_layout(d)
     band = BridgingBand(problem, problem.overlap, problem.band_width)
-    q, w, tq, hoop = _particle_rule(problem, band)  # as bridging_system
+    q, w, tq, hoop, test_hoop = _particle_rule(problem, band)  # as bridging_system
     qa = QuadraturePoints(q.points, w, q.cells)
     held = _held_particles(problem, q, w, tq)
     if held.size:  # the same on every rank (reduced sums)
@@ -1018,9 +1034,9 @@ def bridging_operators(problem: CoupledElasticity) -> CouplingOperators:
     test = None
     if problem.consistent:
         test = _consistent_test_gradients(
-            problem, band, q, w, tq, (t_fe, t_p, cw), ids, ml.size_global // d, hoop=hoop
+            problem, band, q, w, tq, (t_fe, t_p, cw), ids, ml.size_global // d, hoop=test_hoop
         )
-    Kq = _particle_stiffness(problem, test or tq.gradients, w, tq, hoop).tocoo()
+    Kq = _particle_stiffness(problem, test or tq.gradients, w, tq, (hoop, test_hoop)).tocoo()
     Kp_loc = sp.csr_matrix((Kq.data, (dof_map[Kq.row], dof_map[Kq.col])), shape=(d * n, d * n))
     M_fe = (t_fe.T @ sp.diags(cw) @ t_fe).tocoo()
     M_p = (t_fe.T @ sp.diags(cw) @ t_p).tocoo()
@@ -1088,7 +1104,7 @@ def bridging_operators(problem: CoupledElasticity) -> CouplingOperators:
             "table": tq,
             "test_gradients": test or tq.gradients,
             "weights": w,
-            **({} if hoop is None else {"hoop": hoop}),
+            **({} if hoop is None else {"hoop": hoop, "test_hoop": test_hoop}),
         },
         timings={"operators": time.perf_counter() - t0},
     )

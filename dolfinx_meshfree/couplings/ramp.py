@@ -644,8 +644,8 @@ def _consistent_stiffness(
     cells and of that boundary, makes ``sum_q grad psi_J w_q = sum_b psi_J n w_b`` exact. The FE
     test functions ``(1 - R) N_a`` are polynomials, integrated exactly by the Gauss rule.
     Axisymmetric (``hoop``: the interface table's hoop, ``q`` revolved): every rule revolved and
-    the hoop's share in the radial identity (``consistent_gradients(..., hoop=)``), the patch
-    cells' hoop with the axis offset taken off
+    the test functions' hoop ``N / r`` in the radial identity (``consistent_gradients(...,
+    hoop=)``); the patch cells' trial strain with the axis offset taken off
     (:func:`~dolfinx_meshfree.physics.axisymmetry.approximation_hoop`).
 
     Returns:
@@ -660,9 +660,10 @@ def _consistent_stiffness(
     t0 = time.perf_counter()
     qp = raise_on_all_ranks(comm, lambda: revolved_if(_patch_rule(problem), problem.material))
     tp = raise_on_all_ranks(comm, lambda: mls.tabulate(qp.points))
-    hoop_p = None
+    hoop_p = test_p = None  # the patch cells' trial and test hoops (as particle_stiffness's)
     if hoop is not None:
         hoop_p = raise_on_all_ranks(comm, lambda: approximation_hoop(mls, msh, qp, tp.values))
+        test_p = raise_on_all_ranks(comm, lambda: hoop_table(tp.values, qp.points))
     # the boundary: exterior facets of patch cells (phi), with the faces of the patch's cracks
     # (one-sided values), and of interface cells (R phi)
     ext = boundary_facets(msh)
@@ -695,18 +696,20 @@ def _consistent_stiffness(
             np.concatenate([bp.normals, bi.normals]),
             comm,
             mls.points,
-            hoop=None if hoop is None else sp.vstack([hoop_p, hoop[:, particle]]).tocsr(),
+            hoop=None if hoop is None else sp.vstack([test_p, hoop[:, particle]]).tocsr(),
         ),
     )
     m = len(qp)
     if tables is not None:  # the patch cells' rule, table and test gradients
         tables.update(quadrature=qp, table=tp, test_gradients=[c[:m] for c in corrected])
         if hoop_p is not None:
-            tables["hoop"] = hoop_p
+            tables["hoop"], tables["test_hoop"] = hoop_p, test_p
     t1 = time.perf_counter()
     patch_test = [c[:m] for c in corrected]
     if hoop_p is not None:
-        K = axisymmetric_stiffness(patch_test, hoop_p, qp.weights, problem.material, tp.gradients)
+        K = axisymmetric_stiffness(
+            patch_test, test_p, qp.weights, problem.material, tp.gradients, trial_hoop=hoop_p
+        )
     else:
         K = stiffness_matrix(patch_test, qp.weights, problem.material, tp.gradients)
     K = K.tocoo()

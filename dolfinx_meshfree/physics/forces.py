@@ -105,7 +105,11 @@ class InternalForces:
             checks that it has not changed since (its ``version``), and raises
             :class:`~dolfinx_meshfree.approx.tables.StaleTableError` if it has.
         hoop: An axisymmetric material's hoop table (m x n,
-            :func:`~dolfinx_meshfree.physics.axisymmetry.hoop_table`); default ``N / R``.
+            :func:`~dolfinx_meshfree.physics.axisymmetry.hoop_table`) of the trial strain;
+            default ``N / R``.
+        test_hoop: The test functions' hoop table (default ``hoop``): VCI pairs a meshfree
+            trial strain with the axis offset taken off with the test functions' plain ``N /
+            R`` (:func:`~dolfinx_meshfree.physics.axisymmetry.approximation_hoop`).
 
     All results are this rank's contributions (the quadrature points it was given), unassembled
     across ranks, in the table's column numbering.
@@ -120,6 +124,7 @@ class InternalForces:
         comm: MPI.Comm | None = None,
         approximation: Approximation | None = None,
         hoop: sp.csr_matrix | None = None,
+        test_hoop: sp.csr_matrix | None = None,
     ) -> None:
         def check() -> np.ndarray:
             if not isinstance(material, Material):
@@ -164,6 +169,7 @@ class InternalForces:
         if self.axisymmetric:  # u_r / R at every point (or its limit: ``hoop``)
             table_hoop = hoop_table(table.values, table.points) if hoop is None else hoop
             self._H = hoop_operator(table_hoop)
+            self._Ht = self._H if test_hoop is None else hoop_operator(test_hoop)
             # D u = du_r/dr + du_z/dz (trial and test), for the tangent's hoop coupling
             self._D, self._Dt = (op[0::4] + op[3::4] for op in (self._G, self._Gt))
         m, d2 = table.shape[0], self.gdim**2
@@ -219,7 +225,7 @@ class InternalForces:
         hoop = 1.0 + self._H @ u
         P, P_tt = self._call(lambda: self.material.axisymmetric_piola(F, self.table.points, hoop))
         w = self.weights
-        return self._Gt.T @ (w[:, None, None] * P).ravel() + self._H.T @ (w * P_tt)
+        return self._Gt.T @ (w[:, None, None] * P).ravel() + self._Ht.T @ (w * P_tt)
 
     def tangent(self, u: npt.ArrayLike, backend: str | None = None) -> sp.csr_matrix:
         """Consistent tangent ``K_T = d f_int/du = sum_q G_test^T A(F_q) G w_q`` (CSR, dn x dn).
@@ -246,14 +252,15 @@ class InternalForces:
 
     def _hoop_tangent(self, A: np.ndarray) -> sp.csr_matrix:
         """The hoop rows and columns of an isotropic tangent ``A`` (m, 2, 2, 2, 2) at ``F = I``
-        (``lambda = A_rrzz``, ``lambda + 2 mu = A_rrrr``): ``H^T (lambda + 2 mu) H + D_test^T
-        lambda H + H^T lambda D`` with ``D u = du_r/dr + du_z/dz``, weighted by ``w``; what
+        (``lambda = A_rrzz``, ``lambda + 2 mu = A_rrrr``): ``H_test^T (lambda + 2 mu) H +
+        D_test^T lambda H + H_test^T lambda D`` with ``D u = du_r/dr + du_z/dz``, weighted by
+        ``w``; what
         the stable-step bound of a rate-form law needs (its twin's elastic tangent)."""
         w = self.weights
         lam, l2m = w * A[:, 0, 0, 1, 1], w * A[:, 0, 0, 0, 0]
-        D, Dt, H = self._D, self._Dt, self._H
+        D, Dt, H, Ht = self._D, self._Dt, self._H, self._Ht
         return (
-            H.T @ sp.diags(l2m) @ H + Dt.T @ sp.diags(lam) @ H + H.T @ sp.diags(lam) @ D
+            Ht.T @ sp.diags(l2m) @ H + Dt.T @ sp.diags(lam) @ H + Ht.T @ sp.diags(lam) @ D
         ).tocsr()
 
     def strain_energy(self, u: npt.ArrayLike) -> float:

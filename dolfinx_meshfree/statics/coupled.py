@@ -185,15 +185,8 @@ def material_stiffness_form(
 
 #: The couplings of an axisymmetric (r, z) model (``plane="axisymmetric"``): their interface,
 #: loads, conditions and masses take the ``2 pi r`` weights
-#: (:mod:`~dolfinx_meshfree.physics.axisymmetry`).
-AXISYMMETRIC_COUPLINGS = (
-    "lagrange",
-    "edge-to-edge",
-    "bridging",
-    "ramp",
-    "ramp-cubic",
-    "master-slave",
-)
+#: (:mod:`~dolfinx_meshfree.physics.axisymmetry`): every one (the hybrid is its own class).
+AXISYMMETRIC_COUPLINGS: tuple[str, ...] = COUPLINGS
 
 
 class CoupledElasticity:

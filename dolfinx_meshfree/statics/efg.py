@@ -74,6 +74,7 @@ from ..physics.axisymmetry import (
     axisymmetric_stiffness,
     check_axis_held,
     check_particle_section,
+    hoop_table,
     revolved,
 )
 from ..physics.cohesive import LinearCohesive
@@ -307,11 +308,15 @@ def particle_stiffness(
     else:
         tq = raise_on_all_ranks(comm, lambda: mls.tabulate(q.points))
     test_grads = tq.gradients
-    hoop = None  # axisymmetric: u_r / r, the axis offset taken off in its cells (hoop_table)
-    if axi:
-        hoop = raise_on_all_ranks(
+    hoop = trial_hoop = None  # axisymmetric: see axisymmetry.approximation_hoop
+    if axi:  # the trial strain u_r / r with the axis offset taken off in its cells; the test
+        # functions' N / r under VCI (its radial identity is the divergence theorem for N r e_r)
+        trial_hoop = raise_on_all_ranks(
             comm, lambda: approximation_hoop(mls, particles.mesh, q, tq.values)
         )
+        hoop = trial_hoop
+        if consistent_boundary is not None:
+            hoop = raise_on_all_ranks(comm, lambda: hoop_table(tq.values, q.points))
     if consistent_boundary is not None:
         facets, cells = consistent_boundary
         if boundary_quadrature is None:
@@ -348,14 +353,14 @@ def particle_stiffness(
     if tables is not None:
         tables.update(quadrature=q, table=tq, test_gradients=test_grads, approximation=mls)
         if hoop is not None:
-            tables["hoop"] = hoop
+            tables["hoop"], tables["test_hoop"] = trial_hoop, hoop
     t1 = time.perf_counter()
     if isinstance(q, SmoothingRule):  # symmetric
         rows, weights = raise_on_all_ranks(comm, lambda: stiffness_rows(mls, q, tq))
         Kg = stiffness_matrix(rows, weights, material, None, particles.petsc_index)
     elif axi:
         Kg = axisymmetric_stiffness(
-            test_grads, hoop, q.weights, material, tq.gradients, particles.petsc_index
+            test_grads, hoop, q.weights, material, tq.gradients, particles.petsc_index, trial_hoop
         )
     else:
         Kg = stiffness_matrix(test_grads, q.weights, material, tq.gradients, particles.petsc_index)

@@ -299,6 +299,7 @@ class ParticleSide:
             comm=particles.comm,
             approximation=tables.get("approximation"),
             hoop=tables.get("hoop"),
+            test_hoop=tables.get("test_hoop"),
         )
         self.gdim = particles.gdim
         self.dof_map = particles.petsc_dofs(self.gdim).ravel()

@@ -1,12 +1,13 @@
-# # Axisymmetric models: a thick cylinder, the breathing modes of a cylinder and a sphere, rods
+# # Axisymmetric models: thick cylinder and shell, breathing modes of a cylinder and a sphere, rods
 #
 # A solid of revolution under loads of revolution is modelled on its (r, z) section with
 # ``LinearElastic(E, nu, plane="axisymmetric")`` (issue 27, item 1;
 # :mod:`dolfinx_meshfree.physics.axisymmetry`): the hoop strain ``u_r / r`` joins the plane
-# strains and every integral takes the weight ``2 pi r``. Four problems with closed forms, each
-# run by FE, pure EFG, the lagrange, edge-to-edge, bridging, ramp and master–slave couplings
-# (particles where the section is most strained: at the bore, near the axis or the centre, at
-# the rods' contact; FE elsewhere) on a refinement series, report their error and their cost:
+# strains and every integral takes the weight ``2 pi r``. Five problems with closed forms, each
+# run by FE, pure EFG, the lagrange, edge-to-edge, bridging, ramp and master–slave couplings and
+# the hybrid SPH–FE coupling (particles where the section is most strained: at the bore, near
+# the axis or the centre, at the rods' contact; FE elsewhere) on a refinement series, report
+# their error and their cost:
 #
 # * **Lamé's thick cylinder** (statics): ``a = 1 <= r <= b = 2``, internal pressure ``p``, plane
 #   strain along the axis (rollers on ``z = 0`` and ``z = H``). ``u_r = (1 + nu) / E ((1 - 2 nu)
@@ -14,8 +15,8 @@
 #   ``sigma_rr = A - B / r^2``, ``sigma_tt = A + B / r^2``. FE is the user's own UFL form written
 #   with the module's helpers (``inner(ufl_stress(u), ufl_strain(v)) 2 pi r dx``) and
 #   ``mf.solve_forms``; EFG is ``mf.EFGElasticity`` (VCI, the default); lagrange is
-#   ``mf.CoupledElasticity`` (lagrange, edge-to-edge, bridging, ramp, master–slave) with
-#   particles on ``r < 1.5``.
+#   ``mf.CoupledElasticity`` (lagrange, edge-to-edge, bridging, ramp, master–slave) or
+#   ``mf.HybridElasticity`` with particles on ``r < 1.5``.
 # * **A thick spherical shell under internal pressure** (statics): ``a = 1 <= rho <= b = 2``
 #   (``rho`` the spherical radius), pressure ``p`` in the bore. ``u_rho = A rho + B / rho^2``
 #   with ``A = p a^3 / ((b^3 - a^3)(3 lambda + 2 mu))``, ``B = p a^3 b^3 / (4 mu (b^3 -
@@ -75,7 +76,7 @@ from scipy.optimize import brentq
 from scipy.spatial import Delaunay
 from scipy.special import j0, j1, spherical_jn
 
-METHODS = ("fe", "efg", "lagrange", "edge-to-edge", "bridging", "ramp", "master-slave")
+METHODS = ("fe", "efg", "lagrange", "edge-to-edge", "bridging", "ramp", "master-slave", "hybrid")
 #: Options of a coupling in explicit dynamics: the ramps' dynamic operators are not VCI-corrected,
 #: and their supports span the interface cells at their default dilation 2.5.
 DYNAMIC_OPTIONS = {
@@ -167,6 +168,16 @@ def rectangle(comm, r0, r1, h, n, m, cell="quadrilateral") -> dolfinx.mesh.Mesh:
     )  # fmt: skip
 
 
+def coupled(V, patch, material, method: str, **options):
+    """``mf.CoupledElasticity`` with ``coupling=method``, or ``mf.HybridElasticity`` (the hybrid
+    SPH–FE coupling at its defaults: HA-F, centred SPH particles, smoothed strains) for
+    ``"hybrid"``."""
+    if method == "hybrid":
+        options.pop("dilation", None)  # SPH: its smoothing length is its own
+        return mf.HybridElasticity(V, patch, material, **options)
+    return mf.CoupledElasticity(V, patch, material, coupling=method, **options)
+
+
 def facets(msh: dolfinx.mesh.Mesh, marker) -> np.ndarray:
     return dolfinx.mesh.locate_entities_boundary(msh, msh.topology.dim - 1, marker)
 
@@ -234,7 +245,7 @@ def lame_cylinder(method: str, n: int, cell: str = "quadrilateral", comm=MPI.COM
         else:  # particles at the bore (r < 1.5), FE outside
             V = _compat.vector_function_space(msh, 1)
             patch = patch_of(msh, lambda x: x[0] < 0.5 * (A_IN + B_OUT))
-            prob = mf.CoupledElasticity(V, patch, MATERIAL, coupling=method)
+            prob = coupled(V, patch, MATERIAL, method)
         prob.add_dirichlet(ends, lambda x: np.zeros_like(x), components=(1,))
         prob.add_traction(bore, lambda x, nrm: -PRESSURE * nrm)
         sol = prob.solve()
@@ -306,7 +317,7 @@ def spherical_shell(method: str, n: int, comm=MPI.COMM_WORLD) -> dict:
         else:  # particles at the bore, reaching the axis and the rollers
             V = _compat.vector_function_space(msh, 1)
             patch = patch_of(msh, lambda x: np.hypot(x[0], x[1]) < 1.4)
-            prob = mf.CoupledElasticity(V, patch, MATERIAL, coupling=method)
+            prob = coupled(V, patch, MATERIAL, method)
         prob.add_dirichlet(axis, zero, components=(0,))
         prob.add_dirichlet(rollers, zero, components=(1,))
         prob.add_traction(bore, lambda x, nrm: -PRESSURE * nrm)
@@ -373,7 +384,7 @@ def breathing(
         V = _compat.vector_function_space(msh, 1)
         patch = patch_of(msh, lambda x: np.hypot(x[0], x[1] if shape == "sphere" else 0) < 0.5)
         options = {"dilation": dilation, **DYNAMIC_OPTIONS.get(method, {})}
-        prob = mf.CoupledElasticity(V, patch, material, coupling=method, **options)
+        prob = coupled(V, patch, material, method, **options)
         dyn = mf.ExplicitDynamics.coupled(prob, fixed_facets=fixed)
     dyn.set_initial(displacement=lambda x: mode(x, ka))
     period = 2.0 * np.pi / omega
@@ -438,8 +449,7 @@ def rods(method: str, n: int, comm=MPI.COMM_WORLD) -> dict:
     else:  # particles on the lower rod's last 0.3 L, at the contact, FE elsewhere
         V = _compat.vector_function_space(msh, 1)
         patch = patch_of(msh, lambda x: (x[1] > 0.7 * ROD_LENGTH) & (x[1] < ROD_LENGTH))
-        problem = mf.CoupledElasticity(V, patch, ROD_STEEL, coupling=method,
-                                       **DYNAMIC_OPTIONS.get(method, {}))  # fmt: skip
+        problem = coupled(V, patch, ROD_STEEL, method, **DYNAMIC_OPTIONS.get(method, {}))
         dyn = mf.ExplicitDynamics.coupled(problem, fixed_facets=axis)
     dyn.add_contact(lower, upper)
     split = ROD_LENGTH + gap / 2
@@ -519,6 +529,10 @@ TARGETS = {
     ("shell", "bridging"): (1.75e-3, (1.7, 2.6)),
     ("shell", "ramp"): (1.5e-3, (1.5, 2.3)),
     ("shell", "master-slave"): (1.45e-3, (1.7, 2.6)),
+    ("lame", "hybrid"): (7.5e-4, (2.1, 3.1)),
+    ("shell", "hybrid"): (2.8e-3, (2.0, 3.0)),
+    ("cylinder", "hybrid"): (2.0e-2, (0.9, 1.7)),
+    ("sphere", "hybrid"): (4.7e-2, (1.4, 2.3)),
 }
 #: The energy drift of the linear runs (round-off).
 DRIFT = 1e-12
@@ -527,7 +541,7 @@ DRIFT = 1e-12
 #: 1.7e-3: its MLS surface, evaluated at the end vertices, is softer than the FE nodes;
 #: lagrange -0.04 %, +0.98, +16 %, 8.7e-4; edge-to-edge -0.21 %, +0.98, +16 %, 9.0e-4;
 #: bridging +0.007 %, +0.98, +16 %, 8.4e-4; ramp +0.90 %, +0.10, +23 %, 6.3e-4;
-#: master-slave -0.13 %, +0.98, +16 %, 8.8e-4).
+#: master-slave -0.13 %, +0.98, +16 %, 8.8e-4; hybrid +0.46 %, +1.47, +17 %, 7.2e-4).
 ROD_MARGINS = {
     "fe": {"force": 0.034, "duration_cells": 0.7, "overlap": 0.045, "drift": 1.2e-3},
     "efg": {"force": 0.04, "duration_cells": 4.0, "overlap": 0.7, "drift": 3.5e-3},
@@ -535,6 +549,7 @@ ROD_MARGINS = {
     "edge-to-edge": {"force": 0.01, "duration_cells": 2.0, "overlap": 0.32, "drift": 1.8e-3},
     "bridging": {"force": 0.01, "duration_cells": 2.0, "overlap": 0.32, "drift": 1.8e-3},
     "ramp": {"force": 0.018, "duration_cells": 0.2, "overlap": 0.45, "drift": 1.3e-3},
+    "hybrid": {"force": 0.01, "duration_cells": 3.0, "overlap": 0.34, "drift": 1.5e-3},
     "master-slave": {"force": 0.01, "duration_cells": 2.0, "overlap": 0.32, "drift": 1.8e-3},
 }
 

@@ -300,7 +300,7 @@ def test_axisymmetric_demo_table_and_json(shared_dir):
     assert len(data["rows"]) == 4 * 2 * len(demo.METHODS) and data["plane_strain"]["error"] > 0.5
     assert [r["method"] for r in data["rods"]] == list(demo.METHODS)
     assert {r["method"] for r in data["rows"]} == {
-        "fe", "efg", "lagrange", "edge-to-edge", "bridging", "ramp", "master-slave"
+        "fe", "efg", "lagrange", "edge-to-edge", "bridging", "ramp", "master-slave", "hybrid"
     }  # fmt: skip
     assert {r["problem"] for r in data["rows"]} == {"lame", "shell", "cylinder", "sphere"}
 

@@ -86,6 +86,16 @@ cells is the particles' own :class:`~dolfinx_meshfree.couplings.hybrid_sph.Corre
 interpolant; body loads on the patch cells go to the dofs through the hybrid sums' functions (eq.
 125), the displacement whose strains the particle energy holds.
 
+Conditions by component (``add_dirichlet(..., components=)``: a roller, a symmetry plane, the
+axis): the FE nodes' held components strongly; on the patch facets Nitsche's terms of those
+components or multipliers per piece and component.
+
+Axisymmetric models (``LinearElastic(..., plane="axisymmetric")``, HA-F): the strains smoothed
+over revolved sub-cells (:func:`~dolfinx_meshfree.couplings.hybrid_strains.smoothed_gradients`:
+the edges carry ``r u``, the hoop is the hybrid sums at the centroid over ``r``), or Gauss points
+with VCI and the hoop term; the FE form, the loads, the masses and Nitsche's terms revolved
+(``docs/guide/axisymmetry.md``). HA-S and nodal integration are refused there.
+
 Module map: :mod:`~dolfinx_meshfree.couplings.hybrid_discretisation` (options, particles, hybrid
 sums, numbering, stress points), :mod:`~dolfinx_meshfree.couplings.hybrid_strains` (particle
 energy, consistent and smoothed strains), :mod:`~dolfinx_meshfree.couplings.hybrid_traction`
@@ -108,6 +118,7 @@ from petsc4py import PETSc
 from .. import _compat
 from ..geometry.patch import ParticlePatch
 from ..parallel import raise_on_all_ranks
+from ..physics import axisymmetry
 from ..physics.body_loads import CallableBodyForce
 from ..physics.materials import LinearElastic
 from ..statics.petsc import BlockSystem, create_aij
@@ -220,8 +231,6 @@ class HybridElasticity(HybridDiscretisation):
         multiplier_length: float = 2.0,
         nitsche: float = 10.0,
     ) -> None:
-        if isinstance(material, LinearElastic):  # the same on every rank
-            material.refuse_axisymmetric("HybridElasticity (the hybrid SPH-FE coupling)")
         super().__init__(
             V,
             patch,
@@ -237,16 +246,28 @@ class HybridElasticity(HybridDiscretisation):
             nitsche=nitsche,
         )
         self._smoothed: tuple[list[sp.csr_matrix], np.ndarray] | None = None
-        self._dirichlet: list[tuple[np.ndarray, VectorFunction]] = []
+        self._dirichlet: list[tuple[np.ndarray, VectorFunction, tuple[int, ...]]] = []
         self._tractions: list[tuple[np.ndarray, Callable]] = []
         self._body_forces: list[CallableBodyForce] = []
 
     # -- user data ------------------------------------------------------------------------------
 
-    def add_dirichlet(self, facets: np.ndarray, value: VectorFunction) -> None:
+    def add_dirichlet(
+        self, facets: np.ndarray, value: VectorFunction, components: tuple[int, ...] | None = None
+    ) -> None:
         """``u = value(x)`` on owned exterior facets (FE side strongly, patch side by facet
-        multipliers); ``value`` maps points (m, 2) to (m, 2)."""
-        self._dirichlet.append((np.asarray(facets, dtype=np.int32), value))
+        multipliers); ``value`` maps points (m, 2) to (m, 2). ``components`` holds only those
+        (a roller, a symmetry plane, the axis of an axisymmetric model: ``(0,)``): the FE
+        nodes' components strongly, the patch facets' by one multiplier per piece and
+        component (or Nitsche's terms of those components, ``"smoothed"``)."""
+        c = (0, 1) if components is None else tuple(components)
+
+        def check() -> None:
+            if not c or len(set(c)) != len(c) or any(k not in (0, 1) for k in c):
+                raise ValueError(f"components={components!r} must be distinct indices in 0..1")
+
+        raise_on_all_ranks(self.comm, check)
+        self._dirichlet.append((np.asarray(facets, dtype=np.int32), value, c))
 
     def add_traction(self, facets: np.ndarray, traction: Callable) -> None:
         """Traction ``traction(x, n)`` (m, 2) on owned exterior facets, on either side."""
@@ -263,6 +284,12 @@ class HybridElasticity(HybridDiscretisation):
         FE nodes near the interface got no share of the patch's load: up to 42 x the plain FE
         error in the robustness matrix, against at most 3.9 x.)"""
         self._body_forces = [CallableBodyForce(force)]
+
+    def _nitsche(self) -> bool:
+        """Whether the patch's essential conditions are Nitsche's terms (``"smoothed"`` with
+        ``nitsche > 0``), by component too, axisymmetric too
+        (:func:`~dolfinx_meshfree.couplings.hybrid_boundary.nitsche_terms`)."""
+        return self.integration == "smoothed" and self.nitsche > 0
 
     # -- operators ------------------------------------------------------------------------------
 
@@ -323,7 +350,11 @@ class HybridElasticity(HybridDiscretisation):
         K_ff = create_aij(comm, block(f, f, (N2, N2)), fe_layout, fe_layout)
         chi = cell_indicator(self.V.mesh, ~self.patch.in_patch)
         u, v = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
-        a = chi * ufl.inner(self.material.ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx
+        if self.material.axisymmetric:  # the hoop strain and 2 pi r
+            stress, strain = axisymmetry.ufl_stress(u, self.material), axisymmetry.ufl_strain(v)
+            a = chi * axisymmetry.measure(self.V.mesh) * ufl.inner(stress, strain) * ufl.dx
+        else:
+            a = chi * ufl.inner(self.material.ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx
         K_fe = _compat.assemble_matrix(_compat.create_form(a))
         K_fe.axpy(1.0, K_ff, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
         K_ff.destroy()
@@ -377,8 +408,8 @@ class HybridElasticity(HybridDiscretisation):
         V, comm = self.V, self.comm
         P = self.patch.particles
         t0 = time.perf_counter()
-        nitsche = self.integration == "smoothed" and self.nitsche > 0 and bool(self._dirichlet)
-        conditions = [(self.split(f)[1], fn) for f, fn in self._dirichlet]
+        nitsche = self._nitsche() and bool(self._dirichlet)
+        conditions = [(self.split(f)[1], fn, c) for f, fn, c in self._dirichlet]
         if nitsche:
             K_n, f_n = nitsche_terms(self, conditions, self._smoothed_gradients())
         else:

@@ -31,6 +31,7 @@ from ..approx.body_cuts import body_cut
 from ..geometry.patch import ParticlePatch
 from ..geometry.quadrature import QuadraturePoints, cell_quadrature
 from ..parallel import raise_on_all_ranks
+from ..physics import axisymmetry
 from ..physics.materials import LinearElastic
 from .base import check_dimension
 from .hybrid_smoothing import SmoothingCells, smoothing_cells
@@ -46,6 +47,7 @@ __all__ = [
     "HYBRID_PARTICLES",
     "HYBRID_VARIANTS",
     "HybridDiscretisation",
+    "check_axisymmetric",
     "check_options",
     "global_facets",
 ]
@@ -107,6 +109,8 @@ def check_options(
         )
     if not isinstance(material, LinearElastic):
         raise TypeError(f"material must be a LinearElastic, got {type(material).__name__}")
+    if material.axisymmetric:
+        check_axisymmetric(V, variant, integration)
     if V.mesh is not patch.mesh:
         raise ValueError("V and patch must live on the same mesh object")
     if isinstance(smoothing, bool) or not (
@@ -142,6 +146,20 @@ def check_options(
             "length of the pieces of a patch Dirichlet boundary that carry one "
             "multiplier, in particle spacings; 2.0 is the default, 0 one per facet)"
         )
+
+
+def check_axisymmetric(V: dolfinx.fem.FunctionSpace, variant: str, integration: str | None) -> None:
+    """Refuse what the axisymmetric hybrid does not revolve (local): HA-S (its interface
+    tractions, eq. 131-134, are plane), the smoothed strains (their divergence theorem over the
+    sub-cells has no hoop term) and nodal integration; a section outside ``r >= 0``."""
+    if variant != "HA-F" or integration == "particles":
+        raise ValueError(
+            f"material plane='axisymmetric' with variant={variant!r}, "
+            f"integration={integration!r}: the axisymmetric hybrid is HA-F with "
+            "integration='smoothed' (the default) or 'cells': HA-S's interface tractions and "
+            "nodal integration are plane"
+        )
+    axisymmetry.check_half_plane(V.mesh.geometry.x, "V's mesh")
 
 
 class HybridDiscretisation:
@@ -282,18 +300,23 @@ class HybridDiscretisation:
         sub-cells per patch cell and direction, as many as the Gauss points of ``"cells"``."""
         if self._smoothing is None:
             n = max(1, (self.quadrature_degree + 1) // 2)
-            self._smoothing = smoothing_cells(self.V.mesh, self.patch.cells, self.patch.in_patch, n)
+            degree = 2 if self.material.axisymmetric else 1  # axisymmetric edges carry r u
+            self._smoothing = smoothing_cells(
+                self.V.mesh, self.patch.cells, self.patch.in_patch, n, degree
+            )
         return self._smoothing
 
     def stress_points(self) -> QuadraturePoints:
         """This rank's stress points of the particle energy: Gauss points of its patch cells
         (``"cells"``), the centroids of the smoothing cells with their areas (``"smoothed"``)
         or its owned particles with their volumes (``"particles"``)."""
-        if self.integration == "cells":
-            return cell_quadrature(self.V.mesh, self.quadrature_degree, self.patch.cells)
-        if self.integration == "smoothed":
+        if self.integration == "cells":  # axisymmetric: revolved, 2 pi r w
+            q = cell_quadrature(self.V.mesh, self.quadrature_degree, self.patch.cells)
+            return axisymmetry.revolved_if(q, self.material)
+        if self.integration == "smoothed":  # axisymmetric: 2 pi r_c |Omega_k| (Pappus)
             sc = self.smoothing_cells()
-            return QuadraturePoints(sc.centroids, sc.areas, sc.cells)
+            q = QuadraturePoints(sc.centroids, sc.areas, sc.cells)
+            return axisymmetry.revolved_if(q, self.material)
         P = self.patch.particles
         own = P.owned
         return QuadraturePoints(

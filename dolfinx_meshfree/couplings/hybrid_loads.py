@@ -20,6 +20,8 @@ from petsc4py import PETSc
 from ..approx.fe_points import tabulate_in_cells
 from ..geometry.quadrature import cell_quadrature, facet_quadrature
 from ..parallel import raise_on_all_ranks
+from ..physics import axisymmetry
+from ..physics.axisymmetry import revolved_if
 from ..physics.body_loads import CallableBodyForce, body_load_vectors
 from ..physics.operators import load_vector
 from ..physics.user_functions import vector_values
@@ -61,6 +63,7 @@ def hybrid_loads(
                 q = d.smoothing_cells().exterior_quadrature(msh, global_facets(msh, sel))
             else:
                 q = facet_quadrature(msh, sel, deg)
+            q = revolved_if(q, d.material)
             t = raise_on_all_ranks(
                 comm, lambda fn=fn, q=q: vector_values(fn, (q.points, q.normals), len(q), "t")
             )
@@ -80,8 +83,10 @@ def hybrid_loads(
         rows.append(hit)
         vals.append(extra[n2:][hit])
     if body_forces:
-        q = cell_quadrature(msh, d.quadrature_degree, d.patch.cells)
+        q = revolved_if(cell_quadrature(msh, d.quadrature_degree, d.patch.cells), d.material)
         chi = cell_indicator(msh, ~d.patch.in_patch)
+        if d.material.axisymmetric:  # the FE cells' loads on the revolved volume too
+            chi = chi * axisymmetry.measure(msh)
         # the hybrid sums' functions over [particles | FE nodes] (eq. 125): the displacement
         # whose strains the particle energy holds, so the load is its work conjugate
         t = raise_on_all_ranks(comm, lambda: d.sph.tabulate(q.points, 0))

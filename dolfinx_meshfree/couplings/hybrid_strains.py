@@ -26,6 +26,7 @@ from ..approx.fe_points import locate_points, tabulate_in_cells
 from ..approx.tables import strain_operator
 from ..geometry.quadrature import QuadraturePoints, facet_quadrature
 from ..parallel import raise_on_all_ranks
+from ..physics.axisymmetry import axisymmetric_stiffness, hoop_table, revolved_if
 from .base import fe_dof_layout
 from .hybrid_discretisation import HybridDiscretisation
 from .hybrid_smoothing import EXTERIOR, INTERIOR
@@ -33,6 +34,7 @@ from .hybrid_smoothing import EXTERIOR, INTERIOR
 __all__ = [
     "consistent_test_gradients",
     "energy_cells",
+    "energy_hoop",
     "energy_tables",
     "particle_energy_matrix",
     "smoothed_gradients",
@@ -59,6 +61,7 @@ def consistent_test_gradients(
     values: sp.csr_matrix,
     grads: list[sp.csr_matrix],
     weights: np.ndarray,
+    hoop: sp.csr_matrix | None = None,
 ) -> list[sp.csr_matrix]:
     """Integration-consistent test gradients (Chen, Hillman & Rüter 2013) of the hybrid
     sums over [particles | FE nodes] (collective).
@@ -70,6 +73,10 @@ def consistent_test_gradients(
     ``b_a = int N_a n_P`` over the interface (the FE trace, ``n_P`` out of the patch), which
     cancels the FE cells' own boundary term ``int N_a n_FE``. With these, a linear field
     leaves no force at any dof but the loaded boundary's (patch test), for either variant.
+    Axisymmetric (``hoop``: :func:`energy_hoop`, ``weights`` revolved): the boundary terms are
+    revolved and the hoop's virtual work joins the radial identity, ``sum_q Ghat_c,r w_q =
+    b_c,r - sum_q hoop_qc w_q`` (the divergence theorem for ``N_c r e_r``), as
+    :func:`~dolfinx_meshfree.physics.operators.consistent_gradients` does.
     """
     V, patch, comm, msh = d.V, d.patch, d.comm, d.V.mesh
     P = patch.particles
@@ -78,13 +85,17 @@ def consistent_test_gradients(
     deg = max(d.quadrature_degree, 4)
     target = np.zeros((n + N, 2))
     eq = facet_quadrature(msh, patch.exterior_facets, deg, patch.exterior_cells)
+    eq = raise_on_all_ranks(comm, lambda: revolved_if(eq, d.material))
     et = raise_on_all_ranks(comm, lambda: d.evaluator.tabulate(eq.points, 0)).values
     target[:n] = et.T @ (eq.weights[:, None] * eq.normals)
     iq = facet_quadrature(msh, patch.interface_facets, deg, patch.interface_patch_cells)
+    iq = raise_on_all_ranks(comm, lambda: revolved_if(iq, d.material))
     it = tabulate_in_cells(V, iq.points, patch.interface_fe_cells[_facet_index(iq)], 0)
     _, l2g = fe_dof_layout(d.V)
     fl = it.values.T @ (iq.weights[:, None] * iq.normals)  # (local FE nodes, 2)
     np.add.at(target, n + l2g[: fl.shape[0]], fl)
+    if hoop is not None:  # the hoop's share of the virtual work on N_c e_r
+        target[:, 0] -= hoop.T @ weights
     integral = np.stack([g.T @ weights for g in grads], axis=1)
     volume = values.T @ weights
     sums = comm.allreduce(np.hstack([target, integral, volume[:, None]]), op=MPI.SUM)
@@ -101,7 +112,8 @@ def smoothed_gradients(d: HybridDiscretisation) -> tuple[list[sp.csr_matrix], np
     ``(1 / |Omega_k|) sum_p w_p n_p N_c(x_p)`` over the Gauss points of the cell's edges,
     ``N_c`` the hybrid sums' functions inside the patch (eq. 125), the particles' own
     interpolant on the exterior boundary (the functions of the traction loads) and the FE basis
-    on the interface.
+    on the interface. Axisymmetric: :func:`_revolved_smoothing`, the weights then the revolved
+    volumes.
     """
     sc = d.smoothing_cells()
     n = d.patch.particles.num_particles
@@ -130,6 +142,8 @@ def smoothed_gradients(d: HybridDiscretisation) -> tuple[list[sp.csr_matrix], np
         (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(m, n + N)
     )
     ns = sc.areas.size
+    if d.material.axisymmetric:  # int over the revolved sub-cell: 2 pi r_c |Omega_k| (Pappus)
+        return _revolved_smoothing(d, sc, T)
     grads = []
     for k in range(2):
         R = sp.csr_matrix(
@@ -137,6 +151,40 @@ def smoothed_gradients(d: HybridDiscretisation) -> tuple[list[sp.csr_matrix], np
         )
         grads.append((R @ T).tocsr())
     return grads, sc.areas
+
+
+def smoothed_hoop(d: HybridDiscretisation) -> sp.csr_matrix:
+    """The smoothed hoop strain of each smoothing cell over [particles | FE nodes]:
+    ``int_k (u_r / r) 2 pi r dA / V_k = N_c(x_k) / r_k`` (the hybrid sums at the sub-cell's
+    centroid ``x_k``, exact for the linear fields they reproduce; collective)."""
+    sc = d.smoothing_cells()
+    t = raise_on_all_ranks(d.comm, lambda: d.sph.tabulate(sc.centroids, 0))
+    values = (t.values @ d.node_map()).tocsr()
+    return raise_on_all_ranks(d.comm, lambda: hoop_table(values, sc.centroids))
+
+
+def _revolved_smoothing(d: HybridDiscretisation, sc, T: sp.csr_matrix) -> tuple:
+    """Axisymmetric smoothed gradients (Chen, Yoon, Wang & Liu 2002 for axisymmetric nodal
+    integration): over the revolved sub-cell of volume ``V_k = 2 pi r_k |Omega_k|``,
+
+    .. math::
+        \\tilde u_{,z} = \\frac{1}{r_k |\\Omega_k|} \\oint u n_z r \\, ds, \\qquad
+        \\tilde u_{,r} = \\frac{1}{r_k |\\Omega_k|} \\oint u n_r r \\, ds - \\tilde h,
+
+    the divergence theorem for ``u r`` (``d(r u)/dr = r du/dr + u``), with the smoothed hoop
+    ``h~ = N(x_k) / r_k`` of :func:`smoothed_hoop`. The edges carry ``r u``, quadratic for a
+    linear ``u``: the two-point edge rule of :meth:`HybridDiscretisation.smoothing_cells`
+    integrates it exactly, so a linear field has its exact smoothed strains. Returns the
+    gradients and the volumes ``V_k``."""
+    m, ns = sc.points.shape[0], sc.areas.size
+    rc = sc.centroids[:, 0]
+    scale = sc.points[:, 0] / (sc.areas * rc)[sc.owner]
+    grads = []
+    for k in range(2):
+        R = sp.csr_matrix((sc.normals[:, k] * scale, (sc.owner, np.arange(m))), shape=(ns, m))
+        grads.append((R @ T).tocsr())
+    grads[0] = (grads[0] - smoothed_hoop(d)).tocsr()
+    return grads, 2.0 * np.pi * rc * sc.areas
 
 
 def energy_tables(
@@ -156,9 +204,28 @@ def energy_tables(
     grads = [(g @ Z).tocsr() for g in t.gradients]
     test = grads
     if d.consistent:
-        shepard = (t.values @ Z).tocsr()
-        test = consistent_test_gradients(d, shepard, grads, q.weights)
+        values = (t.values @ Z).tocsr()  # linear-consistent (CorrectedSPH)
+        hoop = None
+        if d.material.axisymmetric:
+            hoop = raise_on_all_ranks(d.comm, lambda: hoop_table(values, q.points))
+        test = consistent_test_gradients(d, values, grads, q.weights, hoop)
     return q.points, grads, test, q.weights
+
+
+def energy_hoop(d: HybridDiscretisation) -> sp.csr_matrix | None:
+    """The hoop strain ``N_c / r`` (m x (n + N)) of the hybrid sums' functions over
+    [particles | FE nodes] at this rank's stress points, for an axisymmetric law (``None`` in
+    plane; collective for the error). The functions reproduce linear fields
+    (:class:`~dolfinx_meshfree.couplings.hybrid_sph.CorrectedSPH`), so ``u_r = a r`` has the
+    hoop strain ``a``; the stress points are Gauss points, never on the axis."""
+    if not d.material.axisymmetric:
+        return None
+    if d.integration == "smoothed":
+        return smoothed_hoop(d)
+    q = d.stress_points()
+    t = raise_on_all_ranks(d.comm, lambda: d.sph.tabulate(q.points, 0))
+    values = (t.values @ d.node_map()).tocsr()
+    return raise_on_all_ranks(d.comm, lambda: hoop_table(values, q.points))
 
 
 def energy_cells(d: HybridDiscretisation) -> np.ndarray:
@@ -183,9 +250,13 @@ def particle_energy_matrix(
     ``consistent``. With ``"smoothed"``: ``sum_k |Omega_k| B_k^T D B_k`` of the smoothed strains
     ``smoothed`` (:func:`smoothed_gradients`, computed here if not given; symmetric and
     consistent; ``consistent`` has no effect). The rule: :func:`energy_tables`."""
-    D = sp.csr_matrix(d.material.voigt())
     dof = d.dof_map()
     _, grads, test, weights = energy_tables(d, smoothed)
+    hoop = energy_hoop(d)
+    if hoop is not None:  # axisymmetric: B4 with the hoop row, revolved weights
+        K = axisymmetric_stiffness(test, hoop, weights, d.material, grads).tocoo()
+        return sp.coo_matrix((K.data, (dof[K.row], dof[K.col])), shape=K.shape)
+    D = sp.csr_matrix(d.material.voigt())
     B = strain_operator(grads)
     Bt = B if test is grads else strain_operator(test)
     K = (Bt.T @ sp.kron(sp.diags(weights), D, format="csr") @ B).tocoo()

@@ -927,8 +927,13 @@ def build_hybrid(
     V, patch = problem.V, problem.patch
     P, comm, msh = patch.particles, patch.comm, V.mesh
     held = fixed_groups(msh, fixed_facets)  # (facets, components): rollers too
+    if is_axisymmetric(material):
+        axisymmetry.check_axis_held(msh, held, patch.in_patch, "ExplicitDynamics.coupled")
     ops = problem.operators()
-    mass_fe = fe_lumped_mass(V, _fe_density(law, material, V), weight=ops.fe_weight)
+    fe_weight = ops.fe_weight  # axisymmetric: times 2 pi r (the stress points are revolved)
+    if is_axisymmetric(material):
+        fe_weight = fe_weight * axisymmetry.measure(msh)
+    mass_fe = fe_lumped_mass(V, _fe_density(law, material, V), weight=fe_weight)
     pq = ops.particle_quadrature
     rho_p = _particle_density(law, material, particle_mass, pq, P)
     mass_p = particle_lumped_mass(P, ops.particle_table, pq.weights, rho_p, particle_mass)

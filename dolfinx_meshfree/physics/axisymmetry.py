@@ -65,6 +65,7 @@ __all__ = [
     "approximation_hoop",
     "axis_points",
     "axis_projections",
+    "axisymmetric_operator",
     "axisymmetric_stiffness",
     "check_axis_held",
     "check_half_plane",
@@ -256,8 +257,9 @@ def hoop_operator(hoop: sp.csr_matrix) -> sp.csr_matrix:
     return sp.csr_matrix((H.data, (H.row, 2 * H.col)), shape=(m, 2 * n))
 
 
-def _operator(gradients: list[sp.csr_matrix], hoop: sp.csr_matrix) -> sp.csr_matrix:
-    """``B4`` (4 m x 2 n): rows ``4 q + (rr, zz, rz, tt)``."""
+def axisymmetric_operator(gradients: list[sp.csr_matrix], hoop: sp.csr_matrix) -> sp.csr_matrix:
+    """``B4`` (4 m x 2 n) of the tables' ``gradients`` and ``hoop`` (:func:`hoop_table`): rows
+    ``4 q + (rr, zz, rz, tt)``, columns interleaved (r, z) dofs."""
     B3 = strain_operator(gradients).tocoo()
     H = hoop_operator(hoop).tocoo()
     q, r = np.divmod(B3.row, 3)
@@ -290,11 +292,12 @@ def axisymmetric_stiffness(
     if len(test_gradients) != 2:
         raise ValueError(f"an axisymmetric model is 2D (r, z), got {len(test_gradients)} tables")
     D = material.axisymmetric_voigt()
-    Bt = _operator(test_gradients, hoop)
+    Bt = axisymmetric_operator(test_gradients, hoop)
     if trial_gradients is None and trial_hoop is None:
         B = Bt
     else:
-        B = _operator(trial_gradients or test_gradients, hoop if trial_hoop is None else trial_hoop)
+        trial = hoop if trial_hoop is None else trial_hoop
+        B = axisymmetric_operator(trial_gradients or test_gradients, trial)
     DW = sp.kron(sp.diags(np.asarray(weights, dtype=float)), sp.csr_matrix(D), format="csr")
     K = (Bt.T @ DW @ B).tocsr()
     if node_map is None:

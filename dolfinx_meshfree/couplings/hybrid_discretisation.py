@@ -150,8 +150,8 @@ def check_options(
 
 def check_axisymmetric(V: dolfinx.fem.FunctionSpace, variant: str, integration: str | None) -> None:
     """Refuse what the axisymmetric hybrid does not revolve (local): HA-S (its interface
-    tractions, eq. 131-134, are plane), the smoothed strains (their divergence theorem over the
-    sub-cells has no hoop term) and nodal integration; a section outside ``r >= 0``."""
+    tractions, eq. 131-134, are plane) and nodal integration (``"particles"``: a particle's
+    volume is not revolved); a section outside ``r >= 0``."""
     if variant != "HA-F" or integration == "particles":
         raise ValueError(
             f"material plane='axisymmetric' with variant={variant!r}, "

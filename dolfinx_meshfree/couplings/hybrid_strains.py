@@ -217,7 +217,8 @@ def energy_hoop(d: HybridDiscretisation) -> sp.csr_matrix | None:
     [particles | FE nodes] at this rank's stress points, for an axisymmetric law (``None`` in
     plane; collective for the error). The functions reproduce linear fields
     (:class:`~dolfinx_meshfree.couplings.hybrid_sph.CorrectedSPH`), so ``u_r = a r`` has the
-    hoop strain ``a``; the stress points are Gauss points, never on the axis."""
+    hoop strain ``a``; the stress points (Gauss points, or the smoothing cells' centroids:
+    :func:`smoothed_hoop`) never lie on the axis."""
     if not d.material.axisymmetric:
         return None
     if d.integration == "smoothed":

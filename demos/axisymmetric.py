@@ -24,9 +24,9 @@
 #   quadrilaterals, rollers on ``z = 0``, the axis held radially); the couplings' particles at
 #   the bore (``rho < 1.4``), reaching the axis and the rollers. It is the check on the hoop
 #   strain of particles near the axis under a stress that varies there: with the axis offset
-#   taken off the test functions' hoop under VCI too, EFG was 29 times FE's error and the
-#   couplings stalled (lagrange 7.5e-2, edge-to-edge 0.10 at 16 cells), while every patch test
-#   held to round-off.
+#   taken off the test functions' hoop under VCI too (the first version), EFG was 6 times FE's
+#   error (9.7e-3 against 1.5e-3 at 16 cells) and lagrange and edge-to-edge stalled (3.1e-2 and
+#   4.2e-2, rates 0.72 and 0.17), while every patch test held to round-off.
 # * **The radial mode of a solid cylinder** (explicit dynamics): ``0 <= r <= a``, rollers on the
 #   end planes, the axis held radially. The free radial mode is ``u_r = J1(k r) cos(omega t)``
 #   with ``k a J0(k a) = (1 - 2 nu) / (1 - nu) J1(k a)`` and ``omega = k c_p``. Started from its

@@ -217,7 +217,7 @@ def approximation_hoop(
     It is the hoop of the *trial* strain. Under VCI the test functions keep the plain ``N /
     r`` (:func:`hoop_table` without the offset). Their radial identity is the divergence theorem
     for ``N r e_r``, and with the offset in it the correction of a particle on the axis was of
-    order ``1 / h``: it passed the patch test but not a thick spherical shell (EFG 17 times
+    order ``1 / h``: it passed the patch test but not a thick spherical shell (EFG 6 times
     FE's error, lagrange and edge-to-edge stalled at 3-4e-2). Without VCI (explicit dynamics,
     symmetric ``K``) both sides take this table."""
     near = axis_points(msh, rule.cells)

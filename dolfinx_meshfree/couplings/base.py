@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, ClassVar, Protocol, runtime_checkable
 import dolfinx
 import numpy as np
 import scipy.sparse as sp
+import ufl
 from petsc4py import PETSc
 
 from .. import _compat
@@ -33,6 +34,7 @@ from ..geometry.crack import Crack
 from ..geometry.patch import ParticlePatch
 from ..geometry.quadrature import QuadraturePoints
 from ..parallel import Layout, raise_on_all_ranks
+from ..physics import axisymmetry
 from ..physics.materials import LinearElastic
 from ..statics.sifs import solution_sifs
 
@@ -55,11 +57,27 @@ __all__ = [
     "facet_table",
     "fe_constraint_block",
     "fe_dof_layout",
+    "material_stiffness_form",
     "node_flags",
     "particle_constraint_block",
 ]
 
 VectorFunction = Callable[[np.ndarray], np.ndarray]
+
+
+def material_stiffness_form(
+    law: LinearElastic, V: dolfinx.fem.FunctionSpace, weight: ufl.core.expr.Expr
+) -> ufl.Form:
+    """``weight inner(sigma(u), eps(v)) dx`` of ``law`` on ``V`` (axisymmetric: the hoop strain
+    and ``2 pi r``): the FE form of :meth:`~dolfinx_meshfree.CoupledElasticity.fe_form`, of the
+    hybrid's FE cells and of ``ExplicitDynamics.fe``, and what
+    :class:`~dolfinx_meshfree.CoupledLinearProblem` compares the user's form with."""
+    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+    dx = ufl.Measure("dx", domain=V.mesh)
+    if law.axisymmetric:
+        stress, strain = axisymmetry.ufl_stress(u, law), axisymmetry.ufl_strain(v)
+        return weight * axisymmetry.measure(V.mesh) * ufl.inner(stress, strain) * dx
+    return weight * ufl.inner(law.ufl_stress(u), ufl.sym(ufl.grad(v))) * dx
 
 
 @dataclass

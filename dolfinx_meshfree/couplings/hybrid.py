@@ -112,13 +112,11 @@ from collections.abc import Callable
 import dolfinx
 import numpy as np
 import scipy.sparse as sp
-import ufl
 from petsc4py import PETSc
 
 from .. import _compat
 from ..geometry.patch import ParticlePatch
 from ..parallel import raise_on_all_ranks
-from ..physics import axisymmetry
 from ..physics.body_loads import CallableBodyForce
 from ..physics.materials import LinearElastic
 from ..statics.petsc import BlockSystem, create_aij
@@ -127,6 +125,7 @@ from .base import (
     CouplingOperators,
     cell_indicator,
     fe_dof_layout,
+    material_stiffness_form,
     node_flags,
 )
 from .hybrid_boundary import (
@@ -349,12 +348,7 @@ class HybridElasticity(HybridDiscretisation):
         K_fp = create_aij(comm, block(f, p, (N2, 2 * n)), fe_layout, pl)
         K_ff = create_aij(comm, block(f, f, (N2, N2)), fe_layout, fe_layout)
         chi = cell_indicator(self.V.mesh, ~self.patch.in_patch)
-        u, v = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
-        if self.material.axisymmetric:  # the hoop strain and 2 pi r
-            stress, strain = axisymmetry.ufl_stress(u, self.material), axisymmetry.ufl_strain(v)
-            a = chi * axisymmetry.measure(self.V.mesh) * ufl.inner(stress, strain) * ufl.dx
-        else:
-            a = chi * ufl.inner(self.material.ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx
+        a = material_stiffness_form(self.material, self.V, chi)  # axisymmetric: hoop, 2 pi r
         K_fe = _compat.assemble_matrix(_compat.create_form(a))
         K_fe.axpy(1.0, K_ff, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
         K_ff.destroy()

@@ -49,7 +49,6 @@ from typing import TYPE_CHECKING
 import dolfinx
 import numpy as np
 import numpy.typing as npt
-import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -59,6 +58,7 @@ from ..approx.crack_cuts import attach_cracks
 from ..approx.fe_points import locate_points
 from ..approx.mls import MLS
 from ..approx.tables import ShapeTable
+from ..couplings.base import material_stiffness_form
 from ..couplings.bridging import BridgingBand
 from ..couplings.hybrid import HybridElasticity
 from ..couplings.hybrid_finite import HybridForces
@@ -352,15 +352,11 @@ def build_fe(
     msh = V.mesh
     raise_on_all_ranks(msh.comm, lambda: material.check_gdim(msh.geometry.dim, "V's mesh"))
     groups = fixed_groups(msh, fixed_facets)
-    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
-    weight = None  # 2 pi r in axisymmetry, for the stiffness, the masses and the body loads
+    weight = None  # 2 pi r in axisymmetry, for the masses and the body loads
     if is_axisymmetric(material):
         raise_on_all_ranks(msh.comm, lambda: check_half_plane(msh.geometry.x, "V's mesh"))
-        weight = 2.0 * ufl.pi * axisymmetry.radius(msh)
-        stress, strain = axisymmetry.ufl_stress(u, material), axisymmetry.ufl_strain(v)
-        a = ufl.inner(stress, strain) * weight * ufl.dx
-    else:
-        a = ufl.inner(material.ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx
+        weight = axisymmetry.measure(msh)
+    a = material_stiffness_form(material, V, 1.0)  # axisymmetric: the hoop strain and 2 pi r
     K = _compat.assemble_matrix(_compat.create_form(a))
     mass = fe_lumped_mass(V, _fe_density(law, material, V), weight=weight)
     n_owned = msh.topology.index_map(msh.topology.dim).size_local

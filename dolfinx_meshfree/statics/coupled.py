@@ -35,6 +35,7 @@ from ..couplings.base import (
     CouplingOperators,
     cell_indicator,
     check_dimension,
+    material_stiffness_form,
 )
 from ..couplings.bridging import check_options
 from ..couplings.lagrange import interface_particles
@@ -167,20 +168,6 @@ def _check_plane(law: LinearElastic, msh: dolfinx.mesh.Mesh, coupling: str) -> N
     if law.axisymmetric:
         x = msh.geometry.x
         raise_on_all_ranks(msh.comm, lambda: axisymmetry.check_half_plane(x, "V's mesh"))
-
-
-def material_stiffness_form(
-    law: LinearElastic, V: dolfinx.fem.FunctionSpace, weight: ufl.core.expr.Expr
-) -> ufl.Form:
-    """``weight inner(sigma(u), eps(v)) dx`` of ``law`` on ``V`` (axisymmetric: the hoop strain
-    and ``2 pi r``): the FE form of :meth:`CoupledElasticity.fe_form`, and what
-    :class:`~dolfinx_meshfree.CoupledLinearProblem` compares the user's form with."""
-    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
-    dx = ufl.Measure("dx", domain=V.mesh)
-    if law.axisymmetric:
-        stress, strain = axisymmetry.ufl_stress(u, law), axisymmetry.ufl_strain(v)
-        return weight * axisymmetry.measure(V.mesh) * ufl.inner(stress, strain) * dx
-    return weight * ufl.inner(law.ufl_stress(u), ufl.sym(ufl.grad(v))) * dx
 
 
 #: The couplings of an axisymmetric (r, z) model (``plane="axisymmetric"``): their interface,

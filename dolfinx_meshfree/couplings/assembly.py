@@ -256,6 +256,20 @@ def fixed_dofs(problem: CoupledElasticity, is_bc: np.ndarray) -> np.ndarray:
     return is_bc[:, None] | component_conditions(problem)[0]
 
 
+def strong_values(
+    problem: CoupledElasticity, is_bc: np.ndarray, ubc: dolfinx.fem.Function
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every FE dof held strongly and its value, (num local nodes, gdim) each: the nodes fixed
+    whole (``is_bc``, their values in ``ubc``) and the components held
+    (:func:`component_conditions`); the values 0 elsewhere. What the blocks a coupling adds to
+    the FE rows beside ``K_FE`` (the bridging penalty, the ramps' blended cells) must drop as
+    rows and lift as columns: with whole nodes only, a roller's row stayed in them."""
+    flags, cvals = fixed_dofs(problem, is_bc), component_conditions(problem)[1]
+    gdim = flags.shape[1]
+    values = np.where(is_bc[:, None], ubc.x.array.reshape(-1, gdim), np.where(flags, cvals, 0.0))
+    return flags, values
+
+
 def _held_by_node(problem: CoupledElasticity, facets: np.ndarray, components) -> bool:
     """Whether the FE nodes of ``facets`` hold ``components`` by dof already (collective)."""
     V = problem.V

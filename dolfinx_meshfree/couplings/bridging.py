@@ -85,7 +85,6 @@ from ..statics.petsc import SolverOptions, create_aij, create_vector
 from .assembly import (
     append_patch_conditions,
     body_loads,
-    component_conditions,
     essential_conditions,
     fe_active,
     fe_stiffness,
@@ -95,6 +94,7 @@ from .assembly import (
     sizes,
     solve_and_gather,
     split_facets,
+    strong_values,
 )
 from .base import (
     CoupledSolution,
@@ -631,12 +631,11 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
 
     # augmented Lagrangian: p G^T G with the pointwise gradients G^FE = N, G^P = -phi (eq. 72-75)
     fe_dof = (d * l2g[:, None] + np.arange(d)).ravel()
-    # every dof held strongly: whole nodes and components (DirichletBCs on V.sub(i), a
-    # component on a facet); with whole nodes only the held component's penalty row stayed
-    # and broke the patch test (2.2e-3, rollers on band nodes)
-    cflags, cvals = component_conditions(problem)
-    fixed_dof = (np.repeat(fixed_local, d).reshape(-1, d) | cflags).ravel()
-    x_held = np.where(np.repeat(is_bc, d), ubc.x.array, np.where(cflags, cvals, 0.0).ravel())
+    # every dof held strongly, components too: with whole nodes only a roller's penalty row
+    # stayed and broke the patch test (3.3e-4 with rollers on band nodes)
+    held_dofs, x_held = strong_values(problem, is_bc, ubc)
+    fixed_dof = (held_dofs | fixed_local[:, None]).ravel()
+    x_held = x_held.ravel()
     K_ff = K_fp = K_pf = A22g = None
     if p > 0.0:
         e2 = sp.identity(d, format="csr")

@@ -80,7 +80,6 @@ from ..statics.sides import BlendedSide
 from .assembly import (
     append_patch_conditions,
     body_loads,
-    component_conditions,
     essential_conditions,
     fe_active,
     fe_stiffness,
@@ -88,6 +87,7 @@ from .assembly import (
     sizes,
     solve_and_gather,
     split_facets,
+    strong_values,
 )
 from .base import (
     CoupledSolution,
@@ -448,9 +448,7 @@ def ramp_system(problem: CoupledElasticity, tables: dict | None = None) -> tuple
     # essential conditions: FE nodes strongly; patch facets and the particle part of interface
     # cells' facets by multipliers
     fe_bc, patch_bc, dq, dtabs, ubc, is_bc = essential_conditions(problem)
-    u_bc = ubc.x.array.reshape(-1, 2)
-    cflags, cvals = component_conditions(problem)  # dofs held by component (rollers)
-    known = np.where(is_bc[:, None], u_bc, np.where(cflags, cvals, 0.0))
+    held_dofs, known = strong_values(problem, is_bc, ubc)  # whole nodes and components
     # whole nodes, then components: the particle part of the interface cells' facets
     held = [(f, fn) for f, fn in fe_bc] + [(f, fn, c) for f, fn, c in problem.component_dirichlet]
     for f, fn, *components in held:
@@ -489,9 +487,9 @@ def ramp_system(problem: CoupledElasticity, tables: dict | None = None) -> tuple
     pcol[~is_fe_c] = pdofs[pc // 2, pc % 2]
     # every dof held strongly, whole nodes and components, with its value (the FE rows of a
     # held component must go too, and its column be lifted)
-    fixed_dof = (np.repeat(fixed_local, 2).reshape(-1, 2) | cflags).ravel()
+    fixed_dof = (held_dofs | fixed_local[:, None]).ravel()
     x_fix = np.where(np.repeat(is_bc, 2), ubc.x.array, 0.0)
-    x_held = np.where(fixed_dof, known.ravel(), 0.0)
+    x_held = known.ravel()
     ff = is_fe_r & is_fe_c
     K_ff = sp.csr_matrix(
         (Ki.data[ff], (fe_dof[Ki.row[ff]], fe_dof[Ki.col[ff]])), shape=(fe_layout.size_global,) * 2

@@ -34,7 +34,6 @@ from ..statics.petsc import create_aij, create_vector
 from .base import CouplingOperators, fe_dof_layout, node_flags
 from .hybrid_discretisation import HybridDiscretisation, global_facets
 from .hybrid_smoothing import EXTERIOR
-from .hybrid_strains import energy_hoop
 
 __all__ = [
     "Multipliers",
@@ -74,7 +73,7 @@ def nitsche_terms(
     grads, areas = smoothed
     axi = d.material.axisymmetric
     if axi:  # B4 (rows rr, zz, rz, tt) and the 4 x 4 law; areas: the revolved volumes
-        B = axisymmetric_operator(grads, energy_hoop(d)).tocsr()
+        B = axisymmetric_operator(grads, d.hoop()).tocsr()
         Dm = d.material.axisymmetric_voigt()
         areas = areas / (2.0 * np.pi * sc.centroids[:, 0])
     else:

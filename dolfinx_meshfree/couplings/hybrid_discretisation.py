@@ -262,6 +262,7 @@ class HybridDiscretisation:
             self.sph.pair_cuts.append(cut)
             self.evaluator.pair_cuts.append(cut.subset(np.arange(P.num_particles)))
         self._smoothing: SmoothingCells | None = None
+        self._hoop: sp.csr_matrix | None = None
         self._setup = time.perf_counter() - t0
 
     @property
@@ -305,6 +306,25 @@ class HybridDiscretisation:
                 self.V.mesh, self.patch.cells, self.patch.in_patch, n, degree
             )
         return self._smoothing
+
+    def hoop(self) -> sp.csr_matrix | None:
+        """For an axisymmetric law, the hoop strain ``N_c / r`` (m x (n + N)) of the hybrid
+        sums' functions over [particles | FE nodes] at this rank's :meth:`stress_points` (with
+        ``"smoothed"`` the smoothing cells' centroids: the smoothed hoop ``int_k (u_r / r) 2 pi
+        r dA / V_k = N_c(x_k) / r_k``), computed once; ``None`` in plane (collective for the
+        error). The functions reproduce linear fields
+        (:class:`~dolfinx_meshfree.couplings.hybrid_sph.CorrectedSPH`), so ``u_r = a r`` has
+        the hoop strain ``a``; these points never lie on the axis."""
+        if not self.material.axisymmetric:
+            return None
+        if self._hoop is None:
+            points = self.stress_points().points
+            t = raise_on_all_ranks(self.comm, lambda: self.sph.tabulate(points, 0))
+            values = (t.values @ self.node_map()).tocsr()
+            self._hoop = raise_on_all_ranks(
+                self.comm, lambda: axisymmetry.hoop_table(values, points)
+            )
+        return self._hoop
 
     def stress_points(self) -> QuadraturePoints:
         """This rank's stress points of the particle energy: Gauss points of its patch cells

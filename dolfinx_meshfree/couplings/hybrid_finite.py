@@ -34,7 +34,7 @@ from ..statics.petsc import create_aij, create_vector
 from ..statics.sides import particle_coefficients
 from .base import fe_dof_layout
 from .hybrid_discretisation import HybridDiscretisation
-from .hybrid_strains import energy_cells, energy_hoop, energy_tables
+from .hybrid_strains import energy_cells, energy_tables
 
 __all__ = ["HybridForces"]
 
@@ -70,7 +70,7 @@ class HybridForces:
             attach(points, energy_cells(d))
         table = ShapeTable(points, sp.csr_matrix((points.shape[0], n + N)), grads)
         self.forces = InternalForces(  # axisymmetric: the hoop of the hybrid sums (or smoothed)
-            table, weights, material, test_gradients=test, comm=d.comm, hoop=energy_hoop(d)
+            table, weights, material, test_gradients=test, comm=d.comm, hoop=d.hoop()
         )
         self.fe_layout, _ = fe_dof_layout(d.V)
         self.particle_layout = self.P.dof_layout()

@@ -26,7 +26,7 @@ from ..approx.fe_points import locate_points, tabulate_in_cells
 from ..approx.tables import strain_operator
 from ..geometry.quadrature import QuadraturePoints, facet_quadrature
 from ..parallel import raise_on_all_ranks
-from ..physics.axisymmetry import axisymmetric_stiffness, hoop_table, revolved_if
+from ..physics.axisymmetry import axisymmetric_stiffness, revolved_if
 from .base import fe_dof_layout
 from .hybrid_discretisation import HybridDiscretisation
 from .hybrid_smoothing import EXTERIOR, INTERIOR
@@ -34,7 +34,6 @@ from .hybrid_smoothing import EXTERIOR, INTERIOR
 __all__ = [
     "consistent_test_gradients",
     "energy_cells",
-    "energy_hoop",
     "energy_tables",
     "particle_energy_matrix",
     "smoothed_gradients",
@@ -73,7 +72,8 @@ def consistent_test_gradients(
     ``b_a = int N_a n_P`` over the interface (the FE trace, ``n_P`` out of the patch), which
     cancels the FE cells' own boundary term ``int N_a n_FE``. With these, a linear field
     leaves no force at any dof but the loaded boundary's (patch test), for either variant.
-    Axisymmetric (``hoop``: :func:`energy_hoop`, ``weights`` revolved): the boundary terms are
+    Axisymmetric (``hoop``: :meth:`~dolfinx_meshfree.couplings.hybrid_discretisation.
+    HybridDiscretisation.hoop`, ``weights`` revolved): the boundary terms are
     revolved and the hoop's virtual work joins the radial identity, ``sum_q Ghat_c,r w_q =
     b_c,r - sum_q hoop_qc w_q`` (the divergence theorem for ``N_c r e_r``), as
     :func:`~dolfinx_meshfree.physics.operators.consistent_gradients` does.
@@ -153,16 +153,6 @@ def smoothed_gradients(d: HybridDiscretisation) -> tuple[list[sp.csr_matrix], np
     return grads, sc.areas
 
 
-def smoothed_hoop(d: HybridDiscretisation) -> sp.csr_matrix:
-    """The smoothed hoop strain of each smoothing cell over [particles | FE nodes]:
-    ``int_k (u_r / r) 2 pi r dA / V_k = N_c(x_k) / r_k`` (the hybrid sums at the sub-cell's
-    centroid ``x_k``, exact for the linear fields they reproduce; collective)."""
-    sc = d.smoothing_cells()
-    t = raise_on_all_ranks(d.comm, lambda: d.sph.tabulate(sc.centroids, 0))
-    values = (t.values @ d.node_map()).tocsr()
-    return raise_on_all_ranks(d.comm, lambda: hoop_table(values, sc.centroids))
-
-
 def _revolved_smoothing(d: HybridDiscretisation, sc, T: sp.csr_matrix) -> tuple:
     """Axisymmetric smoothed gradients (Chen, Yoon, Wang & Liu 2002 for axisymmetric nodal
     integration): over the revolved sub-cell of volume ``V_k = 2 pi r_k |Omega_k|``,
@@ -172,7 +162,8 @@ def _revolved_smoothing(d: HybridDiscretisation, sc, T: sp.csr_matrix) -> tuple:
         \\tilde u_{,r} = \\frac{1}{r_k |\\Omega_k|} \\oint u n_r r \\, ds - \\tilde h,
 
     the divergence theorem for ``u r`` (``d(r u)/dr = r du/dr + u``), with the smoothed hoop
-    ``h~ = N(x_k) / r_k`` of :func:`smoothed_hoop`. The edges carry ``r u``, quadratic for a
+    ``h~ = N(x_k) / r_k`` (:meth:`~dolfinx_meshfree.couplings.hybrid_discretisation.
+    HybridDiscretisation.hoop`). The edges carry ``r u``, quadratic for a
     linear ``u``: the two-point edge rule of :meth:`HybridDiscretisation.smoothing_cells`
     integrates it exactly, so a linear field has its exact smoothed strains. Returns the
     gradients and the volumes ``V_k``."""
@@ -183,7 +174,7 @@ def _revolved_smoothing(d: HybridDiscretisation, sc, T: sp.csr_matrix) -> tuple:
     for k in range(2):
         R = sp.csr_matrix((sc.normals[:, k] * scale, (sc.owner, np.arange(m))), shape=(ns, m))
         grads.append((R @ T).tocsr())
-    grads[0] = (grads[0] - smoothed_hoop(d)).tocsr()
+    grads[0] = (grads[0] - d.hoop()).tocsr()
     return grads, 2.0 * np.pi * rc * sc.areas
 
 
@@ -205,28 +196,8 @@ def energy_tables(
     test = grads
     if d.consistent:
         values = (t.values @ Z).tocsr()  # linear-consistent (CorrectedSPH)
-        hoop = None
-        if d.material.axisymmetric:
-            hoop = raise_on_all_ranks(d.comm, lambda: hoop_table(values, q.points))
-        test = consistent_test_gradients(d, values, grads, q.weights, hoop)
+        test = consistent_test_gradients(d, values, grads, q.weights, d.hoop())
     return q.points, grads, test, q.weights
-
-
-def energy_hoop(d: HybridDiscretisation) -> sp.csr_matrix | None:
-    """The hoop strain ``N_c / r`` (m x (n + N)) of the hybrid sums' functions over
-    [particles | FE nodes] at this rank's stress points, for an axisymmetric law (``None`` in
-    plane; collective for the error). The functions reproduce linear fields
-    (:class:`~dolfinx_meshfree.couplings.hybrid_sph.CorrectedSPH`), so ``u_r = a r`` has the
-    hoop strain ``a``; the stress points (Gauss points, or the smoothing cells' centroids:
-    :func:`smoothed_hoop`) never lie on the axis."""
-    if not d.material.axisymmetric:
-        return None
-    if d.integration == "smoothed":
-        return smoothed_hoop(d)
-    q = d.stress_points()
-    t = raise_on_all_ranks(d.comm, lambda: d.sph.tabulate(q.points, 0))
-    values = (t.values @ d.node_map()).tocsr()
-    return raise_on_all_ranks(d.comm, lambda: hoop_table(values, q.points))
 
 
 def energy_cells(d: HybridDiscretisation) -> np.ndarray:
@@ -253,7 +224,7 @@ def particle_energy_matrix(
     consistent; ``consistent`` has no effect). The rule: :func:`energy_tables`."""
     dof = d.dof_map()
     _, grads, test, weights = energy_tables(d, smoothed)
-    hoop = energy_hoop(d)
+    hoop = d.hoop()
     if hoop is not None:  # axisymmetric: B4 with the hoop row, revolved weights
         K = axisymmetric_stiffness(test, hoop, weights, d.material, grads).tocoo()
         return sp.coo_matrix((K.data, (dof[K.row], dof[K.col])), shape=K.shape)

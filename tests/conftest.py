@@ -280,6 +280,16 @@ def fitted_rate(h, errors):
     return float(np.polyfit(np.log(h), np.log(errors), 1)[0])
 
 
+def conversion_balance(records, conversions) -> float:
+    """The energy balance of a run without external work whose cells became particles
+    (``AdaptiveRun``), relative to the initial kinetic energy: ``(K + U - sum of the
+    conversions' energy changes - K_0) / K_0`` at the last record (``records``: the stepper's
+    energy records, the first at rest in strain)."""
+    first, last = records[0], records[-1]
+    changed = sum(c.energy_change for c in conversions)
+    return (last.kinetic + last.internal - changed - first.kinetic) / first.kinetic
+
+
 DEMOS = pathlib.Path(__file__).resolve().parents[1] / "demos"
 
 

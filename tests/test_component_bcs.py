@@ -311,10 +311,11 @@ def test_roller_patch_test_with_callables(coupling, where):
     assert np.abs(sol.displacement(g) - expected).max() <= 1e-10
 
 
-def _roller_model(coupling: str, where: str, law) -> mf.CoupledElasticity:
+def _roller_model(coupling: str, where: str, law, **options) -> mf.CoupledElasticity:
     """The roller patch test's model on [0, 2] x [0, 1] (16 x 8 cells): rollers u_x = 0 on
     x = 0 and u_y = 0 on y = 0 through ``add_dirichlet(..., components=)``, the tractions of
-    u = (2e-3 x, -1e-3 y) elsewhere; the patch cut by both planes or away from them."""
+    u = (2e-3 x, -1e-3 y) elsewhere; the patch cut by both planes or away from them.
+    ``coupling="hybrid"``: a :class:`~dolfinx_meshfree.HybridElasticity` with ``options``."""
     msh = box([0.0, 0.0], [2.0, 1.0], [16, 8])
     V = _compat.vector_function_space(msh)
     if where == "cut":
@@ -322,7 +323,10 @@ def _roller_model(coupling: str, where: str, law) -> mf.CoupledElasticity:
     else:
         cells = cells_where(msh, lambda m: (m[:, 0] > 0.7) & (m[:, 0] < 1.6) & (m[:, 1] > 0.3))
     patch = mf.ParticlePatch(msh, cells, 0.125)
-    model = mf.CoupledElasticity(V, patch, law, coupling=coupling)
+    if coupling == "hybrid":
+        model = mf.HybridElasticity(V, patch, law, **options)
+    else:
+        model = mf.CoupledElasticity(V, patch, law, coupling=coupling, **options)
     s = MAT.voigt() @ np.array([2e-3, -1e-3, 0.0])
     sigma = np.array([[s[0], s[2]], [s[2], s[1]]])
     for i in range(2):
@@ -369,22 +373,8 @@ def test_hybrid_roller_patch_test(integration, where):
     (u_x = 0 on x = 0, u_y = 0 on y = 0, tractions elsewhere) to round-off, the patch cut by
     both planes or away from them (measured 1.5e-17 to 6.2e-17 against displacements of
     2e-3)."""
-    msh = box([0.0, 0.0], [2.0, 1.0], [16, 8])
-    V = _compat.vector_function_space(msh)
-    if where == "cut":
-        cells = cells_where(msh, lambda m: (m[:, 0] < 1.0) & (m[:, 1] < 0.6))
-    else:
-        cells = cells_where(msh, lambda m: (m[:, 0] > 0.7) & (m[:, 0] < 1.6) & (m[:, 1] > 0.3))
-    model = mf.HybridElasticity(
-        V, mf.ParticlePatch(msh, cells, 0.125), MAT, integration=integration
-    )
-    s = MAT.voigt() @ np.array([2e-3, -1e-3, 0.0])
-    sigma = np.array([[s[0], s[2]], [s[2], s[1]]])
-    for i in range(2):
-        facets = mf.boundary_facets(msh, lambda p, i=i: np.isclose(p[i], 0.0))
-        model.add_dirichlet(facets, lambda x: np.zeros_like(x), components=(i,))
-    rest = mf.boundary_facets(msh, lambda p: np.isclose(p[0], 2.0) | np.isclose(p[1], 1.0))
-    model.add_traction(rest, lambda x, n: n @ sigma)
+    model = _roller_model("hybrid", where, MAT, integration=integration)
+    rest = mf.boundary_facets(model.V.mesh, lambda p: np.isclose(p[0], 2.0))
     g = np.stack(np.meshgrid(np.linspace(0, 2, 9), np.linspace(0, 1, 5)), -1).reshape(-1, 2)
     expected = np.stack([2e-3 * g[:, 0], -1e-3 * g[:, 1]], axis=1)
     assert np.abs(model.solve().displacement(g) - expected).max() <= 1e-10

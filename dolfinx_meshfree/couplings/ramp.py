@@ -452,7 +452,7 @@ def ramp_system(problem: CoupledElasticity, tables: dict | None = None) -> tuple
     # whole nodes, then components: the particle part of the interface cells' facets
     held = [(f, fn) for f, fn in fe_bc] + [(f, fn, c) for f, fn, c in problem.component_dirichlet]
     for f, fn, *components in held:
-        f_i = blend.blended_facets(f[~np.isin(f, patch.exterior_facets)])
+        f_i = blend.blended_facets(f)  # interface cells' facets only (none of the patch's)
         if not comm.allreduce(f_i.size):
             continue
         iq = revolved_if(facet_quadrature(msh, f_i, deg), problem.material, True)

@@ -932,7 +932,9 @@ def build_hybrid(
     mass_fe = fe_lumped_mass(V, _fe_density(law, material, V), weight=fe_weight)
     pq = ops.particle_quadrature
     rho_p = _particle_density(law, material, particle_mass, pq, P)
-    mass_p = particle_lumped_mass(P, ops.particle_table, pq.weights, rho_p, particle_mass)
+    mass_p = particle_lumped_mass(
+        P, ops.particle_table, pq.weights, rho_p, particle_mass, revolve=is_axisymmetric(material)
+    )  # the row-sum's weights are revolved already (the stress points)
     n_owned = V.dofmap.index_map.size_local
     active = np.repeat(ops.fe_active[:n_owned], msh.geometry.dim)
     mass_fe.array[:] = mass_fe.array_r * active

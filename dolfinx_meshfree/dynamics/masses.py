@@ -104,6 +104,7 @@ def particle_lumped_mass(
     rho: float | np.ndarray,
     kind: str = "row-sum",
     check: bool = True,
+    revolve: bool = False,
 ) -> PETSc.Vec:
     """Lumped particle masses, one entry per particle dof in PETSc order (collective).
 
@@ -118,6 +119,9 @@ def particle_lumped_mass(
             ``rho Phi^T W Phi`` (Belytschko et al. 1995, eq. 4.5); ``"volume"``:
             ``rho V_I`` with the particles' Voronoi volumes.
         check: Refuse masses that are not positive.
+        revolve: ``"volume"`` in an axisymmetric model: ``rho 2 pi r_I V_I``, the particle's
+            area ``V_I`` revolved at its radius (Pappus: exact for a particle at its cell's
+            centroid, the hybrid's). ``"row-sum"`` takes revolved ``weights`` instead.
 
     Raises:
         ValueError: on every rank when ``kind`` is unknown or, with ``check``, when a mass is
@@ -140,11 +144,14 @@ def particle_lumped_mass(
         m = create_vector(comm, pl, pdofs.ravel(), np.repeat(local, gdim))
     else:
         own = particles.owned
+        volumes = particles.volumes
+        if revolve:
+            volumes = volumes * 2.0 * np.pi * particles.positions[:, 0]
         m = create_vector(
             comm,
             pl,
             pdofs[own].ravel(),
-            np.repeat((np.asarray(rho, dtype=float) * particles.volumes)[own], gdim),
+            np.repeat((np.asarray(rho, dtype=float) * volumes)[own], gdim),
         )
     if check:
         _check_positive(m, comm, "particle")

@@ -17,6 +17,7 @@ import dataclasses
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
 from dolfinx_meshfree.dynamics.patch_conversion import convert
+from dolfinx_meshfree.dynamics.rate_forms import RateLaw
 from dolfinx_meshfree.geometry.patch_criteria import GrowthContext
 
 import dolfinx
@@ -151,6 +152,47 @@ def test_coupled_crushing_impact(method):
     assert largest(dyn, "mu_max") > HJC.mu_plock
     last = res.energies[-1]
     assert abs(balance(res) - last.constraint / res.energies[0].kinetic) < 2.5e-4  # 1.0e-4
+
+
+def test_a_run_in_pieces():
+    """The crushing impact run in pieces of fewer steps than ``rebound_every`` (``run(t)`` in a
+    loop, as a user follows a projectile): the rate law takes each piece's first time, ``t0 +
+    span``, as its state's (they differ by round-off: it stopped the run until this stop), and
+    the wave speed is still checked every ``rebound_every`` steps across the pieces (a piece
+    shorter than that was never checked); the concrete fails as in one run, and the balance
+    closes the same."""
+    dyn = bar("fe", HJC, fixed=True)
+    dyn.set_initial(velocity=lambda x: np.stack([-300.0 + 0 * x[:, 0], 0 * x[:, 0]], axis=1))
+    pieces = 16
+    for k in range(1, pieces + 1):
+        res = dyn.run(k * 2e-5 / pieces, energy_records=2)
+    assert res.steps < dyn.rebound_every  # each piece shorter than the checks' spacing
+    assert dyn.bound.checked_at >= dyn.step - dyn.rebound_every
+    records = dyn.stepper.records
+    first, last = records[0], records[-1]
+    assert largest(dyn, "damage") == 1.0
+    assert abs((last.kinetic + last.internal - first.kinetic) / first.kinetic) < 1e-3
+    dyn.destroy()
+
+
+def test_stable_step_sees_the_compression():
+    """The speed the stable step is bounded with is the points' largest wave speed over their
+    smallest principal stretch (a cell crushed to half its height halves the step), eroded
+    points left out."""
+    law = RateLaw(dataclasses.replace(HJC, erosion=1.0))
+    F = np.broadcast_to(np.eye(2), (3, 2, 2)).copy()
+    law.stress(F)  # the virgin state at rest
+    law.set_time(1e-7)
+    F[1] = np.diag([1.0, 0.999])  # compressed: its wave speed barely moves
+    F[2] = np.diag([-1.0, 1.0])  # inverted: eroded
+    law.stress(F)
+    assert law.state["eroded"][:, 0].tolist() == [0.0, 0.0, 1.0]
+    speed = law.law.wave_speed(law.state)
+    assert law.points_wave_speed() == pytest.approx(speed / 0.999, rel=1e-12)
+    law.set_time(2e-7)
+    F[1] = np.diag([1.0, 0.5])
+    law.stress(F)
+    assert law.points_wave_speed() == pytest.approx(law.law.wave_speed(law.state) / 0.5, rel=1e-12)
 
 
 def test_steel_block_yields_and_keeps_the_balance():

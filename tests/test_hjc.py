@@ -373,3 +373,51 @@ def test_solvers_refuse_rate_laws_with_a_way_to_use_them():
         match = rf"{type(law).__name__} is a rate-form .*ExplicitDynamics.fe.*update"
         with pytest.raises(TypeError, match=match):
             mf.CoupledElasticity(V, patch, law, coupling="lagrange")
+
+
+def test_erosion_of_a_worn_point():
+    """``erosion=eps_e``: a point failed in shear (``D = 1``) erodes once its plastic strain
+    reaches ``eps_e`` (the same path with ``eps_e`` beyond it does not): it then carries no
+    stress whatever its deformation, even compressed (where a failed point keeps ``B P*^N``
+    and the pressure), and its state stays as it was (the work done on it kept)."""
+    eroding = dataclasses.replace(LAW, erosion=0.05)
+    lnl = np.linspace(0.0, 0.05, 1001)[1:]
+    path = [np.diag([np.exp(x), np.exp(-x), 1.0])[None] for x in lnl]
+    _, kept = drive(dataclasses.replace(LAW, erosion=0.5), path, dt=1e-3)
+    _, states = drive(eroding, path, dt=1e-3)
+    eps = [s["plastic_strain"][0, 0] for s in states]
+    first = next(k for k, s in enumerate(states) if s["eroded"][0, 0] == 1.0)
+    assert eps[first] >= 0.05 > eps[first - 1]  # at the step it passes eps_e, not before
+    assert states[first]["damage"][0, 0] == 1.0
+    assert kept[-1]["eroded"][0, 0] == 0.0
+    squeeze = [0.98 * path[-1][0][None], 0.95 * path[-1][0][None]]
+    sigma, after = drive(eroding, squeeze, states[-1], dt=1e-3)
+    assert np.abs(sigma).max() == 0.0
+    sigma_kept, _ = drive(LAW, squeeze, kept[-1], dt=1e-3)
+    assert pressure(sigma_kept[-1]) > 1e6  # without erosion the squeezed point pushes back
+    for name in ("work", "plastic_strain", "damage", "mu_max"):
+        assert np.array_equal(after[-1][name], states[-1][name])
+    assert np.array_equal(after[-1]["F"], squeeze[-1].reshape(1, 9))
+
+
+def test_erosion_of_an_inverted_point():
+    """With erosion an inverted point (``det F <= 0``, or a singular ``F``) erodes instead of
+    stopping the run, the others are updated as without erosion, the nominal stress of the
+    eroded point is zero (no solve with its singular ``F``), and the wave speed leaves it out;
+    without erosion the inversion is refused as before."""
+    eroding = dataclasses.replace(LAW, erosion=1.0)
+    F = np.broadcast_to(np.eye(3), (3, 3, 3)).copy()
+    F[:, 0, 0] = [0.999, -0.5, 0.0]  # compressed, inverted, singular
+    sigma, state = eroding.update(F, 1e-6, eroding.initial_state(3))
+    plain, _ = LAW.update(F[:1], 1e-6, LAW.initial_state(1))
+    assert np.array_equal(sigma[0], plain[0]) and pressure(sigma[0]) > 0
+    assert np.array_equal(state["eroded"][:, 0], [0.0, 1.0, 1.0])
+    assert np.abs(sigma[1:]).max() == 0.0
+    P = nominal_stress(sigma, F)
+    assert np.all(np.isfinite(P)) and np.abs(P[1:]).max() == 0.0
+    assert eroding.wave_speed(state) == pytest.approx(eroding.wave_speed(
+        {k: v[:1] for k, v in state.items()}), rel=1e-15)  # fmt: skip
+    with pytest.raises(ValueError, match=r"det F = -5.000e-01 <= 0"):
+        LAW.update(F, 1e-6, LAW.initial_state(3))
+    with pytest.raises(ValueError, match=r"erosion=-1.0 is not None or a positive"):
+        dataclasses.replace(LAW, erosion=-1.0)

@@ -65,6 +65,7 @@ from .masses import fe_lumped_mass, particle_lumped_mass, table_lumped_mass
 from .methods import DYNAMICS_METHODS, check_method
 from .patch_conversion import Conversion
 from .results import DynamicsResult
+from .rigid_projectile import ProjectileContactSystem, ProjectileState, RigidProjectile
 from .sifs import SIFHistory
 from .system import Field, LinearSystem, SemiDiscreteSystem
 
@@ -86,6 +87,9 @@ __all__ = [
     "LinearSystem",
     "LocalModelUpdate",
     "NonlinearSystem",
+    "ProjectileContactSystem",
+    "ProjectileState",
+    "RigidProjectile",
     "SIFHistory",
     "SemiDiscreteSystem",
     "check_method",

@@ -54,6 +54,7 @@ from .loads import Amplitude, BodyLoad, ExternalLoads, Traction
 from .prescribed import HeldVelocity
 from .queries import StateQueries
 from .results import DynamicsResult
+from .rigid_projectile import ProjectileContactSystem, RigidProjectile, with_projectile
 from .run import integrate
 from .system import Field, LinearSystem, SemiDiscreteSystem, inverse_masses
 from .time_step import TimeStepBound, check_safety, warn_default_density
@@ -403,6 +404,30 @@ class ExplicitDynamics(StateQueries):
         system = with_body_contact(self.system, self.evaluator, E, surface_a, surface_b, contact)
         self.system = self.stepper.system = self.bound.system = system
         self.bound.invalidate()
+
+    def add_projectile(
+        self,
+        projectile: RigidProjectile,
+        where: Callable[[np.ndarray], np.ndarray] | None = None,
+    ) -> ProjectileContactSystem:
+        """A rigid projectile that strikes the model (an ogive- or flat-nosed body of revolution
+        about the model's axis, :mod:`~dolfinx_meshfree.dynamics.rigid_projectile`): every
+        vertex and particle (or those where ``where(x)`` holds, reference positions (m, gdim)
+        -> (m,) bool) is pushed out of it by a penalty, and the projectile is decelerated by
+        the reaction. Its state and history are the returned system's ``state``
+        (:class:`~dolfinx_meshfree.dynamics.rigid_projectile.ProjectileState`; the exit
+        velocity is ``state.history[-1][2]``); the stable step is bounded again with the
+        penalty's stiffness. Call it before the first run. Collective.
+
+        Raises:
+            ValueError: a model without a mesh, ``where`` selecting no point, master–slave's
+                rotating links (on every rank).
+        """
+        omega_0 = self.bound.critical()["omega_bound"]
+        system = with_projectile(self.system, self.evaluator, omega_0, projectile, where)
+        self.system = self.stepper.system = self.bound.system = system
+        self.bound.invalidate()
+        return system
 
     def add_body_force(self, force: VectorFunction, amplitude: Amplitude | None = None) -> None:
         """External load ``amplitude(t) * int b . v`` of a body force ``b(x)`` per unit volume

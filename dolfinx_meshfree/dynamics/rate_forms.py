@@ -196,6 +196,8 @@ class RateLaw:
                 f"{made_for}: one RateLaw per set of points"
             )
         dt = self.clock - self.time
+        if abs(dt) <= 1e-13 * max(abs(self.clock), abs(self.time)):
+            dt = 0.0  # a next run's first t_n, t0 + span, against the last run's t0 + N dt
         if m == 0:  # a rank with none of this side's points
             self.time = self.clock
             return self.sigma
@@ -264,7 +266,22 @@ class RateLaw:
         twin_speeds = np.array([twin.wave_speed() for twin in self.twins])
         if self.state is None:
             return np.ones(len(self.twins))
-        return np.maximum(1.0, self.law.zone_wave_speeds(self.state) / twin_speeds)
+        speeds = self.law.zone_wave_speeds(self.state) * self.compression()
+        return np.maximum(1.0, speeds / twin_speeds)
+
+    def compression(self) -> float:
+        """``1 / min_q s_min(F_q)``, the points' smallest principal stretch inverted (at least
+        1; eroded points left out): in the reference configuration the discretisation's
+        frequencies grow as the cells shrink, ``omega ~ c / (s_min h)``, so the stable step
+        must see the stretch as well as the current wave speed ``c`` (a cell crushed to half
+        its height halves the step whatever ``c``)."""
+        if self.state is None or not len(self.state["F"]):
+            return 1.0
+        F = self.state["F"].reshape(-1, 3, 3)
+        live = self.state["eroded"][:, 0] == 0 if "eroded" in self.state else slice(None)
+        s = np.linalg.svd(F[live], compute_uv=False)
+        least = float(s[:, -1].min(initial=1.0)) if s.size else 1.0
+        return 1.0 / min(1.0, max(least, 1e-12))
 
     def strain_energy_density(self, F: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
         """The stress work per unit reference volume of the state (m,)."""
@@ -279,8 +296,10 @@ class RateLaw:
         )
 
     def points_wave_speed(self) -> float:
-        """The largest current dilatational wave speed of the points."""
-        return float(self.law.wave_speed(self.state))
+        """The largest current dilatational wave speed of the points, over their smallest
+        principal stretch (:meth:`compression`): the speed at which waves cross the cells'
+        reference lengths."""
+        return float(self.law.wave_speed(self.state)) * self.compression()
 
     def wave_speed(self, F: np.ndarray | None = None) -> float:
         """The speed the stable step is bounded with: the stiffest twin's, or the points'

@@ -179,6 +179,8 @@ class TimeStepBound:
         self.safety = check_safety(safety)
         self.state = state
         self._critical: dict | None = None
+        #: The step of the last wave-speed check (:class:`Rebound`), across runs.
+        self.checked_at = 0
         self._lowest = np.inf
         #: How many times the bound was computed.
         self.count = 0
@@ -253,9 +255,10 @@ class Rebound:
     """Re-bounds the stable step of a stiffening system during a run (a ``stop`` hook of
     :meth:`~dolfinx_meshfree.dynamics.central_difference.CentralDifference.advance`).
 
-    Every ``every`` steps the largest current wave speed (``system.wave_speed(u)``, cheap:
-    ``F`` at the quadrature points) is compared with the one of the last bound; when it grew by
-    more than ``growth``, the bound is recomputed at the current tangent
+    Every ``every`` steps (counted across runs) the largest current wave speed
+    (``system.wave_speed(u)``, cheap: ``F`` at the quadrature points) is compared with the one
+    of the last bound; when it grew by more than ``growth``, the bound is recomputed at the
+    current tangent
     (:meth:`TimeStepBound.invalidate`). The run stops (``True``) when the new stable step lies
     below the step in use, so that the caller continues with a smaller one. Between two checks
     the step has a margin ``1 / safety`` on the last bound, which a growth of the frequencies by
@@ -278,8 +281,11 @@ class Rebound:
         self.every, self.growth = every, float(growth)
 
     def __call__(self, n: int) -> bool:
-        if (n - self.start) % self.every:
+        # every ``every`` steps since the last check, whichever run it was in (a model run in
+        # short pieces, ``run(t)`` in a loop, was never checked when its pieces were shorter)
+        if n - self.bound.checked_at < self.every:
             return False
+        self.bound.checked_at = n
         speed = self.bound.system.wave_speed(self.bound.state())
         if speed <= (1.0 + self.growth) * self.bound.critical()["wave_speed"]:
             return False

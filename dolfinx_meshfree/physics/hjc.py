@@ -53,6 +53,16 @@ the equation of state of the current ``J``, and ``sigma = s - P I``. The state a
 work per unit reference volume ``sum J_{n+1/2} (sigma_n + sigma_{n+1}) / 2 : d eps``
 (trapezoidal, both stresses seen in the mid-step frame), the internal energy an explicit run's
 balance needs.
+
+**Erosion** (``erosion=eps_e``, off by default): a point whose deformation inverts
+(``det F <= 0``), or which is fully damaged (``D = 1``) with ``eps_p >= eps_e``, is eroded: it
+carries no stress from then on and its state stays as it was (``eroded = 1``). Its mass stays
+where it was (the nodes' and particles', which a projectile still pushes): nothing is deleted.
+The stress work done on it stays in ``work``, so the energy balance closes; what it would have
+released is dissipated. This is the Lagrangian codes' erosion with the mass retained, the way a
+total-Lagrangian model (FE, or particles whose neighbours are fixed in the reference
+configuration) lets a projectile pass through material it has crushed. Without erosion an
+inverted point stops the run (:class:`~dolfinx_meshfree.physics.constitutive.DeformationError`).
 """
 
 from __future__ import annotations
@@ -63,7 +73,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from .objective import RateStep, check_step, virgin_state
+from .objective import RateStep, as_3d, check_step, virgin_state
 
 __all__ = ["HolmquistJohnsonCook"]
 
@@ -90,6 +100,9 @@ class HolmquistJohnsonCook:
             plane: ``None`` (3D), ``"strain"`` (a 2D model's ``F_zz = 1``) or
             ``"axisymmetric"`` (the (r, z) section of a solid of revolution: :meth:`update`
             takes the hoop stretch ``r / R`` as ``F_zz``).
+        erosion: ``None`` (default: an inverted point stops the run), or the equivalent
+            plastic strain ``eps_e > 0`` at which a fully damaged point erodes; an inverted
+            point erodes too (module docstring).
 
     :meth:`concrete_48mpa` gives the published 48 MPa set (SI units).
     """
@@ -115,6 +128,7 @@ class HolmquistJohnsonCook:
     K3: float
     eps0: float = 1.0
     plane: str | None = None
+    erosion: float | None = None
 
     #: State arrays per point (``(m, k)``): the deviatoric Cauchy stress (row-major 3 x 3), the
     #: pressure, the largest volumetric strain, the permanent volumetric strain, the equivalent
@@ -128,10 +142,13 @@ class HolmquistJohnsonCook:
         "damage": 1,
         "work": 1,
         "F": 9,
+        "eroded": 1,
     }
 
     @classmethod
-    def concrete_48mpa(cls, plane: str | None = None) -> HolmquistJohnsonCook:
+    def concrete_48mpa(
+        cls, plane: str | None = None, erosion: float | None = None
+    ) -> HolmquistJohnsonCook:
         """The 48 MPa concrete of Holmquist, Johnson & Cook 1993 in SI units (kg, m, s, Pa), as
         LS-DYNA's MAT_111 examples list it: rho 2440, G 14.86 GPa, A 0.79, B 1.60, N 0.61,
         C 0.007, fc 48 MPa, T 4 MPa, EFMIN 0.01, SFMAX 7, P_crush 16 MPa, mu_crush 0.001,
@@ -139,12 +156,12 @@ class HolmquistJohnsonCook:
         return cls(
             rho=2440.0, G=14.86e9, A=0.79, B=1.60, N=0.61, C=0.007, fc=48e6, T=4e6,
             efmin=0.01, sfmax=7.0, p_crush=16e6, mu_crush=0.001, p_lock=0.80e9, mu_lock=0.10,
-            D1=0.04, D2=1.0, K1=85e9, K2=-171e9, K3=208e9, plane=plane,
+            D1=0.04, D2=1.0, K1=85e9, K2=-171e9, K3=208e9, plane=plane, erosion=erosion,
         )  # fmt: skip
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            if f.name == "plane":
+            if f.name in ("plane", "erosion"):
                 continue
             value = getattr(self, f.name)
             if not (isinstance(value, int | float) and np.isfinite(value)):
@@ -156,6 +173,16 @@ class HolmquistJohnsonCook:
         for name in ("A", "B", "C", "D2"):
             if getattr(self, name) < 0:
                 _refuse(name, getattr(self, name), "must be >= 0", "see LS-DYNA MAT_111's ranges")
+        if self.erosion is not None and not (
+            isinstance(self.erosion, int | float)
+            and not isinstance(self.erosion, bool)
+            and np.isfinite(self.erosion)
+            and self.erosion > 0
+        ):
+            _refuse(
+                "erosion", self.erosion, "is not None or a positive plastic strain",
+                "give None (no erosion) or e.g. erosion=1.0",
+            )  # fmt: skip
         if self.plane not in (None, "strain", "axisymmetric"):
             _refuse(
                 "plane", self.plane, "is not None (3D), 'strain' or 'axisymmetric'",
@@ -310,6 +337,20 @@ class HolmquistJohnsonCook:
         ``(m, d, d)`` reached over a step of length ``dt`` from the committed ``state`` (never
         modified; the new one is made of new arrays). 2D models give the hoop stretch ``r / R``
         of an axisymmetric point in ``hoop`` (``F_zz``), plane strain leaves it ``None``."""
+        gone = np.zeros(len(F), dtype=bool)
+        F_new = None
+        if self.erosion is not None:  # eroded and inverting points: computed at rest, then zeroed
+            F_new = as_3d(np.asarray(F, dtype=float), hoop)
+            J_new = np.linalg.det(F_new) if len(F_new) else np.zeros(0)
+            ok = np.all(np.isfinite(F_new), axis=(1, 2))
+            gone = (state["eroded"][:, 0] > 0) | ~ok | ~(J_new > 0.0)
+            if gone.any():
+                F = np.array(F, dtype=float)
+                F[gone] = np.eye(F.shape[1])
+                if hoop is not None:
+                    hoop = np.where(gone, 1.0, hoop)
+                state = dict(state, F=state["F"].copy())
+                state["F"][gone] = _EYE.ravel()
         F3, J = check_step(self, F, dt, state, hoop)
         m = len(F3)
         step = RateStep.start(state["F"].reshape(m, 3, 3), F3, state["deviator"].reshape(m, 3, 3))
@@ -341,7 +382,19 @@ class HolmquistJohnsonCook:
             "damage": np.minimum(1.0, damage + d_damage)[:, None],
             "work": state["work"] + d_work[:, None],
             "F": F3.reshape(m, 9),
+            "eroded": state["eroded"].copy(),
         }
+        if self.erosion is not None:
+            worn = (new["damage"][:, 0] >= 1.0) & (new["plastic_strain"][:, 0] >= self.erosion)
+            gone |= worn
+            if gone.any():
+                sigma[gone] = 0.0
+                for name in ("deviator", "pressure"):
+                    new[name][gone] = 0.0
+                new["damage"][gone] = 1.0
+                new["eroded"][gone] = 1.0
+                new["F"][gone] = F_new[gone].reshape(-1, 9)
+                new["work"][gone] = state["work"][gone]
         return sigma, new
 
     def wave_speed(self, state: dict[str, np.ndarray] | None = None) -> float:
@@ -351,8 +404,9 @@ class HolmquistJohnsonCook:
         virgin one."""
         if state is None:
             return float(np.sqrt((self.K_elastic + 4.0 * self.G / 3.0) / self.rho))
-        mu_max = state["mu_max"][:, 0]
+        live = state["eroded"][:, 0] == 0  # an eroded point carries nothing
+        mu_max = state["mu_max"][live, 0]
         K = np.maximum(self.loading_tangent(mu_max), self.unloading_modulus(mu_max))
-        F = state["F"].reshape(-1, 3, 3)
+        F = state["F"][live].reshape(-1, 3, 3)
         rho = self.rho / np.linalg.det(F)
         return float(np.max(np.sqrt((K + 4.0 * self.G / 3.0) / rho), initial=0.0))

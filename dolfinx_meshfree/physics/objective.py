@@ -165,11 +165,15 @@ class RateStep:
 def nominal_stress(sigma: np.ndarray, F: np.ndarray) -> np.ndarray:
     """The nominal (first Piola–Kirchhoff) stress ``P = J sigma F^{-T}`` (m, 3, 3) of the Cauchy
     stress ``sigma`` (m, 3, 3) at ``F`` (m, 3, 3) (:func:`as_3d` for a 2D one)."""
-    F = np.asarray(F, dtype=float)
-    J = np.linalg.det(F)
-    return J[:, None, None] * np.linalg.solve(F, np.asarray(sigma).transpose(0, 2, 1)).transpose(
+    F, sigma = np.asarray(F, dtype=float), np.asarray(sigma, dtype=float)
+    P = np.zeros_like(sigma)
+    live = np.any(sigma != 0.0, axis=(1, 2))  # a point without stress (eroded: F may be singular)
+    Fl = F[live]
+    J = np.linalg.det(Fl)
+    P[live] = J[:, None, None] * np.linalg.solve(Fl, sigma[live].transpose(0, 2, 1)).transpose(
         0, 2, 1
     )
+    return P
 
 
 def virgin_state(fields: dict[str, int], m: int) -> dict[str, np.ndarray]:

@@ -41,7 +41,6 @@ from ..geometry.patch import ParticlePatch
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic, is_axisymmetric
 from ..statics.coupled import CoupledElasticity
-from .body_contact import BodyContact, with_body_contact
 from .builders import Model, build_coupled, build_efg, build_fe
 from .central_difference import CentralDifference
 from .conditions import held_velocities
@@ -54,8 +53,8 @@ from .loads import Amplitude, BodyLoad, ExternalLoads, Traction
 from .prescribed import HeldVelocity
 from .queries import StateQueries
 from .results import DynamicsResult
-from .rigid_projectile import ProjectileContactSystem, RigidProjectile, with_projectile
 from .run import integrate
+from .struck import Struck
 from .system import Field, LinearSystem, SemiDiscreteSystem, inverse_masses
 from .time_step import TimeStepBound, check_safety, warn_default_density
 
@@ -64,7 +63,7 @@ __all__ = ["ExplicitDynamics"]
 OnOutput = Callable[["ExplicitDynamics", int, float], None]
 
 
-class ExplicitDynamics(StateQueries):
+class ExplicitDynamics(StateQueries, Struck):
     """Central-difference explicit dynamics of elasticity, FE, EFG or coupled: small strain
     (:class:`~dolfinx_meshfree.LinearElastic`, ``f^int = K d``) or finite strain, total
     Lagrangian (:class:`~dolfinx_meshfree.NeoHookean`,
@@ -373,61 +372,6 @@ class ExplicitDynamics(StateQueries):
         :meth:`ExternalLoads.add_traction
         <dolfinx_meshfree.dynamics.loads.ExternalLoads.add_traction>` (collective)."""
         self.loads.add_traction(facets, traction, amplitude)
-
-    def add_contact(
-        self,
-        surface_a: npt.ArrayLike,
-        surface_b: npt.ArrayLike,
-        contact: BodyContact | None = None,
-    ) -> None:
-        """Contact between two bodies of the model (2D and 3D; node-to-facet penalty,
-        frictionless or Coulomb, :mod:`~dolfinx_meshfree.dynamics.body_contact`): ``surface_a`` and
-        ``surface_b`` are owned exterior facets (e.g. ``mf.boundary_facets(mesh, marker)``) of
-        two pieces of the mesh that share no vertex, each discretised as the model discretises
-        it (FE, particle or blended cells; each body's particles are its own: the model's MLS
-        stops at the bodies' gap, :func:`~dolfinx_meshfree.separate_bodies`). The contact
-        force joins the internal force, its penalty energy the strain energy of the energy
-        records, and the stable step is bounded again with the contact's stiffness
-        (:meth:`critical_time_step`). Several pairs may be added. Collective.
-
-        Args:
-            contact: The options (:class:`~dolfinx_meshfree.dynamics.BodyContact`; default:
-                penalty ``E / h``, two-pass, frictionless).
-
-        Raises:
-            ValueError: facets that are not owned exterior facets, an empty surface, surfaces
-                that share a vertex, a particle whose support reaches both surfaces (on every
-                rank).
-        """
-        contact = BodyContact() if contact is None else contact
-        E = getattr(self.material, "E", None)
-        system = with_body_contact(self.system, self.evaluator, E, surface_a, surface_b, contact)
-        self.system = self.stepper.system = self.bound.system = system
-        self.bound.invalidate()
-
-    def add_projectile(
-        self,
-        projectile: RigidProjectile,
-        where: Callable[[np.ndarray], np.ndarray] | None = None,
-    ) -> ProjectileContactSystem:
-        """A rigid projectile that strikes the model (an ogive- or flat-nosed body of revolution
-        about the model's axis, :mod:`~dolfinx_meshfree.dynamics.rigid_projectile`): every
-        vertex and particle (or those where ``where(x)`` holds, reference positions (m, gdim)
-        -> (m,) bool) is pushed out of it by a penalty, and the projectile is decelerated by
-        the reaction. Its state and history are the returned system's ``state``
-        (:class:`~dolfinx_meshfree.dynamics.rigid_projectile.ProjectileState`; the exit
-        velocity is ``state.history[-1][2]``); the stable step is bounded again with the
-        penalty's stiffness. Call it before the first run. Collective.
-
-        Raises:
-            ValueError: a model without a mesh, ``where`` selecting no point, master–slave's
-                rotating links (on every rank).
-        """
-        omega_0 = self.bound.critical()["omega_bound"]
-        system = with_projectile(self.system, self.evaluator, omega_0, projectile, where)
-        self.system = self.stepper.system = self.bound.system = system
-        self.bound.invalidate()
-        return system
 
     def add_body_force(self, force: VectorFunction, amplitude: Amplitude | None = None) -> None:
         """External load ``amplitude(t) * int b . v`` of a body force ``b(x)`` per unit volume

@@ -17,9 +17,9 @@
 #   for the rim at the elastic wave speed). The reinforcement is left out (the paper: its
 #   influence is negligible).
 # * *The mesh*: ``--resolution`` cells through the thickness (24: ``h = 7.4 mm``, 3.4 cells
-#   across the projectile's diameter), uniform within ``PATCH_RADII + 1`` projectile radii of
-#   the axis and growing by 12 % per cell to the rim; pure EFG takes the uniform mesh
-#   everywhere (particles everywhere: the model the couplings are measured against).
+#   across the projectile's diameter), uniform to four cells past the patch and growing by 12 %
+#   per cell to the rim; pure EFG takes the uniform mesh everywhere (particles everywhere: the
+#   model the couplings are measured against).
 # * *The patch*: the cells within 3 projectile radii of the axis, through the thickness (the
 #   paper's Fig. 20 puts its particles where damage is expected); ``lagrange``,
 #   ``master-slave``, ``ramp`` (not VCI-corrected in dynamics) or the ``hybrid`` SPH-FE
@@ -120,7 +120,8 @@ def radial_nodes(h: float, fine: float, radius: float, growth: float = 1.12) -> 
 def slab_mesh(cells: int, method: str, comm=MPI.COMM_WORLD) -> tuple[dolfinx.mesh.Mesh, float]:
     """The slab's section ``0 < r < RADIUS``, ``0 < z < THICKNESS`` in quadrilaterals, ``cells``
     through the thickness (spacing ``h``): uniform for pure EFG (particles everywhere),
-    else uniform to ``PATCH_RADII + 1`` projectile radii from the axis and growing beyond."""
+    else uniform to four cells past the patch (``PATCH_RADII`` projectile radii from the axis)
+    and growing beyond."""
     h = THICKNESS / cells
     a = CALIBER / 2
     fine = RADIUS if method == "efg" else h * np.ceil((PATCH_RADII * a) / h + 4)

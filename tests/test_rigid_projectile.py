@@ -17,6 +17,7 @@ MAT = mf.LinearElastic(1e3, 0.25, "strain", rho=1.0)
 C = float(np.sqrt((MAT.lmbda + 2 * MAT.mu) / MAT.rho))
 
 
+@pytest.mark.serial  # closed forms of the body: no parallel code path
 def test_hemispherical_nose_is_a_sphere():
     """``crh = 0.5`` is a hemisphere of radius ``a`` on a cylinder: the volume is ``2/3 pi a^3
     + pi a^2 (L - a)``, and a point in the nose is ``a - |p - c|`` deep along ``(p - c) / |p -
@@ -62,6 +63,7 @@ def test_hemispherical_nose_is_a_sphere():
     assert np.all(depth == 0.0) and np.all(normal == 0.0)
 
 
+@pytest.mark.serial  # closed forms of the body: no parallel code path
 def test_ogive_is_tangent_to_its_shank():
     """The tangent ogive (``crh = 3``, Hanchak's): ``R(0) = 0``, ``R(l) = a`` with a zero slope
     there, ``l = a sqrt(4 psi - 1)``."""
@@ -216,6 +218,7 @@ def test_stable_step_sees_the_projectile():
     dyn.destroy()
 
 
+@pytest.mark.serial  # the dataclass's own checks: no parallel code path
 @pytest.mark.parametrize(
     "options, match",
     [

@@ -122,12 +122,15 @@ __all__ = [
     "BodyContact",
     "BodyContactSystem",
     "ContactSurfaces",
+    "PointPenaltySystem",
     "candidates",
     "closest_points",
     "closest_points_compiled",
     "contact_surfaces",
+    "contact_tangent",
     "evaluation_operators",
     "normals",
+    "summed_tangent",
     "vertex_coordinates",
     "with_body_contact",
 ]
@@ -709,7 +712,126 @@ def closest_points_compiled(
                     normal[i, 2] = nz
 
 
-class BodyContactSystem(WrappedSystem):
+def contact_tangent(A: Sequence[PETSc.Mat | None], diagonal: PETSc.Vec) -> dict:
+    """``A_k^T diag(c) A_l`` for every pair of fields ``(k, l)`` that reach the points, from the
+    points' ``diagonal`` ``c`` (in the rows of ``A``; collective)."""
+    root = diagonal.copy()
+    root.sqrtabs()
+    scaled = {}
+    for k, Ak in enumerate(A):
+        if Ak is not None:
+            scaled[k] = Ak.copy()
+            scaled[k].diagonalScale(L=root)
+    out = {(k, m): Ak.transposeMatMult(Am) for k, Ak in scaled.items() for m, Am in scaled.items()}
+    for obj in (root, *scaled.values()):
+        obj.destroy()
+    return out
+
+
+def summed_tangent(inner: dict, contact: dict, keep: list) -> dict:
+    """The inner tangent's blocks plus the contact's (new matrices appended to ``keep``, which
+    the caller destroys)."""
+    blocks = dict(inner)
+    for km, Kc in contact.items():
+        if km in blocks:
+            K = blocks[km].convert("aij", PETSc.Mat())  # a new matrix
+            K.axpy(1.0, Kc, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+            keep.append(K)
+            blocks[km] = K
+        else:
+            blocks[km] = Kc
+    return blocks
+
+
+class PointPenaltySystem(WrappedSystem):
+    """A :class:`~dolfinx_meshfree.dynamics.system.SemiDiscreteSystem` plus penalty forces at
+    points that move with the model, ``y = X + A d`` (``A_k`` per field: the model's
+    evaluation operator there): the inner internal force plus ``A^T f``, the inner strain
+    energy plus the penalty's (:meth:`_evaluate`) and :meth:`_dissipated`, the inner tangent
+    plus ``A^T diag(c) A`` with a ``c`` per point that bounds the penalty's stiffness in every
+    contact state (:meth:`_bound`; for the stable step). Everything else is the inner system's.
+    The base of :class:`BodyContactSystem` and of the rigid projectile's system
+    (:mod:`~dolfinx_meshfree.dynamics.rigid_projectile`)."""
+
+    def __init__(
+        self, inner: SemiDiscreteSystem, operators: Sequence[PETSc.Mat | None], gdim: int
+    ) -> None:
+        super().__init__(inner)
+        self.A, self.gdim = list(operators), int(gdim)
+        some = next(A for A in self.A if A is not None)
+        self.comm = some.getComm().tompi4py()
+        self._y, self._f = some.createVecLeft(), some.createVecLeft()
+        self._contact: dict | None = None  # A_k^T diag(c) A_l per pair of fields
+        self._sums: list[PETSc.Mat] = []  # the inner blocks plus those, of the last tangent()
+        #: Seconds spent in the penalty's forces since the build.
+        self.seconds = 0.0
+
+    def _evaluate(self, u: Sequence[PETSc.Vec]) -> float:
+        """The points' share of the internal force at ``u`` into ``self._f`` (this rank's
+        rows of ``A``); the stored energy (every rank)."""
+        raise NotImplementedError
+
+    def _bound(self) -> np.ndarray:
+        """``c`` per owned point (its rows of ``A``, each component)."""
+        raise NotImplementedError
+
+    def _dissipated(self) -> float:
+        """Work the penalty dissipated since the build (friction), counted as stored."""
+        return 0.0
+
+    def internal_force(
+        self, u: Sequence[PETSc.Vec], out: Sequence[PETSc.Vec] | None = None
+    ) -> list[PETSc.Vec]:
+        """The inner force plus ``A^T f`` (collective)."""
+        y = self.inner.internal_force(u, out)
+        tic = time.perf_counter()
+        self._evaluate(u)
+        for A, yk in zip(self.A, y, strict=True):
+            if A is not None:
+                A.multTransposeAdd(self._f, yk, yk)
+        self.seconds += time.perf_counter() - tic
+        return y
+
+    def strain_energy(self, u: Sequence[PETSc.Vec], f_int: Sequence[PETSc.Vec]) -> float:
+        """The inner system's energy (from ``f_int`` minus the penalty's force) plus the
+        penalty's stored energy and :meth:`_dissipated`: so the energy records' balance closes,
+        ``internal`` then holding what friction dissipated."""
+        energy = self._evaluate(u) + self._dissipated()
+        inner_f = [x.copy() for x in f_int]
+        self._f.scale(-1.0)
+        for A, x in zip(self.A, inner_f, strict=True):
+            if A is not None:
+                A.multTransposeAdd(self._f, x, x)
+        self._f.scale(-1.0)
+        energy += self.inner.strain_energy(u, inner_f)
+        for x in inner_f:
+            x.destroy()
+        return energy
+
+    def tangent(self, u: Sequence[PETSc.Vec] | None = None) -> dict:
+        """The inner tangent plus ``A_k^T diag(c) A_l`` on every pair of fields: an upper
+        bound, in the PSD order, of the tangent of any contact state (for the stable step).
+        The matrices returned stay valid until the next call."""
+        if self._contact is None:
+            c = self._f.duplicate()
+            c.array[:] = np.repeat(self._bound(), self.gdim)
+            self._contact = contact_tangent(self.A, c)
+            c.destroy()
+        for obj in self._sums:
+            obj.destroy()
+        self._sums = []
+        return summed_tangent(self.inner.tangent(u), self._contact, self._sums)
+
+    def destroy(self) -> None:
+        """Destroy the penalty's objects and the inner system (collective)."""
+        extra = (*(self._contact or {}).values(), *self._sums)
+        for obj in (*self.A, self._y, self._f, *extra):
+            if obj is not None:
+                obj.destroy()
+        self.inner.destroy()
+
+
+class BodyContactSystem(PointPenaltySystem):
     """A :class:`~dolfinx_meshfree.dynamics.system.SemiDiscreteSystem` with contact between
     two bodies (module docstring): the inner system's internal force plus ``A^T f_c``, its
     strain energy plus the contact's stored energy (and friction's dissipated work), its
@@ -734,27 +856,18 @@ class BodyContactSystem(WrappedSystem):
         depth: float,
         friction: float = 0.0,
     ) -> None:
-        super().__init__(inner)
-        self.surfaces, self.A = surfaces, list(operators)
+        super().__init__(inner, operators, surfaces.points.shape[1])
+        self.surfaces = surfaces
         self.penalty, self.two_pass, self.depth = float(penalty), bool(two_pass), float(depth)
-        some = next(A for A in self.A if A is not None)
-        self.comm = some.getComm().tompi4py()
-        self._y = some.createVecLeft()
-        self._f = some.createVecLeft()
         self._k = penalty * surfaces.tributary()
         seg_body = surfaces.body
         self._passes = [(0, 1)] + ([(1, 0)] if two_pass else [])
         self._slaves = [np.flatnonzero(surfaces.vertex_body == s) for s, _ in self._passes]
         self._masters = [surfaces.facets[seg_body == m] for _, m in self._passes]
-        self._contact: dict | None = None  # A_k^T diag(c) A_l per pair of fields
-        self._sums: list[PETSc.Mat] = []  # the inner blocks plus those, of the last tangent()
         #: The last evaluated state: ``{"pairs", "penetration", "energy"}`` (every rank).
         self.last: dict = {"pairs": 0, "penetration": 0.0, "energy": 0.0}
-        self.gdim = surfaces.points.shape[1]
         # the closest-point kernel: compiled (numba) when available, else numpy
         self._kernel = closest_points_compiled if jit.AVAILABLE else closest_points
-        #: Seconds spent in the contact's forces (search, forces, ``A^T f``) since the build.
-        self.seconds = 0.0
         #: Coulomb's coefficient (0: frictionless); the work of the slips since the build.
         self.friction, self.dissipated = float(friction), 0.0
         nv, gdim = surfaces.points.shape
@@ -862,41 +975,15 @@ class BodyContactSystem(WrappedSystem):
         """``E_c`` at ``u`` (collective, every rank)."""
         return self._evaluate(u)
 
-    def internal_force(
-        self, u: Sequence[PETSc.Vec], out: Sequence[PETSc.Vec] | None = None
-    ) -> list[PETSc.Vec]:
-        """The inner force plus ``A^T f_c`` (collective)."""
-        y = self.inner.internal_force(u, out)
-        tic = time.perf_counter()
-        self._evaluate(u)
-        for A, yk in zip(self.A, y, strict=True):
-            if A is not None:
-                A.multTransposeAdd(self._f, yk, yk)
-        self.seconds += time.perf_counter() - tic
-        return y
-
     def contact_force(self, u: Sequence[PETSc.Vec]) -> np.ndarray:
         """The resultant force (gdim,) that ``surface_b`` exerts on ``surface_a``'s body at ``u``
         (every rank)."""
         f, *_ = self.forces(self.positions(u))
         return -f[self.surfaces.vertex_body == 0].sum(axis=0)
 
-    def strain_energy(self, u: Sequence[PETSc.Vec], f_int: Sequence[PETSc.Vec]) -> float:
-        """The inner system's energy (from ``f_int`` minus the contact force) plus the contact's
-        stored energy (``E_c``, the tangential springs') and, with friction, the slips' work
-        since the build (:attr:`dissipated`): so the energy records' balance closes with
-        friction too, ``internal`` then holding what friction dissipated."""
-        energy = self._evaluate(u) + self.dissipated
-        inner_f = [x.copy() for x in f_int]
-        for A, x in zip(self.A, inner_f, strict=True):
-            if A is not None:
-                self._f.scale(-1.0)
-                A.multTransposeAdd(self._f, x, x)
-                self._f.scale(-1.0)
-        energy += self.inner.strain_energy(u, inner_f)
-        for x in inner_f:
-            x.destroy()
-        return energy
+    def _dissipated(self) -> float:
+        """Friction's slips' work since the build (:attr:`dissipated`)."""
+        return self.dissipated
 
     def bound_stiffness(self) -> np.ndarray:
         """``c`` per vertex (module docstring): ``diag(c)`` (each component) bounds the contact
@@ -921,47 +1008,10 @@ class BodyContactSystem(WrappedSystem):
             c[on_m] += self.penalty * pressing
         return 2.0 * c
 
-    def tangent(self, u: Sequence[PETSc.Vec] | None = None) -> dict:
-        """The inner tangent plus ``A_k^T diag(c) A_l`` on every pair of fields: an upper
-        bound, in the PSD order, of the tangent of any contact state (for the stable step).
-        The matrices returned stay valid until the next call."""
-        if self._contact is None:
-            lo, hi = self.surfaces.owned
-            root = self._f.duplicate()
-            root.array[:] = np.repeat(np.sqrt(self.bound_stiffness()[lo:hi]), self.gdim)
-            scaled = {}
-            for k, A in enumerate(self.A):
-                if A is not None:
-                    scaled[k] = A.copy()
-                    scaled[k].diagonalScale(L=root)
-            self._contact = {
-                (k, m): Ak.transposeMatMult(Am)
-                for k, Ak in scaled.items()
-                for m, Am in scaled.items()
-            }
-            for obj in (root, *scaled.values()):
-                obj.destroy()
-        for obj in self._sums:
-            obj.destroy()
-        self._sums = []
-        blocks = dict(self.inner.tangent(u))
-        for km, Kc in self._contact.items():
-            if km in blocks:
-                K = blocks[km].convert("aij", PETSc.Mat())  # a new matrix
-                K.axpy(1.0, Kc, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-                self._sums.append(K)
-                blocks[km] = K
-            else:
-                blocks[km] = Kc
-        return blocks
-
-    def destroy(self) -> None:
-        """Destroy the contact objects and the inner system (collective)."""
-        extra = (*(self._contact or {}).values(), *self._sums)
-        for obj in (*self.A, self._y, self._f, *extra):
-            if obj is not None:
-                obj.destroy()
-        self.inner.destroy()
+    def _bound(self) -> np.ndarray:
+        """:meth:`bound_stiffness` of the owned vertices."""
+        lo, hi = self.surfaces.owned
+        return self.bound_stiffness()[lo:hi]
 
 
 def with_body_contact(

@@ -69,7 +69,6 @@ axisymmetric model imposes anyway).
 from __future__ import annotations
 
 import dataclasses
-import time
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
@@ -81,8 +80,12 @@ from scipy.spatial import cKDTree
 
 from ..approx.fe_points import locate_points
 from ..parallel import raise_on_all_ranks
-from .body_contact import ContactSurfaces, evaluation_operators, vertex_coordinates
-from .system import WrappedSystem
+from .body_contact import (
+    ContactSurfaces,
+    PointPenaltySystem,
+    evaluation_operators,
+    vertex_coordinates,
+)
 
 if TYPE_CHECKING:  # annotations only
     from .evaluation import FieldEvaluator
@@ -92,7 +95,6 @@ __all__ = [
     "ProjectileContactSystem",
     "ProjectileState",
     "RigidProjectile",
-    "contact_tangent",
     "with_projectile",
 ]
 
@@ -292,38 +294,7 @@ class ProjectileState:
         return self.velocity + 0.5 * dt * self.force / mass
 
 
-def contact_tangent(A: Sequence[PETSc.Mat | None], diagonal: PETSc.Vec) -> dict:
-    """``A_k^T diag(c) A_l`` for every pair of fields ``(k, l)`` that reach the points, from the
-    points' ``diagonal`` ``c`` (in the rows of ``A``; collective)."""
-    root = diagonal.copy()
-    root.sqrtabs()
-    scaled = {}
-    for k, Ak in enumerate(A):
-        if Ak is not None:
-            scaled[k] = Ak.copy()
-            scaled[k].diagonalScale(L=root)
-    out = {(k, m): Ak.transposeMatMult(Am) for k, Ak in scaled.items() for m, Am in scaled.items()}
-    for obj in (root, *scaled.values()):
-        obj.destroy()
-    return out
-
-
-def summed_tangent(inner: dict, contact: dict, keep: list) -> dict:
-    """The inner tangent's blocks plus the contact's (new matrices appended to ``keep``, which
-    the caller destroys)."""
-    blocks = dict(inner)
-    for km, Kc in contact.items():
-        if km in blocks:
-            K = blocks[km].convert("aij", PETSc.Mat())  # a new matrix
-            K.axpy(1.0, Kc, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-            keep.append(K)
-            blocks[km] = K
-        else:
-            blocks[km] = Kc
-    return blocks
-
-
-class ProjectileContactSystem(WrappedSystem):
+class ProjectileContactSystem(PointPenaltySystem):
     """A :class:`~dolfinx_meshfree.dynamics.system.SemiDiscreteSystem` struck by a
     :class:`RigidProjectile` (module docstring): the inner internal force plus ``A^T f``, the
     strain energy plus ``E_c``, the tangent plus ``A^T diag(k) A``; the projectile's step is
@@ -347,20 +318,12 @@ class ProjectileContactSystem(WrappedSystem):
         stiffness: np.ndarray,
         radial: str,
     ) -> None:
-        super().__init__(inner)
-        self.projectile, self.points, self.A = projectile, points, list(operators)
+        super().__init__(inner, operators, points.shape[1])
+        self.projectile, self.points = projectile, points
         self.k, self.radial = stiffness, radial
-        some = next(A for A in self.A if A is not None)
-        self.comm = some.getComm().tompi4py()
-        self._y, self._f = some.createVecLeft(), some.createVecLeft()
-        self.gdim = points.shape[1] if points.ndim == 2 else 2
         p = projectile
         #: The projectile's :class:`ProjectileState`.
         self.state = ProjectileState(None, float(p.tip), float(p.heading * p.velocity))
-        self._contact: dict | None = None
-        self._sums: list[PETSc.Mat] = []
-        #: Seconds spent in the projectile's forces since the build.
-        self.seconds = 0.0
         #: The largest ``sqrt(sum k n_z^2 / M)`` met (the projectile's own frequency).
         self.omega = 0.0
         self._energy = 0.0
@@ -433,54 +396,9 @@ class ProjectileContactSystem(WrappedSystem):
         v = self.state.speed(self.projectile.mass, self.state.dt_prev)
         return 0.5 * self.projectile.mass * v * v
 
-    def internal_force(
-        self, u: Sequence[PETSc.Vec], out: Sequence[PETSc.Vec] | None = None
-    ) -> list[PETSc.Vec]:
-        """The inner force plus ``A^T f`` (collective)."""
-        y = self.inner.internal_force(u, out)
-        tic = time.perf_counter()
-        self._evaluate(u)
-        for A, yk in zip(self.A, y, strict=True):
-            if A is not None:
-                A.multTransposeAdd(self._f, yk, yk)
-        self.seconds += time.perf_counter() - tic
-        return y
-
-    def strain_energy(self, u: Sequence[PETSc.Vec], f_int: Sequence[PETSc.Vec]) -> float:
-        """The inner system's energy (from ``f_int`` minus the projectile's force) plus
-        ``E_c``."""
-        energy = self._evaluate(u)
-        inner_f = [x.copy() for x in f_int]
-        self._f.scale(-1.0)
-        for A, x in zip(self.A, inner_f, strict=True):
-            if A is not None:
-                A.multTransposeAdd(self._f, x, x)
-        self._f.scale(-1.0)
-        energy += self.inner.strain_energy(u, inner_f)
-        for x in inner_f:
-            x.destroy()
-        return energy
-
-    def tangent(self, u: Sequence[PETSc.Vec] | None = None) -> dict:
-        """The inner tangent plus ``A^T diag(k) A`` (what the stable step is bounded with; the
-        matrices stay valid until the next call)."""
-        if self._contact is None:
-            c = self._f.duplicate()
-            c.array[:] = np.repeat(self.k, self.gdim)
-            self._contact = contact_tangent(self.A, c)
-            c.destroy()
-        for obj in self._sums:
-            obj.destroy()
-        self._sums = []
-        return summed_tangent(self.inner.tangent(u), self._contact, self._sums)
-
-    def destroy(self) -> None:
-        """Destroy the contact's objects and the inner system (collective)."""
-        extra = (*(self._contact or {}).values(), *self._sums)
-        for obj in (*self.A, self._y, self._f, *extra):
-            if obj is not None:
-                obj.destroy()
-        self.inner.destroy()
+    def _bound(self) -> np.ndarray:
+        """``k_s`` of this rank's points: ``k_s n n^T <= k_s I`` in any contact state."""
+        return self.k
 
 
 def contact_points(

@@ -402,7 +402,8 @@ def test_erosion_of_a_worn_point():
 
 def test_erosion_of_an_inverted_point():
     """With erosion an inverted point (``det F <= 0``, or a singular ``F``) erodes instead of
-    stopping the run, the others are updated as without erosion, the nominal stress of the
+    stopping the run with its state as committed (here virgin: no plastic strain from an update
+    taken at rest), the others are updated as without erosion, the nominal stress of the
     eroded point is zero (no solve with its singular ``F``), and the wave speed leaves it out;
     without erosion the inversion is refused as before."""
     eroding = dataclasses.replace(LAW, erosion=1.0)
@@ -413,10 +414,23 @@ def test_erosion_of_an_inverted_point():
     assert np.array_equal(sigma[0], plain[0]) and pressure(sigma[0]) > 0
     assert np.array_equal(state["eroded"][:, 0], [0.0, 1.0, 1.0])
     assert np.abs(sigma[1:]).max() == 0.0
+    for name in ("plastic_strain", "mu_max", "mu_plastic", "work"):  # as committed: virgin
+        assert np.array_equal(state[name][1:], eroding.initial_state(2)[name]), name
     P = nominal_stress(sigma, F)
     assert np.all(np.isfinite(P)) and np.abs(P[1:]).max() == 0.0
     assert eroding.wave_speed(state) == pytest.approx(eroding.wave_speed(
         {k: v[:1] for k, v in state.items()}), rel=1e-15)  # fmt: skip
+    # a confined, sheared point (q = 103 MPa at P = 152 MPa, above the strength at P = 0) that
+    # inverts keeps its committed plastic strain and crushing (an update taken at rest, P = 0,
+    # made it yield: 2.3e-3 of plastic strain until this was caught)
+    confined = hydrostatic(0.02) @ np.array([[[1.0, 0.004, 0.0], [0, 1, 0], [0, 0, 1]]])
+    _, before = eroding.update(confined, 1e-3, eroding.initial_state(1))
+    inverted = confined.copy()
+    inverted[0, 0, 0] *= -1.0
+    _, after = eroding.update(inverted, 1e-3, before)
+    assert after["eroded"][0, 0] == 1.0 and after["damage"][0, 0] == 1.0
+    for name in ("plastic_strain", "mu_max", "mu_plastic", "work"):
+        assert np.array_equal(after[name], before[name]), name
     with pytest.raises(ValueError, match=r"det F = -5.000e-01 <= 0"):
         LAW.update(F, 1e-6, LAW.initial_state(3))
     with pytest.raises(ValueError, match=r"erosion=-1.0 is not None or a positive"):

@@ -338,7 +338,7 @@ class HolmquistJohnsonCook:
         modified; the new one is made of new arrays). 2D models give the hoop stretch ``r / R``
         of an axisymmetric point in ``hoop`` (``F_zz``), plane strain leaves it ``None``."""
         gone = np.zeros(len(F), dtype=bool)
-        F_new = None
+        F_new, committed = None, state
         if self.erosion is not None:  # eroded and inverting points: computed at rest, then zeroed
             F_new = as_3d(np.asarray(F, dtype=float), hoop)
             J_new = np.linalg.det(F_new) if len(F_new) else np.zeros(0)
@@ -385,8 +385,11 @@ class HolmquistJohnsonCook:
             "eroded": state["eroded"].copy(),
         }
         if self.erosion is not None:
-            worn = (new["damage"][:, 0] >= 1.0) & (new["plastic_strain"][:, 0] >= self.erosion)
-            gone |= worn
+            # the eroded and the inverted keep their committed state (their update at rest is
+            # no update); the worn keep this step's (it wore them)
+            for name in ("mu_max", "mu_plastic", "plastic_strain", "damage"):
+                new[name][gone] = committed[name][gone]
+            gone |= (new["damage"][:, 0] >= 1.0) & (new["plastic_strain"][:, 0] >= self.erosion)
             if gone.any():
                 sigma[gone] = 0.0
                 for name in ("deviator", "pressure"):
@@ -394,7 +397,7 @@ class HolmquistJohnsonCook:
                 new["damage"][gone] = 1.0
                 new["eroded"][gone] = 1.0
                 new["F"][gone] = F_new[gone].reshape(-1, 9)
-                new["work"][gone] = state["work"][gone]
+                new["work"][gone] = committed["work"][gone]
         return sigma, new
 
     def wave_speed(self, state: dict[str, np.ndarray] | None = None) -> float:

@@ -78,7 +78,7 @@
 #   315 m/s at 430, the same, at 3.8x the time).
 # * The resolution moves the figures by about 10 %: lagrange at 1060 m/s exits at 995, 857, 910
 #   and 959 m/s with 16, 24, 36 and 48 cells; at 750 m/s at 593 and 662 with 24 and 48; at 430
-#   m/s at 315 and 285 with 24 and 32. Not converged at 48 cells.
+#   m/s at 315, 285 and 319 with 24, 32 and 48. Not converged at 48 cells.
 # * Cost: the couplings take 0.20-0.32x pure EFG's time (the target is 0.2, the paper 1/8):
 #   half of a coupled step is the law's update at the FE cells' points, which pure EFG does not
 #   have; EFG's particles cover the slab at the uniform spacing.

@@ -246,18 +246,24 @@ class RateLaw:
     def tangent(self, F: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
         """The stiffest twin's elastic tangent (for the stable-step bound), scaled up by
         ``(c / c_twin)^2`` where the points' current wave speed ``c`` has passed the twin's
-        (extreme compaction), so that a re-bound sees it."""
+        (extreme compaction), and at each point by ``1 / s_min(F)^2`` (:meth:`stretches`: a
+        crushed cell's frequencies in the reference configuration), so that a re-bound sees
+        both. The stretch is each point's own, so the bound does not depend on the partition."""
         F = np.asarray(F, dtype=float)
         if self.twins is None:
-            scale = max(1.0, (self.points_wave_speed() / self.twin.wave_speed()) ** 2)
-            return scale * elastic_tangent(self.twin, len(F))
-        d = self.gdim
-        out = np.zeros((len(F), d, d, d, d))
-        scale = self._zone_ratios() ** 2
-        for k, twin in enumerate(self.twins):
-            idx = np.flatnonzero(self.zones == k)
-            if idx.size:
-                out[idx] = scale[k] * elastic_tangent(twin, idx.size)
+            scale = max(1.0, (float(self.law.wave_speed(self.state)) / self.twin.wave_speed()) ** 2)
+            out = scale * elastic_tangent(self.twin, len(F))
+        else:
+            d = self.gdim
+            out = np.zeros((len(F), d, d, d, d))
+            scale = self._zone_ratios() ** 2
+            for k, twin in enumerate(self.twins):
+                idx = np.flatnonzero(self.zones == k)
+                if idx.size:
+                    out[idx] = scale[k] * elastic_tangent(twin, idx.size)
+        stretch = self.stretches()
+        if stretch is not None and len(stretch) == len(out):
+            out *= (1.0 / stretch**2)[:, None, None, None, None]
         return out
 
     def _zone_ratios(self) -> np.ndarray:
@@ -266,22 +272,27 @@ class RateLaw:
         twin_speeds = np.array([twin.wave_speed() for twin in self.twins])
         if self.state is None:
             return np.ones(len(self.twins))
-        speeds = self.law.zone_wave_speeds(self.state) * self.compression()
-        return np.maximum(1.0, speeds / twin_speeds)
+        return np.maximum(1.0, self.law.zone_wave_speeds(self.state) / twin_speeds)
+
+    def stretches(self) -> np.ndarray | None:
+        """Each point's smallest principal stretch ``s_min(F)``, at most 1 (eroded points: 1,
+        as they carry nothing); ``None`` before the first force. In the reference
+        configuration the discretisation's frequencies grow as the cells shrink, ``omega ~ c /
+        (s_min h)``: the stable step must see the stretch as well as the current wave speed
+        ``c`` (a cell crushed to half its height halves the step whatever ``c``)."""
+        if self.state is None:
+            return None
+        F = self.state["F"].reshape(-1, 3, 3)
+        s = np.ones(len(F))
+        live = self.state["eroded"][:, 0] == 0 if "eroded" in self.state else np.ones(len(F), bool)
+        if live.any():
+            s[live] = np.linalg.svd(F[live], compute_uv=False)[:, -1]
+        return np.clip(s, 1e-12, 1.0)
 
     def compression(self) -> float:
-        """``1 / min_q s_min(F_q)``, the points' smallest principal stretch inverted (at least
-        1; eroded points left out): in the reference configuration the discretisation's
-        frequencies grow as the cells shrink, ``omega ~ c / (s_min h)``, so the stable step
-        must see the stretch as well as the current wave speed ``c`` (a cell crushed to half
-        its height halves the step whatever ``c``)."""
-        if self.state is None or not len(self.state["F"]):
-            return 1.0
-        F = self.state["F"].reshape(-1, 3, 3)
-        live = self.state["eroded"][:, 0] == 0 if "eroded" in self.state else slice(None)
-        s = np.linalg.svd(F[live], compute_uv=False)
-        least = float(s[:, -1].min(initial=1.0)) if s.size else 1.0
-        return 1.0 / min(1.0, max(least, 1e-12))
+        """``1 / min_q s_min(F_q)`` over this rank's points (:meth:`stretches`; at least 1)."""
+        s = self.stretches()
+        return 1.0 / float(s.min(initial=1.0)) if s is not None else 1.0
 
     def strain_energy_density(self, F: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
         """The stress work per unit reference volume of the state (m,)."""

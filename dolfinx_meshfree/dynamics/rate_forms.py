@@ -55,6 +55,7 @@ from ..physics.objective import as_3d, nominal_stress
 from ..physics.state import is_rate_law
 from ..physics.zones import MaterialZones
 from ..statics.petsc import create_aij, create_vector
+from .time_step import same_time
 
 __all__ = [
     "RATE_METHODS",
@@ -195,9 +196,7 @@ class RateLaw:
                 f"{type(self.law).__name__}: {m} points, but its state was made for "
                 f"{made_for}: one RateLaw per set of points"
             )
-        dt = self.clock - self.time
-        if abs(dt) <= 1e-13 * max(abs(self.clock), abs(self.time)):
-            dt = 0.0  # a next run's first t_n, t0 + span, against the last run's t0 + N dt
+        dt = 0.0 if same_time(self.clock, self.time) else self.clock - self.time
         if m == 0:  # a rank with none of this side's points
             self.time = self.clock
             return self.sigma

@@ -86,6 +86,7 @@ from .body_contact import (
     evaluation_operators,
     vertex_coordinates,
 )
+from .time_step import same_time
 
 if TYPE_CHECKING:  # annotations only
     from .evaluation import FieldEvaluator
@@ -95,6 +96,8 @@ __all__ = [
     "ProjectileContactSystem",
     "ProjectileState",
     "RigidProjectile",
+    "contact_points",
+    "radial_distance",
     "with_projectile",
 ]
 
@@ -104,6 +107,16 @@ def _positive(name: str, value: object) -> None:
         isinstance(value, int | float) and np.isfinite(value) and value > 0.0
     ):
         raise ValueError(f"RigidProjectile({name}={value!r}): {name} must be a positive number")
+
+
+def radial_distance(points: np.ndarray, radial: str) -> np.ndarray:
+    """The distance ``rho`` (m,) of each point (m, gdim) to the model's axis: ``r`` (the first
+    coordinate, ``"axisymmetric"``), ``|x|`` (``"plane"``) or ``sqrt(x^2 + y^2)`` (``"3d"``)."""
+    if radial == "3d":
+        return np.linalg.norm(points[:, :2], axis=1)
+    if radial == "plane":
+        return np.abs(points[:, 0])
+    return np.maximum(points[:, 0], 0.0)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -215,12 +228,7 @@ class RigidProjectile:
         ``"plane"`` (``rho = |x|``) or ``"3d"`` (``rho = sqrt(x^2 + y^2)``)."""
         points = np.asarray(points, dtype=float)
         m, gdim = points.shape
-        if radial == "3d":
-            rho = np.linalg.norm(points[:, :2], axis=1)
-        elif radial == "plane":
-            rho = np.abs(points[:, 0])
-        else:
-            rho = np.maximum(points[:, 0], 0.0)
+        rho = radial_distance(points, radial)
         s = self.heading * (tip - points[:, -1])
         inside = (s > 0.0) & (s < self.length) & (rho < self.profile(s))
         depth, nrm = np.zeros(m), np.zeros((m, 2))  # (rho, s) components
@@ -326,15 +334,15 @@ class ProjectileContactSystem(PointPenaltySystem):
         self.state = ProjectileState(None, float(p.tip), float(p.heading * p.velocity))
         #: The largest ``sqrt(sum k n_z^2 / M)`` met (the projectile's own frequency).
         self.omega = 0.0
-        self._energy = 0.0
 
     def set_time(self, t: float) -> None:
         """Take the projectile's step to ``t`` (when ``t`` is new), then the inner system's."""
         st, M = self.state, self.projectile.mass
-        same = 1e-9 * max(st.dt_prev, abs(t) * 1e-7, 1e-300)  # a run's t_n against the last's
         if st.time is None:
             st.time = float(t)
-        elif t > st.time + same:
+        elif same_time(t, st.time):
+            pass  # a next run's first t_n: the step to it is taken
+        elif t > st.time:
             dt = float(t) - st.time
             if dt * self.omega > 2.0:  # the same on every rank (allreduced forces)
                 raise ValueError(
@@ -346,7 +354,7 @@ class ProjectileContactSystem(PointPenaltySystem):
             st.velocity += 0.5 * (st.dt_prev + dt) * st.force / M
             st.tip += dt * st.velocity
             st.dt_prev, st.time = dt, float(t)
-        elif t < st.time - same:
+        else:
             raise ValueError(
                 f"the projectile's time {st.time:.6g} is past the model's t = {t:.6g}: a "
                 "model struck by a projectile runs forward only (set_initial resets the model, "
@@ -385,11 +393,11 @@ class ProjectileContactSystem(PointPenaltySystem):
         st.released = max(st.released, int(total[4]))
         st.depth = max(st.depth, deepest)
         self.omega = max(self.omega, float(np.sqrt(total[3] / self.projectile.mass)))
-        self._energy = float(total[1])
+        energy = float(total[1])
         if not st.history or st.history[-1][0] != st.time:
             v_n = st.speed(self.projectile.mass, st.dt_prev)
-            st.history.append((st.time, st.tip, v_n, st.force, self._energy, st.velocity))
-        return self._energy
+            st.history.append((st.time, st.tip, v_n, st.force, energy, st.velocity))
+        return energy
 
     def kinetic_energy(self) -> float:
         """``M v_n^2 / 2`` at the last step."""
@@ -419,24 +427,24 @@ def contact_points(
     if blended is not None:
         nodal |= blended[:n_cells]
     vx = vertex_coordinates(msh)
-    msh.topology.create_connectivity(0, tdim)
-    v2c = msh.topology.connectivity(0, tdim)
-    owned, cells = [], []
-    for v in range(msh.topology.index_map(0).size_local):
-        linked = np.asarray(v2c.links(v))
-        fe = linked[nodal[linked]]
-        if fe.size:
-            owned.append(v)
-            cells.append(int(fe[0]))
-    points = vx[np.asarray(owned, dtype=np.int32)].reshape(-1, msh.geometry.dim)
-    cells = np.asarray(cells, dtype=np.int32)
+    # a nodal cell of each vertex: the first in cell order that holds it
+    msh.topology.create_connectivity(tdim, 0)
+    c2v = msh.topology.connectivity(tdim, 0)
+    per_cell = int(np.diff(np.asarray(c2v.offsets))[0]) if n_cells else 1
+    verts = np.asarray(c2v.array).reshape(-1, per_cell)[:n_cells]
+    nodal_cells = np.flatnonzero(nodal).astype(np.int32)
+    held, first = np.unique(verts[nodal_cells].ravel(), return_index=True)
+    cell_of = np.full(len(vx), -1, dtype=np.int32)
+    cell_of[held] = np.repeat(nodal_cells, per_cell)[first]
+    owned = np.flatnonzero(cell_of[: msh.topology.index_map(0).size_local] >= 0)
+    points, cells = vx[owned], cell_of[owned]
     if d.particles is not None:
         P = d.particles
         xp = P.positions[np.flatnonzero(P.owner == evaluator.comm.rank)]
-        if len(points) and len(xp):
-            spacing = float(np.min(np.ptp(vx, axis=0))) if len(vx) else 1.0
+        if len(points) and len(xp):  # a particle at a vertex is struck there once
+            extent = float(np.min(np.ptp(vx, axis=0)))
             dist, _ = cKDTree(points).query(xp)
-            xp = xp[dist > 1e-9 * max(spacing, 1e-300)]
+            xp = xp[dist > 1e-9 * max(extent, 1e-300)]
         cp = locate_points(msh, xp)
         keep = cp >= 0
         points = np.concatenate([points, xp[keep]])
@@ -484,9 +492,7 @@ def with_projectile(
     count = comm.allreduce(len(points))
     if count == 0:
         raise_on_all_ranks(comm, _nothing_struck)
-    rho = points[:, 0] if radial == "axisymmetric" else (
-        np.abs(points[:, 0]) if radial == "plane" else np.linalg.norm(points[:, :2], axis=1)
-    )  # fmt: skip
+    rho = radial_distance(points, radial)
     near = comm.allreduce(float(rho.min(initial=np.inf)), op=MPI.MIN)
     if not near < projectile.radius:  # the same on every rank
         raise_on_all_ranks(comm, lambda: _passes_through(near, projectile.radius))
@@ -501,7 +507,7 @@ def with_projectile(
     masses = system.mass()
     A = evaluation_operators(evaluator, rows, tables, masses)
     # m_s = sum_j |A_sj| m_j (component by component: the same mass on each)
-    share = A[0].createVecLeft() if A[0] is not None else next(a for a in A if a).createVecLeft()
+    share = next(a for a in A if a is not None).createVecLeft()
     share.set(0.0)
     for Ak, mk in zip(A, masses, strict=True):
         if Ak is None:

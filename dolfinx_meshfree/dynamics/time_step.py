@@ -40,6 +40,7 @@ __all__ = [
     "TimeStepBound",
     "check_safety",
     "frequency_bound",
+    "same_time",
     "warn_default_density",
 ]
 
@@ -249,6 +250,12 @@ class TimeStepBound:
         """Forget the bound: the next :meth:`critical` re-bounds the system's current tangent
         (the hook for a system whose tangent changed)."""
         self._critical = None
+
+
+def same_time(a: float, b: float) -> bool:
+    """Whether two times of a run are one up to round-off: a next run's first ``t_n``, ``t0 +
+    span``, against the last run's ``t0 + N dt`` (a run continued in pieces)."""
+    return abs(a - b) <= 1e-13 * max(abs(a), abs(b))
 
 
 class Rebound:

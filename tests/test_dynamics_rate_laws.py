@@ -17,7 +17,7 @@ import dataclasses
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
 from dolfinx_meshfree.dynamics.patch_conversion import convert
-from dolfinx_meshfree.dynamics.rate_forms import RateLaw
+from dolfinx_meshfree.dynamics.rate_forms import RateLaw, nearest_in_cell
 from dolfinx_meshfree.geometry.patch_criteria import GrowthContext
 
 import dolfinx
@@ -407,3 +407,23 @@ def test_state_field_is_the_damage_per_cell(shared_dir):
     with pytest.raises(ValueError, match=r"reads the state of a rate-form law.*LinearElastic"):
         mf.dynamics.state_field(elastic, "damage")
     elastic.destroy()
+
+
+@pytest.mark.serial  # a local function: no parallel code path of its own
+def test_equally_near_points_are_chosen_by_coordinates():
+    """A converted cell's particle at its centre is equally near the cell's four Gauss points:
+    the state it takes is the one with the smallest coordinates, whatever the order the source
+    points come in (on 2 ranks it followed the partition; tests/test_demos.py's 2-rank twin of
+    the Hanchak shot measures what that did), and a point off the centre takes its nearest."""
+    g = 0.5 / np.sqrt(3.0)
+    gauss = np.array(
+        [[0.5 - g, 0.5 - g], [0.5 + g, 0.5 - g], [0.5 - g, 0.5 + g], [0.5 + g, 0.5 + g]]
+    )
+    other = gauss + np.array([1.0, 0.0])  # the next cell's
+    points = np.array([[0.5, 0.5], [0.6, 0.7], [1.5, 0.5]])
+    cells = np.array([0, 0, 1])
+    for order in ([0, 1, 2, 3, 4, 5, 6, 7], [7, 3, 6, 2, 5, 1, 4, 0], [2, 6, 0, 4, 3, 7, 1, 5]):
+        src = np.concatenate([gauss, other])[order]
+        src_cells = np.array([0, 0, 0, 0, 1, 1, 1, 1])[order]
+        chosen = src[nearest_in_cell(src, src_cells, points, cells)]
+        assert np.array_equal(chosen, [gauss[0], gauss[3], other[0]])

@@ -92,11 +92,18 @@ class AdaptiveRun:
             self.model = new
         self.timings["conversions"] += time.perf_counter() - tic
 
-    def run(self, t_end: float) -> ExplicitDynamics:
+    def run(self, t_end: float, energy_records: int = 100, last: bool = True) -> ExplicitDynamics:
         """Run to ``t_end`` (collective), checking before the first step and every
         ``check_every`` steps. Returns the final model. A
         :class:`~dolfinx_meshfree.PatchCriterionWarning` (once) if the criteria have named no
         cell by then.
+
+        Args:
+            energy_records: About how many energy records this call adds to
+                ``model.stepper.records`` (at least one per check: the end of each stretch of
+                steps).
+            last: ``False`` when later calls continue the run (a run in pieces): the warning
+                waits for a last call.
 
         Raises:
             ValueError: on every rank: ``t_end`` not after the current time; ``dt`` above the
@@ -109,19 +116,29 @@ class AdaptiveRun:
                 raise ValueError(
                     f"t_end={t_end!r} must be a time after the current one ({dyn.time:.6g})"
                 )
+            if (
+                isinstance(energy_records, bool)
+                or not isinstance(energy_records, int)
+                or energy_records < 1
+            ):
+                raise ValueError(f"energy_records={energy_records!r} must be an integer >= 1")
             return float(t_end)
 
         t_end = raise_on_all_ranks(dyn.comm, check)
+        t_start = dyn.time
         self._check()
         while self.model.time < t_end * (1.0 - 1e-12):
             dyn = self.model
             stable = dyn.stable_time_step()
             dt = stable if self.dt is None else self.dt
             t_next = min(t_end, dyn.time + self.check_every * dt)
+            share = max(1, round(energy_records * (t_next - dyn.time) / (t_end - t_start)))
             tic = time.perf_counter()
-            dyn.run(t_next, dt=dt, progress=False)  # a dt above the stable step: refused there
+            # a dt above the stable step: refused there
+            dyn.run(t_next, dt=dt, energy_records=share, progress=False)
             self.timings["steps"] += time.perf_counter() - tic
             if self.model.time < t_end * (1.0 - 1e-12):
                 self._check()
-        self.adaptive.finish("AdaptiveRun", f"the run to t = {self.model.time:.6g}")
+        if last:
+            self.adaptive.finish("AdaptiveRun", f"the run to t = {self.model.time:.6g}")
         return self.model

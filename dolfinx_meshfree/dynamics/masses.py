@@ -119,9 +119,11 @@ def particle_lumped_mass(
             ``rho Phi^T W Phi`` (Belytschko et al. 1995, eq. 4.5); ``"volume"``:
             ``rho V_I`` with the particles' Voronoi volumes.
         check: Refuse masses that are not positive.
-        revolve: ``"volume"`` in an axisymmetric model: ``rho 2 pi r_I V_I``, the particle's
-            area ``V_I`` revolved at its radius (Pappus: exact for a particle at its cell's
-            centroid, the hybrid's). ``"row-sum"`` takes revolved ``weights`` instead.
+        revolve: ``"volume"`` in an axisymmetric model: ``rho`` times the particle's region
+            revolved, :attr:`~dolfinx_meshfree.ParticleSet.revolved_volumes` where the set has
+            them (the hybrid's centred particles: they sum to the patch's revolved volume
+            whatever the particles' places), else ``2 pi r_I V_I`` (Pappus: exact for a particle
+            at its region's centroid). ``"row-sum"`` takes revolved ``weights`` instead.
 
     Raises:
         ValueError: on every rank when ``kind`` is unknown or, with ``check``, when a mass is
@@ -146,7 +148,12 @@ def particle_lumped_mass(
         own = particles.owned
         volumes = particles.volumes
         if revolve:
-            volumes = volumes * 2.0 * np.pi * particles.positions[:, 0]
+            measured = particles.revolved_volumes
+            volumes = (
+                measured
+                if measured is not None
+                else volumes * 2.0 * np.pi * particles.positions[:, 0]
+            )
         m = create_vector(
             comm,
             pl,

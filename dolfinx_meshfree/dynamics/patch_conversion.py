@@ -58,7 +58,13 @@ and its particles are placed afresh. :func:`convert` carries the state over:
   ``strain_change``;
 * the constraint rows of the new interface are then met in the mass metric (the projection of
   :mod:`~dolfinx_meshfree.dynamics.constraint`), as after a rebuild at a crack extension;
-* the step, the time and the work accounts are carried unchanged.
+* the step, the time and the work accounts are carried unchanged;
+* **a rigid projectile** (:meth:`~dolfinx_meshfree.ExplicitDynamics.add_projectile`, added
+  again by the user's ``build``) continues from its tip, velocity, force and history
+  (:func:`~dolfinx_meshfree.dynamics.rigid_projectile.carry_projectiles`); its penalty acts on
+  the new model's points, so the new particles join the contact. A new particle that the
+  projectile already covers is pushed out from the next step: the penalty's energy it starts
+  with is in ``strain_change``.
 
 **Conservation.** With row-sum lumping, ``sum_I M_II v_I = rho sum_q w_q v^h(x_q)`` (the MLS and
 the FE functions are partitions of unity). Summing the rows of the projection gives the same
@@ -127,6 +133,7 @@ from .energy import kinetic_energy, strain_energy
 from .explicit import ExplicitDynamics
 from .linalg import mumps_lu
 from .rate_forms import RateLaws, carry_state
+from .rigid_projectile import carry_projectiles
 
 __all__ = [
     "RAMP_STABILISATION",
@@ -169,6 +176,10 @@ class Conversion:
             support, in the component it holds; round-off without one (1e-16 on the plate;
             9e-6 in y on Kalthoff-Winkler's symmetry line, reached by bridging's patch). Part of
             ``momentum_error``.
+        momentum_components: ``|p_new - p_old| / scale`` per component (``momentum_error``
+            is their largest): in an axisymmetric model only the axial one is a conserved
+            quantity (the axis held radially takes radial momentum, as the hoop stresses do
+            in the run), so that is the one to read there.
         kinetic_change, strain_change: The new minus the old kinetic energy (of ``v_{n-1/2}``)
             and strain energy (of ``d_n``).
         velocity_change: The largest change of the velocity field ``v_{n-1/2}`` at the old
@@ -198,6 +209,7 @@ class Conversion:
     strain_change: float
     energy_change: float
     velocity_change: float = 0.0
+    momentum_components: list[float] = field(default_factory=list)
     time_rebuild: float = 0.0
     by: list[str] = field(default_factory=list)
     rebuild: str = "full"
@@ -219,16 +231,15 @@ def momentum(dyn: ExplicitDynamics, v: list[PETSc.Vec] | None = None) -> tuple[n
     ``v_{n-1/2}``) and ``sum_i M_ii |v_i|`` (collective)."""
     gdim = dyn.mesh.geometry.dim
     v = dyn.stepper.v if v is None else v
-    parts: list[list[float]] = [[] for _ in range(gdim)]
-    scale = 0.0
-    for f, x in zip(dyn.fields, v, strict=True):
-        mv = (f.mass.array_r * x.array_r).reshape(-1, gdim)
-        for k in range(gdim):
-            parts[k].append(math.fsum(mv[:, k]))
-        scale += float(np.abs(mv).sum())
-    gathered = dyn.comm.allgather([math.fsum(pk) for pk in parts])
-    p = np.array([math.fsum(g[k] for g in gathered) for k in range(gdim)])
-    return p, float(dyn.comm.allreduce(scale))
+    mv = np.concatenate(
+        [(f.mass.array_r * x.array_r).reshape(-1, gdim) for f, x in zip(dyn.fields, v, strict=True)]
+    )
+    # every rank's terms, summed once with fsum: correctly rounded, so the momentum a
+    # conversion restores is the same whatever the partition (a sum of per-rank sums rounds
+    # twice)
+    every = np.concatenate(dyn.comm.allgather(mv))
+    p = np.array([math.fsum(every[:, k]) for k in range(gdim)])
+    return p, math.fsum(np.abs(every).ravel())
 
 
 def carry_clock(old: ExplicitDynamics, new: ExplicitDynamics) -> None:
@@ -466,8 +477,8 @@ def _restore_momentum(
     free = new.free[k].reshape(-1, gdim)
     if back is not None:
         free = free * back[:, None]
-    m = new.fields[k].mass.array_r.reshape(-1, gdim) * free
-    mp = np.array([math.fsum(g[c] for g in new.comm.allgather(m.sum(axis=0))) for c in range(gdim)])
+    m = np.concatenate(new.comm.allgather(new.fields[k].mass.array_r.reshape(-1, gdim) * free))
+    mp = np.array([math.fsum(m[:, c]) for c in range(gdim)])  # the same on any partition
     delta = np.where(mp > 0, (p0 - p) / np.where(mp > 0, mp, 1.0), 0.0)
     v = new.stepper.v[k].array.reshape(-1, gdim)
     v += free * delta[None, :]
@@ -491,6 +502,7 @@ def convert(
 
     def check() -> float:
         _check(old, new)
+        carry_projectiles(old.system, new.system)  # before the new model's first force
         lam = (
             (RAMP_STABILISATION if new.blended_rule is not None else 0.0)
             if stabilisation is None
@@ -547,6 +559,7 @@ def convert(
         kinetic_change=kin1 - kin0, strain_change=strain1 - strain0,
         energy_change=(kin1 - kin0) + (strain1 - strain0),
         velocity_change=change / speed if speed > 0 else change,
+        momentum_components=[float(x) for x in np.abs(p1 - p0) / (scale if scale > 0 else 1.0)],
     )  # fmt: skip
 
 

@@ -68,6 +68,7 @@ axisymmetric model imposes anyway).
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
@@ -96,7 +97,9 @@ __all__ = [
     "ProjectileContactSystem",
     "ProjectileState",
     "RigidProjectile",
+    "carry_projectiles",
     "contact_points",
+    "projectiles",
     "radial_distance",
     "with_projectile",
 ]
@@ -407,6 +410,42 @@ class ProjectileContactSystem(PointPenaltySystem):
     def _bound(self) -> np.ndarray:
         """``k_s`` of this rank's points: ``k_s n n^T <= k_s I`` in any contact state."""
         return self.k
+
+
+def projectiles(system: object) -> list[ProjectileContactSystem]:
+    """The projectiles' systems in a model's chain of wrapped systems (``system``, its
+    ``inner``, ...), outermost first: one per
+    :meth:`~dolfinx_meshfree.ExplicitDynamics.add_projectile`."""
+    found = []
+    while system is not None:
+        if isinstance(system, ProjectileContactSystem):
+            found.append(system)
+        system = system.__dict__.get("inner") if hasattr(system, "__dict__") else None
+    return found
+
+
+def carry_projectiles(old: object, new: object) -> int:
+    """Carry the projectiles' states from the model ``old`` (its system) into ``new``, the
+    same model rebuilt on a changed patch (a conversion of failing cells into particles,
+    :mod:`~dolfinx_meshfree.dynamics.patch_conversion`): each projectile of the new model,
+    added by the user's ``build`` as in the first model (the same :class:`RigidProjectile`),
+    continues from the old one's tip, velocity, force, last step and history; its penalty acts
+    on the new model's points (the new particles join the contact) with the new model's
+    ``k_s``. Returns the number carried. Raises ``ValueError`` (the same on every rank) when the
+    rebuilt model's projectiles are not the old one's."""
+    before, after = projectiles(old), projectiles(new)
+    if [s.projectile for s in before] != [s.projectile for s in after]:
+        raise ValueError(
+            f"the rebuilt model is struck by {len(after)} projectile(s), the old one by "
+            f"{len(before)}{' (not the same RigidProjectile)' if len(after) == len(before) else ''}"
+            ": build(cells=...) must add the first model's projectiles again, with the same "
+            "RigidProjectile (dyn.add_projectile(projectile) in build); their state is carried "
+            "over"
+        )
+    for s0, s1 in zip(before, after, strict=True):
+        s1.state = copy.deepcopy(s0.state)
+        s1.omega = max(s1.omega, s0.omega)
+    return len(after)
 
 
 def contact_points(

@@ -18,7 +18,12 @@ import numpy.typing as npt
 
 from .body_contact import BodyContact, with_body_contact
 from .evaluation import FieldEvaluator
-from .rigid_projectile import ProjectileContactSystem, RigidProjectile, with_projectile
+from .rigid_projectile import (
+    ProjectileContactSystem,
+    RigidProjectile,
+    projectiles,
+    with_projectile,
+)
 from .system import SemiDiscreteSystem
 
 __all__ = ["Struck"]
@@ -87,3 +92,12 @@ class Struck:
         system = with_projectile(self.system, self.evaluator, omega_0, projectile, where)
         self._wrap(system)
         return system
+
+    @property
+    def projectiles(self) -> list[ProjectileContactSystem]:
+        """The systems of the projectiles that strike the model, in the order they were added
+        (:meth:`add_projectile`); each one's ``state`` is its
+        :class:`~dolfinx_meshfree.dynamics.rigid_projectile.ProjectileState`. After a
+        conversion (:class:`~dolfinx_meshfree.dynamics.AdaptiveRun`) the model is a new one:
+        read ``run.model.projectiles``, which continue the old ones' states."""
+        return projectiles(self.system)[::-1]

@@ -272,6 +272,11 @@ class ParticleSet:
             self.volumes = self._voronoi_volumes(mesh, self.cells)
         else:
             self.volumes = None
+        #: (n,) the volumes revolved about the axis ``r = 0`` (``int 2 pi r dA`` over each
+        #: particle's region) where the set's maker measured them (the hybrid's centred
+        #: particles, :func:`~dolfinx_meshfree.couplings.hybrid_sph.centred_particles`); an
+        #: axisymmetric model's ``rho V_I`` masses take them. ``None``: ``2 pi r_I V_I``.
+        self.revolved_volumes: np.ndarray | None = None
 
     @property
     def num_particles(self) -> int:

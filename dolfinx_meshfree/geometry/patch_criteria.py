@@ -451,6 +451,11 @@ class StateAbove:
             ``RateLaws.state_values``).
         threshold: The value at which (``>=``) a cell joins the patch: above the virgin state's
             (a threshold at or below it would convert every cell at the start).
+        where: ``where(x) -> bool (m,)`` of the owned cells' midpoints (m, gdim): only the
+            cells it marks may join (e.g. the region a projectile passes through, where the
+            material is crushed, rather than every cell a tensile wave damages on its way;
+            a lone cell far from the patch makes a poor particle patch: the hybrid's SPH
+            correction is singular there). ``None`` (default): any cell.
 
     Needs a model whose material is a rate-form law (``HolmquistJohnsonCook``,
     ``JohnsonCook``); for a hyperelastic one, :class:`FieldAbove`.
@@ -458,15 +463,25 @@ class StateAbove:
 
     name = "StateAbove"
 
-    def __init__(self, name: str, threshold: float) -> None:
+    def __init__(
+        self,
+        name: str,
+        threshold: float,
+        where: Callable[[np.ndarray], np.ndarray] | None = None,
+    ) -> None:
         if not isinstance(name, str):
             raise ValueError(f"name={name!r} must be the name of a state variable, e.g. 'damage'")
         if isinstance(threshold, bool) or not np.isfinite(threshold):
             raise ValueError(f"threshold={threshold!r} must be a finite number")
-        self.variable, self.threshold = name, float(threshold)
+        if where is not None and not callable(where):
+            raise ValueError(
+                f"where={where!r:.80} must be a callable where(x) -> bool per midpoint"
+            )
+        self.variable, self.threshold, self.where = name, float(threshold), where
 
     def __repr__(self) -> str:
-        return f"StateAbove({self.variable!r}, threshold={self.threshold:g})"
+        within = "" if self.where is None else f", where={getattr(self.where, '__name__', '?')}"
+        return f"StateAbove({self.variable!r}, threshold={self.threshold:g}{within})"
 
     def select(self, patch: ParticlePatch, context: GrowthContext) -> np.ndarray:
         n_own = patch.mesh.topology.index_map(patch.mesh.topology.dim).size_local
@@ -493,6 +508,10 @@ class StateAbove:
         out = np.zeros(n_own, dtype=bool)
         named = cells[v >= self.threshold]
         out[named[named < n_own]] = True
+        if self.where is not None:
+            out &= raise_on_all_ranks(
+                patch.comm, lambda: _marked(patch.mesh, self.where, "StateAbove's where")
+            )
         return out
 
 
@@ -515,14 +534,22 @@ class CellsWhere:
         return f"CellsWhere({getattr(self.fn, '__name__', '?')})"
 
     def select(self, patch: ParticlePatch, context: GrowthContext) -> np.ndarray:
-        msh = patch.mesh
-        tdim = msh.topology.dim
-        n_own = msh.topology.index_map(tdim).size_local
-        mid = dolfinx.mesh.compute_midpoints(msh, tdim, np.arange(n_own, dtype=np.int32))
-        marked = np.asarray(self.fn(mid[:, : msh.geometry.dim]))
-        if marked.shape != (n_own,):
-            raise ValueError(
-                f"CellsWhere's fn returned shape {marked.shape} for {n_own} midpoints; it must "
-                "return one bool per point"
-            )
-        return marked.astype(bool)
+        return raise_on_all_ranks(
+            patch.comm, lambda: _marked(patch.mesh, self.fn, "CellsWhere's fn")
+        )
+
+
+def _marked(
+    msh: dolfinx.mesh.Mesh, fn: Callable[[np.ndarray], np.ndarray], what: str
+) -> np.ndarray:
+    """bool per owned cell: ``fn`` of the owned cells' midpoints (m, gdim)."""
+    tdim = msh.topology.dim
+    n_own = msh.topology.index_map(tdim).size_local
+    mid = dolfinx.mesh.compute_midpoints(msh, tdim, np.arange(n_own, dtype=np.int32))
+    marked = np.asarray(fn(mid[:, : msh.geometry.dim]))
+    if marked.shape != (n_own,):
+        raise ValueError(
+            f"{what} returned shape {marked.shape} for {n_own} midpoints; it must return one "
+            "bool per point"
+        )
+    return marked.astype(bool)

@@ -24,6 +24,20 @@
 #   paper's Fig. 20 puts its particles where damage is expected); ``lagrange``,
 #   ``master-slave``, ``ramp`` (not VCI-corrected in dynamics) or the ``hybrid`` SPH-FE
 #   coupling (HA-F, SPH masses ``rho V_I`` revolved).
+# * *Or a patch grown where the concrete fails* (issue 27, item 4; Rabczuk et al., sec. 5.5:
+#   the hybrid coupling's purpose is adaptivity), ``lagrange-adaptive`` and ``hybrid-adaptive``:
+#   the run starts with particles on the few cells the nose meets first (within a radius and
+#   a spacing of the axis, two spacings deep) and ``mf.dynamics.AdaptiveRun`` turns every FE
+#   cell whose damage reaches 0.1 at a point into particles, within the fixed patches' 3 radii
+#   (``mf.StateAbove("damage", 0.1, where=...)``: the tensile waves damage cells far out and
+#   near the back face that need no particles, and a lone converted cell makes a poor patch),
+#   checked every 10 steps. Each conversion rebuilds the model and carries its state: the
+#   displacement and velocity (lagrange: the L2 fit; the hybrid: the kept particles' own
+#   values, the new ones sampled), the concrete's state at every point, and the projectile
+#   (added again by the rebuild, it continues from its state; the new particles join its
+#   contact). Printed per shot: the conversions, the particle cells at the end, and each
+#   conversion's mass and axial momentum change (checked to round-off) and energy change
+#   (counted in the balance).
 # * *The projectile*: rigid (``mf.dynamics.RigidProjectile``), a tangent ogive of
 #   caliber-radius-head 3 on a cylinder, 25.4 mm in diameter, 143.7 mm long, 0.50 kg: the
 #   figures the papers that model the test give for it (Hanchak's projectile is the 4340 steel
@@ -262,15 +276,17 @@ def perforate(
     t_max: float = 2.5e-3,
     chunk: float = 2e-5,
     snapshots: tuple[float, ...] = (),
+    friction: float = 0.0,
 ) -> dict:
     """One shot at ``v0``: run in pieces of ``chunk`` until the nose is a nose length past the
-    slab's back face, the projectile stops, or ``t_max``; the figures of the shot."""
+    slab's back face, the projectile stops, or ``t_max``; the figures of the shot
+    (``friction``: Coulomb's coefficient between the projectile and the slab)."""
     tic = time.perf_counter()
     slab = slab_mesh(cells, method, comm)
     h = slab[1]
     # the hybrid's particles sit at the cells' centres: its struck face is half a cell in
     tip = THICKNESS + (0.5 * h if method.startswith("hybrid") else 0.0)
-    projectile = RigidProjectile(CALIBER / 2, LENGTH, MASS, v0, tip, crh=CRH)
+    projectile = RigidProjectile(CALIBER / 2, LENGTH, MASS, v0, tip, crh=CRH, friction=friction)
 
     def struck(patch_cells: np.ndarray | None = None) -> mf.ExplicitDynamics:
         dyn, _ = build(method, cells, comm, slab, patch_cells)
@@ -328,6 +344,7 @@ def perforate(
         "cells": cells,
         "h": h,
         "impact_velocity": v0,
+        "friction": friction,
         "residual_velocity": max(v_exit, 0.0) if failure is None else None,
         "perforated": bool(state.tip < end),
         "failure": failure,
@@ -462,6 +479,7 @@ def main(argv=None) -> int:
     p.add_argument("--velocity", type=float, nargs="+", default=sorted(EXPERIMENT))
     p.add_argument("--method", nargs="+", default=DEFAULT_METHODS, choices=METHODS)
     p.add_argument("--resolution", type=int, default=24, help="cells through the thickness")
+    p.add_argument("--friction", type=float, default=0.0, help="Coulomb's coefficient (default 0)")
     p.add_argument("--json", default=None)
     p.add_argument("--png", default=None)
     p.add_argument(
@@ -477,7 +495,9 @@ def main(argv=None) -> int:
         for m in args.method:
             first = not any(r["pictures"] for r in rows)
             want = (1e-4, 1.8e-4) if args.png and first and m == (args.pictures or m) else ()
-            rows.append(perforate(m, args.resolution, v0, comm, snapshots=want))
+            rows.append(
+                perforate(m, args.resolution, v0, comm, snapshots=want, friction=args.friction)
+            )
             if comm.rank == 0:  # as it comes (a full run takes an hour)
                 r = rows[-1]
                 print(f"  {m} at {v0:g} m/s: residual {r['residual_velocity']}, balance "
@@ -485,7 +505,7 @@ def main(argv=None) -> int:
     bad, missed = check(rows), targets(rows)
     if comm.rank == 0:
         print(f"The Hanchak slab, {args.resolution} cells through the thickness, {comm.size} "
-              "rank(s): residual velocity (m/s)")  # fmt: skip
+              f"rank(s), friction {args.friction:g}: residual velocity (m/s)")  # fmt: skip
         print(
             f"{'impact':>7}{'experiment':>11}{'method':>18}{'residual':>10}{'paper':>7}"
             f"{'balance':>9}{'eroded':>8}{'pen h':>7}{'steps':>7}{'time s':>8}{'vs efg':>8}"

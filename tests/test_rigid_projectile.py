@@ -230,6 +230,7 @@ def test_stable_step_sees_the_projectile():
         ({"heading": 0}, r"heading=0\) must be -1"),
         ({"length": 0.03}, r"length=0.03\) must exceed the nose's length 0.0421"),
         ({"factor": float("nan")}, r"factor=nan\): factor must be a positive"),
+        ({"friction": -0.1}, r"friction=-0.1\): Coulomb's coefficient must be a number >= 0"),
     ],
 )
 def test_bad_projectile(options, match):
@@ -325,3 +326,56 @@ def test_projectile_carried_through_conversions(method, plane):
         bare.run(0.5 * L / C)
     run.model.destroy()
     bare.model.destroy()
+
+
+def dragged(method: str, mu: float, comm=COMM) -> dict:
+    """A block ``a < x < a + w``, ``0 < y < 2 w`` (E = rho = 1, plane strain, 4 x 8 cells or
+    EFG particles at the vertices), free but for gravity ``g`` towards the projectile's flank
+    ``x = a`` (raised linearly over ``t = 1``), while a heavy flat-nosed projectile of radius
+    ``a`` slides past it at 0.1 towards ``-y``: the block's mean velocity along ``y`` at ``t =
+    5``, friction's dissipated work and the energy balance with the projectile's kinetic
+    change, over the dissipated work."""
+    a, w, g, t_end = 0.1, 0.1, 1e-3, 5.0
+    msh = dolfinx.mesh.create_rectangle(
+        comm, [np.array([a, 0.0]), np.array([a + w, 2 * w])], [4, 8],
+        dolfinx.mesh.CellType.quadrilateral,
+    )  # fmt: skip
+    material = mf.LinearElastic(1.0, 0.25, "strain", rho=1.0)
+    if method == "fe":
+        dyn = mf.ExplicitDynamics.fe(_compat.vector_function_space(msh), material)
+    else:
+        dyn = mf.ExplicitDynamics.efg(mf.ParticleSet.from_cells(msh, w / 4), material)
+    dyn.add_body_force(lambda x: np.tile([-g, 0.0], (len(x), 1)), lambda t: min(t, 1.0))
+    # the flank a hair inside the block's face: a point must lie within the radius
+    projectile = RigidProjectile(a * (1 + 1e-9), 10.0, 1e6, 0.1, -2.0, crh=None, friction=mu)
+    system = dyn.add_projectile(projectile)
+    res = dyn.run(t_end)
+    q, vals = dyn.evaluator.at_quadrature(dyn.stepper.current_velocity(), 3)
+    v = dyn.comm.allreduce(np.array([np.sum(q.weights * vals[:, 1]), q.weights.sum()]))
+    last = res.energies[-1]
+    speed = -system.state.history[-1][2]
+    kinetic = 0.5 * projectile.mass * (speed**2 - 0.1**2)
+    out = {
+        "v": v[0] / v[1],
+        "expected": -mu * g * (t_end - 0.5),
+        "dissipated": system.dissipated,
+        "balance": last.kinetic + last.internal - last.external + kinetic,
+    }
+    dyn.destroy()
+    return out
+
+
+@pytest.mark.parametrize("method", ["fe", "efg"])
+def test_friction_drags_a_block(method):
+    """Coulomb friction between the projectile and the model (``friction=mu``): a block
+    pressed against the flank of a projectile sliding past it is dragged along at ``mu g``,
+    its velocity ``-mu g (t - 1/2)`` at ``t = 5`` (gravity raised over ``t = 1``): measured
+    1.3 % (fe) and 0.7 % (efg) off with ``mu = 0.3``, checked 4 %. The projectile loses what
+    the block gains and friction dissipates: the balance closes to 0.35 % and 0.50 % of the
+    dissipated work (checked 1 %). Frictionless, the block does not move along the flank
+    (measured 6e-19)."""
+    r = dragged(method, 0.3)
+    assert r["v"] == pytest.approx(r["expected"], rel=0.04)
+    assert r["dissipated"] > 0.0 and abs(r["balance"]) < 0.01 * r["dissipated"]
+    free = dragged(method, 0.0)
+    assert abs(free["v"]) < 1e-9 * abs(r["expected"]) and free["dissipated"] == 0.0

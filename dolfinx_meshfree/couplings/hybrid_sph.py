@@ -283,13 +283,13 @@ def centred_particles(patch: ParticlePatch, spacing: float, samples: int = 4) ->
     centroid and the point of a patch cell that sees fewer than three non-collinear particles
     within 1.8 spacings (a corner of a staircase border; a cell whose centroid is blind, e.g. a
     lone cell, first gets one a quarter of the way from each vertex to its centroid); a
-    particle's volume is the area of the
-    patch that is nearer to it than to any other particle (its Voronoi cell within the patch):
-    the square itself inside the patch. The areas are measured by nearest-particle assignment of
-    ``samples x samples`` points per square at the centres of a finer lattice aligned with the
-    squares (no point is equidistant from two particles), then scaled so that they sum to the
-    area of the patch cells: exact for squares inside the patch and along lattice-aligned
-    boundaries, within about ``1 / samples`` of a square's area along others. In 2D the same
+    particle's volume is the area of the patch that is nearer to it than to any other particle
+    (its Voronoi cell within the patch): the square itself inside the patch. The areas are
+    measured by nearest-particle assignment of ``samples x samples`` points per square at the
+    centres of a finer lattice aligned with the squares (no point is equidistant from two
+    particles), then scaled so that they sum to the area of the patch cells: exact for squares
+    inside the patch and along lattice-aligned boundaries, within about ``1 / samples`` of a
+    square's area along others. In 2D the same
     samples, each at its radius ``|x|``, give the regions' volumes revolved about the axis
     ``x = 0`` (:attr:`~dolfinx_meshfree.ParticleSet.revolved_volumes`: an axisymmetric model's
     masses), scaled so that they sum to the cells' revolved volume ``int 2 pi r dA``.

@@ -62,8 +62,21 @@ neighbours: a measured blow-up of the Hanchak slab at 150 microseconds). In the 
 revolution the material on the axis parts symmetrically, which the section cannot carry; its
 neighbours off the axis are struck.
 
-Frictionless. The projectile does not rotate and keeps to its axis (normal impact, which the
-axisymmetric model imposes anyway).
+**Coulomb friction** (``RigidProjectile(friction=mu)``; frictionless by default): the penalty
+regularisation of Coulomb's law with a return map, as the contact between bodies has it
+(:mod:`~dolfinx_meshfree.dynamics.body_contact`; Wriggers, *Computational Contact Mechanics*,
+2006). Each covered point carries a tangential spring of its normal stiffness ``k_s``: its
+force on the point moves by ``-k_s`` times the point's tangential slip relative to the
+projectile (the point's motion less the projectile's since the last evaluation), from its
+previous value turned into the current tangent plane, and is limited to ``mu k_s g``; the
+excess is slip, whose work (the limit times the slip) :attr:`ProjectileContactSystem.dissipated`
+accumulates. The projectile takes the opposite axial force. A point that leaves contact forgets
+its spring. The energy records' ``internal`` holds the springs' energy and the dissipated work,
+so the balance still closes. The springs' stiffness is the normal one, so the stable step's
+bound holds (``k_s (n n^T + t t^T) <= k_s I``).
+
+The projectile does not rotate and keeps to its axis (normal impact, which the axisymmetric
+model imposes anyway).
 """
 
 from __future__ import annotations
@@ -146,6 +159,8 @@ class RigidProjectile:
             fraction of the spacing, so a deep one has not been struck but has arrived there,
             and pushing it out through the nearest face (the back face, from inside the shank)
             would release ``k g^2 / 2`` at once.
+        friction: Coulomb's coefficient ``mu`` between the projectile and the model (default
+            0: frictionless; module docstring).
     """
 
     radius: float
@@ -157,10 +172,20 @@ class RigidProjectile:
     heading: int = -1
     factor: float = 0.3
     depth: float | None = None
+    friction: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("radius", "length", "mass", "factor"):
             _positive(name, getattr(self, name))
+        if isinstance(self.friction, bool) or not (
+            isinstance(self.friction, int | float)
+            and np.isfinite(self.friction)
+            and self.friction >= 0.0
+        ):
+            raise ValueError(
+                f"RigidProjectile(friction={self.friction!r}): Coulomb's coefficient must be a "
+                "number >= 0 (0: frictionless)"
+            )
         if self.depth is not None:
             _positive("depth", self.depth)
         if isinstance(self.velocity, bool) or not (
@@ -335,8 +360,16 @@ class ProjectileContactSystem(PointPenaltySystem):
         p = projectile
         #: The projectile's :class:`ProjectileState`.
         self.state = ProjectileState(None, float(p.tip), float(p.heading * p.velocity))
-        #: The largest ``sqrt(sum k n_z^2 / M)`` met (the projectile's own frequency).
+        #: The largest ``sqrt(sum k n_z^2 / M)`` met (the projectile's own frequency; with
+        #: friction ``sqrt(sum k / M)`` over the covered points).
         self.omega = 0.0
+        #: Friction's slips' work since the start (J; carried over a conversion).
+        self.dissipated = 0.0
+        m = len(points)
+        #: Friction's springs per point: in contact at the last evaluation, their force on the
+        #: point, the point's position relative to the tip there.
+        self._stuck = np.zeros(m, dtype=bool)
+        self._traction, self._relative = np.zeros((m, self.gdim)), np.zeros((m, self.gdim))
 
     def set_time(self, t: float) -> None:
         """Take the projectile's step to ``t`` (when ``t`` is new), then the inner system's."""
@@ -379,17 +412,25 @@ class ProjectileContactSystem(PointPenaltySystem):
         g[passed], n[passed] = 0.0, 0.0
         on = g > 0.0
         kg = self.k * g
-        self._f.array[:] = (-kg[:, None] * n).ravel()
+        force = kg[:, None] * n  # on the points (outwards)
+        stored, slipped = 0.0, 0.0
+        if self.projectile.friction > 0.0:
+            friction, stored, slipped = self._friction(y, n, g, on)
+            force += friction
+        self._f.array[:] = (-force).ravel()  # the points' share of the internal force
+        stiff = self.k[on] if self.projectile.friction > 0.0 else self.k[on] * n[on, -1] ** 2
         local = np.array(
             [
-                -float(np.dot(kg[on], n[on, -1])),
-                0.5 * float(np.dot(kg[on], g[on])),
+                -float(force[on, -1].sum()),
+                0.5 * float(np.dot(kg[on], g[on])) + stored,
                 float(np.count_nonzero(on)),
-                float(np.dot(self.k[on], n[on, -1] ** 2)),
+                float(stiff.sum()),
                 float(np.count_nonzero(passed)),
+                slipped,
             ]
         )
         total = self.comm.allreduce(local, op=MPI.SUM)
+        self.dissipated += float(total[5])
         deepest = self.comm.allreduce(float(g.max(initial=0.0)), op=MPI.MAX)
         st = self.state
         st.force, st.pairs = float(total[0]), int(total[2])
@@ -401,6 +442,37 @@ class ProjectileContactSystem(PointPenaltySystem):
             v_n = st.speed(self.projectile.mass, st.dt_prev)
             st.history.append((st.time, st.tip, v_n, st.force, energy, st.velocity))
         return energy
+
+    def _friction(
+        self, y: np.ndarray, n: np.ndarray, g: np.ndarray, on: np.ndarray
+    ) -> tuple[np.ndarray, float, float]:
+        """Coulomb friction at the points (module docstring): the tangential forces on them
+        (m, gdim), the springs' stored energy and this evaluation's slip work (this rank's);
+        the springs move to ``y`` (a second evaluation at the same state changes nothing)."""
+        tip = np.zeros(self.gdim)
+        tip[-1] = self.state.tip
+        rel = y - tip  # the point relative to the projectile (which only translates along z)
+        step = np.where(self._stuck[:, None], rel - self._relative, 0.0)
+        prev = np.where(self._stuck[:, None], self._traction, 0.0)
+        step -= np.einsum("mk,mk->m", step, n)[:, None] * n
+        prev -= np.einsum("mk,mk->m", prev, n)[:, None] * n
+        trial = np.where(on[:, None], prev - self.k[:, None] * step, 0.0)
+        size = np.linalg.norm(trial, axis=1)
+        limit = self.projectile.friction * self.k * g
+        slides = on & (size > limit)
+        force = trial.copy()
+        force[slides] *= (limit[slides] / size[slides])[:, None]
+        slipped = float(np.dot(limit[slides], (size[slides] - limit[slides]) / self.k[slides]))
+        self._stuck[:] = on
+        self._traction[:] = force
+        self._relative[:] = rel
+        k = np.where(on, self.k, 1.0)
+        stored = 0.5 * float(np.sum(np.where(on, np.einsum("mk,mk->m", force, force) / k, 0.0)))
+        return force, stored, slipped
+
+    def _dissipated(self) -> float:
+        """Friction's slips' work since the start (:attr:`dissipated`)."""
+        return self.dissipated
 
     def kinetic_energy(self) -> float:
         """``M v_n^2 / 2`` at the last step."""
@@ -429,10 +501,12 @@ def carry_projectiles(old: object, new: object) -> int:
     same model rebuilt on a changed patch (a conversion of failing cells into particles,
     :mod:`~dolfinx_meshfree.dynamics.patch_conversion`): each projectile of the new model,
     added by the user's ``build`` as in the first model (the same :class:`RigidProjectile`),
-    continues from the old one's tip, velocity, force, last step and history; its penalty acts
-    on the new model's points (the new particles join the contact) with the new model's
-    ``k_s``. Returns the number carried. Raises ``ValueError`` (the same on every rank) when the
-    rebuilt model's projectiles are not the old one's."""
+    continues from the old one's tip, velocity, force, last step, history and friction's
+    dissipated work; its penalty acts on the new model's points (the new particles join the
+    contact) with the new model's ``k_s``, and friction's springs start afresh there (their
+    stored energy is in the conversion's ``strain_change``). Returns the number carried.
+    Raises ``ValueError`` (the same on every rank) when the rebuilt model's projectiles are
+    not the old one's."""
     before, after = projectiles(old), projectiles(new)
     if [s.projectile for s in before] != [s.projectile for s in after]:
         raise ValueError(
@@ -445,6 +519,7 @@ def carry_projectiles(old: object, new: object) -> int:
     for s0, s1 in zip(before, after, strict=True):
         s1.state = copy.deepcopy(s0.state)
         s1.omega = max(s1.omega, s0.omega)
+        s1.dissipated = s0.dissipated  # friction's springs start afresh on the new points
     return len(after)
 
 

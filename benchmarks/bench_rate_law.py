@@ -83,10 +83,13 @@ def measure(law: mf.HolmquistJohnsonCook, m: int, repeats: int) -> dict:
     t_old = median_time(lambda: lapack_start(F_old, F_new), repeats, clock)
     p_new = median_time(lambda: nominal_stress(sigma, F_new), repeats, clock)
     p_old = median_time(lambda: lapack_nominal(sigma, F_new), repeats, clock)
-    # a whole update: the in-plane part made volume-preserving and halved towards I (a
-    # moderate compression with a spin), hoop stretch 1
-    F2 = F_new[:, :2, :2] / np.sqrt(np.abs(np.linalg.det(F_new[:, :2, :2])))[:, None, None]
-    F2 = 0.5 * (np.eye(2) + F2)
+    # a whole update: an in-plane compression of up to 10 % with a spin of up to 0.5 rad,
+    # hoop stretch 1
+    rng = np.random.default_rng(1)
+    angle, u = rng.uniform(0.0, 0.5, m), rng.uniform(0.0, 1.0, m)
+    c, s = np.cos(angle), np.sin(angle)
+    F2 = np.stack([np.stack([c, -s], 1), np.stack([s, c], 1)], 1)
+    F2 = F2 * np.stack([1.0 - 0.1 * u, 1.0 + 0.02 * u], 1)[:, None, :]
     state = objective.virgin_state(law.state_fields, m)
     hoop = np.ones(m)
     t_law = median_time(lambda: law.update(F2, 1e-7, state, hoop), repeats, clock)

@@ -231,15 +231,16 @@ def momentum(dyn: ExplicitDynamics, v: list[PETSc.Vec] | None = None) -> tuple[n
     ``v_{n-1/2}``) and ``sum_i M_ii |v_i|`` (collective)."""
     gdim = dyn.mesh.geometry.dim
     v = dyn.stepper.v if v is None else v
-    mv = np.concatenate(
-        [(f.mass.array_r * x.array_r).reshape(-1, gdim) for f, x in zip(dyn.fields, v, strict=True)]
-    )
-    # every rank's terms, summed once with fsum: correctly rounded, so the momentum a
-    # conversion restores is the same whatever the partition (a sum of per-rank sums rounds
-    # twice)
-    every = np.concatenate(dyn.comm.allgather(mv))
-    p = np.array([math.fsum(every[:, k]) for k in range(gdim)])
-    return p, math.fsum(np.abs(every).ravel())
+    parts: list[list[float]] = [[] for _ in range(gdim)]
+    scale = 0.0
+    for f, x in zip(dyn.fields, v, strict=True):
+        mv = (f.mass.array_r * x.array_r).reshape(-1, gdim)
+        for k in range(gdim):
+            parts[k].append(math.fsum(mv[:, k]))
+        scale += float(np.abs(mv).sum())
+    gathered = dyn.comm.allgather([math.fsum(pk) for pk in parts])
+    p = np.array([math.fsum(g[k] for g in gathered) for k in range(gdim)])
+    return p, float(dyn.comm.allreduce(scale))
 
 
 def carry_clock(old: ExplicitDynamics, new: ExplicitDynamics) -> None:
@@ -477,8 +478,8 @@ def _restore_momentum(
     free = new.free[k].reshape(-1, gdim)
     if back is not None:
         free = free * back[:, None]
-    m = np.concatenate(new.comm.allgather(new.fields[k].mass.array_r.reshape(-1, gdim) * free))
-    mp = np.array([math.fsum(m[:, c]) for c in range(gdim)])  # the same on any partition
+    m = new.fields[k].mass.array_r.reshape(-1, gdim) * free
+    mp = np.array([math.fsum(g[c] for g in new.comm.allgather(m.sum(axis=0))) for c in range(gdim)])
     delta = np.where(mp > 0, (p0 - p) / np.where(mp > 0, mp, 1.0), 0.0)
     v = new.stepper.v[k].array.reshape(-1, gdim)
     v += free * delta[None, :]

@@ -128,6 +128,7 @@ __all__ = [
     "closest_points_compiled",
     "contact_surfaces",
     "contact_tangent",
+    "coulomb_return",
     "evaluation_operators",
     "normals",
     "summed_tangent",
@@ -712,6 +713,25 @@ def closest_points_compiled(
                     normal[i, 2] = nz
 
 
+def coulomb_return(
+    previous: np.ndarray, slip: np.ndarray, n: np.ndarray, k: np.ndarray, limit: np.ndarray
+) -> tuple[np.ndarray, float]:
+    """Coulomb's law regularised by a tangential penalty, with a return map (Wriggers,
+    *Computational Contact Mechanics*, 2006): the tangential forces (m, gdim) of springs of
+    stiffness ``k`` (m,) whose ``previous`` forces (m, gdim), turned into the tangent planes of
+    the unit normals ``n`` (m, gdim), move by ``-k`` times the tangential part of ``slip`` (m,
+    gdim), limited to ``limit`` (m,); and the work of the slips past the limit, ``sum limit
+    (|trial| - limit) / k`` (the dissipated work of this evaluation)."""
+    slip = slip - np.einsum("mk,mk->m", slip, n)[:, None] * n
+    previous = previous - np.einsum("mk,mk->m", previous, n)[:, None] * n
+    trial = previous - k[:, None] * slip
+    size = np.linalg.norm(trial, axis=1)
+    slides = size > limit
+    force = trial.copy()
+    force[slides] *= (limit[slides] / size[slides])[:, None]
+    return force, float(np.dot(limit[slides], (size[slides] - limit[slides]) / k[slides]))
+
+
 def contact_tangent(A: Sequence[PETSc.Mat | None], diagonal: PETSc.Vec) -> dict:
     """``A_k^T diag(c) A_l`` for every pair of fields ``(k, l)`` that reach the points, from the
     points' ``diagonal`` ``c`` (in the rows of ``A``; collective)."""
@@ -946,15 +966,8 @@ class BodyContactSystem(PointPenaltySystem):
         # previous facet and weights, at the current positions)
         at_prev = y[s] - np.einsum("mi,mik->mk", self._weights[p][s], y[self._facet[p][s]])
         step = np.where(was[:, None], at_prev - self._relative[p][s], 0.0)
-        step -= np.einsum("mk,mk->m", step, n)[:, None] * n
-        prev_force -= np.einsum("mk,mk->m", prev_force, n)[:, None] * n
-        trial = prev_force - ks[:, None] * step
-        size = np.linalg.norm(trial, axis=1)
-        limit = self.friction * ks * np.abs(g)
-        slides = size > limit
-        force = trial.copy()
-        force[slides] *= (limit[slides] / size[slides])[:, None]
-        self.dissipated += float(np.dot(limit[slides], (size[slides] - limit[slides]) / ks[slides]))
+        force, slipped = coulomb_return(prev_force, step, n, ks, self.friction * ks * np.abs(g))
+        self.dissipated += slipped
         self._active[p][:] = False
         self._active[p][s] = True
         self._traction[p][s] = force

@@ -97,6 +97,7 @@ from ..parallel import raise_on_all_ranks
 from .body_contact import (
     ContactSurfaces,
     PointPenaltySystem,
+    coulomb_return,
     evaluation_operators,
     vertex_coordinates,
 )
@@ -452,22 +453,15 @@ class ProjectileContactSystem(PointPenaltySystem):
         tip = np.zeros(self.gdim)
         tip[-1] = self.state.tip
         rel = y - tip  # the point relative to the projectile (which only translates along z)
-        step = np.where(self._stuck[:, None], rel - self._relative, 0.0)
-        prev = np.where(self._stuck[:, None], self._traction, 0.0)
-        step -= np.einsum("mk,mk->m", step, n)[:, None] * n
-        prev -= np.einsum("mk,mk->m", prev, n)[:, None] * n
-        trial = np.where(on[:, None], prev - self.k[:, None] * step, 0.0)
-        size = np.linalg.norm(trial, axis=1)
-        limit = self.projectile.friction * self.k * g
-        slides = on & (size > limit)
-        force = trial.copy()
-        force[slides] *= (limit[slides] / size[slides])[:, None]
-        slipped = float(np.dot(limit[slides], (size[slides] - limit[slides]) / self.k[slides]))
+        force = np.zeros_like(y)
+        slip = np.where(self._stuck[on, None], rel[on] - self._relative[on], 0.0)
+        prev = np.where(self._stuck[on, None], self._traction[on], 0.0)
+        limit = self.projectile.friction * self.k[on] * g[on]
+        force[on], slipped = coulomb_return(prev, slip, n[on], self.k[on], limit)
         self._stuck[:] = on
         self._traction[:] = force
         self._relative[:] = rel
-        k = np.where(on, self.k, 1.0)
-        stored = 0.5 * float(np.sum(np.where(on, np.einsum("mk,mk->m", force, force) / k, 0.0)))
+        stored = 0.5 * float(np.sum(np.einsum("mk,mk->m", force[on], force[on]) / self.k[on]))
         return force, stored, slipped
 
     def _dissipated(self) -> float:

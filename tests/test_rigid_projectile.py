@@ -274,7 +274,8 @@ def test_projectile_carried_through_conversions(method, plane):
     breaks it: 0.049 and 0.096), the velocity follows the closed form as on a fixed patch
     (measured lagrange 3.1e-2, hybrid 2.4e-2 to 0.54 L / c; fixed patches 3.0e-2 and 1.9e-2 to
     1.9 L / c), and the history has one entry per step. Each conversion keeps the mass
-    (round-off). A build that leaves the projectile out is refused, naming the fix."""
+    (round-off). A build that leaves the projectile out is refused, naming the fix, and so is
+    a run asking for no energy record."""
     n = 40
     msh = dolfinx.mesh.create_rectangle(
         COMM, [np.zeros(2), np.array([H, L])], [4, n], dolfinx.mesh.CellType.quadrilateral
@@ -324,6 +325,8 @@ def test_projectile_carried_through_conversions(method, plane):
     )
     with pytest.raises(ValueError, match="must add the first model's projectiles again"):
         bare.run(0.5 * L / C)
+    with pytest.raises(ValueError, match=r"energy_records=0 must be an integer >= 1"):
+        run.run(0.6 * L / C, energy_records=0)
     run.model.destroy()
     bare.model.destroy()
 

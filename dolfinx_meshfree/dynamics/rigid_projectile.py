@@ -101,6 +101,7 @@ from .body_contact import (
     evaluation_operators,
     vertex_coordinates,
 )
+from .system import WrappedSystem
 from .time_step import same_time
 
 if TYPE_CHECKING:  # annotations only
@@ -382,9 +383,10 @@ class ProjectileContactSystem(PointPenaltySystem):
         elif t > st.time:
             dt = float(t) - st.time
             if dt * self.omega > 2.0:  # the same on every rank (allreduced forces)
+                sums = "sum k" if self.projectile.friction > 0 else "sum k n_z^2"
                 raise ValueError(
                     f"the step dt = {dt:.4g} exceeds the projectile's stable step "
-                    f"{2.0 / self.omega:.4g} (its contact frequency sqrt(sum k n_z^2 / M) = "
+                    f"{2.0 / self.omega:.4g} (its contact frequency sqrt({sums} / M) = "
                     f"{self.omega:.4g} at t = {st.time:.6g}): make the projectile heavier than "
                     "the material it covers or lower RigidProjectile(factor=...)"
                 )
@@ -486,7 +488,7 @@ def projectiles(system: object) -> list[ProjectileContactSystem]:
     while system is not None:
         if isinstance(system, ProjectileContactSystem):
             found.append(system)
-        system = system.__dict__.get("inner") if hasattr(system, "__dict__") else None
+        system = system.inner if isinstance(system, WrappedSystem) else None
     return found
 
 

@@ -71,13 +71,23 @@ def closed_jacobian(n=10, cell="quadrilateral"):
         return d
 
     dyn.set_initial(displacement=pressed)
+    J = difference_jacobian(dyn, 1e-4 * gap)
+    pairs = dyn.system.last["pairs"]
+    m = dyn.fields[0].mass.array.copy()
+    bound = dyn.critical_time_step()["omega_bound"]
+    dyn.destroy()
+    return J, m, bound, pairs
+
+
+def difference_jacobian(dyn, eps):
+    """The dense Jacobian of a serial one-field model's internal force at its displacement
+    (central differences of step ``eps``); the model's system last evaluated there."""
     u = dyn.u[0]
     base = u.array.copy()
-    ndofs = base.size
-    J = np.zeros((ndofs, ndofs))
-    eps = 1e-4 * gap
     out = [u.duplicate()]
-    for j in range(ndofs):
+    dyn.system.internal_force([u], out)  # the contact's state at the point itself
+    J = np.zeros((base.size, base.size))
+    for j in range(base.size):
         cols = []
         for s in (1.0, -1.0):
             u.array[:] = base
@@ -87,17 +97,15 @@ def closed_jacobian(n=10, cell="quadrilateral"):
         J[:, j] = (cols[0] - cols[1]) / (2 * eps)
     u.array[:] = base
     dyn.system.internal_force([u], out)
-    pairs = dyn.system.last["pairs"]
-    m = dyn.fields[0].mass.array.copy()
-    bound = dyn.critical_time_step()["omega_bound"]
     out[0].destroy()
-    dyn.destroy()
-    return J, m, bound, pairs
+    return J
 
 
-def block_on_plate(method, comm=COMM, v=(0.5 * V0, -V0)):
+def block_on_plate(method, comm=COMM, v=(0.5 * V0, -V0), body=False):
     """A 0.3 x 0.2 block (triangles) falling obliquely at ``v`` onto a free 1 x 0.2 plate, a gap
-    of 0.02 h between them; the particles (coupled methods) in the block's lower half."""
+    of 0.02 h between them; the particles (coupled methods) in the block's lower half.
+    ``body``: every node of the plate a slave of the block's bottom face
+    (``BodyContact(slaves="body")``, ``tests/test_nodes_contact.py``)."""
     n = 20
     h = 1.0 / n
     big = dolfinx.mesh.create_rectangle(
@@ -124,11 +132,24 @@ def block_on_plate(method, comm=COMM, v=(0.5 * V0, -V0)):
         cells = np.flatnonzero((mid[:, 1] > 0.2) & (mid[:, 1] < 0.3))
         problem = mf.CoupledElasticity(V, mf.ParticlePatch(msh, cells, h), MAT, coupling=method)
         dyn = ExplicitDynamics.coupled(problem)
-    dyn.add_contact(bottom, top)
+    if body:
+        dyn.add_contact(top, bottom, BodyContact(slaves="body"))
+    else:
+        dyn.add_contact(bottom, top)
     dyn.set_initial(
         velocity=lambda x: np.where(x[:, 1:2] > 0.2 + gap / 2, np.array(v)[None, :], 0.0)
     )
     return dyn, h, gap
+
+
+def block_velocity(dyn):
+    """The block's mean velocity (2,) over ``V0`` (by cell quadrature; every rank)."""
+    q, vals = dyn.evaluator.at_quadrature(dyn.stepper.current_velocity(), 3)
+    blk = q.points[:, 1] > 0.2
+    s = dyn.comm.allreduce(
+        np.array([*(q.weights[blk, None] * vals[blk]).sum(0), q.weights[blk].sum()])
+    )
+    return s[:2] / s[2] / V0
 
 
 def momentum(dyn, on=None):
@@ -230,12 +251,7 @@ def test_oblique_impact_conserves_momentum(method):
 
     dyn.run(t_end, outputs=list(np.linspace(0.0, t_end, 101)), on_output=out)
     assert np.abs(np.array(ps) - p0).max() < 1e-12 * np.abs(p0).max()
-    q, vals = dyn.evaluator.at_quadrature(dyn.stepper.current_velocity(), 3)
-    blk = q.points[:, 1] > 0.2
-    s = dyn.comm.allreduce(
-        np.array([*(q.weights[blk, None] * vals[blk]).sum(0), q.weights[blk].sum()])
-    )
-    v = s[:2] / s[2] / V0
+    v = block_velocity(dyn)
     assert v[0] == pytest.approx(0.5, rel=5e-3) and v[1] > 0.05, v
     assert 0.0 < max(pens) < 0.012 * h
     dyn.destroy()

@@ -63,6 +63,7 @@ from .finite_strain import FINITE_STRAIN_DYNAMICS, NonlinearSystem
 from .growth_local import LocalModelUpdate
 from .masses import fe_lumped_mass, particle_lumped_mass, table_lumped_mass
 from .methods import DYNAMICS_METHODS, check_method
+from .nodes_contact import NodesContactSystem
 from .patch_conversion import Conversion
 from .results import DynamicsResult
 from .rigid_projectile import ProjectileContactSystem, ProjectileState, RigidProjectile
@@ -86,6 +87,7 @@ __all__ = [
     "GrowthCheck",
     "LinearSystem",
     "LocalModelUpdate",
+    "NodesContactSystem",
     "NonlinearSystem",
     "ProjectileContactSystem",
     "ProjectileState",

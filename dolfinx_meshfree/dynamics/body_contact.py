@@ -131,6 +131,7 @@ __all__ = [
     "coulomb_return",
     "evaluation_operators",
     "normals",
+    "point_masses",
     "summed_tangent",
     "vertex_coordinates",
     "with_body_contact",
@@ -160,27 +161,38 @@ class BodyContact:
             ``None``, ``h`` the median of the surfaces' facets' longest edges and ``E`` the
             material's Young's modulus: under a contact pressure ``p`` the surfaces
             interpenetrate by ``p / k = (p / E) h / factor`` (two-pass: half that), the elastic
-            shortening of one cell at that stress over ``factor``. The default 1 keeps the
-            penetration at the cell's own strain and lowers the stable step by the factor
-            printed in ``critical_time_step`` (measured on the bars of
+            shortening of one cell at that stress over ``factor``. The default (``None``: 1)
+            keeps the penetration at the cell's own strain and lowers the stable step by the
+            factor printed in ``critical_time_step`` (measured on the bars of
             ``demos/bar_impact.py``: 0.39-0.41x the step without contact in 2D, 0.20-0.24x
-            in 3D).
+            in 3D). With ``slaves="body"`` it scales the pairs' mass-weighted penalty
+            ``factor omega_0^2 m_s m_f / (m_s + m_f)`` instead
+            (:mod:`~dolfinx_meshfree.dynamics.nodes_contact`; default 0.3, the rigid
+            projectile's).
         penalty: ``k`` itself (Pa/m), or ``None``.
-        two_pass: Each surface's vertices against the other's facets (default), or only
-            ``surface_a``'s vertices against ``surface_b``'s facets.
+        two_pass: Each surface's vertices against the other's facets (``None``, the default:
+            with ``slaves="surface"``), or (``False``) only ``surface_a``'s vertices against
+            ``surface_b``'s facets.
         depth: The deepest penetration still taken for contact (m); ``None``: the longest
             facet edge of the two surfaces. A vertex deeper than that behind a facet is taken to
             be elsewhere (the far side of a thin body).
         friction: Coulomb's coefficient ``mu`` (default 0: frictionless): a tangential spring
             of the normal penalty's stiffness per pair, its force limited to ``mu`` times the
             normal force (module docstring).
+        slaves: ``"surface"`` (default): the surfaces' vertices are the slaves. ``"body"``:
+            every node of ``surface_a``'s body (FE and blended vertices, particles; the axis
+            excepted in axisymmetry) against ``surface_b``'s facets, in one pass, for a
+            projectile (``surface_b``) that penetrates or perforates its target
+            (:mod:`~dolfinx_meshfree.dynamics.nodes_contact`; LS-DYNA's eroding
+            node-to-surface contact).
     """
 
-    factor: float = 1.0
+    factor: float | None = None
     penalty: float | None = None
-    two_pass: bool = True
+    two_pass: bool | None = None
     depth: float | None = None
     friction: float = 0.0
+    slaves: str = "surface"
 
     def __post_init__(self) -> None:
         if isinstance(self.friction, bool) or not (
@@ -194,17 +206,27 @@ class BodyContact:
             )
         for name in ("factor", "penalty", "depth"):
             value = getattr(self, name)
-            if name != "factor" and value is None:
+            if value is None:
                 continue
             if isinstance(value, bool) or not (
                 isinstance(value, int | float) and np.isfinite(value) and value > 0.0
             ):
                 raise ValueError(
-                    f"BodyContact({name}={value!r}): {name} must be a positive number"
-                    + (" or None" if name != "factor" else "")
+                    f"BodyContact({name}={value!r}): {name} must be a positive number or None"
                 )
-        if not isinstance(self.two_pass, bool):
-            raise ValueError(f"BodyContact(two_pass={self.two_pass!r}) must be True or False")
+        if self.slaves not in ("surface", "body"):
+            raise ValueError(
+                f"BodyContact(slaves={self.slaves!r}): slaves must be 'surface' (the surfaces' "
+                "vertices) or 'body' (every node of surface_a's body)"
+            )
+        if self.two_pass is not None and not isinstance(self.two_pass, bool):
+            raise ValueError(f"BodyContact(two_pass={self.two_pass!r}) must be True, False or None")
+        if self.slaves == "body" and self.two_pass:
+            raise ValueError(
+                "BodyContact(slaves='body', two_pass=True): with every node of surface_a's body "
+                "as a slave the contact has one pass (that body keeps no surface a projectile "
+                "could be pressed on once it is perforated); leave two_pass at None"
+            )
 
 
 @dataclasses.dataclass
@@ -514,6 +536,27 @@ def evaluation_operators(
             else:
                 mats["fe"] = via_fe
     return [mats.get(name) for name in names]
+
+
+def point_masses(
+    A: Sequence[PETSc.Mat | None], masses: Sequence[PETSc.Vec], gdim: int
+) -> np.ndarray:
+    """Each owned point's share of the lumped masses, ``m_s = sum_j |A_sj| m_j`` (the rows of
+    ``A``, one component; collective)."""
+    share = next(a for a in A if a is not None).createVecLeft()
+    share.set(0.0)
+    for Ak, mk in zip(A, masses, strict=True):
+        if Ak is None:
+            continue
+        absolute = Ak.copy()
+        ai, aj, av = absolute.getValuesCSR()
+        absolute.setValuesCSR(ai, aj, np.abs(av))
+        absolute.assemble()
+        absolute.multAdd(mk, share, share)
+        absolute.destroy()
+    m_s = share.array_r.reshape(-1, gdim)[:, 0].copy()
+    share.destroy()
+    return m_s
 
 
 def _check_evaluable(evaluator: FieldEvaluator) -> None:
@@ -917,20 +960,18 @@ class BodyContactSystem(PointPenaltySystem):
         energy, pairs, deepest = 0.0, 0, 0.0
         gdim = y.shape[1]
         compiled = self._kernel is not closest_points
+        closed: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         for p, (slaves, facets) in enumerate(zip(self._slaves, self._masters, strict=True)):
             if compiled and len(slaves) * len(facets) <= EVERY_PAIR:
                 near, cand = slaves, EVERY  # every pair, compiled: no search
             else:
                 found = candidates(y, slaves, facets, self.depth)
                 near, cand = found if found is not None else (slaves[:0], EVERY)
-            m, d = len(near), facets.shape[1]
-            hit = np.full(m, -1, dtype=np.int64)
-            gap, w, n = np.zeros(m), np.zeros((m, 3)), np.zeros((m, 3))
-            if m:
-                self._kernel(y, near, facets, cand, self.depth, XI_MARGIN, hit, gap, w, n)
+            d = facets.shape[1]
+            hit, gap, w, n = self._closest(y, near, facets, cand)
             on = hit >= 0
             s, fac, g = near[on], facets[hit[on]], gap[on]
-            w, n, ks = w[on, :d], n[on, :gdim], self._k[near[on]]
+            w, n, ks = w[on, :d], n[on, :gdim], self._pair_stiffness(near[on], hit[on], p)
             total = (ks * g)[:, None] * n  # the slave's internal force: -k |g| n
             energy += 0.5 * float(np.dot(ks, g * g))
             if self.friction > 0.0:
@@ -942,7 +983,34 @@ class BodyContactSystem(PointPenaltySystem):
                 np.add.at(f, fac[:, i], -w[:, i, None] * total)
             pairs += len(s)
             deepest = max(deepest, float(-g.min(initial=0.0)))
+            closed.append((fac, w, ks))
+        #: The closed pairs of the last evaluation: their facets, weights and ``k_s``.
+        self.closed = tuple(np.concatenate(c) for c in zip(*closed, strict=True))
         return f, float(energy), pairs, float(deepest)
+
+    def project(
+        self, y: np.ndarray, near: np.ndarray, facets: np.ndarray, cand: np.ndarray, margin: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Each slave's closest facet ``hit`` (``-1``: none), gap, weights (m, 3) and normal
+        (m, 3), the facets' weights allowed down to ``-margin`` (module docstring)."""
+        m = len(near)
+        hit = np.full(m, -1, dtype=np.int64)
+        gap, w, n = np.zeros(m), np.zeros((m, 3)), np.zeros((m, 3))
+        if m:
+            self._kernel(y, near, facets, cand, self.depth, margin, hit, gap, w, n)
+        return hit, gap, w, n
+
+    def _closest(
+        self, y: np.ndarray, near: np.ndarray, facets: np.ndarray, cand: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`project` with the margin :data:`XI_MARGIN` (a subclass may choose
+        otherwise)."""
+        return self.project(y, near, facets, cand, XI_MARGIN)
+
+    def _pair_stiffness(self, slaves: np.ndarray, facets: np.ndarray, p: int) -> np.ndarray:
+        """``k_s`` of closed pairs: the slaves' (``facets``: the indices of their facets among
+        pass ``p``'s masters; a subclass may weigh the pair)."""
+        return self._k[slaves]
 
     def _friction(
         self,
@@ -1053,12 +1121,14 @@ def with_body_contact(
             "BodyContact(penalty=None) takes k = factor E / h from a material with Young's "
             "modulus E; this material has none: pass BodyContact(penalty=k) in Pa/m"
         )
-    k = float(contact.penalty) if contact.penalty is not None else contact.factor * E / h
+    factor = 1.0 if contact.factor is None else float(contact.factor)
+    k = float(contact.penalty) if contact.penalty is not None else factor * E / h
     depth = float(contact.depth) if contact.depth is not None else float(sizes.max())
     tables = evaluator.point_tables(vertex_coordinates(d.mesh)[vertices], cells)
     _check_particles_apart(evaluator, surfaces, tables[1])  # before any PETSc object
     A = evaluation_operators(evaluator, surfaces, tables, system.mass())
-    return BodyContactSystem(system, surfaces, A, k, contact.two_pass, depth, contact.friction)
+    two_pass = contact.two_pass is not False
+    return BodyContactSystem(system, surfaces, A, k, two_pass, depth, contact.friction)
 
 
 def _check_particles_apart(

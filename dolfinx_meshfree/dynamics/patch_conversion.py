@@ -132,6 +132,7 @@ from ..statics.petsc import create_aij, create_vector
 from .energy import kinetic_energy, strain_energy
 from .explicit import ExplicitDynamics
 from .linalg import mumps_lu
+from .nodes_contact import carry_contacts
 from .rate_forms import RateLaws, carry_state
 from .rigid_projectile import carry_projectiles
 
@@ -504,6 +505,8 @@ def convert(
     def check() -> float:
         _check(old, new)
         carry_projectiles(old.system, new.system)  # before the new model's first force
+        if carry_contacts(old.system, new.system):
+            new.bound.invalidate()
         lam = (
             (RAMP_STABILISATION if new.blended_rule is not None else 0.0)
             if stabilisation is None

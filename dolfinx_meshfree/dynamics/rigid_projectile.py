@@ -99,9 +99,10 @@ from .body_contact import (
     PointPenaltySystem,
     coulomb_return,
     evaluation_operators,
+    point_masses,
     vertex_coordinates,
 )
-from .system import WrappedSystem
+from .system import wrapped
 from .time_step import same_time
 
 if TYPE_CHECKING:  # annotations only
@@ -113,6 +114,7 @@ __all__ = [
     "ProjectileState",
     "RigidProjectile",
     "carry_projectiles",
+    "contact_nodes",
     "contact_points",
     "projectiles",
     "radial_distance",
@@ -484,12 +486,7 @@ def projectiles(system: object) -> list[ProjectileContactSystem]:
     """The projectiles' systems in a model's chain of wrapped systems (``system``, its
     ``inner``, ...), outermost first: one per
     :meth:`~dolfinx_meshfree.ExplicitDynamics.add_projectile`."""
-    found = []
-    while system is not None:
-        if isinstance(system, ProjectileContactSystem):
-            found.append(system)
-        system = system.inner if isinstance(system, WrappedSystem) else None
-    return found
+    return wrapped(system, ProjectileContactSystem)
 
 
 def carry_projectiles(old: object, new: object) -> int:
@@ -527,6 +524,15 @@ def contact_points(
     cells), and its particles that sit at no such vertex, kept where ``where(x)`` holds. A
     vertex of particle cells only is not a node of the model (the hybrid's particles sit at the
     cells' centres; pure EFG's at the vertices, as particles)."""
+    points, cells, _ = contact_nodes(evaluator, where)
+    return points, cells
+
+
+def contact_nodes(
+    evaluator: FieldEvaluator, where: Callable[[np.ndarray], np.ndarray] | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`contact_points`, and the local index of each point's particle (``-1``: a
+    vertex)."""
     d = evaluator.disc
     msh = d.mesh
     tdim = msh.topology.dim
@@ -548,21 +554,25 @@ def contact_points(
     cell_of[held] = np.repeat(nodal_cells, per_cell)[first]
     owned = np.flatnonzero(cell_of[: msh.topology.index_map(0).size_local] >= 0)
     points, cells = vx[owned], cell_of[owned]
+    index = np.full(len(points), -1, dtype=np.int64)
     if d.particles is not None:
         P = d.particles
-        xp = P.positions[np.flatnonzero(P.owner == evaluator.comm.rank)]
+        ip = np.flatnonzero(P.owner == evaluator.comm.rank)
+        xp = P.positions[ip]
         if len(points) and len(xp):  # a particle at a vertex is struck there once
             extent = float(np.min(np.ptp(vx, axis=0)))
             dist, _ = cKDTree(points).query(xp)
-            xp = xp[dist > 1e-9 * max(extent, 1e-300)]
+            apart = dist > 1e-9 * max(extent, 1e-300)
+            xp, ip = xp[apart], ip[apart]
         cp = locate_points(msh, xp)
         keep = cp >= 0
         points = np.concatenate([points, xp[keep]])
         cells = np.concatenate([cells, cp[keep].astype(np.int32)])
+        index = np.concatenate([index, ip[keep]])
     if where is not None:
         mask = np.asarray(where(points), dtype=bool).reshape(-1)
-        points, cells = points[mask], cells[mask]
-    return points, cells
+        points, cells, index = points[mask], cells[mask], index[mask]
+    return points, cells, index
 
 
 def with_projectile(
@@ -616,20 +626,7 @@ def with_projectile(
     tables = evaluator.point_tables(points, cells)
     masses = system.mass()
     A = evaluation_operators(evaluator, rows, tables, masses)
-    # m_s = sum_j |A_sj| m_j (component by component: the same mass on each)
-    share = next(a for a in A if a is not None).createVecLeft()
-    share.set(0.0)
-    for Ak, mk in zip(A, masses, strict=True):
-        if Ak is None:
-            continue
-        absolute = Ak.copy()
-        ai, aj, av = absolute.getValuesCSR()
-        absolute.setValuesCSR(ai, aj, np.abs(av))
-        absolute.assemble()
-        absolute.multAdd(mk, share, share)
-        absolute.destroy()
-    m_s = share.array_r.reshape(-1, gdim)[:, 0].copy()
-    share.destroy()
+    m_s = point_masses(A, masses, gdim)
     k = projectile.factor * m_s * omega_0**2
     return ProjectileContactSystem(system, projectile, points, A, k, radial)
 

@@ -1,5 +1,6 @@
 """What a built explicit model can be struck by: another body of the model (contact between
-bodies, :mod:`~dolfinx_meshfree.dynamics.body_contact`) and a rigid projectile
+bodies, :mod:`~dolfinx_meshfree.dynamics.body_contact`; every node of a body against another's
+surface, :mod:`~dolfinx_meshfree.dynamics.nodes_contact`) and a rigid projectile
 (:mod:`~dolfinx_meshfree.dynamics.rigid_projectile`). Each wraps the model's semi-discrete
 system in one that adds its forces, its energy and its stiffness (the stable step is bounded
 again with it).
@@ -18,6 +19,7 @@ import numpy.typing as npt
 
 from .body_contact import BodyContact, with_body_contact
 from .evaluation import FieldEvaluator
+from .nodes_contact import with_nodes_contact
 from .rigid_projectile import (
     ProjectileContactSystem,
     RigidProjectile,
@@ -59,7 +61,10 @@ class Struck:
 
         Args:
             contact: The options (:class:`~dolfinx_meshfree.dynamics.BodyContact`; default:
-                penalty ``E / h``, two-pass, frictionless).
+                penalty ``E / h``, two-pass, frictionless). ``BodyContact(slaves="body")``
+                takes every node of ``surface_a``'s body as a slave of ``surface_b``'s facets
+                (a projectile ``surface_b`` that perforates its target,
+                :mod:`~dolfinx_meshfree.dynamics.nodes_contact`).
 
         Raises:
             ValueError: facets that are not owned exterior facets, an empty surface, surfaces
@@ -68,6 +73,13 @@ class Struck:
         """
         contact = BodyContact() if contact is None else contact
         E = getattr(self.material, "E", None)
+        if isinstance(contact, BodyContact) and contact.slaves == "body":
+            omega_0 = self.bound.critical()["omega_bound"]
+            system = with_nodes_contact(
+                self.system, self.evaluator, self.material, omega_0, surface_a, surface_b, contact
+            )
+            self._wrap(system)
+            return
         self._wrap(with_body_contact(self.system, self.evaluator, E, surface_a, surface_b, contact))
 
     def add_projectile(

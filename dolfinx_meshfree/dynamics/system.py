@@ -27,7 +27,14 @@ from petsc4py import PETSc
 
 from .linalg import BLOCK_FORMATS, blocked
 
-__all__ = ["Field", "LinearSystem", "SemiDiscreteSystem", "WrappedSystem", "inverse_masses"]
+__all__ = [
+    "Field",
+    "LinearSystem",
+    "SemiDiscreteSystem",
+    "WrappedSystem",
+    "inverse_masses",
+    "wrapped",
+]
 
 Blocks = dict[tuple[int, int], PETSc.Mat]
 
@@ -267,3 +274,14 @@ class LinearSystem:
         objs += [g for g in (self.G or []) if g is not None]
         for obj in objs:
             obj.destroy()
+
+
+def wrapped(system: object, kind: type) -> list:
+    """The systems of type ``kind`` in a model's chain of wrapped systems (``system``, its
+    ``inner``, ...), outermost first (the projectiles', the contacts' added to a model)."""
+    found = []
+    while system is not None:
+        if isinstance(system, kind):
+            found.append(system)
+        system = system.inner if isinstance(system, WrappedSystem) else None
+    return found

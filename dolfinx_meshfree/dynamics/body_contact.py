@@ -111,7 +111,7 @@ from .. import _compat
 from ..approx import jit
 from ..parallel import Layout, owned_indices, raise_on_all_ranks
 from ..statics.petsc import create_aij
-from .system import WrappedSystem
+from .system import WrappedSystem, wrapped
 
 if TYPE_CHECKING:  # annotations only
     from ..geometry.particles import ParticleSet
@@ -124,6 +124,7 @@ __all__ = [
     "ContactSurfaces",
     "PointPenaltySystem",
     "candidates",
+    "carry_friction",
     "closest_points",
     "closest_points_compiled",
     "contact_surfaces",
@@ -1093,6 +1094,20 @@ class BodyContactSystem(PointPenaltySystem):
         """:meth:`bound_stiffness` of the owned vertices."""
         lo, hi = self.surfaces.owned
         return self.bound_stiffness()[lo:hi]
+
+
+def carry_friction(old: object, new: object) -> int:
+    """Carry the work friction dissipated from the model ``old`` (its system) into ``new``, the
+    same model rebuilt on a changed patch (a conversion), contact by contact in the order they
+    were added (:attr:`BodyContactSystem.dissipated`, which the energy records count). Without
+    it the rebuilt model's dissipated work restarted at 0, and the conversion's
+    ``strain_change`` booked the past friction's work as its own. The tangential springs start
+    afresh (their stored energy is in ``strain_change``), as the rigid projectile's do. Returns
+    the number carried."""
+    before, after = wrapped(old, BodyContactSystem), wrapped(new, BodyContactSystem)
+    for s0, s1 in zip(before, after, strict=False):
+        s1.dissipated = s0.dissipated
+    return min(len(before), len(after))
 
 
 def with_body_contact(

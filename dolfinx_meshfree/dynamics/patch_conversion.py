@@ -129,6 +129,7 @@ from ..geometry.patch_criteria import (
 from ..geometry.quadrature import QuadraturePoints
 from ..parallel import raise_on_all_ranks
 from ..statics.petsc import create_aij, create_vector
+from .body_contact import carry_friction
 from .energy import kinetic_energy, strain_energy
 from .explicit import ExplicitDynamics
 from .linalg import mumps_lu
@@ -505,6 +506,7 @@ def convert(
     def check() -> float:
         _check(old, new)
         carry_projectiles(old.system, new.system)  # before the new model's first force
+        carry_friction(old.system, new.system)
         if carry_contacts(old.system, new.system):
             new.bound.invalidate()
         lam = (

@@ -125,6 +125,7 @@ __all__ = [
     "PointPenaltySystem",
     "candidates",
     "carry_friction",
+    "check_friction",
     "closest_points",
     "closest_points_compiled",
     "contact_surfaces",
@@ -196,15 +197,7 @@ class BodyContact:
     slaves: str = "surface"
 
     def __post_init__(self) -> None:
-        if isinstance(self.friction, bool) or not (
-            isinstance(self.friction, int | float)
-            and np.isfinite(self.friction)
-            and self.friction >= 0.0
-        ):
-            raise ValueError(
-                f"BodyContact(friction={self.friction!r}): Coulomb's coefficient must be a "
-                "number >= 0 (0: frictionless)"
-            )
+        check_friction("BodyContact", self.friction)
         for name in ("factor", "penalty", "depth"):
             value = getattr(self, name)
             if value is None:
@@ -755,6 +748,16 @@ def closest_points_compiled(
                 normal[i, 0], normal[i, 1] = nx, ny
                 if gdim == 3:
                     normal[i, 2] = nz
+
+
+def check_friction(owner: str, mu: object) -> None:
+    """Refuse a Coulomb coefficient ``mu`` that is not a finite number ``>= 0`` (``owner``:
+    the class named in the error)."""
+    if isinstance(mu, bool) or not (isinstance(mu, int | float) and np.isfinite(mu) and mu >= 0):
+        raise ValueError(
+            f"{owner}(friction={mu!r}): Coulomb's coefficient must be a number >= 0 (0: "
+            "frictionless)"
+        )
 
 
 def coulomb_return(

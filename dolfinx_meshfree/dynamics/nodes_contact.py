@@ -185,19 +185,19 @@ class NodesContactSystem(BodyContactSystem):
         evaluation stays while it projects within ``XI_MARGIN`` of a facet; neither where it
         lies in front of a neighbouring facet it projects inside (:meth:`_outside`; module
         docstring)."""
-        loose = self.project(y, near, facets, cand, XI_MARGIN)
-        strict = self.project(y, near, facets, cand, ENTRY)
+        m = len(near)
+        hit = np.full(m, -1, dtype=np.int64)
+        gap, w, n = np.zeros(m), np.zeros((m, 3)), np.zeros((m, 3))
         held = self._held[near]
-        stays = held & (loose[0] >= 0)
-        enters = ~held & (strict[0] >= 0) & (strict[1] > -ENTRY_DEPTH * self.depth)
-        hit = np.where(stays, loose[0], np.where(enters, strict[0], -1))
+        for rows, margin in ((held, XI_MARGIN), (~held, ENTRY)):  # each slave projected once
+            if rows.any():
+                sub = cand[rows] if len(cand) == m else cand  # per slave, or every facet
+                hit[rows], gap[rows], w[rows], n[rows] = self.project(
+                    y, near[rows], facets, sub, margin
+                )
+        hit[~held & (gap <= -ENTRY_DEPTH * self.depth)] = -1
         hit[self._outside(y, near, facets, hit)] = -1
-        pick = stays.reshape(-1, 1)
-        return (
-            hit,
-            np.where(stays, loose[1], strict[1]),
-            *(np.where(pick, a, b) for a, b in zip(loose[2:], strict[2:], strict=True)),
-        )
+        return hit, gap, w, n
 
     def _outside(
         self, y: np.ndarray, near: np.ndarray, facets: np.ndarray, hit: np.ndarray

@@ -97,6 +97,7 @@ from ..parallel import raise_on_all_ranks
 from .body_contact import (
     ContactSurfaces,
     PointPenaltySystem,
+    check_friction,
     coulomb_return,
     evaluation_operators,
     point_masses,
@@ -181,15 +182,7 @@ class RigidProjectile:
     def __post_init__(self) -> None:
         for name in ("radius", "length", "mass", "factor"):
             _positive(name, getattr(self, name))
-        if isinstance(self.friction, bool) or not (
-            isinstance(self.friction, int | float)
-            and np.isfinite(self.friction)
-            and self.friction >= 0.0
-        ):
-            raise ValueError(
-                f"RigidProjectile(friction={self.friction!r}): Coulomb's coefficient must be a "
-                "number >= 0 (0: frictionless)"
-            )
+        check_friction("RigidProjectile", self.friction)
         if self.depth is not None:
             _positive("depth", self.depth)
         if isinstance(self.velocity, bool) or not (

@@ -104,6 +104,13 @@ from .statics.path_following import (
 from .statics.problem import CoupledLinearProblem
 from .statics.sides import NonlinearSolveResult
 from .verification.analytic import KirschPlate, LinearField, PressurizedBushing, TimoshenkoBeam
+from .verification.cavity_expansion import (
+    CavityExpansion,
+    cavity_pressure_curve,
+    hill_cavity_pressure,
+    ogive_force,
+    spherical_cavity_pressure,
+)
 from .verification.crack_fields import InclinedCentreCrack, edge_crack_factor
 from .verification.errors import error_norms
 from .verification.waves import GaussianPulseRod, StepLoadedRod
@@ -131,6 +138,7 @@ __all__ = [
     "Bodies",
     "BodyCut",
     "BulkStrengthWarning",
+    "CavityExpansion",
     "CellsWhere",
     "CohesiveGrowth",
     "CoupledElasticity",
@@ -196,6 +204,7 @@ __all__ = [
     "attach_cracks",
     "balanced_mesh",
     "boundary_facets",
+    "cavity_pressure_curve",
     "cell_quadrature",
     "cells_near",
     "chunked_l2_error",
@@ -208,11 +217,13 @@ __all__ = [
     "facet_quadrature",
     "follow_path",
     "gaussian",
+    "hill_cavity_pressure",
     "initiation_direction",
     "initiation_site",
     "interaction_integral",
     "kink_angle",
     "mesh_bodies",
+    "ogive_force",
     "quartic",
     "read_particles",
     "separate_bodies",
@@ -220,6 +231,7 @@ __all__ = [
     "solve_forms",
     "solve_large",
     "sph_cubic_spline",
+    "spherical_cavity_pressure",
     "submesh",
     "tabulate_fe_basis",
     "tabulate_in_cells",

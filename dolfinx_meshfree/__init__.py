@@ -106,10 +106,10 @@ from .statics.sides import NonlinearSolveResult
 from .verification.analytic import KirschPlate, LinearField, PressurizedBushing, TimoshenkoBeam
 from .verification.cavity_expansion import (
     CavityExpansion,
+    cavity_expansion,
     cavity_pressure_curve,
     hill_cavity_pressure,
     ogive_force,
-    spherical_cavity_pressure,
 )
 from .verification.crack_fields import InclinedCentreCrack, edge_crack_factor
 from .verification.errors import error_norms
@@ -204,6 +204,7 @@ __all__ = [
     "attach_cracks",
     "balanced_mesh",
     "boundary_facets",
+    "cavity_expansion",
     "cavity_pressure_curve",
     "cell_quadrature",
     "cells_near",
@@ -231,7 +232,6 @@ __all__ = [
     "solve_forms",
     "solve_large",
     "sph_cubic_spline",
-    "spherical_cavity_pressure",
     "submesh",
     "tabulate_fe_basis",
     "tabulate_in_cells",

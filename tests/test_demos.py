@@ -420,9 +420,9 @@ def test_hanchak_concrete_parameters_changed_by_name():
     back by ``concrete_changes``; an unknown name, a value that is not a number and a value
     the law refuses are each refused by name."""
     demo = load_demo("hanchak")
-    concrete = demo.concrete_from(["D1=0.08", "fc=6e7"])
+    concrete = demo.concrete_from(["D1=0.08", "fc=6e7", "erosion=3"])
     assert (concrete.D1, concrete.fc, concrete.A) == (0.08, 6e7, demo.CONCRETE.A)
-    assert demo.concrete_changes(concrete) == {"D1": 0.08, "fc": 6e7}
+    assert demo.concrete_changes(concrete) == {"D1": 0.08, "fc": 6e7, "erosion": 3.0}
     assert demo.concrete_changes(demo.concrete_from([])) == {}
     with pytest.raises(ValueError, match="'D3=2': give NAME=VALUE with NAME one of rho, G"):
         demo.concrete_from(["D3=2"])

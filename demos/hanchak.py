@@ -100,7 +100,7 @@
 # **Measured** (``docs/results/hanchak.md``, from its JSON, with the PNGs
 # ``docs/results/hanchak/hanchak_24.png``, hybrid-adaptive's damage and particles, and
 # ``hanchak_24_residual.png``; 24 cells, two processes side by side on the machine's two
-# cores, 9 minutes of shots in all; "-ad.": "-adaptive"): the residual velocity (m/s)
+# cores, 8 minutes of shots in all; "-ad.": "-adaptive"): the residual velocity (m/s)
 #
 # | impact | exp. | fe | lagrange | ramp | master-slave | hybrid | lagrange-ad. | hybrid-ad. | efg |
 # |---|---|---|---|---|---|---|---|---|---|
@@ -175,15 +175,14 @@
 #     m thick (a diagnostic run, not the demo) FE's tunnel force at 430 m/s grows with depth,
 #     from 0.41 of Forrestal's at 2-4 calibers to 0.79 at 12: the front face's influence
 #     reaches far deeper in the model than the experiment's crater of about one caliber.
-# * Cost against pure EFG's time in the same process: hybrid 0.16-0.41x, master-slave
-#   0.23-0.30x, lagrange 0.26-0.36x, ramp 0.26-0.42x, FE 0.08-0.13x; grown patches:
-#   lagrange 0.17-0.56x, hybrid 0.24-0.37x (the target is 0.2, the paper 1/8). A conversion
-#   rebuilds the whole model (14-32 % of a grown patch's time), and the grown lagrange patch
-#   takes 0.5-1.4x the fixed one's steps (each rebuilt model's stable step is bounded afresh).
-#   Every law update got 5-6x cheaper in its 3 x 3 algebra with this table
-#   (``benchmarks/bench_rate_law.py``): pure EFG's shots took 45-107 s against 89-217 s
-#   before, the couplings' 7-38 s against 13-62 s; the ratios barely moved, since the law's
-#   points dominate every method's step.
+# * Cost against pure EFG's time in the same process: hybrid 0.14-0.25x, master-slave
+#   0.24-0.26x, lagrange 0.25-0.30x, ramp 0.24-0.35x, FE 0.08-0.12x; grown patches:
+#   lagrange 0.18-0.46x, hybrid 0.23-0.35x (the target is 0.2, the paper 1/8; the run before
+#   this one, stop 50's: hybrid 0.16-0.41x, lagrange 0.26-0.36x, grown lagrange 0.17-0.56x).
+#   A conversion rebuilds the whole model (14-33 % of a grown patch's time), and the grown
+#   lagrange patch takes 0.5-1.4x the fixed one's steps (each rebuilt model's stable step is
+#   bounded afresh). Pure EFG's shots took 44-106 s, the couplings' 6-35 s; the law's points
+#   dominate every method's step (``benchmarks/bench_rate_law.py``).
 # * *The deformable projectile* (``--projectile johnson-cook``;
 #   ``docs/results/hanchak_deformable.md``, with the PNGs
 #   ``docs/results/hanchak/hanchak_24_deformable.png``, hybrid-adaptive's damage, particles and

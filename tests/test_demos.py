@@ -442,7 +442,7 @@ def test_hanchak_demo_perforates(shared_dir):
     lagrange-adaptive 992 m/s; the lagrange patch erodes 40 points, FE none at this spacing).
     Yet the slab resists the tunnel with 0.40, 0.53 and 0.56 of Forrestal et al.'s empirical
     force (``tunnel_ratio``, measured; checked between 0.3 and 0.8) and with 0.31, 0.41 and
-    0.43 of the force its own concrete's cavity pressure puts on the nose
+    0.44 of the force its own concrete's cavity pressure puts on the nose
     (``tunnel_material_ratio``; checked between 0.15 and 0.8), and takes 0.50, 0.59 and 0.61
     of the experiment's energy (``absorbed``; checked between 0.3 and 0.9): at this speed a
     slab half as strong moves the exit velocity by 6 %.
@@ -479,8 +479,9 @@ def test_hanchak_two_ranks_equal_serial():
     if MPI.COMM_WORLD.size == 1:
         pytest.skip("compares 2 ranks with 1")
     demo = load_demo("hanchak")
-    world = demo.perforate("lagrange", 16, 1060.0, MPI.COMM_WORLD)
-    alone = demo.perforate("lagrange", 16, 1060.0, MPI.COMM_SELF)
+    kw = {"readings": False}  # read from the history compared here; their curve costs 11 s
+    world = demo.perforate("lagrange", 16, 1060.0, MPI.COMM_WORLD, **kw)
+    alone = demo.perforate("lagrange", 16, 1060.0, MPI.COMM_SELF, **kw)
     assert world["steps"] == alone["steps"]
     assert abs(world["residual_velocity"] - alone["residual_velocity"]) < 1e-9 * 1060.0
 
@@ -494,8 +495,8 @@ def test_hanchak_deformable_projectile():
     fe 1028 against 1005 m/s, +2.3 %; lagrange 1021 against 995, +2.6 %)."""
     demo = load_demo("hanchak")
     for method in ("fe", "lagrange"):
-        soft = demo.perforate(method, 16, 1060.0, projectile="johnson-cook")
-        hard = demo.perforate(method, 16, 1060.0)
+        soft = demo.perforate(method, 16, 1060.0, projectile="johnson-cook", readings=False)
+        hard = demo.perforate(method, 16, 1060.0, readings=False)
         assert demo.check([soft]) == [] and soft["perforated"]
         assert soft["balance"] < 0.01 and soft["mass_change"] < 1e-12
         assert abs(soft["residual_velocity"] / hard["residual_velocity"] - 1.0) < 0.05
@@ -508,7 +509,7 @@ def test_hanchak_deformable_two_ranks_equal_serial():
     if MPI.COMM_WORLD.size == 1:
         pytest.skip("compares 2 ranks with 1")
     demo = load_demo("hanchak")
-    kw = {"t_max": 1e-4, "projectile": "johnson-cook"}
+    kw = {"t_max": 1e-4, "projectile": "johnson-cook", "readings": False}
     world = demo.perforate("lagrange", 16, 1060.0, MPI.COMM_WORLD, **kw)
     alone = demo.perforate("lagrange", 16, 1060.0, MPI.COMM_SELF, **kw)
     assert world["steps"] == alone["steps"]
@@ -545,8 +546,9 @@ def test_hanchak_adaptive_two_ranks_equal_serial():
     if MPI.COMM_WORLD.size == 1:
         pytest.skip("compares 2 ranks with 1")
     demo = load_demo("hanchak")
-    world = demo.perforate("hybrid-adaptive", 16, 1060.0, MPI.COMM_WORLD, t_max=1e-4)
-    alone = demo.perforate("hybrid-adaptive", 16, 1060.0, MPI.COMM_SELF, t_max=1e-4)
+    kw = {"t_max": 1e-4, "readings": False}
+    world = demo.perforate("hybrid-adaptive", 16, 1060.0, MPI.COMM_WORLD, **kw)
+    alone = demo.perforate("hybrid-adaptive", 16, 1060.0, MPI.COMM_SELF, **kw)
     assert world["conversions"]["count"] == alone["conversions"]["count"] >= 5
     assert world["steps"] == alone["steps"]
     assert abs(world["residual_velocity"] - alone["residual_velocity"]) < 1e-9 * 1060.0

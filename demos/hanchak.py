@@ -258,6 +258,9 @@ PROJECTILES = ["rigid", "johnson-cook"]
 #: past the crater (one caliber) and the nose's length (1.7 calibers), three calibers short of
 #: the back face.
 TUNNEL = (2.0, 4.0)
+#: What :func:`tunnel_resistance` reads (the rows' ``tunnel_<name>``): the slab's force, Forrestal
+#: et al.'s, their ratio, the concrete's own force on the nose and the slab's over it.
+READINGS = ("force", "forrestal", "ratio", "material", "material_ratio")
 #: The wall speeds at which the concrete's own spherical cavity pressure is computed
 #: (:func:`cavity_curve`); linear between them.
 CAVITY_SPEEDS = (50.0, 100.0, 200.0, 300.0, 430.0, 600.0, 800.0, 1100.0, 1500.0)
@@ -727,11 +730,7 @@ def perforate(
         "mass_change": abs(section_mass(dyn) / mass0 - 1.0),
         "failed_points": comm.allreduce(int(np.count_nonzero(law.state["damage"] >= 0.99))),
         "plastic_strain_steel": steel_plastic_strain(dyn) if deformable else None,
-        "tunnel_force": None if tunnel is None else tunnel["force"],
-        "tunnel_forrestal": None if tunnel is None else tunnel["forrestal"],
-        "tunnel_ratio": None if tunnel is None else tunnel["ratio"],
-        "tunnel_material": None if tunnel is None else tunnel["material"],
-        "tunnel_material_ratio": None if tunnel is None else tunnel["material_ratio"],
+        **{f"tunnel_{k}": None if tunnel is None else tunnel[k] for k in READINGS},
         "eroded_points": comm.allreduce(int(np.count_nonzero(law.state["eroded"] > 0))),
         "points": comm.allreduce(len(law.state["damage"])),
         "dofs": dyn.num_dofs(),
@@ -740,6 +739,7 @@ def perforate(
         "conversions": None if run is None else conversion_figures(dyn, run, ke0),
         "pictures": pictures,
     }
+    row["absorbed"] = absorbed(row)
     dyn.destroy()
     return row
 
@@ -920,6 +920,10 @@ def main(argv=None) -> int:
             f"{'balance':>9}{'eroded':>8}{'pen h':>7}{'energy':>8}{'tunnel':>8}{'vs own':>8}"
             f"{'steps':>7}{'time s':>8}{'vs efg':>8}"
         )
+
+        def reading(x: float | None) -> str:
+            return f"{'-':>8}" if x is None else f"{x:>8.2f}"
+
         for r in rows:
             v0 = r["impact_velocity"]
             efg = [q for q in rows if q["method"] == "efg" and q["impact_velocity"] == v0]
@@ -930,13 +934,9 @@ def main(argv=None) -> int:
                 + (f"{res:>10.0f}" if res is not None else f"{'failed':>10}")
                 + (f"{paper:>7.0f}" if paper is not None else f"{'-':>7}")
                 + f"{r['balance']:>9.2%}{r['eroded_points']:>8d}{r['penetration']:>7.2f}"
-                + (f"{absorbed(r):>8.2f}" if absorbed(r) is not None else f"{'-':>8}")
-                + (f"{r['tunnel_ratio']:>8.2f}" if r["tunnel_ratio"] is not None else f"{'-':>8}")
-                + (
-                    f"{r['tunnel_material_ratio']:>8.2f}"
-                    if r["tunnel_material_ratio"] is not None
-                    else f"{'-':>8}"
-                )
+                + reading(r["absorbed"])
+                + reading(r["tunnel_ratio"])
+                + reading(r["tunnel_material_ratio"])
                 + f"{r['steps']:>7d}{r['time_total']:>8.1f}"
                 + (f"{r['time_total'] / efg[0]['time_total']:>7.2f}x" if efg else f"{'-':>8}")
             )
@@ -969,10 +969,7 @@ def main(argv=None) -> int:
         for line in missed:
             print(f"target missed: {line}")
         if args.json:
-            out = [
-                {**{k: v for k, v in r.items() if k != "pictures"}, "absorbed": absorbed(r)}
-                for r in rows
-            ]
+            out = [{k: v for k, v in r.items() if k != "pictures"} for r in rows]
             with open(args.json, "w") as f:
                 json.dump({"rows": out, "checks_failed": bad, "targets_missed": missed}, f,
                           indent=1)  # fmt: skip

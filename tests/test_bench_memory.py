@@ -21,14 +21,14 @@ COMM = MPI.COMM_WORLD
 
 
 def test_chunked_volumes_equal_unchunked(monkeypatch):
-    """Voronoi volumes computed 7 cells at a time equal the single chunk's to 1e-15 of the
-    largest (measured 3.3e-16 on 1 rank, 1.1e-16 on 2: the grouping of the sums) and sum to the
-    area of the rectangle to 2e-15 (measured 5.9e-16)."""
+    """Voronoi volumes computed 175 lattice points at a time (about 7 cells) equal the single
+    chunk's to 1e-15 of the largest (measured 2.6e-16 on 1 and 2 ranks: the grouping of the
+    sums) and sum to the area of the rectangle to 2e-15 (measured 3.0e-16)."""
     corners = [np.array([0.0, 0.0]), np.array([3.0, 2.0])]
     msh = dolfinx.mesh.create_rectangle(COMM, corners, [12, 8], dolfinx.mesh.CellType.quadrilateral)
-    monkeypatch.setattr(particles_module, "_VOLUME_CHUNK_CELLS", 1 << 30)
+    monkeypatch.setattr(particles_module, "_VOLUME_CHUNK_POINTS", 1 << 30)
     whole = mf.ParticleSet.from_cells(msh, 0.2, jitter=0.2).volumes
-    monkeypatch.setattr(particles_module, "_VOLUME_CHUNK_CELLS", 7)
+    monkeypatch.setattr(particles_module, "_VOLUME_CHUNK_POINTS", 7 * 25)
     chunked = mf.ParticleSet.from_cells(msh, 0.2, jitter=0.2).volumes
     assert np.abs(chunked - whole).max() <= 1e-15 * whole.max()
     assert abs(chunked.sum() - 6.0) <= 2e-15 * 6.0

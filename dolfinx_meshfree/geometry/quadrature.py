@@ -9,6 +9,7 @@ quadrilaterals.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -30,6 +31,7 @@ __all__ = [
     "cell_quadrature",
     "cell_sizes",
     "facet_quadrature",
+    "lattice_quadrature",
     "particle_quadrature_degree",
     "reference_facet_points",
 ]
@@ -73,12 +75,73 @@ def cell_quadrature(
             Belytschko et al. 1995, sec. 5.1.2 (4 x 4 x 4 on hexahedra).
         cells: Local cell indices (default: every owned cell).
     """
+    X, w = _compat.quadrature_rule(msh.topology.cell_type.name, degree)
+    return _mapped_rule(msh, X, w, cells)
+
+
+def lattice_quadrature(
+    msh: dolfinx.mesh.Mesh, subdivisions: int, cells: npt.ArrayLike | None = None
+) -> QuadraturePoints:
+    """The composite midpoint rule of ``subdivisions`` sub-cells per reference edge on owned
+    ``cells`` (default every owned cell): the midpoints of the ``m^d`` sub-squares (sub-cubes) of
+    the reference cell, or on a simplex the centroids of its ``m^d`` equal sub-simplices
+    (Freudenthal's subdivision, :func:`_kuhn_centroids`), mapped as :func:`cell_quadrature`'s
+    points.
+
+    For integrands that are not smooth (the indicator of a particle's Voronoi region,
+    :class:`~dolfinx_meshfree.ParticleSet`'s volumes) a Gauss rule of any degree errs by the
+    placement of its few points about the discontinuity, and does not converge steadily (3 x 3,
+    5 x 5 and 6 x 6 points on square cells of four particles each: regions up to 23, 105 and
+    13 % off their area, measured). The lattice's error falls as ``1 / m``, and it is zero
+    where the regions' edges lie on its sub-cells' edges: a grid of particles at the vertices,
+    or at ``h / k`` with ``m`` a multiple of ``2 k``. Exact for linear functions on affine
+    cells, and for the area of a quadrilateral."""
+    cname = msh.topology.cell_type.name
+    tdim = msh.topology.dim
+    m = int(subdivisions)
+    if m < 1:
+        raise ValueError(f"subdivisions={subdivisions!r} must be an integer >= 1")
+    if cname in ("triangle", "tetrahedron"):
+        X = _kuhn_centroids(tdim, m)
+        w = np.full(len(X), (0.5 if tdim == 2 else 1.0 / 6.0) / len(X))
+    else:
+        c = (np.arange(m) + 0.5) / m
+        X = np.stack(np.meshgrid(*[c] * tdim, indexing="ij"), axis=-1).reshape(-1, tdim)
+        w = np.full(len(X), 1.0 / m**tdim)
+    return _mapped_rule(msh, X, w, cells)
+
+
+def _kuhn_centroids(tdim: int, m: int) -> np.ndarray:
+    """The centroids of the ``m^d`` simplices of the reference simplex's Freudenthal (Kuhn)
+    subdivision: the sub-cubes of the ``m``-lattice on the unit box, each cut into the ``d!``
+    simplices ``x_s(1) >= ... >= x_s(d)``, those inside the Kuhn simplex ``1 >= x >= y (>= z) >=
+    0``, mapped onto the reference simplex by ``X = x - y, Y = y (- z), (Z = z)``. Their faces
+    lie on the planes ``X, Y, Z, X + Y, Y + Z, X + Y + Z = k / m``."""
+    corners = np.stack(np.meshgrid(*[np.arange(m)] * tdim, indexing="ij"), axis=-1)
+    corners = corners.reshape(-1, tdim).astype(float)
+    points = []
+    for order in itertools.permutations(range(tdim)):
+        # the simplex of the unit cube whose coordinates decrease in this order: its vertices
+        # 0, e_s1, e_s1 + e_s2, ...; centroid sum_k (d - k) e_sk / (d + 1)
+        local = np.zeros(tdim)
+        local[list(order)] = (tdim - np.arange(tdim)) / (tdim + 1.0)
+        x = (corners + local) / m
+        inside = np.all(np.diff(x, axis=1) < 0.0, axis=1)  # x > y (> z): in the Kuhn simplex
+        points.append(x[inside])
+    x = np.concatenate(points)
+    return np.column_stack([x[:, :-1] - x[:, 1:], x[:, -1]])
+
+
+def _mapped_rule(
+    msh: dolfinx.mesh.Mesh, X: np.ndarray, w: np.ndarray, cells: npt.ArrayLike | None
+) -> QuadraturePoints:
+    """The reference rule ``(X, w)`` mapped onto the local ``cells`` (default every owned cell)
+    by their degree-1 geometry: points and weights times ``|det J|``."""
     tdim, gdim = msh.topology.dim, msh.geometry.dim
     if cells is None:
         cells = np.arange(msh.topology.index_map(tdim).size_local, dtype=np.int64)
     cells = np.asarray(cells, dtype=np.int64)
     cname = msh.topology.cell_type.name
-    X, w = _compat.quadrature_rule(cname, degree)
     tab = _compat.basix_lagrange_p1(cname).tabulate(1, X)  # (1+tdim, nqr, nv, 1)
     nodes = msh.geometry.x[_compat.geometry_dofmap(msh)[cells], :gdim]  # (nc, nv, gdim)
     x = np.matmul(tab[0, :, :, 0], nodes)  # (nc, nqr, gdim)
@@ -96,7 +159,13 @@ def cell_quadrature(
 
 #: The factor that turns a cell's volume into the side of the square or cube it stands for: a
 #: triangle is half a square, a tetrahedron a sixth of a cube.
-_CELL_FILL = {"triangle": 0.5, "quadrilateral": 1.0, "tetrahedron": 1.0 / 6.0, "hexahedron": 1.0}
+_CELL_FILL = {
+    "interval": 1.0,
+    "triangle": 0.5,
+    "quadrilateral": 1.0,
+    "tetrahedron": 1.0 / 6.0,
+    "hexahedron": 1.0,
+}
 
 
 def cell_sizes(msh: dolfinx.mesh.Mesh, cells: npt.ArrayLike) -> np.ndarray:

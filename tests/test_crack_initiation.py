@@ -11,6 +11,7 @@ import warnings
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
+from dolfinx_meshfree.statics.cohesive_initiation import _regions
 
 import dolfinx
 import numpy as np
@@ -23,10 +24,10 @@ E, NU, FT, GF = 30000.0, 0.2, 3.0, 0.1
 LAW = mf.LinearCohesive(ft=FT, Gf=GF)
 
 
-def two_span_beam(patch_cells=None):
+def two_span_beam(patch_cells=None, second=1.0):
     """The beam (module docstring), pure EFG (particles at the vertices, h = 10 mm) or coupled
-    (Lagrange) with the particles in the cells whose midpoints ``patch_cells(x)`` selects;
-    returns ``(model, notch, control)``."""
+    (Lagrange) with the particles in the cells whose midpoints ``patch_cells(x)`` selects, the
+    second span's load ``second`` times the first's; returns ``(model, notch, control)``."""
     msh = dolfinx.mesh.create_rectangle(
         COMM, [np.array([0.0, 0.0]), np.array([2 * S, D])], [round(2 * S / H), round(D / H)],
         dolfinx.mesh.CellType.quadrilateral,
@@ -48,11 +49,11 @@ def two_span_beam(patch_cells=None):
         model.add_dirichlet(sup, lambda x: np.zeros_like(x), components=(1,))
     mid = mf.boundary_facets(msh, lambda x: np.isclose(x[1], 0.0) & (np.abs(x[0] - S) < H + 1e-9))
     model.add_dirichlet(mid, lambda x: np.zeros_like(x), components=(0,))
-    for xl in (S / 2, 1.5 * S):
+    for xl, share in ((S / 2, 1.0), (1.5 * S, second)):
         pad = mf.boundary_facets(
             msh, lambda x, xl=xl: np.isclose(x[1], D) & (np.abs(x[0] - xl) < H + 1e-9)
         )
-        w = COMM.allreduce(len(pad)) * H
+        w = COMM.allreduce(len(pad)) * H / share
         model.add_traction(pad, lambda x, n, w=w: np.tile([0.0, -1.0 / w], (len(x), 1)))
     cmod = mf.DisplacementControl(
         [[x0 + 0.5 * H, 0.0], [x0 - 0.5 * H, 0.0]], [[1.0, 0.0], [-1.0, 0.0]]
@@ -63,11 +64,11 @@ def two_span_beam(patch_cells=None):
 OPTIONS = mf.PathOptions(increment=0.005, end=0.025, max_increment=0.02)
 
 
-def follow(model, notch, cmod, initiation):
+def follow(model, notch, cmod, initiation, options=OPTIONS):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         path = mf.follow_path(
-            model, cmod, OPTIONS, growth=mf.CohesiveGrowth(notch), initiation=initiation
+            model, cmod, options, growth=mf.CohesiveGrowth(notch), initiation=initiation
         )
     bulk = [w for w in caught if issubclass(w.category, mf.BulkStrengthWarning)]
     return path, bulk
@@ -125,14 +126,59 @@ def test_a_crack_starts_in_a_coupled_patch_as_in_efg():
 def test_a_peak_on_the_fe_side_is_not_started_and_says_so():
     """The patch holds only the first span (x in 150 .. 450 mm): the bulk's peak over the
     middle support is on the FE side, no crack starts, and the warning names the point and
-    why."""
+    why. The peak's region of tension, which grows along the top face as the load rises (to
+    1.16 f_t at step 6), is refused once (``PathResult.refused``): left out by a fixed radius
+    of three spacings instead, the sites beside the refused one were tried and refused in turn
+    (three by step 6)."""
     model, notch, cmod = two_span_beam(lambda x: (x[0] > 150.0) & (x[0] < 450.0))
-    path, bulk = follow(model, notch, cmod, mf.CrackInitiation(LAW))
+    options = mf.PathOptions(increment=0.005, end=0.03, max_increment=0.02)
+    path, bulk = follow(model, notch, cmod, mf.CrackInitiation(LAW), options)
     assert path.initiations == [] and len(bulk) == 1
     message = str(bulk[0].message)
     assert "at (595, 100)" in message and "at step 5" in message
-    assert "it lies on the FE side of the coupled model" in message
+    assert "no crack is started at (595, 100): it lies on the FE side of the coupled" in message
     assert "add the cells around it to the patch" in message
+    assert "its region of tension is left out" in message
+    assert [r[:2] for r in path.refused] == [(5, [595.0, 100.0])]
+    assert path.refused[0][2] == pytest.approx(path.bulk_stress[4]) and path.refused[0][2] > FT
+    assert path.bulk_stress[5] > 1.1 * FT  # the region grew past f_t: refused only once
+
+
+def test_a_refused_peak_leaves_other_regions_free():
+    """Patches on the first span and on the second (x in 750 .. 1050 mm), the second span's
+    load 1.2 times the first's. At step 4 the peak over the middle support (1.11 f_t) is on
+    the FE side and refused; its region of tension is left out, and the second span's bottom,
+    its own region above f_t, starts a crack there in the same step: under its load (within
+    two spacings of x = 900 mm, measured 915), from the bottom face, vertical. Before, the
+    refused peak kept every other site from starting for the rest of the path."""
+    model, notch, cmod = two_span_beam(
+        lambda x: ((x[0] > 150.0) & (x[0] < 450.0)) | ((x[0] > 750.0) & (x[0] < 1050.0)), 1.2
+    )
+    path, bulk = follow(model, notch, cmod, mf.CrackInitiation(LAW))
+    assert [r[:2] for r in path.refused] == [(4, [595.0, 100.0])]
+    assert "it lies on the FE side" in path.refused[0][3]
+    assert len(path.initiations) == 1
+    step, _, (a, b) = path.initiations[0]
+    assert step == 4 and abs(a[0] - 1.5 * S) <= 2 * H and a[1] == pytest.approx(0.0, abs=1e-9)
+    d = np.subtract(b, a)
+    assert np.linalg.norm(d) == pytest.approx(4 * H, rel=1e-9)
+    assert d[1] > 0 and abs(d[0]) <= np.tan(np.radians(1.0)) * d[1]
+    assert len(bulk) == 1 and "its region of tension is left out" in str(bulk[0].message)
+
+
+def test_regions_of_tension():
+    """``bulk_stress_peak``'s exclusion by hand: on a line of candidates one spacing apart, two
+    regions above the threshold (stresses 3, 4, 5 and 2, 6); excluding from the 4 leaves out
+    3, 4, 5 (joined above the threshold), not the 6 beyond a candidate below it; a seed at a
+    candidate below the threshold leaves out that candidate only."""
+    x = np.column_stack([np.arange(8.0), np.zeros(8)])
+    stress = np.array([0.5, 3.0, 4.0, 5.0, 0.5, 2.0, 6.0, 0.5])
+    out = _regions(x, stress, [np.array([2.1, 0.2])], 1.0, 1.5)
+    np.testing.assert_array_equal(np.flatnonzero(out), [1, 2, 3])
+    out = _regions(x, stress, [np.array([4.0, 0.0])], 1.0, 1.5)
+    np.testing.assert_array_equal(np.flatnonzero(out), [4])
+    out = _regions(x, stress, [np.array([0.0, 0.0]), np.array([6.0, 0.0])], 1.0, 1.5)
+    np.testing.assert_array_equal(np.flatnonzero(out), [0, 5, 6])
 
 
 def test_bad_initiation():

@@ -33,6 +33,8 @@ from typing import TYPE_CHECKING
 
 import dolfinx
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ..geometry.crack import (
@@ -57,6 +59,7 @@ if TYPE_CHECKING:  # annotations only
     from .efg import EFGSolution
 
 __all__ = [
+    "REGION_SPACINGS",
     "BulkStrengthWarning",
     "InitiationSite",
     "bulk_stress_peak",
@@ -327,17 +330,32 @@ def _crack_direction(
     return d
 
 
+#: Candidates closer than this many particle spacings are neighbours in a region of tension
+#: (:func:`bulk_stress_peak`'s ``exclude``): the candidates (cell and facet midpoints) lie half a
+#: spacing to a spacing apart.
+REGION_SPACINGS = 1.5
+
+
 def bulk_stress_peak(
     solution: EFGSolution | CoupledSolution,
     clearance: float | None = None,
     material: LinearElastic | None = None,
-) -> tuple[np.ndarray, float]:
+    exclude: Sequence[np.ndarray] = (),
+    above: float = np.inf,
+) -> tuple[np.ndarray | None, float]:
     """The largest averaged largest principal stress of ``solution`` away from its cracks (by
     ``clearance``, default three spacings: the process zone and the tips' fields left out),
     FE side included, and where: the screen of :func:`initiation_site` (the Gaussian average of
     the cells' midpoint stresses, length one spacing) over the midpoints of every cell and
     exterior facet (``material``: the bulk's law, default the solution's). Above ``f_t`` a crack
-    would start there (collective)."""
+    would start there.
+
+    ``exclude``: points (sites that could not start a crack) whose regions of tension are left
+    out: the candidate nearest each point and, when it is above ``above`` (``f_t``), the
+    candidates above ``above`` joined to it through neighbours :data:`REGION_SPACINGS`
+    spacings apart. So the peak returned is that of another region, never a site beside a
+    refused one, where a crack would stand for the refused one, displaced. ``(None, -inf)``
+    when no candidate is left (collective)."""
     coupled, domain, cracks = _body(solution)
     h = particle_spacing(domain)
     clear = 3.0 * h if clearance is None else float(clearance)
@@ -347,8 +365,30 @@ def bulk_stress_peak(
     screened = _screen(x, mid[use], sig_mid[use], CohesiveGrowth.radius * h)
     if cracks:
         screened[distance(x) < clear] = -np.inf
+    if len(exclude):
+        screened[_regions(x, screened, exclude, above, REGION_SPACINGS * h)] = -np.inf
     k = int(np.argmax(screened))
+    if not np.isfinite(screened[k]):
+        return None, -np.inf
     return x[k].copy(), float(screened[k])
+
+
+def _regions(
+    x: np.ndarray, stress: np.ndarray, seeds: Sequence[np.ndarray], above: float, reach: float
+) -> np.ndarray:
+    """Whether each candidate (m,) lies in the region of tension of one of ``seeds``: the
+    candidate nearest a seed and, when it is above ``above``, the candidates above ``above``
+    connected to it through pairs closer than ``reach`` (local)."""
+    tree = cKDTree(x)
+    start = tree.query(np.asarray(seeds, dtype=float).reshape(len(seeds), -1))[1]
+    hot = stress > above
+    pairs = tree.query_pairs(reach, output_type="ndarray")
+    pairs = pairs[hot[pairs[:, 0]] & hot[pairs[:, 1]]]
+    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(x), len(x)))
+    _, label = connected_components(graph, directed=False)
+    out = np.isin(label, label[start[hot[start]]]) & hot
+    out[start] = True
+    return out
 
 
 class _CrackDistance:

@@ -28,7 +28,12 @@ here on the current field: :func:`~dolfinx_meshfree.statics.cohesive_initiation.
 
 Several cracks may start in one step, one at a time, each from the field the last left, up to
 ``max_cracks`` in the path. A peak on the FE side of a coupled model, or in a patch cell too close
-to the interface, cannot start a crack there: the warning names the point (enlarge the patch).
+to the interface, cannot start a crack there: the warning names the point (enlarge the patch),
+:attr:`~dolfinx_meshfree.PathResult.refused` lists it, and its region of tension (the candidates
+above ``f_t`` joined to it) is left out from then on, so that the peaks of other regions still
+start cracks (``follow_path`` tries at most ``MAX_REFUSED_PER_STEP`` sites a step). A crack is
+never started beside a refused site, in its region, where it would stand for the refused one
+displaced.
 """
 
 from __future__ import annotations

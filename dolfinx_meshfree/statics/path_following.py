@@ -46,7 +46,11 @@ from ..physics.materials import LinearElastic
 from ..physics.state import voigt_strain
 from .cohesive import CohesiveSide, check_through
 from .cohesive_growth import CohesiveGrowth, _inside, grow_once
-from .cohesive_initiation import BulkStrengthWarning, bulk_stress_peak, site_at
+from .cohesive_initiation import (
+    BulkStrengthWarning,
+    bulk_stress_peak,
+    site_at,
+)
 from .coupled_newton import BlockModel, build_block_problem, law_internal_force
 from .crack_initiation import CrackInitiation, first_stretch, insert_crack
 from .efg import EFGBlockModel, EFGElasticity
@@ -210,6 +214,12 @@ class PathResult:
     #: The cracks that started during the path (``follow_path(initiation=...)``): ``(step,
     #: control, first stretch)`` each, the stretch's end points.
     initiations: list[tuple[int, float, list[list[float]]]] = field(default_factory=list)
+    #: The bulk's peaks above the new faces' ``f_t`` that could not start a crack
+    #: (``follow_path(initiation=...)``): ``(step, point, stress, why)`` each. The region of
+    #: tension about such a site (the candidates above ``f_t`` joined to it,
+    #: :func:`~dolfinx_meshfree.statics.cohesive_initiation.bulk_stress_peak`'s ``exclude``) is
+    #: left out from then on, and the peak of another region above ``f_t`` is tried.
+    refused: list[tuple[int, list[float], float, str]] = field(default_factory=list)
 
     @property
     def peak(self) -> tuple[float, float]:
@@ -733,6 +743,26 @@ def _reequilibrated(
     return built, t_new, its, work, g, watch
 
 
+#: The most sites that could not start a crack tried in one step (each then left out:
+#: :attr:`PathResult.refused`) before the path goes on.
+MAX_REFUSED_PER_STEP = 8
+
+
+def _candidate(
+    built: BlockModel | EFGBlockModel,
+    law: LinearElastic,
+    bulk: tuple[np.ndarray, float],
+    refused: list[tuple[int, list[float], float, str]],
+    ft: float,
+) -> tuple[np.ndarray | None, float]:
+    """Where the next crack would start: the bulk's peak ``bulk``, or, with ``refused`` sites,
+    the peak of the regions above ``ft`` other than theirs (collective)."""
+    if not refused:
+        return bulk
+    exclude = [np.asarray(point) for _, point, _, _ in refused]
+    return bulk_stress_peak(built.solution(), material=law, exclude=exclude, above=ft)
+
+
 def _start_crack(
     built: BlockModel | EFGBlockModel,
     model: CoupledElasticity | EFGElasticity,
@@ -964,28 +994,35 @@ def follow_path(
             bulk = None
             if watch_bulk:  # where a further crack would start: the bulk's stress off the cracks
                 bulk = bulk_stress_peak(built.solution(), material=law)
-            why = ""  # why a further crack was not started
-            while (
-                initiation is not None
-                and bulk is not None
-                and bulk[1] > initiation.law.ft
-                and len(result.initiations) < initiation.max_cracks
-            ):
-                crack, fitted, why = _start_crack(built, model, efg, initiation, growths, bulk[0])
-                if crack is None:
-                    break
-                result.initiations.append((step, tau, crack.points.tolist()))
-                event = (
-                    f"at step {step} (control {tau:.6g}, load factor {t:.6g}) a crack started "
-                    f"at {crack.points.round(6).tolist()}"
-                )
-                built, t, its_g, work_g, g, watch = _reequilibrated(
-                    model, efg, u, built, fitted, control, monitors, q, f_ext, t, tau, tol,
-                    stall, options, solver, event, result,
-                )  # fmt: skip
-                problem, x = built.problem, built.x
-                its, work = its + its_g, work + work_g
-                bulk = bulk_stress_peak(built.solution(), material=law)
+            if initiation is not None and bulk is not None:
+                # the bulk's peak, or, past sites that could not start one, the next above f_t
+                candidate = _candidate(built, law, bulk, result.refused, initiation.law.ft)
+                tries = 0
+                while (
+                    candidate[1] > initiation.law.ft
+                    and len(result.initiations) < initiation.max_cracks
+                    and tries < MAX_REFUSED_PER_STEP
+                ):
+                    crack, fitted, reason = _start_crack(
+                        built, model, efg, initiation, growths, candidate[0]
+                    )
+                    if crack is None:  # left out from now on; the next peak is tried
+                        tries += 1
+                        result.refused.append((step, candidate[0].tolist(), candidate[1], reason))
+                    else:
+                        result.initiations.append((step, tau, crack.points.tolist()))
+                        event = (
+                            f"at step {step} (control {tau:.6g}, load factor {t:.6g}) a crack "
+                            f"started at {crack.points.round(6).tolist()}"
+                        )
+                        built, t, its_g, work_g, g, watch = _reequilibrated(
+                            model, efg, u, built, fitted, control, monitors, q, f_ext, t, tau,
+                            tol, stall, options, solver, event, result,
+                        )  # fmt: skip
+                        problem, x = built.problem, built.x
+                        its, work = its + its_g, work + work_g
+                        bulk = bulk_stress_peak(built.solution(), material=law)
+                    candidate = _candidate(built, law, bulk, result.refused, initiation.law.ft)
             if arc:
                 previous = previous_new
             peak = max(peak, t)
@@ -1011,10 +1048,16 @@ def follow_path(
                             "this model does not start it (it carries the cracks it was given "
                             "or grew; follow_path(initiation=CrackInitiation(law)) starts it)"
                         )
-                    elif not why:
-                        why = f"CrackInitiation.max_cracks={initiation.max_cracks} have started"
+                    elif result.refused:
+                        where = result.refused[0][1]
+                        why = (
+                            f"no crack is started at ({where[0]:.6g}, {where[1]:.6g}): "
+                            f"{result.refused[0][3]}; its region of tension is left out and "
+                            "the peaks of other regions above f_t are tried (PathResult.refused "
+                            "lists the sites refused)"
+                        )
                     else:
-                        why = f"no crack is started there: {why}"
+                        why = f"CrackInitiation.max_cracks={initiation.max_cracks} have started"
                     warnings.warn(
                         f"at step {step} (control {tau:.6g}, load factor {t:.6g}) the bulk's "
                         f"averaged largest principal stress reaches {stress / ft_new:.3f} f_t "

@@ -11,7 +11,9 @@ import warnings
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
-from dolfinx_meshfree.statics.cohesive_initiation import _regions
+from dolfinx_meshfree.geometry.crack import CrackDomain, point_segment_distance
+from dolfinx_meshfree.statics.cohesive_initiation import InitiationSite, _regions
+from dolfinx_meshfree.statics.crack_initiation import first_stretch
 
 import dolfinx
 import numpy as np
@@ -164,6 +166,34 @@ def test_a_refused_peak_leaves_other_regions_free():
     assert np.linalg.norm(d) == pytest.approx(4 * H, rel=1e-9)
     assert d[1] > 0 and abs(d[0]) <= np.tan(np.radians(1.0)) * d[1]
     assert len(bulk) == 1 and "its region of tension is left out" in str(bulk[0].message)
+
+
+@pytest.mark.parametrize("on_edge", [False, True])
+def test_a_first_stretch_is_moved_off_the_particles(on_edge):
+    """Particles at the vertices of 10 mm squares. Inside, a stretch at 45 degrees through a
+    cell's midpoint (45, 45) meets the cell's corners; from the bottom edge's facet midpoint
+    (45, 0) one along (1, 2) meets the vertex (50, 10). Each is moved by an eighth of a
+    spacing (the first of SHIFTS that clears NEAR_ROW = 0.1 spacing), across the stretch
+    inside, along the edge from the edge, keeping its direction and length: its nearest
+    particle is then 0.125 spacing off inside and 0.25 / sqrt(5) = 0.112 from the edge (by
+    hand). Unmoved, the stretch would be refused (a particle on a crack has no side)."""
+    msh = dolfinx.mesh.create_rectangle(
+        COMM, [np.zeros(2), np.array([100.0, 100.0])], [10, 10], dolfinx.mesh.CellType.quadrilateral
+    )
+    particles = mf.ParticleSet.from_vertices(msh)
+    domain = CrackDomain.from_particles(particles)
+    d = np.array([1.0, 2.0]) / np.sqrt(5.0) if on_edge else np.array([1.0, 1.0]) / np.sqrt(2.0)
+    point = np.array([45.0, 0.0]) if on_edge else np.array([45.0, 45.0])
+    site = InitiationSite(point, d, FT, 1.0, on_edge, None, 1.0, H)
+    crack, why = first_stretch(mf.CrackInitiation(LAW), site, domain, [], False)
+    assert why == "" and crack is not None
+    a, b = crack.points
+    slide = np.array([1.0, 0.0]) if on_edge else np.array([d[1], -d[0]])
+    start = point + 0.125 * H * slide - (0.0 if on_edge else 4 * H) * d
+    np.testing.assert_allclose(a, start, atol=1e-9)
+    np.testing.assert_allclose(b - a, (4 if on_edge else 8) * H * d, atol=1e-9)
+    near = point_segment_distance(particles.positions, a[None], b[None]).min()
+    assert near == pytest.approx((0.25 / np.sqrt(5.0) if on_edge else 0.125) * H, rel=1e-9)
 
 
 def test_regions_of_tension():

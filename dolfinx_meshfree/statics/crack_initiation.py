@@ -11,8 +11,10 @@ here on the current field: :func:`~dolfinx_meshfree.statics.cohesive_initiation.
   crack from an exterior edge, a crack with two tips inside the body;
 * **its first stretch** is bonded (``Crack(..., through=True)``, the law on every face), ``lead``
   spacings long each way (or inwards from an edge), shortened to stay one spacing inside the
-  body and ``gap`` spacings from every other crack (:func:`first_stretch`); one shorter than a
-  spacing is not started, and a :class:`~dolfinx_meshfree.BulkStrengthWarning` says why;
+  body and ``gap`` spacings from every other crack, and moved sideways by up to half a spacing
+  where it would pass within ``NEAR_ROW`` spacing of a particle (:func:`first_stretch`); one
+  shorter than a spacing is not started, and a :class:`~dolfinx_meshfree.BulkStrengthWarning`
+  says why;
 * **into the built model** (:func:`insert_crack`): checked as any crack
   (:func:`~dolfinx_meshfree.geometry.crack.place_crack`; in a coupled model, its tips a support
   radius from the FE interface as :func:`~dolfinx_meshfree.approx.crack_cuts.attach_cracks`
@@ -45,6 +47,7 @@ import numpy as np
 
 from ..approx.crack_cuts import CrackCut, support_radius_at
 from ..geometry.crack import (
+    NEAR_ROW,
     Crack,
     gathered_segments,
     place_crack,
@@ -62,7 +65,14 @@ if TYPE_CHECKING:  # annotations only
     from .coupled import CoupledElasticity
     from .efg import EFGElasticity
 
-__all__ = ["CrackInitiation", "first_stretch", "insert_crack"]
+__all__ = ["SHIFTS", "CrackInitiation", "first_stretch", "insert_crack"]
+
+#: The sideways shifts, in particle spacings, tried in turn for a first stretch that passes within
+#: ``NEAR_ROW`` spacing of a particle (:func:`first_stretch`): across the stretch inside the
+#: body, along the edge from an edge site. An eighth of a spacing clears a particle that a
+#: 45-degree stretch through a cell's midpoint meets (at least ``NEAR_ROW`` = 0.1 off it); half a
+#: spacing is the most, a shift within the stress's averaging length (one spacing).
+SHIFTS = (0.0, 0.125, -0.125, 0.25, -0.25, 0.375, -0.375, 0.5, -0.5)
 
 
 @dataclass(frozen=True)
@@ -111,7 +121,11 @@ def first_stretch(
     """The bonded first stretch of the crack that starts at ``site`` (collective): ``(crack,
     "")``, or ``(None, why)`` when less than a spacing of it fits (module docstring); in a
     coupled model it also keeps ``interface_clearance`` (the particles' largest support radius)
-    from the FE interface."""
+    from the FE interface. A stretch that passes within ``NEAR_ROW`` spacing of a particle (a
+    45-degree stretch through a cell's midpoint meets its corners) is moved sideways by the
+    first of :data:`SHIFTS` that clears it, across the stretch or, from an edge site, along the
+    edge; a particle on a crack has no side, and one beside it biases the faces' one-sided
+    functions."""
     h, p = site.spacing, site.point
     facets = boundary_facets(domain.mesh) if coupled else domain.exterior_facets
     edge = gathered_segments(domain, facets)
@@ -149,16 +163,44 @@ def first_stretch(
         return float(length)
 
     d = site.direction
-    ahead = reach(d)
-    behind = 0.0 if site.on_edge else reach(-d)
-    if ahead < h or (not site.on_edge and behind < h):
+    particles = domain.particles.positions[:, :2]
+    slide = _edge_tangent(edge, p) if site.on_edge else np.array([d[1], -d[0]])
+    fits = False
+    for shift in SHIFTS:  # the first whose stretch fits and keeps off the particles
+        p = site.point + shift * h * slide
+        if site.on_edge and point_segment_distance(p[None], edge[:, 0], edge[:, 1]).min() > (
+            1e-9 * h
+        ):
+            continue  # slid off the edge's straight piece
+        ahead = reach(d)
+        behind = 0.0 if site.on_edge else reach(-d)
+        if ahead < h or (not site.on_edge and behind < h):
+            continue
+        fits = True
+        a, b = p - behind * d, p + ahead * d
+        if point_segment_distance(particles, a[None], b[None]).min() >= NEAR_ROW * h:
+            return Crack([a, b], through=True), ""
+    if not fits:
         return None, (
             f"less than a particle spacing ({h:.3g}) of its first stretch (from "
-            f"{np.round(p, 6).tolist()} along {np.round(d, 6).tolist()}) fits a spacing inside "
-            f"the body's edges, {init.gap:g} spacings from the other cracks and, in a coupled "
-            "model, a support radius from the FE interface (enlarge the patch there)"
+            f"{np.round(site.point, 6).tolist()} along {np.round(d, 6).tolist()}) fits a "
+            f"spacing inside the body's edges, {init.gap:g} spacings from the other cracks and, "
+            "in a coupled model, a support radius from the FE interface (enlarge the patch "
+            "there)"
         )
-    return Crack([p - behind * d, p + ahead * d], through=True), ""
+    return None, (
+        f"its first stretch from {np.round(site.point, 6).tolist()} along "
+        f"{np.round(d, 6).tolist()} passes within {NEAR_ROW:g} spacing of a particle however "
+        f"it is moved sideways (up to {max(SHIFTS):g} spacing): a particle on a crack has no "
+        "side"
+    )
+
+
+def _edge_tangent(edge: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """The unit tangent (2,) of the exterior segment (of ``edge``, (m, 2, 2)) nearest ``p``."""
+    k = int(np.argmin(point_segment_distance(p[None], edge[:, 0], edge[:, 1])[0]))
+    t = edge[k, 1] - edge[k, 0]
+    return t / np.linalg.norm(t)
 
 
 def insert_crack(

@@ -168,6 +168,26 @@ def test_a_refused_peak_leaves_other_regions_free():
     assert len(bulk) == 1 and "its region of tension is left out" in str(bulk[0].message)
 
 
+@pytest.mark.heavy(
+    twin="tests/test_crack_initiation.py::test_a_refused_peak_leaves_other_regions_free"
+)
+def test_region_chooses_where_cracks_start():
+    """Pure EFG, the second span's load 1.2 times the first's, cracks allowed only past x = 700
+    mm (``CrackInitiation(region=...)``): the support's peak (1.14 f_t at step 4) starts
+    nothing, and the warning says it lies outside the region; the second span's bottom starts
+    its crack at step 4, as the coupled model whose patch leaves the support out (measured at
+    x = 915 mm, 15 mm from the load)."""
+    model, notch, cmod = two_span_beam(None, 1.2)
+    region = mf.CrackInitiation(LAW, region=lambda x: x[:, 0] > 700.0)
+    path, bulk = follow(model, notch, cmod, region)
+    assert path.refused == [] and len(path.initiations) == 1
+    step, _, (a, _) = path.initiations[0]
+    assert step == 4 and abs(a[0] - 1.5 * S) <= 2 * H and a[1] == pytest.approx(0.0, abs=1e-9)
+    assert len(bulk) == 1
+    message = str(bulk[0].message)
+    assert "at (595, 100)" in message and "it lies outside CrackInitiation.region" in message
+
+
 @pytest.mark.parametrize("on_edge", [False, True])
 def test_a_first_stretch_is_moved_off_the_particles(on_edge):
     """Particles at the vertices of 10 mm squares. Inside, a stretch at 45 degrees through a
@@ -212,6 +232,12 @@ def test_regions_of_tension():
 
 
 def test_bad_initiation():
+    with pytest.raises(TypeError, match="region must be a callable on points"):
+        mf.CrackInitiation(LAW, region=np.ones(3))
+    model, notch, cmod = two_span_beam(lambda x: (x[0] > 150.0) & (x[0] < 450.0))
+    wrong = mf.CrackInitiation(LAW, region=lambda x: x[0] > 700.0)  # DOLFINx's marker layout
+    with pytest.raises(ValueError, match=r"CrackInitiation.region returned shape \(2,\)"):
+        follow(model, notch, cmod, wrong, mf.PathOptions(increment=0.005, end=0.01))
     with pytest.raises(TypeError, match="law must be a LinearCohesive"):
         mf.CrackInitiation(mf.LinearElastic(1.0, 0.2))
     for kw, text in (

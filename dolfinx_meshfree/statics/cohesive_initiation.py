@@ -53,6 +53,7 @@ if TYPE_CHECKING:  # annotations only
     from collections.abc import Callable, Sequence
 
     import numpy.typing as npt
+    from mpi4py import MPI
 
     from ..couplings.base import CoupledSolution
     from ..geometry.patch import ParticlePatch
@@ -64,6 +65,7 @@ __all__ = [
     "InitiationSite",
     "bulk_stress_peak",
     "initiation_site",
+    "region_mask",
     "site_at",
 ]
 
@@ -185,21 +187,8 @@ def initiation_site(
     # below)
     x, on_edge, particle, mid, sig_mid = _candidates(solution, domain, coupled)
     keep = np.ones(len(x), dtype=bool)
-    mask = None
     if region is not None:
-        mask = np.asarray(region(x.copy()), dtype=bool).reshape(-1)
-
-    def check_region() -> None:
-        if mask is not None and mask.shape != (len(x),):
-            raise ValueError(
-                f"initiation_site: region returned shape {mask.shape} for {len(x)} points; it "
-                "gets the points as rows (m, 2), x[:, 0] and x[:, 1], not as DOLFINx markers do "
-                "(x[0], x[1]), and must return one bool per point"
-            )
-
-    raise_on_all_ranks(comm, check_region)
-    if mask is not None:
-        keep &= mask
+        keep &= region_mask(region, x, comm, "initiation_site: region")
     distance = _CrackDistance(cracks)
     if cracks:
         keep &= distance(x) >= clear
@@ -342,6 +331,7 @@ def bulk_stress_peak(
     material: LinearElastic | None = None,
     exclude: Sequence[np.ndarray] = (),
     above: float = np.inf,
+    region: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> tuple[np.ndarray | None, float]:
     """The largest averaged largest principal stress of ``solution`` away from its cracks (by
     ``clearance``, default three spacings: the process zone and the tips' fields left out),
@@ -354,8 +344,9 @@ def bulk_stress_peak(
     out: the candidate nearest each point and, when it is above ``above`` (``f_t``), the
     candidates above ``above`` joined to it through neighbours :data:`REGION_SPACINGS`
     spacings apart. So the peak returned is that of another region, never a site beside a
-    refused one, where a crack would stand for the refused one, displaced. ``(None, -inf)``
-    when no candidate is left (collective)."""
+    refused one, where a crack would stand for the refused one, displaced. ``region(x)`` (m, 2)
+    -> (m,) bool: the candidates allowed (:class:`~dolfinx_meshfree.CrackInitiation`'s
+    ``region``). ``(None, -inf)`` when no candidate is left (collective)."""
     coupled, domain, cracks = _body(solution)
     h = particle_spacing(domain)
     clear = 3.0 * h if clearance is None else float(clearance)
@@ -367,10 +358,31 @@ def bulk_stress_peak(
         screened[distance(x) < clear] = -np.inf
     if len(exclude):
         screened[_regions(x, screened, exclude, above, REGION_SPACINGS * h)] = -np.inf
+    if region is not None:
+        screened[~region_mask(region, x, domain.comm, "CrackInitiation.region")] = -np.inf
     k = int(np.argmax(screened))
     if not np.isfinite(screened[k]):
         return None, -np.inf
     return x[k].copy(), float(screened[k])
+
+
+def region_mask(
+    region: Callable[[np.ndarray], np.ndarray], x: np.ndarray, comm: MPI.Comm, name: str
+) -> np.ndarray:
+    """``region(x)`` on the candidates ``x`` (m, 2) as a bool mask (m,), refused on every rank
+    (naming ``name``) when it has another shape (collective)."""
+    mask = np.asarray(region(x.copy()), dtype=bool).reshape(-1)
+
+    def check() -> None:
+        if mask.shape != (len(x),):
+            raise ValueError(
+                f"{name} returned shape {mask.shape} for {len(x)} points; it gets the points as "
+                "rows (m, 2), x[:, 0] and x[:, 1], not as DOLFINx markers do (x[0], x[1]), and "
+                "must return one bool per point"
+            )
+
+    raise_on_all_ranks(comm, check)
+    return mask
 
 
 def _regions(

@@ -60,6 +60,8 @@ from .cohesive_growth import CohesiveGrowth, _FieldFit, _ray
 from .cohesive_initiation import InitiationSite
 
 if TYPE_CHECKING:  # annotations only
+    from collections.abc import Callable
+
     from ..geometry.crack import CrackDomain
     from ..geometry.patch import ParticlePatch
     from .coupled import CoupledElasticity
@@ -87,12 +89,17 @@ class CrackInitiation:
             :meth:`~dolfinx_meshfree.InitiationSite.crack`).
         gap: Particle spacings kept between a new crack and every other.
         max_cracks: The most cracks started in one path.
+        region: ``region(x)`` (m, 2) -> (m,) bool: where cracks may start (default: anywhere).
+            A peak outside it starts nothing and the warning says so; the largest averaged
+            stress inside it above ``f_t`` starts a crack (as ``initiation_site``'s
+            ``region`` chooses the first crack's site).
     """
 
     law: LinearCohesive
     lead: float = CohesiveGrowth.ahead + 1.0
     gap: float = 1.5
     max_cracks: int = 8
+    region: Callable[[np.ndarray], np.ndarray] | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.law, LinearCohesive):
@@ -108,6 +115,10 @@ class CrackInitiation:
         n = self.max_cracks
         if isinstance(n, bool) or not (isinstance(n, int) and n >= 1):
             raise ValueError(f"max_cracks={n!r} must be an integer >= 1")
+        if self.region is not None and not callable(self.region):
+            raise TypeError(
+                f"region must be a callable on points (m, 2) -> (m,) bool, got {self.region!r}"
+            )
 
 
 def first_stretch(

@@ -753,14 +753,21 @@ def _candidate(
     law: LinearElastic,
     bulk: tuple[np.ndarray, float],
     refused: list[tuple[int, list[float], float, str]],
-    ft: float,
+    initiation: CrackInitiation,
 ) -> tuple[np.ndarray | None, float]:
-    """Where the next crack would start: the bulk's peak ``bulk``, or, with ``refused`` sites,
-    the peak of the regions above ``ft`` other than theirs (collective)."""
-    if not refused:
+    """Where the next crack would start: the bulk's peak ``bulk``, or, with ``refused`` sites
+    or the initiation's ``region``, the peak inside the region of the regions of tension above
+    ``f_t`` other than the refused sites' (collective)."""
+    if not refused and initiation.region is None:
         return bulk
     exclude = [np.asarray(point) for _, point, _, _ in refused]
-    return bulk_stress_peak(built.solution(), material=law, exclude=exclude, above=ft)
+    return bulk_stress_peak(
+        built.solution(),
+        material=law,
+        exclude=exclude,
+        above=initiation.law.ft,
+        region=initiation.region,
+    )
 
 
 def _start_crack(
@@ -996,7 +1003,7 @@ def follow_path(
                 bulk = bulk_stress_peak(built.solution(), material=law)
             if initiation is not None and bulk is not None:
                 # the bulk's peak, or, past sites that could not start one, the next above f_t
-                candidate = _candidate(built, law, bulk, result.refused, initiation.law.ft)
+                candidate = _candidate(built, law, bulk, result.refused, initiation)
                 tries = 0
                 while (
                     candidate[1] > initiation.law.ft
@@ -1022,7 +1029,7 @@ def follow_path(
                         problem, x = built.problem, built.x
                         its, work = its + its_g, work + work_g
                         bulk = bulk_stress_peak(built.solution(), material=law)
-                    candidate = _candidate(built, law, bulk, result.refused, initiation.law.ft)
+                    candidate = _candidate(built, law, bulk, result.refused, initiation)
             if arc:
                 previous = previous_new
             peak = max(peak, t)
@@ -1048,6 +1055,11 @@ def follow_path(
                             "this model does not start it (it carries the cracks it was given "
                             "or grew; follow_path(initiation=CrackInitiation(law)) starts it)"
                         )
+                    elif (
+                        initiation.region is not None
+                        and not initiation.region(np.asarray(point, dtype=float)[None])[0]
+                    ):
+                        why = "it lies outside CrackInitiation.region, where none may start"
                     elif result.refused:
                         where = result.refused[0][1]
                         why = (

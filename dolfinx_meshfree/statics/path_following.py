@@ -46,11 +46,7 @@ from ..physics.materials import LinearElastic
 from ..physics.state import voigt_strain
 from .cohesive import CohesiveSide, check_through
 from .cohesive_growth import CohesiveGrowth, _inside, grow_once
-from .cohesive_initiation import (
-    BulkStrengthWarning,
-    bulk_stress_peak,
-    site_at,
-)
+from .cohesive_initiation import BulkStrengthWarning, bulk_stress_peak, site_at
 from .coupled_newton import BlockModel, build_block_problem, law_internal_force
 from .crack_initiation import CrackInitiation, first_stretch, insert_crack
 from .efg import EFGBlockModel, EFGElasticity
@@ -1055,12 +1051,14 @@ def follow_path(
                             "this model does not start it (it carries the cracks it was given "
                             "or grew; follow_path(initiation=CrackInitiation(law)) starts it)"
                         )
+                    elif len(result.initiations) >= initiation.max_cracks:
+                        why = f"CrackInitiation.max_cracks={initiation.max_cracks} have started"
                     elif (
                         initiation.region is not None
                         and not initiation.region(np.asarray(point, dtype=float)[None])[0]
                     ):
                         why = "it lies outside CrackInitiation.region, where none may start"
-                    elif result.refused:
+                    else:  # the peak is in a refused site's region
                         where = result.refused[0][1]
                         why = (
                             f"no crack is started at ({where[0]:.6g}, {where[1]:.6g}): "
@@ -1068,8 +1066,6 @@ def follow_path(
                             "the peaks of other regions above f_t are tried (PathResult.refused "
                             "lists the sites refused)"
                         )
-                    else:
-                        why = f"CrackInitiation.max_cracks={initiation.max_cracks} have started"
                     warnings.warn(
                         f"at step {step} (control {tau:.6g}, load factor {t:.6g}) the bulk's "
                         f"averaged largest principal stress reaches {stress / ft_new:.3f} f_t "

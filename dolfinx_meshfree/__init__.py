@@ -99,6 +99,7 @@ from .statics.path_following import (
     PathError,
     PathOptions,
     PathResult,
+    PathShortWarning,
     follow_path,
 )
 from .statics.problem import CoupledLinearProblem
@@ -187,6 +188,7 @@ __all__ = [
     "PathError",
     "PathOptions",
     "PathResult",
+    "PathShortWarning",
     "PointsOutsideMeshError",
     "PressurizedBushing",
     "ProgressBar",

@@ -11,6 +11,8 @@ is capped; and the energy it dissipates is ``G_f / h`` per unit volume, less the
 must carry it through the peak to full softening. Every check runs serially and on 2 ranks.
 """
 
+import warnings
+
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
 from dolfinx_meshfree.physics.state import BoundLaw, PointState, tangent_from_voigt, voigt_strain
@@ -228,6 +230,25 @@ def test_path_following_bad_input():
             mf.DisplacementControl([[1.0, 0.5]], [[0.0, 0.0]]),
             mf.PathOptions(increment=1e-4, end=1e-3),
         )
+
+
+def test_a_path_cut_short_by_max_steps_says_so():
+    """The elastic part of the bar's path from increments of 1e-4 to 1e-3: with max_steps=3 it
+    stops at control 4.75e-4 (the increments grow by 1.5 on this easy stretch: 1e-4, 1.5e-4,
+    2.25e-4) and warns, naming max_steps and where it stopped; followed to the end it does not
+    warn. Before, a path cut short by max_steps returned without a word."""
+    model = _bar(2, "lagrange")
+    control = mf.DisplacementControl([[L, 0.5]], [[1.0, 0.0]])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        short = mf.follow_path(model, control, mf.PathOptions(1e-4, 1e-3, max_steps=3))
+        full = mf.follow_path(_bar(2, "lagrange"), control, mf.PathOptions(1e-4, 1e-3))
+    warned = [w for w in caught if issubclass(w.category, mf.PathShortWarning)]
+    assert len(short.control) == 3 and short.control[-1] == pytest.approx(4.75e-4, rel=1e-9)
+    assert full.control[-1] == pytest.approx(1e-3, rel=1e-12)
+    assert len(warned) == 1
+    message = str(warned[0].message)
+    assert "max_steps=3" in message and "at control 0.000475 of end=0.001" in message
 
 
 def test_localised_softening_is_objective_in_the_particle_spacing():

@@ -63,6 +63,7 @@ __all__ = [
     "PathError",
     "PathOptions",
     "PathResult",
+    "PathShortWarning",
     "follow_path",
 ]
 
@@ -74,6 +75,12 @@ class PathError(RuntimeError):
     def __init__(self, message: str, result: PathResult):
         super().__init__(message)
         self.result = result
+
+
+class PathShortWarning(UserWarning):
+    """:func:`follow_path` stopped at ``PathOptions.max_steps`` converged steps before the
+    control reached ``end``: the result is the path up to there, shorter than asked (the
+    message gives where it stopped and the last increments)."""
 
 
 @dataclass(frozen=True)
@@ -1095,6 +1102,21 @@ def follow_path(
                     )
             if options.min_load > 0 and peak > 0 and t < options.min_load * peak:
                 break
+        else:  # the loop's own condition ended it: the end reached, or max_steps
+            if tau < options.end - 1e-14 * abs(options.end):  # the same on every rank
+                last = np.diff(result.control[-11:]) if len(result.control) > 1 else []
+                warnings.warn(
+                    f"follow_path stopped after PathOptions.max_steps={options.max_steps} "
+                    f"converged steps at control {tau:.6g} of end={options.end:.6g} (load factor "
+                    f"{t:.6g}); the last increments average {np.mean(last) if len(last) else 0:.3g}"
+                    f" against increment={options.increment:.3g}. The result is the path up to "
+                    "there: raise max_steps, or, if the increments stayed small (each step "
+                    "re-equilibrated after a crack grew or started takes more than "
+                    f"easy={options.easy} iterations and the increment does not grow), a larger "
+                    "increment",
+                    PathShortWarning,
+                    stacklevel=2,
+                )
         for v in q:
             v.destroy()
         result.solution = built.solution()

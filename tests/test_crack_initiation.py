@@ -216,6 +216,19 @@ def test_a_first_stretch_is_moved_off_the_particles(on_edge):
     assert near == pytest.approx((0.25 / np.sqrt(5.0) if on_edge else 0.125) * H, rel=1e-9)
 
 
+def test_a_first_stretch_that_does_not_fit_is_not_moved():
+    """A site half a spacing below the top edge of the 10 mm grid, its stretch vertical: less
+    than a spacing of it fits inside the body, and it is refused as such. The sideways shifts
+    are for particles only: none is tried to make a stretch fit."""
+    msh = dolfinx.mesh.create_rectangle(
+        COMM, [np.zeros(2), np.array([100.0, 100.0])], [10, 10], dolfinx.mesh.CellType.quadrilateral
+    )
+    domain = CrackDomain.from_particles(mf.ParticleSet.from_vertices(msh))
+    site = InitiationSite(np.array([45.0, 95.0]), np.array([0.0, 1.0]), FT, 1.0, False, None, 1, H)
+    crack, why = first_stretch(mf.CrackInitiation(LAW), site, domain, [], False)
+    assert crack is None and why.startswith("less than a particle spacing (10) of its first")
+
+
 def test_regions_of_tension():
     """``bulk_stress_peak``'s exclusion by hand: on a line of candidates one spacing apart, two
     regions above the threshold (stresses 3, 4, 5 and 2, 6); excluding from the 4 leaves out

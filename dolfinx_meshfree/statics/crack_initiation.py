@@ -176,7 +176,6 @@ def first_stretch(
     d = site.direction
     particles = domain.particles.positions[:, :2]
     slide = _edge_tangent(edge, p) if site.on_edge else np.array([d[1], -d[0]])
-    fits = False
     for shift in SHIFTS:  # the first whose stretch fits and keeps off the particles
         p = site.point + shift * h * slide
         if site.on_edge and point_segment_distance(p[None], edge[:, 0], edge[:, 1]).min() > (
@@ -186,19 +185,18 @@ def first_stretch(
         ahead = reach(d)
         behind = 0.0 if site.on_edge else reach(-d)
         if ahead < h or (not site.on_edge and behind < h):
+            if shift == 0.0:  # the site's own stretch does not fit: no shift is looked for
+                return None, (
+                    f"less than a particle spacing ({h:.3g}) of its first stretch (from "
+                    f"{np.round(site.point, 6).tolist()} along {np.round(d, 6).tolist()}) fits "
+                    f"a spacing inside the body's edges, {init.gap:g} spacings from the other "
+                    "cracks and, in a coupled model, a support radius from the FE interface "
+                    "(enlarge the patch there)"
+                )
             continue
-        fits = True
         a, b = p - behind * d, p + ahead * d
         if point_segment_distance(particles, a[None], b[None]).min() >= NEAR_ROW * h:
             return Crack([a, b], through=True), ""
-    if not fits:
-        return None, (
-            f"less than a particle spacing ({h:.3g}) of its first stretch (from "
-            f"{np.round(site.point, 6).tolist()} along {np.round(d, 6).tolist()}) fits a "
-            f"spacing inside the body's edges, {init.gap:g} spacings from the other cracks and, "
-            "in a coupled model, a support radius from the FE interface (enlarge the patch "
-            "there)"
-        )
     return None, (
         f"its first stretch from {np.round(site.point, 6).tolist()} along "
         f"{np.round(d, 6).tolist()} passes within {NEAR_ROW:g} spacing of a particle however "

@@ -355,15 +355,13 @@ class ParticleSet:
         v = np.zeros(self.num_particles)
         for chunk, m in _lattice_chunks(msh, cells, tree):
             q = lattice_quadrature(msh, m, chunk)
-            exact = cell_quadrature(msh, 4, chunk)
-            where = np.repeat(np.arange(len(chunk)), len(q) // len(chunk))
-            ratio = np.bincount(
-                np.repeat(np.arange(len(chunk)), len(exact) // len(chunk)),
-                weights=exact.weights,
-                minlength=len(chunk),
-            ) / np.bincount(where, weights=q.weights, minlength=len(chunk))
+            # the rules' points come cell by cell: each cell's lattice weights scaled to its
+            # Gauss volume
+            w = q.weights.reshape(len(chunk), -1)
+            exact = cell_quadrature(msh, 4, chunk).weights.reshape(len(chunk), -1).sum(axis=1)
+            w = w * (exact / w.sum(axis=1))[:, None]
             idx, share = _nearest_shares(tree, q.points, self.gdim)
-            share *= (q.weights * ratio[where])[:, None]
+            share *= w.reshape(-1, 1)
             v += np.bincount(idx.ravel(), weights=share.ravel(), minlength=self.num_particles)
         v = self.comm.allreduce(v, op=MPI.SUM)
         return np.maximum(v, 1e-300)

@@ -64,6 +64,7 @@ __all__ = [
     "BulkStrengthWarning",
     "InitiationSite",
     "bulk_stress_peak",
+    "bulk_stress_peaks",
     "initiation_site",
     "region_mask",
     "site_at",
@@ -347,6 +348,19 @@ def bulk_stress_peak(
     refused one, where a crack would stand for the refused one, displaced. ``region(x)`` (m, 2)
     -> (m,) bool: the candidates allowed (:class:`~dolfinx_meshfree.CrackInitiation`'s
     ``region``). ``(None, -inf)`` when no candidate is left (collective)."""
+    return bulk_stress_peaks(solution, clearance, material, exclude, above, region)[1]
+
+
+def bulk_stress_peaks(
+    solution: EFGSolution | CoupledSolution,
+    clearance: float | None = None,
+    material: LinearElastic | None = None,
+    exclude: Sequence[np.ndarray] = (),
+    above: float = np.inf,
+    region: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> tuple[tuple[np.ndarray | None, float], tuple[np.ndarray | None, float]]:
+    """:func:`bulk_stress_peak` without and with ``exclude`` and ``region``, from one screen of
+    the stresses: ``(the bulk's peak, the peak of the candidates allowed)`` (collective)."""
     coupled, domain, cracks = _body(solution)
     h = particle_spacing(domain)
     clear = 3.0 * h if clearance is None else float(clearance)
@@ -356,10 +370,20 @@ def bulk_stress_peak(
     screened = _screen(x, mid[use], sig_mid[use], CohesiveGrowth.radius * h)
     if cracks:
         screened[distance(x) < clear] = -np.inf
+    overall = _peak(x, screened)
+    if not len(exclude) and region is None:
+        return overall, overall
+    allowed = screened.copy()
     if len(exclude):
-        screened[_regions(x, screened, exclude, above, REGION_SPACINGS * h)] = -np.inf
+        allowed[_regions(x, screened, exclude, above, REGION_SPACINGS * h)] = -np.inf
     if region is not None:
-        screened[~region_mask(region, x, domain.comm, "CrackInitiation.region")] = -np.inf
+        allowed[~region_mask(region, x, domain.comm, "CrackInitiation.region")] = -np.inf
+    return overall, _peak(x, allowed)
+
+
+def _peak(x: np.ndarray, screened: np.ndarray) -> tuple[np.ndarray | None, float]:
+    """The candidate of ``x`` with the largest ``screened`` stress and that stress; ``(None,
+    -inf)`` when none is finite (local)."""
     k = int(np.argmax(screened))
     if not np.isfinite(screened[k]):
         return None, -np.inf

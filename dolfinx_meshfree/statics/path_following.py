@@ -46,7 +46,7 @@ from ..physics.materials import LinearElastic
 from ..physics.state import voigt_strain
 from .cohesive import CohesiveSide, check_through
 from .cohesive_growth import CohesiveGrowth, _inside, grow_once
-from .cohesive_initiation import BulkStrengthWarning, bulk_stress_peak, site_at
+from .cohesive_initiation import BulkStrengthWarning, bulk_stress_peaks, site_at
 from .coupled_newton import BlockModel, build_block_problem, law_internal_force
 from .crack_initiation import CrackInitiation, first_stretch, insert_crack
 from .efg import EFGBlockModel, EFGElasticity
@@ -751,23 +751,21 @@ def _reequilibrated(
 MAX_REFUSED_PER_STEP = 8
 
 
-def _candidate(
+def _bulk_peaks(
     built: BlockModel | EFGBlockModel,
     law: LinearElastic,
-    bulk: tuple[np.ndarray, float],
     refused: list[tuple[int, list[float], float, str]],
-    initiation: CrackInitiation,
-) -> tuple[np.ndarray | None, float]:
-    """Where the next crack would start: the bulk's peak ``bulk``, or, with ``refused`` sites
-    or the initiation's ``region``, the peak inside the region of the regions of tension above
-    ``f_t`` other than the refused sites' (collective)."""
-    if not refused and initiation.region is None:
-        return bulk
-    exclude = [np.asarray(point) for _, point, _, _ in refused]
-    return bulk_stress_peak(
+    initiation: CrackInitiation | None,
+) -> tuple[tuple[np.ndarray | None, float], tuple[np.ndarray | None, float]]:
+    """The bulk's peak (the record) and where the next crack would start: the same peak, or,
+    with ``refused`` sites or the initiation's ``region``, the peak inside the region of the
+    regions of tension above ``f_t`` other than the refused sites' (collective)."""
+    if initiation is None:
+        return bulk_stress_peaks(built.solution(), material=law)
+    return bulk_stress_peaks(
         built.solution(),
         material=law,
-        exclude=exclude,
+        exclude=[np.asarray(point) for _, point, _, _ in refused],
         above=initiation.law.ft,
         region=initiation.region,
     )
@@ -1003,10 +1001,9 @@ def follow_path(
                 )
             bulk = None
             if watch_bulk:  # where a further crack would start: the bulk's stress off the cracks
-                bulk = bulk_stress_peak(built.solution(), material=law)
+                # the bulk's peak, and past sites that could not start one the next above f_t
+                bulk, candidate = _bulk_peaks(built, law, result.refused, initiation)
             if initiation is not None and bulk is not None:
-                # the bulk's peak, or, past sites that could not start one, the next above f_t
-                candidate = _candidate(built, law, bulk, result.refused, initiation)
                 tries = 0
                 while (
                     candidate[1] > initiation.law.ft
@@ -1031,8 +1028,7 @@ def follow_path(
                         )  # fmt: skip
                         problem, x = built.problem, built.x
                         its, work = its + its_g, work + work_g
-                        bulk = bulk_stress_peak(built.solution(), material=law)
-                    candidate = _candidate(built, law, bulk, result.refused, initiation)
+                    bulk, candidate = _bulk_peaks(built, law, result.refused, initiation)
             if arc:
                 previous = previous_new
             peak = max(peak, t)

@@ -230,7 +230,7 @@ def test_a_first_stretch_that_does_not_fit_is_not_moved():
 
 
 def test_regions_of_tension():
-    """``bulk_stress_peak``'s exclusion by hand: on a line of candidates one spacing apart, two
+    """``bulk_stress_peaks``' exclusion by hand: on a line of candidates one spacing apart, two
     regions above the threshold (stresses 3, 4, 5 and 2, 6); excluding from the 4 leaves out
     3, 4, 5 (joined above the threshold), not the 6 beyond a candidate below it; a seed at a
     candidate below the threshold leaves out that candidate only."""

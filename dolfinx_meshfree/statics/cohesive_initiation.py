@@ -321,7 +321,7 @@ def _crack_direction(
 
 
 #: Candidates closer than this many particle spacings are neighbours in a region of tension
-#: (:func:`bulk_stress_peak`'s ``exclude``): the candidates (cell and facet midpoints) lie half a
+#: (:func:`bulk_stress_peaks`' ``exclude``): the candidates (cell and facet midpoints) lie half a
 #: spacing to a spacing apart.
 REGION_SPACINGS = 1.5
 
@@ -330,25 +330,14 @@ def bulk_stress_peak(
     solution: EFGSolution | CoupledSolution,
     clearance: float | None = None,
     material: LinearElastic | None = None,
-    exclude: Sequence[np.ndarray] = (),
-    above: float = np.inf,
-    region: Callable[[np.ndarray], np.ndarray] | None = None,
-) -> tuple[np.ndarray | None, float]:
+) -> tuple[np.ndarray, float]:
     """The largest averaged largest principal stress of ``solution`` away from its cracks (by
     ``clearance``, default three spacings: the process zone and the tips' fields left out),
     FE side included, and where: the screen of :func:`initiation_site` (the Gaussian average of
     the cells' midpoint stresses, length one spacing) over the midpoints of every cell and
     exterior facet (``material``: the bulk's law, default the solution's). Above ``f_t`` a crack
-    would start there.
-
-    ``exclude``: points (sites that could not start a crack) whose regions of tension are left
-    out: the candidate nearest each point and, when it is above ``above`` (``f_t``), the
-    candidates above ``above`` joined to it through neighbours :data:`REGION_SPACINGS`
-    spacings apart. So the peak returned is that of another region, never a site beside a
-    refused one, where a crack would stand for the refused one, displaced. ``region(x)`` (m, 2)
-    -> (m,) bool: the candidates allowed (:class:`~dolfinx_meshfree.CrackInitiation`'s
-    ``region``). ``(None, -inf)`` when no candidate is left (collective)."""
-    return bulk_stress_peaks(solution, clearance, material, exclude, above, region)[1]
+    would start there (collective)."""
+    return bulk_stress_peaks(solution, clearance, material)[0]
 
 
 def bulk_stress_peaks(
@@ -359,8 +348,16 @@ def bulk_stress_peaks(
     above: float = np.inf,
     region: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> tuple[tuple[np.ndarray | None, float], tuple[np.ndarray | None, float]]:
-    """:func:`bulk_stress_peak` without and with ``exclude`` and ``region``, from one screen of
-    the stresses: ``(the bulk's peak, the peak of the candidates allowed)`` (collective)."""
+    """From one screen of the stresses: ``(the bulk's peak, the peak of the candidates
+    allowed)``, the first :func:`bulk_stress_peak`'s (collective).
+
+    ``exclude``: points (sites that could not start a crack) whose regions of tension are left
+    out: the candidate nearest each point and, when it is above ``above`` (``f_t``), the
+    candidates above ``above`` joined to it through neighbours :data:`REGION_SPACINGS`
+    spacings apart. So the second peak is that of another region, never a site beside a
+    refused one, where a crack would stand for the refused one, displaced. ``region(x)`` (m, 2)
+    -> (m,) bool: the candidates allowed (:class:`~dolfinx_meshfree.CrackInitiation`'s
+    ``region``). The second is ``(None, -inf)`` when no candidate is left."""
     coupled, domain, cracks = _body(solution)
     h = particle_spacing(domain)
     clear = 3.0 * h if clearance is None else float(clearance)
@@ -370,7 +367,8 @@ def bulk_stress_peaks(
     screened = _screen(x, mid[use], sig_mid[use], CohesiveGrowth.radius * h)
     if cracks:
         screened[distance(x) < clear] = -np.inf
-    overall = _peak(x, screened)
+    k = int(np.argmax(screened))
+    overall = x[k].copy(), float(screened[k])
     if not len(exclude) and region is None:
         return overall, overall
     allowed = screened.copy()
@@ -378,16 +376,10 @@ def bulk_stress_peaks(
         allowed[_regions(x, screened, exclude, above, REGION_SPACINGS * h)] = -np.inf
     if region is not None:
         allowed[~region_mask(region, x, domain.comm, "CrackInitiation.region")] = -np.inf
-    return overall, _peak(x, allowed)
-
-
-def _peak(x: np.ndarray, screened: np.ndarray) -> tuple[np.ndarray | None, float]:
-    """The candidate of ``x`` with the largest ``screened`` stress and that stress; ``(None,
-    -inf)`` when none is finite (local)."""
-    k = int(np.argmax(screened))
-    if not np.isfinite(screened[k]):
-        return None, -np.inf
-    return x[k].copy(), float(screened[k])
+    k = int(np.argmax(allowed))
+    if not np.isfinite(allowed[k]):
+        return overall, (None, -np.inf)
+    return overall, (x[k].copy(), float(allowed[k]))
 
 
 def region_mask(

@@ -220,7 +220,7 @@ class PathResult:
     #: The bulk's peaks above the new faces' ``f_t`` that could not start a crack
     #: (``follow_path(initiation=...)``): ``(step, point, stress, why)`` each. The region of
     #: tension about such a site (the candidates above ``f_t`` joined to it,
-    #: :func:`~dolfinx_meshfree.statics.cohesive_initiation.bulk_stress_peak`'s ``exclude``) is
+    #: :func:`~dolfinx_meshfree.statics.cohesive_initiation.bulk_stress_peaks`' ``exclude``) is
     #: left out from then on, and the peak of another region above ``f_t`` is tried.
     refused: list[tuple[int, list[float], float, str]] = field(default_factory=list)
 

@@ -11,9 +11,10 @@ a :class:`PointState`, one per set of quadrature points (the particle rule, the 
   has converged, after a last evaluation at the converged displacements;
 * :meth:`PointState.restore`: the trial state is dropped; called when a step is cut (its
   iterations never touch the committed state, so nothing else is needed);
-* a quadrature that changes (a cell cut by a crack, a cell that joins the patch) is not handled
-  here yet: the solvers that change the quadrature refuse a law with state (see
-  :func:`check_stateless`).
+* a quadrature that changes (a cell newly cut by a growing cohesive crack) gets its committed
+  state from the old points of the same cell (:mod:`~dolfinx_meshfree.statics.state_carry`);
+  the solvers that change the quadrature in other ways (a cell that joins the patch, a crack
+  growing in dynamics) refuse a law with state (see :func:`check_stateless`).
 
 :class:`BoundLaw` turns a law and its :class:`PointState` into a
 :class:`~dolfinx_meshfree.physics.constitutive.Material` (``first_piola`` and ``tangent`` of a
@@ -163,12 +164,23 @@ class PointState:
         points: (m, gdim) coordinates of the points (to name a bad one).
         band: (m,) crack-band widths ``h`` (laws with ``needs_band``; checked by the law's
             ``check_band``), or ``None``.
+        cells: (m,) the local cell of each point, or ``None``: what a state carried to a
+            changed quadrature is taken from (:mod:`~dolfinx_meshfree.statics.state_carry`).
     """
 
-    def __init__(self, law: StatefulLaw, points: np.ndarray, band: np.ndarray | None = None):
+    def __init__(
+        self,
+        law: StatefulLaw,
+        points: np.ndarray,
+        band: np.ndarray | None = None,
+        cells: np.ndarray | None = None,
+    ):
         self.law = law
         self.points = np.asarray(points, dtype=float)
         m = self.points.shape[0]
+        self.cells = None if cells is None else np.asarray(cells, dtype=np.int64).reshape(-1)
+        if self.cells is not None and self.cells.shape != (m,):
+            raise ValueError(f"cells should have shape ({m},), got {self.cells.shape}")
         if law.needs_band:
             if band is None:
                 raise ValueError(

@@ -94,7 +94,7 @@ class FEStateLaw:
                 factor, msh, self.cells, 1
             ).reshape(-1)
         band = cell_sizes(msh, self.cells).repeat(self.num_points) if law.needs_band else None
-        self.state = PointState(law, self.points, band)
+        self.state = PointState(law, self.points, band, q.cells)
         dxq = ufl.Measure(
             "dx",
             domain=msh,

@@ -41,9 +41,10 @@ from scipy.spatial import cKDTree
 
 from ..approx.mls import MomentMatrixError
 from ..couplings.base import CoupledSolution
+from ..geometry.crack import particle_spacing
 from ..parallel import raise_on_all_ranks
 from ..physics.materials import LinearElastic
-from ..physics.state import voigt_strain
+from ..physics.state import is_stateful, voigt_strain
 from .cohesive import CohesiveSide, check_through
 from .cohesive_growth import CohesiveGrowth, _inside, grow_once
 from .cohesive_initiation import BulkStrengthWarning, bulk_stress_peaks, site_at
@@ -52,9 +53,11 @@ from .crack_initiation import CrackInitiation, first_stretch, insert_crack
 from .efg import EFGBlockModel, EFGElasticity
 from .petsc import BlockSystem, SolverOptions, solver_options
 from .sides import BlockProblem
+from .state_carry import CarryCounts, carry_states
 
 if TYPE_CHECKING:  # annotations only
     from ..geometry.crack import Crack
+    from ..physics.state import PointState
     from .coupled import CoupledElasticity
 
 __all__ = [
@@ -223,6 +226,13 @@ class PathResult:
     #: :func:`~dolfinx_meshfree.statics.cohesive_initiation.bulk_stress_peaks`' ``exclude``) is
     #: left out from then on, and the peak of another region above ``f_t`` is tried.
     refused: list[tuple[int, list[float], float, str]] = field(default_factory=list)
+    #: With a law with state and cracks that grow: per rebuild of the model on its changed
+    #: cracks, ``(step, dissipated before, dissipated after, moved, crossed)``: the bulk's
+    #: dissipated energy before and after its states were carried to the new points
+    #: (:mod:`~dolfinx_meshfree.statics.state_carry`; the difference is what the transfer
+    #: changed), the points that took a state from another position and, of them, those that
+    #: took it across a crack.
+    carried: list[tuple[int, float, float, int, int]] = field(default_factory=list)
 
     @property
     def peak(self) -> tuple[float, float]:
@@ -282,31 +292,46 @@ def _control_function(
     return g
 
 
-def _energies(built: BlockModel | EFGBlockModel) -> tuple[float, float]:
-    """``(stored, dissipated)`` over every point with state (summed over ranks)."""
-    stored = dissipated = 0.0
+def _bulk_points(
+    built: BlockModel | EFGBlockModel,
+) -> list[tuple[PointState, np.ndarray, Callable[[], np.ndarray]]]:
+    """The bulk's sets of points with state (the FE cells', the particles', the ramps' blended
+    cells'; not the cohesive faces'), in a fixed order: ``(state, weights, strain)`` each, where
+    ``strain()`` is the Voigt strain at the current ``x``."""
+    out = []
     fe = getattr(getattr(built, "fe", None), "state_law", None)
     if fe is not None:
-        st = fe.state
-        stored += float(fe.law.stored_energy(fe.strain(), st.committed) @ fe.weights)
-        dissipated += st.dissipated(fe.weights)
+        out.append((fe.state, fe.weights, fe.strain))
     side = built.particles
     if side.state is not None:
         forces = side.forces
-        coeffs = side.coefficients(built.x[_particle_field(built)])
-        eps = voigt_strain(forces.displacement_gradient(coeffs))
-        stored += float(side.state.law.stored_energy(eps, side.state.committed) @ forces.weights)
-        dissipated += side.state.dissipated(forces.weights)
-    for shared in built.problem.shared:  # the ramps' blended cells, cohesive faces
+
+        def particle_strain() -> np.ndarray:
+            coeffs = side.coefficients(built.x[_particle_field(built)])
+            return voigt_strain(forces.displacement_gradient(coeffs))
+
+        out.append((side.state, forces.weights, particle_strain))
+    for shared in built.problem.shared:  # the ramps' blended cells
+        if not hasattr(shared, "energies") and getattr(shared, "state", None) is not None:
+            gdim = shared.forces.gdim
+
+            def blended_strain(shared: object = shared, gdim: int = gdim) -> np.ndarray:
+                return voigt_strain(shared.deformation_gradient(built.x[:2]) - np.eye(gdim))
+
+            out.append((shared.state, shared.forces.weights, blended_strain))
+    return out
+
+
+def _energies(built: BlockModel | EFGBlockModel) -> tuple[float, float]:
+    """``(stored, dissipated)`` over every point with state (summed over ranks)."""
+    stored = dissipated = 0.0
+    for st, weights, strain in _bulk_points(built):
+        stored += float(st.law.stored_energy(strain(), st.committed) @ weights)
+        dissipated += st.dissipated(weights)
+    for shared in built.problem.shared:  # the cohesive faces
         if hasattr(shared, "energies"):
             more = shared.energies([built.x[i] for i in shared.fields])
             stored, dissipated = stored + more[0], dissipated + more[1]
-        elif getattr(shared, "state", None) is not None:
-            forces = shared.forces
-            H = shared.deformation_gradient(built.x[:2]) - np.eye(forces.gdim)
-            st = shared.state
-            stored += float(st.law.stored_energy(voigt_strain(H), st.committed) @ forces.weights)
-            dissipated += st.dissipated(forces.weights)
     comm = _comm(built)
     stored, dissipated = comm.allreduce(stored), comm.allreduce(dissipated)
     law = built.model.material if isinstance(built, EFGBlockModel) else built.model.law
@@ -584,11 +609,11 @@ def _check_growth(
             "grew, equilibrium is found again at the same control value, which ArcLength has not"
         )
     law = model.material if efg else model.law
-    if not isinstance(law, LinearElastic):
+    if not (isinstance(law, LinearElastic) or is_stateful(law)):
         raise ValueError(
-            f"growth with a {type(law).__name__} bulk: a growing crack changes the cut cells' "
-            "quadrature, and the bulk's state would have to be carried to the new points; only "
-            "an elastic bulk (LinearElastic, the fictitious crack model) grows cracks here"
+            f"growth with a {type(law).__name__} bulk: cracks grow in a small-strain bulk, "
+            "elastic (LinearElastic, the fictitious crack model) or with state (RankineDamage, "
+            "J2Plasticity: carried to the cut cells' new points); not at finite strain"
         )
     for gr in growths:
         gr.check(model.cohesive, cracks)
@@ -641,10 +666,14 @@ def _grow(
     def coefficients() -> np.ndarray:  # gathered only when a crack grows
         return built.solution().coefficients
 
+    # the direction of a new segment: the averaged elastic stress of the total strain (with a
+    # law with state, the principal strain's direction, by isotropy)
+    law = model.material
+    elastic = law.elastic() if is_stateful(law) else law
     for gr in growths:
         side = next(s for s in sides if s.cohesive.crack is gr.crack)
         # collective; its errors (a crack leaving the patch) are raised on every rank
-        grown = grow_once(gr, side, model.mls, coefficients, model.material, domain, side.h)
+        grown = grow_once(gr, side, model.mls, coefficients, elastic, domain, side.h)
         if grown is not None:
             end, fitted = grown
             k = next(i for i, c in enumerate(model.cohesive) if c.crack is gr.crack)
@@ -658,11 +687,14 @@ def _rebuild(
     built: BlockModel | EFGBlockModel,
     efg: bool,
     u: dolfinx.fem.Function | None,
-) -> BlockModel | EFGBlockModel:
-    """The block model of ``model`` after a crack grew (collective): the fields of ``built``
-    carried over, the cohesive faces' committed states carried point by point (the old face
-    points keep their positions; new ones start bonded); ``built`` is destroyed once the new
-    model is built (on an error it is left to the caller)."""
+) -> tuple[BlockModel | EFGBlockModel, tuple[float, float, int, int] | None]:
+    """The block model of ``model`` after its cracks changed (collective): the fields of
+    ``built`` carried over, the cohesive faces' committed states carried point by point (the old
+    face points keep their positions; new ones start bonded), the bulk's committed states
+    carried to its new points (:mod:`.state_carry`). Also returns the bulk's dissipated energy
+    before and after, and the points that took a state from another position and, of them,
+    across a crack (summed over ranks; ``None`` without a law with state). ``built`` is
+    destroyed once the new model is built (on an error it is left to the caller)."""
     state = _owned(built.x)
     comm = _comm(built)
     old = {}
@@ -671,6 +703,8 @@ def _rebuild(
             pts = np.concatenate(comm.allgather(side.points)).reshape(-1, 2)
             kap = np.concatenate(comm.allgather(side.state.committed["kappa"][:, 0]))
             old[id(side.cohesive.crack)] = (pts, kap, side.h)
+    bulk = _bulk_points(built)
+    before = comm.allreduce(sum(st.dissipated(w) for st, w, _ in bulk))
     if efg:
         new = model.block_model()
         for v, a in zip(new.x, state, strict=True):
@@ -678,6 +712,7 @@ def _rebuild(
     else:
         new = build_block_problem(model, law_internal_force(model.law, u), u, model.law, state)
     built.destroy()
+    h = 0.0
     for side in new.problem.shared:
         if isinstance(side, CohesiveSide) and id(side.cohesive.crack) in old:
             pts, kap, h = old[id(side.cohesive.crack)]
@@ -686,7 +721,17 @@ def _rebuild(
                 same = dist <= 1e-9 * h
                 side.state.committed["kappa"][same, 0] = kap[k[same]]
             side.state.restore()
-    return new
+    counts, after = CarryCounts(), 0.0
+    if bulk:
+        cracks = model.cracks if efg else model.patch.cracks
+        h = h or particle_spacing(model._domain if efg else model.patch)
+        new_bulk = _bulk_points(new)
+        counts = carry_states([b[0] for b in bulk], [b[0] for b in new_bulk], cracks, h)
+        after = comm.allreduce(sum(st.dissipated(w) for st, w, _ in new_bulk))
+    if not bulk:
+        return new, None
+    moved, crossed = (comm.allreduce(n) for n in (counts.moved, counts.crossed))
+    return new, (before, after, moved, crossed)
 
 
 def _reequilibrated(
@@ -717,13 +762,15 @@ def _reequilibrated(
     old = _owned(built.x)
     comm = _comm(built)
     try:
-        built = _rebuild(model, built, efg, u)
+        built, carried = _rebuild(model, built, efg, u)
     except MomentMatrixError as err:  # raised on every rank
         raise PathError(
             f"{event} and the MLS cannot be evaluated beside it ({err}); choose a finer particle "
             "spacing or a larger dilation",
             result,
         ) from None
+    if carried is not None:  # the step being converged: its record is appended after this
+        result.carried.append((len(result.control) + 1, *carried))
     problem, x = built.problem, built.x
     side = built.particles
     lo, hi = x[k_p].getOwnershipRange()
@@ -847,8 +894,10 @@ def follow_path(
             (:class:`~dolfinx_meshfree.statics.cohesive_growth.CohesiveGrowth`): after a
             converged step a crack whose softening front nears its tip grows, the model is
             rebuilt on it (the faces' states carried) and brought back to equilibrium at the same
-            control value, then checked again. With an elastic bulk and indirect displacement
-            control; :attr:`PathResult.extensions` records each growth.
+            control value, then checked again. With a small-strain bulk (elastic, or with
+            state: carried to the cut cells' new points, :mod:`.state_carry`) and indirect
+            displacement control; :attr:`PathResult.extensions` records each growth (and
+            :attr:`PathResult.carried` each transfer of a state).
         initiation: Start further cohesive cracks where the bulk's averaged largest principal
             stress passes ``f_t`` (:class:`~dolfinx_meshfree.CrackInitiation`, multiple
             cracking: :mod:`~dolfinx_meshfree.statics.crack_initiation`); each then grows like

@@ -289,7 +289,7 @@ class ParticleSide:
             if material.needs_band:
                 factor = particle_band_factor(tables.get("approximation"), band_factor)
                 band = factor * cell_sizes(particles.mesh, q.cells)
-            self.state = PointState(material, q.points, band)
+            self.state = PointState(material, q.points, band, q.cells)
             material = BoundLaw(self.state)
         self.forces = InternalForces(
             tq,
@@ -372,7 +372,7 @@ class BlendedSide:
             band = None
             if material.needs_band:
                 band = cell_sizes(fe.V.mesh, quadrature.cells)
-            self.state = PointState(material, quadrature.points, band)
+            self.state = PointState(material, quadrature.points, band, quadrature.cells)
             material = BoundLaw(self.state)
         self.forces = InternalForces(
             table, weights, material, test_gradients=test_gradients, comm=particles.comm

@@ -223,9 +223,11 @@ def test_growth_in_a_plastic_bulk():
     of their cells (statics.state_carry), and
 
     * the bulk's plastic dissipation moves by at most 1.5e-4 of itself at a rebuild (measured
-      6.3e-5, serial and 2 ranks);
+      6.4e-5);
     * the work of the load minus the stored energy equals the energy dissipated by the faces and
-      the bulk within 2.5e-3 (measured 9.9e-4 serial, 1.1e-3 on 2 ranks)."""
+      the bulk within 3e-3 (measured 1.5e-3).
+
+    Serial and 2 ranks take the same 32 steps, equal to 5e-14."""
     law = mf.J2Plasticity(E=E, nu=NU, sigma_y=1.5, H=3000.0, plane="strain")
     model, crack, control = _bar("efg", 30.0, law=law)
     model.add_cohesive(crack, mf.LinearCohesive(FT, GF), segments=[1])
@@ -236,7 +238,7 @@ def test_growth_in_a_plastic_bulk():
     assert moved.min() > 0 and before[-1] > 0.2 * path.dissipated_energy[-1]  # plastic
     assert np.all(np.abs(after - before) <= 1.5e-4 * before)
     balance = path.external_work[-1] - path.stored_energy[-1]
-    assert abs(balance - path.dissipated_energy[-1]) <= 2.5e-3 * path.dissipated_energy[-1]
+    assert abs(balance - path.dissipated_energy[-1]) <= 3e-3 * path.dissipated_energy[-1]
 
 
 @pytest.mark.heavy(twin="tests/test_cohesive_growth.py::test_crack_turns_normal_to_the_load")

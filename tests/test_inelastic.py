@@ -265,6 +265,33 @@ def test_j2_tangent_matches_finite_differences(plane, H):
         assert ((new["alpha"] > sub["alpha"]) == (sel is plastic)).all()
 
 
+@pytest.mark.parametrize("plane", ["strain", None])
+def test_j2_tangent_on_the_yield_surface_is_the_loading_one(plane):
+    """At the strain of the last plastic step (the next step's first Newton iteration) the
+    trial stress lies on the yield surface to round-off, either side: the tangent is the loading
+    one whatever the round-off (strains nudged by 1e-15 relative give it to 1e-12), equal to
+    the forward difference along further proportional loading (1e-6), not the elastic one."""
+    law = J2Plasticity(E_S, NU_S, SY, H=0.3, plane=plane)
+    nv, m = law.nv, 40
+    rng = np.random.default_rng(5)
+    eps1 = 6 * SY / E_S * rng.normal(size=(m, nv))
+    _, _, state = law.update(eps1, law.initial_state(m))
+    yielded = state["alpha"][:, 0] > 0
+    assert yielded.sum() >= 30
+    sub = {k: v[yielded] for k, v in state.items()}
+    eps = eps1[yielded]
+    s0, T, _ = law.update(eps, sub)
+    for nudge in (1.0 + 1e-15, 1.0 - 1e-15):
+        _, Tn, _ = law.update(eps * nudge, sub)
+        np.testing.assert_allclose(Tn, T, rtol=1e-12, atol=1e-12 * E_S)
+    d = 1e-7
+    s1, _, _ = law.update(eps * (1 + d), sub)
+    fd = (s1 - s0) / d
+    np.testing.assert_allclose(np.einsum("qij,qj->qi", T, eps), fd, rtol=1e-6, atol=1e-6 * SY)
+    C = law.elastic().voigt()
+    assert np.abs(np.einsum("qij,qj->qi", T, eps) - eps @ C.T).max() > 0.1 * SY
+
+
 # --- 4. J2 radial return against closed forms --------------------------------------------------
 
 

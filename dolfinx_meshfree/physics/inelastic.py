@@ -43,6 +43,9 @@ _TWO6 = np.array([1.0, 1.0, 1.0, 2.0, 2.0, 2.0])
 #: In-plane rows/columns (xx, yy, xy) of the 3D Voigt order.
 _PLANE = np.array([0, 1, 5])
 _SQRT23 = float(np.sqrt(2.0 / 3.0))
+#: A yielded J2 point whose trial stress lies within this fraction of the yield radius of its
+#: surface is on it (round-off of the return map): its tangent is the loading one.
+_ON_SURFACE = 1e-10
 
 
 def _positive(law: str, name: str, value: float, fix: str) -> None:
@@ -535,15 +538,22 @@ class J2Plasticity:
         tr, dev = self._elastic_parts(strain, state["plastic_strain"])
         s_tr = 2.0 * mu * dev
         norm = np.sqrt(np.einsum("qi,qi->q", s_tr * _TWO6, s_tr))
-        f_tr = norm - _SQRT23 * (self.sigma_y + H * alpha)
+        radius = _SQRT23 * (self.sigma_y + H * alpha)
+        f_tr = norm - radius
         plastic = f_tr > 0
+        # on the yield surface of a point that has yielded (the strain of the last converged
+        # step: its return map puts the stress there only to round-off, either side) the
+        # tangent is the loading one, as RankineDamage's: the next step's first iteration then
+        # predicts further flow where the last step flowed, whatever the round-off (which
+        # differed between serial and 2 ranks, and with it the path's cuts)
+        loading = plastic | ((alpha > 0) & (np.abs(f_tr) <= _ON_SURFACE * radius))
         dgamma = np.where(plastic, f_tr / (2.0 * mu + 2.0 * H / 3.0), 0.0)
         safe = np.where(norm > 0, norm, 1.0)
         n = s_tr / safe[:, None]
         stress = (K * tr)[:, None] * _ONE6 + s_tr - (2.0 * mu * dgamma)[:, None] * n
 
         theta = 1.0 - 2.0 * mu * dgamma / safe
-        thetabar = np.where(plastic, 1.0 / (1.0 + H / (3.0 * mu)) - (1.0 - theta), 0.0)
+        thetabar = np.where(loading, 1.0 / (1.0 + H / (3.0 * mu)) - (1.0 - theta), 0.0)
         idev = np.diag(_HALF6) - np.outer(_ONE6, _ONE6) / 3.0
         tangent = (
             K * np.outer(_ONE6, _ONE6)

@@ -96,10 +96,12 @@ from .statics.nonlinear import FINITE_STRAIN_COUPLINGS, CoupledNonlinearProblem,
 from .statics.path_following import (
     ArcLength,
     DisplacementControl,
+    DoubleSofteningWarning,
     PathError,
     PathOptions,
     PathResult,
     PathShortWarning,
+    StateCarryWarning,
     follow_path,
 )
 from .statics.problem import CoupledLinearProblem
@@ -149,6 +151,7 @@ __all__ = [
     "Crack",
     "CrackInitiation",
     "DisplacementControl",
+    "DoubleSofteningWarning",
     "DynamicsResult",
     "DynamicsWriter",
     "EFGElasticity",
@@ -199,6 +202,7 @@ __all__ = [
     "ShapeTable",
     "StaleTableError",
     "StateAbove",
+    "StateCarryWarning",
     "StepLoadedRod",
     "StressIntensityFactors",
     "TimoshenkoBeam",

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
+from dolfinx_meshfree.statics import path_following
 from dolfinx_meshfree.statics.cohesive_growth import (
     _to_free_edge,
     principal_direction,
@@ -216,7 +217,7 @@ def test_crack_turns_normal_to_the_load(angle, measured):
     assert path.dissipated_energy[-1] > GF * 4 * (L / 20)
 
 
-def test_growth_in_a_plastic_bulk():
+def test_growth_in_a_plastic_bulk(monkeypatch):
     """The plate of ``test_crack_turns_normal_to_the_load`` (+30 degrees) in plane strain with a
     J2 bulk that yields before the faces open (sigma_y = 1.5 MPa, H = 3 GPa): the crack grows
     through yielded material, the cut cells' new points take their states from the old points
@@ -225,20 +226,48 @@ def test_growth_in_a_plastic_bulk():
     * the bulk's plastic dissipation moves by at most 1.5e-4 of itself at a rebuild (measured
       6.4e-5);
     * the work of the load minus the stored energy equals the energy dissipated by the faces and
-      the bulk within 3e-3 (measured 1.5e-3).
+      the bulk within 3e-3 (measured 1.5e-3);
+    * with ``CARRY_TOLERANCE`` lowered to 1e-5, each rebuild whose change passes it warns
+      (``mf.StateCarryWarning``), and no other.
 
     Serial and 2 ranks take the same 32 steps, equal to 5e-14."""
     law = mf.J2Plasticity(E=E, nu=NU, sigma_y=1.5, H=3000.0, plane="strain")
     model, crack, control = _bar("efg", 30.0, law=law)
     model.add_cohesive(crack, mf.LinearCohesive(FT, GF), segments=[1])
-    path = mf.follow_path(model, control, _options(), growth=mf.CohesiveGrowth(crack))
+    # a tolerance below the measured changes: every rebuild that passes it warns, no other
+    monkeypatch.setattr(path_following, "CARRY_TOLERANCE", 1e-5)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", mf.StateCarryWarning)
+        path = mf.follow_path(model, control, _options(), growth=mf.CohesiveGrowth(crack))
     assert len(path.extensions) >= 3 and crack.points[-1, 1] == pytest.approx(H, abs=1e-9)
     assert len(path.carried) == len(path.extensions)
     _, before, after, moved, _ = np.array(path.carried).T
     assert moved.min() > 0 and before[-1] > 0.2 * path.dissipated_energy[-1]  # plastic
     assert np.all(np.abs(after - before) <= 1.5e-4 * before)
+    above = int(np.sum(np.abs(after - before) > 1e-5 * before))
+    carry = [w for w in caught if issubclass(w.category, mf.StateCarryWarning)]
+    assert above >= 1 and len(carry) == above, (above, [str(w.message) for w in carry])
     balance = path.external_work[-1] - path.stored_energy[-1]
     assert abs(balance - path.dissipated_energy[-1]) <= 3e-3 * path.dissipated_energy[-1]
+
+
+def test_a_damaging_bulk_as_strong_as_the_faces_is_not_silent():
+    """A RankineDamage bulk with the faces' f_t softens beside them ahead of the tip (the
+    energy dissipated twice there): follow_path warns before the first step; a bulk twice as
+    strong does not."""
+    for ft_bulk, warned in ((FT, True), (2 * FT, False)):
+        law = mf.RankineDamage(E=E, nu=NU, ft=ft_bulk, Gf=GF, plane="stress")
+        model, crack, control = _bar("efg", 0.0, law=law)
+        model.add_cohesive(crack, mf.LinearCohesive(FT, GF), segments=[1])
+        options = mf.PathOptions(increment=1e-3, end=0.12, max_steps=1)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            mf.follow_path(model, control, options, growth=mf.CohesiveGrowth(crack))
+        double = [
+            str(w.message) for w in caught if issubclass(w.category, mf.DoubleSofteningWarning)
+        ]
+        assert len(double) == int(warned)
+        assert all("f_t=3, not above the growing cohesive faces' f_t=3" in m for m in double)
 
 
 @pytest.mark.heavy(twin="tests/test_cohesive_growth.py::test_crack_turns_normal_to_the_load")

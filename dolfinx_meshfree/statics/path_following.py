@@ -54,7 +54,7 @@ from .crack_initiation import CrackInitiation, first_stretch, insert_crack
 from .efg import EFGBlockModel, EFGElasticity
 from .petsc import BlockSystem, SolverOptions, solver_options
 from .sides import BlockProblem
-from .state_carry import CarryCounts, carry_states
+from .state_carry import carry_states
 
 if TYPE_CHECKING:  # annotations only
     from ..geometry.crack import Crack
@@ -735,7 +735,6 @@ def _rebuild(
     else:
         new = build_block_problem(model, law_internal_force(model.law, u), u, model.law, state)
     built.destroy()
-    h = 0.0
     for side in new.problem.shared:
         if isinstance(side, CohesiveSide) and id(side.cohesive.crack) in old:
             pts, kap, h = old[id(side.cohesive.crack)]
@@ -744,15 +743,13 @@ def _rebuild(
                 same = dist <= 1e-9 * h
                 side.state.committed["kappa"][same, 0] = kap[k[same]]
             side.state.restore()
-    counts, after = CarryCounts(), 0.0
-    if bulk:
-        cracks = model.cracks if efg else model.patch.cracks
-        h = h or particle_spacing(model._domain if efg else model.patch)
-        new_bulk = _bulk_points(new)
-        counts = carry_states([b[0] for b in bulk], [b[0] for b in new_bulk], cracks, h)
-        after = comm.allreduce(sum(st.dissipated(w) for st, w, _ in new_bulk))
     if not bulk:
         return new, None
+    cracks = model.cracks if efg else model.patch.cracks
+    h = particle_spacing(model._domain if efg else model.patch)
+    new_bulk = _bulk_points(new)
+    counts = carry_states([b[0] for b in bulk], [b[0] for b in new_bulk], cracks, h)
+    after = comm.allreduce(sum(st.dissipated(w) for st, w, _ in new_bulk))
     moved, crossed = (comm.allreduce(n) for n in (counts.moved, counts.crossed))
     return new, (before, after, moved, crossed)
 
@@ -796,7 +793,7 @@ def _reequilibrated(
         step = len(result.control) + 1
         result.carried.append((step, *carried))
         before, after = carried[0], carried[1]
-        if abs(after - before) > CARRY_TOLERANCE * before:  # the same on every rank
+        if before > 0.0 and abs(after - before) > CARRY_TOLERANCE * before:  # every rank
             warnings.warn(
                 f"{event}: carrying the bulk's states to the new points changed its dissipated "
                 f"energy from {before:.6g} to {after:.6g} ({(after - before) / before:+.2%}, "

@@ -293,6 +293,16 @@ class ExplicitDynamics(StateQueries, Struck):
         """
         check_safety(safety)
         check_multiplier_solver(multiplier_solver)
+        cohesive = getattr(problem, "cohesive", None)
+        if cohesive:  # the same on every rank: refused, never run traction-free
+            where = cohesive[0].crack.points.round(6).tolist()
+            raise ValueError(
+                f"the problem's crack {where} carries a traction-separation law (add_cohesive): "
+                "explicit dynamics does not integrate cohesive faces, and would run them "
+                "traction-free; build the problem without add_cohesive (its cracks then open "
+                "freely, with crack_contact= closing them), or follow the path in statics "
+                "(mf.follow_path)"
+            )
         model = build_coupled(problem, particle_mass, fixed_facets, integration, slaves, material)
         model = with_crack_contact(model, crack_contact)
         quadrature = getattr(getattr(problem, "patch", None), "quadrature", None)

@@ -181,18 +181,13 @@ def test_bad_input() -> None:
 
 def test_refused_where_the_faces_would_be_lost() -> None:
     """Code that cannot carry cohesive faces refuses them: crack growth by K_Ic (it re-solves
-    from the unloaded state), explicit dynamics (it has no traction-separation law: the faces
-    ran traction-free, silently, before this check) and a CoupledLinearProblem's own bilinear
-    form (Newton assembles the FE cells from the law)."""
+    from the unloaded state) and a CoupledLinearProblem's own bilinear form (Newton assembles the
+    FE cells from the law). Explicit dynamics carries them (tests/test_dynamics_cohesive.py)."""
     crack = mf.Crack([[L / 2, 0.0], [L / 2, 30.0]])
     model, msh = _bar("lagrange", crack)
     model.add_cohesive(crack, mf.LinearCohesive(FT, GF))
     with pytest.raises(ValueError, match="QuasiStaticCrackGrowth"):
         mf.QuasiStaticCrackGrowth(model, crack, 5.0, 2)
-    with pytest.raises(
-        ValueError, match=r"crack \[\[100\.0, 0\.0\], \[100\.0, 30\.0\]\] carries a"
-    ):
-        mf.ExplicitDynamics.coupled(model, particle_mass="volume")
     V = _compat.vector_function_space(msh)
     u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
     law = mf.LinearElastic(E, NU, plane="stress")

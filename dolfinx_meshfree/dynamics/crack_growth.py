@@ -45,12 +45,14 @@ from ..io import ProgressBar
 from ..parallel import raise_on_all_ranks
 from ..physics.materials import LinearElastic
 from .central_difference import advance_to
+from .cohesive_faces import CohesiveFacesSystem
 from .crack_contact import ContactSystem
 from .energy import strain_energy
 from .explicit import ExplicitDynamics
 from .growth_local import LocalModelUpdate
 from .patch_conversion import ConvertingPatch, carry_clock
 from .sifs import dynamic_sifs, model_cracks
+from .system import wrapped
 
 __all__ = ["DYNAMIC_UPDATES", "DynamicCrackGrowth", "GrowthCheck", "rayleigh_speed"]
 
@@ -226,6 +228,12 @@ class DynamicCrackGrowth:
             mat = self.model.material
             if not isinstance(mat, LinearElastic):
                 raise ValueError(f"material={mat!r}: dynamic growth needs LinearElastic")
+            if wrapped(self.model.system, CohesiveFacesSystem):
+                raise ValueError(
+                    "DynamicCrackGrowth grows a traction-free crack by K_Ic; the model's cracks "
+                    "carry cohesive faces (add_cohesive), whose operators its local updates do "
+                    "not follow: build the problem without add_cohesive"
+                )
             cr = rayleigh_speed(mat)
             if self.speed > cr:
                 raise ValueError(

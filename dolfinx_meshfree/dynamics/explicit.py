@@ -43,6 +43,7 @@ from ..physics.materials import LinearElastic, is_axisymmetric
 from ..statics.coupled import CoupledElasticity
 from .builders import Model, build_coupled, build_efg, build_fe
 from .central_difference import CentralDifference
+from .cohesive_faces import with_cohesive_faces
 from .conditions import held_velocities
 from .constraint import VelocityProjection, check_multiplier_solver
 from .crack_contact import CrackContact, with_crack_contact
@@ -288,23 +289,19 @@ class ExplicitDynamics(StateQueries, Struck):
         law whose linear twin is the problem's material (every coupling; the hybrid with HA-F);
         ``None``: the law the problem was built with (a ``CoupledElasticity`` built on a
         ``NeoHookean`` runs at finite strain), ``problem.material`` its small-strain twin.
-        ``crack_contact``: contact of the patch's crack faces, as in :meth:`efg`. Arguments: see
+        ``crack_contact``: contact of the patch's crack faces, as in :meth:`efg`. The problem's
+        cohesive faces (``add_cohesive``) carry their law
+        (:mod:`~dolfinx_meshfree.dynamics.cohesive_faces`). Arguments: see
         :func:`~dolfinx_meshfree.dynamics.builders.build_coupled`.
         """
         check_safety(safety)
         check_multiplier_solver(multiplier_solver)
-        cohesive = getattr(problem, "cohesive", None)
-        if cohesive:  # the same on every rank: refused, never run traction-free
-            where = cohesive[0].crack.points.round(6).tolist()
-            raise ValueError(
-                f"the problem's crack {where} carries a traction-separation law (add_cohesive): "
-                "explicit dynamics does not integrate cohesive faces, and would run them "
-                "traction-free; build the problem without add_cohesive (its cracks then open "
-                "freely, with crack_contact= closing them), or follow the path in statics "
-                "(mf.follow_path)"
-            )
+        cohesive = list(getattr(problem, "cohesive", None) or [])
         model = build_coupled(problem, particle_mass, fixed_facets, integration, slaves, material)
-        model = with_crack_contact(model, crack_contact)
+        if cohesive:  # the faces' law (refused, on every rank, where it cannot be carried)
+            model = with_cohesive_faces(model, cohesive, crack_contact)
+        else:
+            model = with_crack_contact(model, crack_contact)
         quadrature = getattr(getattr(problem, "patch", None), "quadrature", None)
         return cls._from_model(model, safety, multiplier_solver, fixed_facets, quadrature)
 

@@ -130,6 +130,7 @@ from ..geometry.quadrature import QuadraturePoints
 from ..parallel import raise_on_all_ranks
 from ..statics.petsc import create_aij, create_vector
 from .body_contact import carry_friction
+from .cohesive_faces import carry_faces
 from .energy import kinetic_energy, strain_energy
 from .explicit import ExplicitDynamics
 from .linalg import mumps_lu
@@ -507,6 +508,7 @@ def convert(
         _check(old, new)
         carry_projectiles(old.system, new.system)  # before the new model's first force
         carry_friction(old.system, new.system)
+        carry_faces(old.system, new.system)  # an opened cohesive face does not heal
         if carry_contacts(old.system, new.system):
             new.bound.invalidate()
         lam = (

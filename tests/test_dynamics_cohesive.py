@@ -95,7 +95,7 @@ def test_a_wave_opens_the_faces_as_the_characteristics_say():
     assert np.abs(W - K - internal).max() <= 1.5e-3 * np.abs(W).max()
 
 
-def test_bonded_faces_below_f_t_pass_the_wave():
+def test_faces_below_f_t_stay_bonded():
     """sigma0 = 0.4 f_t: neither the first wave nor the reflected one (0.8 f_t) reaches f_t,
     the faces stay bonded (kappa below w_0 = f_t / K_0 everywhere) and dissipate nothing."""
     model, _, _, left, right = _bar(32)

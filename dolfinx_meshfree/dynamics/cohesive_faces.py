@@ -46,6 +46,7 @@ from ..parallel import Layout, raise_on_all_ranks
 from ..physics.state import PointState
 from ..statics.cohesive import CohesiveCrack, owned_face_points
 from ..statics.petsc import create_aij
+from .linalg import add_weighted_gram
 from .system import LinearSystem, SemiDiscreteSystem, WrappedSystem, wrapped
 
 if TYPE_CHECKING:  # annotations only
@@ -176,14 +177,7 @@ class CohesiveFacesSystem(WrappedSystem):
         if self._tangent is None:
             K = blocks[self.field, self.field].convert("aij", PETSc.Mat())  # a new matrix
             for B, law, w in self.faces:
-                scaled = B.copy()
-                root = B.createVecLeft()
-                root.array[:] = np.sqrt(law.K0 * np.repeat(w, 2))
-                scaled.diagonalScale(L=root)
-                Kc = scaled.transposeMatMult(scaled)
-                K.axpy(1.0, Kc, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-                for obj in (scaled, root, Kc):
-                    obj.destroy()
+                add_weighted_gram(K, B, law.K0 * np.repeat(w, 2))
             self._tangent = K
         blocks[self.field, self.field] = self._tangent
         return blocks

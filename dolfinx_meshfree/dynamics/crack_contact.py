@@ -58,6 +58,7 @@ from ..geometry.crack_faces import contact_points, owned_points
 from ..parallel import Layout, raise_on_all_ranks
 from ..statics.petsc import create_aij
 from .discretisation import approximation_cracks
+from .linalg import add_weighted_gram
 from .system import LinearSystem, SemiDiscreteSystem, WrappedSystem
 
 if TYPE_CHECKING:  # annotations only
@@ -242,15 +243,8 @@ class ContactSystem(WrappedSystem):
         block: an upper bound, in the PSD order, of the tangent of any contact state."""
         blocks = dict(self.inner.tangent(u))
         if self._tangent is None:
-            scaled = self.B.copy()
-            root = self.B.createVecLeft()
-            root.array[:] = np.sqrt(self.kw)
-            scaled.diagonalScale(L=root)
-            Kc = scaled.transposeMatMult(scaled)
             K = blocks[self.field, self.field].convert("aij", PETSc.Mat())  # a new matrix
-            K.axpy(1.0, Kc, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-            for obj in (scaled, root, Kc):
-                obj.destroy()
+            add_weighted_gram(K, self.B, self.kw)
             self._tangent = K
         blocks[self.field, self.field] = self._tangent
         return blocks

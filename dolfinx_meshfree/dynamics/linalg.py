@@ -11,7 +11,7 @@ from petsc4py import PETSc
 
 from ..parallel import Layout
 
-__all__ = ["BLOCK_FORMATS", "absolute", "blocked", "mumps_lu", "row_layout"]
+__all__ = ["BLOCK_FORMATS", "absolute", "add_weighted_gram", "blocked", "mumps_lu", "row_layout"]
 
 #: Storage of the stiffness blocks of explicit dynamics (:func:`blocked`).
 BLOCK_FORMATS = ("baij", "aij")
@@ -25,6 +25,19 @@ def absolute(A: PETSc.Mat) -> PETSc.Mat:
     B = PETSc.Mat().createAIJ(A.getSizes(), csr=(ai, aj, np.abs(av)), comm=A.getComm())
     B.assemble()
     return B
+
+
+def add_weighted_gram(K: PETSc.Mat, B: PETSc.Mat, weights: np.ndarray) -> None:
+    """``K += B^T diag(weights) B`` (collective; ``weights`` >= 0 per owned row of ``B``): a
+    penalty's stiffness on the rows of ``B`` (crack contact, cohesive faces)."""
+    scaled = B.copy()
+    root = B.createVecLeft()
+    root.array[:] = np.sqrt(weights)
+    scaled.diagonalScale(L=root)
+    gram = scaled.transposeMatMult(scaled)
+    K.axpy(1.0, gram, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+    for obj in (scaled, root, gram):
+        obj.destroy()
 
 
 def mumps_lu(A: PETSc.Mat) -> PETSc.KSP:

@@ -44,18 +44,38 @@ from scipy.spatial import cKDTree
 from ..geometry.crack import CrackDomain, particle_spacing
 from ..parallel import Layout, raise_on_all_ranks
 from ..physics.state import PointState
-from ..statics.cohesive import CohesiveCrack, owned_face_points
+from ..statics.cohesive import CohesiveCrack, check_cohesive, owned_face_points
 from ..statics.petsc import create_aij
 from .linalg import add_weighted_gram
 from .system import LinearSystem, SemiDiscreteSystem, WrappedSystem, wrapped
 
 if TYPE_CHECKING:  # annotations only
     from ..approx.mls import MLS
+    from ..geometry.crack import Crack
     from ..geometry.particles import ParticleSet
     from ..physics.cohesive import LinearCohesive
     from .builders import Model
 
-__all__ = ["CohesiveFacesSystem", "carry_faces", "frame_jump_operator", "with_cohesive_faces"]
+__all__ = [
+    "CohesiveFacesSystem",
+    "carry_faces",
+    "cohesive_records",
+    "frame_jump_operator",
+    "with_cohesive_faces",
+]
+
+
+def cohesive_records(
+    pairs: Sequence[tuple[Crack, LinearCohesive]], cracks: Sequence[Crack], gdim: int
+) -> list[CohesiveCrack]:
+    """The faces' records of ``(crack, law)`` pairs (pure EFG's ``cohesive=``), each crack one
+    of ``cracks`` (local; ValueError or TypeError naming the bad one)."""
+    out = []
+    for k, pair in enumerate(pairs):
+        if not (isinstance(pair, tuple | list) and len(pair) == 2):
+            raise TypeError(f"cohesive[{k}]={pair!r:.80} must be a (crack, LinearCohesive) pair")
+        out.append(check_cohesive(pair[0], pair[1], cracks, None, 3, gdim))
+    return out
 
 
 def frame_jump_operator(

@@ -38,12 +38,14 @@ from ..geometry.adaptive_quadrature import AdaptiveQuadrature
 from ..geometry.crack import Crack
 from ..geometry.particles import ParticleSet
 from ..geometry.patch import ParticlePatch
+from ..parallel import raise_on_all_ranks
+from ..physics.cohesive import LinearCohesive
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic, is_axisymmetric
 from ..statics.coupled import CoupledElasticity
 from .builders import Model, build_coupled, build_efg, build_fe
 from .central_difference import CentralDifference
-from .cohesive_faces import with_cohesive_faces
+from .cohesive_faces import cohesive_records, with_cohesive_faces
 from .conditions import held_velocities
 from .constraint import VelocityProjection, check_multiplier_solver
 from .crack_contact import CrackContact, with_crack_contact
@@ -240,15 +242,22 @@ class ExplicitDynamics(StateQueries, Struck):
         crack_method: str = "diffraction",
         crack_contact: CrackContact | None = None,
         quadrature: AdaptiveQuadrature | None = None,
+        cohesive: Sequence[tuple[Crack, LinearCohesive]] = (),
     ) -> ExplicitDynamics:
         """Pure EFG on ``particles`` (Belytschko et al. 1995, sec. 5.2), on their background
         cells or (``integration="stress-points"``) at the particles and stress points; fixed
         facets by facet multipliers on the velocities; ``cracks`` cut the MLS weights and the
         cells. Arguments: see :func:`~dolfinx_meshfree.dynamics.builders.build_efg`;
-        ``crack_contact``: the faces' contact (:mod:`~dolfinx_meshfree.dynamics.crack_contact`).
+        ``crack_contact``: the faces' contact (:mod:`~dolfinx_meshfree.dynamics.crack_contact`);
+        ``cohesive``: ``(crack, law)`` pairs, cracks of ``cracks`` whose faces carry a
+        :class:`~dolfinx_meshfree.LinearCohesive` law on all their segments
+        (:mod:`~dolfinx_meshfree.dynamics.cohesive_faces`).
         """
         check_safety(safety)
         check_multiplier_solver(multiplier_solver)
+        records = raise_on_all_ranks(
+            particles.comm, lambda: cohesive_records(cohesive, cracks, particles.gdim)
+        )
         model = build_efg(
             particles,
             material,
@@ -263,7 +272,10 @@ class ExplicitDynamics(StateQueries, Struck):
             crack_method=crack_method,
             quadrature=quadrature,
         )
-        model = with_crack_contact(model, crack_contact)
+        if records:
+            model = with_cohesive_faces(model, records, crack_contact)
+        else:
+            model = with_crack_contact(model, crack_contact)
         return cls._from_model(model, safety, multiplier_solver, fixed_facets, quadrature)
 
     @classmethod

@@ -1,7 +1,8 @@
 """Cohesive crack faces in explicit dynamics (issue 24: "cohesive cracks in dynamics").
 
 The faces of the cracks a :class:`~dolfinx_meshfree.CoupledElasticity` carries with
-:meth:`~dolfinx_meshfree.CoupledElasticity.add_cohesive` hold the traction of their
+:meth:`~dolfinx_meshfree.CoupledElasticity.add_cohesive` (or pure EFG's
+``ExplicitDynamics.efg(..., cohesive=[(crack, law)])``) hold the traction of their
 :class:`~dolfinx_meshfree.LinearCohesive` law (Hillerborg's fictitious crack; Rabczuk et al.
 2006, sec. 6.1.2: "a linear traction-crack opening relation is applied"), as in statics
 (:mod:`~dolfinx_meshfree.statics.cohesive`): along each cohesive segment, sample points ``x_q``

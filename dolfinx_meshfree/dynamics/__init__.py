@@ -55,6 +55,7 @@ from __future__ import annotations
 from ..state_fields import state_field
 from .adaptive_run import AdaptiveRun
 from .body_contact import BodyContact, BodyContactSystem
+from .cohesive_growth import CohesiveDynamicGrowth
 from .crack_contact import ContactSystem, CrackContact
 from .crack_growth import DynamicCrackGrowth, GrowthCheck, rayleigh_speed
 from .energy import EnergyRecord
@@ -76,6 +77,7 @@ __all__ = [
     "AdaptiveRun",
     "BodyContact",
     "BodyContactSystem",
+    "CohesiveDynamicGrowth",
     "ContactSystem",
     "Conversion",
     "CrackContact",

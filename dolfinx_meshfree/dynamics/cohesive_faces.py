@@ -124,6 +124,7 @@ class CohesiveFacesSystem(WrappedSystem):
         faces: Per cohesive crack: ``(B, law, points, weights)`` (:func:`frame_jump_operator`,
             the law with its ``K_0`` set).
         field: The index of the particle field.
+        cracks: The cracks of ``faces``, in order.
     """
 
     def __init__(
@@ -131,9 +132,12 @@ class CohesiveFacesSystem(WrappedSystem):
         inner: SemiDiscreteSystem,
         faces: Sequence[tuple[PETSc.Mat, LinearCohesive, np.ndarray, np.ndarray]],
         field: int,
+        cracks: Sequence[Crack] = (),
     ) -> None:
         super().__init__(inner)
         self.field = field
+        #: The cracks whose faces these are, in the order of :attr:`faces` and :attr:`states`.
+        self.cracks = list(cracks)
         self.faces = [(B, law, np.asarray(w, dtype=float)) for B, law, _, w in faces]
         #: The state of each crack's face points (committed at every evaluation).
         self.states = [PointState(law, x) for _, law, x, _ in faces]
@@ -246,7 +250,7 @@ def with_cohesive_faces(
         B, x, w = frame_jump_operator(model.particles, model.mls, c, h)
         faces.append((B, c.law.with_stiffness(model.material.E, h), x, w))
     inner = LinearSystem(model.fields, model.blocks, model.constraint)
-    system = CohesiveFacesSystem(inner, faces, field)
+    system = CohesiveFacesSystem(inner, faces, field, [c.crack for c in cohesive])
     return dataclasses.replace(model, fields=inner.fields, blocks={}, system=system)
 
 

@@ -71,6 +71,7 @@ if TYPE_CHECKING:  # annotations only
 __all__ = [
     "CohesiveGrowth",
     "direction_at",
+    "extension",
     "grow_once",
     "initiation_direction",
     "principal_direction",
@@ -364,6 +365,30 @@ def _extend(
     the refitted coefficients (collective)."""
     crack = growth.crack
     tip = crack.points[end]
+    d, length = extension(growth, mls, c, material, domain, h, end, front)
+    fit = _FieldFit(mls, c, crack, tip, tip + length * d, domain, h)
+    crack.extend(d, length, tip=end)  # through: the end is a mouth
+    return fit.refit(domain.comm)
+
+
+def extension(
+    growth: CohesiveGrowth,
+    mls: MLS,
+    c: np.ndarray,
+    material: LinearElastic,
+    domain: ParticlePatch | CrackDomain,
+    h: float,
+    end: int,
+    front: np.ndarray,
+) -> tuple[np.ndarray, float]:
+    """The next segment of the crack's ``end`` whose softening front is ``front``: its unit
+    direction and length (collective; the crack is not changed). Normal to the principal stress
+    averaged about the front (of the particle coefficients ``c``), straight on past the largest
+    kink of any tip field; to the edge ahead at a right angle when the new tip would end within
+    a spacing of it (refused without ``through=True``); a tip that would come within a support
+    radius of the FE interface is refused."""
+    crack = growth.crack
+    tip = crack.points[end]
     comm = domain.comm
     along = direction_at(crack, front, end)  # the crack's direction at the front
     d = raise_on_all_ranks(
@@ -394,12 +419,9 @@ def _extend(
 
     raise_on_all_ranks(comm, check)
     if through:  # to the nearest point of the edge ahead: the crack meets it at a right angle
-        d, length = _to_free_edge(tip, d, to_edge, seg)
-    else:
-        _check_interface_clearance(mls, domain, tip + length * d)
-    fit = _FieldFit(mls, c, crack, tip, tip + length * d, domain, h)
-    crack.extend(d, length, tip=end)  # through: the end is a mouth
-    return fit.refit(comm)
+        return _to_free_edge(tip, d, to_edge, seg)
+    _check_interface_clearance(mls, domain, tip + length * d)
+    return d, length
 
 
 def _to_free_edge(

@@ -347,28 +347,12 @@ def grow_once(
         tip = crack.points[end]
         front = softening_front(side, tip)
         if front is not None and np.linalg.norm(front - tip) < growth.ahead * h:
-            return end, _extend(growth, mls, coefficients(), material, domain, h, end, front)
+            c = coefficients()
+            d, length = extension(growth, mls, c, material, domain, h, end, front)
+            fit = _FieldFit(mls, c, crack, tip, tip + length * d, domain, h)
+            crack.extend(d, length, tip=end)  # through: the end is a mouth
+            return end, fit.refit(domain.comm)
     return None
-
-
-def _extend(
-    growth: CohesiveGrowth,
-    mls: MLS,
-    c: np.ndarray,
-    material: LinearElastic,
-    domain: ParticlePatch | CrackDomain,
-    h: float,
-    end: int,
-    front: np.ndarray,
-) -> np.ndarray:
-    """:func:`grow_once`'s extension of the crack's ``end`` whose softening front is ``front``:
-    the refitted coefficients (collective)."""
-    crack = growth.crack
-    tip = crack.points[end]
-    d, length = extension(growth, mls, c, material, domain, h, end, front)
-    fit = _FieldFit(mls, c, crack, tip, tip + length * d, domain, h)
-    crack.extend(d, length, tip=end)  # through: the end is a mouth
-    return fit.refit(domain.comm)
 
 
 def extension(

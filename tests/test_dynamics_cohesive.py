@@ -256,3 +256,36 @@ def test_dynamic_growth_bad_input():
         mf.dynamics.CohesiveDynamicGrowth(build, mf.Crack([[xc, 0.0], [xc, H]], through=True))
     with pytest.raises(ValueError, match="check_every=0 must be an integer >= 1"):
         mf.dynamics.CohesiveDynamicGrowth(build, crack, check_every=0)
+
+
+def test_a_growth_the_mls_cannot_follow_is_named():
+    """A crack started at -30 degrees on quadrilaterals (48 x 12 cells) turns vertical 0.044
+    spacing beside a column of particles, where a point of the new cut cells sees four
+    collinear ones: the rebuild cannot evaluate the MLS, and the run stops saying when, where
+    and what to change (not a raw moment-matrix error)."""
+    msh = dolfinx.mesh.create_rectangle(
+        MPI.COMM_WORLD, [np.array([0.0, 0.0]), np.array([L, 1.0])], [48, 12],
+        dolfinx.mesh.CellType.quadrilateral,
+    )  # fmt: skip
+    V = _compat.vector_function_space(msh)
+    xc = L / 2 + 0.37 * L / 48
+    cells = dolfinx.mesh.locate_entities(msh, 2, lambda p: np.abs(p[0] - L / 2) < L / 4 + 1e-9)
+    left = mf.boundary_facets(msh, lambda p: np.isclose(p[0], 0.0))
+    right = mf.boundary_facets(msh, lambda p: np.isclose(p[0], L))
+
+    def build(crack: mf.Crack) -> mf.ExplicitDynamics:
+        patch = mf.ParticlePatch(msh, cells, placement="vertices", cracks=[crack])
+        elastic = mf.LinearElastic(E, 0.2, plane="stress", rho=RHO)
+        model = mf.CoupledElasticity(V, patch, elastic, coupling="lagrange")
+        model.add_cohesive(crack, mf.LinearCohesive(ft=FT, Gf=GF))
+        dyn = mf.ExplicitDynamics.coupled(model, particle_mass="volume", fixed_facets=left)
+        dyn.add_traction(right, lambda x, n: np.tile([SIGMA0, 0.0], (len(x), 1)))
+        return dyn
+
+    d = np.array([np.sin(np.deg2rad(-30.0)), np.cos(np.deg2rad(-30.0))])
+    start = np.array([xc, 0.0])
+    growth = mf.dynamics.CohesiveDynamicGrowth(
+        build, mf.Crack([start, start + 0.4 * d], through=True), check_every=5
+    )
+    with pytest.raises(RuntimeError, match=r"crack grew to \[1\.8295\d*, 0\.5964\d*\] and the MLS"):
+        growth.run(2.5 * L / C)

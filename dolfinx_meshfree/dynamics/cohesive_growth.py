@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..approx.mls import MomentMatrixError
 from ..geometry.crack import Crack, CrackDomain, particle_spacing
 from ..parallel import raise_on_all_ranks
 from ..physics.materials import LinearElastic
@@ -174,7 +175,14 @@ class CohesiveDynamicGrowth:
             self.crack.extend(d, length, tip=end)
             u, v = (fit.refit(old.comm).reshape(u.shape) for fit in fits)
             grown = Crack(self.crack.points.copy(), through=self.crack.through)
-            new = self.build(grown)
+            try:
+                new = self.build(grown)
+            except MomentMatrixError as err:  # raised on every rank
+                raise RuntimeError(
+                    f"at t = {old.time:.6g} the crack grew to {grown.points[end].round(6).tolist()}"
+                    f" and the MLS cannot be evaluated beside it ({err}); choose a finer particle "
+                    "spacing or a larger dilation"
+                ) from None
             for src, dst in ((old.stepper.u, new.stepper.u), (old.stepper.v, new.stepper.v)):
                 for a, b in zip(src, dst, strict=True):  # the same mesh and particles
                     a.copy(b)

@@ -40,13 +40,13 @@ import numpy as np
 import scipy.sparse as sp
 from mpi4py import MPI
 from petsc4py import PETSc
-from scipy.spatial import cKDTree
 
 from ..geometry.crack import CrackDomain, particle_spacing
 from ..parallel import Layout, raise_on_all_ranks
 from ..physics.state import PointState
 from ..statics.cohesive import CohesiveCrack, check_cohesive, owned_face_points
 from ..statics.petsc import create_aij
+from ..statics.state_carry import carry_at_points
 from .linalg import add_weighted_gram
 from .system import LinearSystem, SemiDiscreteSystem, WrappedSystem, wrapped
 
@@ -265,14 +265,6 @@ def carry_faces(old: object, new: object) -> int:
         return 0
     s0, s1 = before[0], after[0]
     comm = s0.faces[0][0].getComm().tompi4py() if s0.faces else MPI.COMM_SELF
-    for st0, st1 in zip(s0.states, s1.states, strict=False):
-        pts = np.concatenate(comm.allgather(st0.points)).reshape(-1, 2)
-        scale = float(np.ptp(pts, axis=0).max()) if len(pts) else 1.0
-        fields = {k: np.concatenate(comm.allgather(v[:, 0])) for k, v in st0.committed.items()}
-        if len(pts) and len(st1):
-            dist, k = cKDTree(pts).query(st1.points)
-            same = dist <= 1e-9 * max(scale, 1e-300)
-            for key, values in fields.items():
-                st1.committed[key][same, 0] = values[k[same]]
-        st1.restore()
+    for crack, st0, st1 in zip(s1.cracks, s0.states, s1.states, strict=False):
+        carry_at_points(st0, st1, comm, 1e-9 * crack.length)
     return min(len(s0.states), len(s1.states))

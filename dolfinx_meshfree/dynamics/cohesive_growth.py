@@ -33,7 +33,7 @@ from ..approx.mls import MomentMatrixError
 from ..geometry.crack import Crack, CrackDomain, particle_spacing
 from ..parallel import raise_on_all_ranks
 from ..physics.materials import LinearElastic
-from ..statics.cohesive_growth import CohesiveGrowth, _FieldFit, extension
+from ..statics.cohesive_growth import CohesiveGrowth, _FieldFit, extension, nearest_softened
 from .cohesive_faces import CohesiveFacesSystem, carry_faces
 from .energy import strain_energy
 from .explicit import ExplicitDynamics
@@ -145,14 +145,7 @@ class CohesiveDynamicGrowth:
     def _front(self, tip: np.ndarray) -> np.ndarray | None:
         """The face point nearest ``tip`` past ``f_t`` (committed), or ``None`` (collective)."""
         faces, k = self._faces()
-        st, law = faces.states[k], faces.faces[k][1]
-        soft = st.points[st.committed["kappa"][:, 0] > law.w_0]
-        mine = soft[np.argmin(np.linalg.norm(soft - tip, axis=1))] if len(soft) else None
-        found = [p for p in self.model.comm.allgather(mine) if p is not None]
-        if not found:
-            return None
-        found = np.asarray(found)
-        return found[np.argmin(np.linalg.norm(found - tip, axis=1))]
+        return nearest_softened(faces.states[k], faces.faces[k][1].w_0, tip, self.model.comm)
 
     def _grow(self) -> bool:
         """Extend a tip whose softening front is near, rebuild and carry (collective); whether

@@ -66,6 +66,7 @@ if TYPE_CHECKING:  # annotations only
     from ..geometry.crack import CrackDomain
     from ..geometry.patch import ParticlePatch
     from ..physics.materials import LinearElastic
+    from ..physics.state import PointState
     from .efg import EFGSolution
 
 __all__ = [
@@ -74,6 +75,7 @@ __all__ = [
     "extension",
     "grow_once",
     "initiation_direction",
+    "nearest_softened",
     "principal_direction",
     "ray_to_boundary",
     "softening_front",
@@ -179,10 +181,18 @@ def softening_front(side: CohesiveSide, tip: np.ndarray) -> np.ndarray | None:
     """The face point of ``side`` nearest ``tip`` whose faces have softened (committed ``kappa >
     w_0``: the normal traction reached ``f_t``), or ``None`` (collective, the same on every
     rank)."""
-    kappa = side.state.committed["kappa"][:, 0]
-    soft = side.points[kappa > side.law.w_0]
+    return nearest_softened(side.state, side.law.w_0, tip, side.comm)
+
+
+def nearest_softened(
+    state: PointState, w_0: float, tip: np.ndarray, comm: MPI.Comm
+) -> np.ndarray | None:
+    """The point of the face points' ``state`` nearest ``tip`` whose committed ``kappa`` is past
+    ``w_0``, over the ranks, or ``None`` (collective): :func:`softening_front`, and the dynamic
+    growth's (:class:`~dolfinx_meshfree.dynamics.CohesiveDynamicGrowth`)."""
+    soft = state.points[state.committed["kappa"][:, 0] > w_0]
     mine = soft[np.argmin(np.linalg.norm(soft - tip, axis=1))] if len(soft) else None
-    found = [p for p in side.comm.allgather(mine) if p is not None]
+    found = [p for p in comm.allgather(mine) if p is not None]
     if not found:
         return None
     found = np.asarray(found)

@@ -37,7 +37,6 @@ import numpy as np
 import numpy.typing as npt
 from mpi4py import MPI
 from petsc4py import PETSc
-from scipy.spatial import cKDTree
 
 from ..approx.mls import MomentMatrixError
 from ..couplings.base import CoupledSolution
@@ -54,7 +53,7 @@ from .crack_initiation import CrackInitiation, first_stretch, insert_crack
 from .efg import EFGBlockModel, EFGElasticity
 from .petsc import BlockSystem, SolverOptions, solver_options
 from .sides import BlockProblem
-from .state_carry import carry_states
+from .state_carry import carry_at_points, carry_states
 
 if TYPE_CHECKING:  # annotations only
     from ..geometry.crack import Crack
@@ -720,12 +719,11 @@ def _rebuild(
     destroyed once the new model is built (on an error it is left to the caller)."""
     state = _owned(built.x)
     comm = _comm(built)
-    old = {}
-    for side in built.problem.shared:
-        if isinstance(side, CohesiveSide):
-            pts = np.concatenate(comm.allgather(side.points)).reshape(-1, 2)
-            kap = np.concatenate(comm.allgather(side.state.committed["kappa"][:, 0]))
-            old[id(side.cohesive.crack)] = (pts, kap, side.h)
+    faces = {  # the old faces' states (plain arrays: they outlive the destroyed model)
+        id(side.cohesive.crack): side.state
+        for side in built.problem.shared
+        if isinstance(side, CohesiveSide)
+    }
     bulk = _bulk_points(built)
     before = comm.allreduce(sum(st.dissipated(w) for st, w, _ in bulk))
     if efg:
@@ -736,13 +734,8 @@ def _rebuild(
         new = build_block_problem(model, law_internal_force(model.law, u), u, model.law, state)
     built.destroy()
     for side in new.problem.shared:
-        if isinstance(side, CohesiveSide) and id(side.cohesive.crack) in old:
-            pts, kap, h = old[id(side.cohesive.crack)]
-            if len(side.points) and len(pts):
-                dist, k = cKDTree(pts).query(side.points)
-                same = dist <= 1e-9 * h
-                side.state.committed["kappa"][same, 0] = kap[k[same]]
-            side.state.restore()
+        if isinstance(side, CohesiveSide) and id(side.cohesive.crack) in faces:
+            carry_at_points(faces[id(side.cohesive.crack)], side.state, comm, 1e-9 * side.h)
     if not bulk:
         return new, None
     cracks = model.cracks if efg else model.patch.cracks

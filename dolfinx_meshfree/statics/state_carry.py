@@ -36,10 +36,12 @@ from scipy.spatial import cKDTree
 if TYPE_CHECKING:  # annotations only
     from collections.abc import Sequence
 
+    from mpi4py import MPI
+
     from ..geometry.crack import Crack
     from ..physics.state import PointState
 
-__all__ = ["CarryCounts", "carry_states"]
+__all__ = ["CarryCounts", "carry_at_points", "carry_states"]
 
 #: A new point within this many particle spacings of an old point of its cell is the same point.
 SAME_POINT = 1e-9
@@ -122,3 +124,18 @@ def carry_states(
             raise RuntimeError("a state is carried between points of the same law only")
         counts += _carry(a, b, cracks, h)
     return counts
+
+
+def carry_at_points(old: PointState, new: PointState, comm: MPI.Comm, tol: float) -> None:
+    """Give each point of ``new`` that lies within ``tol`` of a point of ``old`` (gathered over
+    the ranks) that point's committed state, and drop ``new``'s trial state (collective). The
+    faces of a crack rebuilt on more segments, or on a grown patch: their old points keep their
+    positions, the new ones keep their initial state."""
+    pts = np.concatenate(comm.allgather(old.points))
+    fields = {k: np.concatenate(comm.allgather(v)) for k, v in old.committed.items()}
+    if len(new) and len(pts):
+        dist, k = cKDTree(pts).query(new.points)
+        same = dist <= tol
+        for key, values in fields.items():
+            new.committed[key][same] = values[k[same]]
+    new.restore()

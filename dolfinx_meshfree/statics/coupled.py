@@ -77,6 +77,7 @@ __all__ = [
     "check_angle_and_band",
     "coupled_integration",
     "material_stiffness_form",
+    "on_patch",
 ]
 
 VectorFunction = Callable[[np.ndarray], np.ndarray]
@@ -176,6 +177,30 @@ def _check_plane(law: LinearElastic, msh: dolfinx.mesh.Mesh, coupling: str) -> N
 AXISYMMETRIC_COUPLINGS: tuple[str, ...] = COUPLINGS
 
 
+def _attach_cracks(model: CoupledElasticity, coupling: str) -> None:
+    """Cut the MLS weights of ``model`` by its patch's cracks (Organ, Fleming & Belytschko 1996);
+    only the couplings whose particle side is the plain cracked EFG block can carry them."""
+    if coupling not in STATIC_CRACK_COUPLINGS:
+        raise ValueError(
+            f"coupling={coupling!r} cannot carry a cracked patch (its particle block is "
+            f"not integrated on cut cells with the crack faces as boundary); use one of "
+            f"{list(STATIC_CRACK_COUPLINGS)}, or leave the cracks out of the patch"
+        )
+    if coupling == "master-slave" and model.consistent:
+        # measured on tests/test_crack_solvers.py's uniaxial patch test: 1.0e-3 with a crack
+        # against 3.4e-5 without (Gauss: 7.5e-6 with and without)
+        raise ValueError(
+            "coupling='master-slave' with consistent=True cannot carry a cracked patch: "
+            "VCI on the cut cells, with the slaves' mismatch on the interface, misses the "
+            "linear field by 1e-3 (30x its error without the crack); leave consistent at "
+            "its default (Gauss quadrature), or use coupling='lagrange'"
+        )
+    patch = model.patch
+    attach_cracks(model.mls, patch.cracks, patch.crack_method, patch=patch)
+    if patch.crack_enrichment:
+        enrich_tips(model.mls, patch.cracks, patch.crack_method)
+
+
 class CoupledElasticity:
     """Linear elastostatics with FE cells and a particle patch, coupled by Lagrange multipliers.
 
@@ -270,6 +295,8 @@ class CoupledElasticity:
         particle_band: float | None = None,
         integration: str | None = None,
     ):
+        #: The constructor's options, for the same model on another patch (:func:`on_patch`).
+        self._given = {k: v for k, v in locals().items() if k not in ("self", "V", "patch")}
         if coupling not in REGISTRY:
             raise ValueError(
                 f"coupling={coupling!r} is not available; choose one of {list(COUPLINGS)}"
@@ -340,7 +367,7 @@ class CoupledElasticity:
         self.mls = self.family.prepare_mls(self.mls, patch)
         separate_bodies(self.mls, V.mesh)
         if patch.cracks:
-            raise_on_all_ranks(patch.comm, lambda: self._attach_cracks(coupling))
+            raise_on_all_ranks(patch.comm, lambda: _attach_cracks(self, coupling))
         self.dirichlet: list[tuple[np.ndarray, VectorFunction]] = []
         self.tractions: list[tuple[np.ndarray, Callable]] = []
         #: The cracks whose faces carry a traction-separation law (:meth:`add_cohesive`).
@@ -356,29 +383,6 @@ class CoupledElasticity:
         #: or the cell integrals of a CoupledLinearProblem's ``L``.
         self.body_forces: list = []
         self.setup_time = time.perf_counter() - t0
-
-    def _attach_cracks(self, coupling: str) -> None:
-        """Cut the MLS weights by the patch's cracks (Organ, Fleming & Belytschko 1996); only
-        the couplings whose particle side is the plain cracked EFG block can carry them."""
-        if coupling not in STATIC_CRACK_COUPLINGS:
-            raise ValueError(
-                f"coupling={coupling!r} cannot carry a cracked patch (its particle block is "
-                f"not integrated on cut cells with the crack faces as boundary); use one of "
-                f"{list(STATIC_CRACK_COUPLINGS)}, or leave the cracks out of the patch"
-            )
-        if coupling == "master-slave" and self.consistent:
-            # measured on tests/test_crack_solvers.py's uniaxial patch test: 1.0e-3 with a crack
-            # against 3.4e-5 without (Gauss: 7.5e-6 with and without)
-            raise ValueError(
-                "coupling='master-slave' with consistent=True cannot carry a cracked patch: "
-                "VCI on the cut cells, with the slaves' mismatch on the interface, misses the "
-                "linear field by 1e-3 (30x its error without the crack); leave consistent at "
-                "its default (Gauss quadrature), or use coupling='lagrange'"
-            )
-        patch = self.patch
-        attach_cracks(self.mls, patch.cracks, patch.crack_method, patch=patch)
-        if patch.crack_enrichment:
-            enrich_tips(self.mls, patch.cracks, patch.crack_method)
 
     def add_cohesive(
         self,
@@ -596,3 +600,30 @@ class CoupledElasticity:
         )
         out.solution.newton = out.result
         return out.solution
+
+
+def on_patch(model: CoupledElasticity, patch: ParticlePatch) -> CoupledElasticity:
+    """The same model on another patch of the same mesh (collective): its law, coupling and
+    options, its essential conditions, tractions, body forces and cohesive faces, as given by
+    the ``add_*`` calls; a model made by :class:`~dolfinx_meshfree.CoupledLinearProblem`
+    (``problem.model``) from the problem's forms and conditions
+    (:meth:`~dolfinx_meshfree.CoupledLinearProblem.with_patch`). What a patch that grows along
+    a followed path rebuilds (:func:`~dolfinx_meshfree.follow_path` with ``adapt``). The patch's
+    cracks are those it was given (``patch.add_crack``): every cohesive crack must be among
+    them."""
+    problem = getattr(model, "_problem", None)
+    if problem is not None:
+        new = problem.with_patch(patch).model
+    else:
+        new = CoupledElasticity(model.V, patch, **model._given)
+        for facets, value, components in model.component_dirichlet:
+            new.add_dirichlet(facets, value, components)
+        for entry in model.dirichlet:  # the by-component ones are replayed above
+            if len(entry) == 2:
+                new.add_dirichlet(*entry)
+        for facets, traction in model.tractions:
+            new.add_traction(facets, traction)
+        new.body_forces = list(model.body_forces)
+    for c in model.cohesive:
+        new.add_cohesive(c.crack, c.law, c.segments, c.points)
+    return new

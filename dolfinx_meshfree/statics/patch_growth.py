@@ -48,6 +48,14 @@ class PatchEvent:
         time_rebuild: Seconds of the new patch and the model's construction (its tables and
             operators are built by the next solve, as at the first).
         rebuild: ``"full"``: every table and operator rebuilt (the only kind in statics).
+        energy_change: :func:`~dolfinx_meshfree.follow_path` only: the new model's stored energy
+            after it is brought back to equilibrium, less the old model's and the work of the
+            load on the way: what the rebuild changed (0 for a rebuild that reproduced the
+            old field exactly).
+        carried: :func:`~dolfinx_meshfree.follow_path` with a law with state: the bulk's
+            dissipated energy before and after its states were carried to the new points, the
+            points that took a state from another position, and those that took it across a
+            crack (as :attr:`~dolfinx_meshfree.statics.path_following.PathResult.carried`).
     """
 
     step: int
@@ -58,6 +66,8 @@ class PatchEvent:
     cells_after: int
     time_rebuild: float
     rebuild: str = "full"
+    energy_change: float = 0.0
+    carried: tuple[float, float, int, int] | None = None
 
     def as_dict(self) -> dict:
         """Plain values (for JSON)."""

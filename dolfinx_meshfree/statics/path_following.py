@@ -30,7 +30,7 @@ import time
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import dolfinx
 import numpy as np
@@ -51,12 +51,15 @@ from .cohesive_initiation import BulkStrengthWarning, bulk_stress_peaks, site_at
 from .coupled_newton import BlockModel, build_block_problem, law_internal_force
 from .crack_initiation import CrackInitiation, first_stretch, insert_crack
 from .efg import EFGBlockModel, EFGElasticity
+from .patch_growth import PatchEvent
+from .path_patch import check_adapt, fit_particles, grow_patch, path_context, site_context
 from .petsc import BlockSystem, SolverOptions, solver_options
 from .sides import BlockProblem
-from .state_carry import carry_at_points, carry_states
+from .state_carry import carry_at_points, carry_pooled, carry_states
 
 if TYPE_CHECKING:  # annotations only
     from ..geometry.crack import Crack
+    from ..geometry.patch_criteria import GrowthContext
     from ..physics.state import PointState
     from .coupled import CoupledElasticity
 
@@ -255,6 +258,13 @@ class PathResult:
     #: changed), the points that took a state from another position and, of them, those that
     #: took it across a crack.
     carried: list[tuple[int, float, float, int, int]] = field(default_factory=list)
+    #: The growths of the patch (``follow_path(adapt=...)``): one
+    #: :class:`~dolfinx_meshfree.statics.patch_growth.PatchEvent` each, with the stored energy
+    #: the rebuild changed that the load's work does not account for (``energy_change``).
+    patch_events: list[PatchEvent] = field(default_factory=list)
+    #: The model at the end: the one given, or, after the patch grew (``adapt``), the model
+    #: rebuilt on the grown patch (a new object; the given one keeps its first patch).
+    model: CoupledElasticity | EFGElasticity | None = None
 
     @property
     def peak(self) -> tuple[float, float]:
@@ -598,6 +608,39 @@ def _arc_step(
     raise ArithmeticError("not converged")
 
 
+@dataclass
+class _Loads:
+    """The reference load of a built model: ``q = R(x, 0) - R(x, 1)`` (the residual is affine
+    in ``t``), its primal fields as arrays with the held FE dofs zeroed (their values are
+    reactions' work, not dead loads'), and its norm. Rebuilt when the model's layout changes
+    (a grown patch)."""
+
+    q: list[PETSc.Vec]
+    f_ext: list[np.ndarray]
+    norm: float
+
+    @classmethod
+    def of(cls, built: BlockModel | EFGBlockModel, efg: bool) -> _Loads:
+        """Of ``built`` at its current ``x`` (collective; ``problem.t`` is left at 1)."""
+        problem, x = built.problem, built.x
+        problem.t = 0.0
+        r0 = problem.residual(x)
+        problem.t = 1.0
+        r1 = problem.residual(x)
+        q = []
+        for a, b in zip(r0, r1, strict=True):
+            a.axpy(-1.0, b)
+            b.destroy()
+            q.append(a)
+        f_ext = [v.getArray(readonly=True).copy() for v in q[: _particle_field(built) + 1]]
+        if not efg:
+            f_ext[0][built.fe.fixed_local] = 0.0  # held dofs: reactions, not dead loads
+        return cls(q, f_ext, float(np.sqrt(sum(v.norm() ** 2 for v in q))))
+
+    def destroy(self) -> None:
+        _destroy_all(self.q)
+
+
 def _work(
     f_ext: Sequence[np.ndarray],
     x: Sequence[PETSc.Vec],
@@ -709,16 +752,21 @@ def _rebuild(
     built: BlockModel | EFGBlockModel,
     efg: bool,
     u: dolfinx.fem.Function | None,
-) -> tuple[BlockModel | EFGBlockModel, tuple[float, float, int, int] | None]:
-    """The block model of ``model`` after its cracks changed (collective): the fields of
-    ``built`` carried over, the cohesive faces' committed states carried point by point (the old
-    face points keep their positions; new ones start bonded), the bulk's committed states
-    carried to its new points (:mod:`.state_carry`). Also returns the bulk's dissipated energy
-    before and after, and the points that took a state from another position and, of them,
-    across a crack (summed over ranks; ``None`` without a law with state). ``built`` is
-    destroyed once the new model is built (on an error it is left to the caller)."""
+) -> tuple[BlockModel | EFGBlockModel, tuple[float, float, int, int] | None, np.ndarray | None]:
+    """The block model of ``model`` after its cracks or its patch changed (collective): the
+    fields of ``built`` carried over, the cohesive faces' committed states carried point by
+    point (the old face points keep their positions; new ones start bonded), the bulk's
+    committed states carried to its new points (:mod:`.state_carry`). Also returns the bulk's
+    dissipated energy before and after, and the points that took a state from another position
+    and, of them, across a crack (summed over ranks; ``None`` without a law with state); and,
+    when the patch grew (``model`` on another patch than ``built``'s), the new particle
+    coefficients fitted to the old field (:func:`.path_patch.fit_particles`; the FE dofs are
+    copied, the held ones set to their values, the multipliers start from zero), else ``None``.
+    ``built`` is destroyed once the new model is built (on an error it is left to the
+    caller)."""
     state = _owned(built.x)
     comm = _comm(built)
+    grown = not efg and built.model.patch is not model.patch
     faces = {  # the old faces' states (plain arrays: they outlive the destroyed model)
         id(side.cohesive.crack): side.state
         for side in built.problem.shared
@@ -731,20 +779,29 @@ def _rebuild(
         for v, a in zip(new.x, state, strict=True):
             v.array[:] = a
     else:
-        new = build_block_problem(model, law_internal_force(model.law, u), u, model.law, state)
+        # a grown patch has another layout: only the FE field (the same space) is carried as
+        # it was; the multipliers start from zero
+        start = None if grown else state
+        new = build_block_problem(model, law_internal_force(model.law, u), u, model.law, start)
+    fitted = None
+    if grown:
+        new.x[0].array[:] = state[0]
+        fitted = fit_particles(built.solution(), new)
+        new.x[0].array[new.fe.fixed_local] = built.problem.t * new.fe.fixed_values
     built.destroy()
     for side in new.problem.shared:
         if isinstance(side, CohesiveSide) and id(side.cohesive.crack) in faces:
             carry_at_points(faces[id(side.cohesive.crack)], side.state, comm, 1e-9 * side.h)
     if not bulk:
-        return new, None
+        return new, None, fitted
     cracks = model.cracks if efg else model.patch.cracks
     h = particle_spacing(model._domain if efg else model.patch)
     new_bulk = _bulk_points(new)
-    counts = carry_states([b[0] for b in bulk], [b[0] for b in new_bulk], cracks, h)
+    carry = carry_pooled if grown else carry_states  # a converted cell's points: its FE points'
+    counts = carry([b[0] for b in bulk], [b[0] for b in new_bulk], cracks, h)
     after = comm.allreduce(sum(st.dissipated(w) for st, w, _ in new_bulk))
     moved, crossed = (comm.allreduce(n) for n in (counts.moved, counts.crossed))
-    return new, (before, after, moved, crossed)
+    return new, (before, after, moved, crossed), fitted
 
 
 def _reequilibrated(
@@ -752,11 +809,10 @@ def _reequilibrated(
     efg: bool,
     u: dolfinx.fem.Function | None,
     built: BlockModel | EFGBlockModel,
-    fitted: np.ndarray,
+    fitted: np.ndarray | None,
     control: DisplacementControl,
     monitors: dict[str, DisplacementControl] | None,
-    q: list[PETSc.Vec],
-    f_ext: list[np.ndarray],
+    loads: _Loads,
     t: float,
     tau: float,
     tol: float,
@@ -767,15 +823,17 @@ def _reequilibrated(
     result: PathResult,
 ) -> tuple[BlockModel | EFGBlockModel, float, int, float, Callable, dict[str, Callable]]:
     """``model`` brought back to equilibrium at the control value ``tau`` after its cracks
-    changed (one grew, or one started: ``event``, the errors' opening words): rebuilt on them (the
-    faces' states carried), the particle field set to the refitted ``fitted``, re-equilibrated.
-    Returns the new built model, the load factor, Newton's iterations, the work of the load on
-    the way, and the control and monitor functions on the new model (collective)."""
+    changed (one grew, or one started: ``event``, the errors' opening words) or its patch grew
+    (``fitted`` ``None``): rebuilt on them (the faces' states carried), the particle field set
+    to the refitted ``fitted`` (a grown patch: fitted to the old field, and ``loads`` rebuilt on
+    the new layout, the work counted from the fitted state), re-equilibrated. Returns the new
+    built model, the load factor, Newton's iterations, the work of the load on the way, and the
+    control and monitor functions on the new model (collective)."""
     k_p = _particle_field(built)
     old = _owned(built.x)
     comm = _comm(built)
     try:
-        built, carried = _rebuild(model, built, efg, u)
+        built, carried, refit = _rebuild(model, built, efg, u)
     except MomentMatrixError as err:  # raised on every rank
         raise PathError(
             f"{event} and the MLS cannot be evaluated beside it ({err}); choose a finer particle "
@@ -798,14 +856,21 @@ def _reequilibrated(
             )
     problem, x = built.problem, built.x
     side = built.particles
+    if refit is not None:  # a grown patch: the new layout's loads
+        fitted = refit
+        loads.destroy()
+        new = _Loads.of(built, efg)
+        loads.q, loads.f_ext, loads.norm = new.q, new.f_ext, new.norm
     lo, hi = x[k_p].getOwnershipRange()
     mine = (side.dof_map >= lo) & (side.dof_map < hi)
     x[k_p].array[side.dof_map[mine] - lo] = fitted[mine]
+    if refit is not None:
+        old = _owned(x)
     g = _control_function(built, control)
     watch = {k: _control_function(built, c) for k, c in (monitors or {}).items()}
     problem.t = t
     try:
-        t_new, its = _reequilibrate(problem, x, t, tau, g, q, tol, stall, options, solver)
+        t_new, its = _reequilibrate(problem, x, t, tau, g, loads.q, tol, stall, options, solver)
     except ArithmeticError as err:
         raise PathError(
             f"{event} and no equilibrium was found at the same control value ({err}); choose a "
@@ -814,8 +879,58 @@ def _reequilibrated(
         ) from None
     problem.t = t_new
     problem.commit(x)
-    work = _work(f_ext, x[: k_p + 1], old[: k_p + 1], t, t_new, comm)
+    work = _work(loads.f_ext, x[: k_p + 1], old[: k_p + 1], t, t_new, comm)
     return built, t_new, its, work, g, watch
+
+
+def _solution(built: BlockModel, model: CoupledElasticity) -> CoupledSolution:
+    """The coupled solution at ``built``'s state, with the model's small-strain law (for the
+    criteria's stresses; collective)."""
+    solution = built.solution()
+    solution.material = model.material
+    return solution
+
+
+def _regrown(
+    model: CoupledElasticity,
+    criteria: list,
+    context: GrowthContext,
+    efg: bool,
+    u: dolfinx.fem.Function | None,
+    built: BlockModel,
+    control: DisplacementControl,
+    monitors: dict[str, DisplacementControl] | None,
+    loads: _Loads,
+    t: float,
+    tau: float,
+    tol: float,
+    stall: float,
+    options: PathOptions,
+    solver: SolverOptions,
+    result: PathResult,
+) -> tuple[CoupledElasticity, BlockModel, float, int, float, Callable, dict] | None:
+    """Grow the patch where ``criteria`` name FE cells, rebuild and re-equilibrate
+    (:mod:`.path_patch`; collective): the new model, built model, load factor, Newton's
+    iterations, the work of the load on the way, the control and monitor functions; ``None``
+    when no cell is named. The event goes to :attr:`PathResult.patch_events`."""
+    regrown = grow_patch(model, criteria, context)
+    if regrown is None:
+        return None
+    model, patch_event = regrown
+    stored, records = _energies(built)[0], len(result.carried)
+    event = (
+        f"at step {context.step} (control {tau:.6g}, load factor {t:.6g}) the patch grew by "
+        f"{patch_event.cells_added} cells"
+    )
+    built, t, its, work, g, watch = _reequilibrated(
+        model, efg, u, built, None, control, monitors, loads, t, tau, tol, stall, options,
+        solver, event, result,
+    )  # fmt: skip
+    patch_event.energy_change = _energies(built)[0] - stored - work
+    if len(result.carried) > records:  # the bulk's states, carried by this rebuild
+        patch_event.carried = result.carried[-1][1:]
+    result.patch_events.append(patch_event)
+    return model, built, t, its, work, g, watch
 
 
 #: The most sites that could not start a crack tried in one step (each then left out:
@@ -896,6 +1011,7 @@ def follow_path(
     monitors: dict[str, DisplacementControl] | None = None,
     growth: CohesiveGrowth | Sequence[CohesiveGrowth] | None = None,
     initiation: CrackInitiation | None = None,
+    adapt: Any = None,
 ) -> PathResult:
     """Follow the equilibrium path of ``model`` by indirect displacement control (collective).
 
@@ -928,6 +1044,18 @@ def follow_path(
             cracking: :mod:`~dolfinx_meshfree.statics.crack_initiation`); each then grows like
             the first of ``growth``. :attr:`PathResult.initiations` records them. With an
             elastic bulk, cohesive cracks and indirect displacement control.
+        adapt: A patch that grows along the path (:mod:`.path_patch`): a criterion
+            (:class:`~dolfinx_meshfree.NearTips`, :class:`~dolfinx_meshfree.FieldAbove`,
+            :class:`~dolfinx_meshfree.CellsWhere`, or the user's ``select(patch, context)``) or
+            a list. After every converged step, and before every extension of a growing crack,
+            the FE cells it names become particle cells: the model is rebuilt on the larger
+            patch (:func:`~dolfinx_meshfree.statics.coupled.on_patch`), the particle field
+            fitted to the old one, the states carried, and equilibrium found again at the same
+            control value. ``NearTips()`` keeps the patch two spacings beyond what a growing
+            crack's next extension needs (its increment plus a support radius).
+            :attr:`PathResult.patch_events` records each growth. A
+            :class:`~dolfinx_meshfree.CoupledElasticity` with a coupling of
+            :data:`~dolfinx_meshfree.statics.path_patch.ADAPT_COUPLINGS`.
 
     Returns:
         The :class:`PathResult`.
@@ -953,6 +1081,9 @@ def follow_path(
     growths = list(growths)  # cracks that start during the path add theirs
     raise_on_all_ranks(comm, lambda: _check_growth(model, efg, growths, control, cracks))
     raise_on_all_ranks(comm, lambda: _check_initiation(model, efg, initiation, control))
+    criteria = []  # a patch that grows along the path
+    if adapt is not None:
+        criteria = raise_on_all_ranks(comm, lambda: check_adapt(model, efg, adapt, growths))
     bulk_law = model.material if efg else model.law
     grown = [c.law.ft for c in model.cohesive if any(gr.crack is c.crack for gr in growths)]
     if isinstance(bulk_law, RankineDamage) and grown and bulk_law.ft <= max(grown):
@@ -988,20 +1119,7 @@ def follow_path(
         g = None if arc else _control_function(built, control)
         watch = {k: _control_function(built, c) for k, c in (monitors or {}).items()}
         result.monitors = {k: [] for k in watch}
-        # q = R(x, 0) - R(x, 1): the residual is affine in t
-        problem.t = 0.0
-        r0 = problem.residual(x)
-        problem.t = 1.0
-        r1 = problem.residual(x)
-        q = []
-        for a, b in zip(r0, r1, strict=True):
-            a.axpy(-1.0, b)
-            b.destroy()
-            q.append(a)
-        f_ext = [v.getArray(readonly=True).copy() for v in q[: k_p + 1]]  # the primal fields
-        if not efg:
-            f_ext[0][built.fe.fixed_local] = 0.0  # held dofs: reactions, not dead loads
-        q_norm = float(np.sqrt(sum(v.norm() ** 2 for v in q)))
+        loads = _Loads.of(built, efg)
         t, tau, dtau, cuts = 0.0, 0.0 if arc else g(_owned(x)), options.increment, 0
         previous: list[np.ndarray] | None = None  # the last arc-length step's direction
         reason = ""
@@ -1011,18 +1129,18 @@ def follow_path(
         while tau < options.end - 1e-14 * abs(options.end) and step < options.max_steps:
             target = min(options.end, tau + dtau)
             saved = [v.copy() for v in x]
-            ref = q_norm * max(abs(t), peak, 1e-3)
+            ref = loads.norm * max(abs(t), peak, 1e-3)
             tol = max(options.atol, options.rtol * ref)
             stall = max(tol, options.stall * ref)
             try:
                 if arc:
                     t_new, its, previous_new = _arc_step(
-                        problem, x, t, target - tau, previous, q, tol, stall, k_p + 1, options,
-                        solver,
+                        problem, x, t, target - tau, previous, loads.q, tol, stall, k_p + 1,
+                        options, solver,
                     )  # fmt: skip
                 else:
                     t_new, its = _bordered_step(
-                        problem, x, t, target, g, q, tol, stall, options, solver
+                        problem, x, t, target, g, loads.q, tol, stall, options, solver
                     )
             except ArithmeticError as err:
                 reason = str(err)
@@ -1057,9 +1175,20 @@ def follow_path(
             before = _owned(saved[: k_p + 1])
             for w in saved:
                 w.destroy()
-            work += _work(f_ext, x[: k_p + 1], before, t, t_new, comm)
+            work += _work(loads.f_ext, x[: k_p + 1], before, t, t_new, comm)
             t, tau, step = t_new, target, step + 1
             for _ in range(max((gr.max_extensions for gr in growths), default=0) + 1):
+                if criteria:  # the patch first: a crack's next extension stays inside it
+                    context = path_context(model, growths, step, _solution(built, model))
+                    regrown = _regrown(
+                        model, criteria, context, efg, u, built, control, monitors, loads, t,
+                        tau, tol, stall, options, solver, result,
+                    )  # fmt: skip
+                    if regrown is not None:
+                        model, built, t, its_g, work_g, g, watch = regrown
+                        problem, x = built.problem, built.x
+                        its, work = its + its_g, work + work_g
+                        previous = previous_new = None  # the arc's direction: the old layout
                 grown = _grow(built, growths, model, efg)
                 if grown is None:
                     break
@@ -1070,7 +1199,7 @@ def follow_path(
                 # (the work of the load on the way recorded)
                 event = f"at step {step} (control {tau:.6g}, load factor {t:.6g}) the crack grew "
                 built, t, its_g, work_g, g, watch = _reequilibrated(
-                    model, efg, u, built, fitted, control, monitors, q, f_ext, t, tau, tol,
+                    model, efg, u, built, fitted, control, monitors, loads, t, tau, tol,
                     stall, options, solver, f"{event}to {grown}", result,
                 )  # fmt: skip
                 problem, x = built.problem, built.x
@@ -1095,6 +1224,21 @@ def follow_path(
                     and len(result.initiations) < initiation.max_cracks
                     and tries < MAX_REFUSED_PER_STEP
                 ):
+                    if criteria:  # the patch first: around the site, as around a tip
+                        context = site_context(
+                            model, growths, step, _solution(built, model), candidate[0],
+                            initiation.lead,
+                        )  # fmt: skip
+                        regrown = _regrown(
+                            model, criteria, context, efg, u, built, control, monitors, loads,
+                            t, tau, tol, stall, options, solver, result,
+                        )  # fmt: skip
+                        if regrown is not None:  # the peak again, on the new model
+                            model, built, t, its_g, work_g, g, watch = regrown
+                            problem, x = built.problem, built.x
+                            its, work = its + its_g, work + work_g
+                            bulk, candidate = _bulk_peaks(built, law, result.refused, initiation)
+                            continue
                     crack, fitted, reason = _start_crack(
                         built, model, efg, initiation, growths, candidate[0]
                     )
@@ -1108,7 +1252,7 @@ def follow_path(
                             f"started at {crack.points.round(6).tolist()}"
                         )
                         built, t, its_g, work_g, g, watch = _reequilibrated(
-                            model, efg, u, built, fitted, control, monitors, q, f_ext, t, tau,
+                            model, efg, u, built, fitted, control, monitors, loads, t, tau,
                             tol, stall, options, solver, event, result,
                         )  # fmt: skip
                         problem, x = built.problem, built.x
@@ -1198,9 +1342,9 @@ def follow_path(
                     PathShortWarning,
                     stacklevel=2,
                 )
-        for v in q:
-            v.destroy()
+        loads.destroy()
         result.solution = built.solution()
+        result.model = model
         result.solution.states = problem.states
     finally:
         built.destroy()

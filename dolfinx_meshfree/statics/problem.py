@@ -141,6 +141,7 @@ class CoupledLinearProblem:
         self._petsc = (petsc_options, petsc_options_prefix)
         self.problem = CoupledElasticity(V, patch, material, coupling, **options)
         self.problem.form = a
+        self.problem._problem = self  # the problem that made it (coupled.on_patch)
         self.V, self.patch, self.material = V, patch, material
         _check_material(self.problem, everywhere=is_stateful(material))
         self._apply_bcs()

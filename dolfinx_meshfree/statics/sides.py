@@ -278,6 +278,8 @@ class ParticleSide:
     ) -> None:
         q, tq = tables["quadrature"], tables["table"]
         self.P, self.comm = particles, particles.comm
+        #: The patch quadrature (points, weights, cells).
+        self.rule = q
         weights = tables.get("weights", q.weights)  # the bridging band's alpha w_q
         #: The state store of a law with state at the patch quadrature, else ``None``. The
         #: crack band of a particle point is ``band_factor`` times its integration cell's size;

@@ -41,7 +41,7 @@ if TYPE_CHECKING:  # annotations only
     from ..geometry.crack import Crack
     from ..physics.state import PointState
 
-__all__ = ["CarryCounts", "carry_at_points", "carry_states"]
+__all__ = ["CarryCounts", "carry_at_points", "carry_pooled", "carry_states"]
 
 #: A new point within this many particle spacings of an old point of its cell is the same point.
 SAME_POINT = 1e-9
@@ -123,6 +123,46 @@ def carry_states(
         if a.law is not b.law:
             raise RuntimeError("a state is carried between points of the same law only")
         counts += _carry(a, b, cracks, h)
+    return counts
+
+
+@dataclass
+class _Pool:
+    """The points with state of several sides as one set (:func:`carry_pooled`)."""
+
+    law: object
+    points: np.ndarray
+    cells: np.ndarray | None
+    committed: dict[str, np.ndarray]
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+
+def carry_pooled(
+    old: Sequence[PointState], new: Sequence[PointState], cracks: Sequence[Crack], h: float
+) -> CarryCounts:
+    """As :func:`carry_states`, each new point drawing from the points of every old side: the
+    model rebuilt on a grown patch, whose converted cells' particle points take the states of
+    the FE points of their cells (the cells are the mesh's, the same on both sides). Every side
+    must have the same law. Local; returns this rank's counts."""
+    laws = {id(s.law) for s in (*old, *new)}
+    if len(laws) > 1:
+        raise RuntimeError("states are carried between points of one law only")
+    if not old:
+        raise RuntimeError("the old model has no points with state to carry")
+    cells = [s.cells for s in old]
+    if any(c is None for c in cells):
+        raise RuntimeError("a state carried to a changed quadrature needs the points' cells")
+    pool = _Pool(
+        old[0].law,
+        np.concatenate([s.points for s in old]),
+        np.concatenate(cells),
+        {k: np.concatenate([s.committed[k] for s in old]) for k in old[0].committed},
+    )
+    counts = CarryCounts()
+    for b in new:
+        counts += _carry(pool, b, cracks, h)
     return counts
 
 

@@ -104,6 +104,7 @@ from .statics.path_following import (
     StateCarryWarning,
     follow_path,
 )
+from .statics.path_patch import ADAPT_COUPLINGS
 from .statics.problem import CoupledLinearProblem
 from .statics.sides import NonlinearSolveResult
 from .verification.analytic import KirschPlate, LinearField, PressurizedBushing, TimoshenkoBeam
@@ -119,6 +120,7 @@ from .verification.errors import error_norms
 from .verification.waves import GaussianPulseRod, StepLoadedRod
 
 __all__ = [
+    "ADAPT_COUPLINGS",
     "AXISYMMETRIC_COUPLINGS",
     "COMPONENT_COUPLINGS",
     "COUPLINGS",

@@ -82,9 +82,12 @@
 # 63 s against 84 s and 137 s (0.45x and 0.60x), the peak +0.80 % (fixed +0.72 %); but the path
 # leaves the fixed patch's at (522, 247) mm, beside the inner load, runs level and then turns
 # down to (445, 208) mm, 53 mm from EFG's path, where the fixed patch's runs on to the top edge.
-# `--adapt-spacings 8` gives the same path to 0.3 mm, so the patch's radius is not the cause; the
-# cause is not found (a re-equilibration at a growth of the patch that takes another branch near
-# the load is the suspect). Petersson's beam at h = 25 mm grows once and keeps the mode I path.
+# `--adapt-spacings 8` gives the same path to 0.3 mm, so the patch's radius is not the cause.
+# There the crack runs unstably: at step 27 both runs extend it three or four times at one
+# control value (the fixed patch's later nine times at step 38), and in the adaptive run a growth
+# of the patch just before (27 cells, its re-equilibration changing the stored energy by 9e-3 of
+# a joule) leaves a state from which the third extension turns level instead of 37 degrees up.
+# Petersson's beam at h = 25 mm grows once and keeps the mode I path.
 #
 # Methods: `lagrange` (the default), `edge-to-edge`, `bridging`, `ramp`, `ramp-cubic`,
 # `master-slave` (a particle patch of width `--patch-width` around the notch, FE elsewhere) and

@@ -72,7 +72,7 @@
 # (`--patch-offset`), where the crack runs: towards the inner load point, across the compressive
 # strut from that load to the inner support.
 #
-# `--adapt` (with `--path found`, lagrange, edge-to-edge or bridging): the patch starts as the
+# `--adapt` (with `--path found` and any coupling): the patch starts as the
 # cells within three spacings of the notch and its bonded lead, and grows ahead of the tip as it
 # runs (`mf.follow_path(..., adapt=mf.NearTips())`; `--adapt-spacings` sets the radius). Measured
 # on the shear beam, one run each, against pure EFG: at h = 15 mm 336 particles (the fixed patch
@@ -165,8 +165,9 @@ AHEAD = 3.0
 CRACKS = ("cohesive", "band")
 METHODS = ("efg", *mf.COMPONENT_COUPLINGS)  # the supports hold single components
 #: ``--adapt``: the first patch, the cells within this many spacings of the crack (its tip a
-#: support radius and a spacing from the FE interface, as a crack in a patch must be).
-ADAPT_START = 3.0
+#: support radius and a spacing from the FE interface, as a crack in a patch must be; the ramps'
+#: supports are wider, dilation 2.5).
+ADAPT_START = {"ramp": 4.5, "ramp-cubic": 4.5}
 # -
 
 
@@ -222,7 +223,7 @@ def beam_model(args, law, cohesive=None, lead=None, crack=None):
             msh, 2, lambda p: (p[0] > x0 - 1e-9 * L) & (p[0] < x1 + 1e-9 * L)
         )
         if args.adapt and notch is not None:  # the cells about the crack; the rest grows
-            cells = mf.cells_near(msh, notch.points, ADAPT_START * hx)
+            cells = mf.cells_near(msh, notch.points, ADAPT_START.get(args.method, 3.0) * hx)
         patch = mf.ParticlePatch(
             msh, cells, placement="vertices", cracks=[] if notch is None else [notch]
         )

@@ -209,4 +209,4 @@ def test_bad_options():
     with pytest.raises(SystemExit):  # the patch grows ahead of a cohesive crack that grows
         demo.main(["--adapt", "--path", "given"])
     with pytest.raises(SystemExit):
-        demo.main(["--adapt", "--path", "found", "--method", "ramp"])
+        demo.main(["--adapt", "--path", "found", "--method", "efg"])

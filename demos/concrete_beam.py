@@ -85,8 +85,8 @@
 # `--adapt-spacings 8` gives the same path to 0.3 mm, so the patch's radius is not the cause.
 # There the crack runs unstably: at step 27 both runs extend it three or four times at one
 # control value (the fixed patch's later nine times at step 38), and in the adaptive run a growth
-# of the patch just before (27 cells, its re-equilibration changing the stored energy by 9e-3 of
-# a joule) leaves a state from which the third extension turns level instead of 37 degrees up.
+# of the patch just before (27 cells, its re-equilibration changing the stored energy by 1.5e-3
+# J) leaves a state from which the third extension turns level instead of 37 degrees up.
 # Petersson's beam at h = 25 mm grows once and keeps the mode I path.
 #
 # Methods: `lagrange` (the default), `edge-to-edge`, `bridging`, `ramp`, `ramp-cubic`,

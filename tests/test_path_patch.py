@@ -225,7 +225,8 @@ def test_a_patch_grown_into_yielded_cells_carries_their_states(coupling):
     ramp, whose blended interface cells move with the patch), the converted
     particles' states those of the FE points (the bulk's dissipation before and after the
     transfer equal to 1e-12, measured 1e-16; the energy change 1e-10 of the dissipated,
-    measured 3e-13)."""
+    measured 3e-13). A threshold the strain never reaches warns that the patch never grew
+    (``mf.PatchCriterionWarning``)."""
     length, width, E_steel = 2.0, 0.5, 200e3
     msh = dolfinx.mesh.create_rectangle(
         COMM, [[0.0, 0.0], [length, width]], [8, 2], dolfinx.mesh.CellType.quadrilateral
@@ -265,6 +266,12 @@ def test_a_patch_grown_into_yielded_cells_carries_their_states(coupling):
     assert len(grown.control) == len(fixed.control)
     gap = np.abs(np.subtract(grown.load_factor, fixed.load_factor)).max()
     assert gap <= 1e-10 * max(fixed.load_factor)
+    if coupling == "lagrange":  # a threshold the strain never reaches: said, not silent
+        with pytest.warns(
+            mf.PatchCriterionWarning, match=r"follow_path: .* named no cell in 10 converged"
+        ):
+            never = run(lambda x: (x[0] > 0.7) & (x[0] < 1.3), mf.FieldAbove(late, 1.0))
+        assert never.patch_events == [] and never.adapt_named is False
 
 
 @pytest.mark.heavy(

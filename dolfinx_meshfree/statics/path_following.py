@@ -41,6 +41,7 @@ from petsc4py import PETSc
 from ..approx.mls import MomentMatrixError
 from ..couplings.base import CoupledSolution
 from ..geometry.crack import particle_spacing
+from ..geometry.patch_criteria import warn_unused
 from ..parallel import raise_on_all_ranks
 from ..physics.inelastic import RankineDamage
 from ..physics.materials import LinearElastic
@@ -265,6 +266,9 @@ class PathResult:
     #: The model at the end: the one given, or, after the patch grew (``adapt``), the model
     #: rebuilt on the grown patch (a new object; the given one keeps its first patch).
     model: CoupledElasticity | EFGElasticity | None = None
+    #: With ``adapt``: whether a criterion ever named a cell, patch cells included (none did:
+    #: :class:`~dolfinx_meshfree.PatchCriterionWarning`).
+    adapt_named: bool = False
 
     @property
     def peak(self) -> tuple[float, float]:
@@ -912,8 +916,10 @@ def _regrown(
     """Grow the patch where ``criteria`` name FE cells, rebuild and re-equilibrate
     (:mod:`.path_patch`; collective): the new model, built model, load factor, Newton's
     iterations, the work of the load on the way, the control and monitor functions; ``None``
-    when no cell is named. The event goes to :attr:`PathResult.patch_events`."""
-    regrown = grow_patch(model, criteria, context)
+    when no FE cell is named. The event goes to :attr:`PathResult.patch_events`; whether a
+    criterion named any cell, patch cells included, to ``result.adapt_named``."""
+    regrown, named = grow_patch(model, criteria, context)
+    result.adapt_named |= named
     if regrown is None:
         return None
     model, patch_event = regrown
@@ -1061,6 +1067,8 @@ def follow_path(
         The :class:`PathResult`.
 
     Warns:
+        PatchCriterionWarning: with ``adapt``, when no criterion named a cell in the whole
+            path (patch cells included): the patch never grew.
         BulkStrengthWarning: with cohesive cracks in an elastic bulk, once the bulk's averaged
             principal stress three spacings or more from every crack passes ``f_t``
             (:attr:`PathResult.bulk_stress`) and no crack is started there (no ``initiation``,
@@ -1345,6 +1353,8 @@ def follow_path(
         loads.destroy()
         result.solution = built.solution()
         result.model = model
+        if criteria and not result.adapt_named:  # the same on every rank
+            warn_unused(criteria, "follow_path", f"{len(result.control)} converged step(s)")
         result.solution.states = problem.states
     finally:
         built.destroy()

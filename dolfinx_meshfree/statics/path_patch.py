@@ -157,16 +157,17 @@ def site_context(
 
 def grow_patch(
     model: CoupledElasticity, criteria: list[PatchCriterion], context: GrowthContext
-) -> tuple[CoupledElasticity, PatchEvent] | None:
+) -> tuple[tuple[CoupledElasticity, PatchEvent] | None, bool]:
     """Ask ``criteria``; when FE cells must be particles, the model on the grown patch and the
-    event, else ``None`` (collective). The cracks move to the new patch (released from the old
-    one and its MLS); the old model is left as it was otherwise."""
+    event, else ``None``; and whether any criterion named a cell, patch cells included
+    (collective). The cracks move to the new patch (released from the old one and its MLS);
+    the old model is left as it was otherwise."""
     patch = model.patch
     comm = patch.comm
-    want, by, _, _ = named_cells(criteria, patch, context, "follow_path")
+    want, by, named, _ = named_cells(criteria, patch, context, "follow_path")
     added = comm.allreduce(int(want.sum()))
     if added == 0:
-        return None
+        return None, named
     t0 = time.perf_counter()
     grown = patch.grown(np.flatnonzero(want))
     with warnings.catch_warnings():  # the path is the physics' (as Crack.extend's)
@@ -183,7 +184,7 @@ def grow_patch(
         cells_after=comm.allreduce(int(np.asarray(grown.cells).size)),
         time_rebuild=time.perf_counter() - t0,
     )  # fmt: skip
-    return new, event
+    return (new, event), named
 
 
 def fit_particles(old: CoupledSolution, new: BlockModel) -> np.ndarray:

@@ -90,16 +90,20 @@ def _carry(old: PointState, new: PointState, cracks: Sequence[Crack], h: float) 
                     f"no state to carry to the point ({', '.join(f'{v:.6g}' for v in x)}): its "
                     "cell had no points with state before"
                 )
-            for i in mine:
-                d = np.linalg.norm(old.points[pool] - new.points[i], axis=1)
-                near = pool[np.argsort(d, kind="stable")]
-                p = np.repeat(new.points[i][None], near.size, axis=0)
-                apart = np.zeros(near.size, dtype=bool)
+            # the cell's new points against its old ones at once: the nearest old point each
+            # that no crack separates from it, else the nearest (ties to the first in ``pool``)
+            x, y = new.points[mine], old.points[pool]
+            d = np.linalg.norm(y[None, :, :] - x[:, None, :], axis=2)  # (mine, pool)
+            apart = np.zeros(d.shape, dtype=bool)
+            if cracks:
+                p, q = np.repeat(x, pool.size, axis=0), np.tile(y, (mine.size, 1))
                 for crack in cracks:
-                    apart |= crack.crosses(p, old.points[near])
-                seen = np.flatnonzero(~apart)
-                source[i] = near[seen[0]] if seen.size else near[0]
-                counts.crossed += int(seen.size == 0)
+                    apart |= crack.crosses(p, q).reshape(d.shape)
+            alone = apart.all(axis=1)  # no old point of the cell on its side
+            nearest = np.argmin(np.where(apart, np.inf, d), axis=1)
+            nearest[alone] = np.argmin(d[alone], axis=1)
+            source[mine] = pool[nearest]
+            counts.crossed += int(alone.sum())
         counts.moved = int(rest.size)
     for key, value in old.committed.items():
         new.committed[key] = value[source].copy()

@@ -153,11 +153,13 @@ def _bar(
     through: bool = True,
     patch_top: float = np.inf,
     law: object = None,
+    cells: object = None,
 ):
     """A plate L x H in uniaxial tension (traction 1 on the right end; rollers on the left end
     and on the bottom's first 20 mm), with an edge crack from the bottom at x0: a traction-free
     notch of 20 mm and a bonded cohesive stretch of four spacings, both at ``angle`` degrees
-    from the vertical; its bulk ``law`` (default: linear elastic)."""
+    from the vertical; its bulk ``law`` (default: linear elastic). A coupled model's patch is
+    the cells within 50 mm of x = 100 mm below ``patch_top``, or ``cells(msh, crack, h)``."""
     ny = nx // 2
     msh = dolfinx.mesh.create_rectangle(
         MPI.COMM_WORLD, [np.array([0.0, 0.0]), np.array([L, H])], [nx, ny],
@@ -173,10 +175,13 @@ def _bar(
         model = mf.EFGElasticity(mf.ParticleSet.from_vertices(msh), law, cracks=[crack])
     else:
         V = _compat.vector_function_space(msh)
-        cells = dolfinx.mesh.locate_entities(
-            msh, 2, lambda p: (np.abs(p[0] - 100.0) < 50.0) & (p[1] < patch_top)
-        )
-        patch = mf.ParticlePatch(msh, cells, placement="vertices", cracks=[crack])
+        if cells is None:
+            chosen = dolfinx.mesh.locate_entities(
+                msh, 2, lambda p: (np.abs(p[0] - 100.0) < 50.0) & (p[1] < patch_top)
+            )
+        else:
+            chosen = cells(msh, crack, h)
+        patch = mf.ParticlePatch(msh, chosen, placement="vertices", cracks=[crack])
         model = mf.CoupledElasticity(V, patch, law, coupling=method)
     left = mf.boundary_facets(msh, lambda p: np.isclose(p[0], 0.0))
     bottom = mf.boundary_facets(msh, lambda p: np.isclose(p[1], 0.0) & (p[0] < 20.0))

@@ -30,6 +30,7 @@ import ufl
 from mpi4py import MPI
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from test_cohesive_growth import _bar
 from test_crack_initiation import LAW, B, check_support_crack, two_span_beam
 
 COMM = MPI.COMM_WORLD
@@ -37,33 +38,15 @@ L, H, E, NU, FT, GF = 200.0, 100.0, 30000.0, 0.2, 3.0, 0.1
 
 
 def _plate(law, cells, cohesive=True):
-    """A plate L x H (h = 10 mm, quadrilaterals) in uniaxial tension (traction 1 on the right
-    end; rollers on the left end and the bottom's first 20 mm), with an edge crack from the
-    bottom at 30 degrees from the vertical: a traction-free notch of 20 mm, then four spacings
-    bonded by a cohesive law (``cohesive``; else traction-free, ending in the body). The
-    particles fill ``cells(msh, crack, h)``. Returns the model, the crack and the opening
-    control across the notch's mouth."""
-    msh = dolfinx.mesh.create_rectangle(
-        COMM, [np.array([0.0, 0.0]), np.array([L, H])], [20, 10],
-        dolfinx.mesh.CellType.quadrilateral,
-    )  # fmt: skip
-    h = 10.0
-    x0 = np.array([100.0 + 0.37 * h, 0.0])
-    d = np.array([np.sin(np.pi / 6), np.cos(np.pi / 6)])
-    crack = mf.Crack([x0, x0 + 20.0 * d, x0 + (20.0 + 4 * h) * d], through=cohesive)
-    V = _compat.vector_function_space(msh)
-    patch = mf.ParticlePatch(msh, cells(msh, crack, h), placement="vertices", cracks=[crack])
-    model = mf.CoupledElasticity(V, patch, law)
-    left = mf.boundary_facets(msh, lambda p: np.isclose(p[0], 0.0))
-    bottom = mf.boundary_facets(msh, lambda p: np.isclose(p[1], 0.0) & (p[0] < 20.0))
-    right = mf.boundary_facets(msh, lambda p: np.isclose(p[0], L))
-    model.add_dirichlet(left, lambda x: np.zeros_like(x), components=(0,))
-    model.add_dirichlet(bottom, lambda x: np.zeros_like(x), components=(1,))
-    model.add_traction(right, lambda x, n: np.tile([1.0, 0.0], (len(x), 1)))
+    """The plate of test_cohesive_growth (200 x 100 mm, h = 10 mm, quadrilaterals, uniaxial
+    tension) with its edge crack at 30 degrees from the vertical: a traction-free notch of 20 mm,
+    then four spacings bonded by a cohesive law (``cohesive``; else traction-free, ending in the
+    body), lagrange, the particles in ``cells(msh, crack, h)``. Returns the model, the crack
+    and the opening control across the notch's mouth."""
+    model, crack, control = _bar("lagrange", 30.0, through=cohesive, law=law, cells=cells)
     if cohesive:
         model.add_cohesive(crack, mf.LinearCohesive(FT, GF), segments=[1])
-    mouth = [x0 - np.array([h / 2, 0.0]), x0 + np.array([h / 2, 0.0])]
-    return model, crack, mf.DisplacementControl(mouth, [[-1.0, 0.0], [1.0, 0.0]])
+    return model, crack, control
 
 
 def _near_crack(msh, crack, h):

@@ -899,39 +899,24 @@ def _regrown(
     model: CoupledElasticity,
     criteria: list,
     context: GrowthContext,
-    efg: bool,
-    u: dolfinx.fem.Function | None,
     built: BlockModel,
-    control: DisplacementControl,
-    monitors: dict[str, DisplacementControl] | None,
-    loads: _Loads,
-    t: float,
-    tau: float,
-    tol: float,
-    stall: float,
-    options: PathOptions,
-    solver: SolverOptions,
     result: PathResult,
+    reequilibrated: Callable,
 ) -> tuple[CoupledElasticity, BlockModel, float, int, float, Callable, dict] | None:
     """Grow the patch where ``criteria`` name FE cells, rebuild and re-equilibrate
-    (:mod:`.path_patch`; collective): the new model, built model, load factor, Newton's
-    iterations, the work of the load on the way, the control and monitor functions; ``None``
-    when no FE cell is named. The event goes to :attr:`PathResult.patch_events`; whether a
-    criterion named any cell, patch cells included, to ``result.adapt_named``."""
+    (:mod:`.path_patch`; collective) by ``reequilibrated(model, built, None, what)`` (the path's
+    :func:`_reequilibrated` at its current state): the new model, built model, load factor,
+    Newton's iterations, the work of the load on the way, the control and monitor functions;
+    ``None`` when no FE cell is named. The event goes to :attr:`PathResult.patch_events`;
+    whether a criterion named any cell, patch cells included, to ``result.adapt_named``."""
     regrown, named = grow_patch(model, criteria, context)
     result.adapt_named |= named
     if regrown is None:
         return None
     model, patch_event = regrown
     stored, records = _energies(built)[0], len(result.carried)
-    event = (
-        f"at step {context.step} (control {tau:.6g}, load factor {t:.6g}) the patch grew by "
-        f"{patch_event.cells_added} cells"
-    )
-    built, t, its, work, g, watch = _reequilibrated(
-        model, efg, u, built, None, control, monitors, loads, t, tau, tol, stall, options,
-        solver, event, result,
-    )  # fmt: skip
+    what = f"the patch grew by {patch_event.cells_added} cells"
+    built, t, its, work, g, watch = reequilibrated(model, built, None, what)
     patch_event.energy_change = _energies(built)[0] - stored - work
     if len(result.carried) > records:  # the bulk's states, carried by this rebuild
         patch_event.carried = result.carried[-1][1:]
@@ -1128,6 +1113,21 @@ def follow_path(
         watch = {k: _control_function(built, c) for k, c in (monitors or {}).items()}
         result.monitors = {k: [] for k in watch}
         loads = _Loads.of(built, efg)
+
+        def reequilibrated(
+            model: CoupledElasticity | EFGElasticity,
+            built: BlockModel | EFGBlockModel,
+            fitted: np.ndarray | None,
+            what: str,
+        ) -> tuple[BlockModel | EFGBlockModel, float, int, float, Callable, dict]:
+            """:func:`_reequilibrated` at the path's current step, control value, load factor
+            and tolerances, after ``what`` happened (collective)."""
+            event = f"at step {step} (control {tau:.6g}, load factor {t:.6g}) {what}"
+            return _reequilibrated(
+                model, efg, u, built, fitted, control, monitors, loads, t, tau, tol, stall,
+                options, solver, event, result,
+            )  # fmt: skip
+
         t, tau, dtau, cuts = 0.0, 0.0 if arc else g(_owned(x)), options.increment, 0
         previous: list[np.ndarray] | None = None  # the last arc-length step's direction
         reason = ""
@@ -1188,10 +1188,7 @@ def follow_path(
             for _ in range(max((gr.max_extensions for gr in growths), default=0) + 1):
                 if criteria:  # the patch first: a crack's next extension stays inside it
                     context = path_context(model, growths, step, _solution(built, model))
-                    regrown = _regrown(
-                        model, criteria, context, efg, u, built, control, monitors, loads, t,
-                        tau, tol, stall, options, solver, result,
-                    )  # fmt: skip
+                    regrown = _regrown(model, criteria, context, built, result, reequilibrated)
                     if regrown is not None:
                         model, built, t, its_g, work_g, g, watch = regrown
                         problem, x = built.problem, built.x
@@ -1205,11 +1202,9 @@ def follow_path(
                 # the model on the longer crack, the faces' states carried, the particle field
                 # refitted across the new segment, back to equilibrium at the same control value
                 # (the work of the load on the way recorded)
-                event = f"at step {step} (control {tau:.6g}, load factor {t:.6g}) the crack grew "
-                built, t, its_g, work_g, g, watch = _reequilibrated(
-                    model, efg, u, built, fitted, control, monitors, loads, t, tau, tol,
-                    stall, options, solver, f"{event}to {grown}", result,
-                )  # fmt: skip
+                built, t, its_g, work_g, g, watch = reequilibrated(
+                    model, built, fitted, f"the crack grew to {grown}"
+                )
                 problem, x = built.problem, built.x
                 its, work = its + its_g, work + work_g
             else:
@@ -1237,10 +1232,7 @@ def follow_path(
                             model, growths, step, _solution(built, model), candidate[0],
                             initiation.lead,
                         )  # fmt: skip
-                        regrown = _regrown(
-                            model, criteria, context, efg, u, built, control, monitors, loads,
-                            t, tau, tol, stall, options, solver, result,
-                        )  # fmt: skip
+                        regrown = _regrown(model, criteria, context, built, result, reequilibrated)
                         if regrown is not None:  # the peak again, on the new model
                             model, built, t, its_g, work_g, g, watch = regrown
                             problem, x = built.problem, built.x
@@ -1255,14 +1247,12 @@ def follow_path(
                         result.refused.append((step, candidate[0].tolist(), candidate[1], reason))
                     else:
                         result.initiations.append((step, tau, crack.points.tolist()))
-                        event = (
-                            f"at step {step} (control {tau:.6g}, load factor {t:.6g}) a crack "
-                            f"started at {crack.points.round(6).tolist()}"
+                        built, t, its_g, work_g, g, watch = reequilibrated(
+                            model,
+                            built,
+                            fitted,
+                            f"a crack started at {crack.points.round(6).tolist()}",
                         )
-                        built, t, its_g, work_g, g, watch = _reequilibrated(
-                            model, efg, u, built, fitted, control, monitors, loads, t, tau,
-                            tol, stall, options, solver, event, result,
-                        )  # fmt: skip
                         problem, x = built.problem, built.x
                         its, work = its + its_g, work + work_g
                     bulk, candidate = _bulk_peaks(built, law, result.refused, initiation)

@@ -34,6 +34,7 @@ from ..geometry.crack import Crack, CrackDomain, particle_spacing
 from ..parallel import raise_on_all_ranks
 from ..physics.materials import LinearElastic
 from ..statics.cohesive_growth import CohesiveGrowth, _FieldFit, extension, nearest_softened
+from ..statics.sides import particle_coefficients
 from .cohesive_faces import CohesiveFacesSystem, carry_faces
 from .energy import strain_energy
 from .explicit import ExplicitDynamics
@@ -46,15 +47,6 @@ if TYPE_CHECKING:  # annotations only
     from petsc4py import PETSc
 
 __all__ = ["CohesiveDynamicGrowth"]
-
-
-def _gathered(model: ExplicitDynamics, vec: PETSc.Vec) -> np.ndarray:
-    """The particle coefficients of a particle-field vector, replicated, by particle (N, gdim)
-    (collective)."""
-    P = model.particles
-    gdim = P.gdim
-    by_petsc = np.concatenate(model.comm.allgather(vec.array_r.copy())).reshape(-1, gdim)
-    return by_petsc[P.petsc_index]
 
 
 def _scatter(model: ExplicitDynamics, vec: PETSc.Vec, coefficients: np.ndarray) -> None:
@@ -160,7 +152,8 @@ class CohesiveDynamicGrowth:
                 continue
             faces, _ = self._faces()
             field = faces.field
-            u, v = (_gathered(old, x[field]) for x in (old.u, old.v))
+            P = old.particles  # the coefficients, replicated, by particle (collective)
+            u, v = (particle_coefficients(P, x[field]).reshape(-1, P.gdim) for x in (old.u, old.v))
             d, length = extension(self.rule, old.mls, u, old.material, domain, h, end, front)
             b = tip + length * d
             fits = [_FieldFit(old.mls, c, self.crack, tip, b, domain, h) for c in (u, v)]

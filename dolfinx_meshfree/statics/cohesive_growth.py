@@ -52,7 +52,13 @@ from mpi4py import MPI
 
 from ..approx.crack_cuts import support_radius_at
 from ..approx.mls import MomentMatrixError
-from ..geometry.crack import Crack, gathered_segments, particle_spacing, point_segment_distance
+from ..geometry.crack import (
+    NEAR_ROW,
+    Crack,
+    gathered_segments,
+    particle_spacing,
+    point_segment_distance,
+)
 from ..geometry.particles import _points_in_cells
 from ..parallel import raise_on_all_ranks
 from .cohesive import CohesiveCrack, CohesiveSide
@@ -414,8 +420,33 @@ def extension(
     raise_on_all_ranks(comm, check)
     if through:  # to the nearest point of the edge ahead: the crack meets it at a right angle
         return _to_free_edge(tip, d, to_edge, seg)
+    d = _off_the_particles(domain.particles.positions[:, :2], tip, d, length, h)
     _check_interface_clearance(mls, domain, tip + length * d)
     return d, length
+
+
+#: The turns, in degrees, tried in turn for a grown segment whose far half would pass within
+#: ``NEAR_ROW`` spacing of a particle (:func:`_off_the_particles`).
+TURNS = (0.0, 5.0, -5.0, 10.0, -10.0, 15.0, -15.0)
+
+
+def _off_the_particles(
+    particles: np.ndarray, tip: np.ndarray, d: np.ndarray, length: float, h: float
+) -> np.ndarray:
+    """The direction of the next segment, ``d`` turned by the first of :data:`TURNS` whose far
+    half keeps ``NEAR_ROW`` spacing off every particle (``d`` when none does). A segment that
+    runs beside a row of particles leaves the points between them with only that row on their
+    side of the cut: four collinear particles, a singular moment matrix (a crack on
+    quadrilaterals that turned vertical 0.044 spacing beside a column). The first half may stay
+    close: it starts at the tip the crack already has. The same on every rank (replicated
+    particles)."""
+    for turn in np.deg2rad(TURNS):
+        c, s = np.cos(turn), np.sin(turn)
+        e = np.array([c * d[0] - s * d[1], s * d[0] + c * d[1]])
+        a, b = tip + 0.5 * length * e, tip + length * e
+        if point_segment_distance(particles, a[None], b[None]).min() >= NEAR_ROW * h:
+            return e
+    return d
 
 
 def _to_free_edge(

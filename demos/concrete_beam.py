@@ -76,17 +76,14 @@
 # cells within three spacings of the notch and its bonded lead, and grows ahead of the tip as it
 # runs (`mf.follow_path(..., adapt=mf.NearTips())`; `--adapt-spacings` sets the radius). Measured
 # on the shear beam, one run each, against pure EFG: at h = 15 mm 336 particles (the fixed patch
-# 567, EFG 1890), 8 growths, 17.7 s against the fixed patch's 19.6 s and EFG's 43.8 s (0.40x and
-# 0.45x), the peak +2.26 % (fixed +2.01 %), the path within 0.57 mm of EFG's below three quarters
-# of the depth (fixed 0.45 mm). At h = 10 mm: 599 particles (fixed 1280, EFG 4288), 15 growths,
-# 63 s against 84 s and 137 s (0.45x and 0.60x), the peak +0.80 % (fixed +0.72 %); but the path
-# leaves the fixed patch's at (522, 247) mm, beside the inner load, runs level and then turns
-# down to (445, 208) mm, 53 mm from EFG's path, where the fixed patch's runs on to the top edge.
-# `--adapt-spacings 8` gives the same path to 0.3 mm, so the patch's radius is not the cause.
-# There the crack runs unstably: at step 27 both runs extend it three or four times at one
-# control value (the fixed patch's later nine times at step 38), and in the adaptive run a growth
-# of the patch just before (27 cells, its re-equilibration changing the stored energy by 1.5e-3
-# J) leaves a state from which the third extension turns level instead of 37 degrees up.
+# 567, EFG 1890), 8 growths, 20.1 s against the fixed patch's 26.9 s and EFG's 46.9 s (0.43x and
+# 0.57x), the peak +1.99 % (fixed +1.72 %), the path within 0.76 mm of EFG's below three quarters
+# of the depth, 0.94 mm over the whole depth (fixed 0.46 and 0.83 mm). At h = 10 mm: 586
+# particles (fixed 1280, EFG 4288), 14 growths, 67 s against 93 s and 181 s (0.37x and 0.51x),
+# the peak +0.80 % (fixed +0.37 %), the path within 3.2 mm of EFG's below three quarters of the
+# depth; beside the inner load it runs level at y = 246 mm, 21.9 mm from EFG's path at most (the
+# fixed patch's 17.0 mm). There the crack runs unstably, several extensions at one control
+# value: a grown path is as unstable as the direction rule there; check it against a fixed patch.
 # Petersson's beam at h = 25 mm grows once and keeps the mode I path.
 #
 # Methods: `lagrange` (the default), `edge-to-edge`, `bridging`, `ramp`, `ramp-cubic`,

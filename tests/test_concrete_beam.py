@@ -144,19 +144,19 @@ def test_shear_beam_finds_a_mixed_mode_path(tmp_path):
 @pytest.mark.slow
 def test_shear_beam_coupling_follows_pure_efg():
     """Issue 24's coupling target on the shear beam at h = 15 mm: the lagrange coupling's peak
-    within 4 % of pure EFG's (measured +2.0 %; target 2 %), its found path within 1 mm of EFG's
-    below three quarters of the depth (measured 0.46 mm), and within 70 mm over the whole
-    depth (measured 35 mm: near the load point the paths part, target two spacings = 30 mm).
-    Pure EFG at this spacing misses the demo's 2 % energy check (work minus stored against
-    dissipated: 3.0 %, the refits at its 18 growths; 1.1 % at h = 10 mm): run without the
-    demo's checks and held to 6 % here."""
+    within 3.5 % of pure EFG's (measured +1.72 %; target 2 %), its found path within 1 mm of
+    EFG's below three quarters of the depth (measured 0.46 mm), and within 2 mm over the whole
+    depth (measured 0.83 mm; target two spacings = 30 mm). Pure EFG's energy balance (work
+    minus stored against dissipated) within 1.5 % (measured 0.73 %), run without the demo's
+    checks. Before grown segments kept off the particles, EFG's crack turned flat beside a
+    particle row near the load: the paths parted by 35 mm and its balance was 3.0 % off."""
     efg = demo.main([*SHEAR, "--method", "efg", "--no-check"])
     balance = abs(efg["energy_balance_J"] / efg["dissipated_energy_J"] - 1.0)
-    assert balance <= 0.06
+    assert balance <= 0.015
     lag = demo.main([*SHEAR, "--method", "lagrange"])
-    assert abs(lag["peak_load_N"] / efg["peak_load_N"] - 1.0) <= 0.04
+    assert abs(lag["peak_load_N"] / efg["peak_load_N"] - 1.0) <= 0.035
     assert _path_distance(lag["crack_polyline"], efg["crack_polyline"], 0.75 * 306.0) <= 1.0
-    assert _path_distance(lag["crack_polyline"], efg["crack_polyline"], 306.0) <= 70.0
+    assert _path_distance(lag["crack_polyline"], efg["crack_polyline"], 306.0) <= 2.0
 
 
 @pytest.mark.slow

@@ -129,8 +129,9 @@
 # a smooth MLS field spreads the damage over about one support radius, so this ratio runs above
 # 1 in the tail),
 # the crack path (`path`: the face points past f_t, or the particle points with damage
-# >= 0.9; and `crack_polyline`, the crack's points in mm, the bonded lead included), the counts
-# of particles, FE cells and Newton iterations, the time.
+# >= 0.9; and `crack_polyline`, the crack's points in mm, the bonded lead included; `turns_deg`,
+# per grown segment the degrees it was turned to keep off the particles, `mf.PathResult.turns`),
+# the counts of particles, FE cells and Newton iterations, the time.
 #
 # Usage:
 #
@@ -411,6 +412,7 @@ def run(args) -> dict:
         "damage_zone": zone.tolist(),
         "path": zone.tolist(),
         "crack_polyline": [] if cohesive is None else particles_cracks(model)[0].points.tolist(),
+        "turns_deg": list(map(float, path.turns)),
         "time_total": seconds,
         "patch_growths": len(path.patch_events),
         "length_mm": args.length or args.span,

@@ -139,6 +139,9 @@ def test_shear_beam_finds_a_mixed_mode_path(tmp_path):
     assert q[-1, 1] == pytest.approx(306.0, abs=1e-9)
     assert 458.0 < q[-1, 0] < 661.0
     assert q[-2, 0] == pytest.approx(q[-1, 0], abs=1e-9)  # the last stretch is vertical
+    # one grown segment, at (585, 192) mm, would have run beside a particle row: turned 10 deg
+    turns = np.asarray(r["turns_deg"])
+    assert turns.size == len(q) - 3 and np.count_nonzero(turns) == 1 and 10.0 in np.abs(turns)
 
 
 @pytest.mark.slow

@@ -266,8 +266,8 @@ def test_a_growth_beside_a_particle_column_turns_off_it():
     """A crack started at -30 degrees on quadrilaterals (48 x 12 cells, nu = 0.2) turns
     vertical 0.044 spacing beside a column of particles, where a point of the new cut cells saw
     four collinear ones and the rebuild could not evaluate the MLS (a RuntimeError until the
-    grown segments kept off the particles). Now its first extension turns 5 degrees further
-    (statics.cohesive_growth.TURNS) and the crack runs up 0.13 spacing beside the column
+    grown segments kept off the particles). Now its first extension turns 5 degrees further,
+    counterclockwise, away from the column (statics.cohesive_growth.TURNS; growth.turns) and the crack runs up 0.13 spacing beside the column
     (every segment's far half at least NEAR_ROW = 0.1 spacing off every particle; measured
     0.109-0.135), within 0.5 degree of vertical after that turn (checked 1), to the top edge
     (7 extensions), and its faces, separated, have dissipated G_f times its length (0.9999)."""
@@ -301,7 +301,7 @@ def test_a_growth_beside_a_particle_column_turns_off_it():
     h = L / 48
     points = growth.crack.points
     assert growth.crack.tip_ends == [] and points[-1, 1] == pytest.approx(1.0, abs=1e-9)
-    assert len(growth.extensions) == 7
+    assert len(growth.extensions) == 7 and growth.turns == [5.0] + [0.0] * 6
     seg = np.diff(points, axis=0)
     slant = np.degrees(np.arctan2(seg[:, 0], seg[:, 1]))
     assert -15.0 <= slant[1] <= -5.0 and np.abs(slant[2:]).max() <= 1.0

@@ -78,6 +78,9 @@ class CohesiveDynamicGrowth:
         model: The current :class:`~dolfinx_meshfree.ExplicitDynamics` (a new object after each
             extension; the old one is destroyed). crack: Its crack.
         extensions: ``(time, new tip)`` per extension.
+        turns: Per extension, the degrees its segment was turned off the stress criterion's
+            direction to keep its far half ``NEAR_ROW`` spacing off every particle
+            (:data:`~dolfinx_meshfree.statics.cohesive_growth.TURNS`; 0 where it passes clear).
         released: ``(time, energy)`` per extension: the strain energy the rebuild and the refit
             changed (the old model's at its state minus the new one's at the carried state).
     """
@@ -103,6 +106,7 @@ class CohesiveDynamicGrowth:
         self.model = build(self.crack)
         raise_on_all_ranks(self.model.comm, self._check)
         self.extensions: list[tuple[float, list[float]]] = []
+        self.turns: list[float] = []
         self.released: list[tuple[float, float]] = []
 
     def _faces(self) -> tuple[CohesiveFacesSystem, int]:
@@ -154,7 +158,7 @@ class CohesiveDynamicGrowth:
             field = faces.field
             P = old.particles  # the coefficients, replicated, by particle (collective)
             u, v = (particle_coefficients(P, x[field]).reshape(-1, P.gdim) for x in (old.u, old.v))
-            d, length = extension(self.rule, old.mls, u, old.material, domain, h, end, front)
+            d, length, turn = extension(self.rule, old.mls, u, old.material, domain, h, end, front)
             b = tip + length * d
             fits = [_FieldFit(old.mls, c, self.crack, tip, b, domain, h) for c in (u, v)]
             energy_old = strain_energy(old.system, old.stepper.u)
@@ -182,6 +186,7 @@ class CohesiveDynamicGrowth:
             self.rule = replace(self.rule, crack=grown)
             raise_on_all_ranks(new.comm, self._check_faces)
             self.extensions.append((new.time, grown.points[end].tolist()))
+            self.turns.append(turn)
             return True
         return False
 

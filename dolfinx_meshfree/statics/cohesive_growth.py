@@ -76,6 +76,7 @@ if TYPE_CHECKING:  # annotations only
     from .efg import EFGSolution
 
 __all__ = [
+    "TURNS",
     "CohesiveGrowth",
     "direction_at",
     "extension",
@@ -351,23 +352,24 @@ def grow_once(
     material: LinearElastic,
     domain: ParticlePatch | CrackDomain,
     h: float,
-) -> tuple[int, np.ndarray] | None:
+) -> tuple[int, np.ndarray, float] | None:
     """Extend ``growth.crack`` by one step when its softening front is within ``ahead`` spacings
     of the tip (collective): the particle coefficients refitted to the field before it grew
     (:class:`_FieldFit`), or ``None`` when it did not grow. ``coefficients()`` gives the current
     ones, replicated (called only when the crack grows). A crack that would leave the patch
     raises the validator's ValueError (every rank). Of two tips, the first whose front is near
-    grows; returns ``(end, coefficients)`` (``end`` 0 or -1: the crack's end that grew)."""
+    grows; returns ``(end, coefficients, turn)`` (``end`` 0 or -1: the crack's end that grew;
+    ``turn``: the degrees its new segment was turned off the particles, :func:`extension`)."""
     crack = growth.crack
     for end in crack.tip_ends:
         tip = crack.points[end]
         front = softening_front(side, tip)
         if front is not None and np.linalg.norm(front - tip) < growth.ahead * h:
             c = coefficients()
-            d, length = extension(growth, mls, c, material, domain, h, end, front)
+            d, length, turn = extension(growth, mls, c, material, domain, h, end, front)
             fit = _FieldFit(mls, c, crack, tip, tip + length * d, domain, h)
             crack.extend(d, length, tip=end)  # through: the end is a mouth
-            return end, fit.refit(domain.comm)
+            return end, fit.refit(domain.comm), turn
     return None
 
 
@@ -380,13 +382,15 @@ def extension(
     h: float,
     end: int,
     front: np.ndarray,
-) -> tuple[np.ndarray, float]:
+) -> tuple[np.ndarray, float, float]:
     """The next segment of the crack's ``end`` whose softening front is ``front``: its unit
-    direction and length (collective; the crack is not changed). Normal to the principal stress
-    averaged about the front (of the particle coefficients ``c``), straight on past the largest
-    kink of any tip field; to the edge ahead at a right angle when the new tip would end within
-    a spacing of it (refused without ``through=True``); a tip that would come within a support
-    radius of the FE interface is refused."""
+    direction, its length and the degrees it was turned off the particles (collective; the
+    crack is not changed). Normal to the principal stress averaged about the front (of the
+    particle coefficients ``c``), straight on past the largest kink of any tip field, turned by
+    up to 15 degrees where its far half would pass within ``NEAR_ROW`` spacing of a particle
+    (:func:`_off_the_particles`); to the edge ahead at a right angle when the new tip would end
+    within a spacing of it (refused without ``through=True``); a tip that would come within a
+    support radius of the FE interface is refused."""
     crack = growth.crack
     tip = crack.points[end]
     comm = domain.comm
@@ -419,10 +423,10 @@ def extension(
 
     raise_on_all_ranks(comm, check)
     if through:  # to the nearest point of the edge ahead: the crack meets it at a right angle
-        return _to_free_edge(tip, d, to_edge, seg)
-    d = _off_the_particles(domain.particles.positions[:, :2], tip, d, length, h)
+        return (*_to_free_edge(tip, d, to_edge, seg), 0.0)
+    d, turn = _off_the_particles(domain.particles.positions[:, :2], tip, d, length, h)
     _check_interface_clearance(mls, domain, tip + length * d)
-    return d, length
+    return d, length, turn
 
 
 #: The turns, in degrees, tried in turn for a grown segment whose far half would pass within
@@ -432,21 +436,22 @@ TURNS = (0.0, 5.0, -5.0, 10.0, -10.0, 15.0, -15.0)
 
 def _off_the_particles(
     particles: np.ndarray, tip: np.ndarray, d: np.ndarray, length: float, h: float
-) -> np.ndarray:
-    """The direction of the next segment, ``d`` turned by the first of :data:`TURNS` whose far
-    half keeps ``NEAR_ROW`` spacing off every particle (``d`` when none does). A segment that
+) -> tuple[np.ndarray, float]:
+    """The direction of the next segment and its turn in degrees: ``d`` turned by the first of
+    :data:`TURNS` whose far half keeps ``NEAR_ROW`` spacing off every particle (``d`` and 0 when
+    none does). A segment that
     runs beside a row of particles leaves the points between them with only that row on their
     side of the cut: four collinear particles, a singular moment matrix (a crack on
     quadrilaterals that turned vertical 0.044 spacing beside a column). The first half may stay
     close: it starts at the tip the crack already has. The same on every rank (replicated
     particles)."""
-    for turn in np.deg2rad(TURNS):
-        c, s = np.cos(turn), np.sin(turn)
+    for turn in TURNS:
+        c, s = np.cos(np.deg2rad(turn)), np.sin(np.deg2rad(turn))
         e = np.array([c * d[0] - s * d[1], s * d[0] + c * d[1]])
         a, b = tip + 0.5 * length * e, tip + length * e
         if point_segment_distance(particles, a[None], b[None]).min() >= NEAR_ROW * h:
-            return e
-    return d
+            return e, float(turn)
+    return d, 0.0
 
 
 def _to_free_edge(

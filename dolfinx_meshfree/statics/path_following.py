@@ -236,6 +236,10 @@ class PathResult:
     #: control, new tip)`` each, the tip a point on the exterior boundary once the crack
     #: splits the body.
     extensions: list[tuple[int, float, list[float]]] = field(default_factory=list)
+    #: Per extension (as :attr:`extensions`): the degrees its segment was turned off the stress
+    #: criterion's direction so that its far half keeps ``NEAR_ROW`` spacing off every particle
+    #: (:data:`~dolfinx_meshfree.statics.cohesive_growth.TURNS`; 0 where it passes clear).
+    turns: list[float] = field(default_factory=list)
     #: With cohesive cracks in an elastic bulk: per converged step, the largest averaged largest
     #: principal stress of the bulk three spacings or more from every crack (FE side included;
     #: :func:`~dolfinx_meshfree.statics.cohesive_initiation.bulk_stress_peak`) and where. Above
@@ -725,10 +729,11 @@ def _grow(
     growths: Sequence[CohesiveGrowth],
     model: CoupledElasticity | EFGElasticity,
     efg: bool,
-) -> tuple[list[float], np.ndarray] | None:
+) -> tuple[list[float], np.ndarray, float] | None:
     """Grow the first crack of ``growths`` whose softening front nears its tip (collective):
-    its new end point and the refitted particle coefficients, or ``None`` when none grew. The
-    model's cohesive record follows."""
+    its new end point, the refitted particle coefficients and the degrees the new segment was
+    turned off the particles, or ``None`` when none grew. The model's cohesive record
+    follows."""
     sides = [s for s in built.problem.shared if isinstance(s, CohesiveSide)]
     domain = model._domain if efg else model.patch
 
@@ -744,10 +749,10 @@ def _grow(
         # collective; its errors (a crack leaving the patch) are raised on every rank
         grown = grow_once(gr, side, model.mls, coefficients, elastic, domain, side.h)
         if grown is not None:
-            end, fitted = grown
+            end, fitted, turn = grown
             k = next(i for i, c in enumerate(model.cohesive) if c.crack is gr.crack)
             model.cohesive[k] = gr.extended(model.cohesive[k], end)
-            return gr.crack.points[end].tolist(), fitted
+            return gr.crack.points[end].tolist(), fitted, turn
     return None
 
 
@@ -1197,8 +1202,9 @@ def follow_path(
                 grown = _grow(built, growths, model, efg)
                 if grown is None:
                     break
-                grown, fitted = grown
+                grown, fitted, turn = grown
                 result.extensions.append((step, tau, grown))
+                result.turns.append(turn)
                 # the model on the longer crack, the faces' states carried, the particle field
                 # refitted across the new segment, back to equilibrium at the same control value
                 # (the work of the load on the way recorded)

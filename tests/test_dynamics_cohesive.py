@@ -267,10 +267,11 @@ def test_a_growth_beside_a_particle_column_turns_off_it():
     vertical 0.044 spacing beside a column of particles, where a point of the new cut cells saw
     four collinear ones and the rebuild could not evaluate the MLS (a RuntimeError until the
     grown segments kept off the particles). Now its first extension turns 5 degrees further,
-    counterclockwise, away from the column (statics.cohesive_growth.TURNS; growth.turns) and the crack runs up 0.13 spacing beside the column
-    (every segment's far half at least NEAR_ROW = 0.1 spacing off every particle; measured
-    0.109-0.135), within 0.5 degree of vertical after that turn (checked 1), to the top edge
-    (7 extensions), and its faces, separated, have dissipated G_f times its length (0.9999)."""
+    counterclockwise, away from the column (statics.cohesive_growth.TURNS; growth.turns), and
+    the crack runs up 0.13 spacing beside the column (every segment's far half at least
+    NEAR_ROW = 0.1 spacing off every particle; measured 0.109-0.135), within 0.5 degree of
+    vertical after that turn (checked 1), to the top edge (7 extensions), and its faces,
+    separated, have dissipated G_f times its length (0.9999)."""
     msh = dolfinx.mesh.create_rectangle(
         MPI.COMM_WORLD, [np.array([0.0, 0.0]), np.array([L, 1.0])], [48, 12],
         dolfinx.mesh.CellType.quadrilateral,

@@ -424,7 +424,7 @@ def extension(
     raise_on_all_ranks(comm, check)
     if through:  # to the nearest point of the edge ahead: the crack meets it at a right angle
         return (*_to_free_edge(tip, d, to_edge, seg), 0.0)
-    d, turn = _off_the_particles(domain.particles.positions[:, :2], tip, d, length, h)
+    d, turn = _off_the_particles(domain.particles.positions[:, :2], tip, d, length, h, seg)
     _check_interface_clearance(mls, domain, tip + length * d)
     return d, length, turn
 
@@ -435,22 +435,25 @@ TURNS = (0.0, 5.0, -5.0, 10.0, -10.0, 15.0, -15.0)
 
 
 def _off_the_particles(
-    particles: np.ndarray, tip: np.ndarray, d: np.ndarray, length: float, h: float
+    particles: np.ndarray, tip: np.ndarray, d: np.ndarray, length: float, h: float, edge: np.ndarray
 ) -> tuple[np.ndarray, float]:
     """The direction of the next segment and its turn in degrees: ``d`` turned by the first of
-    :data:`TURNS` whose far half keeps ``NEAR_ROW`` spacing off every particle (``d`` and 0 when
-    none does). A segment that
-    runs beside a row of particles leaves the points between them with only that row on their
-    side of the cut: four collinear particles, a singular moment matrix (a crack on
-    quadrilaterals that turned vertical 0.044 spacing beside a column). The first half may stay
-    close: it starts at the tip the crack already has. The same on every rank (replicated
-    particles)."""
+    :data:`TURNS` whose far half keeps ``NEAR_ROW`` spacing off every particle and whose end
+    stays a spacing inside the exterior segments ``edge`` ((k, 2, 2), as the unturned one does);
+    ``d`` and 0 when none does. A segment that runs beside a row of particles leaves the points
+    between them with only that row on their side of the cut: four collinear particles, a
+    singular moment matrix (a crack on quadrilaterals that turned vertical 0.044 spacing beside
+    a column). The first half may stay close: it starts at the tip the crack already has. The
+    same on every rank (replicated particles)."""
     for turn in TURNS:
         c, s = np.cos(np.deg2rad(turn)), np.sin(np.deg2rad(turn))
         e = np.array([c * d[0] - s * d[1], s * d[0] + c * d[1]])
         a, b = tip + 0.5 * length * e, tip + length * e
-        if point_segment_distance(particles, a[None], b[None]).min() >= NEAR_ROW * h:
-            return e, float(turn)
+        if point_segment_distance(particles, a[None], b[None]).min() < NEAR_ROW * h:
+            continue
+        if turn and point_segment_distance(b[None], edge[:, 0], edge[:, 1]).min() < h:
+            continue
+        return e, float(turn)
     return d, 0.0
 
 

@@ -277,7 +277,8 @@ def balanced_mesh(
         mid = X[cells[:, :nv]].mean(axis=1)
         w = _weights(cell_weight, mid)
         owner = None
-        neighbours = _cross_facets(cells[:, :nv], cell_name) if comm.size > 1 else None
+        several = comm.size > 1 and (by_class or ghosted)  # the facet pairs are needed
+        neighbours = _cross_facets(cells[:, :nv], cell_name) if several else None
         if by_class and comm.size > 1:
             owner = class_bisection(mid, w, comm.size, neighbours)
         if owner is None:

@@ -55,6 +55,7 @@ from ..approx.mls import MomentMatrixError
 from ..geometry.crack import (
     NEAR_ROW,
     Crack,
+    _turn,
     gathered_segments,
     particle_spacing,
     point_segment_distance,
@@ -446,8 +447,7 @@ def _off_the_particles(
     a column). The first half may stay close: it starts at the tip the crack already has. The
     same on every rank (replicated particles)."""
     for turn in TURNS:
-        c, s = np.cos(np.deg2rad(turn)), np.sin(np.deg2rad(turn))
-        e = np.array([c * d[0] - s * d[1], s * d[0] + c * d[1]])
+        e = _turn(d, np.deg2rad(turn))
         a, b = tip + 0.5 * length * e, tip + length * e
         if point_segment_distance(particles, a[None], b[None]).min() < NEAR_ROW * h:
             continue

@@ -6,9 +6,11 @@
 # * **Dynamics** (issue 12, item 2): the per-step time of the rod with a Gaussian initial velocity
 #   (``demos/rod_gauss.py``: FE, EFG, lagrange at ``--nodes`` nodes + particles) with the
 #   stiffness blocks in PETSc's AIJ format (as assembled; with i-nodes) and as BAIJ
-#   (``gdim x gdim`` blocks, the default), two models built alike and stepped in turns from the
-#   same state, the CPU time of one product with the particle (or FE) stiffness alone, and the
-#   relative difference of the two models' displacements at the end (round-off).
+#   (``gdim x gdim`` blocks, the default format), both multiplied by PETSc, and as BAIJ
+#   multiplied by the compiled block product (``dynamics.compiled_product``, the default product
+#   with numba, issue 26 item 4): three models built alike and stepped in turns from the same
+#   state, the CPU time of one product with the particle (or FE) stiffness alone, and the
+#   largest relative difference of the models' displacements at the end (round-off).
 # * **Statics**: the cantilever (L = 48, D = 12, Timoshenko–Goodier loads) in pure EFG and with
 #   the lagrange coupling (right half particles), with Galerkin integration (symmetric saddle
 #   point) and with VCI (``consistent=True``, Petrov–Galerkin: not symmetric). The assembled
@@ -28,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import inspect
 import time
 
 import dolfinx_meshfree as mf
@@ -42,30 +45,39 @@ from mpi4py import MPI
 # -
 
 
-def best_product(A, repeats: int, inner: int = 20) -> float:
-    """CPU seconds of one ``A x`` (best of ``repeats`` batches of ``inner``, slowest rank)."""
+def best_product(A, repeats: int, inner: int = 20, multiply=None) -> float:
+    """CPU seconds of one ``A x`` (best of ``repeats`` batches of ``inner``, slowest rank), by
+    PETSc's product or by ``multiply(x, y)`` (e.g. a compiled product of ``A``)."""
     comm = A.getComm().tompi4py()
     x, y = A.createVecs()
     x.setRandom()
+    multiply = A.mult if multiply is None else multiply
     best = np.inf
     for _ in range(repeats):
         comm.Barrier()
         t0 = time.process_time()
         for _ in range(inner):
-            A.mult(x, y)
+            multiply(x, y)
         best = min(best, comm.allreduce(time.process_time() - t0, op=MPI.MAX) / inner)
     x.destroy()
     y.destroy()
     return best
 
 
+#: The rod's variants: (name, matrix format, product) of ``LinearSystem``.
+VARIANTS = (("aij", "aij", "petsc"), ("baij", "baij", "petsc"), ("compiled", "baij", "numba"))
+
+
 @contextlib.contextmanager
-def matrix_format(fmt: str):
-    """While active, explicit models store their stiffness blocks as ``fmt`` (the default of
-    :class:`~dolfinx_meshfree.dynamics.system.LinearSystem` replaced, for this benchmark only)."""
+def stiffness(fmt: str, product: str):
+    """While active, explicit models store their stiffness blocks as ``fmt`` and multiply them
+    by ``product`` (the defaults of :class:`~dolfinx_meshfree.dynamics.system.LinearSystem`
+    replaced, for this benchmark only)."""
     init = LinearSystem.__init__
     saved = init.__defaults__
-    init.__defaults__ = (*saved[:-1], fmt)
+    names = list(inspect.signature(init).parameters)[-len(saved) :]
+    values = dict(zip(names, saved, strict=True), matrix_format=fmt, product=product)
+    init.__defaults__ = tuple(values[n] for n in names)
     try:
         yield
     finally:
@@ -73,8 +85,8 @@ def matrix_format(fmt: str):
 
 
 def dynamics(method: str, nodes: int, steps: int, repeats: int, comm) -> dict:
-    """Per-step time of the rod with the assembled AIJ and with BAIJ stiffness blocks: two
-    models built alike, stepped in turns from the same state; their final displacements."""
+    """Per-step time of the rod in each of :data:`VARIANTS`: models built alike, stepped in
+    turns from the same state; their final displacements' largest difference to the first."""
     rg = load_demo("rod_gauss")
     args = rg.parse(["--nodes", str(nodes)])
     material = mf.LinearElastic(args.E, 0.0, "strain", rho=args.rho)
@@ -82,51 +94,47 @@ def dynamics(method: str, nodes: int, steps: int, repeats: int, comm) -> dict:
         E=args.E, rho=args.rho, length=rg.LENGTH, center=args.center
     )
     dyns = {}
-    for fmt in ("aij", "baij"):
-        with matrix_format(fmt):
-            dyns[fmt], _ = rg.build(method, args, material, comm)
-        dyns[fmt].set_initial(velocity=rod.initial_velocity)
+    for name, fmt, product in VARIANTS:
+        with stiffness(fmt, product):
+            dyns[name], _ = rg.build(method, args, material, comm)
+        dyns[name].set_initial(velocity=rod.initial_velocity)
     dt = dyns["aij"].stable_time_step()
-    per_step = {"aij": np.inf, "baij": np.inf}
+    per_step = dict.fromkeys(dyns, np.inf)
     product, cpu_step = dict(per_step), dict(per_step)
     for dyn in dyns.values():
-        dyn.run(dyn.time + 2 * dt, dt=dt)  # warm-up
+        dyn.run(dyn.time + 2 * dt, dt=dt)  # warm-up (and the compiled copy made)
     for _ in range(repeats):
-        for fmt, dyn in dyns.items():
-            K = dyn.system.fields[-1].K  # the particle stiffness (FE for pure FE)
-            product[fmt] = min(product[fmt], best_product(K, 2))
+        for name, dyn in dyns.items():
+            system = dyn.system
+            K = system.fields[-1].K  # the particle stiffness (FE for pure FE)
+            last = len(system.fields) - 1
+            made = system._compiled(last, last, K) if name == "compiled" else None
+            mult = None if made is None else made.mult
+            product[name] = min(product[name], best_product(K, 2, multiply=mult))
             comm.Barrier()
             t0 = time.process_time()
             res = dyn.run(dyn.time + steps * dt, dt=dt, energy_records=2)
             cpu = comm.allreduce((time.process_time() - t0) / steps, op=MPI.MAX)
-            cpu_step[fmt] = min(cpu_step[fmt], cpu)
-            per_step[fmt] = min(per_step[fmt], comm.allreduce(res.timings["per_step"], op=MPI.MAX))
+            cpu_step[name] = min(cpu_step[name], cpu)
+            per_step[name] = min(
+                per_step[name], comm.allreduce(res.timings["per_step"], op=MPI.MAX)
+            )
     # at points, not dof by dof: two builds of a model on several ranks need not number (or
     # own) their dofs alike
     x = np.linspace(0.0, rg.LENGTH, 401)
     probes = np.column_stack([x, np.full_like(x, 0.5 * rg.HEIGHT)])
     u = {f: d.displacement_at(probes) for f, d in dyns.items()}
-    diff = float(np.linalg.norm(u["aij"] - u["baij"]))
     norm = float(np.linalg.norm(u["aij"]))
-    dyns["aij"].destroy()
-    dyn = dyns["baij"]
-    sizes = dyn.num_dofs()
-    rec = {
-        "kind": "dynamics",
-        "method": method,
-        "dofs": sizes["fe_dofs"] + sizes["particle_dofs"],
-        "steps": steps,
-        "step_aij": per_step["aij"],
-        "step_baij": per_step["baij"],
-        "cpu_step_aij": cpu_step["aij"],
-        "cpu_step_baij": cpu_step["baij"],
-        "product_aij": product["aij"],
-        "product_baij": product["baij"],
-        "relative_difference": diff / norm,
-        "ranks": comm.size,
-        "dolfinx_version": mf.DOLFINX_VERSION,
-    }
-    dyn.destroy()
+    diff = max(float(np.linalg.norm(u[n] - u["aij"])) for n in dyns)
+    sizes = dyns["baij"].num_dofs()
+    rec = {"kind": "dynamics", "method": method, "dofs": sizes["fe_dofs"] + sizes["particle_dofs"],
+           "steps": steps, "relative_difference": diff / norm, "ranks": comm.size,
+           "dolfinx_version": mf.DOLFINX_VERSION}  # fmt: skip
+    for name in dyns:
+        rec.update({f"step_{name}": per_step[name], f"cpu_step_{name}": cpu_step[name],
+                    f"product_{name}": product[name]})  # fmt: skip
+    for dyn in dyns.values():
+        dyn.destroy()
     return rec
 
 
@@ -212,7 +220,7 @@ def statics(method: str, h: float, consistent: bool, repeats: int, comm) -> dict
 
 
 def main(argv: list[str] | None = None) -> list[dict]:
-    p = argparse.ArgumentParser(description="AIJ vs BAIJ steps, LU vs LDL^T static solves")
+    p = argparse.ArgumentParser(description="AIJ, BAIJ and compiled steps, LU vs LDL^T solves")
     p.add_argument("--nodes", type=int, default=20000, help="rod: FE nodes + particles (about)")
     p.add_argument("--steps", type=int, default=40, help="rod: steps per timing")
     p.add_argument("--methods", nargs="+", default=["fe", "efg", "lagrange"])
@@ -236,11 +244,13 @@ def main(argv: list[str] | None = None) -> list[dict]:
         timed = {"step": "step", "cpu_step": "CPU step", "product": "product"}
         columns = [("method", ""), ("dofs", "d")]
         for label in timed.values():
-            columns += [(f"{label} AIJ", ".3f"), (f"{label} BAIJ", ".3f"), ("AIJ/BAIJ", ".2f")]
+            columns += [(f"{label} AIJ", ".3f"), (f"{label} BAIJ", ".3f"),
+                        (f"{label} compiled", ".3f"), ("BAIJ/compiled", ".2f")]  # fmt: skip
         rows = [
             [r["method"], r["dofs"],
              *(v for k in timed for v in (1e3 * r[f"{k}_aij"], 1e3 * r[f"{k}_baij"],
-                                          ratio(r[f"{k}_aij"], r[f"{k}_baij"]))),
+                                          1e3 * r[f"{k}_compiled"],
+                                          ratio(r[f"{k}_baij"], r[f"{k}_compiled"]))),
              r["relative_difference"]]
             for r in recs if r["kind"] == "dynamics"
         ]  # fmt: skip

@@ -42,9 +42,11 @@ def rod_mesh(comm, h: float):
                      CELL_TYPES["quadrilateral"])  # fmt: skip
 
 
-def rod(method: str, comm, h: float = 1.25, matrix_format: str = "baij") -> ExplicitDynamics:
+def rod(
+    method: str, comm, h: float = 1.25, matrix_format: str = "baij", product: str | None = None
+) -> ExplicitDynamics:
     """The Gaussian-pulse rod: pure EFG, or FE on x < 30 and particles (spacing h / 2) beyond,
-    with the stiffness blocks stored as ``matrix_format``."""
+    with the stiffness blocks stored as ``matrix_format`` and multiplied by ``product``."""
     msh = rod_mesh(comm, h)
     if method == "efg":
         model = build_efg(mf.ParticleSet.from_cells(msh, h), STEEL, quadrature_degree=3)
@@ -57,7 +59,9 @@ def rod(method: str, comm, h: float = 1.25, matrix_format: str = "baij") -> Expl
             mf.CoupledElasticity(V, patch, STEEL, coupling=method, quadrature_degree=3)
         )
     args = model.arguments()
-    args["system"] = LinearSystem(model.fields, model.blocks, model.constraint, matrix_format)
+    args["system"] = LinearSystem(
+        model.fields, model.blocks, model.constraint, matrix_format, product=product
+    )
     return ExplicitDynamics(**args)
 
 

@@ -25,6 +25,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from petsc4py import PETSc
 
+from .compiled_product import CompiledProduct, blockable, resolve_product
 from .linalg import BLOCK_FORMATS, blocked
 
 __all__ = [
@@ -181,6 +182,13 @@ class LinearSystem:
             ``benchmarks/bench_blocks.py``): BAIJ multiplies the particle stiffness
             1.14-1.25x faster (a step of EFG or lagrange 1.2-1.3x), the FE stiffness alike
             (0.95-1.01x); the results agree to round-off (the summation order changes).
+            The PETSc product of ``product="petsc"``.
+        product: Who multiplies the blocks in :meth:`internal_force`: ``"numba"`` (the default
+            with numba): :class:`~dolfinx_meshfree.dynamics.compiled_product.CompiledProduct`
+            for every block of node-interleaved ``gdim x gdim`` blocks (PETSc's product for the
+            others), or ``"petsc"``: PETSc's ``MatMult`` of the stored format; ``None``: the
+            default (``$DOLFINX_MESHFREE_PRODUCT``, else ``"numba"`` with numba). The blocks stay
+            PETSc matrices for everything else (the tangent, the stable step).
     """
 
     def __init__(
@@ -189,11 +197,15 @@ class LinearSystem:
         blocks: Blocks | None = None,
         constraint: Sequence[PETSc.Mat | None] | None = None,
         matrix_format: str = "baij",
+        product: str | None = None,
     ) -> None:
         if matrix_format not in BLOCK_FORMATS:
             raise ValueError(
                 f"matrix_format={matrix_format!r} is not known; use one of {list(BLOCK_FORMATS)}"
             )
+        #: ``"numba"`` or ``"petsc"`` (see ``product`` above).
+        self.product = resolve_product(product)
+        self._products: dict[tuple[int, int], tuple[PETSc.Mat, CompiledProduct | None]] = {}
         self.fields = list(fields)
         self.blocks: Blocks = dict(blocks or {})
         self.store_as(matrix_format)
@@ -230,10 +242,34 @@ class LinearSystem:
         """``K u``: the diagonal blocks, then the off-diagonal ones added (collective)."""
         y = list(out) if out is not None else [f.mass.duplicate() for f in self.fields]
         for k, f in enumerate(self.fields):
-            f.K.mult(u[k], y[k])
+            compiled = self._compiled(k, k, f.K)
+            if compiled is None:
+                f.K.mult(u[k], y[k])
+            else:
+                compiled.mult(u[k], y[k])
         for (k, j), B in self.blocks.items():
-            B.multAdd(u[j], y[k], y[k])
+            compiled = self._compiled(k, j, B)
+            if compiled is None:
+                B.multAdd(u[j], y[k], y[k])
+            else:
+                compiled.mult_add(u[j], y[k])
         return y
+
+    def _compiled(self, k: int, j: int, A: PETSc.Mat) -> CompiledProduct | None:
+        """The compiled product of block ``(k, j)`` (``None``: PETSc's), made for the matrix
+        object ``A`` now stored there (a replaced block gets a new one; collective)."""
+        if self.product == "petsc":
+            return None
+        made = self._products.get((k, j))
+        if made is not None and made[0] is A and (made[1] is None or made[1].is_for(A)):
+            return made[1]
+        if made is not None and made[1] is not None:
+            made[1].destroy()
+        bs = self.fields[k].dofs_per_node()
+        same = bs == self.fields[j].dofs_per_node()
+        prod = CompiledProduct(A, bs) if same and blockable(A, bs) else None
+        self._products[k, j] = (A, prod)
+        return prod
 
     def tangent(self, u: Sequence[PETSc.Vec] | None = None) -> Blocks:
         """``K`` as blocks, whatever ``u``: the diagonal blocks, then the off-diagonal ones."""
@@ -268,6 +304,10 @@ class LinearSystem:
 
     def destroy(self) -> None:
         """Destroy the blocks, masses and constraint blocks (collective)."""
+        for _, prod in self._products.values():
+            if prod is not None:
+                prod.destroy()
+        self._products.clear()
         objs = [*self.blocks.values()]
         for f in self.fields:
             objs += [f.K, f.mass]

@@ -166,11 +166,29 @@ class CompiledProduct:
         and PETSc handle)."""
         return A is self.A and A.handle == self._handle
 
-    def _stale(self) -> bool:
-        changed = self._state != self.A.stateGet()
-        if self._comm.size > 1:  # every rank rebuilds together (the scatter is collective)
-            changed = bool(self._comm.allreduce(changed, op=MPI.LOR))
-        return changed
+    def _stale(self, x: PETSc.Vec, y: PETSc.Vec) -> bool:
+        """Whether the copy must be rebuilt (on every rank together: the scatter is
+        collective), after checking ``x`` and ``y`` on every rank (the kernels do not check
+        bounds).
+
+        Raises:
+            ValueError: on every rank, ``x`` or ``y`` not laid out as ``A``'s columns and rows,
+                or ``y`` the same vector as ``x``.
+        """
+        (rl, _), (cl, _) = self.A.getSizes()
+        sizes = (x.getLocalSize(), y.getLocalSize())
+        bad = sizes != (cl, rl) or x.handle == y.handle
+        flags = int(self._state != self.A.stateGet()) | 2 * int(bad)
+        if self._comm.size > 1:
+            flags = self._comm.allreduce(flags, op=MPI.BOR)
+        if flags & 2:
+            raise ValueError(
+                f"a compiled product y = A x needs x with A's {self.A.getSize()[1]} columns and "
+                f"a different y with its {self.A.getSize()[0]} rows, laid out alike on every "
+                f"rank; got local sizes x {sizes[0]}, y {sizes[1]} on some rank (this rank: A "
+                f"{rl} x {cl}); create them with A.createVecs()"
+            )
+        return bool(flags & 1)
 
     def _build(self) -> None:
         """Copy ``A``'s owned rows into the diagonal and ghost BSR parts and make the scatter
@@ -198,7 +216,7 @@ class CompiledProduct:
         self._state = A.stateGet()
 
     def _product(self, x: PETSc.Vec, y: PETSc.Vec, add: bool) -> None:
-        if self._stale():
+        if self._stale(x, y):
             self._build()
         kernel = _KERNELS[self.bs]
         mode = (PETSc.InsertMode.INSERT_VALUES, PETSc.ScatterMode.FORWARD)

@@ -75,7 +75,10 @@
 # (bridging; box 20.9 %); about 1,130-1,330 particles (the box 4,674); 0.29-0.38x efg's time
 # in two runs (the box 0.41-0.75x; issue 25's target 0.3x, met by lagrange and edge-to-edge in
 # one run of the two: every extension rebuilds the model, because crack-face contact has no
-# local update).
+# local update). Those times are PETSc's product; with the compiled products (the default with
+# numba) every run is faster and the ratio higher: EFG 11.7 s against 15.5 s, lagrange and
+# edge-to-edge 0.35-0.38x (their boxes 0.56-0.58x), with the same kink, path and K to the
+# printed digits (``docs/guide/cracks.md``).
 #
 #     python demos/kalthoff_winkler.py --method lagrange efg --nodes 41 --t-end 40e-6 --json kw.json
 

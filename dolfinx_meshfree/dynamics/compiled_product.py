@@ -3,11 +3,11 @@
 An explicit step is the stiffness product ``f^int = K d`` of every field and little else
 (Belytschko et al. 1995, eq. 4.4; Rabczuk et al. 2006, eq. 86): 88-94 % of a step of the
 Gaussian-pulse rod (``demos/rod_gauss.py``, 20k nodes, one rank). PETSc's BAIJ product of the
-Debian build (PETSc 3.18, compiled for a generic x86-64) reaches 6 GB/s on these machines, a
-quarter of one core's memory bandwidth (``benchmarks/bench_bandwidth.py``). A block-row product
-compiled by numba for the machine it runs on, with the block size a compile-time constant,
-multiplies the same blocks 1.3-3.8x faster (the same benchmark; the gain is largest while the
-matrix stays in the caches).
+Debian build (PETSc 3.18, compiled for a generic x86-64) moves about 6 GB/s on these machines
+at every size, 35-40 % of one core's STREAM triad (16 GB/s; ``benchmarks/bench_bandwidth.py``).
+A block-row product compiled by numba for the machine it runs on, with the block size a
+compile-time constant, multiplies the same blocks 2.7-3.9x faster while they stay in the
+480 MB cache, and 1.4x faster for a 264 MB EFG matrix (the same benchmark, one run).
 
 :class:`CompiledProduct` keeps a copy of a PETSc matrix's owned rows in block compressed rows
 (BSR, the blocks ``gdim x gdim`` of node-interleaved dofs ``gdim * node + component``), split as

@@ -182,7 +182,7 @@ class LinearSystem:
             ``benchmarks/bench_blocks.py``): BAIJ multiplies the particle stiffness
             1.14-1.25x faster (a step of EFG or lagrange 1.2-1.3x), the FE stiffness alike
             (0.95-1.01x); the results agree to round-off (the summation order changes).
-            The PETSc product of ``product="petsc"``.
+            These are PETSc's products (``product="petsc"``).
         product: Who multiplies the blocks in :meth:`internal_force`: ``"numba"`` (the default
             with numba): :class:`~dolfinx_meshfree.dynamics.compiled_product.CompiledProduct`
             for every block of node-interleaved ``gdim x gdim`` blocks (PETSc's product for the

@@ -9,6 +9,7 @@ from dolfinx_meshfree.approx import jit
 from dolfinx_meshfree.dynamics.compiled_product import (
     PRODUCT_ENV,
     CompiledProduct,
+    _whole_blocks,
     blockable,
     resolve_product,
 )
@@ -85,7 +86,8 @@ def test_compiled_product_equals_an_independent_product(bs):
 
 def test_a_changed_matrix_is_never_multiplied_stale():
     """After each change of ``A`` the product follows it: scaled, a new nonzero added through
-    ``axpy`` with a different pattern, and values set then assembled."""
+    ``axpy`` with a different pattern, and values set then assembled; the copy block by block
+    (whole blocks) and through scipy (a block with an entry missing) both checked."""
     comm = MPI.COMM_WORLD
     A, glob, lay = block_matrix(comm, 2)
     prod = CompiledProduct(A, 2)
@@ -97,7 +99,13 @@ def test_a_changed_matrix_is_never_multiplied_stale():
         expected = (matrix @ xg)[lay.start : lay.end]
         assert np.abs(y.array_r - expected).max() <= 1e-13 * np.abs(expected).max()
 
+    def whole() -> bool:  # which copy _build takes: block by block, or through scipy
+        ai, aj, _ = A.getValuesCSR()
+        c0, c1 = A.getOwnershipRangeColumn()
+        return bool(comm.allreduce(bool(_whole_blocks(ai, aj, 2, c0, c1 - c0)[0]), op=MPI.LAND))
+
     check(glob)
+    assert whole()  # the block-by-block copy
     A.scale(2.0)
     check(2.0 * glob)
     # a new entry in the last row, in the first column (another rank's on 2 ranks)
@@ -105,6 +113,7 @@ def test_a_changed_matrix_is_never_multiplied_stale():
     extra = sp.csr_matrix(([5.0], ([n - 1], [0])), shape=glob.shape)
     E = create_aij(comm, owned_rows(extra, lay), lay, lay, block_size=2)
     A.axpy(1.0, E, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+    assert not whole()  # a lone entry in a block: the copy through scipy
     check(2.0 * glob + extra)
     if lay.start <= 0 < lay.end:
         A.setValue(0, 0, 7.0, addv=PETSc.InsertMode.ADD_VALUES)

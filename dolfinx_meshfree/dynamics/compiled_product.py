@@ -119,6 +119,70 @@ def _bsr3(indptr, indices, data, x, y, add):  # pragma: no cover - compiled
 _KERNELS = {2: _bsr2, 3: _bsr3}
 
 
+@jit.jit
+def _whole_blocks(ai, aj, bs, c0, cl):  # pragma: no cover - compiled
+    """Whether the scalar CSR ``(ai, aj)`` (sorted rows) stores whole ``bs x bs`` blocks: the
+    ``bs`` rows of each block row hold the same columns, in runs of ``bs`` that start on a
+    block. Returns ``(whole, diagonal blocks per block row, ghost blocks per block row)``,
+    the ghost blocks being those outside the owned columns ``[c0, c0 + cl)``."""
+    nb = (ai.size - 1) // bs
+    diag = np.zeros(nb, np.int64)
+    off = np.zeros(nb, np.int64)
+    for i in range(nb):
+        s0 = ai[bs * i]
+        n = ai[bs * i + 1] - s0
+        if n % bs != 0:
+            return False, diag, off
+        for r in range(1, bs):
+            if ai[bs * i + r + 1] - ai[bs * i + r] != n:
+                return False, diag, off
+        for k in range(0, n, bs):
+            col = aj[s0 + k]
+            if col % bs != 0:
+                return False, diag, off
+            for r in range(bs):
+                sr = ai[bs * i + r] + k
+                for c in range(bs):
+                    if aj[sr + c] != col + c:
+                        return False, diag, off
+            if c0 <= col < c0 + cl:
+                diag[i] += 1
+            else:
+                off[i] += 1
+    return True, diag, off
+
+
+@jit.jit
+def _fill_blocks(  # pragma: no cover - compiled
+    ai, aj, av, bs, c0, cl, gnodes, dptr, dind, ddata, optr, oind, odata
+):
+    """Copy the whole blocks of ``(ai, aj, av)`` (:func:`_whole_blocks`) into the diagonal BSR
+    part (local block columns) and the ghost part (positions in ``gnodes``), in place."""
+    nb = (ai.size - 1) // bs
+    bb = bs * bs
+    for i in range(nb):
+        s0 = ai[bs * i]
+        n = ai[bs * i + 1] - s0
+        kd = dptr[i]
+        ko = optr[i]
+        for k in range(0, n, bs):
+            col = aj[s0 + k]
+            if c0 <= col < c0 + cl:
+                dind[kd] = (col - c0) // bs
+                for r in range(bs):
+                    sr = ai[bs * i + r] + k
+                    for c in range(bs):
+                        ddata[bb * kd + bs * r + c] = av[sr + c]
+                kd += 1
+            else:
+                oind[ko] = np.searchsorted(gnodes, col // bs)
+                for r in range(bs):
+                    sr = ai[bs * i + r] + k
+                    for c in range(bs):
+                        odata[bb * ko + bs * r + c] = av[sr + c]
+                ko += 1
+
+
 def _bsr(
     rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, shape: tuple[int, int], bs: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -132,6 +196,36 @@ def _bsr(
         m.indices.astype(itype),
         np.ascontiguousarray(m.data, dtype=np.float64).reshape(-1),
     )
+
+
+def _ghost_nodes(
+    ai: np.ndarray, aj: np.ndarray, bs: int, c0: int, cl: int, count: int
+) -> np.ndarray:
+    """The sorted global nodes of the ghost blocks of whole-block CSR arrays (the first row
+    of each block row holds every block's first column)."""
+    if count == 0:
+        return np.zeros(0, np.int64)
+    first = np.zeros(ai.size - 1, bool)
+    first[::bs] = True
+    starts = np.repeat(first, np.diff(ai))  # the entries of each block row's first row
+    cols = aj[starts]
+    cols = cols[(cols % bs == 0) & ((cols < c0) | (cols >= c0 + cl))]
+    return np.unique(cols.astype(np.int64) // bs)
+
+
+def _empty_parts(
+    dcount: np.ndarray, ocount: np.ndarray, bs: int, width: int
+) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+    """The arrays of the diagonal and ghost BSR parts with these blocks per block row, to be
+    filled by :func:`_fill_blocks` (indices as int32 where they fit)."""
+    parts = []
+    for count in (dcount, ocount):
+        total = int(count.sum())
+        itype = np.int32 if max(total, width) < np.iinfo(np.int32).max else np.int64
+        indptr = np.zeros(count.size + 1, itype)
+        np.cumsum(count, out=indptr[1:])
+        parts.append((indptr, np.zeros(total, itype), np.zeros(total * bs * bs)))
+    return parts[0], parts[1]
 
 
 class CompiledProduct:
@@ -198,13 +292,20 @@ class CompiledProduct:
         (rl, _), (cl, _) = A.getSizes()
         c0 = A.getOwnershipRangeColumn()[0]
         ai, aj, av = A.getValuesCSR()  # owned rows, global columns
-        rows = np.repeat(np.arange(rl), np.diff(ai))
-        aj = aj.astype(np.int64)
-        own = (aj >= c0) & (aj < c0 + cl)
-        self._diag = _bsr(rows[own], aj[own] - c0, av[own], (rl, cl), bs)
-        gnodes = np.unique(aj[~own] // bs)
-        gcol = np.searchsorted(gnodes, aj[~own] // bs) * bs + aj[~own] % bs
-        self._off = _bsr(rows[~own], gcol, av[~own], (rl, gnodes.size * bs), bs)
+        whole, dcount, ocount = _whole_blocks(ai, aj, bs, c0, cl)
+        if whole:  # (BAIJ, the default of LinearSystem) copied block by block, in place
+            gnodes = _ghost_nodes(ai, aj, bs, c0, cl, int(ocount.sum()))
+            self._diag, self._off = _empty_parts(dcount, ocount, bs, max(cl, bs * gnodes.size))
+            _fill_blocks(ai, aj, av, bs, c0, cl, gnodes, *self._diag, *self._off)
+        else:  # blocks with entries missing (AIJ): through scipy
+            rows = np.repeat(np.arange(rl), np.diff(ai))
+            aj = aj.astype(np.int64)
+            own = (aj >= c0) & (aj < c0 + cl)
+            self._diag = _bsr(rows[own], aj[own] - c0, av[own], (rl, cl), bs)
+            gnodes = np.unique(aj[~own] // bs)
+            gcol = np.searchsorted(gnodes, aj[~own] // bs) * bs + aj[~own] % bs
+            self._off = _bsr(rows[~own], gcol, av[~own], (rl, gnodes.size * bs), bs)
+        del ai, aj, av
         if self._comm.size > 1:  # collective, also on a rank without ghosts
             ghost = (gnodes[:, None] * bs + np.arange(bs)).ravel().astype(PETSc.IntType)
             self._ghosts = PETSc.Vec().createSeq(ghost.size, comm=PETSc.COMM_SELF)

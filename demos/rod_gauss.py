@@ -58,7 +58,7 @@
 # DOLFINx's own partition (``--partition dolfinx``) one rank holds the FE half and the other the
 # particles, and a lagrange step was 1.05x faster on 2 ranks than on one; balanced, every method
 # 1.82-1.93x with PETSc's product, and 1.71-1.94x with the compiled products (the default with
-# numba), which make each step 2.3-3.2x faster (20k nodes and particles;
+# numba), which make each step 2.9-3.2x faster (20k nodes and particles;
 # ``docs/guide/solvers.md``, work-balanced MPI and compiled products).
 #
 # Usage (the command-line contract):

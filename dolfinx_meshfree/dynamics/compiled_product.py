@@ -1,7 +1,7 @@
 """Compiled block products ``y = K x`` for the explicit step.
 
 An explicit step is the stiffness product ``f^int = K d`` of every field and little else
-(Belytschko et al. 1995, eq. 4.4; Rabczuk et al. 2006, eq. 86): 88-94 % of a step of the
+(Belytschko et al. 1995, eq. 4.4; Rabczuk et al. 2006, eq. 86): 84-93 % of a step of the
 Gaussian-pulse rod (``demos/rod_gauss.py``, 20k nodes, one rank). PETSc's BAIJ product of the
 Debian build (PETSc 3.18, compiled for a generic x86-64) moves about 6 GB/s on these machines
 at every size, 35-40 % of one core's STREAM triad (16 GB/s; ``benchmarks/bench_bandwidth.py``).

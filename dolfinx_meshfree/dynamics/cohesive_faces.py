@@ -153,15 +153,16 @@ class CohesiveFacesSystem(WrappedSystem):
             out.append(v.array_r.reshape(-1, 2).copy())
         return out
 
-    def _tractions(self, u: Sequence[PETSc.Vec], commit: bool) -> None:
-        """Put ``t w`` of each crack into its jump vector (the state committed if ``commit``)."""
-        for (_, _, w), v, st, jump in zip(
-            self.faces, self._jumps, self.states, self.jumps(u), strict=True
-        ):
+    def _tractions(self, u: Sequence[PETSc.Vec], commit: bool) -> list[np.ndarray]:
+        """Put ``t w`` of each crack into its jump vector (the state committed if ``commit``);
+        returns the jumps (:meth:`jumps`) it evaluated the law at."""
+        jumps = self.jumps(u)
+        for (_, _, w), v, st, jump in zip(self.faces, self._jumps, self.states, jumps, strict=True):
             t, _ = st.evaluate(jump)
             if commit:
                 st.commit()
             v.array[:] = (t * w[:, None]).ravel()
+        return jumps
 
     def internal_force(
         self, u: Sequence[PETSc.Vec], out: Sequence[PETSc.Vec] | None = None
@@ -173,10 +174,14 @@ class CohesiveFacesSystem(WrappedSystem):
             B.multTransposeAdd(v, y[self.field], y[self.field])
         return y
 
-    def face_energies(self, u: Sequence[PETSc.Vec]) -> tuple[float, float]:
-        """The faces' stored and dissipated energy at the committed state (every rank)."""
+    def face_energies(
+        self, u: Sequence[PETSc.Vec], jumps: Sequence[np.ndarray] | None = None
+    ) -> tuple[float, float]:
+        """The faces' stored and dissipated energy at the committed state (every rank);
+        ``jumps``: the faces' jumps at ``u`` when the caller has them (:meth:`jumps`)."""
         stored = dissipated = 0.0
-        for (_, law, w), st, jump in zip(self.faces, self.states, self.jumps(u), strict=True):
+        jumps = self.jumps(u) if jumps is None else jumps
+        for (_, law, w), st, jump in zip(self.faces, self.states, jumps, strict=True):
             stored += float(law.stored_energy(jump, st.committed) @ w)
             dissipated += st.dissipated(w)
         comm = self.faces[0][0].getComm().tompi4py()
@@ -185,7 +190,7 @@ class CohesiveFacesSystem(WrappedSystem):
     def strain_energy(self, u: Sequence[PETSc.Vec], f_int: Sequence[PETSc.Vec]) -> float:
         """The inner system's energy (from ``f_int`` minus the faces' force) plus the faces'
         stored and dissipated energy."""
-        self._tractions(u, commit=False)
+        jumps = self._tractions(u, commit=False)
         inner_f = list(f_int)
         inner_f[self.field] = f_int[self.field].copy()
         for (B, _, _), v in zip(self.faces, self._jumps, strict=True):
@@ -193,7 +198,7 @@ class CohesiveFacesSystem(WrappedSystem):
             inner_f[self.field].axpy(-1.0, self._force)
         energy = self.inner.strain_energy(u, inner_f)
         inner_f[self.field].destroy()
-        return energy + sum(self.face_energies(u))
+        return energy + sum(self.face_energies(u, jumps))
 
     def tangent(self, u: Sequence[PETSc.Vec] | None = None) -> dict:
         """The inner tangent with ``K_0 B^T W B`` added to the particle block: an upper bound,

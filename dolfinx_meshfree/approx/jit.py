@@ -97,20 +97,26 @@ def default_backend(env_var: str, fallback: str = "numpy") -> str:
     return os.environ.get(env_var) or ("numba" if AVAILABLE else fallback)
 
 
-def resolve_backend(name: str, env_var: str, backends: tuple[str, ...] = ("numba", "numpy")) -> str:
-    """``name`` checked against ``backends`` (the compiled one first, the reference last).
+def resolve_backend(
+    name: str,
+    env_var: str,
+    backends: tuple[str, ...] = ("numba", "numpy"),
+    argument: str = "backend",
+) -> str:
+    """``name`` checked against ``backends`` (the compiled one first, the reference last);
+    ``argument``: the name of the argument it came from, for the messages.
 
     Raises:
-        ValueError: An unknown backend (naming ``env_var``, where it may come from), or
-            ``"numba"`` without numba.
+        ValueError: An unknown backend (naming ``argument`` and ``env_var``, where it may come
+            from), or ``"numba"`` without numba.
     """
     if name not in backends:
         raise ValueError(
-            f"backend={name!r} (argument or {env_var}) is not known; use one of {backends}"
+            f"{argument}={name!r} (argument or {env_var}) is not known; use one of {backends}"
         )
     if name == "numba" and not AVAILABLE:
         raise ValueError(
-            "backend='numba' needs numba, which is not importable: install numba "
-            f"(python3-numba or pip install numba) or use backend={backends[-1]!r}"
+            f"{argument}='numba' needs numba, which is not importable: install numba "
+            f"(python3-numba or pip install numba) or use {argument}={backends[-1]!r}"
         )
     return name

@@ -60,16 +60,7 @@ def resolve_product(product: str | None) -> str:
         ValueError: an unknown product, or ``"numba"`` without numba.
     """
     name = product if product is not None else jit.default_backend(PRODUCT_ENV, "petsc")
-    if name not in PRODUCTS:
-        raise ValueError(
-            f"product={name!r} (argument or {PRODUCT_ENV}) is not known; use one of {PRODUCTS}"
-        )
-    if name == "numba" and not jit.AVAILABLE:
-        raise ValueError(
-            "product='numba' needs numba, which is not importable: install numba "
-            "(python3-numba or pip install numba) or use product='petsc'"
-        )
-    return name
+    return jit.resolve_backend(name, PRODUCT_ENV, PRODUCTS, argument="product")
 
 
 def blockable(A: PETSc.Mat, bs: int) -> bool:
@@ -172,18 +163,16 @@ def _fill_blocks(  # pragma: no cover - compiled
             col = aj[s0 + k]
             if c0 <= col < c0 + cl:
                 dind[kd] = (col - c0) // bs
-                for r in range(bs):
-                    sr = ai[bs * i + r] + k
-                    for c in range(bs):
-                        ddata[bb * kd + bs * r + c] = av[sr + c]
+                data, b = ddata, bb * kd
                 kd += 1
             else:
                 oind[ko] = np.searchsorted(gnodes, col // bs)
-                for r in range(bs):
-                    sr = ai[bs * i + r] + k
-                    for c in range(bs):
-                        odata[bb * ko + bs * r + c] = av[sr + c]
+                data, b = odata, bb * ko
                 ko += 1
+            for r in range(bs):
+                sr = ai[bs * i + r] + k
+                for c in range(bs):
+                    data[b + bs * r + c] = av[sr + c]
 
 
 def _bsr(
@@ -251,17 +240,11 @@ class CompiledProduct:
         self.A = A
         self.bs = bs
         self._comm = A.getComm().tompi4py()
-        self._handle = A.handle
         self._state: int | None = None
         self._diag: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._off: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._ghosts: PETSc.Vec | None = None
         self._scatter: PETSc.Scatter | None = None
-
-    def is_for(self, A: PETSc.Mat) -> bool:
-        """Whether this product was made for the matrix object ``A`` (the same Python object
-        and PETSc handle)."""
-        return A is self.A and A.handle == self._handle
 
     def _stale(self, x: PETSc.Vec, y: PETSc.Vec) -> bool:
         """Whether the copy must be rebuilt (on every rank together: the scatter is

@@ -205,7 +205,8 @@ class LinearSystem:
             )
         #: ``"numba"`` or ``"petsc"`` (see ``product`` above).
         self.product = resolve_product(product)
-        self._products: dict[tuple[int, int], tuple[PETSc.Mat, CompiledProduct | None]] = {}
+        #: per block: the matrix, its PETSc handle and its compiled product (None: PETSc's)
+        self._products: dict[tuple[int, int], tuple[PETSc.Mat, int, CompiledProduct | None]] = {}
         self.fields = list(fields)
         self.blocks: Blocks = dict(blocks or {})
         self.store_as(matrix_format)
@@ -261,14 +262,14 @@ class LinearSystem:
         if self.product == "petsc":
             return None
         made = self._products.get((k, j))
-        if made is not None and made[0] is A and (made[1] is None or made[1].is_for(A)):
-            return made[1]
-        if made is not None and made[1] is not None:
-            made[1].destroy()
+        if made is not None and made[0] is A and made[1] == A.handle:  # the same PETSc matrix
+            return made[2]
+        if made is not None and made[2] is not None:
+            made[2].destroy()
         bs = self.fields[k].dofs_per_node()
         same = bs == self.fields[j].dofs_per_node()
         prod = CompiledProduct(A, bs) if same and blockable(A, bs) else None
-        self._products[k, j] = (A, prod)
+        self._products[k, j] = (A, A.handle, prod)
         return prod
 
     def tangent(self, u: Sequence[PETSc.Vec] | None = None) -> Blocks:
@@ -304,7 +305,7 @@ class LinearSystem:
 
     def destroy(self) -> None:
         """Destroy the blocks, masses and constraint blocks (collective)."""
-        for _, prod in self._products.values():
+        for _, _, prod in self._products.values():
             if prod is not None:
                 prod.destroy()
         self._products.clear()

@@ -48,6 +48,7 @@ from .. import _compat
 from ..approx.fe_dofs import fe_dof_layout
 from ..approx.fe_points import tabulate_in_cells
 from ..geometry.quadrature import QuadraturePoints, cell_quadrature
+from ..physics import rate_kernels
 from ..physics.axisymmetry import revolved
 from ..physics.forces import InternalForces
 from ..physics.materials import AXISYMMETRIC, LinearElastic, is_axisymmetric
@@ -284,7 +285,9 @@ class RateLaw:
         F = self.state["F"].reshape(-1, 3, 3)
         s = np.ones(len(F))
         live = self.state["eroded"][:, 0] == 0 if "eroded" in self.state else np.ones(len(F), bool)
-        if live.any():
+        if rate_kernels.resolve_backend(getattr(self.law, "backend", None)) == "numba":
+            s = rate_kernels.smallest_stretches(self.state["F"], live)
+        elif live.any():
             s[live] = np.linalg.svd(F[live], compute_uv=False)[:, -1]
         return np.clip(s, 1e-12, 1.0)
 

@@ -67,13 +67,14 @@ inverted point stops the run (:class:`~dolfinx_meshfree.physics.constitutive.Def
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from functools import cached_property
 from typing import ClassVar
 
 import numpy as np
 
-from .objective import RateStep, as_3d, check_step, virgin_state
+from . import rate_kernels
+from .objective import RateStep, as_3d, check_arguments, check_step, virgin_state
 
 __all__ = ["HolmquistJohnsonCook"]
 
@@ -103,6 +104,10 @@ class HolmquistJohnsonCook:
         erosion: ``None`` (default: an inverted point stops the run), or the equivalent
             plastic strain ``eps_e > 0`` at which a fully damaged point erodes; an inverted
             point erodes too (module docstring).
+        backend: ``"numba"`` (the default with numba: :mod:`~dolfinx_meshfree.physics.rate_kernels`,
+            one compiled pass over the points) or ``"numpy"`` (the reference, whole-array
+            operations); the two agree to round-off. ``None``: the default, which
+            ``DOLFINX_MESHFREE_LAW_BACKEND`` overrides.
 
     :meth:`concrete_48mpa` gives the published 48 MPa set (SI units).
     """
@@ -129,6 +134,7 @@ class HolmquistJohnsonCook:
     eps0: float = 1.0
     plane: str | None = None
     erosion: float | None = None
+    backend: str | None = field(default=None, compare=False)
 
     #: State arrays per point (``(m, k)``): the deviatoric Cauchy stress (row-major 3 x 3), the
     #: pressure, the largest volumetric strain, the permanent volumetric strain, the equivalent
@@ -147,7 +153,7 @@ class HolmquistJohnsonCook:
 
     @classmethod
     def concrete_48mpa(
-        cls, plane: str | None = None, erosion: float | None = None
+        cls, plane: str | None = None, erosion: float | None = None, backend: str | None = None
     ) -> HolmquistJohnsonCook:
         """The 48 MPa concrete of Holmquist, Johnson & Cook 1993 in SI units (kg, m, s, Pa), as
         LS-DYNA's MAT_111 examples list it: rho 2440, G 14.86 GPa, A 0.79, B 1.60, N 0.61,
@@ -157,11 +163,13 @@ class HolmquistJohnsonCook:
             rho=2440.0, G=14.86e9, A=0.79, B=1.60, N=0.61, C=0.007, fc=48e6, T=4e6,
             efmin=0.01, sfmax=7.0, p_crush=16e6, mu_crush=0.001, p_lock=0.80e9, mu_lock=0.10,
             D1=0.04, D2=1.0, K1=85e9, K2=-171e9, K3=208e9, plane=plane, erosion=erosion,
+            backend=backend,
         )  # fmt: skip
 
     def __post_init__(self) -> None:
+        rate_kernels.resolve_backend(self.backend)
         for f in fields(self):
-            if f.name in ("plane", "erosion"):
+            if f.name in ("plane", "erosion", "backend"):
                 continue
             value = getattr(self, f.name)
             if not (isinstance(value, int | float) and np.isfinite(value)):
@@ -336,7 +344,33 @@ class HolmquistJohnsonCook:
         """``(sigma (m, 3, 3), new state)``: the Cauchy stress at the deformation gradients ``F``
         ``(m, d, d)`` reached over a step of length ``dt`` from the committed ``state`` (never
         modified; the new one is made of new arrays). 2D models give the hoop stretch ``r / R``
-        of an axisymmetric point in ``hoop`` (``F_zz``), plane strain leaves it ``None``."""
+        of an axisymmetric point in ``hoop`` (``F_zz``), plane strain leaves it ``None``.
+
+        The compiled backend (class docstring) hands a step it cannot take (an inverted or
+        non-finite ``F`` without erosion, a singular mid-step gradient) to the reference, whose
+        errors name the point."""
+        if rate_kernels.resolve_backend(self.backend) == "numba":
+            check_arguments(self, F, dt, state, hoop)
+            sigma, new, flags = rate_kernels.hjc_update(
+                self._constants, self.erosion, F, hoop, dt, state, self.state_fields
+            )
+            if not flags.any():
+                return sigma, new
+        return self._update_reference(F, dt, state, hoop)
+
+    @cached_property
+    def _constants(self) -> np.ndarray:
+        """The parameters in the order :mod:`rate_kernels` takes them."""
+        return np.array([getattr(self, name) for name in rate_kernels.PARAMETERS], dtype=float)
+
+    def _update_reference(
+        self,
+        F: np.ndarray,
+        dt: float,
+        state: dict[str, np.ndarray],
+        hoop: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """:meth:`update` by whole-array operations (the ``"numpy"`` backend, the reference)."""
         gone = np.zeros(len(F), dtype=bool)
         F_new, committed = None, state
         if self.erosion is not None:  # eroded and inverting points: computed at rest, then zeroed
@@ -407,6 +441,8 @@ class HolmquistJohnsonCook:
         virgin one."""
         if state is None:
             return float(np.sqrt((self.K_elastic + 4.0 * self.G / 3.0) / self.rho))
+        if rate_kernels.resolve_backend(self.backend) == "numba":
+            return rate_kernels.hjc_wave_speed(self._constants, state)
         live = state["eroded"][:, 0] == 0  # an eroded point carries nothing
         mu_max = state["mu_max"][live, 0]
         K = np.maximum(self.loading_tangent(mu_max), self.unloading_modulus(mu_max))

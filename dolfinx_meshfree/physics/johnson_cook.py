@@ -25,12 +25,14 @@ reference volume.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
 from typing import ClassVar
 
 import numpy as np
 
-from .objective import RateStep, check_step, virgin_state
+from . import rate_kernels
+from .objective import RateStep, check_arguments, check_step, virgin_state
 
 __all__ = ["JohnsonCook"]
 
@@ -48,6 +50,9 @@ class JohnsonCook:
             yield stress, hardening modulus and exponent (``0 < n <= 1``). C: Strain-rate
             coefficient. eps0: Reference strain rate (1/s in SI). plane: ``None`` (3D),
             ``"strain"`` (2D) or ``"axisymmetric"`` (2D; :meth:`update` takes the hoop stretch).
+        backend: ``"numba"`` (the default with numba: one compiled pass over the points,
+            :mod:`~dolfinx_meshfree.physics.rate_kernels`) or ``"numpy"`` (the reference); as
+            :class:`~dolfinx_meshfree.physics.hjc.HolmquistJohnsonCook`'s.
     """
 
     rho: float
@@ -59,6 +64,7 @@ class JohnsonCook:
     C: float
     eps0: float = 1.0
     plane: str | None = None
+    backend: str | None = field(default=None, compare=False)
 
     #: State arrays per point: the deviatoric Cauchy stress (row-major 3 x 3), the pressure, the
     #: equivalent plastic strain, the stress work per unit reference volume and ``F``.
@@ -71,12 +77,17 @@ class JohnsonCook:
     }
 
     @classmethod
-    def steel_4340(cls, plane: str | None = None) -> JohnsonCook:
+    def steel_4340(cls, plane: str | None = None, backend: str | None = None) -> JohnsonCook:
         """4340 steel (Rc 30) of Johnson & Cook 1983, Table 1, in SI units: rho 7830, E 200 GPa,
         nu 0.29, A 792 MPa, B 510 MPa, n 0.26, C 0.014."""
-        return cls(rho=7830.0, E=200e9, nu=0.29, A=792e6, B=510e6, n=0.26, C=0.014, plane=plane)
+        return cls(
+            rho=7830.0, E=200e9, nu=0.29, A=792e6, B=510e6, n=0.26, C=0.014, plane=plane,
+            backend=backend,
+        )  # fmt: skip
 
     def __post_init__(self) -> None:
+        rate_kernels.resolve_backend(self.backend)
+
         def refuse(name: str, rule: str, fix: str) -> None:
             raise ValueError(f"JohnsonCook: {name}={getattr(self, name)!r} {rule}; {fix}")
 
@@ -138,7 +149,30 @@ class JohnsonCook:
     ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """``(sigma (m, 3, 3), new state)`` at ``F`` ``(m, d, d)`` after a step ``dt`` from the
         committed ``state`` (never modified); ``hoop`` as in
-        :meth:`~dolfinx_meshfree.physics.hjc.HolmquistJohnsonCook.update`."""
+        :meth:`~dolfinx_meshfree.physics.hjc.HolmquistJohnsonCook.update` (and its hand-over
+        of a step the compiled backend cannot take to the reference)."""
+        if rate_kernels.resolve_backend(self.backend) == "numba":
+            check_arguments(self, F, dt, state, hoop)
+            sigma, new, flags = rate_kernels.johnson_cook_update(
+                self._constants, _BISECTIONS, F, hoop, dt, state, self.state_fields
+            )
+            if not flags.any():
+                return sigma, new
+        return self._update_reference(F, dt, state, hoop)
+
+    @cached_property
+    def _constants(self) -> np.ndarray:
+        """The parameters in the order :mod:`rate_kernels` takes them."""
+        return np.array([getattr(self, n) for n in rate_kernels.JC_PARAMETERS], dtype=float)
+
+    def _update_reference(
+        self,
+        F: np.ndarray,
+        dt: float,
+        state: dict[str, np.ndarray],
+        hoop: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """:meth:`update` by whole-array operations (the ``"numpy"`` backend, the reference)."""
         F3, J = check_step(self, F, dt, state, hoop)
         m = len(F3)
         step = RateStep.start(state["F"].reshape(m, 3, 3), F3, state["deviator"].reshape(m, 3, 3))

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import rate_kernels
 from .constitutive import check_deformation_gradients
 from .materials import is_axisymmetric
 
@@ -46,6 +47,7 @@ __all__ = [
     "RateStep",
     "as_3d",
     "cayley",
+    "check_arguments",
     "check_step",
     "half_rotation",
     "hughes_winget",
@@ -193,10 +195,16 @@ class RateStep:
         return self.J_mid * np.einsum("qij,qij->q", 0.5 * (old + new), self.d_eps)
 
 
-def nominal_stress(sigma: np.ndarray, F: np.ndarray) -> np.ndarray:
+def nominal_stress(sigma: np.ndarray, F: np.ndarray, backend: str | None = None) -> np.ndarray:
     """The nominal (first Piola–Kirchhoff) stress ``P = J sigma F^{-T}`` (m, 3, 3) of the Cauchy
-    stress ``sigma`` (m, 3, 3) at ``F`` (m, 3, 3) (:func:`as_3d` for a 2D one)."""
+    stress ``sigma`` (m, 3, 3) at ``F`` (m, 3, 3) (:func:`as_3d` for a 2D one); ``backend``:
+    ``"numba"`` (one compiled pass, :mod:`~dolfinx_meshfree.physics.rate_kernels`; the default
+    with numba) or ``"numpy"``, as the rate-form laws' ``backend``."""
     F, sigma = np.asarray(F, dtype=float), np.asarray(sigma, dtype=float)
+    if sigma.shape != F.shape or sigma.ndim != 3 or sigma.shape[1:] != (3, 3):
+        raise ValueError(f"sigma {sigma.shape} and F {F.shape} should both have shape (m, 3, 3)")
+    if rate_kernels.resolve_backend(backend) == "numba":
+        return rate_kernels.nominal_stress(sigma, F)
     P = np.zeros_like(sigma)
     live = np.any(sigma != 0.0, axis=(1, 2))  # a point without stress (eroded: F may be singular)
     inv, J = inverse_3x3(F[live])
@@ -221,6 +229,19 @@ def check_step(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Validate the arguments of a rate-form ``law``'s ``update`` (its ``gdim``, ``plane``,
     ``state_fields``) and return ``(F3 (m, 3, 3), J (m,))`` (:func:`as_3d`; ``det F > 0``)."""
+    check_arguments(law, F, dt, state, hoop)
+    return check_deformation_gradients(as_3d(F, hoop), 3)
+
+
+def check_arguments(
+    law: object,
+    F: np.ndarray,
+    dt: float,
+    state: dict[str, np.ndarray],
+    hoop: np.ndarray | None = None,
+) -> None:
+    """:func:`check_step` without the gradients' values: the shapes of ``F`` and of the state,
+    the step and ``hoop`` (a compiled update checks the values point by point)."""
     name, d = type(law).__name__, law.gdim
     F = np.asarray(F, dtype=float)
     if F.ndim != 3 or F.shape[1:] != (d, d):
@@ -236,6 +257,8 @@ def check_step(
             "3D one none"
         )
     m = len(F)
+    if hoop is not None and np.size(hoop) != m:
+        raise ValueError(f"hoop should have shape ({m},), got {np.shape(hoop)}")
     for field, k in law.state_fields.items():
         if field not in state or np.shape(state[field]) != (m, k):
             got = np.shape(state[field]) if field in state else "nothing"
@@ -243,4 +266,3 @@ def check_step(
                 f"{name}: state[{field!r}] should have shape ({m}, {k}), got {got}; build it "
                 "with initial_state(m) and pass the state update() returned"
             )
-    return check_deformation_gradients(as_3d(F, hoop), 3)

@@ -67,12 +67,12 @@ def run(law: HolmquistJohnsonCook, F: np.ndarray, hoop: np.ndarray | None, dt: f
     [(None, None), (None, 0.05), ("strain", None), ("axisymmetric", 0.05)],
 )
 def test_compiled_update_meets_the_reference(plane, erosion):
-    """Every step's stress and state fields agree within 1e-10 of each field's scale (the
+    """Every step's stress and state fields agree within 2e-11 of each field's scale (the
     deviator's: the stress's), measured up to 7.3e-12 (the plastic strain; ``mu = 1 / J - 1``
     of a small compression takes the round-off of ``det F`` relative to ``mu``). The paths
     end with points in region III, in tension, intact, fully damaged and (with erosion)
     eroded, so each branch is compared. The wave speed and the nominal stress of the same
-    state agree within 1e-14 (measured 2.1e-16 and 3.3e-16)."""
+    state agree within 1e-15 (measured 2.1e-16 and 3.5e-16)."""
     d = 3 if plane is None else 2
     F = paths(200, d, 120, seed=3)
     hoop = None
@@ -85,16 +85,16 @@ def test_compiled_update_meets_the_reference(plane, erosion):
     fast_law, slow_law = (dataclasses.replace(base, backend=b) for b in ("numba", "numpy"))
     fast, slow = run(fast_law, F, hoop, 2e-6), run(slow_law, F, hoop, 2e-6)
     for (s1, a), (s2, b) in zip(fast, slow, strict=True):
-        assert np.abs(s1 - s2).max() <= 1e-10 * np.abs(s2).max()
+        assert np.abs(s1 - s2).max() <= 2e-11 * np.abs(s2).max()
         c1, c2 = fast_law.wave_speed(b), slow_law.wave_speed(b)  # the same state
-        assert abs(c1 - c2) <= 1e-14 * c2
+        assert abs(c1 - c2) <= 1e-15 * c2
         F3 = b["F"].reshape(-1, 3, 3)
         P1, P2 = (nominal_stress(s2, F3, backend=k) for k in ("numba", "numpy"))
-        assert np.abs(P1 - P2).max() <= 1e-14 * np.abs(P2).max()
+        assert np.abs(P1 - P2).max() <= 1e-15 * np.abs(P2).max()
         assert np.array_equal(P1 == 0.0, P2 == 0.0)  # the eroded: none
         for name in a:
             scale = np.abs(s2 if name == "deviator" else b[name]).max()
-            assert np.abs(a[name] - b[name]).max() <= 1e-10 * scale, name
+            assert np.abs(a[name] - b[name]).max() <= 2e-11 * scale, name
             assert a[name].flags.c_contiguous
     last = slow[-1][1]
     assert (last["mu_max"] > base.mu_plock).any()  # region III
@@ -108,7 +108,7 @@ def test_compiled_update_meets_the_reference(plane, erosion):
 def test_compiled_johnson_cook_meets_the_reference(plane):
     """Johnson–Cook's compiled step against its reference on the same paths (4340 steel: it
     yields at a shear of about 0.01, so most points flow): every step's stress and state within
-    1e-10 of each field's scale (measured up to 1.8e-12); most points flow, some stay
+    1e-11 of each field's scale (measured up to 1.8e-12); most points flow, some stay
     elastic."""
     d = 3 if plane is None else 2
     F = paths(200, d, 120, seed=5)
@@ -122,10 +122,10 @@ def test_compiled_johnson_cook_meets_the_reference(plane):
     fast_law, slow_law = (dataclasses.replace(base, backend=b) for b in ("numba", "numpy"))
     fast, slow = run(fast_law, F, hoop, 2e-6), run(slow_law, F, hoop, 2e-6)
     for (s1, a), (s2, b) in zip(fast, slow, strict=True):
-        assert np.abs(s1 - s2).max() <= 1e-10 * np.abs(s2).max()
+        assert np.abs(s1 - s2).max() <= 1e-11 * np.abs(s2).max()
         for name in a:
             scale = np.abs(s2 if name == "deviator" else b[name]).max()
-            assert np.abs(a[name] - b[name]).max() <= 1e-10 * scale, name
+            assert np.abs(a[name] - b[name]).max() <= 1e-11 * scale, name
     assert (slow[-1][1]["plastic_strain"] > 0.0).mean() > 0.5
     assert (slow[-1][1]["plastic_strain"] == 0.0).any()
 
@@ -167,7 +167,7 @@ def test_backend_by_name():
 def test_smallest_stretch_meets_the_svd():
     """``smallest_stretches`` (Jacobi on ``F^T F``) against numpy's SVD: random gradients with
     stretches from 0.05 to 2 and any rotation, the identity, a rotation, a crushed cell (0.01)
-    and a repeated stretch, within 1e-12 relative (measured 2.0e-13: ``C = F^T F`` squares the
+    and a repeated stretch, within 5e-13 relative (measured 2.0e-13: ``C = F^T F`` squares the
     stretches' spread, 40 here, into its round-off); points not live read 1."""
     rng = np.random.default_rng(7)
     m = 2000
@@ -184,5 +184,5 @@ def test_smallest_stretch_meets_the_svd():
     want = np.linalg.svd(F, compute_uv=False)[:, -1]
     assert got[10] == 1.0
     rel = np.abs(got - want)[live] / want[live]
-    assert rel.max() < 1e-12
+    assert rel.max() < 5e-13
     assert got[0] == pytest.approx(1.0, rel=1e-15) and got[2] == pytest.approx(0.01, rel=1e-12)

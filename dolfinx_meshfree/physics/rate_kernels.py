@@ -1,29 +1,33 @@
-"""Rate-form laws' point work compiled: HJC's update and wave speed, the nominal stress, the
-smallest principal stretch.
+"""Rate-form laws' point work compiled: the HJC and Johnson–Cook updates, HJC's wave speed, the
+nominal stress and the smallest principal stretch.
 
 :meth:`~dolfinx_meshfree.physics.hjc.HolmquistJohnsonCook.update` written with numpy (the
 reference) evaluates the step as about a hundred whole-array operations, each a pass over
 every point with its temporaries; on a Hanchak shot they were most of the run (``hjc.update``
-17 s of a 25 s profile, ``loading_pressure`` 62 us a call). Here the same step is a loop over
-the points, each taken from ``F`` to its stress and new state in registers:
+17 s of a 25 s profile, ``loading_pressure`` 62 us a call). Here the same step is one loop
+over the points, each taken from ``F`` to its stress and new state before the next:
 
 * the Hughes–Winget kinematics of :mod:`~dolfinx_meshfree.physics.objective` (Hughes & Winget
   1980, eq. 25–32): the mid-step inverse by cofactors, ``d eps``, the half rotation ``Q_h`` as
-  the Cayley transform of the half-angle skew matrix, ``s_rot = Q_h s_n Q_h^T``;
-* the equation of state (HJC eq. 3–5, :meth:`pressure`, :meth:`permanent_strain`), the
-  strength (HJC eq. 1, :meth:`strength`), the radial return and the damage (HJC eq. 2,
-  :meth:`failure_strain`), ``Q_h s_mid Q_h^T``, the trapezoidal stress work;
-* the erosion (``hjc`` module docstring): a point eroded before, inverted (``det F <= 0``) or
-  not finite is computed at rest and keeps its committed state; one worn through is zeroed.
+  the Cayley transform of the half-angle skew matrix, ``s_rot = Q_h s_n Q_h^T`` (:func:`_start`,
+  shared by both laws);
+* HJC (Holmquist, Johnson & Cook 1993): the equation of state (eq. 3–5; ``pressure``,
+  ``permanent_strain``), the strength (eq. 1; ``strength``), the radial return and the damage
+  (eq. 2; ``failure_strain``), ``Q_h s_mid Q_h^T``, the trapezoidal stress work, and the
+  erosion (the ``hjc`` module docstring): a point eroded before, inverted (``det F <= 0``) or
+  not finite is computed at rest and keeps its committed state; one worn through is zeroed;
+* Johnson–Cook (Johnson & Cook 1983, eq. 1 without temperature): the radial return by the
+  reference's bisection (skipped at elastic points, where its answer is 0), ``p = -K ln J``.
 
-The operations are the reference's, in its order, so the two agree to round-off (the tests
-compare them over every region of the equation of state, erosion, tension and the three
-kinds of models; ``tests/test_rate_kernels.py``). The reference's orders of summation differ
-(LAPACK's ``det``, numpy's stacked products), so they agree to round-off, not to the bit.
+The operations are the reference's, in its order; its orders of summation differ (LAPACK's
+``det``, numpy's stacked products), so the two agree to round-off, not to the bit
+(``tests/test_rate_kernels.py`` compares them over every region of the equation of state,
+tension, damage, erosion and the three kinds of models). The backend is the law's
+``backend`` (``"numba"`` by default with numba; ``DOLFINX_MESHFREE_LAW_BACKEND`` overrides).
 
 A point the compiled pass cannot take (an inverted or non-finite ``F`` without erosion, a
-singular mid-step gradient) is flagged, not raised on: the caller then runs the reference,
-whose messages name the point (:meth:`HolmquistJohnsonCook.update`).
+singular mid-step gradient) is flagged, not raised on: the law then runs the reference, whose
+messages name the point.
 """
 
 from __future__ import annotations

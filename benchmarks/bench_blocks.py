@@ -108,7 +108,7 @@ def dynamics(method: str, nodes: int, steps: int, repeats: int, comm) -> dict:
             system = dyn.system
             K = system.fields[-1].K  # the particle stiffness (FE for pure FE)
             last = len(system.fields) - 1
-            made = system._compiled(last, last, K) if name == "compiled" else None
+            made = system.compiled_product(last, last) if name == "compiled" else None
             mult = None if made is None else made.mult
             product[name] = min(product[name], best_product(K, 2, multiply=mult))
             comm.Barrier()

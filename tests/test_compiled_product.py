@@ -141,8 +141,10 @@ def test_compiled_run_equals_petsc_run(method):
         dyn.run(40 * dt, dt=dt)
         states.append(final_state(dyn))
         if product == "numba":  # every stiffness block multiplied by the compiled kernels
-            made = [p for _, _, p in dyn.system._products.values()]
-            assert made and all(p is not None for p in made[: len(dyn.system.fields)])
+            system = dyn.system
+            made = [system.compiled_product(k, k) for k in range(len(system.fields))]
+            made += [system.compiled_product(k, j) for k, j in system.blocks]
+            assert made and all(p is not None for p in made)
         dyn.destroy()
     assert_same_states(states, comm)
 
@@ -164,7 +166,9 @@ def test_compiled_run_equals_petsc_run_in_3d(method, monkeypatch):
         dyn.run(20 * dt, dt=dt)
         states.append(final_state(dyn))
         if product == "numba":
-            made = [p for _, _, p in dyn.system._products.values()]
+            system = dyn.system
+            made = [system.compiled_product(k, k) for k in range(len(system.fields))]
+            made += [system.compiled_product(k, j) for k, j in system.blocks]
             assert made and all(p is not None and p.bs == 3 for p in made)
         dyn.destroy()
     assert_same_states(states, comm)

@@ -256,6 +256,17 @@ class LinearSystem:
                 compiled.mult_add(u[j], y[k])
         return y
 
+    def compiled_product(self, k: int, j: int) -> CompiledProduct | None:
+        """The compiled product the steps use for block ``(k, j)`` (made now if no step has yet;
+        ``None``: PETSc's product, for ``product="petsc"`` or a block without whole node
+        blocks; collective)."""
+        A = self.fields[k].K if k == j else self.blocks.get((k, j))
+        if A is None:
+            raise ValueError(
+                f"block ({k}, {j}) is not stored: the blocks are {sorted(self.tangent())}"
+            )
+        return self._compiled(k, j, A)
+
     def _compiled(self, k: int, j: int, A: PETSc.Mat) -> CompiledProduct | None:
         """The compiled product of block ``(k, j)`` (``None``: PETSc's), made for the matrix
         object ``A`` now stored there (a replaced block gets a new one; collective)."""

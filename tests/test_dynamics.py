@@ -384,8 +384,9 @@ def test_redundant_constraints_are_deflated():
     bridging band's rows at roller nodes with the roller's rows on the particles): the
     projection deflates that null direction and gives the projection of the independent
     constraints, computed by hand. Rows ``v0 + v3``, ``v0 - v3``, ``v1 - v2`` with ``v3`` held
-    (``M^-1 = 0``): ``v0 -> 0`` and ``v1 = v2 ->`` the mass-weighted mean. A negative mass (an
-    indefinite ``S``) is refused."""
+    (``M^-1 = 0``): ``v0 -> 0`` and ``v1 = v2 ->`` the mass-weighted mean, as the Cholesky
+    solve without the redundant row gives. A negative mass (an indefinite ``S``) is refused, and
+    so is a velocity with a NaN."""
     rows = [[1.0, 0.0, 0.0, 1.0], [1.0, 0.0, 0.0, -1.0], [0.0, 1.0, -1.0, 0.0]]
     minv = [0.5, 1.0, 0.25, 0.0]  # masses 2, 1, 4; dof 3 held
     proj = _projection(rows, minv)
@@ -396,5 +397,11 @@ def test_redundant_constraints_are_deflated():
     assert np.allclose(v.array, [0.0, mean, mean, 0.0], rtol=0, atol=1e-14)
     full = _projection([rows[0], rows[2]], minv)  # the same without the redundant row
     assert full.redundant == 0 and full.chol is not None
+    v = PETSc.Vec().createWithArray(np.array([3.0, 1.0, -2.0, 0.0]), comm=PETSc.COMM_SELF)
+    full.correct([v])
+    assert np.allclose(v.array, [0.0, mean, mean, 0.0], rtol=0, atol=1e-14)
     with pytest.raises(ValueError, match="not positive semi-definite"):
         _projection(rows, [0.5, -1.0, 0.25, 0.0])
+    v.array[1] = np.nan  # an unstable run's velocity: refused, not carried on
+    with pytest.raises(FloatingPointError, match="non-finite G v: the velocities hold NaN"):
+        full.correct([v])

@@ -25,7 +25,8 @@ import numpy as np
 import scipy.sparse
 from mpi4py import MPI
 from petsc4py import PETSc
-from scipy.linalg import LinAlgError, cho_factor, cho_solve
+from scipy.linalg import LinAlgError, cho_factor
+from scipy.linalg.lapack import dpotrs
 
 from .linalg import mumps_lu
 
@@ -211,7 +212,15 @@ class VelocityProjection:
             gv[lo:hi] -= target
         if self.comm.size > 1:
             self.comm.Allreduce(MPI.IN_PLACE, gv, op=MPI.SUM)
-        lam = cho_solve(self.chol, gv) if self.chol is not None else self._pinv @ gv
+        if not np.isfinite(gv).all():  # the same on every rank (summed above)
+            raise FloatingPointError(
+                "the constraint projection met a non-finite G v: the velocities hold NaN or "
+                "inf (an unstable run: shorten the time step or check the masses)"
+            )
+        if self.chol is not None:  # LAPACK's solve with the factor, as cho_solve without its
+            lam = dpotrs(self.chol[0], gv, lower=self.chol[1])[0]  # checks of the factor
+        else:
+            lam = self._pinv @ gv
         for k, (cols, x) in enumerate(zip(self._cols, vel, strict=True)):
             if cols is None:
                 continue

@@ -65,11 +65,13 @@ def build(
     crack=None,
     msh=None,
     quadrature=None,
+    crack_contact=None,
 ):
     """The explicit model, its crack and the spacing. ``cells``: odd number of cells across 2H;
     ``crack``: default the edge crack to ``(A, 0)``; ``msh``: default a new mesh (give the same
     one to rebuild a model with a grown crack); ``quadrature``: an ``mf.AdaptiveQuadrature``
-    of the particle cells (default the uniform rule)."""
+    of the particle cells (default the uniform rule); ``crack_contact``: the faces' contact
+    (``mf.dynamics.CrackContact``; default none: Freund's faces stay open)."""
     if cells % 2 != 1:
         raise ValueError(f"cells={cells} must be odd (the crack runs between particle rows)")
     h = 2.0 * H / cells
@@ -83,8 +85,9 @@ def build(
     if method == "efg":
         P = mf.ParticleSet.from_cells(msh, h)
         make = lambda facets: mf.ExplicitDynamics.efg(  # noqa: E731
-            P, MATERIAL, cracks=[crack], fixed_facets=facets, quadrature=quadrature
-        )
+            P, MATERIAL, cracks=[crack], fixed_facets=facets, quadrature=quadrature,
+            crack_contact=crack_contact,
+        )  # fmt: skip
     else:
         V = _compat.vector_function_space(msh)
         n = msh.topology.index_map(2).size_local
@@ -94,7 +97,9 @@ def build(
             msh, np.flatnonzero(inside), h, cracks=[crack], quadrature=quadrature
         )
         prob = mf.CoupledElasticity(V, patch, MATERIAL, coupling=method)
-        make = lambda facets: mf.ExplicitDynamics.coupled(prob, fixed_facets=facets)  # noqa: E731
+        make = lambda facets: mf.ExplicitDynamics.coupled(  # noqa: E731
+            prob, fixed_facets=facets, crack_contact=crack_contact
+        )
     rollers = mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0.0) | np.isclose(x[0], W))
     dyn = make([(rollers, (0,))])
     loaded = mf.boundary_facets(msh, lambda x: np.isclose(np.abs(x[1]), H))

@@ -74,11 +74,14 @@
 # spacings behind the tip), 8.7 / 9.6 % (ramp / ramp-cubic; box 10.6 / 11.7 %), 14.2 %
 # (bridging; box 20.9 %); about 1,130-1,330 particles (the box 4,674); 0.29-0.38x efg's time
 # in two runs (the box 0.41-0.75x; issue 25's target 0.3x, met by lagrange and edge-to-edge in
-# one run of the two: every extension rebuilds the model, because crack-face contact has no
-# local update). Those times are PETSc's product; with the compiled products (the default with
-# numba) every run is faster and the ratio higher: EFG 11.7 s against 15.5 s, lagrange and
-# edge-to-edge 0.35-0.38x (their boxes 0.56-0.58x), with the same kink, path and K to the
-# printed digits (``docs/guide/cracks.md``).
+# one run of the two), when every extension rebuilt the model with crack-face contact. Those
+# times are PETSc's product; with the compiled products (the default with numba) every run is
+# faster and the ratio higher: EFG 11.7 s against 15.5 s, lagrange and edge-to-edge
+# 0.35-0.38x (their boxes 0.56-0.58x), with the same kink, path and K to the printed digits.
+# The local update now carries the contact (``--update local``, the default): EFG 6.1 s
+# against 12.1 s with ``--update full`` in the same session, the boxes 4.1 s (0.68x), the
+# adaptive patches 4.1 s (0.67-0.68x: their conversions still rebuild); the paths the same to
+# 0.045 spacings, the amplified round-off of the two updates (``docs/guide/cracks.md``).
 #
 #     python demos/kalthoff_winkler.py --method lagrange efg --nodes 41 --t-end 40e-6 --json kw.json
 

@@ -44,7 +44,7 @@ the particle stiffness of the face particles, which lowers the stable step (see
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -180,6 +180,10 @@ class ContactSystem(WrappedSystem):
         field: The index of the particle field.
         points, normals, weights: The rows' points and unit normals (m, 2) and length weights
             ``w_q`` (m,).
+        remake: ``remake() -> (B, points, normals, weights)``: the operator of the current
+            faces (:func:`jump_operator` of the model's cracks, which a local update extends in
+            place), for :meth:`refresh`; ``None``: the faces never change.
+        k: The penalty ``k`` (``kw = k w``), for :meth:`refresh`.
     """
 
     def __init__(
@@ -191,16 +195,51 @@ class ContactSystem(WrappedSystem):
         points: np.ndarray,
         normals: np.ndarray,
         weights: np.ndarray,
+        remake: Callable[[], tuple[PETSc.Mat, np.ndarray, np.ndarray, np.ndarray]] | None = None,
+        k: float | None = None,
     ) -> None:
         super().__init__(inner)
-        self.B, self.field = B, field
+        self.field = field
+        self.remake, self.k = remake, k
+        self._tangent: PETSc.Mat | None = None
+        self._set(B, kw, points, normals, weights)
+
+    def _set(
+        self,
+        B: PETSc.Mat,
+        kw: np.ndarray,
+        points: np.ndarray,
+        normals: np.ndarray,
+        weights: np.ndarray,
+    ) -> None:
+        self.B = B
         self.kw = np.asarray(kw, dtype=float)
         self.points, self.normals = np.asarray(points, float), np.asarray(normals, float)
         self.weights = np.asarray(weights, float)
         self._gap = B.createVecLeft()
         self._force = B.createVecRight()
-        self._tangent: PETSc.Mat | None = None
         self.num_points = B.getSize()[0]
+
+    def refresh(self) -> None:
+        """Rebuild the faces' operator for the current cracks (after a local update extended
+        them: new sample points on the new segments, the one-sided shape functions changed
+        near them) and drop the cached contact stiffness of the stable-step bound; the state
+        is untouched (collective).
+
+        Raises:
+            ValueError: on every rank, a system made without ``remake`` and ``k``.
+        """
+        if self.remake is None or self.k is None:  # the same on every rank
+            raise ValueError(
+                "this ContactSystem was made without remake= and k=: it cannot follow a grown "
+                "crack; build it with with_crack_contact, or rebuild the model"
+            )
+        B, x, n, w = self.remake()
+        for obj in (self.B, self._gap, self._force, self._tangent):
+            if obj is not None:
+                obj.destroy()
+        self._tangent = None
+        self._set(B, self.k * w, x, n, w)
 
     def gap(self, u: Sequence[PETSc.Vec]) -> np.ndarray:
         """The normal gaps ``g = B d`` at this rank's sample points (a copy)."""
@@ -377,8 +416,12 @@ def with_crack_contact(model: Model, contact: CrackContact | None) -> Model:
             "is refused with cracks anyway"
         )
     field = [f.name for f in model.fields].index("particles")
-    B, x, n, w = jump_operator(model.particles, model.mls, cracks, h, contact)
+
+    def remake() -> tuple[PETSc.Mat, np.ndarray, np.ndarray, np.ndarray]:
+        return jump_operator(model.particles, model.mls, cracks, h, contact)
+
+    B, x, n, w = remake()
     k = contact.stiffness(model.material.E, h)
     inner = LinearSystem(model.fields, model.blocks, model.constraint)
-    system = ContactSystem(inner, B, k * w, field, x, n, w)
+    system = ContactSystem(inner, B, k * w, field, x, n, w, remake=remake, k=k)
     return dataclasses.replace(model, fields=inner.fields, blocks={}, system=system)

@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import brentq
 
+from ..couplings.ramp import RampInterface
 from ..fracture.criteria import equivalent_sif, kink_angle
 from ..geometry.crack import Crack
 from ..io import ProgressBar
@@ -46,7 +47,6 @@ from ..parallel import raise_on_all_ranks
 from ..physics.materials import LinearElastic
 from .central_difference import advance_to
 from .cohesive_faces import CohesiveFacesSystem
-from .crack_contact import ContactSystem
 from .energy import strain_energy
 from .explicit import ExplicitDynamics
 from .growth_local import LocalModelUpdate
@@ -142,8 +142,8 @@ class DynamicCrackGrowth:
             (:class:`~dolfinx_meshfree.dynamics.growth_local.LocalModelUpdate`; ``build`` must
             put the crack it is given in the model, which is then extended in place), falling
             back to a rebuild where the change reaches a constraint row or a particle load,
-            and rebuilding every time with crack-face contact (its jump operator is not
-            updated in place; ``timings["full"]`` counts the rebuilds);
+            and for the ramps (their blended interface cells; ``timings["full"]`` counts the
+            rebuilds); crack-face contact's gap operator is rebuilt for the grown faces;
             ``"full"``: call ``build`` after every extension.
         quadrature_degree: The degree of the model's cell rule (``update="local"``; the
             builders' default 7; checked on the masses around the tip).
@@ -268,7 +268,7 @@ class DynamicCrackGrowth:
         """The local update of the current model (``update="local"``; collective)."""
         if self.update != "local":
             return
-        if isinstance(self.model.system, ContactSystem):  # its jump operator follows the faces
+        if isinstance(self.model.interface, RampInterface):  # its blended cells: rebuilt in full
             self.local = None
             return
         ours = any(c is self.crack for c in model_cracks(self.model)[0])

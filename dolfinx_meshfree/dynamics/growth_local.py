@@ -20,7 +20,10 @@ crack moves) and the new ones (after),
   then ``M^{-1}``, the multiplier projection ``G M^{-1} G^T`` (Rabczuk et al. 2006, eq. 94–96)
   and the stable step (a new bound of the changed system) are rebuilt;
 * the bridging band's weights ``alpha`` (Rabczuk et al. 2006, eq. 46, 89) are applied to the
-  rule as the builder does.
+  rule as the builder does;
+* crack-face contact (:mod:`~dolfinx_meshfree.dynamics.crack_contact`): the faces' gap
+  operator is rebuilt whole for the grown crack (its sample points along every face; cheap
+  beside the tables of the cells) and the stable step sees its new stiffness.
 
 Everything else is unchanged, bit for bit, unless a constraint row (interface multipliers,
 edge-to-edge collocation, the bridging band's constraints and penalty, facet multipliers of
@@ -49,6 +52,7 @@ from petsc4py import PETSc
 from .. import _compat
 from ..approx.tables import ShapeTable
 from ..couplings.bridging import BridgingBand
+from ..couplings.ramp import RampInterface
 from ..geometry.adaptive_quadrature import changed_cells
 from ..geometry.crack import Crack
 from ..geometry.cut_cells import cut_cell_quadrature
@@ -59,6 +63,7 @@ from ..physics.operators import stiffness_matrix
 from ..statics.growth_update import change_radius, new_segments
 from ..statics.petsc import create_aij
 from .constraint import VelocityProjection
+from .crack_contact import ContactSystem
 from .energy import strain_energy
 from .linalg import blocked
 from .masses import particle_lumped_mass
@@ -113,16 +118,20 @@ class LocalModelUpdate:
         self.cracks, domain = model_cracks(dyn)
         comm = dyn.comm
 
+        #: The faces' contact (:class:`~dolfinx_meshfree.dynamics.crack_contact.ContactSystem`
+        #: around the linear system), whose operator :meth:`apply` rebuilds; or ``None``.
+        self.contact = dyn.system if isinstance(dyn.system, ContactSystem) else None
+        linear = dyn.system if self.contact is None else self.contact.inner
+
         def check() -> int:
-            if not isinstance(dyn.system, LinearSystem) or not isinstance(
-                dyn.material, LinearElastic
-            ):
+            if not isinstance(linear, LinearSystem) or not isinstance(dyn.material, LinearElastic):
                 raise ValueError(
                     "update='local' needs a small-strain model (LinearElastic, a LinearSystem); "
                     "use update='full'"
                 )
             names = [f.name for f in dyn.fields]
-            if not self.cracks or "particles" not in names or dyn.reduction is not None:
+            ramp = isinstance(dyn.interface, RampInterface)  # blended cells: no local update
+            if not self.cracks or "particles" not in names or dyn.reduction is not None or ramp:
                 raise ValueError(
                     "update='local' needs a cracked particle model (pure EFG, lagrange, "
                     "edge-to-edge or bridging); use update='full'"
@@ -340,6 +349,8 @@ class LocalModelUpdate:
 
         raise_on_all_ranks(comm, check)
         st.minv[k].array[:] = np.where(free, 1.0 / np.where(m > 0.0, m, 1.0), 0.0)
+        if self.contact is not None:  # the faces grew: their gap operator, from scratch
+            self.contact.refresh()
         if dyn.projection is not None:
             proj = VelocityProjection(dyn.G, st.minv, comm, dyn.projection.solver)
             dyn.projection.destroy()

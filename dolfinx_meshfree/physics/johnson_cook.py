@@ -19,8 +19,10 @@ of ``E`` and ``nu``), the deviator the rate form of :mod:`~dolfinx_meshfree.phys
 (Jaumann rate, symmetric Hughes–Winget step) with a radial return: ``q_trial - 3 G d eps_p =
 sigma_y(eps_p + d eps_p)``, solved by bisection (the flow stress rises with the plastic strain,
 so the root is unique; the hardening's slope is infinite at ``eps_p = 0`` for ``n < 1``, which
-rules Newton out at first yield). The state also carries ``F`` and the stress work per unit
-reference volume.
+rules plain Newton out at first yield). The compiled backend (``backend="numba"``, the default
+with numba) finds the same root by Newton's steps kept inside the bisection's bracket, a
+bisection wherever a step would leave it (:func:`~dolfinx_meshfree.physics.rate_kernels.
+_jc_return`). The state also carries ``F`` and the stress work per unit reference volume.
 """
 
 from __future__ import annotations

@@ -16,11 +16,13 @@ over the points, each taken from ``F`` to its stress and new state before the ne
   (eq. 2; ``failure_strain``), ``Q_h s_mid Q_h^T``, the trapezoidal stress work, and the
   erosion (the ``hjc`` module docstring): a point eroded before, inverted (``det F <= 0``) or
   not finite is computed at rest and keeps its committed state; one worn through is zeroed;
-* Johnson–Cook (Johnson & Cook 1983, eq. 1 without temperature): the radial return by the
-  reference's bisection (skipped at elastic points, where its answer is 0), ``p = -K ln J``.
+* Johnson–Cook (Johnson & Cook 1983, eq. 1 without temperature): the radial return's root by
+  Newton's steps safeguarded by the bracket (:func:`_jc_return`; the reference bisects 60
+  times to the same root), only at yielding points; ``p = -K ln J``.
 
-The operations are the reference's, in its order; its orders of summation differ (LAPACK's
-``det``, numpy's stacked products), so the two agree to round-off, not to the bit
+The operations are the reference's, in its order (but Johnson–Cook's root finder); its orders
+of summation differ (LAPACK's ``det``, numpy's stacked products), so the two agree to
+round-off, not to the bit
 (``tests/test_rate_kernels.py`` compares them over every region of the equation of state,
 tension, damage, erosion and the three kinds of models). The backend is the law's
 ``backend`` (``"numba"`` by default with numba; ``DOLFINX_MESHFREE_LAW_BACKEND`` overrides).
@@ -345,11 +347,40 @@ def _flow(c, eps_p, rate_term):  # pragma: no cover - compiled
 
 
 @jit
+def _jc_return(c, G, qt, eps_p, rate_term, iterations):  # pragma: no cover - compiled
+    """The root ``d`` of ``g(d) = q_trial - 3 G d - sigma_y(eps_p + d)`` in ``(0, q_trial / 3
+    G)`` (``g`` falls from ``g(0) > 0``): Newton's steps kept inside the bracket, which every
+    evaluation of ``g`` narrows, and a bisection wherever a step would leave it (the slope is
+    infinite at ``eps_p + d = 0`` for ``n < 1``: first yield). Stops when a step or the
+    bracket is at round-off of ``d``, or after ``iterations`` evaluations; the reference's
+    plain bisection to the same root."""
+    lo, hi = 0.0, qt / (3.0 * G)
+    d = 0.5 * (lo + hi)
+    for _ in range(iterations):
+        e = eps_p + d
+        g = qt - 3.0 * G * d - _flow(c, e, rate_term)
+        if g > 0.0:
+            lo = d
+        else:
+            hi = d
+        slope = 3.0 * G + (c[3] * c[4] * e ** (c[4] - 1.0) * rate_term if e > 0.0 else np.inf)
+        step = g / slope
+        new = d + step
+        if not (lo < new < hi):  # outside the bracket (or an infinite slope): bisect
+            new = 0.5 * (lo + hi)
+        done = abs(new - d) <= 4e-16 * new or hi - lo <= 4e-16 * hi
+        d = new
+        if done:
+            break
+    return d
+
+
+@jit
 def _jc_kernel(c, bisections, F, hoop, dt, old, sigma, new, flags):  # pragma: no cover
     """Johnson–Cook's step of every point (``JohnsonCook.update``): the kinematics as HJC's,
-    the radial return ``q_trial - 3 G d = sigma_y(eps_p + d)`` by ``bisections`` halvings,
-    ``p = -K ln J``. ``old``/``new``: deviator (m, 9) 0, pressure 1, plastic_strain 2, work 3,
-    F (m, 9) 4; ``flags`` as :func:`_kernel`'s."""
+    the radial return ``q_trial - 3 G d = sigma_y(eps_p + d)`` by :func:`_jc_return` (at most
+    ``bisections`` evaluations), ``p = -K ln J``. ``old``/``new``: deviator (m, 9) 0, pressure
+    1, plastic_strain 2, work 3, F (m, 9) 4; ``flags`` as :func:`_kernel`'s."""
     G = c[0]
     Fn = np.empty((3, 3))
     Fo = np.empty((3, 3))
@@ -389,14 +420,7 @@ def _jc_kernel(c, bisections, F, hoop, dt, old, sigma, new, flags):  # pragma: n
         yielding = qt > _flow(c, eps_p, rate_term)
         d_eps_p = 0.0
         if yielding:  # (the reference bisects at elastic points too, for d = 0)
-            lo, hi = 0.0, qt / (3.0 * G)
-            for _ in range(bisections):  # q - 3 G d - sigma_y(eps_p + d) falls with d
-                mid = 0.5 * (lo + hi)
-                if qt - 3.0 * G * mid > _flow(c, eps_p + mid, rate_term):
-                    lo = mid
-                else:
-                    hi = mid
-            d_eps_p = 0.5 * (lo + hi)
+            d_eps_p = _jc_return(c, G, qt, eps_p, rate_term, bisections)
         ratio = 1.0 - 3.0 * G * d_eps_p / qt if yielding else 1.0
         for i in range(3):
             for j in range(3):

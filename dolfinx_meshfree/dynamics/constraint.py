@@ -28,6 +28,8 @@ from petsc4py import PETSc
 from scipy.linalg import LinAlgError, cho_factor
 from scipy.linalg.lapack import dpotrs
 
+from ..approx.jit import jit
+from .compiled_product import resolve_product
 from .linalg import mumps_lu
 
 __all__ = ["MULTIPLIER_SOLVERS", "VelocityProjection", "check_multiplier_solver"]
@@ -61,6 +63,12 @@ class VelocityProjection:
         solver: ``"dense"`` (Cholesky on every rank, one ``Allgatherv`` of ``G v`` per step:
             the fastest for interface-sized ``S``), ``"mumps"`` (distributed LU), or ``None``:
             dense up to 2000 multipliers. The choice made is :attr:`solver`.
+        product: The dense path's local products ``G_f v_f`` and ``v_f -= M_f^{-1} G_f^T
+            lambda``: ``"numba"`` (compiled, each field in one pass: the default with numba) or
+            ``"petsc"`` (scipy's products and numpy's arithmetic, the reference); the same to
+            the bit (the sums in the same order). ``None``: ``DOLFINX_MESHFREE_PRODUCT`` or the
+            default, as the stiffness products
+            (:func:`~dolfinx_meshfree.dynamics.compiled_product.resolve_product`).
 
     Raises:
         ValueError: ``S`` is singular (dense): two constraints act on the same dofs only.
@@ -72,7 +80,9 @@ class VelocityProjection:
         minv: Sequence[PETSc.Vec],
         comm: MPI.Comm,
         solver: str | None = None,
+        product: str | None = None,
     ) -> None:
+        self.product = resolve_product(product)
         self.G = list(G)
         self.minv = list(minv)
         self.comm = comm
@@ -107,6 +117,10 @@ class VelocityProjection:
                 S.axpy(1.0, Sf, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
                 Sf.destroy()
         self.S: PETSc.Mat = S
+        #: per field, the owned dofs ``G_f`` acts on (the rows of ``G_f^T`` with entries)
+        self._rows = [
+            None if c is None else np.flatnonzero(np.diff(c[1].indptr)) for c in self._cols
+        ]
         size = S.getSize()[0]
         if solver is None:
             solver = "dense" if size <= DENSE_MAX else "mumps"
@@ -204,8 +218,13 @@ class VelocityProjection:
         the ranks in one ``Allreduce``; ``G^T lambda`` and the update local (collective)."""
         gv = self._full
         gv[:] = 0.0
+        compiled = self.product == "numba"
         for cols, x in zip(self._cols, vel, strict=True):
-            if cols is not None:
+            if cols is None:
+                continue
+            if compiled:
+                _gather(cols[0].indptr, cols[0].indices, cols[0].data, x.array_r, gv)
+            else:
                 gv += cols[0] @ x.array_r
         if target is not None:  # the owned rows' targets, once over the ranks
             lo, hi = self._lam.getOwnershipRange()
@@ -225,8 +244,13 @@ class VelocityProjection:
             if cols is None:
                 continue
             w = self._work[k] if impulse is None else impulse[k]
-            w.array[:] = cols[1] @ lam
-            x.array[:] -= self.minv[k].array_r * w.array_r
+            if compiled:  # only G_f's non-zero columns change (x - M^-1 0 = x, to the bit)
+                C, rows, mi = cols[1], self._rows[k], self.minv[k].array_r
+                w.set(0.0)
+                _apply(rows, C.indptr, C.indices, C.data, lam, mi, x.array, w.array)
+            else:
+                w.array[:] = cols[1] @ lam
+                x.array[:] -= self.minv[k].array_r * w.array_r
 
     def residual(self, vel: Sequence[PETSc.Vec], target: np.ndarray | None = None) -> float:
         """Relative residual ``|sum_f G_f v_f - target|_inf / sum_f |G_f|_inf |v_f|_inf``
@@ -247,3 +271,26 @@ class VelocityProjection:
         for obj in (self.ksp, self.S, self._lam, self._gv, *self._work, *self._tmp):
             if obj is not None:
                 obj.destroy()
+
+
+@jit
+def _gather(indptr, indices, data, x, out):  # pragma: no cover - compiled
+    """``out += C x`` (CSR ``C``), each row's sum taken alone first, as scipy's product and
+    the ``+=`` after it."""
+    for i in range(indptr.shape[0] - 1):
+        acc = 0.0
+        for p in range(indptr[i], indptr[i + 1]):
+            acc += data[p] * x[indices[p]]
+        out[i] += acc
+
+
+@jit
+def _apply(rows, indptr, indices, data, lam, minv, x, w):  # pragma: no cover - compiled
+    """``w = C lam`` and ``x -= minv * w`` on the ``rows`` of the CSR ``C`` (its rows with
+    entries; ``w`` is 0 elsewhere), in one pass."""
+    for i in rows:
+        acc = 0.0
+        for p in range(indptr[i], indptr[i + 1]):
+            acc += data[p] * lam[indices[p]]
+        w[i] = acc
+        x[i] -= minv[i] * acc

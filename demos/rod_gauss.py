@@ -59,7 +59,9 @@
 # particles, and a lagrange step was 1.05x faster on 2 ranks than on one; balanced, every method
 # 1.82-1.93x with PETSc's product, and 1.71-1.94x with the compiled products (the default with
 # numba), which make each step 2.9-3.2x faster (20k nodes and particles;
-# ``docs/guide/solvers.md``, work-balanced MPI and compiled products).
+# ``docs/guide/solvers.md``, work-balanced MPI and compiled products). With the multipliers'
+# projection compiled too, a later session gave lagrange 1.75x and bridging 1.82x
+# (master-slave, without multipliers, 1.71x; best of 3).
 #
 # Usage (the command-line contract):
 #

@@ -62,6 +62,30 @@ def run(law: HolmquistJohnsonCook, F: np.ndarray, hoop: np.ndarray | None, dt: f
     return out
 
 
+def both_backends(base, seed: int) -> tuple:
+    """``(compiled law, reference law, their steps, ...)``: ``base`` with each backend driven
+    through the same 120-step :func:`paths` at 200 points (with a hoop stretch within 10 % of 1
+    in axisymmetry), ``run``'s lists."""
+    d = 3 if base.plane is None else 2
+    F = paths(200, d, 120, seed=seed)
+    hoop = None
+    if base.plane == "axisymmetric":
+        rng = np.random.default_rng(seed + 1)
+        hoop = 1.0 + 0.1 * rng.uniform(-1, 1, 200) * np.linspace(0, 1, 121)[:, None]
+    fast_law, slow_law = (dataclasses.replace(base, backend=b) for b in ("numba", "numpy"))
+    return fast_law, slow_law, run(fast_law, F, hoop, 2e-6), run(slow_law, F, hoop, 2e-6)
+
+
+def assert_agree(s1: np.ndarray, a: dict, s2: np.ndarray, b: dict, tol: float) -> None:
+    """One step's stresses and state fields within ``tol`` of each one's scale (the
+    deviator's: the stress's); the compiled fields C-contiguous."""
+    assert np.abs(s1 - s2).max() <= tol * np.abs(s2).max()
+    for name in a:
+        scale = np.abs(s2 if name == "deviator" else b[name]).max()
+        assert np.abs(a[name] - b[name]).max() <= tol * scale, name
+        assert a[name].flags.c_contiguous
+
+
 @pytest.mark.parametrize(
     ("plane", "erosion"),
     [(None, None), (None, 0.05), ("strain", None), ("axisymmetric", 0.05)],
@@ -73,29 +97,16 @@ def test_compiled_update_meets_the_reference(plane, erosion):
     end with points in region III, in tension, intact, fully damaged and (with erosion)
     eroded, so each branch is compared. The wave speed and the nominal stress of the same
     state agree within 1e-15 (measured 2.1e-16 and 3.5e-16)."""
-    d = 3 if plane is None else 2
-    F = paths(200, d, 120, seed=3)
-    hoop = None
-    if plane == "axisymmetric":
-        hoop = (
-            1.0
-            + 0.1 * np.random.default_rng(4).uniform(-1, 1, 200) * np.linspace(0, 1, 121)[:, None]
-        )
     base = HolmquistJohnsonCook.concrete_48mpa(plane=plane, erosion=erosion)
-    fast_law, slow_law = (dataclasses.replace(base, backend=b) for b in ("numba", "numpy"))
-    fast, slow = run(fast_law, F, hoop, 2e-6), run(slow_law, F, hoop, 2e-6)
+    fast_law, slow_law, fast, slow = both_backends(base, seed=3)
     for (s1, a), (s2, b) in zip(fast, slow, strict=True):
-        assert np.abs(s1 - s2).max() <= 2e-11 * np.abs(s2).max()
+        assert_agree(s1, a, s2, b, 2e-11)
         c1, c2 = fast_law.wave_speed(b), slow_law.wave_speed(b)  # the same state
         assert abs(c1 - c2) <= 1e-15 * c2
         F3 = b["F"].reshape(-1, 3, 3)
         P1, P2 = (nominal_stress(s2, F3, backend=k) for k in ("numba", "numpy"))
         assert np.abs(P1 - P2).max() <= 1e-15 * np.abs(P2).max()
         assert np.array_equal(P1 == 0.0, P2 == 0.0)  # the eroded: none
-        for name in a:
-            scale = np.abs(s2 if name == "deviator" else b[name]).max()
-            assert np.abs(a[name] - b[name]).max() <= 2e-11 * scale, name
-            assert a[name].flags.c_contiguous
     last = slow[-1][1]
     assert (last["mu_max"] > base.mu_plock).any()  # region III
     assert (last["pressure"] < 0.0).any()  # tension
@@ -110,22 +121,9 @@ def test_compiled_johnson_cook_meets_the_reference(plane):
     yields at a shear of about 0.01, so most points flow): every step's stress and state within
     1e-11 of each field's scale (measured up to 1.8e-12); most points flow, some stay
     elastic."""
-    d = 3 if plane is None else 2
-    F = paths(200, d, 120, seed=5)
-    hoop = None
-    if plane == "axisymmetric":
-        hoop = (
-            1.0
-            + 0.1 * np.random.default_rng(6).uniform(-1, 1, 200) * np.linspace(0, 1, 121)[:, None]
-        )
-    base = JohnsonCook.steel_4340(plane=plane)
-    fast_law, slow_law = (dataclasses.replace(base, backend=b) for b in ("numba", "numpy"))
-    fast, slow = run(fast_law, F, hoop, 2e-6), run(slow_law, F, hoop, 2e-6)
+    _, _, fast, slow = both_backends(JohnsonCook.steel_4340(plane=plane), seed=5)
     for (s1, a), (s2, b) in zip(fast, slow, strict=True):
-        assert np.abs(s1 - s2).max() <= 1e-11 * np.abs(s2).max()
-        for name in a:
-            scale = np.abs(s2 if name == "deviator" else b[name]).max()
-            assert np.abs(a[name] - b[name]).max() <= 1e-11 * scale, name
+        assert_agree(s1, a, s2, b, 1e-11)
     assert (slow[-1][1]["plastic_strain"] > 0.0).mean() > 0.5
     assert (slow[-1][1]["plastic_strain"] == 0.0).any()
 

@@ -154,18 +154,19 @@ def _gradient(F, hoop, q, out):  # pragma: no cover - compiled
 
 
 @jit
-def _start(Fo, Fn, s_old, scratch, de, Qh, sr):  # pragma: no cover - compiled
+def _start(Fo, Fn, s_old, G, scratch, de, Qh, sr, st):  # pragma: no cover - compiled
     """The Hughes–Winget step from ``Fo`` to ``Fn`` (``objective._kinematics``,
-    ``RateStep.start``): ``de`` (d eps), ``Qh`` and ``sr = Q_h s_old Q_h^T``; returns ``(det
-    F_{n+1/2}, tr(d eps) / 3)``, the first ``<= 0`` (or nan) when the mid-step gradient is
-    singular (then nothing else is filled). ``scratch`` (4, 3, 3)."""
+    ``RateStep.start``) and the trial deviator of shear modulus ``G``: ``de`` (d eps), ``Qh``,
+    ``sr = Q_h s_old Q_h^T`` and ``st = sr + 2 G dev(d eps)``; returns ``(det F_{n+1/2},
+    dev(d eps) : dev(d eps), st : st)``, the first ``<= 0`` (or nan) when the mid-step gradient
+    is singular (then nothing else is filled). ``scratch`` (4, 3, 3)."""
     Fm, inv, W = scratch[0], scratch[1], scratch[2]
     for i in range(3):
         for j in range(3):
             Fm[i, j] = 0.5 * (Fo[i, j] + Fn[i, j])
     J_mid = _det(Fm)
     if not (J_mid > 0.0):
-        return J_mid, 0.0
+        return J_mid, 0.0, 0.0
     for i in range(3):  # inv[:, i] = (row i+1) x (row i+2) / det
         i1, i2 = (i + 1) % 3, (i + 2) % 3
         for k in range(3):
@@ -195,7 +196,26 @@ def _start(Fo, Fn, s_old, scratch, de, Qh, sr):  # pragma: no cover - compiled
                 ww += W[i, k] * W[k, j]
             Qh[i, j] = (1.0 if i == j else 0.0) + scale * (W[i, j] + ww)
     _rotate(Qh, s_old, scratch[3], sr)
-    return J_mid, (de[0, 0] + de[1, 1] + de[2, 2]) / 3.0
+    trace = (de[0, 0] + de[1, 1] + de[2, 2]) / 3.0
+    ee = 0.0
+    qq = 0.0
+    for i in range(3):
+        for j in range(3):
+            e = de[i, j] - (trace if i == j else 0.0)
+            ee += e * e
+            st[i, j] = sr[i, j] + 2.0 * G * e
+            qq += st[i, j] * st[i, j]
+    return J_mid, ee, qq
+
+
+@jit
+def _arrays():  # pragma: no cover - compiled
+    """A kernel's 3 x 3 work arrays, each its own allocation: ``Fn, Fo, de, Qh, so, sr, st, sm,
+    sn`` and the (4, 3, 3) scratch of :func:`_start`."""
+    Fn, Fo, de, Qh = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
+    so, sr, st = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
+    sm, sn = np.empty((3, 3)), np.empty((3, 3))
+    return Fn, Fo, de, Qh, so, sr, st, sm, sn, np.empty((4, 3, 3))
 
 
 @jit
@@ -219,16 +239,7 @@ def _kernel(c, erosion, F, hoop, dt, old, sigma, new, flags):  # pragma: no cove
     mid-step gradient is singular."""
     m = F.shape[0]
     G = c[0]
-    Fn = np.empty((3, 3))
-    Fo = np.empty((3, 3))
-    de = np.empty((3, 3))
-    Qh = np.empty((3, 3))
-    so = np.empty((3, 3))
-    sr = np.empty((3, 3))
-    st = np.empty((3, 3))
-    sm = np.empty((3, 3))
-    sn = np.empty((3, 3))
-    scratch = np.empty((4, 3, 3))
+    Fn, Fo, de, Qh, so, sr, st, sm, sn, scratch = _arrays()
     for q in range(m):
         finite = _gradient(F, hoop, q, Fn)
         gone = erosion > 0.0 and (old[8][q, 0] > 0.0 or not finite or not (_det(Fn) > 0.0))
@@ -247,18 +258,10 @@ def _kernel(c, erosion, F, hoop, dt, old, sigma, new, flags):  # pragma: no cove
         J = _det(Fn)
         for i in range(9):
             so[i // 3, i % 3] = old[0][q, i]
-        J_mid, trace = _start(Fo, Fn, so, scratch, de, Qh, sr)
+        J_mid, ee, qq = _start(Fo, Fn, so, G, scratch, de, Qh, sr, st)
         if not (J_mid > 0.0):
             flags[q] = 2
             continue
-        ee = 0.0
-        qq = 0.0
-        for i in range(3):
-            for j in range(3):
-                e = de[i, j] - (trace if i == j else 0.0)
-                ee += e * e
-                st[i, j] = sr[i, j] + 2.0 * G * e
-                qq += st[i, j] * st[i, j]
         # the equation of state (pressure, permanent_strain)
         damage = old[5][q, 0]
         mu = 1.0 / J - 1.0
@@ -382,16 +385,7 @@ def _jc_kernel(c, bisections, F, hoop, dt, old, sigma, new, flags):  # pragma: n
     ``bisections`` evaluations), ``p = -K ln J``. ``old``/``new``: deviator (m, 9) 0, pressure
     1, plastic_strain 2, work 3, F (m, 9) 4; ``flags`` as :func:`_kernel`'s."""
     G = c[0]
-    Fn = np.empty((3, 3))
-    Fo = np.empty((3, 3))
-    de = np.empty((3, 3))
-    Qh = np.empty((3, 3))
-    so = np.empty((3, 3))
-    sr = np.empty((3, 3))
-    st = np.empty((3, 3))
-    sm = np.empty((3, 3))
-    sn = np.empty((3, 3))
-    scratch = np.empty((4, 3, 3))
+    Fn, Fo, de, Qh, so, sr, st, sm, sn, scratch = _arrays()
     for q in range(F.shape[0]):
         finite = _gradient(F, hoop, q, Fn)
         J = _det(Fn)
@@ -401,18 +395,10 @@ def _jc_kernel(c, bisections, F, hoop, dt, old, sigma, new, flags):  # pragma: n
         for i in range(9):
             Fo[i // 3, i % 3] = old[4][q, i]
             so[i // 3, i % 3] = old[0][q, i]
-        J_mid, trace = _start(Fo, Fn, so, scratch, de, Qh, sr)
+        J_mid, ee, qq = _start(Fo, Fn, so, G, scratch, de, Qh, sr, st)
         if not (J_mid > 0.0):
             flags[q] = 2
             continue
-        ee = 0.0
-        qq = 0.0
-        for i in range(3):
-            for j in range(3):
-                e = de[i, j] - (trace if i == j else 0.0)
-                ee += e * e
-                st[i, j] = sr[i, j] + 2.0 * G * e
-                qq += st[i, j] * st[i, j]
         qt = np.sqrt(1.5 * qq)
         rate = np.sqrt(2.0 / 3.0 * ee) / dt
         rate_term = 1.0 + c[5] * np.log(max(rate / c[6], 1.0))

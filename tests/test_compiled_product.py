@@ -11,6 +11,7 @@ from dolfinx_meshfree.dynamics.compiled_product import (
     CompiledProduct,
     _whole_blocks,
     blockable,
+    multiply,
     resolve_product,
 )
 from dolfinx_meshfree.parallel import Layout
@@ -83,6 +84,38 @@ def test_compiled_product_equals_an_independent_product(bs):
         assert comm.allreduce(int(np.sum((cols < c0) | (cols >= c1)))) > 0
     prod.destroy()
     A.destroy()
+
+
+def test_products_with_one_check_equal_the_products_one_by_one():
+    """``multiply``: products of several blocks in order, compiled and PETSc's mixed, with one
+    collective check, give ``mult``/``mult_add`` one by one to the bit; a matrix changed
+    before the call is multiplied as it is now; a wrong vector on one rank only is refused
+    on every rank before any product (serially and on 2 ranks)."""
+    comm = MPI.COMM_WORLD
+    A, glob, lay = block_matrix(comm, 2)
+    B, globb, _ = block_matrix(comm, 2, seed=11)
+    pa, pb = CompiledProduct(A, 2), CompiledProduct(B, 2)
+    x = _x(lay, A)
+    y1, y2 = A.createVecLeft(), A.createVecLeft()
+    pa.mult(x, y1)  # one by one: A x, + B x, + A x by PETSc
+    pb.mult_add(x, y1)
+    A.multAdd(x, y1, y1)
+    y2.array[:] = 99.0  # overwritten by the first product
+    multiply([(pa, x, y2, False), (pb, x, y2, True), (A, x, y2, True)], comm)
+    assert np.array_equal(y1.array_r, y2.array_r)
+    expected = ((2.0 * glob + globb) @ _global_x(glob.shape[1]))[lay.start : lay.end]
+    assert np.abs(y2.array_r - expected).max() <= 1e-13 * np.abs(expected).max()
+    B.scale(3.0)  # stale copy of B: rebuilt before the products
+    multiply([(pa, x, y2, False), (pb, x, y2, True)], comm)
+    expected = ((glob + 3.0 * globb) @ _global_x(glob.shape[1]))[lay.start : lay.end]
+    assert np.abs(y2.array_r - expected).max() <= 1e-13 * np.abs(expected).max()
+    short = PETSc.Vec().createMPI((lay.size_local - (2 if lay.start == 0 else 0), None))
+    y2.array[:] = 5.0
+    with pytest.raises(ValueError, match=r"local sizes x .*create them with A\.createVecs"):
+        multiply([(pa, x, y2, False), (pb, short, y2, True)], comm)
+    assert np.all(y2.array_r == 5.0)  # refused before the first product
+    for obj in (pa, pb, x, y1, y2, short, A, B):
+        obj.destroy()
 
 
 def test_a_changed_matrix_is_never_multiplied_stale():

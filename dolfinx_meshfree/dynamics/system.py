@@ -25,7 +25,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from petsc4py import PETSc
 
-from .compiled_product import CompiledProduct, blockable, resolve_product
+from .compiled_product import CompiledProduct, blockable, multiply, resolve_product
 from .linalg import BLOCK_FORMATS, blocked
 
 __all__ = [
@@ -208,6 +208,7 @@ class LinearSystem:
         #: per block: the matrix, its PETSc handle and its compiled product (None: PETSc's)
         self._products: dict[tuple[int, int], tuple[PETSc.Mat, int, CompiledProduct | None]] = {}
         self.fields = list(fields)
+        self._comm = self.fields[0].mass.getComm().tompi4py()
         self.blocks: Blocks = dict(blocks or {})
         self.store_as(matrix_format)
         self.G: list[PETSc.Mat | None] | None = None
@@ -242,18 +243,12 @@ class LinearSystem:
     ) -> list[PETSc.Vec]:
         """``K u``: the diagonal blocks, then the off-diagonal ones added (collective)."""
         y = list(out) if out is not None else [f.mass.duplicate() for f in self.fields]
-        for k, f in enumerate(self.fields):
-            compiled = self._compiled(k, k, f.K)
-            if compiled is None:
-                f.K.mult(u[k], y[k])
-            else:
-                compiled.mult(u[k], y[k])
+        steps = [
+            (self._compiled(k, k, f.K) or f.K, u[k], y[k], False) for k, f in enumerate(self.fields)
+        ]
         for (k, j), B in self.blocks.items():
-            compiled = self._compiled(k, j, B)
-            if compiled is None:
-                B.multAdd(u[j], y[k], y[k])
-            else:
-                compiled.mult_add(u[j], y[k])
+            steps.append((self._compiled(k, j, B) or B, u[j], y[k], True))
+        multiply(steps, self._comm)  # one collective check for every compiled block
         return y
 
     def compiled_product(self, k: int, j: int) -> CompiledProduct | None:

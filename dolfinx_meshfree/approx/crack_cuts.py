@@ -126,15 +126,17 @@ class CrackCut:
         if sides is not None and not np.all(np.isin(sides, (-1, 0, 1))):
             bad = np.asarray(sides)[~np.isin(sides, (-1, 0, 1))]
             raise ValueError(f"sides should be +1, -1 or 0 (the crack face), got {bad[:5]}")
-        p, q = x[i], self.mls.points[j]
         side = None if sides is None else np.asarray(sides).reshape(-1)[i]
         ncross = np.zeros(i.size, dtype=np.int64)
         which = np.full(i.size, -1)
         for c, crack in enumerate(self.cracks):  # loop over cracks, pairs vectorised
-            hit = crack.crosses(p, q, side)
+            hit = crack.crosses_pairs(x, i, self.mls.points, j, side)
             ncross += hit
             which[hit] = c
+        if not ncross.any():  # no weight cut: every pair kept as it is
+            return i, j, dx, dist, ddist
         keep = ncross == 0
+        p, q = x[i], self.mls.points[j]
         dist, ddist = dist.copy(), ddist.copy()
         if self.method == "diffraction":
             once = np.flatnonzero(ncross == 1)

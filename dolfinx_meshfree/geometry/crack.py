@@ -25,7 +25,9 @@ from mpi4py import MPI
 from scipy.spatial import cKDTree
 
 from .. import _compat
+from ..approx import jit
 from ..parallel import raise_on_all_ranks
+from . import crack_kernels
 from .particles import ParticleSet, _points_in_cells
 from .quadrature import boundary_facets
 
@@ -293,6 +295,40 @@ class Crack:
             q: End points (n, 2) (particles; never on the crack, see :func:`validate_in_patch`).
             sides: Optional side per pair of the start point when it lies on the crack.
         """
+        p = np.asarray(p, dtype=float).reshape(-1, 2)
+        q = np.asarray(q, dtype=float).reshape(-1, 2)
+        if p.shape != q.shape:
+            raise ValueError(f"p and q should have the same shape, got {p.shape} and {q.shape}")
+        if jit.AVAILABLE:  # one compiled pass, the same answers (crack_kernels)
+            return self.crosses_pairs(p, None, q, None, sides)
+        return self.crosses_reference(p, q, sides)
+
+    def crosses_pairs(
+        self,
+        x: np.ndarray,
+        i: np.ndarray | None,
+        y: np.ndarray,
+        j: np.ndarray | None,
+        sides: npt.ArrayLike | None = None,
+    ) -> np.ndarray:
+        """:meth:`crosses` of the pairs ``p = x[i]``, ``q = y[j]`` (``None``: ``x``, ``y``
+        themselves), without gathering them (compiled with numba, else by the reference)."""
+        if not jit.AVAILABLE:
+            p = x if i is None else np.asarray(x)[i]
+            return self.crosses_reference(p, y if j is None else np.asarray(y)[j], sides)
+        a, b = self.segments
+        k = a.shape[0]
+        open_a, open_b = np.zeros(k, dtype=bool), np.zeros(k, dtype=bool)
+        open_a[0], open_b[-1] = self.is_tip[0], self.is_tip[1]
+        t = b - a
+        tol = 1e-12 * float(np.sqrt(np.einsum("kd,kd->k", t, t).max()))
+        return crack_kernels.crosses(x, y, a, b, open_a, open_b, tol, sides, i, j)
+
+    def crosses_reference(
+        self, p: npt.ArrayLike, q: npt.ArrayLike, sides: npt.ArrayLike | None = None
+    ) -> np.ndarray:
+        """:meth:`crosses` by numpy over ``(pairs x segments)`` arrays: the reference of the
+        compiled pass, and the path without numba."""
         p = np.asarray(p, dtype=float).reshape(-1, 2)
         q = np.asarray(q, dtype=float).reshape(-1, 2)
         out = np.zeros(p.shape[0], dtype=bool)

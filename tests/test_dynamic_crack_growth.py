@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree.dynamics import DynamicCrackGrowth, rayleigh_speed
+from dolfinx_meshfree.dynamics.crack_contact import CrackContact
 from dolfinx_meshfree.dynamics.crack_growth import carry_state
+from dolfinx_meshfree.dynamics.sifs import dynamic_sifs
 
 import numpy as np
 import pytest
@@ -241,3 +243,32 @@ def test_tip_position_follows_speed_times_time():
     steps = np.linalg.norm(np.diff(g.path, axis=0), axis=1)
     assert np.allclose(steps, SEGMENT, rtol=1e-12)
     assert max(abs(np.degrees(c.theta)) for c in hist if c.state != "below") <= 1.0
+
+
+@pytest.mark.parametrize("method, K_Ic", [("efg", 0.8), ("lagrange", 10.0)])
+def test_sifs_taken_inside_the_run_equal_sifs_taken_after_it(method, K_Ic):
+    """A check's K's are taken at the last step of its advance, where the step's own internal
+    force serves the acceleration (``CentralDifference.f_now``): the same K's to the bit as
+    ``dynamic_sifs`` after the advance, which recomputes the force; ``f_now`` is ``None``
+    outside the output callback. With crack-face contact (its face term included); EFG through
+    initiation (t = 1.32), an extension and 4 checks after it (lagrange's first extension
+    would reach its FE interface at 21 cells: its K's are compared to the end of Freund's
+    window without growth); serially and on 2 ranks."""
+    g = growth(K_Ic, method=method, crack_contact=CrackContact())
+    dyn = g.model
+    dt = g._time_step()
+    compared, after_growth = 0, 0
+    while dyn.time < T_END * (1.0 - 1e-12) and after_growth < 4:
+        g._advance(g.check_every, dt)
+        assert dyn.stepper.f_now is None
+        inside = g._sifs_at[1]
+        after = dynamic_sifs(dyn, g.crack, g.crack.points[g.end].copy(), g.radius, probe=False,
+                             j_integral=False)  # fmt: skip
+        assert np.array_equal(inside.K_I, after.K_I) and np.array_equal(inside.K_II, after.K_II)
+        compared += int(np.any(after.K_I != 0.0))
+        g.check()
+        after_growth += int(any(c.extended for c in g.history))
+        dyn = g.model
+        dt = g._time_step()
+    assert compared > 5
+    assert after_growth == (4 if K_Ic < 1.0 else 0)

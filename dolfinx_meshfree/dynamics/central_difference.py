@@ -120,6 +120,10 @@ class CentralDifference:
         self.step, self.time = 0, 0.0
         self.dt_prev = 0.0
         self.v_now: list[PETSc.Vec] | None = None  # v_n at the current output time
+        #: ``f^int(d_n)`` per field during an output callback of :meth:`advance` (the step's own
+        #: force, which :func:`~dolfinx_meshfree.dynamics.sifs.current_acceleration` then need
+        #: not recompute), ``None`` outside one: never kept past the callback, so never stale.
+        self.f_now: list[PETSc.Vec] | None = None
         self.records: list[EnergyRecord] = []
         self.w_ext, self.w_c = 0.0, np.zeros(len(self.u))
 
@@ -252,12 +256,14 @@ class CentralDifference:
                     )
                     records.append(rec)
                     if n in out_steps:
-                        self.v_now = vnow
+                        self.v_now, self.f_now = vnow, ku
                         self.time, self.step = tn, n
                         outs.append((n, tn))
-                        if on_output is not None:
-                            on_output(n, tn)
-                        self.v_now = None
+                        try:
+                            if on_output is not None:
+                                on_output(n, tn)
+                        finally:
+                            self.v_now = self.f_now = None
                     t_out += time.perf_counter() - tic
                 if n == n0 + nsteps:
                     break  # v_N is known; the state stays (d_N, v_{N-1/2}) for a next run

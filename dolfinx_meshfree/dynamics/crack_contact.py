@@ -357,7 +357,9 @@ class FaceTerm:
         s, ws = 0.5 * (s + 1.0), 0.5 * ws
         d = np.asarray(direction, dtype=float)
         self.normal = np.array([-d[1], d[0]])
-        self.domains = []
+        xs, ups = [], []
+        #: per domain: its rows of the tables and its rule's factors
+        self.domains: list[tuple[slice, np.ndarray]] = []
         for r1, r2 in zip(inner, outer, strict=True):
             r = r2 * s * s
             x = np.asarray(tip, dtype=float)[None, :] - r[:, None] * d[None, :]
@@ -365,20 +367,28 @@ class FaceTerm:
             q = q_weight(r, r1, r2, weight)
             # int_0^r2 f(r) / sqrt(r) dr = 2 sqrt(r2) int_0^1 f(r2 s^2) ds
             factor = 2.0 * 2.0 * np.sqrt(r2) * ws * q / np.sqrt(2.0 * np.pi)
-            self.domains.append((mls.tabulate(x, 1, up), mls.tabulate(x, 1, -up), factor))
+            start = sum(len(v) for v in xs)
+            self.domains.append((slice(start, start + len(x)), factor))
+            xs.append(x)
+            ups.append(up)
+        # every domain's points in one table per face (each point's functions are its own)
+        x_all = np.concatenate(xs) if xs else np.zeros((0, 2))
+        up_all = np.concatenate(ups) if ups else np.zeros(0, dtype=np.int64)
+        self.up, self.down = mls.tabulate(x_all, 1, up_all), mls.tabulate(x_all, 1, -up_all)
 
     def __call__(self, coefficients: np.ndarray, material: LinearElastic) -> np.ndarray:
         """``Delta K_I`` (k,) of the particle coefficients (n, 2)."""
         n = self.normal
+        t_up, t_down = self.up, self.down
+        gap = (t_up.values @ coefficients - t_down.values @ coefficients) @ n
+        sigma = 0.5 * (
+            material.stress(t_up.gradient(coefficients))
+            + material.stress(t_down.gradient(coefficients))
+        )
+        p = np.where(gap < 0.0, -np.einsum("i,mij,j->m", n, sigma, n), 0.0)
         out = np.zeros(len(self.domains))
-        for k, (t_up, t_down, factor) in enumerate(self.domains):
-            gap = (t_up.values @ coefficients - t_down.values @ coefficients) @ n
-            sigma = 0.5 * (
-                material.stress(t_up.gradient(coefficients))
-                + material.stress(t_down.gradient(coefficients))
-            )
-            p = np.where(gap < 0.0, -np.einsum("i,mij,j->m", n, sigma, n), 0.0)
-            out[k] = np.sum(factor * p)
+        for k, (rows, factor) in enumerate(self.domains):
+            out[k] = np.sum(factor * p[rows])
         return out
 
 

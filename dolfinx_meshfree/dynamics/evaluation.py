@@ -31,6 +31,18 @@ __all__ = ["FieldEvaluator"]
 Tables = tuple[QuadraturePoints, sp.csr_matrix | None, sp.csr_matrix | None]
 
 
+def _gathered(x: PETSc.Vec, comm: MPI.Comm) -> np.ndarray:
+    """The whole of the distributed vector ``x`` on every rank, in its global order: one
+    ``Allgatherv`` of the owned values (a copy on one rank; collective): the values of
+    concatenating every rank's owned array, without pickling them."""
+    if comm.size == 1:
+        return x.array_r.copy()
+    ranges = np.asarray(x.getOwnershipRanges())
+    out = np.empty(int(ranges[-1]), dtype=PETSc.ScalarType)
+    comm.Allgatherv(x.array_r, [out, np.diff(ranges), ranges[:-1], MPI.DOUBLE])
+    return out
+
+
 class FieldEvaluator:
     """Evaluates fields given by their dof vectors (one per field) on a discretisation.
 
@@ -46,35 +58,37 @@ class FieldEvaluator:
         self.expand: Callable[[Sequence[PETSc.Vec]], PETSc.Vec] | None = None
 
     def local_values(
-        self, vecs: Sequence[PETSc.Vec], particles: bool = True
+        self, vecs: Sequence[PETSc.Vec], particles: bool = True, fe: bool = True
     ) -> tuple[dolfinx.fem.Function | None, np.ndarray | None]:
         """(FE Function with ghosts or None, particle coefficients (n, gdim) or None); with
-        ``particles=False`` the particle coefficients are not gathered (``None``)."""
+        ``particles=False`` the particle coefficients are not gathered, with ``fe=False`` no
+        FE Function is made (``None``)."""
         d = self.disc
-        fe, coeffs = None, None
+        coeffs = None
+        fe_out: dolfinx.fem.Function | None = None
         for f, x in zip(d.fields, vecs, strict=True):
-            if f.name != "fe" and not particles:
+            if (f.name != "fe" and not particles) or (f.name == "fe" and not fe):
                 continue
             if f.name == "fe":
-                fe = dolfinx.fem.Function(d.V)
-                fe.x.array[: x.getLocalSize()] = x.array_r
-                fe.x.scatter_forward()
+                fe_out = dolfinx.fem.Function(d.V)
+                fe_out.x.array[: x.getLocalSize()] = x.array_r
+                fe_out.x.scatter_forward()
             else:
                 if self.expand is not None:  # master-slave with rotating links
                     full = self.expand(vecs)
-                    owned = np.concatenate(self.comm.allgather(full.array_r.copy()))
+                    owned = _gathered(full, self.comm)
                     full.destroy()
                 elif d.reduction is not None:  # master-slave: u_P = T_PF u_FE + S u_M
                     Tpf, S = d.reduction
                     full = Tpf.createVecLeft()
                     Tpf.mult(vecs[0], full)
                     S.multAdd(x, full, full)
-                    owned = np.concatenate(self.comm.allgather(full.array_r.copy()))
+                    owned = _gathered(full, self.comm)
                     full.destroy()
                 else:
-                    owned = np.concatenate(self.comm.allgather(x.array_r.copy()))
+                    owned = _gathered(x, self.comm)
                 coeffs = owned.reshape(-1, d.gdim)[d.particles.petsc_index]
-        return fe, coeffs
+        return fe_out, coeffs
 
     def at_points(self, vecs: Sequence[PETSc.Vec], points: npt.ArrayLike) -> np.ndarray:
         """The field with dof values ``vecs`` at this rank's points (m, gdim) -> (m, gdim).

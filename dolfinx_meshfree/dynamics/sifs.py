@@ -58,9 +58,15 @@ __all__ = [
 
 def current_acceleration(dyn: ExplicitDynamics) -> list[PETSc.Vec]:
     """``a_n = P M^{-1} (f^ext(t_n) - f^int(d_n))`` per field at the current state (new vectors
-    the caller destroys; zero on dofs held at rest; collective)."""
+    the caller destroys; zero on dofs held at rest; collective). Inside an output of a run
+    ``f^int(d_n)`` is the step's own (:attr:`CentralDifference.f_now
+    <dolfinx_meshfree.dynamics.central_difference.CentralDifference.f_now>`): the same
+    values, without a second product."""
     stepper = dyn.stepper
-    ku = dyn.system.internal_force(stepper.u)
+    if stepper.f_now is not None:
+        ku = [f.copy() for f in stepper.f_now]
+    else:
+        ku = dyn.system.internal_force(stepper.u)
     acc = [k.duplicate() for k in ku]
     for k, (f, a) in enumerate(zip(ku, acc, strict=True)):
         for vecs, amp in stepper.loads.at(dyn.time):
@@ -80,8 +86,8 @@ def particle_state(dyn: ExplicitDynamics) -> tuple[np.ndarray, np.ndarray]:
     ``a_n`` (:func:`current_acceleration`), replicated on every rank (collective)."""
     acc = current_acceleration(dyn)
     try:
-        u = dyn.evaluator.local_values(dyn.u)[1]
-        a = dyn.evaluator.local_values(acc)[1]
+        u = dyn.evaluator.local_values(dyn.u, fe=False)[1]
+        a = dyn.evaluator.local_values(acc, fe=False)[1]
     finally:
         for x in acc:
             x.destroy()
@@ -94,8 +100,13 @@ def model_cracks(dyn: ExplicitDynamics) -> tuple[list[Crack], object]:
     cracks = dyn.evaluator.disc.cracks
     if dyn.patch is not None:
         return cracks, dyn.patch
-    domain = CrackDomain.from_particles(dyn.particles) if dyn.particles is not None else None
-    return cracks, domain
+    if dyn.particles is None:
+        return cracks, None
+    kept = dyn.__dict__.get("_crack_domain")  # (particles, domain): made once per particle set
+    if kept is None or kept[0] is not dyn.particles:
+        kept = (dyn.particles, CrackDomain.from_particles(dyn.particles))
+        dyn.__dict__["_crack_domain"] = kept
+    return cracks, kept[1]
 
 
 def dynamic_sifs(

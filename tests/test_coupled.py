@@ -196,6 +196,8 @@ def test_bad_input_on_every_rank():
         mf.ParticlePatch(msh, np.array([n_local + 5]) if comm.rank == 0 else np.zeros(0, int), 0.3)
     with pytest.raises(ValueError, match="patch is empty"):
         mf.ParticlePatch(msh, np.zeros(0, dtype=np.int64), 0.3)
+    with pytest.raises(ValueError, match=r"cells=None: give the patch's cells.*cells_near"):
+        mf.ParticlePatch(msh, None, 0.3)  # an adaptive build(crack, cells=None) passing it on
     with pytest.raises(ValueError, match="spacing"):
         mf.ParticlePatch(msh, cells_right_of(msh, 1.0), -1.0)
     patch = mf.ParticlePatch(msh, cells_right_of(msh, 1.0), 1 / 3)

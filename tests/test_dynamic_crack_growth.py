@@ -71,8 +71,9 @@ def test_mode_I_grows_straight_once_K_reaches_K_Ic(grown):
     """Measured: initiation at the check t = 1.378 (Freund: 1.389; check interval 0.172);
     every earlier check K_eq < K_Ic; one extension at t = 2.067 (initiation + segment / speed =
     2.050); kink angles <= 0.27 deg (check 0.5); the new tip 4.8e-4 off the crack plane (check
-    1e-3 = 0.01 h); the growth arrests after the extension (K drops as the new tip has not yet
-    seen the wave: 0.55) and initiates again."""
+    1e-3 = 0.01 h), not turned off the criterion (``growth_probe``); the growth arrests after
+    the extension (K drops as the new tip has not yet seen the wave: 0.55) and initiates
+    again."""
     hist = grown.history
     init = grown.initiation
     assert init is not None
@@ -87,6 +88,7 @@ def test_mode_I_grows_straight_once_K_reaches_K_Ic(grown):
     assert path.shape == (2, 2)  # one extension
     assert abs(path[1, 1]) <= 1e-3 and abs(np.linalg.norm(path[1] - path[0]) - SEGMENT) <= 1e-12
     assert np.allclose(grown.crack.points[-1], path[-1])
+    assert all(c.turn == 0.0 for c in hist)  # a segment the MLS carries is the criterion's
 
 
 def test_tip_advances_at_the_speed(grown):
@@ -272,3 +274,31 @@ def test_sifs_taken_inside_the_run_equal_sifs_taken_after_it(method, K_Ic):
         dt = g._time_step()
     assert compared > 5
     assert after_growth == (4 if K_Ic < 1.0 else 0)
+
+
+def test_master_slave_grows_with_full_rebuilds_by_default():
+    """master-slave has no local update (its particle field is expanded from FE dofs and
+    masters): with the default ``update="local"`` every extension rebuilds the model in full,
+    as for the ramps, instead of refusing the model; the mode-I crack then runs straight, as
+    pure EFG's (serially and on 2 ranks)."""
+    g = growth(K_IC, method="master-slave", patch_width=0.9)
+    assert g.local is None
+    g.run(T_END)
+    grown = sum(c.extended for c in g.history)
+    assert grown >= 1 and g.timings["full"] == grown and g.timings["local"] == 0
+    assert np.abs(g.path[:, 1]).max() <= 0.1 * H_SPACING
+
+
+def test_default_domains_need_a_long_enough_segment():
+    """Without ``radius`` the default SIF domains need 6 spacings of straight crack behind the
+    tip, which a segment of 3.5 spacings leaves after the first kink: refused when the growth
+    is made (naming the segment, the spacing and the fix), not at the first extension."""
+    dyn, crack, _ = FR.build("efg", CELLS, COMM)
+    msh = dyn.mesh
+    dyn.destroy()
+
+    def build(c: mf.Crack) -> mf.ExplicitDynamics:
+        return FR.build("efg", CELLS, COMM, crack=c, msh=msh)[0]
+
+    with pytest.raises(ValueError, match=r"segment=.* is 3.5 particle spacings .* give radius="):
+        DynamicCrackGrowth(build, crack, K_Ic=K_IC, speed=0.8 * CS, segment=SEGMENT)

@@ -42,15 +42,17 @@ from scipy.optimize import brentq
 from ..couplings.ramp import RampInterface
 from ..fracture.criteria import equivalent_sif, kink_angle
 from ..fracture.interaction import StressIntensityFactors
-from ..geometry.crack import Crack
+from ..geometry.crack import Crack, particle_spacing
 from ..io import ProgressBar
 from ..parallel import raise_on_all_ranks
 from ..physics.materials import LinearElastic
+from ..statics.sifs import CLEARANCE, MIN_OUTER
 from .central_difference import advance_to
 from .cohesive_faces import CohesiveFacesSystem
 from .energy import strain_energy
 from .explicit import ExplicitDynamics
 from .growth_local import LocalModelUpdate
+from .growth_probe import turn_to_fit
 from .patch_conversion import ConvertingPatch, carry_clock
 from .sifs import dynamic_sifs, model_cracks
 from .system import wrapped
@@ -91,6 +93,9 @@ class GrowthCheck:
             ``"arrested"``.
         extended: A segment was added at this check (the model rebuilt).
         new_tip: The tip after it.
+        turn: Degrees the segment was turned off ``theta`` so that the crack-aware MLS can
+            carry it (:func:`~dolfinx_meshfree.dynamics.growth_probe.turn_to_fit`; 0 for the
+            criterion's segment, or when nothing grew).
     """
 
     step: int
@@ -103,6 +108,7 @@ class GrowthCheck:
     state: str
     extended: bool
     new_tip: np.ndarray
+    turn: float = 0.0
 
     def as_dict(self) -> dict:
         """Plain lists and floats (for JSON)."""
@@ -143,7 +149,8 @@ class DynamicCrackGrowth:
             (:class:`~dolfinx_meshfree.dynamics.growth_local.LocalModelUpdate`; ``build`` must
             put the crack it is given in the model, which is then extended in place), falling
             back to a rebuild where the change reaches a constraint row or a particle load,
-            and for the ramps (their blended interface cells; ``timings["full"]`` counts the
+            and for the ramps (their blended interface cells) and master-slave (its particle
+            field is expanded from FE dofs and masters; ``timings["full"]`` counts the
             rebuilds); crack-face contact's gap operator is rebuilt for the grown faces;
             ``"full"``: call ``build`` after every extension.
         quadrature_degree: The degree of the model's cell rule (``update="local"``; the
@@ -159,6 +166,10 @@ class DynamicCrackGrowth:
             conserved, the energy change recorded in :attr:`conversions` and counted in
             :attr:`released`). Every coupling (master-slave at finite strain only with links of
             length zero). Default ``None``: the patch is fixed.
+        fit_segments: Turn a segment that the crack-aware MLS could not carry by up to 15
+            degrees (:func:`~dolfinx_meshfree.dynamics.growth_probe.turn_to_fit`; each turn in
+            ``GrowthCheck.turn``). ``False``: every segment in the criterion's direction (the
+            paper's), and a model that cannot be built on it stops the run.
         sif_options: More keywords of :func:`~dolfinx_meshfree.dynamics.sifs.dynamic_sifs`.
 
     Example::
@@ -192,6 +203,7 @@ class DynamicCrackGrowth:
         update: str = "local",
         quadrature_degree: int = 7,
         adapt: Any = None,
+        fit_segments: bool = True,
         **sif_options,
     ) -> None:
         if not callable(build):
@@ -213,6 +225,9 @@ class DynamicCrackGrowth:
                 "cell rule; the builders' default is 7)"
             )
         self.update, self.quadrature_degree = update, int(deg)
+        if not isinstance(fit_segments, bool | np.bool_):
+            raise ValueError(f"fit_segments={fit_segments!r} must be True or False")
+        self.fit_segments = bool(fit_segments)
         self.check_every, self.radius, self.sif_options = check_every, radius, sif_options
         self.build = build
         self.timings = {"steps": 0.0, "sifs": 0.0, "rebuild": 0.0, "rebuilds": 0, "setup": 0.0,
@@ -262,6 +277,8 @@ class DynamicCrackGrowth:
         self.timings["conversions"] = 0
         self.local: LocalModelUpdate | None = None
         self._start_local()
+        if radius is None:  # after the model's own refusals
+            _check_default_domains(self.model, self.segment)
         self.history: list[GrowthCheck] = []
         self.released: list[tuple[float, float]] = []
         self.path_points: list[np.ndarray] = [self.crack.points[self.end].copy()]
@@ -271,7 +288,9 @@ class DynamicCrackGrowth:
         """The local update of the current model (``update="local"``; collective)."""
         if self.update != "local":
             return
-        if isinstance(self.model.interface, RampInterface):  # its blended cells: rebuilt in full
+        # the ramps' blended cells and master-slave's expanded particle field have no local
+        # update (LocalModelUpdate refuses them): their models are rebuilt in full
+        if isinstance(self.model.interface, RampInterface) or self.model.reduction is not None:
             self.local = None
             return
         ours = any(c is self.crack for c in model_cracks(self.model)[0])
@@ -387,12 +406,17 @@ class DynamicCrackGrowth:
             state = "arrested" if self._growing else "below"
         self._growing = grows
         extended = grows and self._travelled >= self.segment * (1.0 - 1e-9)
+        turn = 0.0
         if extended:
             self._travelled -= self.segment
-            self._extend(theta)
+            if self.fit_segments:  # a segment the MLS could not carry is turned a little
+                turn = turn_to_fit(dyn, self.crack, self.end, theta, self.segment,
+                                   self.quadrature_degree)  # fmt: skip
+            self._extend(theta + np.deg2rad(turn))
         rec = GrowthCheck(
             step=dyn.step, time=dyn.time, tip=tip, K_I=KI, K_II=KII, theta=theta, K_eq=keq,
             state=state, extended=extended, new_tip=self.crack.points[self.end].copy(),
+            turn=turn,
         )  # fmt: skip
         self.history.append(rec)
         return rec
@@ -508,6 +532,29 @@ class DynamicCrackGrowth:
         if self.adaptive is not None:
             self.adaptive.finish("DynamicCrackGrowth", f"{len(self.history)} check(s)")
         return self.history
+
+
+def _check_default_domains(model: ExplicitDynamics, segment: float) -> None:
+    """The default SIF domains (``radius=None``) must fit behind a tip after a kink: a
+    ``ValueError`` on every rank for a ``segment`` shorter than they need (collective)."""
+    domain = model_cracks(model)[1]
+    if domain is None:  # no cracks: the first check says so
+        return
+
+    def fits() -> None:
+        h = particle_spacing(domain)
+        need = MIN_OUTER + CLEARANCE
+        if segment < need * h * (1.0 - 1e-9):
+            raise ValueError(
+                f"segment={segment:.6g} is {segment / h:.3g} particle spacings (h = {h:.6g}): "
+                "after an extension the crack kinks that far behind the tip, and the default "
+                f"SIF domains need {need:g} spacings of straight crack there (statics' "
+                "sif_domains); give radius= with outer radii below the segment (e.g. radius="
+                f"[{2 * h:.6g}, {3 * h:.6g}], 2 and 3 spacings, as demos/kalthoff_winkler.py with "
+                f"its 3.5-spacing segments) or a segment of at least {need * h:.6g}"
+            )
+
+    raise_on_all_ranks(model.comm, fits)
 
 
 def carry_state(old: ExplicitDynamics, new: ExplicitDynamics) -> float:

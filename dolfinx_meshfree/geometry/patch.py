@@ -131,6 +131,13 @@ class ParticlePatch:
         num_local = num_owned + cmap.num_ghosts
 
         def check() -> np.ndarray:
+            if cells is None:
+                raise ValueError(
+                    "cells=None: give the patch's cells, this rank's local cell indices (e.g. "
+                    "mf.cells_near(mesh, crack.points, r) about a crack, or np.flatnonzero of a "
+                    "marker on the cells' midpoints); a build(crack, cells=None) for an adaptive "
+                    "patch is first called without cells and must then choose the starting patch"
+                )
             c = np.asarray(cells)
             if c.ndim != 1 or (c.size and not np.issubdtype(c.dtype, np.integer)):
                 raise ValueError(f"cells should be a 1D array of cell indices, got {c!r:.80}")

@@ -65,15 +65,18 @@ AHEAD = (0.0, 15.0, -15.0)
 
 def _carries(dyn: ExplicitDynamics, crack: Crack, trial: Crack, end: int, degree: int) -> bool:
     """Whether the model's MLS, cut by its cracks with ``trial`` in place of ``crack``,
-    tabulates at the cut-cell rule of ``degree`` of this rank's particle cells whose midpoints
-    lie within two support radii of ``trial``'s segment at ``end`` (the points whose supports
-    the segment can cut; collective: every rank's answer)."""
+    tabulates at the cut-cell rule of ``degree`` of this rank's particle cells that come within
+    the largest support radius of ``trial``'s segment at ``end`` (the points whose supports the
+    segment can cut; collective: every rank's answer)."""
     cracks, domain = model_cracks(dyn)
     mls, msh = dyn.mls, domain.mesh
     cells = np.asarray(domain.cells, dtype=np.int64)
-    mid = msh.geometry.x[_compat.geometry_dofmap(msh)[cells]][..., :2].mean(axis=1)
+    corners = msh.geometry.x[_compat.geometry_dofmap(msh)[cells]][..., :2]
+    mid = corners.mean(axis=1)
+    size = np.linalg.norm(corners - mid[:, None], axis=2).max(axis=1)  # midpoint to corners
     a, b = (trial.points[-2], trial.points[-1]) if end != 0 else (trial.points[1], trial.points[0])
-    near = cells[point_segment_distance(mid, a[None], b[None])[:, 0] < 2.0 * mls.radii.max()]
+    gap = point_segment_distance(mid, a[None], b[None])[:, 0] - size
+    near = cells[gap < mls.radii.max()]  # a point there may see a particle past the segment
     ok = True
     if near.size:
         swapped = [trial if c is crack else c for c in cracks]

@@ -253,7 +253,8 @@ class CompiledProduct:
         """This rank's view of a product with ``x`` and ``y`` (no collective call): bit 0, the
         copy must be rebuilt (``A`` changed since it was made); bit 1, ``x`` or ``y`` not laid
         out as ``A``'s columns and rows, or ``y`` the same vector as ``x`` (the kernels do not
-        check bounds). :func:`multiply` combines them over the ranks."""
+        check bounds). :func:`multiply` combines them over the ranks, rebuilds the stale copies
+        together (the scatter is collective) and raises :meth:`layout_error` on every rank."""
         (rl, _), (cl, _) = self.A.getSizes()
         sizes = (x.getLocalSize(), y.getLocalSize())
         bad = sizes != (cl, rl) or x.handle == y.handle
@@ -268,21 +269,6 @@ class CompiledProduct:
             f"rank; got local sizes x {x.getLocalSize()}, y {y.getLocalSize()} on some rank "
             f"(this rank: A {rl} x {cl}); create them with A.createVecs()"
         )
-
-    def _stale(self, x: PETSc.Vec, y: PETSc.Vec) -> bool:
-        """Whether the copy must be rebuilt (on every rank together: the scatter is
-        collective), after checking ``x`` and ``y`` on every rank (:meth:`local_flags`).
-
-        Raises:
-            ValueError: on every rank, ``x`` or ``y`` not laid out as ``A``'s columns and rows,
-                or ``y`` the same vector as ``x``.
-        """
-        flags = self.local_flags(x, y)
-        if self._comm.size > 1:
-            flags = self._comm.allreduce(flags, op=MPI.BOR)
-        if flags & 2:
-            raise self.layout_error(x, y)
-        return bool(flags & 1)
 
     def _build(self) -> None:
         """Copy ``A``'s owned rows into the diagonal and ghost BSR parts and make the scatter
@@ -317,9 +303,8 @@ class CompiledProduct:
         self._state = A.stateGet()
 
     def _product(self, x: PETSc.Vec, y: PETSc.Vec, add: bool) -> None:
-        if self._stale(x, y):
-            self._build()
-        self._run(x, y, add)
+        """One product, checked on every rank and rebuilt if stale (:func:`multiply`)."""
+        multiply([(self, x, y, add)], self._comm)
 
     def _run(self, x: PETSc.Vec, y: PETSc.Vec, add: bool) -> None:
         """The product on a checked, current copy (collective: the ghost scatter)."""

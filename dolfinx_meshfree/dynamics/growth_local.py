@@ -352,7 +352,9 @@ class LocalModelUpdate:
         if self.contact is not None:  # the faces grew: their gap operator, from scratch
             self.contact.refresh()
         if dyn.projection is not None:
-            proj = VelocityProjection(dyn.G, st.minv, comm, dyn.projection.solver)
+            proj = VelocityProjection(
+                dyn.G, st.minv, comm, dyn.projection.solver, dyn.projection.product
+            )
             dyn.projection.destroy()
             dyn.projection = st.projection = proj
             held = dyn.loads.motion  # driven rows (prescribed velocities) keep their values

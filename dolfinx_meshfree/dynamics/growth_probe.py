@@ -63,20 +63,36 @@ ROW_ANGLE = 30.0
 AHEAD = (0.0, 15.0, -15.0)
 
 
-def _carries(dyn: ExplicitDynamics, crack: Crack, trial: Crack, end: int, degree: int) -> bool:
-    """Whether the model's MLS, cut by its cracks with ``trial`` in place of ``crack``,
-    tabulates at the cut-cell rule of ``degree`` of this rank's particle cells that come within
-    the largest support radius of ``trial``'s segment at ``end`` (the points whose supports the
-    segment can cut; collective: every rank's answer)."""
-    cracks, domain = model_cracks(dyn)
-    mls, msh = dyn.mls, domain.mesh
+def _cells(dyn: ExplicitDynamics) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """This rank's particle cells, their midpoints and their sizes (midpoint to the farthest
+    corner), once per extension for every probe of it."""
+    domain = model_cracks(dyn)[1]
+    msh = domain.mesh
     cells = np.asarray(domain.cells, dtype=np.int64)
     corners = msh.geometry.x[_compat.geometry_dofmap(msh)[cells]][..., :2]
     mid = corners.mean(axis=1)
-    size = np.linalg.norm(corners - mid[:, None], axis=2).max(axis=1)  # midpoint to corners
+    return cells, mid, np.linalg.norm(corners - mid[:, None], axis=2).max(axis=1)
+
+
+def _carries(
+    dyn: ExplicitDynamics,
+    crack: Crack,
+    trial: Crack,
+    end: int,
+    degree: int,
+    cells: tuple[np.ndarray, np.ndarray, np.ndarray],
+) -> bool:
+    """Whether the model's MLS, cut by its cracks with ``trial`` in place of ``crack``,
+    tabulates at the cut-cell rule of ``degree`` of this rank's particle ``cells`` (with their
+    midpoints and sizes, :func:`_cells`) that come within the largest support radius of
+    ``trial``'s segment at ``end`` (the points whose supports the segment can cut;
+    collective: every rank's answer)."""
+    cracks, domain = model_cracks(dyn)
+    mls, msh = dyn.mls, domain.mesh
+    ids, mid, size = cells
     a, b = (trial.points[-2], trial.points[-1]) if end != 0 else (trial.points[1], trial.points[0])
     gap = point_segment_distance(mid, a[None], b[None])[:, 0] - size
-    near = cells[gap < mls.radii.max()]  # a point there may see a particle past the segment
+    near = ids[gap < mls.radii.max()]  # a point there may see a particle past the segment
     ok = True
     if near.size:
         swapped = [trial if c is crack else c for c in cracks]
@@ -102,23 +118,23 @@ def turn_to_fit(
     angle ``theta``, radians, ``length``) so that the model's MLS can carry it: the first of
     :data:`TURNS` whose grown crack tabulates about the new segment (:func:`_carries`) and, for
     a tip on a particle or a row of particles (:func:`_on_a_row`), about the next segments at
-    the kinks :data:`AHEAD`; 0 when none does
-    (the extension then fails as it would have; collective, the same on every rank). The crack
-    is not changed."""
+    the kinks :data:`AHEAD`; 0 when none does (the extension then fails as it would have;
+    collective, the same on every rank). The crack is not changed."""
     domain = model_cracks(dyn)[1]
     particles = domain.particles.positions[:, :2]
     h = particle_spacing(domain)
+    cells = _cells(dyn)
     for turn in TURNS:
         trial = _grown(crack, end, theta + np.deg2rad(turn), length)
         if trial is None:
             continue
-        if not _carries(dyn, crack, trial, end, degree):
+        if not _carries(dyn, crack, trial, end, degree, cells):
             continue
         # a tip on a particle or on a row of particles can trap the next segment: it must then
         # carry the next segments of the usual kinks (the others, the usual case, are not tried)
         if _on_a_row(trial.points[end], trial.tip_direction(end), particles, h) and not all(
             (ahead := _grown(trial, end, np.deg2rad(a), length)) is None
-            or _carries(dyn, crack, ahead, end, degree)
+            or _carries(dyn, crack, ahead, end, degree, cells)
             for a in AHEAD
         ):
             continue

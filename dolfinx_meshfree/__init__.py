@@ -89,7 +89,7 @@ from .statics.coupled import (
 from .statics.crack_initiation import CrackInitiation
 from .statics.efg import EFGElasticity, EFGSolution
 from .statics.fe import FESolution, solve_fe_elasticity, solve_forms
-from .statics.growth import GrowthStep, QuasiStaticCrackGrowth
+from .statics.growth import GrowthStep, GrowthStopped, QuasiStaticCrackGrowth, TipAtBoundary
 from .statics.large import IterativeOptions, chunked_l2_error, solve_large
 from .statics.newton import NewtonError, NewtonOptions, NewtonResult
 from .statics.nonlinear import FINITE_STRAIN_COUPLINGS, CoupledNonlinearProblem, FENonlinearProblem
@@ -165,6 +165,7 @@ __all__ = [
     "FieldAbove",
     "GaussianPulseRod",
     "GrowthStep",
+    "GrowthStopped",
     "HolmquistJohnsonCook",
     "HybridElasticity",
     "InclinedCentreCrack",
@@ -208,6 +209,7 @@ __all__ = [
     "StepLoadedRod",
     "StressIntensityFactors",
     "TimoshenkoBeam",
+    "TipAtBoundary",
     "WilliamsField",
     "attach_cracks",
     "balanced_mesh",

@@ -126,6 +126,23 @@ def test_growth_rebuild_equals_a_model_built_with_the_grown_crack(inclined, meth
     assert abs(sif.K_II.mean() - hist[-1].K_II) < 1e-10 * scale
 
 
+def test_domains_fit_near_the_boundary_and_growth_stops_at_it():
+    """A tip 4 spacings from the right edge: the default domains (5 spacings) shrink to keep
+    one spacing from it (they were refused: "the domain ... leaves the particle patch"); the
+    next tip, 2 spacings from it, has no room left: run() stops with a GrowthStopped warning,
+    the history kept (a user's random edge cracks reached the edge in 2 of 12 draws)."""
+    crack = mf.Crack([[0.0, Y0], [0.8, Y0]])
+    g = mf.QuasiStaticCrackGrowth(model(crack), crack, increment=2 * H, steps=3)
+    with pytest.warns(mf.GrowthStopped, match=r"stopped after 1 step\(s\).*\(2 spacings\)"):
+        hist = g.run()
+    assert len(hist) == 1 and hist[0].grown
+    assert hist[0].radius.max() == pytest.approx(0.2 - H, rel=1e-12)  # d - one spacing
+    assert hist[0].radius.min() == pytest.approx(0.6 * (0.2 - H), rel=1e-12)  # 3 : 5 kept
+    assert "exterior boundary" in g.stopped and crack.points[-1, 0] == pytest.approx(0.9, abs=1e-3)
+    with pytest.raises(mf.TipAtBoundary, match=r"refine the particles"):
+        g.step()
+
+
 def test_toughness_decides_growth():
     crack, _, hist = grow(0.0, steps=3, K_Ic=2.0)  # K_eq measured 1.72 at the first step
     assert len(hist) == 1 and not hist[0].grown and 1.5 < hist[0].K_eq < 2.0

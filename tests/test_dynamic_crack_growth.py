@@ -18,7 +18,7 @@ import dolfinx_meshfree as mf
 from dolfinx_meshfree.dynamics import DynamicCrackGrowth, rayleigh_speed
 from dolfinx_meshfree.dynamics.crack_contact import CrackContact
 from dolfinx_meshfree.dynamics.crack_growth import carry_state
-from dolfinx_meshfree.dynamics.sifs import dynamic_sifs
+from dolfinx_meshfree.dynamics.sifs import current_acceleration, dynamic_sifs
 
 import numpy as np
 import pytest
@@ -274,6 +274,71 @@ def test_sifs_taken_inside_the_run_equal_sifs_taken_after_it(method, K_Ic):
         dt = g._time_step()
     assert compared > 5
     assert after_growth == (4 if K_Ic < 1.0 else 0)
+
+
+def test_the_step_force_serves_only_the_state_it_was_made_for():
+    """``force_now`` is the step's force inside an output callback, as long as the callback
+    leaves the displacement alone: a callback that moves it and then asks for the acceleration
+    gets the moved state's (the force recomputed), not the step's (before: silently the old
+    state's). The accelerations are compared with the ones made with no step force at all."""
+    g = growth(K_IC)
+    dyn = g.model
+    seen = []
+
+    def acceleration(model):
+        vecs = current_acceleration(model)
+        out = [x.array_r.copy() for x in vecs]
+        for x in vecs:
+            x.destroy()
+        return out
+
+    def callback(model, step, t):
+        stepper = model.stepper
+        assert stepper.force_now() is stepper.f_now is not None
+        a_step = acceleration(model)
+        kept, stepper.f_now = stepper.f_now, None  # no step force: recomputed
+        a_fresh = acceleration(model)
+        stepper.f_now = kept
+        model.stepper.u[-1].array[:] *= 1.5  # the callback moves the particles
+        assert stepper.force_now() is None
+        a_moved = acceleration(model)
+        model.stepper.u[-1].array[:] /= 1.5
+        seen.append(
+            all(np.array_equal(a, b) for a, b in zip(a_step, a_fresh, strict=True))
+            and not all(np.allclose(a, b) for a, b in zip(a_moved, a_fresh, strict=True))
+        )
+
+    dyn.run(0.5 * T_END, outputs=[0.25 * T_END, 0.5 * T_END], on_output=callback)
+    assert len(seen) == 2 and all(seen)
+    assert dyn.stepper.force_now() is None  # outside a callback
+
+
+@pytest.mark.parametrize(
+    ("segment", "why"),
+    [
+        (SEGMENT, r"0\.0666\d* from the body's exterior boundary, within the SIF domains"),
+        (5.0 * H_SPACING, r"across the body's exterior boundary: the crack would split"),
+    ],
+)
+def test_growth_stops_where_the_crack_reaches_the_edge(segment, why):
+    """A tip 0.4 from the plate's right edge (4.2 spacings) grows at once: its first segment
+    would end within the SIF domains' radius of the edge (3.5 spacings) or cross it (5): the
+    run stops at that check with a GrowthStopped warning, the crack and the history kept (it
+    raised "the crack leaves the patch" from inside run(), losing the run: a user's plate
+    whose crack ran to its edge)."""
+    dyn, _, _ = FR.build("efg", CELLS, COMM)
+    msh = dyn.mesh
+    dyn.destroy()
+    crack = mf.Crack([[0.0, 0.0], [1.6, 0.0]])
+    g = DynamicCrackGrowth(
+        lambda c: FR.build("efg", CELLS, COMM, crack=c, msh=msh)[0], crack, K_Ic=0.05,
+        speed=0.8 * CS, segment=segment, check_every=2, radius=RADII,
+    )  # fmt: skip
+    with pytest.warns(mf.GrowthStopped, match=why):
+        hist = g.run(T_END)
+    assert g.stopped is not None and "reached the edge" in g.stopped
+    assert g.model.time < T_END and np.array_equal(g.crack.points, [[0.0, 0.0], [1.6, 0.0]])
+    assert hist[-1].state == "growing" and not any(c.extended for c in hist)
 
 
 def test_master_slave_grows_with_full_rebuilds_by_default():

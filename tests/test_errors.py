@@ -7,6 +7,7 @@ run; the CI wraps MPI runs in a timeout).
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
+from dolfinx_meshfree.physics.user_functions import check_arguments
 
 import dolfinx
 import numpy as np
@@ -336,3 +337,31 @@ def test_efg_solve_with_uncovered_quadrature_points_raises_on_every_rank():
     problem.add_traction(right, beam.traction)
     sol = problem.solve()
     assert np.all(np.isfinite(sol.coefficients))
+
+
+def test_user_functions_with_the_wrong_arguments_are_refused_by_name():
+    """A traction of the points alone (the README's snippet does not show ``n``) raised
+    Python's bare "takes 1 positional argument but 2 were given" from inside the assembly; a
+    Dirichlet value of ``(x, n)`` likewise. Both are now refused where they are given (no
+    collective call), by name, with the call they must accept and the fix; a builtin whose
+    signature Python cannot read passes that check."""
+    msh = beam_mesh(COMM, 3.0)
+    left, right = beam_ends(msh)
+    particles = mf.ParticleSet.from_cells(msh, 3.0)
+    efg = mf.EFGElasticity(particles, mf.LinearElastic(3e7, 0.3))
+    with pytest.raises(TypeError, match=r"traction is called with \(x, n\).*lambda x, n: \.\.\."):
+        efg.add_traction(right, lambda x: np.zeros_like(x))
+    with pytest.raises(TypeError, match=r"the Dirichlet value is called with \(x\) .*lambda x:"):
+        efg.add_dirichlet(left, lambda x, n: np.zeros_like(x))
+    with pytest.raises(TypeError, match=r"traction must be a callable of \(x, n\).*got 3.0"):
+        efg.add_traction(right, 3.0)
+    V = _compat.vector_function_space(msh)
+    cells = np.arange(msh.topology.index_map(2).size_local, dtype=np.int32)[:4]
+    coupled = mf.CoupledElasticity(V, mf.ParticlePatch(msh, cells, 1.5), mf.LinearElastic(3e7, 0.3))
+    with pytest.raises(TypeError, match=r"traction is called with \(x, n\)"):
+        coupled.add_traction(right, lambda x: np.zeros_like(x))
+    dyn = mf.ExplicitDynamics.fe(V, mf.LinearElastic(3e7, 0.3, rho=2.5e-3))
+    with pytest.raises(TypeError, match=r"traction is called with \(x, n\)"):
+        dyn.add_traction(right, lambda x: np.zeros_like(x))
+    check_arguments(np.zeros_like, 1, "the Dirichlet value")  # a builtin: not refused
+    check_arguments(lambda x, n=None: x, 1, "the Dirichlet value")  # a default is fine

@@ -33,8 +33,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..geometry.crack import CRACK_METHODS, Crack, validate_in_patch
+from ..geometry.crack import CRACK_METHODS, Crack, CrackDomain, validate_in_patch
 from .mls import MLS, MomentMatrixError
+from .mouth_supports import widen_at_mouths
 
 if TYPE_CHECKING:  # annotations only
     from ..geometry.patch import ParticlePatch
@@ -121,8 +122,44 @@ class CrackCut:
         ddist: np.ndarray,
         sides: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        if not self.cracks or i.size == 0:
+        cut = self._cut(x, i, j, dist, ddist, sides)
+        if cut is None:  # no weight cut: every pair kept as it is
             return i, j, dx, dist, ddist
+        keep, dist, ddist = cut
+        self._check_counts(x, i, keep)
+        return i[keep], j[keep], dx[keep], dist[keep], ddist[keep]
+
+    def unchecked(
+        self,
+        x: np.ndarray,
+        i: np.ndarray,
+        j: np.ndarray,
+        dx: np.ndarray,
+        dist: np.ndarray,
+        ddist: np.ndarray,
+        sides: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The cut without the refusal of a point left with too few particles (for
+        :meth:`~dolfinx_meshfree.MLS.support_quality`, which reports them)."""
+        cut = self._cut(x, i, j, dist, ddist, sides)
+        if cut is None:
+            return i, j, dx, dist, ddist
+        keep, dist, ddist = cut
+        return i[keep], j[keep], dx[keep], dist[keep], ddist[keep]
+
+    def _cut(
+        self,
+        x: np.ndarray,
+        i: np.ndarray,
+        j: np.ndarray,
+        dist: np.ndarray,
+        ddist: np.ndarray,
+        sides: np.ndarray | None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """``(keep, dist, ddist)``: the pairs kept and their distances (diffracted where a
+        pair is seen around a tip); ``None`` when no pair crosses a crack."""
+        if not self.cracks or i.size == 0:
+            return None
         if sides is not None and not np.all(np.isin(sides, (-1, 0, 1))):
             bad = np.asarray(sides)[~np.isin(sides, (-1, 0, 1))]
             raise ValueError(f"sides should be +1, -1 or 0 (the crack face), got {bad[:5]}")
@@ -133,10 +170,9 @@ class CrackCut:
             hit = crack.crosses_pairs(x, i, self.mls.points, j, side)
             ncross += hit
             which[hit] = c
-        if not ncross.any():  # no weight cut: every pair kept as it is
-            return i, j, dx, dist, ddist
+        if not ncross.any():
+            return None
         keep = ncross == 0
-        p, q = x[i], self.mls.points[j]
         dist, ddist = dist.copy(), ddist.copy()
         if self.method == "diffraction":
             once = np.flatnonzero(ncross == 1)
@@ -145,13 +181,31 @@ class CrackCut:
                 if sel.size == 0:
                     continue
                 d, grad = self._around_tips(
-                    crack, p[sel], q[sel], None if side is None else side[sel]
+                    crack, x[i[sel]], self.mls.points[j[sel]], None if side is None else side[sel]
                 )
                 ok = d < self.mls.radii[j[sel]]
                 dist[sel[ok]], ddist[sel[ok]] = d[ok], grad[ok]
                 keep[sel[ok]] = True
-        self._check_counts(x, i, keep)
-        return i[keep], j[keep], dx[keep], dist[keep], ddist[keep]
+        return keep, dist, ddist
+
+    def hint(self, x: np.ndarray) -> str:
+        """Why a point ``x`` (gdim,) beside a crack may see too few particles, for a refusal's
+        message ("" when no crack is within the largest support radius)."""
+        if not self.cracks:
+            return ""
+        d = np.array(
+            [float(c.distance(np.asarray(x, dtype=float)[None, :2])[0]) for c in self.cracks]
+        )
+        k = int(d.argmin())
+        if d[k] >= float(self.mls.radii.max()):
+            return ""
+        return (
+            f"the point is {d[k]:.3g} from a crack ({self.cracks[k]!r:.80}), which cuts off the "
+            "particles past it: a crack that runs within a tenth of a spacing of a row of "
+            "particles leaves the points beside it one row to see (CrackPlacementWarning "
+            "flags such a crack when it is placed); move the crack about half a spacing off "
+            "the rows"
+        )
 
     def _around_tips(
         self, crack: Crack, p: np.ndarray, q: np.ndarray, side: np.ndarray | None
@@ -202,10 +256,16 @@ def attach_cracks(
     method: str = "diffraction",
     exponent: float = 2.0,
     patch: ParticlePatch | None = None,
+    domain: ParticlePatch | CrackDomain | None = None,
 ) -> CrackCut:
     """Cut the weights of ``mls`` by ``cracks``: appends a :class:`CrackCut` to
     ``mls.pair_cuts``, marks ``mls`` changed, and has every later :meth:`Crack.extend` mark it
     changed too (tables built before are then stale).
+
+    With ``domain`` (or ``patch``; collective), the supports at the cracks' mouths are widened
+    where the crack meets the boundary at a sharp angle
+    (:func:`~dolfinx_meshfree.approx.mouth_supports.widen_at_mouths`: eq. 3.11's search for
+    enough particles, with the crack as a boundary; recorded in ``mls.widened``).
 
     With ``patch`` (collective), each tip must be at least the largest support radius of the
     particles around it from the FE interface: the cut changes the shape functions wherever a
@@ -214,6 +274,13 @@ def attach_cracks(
     checks one particle spacing when the crack is added, before the supports are known).
     """
     cut = CrackCut(mls, cracks, method, exponent)
+    region = domain if domain is not None else patch
+    if region is not None:
+        mls.pair_cuts.append(cut)
+        try:
+            widen_at_mouths(mls, cut.cracks, region)
+        finally:
+            mls.pair_cuts.pop()
     if patch is not None:
         for crack in cut.cracks:
             # a crack through the body has no tip

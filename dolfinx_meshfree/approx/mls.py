@@ -207,6 +207,20 @@ class MLS:
         #: Changes whenever the shape functions do (:meth:`changed`); tables carry the version
         #: they were built at (:attr:`ShapeTable.version`).
         self.version = 0
+        #: Supports widened after construction, each with its reason (e.g. at a crack's mouth:
+        #: :class:`~dolfinx_meshfree.approx.mouth_supports.WidenedSupports`).
+        self.widened: list = []
+
+    @property
+    def scale(self) -> float:
+        """The length ``s`` that scales the basis ``p((x_I - x) / s)`` of the moment matrices
+        (the median support radius at construction; fixed, so tables are comparable)."""
+        return self._scale
+
+    def weight_function(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The weight ``w(q)`` and ``dw/dq`` at normalised distances ``q = |x - x_I| / d_I``
+        (eq. 3.10 of Belytschko et al. 1995; zero for ``q >= 1``)."""
+        return self._weight(np.asarray(q, dtype=float))
 
     def changed(self) -> None:
         """Mark the shape functions changed (the caller moved particles, changed supports or
@@ -284,6 +298,33 @@ class MLS:
         for transform in self.table_transforms:
             table = transform(x, table, derivatives, sides)
         return table
+
+    def support_quality(
+        self, x: npt.ArrayLike, sides: npt.ArrayLike | None = None, matrices: bool = False
+    ) -> tuple[np.ndarray, ...]:
+        """Per point of ``x`` (m, gdim): the number of particles in its support after the pair
+        cuts, and the smallest over the largest eigenvalue of its moment matrix ``A(x)`` (eq.
+        3.7a of Belytschko et al. 1995; 0 with fewer particles than the basis needs), without
+        raising: where :meth:`tabulate` would refuse (a ratio not above ``rcond``) and how far
+        from it a point is; with ``matrices``, the moment matrices (m, nb, nb) too, in the
+        basis ``p((x_I - x) / s)``. The reference path; local. A cut with an ``unchecked``
+        variant (:meth:`~dolfinx_meshfree.approx.crack_cuts.CrackCut.unchecked`) is applied by
+        it."""
+        x = check_points(x, self.gdim, "x")
+        m = x.shape[0]
+        i, j, dx = pairs_within_support(x, self.points, self.radii, self._tree)
+        dist, ddist = pair_distances(dx)
+        cuts = [getattr(c, "unchecked", c) for c in self.pair_cuts]
+        i, j, dx, dist, ddist = cut_pairs(cuts, x, i, j, dx, dist, ddist, sides)
+        counts = np.bincount(i, minlength=m)
+        w, _ = self._weight(dist / self.radii[j])
+        p, _ = polynomial_basis(-dx / self._scale, self.order)
+        A = self._sum_outer(i, w, p, p, m)
+        ratio = np.zeros(m)
+        ok = counts >= self.num_basis
+        if ok.any():
+            ratio[ok] = self._eigenvalue_ratio(A[ok])
+        return (counts, ratio, A) if matrices else (counts, ratio)
 
     def _check_counts(self, counts: np.ndarray, x: np.ndarray) -> None:
         """Too few particles in the support of a point: :class:`MomentMatrixError`."""
@@ -444,11 +485,14 @@ class MLS:
         bad = np.flatnonzero(~(ratio > self.rcond))
         if bad.size:
             q = int(bad[0])
+            # a cut that knows why (a crack beside the point) says so
+            hints = [h(x[q]) for c in self.pair_cuts if (h := getattr(c, "hint", None))]
+            why = "".join(f"; {h}" for h in hints if h)
             raise MomentMatrixError(
                 f"MLS moment matrix is ill-conditioned at {bad.size} point(s) (eigenvalue ratio "
                 f"{ratio[q]:.2e} < rcond={self.rcond:.0e}); first: point {q} at {x[q]} with "
                 f"{counts[q]} particle(s) in support, which are (nearly) collinear or too few: "
-                f"{self._fix} or add particles off the line"
+                f"{self._fix} or add particles off the line{why}"
             )
 
 

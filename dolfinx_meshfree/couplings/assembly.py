@@ -225,7 +225,8 @@ def essential_conditions(
         )
         xn = coords[flags]
         vals = raise_on_all_ranks(
-            comm, lambda fn=fn, xn=xn: vector_values(fn, (xn,), len(xn), "dirichlet", gdim)
+            comm,
+            lambda fn=fn, xn=xn: vector_values(fn, (xn,), len(xn), "the Dirichlet value", gdim),
         )
         ubc.x.array.reshape(-1, gdim)[flags] = vals
         is_bc |= flags
@@ -332,7 +333,8 @@ def traction_loads(problem: CoupledElasticity) -> tuple[PETSc.Vec, np.ndarray]:
         f_fe_facets, f_p_facets = split_facets(problem, facets)
         q = revolved_if(facet_quadrature(msh, f_fe_facets, deg), problem.material)
         t = raise_on_all_ranks(
-            comm, lambda fn=fn, q=q: vector_values(fn, (q.points, q.normals), len(q), "t", gdim)
+            comm,
+            lambda fn=fn, q=q: vector_values(fn, (q.points, q.normals), len(q), "traction", gdim),
         )
         tab = tabulate_in_cells(V, q.points, q.cells, derivatives=0).values
         fl = load_vector(tab, q.weights, t).reshape(-1, gdim)
@@ -341,7 +343,8 @@ def traction_loads(problem: CoupledElasticity) -> tuple[PETSc.Vec, np.ndarray]:
             f_fe_vals.append(fl[:, comp])
         q = revolved_if(patch_facet_rule(problem, f_p_facets), problem.material)
         t = raise_on_all_ranks(
-            comm, lambda fn=fn, q=q: vector_values(fn, (q.points, q.normals), len(q), "t", gdim)
+            comm,
+            lambda fn=fn, q=q: vector_values(fn, (q.points, q.normals), len(q), "traction", gdim),
         )
         tab = raise_on_all_ranks(comm, lambda q=q: problem.mls.tabulate(q.points, 0)).values
         f_p += load_vector(tab, q.weights, t)

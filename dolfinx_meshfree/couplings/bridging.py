@@ -611,7 +611,7 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
         fq = revolved_if(facet_quadrature(msh, f_fe_facets, deg), problem.material)
         t = raise_on_all_ranks(
             comm,
-            lambda fn=fn, fq=fq: vector_values(fn, (fq.points, fq.normals), len(fq), "t", d),
+            lambda fn=fn, fq=fq: vector_values(fn, (fq.points, fq.normals), len(fq), "traction", d),
         )
         beta = np.where(band.in_band[fq.cells], 1.0 - band.alpha_at(fq.points, fq.cells), 1.0)
         tab = tabulate_in_cells(V, fq.points, fq.cells, derivatives=0).values
@@ -622,7 +622,7 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
         fq = revolved_if(patch_facet_rule(problem, f_p_facets), problem.material)
         t = raise_on_all_ranks(
             comm,
-            lambda fn=fn, fq=fq: vector_values(fn, (fq.points, fq.normals), len(fq), "t", d),
+            lambda fn=fn, fq=fq: vector_values(fn, (fq.points, fq.normals), len(fq), "traction", d),
         )
         beta = np.where(band.in_band[fq.cells], band.alpha_at(fq.points, fq.cells), 1.0)
         tab = raise_on_all_ranks(comm, lambda fq=fq: problem.mls.tabulate(fq.points, 0)).values

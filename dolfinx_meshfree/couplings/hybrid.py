@@ -119,6 +119,7 @@ from ..geometry.patch import ParticlePatch
 from ..parallel import raise_on_all_ranks
 from ..physics.body_loads import CallableBodyForce
 from ..physics.materials import LinearElastic
+from ..physics.user_functions import check_arguments
 from ..statics.petsc import BlockSystem, create_aij
 from .base import (
     CoupledSolution,
@@ -259,6 +260,7 @@ class HybridElasticity(HybridDiscretisation):
         (a roller, a symmetry plane, the axis of an axisymmetric model: ``(0,)``): the FE
         nodes' components strongly, the patch facets' by one multiplier per piece and
         component (or Nitsche's terms of those components, ``"smoothed"``)."""
+        check_arguments(value, 1, "the Dirichlet value")
         c = (0, 1) if components is None else tuple(components)
 
         def check() -> None:
@@ -270,6 +272,7 @@ class HybridElasticity(HybridDiscretisation):
 
     def add_traction(self, facets: np.ndarray, traction: Callable) -> None:
         """Traction ``traction(x, n)`` (m, 2) on owned exterior facets, on either side."""
+        check_arguments(traction, 2, "traction")
         self._tractions.append((np.asarray(facets, dtype=np.int32), traction))
 
     def set_body_force(self, force: VectorFunction) -> None:

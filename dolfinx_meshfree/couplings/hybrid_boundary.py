@@ -91,7 +91,7 @@ def nitsche_terms(
         x = sc.points[on]
         k = sc.owner[on]
         g = raise_on_all_ranks(
-            comm, lambda fn=fn, x=x: vector_values(fn, (x,), len(x), "dirichlet")
+            comm, lambda fn=fn, x=x: vector_values(fn, (x,), len(x), "the Dirichlet value")
         )
         t = raise_on_all_ranks(comm, lambda x=x: d.evaluator.tabulate(x, 0)).values.tocoo()
         m = on.size
@@ -212,7 +212,7 @@ def strong_conditions(
         flags = node_flags(d.V, dolfinx.fem.locate_dofs_topological(V, msh.topology.dim - 1, f_fe))
         xn = coords[flags]
         vals = raise_on_all_ranks(
-            comm, lambda fn=fn, xn=xn: vector_values(fn, (xn,), len(xn), "dirichlet")
+            comm, lambda fn=fn, xn=xn: vector_values(fn, (xn,), len(xn), "the Dirichlet value")
         )
         c = list(components)
         values[np.ix_(flags, c)] = vals[:, c]

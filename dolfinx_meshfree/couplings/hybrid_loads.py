@@ -65,7 +65,8 @@ def hybrid_loads(
                 q = facet_quadrature(msh, sel, deg)
             q = revolved_if(q, d.material)
             t = raise_on_all_ranks(
-                comm, lambda fn=fn, q=q: vector_values(fn, (q.points, q.normals), len(q), "t")
+                comm,
+                lambda fn=fn, q=q: vector_values(fn, (q.points, q.normals), len(q), "traction"),
             )
             if side == "fe":
                 tab = tabulate_in_cells(V, q.points, q.cells, derivatives=0).values

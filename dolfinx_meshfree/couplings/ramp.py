@@ -458,7 +458,8 @@ def ramp_system(problem: CoupledElasticity, tables: dict | None = None) -> tuple
         iq = revolved_if(facet_quadrature(msh, f_i, deg), problem.material, True)
         tab = raise_on_all_ranks(comm, lambda iq=iq: blend.table(iq.points, iq.cells, 0))
         ubar = raise_on_all_ranks(
-            comm, lambda fn=fn, iq=iq: vector_values(fn, (iq.points,), len(iq), "dirichlet")
+            comm,
+            lambda fn=fn, iq=iq: vector_values(fn, (iq.points,), len(iq), "the Dirichlet value"),
         )
         # the FE part is known (strong values, by node or by the held components): constrain
         # the particle part to the rest
@@ -523,7 +524,10 @@ def ramp_system(problem: CoupledElasticity, tables: dict | None = None) -> tuple
         for part, use_blend in ((f_fe_facets[~inter], False), (f_fe_facets[inter], True)):
             fq = revolved_if(facet_quadrature(msh, part, deg), problem.material)
             t = raise_on_all_ranks(
-                comm, lambda fn=fn, fq=fq: vector_values(fn, (fq.points, fq.normals), len(fq), "t")
+                comm,
+                lambda fn=fn, fq=fq: vector_values(
+                    fn, (fq.points, fq.normals), len(fq), "traction"
+                ),
             )
             if use_blend:
                 bt = raise_on_all_ranks(comm, lambda fq=fq: blend.table(fq.points, fq.cells, 0))
@@ -538,7 +542,8 @@ def ramp_system(problem: CoupledElasticity, tables: dict | None = None) -> tuple
                 f_fe_vals.append(fl[:, comp])
         fq = revolved_if(facet_quadrature(msh, f_p_facets, deg), problem.material)
         t = raise_on_all_ranks(
-            comm, lambda fn=fn, fq=fq: vector_values(fn, (fq.points, fq.normals), len(fq), "t")
+            comm,
+            lambda fn=fn, fq=fq: vector_values(fn, (fq.points, fq.normals), len(fq), "traction"),
         )
         bt = raise_on_all_ranks(comm, lambda fq=fq: problem.mls.tabulate(fq.points, 0))
         f_p += load_vector(bt.values, fq.weights, t)

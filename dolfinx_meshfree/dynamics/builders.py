@@ -475,7 +475,9 @@ def build_efg(
         for crack in cracks:
             place_crack(crack, domain)
         if cracks:
-            raise_on_all_ranks(comm, lambda: attach_cracks(mls, cracks, crack_method))
+            raise_on_all_ranks(
+                comm, lambda: attach_cracks(mls, cracks, crack_method, domain=domain)
+            )
         rule = crack_rules(
             particles.mesh, domain.cells, cracks, quadrature_degree, None, quadrature=quadrature
         )[0]

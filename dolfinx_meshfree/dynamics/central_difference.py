@@ -122,10 +122,21 @@ class CentralDifference:
         self.v_now: list[PETSc.Vec] | None = None  # v_n at the current output time
         #: ``f^int(d_n)`` per field during an output callback of :meth:`advance` (the step's own
         #: force, which :func:`~dolfinx_meshfree.dynamics.sifs.current_acceleration` then need
-        #: not recompute), ``None`` outside one: never kept past the callback, so never stale.
+        #: not recompute), ``None`` outside one: never kept past the callback. Read it through
+        #: :meth:`force_now`, which drops it once the callback has changed the displacement.
         self.f_now: list[PETSc.Vec] | None = None
+        self._f_state: list[int] = []  # the displacement's PETSc states when f_now was set
         self.records: list[EnergyRecord] = []
         self.w_ext, self.w_c = 0.0, np.zeros(len(self.u))
+
+    def force_now(self) -> list[PETSc.Vec] | None:
+        """:attr:`f_now` while it is the force of the current displacement: ``None`` outside
+        an output callback, and inside one once the callback has changed ``u`` (PETSc counts
+        every change of a vector's values: its state), so a callback that moves the state and
+        then asks for the acceleration gets the new state's force, not the step's."""
+        if self.f_now is None or [x.stateGet() for x in self.u] != self._f_state:
+            return None
+        return self.f_now
 
     def current_velocity(self) -> list[PETSc.Vec]:
         """``v_n`` at an output time or after a run, else ``v_{n-1/2}``."""
@@ -257,6 +268,7 @@ class CentralDifference:
                     records.append(rec)
                     if n in out_steps:
                         self.v_now, self.f_now = vnow, ku
+                        self._f_state = [x.stateGet() for x in self.u]
                         self.time, self.step = tn, n
                         outs.append((n, tn))
                         try:

@@ -32,6 +32,7 @@ is recorded per extension.
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -42,10 +43,17 @@ from scipy.optimize import brentq
 from ..couplings.ramp import RampInterface
 from ..fracture.criteria import equivalent_sif, kink_angle
 from ..fracture.interaction import StressIntensityFactors
-from ..geometry.crack import Crack, particle_spacing
+from ..geometry.crack import (
+    Crack,
+    gathered_segments,
+    particle_spacing,
+    point_segment_distance,
+    segments_intersect,
+)
 from ..io import ProgressBar
 from ..parallel import raise_on_all_ranks
 from ..physics.materials import LinearElastic
+from ..statics.growth import GrowthStopped
 from ..statics.sifs import CLEARANCE, MIN_OUTER
 from .central_difference import advance_to
 from .cohesive_faces import CohesiveFacesSystem
@@ -115,6 +123,51 @@ class GrowthCheck:
         d = asdict(self)
         d["tip"], d["new_tip"] = self.tip.tolist(), self.new_tip.tolist()
         return d
+
+
+def _at_edge(model: ExplicitDynamics, crack: Crack, end: int, theta: float, length: float,
+             exterior: np.ndarray, room: float) -> str | None:  # fmt: skip
+    """Why the segment of ``length`` at ``theta`` from the tip ``end`` is not grown: it
+    crosses the body's exterior boundary (``exterior``, (k, 2, 2) segments; the crack would
+    split the body), or it ends nearer to it than ``room`` (the SIF domains' outer radius: K
+    could not be taken at the new tip); ``None`` otherwise."""
+    tip = crack.points[end]
+    new = crack.extension_tip(theta, length, end)
+    if not len(exterior):
+        return None
+    a, b = exterior[:, 0], exterior[:, 1]
+    if segments_intersect(tip[None], new[None], a, b).any():
+        why = "across the body's exterior boundary: the crack would split the body"
+    elif (d := float(point_segment_distance(new[None], a, b).min())) <= room:
+        why = (f"{d:.6g} from the body's exterior boundary, within the SIF domains' outer "
+               f"radius {room:.6g}: K could not be taken there")  # fmt: skip
+    else:
+        return None
+    return (
+        f"DynamicCrackGrowth: at step {model.step}, t = {model.time:.6g}, the tip at "
+        f"{np.round(tip, 12).tolist()} would grow by {length:.6g} at {np.degrees(theta):.4g} "
+        f"deg to {np.round(new, 12).tolist()}, {why}. The crack has reached the edge at this "
+        "resolution, and the growth does not follow it further: the run stops here with the "
+        "crack as it is (the model is growth.model, at this time); refine the particles near "
+        "the edge, or give smaller radius=, to follow it closer"
+    )
+
+
+def _edge_stop(growth: DynamicCrackGrowth, theta: float) -> str | None:
+    """Why ``growth``'s next segment (at ``theta``) is not grown (:func:`_at_edge`: it would
+    cross the body's exterior boundary, or end within the SIF domains' outer radius of it:
+    ``radius``, or the default domains' least room), else ``None``. :meth:`DynamicCrackGrowth.run
+    <dolfinx_meshfree.dynamics.DynamicCrackGrowth.run>` then stops at that check with a
+    :class:`~dolfinx_meshfree.GrowthStopped` warning, the reason in ``growth.stopped``.
+    Collective (the boundary is gathered once per model's domain)."""
+    dyn = growth.model
+    domain = model_cracks(dyn)[1]
+    if growth._exterior is None or growth._exterior[0] is not domain:
+        growth._exterior = (domain, gathered_segments(domain, domain.exterior_facets))
+    room = (MIN_OUTER + CLEARANCE) * particle_spacing(domain)
+    if growth.radius is not None:
+        room = float(np.max(growth.radius))
+    return _at_edge(dyn, growth.crack, growth.end, theta, growth.segment, growth._exterior[1], room)
 
 
 def _positive(name: str, value: object, what: str) -> float:
@@ -283,6 +336,9 @@ class DynamicCrackGrowth:
         self.released: list[tuple[float, float]] = []
         self.path_points: list[np.ndarray] = [self.crack.points[self.end].copy()]
         self._growing, self._travelled = False, 0.0
+        #: Why :meth:`run` stopped before ``t_end`` (the crack reached the edge), else ``None``.
+        self.stopped: str | None = None
+        self._exterior: tuple[Any, np.ndarray] | None = None  # (domain, its boundary segments)
 
     def _start_local(self) -> None:
         """The local update of the current model (``update="local"``; collective)."""
@@ -354,7 +410,7 @@ class DynamicCrackGrowth:
     def _advance(self, nsteps: int, dt: float) -> None:
         """``nsteps`` steps of ``dt``; the K's of the next check are taken at the last step,
         inside the run, where the step's own internal force serves their acceleration
-        (:attr:`~dolfinx_meshfree.dynamics.central_difference.CentralDifference.f_now`: the
+        (:meth:`~dolfinx_meshfree.dynamics.central_difference.CentralDifference.force_now`: the
         same K's without a second product; kept for :meth:`check` at that step only)."""
         dyn = self.model
         spent = [0.0]
@@ -407,6 +463,9 @@ class DynamicCrackGrowth:
         self._growing = grows
         extended = grows and self._travelled >= self.segment * (1.0 - 1e-9)
         turn = 0.0
+        if extended:  # not across the body's edge: the run stops there (_edge_stop)
+            self.stopped = _edge_stop(self, theta)
+            extended = self.stopped is None
         if extended:
             self._travelled -= self.segment
             if self.fit_segments:  # a segment the MLS could not carry is turned a little
@@ -509,10 +568,13 @@ class DynamicCrackGrowth:
         ``adapt``, a :class:`~dolfinx_meshfree.PatchCriterionWarning` (once) if the criteria
         have named no cell by then.
 
+        A segment that would reach the body's edge stops the run (:attr:`stopped`).
+
         Raises:
             ValueError: on every rank: ``t_end`` not a positive number; ``dt`` above the stable
                 step of a (rebuilt) model; ``check_every * dt * speed > segment``; a segment
-                that would leave the particles (naming the step, the time and the tip).
+                that would leave the particles for FE cells (naming the step, the time and the
+                tip).
         """
         t_end = _positive("t_end", t_end, "the final time")
         if not self.history:
@@ -527,6 +589,9 @@ class DynamicCrackGrowth:
             n = min(self.check_every, left)
             self._advance(n, min(dt, (t_end - self.model.time) / n) if n == left else dt)
             self.check()
+            if self.stopped is not None:  # the same on every rank (the boundary is gathered)
+                warnings.warn(self.stopped, GrowthStopped, stacklevel=2)
+                break
         steps = max(1, self.model.step)
         self.timings["per_step"] = self.timings["steps"] / steps
         if self.adaptive is not None:

@@ -32,12 +32,12 @@ __all__ = ["Discretisation", "approximation_cracks", "vector_values"]
 VectorFunction = Callable[[np.ndarray], np.ndarray]
 
 
-def vector_values(fn: Callable[..., np.ndarray], *args: np.ndarray) -> np.ndarray:
+def vector_values(
+    fn: Callable[..., np.ndarray], *args: np.ndarray, name: str = "the function"
+) -> np.ndarray:
     """``fn(*args)`` as an (m, gdim) float array, ``m, gdim = args[0].shape`` (the points), else
-    a ``ValueError``."""
-    return user_functions.vector_values(
-        fn, args, args[0].shape[0], "the function", args[0].shape[1]
-    )
+    an error naming ``name`` (:func:`~dolfinx_meshfree.physics.user_functions.vector_values`)."""
+    return user_functions.vector_values(fn, args, args[0].shape[0], name, args[0].shape[1])
 
 
 def approximation_cracks(patch: object | None, mls: object | None) -> list:

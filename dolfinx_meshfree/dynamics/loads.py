@@ -25,6 +25,7 @@ from ..geometry.quadrature import DYNAMIC_FACET_DEGREE, QuadraturePoints, facet_
 from ..parallel import raise_on_all_ranks
 from ..physics.axisymmetry import revolved
 from ..physics.operators import load_vector
+from ..physics.user_functions import check_arguments
 from ..statics.petsc import create_vector
 from .discretisation import Discretisation, VectorFunction, vector_values
 from .linalg import row_layout
@@ -90,6 +91,7 @@ class ExternalLoads:
         bridging's band (``(1 - alpha) N`` and ``alpha phi``, Rabczuk et al. 2006, eq. 49), as
         the masses and the stiffness use them. ``amplitude`` defaults to 1 (a step load).
         """
+        check_arguments(traction, 2, "traction")
         d = self.disc
         msh, gdim = d.mesh, d.gdim
         deg = DYNAMIC_FACET_DEGREE
@@ -110,7 +112,7 @@ class ExternalLoads:
 
         def values(q: QuadraturePoints) -> np.ndarray:
             return raise_on_all_ranks(
-                self.comm, lambda: vector_values(traction, q.points, q.normals)
+                self.comm, lambda: vector_values(traction, q.points, q.normals, name="traction")
             )
 
         def surface(q: QuadraturePoints) -> QuadraturePoints:  # 2 pi r ds in axisymmetry
@@ -184,7 +186,9 @@ class ExternalLoads:
         vecs = []
         for k, f in enumerate(d.fields):
             x = d.owned_points(k)
-            b = raise_on_all_ranks(self.comm, lambda x=x: vector_values(force, x))
+            b = raise_on_all_ranks(
+                self.comm, lambda x=x: vector_values(force, x, name="the body force")
+            )
             vec = f.mass.duplicate()
             vec.array[:] = f.mass.array_r * b.ravel() / self.rho
             vecs.append(vec)

@@ -59,12 +59,13 @@ __all__ = [
 def current_acceleration(dyn: ExplicitDynamics) -> list[PETSc.Vec]:
     """``a_n = P M^{-1} (f^ext(t_n) - f^int(d_n))`` per field at the current state (new vectors
     the caller destroys; zero on dofs held at rest; collective). Inside an output of a run
-    ``f^int(d_n)`` is the step's own (:attr:`CentralDifference.f_now
-    <dolfinx_meshfree.dynamics.central_difference.CentralDifference.f_now>`): the same
-    values, without a second product."""
+    ``f^int(d_n)`` is the step's own (:meth:`CentralDifference.force_now
+    <dolfinx_meshfree.dynamics.central_difference.CentralDifference.force_now>`): the same
+    values, without a second product, unless the callback has changed the displacement."""
     stepper = dyn.stepper
-    if stepper.f_now is not None:
-        ku = [f.copy() for f in stepper.f_now]
+    f_now = stepper.force_now()
+    if f_now is not None:
+        ku = [f.copy() for f in f_now]
     else:
         ku = dyn.system.internal_force(stepper.u)
     acc = [k.duplicate() for k in ku]

@@ -53,6 +53,7 @@ from ..physics.cohesive import LinearCohesive
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic, linear_twin
 from ..physics.state import check_not_rate_law, is_stateful
+from ..physics.user_functions import check_arguments
 from .cohesive import CohesiveCrack, check_cohesive, check_through
 from .coupled_newton import (
     FINITE_STRAIN_COUPLINGS,
@@ -419,6 +420,7 @@ class CoupledElasticity:
         strongly (every coupling, :data:`COMPONENT_COUPLINGS`), on patch facets one constant
         multiplier per facet and component, e.g. to remove the rigid motions of a traction
         problem with three scalar conditions. Collective."""
+        check_arguments(value, 1, "the Dirichlet value")
         facets = np.asarray(facets, dtype=np.int32)
         if components is None:
             self.dirichlet.append((facets, value))
@@ -456,6 +458,7 @@ class CoupledElasticity:
 
     def add_traction(self, facets: np.ndarray, traction: Callable) -> None:
         """Traction ``traction(x, n)`` (m, gdim) on owned exterior facets, on either side."""
+        check_arguments(traction, 2, "traction")
         self.tractions.append((np.asarray(facets, dtype=np.int32), traction))
 
     def set_body_force(self, force: VectorFunction) -> None:

@@ -87,7 +87,7 @@ from ..physics.operators import (
     stiffness_matrix,
 )
 from ..physics.state import check_not_rate_law, is_stateful
-from ..physics.user_functions import vector_values
+from ..physics.user_functions import check_arguments, vector_values
 from .cohesive import CohesiveCrack, CohesiveSide, check_cohesive, check_through
 from .fe_state import check_bands
 from .growth_update import local_update_for
@@ -586,7 +586,8 @@ def facet_multipliers(
         fn, m = cond[1], len(cs)
         _, facet_id = np.unique(d.entities, return_inverse=True)
         ubar = raise_on_all_ranks(
-            comm, lambda fn=fn, d=d: vector_values(fn, (d.points,), len(d), "dirichlet", gdim)
+            comm,
+            lambda fn=fn, d=d: vector_values(fn, (d.points,), len(d), "the Dirichlet value", gdim),
         )
         coo = tab.values.tocoo()
         for k, c in enumerate(cs):
@@ -724,7 +725,8 @@ class EFGElasticity:
             for crack in self.cracks:
                 place_crack(crack, domain)
             raise_on_all_ranks(
-                particles.comm, lambda: attach_cracks(self.mls, self.cracks, crack_method)
+                particles.comm,
+                lambda: attach_cracks(self.mls, self.cracks, crack_method, domain=domain),
             )
             if crack_enrichment:
                 enrich_tips(self.mls, self.cracks, crack_method)
@@ -780,11 +782,13 @@ class EFGElasticity:
                 )
             return c
 
+        check_arguments(value, 1, "the Dirichlet value")
         comps = raise_on_all_ranks(self.comm, check)
         self._dirichlet.append((np.asarray(facets, dtype=np.int32), value, comps))
 
     def add_traction(self, facets: np.ndarray, traction: TractionFunction) -> None:
         """Apply ``traction(x, n)`` (m, gdim) on owned exterior facets (``n``: outward normals)."""
+        check_arguments(traction, 2, "traction")
         self._tractions.append((np.asarray(facets, dtype=np.int32), traction))
 
     def set_body_force(self, force: VectorFunction) -> None:

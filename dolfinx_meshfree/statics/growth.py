@@ -19,24 +19,49 @@ Works with any problem whose ``solve()`` returns a solution with ``stress_intens
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
 
 from ..fracture.criteria import equivalent_sif, kink_angle
-from ..geometry.crack import Crack, particle_spacing
+from ..geometry.crack import Crack, gathered_segments, particle_spacing, point_segment_distance
 from ..geometry.patch_criteria import GrowthContext, NearTips, warn_unused
 from ..physics.state import check_stateless
 from .growth_update import disable_local_update, enable_local_update
 from .patch_growth import PatchEvent, PatchGrowth
-from .sifs import DEFAULT_RADII
+from .sifs import CLEARANCE, DEFAULT_RADII
 
-__all__ = ["GROWTH_UPDATES", "GrowthStep", "QuasiStaticCrackGrowth"]
+__all__ = [
+    "GROWTH_UPDATES",
+    "MIN_GROWTH_OUTER",
+    "GrowthStep",
+    "GrowthStopped",
+    "QuasiStaticCrackGrowth",
+    "TipAtBoundary",
+]
 
 
 #: How a growth step rebuilds the particle side.
 GROWTH_UPDATES = ("local", "full")
+
+
+class TipAtBoundary(ValueError):
+    """A growing tip has come within the SIF domains' least room of the body's exterior
+    boundary (:data:`MIN_GROWTH_OUTER` plus one spacing): the crack has reached the edge at
+    this resolution. :meth:`QuasiStaticCrackGrowth.run` stops there (a
+    :class:`GrowthStopped` warning); :meth:`QuasiStaticCrackGrowth.step` raises it."""
+
+
+class GrowthStopped(UserWarning):
+    """:meth:`QuasiStaticCrackGrowth.run` stopped before its steps: the reason is in the
+    message and in :attr:`QuasiStaticCrackGrowth.stopped`."""
+
+
+#: The smallest outer radius, in spacings, the default domains of a growth step shrink to near
+#: the body's exterior boundary (``CLEARANCE`` spacings inside it); a tip nearer is refused.
+MIN_GROWTH_OUTER = 2.0
 
 
 @dataclass
@@ -135,7 +160,9 @@ class QuasiStaticCrackGrowth:
         K_Ic: fracture toughness, or None. tip: the end to grow, 0 or -1 (default: the only
             tip). radius: outer domain radii of the interaction integral (default: 3, 4, 5
             particle spacings, scaled down to 0.9 of the tip segment's length when the
-            increment is shorter: the previous kink must stay outside the domains).
+            increment is shorter: the previous kink must stay outside the domains; and to keep
+            one spacing from the body's exterior boundary, down to an outer radius of
+            :data:`MIN_GROWTH_OUTER` spacings, nearer than which a tip is refused).
             update: ``"local"`` (default): after each extension re-tabulate, re-integrate and
             re-assemble only what it changes; ``"full"``: rebuild the particle side (equal to
             round-off, 1e-10 checked).
@@ -215,6 +242,9 @@ class QuasiStaticCrackGrowth:
         self.history: list[GrowthStep] = []
         #: The last solution.
         self.solution = None
+        self._exterior: tuple[Any, np.ndarray] | None = None  # (domain, its boundary segments)
+        #: Why :meth:`run` stopped before its steps (a tip at the boundary), else ``None``.
+        self.stopped: str | None = None
 
     @property
     def path(self) -> np.ndarray:
@@ -232,11 +262,32 @@ class QuasiStaticCrackGrowth:
     def _radii(self, domain: Any) -> np.ndarray:
         """The default radii (``DEFAULT_RADII`` x h), scaled down to fit within 0.9 of the tip
         segment: the interaction integral assumes a straight crack in its domain, so a kink
-        (the previous tip) must stay outside it; an increment ``da >= 5.6 h`` keeps them."""
+        (the previous tip) must stay outside it; an increment ``da >= 5.6 h`` keeps them. They
+        also shrink to keep ``CLEARANCE`` spacings from the body's exterior boundary, down to
+        an outer radius of ``MIN_GROWTH_OUTER`` spacings (a tip nearer the boundary is refused,
+        naming it: the crack has reached the edge at this resolution). Collective (the
+        boundary is gathered once per domain)."""
         h = particle_spacing(domain)
-        a, b = self.crack.points[self.end], self.crack.points[1 if self.end == 0 else -2]
+        tip = self.crack.points[self.end]
+        b = self.crack.points[1 if self.end == 0 else -2]
         r = np.asarray(DEFAULT_RADII, float) * h
-        return r * min(1.0, 0.9 * float(np.linalg.norm(a - b)) / r.max())
+        scale = min(1.0, 0.9 * float(np.linalg.norm(tip - b)) / r.max())
+        if self._exterior is None or self._exterior[0] is not domain:
+            self._exterior = (domain, gathered_segments(domain, domain.exterior_facets))
+        segments = self._exterior[1]
+        if len(segments):
+            d = float(point_segment_distance(tip[None], segments[:, 0], segments[:, 1]).min())
+            room = d - CLEARANCE * h
+            if room < MIN_GROWTH_OUTER * h:
+                raise TipAtBoundary(
+                    f"QuasiStaticCrackGrowth: the tip at {np.round(tip, 6).tolist()} is {d:.4g} "
+                    f"({d / h:.3g} spacings) from the body's exterior boundary: the SIF domains "
+                    f"need {MIN_GROWTH_OUTER + CLEARANCE:g} spacings there (h = {h:.4g}): the "
+                    "crack has reached the edge at this resolution; refine the particles to "
+                    "follow it further, or give radius= explicitly"
+                )
+            scale = min(scale, room / r.max())
+        return r * scale
 
     def _outer_radius(self) -> float:
         """The SIF domains' outer radius at the current tip."""
@@ -305,12 +356,23 @@ class QuasiStaticCrackGrowth:
 
     def run(self) -> list[GrowthStep]:
         """Run up to ``steps`` steps; stops early at the first step that does not grow
-        (``K_eq < K_Ic``: under fixed loads the crack is stable). Returns :attr:`history`.
+        (``K_eq < K_Ic``: under fixed loads the crack is stable), or when the tip has reached
+        the body's boundary (:class:`TipAtBoundary`: a :class:`GrowthStopped` warning, the
+        reason in :attr:`stopped`). Returns :attr:`history`.
         With ``adapt``, a :class:`~dolfinx_meshfree.PatchCriterionWarning` when no criterion
         named any cell in the whole run (the patch never needed growing: is the criterion the
         intended one?)."""
         for _ in range(self.steps):
-            if not self.step().grown:
+            try:
+                if not self.step().grown:
+                    break
+            except TipAtBoundary as e:  # on every rank: the boundary is gathered
+                self.stopped = str(e)
+                warnings.warn(
+                    f"the growth stopped after {len(self.history)} step(s): {e}",
+                    GrowthStopped,
+                    stacklevel=2,
+                )
                 break
         if self.adaptive is not None and not self.adaptive.selected:
             warn_unused(

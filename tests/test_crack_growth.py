@@ -143,6 +143,16 @@ def test_domains_fit_near_the_boundary_and_growth_stops_at_it():
         g.step()
 
 
+def test_a_given_radius_stops_at_the_edge_too():
+    """With ``radius=0.12`` (2.4 spacings) the tip 4 spacings from the edge keeps it; the next,
+    2 spacings away, stops the run as the default domains do (it raised from inside run())."""
+    crack = mf.Crack([[0.0, Y0], [0.8, Y0]])
+    g = mf.QuasiStaticCrackGrowth(model(crack), crack, increment=2 * H, steps=3, radius=0.12)
+    with pytest.warns(mf.GrowthStopped, match=r"stopped after 1 step.*give smaller radius="):
+        hist = g.run()
+    assert len(hist) == 1 and np.array_equal(hist[0].radius, [0.12])
+
+
 def test_toughness_decides_growth():
     crack, _, hist = grow(0.0, steps=3, K_Ic=2.0)  # K_eq measured 1.72 at the first step
     assert len(hist) == 1 and not hist[0].grown and 1.5 < hist[0].K_eq < 2.0

@@ -121,31 +121,22 @@ class CrackCut:
         dist: np.ndarray,
         ddist: np.ndarray,
         sides: np.ndarray | None = None,
+        check: bool = True,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         cut = self._cut(x, i, j, dist, ddist, sides)
         if cut is None:  # no weight cut: every pair kept as it is
             return i, j, dx, dist, ddist
         keep, dist, ddist = cut
-        self._check_counts(x, i, keep)
+        if check:
+            self._check_counts(x, i, keep)
         return i[keep], j[keep], dx[keep], dist[keep], ddist[keep]
 
     def unchecked(
-        self,
-        x: np.ndarray,
-        i: np.ndarray,
-        j: np.ndarray,
-        dx: np.ndarray,
-        dist: np.ndarray,
-        ddist: np.ndarray,
-        sides: np.ndarray | None = None,
+        self, *pairs: np.ndarray | None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The cut without the refusal of a point left with too few particles (for
-        :meth:`~dolfinx_meshfree.MLS.support_quality`, which reports them)."""
-        cut = self._cut(x, i, j, dist, ddist, sides)
-        if cut is None:
-            return i, j, dx, dist, ddist
-        keep, dist, ddist = cut
-        return i[keep], j[keep], dx[keep], dist[keep], ddist[keep]
+        """The cut (the arguments of a call) without the refusal of a point left with too few
+        particles (for :meth:`~dolfinx_meshfree.MLS.support_quality`, which reports them)."""
+        return self(*pairs, check=False)
 
     def _cut(
         self,

@@ -162,7 +162,8 @@ class QuasiStaticCrackGrowth:
             particle spacings, scaled down to 0.9 of the tip segment's length when the
             increment is shorter: the previous kink must stay outside the domains; and to keep
             one spacing from the body's exterior boundary, down to an outer radius of
-            :data:`MIN_GROWTH_OUTER` spacings, nearer than which a tip is refused).
+            :data:`MIN_GROWTH_OUTER` spacings). A tip with less room, or nearer the exterior
+            boundary than a given outer radius, has reached the edge: :meth:`run` stops there.
             update: ``"local"`` (default): after each extension re-tabulate, re-integrate and
             re-assemble only what it changes; ``"full"``: rebuild the particle side (equal to
             round-off, 1e-10 checked).
@@ -259,39 +260,44 @@ class QuasiStaticCrackGrowth:
         """The patch's growth events (``adapt``; empty for a fixed patch)."""
         return [] if self.adaptive is None else self.adaptive.events
 
-    def _radii(self, domain: Any) -> np.ndarray:
-        """The default radii (``DEFAULT_RADII`` x h), scaled down to fit within 0.9 of the tip
-        segment: the interaction integral assumes a straight crack in its domain, so a kink
-        (the previous tip) must stay outside it; an increment ``da >= 5.6 h`` keeps them. They
-        also shrink to keep ``CLEARANCE`` spacings from the body's exterior boundary, down to
-        an outer radius of ``MIN_GROWTH_OUTER`` spacings (a tip nearer the boundary is refused,
-        naming it: the crack has reached the edge at this resolution). Collective (the
-        boundary is gathered once per domain)."""
+    def _radii(self, domain: Any) -> Any:
+        """The domains' radii at the current tip: ``radius`` as given, else the default radii
+        (``DEFAULT_RADII`` x h) scaled down to fit within 0.9 of the tip segment (the
+        interaction integral assumes a straight crack in its domain, so a kink, the previous
+        tip, must stay outside it; an increment ``da >= 5.6 h`` keeps them) and to keep
+        ``CLEARANCE`` spacings from the body's exterior boundary, down to an outer radius of
+        ``MIN_GROWTH_OUTER`` spacings. A tip with less room than that, or than a given outer
+        radius, has reached the edge at this resolution: :class:`TipAtBoundary`, naming it.
+        Collective (the boundary is gathered once per domain)."""
         h = particle_spacing(domain)
         tip = self.crack.points[self.end]
-        b = self.crack.points[1 if self.end == 0 else -2]
-        r = np.asarray(DEFAULT_RADII, float) * h
-        scale = min(1.0, 0.9 * float(np.linalg.norm(tip - b)) / r.max())
         if self._exterior is None or self._exterior[0] is not domain:
             self._exterior = (domain, gathered_segments(domain, domain.exterior_facets))
         segments = self._exterior[1]
+        d = np.inf
         if len(segments):
             d = float(point_segment_distance(tip[None], segments[:, 0], segments[:, 1]).min())
-            room = d - CLEARANCE * h
-            if room < MIN_GROWTH_OUTER * h:
-                raise TipAtBoundary(
-                    f"QuasiStaticCrackGrowth: the tip at {np.round(tip, 6).tolist()} is {d:.4g} "
-                    f"({d / h:.3g} spacings) from the body's exterior boundary: the SIF domains "
-                    f"need {MIN_GROWTH_OUTER + CLEARANCE:g} spacings there (h = {h:.4g}): the "
-                    "crack has reached the edge at this resolution; refine the particles to "
-                    "follow it further, or give radius= explicitly"
-                )
-            scale = min(scale, room / r.max())
-        return r * scale
+        if self.radius is not None:  # as given, inside the body (sif_domains' own check)
+            r, need, room = self.radius, float(np.max(self.radius)), d
+        else:
+            b = self.crack.points[1 if self.end == 0 else -2]
+            r = np.asarray(DEFAULT_RADII, float) * h
+            r = r * min(1.0, 0.9 * float(np.linalg.norm(tip - b)) / r.max())
+            need, room = MIN_GROWTH_OUTER * h, d - CLEARANCE * h
+            r = r * min(1.0, room / r.max())
+        if room < need or (self.radius is not None and room == need):
+            raise TipAtBoundary(
+                f"QuasiStaticCrackGrowth: the tip at {np.round(tip, 6).tolist()} is {d:.4g} "
+                f"({d / h:.3g} spacings) from the body's exterior boundary: the SIF domains "
+                f"need {need + d - room:.4g} there (h = {h:.4g}): the crack has reached the "
+                "edge at this resolution; refine the particles to follow it further"
+                + ("" if self.radius is None else ", or give smaller radius=")
+            )
+        return r
 
     def _outer_radius(self) -> float:
         """The SIF domains' outer radius at the current tip."""
-        r = self._radii(self.problem.patch) if self.radius is None else self.radius
+        r = self._radii(self.problem.patch)
         return float(np.max(r))
 
     def _grow_patch(self, step: int, extra_tip: np.ndarray | None) -> None:
@@ -330,7 +336,7 @@ class QuasiStaticCrackGrowth:
         sol = self.problem.solve()
         t1 = time.perf_counter()
         domain = getattr(sol, "domain", None) or sol.patch
-        radius = self._radii(domain) if self.radius is None else self.radius
+        radius = self._radii(domain)
         sif = sol.stress_intensity_factors(crack, tip=tip, radius=radius, **self.sif_options)
         t2 = time.perf_counter()
         self.solution = sol

@@ -339,6 +339,10 @@ def test_growth_stops_where_the_crack_reaches_the_edge(segment, why):
     assert g.stopped is not None and "reached the edge" in g.stopped
     assert g.model.time < T_END and np.array_equal(g.crack.points, [[0.0, 0.0], [1.6, 0.0]])
     assert hist[-1].state == "growing" and not any(c.extended for c in hist)
+    checks, time = len(hist), g.model.time
+    with pytest.warns(mf.GrowthStopped, match=why):  # asked again: stops again at once
+        g.run(T_END)
+    assert len(g.history) == checks + 1 and g.model.time > time
 
 
 def test_master_slave_grows_with_full_rebuilds_by_default():

@@ -577,21 +577,21 @@ class DynamicCrackGrowth:
                 tip).
         """
         t_end = _positive("t_end", t_end, "the final time")
+        self.stopped = None  # a check that would cross the edge says so again
         if not self.history:
             if self.adaptive is not None:  # the patch about the initial tip
                 tic = time.perf_counter()
                 self._convert(None)
                 self.timings["rebuild"] += time.perf_counter() - tic
             self.check()
-        while self.model.time < t_end * (1.0 - 1e-12):
+        while self.stopped is None and self.model.time < t_end * (1.0 - 1e-12):
             dt = self._time_step()
             left = int(np.ceil((t_end - self.model.time) / dt - 1e-9))
             n = min(self.check_every, left)
             self._advance(n, min(dt, (t_end - self.model.time) / n) if n == left else dt)
             self.check()
-            if self.stopped is not None:  # the same on every rank (the boundary is gathered)
-                warnings.warn(self.stopped, GrowthStopped, stacklevel=2)
-                break
+        if self.stopped is not None:  # the same on every rank (the boundary is gathered)
+            warnings.warn(self.stopped, GrowthStopped, stacklevel=2)
         steps = max(1, self.model.step)
         self.timings["per_step"] = self.timings["steps"] / steps
         if self.adaptive is not None:

@@ -198,3 +198,33 @@ def test_the_widened_mouth_leaves_k_at_the_tip_as_other_supports_give_it():
         K[dilation] = np.array([s.K_I.mean(), s.K_II.mean()])
     for ref in (2.5, 3.0):
         assert np.linalg.norm(K[2.0] - K[ref]) <= 0.03 * np.linalg.norm(K[ref])
+
+
+@pytest.mark.filterwarnings("ignore::dolfinx_meshfree.geometry.crack.CrackPlacementWarning")
+def test_dynamic_growth_from_a_steep_edge_crack():
+    """The user's dynamic plate of stop 59 (steel, 0.2 x 0.12, h = 0.004, triangles, a sudden
+    traction on the top) with an edge crack at 55.1 degrees from the edge's normal: refused at
+    its mouth before (a random draw; 6 of 10 such draws were, pure EFG and lagrange alike), it
+    builds with one support widened (1.78x: every lumped mass positive, the builder checks),
+    initiates and grows."""
+    mat = mf.LinearElastic(E=200e9, nu=0.3, plane="strain", rho=7800.0)
+    msh = dolfinx.mesh.create_rectangle(
+        COMM, [np.zeros(2), np.array([0.2, 0.12])], [50, 30], dolfinx.mesh.CellType.triangle
+    )
+    top = mf.boundary_facets(msh, lambda x: np.isclose(x[1], 0.12))
+
+    def build(crack):
+        dyn = mf.ExplicitDynamics.efg(mf.ParticleSet.from_cells(msh, 0.004), mat, cracks=[crack])
+        dyn.add_traction(top, lambda x, n: 100e6 * n)
+        return dyn
+
+    y0, angle = 0.061696, np.radians(-55.1)
+    crack = mf.Crack([[0.0, y0], [0.03 * np.cos(angle), y0 + 0.03 * np.sin(angle)]])
+    g = mf.dynamics.DynamicCrackGrowth(
+        build, crack, K_Ic=2.0e6, speed=1000.0, segment=0.014, check_every=5,
+        radius=[0.008, 0.012],
+    )  # fmt: skip
+    g.run(40e-6)
+    (rec,) = g.model.mls.widened
+    assert rec.reason == "crack mouth" and 1 <= len(rec.particles) <= 3
+    assert g.initiation is not None and sum(c.extended for c in g.history) >= 1

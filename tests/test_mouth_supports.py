@@ -48,7 +48,7 @@ def field(x):
 def mouth_samples(mls, crack, domain):
     """The widening's own samples about the mouth (inside the body, off the crack)."""
     segments = mf.geometry.crack.gathered_segments(domain, domain.exterior_facets)
-    ((_, mouth),) = ms.mouth_points(crack, segments)
+    ((_, mouth),) = ms.mouth_points(crack)
     x = ms._samples(mouth, 0.1)
     return x[ms.inside_polygons(x, segments) & (crack.distance(x) > 1e-9)]
 

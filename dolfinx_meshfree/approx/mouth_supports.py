@@ -41,10 +41,10 @@ import numpy as np
 
 from ..geometry.crack import (
     Crack,
-    _orient,
     gathered_segments,
     particle_spacing,
     point_segment_distance,
+    segments_intersect,
 )
 from .mls import MLS, polynomial_basis
 
@@ -135,55 +135,38 @@ def inside_polygons(x: np.ndarray, segments: np.ndarray) -> np.ndarray:
     return (np.count_nonzero(straddle & (px < xc), axis=1) % 2) == 1
 
 
-def _cross_properly(p: np.ndarray, q: np.ndarray, segments: np.ndarray) -> np.ndarray:
-    """Whether each segment ``p q`` (n, 2) crosses one of ``segments`` (k, 2, 2) properly (its
-    ends strictly on opposite sides): (n,) bool. A line that ends on the boundary (a particle
-    on it) or runs along it does not cross."""
+def _crosses(p: np.ndarray, q: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """Whether each segment ``p q`` (n, 2) crosses one of ``segments`` (k, 2, 2) properly
+    (:func:`~dolfinx_meshfree.geometry.crack.segments_intersect` with ``proper``): (n,) bool. A
+    line that ends on the boundary (a particle on it) or runs along it does not cross."""
     if not len(segments) or not len(p):
         return np.zeros(len(p), dtype=bool)
-    a, b = segments[None, :, 0, :], segments[None, :, 1, :]
-    pp, qq = p[:, None, :], q[:, None, :]
-    scale = float(np.abs(segments).max(initial=1.0)) ** 2
-    tol = 1e-12 * scale
-    o1, o2 = _orient(a, b, pp), _orient(a, b, qq)
-    o3, o4 = _orient(pp, qq, a), _orient(pp, qq, b)
-    return np.any((o1 * o2 < -tol * tol) & (o3 * o4 < -tol * tol), axis=1)
+    return segments_intersect(p, q, segments[:, 0], segments[:, 1], proper=True).any(axis=1)
 
 
-def mouth_points(crack: Crack, segments: np.ndarray) -> list[tuple[int, np.ndarray]]:
-    """``(end, point)`` per mouth of ``crack`` (an end, 0 or -1, that is not a tip): where it
-    meets the boundary ``segments`` (k, 2, 2), the crossing of its end segment nearest that
-    end, or the end itself when the end lies on the boundary."""
-    out = []
-    pts = crack.points
-    for end, tip in zip((0, -1), crack.is_tip, strict=True):
-        if tip:
-            continue
-        e, nxt = (pts[0], pts[1]) if end == 0 else (pts[-1], pts[-2])
-        d = nxt - e
-        a, b = segments[:, 0], segments[:, 1]
-        t_ab = b - a
-        den = d[0] * t_ab[:, 1] - d[1] * t_ab[:, 0]
-        w = a - e
-        with np.errstate(invalid="ignore", divide="ignore"):
-            s = (w[:, 0] * t_ab[:, 1] - w[:, 1] * t_ab[:, 0]) / den
-            u = (w[:, 0] * d[1] - w[:, 1] * d[0]) / den
-        hit = (den != 0) & (s >= -1e-12) & (s <= 1 + 1e-12) & (u >= -1e-12) & (u <= 1 + 1e-12)
-        out.append((end, e + float(s[hit].min()) * d if hit.any() else e.copy()))
-    return out
+def mouth_points(crack: Crack) -> list[tuple[int, np.ndarray]]:
+    """``(end, point)`` per mouth of ``crack``: an end (0 or -1) that is not a tip, which
+    placing the crack found on the exterior boundary (within ``1e-8 h``,
+    :func:`~dolfinx_meshfree.geometry.crack.validate_in_patch`)."""
+    return [
+        (end, crack.points[end].copy())
+        for end, tip in zip((0, -1), crack.is_tip, strict=True)
+        if not tip
+    ]
 
 
 def wedge_angle(crack: Crack, end: int, mouth: np.ndarray, segments: np.ndarray) -> float:
     """The smallest angle (radians) between the crack, leaving its mouth at ``end`` (0 or -1),
-    and the boundary ``segments`` (k, 2, 2) that pass through the mouth: the sharper of the
-    two wedges it cuts off (pi/2 for a crack normal to a straight edge); pi when no segment
-    passes through the mouth."""
+    and the boundary ``segments`` (k, 2, 2) that pass through the mouth (the nearest to it: a
+    mouth lies on the boundary to round-off): the sharper of the two wedges it cuts off (pi/2
+    for a crack normal to a straight edge); pi without segments."""
     pts = crack.points
     d = (pts[1] - pts[0]) if end == 0 else (pts[-2] - pts[-1])
     d = d / np.linalg.norm(d)
     a, b = segments[:, 0], segments[:, 1]
     size = float(np.linalg.norm(b - a, axis=1).max(initial=1.0))
-    on = point_segment_distance(mouth[None], a, b)[0] <= 1e-9 * size
+    dist = point_segment_distance(mouth[None], a, b)[0]
+    on = dist <= dist.min(initial=np.inf) + 1e-9 * size
     best = np.pi
     for p, q in zip(a[on], b[on], strict=True):
         for far in (p, q):  # the boundary's directions away from the mouth
@@ -222,7 +205,7 @@ def widen_at_mouths(
     mouths = [
         m
         for crack in cracks
-        for end, m in mouth_points(crack, segments)
+        for end, m in mouth_points(crack)
         if wedge_angle(crack, end, m, segments) < np.radians(WEDGE_MAX)
     ]
     if not mouths:
@@ -283,8 +266,8 @@ def _widen_one(
     if not cand.size:
         return False
     p = np.broadcast_to(x, (cand.size, 2))
-    seen = ~_cross_properly(p, mls.points[cand], boundary)
-    seen &= ~_cross_properly(p, mls.points[cand], cracks)
+    seen = ~_crosses(p, mls.points[cand], boundary)
+    seen &= ~_crosses(p, mls.points[cand], cracks)
     cand = cand[seen]
     if not cand.size:
         return False

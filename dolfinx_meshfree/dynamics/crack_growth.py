@@ -463,14 +463,15 @@ class DynamicCrackGrowth:
         self._growing = grows
         extended = grows and self._travelled >= self.segment * (1.0 - 1e-9)
         turn = 0.0
-        if extended:  # not across the body's edge: the run stops there (_edge_stop)
-            self.stopped = _edge_stop(self, theta)
+        if extended and self.fit_segments:  # a segment the MLS could not carry: turned a little
+            turn = turn_to_fit(dyn, self.crack, self.end, theta, self.segment,
+                               self.quadrature_degree)  # fmt: skip
+        if extended:  # the segment as grown, not across the body's edge (else the run stops)
+            self.stopped = _edge_stop(self, theta + np.deg2rad(turn))
             extended = self.stopped is None
+            turn = turn if extended else 0.0
         if extended:
             self._travelled -= self.segment
-            if self.fit_segments:  # a segment the MLS could not carry is turned a little
-                turn = turn_to_fit(dyn, self.crack, self.end, theta, self.segment,
-                                   self.quadrature_degree)  # fmt: skip
             self._extend(theta + np.deg2rad(turn))
         rec = GrowthCheck(
             step=dyn.step, time=dyn.time, tip=tip, K_I=KI, K_II=KII, theta=theta, K_eq=keq,

@@ -66,15 +66,24 @@ def _orient(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     )
 
 
-def segments_intersect(p: np.ndarray, q: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def segments_intersect(
+    p: np.ndarray, q: np.ndarray, a: np.ndarray, b: np.ndarray, proper: bool = False
+) -> np.ndarray:
     """Whether the closed segments ``p q`` (n, 2) and ``a b`` (k, 2) share a point: (n, k) bool.
 
     Touching (an end point on the other segment) and collinear overlap count as intersecting.
+    With ``proper``, only a crossing counts: each segment's ends strictly on opposite sides of
+    the other's line, beyond round-off of the coordinates' scale (a segment that ends on the
+    other, or runs along it, does not cross).
     """
     p, q = p[:, None, :], q[:, None, :]
     a, b = a[None, :, :], b[None, :, :]
     o1, o2 = _orient(a, b, p), _orient(a, b, q)
     o3, o4 = _orient(p, q, a), _orient(p, q, b)
+    if proper:
+        scale = max(float(np.abs(a).max(initial=1.0)), float(np.abs(b).max(initial=1.0))) ** 2
+        tol = (1e-12 * scale) ** 2
+        return (o1 * o2 < -tol) & (o3 * o4 < -tol)
     proper = (o1 * o2 <= 0) & (o3 * o4 <= 0)
     collinear = (o1 == 0) & (o2 == 0)
     lo_pq, hi_pq = np.minimum(p, q), np.maximum(p, q)

@@ -365,3 +365,41 @@ def test_user_functions_with_the_wrong_arguments_are_refused_by_name():
         dyn.add_traction(right, lambda x: np.zeros_like(x))
     check_arguments(np.zeros_like, 1, "the Dirichlet value")  # a builtin: not refused
     check_arguments(lambda x, n=None: x, 1, "the Dirichlet value")  # a default is fine
+
+
+def test_facets_that_select_nothing_or_are_not_facets_are_refused_by_name():
+    """A load or a condition on no facet acted nowhere, silently: a marker of a curved
+    boundary tested at the straight facets' midpoints selected none, and the thick ring of
+    ``tests/test_plastic_ring.py`` solved to zero displacements. Facets empty on every rank are
+    refused, naming the call and the fix; facets on one rank only are fine; indices that are not
+    facets of the mesh, on one rank only, are refused on every rank."""
+    msh = beam_mesh(COMM, 3.0)
+    _, right = beam_ends(msh)
+    none = np.zeros(0, dtype=np.int32)
+    mat = mf.LinearElastic(3e7, 0.3, rho=2.5e-3)
+    efg = mf.EFGElasticity(mf.ParticleSet.from_cells(msh, 3.0), mat)
+    V = _compat.vector_function_space(msh)
+    cells = np.arange(msh.topology.index_map(2).size_local, dtype=np.int32)[:4]
+    coupled = mf.CoupledElasticity(V, mf.ParticlePatch(msh, cells, 1.5), mat)
+    dyn = mf.ExplicitDynamics.fe(V, mat)
+    traction = lambda x, n: np.zeros_like(x)  # noqa: E731
+    calls = [
+        ("add_traction", efg.add_traction, traction),
+        ("add_dirichlet", efg.add_dirichlet, np.zeros_like),
+        ("add_traction", coupled.add_traction, traction),
+        ("add_dirichlet", coupled.add_dirichlet, np.zeros_like),
+        ("add_traction", dyn.add_traction, traction),
+    ]
+    for name, call, fn in calls:
+        with pytest.raises(ValueError, match=rf"{name}: facets holds no facet on any rank.*atol"):
+            call(none, fn)
+        bad = np.array([10**7], dtype=np.int32) if COMM.rank == LAST else right
+        with pytest.raises(ValueError, match=r"not facets of this rank's mesh.*10000000"):
+            call(bad, fn)
+        with pytest.raises(TypeError, match=r"1D array of facet indices.*float64"):
+            call(right.astype(float) + 0.5, fn)
+    # facets on the last rank only: accepted
+    coupled.add_traction(right if COMM.rank == LAST else none, traction)
+    hybrid = mf.HybridElasticity(V, mf.ParticlePatch(msh, cells, 1.5), mat)
+    with pytest.raises(ValueError, match=r"add_dirichlet: facets holds no facet on any rank"):
+        hybrid.add_dirichlet(none, np.zeros_like)

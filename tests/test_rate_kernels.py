@@ -76,13 +76,22 @@ def both_backends(base, seed: int) -> tuple:
     return fast_law, slow_law, run(fast_law, F, hoop, 2e-6), run(slow_law, F, hoop, 2e-6)
 
 
+#: The round-off of a dimensionless field computed from gradients of order 1 (``mu = 1 / J - 1``,
+#: the plastic strain): a few units of 1's last place, whatever the field's own size. On this
+#: machine's CPU the compiled plane-strain plastic strain at its first yielding steps (scale
+#: 3.2e-5) differed from the reference by 7.8e-16 = 3.5 eps, 2.4e-11 of its scale; on the
+#: machine of stop 60, within 7.3e-12. Fields in Pa or J/m^3 never come near this floor.
+ROUND_OFF = 8 * np.finfo(float).eps
+
+
 def assert_agree(s1: np.ndarray, a: dict, s2: np.ndarray, b: dict, tol: float) -> None:
     """One step's stresses and state fields within ``tol`` of each one's scale (the
-    deviator's: the stress's); the compiled fields C-contiguous."""
+    deviator's: the stress's), or within :data:`ROUND_OFF` of 1; the compiled fields
+    C-contiguous."""
     assert np.abs(s1 - s2).max() <= tol * np.abs(s2).max()
     for name in a:
         scale = np.abs(s2 if name == "deviator" else b[name]).max()
-        assert np.abs(a[name] - b[name]).max() <= tol * scale, name
+        assert np.abs(a[name] - b[name]).max() <= max(tol * scale, ROUND_OFF), name
         assert a[name].flags.c_contiguous
 
 
@@ -92,8 +101,10 @@ def assert_agree(s1: np.ndarray, a: dict, s2: np.ndarray, b: dict, tol: float) -
 )
 def test_compiled_update_meets_the_reference(plane, erosion):
     """Every step's stress and state fields agree within 2e-11 of each field's scale (the
-    deviator's: the stress's), measured up to 7.3e-12 (the plastic strain; ``mu = 1 / J - 1``
-    of a small compression takes the round-off of ``det F`` relative to ``mu``). The paths
+    deviator's: the stress's) or :data:`ROUND_OFF`, measured up to 7.3e-12 (the plastic
+    strain; ``mu = 1 / J - 1`` of a small compression takes the round-off of ``det F``
+    relative to ``mu``), and on another CPU 7.8e-16 where the plastic strain's scale was
+    3.2e-5 (3.5 eps: the floor). The paths
     end with points in region III, in tension, intact, fully damaged and (with erosion)
     eroded, so each branch is compared. The wave speed and the nominal stress of the same
     state agree within 1e-15 (measured 2.1e-16 and 3.5e-16)."""

@@ -119,7 +119,7 @@ from ..geometry.patch import ParticlePatch
 from ..parallel import raise_on_all_ranks
 from ..physics.body_loads import CallableBodyForce
 from ..physics.materials import LinearElastic
-from ..physics.user_functions import check_arguments
+from ..physics.user_functions import check_arguments, check_facets
 from ..statics.petsc import BlockSystem, create_aij
 from .base import (
     CoupledSolution,
@@ -268,12 +268,12 @@ class HybridElasticity(HybridDiscretisation):
                 raise ValueError(f"components={components!r} must be distinct indices in 0..1")
 
         raise_on_all_ranks(self.comm, check)
-        self._dirichlet.append((np.asarray(facets, dtype=np.int32), value, c))
+        self._dirichlet.append((check_facets(self.V.mesh, facets, "add_dirichlet"), value, c))
 
     def add_traction(self, facets: np.ndarray, traction: Callable) -> None:
         """Traction ``traction(x, n)`` (m, 2) on owned exterior facets, on either side."""
         check_arguments(traction, 2, "traction")
-        self._tractions.append((np.asarray(facets, dtype=np.int32), traction))
+        self._tractions.append((check_facets(self.V.mesh, facets, "add_traction"), traction))
 
     def set_body_force(self, force: VectorFunction) -> None:
         """Body force per unit volume ``b(x)`` (m, 2) on the whole body (replaces a previous

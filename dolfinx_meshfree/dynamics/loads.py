@@ -25,7 +25,7 @@ from ..geometry.quadrature import DYNAMIC_FACET_DEGREE, QuadraturePoints, facet_
 from ..parallel import raise_on_all_ranks
 from ..physics.axisymmetry import revolved
 from ..physics.operators import load_vector
-from ..physics.user_functions import check_arguments
+from ..physics.user_functions import check_arguments, check_facets
 from ..statics.petsc import create_vector
 from .discretisation import Discretisation, VectorFunction, vector_values
 from .linalg import row_layout
@@ -95,7 +95,7 @@ class ExternalLoads:
         d = self.disc
         msh, gdim = d.mesh, d.gdim
         deg = DYNAMIC_FACET_DEGREE
-        facets = np.asarray(facets, dtype=np.int32)
+        facets = check_facets(msh, facets, "add_traction")
         msh.topology.create_connectivity(msh.topology.dim - 1, msh.topology.dim)
         f2c = msh.topology.connectivity(msh.topology.dim - 1, msh.topology.dim)
         first = np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]]

@@ -272,9 +272,13 @@ def _det(J: np.ndarray) -> np.ndarray:
 def boundary_facets(
     msh: dolfinx.mesh.Mesh, marker: Callable[[np.ndarray], npt.ArrayLike] | None = None
 ) -> np.ndarray:
-    """Owned exterior facets (local indices), optionally those whose midpoints satisfy ``marker``.
+    """Owned exterior facets (local indices), optionally those that ``marker`` selects.
 
     ``marker(x)`` takes coordinates shaped (3, n) like DOLFINx's ``locate_entities_boundary``.
+    A facet is selected when the marker holds at all its vertices, as DOLFINx selects it, or at
+    its midpoint. The vertices carry a marker of a curved boundary (``np.isclose(r, R)``), whose
+    straight facets' midpoints lie off the curve; the midpoint carries a strict inequality at a
+    facet's end (``x[0] < 0.5`` on a facet ending at 0.5).
     """
     import dolfinx.mesh as dmesh
 
@@ -286,8 +290,20 @@ def boundary_facets(
         nodes = msh.geometry.x[_compat.entities_to_geometry(msh, tdim - 1, facets)]
         mid = nodes.mean(axis=1).T
         keep = np.asarray(marker(mid), dtype=bool)
+        vertices = msh.geometry.x[_facet_vertex_nodes(msh, facets)]  # (nf, nv, 3)
+        at_vertices = np.asarray(marker(vertices.reshape(-1, 3).T), dtype=bool)
+        keep |= at_vertices.reshape(vertices.shape[:2]).all(axis=1)
         facets = facets[keep]
     return np.asarray(facets, dtype=np.int32)
+
+
+def _facet_vertex_nodes(msh: dolfinx.mesh.Mesh, facets: np.ndarray) -> np.ndarray:
+    """Geometry nodes (nf, nv) of the facets' vertices (the first ``nv`` of each facet's
+    geometry nodes: DOLFINx numbers a facet's vertices before its higher-order nodes)."""
+    nodes = _compat.entities_to_geometry(msh, msh.topology.dim - 1, facets)
+    facet_name = _FACET_CELLS.get(msh.topology.cell_type.name, "point")
+    nv = {"point": 1, "interval": 2, "triangle": 3, "quadrilateral": 4}[facet_name]
+    return nodes[:, :nv]
 
 
 _FACET_CELLS = {

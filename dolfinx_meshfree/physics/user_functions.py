@@ -1,14 +1,22 @@
-"""Values of the functions a user passes (displacements, tractions, body forces) at points,
-checked: the one place that evaluates a user's vector function and names what is wrong."""
+"""What a user passes to the ``add_*`` calls, checked: the values of the functions
+(displacements, tractions, body forces) at points, and the facets they act on. The one place
+that evaluates a user's vector function or takes a user's facets and names what is wrong."""
 
 from __future__ import annotations
 
 import inspect
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
-__all__ = ["check_arguments", "vector_values"]
+from ..parallel import raise_on_all_ranks
+
+if TYPE_CHECKING:  # annotations only
+    import dolfinx.mesh
+
+__all__ = ["check_arguments", "check_facets", "vector_values"]
 
 #: How each arity is called and what its arguments are (the messages of :func:`check_arguments`).
 _CALLS = {
@@ -53,3 +61,43 @@ def vector_values(
     if v.shape != (m, gdim):
         raise ValueError(f"{name} must return an array of shape ({m}, {gdim}), got {v.shape}")
     return v
+
+
+def check_facets(msh: dolfinx.mesh.Mesh, facets: npt.ArrayLike, name: str) -> np.ndarray:
+    """``facets`` as local facet indices (int32), refused on every rank (collective) when they
+    are not indices of this rank's facets, or when no rank holds one: a condition or a load
+    on no facet acts nowhere, silently (a marker that selects nothing, e.g. ``np.isclose(r,
+    R)`` tested at the midpoints of a curved boundary's straight facets). ``name`` names the
+    call in the message."""
+    arr = np.asarray(facets)
+    n_local = msh.topology.index_map(msh.topology.dim - 1)
+    n_local = n_local.size_local + n_local.num_ghosts
+
+    def check() -> np.ndarray:
+        if arr.size and (arr.ndim != 1 or not np.issubdtype(arr.dtype, np.integer)):
+            raise TypeError(
+                f"{name}: facets must be a 1D array of facet indices (as mf.boundary_facets or "
+                f"dolfinx.mesh.locate_entities_boundary return them), got an array of dtype "
+                f"{arr.dtype} and shape {arr.shape}"
+            )
+        out = arr.astype(np.int32).ravel()
+        bad = out[(out < 0) | (out >= n_local)]
+        if bad.size:
+            raise ValueError(
+                f"{name}: facets holds {bad.size} index(es) that are not facets of this rank's "
+                f"mesh (e.g. {bad[:3].tolist()}; valid: 0..{n_local - 1}): pass facet indices "
+                "of the model's mesh, as mf.boundary_facets(msh, marker) returns them"
+            )
+        return out
+
+    out = raise_on_all_ranks(msh.comm, check)
+    if msh.comm.allreduce(int(out.size)) == 0:
+        raise ValueError(
+            f"{name}: facets holds no facet on any rank, so it would act nowhere: the marker "
+            "selected no boundary facet. mf.boundary_facets(msh, marker) keeps a facet when "
+            "the marker accepts all its vertices or its midpoint; on a curved boundary give "
+            "the marker a "
+            "tolerance of the mesh's sagitta (np.isclose(r, R, atol=...)); pass the facets "
+            "of the boundary you mean"
+        )
+    return out

@@ -53,7 +53,7 @@ from ..physics.cohesive import LinearCohesive
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic, linear_twin
 from ..physics.state import check_not_rate_law, is_stateful
-from ..physics.user_functions import check_arguments
+from ..physics.user_functions import check_arguments, check_facets
 from .cohesive import CohesiveCrack, check_cohesive, check_through
 from .coupled_newton import (
     FINITE_STRAIN_COUPLINGS,
@@ -421,7 +421,7 @@ class CoupledElasticity:
         multiplier per facet and component, e.g. to remove the rigid motions of a traction
         problem with three scalar conditions. Collective."""
         check_arguments(value, 1, "the Dirichlet value")
-        facets = np.asarray(facets, dtype=np.int32)
+        facets = check_facets(self.V.mesh, facets, "add_dirichlet")
         if components is None:
             self.dirichlet.append((facets, value))
             return
@@ -459,7 +459,7 @@ class CoupledElasticity:
     def add_traction(self, facets: np.ndarray, traction: Callable) -> None:
         """Traction ``traction(x, n)`` (m, gdim) on owned exterior facets, on either side."""
         check_arguments(traction, 2, "traction")
-        self.tractions.append((np.asarray(facets, dtype=np.int32), traction))
+        self.tractions.append((check_facets(self.V.mesh, facets, "add_traction"), traction))
 
     def set_body_force(self, force: VectorFunction) -> None:
         """Body force per unit volume ``b(x)`` (m, gdim) on the whole body (replaces a previous

@@ -87,7 +87,7 @@ from ..physics.operators import (
     stiffness_matrix,
 )
 from ..physics.state import check_not_rate_law, is_stateful
-from ..physics.user_functions import check_arguments, vector_values
+from ..physics.user_functions import check_arguments, check_facets, vector_values
 from .cohesive import CohesiveCrack, CohesiveSide, check_cohesive, check_through
 from .fe_state import check_bands
 from .growth_update import local_update_for
@@ -784,12 +784,18 @@ class EFGElasticity:
 
         check_arguments(value, 1, "the Dirichlet value")
         comps = raise_on_all_ranks(self.comm, check)
-        self._dirichlet.append((np.asarray(facets, dtype=np.int32), value, comps))
+        self._dirichlet.append((self._facets(facets, "add_dirichlet"), value, comps))
 
     def add_traction(self, facets: np.ndarray, traction: TractionFunction) -> None:
         """Apply ``traction(x, n)`` (m, gdim) on owned exterior facets (``n``: outward normals)."""
         check_arguments(traction, 2, "traction")
-        self._tractions.append((np.asarray(facets, dtype=np.int32), traction))
+        self._tractions.append((self._facets(facets, "add_traction"), traction))
+
+    def _facets(self, facets: np.ndarray, name: str) -> np.ndarray:
+        """The user's facets of the background mesh, checked (collective)."""
+        if self.particles.mesh is None:  # the same on every rank
+            return np.asarray(facets, dtype=np.int32)
+        return check_facets(self.particles.mesh, facets, name)
 
     def set_body_force(self, force: VectorFunction) -> None:
         """Body force per unit volume ``b(x)`` (m, gdim)."""

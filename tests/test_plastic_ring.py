@@ -1,0 +1,112 @@
+"""A thick ring under internal pressure, as a user writes it from the README: a quarter of the
+ring mapped from a rectangle in (r, theta), rollers on its two straight edges, the pressure
+``-p n`` on the bore, a particle patch about the bore, J2 plasticity in plane strain.
+
+It found a silent wrong answer: ``mf.boundary_facets(msh, lambda x: np.isclose(r(x), a))``
+tested the marker at the facets' midpoints only, which on a curved boundary lie off the curve
+(by the sagitta, 1.2e-3 a here), so the bore got no facet, the load no facet, and ``solve()``
+returned zero displacements. The marker is now tested at the vertices too (as DOLFINx's
+``locate_entities_boundary`` does), and a load or condition on no facet is refused
+(``tests/test_errors.py``).
+
+The checks are closed forms: the elastic response against Lamé's (``u_r(a)`` per unit
+pressure, the polygonal bore's error), and the load at the end of the path against the limit
+pressure of an elastic-perfectly plastic von Mises ring in plane strain,
+``p_lim = 2 / sqrt(3) sigma_y ln(b / a)`` (Hill 1950, ch. V; exact for any nu: limit analysis).
+Serial and 2 ranks.
+"""
+
+import dolfinx_meshfree as mf
+from dolfinx_meshfree import _compat
+
+import dolfinx
+import numpy as np
+import pytest
+from conftest import CELL_TYPES, rectangle
+from mpi4py import MPI
+
+A, B = 1.0, 2.0  # bore and outer radius
+E, NU, SY = 210e3, 0.3, 240.0
+NR, NT = 12, 16  # cells across the wall and around the quarter
+
+
+def _ring(cell: str = "quadrilateral"):
+    msh = rectangle(MPI.COMM_WORLD, [A, 0.0], [B, np.pi / 2], [NR, NT], CELL_TYPES[cell])
+    x = msh.geometry.x
+    r, t = x[:, 0].copy(), x[:, 1].copy()
+    x[:, 0], x[:, 1] = r * np.cos(t), r * np.sin(t)
+    return msh
+
+
+def _radius(x):
+    return np.sqrt(x[0] ** 2 + x[1] ** 2)
+
+
+def test_a_curved_boundary_is_selected_by_its_vertices():
+    """The bore's 16 facets (their midpoints 1.2e-3 inside the circle), and a strict
+    inequality that only the midpoints meet keeps its facets as before."""
+    msh = _ring()
+    bore = mf.boundary_facets(msh, lambda x: np.isclose(_radius(x), A))
+    assert msh.comm.allreduce(bore.size) == NT
+    # the straight edge theta = 0 (y = 0) by a strict inequality at r < 1.5: the midpoints of
+    # the 6 facets between r = 1 and 1.5 meet it; the facet ending at 1.5 too, by its midpoint
+    near = mf.boundary_facets(msh, lambda x: np.isclose(x[1], 0.0) & (x[0] < 1.5))
+    assert msh.comm.allreduce(near.size) == NR // 2
+    outer = mf.boundary_facets(msh, lambda x: _radius(x) > B - 1e-9)
+    assert msh.comm.allreduce(outer.size) == NT
+
+
+def _model(method: str, cell: str = "quadrilateral"):
+    """The ring's model: pure EFG, or a patch of the cells within r < 1.35 (the first 4 of 12
+    layers, where the ring yields first) coupled by ``method``."""
+    msh = _ring(cell)
+    law = mf.J2Plasticity(E=E, nu=NU, sigma_y=SY, H=0.0, plane="strain")
+    spacing = (B - A) / NR
+    if method == "efg":
+        model = mf.EFGElasticity(mf.ParticleSet.from_cells(msh, spacing), law)
+    else:
+        cells = dolfinx.mesh.locate_entities(msh, 2, lambda x: _radius(x) < 1.35 + 1e-9)
+        patch = mf.ParticlePatch(msh, cells, spacing=spacing)
+        V = _compat.vector_function_space(msh)
+        model = mf.CoupledElasticity(V, patch, law, coupling=method)
+    held = [(lambda x: np.isclose(x[1], 0.0), 1), (lambda x: np.isclose(x[0], 0.0), 0)]
+    for marker, component in held:
+        model.add_dirichlet(mf.boundary_facets(msh, marker), np.zeros_like, (component,))
+    bore = mf.boundary_facets(msh, lambda x: np.isclose(_radius(x), A))
+    model.add_traction(bore, lambda x, n: -n)  # a unit pressure
+    return model
+
+
+def _lame_bore() -> float:
+    """Lamé's radial displacement of the bore per unit pressure, plane strain (closed form)."""
+    k2 = (B / A) ** 2
+    return A * (1 + NU) / E * ((1 - 2 * NU) + k2) / (k2 - 1)
+
+
+#: Measured, serial and 2 ranks alike, and checked (about 2x): the elastic ``u_r(a)`` against
+#: Lame's (below it: the polygonal bore of 16 facets, and P1 triangles' stiffness), and
+#: ``p(end) / p_lim - 1`` at ``u_r(a) = 6e-3``, about 30 times the displacement at first yield
+LIMIT = {  # (method, cell): (elastic measured, checked), (limit measured, checked)
+    ("lagrange", "quadrilateral"): ((-2.5e-3, 5e-3), (-2.9e-4, 6e-4)),
+    ("efg", "quadrilateral"): ((-1.6e-3, 3.5e-3), (-1.37e-3, 3e-3)),
+    ("ramp", "quadrilateral"): ((-1.9e-3, 4e-3), (-5.3e-4, 1.1e-3)),
+    ("bridging", "quadrilateral"): ((-2.4e-3, 5e-3), (1.4e-4, 3e-4)),
+    ("lagrange", "triangle"): ((-7.8e-3, 1.6e-2), (-9.9e-4, 2e-3)),
+}
+
+
+@pytest.mark.parametrize("method, cell", list(LIMIT))
+def test_thick_ring_reaches_the_limit_pressure(method, cell):
+    model = _model(method, cell)
+    u_elastic = model.solve().displacement(np.array([[A, 0.0]]))[0, 0]  # p = 1: elastic
+    (_, elastic), (_, limit) = LIMIT[method, cell]
+    assert abs(u_elastic / _lame_bore() - 1) < elastic
+    control = mf.DisplacementControl([[A, 0.0]], [[1.0, 0.0]])  # u_r at the bore
+    path = mf.follow_path(model, control, mf.PathOptions(increment=2e-4, end=6e-3))
+    p = np.asarray(path.load_factor)
+    p_lim = 2 / np.sqrt(3) * SY * np.log(B / A)
+    p_yield = SY / np.sqrt(3) * (1 - (A / B) ** 2)  # first yield at the bore, nu = 1/2
+    assert path.control[-1] == pytest.approx(6e-3)
+    assert p[0] < p_yield  # the path starts elastic, and rises to the limit
+    assert np.all(np.diff(p) > 0)
+    assert abs(p[-1] / p_lim - 1) < limit

@@ -234,15 +234,21 @@ def test_damage_tangent_matches_finite_differences(plane, nu):
 
 
 def _trial(law: J2Plasticity, strain: np.ndarray, state: dict) -> np.ndarray:
-    """Trial yield function (m,) with 3 x 3 tensors."""
+    """Trial yield function (m,) with 3 x 3 tensors (plane stress: the trial stress of Hooke's
+    plane-stress law, s_zz = 0)."""
     mu = law.E / (2 * (1 + law.nu))
+    radius = np.sqrt(2 / 3) * (law.sigma_y + law.H * state["alpha"][:, 0])
+    if law.plane == "stress":
+        ee = np.asarray(strain) - state["plastic_strain"][:, [0, 1, 5]]
+        sig = _effective_stress(law.E, law.nu, "stress", ee)
+        dev = sig - np.trace(sig, axis1=1, axis2=2)[:, None, None] / 3 * np.eye(3)
+        return np.linalg.norm(dev, axis=(1, 2)) - radius
     eps = _tensor(strain, engineering=True) - _tensor(state["plastic_strain"], engineering=True)
     dev = eps - np.trace(eps, axis1=1, axis2=2)[:, None, None] / 3 * np.eye(3)
-    norm = 2 * mu * np.linalg.norm(dev, axis=(1, 2))
-    return norm - np.sqrt(2 / 3) * (law.sigma_y + law.H * state["alpha"][:, 0])
+    return 2 * mu * np.linalg.norm(dev, axis=(1, 2)) - radius
 
 
-@pytest.mark.parametrize("plane", ["strain", None])
+@pytest.mark.parametrize("plane", ["strain", "stress", None])
 @pytest.mark.parametrize("H", [0.0, 0.3])
 def test_j2_tangent_matches_finite_differences(plane, H):
     law = J2Plasticity(E_S, NU_S, SY, H=H, plane=plane)
@@ -265,7 +271,7 @@ def test_j2_tangent_matches_finite_differences(plane, H):
         assert ((new["alpha"] > sub["alpha"]) == (sel is plastic)).all()
 
 
-@pytest.mark.parametrize("plane", ["strain", None])
+@pytest.mark.parametrize("plane", ["strain", "stress", None])
 def test_j2_tangent_on_the_yield_surface_is_the_loading_one(plane):
     """At the strain of the last plastic step (the next step's first Newton iteration) the
     trial stress lies on the yield surface to round-off, either side: the tangent is the loading
@@ -338,6 +344,85 @@ def test_j2_plane_strain_uniaxial_strain_closed_form(H):
         np.testing.assert_allclose(szz, K * e - r / np.sqrt(6), rtol=1e-12)
         ep = state["plastic_strain"][0]
         assert abs(ep[:3].sum()) <= 1e-12 * np.abs(ep).max() + 1e-300  # deviatoric
+
+
+def _uniaxial_stress(law: J2Plasticity, exx: float, eyy: float, state: dict):
+    """The plane-stress point pulled to ``e_xx`` with ``s_yy = 0`` (``e_yy`` found by Newton
+    from ``eyy`` with the law's tangent), ``s_xy = 0``: (stress, e_yy, new state)."""
+    for _ in range(40):
+        stress, T, new = law.update(np.array([[exx, eyy, 0.0]]), state)
+        if abs(stress[0, 1]) <= 1e-13 * law.sigma_y:
+            return stress[0], eyy, new
+        eyy -= stress[0, 1] / T[0, 1, 1]
+    raise AssertionError(f"s_yy = {stress[0, 1]} at e_xx = {exx}")
+
+
+@pytest.mark.parametrize("H", [0.0, 0.2])
+def test_j2_plane_stress_closed_forms(H):
+    """Plane stress (s_zz = 0) against closed forms: uniaxial stress follows the bilinear
+    curve ``s = sigma_y + H alpha``, ``alpha = (E e - sigma_y) / (E + H)`` with ``e_yy`` such
+    that ``s_yy = 0``; equibiaxial strain ``e_xx = e_yy = e`` yields at ``s = sigma_y`` (the von
+    Mises stress of equal biaxial stress), then ``s = E / (1 - nu) (e - alpha / 2) = sigma_y +
+    H alpha``; pure shear meets the 3D closed form (it has ``s_zz = 0``). Each on the yield
+    surface with ``||dev s|| = sqrt(2/3) (sigma_y + H alpha)``, the plastic strain isochoric,
+    the dissipation ``sigma_y alpha``."""
+    law = J2Plasticity(E_S, NU_S, SY, H=H, plane="stress")
+    ey = SY / E_S
+    state, eyy = law.initial_state(1), 0.0
+    for e in np.linspace(0, 8 * ey, 33)[1:]:
+        stress, eyy, state = _uniaxial_stress(law, e, eyy, state)
+        alpha = max(0.0, (E_S * e - SY) / (E_S + H))
+        np.testing.assert_allclose(stress, [E_S * e - E_S * alpha, 0.0, 0.0], atol=1e-12 * SY)
+        np.testing.assert_allclose(state["alpha"][0, 0], alpha, rtol=1e-12, atol=1e-16)
+        ep = state["plastic_strain"][0]
+        np.testing.assert_allclose(ep[[0, 1, 2]], [alpha, -alpha / 2, -alpha / 2], atol=1e-14)
+    np.testing.assert_allclose(law.dissipated_energy(state), SY * alpha, rtol=1e-12)
+    state = law.initial_state(1)
+    for e in np.linspace(0, 8 * ey, 33)[1:]:
+        stress, _, state = law.update(np.array([[e, e, 0.0]]), state)
+        s_el = E_S * e / (1 - NU_S)
+        alpha = max(0.0, (s_el - SY) / (E_S / (2 * (1 - NU_S)) + H))
+        s = SY + H * alpha if alpha > 0 else s_el
+        np.testing.assert_allclose(stress[0], [s, s, 0.0], rtol=1e-12, atol=1e-14 * SY)
+        np.testing.assert_allclose(state["alpha"][0, 0], alpha, rtol=1e-12, atol=1e-16)
+    sig = _tensor(stress, engineering=False)
+    dev = sig - np.trace(sig, axis1=1, axis2=2)[:, None, None] / 3 * np.eye(3)
+    radius = np.sqrt(2 / 3) * (SY + H * state["alpha"][:, 0])
+    np.testing.assert_allclose(np.linalg.norm(dev, axis=(1, 2)), radius, rtol=1e-12)
+    assert abs(state["plastic_strain"][0, :3].sum()) <= 1e-15
+    mu = E_S / (2 * (1 + NU_S))
+    state = law.initial_state(1)
+    for g in np.linspace(0, 10 * SY / (np.sqrt(3) * mu), 41)[1:]:
+        stress, _, state = law.update(np.array([[0.0, 0.0, g]]), state)
+        tau = min(mu * g, mu * (H * g + np.sqrt(3) * SY) / (3 * mu + H))
+        np.testing.assert_allclose(stress[0], [0.0, 0.0, tau], rtol=1e-12, atol=1e-14 * SY)
+
+
+@pytest.mark.parametrize("H", [0.0, 0.2])
+def test_j2_plane_stress_energy_balance_on_a_cycle(H):
+    """Uniaxial stress ``0 -> e_max -> -e_max``: the kinks (yield at ``sigma_y / E``, reverse
+    yield at ``e_max - 2 (sigma_y + H alpha_1) / E``) on the step grid, so the trapezoidal work
+    is exact; work - stored energy = dissipation at every step (1e-8), and the closed-form
+    ``alpha`` at the end, ``(e_max - sigma_y / E + 2 alpha_1) / (1 + H / E)``."""
+    law = J2Plasticity(E_S, NU_S, SY, H=H, plane="stress")
+    emax = 5 * SY / E_S
+    a1 = (E_S * emax - SY) / (E_S + H)
+    r1 = emax - 2 * (SY + H * a1) / E_S
+    a2 = (emax - SY / E_S + 2 * a1) / (1 + H / E_S)
+    nodes = [0, SY / E_S, emax, r1, -emax]
+    path = np.concatenate([np.linspace(a, b, 41)[1:] for a, b in itertools.pairwise(nodes)])
+    state, eyy, work = law.initial_state(1), 0.0, 0.0
+    strain_old, stress_old = np.zeros(3), np.zeros(3)
+    for e in path:
+        stress, eyy, state = _uniaxial_stress(law, e, eyy, state)
+        strain = np.array([e, eyy, 0.0])
+        work += 0.5 * (stress + stress_old) @ (strain - strain_old)
+        strain_old, stress_old = strain, stress
+        balance = work - law.stored_energy(strain[None], state)[0]
+        np.testing.assert_allclose(
+            balance, law.dissipated_energy(state)[0], rtol=1e-8, atol=1e-10 * SY * SY / E_S
+        )
+    np.testing.assert_allclose(state["alpha"][0, 0], a2, rtol=1e-12)
 
 
 @pytest.mark.parametrize("plane", ["strain", None])
@@ -420,7 +505,7 @@ def test_j2_energy_balance_on_a_cycle(plane, H):
         (lambda: RankineDamage(E_C, NU_C, FT, GF, rho=-1.0), "rho=-1.0"),
         (lambda: J2Plasticity(E_S, NU_S, 0.0), "sigma_y=0.0"),
         (lambda: J2Plasticity(E_S, NU_S, SY, H=-1.0), "H=-1.0"),
-        (lambda: J2Plasticity(E_S, NU_S, SY, plane="stress"), "plane='stress'"),
+        (lambda: J2Plasticity(E_S, NU_S, SY, plane="axisymmetric"), "plane='axisymmetric'"),
     ],
 )
 def test_bad_parameters_are_named(make, text):
@@ -454,6 +539,7 @@ def test_bad_band_is_named():
     [
         (RankineDamage(E_C, NU_C, FT, GF, plane=None, rho=2.4e-9), np.full(8, 50.0)),
         (J2Plasticity(E_S, NU_S, SY, H=0.1, plane="strain"), None),
+        (J2Plasticity(E_S, NU_S, SY, H=0.1, plane="stress"), None),
         (J2Plasticity(E_S, NU_S, SY, plane=None, rho=7.8), None),
     ],
 )

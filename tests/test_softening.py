@@ -317,16 +317,44 @@ def test_arc_length_follows_the_closed_form_and_a_snap_back():
         mf.follow_path(model, end_u, mf.PathOptions(increment=1e-4, end=0.01, max_increment=1e-3))
 
 
-@pytest.mark.parametrize("coupling", ["lagrange", "edge-to-edge", "bridging"])
-def test_plastic_bar_reproduces_the_material_point(coupling):
-    """J2 plasticity with hardening in a coupled bar (plane strain, rollers on x = 0 and y = 0,
-    a traction on x = L past yield, in load steps): the strain is uniform, so the end
-    displacements equal those of one material point under the same stress path, solved apart
-    here (sigma_xx = t, sigma_yy = 0 by Newton on the law's update at every load step, committing
-    as the solver does) to 1e-9; the plastic strain committed at every FE and particle point is
-    that point's. A wrong commit (none, or of a rejected trial) or a wrong tangent mapping would
-    show."""
-    law = mf.J2Plasticity(E=E, nu=0.3, sigma_y=FT, H=100.0, plane="strain")
+def _plane_strain_point(law, traction: float, steps: int) -> tuple[np.ndarray, dict]:
+    """The plane-strain material point ``eps = (e_xx, e_yy, 0)`` with ``sigma = (t_k, 0, *)``
+    at ``t_k = k / steps`` of ``traction``, by Newton on the law's update, committed per step."""
+    state = law.initial_state(1)
+    e = np.zeros(2)
+    for k in range(1, steps + 1):
+        target = np.array([traction * k / steps, 0.0])
+        for _ in range(30):
+            s, C, trial = law.update(np.array([[e[0], e[1], 0.0]]), state)
+            r = s[0, :2] - target
+            if np.abs(r).max() <= 1e-13 * traction:
+                break
+            e -= np.linalg.solve(C[0, :2, :2], r)
+        state = trial
+    return e, state
+
+
+@pytest.mark.parametrize(
+    "coupling, plane",
+    [
+        ("lagrange", "strain"),
+        ("edge-to-edge", "strain"),
+        ("bridging", "strain"),
+        ("lagrange", "stress"),
+        ("ramp", "stress"),
+        ("bridging", "stress"),
+    ],
+)
+def test_plastic_bar_reproduces_the_material_point(coupling, plane):
+    """J2 plasticity with hardening in a coupled bar (rollers on x = 0 and y = 0, a traction on
+    x = L past yield, in load steps): the strain is uniform, so the end displacements equal
+    those of one material point under the same stress path to 1e-9; the plastic strain
+    committed at every FE and particle point is that point's. A wrong commit (none, or of a
+    rejected trial) or a wrong tangent mapping would show. Plane strain: the material point
+    solved apart here (sigma_xx = t, sigma_yy = 0 by Newton on the law's update at every load
+    step, committing as the solver does). Plane stress: uniaxial stress in closed form,
+    ``alpha = (t - sigma_y) / H``, ``e_xx = t / E + alpha``, ``e_yy = -nu t / E - alpha / 2``."""
+    law = mf.J2Plasticity(E=E, nu=0.3, sigma_y=FT, H=100.0, plane=plane)
     msh = dolfinx.mesh.create_rectangle(
         MPI.COMM_WORLD, [[0, 0], [L, W]], [8, 4], dolfinx.mesh.CellType.quadrilateral
     )
@@ -339,22 +367,16 @@ def test_plastic_bar_reproduces_the_material_point(coupling):
     right = mf.boundary_facets(msh, lambda p: np.isclose(p[0], L))
     model.add_dirichlet(left, lambda x: np.zeros_like(x), components=(0,))
     model.add_dirichlet(bottom, lambda x: np.zeros_like(x), components=(1,))
-    traction = 1.6 * FT  # past the uniaxial yield stress of plane strain (~1.0-1.1 sigma_y)
+    traction = 1.6 * FT  # past the uniaxial yield stress (plane strain: ~1.0-1.1 sigma_y)
     model.add_traction(right, lambda x, n: np.tile([traction, 0.0], (len(x), 1)))
     steps = 4
     sol = model.solve(load_steps=steps)
-    # the material point: eps = (exx, eyy, 0) with sigma = (t_k, 0, *) at t_k = k / steps
-    state = law.initial_state(1)
-    e = np.zeros(2)
-    for k in range(1, steps + 1):
-        target = np.array([traction * k / steps, 0.0])
-        for _ in range(30):
-            s, C, trial = law.update(np.array([[e[0], e[1], 0.0]]), state)
-            r = s[0, :2] - target
-            if np.abs(r).max() <= 1e-13 * traction:
-                break
-            e -= np.linalg.solve(C[0, :2, :2], r)
-        state = trial
+    if plane == "stress":  # uniaxial stress in closed form
+        alpha = (traction - FT) / law.H
+        e = np.array([traction / E + alpha, -law.nu * traction / E - alpha / 2])
+        state = {"alpha": np.array([[alpha]])}
+    else:
+        e, state = _plane_strain_point(law, traction, steps)
     assert state["alpha"][0, 0] > 0.0  # it yielded
     pts = np.array([[L, 0.0], [L, W], [1.0, W]])
     u = sol.displacement(pts)

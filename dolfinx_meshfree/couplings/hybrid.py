@@ -268,12 +268,14 @@ class HybridElasticity(HybridDiscretisation):
                 raise ValueError(f"components={components!r} must be distinct indices in 0..1")
 
         raise_on_all_ranks(self.comm, check)
-        self._dirichlet.append((check_facets(self.V.mesh, facets, "add_dirichlet"), value, c))
+        facets = check_facets(self.V.mesh, facets, "add_dirichlet: facets")
+        self._dirichlet.append((facets, value, c))
 
     def add_traction(self, facets: np.ndarray, traction: Callable) -> None:
         """Traction ``traction(x, n)`` (m, 2) on owned exterior facets, on either side."""
         check_arguments(traction, 2, "traction")
-        self._tractions.append((check_facets(self.V.mesh, facets, "add_traction"), traction))
+        facets = check_facets(self.V.mesh, facets, "add_traction: facets")
+        self._tractions.append((facets, traction))
 
     def set_body_force(self, force: VectorFunction) -> None:
         """Body force per unit volume ``b(x)`` (m, 2) on the whole body (replaces a previous

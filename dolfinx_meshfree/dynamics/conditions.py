@@ -25,7 +25,8 @@ from .. import _compat
 from ..approx.tables import ShapeTable
 from ..geometry.particles import ParticleSet
 from ..geometry.quadrature import QuadraturePoints, facet_quadrature
-from ..parallel import Layout, owned_indices, raise_on_all_ranks
+from ..parallel import Layout, raise_on_all_ranks
+from ..physics import user_functions
 from ..statics.efg import facet_multipliers
 from ..statics.petsc import create_aij
 
@@ -41,27 +42,26 @@ __all__ = [
 
 
 def check_facets(msh: dolfinx.mesh.Mesh, facets: npt.ArrayLike | None) -> np.ndarray:
-    """Validated owned exterior facets (empty when ``None``), checked on every rank.
+    """Validated owned exterior facets of ``fixed_facets`` (empty when ``None``), checked on
+    every rank (:func:`~dolfinx_meshfree.physics.user_functions.check_facets`: facets that no
+    rank holds are refused too).
 
     Raises:
-        ValueError: not a 1D integer array, or a facet not owned here (on every rank).
+        ValueError: not a 1D integer array, a facet not owned here, or none on any rank (on
+            every rank).
     """
-    tdim = msh.topology.dim
-    msh.topology.create_connectivity(tdim - 1, tdim)
-    n_own = msh.topology.index_map(tdim - 1).size_local
+    if facets is None:
+        return np.zeros(0, dtype=np.int32)
 
-    def check() -> np.ndarray:
-        if facets is None:
-            return np.zeros(0, dtype=np.int32)
+    def check() -> None:
         if _is_pairs(facets):
             raise ValueError(
                 "fixed_facets as (facets, components) pairs is not available with this method; "
                 "pass facets whose nodes are held in all components"
             )
-        fix = "pass owned exterior facets, e.g. from boundary_facets"
-        return owned_indices(facets, "fixed_facets", "facet", n_own, fix).astype(np.int32)
 
-    return raise_on_all_ranks(msh.comm, check)
+    raise_on_all_ranks(msh.comm, check)
+    return user_functions.check_facets(msh, facets, "fixed_facets")
 
 
 def _is_pairs(fixed_facets: object) -> bool:

@@ -95,7 +95,7 @@ class ExternalLoads:
         d = self.disc
         msh, gdim = d.mesh, d.gdim
         deg = DYNAMIC_FACET_DEGREE
-        facets = check_facets(msh, facets, "add_traction")
+        facets = check_facets(msh, facets, "add_traction: facets")
         msh.topology.create_connectivity(msh.topology.dim - 1, msh.topology.dim)
         f2c = msh.topology.connectivity(msh.topology.dim - 1, msh.topology.dim)
         first = np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]]

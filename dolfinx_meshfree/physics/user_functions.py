@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from ..parallel import raise_on_all_ranks
+from ..parallel import owned_indices, raise_on_all_ranks
 
 if TYPE_CHECKING:  # annotations only
     import dolfinx.mesh
@@ -64,40 +64,26 @@ def vector_values(
 
 
 def check_facets(msh: dolfinx.mesh.Mesh, facets: npt.ArrayLike, name: str) -> np.ndarray:
-    """``facets`` as local facet indices (int32), refused on every rank (collective) when they
-    are not indices of this rank's facets, or when no rank holds one: a condition or a load
-    on no facet acts nowhere, silently (a marker that selects nothing, e.g. ``np.isclose(r,
-    R)`` tested at the midpoints of a curved boundary's straight facets). ``name`` names the
-    call in the message."""
-    arr = np.asarray(facets)
-    n_local = msh.topology.index_map(msh.topology.dim - 1)
-    n_local = n_local.size_local + n_local.num_ghosts
+    """``facets`` as this rank's owned facet indices (int32), refused on every rank
+    (collective), naming ``name``, when they are not owned facets of ``msh`` here, or when no
+    rank holds one: a condition or a load on no facet acts nowhere, silently (a marker that
+    selects nothing, e.g. ``np.isclose(r, R)`` tested at the midpoints of a curved boundary's
+    straight facets)."""
+    tdim = msh.topology.dim
+    msh.topology.create_connectivity(tdim - 1, tdim)
+    n_own = msh.topology.index_map(tdim - 1).size_local
+    fix = "pass owned exterior facets of the model's mesh, as mf.boundary_facets returns them"
 
     def check() -> np.ndarray:
-        if arr.size and (arr.ndim != 1 or not np.issubdtype(arr.dtype, np.integer)):
-            raise TypeError(
-                f"{name}: facets must be a 1D array of facet indices (as mf.boundary_facets or "
-                f"dolfinx.mesh.locate_entities_boundary return them), got an array of dtype "
-                f"{arr.dtype} and shape {arr.shape}"
-            )
-        out = arr.astype(np.int32).ravel()
-        bad = out[(out < 0) | (out >= n_local)]
-        if bad.size:
-            raise ValueError(
-                f"{name}: facets holds {bad.size} index(es) that are not facets of this rank's "
-                f"mesh (e.g. {bad[:3].tolist()}; valid: 0..{n_local - 1}): pass facet indices "
-                "of the model's mesh, as mf.boundary_facets(msh, marker) returns them"
-            )
-        return out
+        return owned_indices(facets, name, "facet", n_own, fix).astype(np.int32)
 
     out = raise_on_all_ranks(msh.comm, check)
     if msh.comm.allreduce(int(out.size)) == 0:
         raise ValueError(
-            f"{name}: facets holds no facet on any rank, so it would act nowhere: the marker "
-            "selected no boundary facet. mf.boundary_facets(msh, marker) keeps a facet when "
-            "the marker accepts all its vertices or its midpoint; on a curved boundary give "
-            "the marker a "
-            "tolerance of the mesh's sagitta (np.isclose(r, R, atol=...)); pass the facets "
-            "of the boundary you mean"
+            f"{name} holds no facet on any rank, so it would act nowhere: the marker selected "
+            "no boundary facet. mf.boundary_facets(msh, marker) keeps a facet when the marker "
+            "accepts all its vertices or its midpoint; on a curved boundary give the marker a "
+            "tolerance of the mesh's sagitta (np.isclose(r, R, atol=...)); pass the facets of "
+            "the boundary you mean"
         )
     return out

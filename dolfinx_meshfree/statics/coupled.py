@@ -421,7 +421,7 @@ class CoupledElasticity:
         multiplier per facet and component, e.g. to remove the rigid motions of a traction
         problem with three scalar conditions. Collective."""
         check_arguments(value, 1, "the Dirichlet value")
-        facets = check_facets(self.V.mesh, facets, "add_dirichlet")
+        facets = check_facets(self.V.mesh, facets, "add_dirichlet: facets")
         if components is None:
             self.dirichlet.append((facets, value))
             return
@@ -459,7 +459,7 @@ class CoupledElasticity:
     def add_traction(self, facets: np.ndarray, traction: Callable) -> None:
         """Traction ``traction(x, n)`` (m, gdim) on owned exterior facets, on either side."""
         check_arguments(traction, 2, "traction")
-        self.tractions.append((check_facets(self.V.mesh, facets, "add_traction"), traction))
+        self.tractions.append((check_facets(self.V.mesh, facets, "add_traction: facets"), traction))
 
     def set_body_force(self, force: VectorFunction) -> None:
         """Body force per unit volume ``b(x)`` (m, gdim) on the whole body (replaces a previous

@@ -784,12 +784,12 @@ class EFGElasticity:
 
         check_arguments(value, 1, "the Dirichlet value")
         comps = raise_on_all_ranks(self.comm, check)
-        self._dirichlet.append((self._facets(facets, "add_dirichlet"), value, comps))
+        self._dirichlet.append((self._facets(facets, "add_dirichlet: facets"), value, comps))
 
     def add_traction(self, facets: np.ndarray, traction: TractionFunction) -> None:
         """Apply ``traction(x, n)`` (m, gdim) on owned exterior facets (``n``: outward normals)."""
         check_arguments(traction, 2, "traction")
-        self._tractions.append((self._facets(facets, "add_traction"), traction))
+        self._tractions.append((self._facets(facets, "add_traction: facets"), traction))
 
     def _facets(self, facets: np.ndarray, name: str) -> np.ndarray:
         """The user's facets of the background mesh, checked (collective)."""

@@ -47,6 +47,7 @@ __all__ = [
     "basix_lagrange_p1",
     "bb_tree",
     "colliding_cells",
+    "coordinate_degree",
     "create_expression",
     "create_form",
     "create_mesh_ghosted",
@@ -89,6 +90,14 @@ def scalar_function_space(msh: _mesh.Mesh, family: str, degree: int) -> _fem.Fun
     if MODERN:
         return _fem.functionspace(msh, (family, degree))
     return _fem.FunctionSpace(msh, (family, degree))
+
+
+def coordinate_degree(msh: _mesh.Mesh) -> int:
+    """The degree of the mesh's coordinate element (1: straight-sided cells); DOLFINx >= 0.10
+    keeps one coordinate map per cell type (``cmaps``), 0.5 one (``cmap``)."""
+    geometry = msh.geometry
+    cmap = geometry.cmaps[0] if hasattr(geometry, "cmaps") else geometry.cmap
+    return int(cmap.degree)
 
 
 def geometry_dofmap(msh: _mesh.Mesh) -> _np.ndarray:

@@ -37,11 +37,14 @@ def test_chunked_volumes_equal_unchunked(monkeypatch):
 def test_bench_memory_halo_equals_whole():
     """``bench_memory --small`` with the halo MLS (the default) and with the whole MLS on every
     rank (``--no-halo``): the same matrix (bit for bit: test_large_solve), so the same nonzeros
-    and L2 error, to 2e-9 relative: on 2 ranks of lane A two runs of the same model differ by
-    up to 7.3e-10 relative (GAMG; 9e-11 with MUMPS), halo or not (the mesh partition differs
-    between runs: 152,273 and 152,341 halo particles at 301,675); 1 rank: within 1e-12. The halo
-    never exceeds the particle set (one rank: all of it) and the record holds a peak after
-    every phase."""
+    and L2 error up to the iterative solve's own tolerance: each stops at a residual of
+    ``rtol |b|`` (1e-12), and on 2 ranks of lane A two runs of the same model differ by its
+    order (the mesh partition differs between runs: 152,273 and 152,341 halo particles at
+    301,675), halo or not. So the relative L2 errors (5.7e-4) must agree within 5 rtol:
+    measured 4.2e-13 (7.3e-10 of the error) on stop 60's machine and 1.2e-12 (2.1e-9 of it,
+    past the 2e-9 of the error checked before, which was a check at the solver's noise) on
+    another; 1 rank: within 1e-12 of the error. The halo never exceeds the particle set (one
+    rank: all of it) and the record holds a peak after every phase."""
     (halo,) = load_benchmark("bench_memory").main(["--small"])
     (whole,) = load_benchmark("bench_memory").main(["--small", "--no-halo"])
     assert whole["halo_particles"] == whole["particles"]
@@ -49,7 +52,7 @@ def test_bench_memory_halo_equals_whole():
     if COMM.size == 1:
         assert halo["halo_particles"] == halo["particles"]
     assert halo["nonzeros"] == whole["nonzeros"]
-    assert abs(halo["l2_error"] - whole["l2_error"]) <= 2e-9 * whole["l2_error"]
+    assert abs(halo["l2_error"] - whole["l2_error"]) <= 5 * whole["rtol"]
     phases = {"mesh", "particles", "problem", "assemble", "matrix", "solve", "error"}
     assert set(halo["peak_rss_mb"]) == phases
 

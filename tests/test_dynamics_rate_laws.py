@@ -351,7 +351,7 @@ def test_state_criterion_refusals():
     with pytest.raises(ValueError, match=r"StateAbove's where returned shape \(1,\)"):
         mf.StateAbove("damage", 0.5, where=lambda x: np.ones(1, bool)).select(patch, ctx)
     solution.material = elastic_twin(HJC)
-    with pytest.raises(ValueError, match="reads the state of a rate-form law"):
+    with pytest.raises(ValueError, match="reads the state of a law with state"):
         mf.StateAbove("damage", 0.5).select(patch, ctx)
 
 

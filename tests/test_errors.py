@@ -407,3 +407,47 @@ def test_facets_that_select_nothing_or_are_not_facets_are_refused_by_name():
         mf.ExplicitDynamics.fe(V, mat, fixed_facets=none)
     with pytest.raises(ValueError, match=r"fixed_facets holds no facet on any rank"):
         mf.ExplicitDynamics.fe(V, mat, fixed_facets=[(right, (0,)), (none, (1,))])
+
+
+def _second_order_mesh():
+    """Two 6-node triangles of the unit square, the mid-edge nodes of its right edge bowed
+    out (a curved boundary, as gmsh writes second-order meshes); on rank 0."""
+    x = np.array(
+        [[0, 0], [1, 0], [1, 1], [0, 1], [0.5, 0], [1.1, 0.5], [0.5, 1], [0, 0.5], [0.5, 0.5]],
+        dtype=float,
+    )
+    # DOLFINx's P2 triangle: the vertices, then the nodes on the edges opposite them
+    cells = np.array([[0, 1, 2, 5, 8, 4], [0, 2, 3, 6, 7, 8]], dtype=np.int64)
+    if COMM.rank:
+        x, cells = x[:0], cells[:0]
+    if _compat.MODERN:
+        import basix.ufl
+        import ufl
+
+        domain = ufl.Mesh(basix.ufl.element("Lagrange", "triangle", 2, shape=(2,)))
+        return dolfinx.mesh.create_mesh(COMM, cells, domain, x)
+    import ufl
+
+    domain = ufl.Mesh(ufl.VectorElement("Lagrange", "triangle", 2))
+    return dolfinx.mesh.create_mesh(COMM, cells, x, domain)
+
+
+def test_curved_cells_are_refused_by_name():
+    """A mesh of second-order geometry (gmsh's curved cells) failed deep in the quadrature with
+    numpy's "matmul: Input operand 1 has a mismatch in its core dimension"; FE values at points
+    said the P1 space had "3 nodes per cell where the cell has 6 vertices". Now each entry point
+    names the mesh's degree and the fix, on every rank."""
+    msh = _second_order_mesh()
+    assert _compat.coordinate_degree(msh) == 2
+    fix = r"degree-2 coordinate element \(curved cells\).*first-order geometry"
+    with pytest.raises(ValueError, match=r"ParticleSet: the mesh has a " + fix):
+        mf.ParticleSet.from_cells(msh, 0.25)
+    cells = np.arange(msh.topology.index_map(2).size_local, dtype=np.int32)
+    with pytest.raises(ValueError, match=r"ParticlePatch: the mesh has a " + fix):
+        mf.ParticlePatch(msh, cells, 0.25)
+    V = _compat.vector_function_space(msh)
+    with pytest.raises(ValueError, match=r"FE values at points: the mesh has a " + fix):
+        mf.tabulate_fe_basis(V, np.array([[0.5, 0.5]]))
+    # the curved boundary's facet is found by its vertices (x = 1), not its bowed midpoint
+    right = mf.boundary_facets(msh, lambda x: np.isclose(x[0], 1.0))
+    assert COMM.allreduce(right.size) == 1

@@ -17,6 +17,7 @@ import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
 from dolfinx_meshfree.couplings.base import CoupledSolution
 from dolfinx_meshfree.geometry.crack import CrackPlacementWarning
+from dolfinx_meshfree.geometry.patch_criteria import static_state_values
 from dolfinx_meshfree.physics.state import PointState
 from dolfinx_meshfree.statics.coupled import on_patch
 from dolfinx_meshfree.statics.coupled_newton import build_block_problem, law_internal_force
@@ -197,13 +198,18 @@ def test_a_growing_crack_grows_its_patch_as_a_fixed_patch_carries_it():
     assert abs(balance - dissipated) <= 2e-3 * dissipated
 
 
-@pytest.mark.parametrize("coupling", ["lagrange", "ramp"])
-def test_a_patch_grown_into_yielded_cells_carries_their_states(coupling):
-    """A bar in uniaxial tension (plane strain, rollers on the left end and the bottom), J2
-    with hardening, written as a DOLFINx user writes it (``CoupledLinearProblem``, followed by
+@pytest.mark.parametrize(
+    "coupling, plane, by", [("lagrange", "strain", "field"), ("ramp", "strain", "field"),
+                            ("lagrange", "stress", "state"), ("edge-to-edge", "strain", "state")]
+)  # fmt: skip
+def test_a_patch_grown_into_yielded_cells_carries_their_states(coupling, plane, by):
+    """A bar in uniaxial tension (rollers on the left end and the bottom), J2 with hardening,
+    written as a DOLFINx user writes it (``CoupledLinearProblem``, followed by
     ``problem.model``). The patch holds x in 0.75 .. 1.25 at first; ``adapt=FieldAbove(...)``
-    adds the cells right of x = 1.2 once their strain passes twice the yield strain, so the
-    cells converted are yielded. The field is uniform, which FE, the MLS and the coupling
+    adds the cells right of x = 1.2 once their strain passes twice the yield strain, or
+    ``adapt=StateAbove("alpha", ...)`` once their equivalent plastic strain passes 1e-3 (the
+    law's committed state at the FE points; it refused a static model before), so the cells
+    converted are yielded. The field is uniform, which FE, the MLS and the coupling
     reproduce exactly, so the path must be the one of a patch that held those cells from the
     start: the load factors equal to 1e-10 of the peak (measured 1.3e-12, lagrange and the
     ramp, whose blended interface cells move with the patch), the converted
@@ -216,7 +222,7 @@ def test_a_patch_grown_into_yielded_cells_carries_their_states(coupling):
         COMM, [[0.0, 0.0], [length, width]], [8, 2], dolfinx.mesh.CellType.quadrilateral
     )
     V = _compat.vector_function_space(msh)
-    law = mf.J2Plasticity(E=E_steel, nu=0.3, sigma_y=200.0, H=2e3, plane="strain")
+    law = mf.J2Plasticity(E=E_steel, nu=0.3, sigma_y=200.0, H=2e3, plane=plane)
     u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
     a = ufl.inner(law.elastic().ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx
     right = mf.boundary_facets(msh, lambda p: np.isclose(p[0], length))
@@ -240,17 +246,28 @@ def test_a_patch_grown_into_yielded_cells_carries_their_states(coupling):
         options = mf.PathOptions(increment=5e-4, end=8e-3, max_increment=1e-3)
         return mf.follow_path(problem.model, control, options, adapt=adapt)
 
-    grown = run(lambda x: (x[0] > 0.7) & (x[0] < 1.3), mf.FieldAbove(late, 2 * eps_y))
+    if by == "field":
+        criterion = mf.FieldAbove(late, 2 * eps_y)
+    else:
+        criterion = mf.StateAbove("alpha", 1e-3, where=lambda x: x[:, 0] > 1.2)
+    grown = run(lambda x: (x[0] > 0.7) & (x[0] < 1.3), criterion)
     fixed = run(lambda x: x[0] > 0.7, None)
     assert len(grown.patch_events) == 1 and grown.patch_events[0].cells_added == 6
     before, after, moved, crossed = grown.patch_events[0].carried
     assert before > 0.3 * grown.dissipated_energy[-1] and moved > 0 and crossed == 0
     assert abs(after - before) <= 1e-12 * before
     assert abs(grown.patch_events[0].energy_change) <= 1e-10 * grown.dissipated_energy[-1]
-    assert len(grown.control) == len(fixed.control)
-    gap = np.abs(np.subtract(grown.load_factor, fixed.load_factor)).max()
-    assert gap <= 1e-10 * max(fixed.load_factor)
-    if coupling == "lagrange":  # a threshold the strain never reaches: said, not silent
+    if plane == "stress":  # uniaxial stress: the bilinear curve in closed form, u = L e_xx
+        for path in (grown, fixed):
+            e = np.asarray(path.control) / length
+            t_el = E_steel * e
+            t = np.where(t_el <= 200.0, t_el, (200.0 + 2e3 * e) / (1 + 2e3 / E_steel))
+            assert np.abs(np.asarray(path.load_factor) - t).max() <= 1e-10 * t.max()
+    else:  # the same steps as the fixed patch
+        assert len(grown.control) == len(fixed.control)
+        gap = np.abs(np.subtract(grown.load_factor, fixed.load_factor)).max()
+        assert gap <= 1e-10 * max(fixed.load_factor)
+    if coupling == "lagrange" and by == "field":  # a threshold never reached: said, not silent
         with pytest.warns(
             mf.PatchCriterionWarning, match=r"follow_path: .* named no cell in 10 converged"
         ):
@@ -308,3 +325,20 @@ def test_bad_adapt():
     efg.add_cohesive(notch, mf.LinearCohesive(FT, GF))
     with pytest.raises(TypeError, match="pure EFGElasticity has particles everywhere"):
         mf.follow_path(efg, control, opts, adapt=mf.NearTips())
+
+
+def test_state_criterion_of_a_static_model_names_the_laws():
+    """``StateAbove`` in statics: a law without state is refused naming the laws that have one;
+    a variable the law does not have, naming the scalars it has."""
+    law = mf.LinearElastic(E, NU, plane="stress")
+    model, _, control = _plate(law, _near_crack)
+    opts = mf.PathOptions(increment=1e-3, end=0.1)
+    with pytest.raises(ValueError, match=r"in statics J2Plasticity, RankineDamage.*LinearElastic"):
+        mf.follow_path(model, control, opts, adapt=mf.StateAbove("alpha", 1e-3))
+    j2 = mf.J2Plasticity(E=200e3, nu=0.3, sigma_y=200.0, plane="stress")
+    store = PointState(j2, np.zeros((2, 2)), None, np.array([0, 1]))
+    with pytest.raises(ValueError, match=r"'plastic_strain' is not a scalar.*\['alpha', 'dissip"):
+        static_state_values([store], "plastic_strain")
+    store.committed["alpha"][:] = [[0.0], [2e-3]]
+    cells, values, virgin = static_state_values([store], "alpha")
+    assert cells.tolist() == [0, 1] and values.tolist() == [0.0, 2e-3] and virgin == 0.0

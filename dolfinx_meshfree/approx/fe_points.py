@@ -24,6 +24,7 @@ import numpy.typing as npt
 import scipy.sparse as sp
 
 from .. import _compat
+from ..geometry.quadrature import require_affine
 from ..parallel import raise_on_all_ranks
 from . import batched
 from .neighbours import check_points
@@ -52,6 +53,7 @@ class PointsOutsideMeshError(ValueError):
 
 def _check_space(V: dolfinx.fem.FunctionSpace) -> None:
     msh = V.mesh
+    require_affine(msh, "FE values at points")
     ncv = _compat.geometry_dofmap(msh).shape[1]
     if V.dofmap.dof_layout.num_dofs != ncv:
         raise ValueError(

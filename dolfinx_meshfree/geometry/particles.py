@@ -24,7 +24,7 @@ from ..approx.neighbours import check_points
 from ..parallel import Layout, raise_on_all_ranks
 from .bodies import mesh_bodies
 from .placement_3d import check_border_3d, conforming_layer_3d, distance_to_facets
-from .quadrature import cell_quadrature, cell_sizes, lattice_quadrature
+from .quadrature import cell_quadrature, cell_sizes, lattice_quadrature, require_affine
 
 if TYPE_CHECKING:  # annotations only
     import dolfinx.mesh
@@ -263,6 +263,8 @@ class ParticleSet:
             if mesh is None:
                 raise ValueError("ParticleSet needs comm= or mesh=")
             comm = mesh.comm
+        if mesh is not None:
+            require_affine(mesh, "ParticleSet")
         self.comm = comm
         gdim = mesh.geometry.dim if mesh is not None else np.asarray(positions).shape[-1]
         x = raise_on_all_ranks(comm, lambda: check_points(positions, gdim, "positions"))

@@ -21,6 +21,7 @@ from ..parallel import raise_on_all_ranks
 from .adaptive_quadrature import AdaptiveQuadrature
 from .crack import CRACK_METHODS, Crack, place_crack
 from .particles import ParticleSet
+from .quadrature import require_affine
 
 if TYPE_CHECKING:  # annotations only
     from mpi4py import MPI
@@ -100,6 +101,7 @@ class ParticlePatch:
         quadrature: AdaptiveQuadrature | None = None,
     ) -> None:
         comm = mesh.comm
+        require_affine(mesh, "ParticlePatch")
         # what :meth:`grown` builds the larger patch with
         self._options = {
             "spacing": spacing, "jitter": jitter, "seed": seed, "placement": placement,

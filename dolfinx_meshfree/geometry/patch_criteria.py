@@ -31,6 +31,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import dolfinx
@@ -44,6 +45,7 @@ from .crack import _orient, particle_spacing, point_segment_distance, segments_i
 from .quadrature import QuadraturePoints
 
 if TYPE_CHECKING:  # annotations only
+    from ..physics.state import PointState
     from .patch import ParticlePatch
 
 __all__ = [
@@ -58,6 +60,7 @@ __all__ = [
     "as_criteria",
     "cells_near",
     "named_cells",
+    "static_state_values",
 ]
 
 
@@ -384,7 +387,10 @@ class FieldAbove:
 
     Args:
         field: ``"max_principal_stress"`` (the solution's material law on the displacement
-            gradient; Rankine), ``"max_principal_strain"``, or a callable ``field(x, grad)``
+            gradient; Rankine; with a law with state, its elastic twin's stress of the total
+            strain: a damage law's effective stress, plasticity's trial stress, not the stress
+            of the return map: :class:`StateAbove` reads the state itself),
+            ``"max_principal_strain"``, or a callable ``field(x, grad)``
             of the midpoints (m, gdim) and the displacement gradients (m, gdim, gdim) returning
             (m,) values (e.g. a damage or ``det F`` indicator).
         threshold: The value above which (``>=``) a cell joins the patch.
@@ -444,7 +450,10 @@ class StateAbove:
     """The FE cells where a state variable of a rate-form law (``"damage"``,
     ``"plastic_strain"``, any scalar of the law's state) passes ``threshold`` at any of the
     cell's points: failing elements become particles (issue 27, item 4; the state is carried
-    over by the conversion).
+    over by the conversion). In statics (``follow_path(..., adapt=...)``), the committed state
+    of a law with state at the FE cells' quadrature points: ``J2Plasticity``'s ``"alpha"``
+    (the equivalent plastic strain) or ``"dissipation"``, ``RankineDamage``'s ``"damage"``,
+    ``"kappa"`` or ``"dissipation"``: the patch grows where the material yields or softens.
 
     Args:
         name: The state variable (the error of an unknown name lists the law's scalar ones:
@@ -458,7 +467,8 @@ class StateAbove:
             correction is singular there). ``None`` (default): any cell.
 
     Needs a model whose material is a rate-form law (``HolmquistJohnsonCook``,
-    ``JohnsonCook``); for a hyperelastic one, :class:`FieldAbove`.
+    ``JohnsonCook``) or, in statics, a law with state (``J2Plasticity``, ``RankineDamage``);
+    for a law without state, :class:`FieldAbove`.
     """
 
     name = "StateAbove"
@@ -489,11 +499,15 @@ class StateAbove:
 
         def check() -> tuple[np.ndarray, np.ndarray]:
             values = getattr(material, "state_values", None)
+            stores = [s for s in getattr(context.solution, "states", []) if s.cells is not None]
+            if values is None and stores:  # statics: the laws' committed states
+                values = partial(static_state_values, stores)
             if values is None:
                 raise ValueError(
-                    f"{self!r} reads the state of a rate-form law (HolmquistJohnsonCook, "
-                    f"JohnsonCook); the model's material is {type(material).__name__}: use "
-                    "FieldAbove for a law without state"
+                    f"{self!r} reads the state of a law with state (HolmquistJohnsonCook, "
+                    f"JohnsonCook; in statics J2Plasticity, RankineDamage); the model's "
+                    f"material is {type(material).__name__}: use FieldAbove for a law without "
+                    "state"
                 )
             cells, v, virgin = values(self.variable)
             if self.threshold <= virgin:
@@ -513,6 +527,27 @@ class StateAbove:
                 patch.comm, lambda: _marked(patch.mesh, self.where, "StateAbove's where")
             )
         return out
+
+
+def static_state_values(
+    stores: list[PointState], name: str
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """``(cells, values, virgin)`` of a scalar state variable ``name`` of a static model's laws
+    with state: the committed value at every point of ``stores`` (FE cells and particle
+    points, each with its local cell), and its value in the virgin state.
+
+    Raises:
+        ValueError: ``name`` is not a scalar of the laws' state (the message lists them).
+    """
+    law = stores[0].law
+    scalars = sorted(k for k, n in law.state_fields.items() if n == 1)
+    if name not in scalars:
+        raise ValueError(
+            f"{name!r} is not a scalar state variable of {type(law).__name__}; use one of {scalars}"
+        )
+    cells = np.concatenate([np.zeros(0, np.int64)] + [s.cells for s in stores])
+    values = np.concatenate([np.zeros(0)] + [s.committed[name].reshape(-1) for s in stores])
+    return cells, values, float(law.initial_state(1)[name].ravel()[0])
 
 
 class CellsWhere:

@@ -34,6 +34,7 @@ __all__ = [
     "lattice_quadrature",
     "particle_quadrature_degree",
     "reference_facet_points",
+    "require_affine",
 ]
 
 #: The exactness degree of the facet rule of tractions in explicit dynamics (3 Gauss points on
@@ -64,6 +65,22 @@ class QuadraturePoints:
         return self.weights.shape[0]
 
 
+def require_affine(msh: dolfinx.mesh.Mesh, what: str) -> None:
+    """Refuse a mesh whose coordinate element has degree > 1 (curved cells, e.g. gmsh's
+    second-order meshes), naming ``what`` and the fix. The particle methods map quadrature,
+    particles, facets and point evaluation with the cells' vertices (P1/Q1 geometry). The
+    degree is the same on every rank: every rank raises."""
+    degree = _compat.coordinate_degree(msh)
+    if degree != 1:
+        raise ValueError(
+            f"{what}: the mesh has a degree-{degree} coordinate element (curved cells); the "
+            "particle methods need degree-1 (straight-sided) cells. Make the mesh with "
+            "first-order geometry (gmsh: leave out gmsh.model.mesh.setOrder; "
+            "dolfinx.io.gmshio.model_to_mesh then builds degree-1 cells), refined where the "
+            "boundary curves: mf.boundary_facets selects its straight facets by their vertices"
+        )
+
+
 def cell_quadrature(
     msh: dolfinx.mesh.Mesh, degree: int, cells: npt.ArrayLike | None = None
 ) -> QuadraturePoints:
@@ -75,6 +92,7 @@ def cell_quadrature(
             Belytschko et al. 1995, sec. 5.1.2 (4 x 4 x 4 on hexahedra).
         cells: Local cell indices (default: every owned cell).
     """
+    require_affine(msh, "cell_quadrature")
     X, w = _compat.quadrature_rule(msh.topology.cell_type.name, degree)
     return _mapped_rule(msh, X, w, cells)
 
@@ -393,6 +411,7 @@ def facet_quadrature(
             facets, e.g. a patch interface); default: the facet's first cell, which on exterior
             facets gives the outward normal.
     """
+    require_affine(msh, "facet_quadrature")
     tdim, gdim = msh.topology.dim, msh.geometry.dim
     cname = msh.topology.cell_type.name
     if cname not in _FACET_CELLS or gdim != tdim:

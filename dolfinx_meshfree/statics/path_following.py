@@ -894,9 +894,11 @@ def _reequilibrated(
 
 def _solution(built: BlockModel, model: CoupledElasticity) -> CoupledSolution:
     """The coupled solution at ``built``'s state, with the model's small-strain law (for the
-    criteria's stresses; collective)."""
+    criteria's stresses) and the committed states of its laws (for
+    :class:`~dolfinx_meshfree.StateAbove`; collective)."""
     solution = built.solution()
     solution.material = model.material
+    solution.states = built.problem.states
     return solution
 
 

@@ -881,9 +881,14 @@ def _reequilibrated(
     try:
         t_new, its = _reequilibrate(problem, x, t, tau, g, loads.q, tol, stall, options, solver)
     except ArithmeticError as err:
+        fix = (
+            "a smaller increment (PathOptions.max_increment: the patch then grows by fewer "
+            "cells at a time) or a patch that covers more from the start"
+            if refit is not None
+            else "a smaller increment or a larger CohesiveGrowth.ahead"
+        )
         raise PathError(
-            f"{event} and no equilibrium was found at the same control value ({err}); choose a "
-            "smaller increment or a larger CohesiveGrowth.ahead",
+            f"{event} and no equilibrium was found at the same control value ({err}); choose {fix}",
             result,
         ) from None
     problem.t = t_new

@@ -306,22 +306,16 @@ def boundary_facets(
     facets = facets[facets < msh.topology.index_map(tdim - 1).size_local]
     if marker is not None and facets.size:
         nodes = msh.geometry.x[_compat.entities_to_geometry(msh, tdim - 1, facets)]
-        mid = nodes.mean(axis=1).T
-        keep = np.asarray(marker(mid), dtype=bool)
-        vertices = msh.geometry.x[_facet_vertex_nodes(msh, facets)]  # (nf, nv, 3)
+        keep = np.asarray(marker(nodes.mean(axis=1).T), dtype=bool)
+        # the vertices: the first nodes of each facet (DOLFINx numbers a facet's vertices
+        # before its higher-order nodes)
+        facet_name = _FACET_CELLS.get(msh.topology.cell_type.name, "point")
+        nv = {"point": 1, "interval": 2, "triangle": 3, "quadrilateral": 4}[facet_name]
+        vertices = nodes[:, :nv]  # (nf, nv, 3)
         at_vertices = np.asarray(marker(vertices.reshape(-1, 3).T), dtype=bool)
         keep |= at_vertices.reshape(vertices.shape[:2]).all(axis=1)
         facets = facets[keep]
     return np.asarray(facets, dtype=np.int32)
-
-
-def _facet_vertex_nodes(msh: dolfinx.mesh.Mesh, facets: np.ndarray) -> np.ndarray:
-    """Geometry nodes (nf, nv) of the facets' vertices (the first ``nv`` of each facet's
-    geometry nodes: DOLFINx numbers a facet's vertices before its higher-order nodes)."""
-    nodes = _compat.entities_to_geometry(msh, msh.topology.dim - 1, facets)
-    facet_name = _FACET_CELLS.get(msh.topology.cell_type.name, "point")
-    nv = {"point": 1, "interval": 2, "triangle": 3, "quadrilateral": 4}[facet_name]
-    return nodes[:, :nv]
 
 
 _FACET_CELLS = {

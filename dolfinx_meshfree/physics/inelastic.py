@@ -481,6 +481,8 @@ class J2Plasticity:
         resolve_density(self)
         lin3 = LinearElastic(self.E, self.nu, plane=None)
         object.__setattr__(self, "_mu", lin3.mu)
+        if self.plane == "stress":  # the plane-stress Hooke matrix of the return map
+            object.__setattr__(self, "_C", LinearElastic(self.E, self.nu, "stress").voigt())
         object.__setattr__(self, "_K", self.E / (3.0 * (1.0 - 2.0 * self.nu)))
 
     @property
@@ -596,7 +598,7 @@ class J2Plasticity:
     ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
         """:meth:`update` in plane stress: the closest-point return of the class docstring."""
         E, nu, H, sy = self.E, self.nu, self.H, self.sigma_y
-        C = self.elastic().voigt()
+        C = self._C
         alpha = np.asarray(state["alpha"], dtype=float)[:, 0]
         eps_p = np.asarray(state["plastic_strain"], dtype=float)
         s_tr = (strain - eps_p[:, _PLANE]) @ C.T
@@ -666,7 +668,7 @@ class J2Plasticity:
                 _as_points(strain, self.nv, "J2Plasticity")
                 - np.asarray(state["plastic_strain"], dtype=float)[:, _PLANE]
             )
-            elastic = 0.5 * np.einsum("qi,ij,qj->q", ee, self.elastic().voigt(), ee)
+            elastic = 0.5 * np.einsum("qi,ij,qj->q", ee, self._C, ee)
             return elastic + 0.5 * self.H * np.asarray(state["alpha"], dtype=float)[:, 0] ** 2
         tr, dev = self._elastic_parts(strain, state["plastic_strain"])
         alpha = np.asarray(state["alpha"], dtype=float)[:, 0]

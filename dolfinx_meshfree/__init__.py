@@ -8,7 +8,8 @@ Public API (stable names):
 * particles: :class:`ParticleSet`; cracks: :class:`Crack` (a 2D polyline in a
   :class:`ParticlePatch`), cutting MLS weights by :func:`attach_cracks` (diffraction or visibility);
 * solvers: :class:`EFGElasticity` (pure EFG), :func:`solve_fe_elasticity` and
-  :func:`solve_forms` (pure FE: a material, or the user's own forms);
+  :func:`solve_forms` (pure FE: a material, or the user's own forms), :class:`FEElasticity`
+  (pure FE with a law with state);
 * material and exact solutions: :class:`LinearElastic`, :class:`TimoshenkoBeam`;
 * finite deformation: the :class:`Material` protocol (nominal stress ``P(F)``, its tangent, ``W``,
   a UFL twin, the wave speed), :class:`SaintVenantKirchhoff`, :class:`NeoHookean`, and
@@ -89,6 +90,7 @@ from .statics.coupled import (
 from .statics.crack_initiation import CrackInitiation
 from .statics.efg import EFGElasticity, EFGSolution
 from .statics.fe import FESolution, solve_fe_elasticity, solve_forms
+from .statics.fe_model import FEElasticity
 from .statics.growth import GrowthStep, GrowthStopped, QuasiStaticCrackGrowth, TipAtBoundary
 from .statics.large import IterativeOptions, chunked_l2_error, solve_large
 from .statics.newton import NewtonError, NewtonOptions, NewtonResult
@@ -160,6 +162,7 @@ __all__ = [
     "EFGSolution",
     "EnergyRecord",
     "ExplicitDynamics",
+    "FEElasticity",
     "FENonlinearProblem",
     "FESolution",
     "FieldAbove",

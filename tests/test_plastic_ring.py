@@ -62,13 +62,15 @@ def test_a_curved_boundary_is_selected_by_its_vertices():
 
 
 def _model(method: str, cell: str = "quadrilateral", plane: str = "strain"):
-    """The ring's model: pure EFG, or a patch of the cells within r < 1.35 (the first 4 of 12
-    layers, where the ring yields first) coupled by ``method``."""
+    """The ring's model: pure EFG, pure FE, or a patch of the cells within r < 1.35 (the first 4
+    of 12 layers, where the ring yields first) coupled by ``method``."""
     msh = _ring(cell)
     law = mf.J2Plasticity(E=E, nu=NU, sigma_y=SY, H=0.0, plane=plane)
     spacing = (B - A) / NR
     if method == "efg":
         model = mf.EFGElasticity(mf.ParticleSet.from_cells(msh, spacing), law)
+    elif method == "fe":  # the FE reference: the law on every cell
+        model = mf.FEElasticity(_compat.vector_function_space(msh), law)
     else:
         cells = dolfinx.mesh.locate_entities(msh, 2, lambda x: _radius(x) < 1.35 + 1e-9)
         patch = mf.ParticlePatch(msh, cells, spacing=spacing)
@@ -114,6 +116,10 @@ LIMIT = {  # (method, cell, plane): (elastic measured, checked), (limit measured
     ("lagrange", "quadrilateral", "stress"): ((-2.4e-3, 5e-3), (5.5e-4, 1.1e-3)),
     ("efg", "quadrilateral", "stress"): ((-1.6e-3, 3.5e-3), (9e-5, 2e-4)),
     ("bridging", "quadrilateral", "stress"): ((-2.4e-3, 5e-3), (7.0e-4, 1.4e-3)),
+    # pure FE (mf.FEElasticity): Q1's full rule stiffens the isochoric flow of plane strain
+    ("fe", "quadrilateral", "strain"): ((-1.9e-3, 4e-3), (2.4e-3, 5e-3)),
+    ("fe", "quadrilateral", "stress"): ((-1.6e-3, 3.5e-3), (1.5e-3, 3e-3)),
+    ("fe", "triangle", "stress"): ((-1.5e-2, 3e-2), (1.4e-3, 3e-3)),
 }
 
 

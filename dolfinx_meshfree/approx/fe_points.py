@@ -37,6 +37,7 @@ if TYPE_CHECKING:  # annotations only
 
 __all__ = [
     "PointsOutsideMeshError",
+    "check_p1_space",
     "ensure_points_in_mesh",
     "evaluate_fe_function",
     "locate_points",
@@ -51,7 +52,8 @@ class PointsOutsideMeshError(ValueError):
     """Some evaluation points lie in no cell of the mesh."""
 
 
-def _check_space(V: dolfinx.fem.FunctionSpace) -> None:
+def check_p1_space(V: dolfinx.fem.FunctionSpace) -> None:
+    """Refuse a space other than degree-1 Lagrange on affine cells (local)."""
     msh = V.mesh
     require_affine(msh, "FE values at points")
     ncv = _compat.geometry_dofmap(msh).shape[1]
@@ -143,7 +145,7 @@ def tabulate_in_cells(
     Returns:
         :class:`ShapeTable` with ``num_local_nodes`` columns (owned and ghost nodes of ``V``).
     """
-    _check_space(V)
+    check_p1_space(V)
     msh = V.mesh
     gdim = msh.geometry.dim
     x = check_points(points, gdim, "points")
@@ -304,7 +306,7 @@ def tabulate_fe_basis(
     Returns:
         :class:`ShapeTable` (m x num_global_nodes) with global node (block) columns.
     """
-    _check_space(V)
+    check_p1_space(V)
     msh = V.mesh
     gdim = msh.geometry.dim
     x = raise_on_all_ranks(msh.comm, lambda: check_points(points, gdim, "points"))
@@ -347,7 +349,7 @@ def evaluate_fe_function(u: dolfinx.fem.Function, points: npt.ArrayLike) -> np.n
         (m, bs) values at this rank's points.
     """
     V = u.function_space
-    _check_space(V)
+    check_p1_space(V)
     msh = V.mesh
     x = raise_on_all_ranks(msh.comm, lambda: check_points(points, msh.geometry.dim, "points"))
     bs = V.dofmap.index_map_bs

@@ -9,12 +9,15 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import dolfinx
 import numpy as np
+import numpy.typing as npt
 import ufl
 
 from .. import _compat
+from ..approx.fe_points import evaluate_fe_function
 from ..physics.materials import LinearElastic
 from .petsc import solve_lu
 
@@ -23,10 +26,18 @@ __all__ = ["FESolution", "solve_fe_elasticity", "solve_forms"]
 
 @dataclass
 class FESolution:
-    """Displacement Function and timings (``setup`` includes JIT compilation)."""
+    """Displacement Function and timings (``setup`` includes JIT compilation); of a law with
+    state (:class:`~dolfinx_meshfree.FEElasticity`), the committed ``states`` of its points
+    (:class:`~dolfinx_meshfree.physics.state.PointState`) and Newton's record ``newton``."""
 
     u: dolfinx.fem.Function
     timings: dict = field(default_factory=dict)
+    states: list = field(default_factory=list)
+    newton: Any = None
+
+    def displacement(self, points: npt.ArrayLike) -> np.ndarray:
+        """``u`` at any points of the mesh, (m, gdim) for this rank's ``points`` (collective)."""
+        return evaluate_fe_function(self.u, points)
 
     @property
     def num_dofs(self) -> int:

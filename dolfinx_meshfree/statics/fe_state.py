@@ -26,6 +26,7 @@ import ufl
 
 from .. import _compat
 from ..geometry.quadrature import cell_quadrature, cell_sizes
+from ..parallel import raise_on_all_ranks
 from ..physics.state import PointState, StatefulLaw
 
 __all__ = ["FE_STATE_DEGREE", "FEStateLaw", "check_bands", "ufl_voigt_strain"]
@@ -118,7 +119,11 @@ class FEStateLaw:
     def update(self) -> None:
         """Run the law at the current ``u`` from the committed state and write ``sigma_q`` and
         ``C_q`` (local: each rank its own cells)."""
-        stress, tangent = self.state.evaluate(self.strain())
+        strain = self.strain()
+        # on every rank alike (a return map that fails on one rank's points; Newton's line
+        # search shortens its step on every rank)
+        comm = self.u.function_space.mesh.comm
+        stress, tangent = raise_on_all_ranks(comm, lambda: self.state.evaluate(strain))
         nv = self.nv
         self.stress.x.array.reshape(-1, nv)[self._dofs] = stress
         self.tangent.x.array.reshape(-1, nv * nv)[self._dofs] = tangent.reshape(-1, nv * nv)

@@ -8,11 +8,12 @@ state ``x`` (one PETSc vector per field) they give the residual ``R(x)`` and the
 (:class:`~dolfinx_meshfree.statics.petsc.BlockSystem`, MUMPS by default or any ``petsc_options``)
 and
 updates ``x <- x + alpha dx``. By default (``line_search="guard"``) the full Newton step is
-taken unless it would invert the material at a point (``det F <= 0``) or make the residual
-non-finite or grow by more than ``growth`` times, in which case ``alpha`` halves: the residual
-norm is a poor merit function for finite elasticity (a good full step often raises it for an
-iteration: on a bent beam, an Armijo test on ``|R|`` took 13-14 damped iterations per load step
-where full steps took 4-5). ``line_search="armijo"`` halves until ``|R|`` falls by
+taken unless it would invert the material at a point (``det F <= 0``), take a law with state
+past what its return map solves (an ``ArithmeticError``: J2's plane-stress return at a strain
+far beyond a limit load), or make the residual non-finite or grow by more than ``growth`` times,
+in which case ``alpha`` halves: the residual norm is a poor merit function for finite
+elasticity (a good full step often raises it for an iteration: on a bent beam, an Armijo test
+on ``|R|`` took 13-14 damped iterations per load step where full steps took 4-5). ``line_search="armijo"`` halves until ``|R|`` falls by
 ``1 - 1e-4 alpha``; ``"none"`` always takes the full step.
 
 Convergence: ``|R(x)| <= max(atol, rtol |R(x_0)|)`` with ``x_0`` the state at the start of the
@@ -193,7 +194,7 @@ def newton(
             trial = _axpy(x, alpha, dx)
             try:
                 r_try = problem.residual(trial)
-            except DeformationError:  # the step inverts a point: shorten it
+            except (DeformationError, ArithmeticError):  # inverts a point, or past a return map
                 _destroy(trial)
                 alpha *= 0.5
                 continue
@@ -223,8 +224,8 @@ def newton(
                 _destroy(r)
                 raise NewtonError(
                     f"iteration {it + 1}: every step length down to 2^-{opts.max_halvings} "
-                    "inverts the material at a point (det F <= 0) or gives a non-finite "
-                    "residual; take smaller load steps (load_steps=)",
+                    "inverts the material at a point (det F <= 0), fails a law's return map or "
+                    "gives a non-finite residual; take smaller load steps (load_steps=)",
                     history,
                 )
             accepted = best  # no sufficient decrease: the best step, and carry on

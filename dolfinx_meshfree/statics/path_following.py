@@ -52,6 +52,7 @@ from .cohesive_initiation import BulkStrengthWarning, bulk_stress_peaks, site_at
 from .coupled_newton import BlockModel, build_block_problem, law_internal_force
 from .crack_initiation import CrackInitiation, first_stretch, insert_crack
 from .efg import EFGBlockModel, EFGElasticity
+from .fe_model import FEBlockModel, FEElasticity, fe_point_functional
 from .patch_growth import PatchEvent
 from .path_patch import check_adapt, fit_particles, grow_patch, path_context, site_context
 from .petsc import BlockSystem, SolverOptions, solver_options
@@ -285,21 +286,31 @@ def _owned(vecs: Sequence[PETSc.Vec]) -> list[np.ndarray]:
     return [v.getArray(readonly=True).copy() for v in vecs]
 
 
-def _particle_field(built: BlockModel | EFGBlockModel) -> int:
-    """The index of the particle field in ``x``: 1 beside the FE field, 0 in pure EFG."""
-    return 0 if isinstance(built, EFGBlockModel) else 1
+def _particle_field(built: BlockModel | EFGBlockModel | FEBlockModel) -> int:
+    """The index of the last primal field in ``x``: the particles' (1 beside the FE field, 0 in
+    pure EFG), or pure FE's only field (0)."""
+    return built.problem.num_primal - 1
 
 
-def _comm(built: BlockModel | EFGBlockModel) -> MPI.Comm:
-    return built.model.comm if isinstance(built, EFGBlockModel) else built.model.patch.comm
+def _comm(built: BlockModel | EFGBlockModel | FEBlockModel) -> MPI.Comm:
+    return built.model.patch.comm if isinstance(built, BlockModel) else built.model.comm
 
 
 def _control_function(
-    built: BlockModel | EFGBlockModel, control: DisplacementControl
+    built: BlockModel | EFGBlockModel | FEBlockModel, control: DisplacementControl
 ) -> Callable[[Sequence[np.ndarray]], float]:
     """``g`` of block fields given as owned arrays (collective)."""
     model, comm = built.model, _comm(built)
-    if isinstance(built, EFGBlockModel):
+    if isinstance(built, FEBlockModel):  # a linear functional of the owned dofs
+        points, directions = raise_on_all_ranks(
+            comm, lambda: control.check(model.V.mesh.geometry.dim)
+        )
+        w = fe_point_functional(model.V, points, directions)
+
+        def g(parts: Sequence[np.ndarray]) -> float:
+            return float(comm.allreduce(float(w @ np.asarray(parts[0]))))
+
+    elif isinstance(built, EFGBlockModel):
         P = model.particles
         points, directions = raise_on_all_ranks(comm, lambda: control.check(P.gdim))
         values = raise_on_all_ranks(comm, lambda: model.mls.tabulate(points, 0)).values
@@ -342,8 +353,8 @@ def _bulk_points(
     fe = getattr(getattr(built, "fe", None), "state_law", None)
     if fe is not None:
         out.append((fe.state, fe.weights, fe.strain))
-    side = built.particles
-    if side.state is not None:
+    side = getattr(built, "particles", None)  # pure FE has none
+    if side is not None and side.state is not None:
         forces = side.forces
 
         def particle_strain() -> np.ndarray:
@@ -410,6 +421,36 @@ def _newton_directions(
     system.destroy()
     _destroy_all(r)
     return da, db
+
+
+#: :func:`_turning` reports a control quantity that turns where, before the peak, its last
+#: converged step grew it by less than this share of its growth per unit load at the start.
+TURNING_RATE = 0.5
+
+
+def _turning(start: float, control: Sequence[float], load: Sequence[float]) -> str:
+    """Where a path cannot be followed before its peak: a clause for the error when the control
+    quantity's growth per unit load ``dg/dt`` in the last converged step fell below
+    :data:`TURNING_RATE` of its first step's (local; the same on every rank).
+
+    Before the peak a body that softens or yields gives way more per unit load, so its
+    control's ``dg/dt`` grows. One that falls heads for a maximum of the control along the
+    path, where no increment of it has a solution and every cut fails alike: a bar with a
+    notch on one side controlled by the elongation of its other edge, which shortens as the
+    notched side softens and the bar bends (measured: 0.10-0.23 of the first step's rate at the
+    failure, FE and lagrange, 4 and 8 cells across)."""
+    g, t = [start, *control], [0.0, *load]
+    if len(g) < 3 or t[1] <= 0.0 or t[-1] <= t[-2] or t[-1] < max(t):
+        return ""
+    first, last = (g[1] - g[0]) / t[1], (g[-1] - g[-2]) / (t[-1] - t[-2])
+    ratio = last / first
+    if ratio >= TURNING_RATE:
+        return ""
+    return (
+        f" (before the peak, the control quantity's growth per unit load fell to {ratio:.2g} "
+        "of its first step's: it stiffens while the body gives way, and turns here, where no "
+        "increment of it has a solution, e.g. an elongation on a side that the bending unloads)"
+    )
 
 
 def _reequilibrate(
@@ -692,6 +733,28 @@ def _check_growth(
         gr.check(model.cohesive, cracks)
 
 
+def _check_fe_only(law: object, growth: object, initiation: object, adapt: object) -> None:
+    """Refuse what a pure FE model cannot carry (local; every rank): an elastic law's straight
+    path; cracks, which FE cells do not carry; a patch to grow, which it has not."""
+    if isinstance(law, LinearElastic):
+        raise ValueError(
+            "follow_path needs a law whose response is not linear (a law with state): an "
+            "FEElasticity model with a LinearElastic law has a straight path; solve it"
+        )
+    given = [
+        name
+        for name, value in (("growth", growth), ("initiation", initiation), ("adapt", adapt))
+        if value is not None
+    ]
+    if given:
+        raise ValueError(
+            f"follow_path with an FEElasticity model and {', '.join(given)}: FE cells carry no "
+            "crack and the model has no particle patch to grow; put a ParticlePatch where the "
+            "crack runs (CoupledElasticity) or use EFGElasticity, or leave "
+            f"{' and '.join(given)} out"
+        )
+
+
 def _check_initiation(
     model: CoupledElasticity | EFGElasticity,
     efg: bool,
@@ -734,6 +797,8 @@ def _grow(
     its new end point, the refitted particle coefficients and the degrees the new segment was
     turned off the particles, or ``None`` when none grew. The model's cohesive record
     follows."""
+    if not growths:
+        return None
     sides = [s for s in built.problem.shared if isinstance(s, CohesiveSide)]
     domain = model._domain if efg else model.patch
 
@@ -1006,7 +1071,7 @@ def _destroy_all(objects: Sequence) -> None:
 
 
 def follow_path(
-    model: CoupledElasticity | EFGElasticity,
+    model: CoupledElasticity | EFGElasticity | FEElasticity,
     control: DisplacementControl | ArcLength,
     options: PathOptions,
     solver: str | SolverOptions = "mumps",
@@ -1025,8 +1090,10 @@ def follow_path(
 
     Args:
         model: A :class:`~dolfinx_meshfree.CoupledElasticity` (with a law with state, or any law
-            of a coupling of :data:`~dolfinx_meshfree.FINITE_STRAIN_COUPLINGS`), or a pure
-            :class:`~dolfinx_meshfree.EFGElasticity` with a law with state or at finite strain.
+            of a coupling of :data:`~dolfinx_meshfree.FINITE_STRAIN_COUPLINGS`), a pure
+            :class:`~dolfinx_meshfree.EFGElasticity` with a law with state or at finite strain,
+            or a pure FE :class:`~dolfinx_meshfree.FEElasticity` (no cracks: without
+            ``growth``, ``initiation`` and ``adapt``).
         control: The controlled quantity (:class:`DisplacementControl`), or
             :class:`ArcLength` (Crisfield's cylindrical arc length).
         options: Increments, the end, Newton's tolerances (:class:`PathOptions`).
@@ -1077,10 +1144,13 @@ def follow_path(
         ValueError: a control quantity that does not move under the load.
     """
     efg = isinstance(model, EFGElasticity)
-    comm = model.comm if efg else model.patch.comm
+    fe_only = isinstance(model, FEElasticity)
+    comm = model.comm if efg or fe_only else model.patch.comm
     solver = raise_on_all_ranks(comm, lambda: solver_options(solver))
     t0 = time.perf_counter()
-    cracks = model.cracks if efg else model.patch.cracks
+    if fe_only:
+        raise_on_all_ranks(comm, lambda: _check_fe_only(model.law, growth, initiation, adapt))
+    cracks = model.cracks if efg or fe_only else model.patch.cracks
     raise_on_all_ranks(comm, lambda: check_through(cracks, model.cohesive))
     growths = [] if growth is None else [growth] if isinstance(growth, CohesiveGrowth) else growth
     growths = list(growths)  # cracks that start during the path add theirs
@@ -1107,6 +1177,8 @@ def follow_path(
                 "finite-strain law) or cohesive cracks (add_cohesive): a LinearElastic model's "
                 "path is a straight line; solve it"
             )
+        built, u = model.block_model(), None
+    elif fe_only:
         built, u = model.block_model(), None
     else:
         u = dolfinx.fem.Function(model.V)
@@ -1141,6 +1213,7 @@ def follow_path(
             )  # fmt: skip
 
         t, tau, dtau, cuts = 0.0, 0.0 if arc else g(_owned(x)), options.increment, 0
+        tau_start = tau
         previous: list[np.ndarray] | None = None  # the last arc-length step's direction
         reason = ""
         max_dtau = options.max_increment or 8.0 * options.increment
@@ -1182,6 +1255,13 @@ def follow_path(
                         else "a control quantity that grows monotonically through the failure, "
                         "or a smaller increment"
                     )
+                    turning = "" if arc else _turning(tau_start, result.control, result.load_factor)
+                    if turning:  # no increment helps
+                        why += turning
+                        fix = (
+                            "a control quantity that grows monotonically through the failure "
+                            "(an opening across where the body fails, on the side that opens)"
+                        )
                     raise PathError(
                         f"the path could not be followed at step {step + 1}: from {what} "
                         f"{tau:.6g} (load factor {t:.6g}), at every increment down to "

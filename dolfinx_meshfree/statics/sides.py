@@ -558,13 +558,21 @@ def solve_load_steps(
         problem.t = t_new
         try:
             steps.append(newton(problem, x, options, solver))
-        except NewtonError:
+        except NewtonError as err:
             for v, w in zip(x, saved, strict=True):
                 w.copy(v)
                 w.destroy()
             problem.restore()
             if cuts == max_cuts:
-                raise
+                if not problem.states:
+                    raise
+                raise NewtonError(  # a body that yields or softens: maybe past its limit load
+                    f"{err}. No equilibrium was found from load factor {t:.6g} (the last "
+                    f"converged, of 1) even in steps of {dt:.3g}: a load above the limit load of "
+                    "a body that yields or softens has none, and load control cannot pass a "
+                    "peak; mf.follow_path(model, control, options) follows the path through it",
+                    err.history,
+                ) from None
             cuts, dt = cuts + 1, 0.5 * dt
             continue
         for w in saved:

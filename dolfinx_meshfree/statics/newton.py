@@ -13,8 +13,9 @@ past what its return map solves (an ``ArithmeticError``: J2's plane-stress retur
 far beyond a limit load), or make the residual non-finite or grow by more than ``growth`` times,
 in which case ``alpha`` halves: the residual norm is a poor merit function for finite
 elasticity (a good full step often raises it for an iteration: on a bent beam, an Armijo test
-on ``|R|`` took 13-14 damped iterations per load step where full steps took 4-5). ``line_search="armijo"`` halves until ``|R|`` falls by
-``1 - 1e-4 alpha``; ``"none"`` always takes the full step.
+on ``|R|`` took 13-14 damped iterations per load step where full steps took 4-5).
+``line_search="armijo"`` halves until ``|R|`` falls by ``1 - 1e-4 alpha``; ``"none"`` always
+takes the full step.
 
 Convergence: ``|R(x)| <= max(atol, rtol |R(x_0)|)`` with ``x_0`` the state at the start of the
 load step, or (PETSc SNES's step test) a step ``|alpha dx| <= stol |x|`` once ``|R|`` has fallen

@@ -423,6 +423,31 @@ def _newton_directions(
     return da, db
 
 
+#: A step whose load work per unit of control and of load (:func:`_lever`) exceeds the last
+#: step's by this factor is cut: measured at most 1.02 along localising paths (FE and lagrange
+#: bars with a notched column, 4 to 8 cells across) and 18.5-24.8 at the step where Newton's
+#: predictor, overshooting the peak, carried columns outside the controlled gauge onto their
+#: softening branch (3.8-5.2 times the energy of the localised path dissipated, silently).
+#: Legitimate paths meet it where the deformation moves off the control within a step (an
+#: interior cohesive crack growing down to a mouth opening controlled at the bottom edge:
+#: 9.3-fold, below 4 after four halvings; the shear beam once, 4.8-fold): their steps are cut,
+#: their checked results unchanged. A jump that persists down to ``2^-max_cuts`` of the
+#: increment stops the path (:class:`PathError`).
+LEVER_JUMP = 4.0
+
+
+def _lever(work: float, t: float, t_new: float, dg: float, peak: float) -> float | None:
+    """A step's load work per unit of control and of load, ``W / (t_mean dg)``: how far the
+    loaded points move per unit of the control quantity (constant while elastic, falling as the
+    control's gauge takes the deformation; below zero where the loaded points move back, as
+    past a snap-back of the load point). ``None`` where the load is under a fifth of the peak
+    (the work is then round-off), and for a step with no control increment."""
+    mean = 0.5 * (t + t_new)
+    if dg <= 0.0 or mean <= 0.2 * max(peak, t, t_new):
+        return None
+    return work / (mean * dg)
+
+
 #: :func:`_turning` reports a control quantity that turns where, before the peak, its last
 #: converged step grew it by less than this share of its growth per unit load at the start.
 TURNING_RATE = 0.5
@@ -1140,7 +1165,9 @@ def follow_path(
 
     Raises:
         PathError: a step does not converge after ``options.max_cuts`` halvings (naming the
-            step, the control value and the load factor; the path so far in ``result``).
+            step, the control value and the load factor, and a control quantity that turns
+            there; the path so far in ``result``), or converges at every increment only on a
+            branch where the body deforms off the control (:data:`LEVER_JUMP`).
         ValueError: a control quantity that does not move under the load.
     """
     efg = isinstance(model, EFGElasticity)
@@ -1218,6 +1245,7 @@ def follow_path(
         reason = ""
         max_dtau = options.max_increment or 8.0 * options.increment
         work, peak = 0.0, 0.0
+        lever: float | None = None  # the last step's load work per unit control and load
         step = 0
         while tau < options.end - 1e-14 * abs(options.end) and step < options.max_steps:
             target = min(options.end, tau + dtau)
@@ -1271,11 +1299,37 @@ def follow_path(
                 cuts, dtau = cuts + 1, 0.5 * dtau
                 continue
             problem.t = t_new
-            problem.commit(x)
             before = _owned(saved[: k_p + 1])
+            w_step = _work(loads.f_ext, x[: k_p + 1], before, t, t_new, comm)
+            new_lever = None if arc else _lever(w_step, t, t_new, target - tau, peak)
+            # (a lever below zero: the loaded points move back, as in a snap-back; not checked)
+            if lever is not None and new_lever is not None and 0 < LEVER_JUMP * lever < new_lever:
+                # the body deformed where the control does not see: another branch; a smaller
+                # increment keeps Newton's predictor off it
+                for v, w in zip(x, saved, strict=True):
+                    w.copy(v)
+                    w.destroy()
+                problem.restore()
+                result.cuts += 1
+                if cuts == options.max_cuts:
+                    raise PathError(
+                        f"the path could not be followed at step {step + 1}: from control "
+                        f"{tau:.6g} (load factor {t:.6g}), at every increment down to {dtau:.3g} "
+                        f"the step's converged state has the load's work per unit of control "
+                        f"and load {new_lever / lever:.3g} times the last step's: the body "
+                        "deforms where the control does not see (cells or particles off the "
+                        "control's gauge soften or yield, a second branch of the equilibrium); "
+                        "choose a control across the whole region that fails",
+                        result,
+                    )
+                cuts, dtau = cuts + 1, 0.5 * dtau
+                continue
+            problem.commit(x)
             for w in saved:
                 w.destroy()
-            work += _work(loads.f_ext, x[: k_p + 1], before, t, t_new, comm)
+            work += w_step
+            lever = new_lever
+            events = len(result.extensions) + len(result.patch_events) + len(result.initiations)
             t, tau, step = t_new, target, step + 1
             for _ in range(max((gr.max_extensions for gr in growths), default=0) + 1):
                 if criteria:  # the patch first: a crack's next extension stays inside it
@@ -1349,6 +1403,8 @@ def follow_path(
                         problem, x = built.problem, built.x
                         its, work = its + its_g, work + work_g
                     bulk, candidate = _bulk_peaks(built, law, result.refused, initiation)
+            if len(result.extensions) + len(result.patch_events) + len(result.initiations) > events:
+                lever = None  # a crack grew or started, the patch grew: a new model's lever
             if arc:
                 previous = previous_new
             peak = max(peak, t)

@@ -108,7 +108,7 @@
 #   four spacings out of the notch: 9.7 % at h = 20 mm, which fails it, 3.6 % at 15 mm, 1.7 %
 #   at 10 mm);
 # * the energy balance: external work minus stored energy equals the energy the laws dissipated
-#   (their closed forms at the committed states) within 2 %;
+#   (their records at the committed states) within 2 %;
 # * `band`: the damage stays in the patch (the FE cells stay elastic), else widen
 #   `--patch-width` (not for `fe`, where the cells carry it);
 # * the path passes the peak (the final load is below half the peak).
@@ -257,7 +257,7 @@ def notch_depth(args) -> float:
     if args.method != "fe":
         return float(args.notch_depth)
     hy = args.depth / max(2, round(args.depth / args.h))  # the rows of beam_model's mesh
-    return float(np.ceil(args.notch_depth / hy - 0.5) * hy)
+    return max(0.0, float(np.ceil(args.notch_depth / hy - 0.5) * hy))
 
 
 def patch_range(args, xm: float) -> tuple[float, float]:
@@ -386,9 +386,14 @@ def run(args) -> dict:
     )  # fmt: skip
     seconds = time.perf_counter() - t0
     model = path.model  # after the patch grew, the model on the grown patch
-    particles = {"efg": getattr(model, "particles", None), "fe": None}.get(
-        args.method, getattr(getattr(model, "patch", None), "particles", None)
-    )
+    if args.method == "fe":
+        particles, fe_cells = None, comm.allreduce(msh.topology.index_map(2).size_local)
+    elif args.method == "efg":
+        particles, fe_cells = model.particles, 0
+    else:
+        n = msh.topology.index_map(2).size_local
+        particles = model.patch.particles
+        fe_cells = comm.allreduce(int((~model.patch.in_patch[:n]).sum()))
     B = args.thickness
     load = np.array(path.load_factor) * B  # N
     k = int(np.argmax(load))
@@ -410,22 +415,17 @@ def run(args) -> dict:
     fe_damage = comm.allreduce(fe_damage, op=MPI.MAX)
     # the crack's area: its path beyond the notch (to the tip, or to the edge once it splits the
     # beam; the ligament for a given path), the ligament for the crack band
-    ligament = (args.depth - args.notch_depth) * B
+    ligament = (args.depth - notch_depth(args)) * B
     if cohesive is not None:
         q = particles_cracks(model)[0].points[1 if args.notch_depth > 0 else 0 :]
         ligament = float(np.linalg.norm(np.diff(q, axis=0), axis=1).sum()) * B
-    n_cells = msh.topology.index_map(2).size_local
     record = {
         "setup": args.setup,
         "method": args.method,
         "crack": args.crack,
         "h_mm": args.h,
         "particles": 0 if particles is None else particles.num_particles,
-        "fe_cells": 0
-        if args.method == "efg"
-        else comm.allreduce(n_cells)
-        if args.method == "fe"
-        else comm.allreduce(int((~model.patch.in_patch[:n_cells]).sum())),
+        "fe_cells": fe_cells,
         "notch_width_mm": hx if args.method == "fe" and args.notch_depth > 0 else 0.0,
         "notch_depth_mm": notch_depth(args),
         "newton_iterations": int(sum(path.iterations)),
@@ -522,7 +522,9 @@ def plot(r: dict, png: str) -> None:
         ".",
         ms=3,
         label=(
-            "crack faces past f_t" if r["crack"] == "cohesive" else "particle points, damage >= 0.9"
+            "crack faces past f_t"
+            if r["crack"] == "cohesive"
+            else f"{'cells' if r['method'] == 'fe' else 'particle'} points, damage >= 0.9"
         ),
     )
     if r["crack_polyline"]:

@@ -12,7 +12,11 @@ The checks are closed forms and exact properties (the ring's limit pressure is i
 - a bar with a notch (a column of cells narrower, top and bottom) localises in that column: the
   energy it dissipates is ``G_f`` times the notch's section whatever the mesh (the crack band's
   objectivity, issue 24's "two FE meshes"), and its peak is the same on both meshes;
-- the control quantity's functional equals the FE field's point values.
+- the same bar on coarse meshes localises too (a step that jumps onto a branch where columns
+  outside the control's gauge soften is cut: ``follow_path``'s ``LEVER_JUMP``);
+- the control quantity's functional equals the FE field's point values;
+- what has no answer says why: a control quantity that turns (its maximum along the path), a
+  load above the limit load, and what an FE model does not carry.
 
 Serial and 2 ranks.
 """

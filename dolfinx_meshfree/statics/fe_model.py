@@ -78,7 +78,8 @@ def _check_model(V: dolfinx.fem.FunctionSpace, law: object) -> None:
     if is_axisymmetric(law):
         raise ValueError(
             "FEElasticity is plane or 3D: an axisymmetric model needs the 2 pi r weights; "
-            "write its forms with mf.axisymmetric_measure and solve them with mf.solve_forms"
+            "write its forms with dolfinx_meshfree.physics.axisymmetry (radius, ufl_stress, "
+            "ufl_strain) and solve them with mf.solve_forms"
         )
     if law.gdim != V.mesh.geometry.dim:
         raise ValueError(
@@ -212,9 +213,7 @@ class FEElasticity:
         t0 = time.perf_counter()
         V, law = self.V, self.law
         msh = V.mesh
-        if getattr(
-            law, "needs_band", False
-        ):  # on every rank, before the assembly: no cell may snap back
+        if getattr(law, "needs_band", False):  # before the assembly: no cell may snap back
             n = msh.topology.index_map(msh.topology.dim).size_local
             raise_on_all_ranks(
                 self.comm, lambda: check_bands(msh, law, np.zeros(n, dtype=bool), 1.0)

@@ -80,7 +80,7 @@ def test_reduced_three_point_bend(tmp_path):
     zone = np.asarray(r["damage_zone"]).reshape(-1, 2)
     assert zone[:, 1].max() > 150.0
     assert np.abs(zone[:, 0] - 1000.0).max() < 2 * 25.0
-    assert P_LOW < r["peak_load_N"] < P_HIGH  # measured 1181 N
+    assert P_LOW < r["peak_load_N"] < P_HIGH  # measured 1090 N
 
 
 def test_reduced_fe_crack_band():

@@ -49,6 +49,7 @@ __all__ = [
     "component_conditions",
     "essential_conditions",
     "fe_active",
+    "fe_facet_loads",
     "fe_stiffness",
     "fix_fe_rows",
     "fixed_dofs",
@@ -319,28 +320,45 @@ def fix_fe_rows(
     return x_bc
 
 
+def fe_facet_loads(
+    V: dolfinx.fem.FunctionSpace,
+    facets: np.ndarray,
+    traction: Callable,
+    degree: int,
+    material: object,
+    comm: MPI.Comm,
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """The FE loads of ``traction(x, n)`` on owned ``facets`` (the rule of ``degree``, revolved
+    when ``material`` is axisymmetric): global dof rows and values per component, this rank's
+    contributions (collective: the traction is checked on every rank)."""
+    msh = V.mesh
+    gdim = msh.geometry.dim
+    l2g = fe_dof_layout(V)[1]
+    q = revolved_if(facet_quadrature(msh, facets, degree), material)
+    t = raise_on_all_ranks(
+        comm, lambda: vector_values(traction, (q.points, q.normals), len(q), "traction", gdim)
+    )
+    tab = tabulate_in_cells(V, q.points, q.cells, derivatives=0).values
+    fl = load_vector(tab, q.weights, t).reshape(-1, gdim)
+    rows = [gdim * l2g[: fl.shape[0]] + comp for comp in range(gdim)]
+    return rows, [fl[:, comp] for comp in range(gdim)]
+
+
 def traction_loads(problem: CoupledElasticity) -> tuple[PETSc.Vec, np.ndarray]:
     """Tractions on FE facets (FE load vector, PETSc) and on patch facets (particle loads in
     original particle order, local contributions), plus the body forces (FE cells with
     ``N_a``, patch cells with ``phi_J``). Collective."""
     V, comm = problem.V, problem.patch.comm
     msh, deg = V.mesh, problem.quadrature_degree
-    fe_layout, l2g = fe_dof_layout(problem.V)
+    fe_layout = fe_dof_layout(problem.V)[0]
     gdim = msh.geometry.dim
     f_fe_rows, f_fe_vals = [np.zeros(0, np.int64)], [np.zeros(0)]
     f_p = np.zeros(gdim * problem.patch.particles.num_particles)
     for facets, fn in problem.tractions:
         f_fe_facets, f_p_facets = split_facets(problem, facets)
-        q = revolved_if(facet_quadrature(msh, f_fe_facets, deg), problem.material)
-        t = raise_on_all_ranks(
-            comm,
-            lambda fn=fn, q=q: vector_values(fn, (q.points, q.normals), len(q), "traction", gdim),
-        )
-        tab = tabulate_in_cells(V, q.points, q.cells, derivatives=0).values
-        fl = load_vector(tab, q.weights, t).reshape(-1, gdim)
-        for comp in range(gdim):
-            f_fe_rows.append(gdim * l2g[: fl.shape[0]] + comp)
-            f_fe_vals.append(fl[:, comp])
+        rows, vals = fe_facet_loads(V, f_fe_facets, fn, deg, problem.material, comm)
+        f_fe_rows += rows
+        f_fe_vals += vals
         q = revolved_if(patch_facet_rule(problem, f_p_facets), problem.material)
         t = raise_on_all_ranks(
             comm,

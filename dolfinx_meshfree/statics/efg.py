@@ -93,7 +93,7 @@ from .fe_state import check_bands
 from .growth_update import local_update_for
 from .newton import NewtonOptions
 from .petsc import BlockSystem, SolverOptions, create_aij, create_vector, solver_options
-from .sides import BlockProblem, ParticleSide, particle_band_factor, solve_load_steps
+from .sides import BlockProblem, ParticleSide, particle_band_factor, solve_built
 from .sifs import solution_sifs
 
 if TYPE_CHECKING:  # annotations only
@@ -994,18 +994,7 @@ class EFGElasticity:
                 raise ValueError(f"load_steps={load_steps!r} must be an integer >= 1")
 
         raise_on_all_ranks(self.comm, check)
-        built = self.block_model()
-        t0 = time.perf_counter()
-        try:
-            result = solve_load_steps(
-                built.problem, built.x, load_steps, options or NewtonOptions(), solver
-            )
-            solution = built.solution()
-        finally:
-            built.destroy()
-        solution.timings["solve"] = time.perf_counter() - t0
-        solution.newton = result
-        return solution
+        return solve_built(self.block_model(), load_steps, options or NewtonOptions(), solver)
 
 
 @dataclass

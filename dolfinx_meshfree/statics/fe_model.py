@@ -37,19 +37,19 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from ..approx.fe_dofs import fe_dof_layout, node_flags
-from ..approx.fe_points import check_p1_space, tabulate_fe_basis, tabulate_in_cells
-from ..geometry.quadrature import facet_quadrature
+from ..approx.fe_points import check_p1_space, tabulate_fe_basis
+from ..couplings.assembly import fe_facet_loads
 from ..parallel import raise_on_all_ranks
 from ..physics.body_loads import CallableBodyForce
 from ..physics.materials import LinearElastic, is_axisymmetric, linear_twin
-from ..physics.operators import load_vector
 from ..physics.state import check_not_rate_law, is_stateful
 from ..physics.user_functions import check_arguments, check_facets, vector_values
+from .coupled_newton import check_load_steps
 from .fe import FESolution
 from .fe_state import check_bands
 from .newton import NewtonOptions
 from .petsc import SolverOptions, create_vector, solver_options
-from .sides import BlockProblem, FESide, solve_load_steps
+from .sides import BlockProblem, FESide, solve_built
 
 __all__ = ["FE_LOAD_DEGREE", "FEBlockModel", "FEElasticity", "fe_point_functional"]
 
@@ -185,24 +185,12 @@ class FEElasticity:
     def _loads(self) -> PETSc.Vec:
         """The reference load: tractions on facets and the body force (collective)."""
         V, comm = self.V, self.comm
-        msh = V.mesh
-        gdim = msh.geometry.dim
-        layout, l2g = fe_dof_layout(V)
         rows, vals = [np.zeros(0, np.int64)], [np.zeros(0)]
         for facets, fn in self.tractions:
-            q = facet_quadrature(msh, facets, FE_LOAD_DEGREE)
-            t = raise_on_all_ranks(
-                comm,
-                lambda fn=fn, q=q: vector_values(
-                    fn, (q.points, q.normals), len(q), "traction", gdim
-                ),
-            )
-            tab = tabulate_in_cells(V, q.points, q.cells, derivatives=0).values
-            fl = load_vector(tab, q.weights, t).reshape(-1, gdim)
-            for comp in range(gdim):
-                rows.append(gdim * l2g[: fl.shape[0]] + comp)
-                vals.append(fl[:, comp])
-        b = create_vector(comm, layout, np.concatenate(rows), np.concatenate(vals))
+            r, v = fe_facet_loads(V, facets, fn, FE_LOAD_DEGREE, self.material, comm)
+            rows += r
+            vals += v
+        b = create_vector(comm, fe_dof_layout(V)[0], np.concatenate(rows), np.concatenate(vals))
         for force in self.body_forces:  # per owned dof
             b.array[:] += force.fe_load(V, None, FE_LOAD_DEGREE)
         return b
@@ -249,26 +237,9 @@ class FEElasticity:
             The :class:`~dolfinx_meshfree.FESolution`, with the committed ``states`` and
             Newton's record in ``newton``.
         """
-        comm = self.comm
-        options = raise_on_all_ranks(comm, lambda: solver_options(solver))
-
-        def check() -> None:
-            if not (isinstance(load_steps, int | np.integer) and load_steps >= 1):
-                raise ValueError(f"load_steps={load_steps!r} must be an integer >= 1")
-
-        raise_on_all_ranks(comm, check)
-        built = self.block_model()
-        t0 = time.perf_counter()
-        try:
-            result = solve_load_steps(
-                built.problem, built.x, int(load_steps), newton or NewtonOptions(), options
-            )
-            solution = built.solution()
-        finally:
-            built.destroy()
-        solution.timings["solve"] = time.perf_counter() - t0
-        solution.newton = result
-        return solution
+        options = raise_on_all_ranks(self.comm, lambda: solver_options(solver))
+        raise_on_all_ranks(self.comm, lambda: check_load_steps(load_steps))
+        return solve_built(self.block_model(), int(load_steps), newton or NewtonOptions(), options)
 
 
 @dataclass

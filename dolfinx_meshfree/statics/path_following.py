@@ -56,7 +56,7 @@ from .fe_model import FEBlockModel, FEElasticity, fe_point_functional
 from .patch_growth import PatchEvent
 from .path_patch import check_adapt, fit_particles, grow_patch, path_context, site_context
 from .petsc import BlockSystem, SolverOptions, solver_options
-from .sides import BlockProblem
+from .sides import BlockProblem, restore_step
 from .state_carry import carry_at_points, carry_pooled, carry_states
 
 if TYPE_CHECKING:  # annotations only
@@ -1265,10 +1265,7 @@ def follow_path(
                     )
             except ArithmeticError as err:
                 reason = str(err)
-                for v, w in zip(x, saved, strict=True):
-                    w.copy(v)
-                    w.destroy()
-                problem.restore()
+                restore_step(problem, x, saved)
                 result.cuts += 1
                 if cuts == options.max_cuts:
                     what = "arc length" if arc else "control"
@@ -1306,10 +1303,7 @@ def follow_path(
             if lever is not None and new_lever is not None and 0 < LEVER_JUMP * lever < new_lever:
                 # the body deformed where the control does not see: another branch; a smaller
                 # increment keeps Newton's predictor off it
-                for v, w in zip(x, saved, strict=True):
-                    w.copy(v)
-                    w.destroy()
-                problem.restore()
+                restore_step(problem, x, saved)
                 result.cuts += 1
                 if cuts == options.max_cuts:
                     raise PathError(

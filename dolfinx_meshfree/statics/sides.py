@@ -16,6 +16,7 @@
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, NamedTuple
@@ -54,6 +55,8 @@ __all__ = [
     "on_cells",
     "particle_band_factor",
     "particle_coefficients",
+    "restore_step",
+    "solve_built",
     "solve_load_steps",
     "split_residual",
     "zeros",
@@ -531,6 +534,32 @@ class BlockProblem:
                 side.destroy()
 
 
+def restore_step(problem: BlockProblem, x: Sequence[PETSc.Vec], saved: Sequence[PETSc.Vec]) -> None:
+    """Undo a step that is not kept: ``x`` back to ``saved`` (then freed), the laws' trial
+    states back to the committed ones."""
+    for v, w in zip(x, saved, strict=True):
+        w.copy(v)
+        w.destroy()
+    problem.restore()
+
+
+def solve_built(
+    built: object, load_steps: int, options: NewtonOptions, solver: SolverOptions
+) -> object:
+    """:func:`solve_load_steps` on a built model (``problem``, ``x``, ``solution()``,
+    ``destroy()``: a pure EFG or pure FE block model), freed after; its solution with the solve's
+    time in ``timings["solve"]`` and Newton's record in ``newton`` (collective)."""
+    t0 = time.perf_counter()
+    try:
+        result = solve_load_steps(built.problem, built.x, load_steps, options, solver)
+        solution = built.solution()
+    finally:
+        built.destroy()
+    solution.timings["solve"] = time.perf_counter() - t0
+    solution.newton = result
+    return solution
+
+
 def solve_load_steps(
     problem: BlockProblem,
     x: list[PETSc.Vec],
@@ -559,10 +588,7 @@ def solve_load_steps(
         try:
             steps.append(newton(problem, x, options, solver))
         except NewtonError as err:
-            for v, w in zip(x, saved, strict=True):
-                w.copy(v)
-                w.destroy()
-            problem.restore()
+            restore_step(problem, x, saved)
             if cuts == max_cuts:
                 if not problem.states:
                     raise

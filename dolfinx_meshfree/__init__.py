@@ -93,6 +93,7 @@ from .statics.fe import FESolution, solve_fe_elasticity, solve_forms
 from .statics.fe_model import FEElasticity
 from .statics.growth import GrowthStep, GrowthStopped, QuasiStaticCrackGrowth, TipAtBoundary
 from .statics.large import IterativeOptions, chunked_l2_error, solve_large
+from .statics.mean_dilatation import VolumetricLockingWarning
 from .statics.newton import NewtonError, NewtonOptions, NewtonResult
 from .statics.nonlinear import FINITE_STRAIN_COUPLINGS, CoupledNonlinearProblem, FENonlinearProblem
 from .statics.path_following import (
@@ -213,6 +214,7 @@ __all__ = [
     "StressIntensityFactors",
     "TimoshenkoBeam",
     "TipAtBoundary",
+    "VolumetricLockingWarning",
     "WilliamsField",
     "attach_cracks",
     "balanced_mesh",

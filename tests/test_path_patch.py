@@ -243,7 +243,11 @@ def test_a_patch_grown_into_yielded_cells_carries_their_states(coupling, plane, 
                                  placement="vertices")  # fmt: skip
         problem = mf.CoupledLinearProblem(a, L_form, bcs, patch, law, coupling=coupling)
         control = mf.DisplacementControl([[length, 0.25]], [[1.0, 0.0]])
-        options = mf.PathOptions(increment=5e-4, end=8e-3, max_increment=1e-3)
+        # fixed increments: the two patches' paths are compared step by step, and the count of
+        # Newton iterations that grows an increment is round-off's in an elastic first step
+        # (its tolerance lies below the residual's round-off there): a grown and a fixed patch
+        # took different steps on 2 ranks with the FE cells' mean dilatation
+        options = mf.PathOptions(increment=6e-4, end=8e-3, grow=1.0)
         return mf.follow_path(problem.model, control, options, adapt=adapt)
 
     if by == "field":
@@ -269,7 +273,7 @@ def test_a_patch_grown_into_yielded_cells_carries_their_states(coupling, plane, 
         assert gap <= 1e-10 * max(fixed.load_factor)
     if coupling == "lagrange" and by == "field":  # a threshold never reached: said, not silent
         with pytest.warns(
-            mf.PatchCriterionWarning, match=r"follow_path: .* named no cell in 10 converged"
+            mf.PatchCriterionWarning, match=r"follow_path: .* named no cell in 14 converged"
         ):
             never = run(lambda x: (x[0] > 0.7) & (x[0] < 1.3), mf.FieldAbove(late, 1.0))
         assert never.patch_events == [] and never.adapt_named is False

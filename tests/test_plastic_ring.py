@@ -109,15 +109,17 @@ def _limit_pressure(plane: str) -> float:
 #: Lame's (below it: the polygonal bore of 16 facets, and P1 triangles' stiffness), and
 #: ``p(end) / p_lim - 1`` at ``u_r(a) = 6e-3``, about 30 times the displacement at first yield
 LIMIT = {  # (method, cell, plane): (elastic measured, checked), (limit measured, checked)
-    ("lagrange", "quadrilateral", "strain"): ((-2.5e-3, 5e-3), (-2.9e-4, 6e-4)),
+    ("lagrange", "quadrilateral", "strain"): ((-2.2e-3, 5e-3), (-1.07e-3, 2.2e-3)),
     ("efg", "quadrilateral", "strain"): ((-1.6e-3, 3.5e-3), (-1.37e-3, 3e-3)),
-    ("ramp", "quadrilateral", "strain"): ((-1.9e-3, 4e-3), (-5.3e-4, 1.1e-3)),
+    ("ramp", "quadrilateral", "strain"): ((-1.8e-3, 4e-3), (-1.10e-3, 2.2e-3)),
     ("lagrange", "triangle", "strain"): ((-7.8e-3, 1.6e-2), (-9.9e-4, 2e-3)),
     ("lagrange", "quadrilateral", "stress"): ((-2.4e-3, 5e-3), (5.5e-4, 1.1e-3)),
     ("efg", "quadrilateral", "stress"): ((-1.6e-3, 3.5e-3), (9e-5, 2e-4)),
     ("bridging", "quadrilateral", "stress"): ((-2.4e-3, 5e-3), (7.0e-4, 1.4e-3)),
-    # pure FE (mf.FEElasticity): Q1's full rule stiffens the isochoric flow of plane strain
-    ("fe", "quadrilateral", "strain"): ((-1.9e-3, 4e-3), (2.4e-3, 5e-3)),
+    # pure FE (mf.FEElasticity); plane strain on Q1 takes the cell's mean dilatation (B-bar):
+    # with the plain strain the full rule locks, +2.4e-3 here and +0.2 at u_r(a) = 0.1
+    # (tests/test_mean_dilatation.py)
+    ("fe", "quadrilateral", "strain"): ((-1.06e-3, 2.2e-3), (-6.0e-4, 1.2e-3)),
     ("fe", "quadrilateral", "stress"): ((-1.6e-3, 3.5e-3), (1.5e-3, 3e-3)),
     ("fe", "triangle", "stress"): ((-1.5e-2, 3e-2), (1.4e-3, 3e-3)),
 }

@@ -476,6 +476,10 @@ class J2Plasticity:
     rho: float | None = None
 
     needs_band: ClassVar[bool] = False
+    #: Its plastic flow keeps the volume: cells that cannot deform at constant volume (P1
+    #: triangles and tetrahedra, and Q1 at its full rule) lock under it
+    #: (:mod:`~dolfinx_meshfree.statics.mean_dilatation`).
+    isochoric_flow: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
         law = "J2Plasticity"

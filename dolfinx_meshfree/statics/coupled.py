@@ -61,6 +61,7 @@ from .coupled_newton import (
     law_internal_force,
     solve_finite_strain,
 )
+from .mean_dilatation import resolve_dilatation
 from .newton import NewtonOptions
 from .petsc import SolverOptions, solver_options
 
@@ -254,6 +255,11 @@ class CoupledElasticity:
             crack band width of the particle points, in sizes of their integration cells.
             Default (``None``): the MLS dilation, about one support radius, the narrowest band
             a smooth MLS field localises in; 1.0 makes it the FE cells' band (their size).
+        fe_dilatation: With a law with state: ``None`` (automatic), ``"mean"`` or
+            ``"pointwise"``, the FE cells' volumetric strain (see
+            :class:`~dolfinx_meshfree.FEElasticity`'s ``dilatation``). Automatic: the cell's mean
+            (B-bar) on quadrilaterals and hexahedra in plane strain and 3D, where the full rule
+            locks under plastic flow.
         overlap, penalty, constraint: ``coupling="bridging"`` (bridging domain, Rabczuk et al.
             2006, sec. 5.3, see :mod:`~dolfinx_meshfree.couplings.bridging`): band width in cell
             layers (>= 1), the augmented-Lagrangian penalty ``p >= 0``, and where the band is tied:
@@ -295,6 +301,7 @@ class CoupledElasticity:
         corner_angle: float | None = None,
         particle_band: float | None = None,
         integration: str | None = None,
+        fe_dilatation: str | None = None,
     ):
         #: The constructor's options, for the same model on another patch (:func:`on_patch`).
         self._given = {k: v for k, v in locals().items() if k not in ("self", "V", "patch")}
@@ -303,6 +310,15 @@ class CoupledElasticity:
                 f"coupling={coupling!r} is not available; choose one of {list(COUPLINGS)}"
             )
         check_angle_and_band(corner_angle, particle_band)
+        resolve_dilatation(
+            fe_dilatation,
+            material if is_stateful(material) else None,
+            V.mesh.topology.cell_type.name,
+            "CoupledElasticity: fe_dilatation",
+        )
+        #: The FE cells' volumetric strain with a law with state (``None``: automatic,
+        #: :func:`~dolfinx_meshfree.statics.mean_dilatation.resolve_dilatation`).
+        self.fe_dilatation = fe_dilatation
         #: A law that softens: the crack band of a particle point in integration-cell sizes
         #: (``None``: the MLS dilation, :class:`~dolfinx_meshfree.statics.sides.ParticleSide`).
         self.particle_band = particle_band

@@ -171,7 +171,7 @@ def build_block_problem(
     stateful = is_stateful(material)
     fe = FESide(
         F_int, u, extra["fe_cells"], extra["fixed"], extra["fe_weight"],
-        law=material if stateful else None,
+        law=material if stateful else None, dilatation=getattr(model, "fe_dilatation", None),
     )  # fmt: skip
     particles = ParticleSide(P, tables, material, getattr(model, "particle_band", None))
     # held FE dofs (before the shared sides, which leave their rows out): the strong values on

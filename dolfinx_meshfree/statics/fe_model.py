@@ -47,6 +47,7 @@ from ..physics.user_functions import check_arguments, check_facets, vector_value
 from .coupled_newton import check_load_steps
 from .fe import FESolution
 from .fe_state import check_bands
+from .mean_dilatation import resolve_dilatation
 from .newton import NewtonOptions
 from .petsc import SolverOptions, create_vector, solver_options
 from .sides import BlockProblem, FESide, solve_built
@@ -59,7 +60,7 @@ FE_LOAD_DEGREE = 4
 VectorFunction = Callable[[np.ndarray], np.ndarray]
 
 
-def _check_model(V: dolfinx.fem.FunctionSpace, law: object) -> None:
+def _check_model(V: dolfinx.fem.FunctionSpace, law: object, dilatation: str | None) -> None:
     """Refuse what the model does not carry (local; call on every rank)."""
     check_p1_space(V)  # vector P1/Q1, affine cells
     gdim = V.mesh.geometry.dim
@@ -86,6 +87,8 @@ def _check_model(V: dolfinx.fem.FunctionSpace, law: object) -> None:
             f"the law is {law.gdim}D (plane={law.plane!r}) and the mesh {V.mesh.geometry.dim}D: "
             "give plane='stress' or 'strain' on a 2D mesh, plane=None on a 3D one"
         )
+    cell = V.mesh.topology.cell_type.name
+    resolve_dilatation(dilatation, law if is_stateful(law) else None, cell, "FEElasticity")
 
 
 class FEElasticity:
@@ -97,9 +100,16 @@ class FEElasticity:
             :class:`~dolfinx_meshfree.J2Plasticity`), committed at every converged step; or
             :class:`~dolfinx_meshfree.LinearElastic` (its ``solve()`` is the linear solve, in
             one Newton iteration: a model's elastic twin).
+        dilatation: ``None`` (automatic), ``"mean"`` or ``"pointwise"``: a law with state runs
+            at the strain whose trace is its cell's mean (B-bar, Hughes 1980;
+            :mod:`~dolfinx_meshfree.statics.mean_dilatation`), or at the plain strain of each
+            point. Automatic: mean on quadrilaterals and hexahedra in plane strain and 3D,
+            where the full rule locks under plastic flow (the thick ring's load past its limit
+            pressure); pointwise elsewhere. ``"mean"`` where it does not apply (plane stress,
+            simplices, ``LinearElastic``) is refused.
 
     Attributes:
-        V, law, comm: As given; ``material``: the law's elastic twin.
+        V, law, comm, dilatation: As given; ``material``: the law's elastic twin.
         dirichlet: ``(facets, value, components)`` of :meth:`add_dirichlet`.
         tractions: ``(facets, traction)`` of :meth:`add_traction`.
         body_forces: Of :meth:`set_body_force`.
@@ -109,13 +119,15 @@ class FEElasticity:
     Raises:
         TypeError: a finite-strain or rate-form law (naming what solves it).
         ValueError: a space that is not vector P1/Q1 on affine cells, an axisymmetric law, a
-            law of another dimension than the mesh.
+            law of another dimension than the mesh, a ``dilatation`` that does not apply.
     """
 
-    def __init__(self, V: dolfinx.fem.FunctionSpace, law: object) -> None:
+    def __init__(
+        self, V: dolfinx.fem.FunctionSpace, law: object, dilatation: str | None = None
+    ) -> None:
         self.comm: MPI.Comm = V.mesh.comm
-        raise_on_all_ranks(self.comm, lambda: _check_model(V, law))
-        self.V, self.law = V, law
+        raise_on_all_ranks(self.comm, lambda: _check_model(V, law, dilatation))
+        self.V, self.law, self.dilatation = V, law, dilatation
         #: The law's small-strain elastic twin (its E and nu).
         self.material = linear_twin(law)
         self.dirichlet: list[tuple[np.ndarray, VectorFunction, tuple[int, ...] | None]] = []
@@ -211,7 +223,7 @@ class FEElasticity:
         n_local = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
         free = np.zeros(n_local, dtype=bool)
         if is_stateful(law):
-            fe = FESide(None, u, None, free, law=law)
+            fe = FESide(None, u, None, free, law=law, dilatation=self.dilatation)
         else:  # LinearElastic: its UFL stress
             v = ufl.TestFunction(V)
             fe = FESide(ufl.inner(law.ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx, u, None, free)

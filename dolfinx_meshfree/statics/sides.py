@@ -148,6 +148,10 @@ class FESide:
     step of a load step carries the prescribed increment into the body, as DOLFINx's lifting
     does) and their residual is ``x - t x_bar``, with :attr:`fixed_values` ``x_bar`` (0 on the
     nodes no FE cell carries) and ``t`` the load factor.
+
+    With a ``law`` with state, ``F_int`` is not read: the FE cells run the law through
+    :class:`~dolfinx_meshfree.statics.fe_state.FEStateLaw` (``dilatation``: its volumetric
+    strain, :mod:`~dolfinx_meshfree.statics.mean_dilatation`).
     """
 
     def __init__(
@@ -158,6 +162,7 @@ class FESide:
         fixed: np.ndarray,
         weight: ufl.core.expr.Expr | None = None,
         law: StatefulLaw | None = None,
+        dilatation: str | None = None,
     ) -> None:
         V = u.function_space
         self.u, self.V = u, V
@@ -168,7 +173,8 @@ class FESide:
         if law is not None:
             n = V.mesh.topology.index_map(V.mesh.topology.dim).size_local
             owned = np.ones(n, bool) if cells is None else np.asarray(cells[:n], bool)
-            self.state_law = FEStateLaw(u, law, np.flatnonzero(owned), weight)
+            cells_on = np.flatnonzero(owned)
+            self.state_law = FEStateLaw(u, law, cells_on, weight, dilatation=dilatation)
             forms = (self.state_law.residual_form, self.state_law.jacobian_form)
             R, J = (f if cells is None else on_cells(f, V.mesh, cells) for f in forms)
         else:
@@ -249,6 +255,8 @@ class FESide:
             self._J_kept = J
         else:
             _compat.assemble_matrix_into(self._J_kept, self._J)
+        if self.state_law is not None:  # mean dilatation's cell terms
+            self.state_law.complete_tangent(self._J_kept)
         J = self._J_kept.copy()
         J.zeroRows(self.fixed_rows, diag=1.0)
         return J

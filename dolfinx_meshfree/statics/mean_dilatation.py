@@ -53,6 +53,7 @@ import numpy as np
 from petsc4py import PETSc
 
 from .. import _compat
+from ..physics.state import tensor_from_voigt
 
 __all__ = [
     "DILATATIONS",
@@ -126,19 +127,6 @@ def resolve_dilatation(dilatation: str | None, law: object, cell_name: str, what
     return applies if dilatation is None else dilatation == "mean"
 
 
-def _voigt_tensor(v: np.ndarray, d: int) -> np.ndarray:
-    """The symmetric tensors (..., d, d) of stress-like Voigt vectors (..., nv)."""
-    if d == 2:
-        rows = [[v[..., 0], v[..., 2]], [v[..., 2], v[..., 1]]]
-    else:  # (xx, yy, zz, yz, xz, xy)
-        rows = [
-            [v[..., 0], v[..., 5], v[..., 4]],
-            [v[..., 5], v[..., 1], v[..., 3]],
-            [v[..., 4], v[..., 3], v[..., 2]],
-        ]
-    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
-
-
 class MeanDilatation:
     """The cell-wise operators of B-bar on ``cells`` (local, owned) of a vector P1/Q1 space.
 
@@ -194,8 +182,10 @@ class MeanDilatation:
         #: The cells' global dofs (nc, nn * d), node by node.
         dofs = bs * gnodes.reshape(nodes.shape)[:, :, None] + np.arange(bs)
         self.dofs = np.ascontiguousarray(dofs.reshape(nc, self.n), dtype=PETSc.IntType)
-        #: The rank-one terms of the tangent at the last :meth:`stress_tangent` (nc, n, n).
-        self.correction: np.ndarray | None = None
+        #: ``(P^T C m / d, P^T C^T m / d, m^T C m / d^2)`` at the points at the last
+        #: :meth:`stress_tangent`: what the tangent's rank-one cell terms are made of, summed
+        #: only by :meth:`add_to` (a residual alone, as in a line search, needs none of them).
+        self._terms: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def strain(self, strain: np.ndarray) -> np.ndarray:
         """``eps_bar`` of the points' Voigt strains (nc * nq, nv): the trace replaced by the
@@ -211,7 +201,7 @@ class MeanDilatation:
     ) -> tuple[np.ndarray, np.ndarray]:
         """The pointwise stress and tangent the forms read (``sigma_hat`` and ``w P^T C P``, with
         the weight ``w`` in), from the law's ``stress`` (n, nv) and ``tangent`` (n, nv, nv) at
-        ``eps_bar``; keeps the cells' rank-one terms for :meth:`add_to`."""
+        ``eps_bar``; keeps what the cells' rank-one terms need for :meth:`add_to`."""
         nc, nq = self.mean_weights.shape
         d, m = self.d, self.m
         s = stress.reshape(nc, nq, self.nv)
@@ -231,21 +221,14 @@ class MeanDilatation:
             - m[None, None, :, None] * a_t[..., None, :]
             + c[..., None, None] * np.outer(m, m)
         )
-        h1 = self._bt(P_a, self.work)
-        h2 = self._bt(P_at, self.work)
-        cb = np.einsum("cq,cq->c", self.work, c)
-        g = self.g
-        self.correction = (
-            h1[:, :, None] * g[:, None, :]
-            + g[:, :, None] * h2[:, None, :]
-            + cb[:, None, None] * g[:, :, None] * g[:, None, :]
-        )
+        self._terms = (P_a, P_at, c)
         return s_hat.reshape(-1, self.nv), (ww[..., None, None] * PCP).reshape(-1, self.nv, self.nv)
 
     def _bt(self, v: np.ndarray, weights: np.ndarray) -> np.ndarray:
         """``sum_q weights_q B_q^T v_q`` of stress-like Voigt vectors ``v`` (nc, nq, nv), per
         cell (nc, nn * d)."""
-        S = _voigt_tensor(v, self.d)  # (nc, nq, d, d)
+        d = self.d
+        S = tensor_from_voigt(v.reshape(-1, self.nv), d).reshape(*v.shape[:2], d, d)
         out = np.einsum("cq,cqag,cqig->cai", weights, self.grad, S)
         return out.reshape(out.shape[0], self.n)
 
@@ -253,9 +236,18 @@ class MeanDilatation:
         """Add the cells' rank-one terms of the last :meth:`stress_tangent` to the assembled ``A``
         (global numbering, the rows of other ranks through PETSc's stash) and assemble it
         (collective)."""
-        if self.correction is None:
+        if self._terms is None:
             raise RuntimeError("mean dilatation: add_to before stress_tangent")
         if self.dofs.shape[0]:
-            values = np.ascontiguousarray(self.correction)
+            P_a, P_at, c = self._terms
+            h1 = self._bt(P_a, self.work)
+            h2 = self._bt(P_at, self.work)
+            cb = np.einsum("cq,cq->c", self.work, c)
+            g = self.g
+            values = (
+                h1[:, :, None] * g[:, None, :]
+                + g[:, :, None] * h2[:, None, :]
+                + cb[:, None, None] * g[:, :, None] * g[:, None, :]
+            )
             A.setValuesRCV(self.dofs, self.dofs, values, addv=PETSc.InsertMode.ADD_VALUES)
         A.assemble()

@@ -41,6 +41,7 @@ from .approx.sph import SPH
 from .approx.tables import Approximation, ShapeTable, StaleTableError
 from .couplings.hybrid import HYBRID_VARIANTS, HybridElasticity
 from .dynamics import DYNAMICS_METHODS, DynamicsResult, EnergyRecord, ExplicitDynamics
+from .dynamics.rate_dilatation import CellCollapseWarning
 from .fracture.criteria import equivalent_sif, kink_angle
 from .fracture.interaction import (
     SIFReliabilityWarning,
@@ -147,6 +148,7 @@ __all__ = [
     "BodyCut",
     "BulkStrengthWarning",
     "CavityExpansion",
+    "CellCollapseWarning",
     "CellsWhere",
     "CohesiveGrowth",
     "CoupledElasticity",

@@ -407,14 +407,16 @@ def wave_speed(concrete) -> float:
 
 @pytest.mark.parametrize(
     "method, margin",
-    [("fe", 0.012), ("efg", 0.03), ("lagrange", 0.016), ("master-slave", 5e-4),
-     ("edge-to-edge", 0.003), ("bridging", 0.025), ("ramp", 0.05), ("hybrid", 0.025)],
+    [("fe", 0.012), ("efg", 0.03), ("lagrange", 0.016), ("master-slave", 2.2e-3),
+     ("edge-to-edge", 0.004), ("bridging", 0.025), ("ramp", 0.05), ("hybrid", 0.025)],
 )  # fmt: skip
 def test_concrete_cylinder_elastic_wave(method, margin):
     """A cylinder of HJC concrete (radius 2 cm, length 10 cm, 20 cells along) on rollers
     (``u_r = 0`` on its side: uniaxial strain) thrown at a wall at 0.5 m/s: the stress behind
-    the front at ``t = L / 2c`` is the 1D ``-rho c v0`` (measured 0.62 %, 1.56 %, 0.78 %,
-    0.025 %, 0.13 %, 1.26 %, 2.37 % and 1.25 % off) and the concrete stays undamaged. The
+    the front at ``t = L / 2c`` is the 1D ``-rho c v0`` (measured 0.62 %, 1.56 %, 0.77 %,
+    0.11 %, 0.19 %, 1.26 %, 2.37 % and 1.25 % off, the FE cells at their mean dilatation: with
+    the full rule master-slave's was 0.025 % and edge-to-edge's 0.13 %) and the concrete stays
+    undamaged. The
     rate-form law with the hoop stretch, in FE, EFG and a lagrange, master–slave, edge-to-edge,
     bridging, ramp or hybrid patch on the quarter at the wall (the ramp not VCI-corrected in
     dynamics)."""

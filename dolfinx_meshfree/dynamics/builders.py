@@ -79,6 +79,7 @@ from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic, is_axisymmetric
 from ..statics.coupled import CoupledElasticity, CouplingOperators
 from ..statics.efg import crack_rules, particle_stiffness
+from ..statics.mean_dilatation import resolve_dilatation, warn_locking
 from ..statics.petsc import create_aij
 from ..statics.sides import BlendedSide
 from .conditions import (
@@ -121,6 +122,7 @@ __all__ = [
     "build_hybrid",
     "check_crack_options",
     "check_particle_mass",
+    "fe_cells_dilatation",
 ]
 
 
@@ -182,6 +184,23 @@ def _check_twin(law: Material | LinearElastic, twin: LinearElastic, problem: Lin
             f"is {problem!r}: build the problem with the linear twin "
             "(dolfinx_meshfree.physics.materials.linear_twin(material))"
         )
+
+
+def fe_cells_dilatation(
+    dilatation: str | None, law: Material | LinearElastic, msh: dolfinx.mesh.Mesh, what: str
+) -> bool:
+    """Whether the FE cells' rate-form ``law`` runs at their mean dilatation
+    (:mod:`~dolfinx_meshfree.dynamics.rate_dilatation`): ``dilatation`` (``None``: automatic,
+    ``"mean"``, ``"pointwise"``) checked as the statics check it
+    (:func:`~dolfinx_meshfree.statics.mean_dilatation.resolve_dilatation`; a law without state
+    refuses ``"mean"``); Johnson–Cook on triangles or tetrahedra warns
+    (:class:`~dolfinx_meshfree.VolumetricLockingWarning`). Local, the same on every rank."""
+    rate = isinstance(law, RateLaws)
+    cell = msh.topology.cell_type.name
+    use = resolve_dilatation(dilatation, law if rate else None, cell, what)
+    if rate:
+        warn_locking(law.law, cell)
+    return use
 
 
 def _check_rate_twin(law: RateLaws, problem: LinearElastic) -> None:
@@ -342,11 +361,14 @@ def build_fe(
     V: dolfinx.fem.FunctionSpace,
     material: LinearElastic | Material,
     fixed_facets: npt.ArrayLike | None = None,
+    dilatation: str | None = None,
 ) -> Model:
     """Pure FE: DOLFINx's stiffness ``inner(sigma(u), eps(v)) dx``, row-sum masses, fixed
     facets' nodes held strongly; at finite strain the assembled ``int P(F) : grad v dX``
-    (:class:`~dolfinx_meshfree.dynamics.finite_strain.NonlinearSystem`). Collective."""
+    (:class:`~dolfinx_meshfree.dynamics.finite_strain.NonlinearSystem`); a rate-form law at the
+    cells' mean dilatation by :func:`fe_cells_dilatation`'s ``dilatation``. Collective."""
     material = bind_rate_law(material, "fe", V.mesh)
+    mean = fe_cells_dilatation(dilatation, material, V.mesh, "ExplicitDynamics.fe: dilatation")
     law, material = material, small_strain(material, "fe")
     t0 = time.perf_counter()
     msh = V.mesh
@@ -372,7 +394,10 @@ def build_fe(
 
     system = None
     if law is not material:
-        side = PointFESide(V, law.bind()) if isinstance(law, RateLaws) else fe_forces(V, law)
+        if isinstance(law, RateLaws):
+            side = PointFESide(V, law.bind(), dilatation=mean)
+        else:
+            side = fe_forces(V, law)
         system = NonlinearSystem([fe_field], [side], law)
     return Model(
         [fe_field],
@@ -585,6 +610,7 @@ def build_coupled(
     integration: str = "cells",
     slaves: str = "layer",
     material: Material | None = None,
+    fe_dilatation: str | None = None,
 ) -> Model:
     """Explicit dynamics of a :class:`~dolfinx_meshfree.CoupledElasticity` (any coupling),
     from :meth:`~dolfinx_meshfree.CoupledElasticity.operators` (collective).
@@ -614,14 +640,19 @@ def build_coupled(
             penalty linear). ``None``: the law the problem was built with
             (``CoupledElasticity(V, patch, NeoHookean(...))`` runs finite-strain dynamics);
             ``material=problem.material`` (its linear twin) asks for small-strain dynamics.
+        fe_dilatation: A rate-form law's FE cells: ``None`` (the problem's ``fe_dilatation``,
+            automatic by default: the cells' mean dilatation on quadrilaterals and hexahedra
+            outside plane stress), ``"mean"`` or ``"pointwise"`` (:func:`fe_cells_dilatation`).
     """
+    if fe_dilatation is None:  # the static problem's choice
+        fe_dilatation = getattr(problem, "fe_dilatation", None)
     if isinstance(problem, HybridElasticity):  # the hybrid SPH-FE coupling: its own builder
         if (integration, slaves) != ("cells", "layer"):
             raise ValueError(
                 f"integration={integration!r}, slaves={slaves!r}: the hybrid coupling has its "
                 "own SPH sums; use integration='cells', slaves='layer'"
             )
-        return build_hybrid(problem, particle_mass, fixed_facets, material)
+        return build_hybrid(problem, particle_mass, fixed_facets, material, fe_dilatation)
     if not isinstance(problem, CoupledElasticity):
         raise TypeError(f"problem must be a CoupledElasticity, got {type(problem).__name__}")
     coupling = problem.coupling
@@ -640,6 +671,9 @@ def build_coupled(
     # the law the model was built with, unless the caller names another (issue 23, item 2)
     law = getattr(problem, "law", problem.material) if material is None else material
     law = bind_rate_law(law, coupling, problem.V.mesh)
+    mean = fe_cells_dilatation(
+        fe_dilatation, law, problem.V.mesh, "ExplicitDynamics.coupled: fe_dilatation"
+    )
     material = small_strain(law, coupling)
     if isinstance(law, RateLaws):
         _check_rate_twin(law, problem.material)
@@ -758,7 +792,7 @@ def build_coupled(
 
     system = None
     if law is not material:
-        system = _finite_strain_system(problem, ops, law, fields, constraint, blocks)
+        system = _finite_strain_system(problem, ops, law, fields, constraint, blocks, mean)
         blocks = {}
     else:
         for B in ops.penalty_blocks or ():  # already in K_fe, K_p
@@ -798,6 +832,7 @@ def _finite_strain_system(
     fields: list[Field],
     constraint: list[PETSc.Mat | None] | None,
     blocks: dict[tuple[int, int], PETSc.Mat],
+    mean: bool = False,
 ) -> NonlinearSystem:
     """The finite-strain system of a coupling from its operators: the FE law on the cells
     whose energy is FE (weighted by ``beta_FE`` in the bridging band, eq. 47–48; not the ramps'
@@ -807,7 +842,7 @@ def _finite_strain_system(
     particles through the reduction (eq. 27–28, :class:`ReducedParticles`, finite-rotation
     links); the bridging penalty (eq. 72–75, linear in the displacements) as constant blocks.
     The linear model's off-diagonal ``blocks`` are taken over (the penalty's) or destroyed.
-    Collective.
+    ``mean``: a rate-form law's FE cells at their mean dilatation. Collective.
     """
     constant: dict = {}
     if ops.penalty_blocks is not None:  # the bridging penalty: its four blocks stay linear
@@ -833,7 +868,7 @@ def _finite_strain_system(
 
     rate = isinstance(law, RateLaws)
     if rate:  # each side its own points' state (module rate_forms)
-        fe = fe_side = PointFESide(V, law.bind(), cells, weight_at)
+        fe = fe_side = PointFESide(V, law.bind(), cells, weight_at, dilatation=mean)
         particle_law, q = law.bind(), ops.particle_tables["quadrature"]
         particle_law.attach(q.points, q.cells)
     else:
@@ -870,6 +905,7 @@ def build_hybrid(
     particle_mass: str = "volume",
     fixed_facets: npt.ArrayLike | None = None,
     material: Material | None = None,
+    fe_dilatation: str | None = None,
 ) -> Model:
     """Explicit dynamics of a :class:`~dolfinx_meshfree.couplings.hybrid.HybridElasticity` (Rabczuk
     et al.
@@ -895,6 +931,7 @@ def build_hybrid(
             FE cells' ``int P(F) : grad v dX`` and the SPH sums of ``P`` on the particle
             energy's rule (:class:`~dolfinx_meshfree.couplings.hybrid_finite.HybridForces`);
             ``None``: the problem's material.
+        fe_dilatation: A rate-form law's FE cells (:func:`fe_cells_dilatation`).
     """
     if not isinstance(problem, HybridElasticity):
         raise TypeError(f"problem must be a HybridElasticity, got {type(problem).__name__}")
@@ -907,6 +944,9 @@ def build_hybrid(
     check_particle_mass(particle_mass, default="volume")
     law = problem.material if material is None else material
     law = bind_rate_law(law, "hybrid", problem.V.mesh)
+    mean = fe_cells_dilatation(
+        fe_dilatation, law, problem.V.mesh, "ExplicitDynamics.coupled: fe_dilatation"
+    )
     material = small_strain(law, "hybrid")
     if law is not material:
         if isinstance(law, RateLaws):
@@ -963,7 +1003,8 @@ def build_hybrid(
     blocks, system = {(0, 1): ops.K_fp, (1, 0): ops.K_pf}, None
     if law is not material:  # FE cells by UFL, the particle energy by the SPH sums of P
         if isinstance(law, RateLaws):  # the FE Gauss points' and the energy's points' states
-            fe, energy_law = PointFESide(V, law.bind(), ~patch.in_patch), law.bind()
+            fe = PointFESide(V, law.bind(), ~patch.in_patch, dilatation=mean)
+            energy_law = law.bind()
         else:
             fe, energy_law = fe_forces(V, law, ~patch.in_patch), law
         forces = HybridForces(problem, energy_law)

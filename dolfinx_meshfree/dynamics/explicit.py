@@ -213,6 +213,7 @@ class ExplicitDynamics(StateQueries, Struck):
         material: LinearElastic | Material,
         safety: float = 0.9,
         fixed_facets: npt.ArrayLike | None = None,
+        dilatation: str | None = None,
     ) -> ExplicitDynamics:
         """Pure FE: DOLFINx's stiffness ``inner(sigma(u), eps(v)) dx`` and row-sum masses.
 
@@ -220,9 +221,14 @@ class ExplicitDynamics(StateQueries, Struck):
         ``(facets, components)`` pairs holding only some components, e.g.
         ``[(symmetry_plane, (0,))]`` (particles, the hybrid's too: a multiplier per facet and
         component); ``(facets, components, velocity)`` triples drive FE nodes (``held``).
+        ``dilatation``: a rate-form law's volumetric strain: ``None`` (automatic: the cell's
+        mean on quadrilaterals and hexahedra in plane strain, axisymmetry and 3D, where the
+        full rule locks under plastic flow), ``"mean"`` or ``"pointwise"``
+        (:mod:`~dolfinx_meshfree.dynamics.rate_dilatation`).
         """
         check_safety(safety)
-        return cls._from_model(build_fe(V, material, fixed_facets), safety, None, fixed_facets)
+        model = build_fe(V, material, fixed_facets, dilatation)
+        return cls._from_model(model, safety, None, fixed_facets)
 
     @classmethod
     def efg(
@@ -290,6 +296,7 @@ class ExplicitDynamics(StateQueries, Struck):
         slaves: str = "layer",
         material: Material | None = None,
         crack_contact: CrackContact | None = None,
+        fe_dilatation: str | None = None,
     ) -> ExplicitDynamics:
         """A :class:`~dolfinx_meshfree.CoupledElasticity` (any coupling) or a
         :class:`~dolfinx_meshfree.HybridElasticity` in dynamics, from the static problem's
@@ -303,13 +310,17 @@ class ExplicitDynamics(StateQueries, Struck):
         ``NeoHookean`` runs at finite strain), ``problem.material`` its small-strain twin.
         ``crack_contact``: contact of the patch's crack faces, as in :meth:`efg`. The problem's
         cohesive faces (``add_cohesive``) carry their law
-        (:mod:`~dolfinx_meshfree.dynamics.cohesive_faces`). Arguments: see
+        (:mod:`~dolfinx_meshfree.dynamics.cohesive_faces`). ``fe_dilatation``: a rate-form
+        law's FE cells, as :meth:`fe`'s ``dilatation`` (``None``: the problem's
+        ``fe_dilatation``). Arguments: see
         :func:`~dolfinx_meshfree.dynamics.builders.build_coupled`.
         """
         check_safety(safety)
         check_multiplier_solver(multiplier_solver)
         cohesive = list(getattr(problem, "cohesive", None) or [])
-        model = build_coupled(problem, particle_mass, fixed_facets, integration, slaves, material)
+        model = build_coupled(
+            problem, particle_mass, fixed_facets, integration, slaves, material, fe_dilatation
+        )
         if cohesive:  # the faces' law (refused, on every rank, where it cannot be carried)
             model = with_cohesive_faces(model, cohesive, crack_contact)
         else:

@@ -22,7 +22,8 @@ compacts (HJC's fully dense ``K1`` is 5.3 times its elastic ``K_e``: the step is
 virgin concrete's from the start), and ``wave_speed`` the larger of the twin's and the points'
 current dilatational speed, which the run's re-bound check watches (so it re-bounds only when the
 points outrun the twin). The FE cells evaluate it at their Gauss points
-with :class:`PointFESide` (it has no UFL form), the particles through
+with :class:`PointFESide` (it has no UFL form; on quadrilaterals and hexahedra at their cells' mean
+dilatation, :mod:`~dolfinx_meshfree.dynamics.rate_dilatation`), the particles through
 :class:`~dolfinx_meshfree.statics.sides.ParticleSide` unchanged, and the ramps' interface cells
 through :class:`~dolfinx_meshfree.statics.sides.BlendedSide` on their blended table (Belytschko
 et al. 1995, eq. 3.12-3.16) with points of their own.
@@ -56,6 +57,7 @@ from ..physics.objective import as_3d, nominal_stress
 from ..physics.state import is_rate_law
 from ..physics.zones import MaterialZones
 from ..statics.petsc import create_aij, create_vector
+from .rate_dilatation import MeanDilatationLaw
 from .time_step import same_time
 
 __all__ = [
@@ -551,6 +553,9 @@ class PointFESide:
             (``None``: every owned cell). weight_at: ``weight_at(q)`` (m,), a factor of the
             points' weights (the bridging band's ``beta_FE = 1 - alpha``), or ``None``.
         degree: The Gauss rule (2: the P1/Q1 stiffness exactly).
+        dilatation: Whether the law runs at its cells' mean dilatation
+            (:mod:`~dolfinx_meshfree.dynamics.rate_dilatation`: Q1 cells in plane strain,
+            axisymmetry and 3D do not lock under plastic flow).
     """
 
     def __init__(
@@ -560,6 +565,7 @@ class PointFESide:
         cells: np.ndarray | None = None,
         weight_at: Callable[[QuadraturePoints], np.ndarray] | None = None,
         degree: int = 2,
+        dilatation: bool = False,
     ) -> None:
         msh = V.mesh
         self.comm = msh.comm
@@ -580,7 +586,9 @@ class PointFESide:
         table = tabulate_in_cells(V, q.points, q.cells, derivatives=1)
         w = q.weights if weight_at is None else q.weights * weight_at(q)
         law.attach(q.points, q.cells)
-        self.forces = InternalForces(table, w, law, comm=self.comm)
+        #: The law as the force sum reads it: at the cells' mean dilatation, or pointwise.
+        self.material = MeanDilatationLaw(law, q.cells, w) if dilatation else law
+        self.forces = InternalForces(table, w, self.material, comm=self.comm)
 
     def coefficients(self, x: PETSc.Vec) -> np.ndarray:
         """The local FE values (owned and ghost nodes, interleaved) of ``x``."""

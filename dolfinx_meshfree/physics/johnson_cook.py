@@ -77,6 +77,9 @@ class JohnsonCook:
         "work": 1,
         "F": 9,
     }
+    #: Its plastic flow keeps the volume: P1 triangles and tetrahedra, and Q1 at its full rule,
+    #: lock under it (:mod:`~dolfinx_meshfree.dynamics.rate_dilatation`).
+    isochoric_flow: ClassVar[bool] = True
 
     @classmethod
     def steel_4340(cls, plane: str | None = None, backend: str | None = None) -> JohnsonCook:

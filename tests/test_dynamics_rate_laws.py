@@ -23,7 +23,7 @@ from dolfinx_meshfree.geometry.patch_criteria import GrowthContext
 import dolfinx
 import numpy as np
 import pytest
-from conftest import CELL_TYPES, conversion_balance, rectangle
+from conftest import CELL_TYPES, conversion_balance, load_demo, rectangle
 from mpi4py import MPI
 
 # the bars' coupled models: a patch on a quarter of a 2-rank mesh is unbalanced (a small model)
@@ -470,3 +470,26 @@ def test_equally_near_points_are_chosen_by_coordinates():
         src_cells = np.array([0, 0, 0, 0, 1, 1, 1, 1])[order]
         chosen = src[nearest_in_cell(src, src_cells, points, cells)]
         assert np.array_equal(chosen, [gauss[0], gauss[3], other[0]])
+
+
+@pytest.mark.xfail(
+    strict=True,
+    raises=AssertionError,
+    reason="known limit (guide, impact materials: the demo's table): without a shock viscosity "
+    "the 300 m/s front rings and the damage behind it alternates from cell to cell, so the "
+    "deepest failed point moves with the time step (pure FE, 40 cells: 37.0 mm at the stable "
+    "step, 17.0 mm at 0.6 and 0.4 of it, measured); the cure, an artificial bulk viscosity, is "
+    "not built",
+)
+def test_failed_depth_is_converged_in_the_step():
+    """The concrete bar of ``demos/concrete_impact.py`` on rollers at 300 m/s, pure FE at 40
+    cells: the depth to which it fails at the stable step and at half of it, within one cell."""
+    demo = load_demo("concrete_impact")
+    depths = []
+    for fraction in (1.0, 0.5):
+        dyn = demo.build("fe", 40)
+        dyn.set_initial(velocity=lambda x: np.stack([np.full(len(x), -300.0), 0 * x[:, 0]], 1))
+        dyn.run(demo.T_END, dt=fraction * dyn.stable_time_step())
+        depths.append(demo.depth(dyn, dyn.material.state["damage"][:, 0] >= 0.99))
+        dyn.destroy()
+    assert abs(depths[0] - depths[1]) <= demo.LENGTH / 40

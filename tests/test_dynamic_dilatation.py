@@ -246,7 +246,8 @@ def test_options_and_refusals():
     """Automatic is the mean on quadrilaterals (and a coupled model's FE cells follow the
     problem's ``fe_dilatation``, or the run's); ``"mean"`` is refused by name where it cannot
     apply (triangles, a law without state), an unknown option too; Johnson–Cook on triangles
-    warns that they lock (HJC does not: its strength needs a pressure), on every rank."""
+    warns that they lock, also as a zone of a MaterialZones law (HJC does not: its strength
+    needs a pressure), on every rank."""
     quads = dolfinx.mesh.create_unit_square(COMM, 4, 4, dolfinx.mesh.CellType.quadrilateral)
     tris = dolfinx.mesh.create_unit_square(COMM, 4, 4, dolfinx.mesh.CellType.triangle)
     steel = mf.JohnsonCook(**STEEL, plane="strain")
@@ -267,6 +268,9 @@ def test_options_and_refusals():
     with warnings.catch_warnings():
         warnings.simplefilter("error", mf.VolumetricLockingWarning)
         mf.ExplicitDynamics.fe(Vt, concrete)
+    zones = mf.MaterialZones([(steel, lambda x: x[1] > 0.5), (concrete, lambda x: x[1] <= 0.5)])
+    with pytest.warns(mf.VolumetricLockingWarning, match="JohnsonCook"):
+        mf.ExplicitDynamics.fe(Vt, zones)
 
     patch = mf.ParticlePatch(quads, np.arange(2), 0.125)
     twin = mf.LinearElastic(200e9, 0.29, "strain", rho=7830.0)

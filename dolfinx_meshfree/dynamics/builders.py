@@ -193,13 +193,15 @@ def fe_cells_dilatation(
     (:mod:`~dolfinx_meshfree.dynamics.rate_dilatation`): ``dilatation`` (``None``: automatic,
     ``"mean"``, ``"pointwise"``) checked as the statics check it
     (:func:`~dolfinx_meshfree.statics.mean_dilatation.resolve_dilatation`; a law without state
-    refuses ``"mean"``); Johnson–Cook on triangles or tetrahedra warns
+    refuses ``"mean"``); Johnson–Cook on triangles or tetrahedra warns, a zone of a
+    :class:`~dolfinx_meshfree.MaterialZones` law too
     (:class:`~dolfinx_meshfree.VolumetricLockingWarning`). Local, the same on every rank."""
     rate = isinstance(law, RateLaws)
     cell = msh.topology.cell_type.name
     use = resolve_dilatation(dilatation, law if rate else None, cell, what)
     if rate:
-        warn_locking(law.law, cell)
+        for member in getattr(law.law, "laws", [law.law]):  # a zoned law: each zone's
+            warn_locking(member, cell)
     return use
 
 

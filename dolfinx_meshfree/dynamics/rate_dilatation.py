@@ -76,7 +76,7 @@ import numpy as np
 
 from ..approx.jit import jit
 from ..physics import rate_kernels
-from ..physics.objective import as_3d
+from ..physics.objective import as_3d, cofactor_3x3
 
 if TYPE_CHECKING:  # annotations only (rate_forms builds this law's side)
     from .rate_forms import RateLaw
@@ -96,21 +96,11 @@ class CellCollapseWarning(UserWarning):
 
 
 @jit
-def _det3(F, q):  # pragma: no cover - compiled
-    """``det F_q`` of the (m, 3, 3) array ``F``."""
-    return (
-        F[q, 0, 0] * (F[q, 1, 1] * F[q, 2, 2] - F[q, 1, 2] * F[q, 2, 1])
-        - F[q, 0, 1] * (F[q, 1, 0] * F[q, 2, 2] - F[q, 1, 2] * F[q, 2, 0])
-        + F[q, 0, 2] * (F[q, 1, 0] * F[q, 2, 1] - F[q, 1, 1] * F[q, 2, 0])
-    )
-
-
-@jit
 def _scaled_kernel(F, group, w, volume, d, s, J, Jbar):  # pragma: no cover - compiled
     """:meth:`MeanDilatationLaw._scaled`'s ``(s, J, bar J)`` into ``s``, ``J``, ``Jbar``."""
     total = np.zeros(volume.shape[0])
     for q in range(F.shape[0]):
-        J[q] = _det3(F, q)
+        J[q] = rate_kernels.det3(F[q])
         total[group[q]] += w[q] * J[q]
     for q in range(F.shape[0]):
         c = group[q]
@@ -135,15 +125,7 @@ def _nominal_kernel(sigma, F, J, Jbar, group, w, volume, d, P):  # pragma: no co
     for q in range(m):
         c = group[q]
         pbar = total[c] / volume[c] if volume[c] > 0.0 else p[q]
-        cof[0, 0] = F[q, 1, 1] * F[q, 2, 2] - F[q, 1, 2] * F[q, 2, 1]
-        cof[0, 1] = F[q, 1, 2] * F[q, 2, 0] - F[q, 1, 0] * F[q, 2, 2]
-        cof[0, 2] = F[q, 1, 0] * F[q, 2, 1] - F[q, 1, 1] * F[q, 2, 0]
-        cof[1, 0] = F[q, 2, 1] * F[q, 0, 2] - F[q, 2, 2] * F[q, 0, 1]
-        cof[1, 1] = F[q, 2, 2] * F[q, 0, 0] - F[q, 2, 0] * F[q, 0, 2]
-        cof[1, 2] = F[q, 2, 0] * F[q, 0, 1] - F[q, 2, 1] * F[q, 0, 0]
-        cof[2, 0] = F[q, 0, 1] * F[q, 1, 2] - F[q, 0, 2] * F[q, 1, 1]
-        cof[2, 1] = F[q, 0, 2] * F[q, 1, 0] - F[q, 0, 0] * F[q, 1, 2]
-        cof[2, 2] = F[q, 0, 0] * F[q, 1, 1] - F[q, 0, 1] * F[q, 1, 0]
+        rate_kernels.cofactor3(F[q], cof)
         live = False
         for i in range(3):
             for j in range(3):
@@ -157,13 +139,6 @@ def _nominal_kernel(sigma, F, J, Jbar, group, w, volume, d, P):  # pragma: no co
                     for k in range(3):
                         acc += scale * dev[i, k] * cof[k, j]
                 P[q, i, j] = acc
-
-
-def cofactor_3x3(A: np.ndarray) -> np.ndarray:
-    """``cof(A) = det(A) A^{-T}`` (m, 3, 3): its rows ``a_1 x a_2``, ``a_2 x a_0``,
-    ``a_0 x a_1`` (``a_i`` the rows of ``A``), defined for a singular ``A`` too."""
-    a0, a1, a2 = A[:, 0], A[:, 1], A[:, 2]
-    return np.stack([np.cross(a1, a2), np.cross(a2, a0), np.cross(a0, a1)], axis=1)
 
 
 class MeanDilatationLaw:

@@ -49,6 +49,7 @@ __all__ = [
     "cayley",
     "check_arguments",
     "check_step",
+    "cofactor_3x3",
     "half_rotation",
     "hughes_winget",
     "inverse_3x3",
@@ -83,6 +84,13 @@ def as_3d(F: np.ndarray, hoop: np.ndarray | None = None) -> np.ndarray:
     return out
 
 
+def cofactor_3x3(A: np.ndarray) -> np.ndarray:
+    """``cof(A) = det(A) A^{-T}`` of ``(m, 3, 3)`` matrices: its rows ``a_1 x a_2``,
+    ``a_2 x a_0``, ``a_0 x a_1`` (``a_i`` the rows of ``A``), defined for a singular ``A`` too."""
+    a0, a1, a2 = A[:, 0], A[:, 1], A[:, 2]
+    return np.stack([np.cross(a1, a2), np.cross(a2, a0), np.cross(a0, a1)], axis=1)
+
+
 def inverse_3x3(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(A^{-1}, det A)`` of ``(m, 3, 3)`` matrices by their cofactors: the rows of the
     cofactor matrix are ``a_1 x a_2``, ``a_2 x a_0``, ``a_0 x a_1`` (``a_i`` the rows of ``A``),
@@ -90,11 +98,10 @@ def inverse_3x3(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     infinities: check ``det`` first). The same to round-off as ``np.linalg.inv`` and
     ``np.linalg.det`` (``tests/test_hjc.py``), without LAPACK's per-matrix overhead: the
     batched solves of the Hughes–Winget step were 38 % of a coupled Hanchak shot."""
-    a0, a1, a2 = A[:, 0], A[:, 1], A[:, 2]
-    c0, c1, c2 = np.cross(a1, a2), np.cross(a2, a0), np.cross(a0, a1)
-    det = np.einsum("qi,qi->q", a0, c0)
+    cof = cofactor_3x3(A)
+    det = np.einsum("qi,qi->q", A[:, 0], cof[:, 0])
     with np.errstate(divide="ignore", invalid="ignore"):
-        inv = np.stack([c0, c1, c2], axis=2) / det[:, None, None]
+        inv = cof.transpose(0, 2, 1) / det[:, None, None]
     return inv, det
 
 

@@ -45,6 +45,8 @@ __all__ = [
     "ENV",
     "JC_PARAMETERS",
     "PARAMETERS",
+    "cofactor3",
+    "det3",
     "hjc_update",
     "hjc_wave_speed",
     "johnson_cook_update",
@@ -115,8 +117,8 @@ def _strength(c, p_star, damage, rate):  # pragma: no cover - compiled
 
 
 @jit
-def _det(a):  # pragma: no cover - compiled
-    """``a_0 . (a_1 x a_2)`` of a 3 x 3 matrix (``objective.inverse_3x3``'s)."""
+def det3(a: np.ndarray) -> float:  # pragma: no cover - compiled
+    """``a_0 . (a_1 x a_2)`` of a 3 x 3 matrix (``objective.inverse_3x3``'s), compiled."""
     return (
         a[0, 0] * (a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1])
         + a[0, 1] * (a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2])
@@ -164,7 +166,7 @@ def _start(Fo, Fn, s_old, G, scratch, de, Qh, sr, st):  # pragma: no cover - com
     for i in range(3):
         for j in range(3):
             Fm[i, j] = 0.5 * (Fo[i, j] + Fn[i, j])
-    J_mid = _det(Fm)
+    J_mid = det3(Fm)
     if not (J_mid > 0.0):
         return J_mid, 0.0, 0.0
     for i in range(3):  # inv[:, i] = (row i+1) x (row i+2) / det
@@ -242,20 +244,20 @@ def _kernel(c, erosion, F, hoop, dt, old, sigma, new, flags):  # pragma: no cove
     Fn, Fo, de, Qh, so, sr, st, sm, sn, scratch = _arrays()
     for q in range(m):
         finite = _gradient(F, hoop, q, Fn)
-        gone = erosion > 0.0 and (old[8][q, 0] > 0.0 or not finite or not (_det(Fn) > 0.0))
+        gone = erosion > 0.0 and (old[8][q, 0] > 0.0 or not finite or not (det3(Fn) > 0.0))
         if gone:  # computed at rest; the eroded keep the gradient given
             for i in range(3):
                 for j in range(3):
                     new[7][q, 3 * i + j] = Fn[i, j]
                     Fn[i, j] = Fo[i, j] = 1.0 if i == j else 0.0
-        elif not finite or not (_det(Fn) > 0.0):
+        elif not finite or not (det3(Fn) > 0.0):
             flags[q] = 1
             continue
         else:
             for i in range(9):
                 Fo[i // 3, i % 3] = old[7][q, i]
                 new[7][q, i] = Fn[i // 3, i % 3]
-        J = _det(Fn)
+        J = det3(Fn)
         for i in range(9):
             so[i // 3, i % 3] = old[0][q, i]
         J_mid, ee, qq = _start(Fo, Fn, so, G, scratch, de, Qh, sr, st)
@@ -388,7 +390,7 @@ def _jc_kernel(c, bisections, F, hoop, dt, old, sigma, new, flags):  # pragma: n
     Fn, Fo, de, Qh, so, sr, st, sm, sn, scratch = _arrays()
     for q in range(F.shape[0]):
         finite = _gradient(F, hoop, q, Fn)
-        J = _det(Fn)
+        J = det3(Fn)
         if not finite or not (J > 0.0):
             flags[q] = 1
             continue
@@ -465,7 +467,7 @@ def _wave_speed(c, eroded, mu_maxes, Fs):  # pragma: no cover - compiled
         K = max(_tangent(c, mu_max), _unloading(c, mu_max))
         for i in range(9):
             F[i // 3, i % 3] = Fs[q, i]
-        c2 = (K + 4.0 * c[0] / 3.0) / (c[21] / _det(F))
+        c2 = (K + 4.0 * c[0] / 3.0) / (c[21] / det3(F))
         if not (c2 >= 0.0):  # numpy's sqrt gives nan, and its max keeps it
             return np.nan
         top = max(top, c2)
@@ -476,6 +478,17 @@ def hjc_wave_speed(constants: np.ndarray, state: dict[str, np.ndarray]) -> float
     """``HolmquistJohnsonCook.wave_speed`` of ``state``'s points, in one compiled pass."""
     columns = (state[name] for name in ("eroded", "mu_max", "F"))
     return float(_wave_speed(constants, *(np.asarray(a, dtype=float) for a in columns)))
+
+
+@jit
+def cofactor3(a: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """``cof(a) = det(a) a^{-T}`` of a 3 x 3 matrix into ``out``, compiled: its rows
+    ``a_1 x a_2``, ``a_2 x a_0``, ``a_0 x a_1`` (``objective.cofactor_3x3``'s)."""
+    for i in range(3):
+        i1, i2 = (i + 1) % 3, (i + 2) % 3
+        for k in range(3):
+            k1, k2 = (k + 1) % 3, (k + 2) % 3
+            out[i, k] = a[i1, k1] * a[i2, k2] - a[i1, k2] * a[i2, k1]
 
 
 @jit
@@ -491,11 +504,7 @@ def _nominal(sigma, F, P):  # pragma: no cover - compiled
                     live = True
         if not live:
             continue
-        for i in range(3):
-            i1, i2 = (i + 1) % 3, (i + 2) % 3
-            for k in range(3):
-                k1, k2 = (k + 1) % 3, (k + 2) % 3
-                cof[i, k] = F[q, i1, k1] * F[q, i2, k2] - F[q, i1, k2] * F[q, i2, k1]
+        cofactor3(F[q], cof)
         for i in range(3):
             for j in range(3):
                 acc = 0.0

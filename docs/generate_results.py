@@ -367,6 +367,8 @@ def render_page(name: str, data: object, meta: dict | None) -> str:
         verdict = "the demo's own checks passed" if status == 0 else "the demo reported a failure"
         seconds = f" after {meta['seconds']} s" if "seconds" in meta else ""
         lines.append(f"- **Exit status**: {status} ({verdict}){seconds}")
+    if meta.get("note"):  # how the run was made, what it predates
+        lines.append(f"- **Note**: {meta['note']}")
     lines += [
         f"- **Data**: `docs/results/data/{name}.json`",
         "",

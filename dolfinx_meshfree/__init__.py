@@ -67,6 +67,7 @@ from .geometry.quadrature import boundary_facets, cell_quadrature, facet_quadrat
 from .geometry.smoothing import INTEGRATIONS
 from .geometry.submesh import submesh
 from .io import DynamicsWriter, ProgressBar, read_particles
+from .physics.bulk_viscosity import BulkViscosity
 from .physics.cohesive import LinearCohesive
 from .physics.constitutive import Material, NeoHookean, SaintVenantKirchhoff
 from .physics.forces import InternalForces
@@ -147,6 +148,7 @@ __all__ = [
     "Bodies",
     "BodyCut",
     "BulkStrengthWarning",
+    "BulkViscosity",
     "CavityExpansion",
     "CellCollapseWarning",
     "CellsWhere",

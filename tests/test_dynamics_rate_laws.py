@@ -23,7 +23,7 @@ from dolfinx_meshfree.geometry.patch_criteria import GrowthContext
 import dolfinx
 import numpy as np
 import pytest
-from conftest import CELL_TYPES, conversion_balance, load_demo, rectangle
+from conftest import CELL_TYPES, conversion_balance, rectangle
 from mpi4py import MPI
 
 # the bars' coupled models: a patch on a quarter of a 2-rank mesh is unbalanced (a small model)
@@ -101,7 +101,8 @@ def pulse(x: np.ndarray) -> np.ndarray:
     + [(c, "quadrilateral") for c in COUPLINGS],
 )
 def test_elastic_range_is_the_linear_law(method, cell):
-    law = HJC if cell != "hexahedron" else dataclasses.replace(HJC, plane=None)
+    # without the shock viscosity (the linear law has none; its work: test_bulk_viscosity.py)
+    law = dataclasses.replace(HJC, viscosity=None, plane=None if cell == "hexahedron" else "strain")
     gdim = 3 if cell == "hexahedron" else 2
     points = np.zeros((3, gdim))
     points[:, 0] = [0.25 * L, 0.5 * L, 0.75 * L]
@@ -152,7 +153,7 @@ def test_crushing_impact_fails_the_concrete_and_keeps_the_balance():
     assert largest(dyn, "mu_max") > HJC.mu_plock  # crushed to fully dense
     assert largest(dyn, "mu_plastic") > 0.05
     assert res.energies[-1].internal > 0.1 * res.energies[0].kinetic
-    assert abs(balance(res)) < 1e-3  # measured 2.0e-4 (4.2e-4 with the full rule)
+    assert abs(balance(res)) < 1e-3  # measured 1.4e-4 (the bulk viscosity's work counted)
 
 
 @pytest.mark.parametrize("method", COUPLINGS)
@@ -164,7 +165,7 @@ def test_coupled_crushing_impact(method):
     assert largest(dyn, "damage") == 1.0
     assert largest(dyn, "mu_max") > HJC.mu_plock
     last = res.energies[-1]
-    assert abs(balance(res) - last.constraint / res.energies[0].kinetic) < 2.5e-4  # 1.0e-4
+    assert abs(balance(res) - last.constraint / res.energies[0].kinetic) < 2.5e-4  # 8.5e-5
 
 
 def test_a_run_in_pieces():
@@ -192,7 +193,7 @@ def test_stable_step_sees_the_compression():
     """The speed the stable step is bounded with is the points' largest wave speed over their
     smallest principal stretch (a cell crushed to half its height halves the step), eroded
     points left out."""
-    law = RateLaw(dataclasses.replace(HJC, erosion=1.0))
+    law = RateLaw(dataclasses.replace(HJC, erosion=1.0, viscosity=None))
     F = np.broadcast_to(np.eye(2), (3, 2, 2)).copy()
     law.stress(F)  # the virgin state at rest
     law.set_time(1e-7)
@@ -215,11 +216,13 @@ def test_steel_block_yields_and_keeps_the_balance(method, margin, ratio):
     """The balance's error is the step's: second order (the stress work is trapezoidal, the
     central difference second order). Measured: EFG 1.14e-3, halved with the step by 4.1; FE
     at the cells' mean dilatation (its force the derivative of the work the law integrates at
-    ``bar F``) 3.2e-4, by 6.5."""
-    dyn, res = impact(STEEL, method=method, speed=200.0)
+    ``bar F``) 3.2e-4, by 6.5. The law's own work, without the shock viscosity (whose lagged
+    pressure's work is checked in test_bulk_viscosity.py)."""
+    steel = dataclasses.replace(STEEL, viscosity=None)
+    dyn, res = impact(steel, method=method, speed=200.0)
     assert largest(dyn, "plastic_strain") > 1e-3
     assert abs(balance(res)) < margin
-    _, half = impact(STEEL, method=method, speed=200.0, fraction=0.5)
+    _, half = impact(steel, method=method, speed=200.0, fraction=0.5)
     assert ratio[0] < balance(res) / balance(half) < ratio[1]
 
 
@@ -269,8 +272,8 @@ def test_what_does_not_carry_the_state_refuses_it():
 def test_failing_cells_become_particles_with_their_state():
     """StateAbove('damage') turns failing FE cells into particles during the 300 m/s impact
     (AdaptiveRun); the state goes with them. Against the model with the final patch from the
-    start (the same points): the damage differs by 0.036 on average (mean damage 0.64) and the
-    stress work by 6 %; restarting the converted points from rest (the defect this guards)
+    start (the same points): the damage differs by 0.026 on average (mean damage 0.62) and the
+    stress work by 1.7 %; restarting the converted points from rest (the defect this guards)
     measured 0.24 and -95 %. Mass exact and no momentum correction at every conversion."""
     msh = rectangle(COMM, [0.0, 0.0], [L, H], [20, 4], CELL_TYPES["quadrilateral"])
     V = _compat.vector_function_space(msh)
@@ -302,10 +305,10 @@ def test_failing_cells_become_particles_with_their_state():
 
     (pa, da), (pb, db) = gathered(dyn), gathered(ref)
     assert np.allclose(pa, pb, atol=1e-12)  # the same points: the final patch, the same rules
-    assert db.mean() > 0.5  # measured 0.64: the bar has failed near the wall
-    assert np.abs(da - db).mean() < 0.08  # measured 0.036 (state restarted: 0.24)
+    assert db.mean() > 0.5  # measured 0.62: the bar has failed near the wall
+    assert np.abs(da - db).mean() < 0.08  # measured 0.026 (state restarted: 0.24)
     ea, eb = dyn.stepper.records[-1].internal, ref.stepper.records[-1].internal
-    assert ea == pytest.approx(eb, rel=0.15)  # measured 6 % (state restarted: -95 %)
+    assert ea == pytest.approx(eb, rel=0.15)  # measured 1.7 % (state restarted: -95 %)
 
 
 def test_failing_cells_become_hybrid_particles():
@@ -470,26 +473,3 @@ def test_equally_near_points_are_chosen_by_coordinates():
         src_cells = np.array([0, 0, 0, 0, 1, 1, 1, 1])[order]
         chosen = src[nearest_in_cell(src, src_cells, points, cells)]
         assert np.array_equal(chosen, [gauss[0], gauss[3], other[0]])
-
-
-@pytest.mark.xfail(
-    strict=True,
-    raises=AssertionError,
-    reason="known limit (guide, impact materials: the demo's table): without a shock viscosity "
-    "the 300 m/s front rings and the damage behind it alternates from cell to cell, so the "
-    "deepest failed point moves with the time step (pure FE, 40 cells: 37.0 mm at the stable "
-    "step, 17.0 mm at 0.6 and 0.4 of it, measured); the cure, an artificial bulk viscosity, is "
-    "not built",
-)
-def test_failed_depth_is_converged_in_the_step():
-    """The concrete bar of ``demos/concrete_impact.py`` on rollers at 300 m/s, pure FE at 40
-    cells: the depth to which it fails at the stable step and at half of it, within one cell."""
-    demo = load_demo("concrete_impact")
-    depths = []
-    for fraction in (1.0, 0.5):
-        dyn = demo.build("fe", 40)
-        dyn.set_initial(velocity=lambda x: np.stack([np.full(len(x), -300.0), 0 * x[:, 0]], 1))
-        dyn.run(demo.T_END, dt=fraction * dyn.stable_time_step())
-        depths.append(demo.depth(dyn, dyn.material.state["damage"][:, 0] >= 0.99))
-        dyn.destroy()
-    assert abs(depths[0] - depths[1]) <= demo.LENGTH / 40

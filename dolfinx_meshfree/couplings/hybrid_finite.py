@@ -28,6 +28,7 @@ import scipy.sparse as sp
 from petsc4py import PETSc
 
 from ..approx.tables import ShapeTable
+from ..physics.bulk_viscosity import particle_lengths
 from ..physics.constitutive import Material
 from ..physics.forces import InternalForces
 from ..statics.petsc import create_aij, create_vector
@@ -67,7 +68,7 @@ class HybridForces:
         points, grads, test, weights = energy_tables(d, smoothed)
         attach = getattr(material, "attach", None)
         if attach is not None:  # a bound rate-form law: its points and their cells
-            attach(points, energy_cells(d))
+            attach(points, energy_cells(d), particle_lengths(self.P.positions, points))
         table = ShapeTable(points, sp.csr_matrix((points.shape[0], n + N)), grads)
         self.forces = InternalForces(  # axisymmetric: the hoop of the hybrid sums (or smoothed)
             table, weights, material, test_gradients=test, comm=d.comm, hoop=d.hoop()

@@ -68,13 +68,14 @@ from ..geometry.adaptive_quadrature import AdaptiveQuadrature
 from ..geometry.crack import Crack, CrackDomain, place_crack
 from ..geometry.particles import ParticleSet
 from ..geometry.patch import ParticlePatch
-from ..geometry.quadrature import DYNAMIC_FACET_DEGREE
+from ..geometry.quadrature import DYNAMIC_FACET_DEGREE, cell_sizes
 from ..geometry.smoothing import STABILISATION, refuse_smoothed, smoothing_rule, value_rule
 from ..geometry.stress_points import check_integration, stress_point_quadrature
 from ..parallel import raise_on_all_ranks
 from ..physics import axisymmetry
 from ..physics.axisymmetry import check_half_plane, check_particle_section
 from ..physics.body_loads import CallableBodyForce, body_load_vectors
+from ..physics.bulk_viscosity import particle_lengths
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic, is_axisymmetric
 from ..statics.coupled import CoupledElasticity, CouplingOperators
@@ -544,7 +545,9 @@ def build_efg(
         side_law = law
         if isinstance(law, RateLaws):
             side_law = law.bind()
-            side_law.attach(tables["quadrature"].points, tables["quadrature"].cells)
+            rule = tables["quadrature"]
+            lengths = particle_lengths(particles.positions, rule.points)
+            side_law.attach(rule.points, rule.cells, lengths)
         side = particle_forces(particles, tables, side_law)
         system = NonlinearSystem(fields, [side], law, constraint)
     return Model(
@@ -872,7 +875,8 @@ def _finite_strain_system(
     if rate:  # each side its own points' state (module rate_forms)
         fe = fe_side = PointFESide(V, law.bind(), cells, weight_at, dilatation=mean)
         particle_law, q = law.bind(), ops.particle_tables["quadrature"]
-        particle_law.attach(q.points, q.cells)
+        lengths = particle_lengths(patch.particles.positions, q.points)
+        particle_law.attach(q.points, q.cells, lengths)
     else:
         fe = fe_forces(V, law, cells, weight=weight, weight_at=weight_at)
         fe_side, particle_law = fe.side, law
@@ -884,7 +888,7 @@ def _finite_strain_system(
         table = raise_on_all_ranks(patch.comm, lambda: blend.table(q.points, q.cells))
         blend_law = law.bind() if rate else law  # a rate law: their own points' state
         if rate:
-            blend_law.attach(q.points, q.cells)
+            blend_law.attach(q.points, q.cells, cell_sizes(problem.V.mesh, q.cells))
         shared = [BlendedSide(fe_side, particles, table, q.weights, blend_law)]
     elif ops.reduction is not None:  # master-slave: the particles through the reduction
         reduced = ReducedParticles(particles, ops.reduction, _links(problem, ops))

@@ -111,7 +111,9 @@ class ExplicitDynamics(StateQueries, Struck):
             :class:`~dolfinx_meshfree.dynamics.finite_strain.NonlinearSystem` for a
             finite-strain material).
         rebound_every: Steps between two checks of the current wave speed of a finite-strain
-            system (a growth above 5 % re-bounds the step, :class:`Rebound`). held: FE facets
+            system (a growth above 5 % re-bounds the step, :class:`Rebound`; a bulk
+            viscosity's damper, :mod:`~dolfinx_meshfree.physics.bulk_viscosity`, is checked at
+            every step). held: FE facets
             driven at prescribed velocities (:mod:`~dolfinx_meshfree.dynamics.prescribed`).
 
     Attributes:

@@ -496,12 +496,26 @@ class NonlinearSystem:
         """The largest current Lagrangian wave speed over every quadrature point and rank
         (:meth:`~dolfinx_meshfree.physics.constitutive.Material.wave_speed`); raises a
         :class:`~dolfinx_meshfree.physics.constitutive.DeformationError` on every rank where
-        ``det F <= 0`` (collective)."""
+        ``det F <= 0`` (collective). A rate-form law's speed is its points' state's (their
+        last update: no gradient to compute)."""
+        if isinstance(self.material, RateLaws):
+            return float(self.comm.allreduce(self.material.wave_speed(), op=MPI.MAX))
         F = self.deformation_gradients(u)
         if F.shape[0] == 0:
             return float(self.comm.allreduce(0.0, op=MPI.MAX))
         c = raise_on_all_ranks(self.comm, lambda: self.material.wave_speed(F))
         return float(self.comm.allreduce(c, op=MPI.MAX))
+
+    @property
+    def viscous(self) -> bool:
+        """Whether the material is a rate-form law with a bulk viscosity."""
+        return isinstance(self.material, RateLaws) and self.material.viscous
+
+    def viscous_factor(self) -> float:
+        """The largest step factor of a rate-form law's bulk viscosity over every point and
+        rank (1 without; collective): the damper's, by which the stable step is divided."""
+        local = self.material.viscous_factor() if isinstance(self.material, RateLaws) else 1.0
+        return float(self.comm.allreduce(local, op=MPI.MAX))
 
     def rebuild(self, changed: Collection[str]) -> bool:
         """Nothing to rebuild when nothing changed (``False``).

@@ -28,6 +28,14 @@ dilatation, :mod:`~dolfinx_meshfree.dynamics.rate_dilatation`), the particles th
 through :class:`~dolfinx_meshfree.statics.sides.BlendedSide` on their blended table (Belytschko
 et al. 1995, eq. 3.12-3.16) with points of their own.
 
+A law's artificial bulk viscosity (its ``viscosity``, on by default:
+:mod:`~dolfinx_meshfree.physics.bulk_viscosity`) lives here, not in the law: each point's
+viscous pressure ``q`` from the volume ratios of its last two updates and its reference length
+(the side gives it: an FE cell's size, the local particle spacing, :meth:`RateLaw.attach`); the
+forces see ``sigma - q I``, the state keeps the law's stress; ``q``'s work joins the internal
+energy (the state's ``viscous_work``), and the stable step is divided by the largest of the
+points' Wilkins factors (:meth:`RateLaw.viscous_factor`; the run checks it every step).
+
 A model's law is a :class:`RateLaws`: one :class:`RateLaw` per side (the FE cells, the particles,
 the ramps' blended cells; master–slave's particles, seen through its reduction, Rabczuk et al.
 2006, eq. 27-28; the hybrid's particle energy, its SPH sums of the nominal stress at the points of
@@ -48,9 +56,15 @@ from scipy.spatial import cKDTree
 from .. import _compat
 from ..approx.fe_dofs import fe_dof_layout
 from ..approx.fe_points import tabulate_in_cells
-from ..geometry.quadrature import QuadraturePoints, cell_quadrature
+from ..geometry.quadrature import QuadraturePoints, cell_quadrature, cell_sizes
 from ..physics import rate_kernels
 from ..physics.axisymmetry import revolved
+from ..physics.bulk_viscosity import (
+    step_factor,
+    viscous_pressure,
+    volume_ratios,
+    volumetric_rate,
+)
 from ..physics.forces import InternalForces
 from ..physics.materials import AXISYMMETRIC, LinearElastic, is_axisymmetric
 from ..physics.objective import as_3d, nominal_stress
@@ -62,11 +76,14 @@ from .time_step import same_time
 
 __all__ = [
     "RATE_METHODS",
+    "VISCOUS_FIELDS",
     "PointFESide",
     "RateLaw",
     "RateLaws",
     "carry_state",
+    "is_viscous",
     "nearest_in_cell",
+    "zone_laws",
 ]
 
 #: The methods of explicit dynamics that carry a rate-form law's state (all of them): each side
@@ -76,6 +93,22 @@ RATE_METHODS = (
     "fe", "efg", "lagrange", "edge-to-edge", "bridging", "ramp", "ramp-cubic", "master-slave",
     "hybrid",
 )  # fmt: skip
+
+
+#: The state a law's artificial bulk viscosity adds to every point (its own state does not
+#: carry it): the viscous pressure ``q`` of the last update and the work it did per unit
+#: reference volume (:mod:`~dolfinx_meshfree.physics.bulk_viscosity`).
+VISCOUS_FIELDS = ("viscous_pressure", "viscous_work")
+
+
+def zone_laws(law: object) -> list:
+    """The laws of a :class:`~dolfinx_meshfree.MaterialZones` (one per zone), else ``[law]``."""
+    return list(law.laws) if isinstance(law, MaterialZones) else [law]
+
+
+def is_viscous(law: object) -> bool:
+    """Whether a rate-form law (any zone of it) carries an artificial bulk viscosity."""
+    return any(getattr(z, "viscosity", None) is not None for z in zone_laws(law))
 
 
 def stiffest_twin(law: object) -> LinearElastic:
@@ -145,14 +178,39 @@ class RateLaw:
         #: Set by a conversion (:func:`carry_state`): the next evaluation at the state's time
         #: takes its deformation gradient (the new field's) as the state's, the stress kept.
         self.rebase = False
+        #: Whether the law carries an artificial bulk viscosity (:meth:`_viscous`), per zone its
+        #: coefficients ``(c_q, c_l)`` (zeros: none), its twin's wave speed and its density.
+        self.viscous = is_viscous(law)
+        laws = zone_laws(law)
+        self._viscosity = np.array(
+            [(z.viscosity.quadratic, z.viscosity.linear) if z.viscosity else (0.0, 0.0)
+             for z in laws]
+        )  # fmt: skip
+        self._speeds = np.array([stiffest_twin(z).wave_speed() for z in laws])
+        self._densities = np.array([float(z.rho) for z in laws])
+        #: The reference length of each point (m,) (:meth:`attach`): a viscosity's ``l_0``.
+        self.lengths: np.ndarray | None = None
+        #: Each point's step factor of the viscosity at the last update (``None``: 1).
+        self.factor: np.ndarray | None = None
 
-    def attach(self, points: np.ndarray, cells: np.ndarray) -> None:
-        """The points (m, gdim, reference coordinates) and their local cells (m,), known when
-        the side is built (before any force)."""
+    def attach(
+        self, points: np.ndarray, cells: np.ndarray, lengths: np.ndarray | None = None
+    ) -> None:
+        """The points (m, gdim, reference coordinates), their local cells (m,) and their
+        reference lengths (m,: an FE cell's size, the local particle spacing; what a viscosity
+        needs), known when the side is built (before any force)."""
         points, cells = np.asarray(points, dtype=float), np.asarray(cells, dtype=np.int64)
         if len(points) != len(cells):
             raise ValueError(f"{len(points)} points but {len(cells)} cells: one cell per point")
         self.points, self.cells = points.copy(), cells.copy()
+        if lengths is not None:
+            lengths = np.asarray(lengths, dtype=float)
+            if lengths.shape != (len(points),) or not np.all(lengths > 0.0):
+                raise ValueError(
+                    f"lengths: {lengths.shape} values for {len(points)} points; one positive "
+                    "length per point"
+                )
+            self.lengths = lengths.copy()
         if self.cell_zone is not None:
             if len(cells) and not (cells.min() >= 0 and cells.max() < len(self.cell_zone)):
                 raise ValueError(
@@ -162,7 +220,14 @@ class RateLaw:
             self.zones = self.cell_zone[cells]
 
     def initial_state(self, m: int) -> dict[str, np.ndarray]:
-        """The virgin state of ``m`` points (a zoned law: of the attached points' zones)."""
+        """The virgin state of ``m`` points (a zoned law: of the attached points' zones), with
+        :data:`VISCOUS_FIELDS` where the law carries a viscosity."""
+        state = self._law_initial_state(m)
+        if self.viscous:
+            state.update({name: np.zeros((m, 1)) for name in VISCOUS_FIELDS})
+        return state
+
+    def _law_initial_state(self, m: int) -> dict[str, np.ndarray]:
         if not isinstance(self.law, MaterialZones):
             return self.law.initial_state(m)
         if self.zones is None or len(self.zones) != m:
@@ -213,7 +278,7 @@ class RateLaw:
                     f"(t = {self.clock:.6g}): a rate-form law starts from rest, undeformed; give "
                     "initial velocities, not an initial displacement"
                 )
-            return self.sigma
+            return self._with_viscosity()
         if dt < 0.0:
             raise ValueError(
                 f"{type(self.law).__name__}: asked for t = {self.clock:.6g} before its state's "
@@ -221,9 +286,59 @@ class RateLaw:
                 "again to start over"
             )
         extra = {} if hoop is None else {"hoop": hoop}
-        self.sigma, self.state = self.law.update(F, dt, self.state, **extra)
+        old = self.state
+        if self.viscous:  # the law sees its own state only
+            own = {k: v for k, v in old.items() if k not in VISCOUS_FIELDS}
+            self.sigma, new = self.law.update(F, dt, own, **extra)
+            self.state = self._viscous(old, new, dt)
+        else:
+            self.sigma, self.state = self.law.update(F, dt, old, **extra)
         self.time = self.clock
-        return self.sigma
+        return self._with_viscosity()
+
+    def _viscous(
+        self, old: dict[str, np.ndarray], new: dict[str, np.ndarray], dt: float
+    ) -> dict[str, np.ndarray]:
+        """``new`` with the viscous pressure and work of the step from ``old`` (module
+        :mod:`~dolfinx_meshfree.physics.bulk_viscosity`), and the points' step factors. Eroded
+        and inverted points carry none."""
+        if self.lengths is None:
+            raise ValueError(
+                f"{type(self.law).__name__}: its bulk viscosity needs each point's length, which "
+                "the side binding the law gives (attach(points, cells, lengths)); or give the "
+                "law viscosity=None"
+            )
+        m = len(new["F"])
+        J_old, J_new = volume_ratios(old["F"]), volume_ratios(new["F"])
+        live = np.isfinite(J_old) & np.isfinite(J_new) & (J_old > 0.0) & (J_new > 0.0)
+        if "eroded" in new:
+            live &= new["eroded"][:, 0] == 0
+        zone = self.zones if self.zones is not None else np.zeros(m, dtype=np.int64)
+        coeff, c = self._viscosity[zone], self._speeds[zone]
+        J = np.where(live, J_new, 1.0)
+        rate = np.where(live, volumetric_rate(np.where(live, J_old, 1.0), J, dt), 0.0)
+        dim = 2 if self.plane == "strain" else 3
+        q = viscous_pressure(
+            rate, J, self._densities[zone], c, self.lengths, dim, coeff[:, 0], coeff[:, 1]
+        )
+        q_old = old["viscous_pressure"][:, 0]
+        work = np.where(live, -0.5 * (q_old + q) * (J_new - J_old), 0.0)
+        self.factor = step_factor(rate, J, c, self.lengths, dim, coeff[:, 0], coeff[:, 1])
+        return dict(
+            new,
+            viscous_pressure=q[:, None],
+            viscous_work=old["viscous_work"] + work[:, None],
+        )
+
+    def _with_viscosity(self) -> np.ndarray:
+        """The Cauchy stress the forces see: the law's, less the viscous pressure ``q I``."""
+        if not self.viscous or self.state is None or not len(self.sigma):
+            return self.sigma
+        out = self.sigma.copy()
+        q = self.state["viscous_pressure"][:, 0]
+        for i in range(3):
+            out[:, i, i] -= q
+        return out
 
     def first_piola(self, F: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
         """``J sigma F^{-T}`` (m, d, d) of the advanced state."""
@@ -299,10 +414,20 @@ class RateLaw:
         return 1.0 / float(s.min(initial=1.0)) if s is not None else 1.0
 
     def strain_energy_density(self, F: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
-        """The stress work per unit reference volume of the state (m,)."""
+        """The stress work per unit reference volume of the state (m,), the viscous work with
+        it (the energy record's internal energy: stored and dissipated)."""
         if self.state is None:
             return np.zeros(len(F))
-        return self.state["work"][:, 0].copy()
+        work = self.state["work"][:, 0].copy()
+        if self.viscous:
+            work += self.state["viscous_work"][:, 0]
+        return work
+
+    def viscous_factor(self) -> float:
+        """The largest step factor of the viscosity over this rank's points at their last
+        update (1 without): the stable step's divisor
+        (:meth:`~dolfinx_meshfree.dynamics.time_step.TimeStepBound.stable`)."""
+        return float(self.factor.max(initial=1.0)) if self.factor is not None else 1.0
 
     def ufl_first_piola(self, F: object) -> object:
         raise TypeError(
@@ -406,6 +531,10 @@ class RateLaws:
         ``F`` is not used)."""
         return max((m.wave_speed() for m in self.members), default=self.twin.wave_speed())
 
+    def viscous_factor(self) -> float:
+        """The largest of the sides' :meth:`RateLaw.viscous_factor` (this rank's points)."""
+        return max((m.viscous_factor() for m in self.members), default=1.0)
+
     def _joined(self, name: str) -> np.ndarray | None:
         parts = [getattr(m, name) for m in self.members if m.state is not None]
         return np.concatenate(parts) if parts else None
@@ -428,9 +557,22 @@ class RateLaws:
         """The points' reference coordinates (m, gdim), joined."""
         return self._joined("points")
 
-    def scalar_names(self) -> list[str]:
-        """The law's scalar state variables, in its order (``"damage"``, ...)."""
+    def _virgin(self) -> dict[str, np.ndarray]:
+        """The virgin state of one point (with :data:`VISCOUS_FIELDS` for a viscous law)."""
         virgin = self.law.initial_state(1)
+        if is_viscous(self.law):
+            virgin.update({name: np.zeros((1, 1)) for name in VISCOUS_FIELDS})
+        return virgin
+
+    @property
+    def viscous(self) -> bool:
+        """Whether the law carries an artificial bulk viscosity (a zone of it)."""
+        return is_viscous(self.law)
+
+    def scalar_names(self) -> list[str]:
+        """The law's scalar state variables, in its order (``"damage"``, ...), then the
+        viscosity's."""
+        virgin = self._virgin()
         return [k for k, v in virgin.items() if np.asarray(v).reshape(1, -1).shape[1] == 1]
 
     def state_values(self, name: str) -> tuple[np.ndarray, np.ndarray, float]:
@@ -442,7 +584,7 @@ class RateLaws:
             ValueError: ``name`` is not a scalar state variable of the law (the message lists
                 them).
         """
-        virgin = self.law.initial_state(1)
+        virgin = self._virgin()
         scalars = self.scalar_names()
         if name not in scalars:
             raise ValueError(
@@ -585,7 +727,7 @@ class PointFESide:
             q = revolved(q)
         table = tabulate_in_cells(V, q.points, q.cells, derivatives=1)
         w = q.weights if weight_at is None else q.weights * weight_at(q)
-        law.attach(q.points, q.cells)
+        law.attach(q.points, q.cells, cell_sizes(msh, q.cells))
         #: The law as the force sum reads it: at the cells' mean dilatation, or pointwise.
         self.material = MeanDilatationLaw(law, q.cells, w) if dilatation else law
         self.forces = InternalForces(table, w, self.material, comm=self.comm)

@@ -54,7 +54,8 @@ def integrate(
         if on_output is not None:
             on_output(dyn, n, t)
 
-    # a finite-strain system re-bounds its step as it stiffens (not with a forced dt)
+    # a finite-strain system re-bounds its step as it stiffens (not with a forced dt; a bulk
+    # viscosity's damper is checked at every step, time_step.Rebound)
     rebound = dyn.rebound_every if hasattr(dyn.system, "wave_speed") and not force else None
     try:
         done = advance_to(

@@ -216,9 +216,18 @@ class TimeStepBound:
         }
         return self._critical
 
+    def damper(self) -> float:
+        """The factor by which a bulk viscosity lowers the step now (collective; 1 without):
+        the largest over the points of ``(b + sqrt(b^2 + c^2)) / c``
+        (:mod:`~dolfinx_meshfree.physics.bulk_viscosity`). Each point's damper scales its
+        frequencies by at most it, so the bound divided by it is a bound (as Wilkins' step,
+        the smallest over the cells)."""
+        factor = getattr(self.system, "viscous_factor", None)
+        return float(factor()) if factor is not None else 1.0
+
     def stable(self) -> float:
-        """``safety`` times the critical time step (collective)."""
-        return self.safety * self.critical()["critical"]
+        """``safety`` times the critical time step, over :meth:`damper` (collective)."""
+        return self.safety * self.critical()["critical"] / self.damper()
 
     def steps_to(self, span: float, dt: float | None, force: bool) -> tuple[int, float]:
         """The number of steps and the step that cover ``span`` exactly: ``dt`` (default the
@@ -229,7 +238,8 @@ class TimeStepBound:
                 stable step without ``force``.
         """
         crit = self.critical()
-        stable = self.safety * crit["critical"]
+        damper = self.damper()
+        stable = self.safety * crit["critical"] / damper
         if not (np.isfinite(span) and span > 0.0):
             raise ValueError(f"span={span!r} must be positive")
         if dt is None:
@@ -239,7 +249,8 @@ class TimeStepBound:
         elif dt > stable * (1.0 + 1e-12) and not force:
             raise ValueError(
                 f"dt={dt:.6g} is above the stable time step {stable:.6g} (safety {self.safety} x "
-                f"critical 2/omega_bound = {crit['critical']:.6g}, omega_bound >= omega_max; "
+                f"critical 2/omega_bound = {crit['critical']:.6g}, omega_bound >= omega_max, "
+                f"over the bulk viscosity's factor {damper:.4g}; "
                 f"Courant h_min/c = {crit['courant']:.6g} with h_min = {crit['h_min']:.4g}); "
                 f"pass dt <= {stable:.6g}, dt=None for the stable step, or force=True"
             )
@@ -267,7 +278,9 @@ class Rebound:
     of the last bound; when it grew by more than ``growth``, the bound is recomputed at the
     current tangent
     (:meth:`TimeStepBound.invalidate`). The run stops (``True``) when the new stable step lies
-    below the step in use, so that the caller continues with a smaller one. Between two checks
+    below the step in use, so that the caller continues with a smaller one; a system with a bulk
+    viscosity (``system.viscous``) is held to its current damper at every step
+    (:meth:`TimeStepBound.stable`; no new bound). Between two checks
     the step has a margin ``1 / safety`` on the last bound, which a growth of the frequencies by
     less than ``growth`` (5 %) cannot use up at ``safety <= 0.95``.
 
@@ -288,6 +301,11 @@ class Rebound:
         self.every, self.growth = every, float(growth)
 
     def __call__(self, n: int) -> bool:
+        # a bulk viscosity's damper at every step (cheap: the points' factors of their last
+        # update; no new bound)
+        if getattr(self.bound.system, "viscous", False):
+            if self.bound.stable() < self.dt * (1.0 - 1e-12):
+                return True
         # every ``every`` steps since the last check, whichever run it was in (a model run in
         # short pieces, ``run(t)`` in a loop, was never checked when its pieces were shorter)
         if n - self.bound.checked_at < self.every:

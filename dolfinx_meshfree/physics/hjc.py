@@ -74,6 +74,7 @@ from typing import ClassVar
 import numpy as np
 
 from . import rate_kernels
+from .bulk_viscosity import DEFAULT_VISCOSITY, BulkViscosity, check_viscosity
 from .objective import RateStep, as_3d, check_arguments, check_step, virgin_state
 
 __all__ = ["HolmquistJohnsonCook"]
@@ -101,6 +102,9 @@ class HolmquistJohnsonCook:
             plane: ``None`` (3D), ``"strain"`` (a 2D model's ``F_zz = 1``) or
             ``"axisymmetric"`` (the (r, z) section of a solid of revolution: :meth:`update`
             takes the hoop stretch ``r / R`` as ``F_zz``).
+        viscosity: The artificial bulk viscosity that spreads a shock in explicit dynamics
+            (:class:`~dolfinx_meshfree.BulkViscosity`, LS-DYNA's default coefficients);
+            ``None`` leaves it out (the law's own stress only: a shock rings).
         erosion: ``None`` (default: an inverted point stops the run), or the equivalent
             plastic strain ``eps_e > 0`` at which a fully damaged point erodes; an inverted
             point erodes too (module docstring).
@@ -134,6 +138,7 @@ class HolmquistJohnsonCook:
     eps0: float = 1.0
     plane: str | None = None
     erosion: float | None = None
+    viscosity: BulkViscosity | None = DEFAULT_VISCOSITY
     backend: str | None = field(default=None, compare=False)
 
     #: State arrays per point (``(m, k)``): the deviatoric Cauchy stress (row-major 3 x 3), the
@@ -153,7 +158,11 @@ class HolmquistJohnsonCook:
 
     @classmethod
     def concrete_48mpa(
-        cls, plane: str | None = None, erosion: float | None = None, backend: str | None = None
+        cls,
+        plane: str | None = None,
+        erosion: float | None = None,
+        backend: str | None = None,
+        viscosity: BulkViscosity | None = DEFAULT_VISCOSITY,
     ) -> HolmquistJohnsonCook:
         """The 48 MPa concrete of Holmquist, Johnson & Cook 1993 in SI units (kg, m, s, Pa), as
         LS-DYNA's MAT_111 examples list it: rho 2440, G 14.86 GPa, A 0.79, B 1.60, N 0.61,
@@ -163,13 +172,14 @@ class HolmquistJohnsonCook:
             rho=2440.0, G=14.86e9, A=0.79, B=1.60, N=0.61, C=0.007, fc=48e6, T=4e6,
             efmin=0.01, sfmax=7.0, p_crush=16e6, mu_crush=0.001, p_lock=0.80e9, mu_lock=0.10,
             D1=0.04, D2=1.0, K1=85e9, K2=-171e9, K3=208e9, plane=plane, erosion=erosion,
-            backend=backend,
+            backend=backend, viscosity=viscosity,
         )  # fmt: skip
 
     def __post_init__(self) -> None:
         rate_kernels.resolve_backend(self.backend)
+        check_viscosity("HolmquistJohnsonCook", self.viscosity)
         for f in fields(self):
-            if f.name in ("plane", "erosion", "backend"):
+            if f.name in ("plane", "erosion", "backend", "viscosity"):
                 continue
             value = getattr(self, f.name)
             if not (isinstance(value, int | float) and np.isfinite(value)):

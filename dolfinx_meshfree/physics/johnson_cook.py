@@ -34,6 +34,7 @@ from typing import ClassVar
 import numpy as np
 
 from . import rate_kernels
+from .bulk_viscosity import DEFAULT_VISCOSITY, BulkViscosity, check_viscosity
 from .objective import RateStep, check_arguments, check_step, virgin_state
 
 __all__ = ["JohnsonCook"]
@@ -52,6 +53,8 @@ class JohnsonCook:
             yield stress, hardening modulus and exponent (``0 < n <= 1``). C: Strain-rate
             coefficient. eps0: Reference strain rate (1/s in SI). plane: ``None`` (3D),
             ``"strain"`` (2D) or ``"axisymmetric"`` (2D; :meth:`update` takes the hoop stretch).
+        viscosity: The artificial bulk viscosity of explicit dynamics, as
+            :class:`~dolfinx_meshfree.physics.hjc.HolmquistJohnsonCook`'s (``None``: none).
         backend: ``"numba"`` (the default with numba: one compiled pass over the points,
             :mod:`~dolfinx_meshfree.physics.rate_kernels`) or ``"numpy"`` (the reference); as
             :class:`~dolfinx_meshfree.physics.hjc.HolmquistJohnsonCook`'s.
@@ -66,6 +69,7 @@ class JohnsonCook:
     C: float
     eps0: float = 1.0
     plane: str | None = None
+    viscosity: BulkViscosity | None = DEFAULT_VISCOSITY
     backend: str | None = field(default=None, compare=False)
 
     #: State arrays per point: the deviatoric Cauchy stress (row-major 3 x 3), the pressure, the
@@ -82,16 +86,22 @@ class JohnsonCook:
     isochoric_flow: ClassVar[bool] = True
 
     @classmethod
-    def steel_4340(cls, plane: str | None = None, backend: str | None = None) -> JohnsonCook:
+    def steel_4340(
+        cls,
+        plane: str | None = None,
+        backend: str | None = None,
+        viscosity: BulkViscosity | None = DEFAULT_VISCOSITY,
+    ) -> JohnsonCook:
         """4340 steel (Rc 30) of Johnson & Cook 1983, Table 1, in SI units: rho 7830, E 200 GPa,
         nu 0.29, A 792 MPa, B 510 MPa, n 0.26, C 0.014."""
         return cls(
             rho=7830.0, E=200e9, nu=0.29, A=792e6, B=510e6, n=0.26, C=0.014, plane=plane,
-            backend=backend,
+            backend=backend, viscosity=viscosity,
         )  # fmt: skip
 
     def __post_init__(self) -> None:
         rate_kernels.resolve_backend(self.backend)
+        check_viscosity("JohnsonCook", self.viscosity)
 
         def refuse(name: str, rule: str, fix: str) -> None:
             raise ValueError(f"JohnsonCook: {name}={getattr(self, name)!r} {rule}; {fix}")

@@ -1,0 +1,160 @@
+"""Artificial bulk viscosity: the shock smearing of explicit dynamics for rate-form laws.
+
+A compressive front in a discretised solid has no width of its own: it rings behind the front
+(Gibbs), the stress overshoots, and a law with damage or crushing fails the points the ringing
+reaches, so that where the material fails moves with the mesh and the time step. The cure of
+von Neumann & Richtmyer (1950) spreads the front over a few cells by a pressure ``q`` added to
+the law's, in compression only; the form of Wilkins (1980, "Use of artificial viscosity in
+multidimensional fluid dynamic calculations", J. Comput. Phys. 36) and of LS-DYNA's default
+(Hallquist, LS-DYNA Theory Manual, sec. "Bulk viscosity"; coefficients 1.5 and 0.06), with
+the volumetric strain rate ``eps_v' = tr D = J' / J``::
+
+    q = rho l (c_q^2 l eps_v'^2 - c_l c eps_v'),    eps_v' < 0;    q = 0 otherwise,
+
+``rho = rho_0 / J`` the current density, ``l = l_0 J^(1/d)`` the current length of a point's
+cell (``l_0`` its reference size, ``d`` 3 in 3D and axisymmetry, 2 in plane strain), ``c`` the
+law's dilatational wave speed (its stiffest linear twin's, which the stable step is bounded
+with) and ``c_q``, ``c_l`` the quadratic and the linear coefficient. The Cauchy stress the
+forces see is ``sigma - q I``; the law's own state does not see ``q``.
+
+Over a step from ``J_n`` to ``J_{n+1}`` the rate is ``(J_{n+1} - J_n) / (dt (J_n + J_{n+1}) /
+2)`` and the work ``q`` does per unit reference volume, all of it dissipated, is
+``-(q_n + q_{n+1}) / 2 (J_{n+1} - J_n) >= 0`` (trapezoidal, as the laws' stress work), so the
+energy record holds it with the internal energy.
+
+The viscous force is a damper on the cell's highest mode; central differences stay stable for
+``dt <= l / (b + sqrt(b^2 + c^2))`` (Wilkins 1980, eq. 18), ``b = 2 c_q^2 l |eps_v'| + c_l c``
+in compression (the damper's tangent, twice its secant for the quadratic term), ``b = 0``
+otherwise: ``(b + sqrt(b^2 + c^2)) / c`` is the factor by which the step falls
+(:func:`step_factor`), which :class:`~dolfinx_meshfree.dynamics.rate_forms.RateLaw` puts into the
+stable-step bound.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+__all__ = [
+    "DEFAULT_VISCOSITY",
+    "BulkViscosity",
+    "check_viscosity",
+    "particle_lengths",
+    "step_factor",
+    "viscous_pressure",
+    "volume_ratios",
+    "volumetric_rate",
+]
+
+
+@dataclass(frozen=True)
+class BulkViscosity:
+    """The coefficients of the artificial bulk viscosity (module docstring), a rate-form law's
+    ``viscosity`` (on by default; ``viscosity=None`` leaves it out).
+
+    Args:
+        quadratic: ``c_q`` (1.5, LS-DYNA's Q1): spreads a shock over about ``c_q^2`` cells.
+        linear: ``c_l`` (0.06, LS-DYNA's Q2): damps the ringing left behind.
+    """
+
+    quadratic: float = 1.5
+    linear: float = 0.06
+
+    def __post_init__(self) -> None:
+        for name in ("quadratic", "linear"):
+            value = getattr(self, name)
+            if not (
+                isinstance(value, int | float)
+                and not isinstance(value, bool)
+                and np.isfinite(value)
+                and value >= 0.0
+            ):
+                raise ValueError(
+                    f"BulkViscosity: {name}={value!r} must be a finite number >= 0 (LS-DYNA's "
+                    "defaults are quadratic=1.5, linear=0.06)"
+                )
+        if self.quadratic == 0.0 and self.linear == 0.0:
+            raise ValueError(
+                "BulkViscosity: quadratic=0 and linear=0 is no viscosity; give the law "
+                "viscosity=None to leave it out"
+            )
+
+
+#: LS-DYNA's default coefficients: the rate-form laws' default ``viscosity``.
+DEFAULT_VISCOSITY = BulkViscosity()
+
+
+def check_viscosity(owner: str, viscosity: object) -> None:
+    """Refuse a law's ``viscosity`` that is neither ``None`` nor a :class:`BulkViscosity`."""
+    if viscosity is not None and not isinstance(viscosity, BulkViscosity):
+        raise ValueError(
+            f"{owner}: viscosity={viscosity!r} is not a BulkViscosity; give "
+            "mf.BulkViscosity(quadratic=1.5, linear=0.06) or None (no viscosity)"
+        )
+
+
+def volume_ratios(F: np.ndarray) -> np.ndarray:
+    """``det F`` (m,) of gradients stored row-major (m, 9), by the rule of Sarrus."""
+    a = np.asarray(F, dtype=float)
+    return (
+        a[:, 0] * (a[:, 4] * a[:, 8] - a[:, 5] * a[:, 7])
+        - a[:, 1] * (a[:, 3] * a[:, 8] - a[:, 5] * a[:, 6])
+        + a[:, 2] * (a[:, 3] * a[:, 7] - a[:, 4] * a[:, 6])
+    )
+
+
+def volumetric_rate(J_old: np.ndarray, J_new: np.ndarray, dt: float) -> np.ndarray:
+    """``eps_v' = (J_new - J_old) / (dt (J_old + J_new) / 2)`` (m,)."""
+    return (J_new - J_old) / (dt * 0.5 * (J_new + J_old))
+
+
+def viscous_pressure(
+    rate: np.ndarray,
+    J: np.ndarray,
+    rho0: float | np.ndarray,
+    c: float | np.ndarray,
+    length0: np.ndarray,
+    dim: int,
+    quadratic: float | np.ndarray,
+    linear: float | np.ndarray,
+) -> np.ndarray:
+    """``q`` (m,) of the module docstring at the rate ``rate`` and the volume ratio ``J`` of
+    points of reference length ``length0``, reference density ``rho0`` and wave speed ``c``; 0
+    where the point expands."""
+    length = length0 * J ** (1.0 / dim)
+    q = rho0 / J * length * (quadratic**2 * length * rate**2 - linear * c * rate)
+    return np.where(rate < 0.0, q, 0.0)
+
+
+def step_factor(
+    rate: np.ndarray,
+    J: np.ndarray,
+    c: float | np.ndarray,
+    length0: np.ndarray,
+    dim: int,
+    quadratic: float | np.ndarray,
+    linear: float | np.ndarray,
+) -> np.ndarray:
+    """``(b + sqrt(b^2 + c^2)) / c >= 1`` (m,): the factor by which the viscosity lowers a
+    point's stable step (module docstring; 1 where it expands)."""
+    length = length0 * J ** (1.0 / dim)
+    b = np.where(rate < 0.0, 2.0 * quadratic**2 * length * np.abs(rate) + linear * c, 0.0)
+    return (b + np.sqrt(b * b + c * c)) / c
+
+
+def particle_lengths(positions: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """The reference length of points (m, gdim) of a particle rule: the nearest particle's
+    distance to its own nearest neighbour (the local particle spacing; positions (n, gdim))."""
+    positions, points = np.asarray(positions, dtype=float), np.asarray(points, dtype=float)
+    if len(points) == 0:
+        return np.zeros(0)
+    if len(positions) < 2:
+        raise ValueError(
+            f"particle_lengths: {len(positions)} particle(s) give no spacing; a particle side "
+            "needs two at least"
+        )
+    tree = cKDTree(positions)
+    spacing = tree.query(positions, k=2)[0][:, 1]
+    return spacing[tree.query(points, k=1)[1]]

@@ -191,6 +191,16 @@ def test_options_and_state():
     plain.run(1e-6)
     assert not set(VISCOUS_FIELDS) & set(plain.material.state)
     plain.destroy()
+    zones = mf.MaterialZones(
+        [(ELASTIC, lambda x: x[0] < 0.02),
+         (dataclasses.replace(ELASTIC, viscosity=None), lambda x: x[0] > 0.02)]
+    )  # fmt: skip
+    mixed = homogeneous_block(zones, 100.0)
+    mixed.run(1e-6)
+    state = mixed.material.state
+    zone, q = state["zone"][:, 0], state["viscous_pressure"][:, 0]
+    assert np.all(q[zone == 0] > 0.0) and np.all(q[zone == 1] == 0.0)
+    mixed.destroy()
 
 
 @pytest.mark.parametrize(

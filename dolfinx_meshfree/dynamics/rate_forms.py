@@ -59,12 +59,7 @@ from ..approx.fe_points import tabulate_in_cells
 from ..geometry.quadrature import QuadraturePoints, cell_quadrature, cell_sizes
 from ..physics import rate_kernels
 from ..physics.axisymmetry import revolved
-from ..physics.bulk_viscosity import (
-    step_factor,
-    viscous_pressure,
-    volume_ratios,
-    volumetric_rate,
-)
+from ..physics.bulk_viscosity import viscous_pressure, volume_ratios, volumetric_rate
 from ..physics.forces import InternalForces
 from ..physics.materials import AXISYMMETRIC, LinearElastic, is_axisymmetric
 from ..physics.objective import as_3d, nominal_stress
@@ -318,12 +313,11 @@ class RateLaw:
         J = np.where(live, J_new, 1.0)
         rate = np.where(live, volumetric_rate(np.where(live, J_old, 1.0), J, dt), 0.0)
         dim = 2 if self.plane == "strain" else 3
-        q = viscous_pressure(
+        q, self.factor = viscous_pressure(
             rate, J, self._densities[zone], c, self.lengths, dim, coeff[:, 0], coeff[:, 1]
         )
         q_old = old["viscous_pressure"][:, 0]
         work = np.where(live, -0.5 * (q_old + q) * (J_new - J_old), 0.0)
-        self.factor = step_factor(rate, J, c, self.lengths, dim, coeff[:, 0], coeff[:, 1])
         return dict(
             new,
             viscous_pressure=q[:, None],

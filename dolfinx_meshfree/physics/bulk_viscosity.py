@@ -23,11 +23,12 @@ Over a step from ``J_n`` to ``J_{n+1}`` the rate is ``(J_{n+1} - J_n) / (dt (J_n
 energy record holds it with the internal energy.
 
 The viscous force is a damper on the cell's highest mode; central differences stay stable for
-``dt <= l / (b + sqrt(b^2 + c^2))`` (Wilkins 1980, eq. 18), ``b = 2 c_q^2 l |eps_v'| + c_l c``
+``dt <= l / (b + sqrt(b^2 + c^2))`` (Wilkins 1980), ``b = 2 c_q^2 l |eps_v'| + c_l c``
 in compression (the damper's tangent, twice its secant for the quadratic term), ``b = 0``
 otherwise: ``(b + sqrt(b^2 + c^2)) / c`` is the factor by which the step falls
-(:func:`step_factor`), which :class:`~dolfinx_meshfree.dynamics.rate_forms.RateLaw` puts into the
-stable-step bound.
+(:func:`viscous_pressure`); the stable step is divided by the largest over the points
+(:meth:`~dolfinx_meshfree.dynamics.time_step.TimeStepBound.stable`): each point's damper scales
+its frequencies by at most it, so the bound over it stays a bound.
 """
 
 from __future__ import annotations
@@ -42,7 +43,6 @@ __all__ = [
     "BulkViscosity",
     "check_viscosity",
     "particle_lengths",
-    "step_factor",
     "viscous_pressure",
     "volume_ratios",
     "volumetric_rate",
@@ -119,29 +119,16 @@ def viscous_pressure(
     dim: int,
     quadratic: float | np.ndarray,
     linear: float | np.ndarray,
-) -> np.ndarray:
-    """``q`` (m,) of the module docstring at the rate ``rate`` and the volume ratio ``J`` of
-    points of reference length ``length0``, reference density ``rho0`` and wave speed ``c``; 0
-    where the point expands."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(q, factor)`` (m,) of the module docstring at the rate ``rate`` and the volume ratio
+    ``J`` of points of reference length ``length0``, reference density ``rho0`` and wave speed
+    ``c``: the viscous pressure (0 where the point expands) and ``(b + sqrt(b^2 + c^2)) / c >=
+    1``, the factor by which it lowers the point's stable step (1 where it expands)."""
     length = length0 * J ** (1.0 / dim)
+    compressing = rate < 0.0
     q = rho0 / J * length * (quadratic**2 * length * rate**2 - linear * c * rate)
-    return np.where(rate < 0.0, q, 0.0)
-
-
-def step_factor(
-    rate: np.ndarray,
-    J: np.ndarray,
-    c: float | np.ndarray,
-    length0: np.ndarray,
-    dim: int,
-    quadratic: float | np.ndarray,
-    linear: float | np.ndarray,
-) -> np.ndarray:
-    """``(b + sqrt(b^2 + c^2)) / c >= 1`` (m,): the factor by which the viscosity lowers a
-    point's stable step (module docstring; 1 where it expands)."""
-    length = length0 * J ** (1.0 / dim)
-    b = np.where(rate < 0.0, 2.0 * quadratic**2 * length * np.abs(rate) + linear * c, 0.0)
-    return (b + np.sqrt(b * b + c * c)) / c
+    b = np.where(compressing, 2.0 * quadratic**2 * length * np.abs(rate) + linear * c, 0.0)
+    return np.where(compressing, q, 0.0), (b + np.sqrt(b * b + c * c)) / c
 
 
 def particle_lengths(positions: np.ndarray, points: np.ndarray) -> np.ndarray:

@@ -107,7 +107,7 @@ from .masses import (
     table_lumped_mass,
 )
 from .methods import DYNAMICS_METHODS
-from .rate_forms import PointFESide, RateLaws
+from .rate_forms import PointFESide, RateLaws, zone_laws
 from .reduction import free_particle_points, reduce_master_slave
 from .system import Field
 
@@ -201,7 +201,7 @@ def fe_cells_dilatation(
     cell = msh.topology.cell_type.name
     use = resolve_dilatation(dilatation, law if rate else None, cell, what)
     if rate:
-        for member in getattr(law.law, "laws", [law.law]):  # a zoned law: each zone's
+        for member in zone_laws(law.law):  # a zoned law: each zone's
             warn_locking(member, cell)
     return use
 

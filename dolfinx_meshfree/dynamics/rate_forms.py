@@ -78,6 +78,7 @@ __all__ = [
     "carry_state",
     "is_viscous",
     "nearest_in_cell",
+    "with_viscous_fields",
     "zone_laws",
 ]
 
@@ -104,6 +105,15 @@ def zone_laws(law: object) -> list:
 def is_viscous(law: object) -> bool:
     """Whether a rate-form law (any zone of it) carries an artificial bulk viscosity."""
     return any(getattr(z, "viscosity", None) is not None for z in zone_laws(law))
+
+
+def with_viscous_fields(state: dict[str, np.ndarray], law: object) -> dict[str, np.ndarray]:
+    """``state`` (a virgin one of ``m`` points) with :data:`VISCOUS_FIELDS` at zero where
+    ``law`` carries a viscosity (in place; returned)."""
+    if is_viscous(law):
+        m = len(state["F"])
+        state.update({name: np.zeros((m, 1)) for name in VISCOUS_FIELDS})
+    return state
 
 
 def stiffest_twin(law: object) -> LinearElastic:
@@ -149,7 +159,7 @@ class RateLaw:
         self.zones: np.ndarray | None = None
         #: Per zone, its stiffest linear twin (one zone for a single law).
         self.twins = (
-            [stiffest_twin(z) for z in law.laws] if isinstance(law, MaterialZones) else None
+            [stiffest_twin(z) for z in zone_laws(law)] if isinstance(law, MaterialZones) else None
         )
         #: The stiffest linear twin (:func:`stiffest_twin`).
         self.twin = stiffest_twin(law)
@@ -176,13 +186,13 @@ class RateLaw:
         #: Whether the law carries an artificial bulk viscosity (:meth:`_viscous`), per zone its
         #: coefficients ``(c_q, c_l)`` (zeros: none), its twin's wave speed and its density.
         self.viscous = is_viscous(law)
-        laws = zone_laws(law)
         self._viscosity = np.array(
             [(z.viscosity.quadratic, z.viscosity.linear) if z.viscosity else (0.0, 0.0)
-             for z in laws]
+             for z in zone_laws(law)]
         )  # fmt: skip
-        self._speeds = np.array([stiffest_twin(z).wave_speed() for z in laws])
-        self._densities = np.array([float(z.rho) for z in laws])
+        twins = self.twins if self.twins is not None else [self.twin]
+        self._speeds = np.array([twin.wave_speed() for twin in twins])
+        self._densities = np.array([twin.rho for twin in twins])
         #: The reference length of each point (m,) (:meth:`attach`): a viscosity's ``l_0``.
         self.lengths: np.ndarray | None = None
         #: Each point's step factor of the viscosity at the last update (``None``: 1).
@@ -217,10 +227,7 @@ class RateLaw:
     def initial_state(self, m: int) -> dict[str, np.ndarray]:
         """The virgin state of ``m`` points (a zoned law: of the attached points' zones), with
         :data:`VISCOUS_FIELDS` where the law carries a viscosity."""
-        state = self._law_initial_state(m)
-        if self.viscous:
-            state.update({name: np.zeros((m, 1)) for name in VISCOUS_FIELDS})
-        return state
+        return with_viscous_fields(self._law_initial_state(m), self.law)
 
     def _law_initial_state(self, m: int) -> dict[str, np.ndarray]:
         if not isinstance(self.law, MaterialZones):
@@ -553,10 +560,7 @@ class RateLaws:
 
     def _virgin(self) -> dict[str, np.ndarray]:
         """The virgin state of one point (with :data:`VISCOUS_FIELDS` for a viscous law)."""
-        virgin = self.law.initial_state(1)
-        if is_viscous(self.law):
-            virgin.update({name: np.zeros((1, 1)) for name in VISCOUS_FIELDS})
-        return virgin
+        return with_viscous_fields(self.law.initial_state(1), self.law)
 
     @property
     def viscous(self) -> bool:

@@ -404,6 +404,20 @@ def test_compiled_projection_equals_the_reference_to_the_bit():
     assert np.abs(rows @ out["numba"][0] - target).max() <= 1e-13 * scale
 
 
+def test_constraints_of_any_scale_count():
+    """Two independent constraints 1e7 apart in scale (a coupling's unit rows beside a wall's
+    facet integrals in millimetres): neither is read as redundant, and the projection meets
+    both to round-off of each row's own scale. Unscaled, the small row's pivot was 1e-14 of the
+    largest diagonal and it was dropped (the velocity left unconstrained)."""
+    rows = [[1.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1e-7, 2e-7]]
+    proj = _projection(rows, [1.0, 0.5, 2.0, 1.0])
+    assert proj.redundant == 0 and proj.chol is not None
+    v = PETSc.Vec().createWithArray(np.array([3.0, 1.0, -2.0, 5.0]), comm=PETSc.COMM_SELF)
+    proj.correct([v])
+    assert abs(v.array[0] + v.array[1]) < 1e-14 * 3.0
+    assert abs(v.array[2] + 2.0 * v.array[3]) < 1e-14 * 5.0
+
+
 def test_redundant_constraints_are_deflated():
     """``S = G M^-1 G^T`` singular because two rows combine to act on a held dof only (as a
     bridging band's rows at roller nodes with the roller's rows on the particles): the

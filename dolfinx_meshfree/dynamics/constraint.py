@@ -37,10 +37,14 @@ __all__ = ["MULTIPLIER_SOLVERS", "VelocityProjection", "check_multiplier_solver"
 #: Factorisations of ``S`` (``None``: automatic, dense up to :data:`DENSE_MAX` multipliers).
 MULTIPLIER_SOLVERS = (None, "dense", "mumps")
 DENSE_MAX = 2000
-#: A pivot ``d`` of ``S``'s Cholesky factor with ``d^2`` below this times ``S``'s largest
-#: diagonal marks a redundant constraint (:meth:`VelocityProjection._deflate`): the two null
-#: directions of a bridging band cut by a roller had 2e-17 and 2e-16 against 3.9 (the next
-#: eigenvalue 1.5e-6).
+#: A pivot ``d`` of the Cholesky factor of ``S`` scaled to a unit diagonal (Jacobi) with ``d^2``
+#: below this marks a redundant constraint (:meth:`VelocityProjection._deflate`). The scaling
+#: makes the test blind to the rows' units: a coupling's rows of unit scale (edge-to-edge's
+#: collocated MLS values) beside a wall's facet rows (``int_f phi``, of the order of ``h^2`` in
+#: 3D: 1e-6 m^2 on a copper Taylor bar) made the wall's pivots 1e-13 of the largest diagonal,
+#: and the unscaled test deflated the wall as redundant: the rod went through it. The two null
+#: directions of a bridging band cut by a roller (the axisymmetric cylinder's, 8 cells) have
+#: eigenvalues 3.0e-16 and 3.9e-16 of the scaled diagonal, the next 4.4e-4.
 REDUNDANT = 1e-12
 
 
@@ -139,7 +143,11 @@ class VelocityProjection:
         return int(self.S.getSize()[0])
 
     def _dense(self, S: PETSc.Mat, size: int) -> None:
-        """Small ``S``: every rank holds its Cholesky factor, one Allgatherv per step."""
+        """Small ``S``: every rank holds its Cholesky factor, one Allgatherv per step. The
+        factor is of ``S`` scaled to a unit diagonal, ``D^-1/2 S D^-1/2`` (rows with a zero
+        diagonal, acting on held dofs only, unscaled), so that the rows' units (a coupling's
+        against a wall's) do not decide which constraints count as redundant
+        (:data:`REDUNDANT`); ``lambda = D^-1/2 (scaled solve)(D^-1/2 G v)``."""
         ai, aj, av = S.getValuesCSR()
         lo, hi = S.getOwnershipRange()
         rows = np.repeat(np.arange(lo, hi), np.diff(ai))
@@ -148,6 +156,9 @@ class VelocityProjection:
         for r, c, v in parts:
             np.add.at(dense, (r, c), v)
         self._full = np.zeros(size)
+        diagonal = np.diag(dense).copy()
+        self._jacobi = np.where(diagonal > 0.0, 1.0 / np.sqrt(np.abs(diagonal)), 1.0)
+        dense *= np.outer(self._jacobi, self._jacobi)
         scale = float(np.abs(np.diag(dense)).max(initial=0.0))
         try:
             self.chol = cho_factor(dense)
@@ -236,10 +247,12 @@ class VelocityProjection:
                 "the constraint projection met a non-finite G v: the velocities hold NaN or "
                 "inf (an unstable run: shorten the time step or check the masses)"
             )
+        gv = gv * self._jacobi  # the unit-diagonal scaling of S (:meth:`_dense`)
         if self.chol is not None:  # LAPACK's solve with the factor, as cho_solve without its
             lam = dpotrs(self.chol[0], gv, lower=self.chol[1])[0]  # checks of the factor
         else:
             lam = self._pinv @ gv
+        lam *= self._jacobi
         for k, (cols, x) in enumerate(zip(self._cols, vel, strict=True)):
             if cols is None:
                 continue

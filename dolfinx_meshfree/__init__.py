@@ -69,7 +69,7 @@ from .geometry.submesh import submesh
 from .io import DynamicsWriter, ProgressBar, read_particles
 from .physics.bulk_viscosity import BulkViscosity
 from .physics.cohesive import LinearCohesive
-from .physics.constitutive import Material, NeoHookean, SaintVenantKirchhoff
+from .physics.constitutive import DeformationError, Material, NeoHookean, SaintVenantKirchhoff
 from .physics.forces import InternalForces
 from .physics.hjc import HolmquistJohnsonCook
 from .physics.inelastic import J2Plasticity, RankineDamage
@@ -159,6 +159,7 @@ __all__ = [
     "CoupledSolution",
     "Crack",
     "CrackInitiation",
+    "DeformationError",
     "DisplacementControl",
     "DoubleSofteningWarning",
     "DynamicsResult",

@@ -125,7 +125,7 @@ def test_concrete_failure_converges_in_the_step_and_the_mesh():
 
 def test_viscous_work_closes_the_balance():
     """At 300 m/s the viscous work is 17 % of the initial kinetic energy (checked above 8 %),
-    and the balance with it in the internal energy closes to 1.0e-3 (checked 2e-3)."""
+    and the balance with it in the internal energy closes to 1.1e-3 (checked 2e-3)."""
     run = concrete_run(40, 1.0)
     print(run)
     assert run["viscous"] > 0.08
@@ -146,7 +146,8 @@ def homogeneous_block(law, rate: float) -> mf.ExplicitDynamics:
 def test_stable_step_falls_by_wilkins_factor():
     """Every point compresses at one rate: the stable step over the bound without the damper is
     ``c / (b + sqrt(b^2 + c^2))``, ``b = 2 c_q^2 l |eps_v'| + c_l c``, with the rate taken from
-    the points' volume ratios before and after the step and ``l = h J^(1/2)``; a step above it
+    the points' volume ratios before and after the step and ``l = h J^(1/2)`` (the thickness
+    of a uniformly compressed cell); a step above it
     is refused, naming the factor; one point compressing faster sets the factor for all."""
     dyn = homogeneous_block(ELASTIC, 2000.0)
     dt = dyn.stable_time_step()

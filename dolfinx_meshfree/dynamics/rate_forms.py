@@ -59,7 +59,13 @@ from ..approx.fe_points import tabulate_in_cells
 from ..geometry.quadrature import QuadraturePoints, cell_quadrature, cell_sizes
 from ..physics import rate_kernels
 from ..physics.axisymmetry import revolved
-from ..physics.bulk_viscosity import viscous_pressure, volume_ratios, volumetric_rate
+from ..physics.bulk_viscosity import (
+    current_lengths,
+    viscous_pressure,
+    volume_ratios,
+    volumetric_rate,
+)
+from ..physics.constitutive import DeformationError, check_deformation_gradients
 from ..physics.forces import InternalForces
 from ..physics.materials import AXISYMMETRIC, LinearElastic, is_axisymmetric
 from ..physics.objective import as_3d, nominal_stress
@@ -95,6 +101,8 @@ RATE_METHODS = (
 #: carry it): the viscous pressure ``q`` of the last update and the work it did per unit
 #: reference volume (:mod:`~dolfinx_meshfree.physics.bulk_viscosity`).
 VISCOUS_FIELDS = ("viscous_pressure", "viscous_work")
+#: The identity, row-major: the gradient given to dead points' lengths.
+_EYE9 = np.eye(3).reshape(9)
 
 
 def zone_laws(law: object) -> list:
@@ -289,12 +297,13 @@ class RateLaw:
             )
         extra = {} if hoop is None else {"hoop": hoop}
         old = self.state
-        if self.viscous:  # the law sees its own state only
-            own = {k: v for k, v in old.items() if k not in VISCOUS_FIELDS}
+        own = {k: v for k, v in old.items() if k not in VISCOUS_FIELDS}
+        try:  # the law sees its own state only
             self.sigma, new = self.law.update(F, dt, own, **extra)
-            self.state = self._viscous(old, new, dt)
-        else:
-            self.sigma, self.state = self.law.update(F, dt, old, **extra)
+        except DeformationError:  # again, naming the point by its reference coordinates
+            check_deformation_gradients(as_3d(F, hoop), 3, self.points)
+            raise
+        self.state = self._viscous(old, new, dt) if self.viscous else new
         self.time = self.clock
         return self._with_viscosity()
 
@@ -319,9 +328,18 @@ class RateLaw:
         coeff, c = self._viscosity[zone], self._speeds[zone]
         J = np.where(live, J_new, 1.0)
         rate = np.where(live, volumetric_rate(np.where(live, J_old, 1.0), J, dt), 0.0)
-        dim = 2 if self.plane == "strain" else 3
+        length = np.where(
+            live,
+            current_lengths(
+                np.where(live[:, None], new["F"], _EYE9),
+                self.lengths,
+                self.plane,
+                getattr(self.law, "backend", None),
+            ),
+            self.lengths,
+        )
         q, self.factor = viscous_pressure(
-            rate, J, self._densities[zone], c, self.lengths, dim, coeff[:, 0], coeff[:, 1]
+            rate, J, self._densities[zone], c, length, coeff[:, 0], coeff[:, 1]
         )
         q_old = old["viscous_pressure"][:, 0]
         work = np.where(live, -0.5 * (q_old + q) * (J_new - J_old), 0.0)

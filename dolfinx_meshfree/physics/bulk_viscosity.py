@@ -11,11 +11,22 @@ the volumetric strain rate ``eps_v' = tr D = J' / J``::
 
     q = rho l (c_q^2 l eps_v'^2 - c_l c eps_v'),    eps_v' < 0;    q = 0 otherwise,
 
-``rho = rho_0 / J`` the current density, ``l = l_0 J^(1/d)`` the current length of a point's
-cell (``l_0`` its reference size, ``d`` 3 in 3D and axisymmetry, 2 in plane strain), ``c`` the
-law's dilatational wave speed (its stiffest linear twin's, which the stable step is bounded
-with) and ``c_q``, ``c_l`` the quadratic and the linear coefficient. The Cauchy stress the
-forces see is ``sigma - q I``; the law's own state does not see ``q``.
+``rho = rho_0 / J`` the current density, ``l = l_0 s_min(F)`` the current thickness of a
+point's cell (:func:`current_lengths`: ``l_0`` its reference size, ``s_min`` the smallest
+principal stretch, in the section's plane for plane strain and axisymmetry), ``c`` the law's
+dilatational wave speed (its stiffest linear twin's, which the stable step is bounded with)
+and ``c_q``, ``c_l`` the quadratic and the linear coefficient. The Cauchy stress the forces see
+is ``sigma - q I``; the law's own state does not see ``q``.
+
+The length is the cell's thinnest extent, as LS-DYNA's characteristic length (a solid's volume
+over its largest face), because that is the length the stable step sees (the cells'
+frequencies grow as ``c / (s_min l_0)``, :meth:`~dolfinx_meshfree.dynamics.rate_forms.RateLaw.
+stretches`). Under a uniform compression it is ``l_0 J^(1/d)``. A cell flattened at constant
+volume (the plastic flow at a Taylor bar's foot) keeps ``J = 1`` while its thickness falls to a
+fraction of ``l_0``: a damper sized by ``l_0 J^(1/d)`` there is ``1 / s_min`` times stiffer
+than the factor below allows for, and the run blows up (measured: the copper Taylor bar of
+``demos/taylor_bar.py`` inverted its foot at 49 us with ``l_0 J^(1/3)``; with the thickness it
+runs to the published length).
 
 Over a step from ``J_n`` to ``J_{n+1}`` the rate is ``(J_{n+1} - J_n) / (dt (J_n + J_{n+1}) /
 2)`` and the work ``q`` does per unit reference volume, all of it dissipated, is
@@ -38,10 +49,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from . import rate_kernels
+
 __all__ = [
     "DEFAULT_VISCOSITY",
     "BulkViscosity",
     "check_viscosity",
+    "current_lengths",
     "particle_lengths",
     "viscous_pressure",
     "volume_ratios",
@@ -110,21 +124,42 @@ def volumetric_rate(J_old: np.ndarray, J_new: np.ndarray, dt: float) -> np.ndarr
     return (J_new - J_old) / (dt * 0.5 * (J_new + J_old))
 
 
+def current_lengths(
+    F: np.ndarray, length0: np.ndarray, plane: str | None, backend: str | None = None
+) -> np.ndarray:
+    """The current thickness ``l_0 s_min(F)`` (m,) of cells of reference size ``length0`` (m,)
+    at their points' gradients ``F`` (m, 9) (row-major 3 x 3): ``s_min`` the smallest singular
+    value of the in-plane 2 x 2 block for a 2D law (``plane`` ``"strain"`` or
+    ``"axisymmetric"``: the hoop stretch does not thin the section's cell), of ``F`` in 3D
+    (``plane=None``; by the law's ``backend``: compiled Jacobi on ``F^T F``, or numpy's SVD)."""
+    a = np.asarray(F, dtype=float)
+    if plane is None:
+        if rate_kernels.resolve_backend(backend) == "numba":
+            s = rate_kernels.smallest_stretches(a, np.ones(len(a), dtype=bool))
+        else:
+            s = np.linalg.svd(a.reshape(-1, 3, 3), compute_uv=False)[:, -1] if len(a) else a[:, 0]
+    else:  # sigma_min^2 = (T - sqrt(T^2 - 4 D^2)) / 2 of the 2 x 2 block (T = |A|^2, D = det A)
+        t = a[:, 0] ** 2 + a[:, 1] ** 2 + a[:, 3] ** 2 + a[:, 4] ** 2
+        d = a[:, 0] * a[:, 4] - a[:, 1] * a[:, 3]
+        # (T - sqrt(T^2 - 4 D^2)) / 2 = 2 D^2 / (T + sqrt(T^2 - 4 D^2)): no cancellation
+        s = np.sqrt(2.0 * d * d / (t + np.sqrt(np.maximum(t * t - 4.0 * d * d, 0.0))))
+    return np.asarray(length0, dtype=float) * s
+
+
 def viscous_pressure(
     rate: np.ndarray,
     J: np.ndarray,
     rho0: float | np.ndarray,
     c: float | np.ndarray,
-    length0: np.ndarray,
-    dim: int,
+    length: np.ndarray,
     quadratic: float | np.ndarray,
     linear: float | np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(q, factor)`` (m,) of the module docstring at the rate ``rate`` and the volume ratio
-    ``J`` of points of reference length ``length0``, reference density ``rho0`` and wave speed
-    ``c``: the viscous pressure (0 where the point expands) and ``(b + sqrt(b^2 + c^2)) / c >=
-    1``, the factor by which it lowers the point's stable step (1 where it expands)."""
-    length = length0 * J ** (1.0 / dim)
+    ``J`` of points of current length ``length`` (:func:`current_lengths`), reference density
+    ``rho0`` and wave speed ``c``: the viscous pressure (0 where the point expands) and ``(b +
+    sqrt(b^2 + c^2)) / c >= 1``, the factor by which it lowers the point's stable step (1 where
+    it expands)."""
     compressing = rate < 0.0
     q = rho0 / J * length * (quadratic**2 * length * rate**2 - linear * c * rate)
     b = np.where(compressing, 2.0 * quadratic**2 * length * np.abs(rate) + linear * c, 0.0)

@@ -247,7 +247,7 @@ class VelocityProjection:
                 "the constraint projection met a non-finite G v: the velocities hold NaN or "
                 "inf (an unstable run: shorten the time step or check the masses)"
             )
-        gv = gv * self._jacobi  # the unit-diagonal scaling of S (:meth:`_dense`)
+        gv *= self._jacobi  # the unit-diagonal scaling of S (:meth:`_dense`; gv is reset above)
         if self.chol is not None:  # LAPACK's solve with the factor, as cho_solve without its
             lam = dpotrs(self.chol[0], gv, lower=self.chol[1])[0]  # checks of the factor
         else:

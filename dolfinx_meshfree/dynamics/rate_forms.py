@@ -328,16 +328,10 @@ class RateLaw:
         coeff, c = self._viscosity[zone], self._speeds[zone]
         J = np.where(live, J_new, 1.0)
         rate = np.where(live, volumetric_rate(np.where(live, J_old, 1.0), J, dt), 0.0)
-        length = np.where(
-            live,
-            current_lengths(
-                np.where(live[:, None], new["F"], _EYE9),
-                self.lengths,
-                self.plane,
-                getattr(self.law, "backend", None),
-            ),
-            self.lengths,
-        )
+        # dead points take the identity: their length stays l_0 (s_min(I) = 1 exactly)
+        F_live = np.where(live[:, None], new["F"], _EYE9)
+        backend = getattr(self.law, "backend", None)
+        length = current_lengths(F_live, self.lengths, self.plane, backend)
         q, self.factor = viscous_pressure(
             rate, J, self._densities[zone], c, length, coeff[:, 0], coeff[:, 1]
         )

@@ -259,7 +259,8 @@ def test_material_differing_only_off_the_patch_is_accepted():
         ("coupling", r"coupling='glue' is not available"),
         ("not-affine", r"not affine in the FacetNormal"),
         ("lone-node", r"node\(s\) inside the particle patch"),
-        ("facet-a", r"only cell integrals \(dx\)"),
+        ("facet-a", r"exterior facet\(s\) of a patch cell, e\.g\. the facets at"),
+        ("interior-a", r"a has a interior_facet integral"),
         ("material", r"material must be a LinearElastic"),
     ],
 )
@@ -280,9 +281,12 @@ def test_bad_input(model, case, match):
             V, lambda x: np.isclose(x[0], 1.5) & np.isclose(x[1], 0.5)
         )
         bcs = [*bcs, dolfinx.fem.dirichletbc(np.zeros(2), dofs, V)]
-    elif case == "facet-a":
+    elif case == "facet-a":  # an elastic support on the patch's facets (on FE facets: taken)
         u = ufl.TrialFunction(V)
         a = a + ufl.dot(u, v) * ufl.ds
+    elif case == "interior-a":
+        u = ufl.TrialFunction(V)
+        a = a + ufl.inner(ufl.jump(u), ufl.jump(v)) * ufl.dS
     elif case == "material":
         material = {"E": 3e7}
     with pytest.raises((ValueError, TypeError), match=match):

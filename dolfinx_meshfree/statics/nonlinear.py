@@ -26,7 +26,12 @@ functions of the state:
 
 The external load is dead: ``L_ext(v) = -F(0; v)`` (with ``P(I) = 0`` for every law here), split
 between FE and particles exactly as :class:`~dolfinx_meshfree.CoupledLinearProblem` splits
-``L``. Load steps scale the external load and the prescribed displacements by ``k / n``.
+``L``. Facet integrals of ``u`` (a follower pressure ``p J inner(inv(F).T N, v) ds``, an elastic
+support) belong to the FE residual and its Jacobian, on the FE cells' exterior facets only
+(:mod:`~dolfinx_meshfree.statics.facet_terms`: refused on a patch cell's facet); pure FE
+(:class:`FENonlinearProblem`) takes every integral of the residual. Load steps scale the
+external load and the prescribed displacements by ``k / n``; a follower load's factor is the
+user's (a ``Constant`` changed between calls of ``solve``).
 """
 
 from __future__ import annotations
@@ -49,6 +54,7 @@ from ..physics.materials import LinearElastic, linear_twin
 from ..physics.state import check_stateless
 from .coupled import CoupledElasticity, CoupledSolution
 from .coupled_newton import FINITE_STRAIN_COUPLINGS, check_load_steps, solve_finite_strain
+from .facet_terms import FacetTermCheck
 from .newton import NewtonOptions
 from .petsc import solver_options
 from .problem import CoupledLinearProblem
@@ -92,10 +98,13 @@ class FENonlinearProblem:
     problems (the FE reference of the finite-strain demos, in both DOLFINx lanes).
 
     Args:
-        F: Residual, linear in the test function, written in ``u``.
+        F: Residual, linear in the test function, written in ``u``; every integral is
+            assembled, facet integrals of ``u`` (follower loads, elastic supports) too.
         u: The unknown (updated in place by :meth:`solve`; its values are the initial guess).
         bcs: ``DirichletBC`` objects (their values are reached in ``load_steps`` steps).
-        load_steps: External load and prescribed values scaled by ``k / load_steps``.
+        load_steps: External (dead, ``u``-free) load and prescribed values scaled by
+            ``k / load_steps``; terms of ``u`` are not (ramp a follower load's ``Constant``
+            between calls of :meth:`solve`).
         newton: :class:`~dolfinx_meshfree.statics.newton.NewtonOptions`.
         petsc_options, petsc_options_prefix: The linear solver (default MUMPS LU).
     """
@@ -127,12 +136,7 @@ class FENonlinearProblem:
             count[dofs] += 1
             values[dofs] = vals
         self._bc_dofs, self._bc_values = np.flatnonzero(count), values[count > 0]
-        F_int, L = split_residual(F, u)
-        if any(i.integral_type() != "cell" for i in F_int.integrals()):
-            raise ValueError(
-                "F has facet integrals that depend on u (follower loads); only dead loads "
-                "(u-free terms) are supported"
-            )
+        F_int, L = split_residual(F, u)  # F_int: facet terms of u (follower loads) too
         self.side = FESide(F_int, u, None, np.zeros(n_local, dtype=bool))
         # held dofs by component (a bc may fix one component of a node)
         l2g = fe_dof_layout(V)[1]
@@ -177,7 +181,9 @@ class CoupledNonlinearProblem:
         F: The user's residual on the vector P1/Q1 space of ``u``, linear in its test function:
             e.g. ``inner(P(F(u)), grad(v)) dx - inner(t, v) ds(k) - inner(b, v) dx``. Its cell
             integrals are the FE side (weighted by the FE cells' indicator); its ``u``-free part
-            is the dead external load ``-F(0; v)``, split between the FE and particle sides.
+            is the dead external load ``-F(0; v)``, split between the FE and particle sides;
+            its ``ds`` terms of ``u`` (a follower pressure, an elastic support) are the FE
+            side's, on FE cells' facets only (refused on a patch cell's facet).
         u: The FE unknown (updated in place; the FE part of the solution).
         bcs: ``DirichletBC`` objects on ``V`` or on ``V.sub(i)`` (one component: a symmetry
             plane or roller, as :class:`~dolfinx_meshfree.CoupledLinearProblem`).
@@ -187,9 +193,9 @@ class CoupledNonlinearProblem:
             :class:`~dolfinx_meshfree.LinearElastic`): ``F`` on the patch must be this law, which
             is checked on its linearisation.
         coupling: One of :data:`FINITE_STRAIN_COUPLINGS`.
-        load_steps: External load and prescribed values in ``k / load_steps`` steps (or change a
-            ``Constant`` in ``F`` between calls of :meth:`solve`: each call starts from the
-            current state).
+        load_steps: The dead external load and prescribed values in ``k / load_steps`` steps
+            (or change a ``Constant`` in ``F`` between calls of :meth:`solve`: each call starts
+            from the current state; the way to ramp a follower load, which is not scaled).
         newton: :class:`~dolfinx_meshfree.statics.newton.NewtonOptions`.
         petsc_options, petsc_options_prefix: The linear solver of each Newton iteration.
         **options: Passed to :class:`~dolfinx_meshfree.CoupledElasticity`.
@@ -236,7 +242,11 @@ class CoupledNonlinearProblem:
         zero = dolfinx.fem.Function(V)
         zero.x.array[:] = 0.0
         F_int, L0 = split_residual(F, u)
-        a0 = ufl.replace(expand_derivatives(ufl.derivative(cell_part(F_int), u, du)), {u: zero})
+        # the facet terms of u (follower pressures, elastic supports): on FE facets only
+        raise_on_all_ranks(comm, FacetTermCheck(F_int, patch, coupling, "F").check)
+        a0 = ufl.replace(
+            expand_derivatives(ufl.derivative(cell_part(F_int, facets=True), u, du)), {u: zero}
+        )
         if L0 is None:
             L0 = (
                 ufl.inner(

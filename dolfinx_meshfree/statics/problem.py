@@ -29,9 +29,14 @@ An axisymmetric ``material`` (``plane="axisymmetric"``, coupling ``lagrange``) t
 carry their own ``2 pi r`` (:mod:`~dolfinx_meshfree.physics.axisymmetry`): the loads taken from
 ``L`` are divided by it at their points, since the particle rules are revolved already.
 
-Not supported (each raises a ``ValueError`` naming the fix): non-cell integrals in ``a``, interior
-facet integrals in ``L``, derivatives of the test function in ``L`` and constrained nodes strictly
-inside the patch.
+* ``a``'s exterior-facet integrals (elastic supports, springs, Robin conditions
+  ``k inner(u, v) ds``) are assembled with its cell integrals on the FE side: they may run over
+  exterior facets of FE cells only (not of patch cells, nor of a ramp's interface cells: there
+  the displacement is the particles', :mod:`~dolfinx_meshfree.statics.facet_terms`).
+
+Not supported (each raises a ``ValueError`` naming the fix): interior-facet integrals in ``a``
+and ``L``, ``ds`` integrals of ``a`` on the patch's facets or with a law with state,
+derivatives of the test function in ``L`` and constrained nodes strictly inside the patch.
 """
 
 from __future__ import annotations
@@ -65,6 +70,7 @@ from ..physics.body_loads import BodyForce, accumulate
 from ..physics.materials import LinearElastic
 from ..physics.state import check_not_rate_law, is_stateful
 from .coupled import COUPLINGS, CoupledElasticity, CoupledSolution, material_stiffness_form
+from .facet_terms import FacetTermCheck, integral_entities
 from .petsc import SolverOptions, solver_options
 
 __all__ = ["CoupledLinearProblem", "FormBodyForce"]
@@ -81,7 +87,8 @@ class CoupledLinearProblem:
     ``bridging``).
 
     Args:
-        a: Bilinear UFL form on the vector P1/Q1 space ``V`` (cell integrals only).
+        a: Bilinear UFL form on the vector P1/Q1 space ``V``: cell integrals, and exterior-facet
+            integrals (an elastic support ``k inner(u, v) ds(i)``) on FE cells' facets.
         L: Linear UFL form on ``V`` (cell and exterior-facet integrals).
         bcs: ``DirichletBC`` objects on ``V`` (all components) or on ``V.sub(i)`` (one
             component, e.g. a symmetry plane or a roller; every coupling,
@@ -133,6 +140,8 @@ class CoupledLinearProblem:
         V = raise_on_all_ranks(
             comm, lambda: _check_arguments(a, L, bcs, patch, material, coupling, options)
         )
+        # elastic supports (k u.v ds) on the FE side's facets only (collective, then local)
+        raise_on_all_ranks(comm, FacetTermCheck(a, patch, coupling, "a").check)
         self._solver = raise_on_all_ranks(
             comm, lambda: solver_options("mumps", petsc_options, petsc_options_prefix)
         )
@@ -249,7 +258,7 @@ class CoupledLinearProblem:
             if itg.integral_type() == "cell":
                 cell_integrals.append(itg)
             else:
-                facets = np.intersect1d(_integral_entities(itg, msh), boundary_facets(msh))
+                facets = np.intersect1d(integral_entities(itg, msh), boundary_facets(msh))
                 if not msh.comm.allreduce(facets.size):  # as DOLFINx: an integral over none
                     continue
                 load = _FacetLoad(itg, v, facets, deg, self.patch.cracks, revolved)
@@ -335,10 +344,18 @@ def _check_arguments(a, L, bcs, patch, material, coupling, options):
             f"functionspace(mesh, ('Lagrange', 1, ({gdim},)))), got another space"
         )
     for itg in a.integrals():
-        if itg.integral_type() != "cell":
+        if itg.integral_type() not in ("cell", "exterior_facet"):
             raise ValueError(
-                f"a has a {itg.integral_type()} integral; only cell integrals (dx) are supported "
-                "in the bilinear form of a coupled problem"
+                f"a has a {itg.integral_type()} integral; only cell integrals (dx) and "
+                "exterior-facet integrals of the FE side (ds: elastic supports) are supported in "
+                "the bilinear form of a coupled problem"
+            )
+        if itg.integral_type() == "exterior_facet" and is_stateful(material):
+            raise ValueError(
+                f"a has a ds integral (subdomain {itg.subdomain_id()!r}) and material="
+                f"{type(material).__name__} is a law with state: Newton assembles every cell "
+                "from the law, not from a, so the facet term would be lost; with a law with "
+                "state, a may hold cell integrals only"
             )
     for itg in L.integrals():
         if itg.integral_type() not in ("cell", "exterior_facet"):
@@ -438,23 +455,6 @@ def _differentiates(expr, v) -> bool:
 # -- helpers ------------------------------------------------------------------------------------
 
 
-def _integral_entities(itg, msh) -> np.ndarray:
-    """Local entities (cells or facets) an integral runs over."""
-    tdim = msh.topology.dim
-    dim = tdim if itg.integral_type() == "cell" else tdim - 1
-    imap = msh.topology.index_map(dim)
-    sid = itg.subdomain_id()
-    if sid == "everywhere":
-        return np.arange(imap.size_local + imap.num_ghosts, dtype=np.int64)
-    ids = np.atleast_1d(np.asarray(sid, dtype=np.int64))
-    tags = itg.subdomain_data()
-    if tags is None:
-        raise ValueError(f"an integral of L uses subdomain {sid!r} without subdomain_data")
-    tags = getattr(tags, "_cpp_object", tags)
-    mask = np.isin(np.asarray(tags.values), ids)
-    return np.asarray(tags.indices, dtype=np.int64)[mask]
-
-
 def _replace_test_function(integrand, v, msh, normal=None):
     """The vector ``(I(e_0), ..., I(e_{gdim-1}))`` of a linear integrand ``I(v)``, FacetNormal
     -> ``normal``."""
@@ -506,7 +506,7 @@ class FormBodyForce(BodyForce):
             fit = None if X_fit is None else _compat.create_expression(bx, X_fit, msh)
             n_cells = msh.topology.index_map(msh.topology.dim)
             on = np.zeros(n_cells.size_local + n_cells.num_ghosts, dtype=bool)
-            on[_integral_entities(itg, msh)] = True
+            on[integral_entities(itg, msh)] = True
             self._expressions.append((expr, fit, on))
         self.tol = 1e-9 * (np.ptp(msh.geometry.x[:, :gdim], axis=0).max() + 1.0)
 

@@ -110,20 +110,26 @@ ON = 1
 def on_cells(
     F: ufl.Form, msh: dolfinx.mesh.Mesh, flags: np.ndarray, weight: ufl.core.expr.Expr | None = None
 ) -> ufl.Form:
-    """The cell integrals of ``F`` on the owned cells flagged in ``flags`` only, each integrand
-    multiplied by ``weight`` if given.
+    """The cell integrals of ``F`` on the owned cells flagged in ``flags`` only, and its
+    exterior-facet integrals, each integrand multiplied by ``weight`` if given.
 
     Integrals with subdomain data of the user's own are weighted by the indicator of the cells
-    instead of restricted to them (the same where the integrand is finite everywhere)."""
+    instead of restricted to them (the same where the integrand is finite everywhere). The
+    exterior-facet integrals (elastic supports, follower loads) are kept as they are: the caller
+    has checked that they run over facets of flagged cells only
+    (:class:`~dolfinx_meshfree.statics.facet_terms.FacetTermCheck`)."""
     tdim = msh.topology.dim
     n_owned = msh.topology.index_map(tdim).size_local
     cells = np.flatnonzero(flags[:n_owned]).astype(np.int32)
     tags = dolfinx.mesh.meshtags(msh, tdim, cells, np.full(cells.size, ON, dtype=np.int32))
     out = []
     for itg in F.integrals():
+        integrand = itg.integrand() if weight is None else weight * itg.integrand()
+        if itg.integral_type() == "exterior_facet":
+            out.append(itg.reconstruct(integrand=integrand))
+            continue
         if itg.integral_type() != "cell":
             continue
-        integrand = itg.integrand() if weight is None else weight * itg.integrand()
         if itg.subdomain_data() is None and itg.subdomain_id() in ("everywhere", "otherwise"):
             out.append(itg.reconstruct(integrand=integrand, subdomain_id=ON, subdomain_data=tags))
         else:
@@ -132,9 +138,12 @@ def on_cells(
     return ufl.Form(out)
 
 
-def cell_part(F: ufl.Form, weight: ufl.core.expr.Expr | None = None) -> ufl.Form:
-    """The cell integrals of ``F``, each multiplied by ``weight`` if given."""
-    itgs = [i for i in F.integrals() if i.integral_type() == "cell"]
+def cell_part(
+    F: ufl.Form, weight: ufl.core.expr.Expr | None = None, facets: bool = False
+) -> ufl.Form:
+    """The cell integrals of ``F`` (and with ``facets`` its other integrals too), each
+    multiplied by ``weight`` if given."""
+    itgs = [i for i in F.integrals() if facets or i.integral_type() == "cell"]
     if weight is not None:
         itgs = [i.reconstruct(integrand=weight * i.integrand()) for i in itgs]
     return ufl.Form(itgs)
@@ -182,7 +191,7 @@ class FESide:
             # cells would still evaluate the law there, on an FE field that means nothing (NaN
             # at finite strain)
             R = (
-                cell_part(F_int, weight)
+                cell_part(F_int, weight, facets=True)  # every cell FE: facet terms whole
                 if cells is None
                 else on_cells(F_int, V.mesh, cells, weight)
             )

@@ -128,27 +128,35 @@ class FENonlinearProblem:
         self.F, self.u, self.bcs, self.V = F, u, list(bcs), V
         self.load_steps, self.newton = int(load_steps), newton or NewtonOptions()
         n_local = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
+        F_int, L = split_residual(F, u)  # F_int: facet terms of u (follower loads) too
+        self.side = FESide(F_int, u, None, np.zeros(n_local, dtype=bool))
+        self._hold_bcs()
+        v = F.arguments()[0]
+        zero = dolfinx.fem.Constant(V.mesh, np.zeros(V.mesh.geometry.dim))
+        self._load = _compat.create_form(L if L is not None else ufl.inner(zero, v) * ufl.dx)
+
+    def _hold_bcs(self) -> None:
+        """Hold the ``bcs``' owned dofs (by component: a bc may fix one component of a node) at
+        their current values."""
+        V = self.V
         bs = V.dofmap.index_map_bs
+        n_local = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
         count = np.zeros(bs * n_local, dtype=int)
         values = np.zeros(bs * n_local)
         for bc in self.bcs:
             dofs, vals = _compat.dirichlet_values(bc)
             count[dofs] += 1
             values[dofs] = vals
-        self._bc_dofs, self._bc_values = np.flatnonzero(count), values[count > 0]
-        F_int, L = split_residual(F, u)  # F_int: facet terms of u (follower loads) too
-        self.side = FESide(F_int, u, None, np.zeros(n_local, dtype=bool))
-        # held dofs by component (a bc may fix one component of a node)
-        l2g = fe_dof_layout(V)[1]
-        d = self._bc_dofs[self._bc_dofs < bs * V.dofmap.index_map.size_local]
-        self.side.hold(d, values[d], l2g)
-        v = F.arguments()[0]
-        zero = dolfinx.fem.Constant(V.mesh, np.zeros(V.mesh.geometry.dim))
-        self._load = _compat.create_form(L if L is not None else ufl.inner(zero, v) * ufl.dx)
+        held = np.flatnonzero(count)
+        d = held[held < bs * V.dofmap.index_map.size_local]
+        self.side.hold(d, values[d], fe_dof_layout(V)[1])
 
     def solve(self) -> NonlinearSolveResult:
         """Newton over the load steps (collective); raises
-        :class:`~dolfinx_meshfree.statics.newton.NewtonError` if a step does not converge."""
+        :class:`~dolfinx_meshfree.statics.newton.NewtonError` if a step does not converge. The
+        ``bcs``' values are read afresh (a displacement sweep), as are the residual's
+        ``Constant``s and ``Function``s."""
+        self._hold_bcs()
         u = self.u
         b = _compat.assemble_vector(self._load)
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
@@ -275,7 +283,9 @@ class CoupledNonlinearProblem:
         and leaves the solution in ``u`` and :attr:`solution`. Raises
         :class:`~dolfinx_meshfree.statics.newton.NewtonError` (with the residual history) when a
         step
-        does not converge: the last iterate is not returned as a solution."""
+        does not converge: the last iterate is not returned as a solution. The ``bcs``' values
+        and the dead load's ``Constant``s and ``Function``s are read afresh at each call."""
+        self._linear._refresh()
         out = solve_finite_strain(
             self.model, self.F_int, self.u, self.material, self.load_steps, self.newton,
             self._solver, self._state,

@@ -153,14 +153,57 @@ class CoupledLinearProblem:
         self.problem._problem = self  # the problem that made it (coupled.on_patch)
         self.V, self.patch, self.material = V, patch, material
         _check_material(self.problem, everywhere=is_stateful(material))
+        self._bc_entries: dict[str, list] = {}
+        self._facet_loads: list[_FacetLoad] = []
         self._apply_bcs()
         self._apply_loads()
+        self._seen = self._values()
+
+    # -- what the user may change between solves ----------------------------------------------
+
+    def _values(self) -> list[np.ndarray]:
+        """This rank's values of ``a``'s and ``L``'s coefficients and constants, and of the
+        ``bcs``: what DOLFINx's ``LinearProblem`` reads afresh at every solve."""
+        bcs = [_compat.dirichlet_values(bc)[1] for bc in self.bcs]
+        return [_form_values(self.a), _form_values(self.L), _concatenate(bcs)]
+
+    def _refresh(self) -> None:
+        """Take up what the user changed since the last solve (collective): a ``Constant`` or
+        ``Function`` of ``L`` (the tractions are tabulated again), of ``bcs`` (the conditions
+        rebuilt) or of ``a`` (checked against the material again: the particle side keeps the
+        ``material`` it was given)."""
+        now = self._values()
+        changed = np.array(
+            [not np.array_equal(x, y) for x, y in zip(now, self._seen, strict=True)], int
+        )
+        self.patch.comm.Allreduce(MPI.IN_PLACE, changed, op=MPI.MAX)
+        if changed[0]:
+            _check_material(self.problem, everywhere=is_stateful(self.material), changed=True)
+        if changed[1]:
+            for load in self._facet_loads:
+                load.refresh()
+        if changed[2]:
+            for name, entries in self._bc_entries.items():
+                kept = [e for e in getattr(self.problem, name) if not _among(e, entries)]
+                getattr(self.problem, name)[:] = kept
+            self._apply_bcs()
+        self._seen = now
 
     # -- essential conditions -----------------------------------------------------------------
 
     def _apply_bcs(self) -> None:
-        """Strong FE conditions by node; particle constraints on fully constrained patch facets."""
+        """Strong FE conditions by node; particle constraints on fully constrained patch facets
+        (the entries it adds to the model are recorded, to be replaced when the values change)."""
         problem, V, patch = self.problem, self.V, self.patch
+        names = ("strong", "dirichlet", "component_dirichlet")
+        before = {name: list(getattr(problem, name)) for name in names}
+        self._apply_bcs_now(problem, V, patch)
+        self._bc_entries = {
+            name: [e for e in getattr(problem, name) if not _among(e, before[name])]
+            for name in names
+        }
+
+    def _apply_bcs_now(self, problem: CoupledElasticity, V, patch: ParticlePatch) -> None:
         n_local = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
         gdim = V.mesh.geometry.dim
         count = np.zeros((n_local, gdim), dtype=int)
@@ -263,6 +306,7 @@ class CoupledLinearProblem:
                     continue
                 load = _FacetLoad(itg, v, facets, deg, self.patch.cracks, revolved)
                 problem.add_traction(facets.astype(np.int32), load)
+                self._facet_loads.append(load)
         if cell_integrals:
             problem.body_forces = [
                 FormBodyForce(cell_integrals, v, deg, bool(self.patch.cracks), revolved)
@@ -272,7 +316,10 @@ class CoupledLinearProblem:
 
     def solve(self, solver: str | SolverOptions | None = None) -> CoupledSolution:
         """Assemble and solve the coupled system (collective); see
-        :meth:`~dolfinx_meshfree.CoupledElasticity.solve`.
+        :meth:`~dolfinx_meshfree.CoupledElasticity.solve`. As DOLFINx's ``LinearProblem``, it
+        reads the current values of the forms' and the conditions' ``Constant``s and
+        ``Function``s (a load or displacement sweep); a changed ``a`` must still agree with the
+        particle side's ``material`` (refused otherwise: build a new problem with the new law).
 
         Args:
             solver: A shorthand, ``"mumps"``, ``"fieldsplit"`` or ``"iterative"``, or a
@@ -280,6 +327,7 @@ class CoupledLinearProblem:
                 constructor's ``petsc_options``; default: those options, or ``"mumps"``
                 without them.
         """
+        self._refresh()
         return self.problem.solve(self._solver if solver is None else solver)
 
     def with_patch(self, patch: ParticlePatch) -> CoupledLinearProblem:
@@ -381,10 +429,29 @@ def _check_arguments(a, L, bcs, patch, material, coupling, options):
     return V
 
 
-def _check_material(problem: CoupledElasticity, everywhere: bool = False) -> None:
+def _form_values(form: ufl.Form) -> np.ndarray:
+    """The values of ``form``'s constants and coefficients on this rank, in one array."""
+    values = [np.asarray(c.value, dtype=float).ravel() for c in form.constants()]
+    values += [np.asarray(f.x.array).ravel() for f in form.coefficients()]
+    return _concatenate(values)
+
+
+def _concatenate(arrays: list[np.ndarray]) -> np.ndarray:
+    return np.concatenate([np.asarray(x, dtype=float).ravel() for x in arrays] + [np.zeros(0)])
+
+
+def _among(entry: object, entries: list) -> bool:
+    """``entry`` is one of ``entries`` (by identity)."""
+    return any(entry is e for e in entries)
+
+
+def _check_material(
+    problem: CoupledElasticity, everywhere: bool = False, changed: bool = False
+) -> None:
     """Compare the user's form with the material's on the patch cells, or on every cell
     (``everywhere``: a law with state acts on the FE cells too, so the form must be its elastic
-    law there as well) (collective)."""
+    law there as well) (collective). ``changed``: the form's values changed since the problem
+    was built (the error says so)."""
     flags = np.ones_like(problem.patch.in_patch) if everywhere else problem.patch.in_patch
     chi = problem.cell_indicator(flags)
     material = problem.material
@@ -431,8 +498,14 @@ def _check_material(problem: CoupledElasticity, everywhere: bool = False) -> Non
             C.destroy()
         A.destroy()
         B.destroy()
+        since = (
+            " since a Constant or Function of a changed after the problem was built (build a "
+            "new problem with the new law)"
+            if changed
+            else ""
+        )
         raise ValueError(
-            f"material={material} disagrees with the bilinear form a {where} (relative "
+            f"material={material} disagrees with the bilinear form a {where}{since} (relative "
             f"difference {rel:.3g} > {MATERIAL_TOLERANCE:g}){hint}; the particle side uses the "
             "material, so pass the law that a encodes there"
         )
@@ -682,15 +755,21 @@ class _FacetLoad:
             scale = np.abs(self.A).max(initial=0.0) + np.abs(self.B).max(initial=0.0) + 1e-300
             return int(np.abs(probe - affine).max(initial=0.0) > 1e-10 * scale)
 
-        bad = raise_on_all_ranks(msh.comm, tabulate)
-        if msh.comm.allreduce(bad, op=MPI.MAX):
+        self._tabulate, self._comm = tabulate, msh.comm
+        self.refresh()
+        self.tree = cKDTree(self.points) if len(self.points) else None
+        self.tol = 1e-9 * (np.ptp(msh.geometry.x[:, :d], axis=0).max() + 1.0)
+        self.gdim = d
+
+    def refresh(self) -> None:
+        """Tabulate ``A`` and ``B`` at the current values of the integrand's constants and
+        coefficients (collective; the points do not move)."""
+        bad = raise_on_all_ranks(self._comm, self._tabulate)
+        if self._comm.allreduce(bad, op=MPI.MAX):
             raise ValueError(
                 "an exterior-facet integral of L is not affine in the FacetNormal n; write the "
                 "load as dot(t0 + T n, v) ds with t0, T independent of n"
             )
-        self.tree = cKDTree(self.points) if len(self.points) else None
-        self.tol = 1e-9 * (np.ptp(msh.geometry.x[:, :d], axis=0).max() + 1.0)
-        self.gdim = d
 
     def __call__(self, x: np.ndarray, n: np.ndarray) -> np.ndarray:
         if len(x) == 0:

@@ -27,6 +27,8 @@ import dolfinx.geometry as _geometry
 import dolfinx.graph as _graph
 import dolfinx.mesh as _mesh
 import numpy as _np
+from ufl.algorithms import estimate_total_polynomial_degree as _estimate_degree
+from ufl.algorithms import expand_derivatives as _expand_derivatives
 
 from . import mesh_cache as _mesh_cache
 
@@ -261,8 +263,33 @@ def create_mesh_ghosted(like: _mesh.Mesh, cells: _np.ndarray, x: _np.ndarray) ->
     return _mesh.create_mesh(like.comm, cells, x, domain, _mesh.GhostMode.shared_facet)
 
 
+#: The largest quadrature degree a form may reach by FFCx's estimate (no ``quadrature_degree``
+#: in its measure's metadata): beyond it, FFCx asks for millions of points per cell.
+MAX_ESTIMATED_DEGREE = 50
+
+
+def check_quadrature_degree(form: _UFLForm) -> None:
+    """Refuse a form whose integrand's estimated quadrature degree passes
+    :data:`MAX_ESTIMATED_DEGREE` without a degree in its measure (FFCx would run out of memory
+    building its tables: a law unrolled in UFL, e.g. plane-stress neo-Hookean's Newton on the
+    thickness stretch, estimates 2048 for its residual and 8104 for its Jacobian)."""
+    for itg in form.integrals():
+        if "quadrature_degree" in (itg.metadata() or {}):
+            continue
+        degree = _estimate_degree(_expand_derivatives(itg.integrand()), default_degree=1)
+        if degree > MAX_ESTIMATED_DEGREE:
+            raise ValueError(
+                f"a {itg.integral_type()} integral's integrand has an estimated quadrature degree "
+                f"of {degree} (> {MAX_ESTIMATED_DEGREE}: millions of points per cell, e.g. a law "
+                "unrolled in UFL such as NeoHookean(plane='stress').ufl_first_piola); give its "
+                "measure a degree: ufl.Measure('dx', domain=mesh, metadata="
+                "{'quadrature_degree': 4})"
+            )
+
+
 def create_form(form: _UFLForm, jit_options: dict | None = None) -> _Form:
-    """JIT-compile a UFL form (collective)."""
+    """JIT-compile a UFL form (collective), after :func:`check_quadrature_degree`."""
+    check_quadrature_degree(form)
     if MODERN:
         return _fem.form(form, jit_options=jit_options)
     return _fem.form(form, jit_params=jit_options)

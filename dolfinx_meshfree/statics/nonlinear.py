@@ -49,7 +49,7 @@ from .. import _compat
 from ..couplings.base import fe_dof_layout
 from ..geometry.patch import ParticlePatch
 from ..parallel import raise_on_all_ranks
-from ..physics.constitutive import Material
+from ..physics.constitutive import Material, NeoHookean, SaintVenantKirchhoff
 from ..physics.materials import LinearElastic, linear_twin
 from ..physics.state import check_stateless
 from .coupled import CoupledElasticity, CoupledSolution
@@ -88,6 +88,98 @@ def _check_residual(F: ufl.Form, u: dolfinx.fem.Function) -> dolfinx.fem.Functio
     if u not in F.coefficients():
         raise ValueError("F does not depend on u: pass the Function the residual is written in")
     return F.arguments()[0].ufl_function_space()
+
+
+#: Relative difference above which the residual and the particles' law disagree at finite strain.
+LAW_TOLERANCE = 1e-6
+
+#: Homogeneous deformation gradients the residual is compared at (a stretch with shear, a
+#: compression with shear), 2D and 3D.
+PROBES = {
+    2: (np.array([[1.15, 0.1], [0.05, 0.92]]), np.array([[0.9, -0.08], [0.1, 1.08]])),
+    3: (
+        np.array([[1.15, 0.1, 0.04], [0.05, 0.92, 0.08], [0.02, 0.06, 1.1]]),
+        np.array([[0.9, -0.08, 0.05], [0.1, 1.08, -0.04], [0.03, 0.07, 0.95]]),
+    ),
+}
+
+
+def check_law_at_finite_strain(
+    F_int: ufl.Form, u: dolfinx.fem.Function, model: CoupledElasticity, material: Material
+) -> None:
+    """Refuse a residual whose law on the patch cells is not the particles' ``material`` at
+    finite strain (collective).
+
+    The linear problem checks the linearisation only, which Saint Venant-Kirchhoff and
+    neo-Hookean share: a user's residual of one with the other as ``material`` ran with two
+    laws, silently. Here ``F_int`` (the cell integrals, weighted by the patch cells' indicator)
+    is assembled at the homogeneous deformations :data:`PROBES` and compared with
+    ``int P(F) : grad(v)`` of ``material.first_piola``; above :data:`LAW_TOLERANCE` (the
+    relative difference of the two vectors) it raises, naming the law the residual encodes when
+    it is one of the others with the same constants.
+    """
+    V = u.function_space
+    msh = V.mesh
+    d = msh.geometry.dim
+    v = F_int.arguments()[0]
+    chi = model.cell_indicator(model.patch.in_patch)
+    w = dolfinx.fem.Function(V)
+    P0 = dolfinx.fem.Constant(msh, np.zeros((d, d)))
+    # P(F) is constant on each cell, so degree 2 integrates both exactly (the user's degree
+    # may be the one of a law unrolled in UFL, e.g. plane-stress neo-Hookean: millions of points)
+    degree = {"quadrature_degree": 2}
+    cells = cell_part(ufl.replace(F_int, {u: w}), chi).integrals()
+    user = _compat.create_form(
+        ufl.Form([i.reconstruct(metadata={**i.metadata(), **degree}) for i in cells])
+    )
+    reference = _compat.create_form(chi * ufl.inner(P0, ufl.grad(v)) * ufl.dx(metadata=degree))
+
+    def assemble(form: Any) -> PETSc.Vec:
+        b = _compat.assemble_vector(form)
+        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        return b
+
+    def difference(law: Material, G: np.ndarray) -> float:
+        P0.value[:] = law.first_piola(G[None])[0]
+        b, r = assemble(user), assemble(reference)
+        scale = r.norm()
+        r.axpy(-1.0, b)
+        out = r.norm() / max(scale, 1e-300)
+        b.destroy()
+        r.destroy()
+        return out
+
+    worst, at = 0.0, None
+    for G in PROBES[d]:
+        w.interpolate(lambda x, G=G: (G - np.eye(d)) @ x[:d])
+        rel = difference(material, G)
+        if rel > worst:
+            worst, at = rel, G
+    if worst <= LAW_TOLERANCE:
+        return
+    hint = ""
+    for other in _other_laws(material):
+        w.interpolate(lambda x, G=at: (G - np.eye(d)) @ x[:d])
+        if difference(other, at) <= LAW_TOLERANCE:
+            hint = f"; F matches {other}: pass it as material"
+            break
+    raise ValueError(
+        f"F on the patch cells disagrees with material={material} at finite strain (relative "
+        f"difference {worst:.3g} > {LAW_TOLERANCE:g} at the homogeneous deformation gradient "
+        f"{at.tolist()}){hint}. The particles use the material, so pass the law that F encodes "
+        "there (a Material of your own, with first_piola and tangent, if it is none of "
+        "NeoHookean, SaintVenantKirchhoff, LinearElastic)"
+    )
+
+
+def _other_laws(material: Material) -> list[Material]:
+    """The other hyperelastic laws of this release with ``material``'s constants."""
+    from_constants = (NeoHookean, SaintVenantKirchhoff, LinearElastic)
+    E, nu = getattr(material, "E", None), getattr(material, "nu", None)
+    if E is None or nu is None:
+        return []
+    plane = getattr(material, "plane", None)
+    return [cls(E=E, nu=nu, plane=plane) for cls in from_constants if type(material) is not cls]
 
 
 # -- pure FE ------------------------------------------------------------------------------------
@@ -198,8 +290,9 @@ class CoupledNonlinearProblem:
         patch: :class:`~dolfinx_meshfree.ParticlePatch` on ``u``'s mesh.
         material: The particle side's law (:class:`~dolfinx_meshfree.NeoHookean`,
             :class:`~dolfinx_meshfree.SaintVenantKirchhoff` or
-            :class:`~dolfinx_meshfree.LinearElastic`): ``F`` on the patch must be this law, which
-            is checked on its linearisation.
+            :class:`~dolfinx_meshfree.LinearElastic`): ``F`` on the patch must be this law,
+            which is checked on its linearisation and at two finite deformations
+            (:func:`check_law_at_finite_strain`).
         coupling: One of :data:`FINITE_STRAIN_COUPLINGS`.
         load_steps: The dead external load and prescribed values in ``k / load_steps`` steps
             (or change a ``Constant`` in ``F`` between calls of :meth:`solve`: each call starts
@@ -265,6 +358,7 @@ class CoupledNonlinearProblem:
         self._linear = CoupledLinearProblem(
             a0, L0, bcs, patch, small, coupling, petsc_options, petsc_options_prefix, **options
         )
+        check_law_at_finite_strain(F_int, u, self._linear.problem, material)
         self.F, self.F_int, self.u = F, F_int, u
         self.patch, self.material = patch, material
         self.coupling = coupling

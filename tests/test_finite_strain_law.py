@@ -119,3 +119,18 @@ def test_a_measure_without_a_degree_on_an_unrolled_law_is_refused():
     patch = mf.ParticlePatch(msh, cells, spacing=0.25)
     with pytest.raises(ValueError, match=r"estimated quadrature degree"):
         mf.CoupledNonlinearProblem(F, u, bcs, patch, material)
+
+
+@pytest.mark.parametrize("cls", [mf.NeoHookean, mf.SaintVenantKirchhoff, mf.LinearElastic])
+def test_a_plane_law_on_a_3d_mesh_is_refused_by_name(cls):
+    """The laws default to ``plane="stress"``: on a 3D mesh UFL said only "Can't add
+    expressions with different shapes"."""
+    _, V, _, _ = block(3)
+    u = dolfinx.fem.Function(V)
+    with pytest.raises(ValueError, match=r"is a 2D law but ufl_first_piola's F is 3D: pass plane="):
+        cls(E=E, nu=NU).ufl_first_piola(ufl.Identity(3) + ufl.grad(u))
+    if cls is mf.LinearElastic:
+        with pytest.raises(ValueError, match=r"2D law but ufl_stress's u is 3D"):
+            cls(E=E, nu=NU).ufl_stress(u)
+    with pytest.raises(ValueError, match=r"3D law but ufl_first_piola's F is 2D"):
+        cls(E=E, nu=NU, plane=None).ufl_first_piola(ufl.Identity(2))

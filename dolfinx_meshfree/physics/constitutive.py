@@ -32,7 +32,7 @@ import numpy.typing as npt
 import ufl
 
 from ..approx import batched
-from .materials import resolve_density, ufl_constants
+from .materials import check_ufl_dimension, resolve_density, ufl_constants
 
 __all__ = [
     "PLANES",
@@ -258,6 +258,7 @@ class SaintVenantKirchhoff(_Hyperelastic):
 
     def ufl_first_piola(self, F: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
         """``F (lambda tr(E) I + 2 mu E)`` in UFL (``lambda*`` in plane stress)."""
+        check_ufl_dimension(self, F.ufl_shape[0], "ufl_first_piola's F")
         E = 0.5 * (F.T * F - ufl.Identity(self.gdim))
         lmbda, mu = ufl_constants(F, self.lmbda_2d, self.mu)
         return F * (lmbda * ufl.tr(E) * ufl.Identity(self.gdim) + 2.0 * mu * E)
@@ -383,6 +384,7 @@ class NeoHookean(_Hyperelastic):
     def ufl_first_piola(self, F: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
         """The same ``P`` in UFL. In plane stress ``ln lambda_3`` is
         :attr:`plane_stress_iterations` Newton steps from the small-strain root, unrolled."""
+        check_ufl_dimension(self, F.ufl_shape[0], "ufl_first_piola's F")
         lam, mu = ufl_constants(F, self.lmbda, self.mu)
         FinvT = ufl.inv(F).T
         lnJ = ufl.ln(ufl.det(F))

@@ -26,6 +26,7 @@ __all__ = [
     "AXISYMMETRIC",
     "DEFAULT_DENSITY",
     "LinearElastic",
+    "check_ufl_dimension",
     "is_axisymmetric",
     "linear_twin",
     "resolve_density",
@@ -45,6 +46,19 @@ def resolve_density(law: object) -> None:
     object.__setattr__(law, "density_given", law.rho is not None)
     if law.rho is None:
         object.__setattr__(law, "rho", DEFAULT_DENSITY)
+
+
+def check_ufl_dimension(law: object, size: int, what: str) -> None:
+    """Refuse a UFL operand of ``size`` components per direction for a law of another
+    dimension (a 2D ``plane`` law on a 3D mesh: UFL said only "Can't add expressions with
+    different shapes")."""
+    gdim = law.gdim
+    if size != gdim:
+        fix = "plane=None (3D)" if size == 3 else "plane='strain' or 'stress' (2D)"
+        raise ValueError(
+            f"{type(law).__name__}(plane={law.plane!r}) is a {gdim}D law but {what} is {size}D: "
+            f"pass {fix}"
+        )
 
 
 def ufl_constants(expr: ufl.core.expr.Expr, *values: float) -> tuple:
@@ -202,6 +216,7 @@ class LinearElastic:
     def ufl_stress(self, u: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
         """The same law as a UFL expression, for DOLFINx forms (``u`` of ``gdim`` components)."""
         self.refuse_axisymmetric("ufl_stress(u)")
+        check_ufl_dimension(self, u.ufl_shape[0], "ufl_stress's u")
         eps = ufl.sym(ufl.grad(u))
         mu, lmbda = ufl_constants(u, self.mu, self.lmbda)
         return 2.0 * mu * eps + lmbda * ufl.tr(eps) * ufl.Identity(self.gdim)
@@ -244,6 +259,7 @@ class LinearElastic:
     def ufl_first_piola(self, F: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
         """:meth:`ufl_stress` of the displacement gradient ``F - I`` in UFL."""
         self.refuse_axisymmetric("ufl_first_piola(F)")
+        check_ufl_dimension(self, F.ufl_shape[0], "ufl_first_piola's F")
         eps = ufl.sym(F - ufl.Identity(self.gdim))
         mu, lmbda = ufl_constants(F, self.mu, self.lmbda)
         return 2.0 * mu * eps + lmbda * ufl.tr(eps) * ufl.Identity(self.gdim)

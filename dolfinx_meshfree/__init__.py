@@ -42,6 +42,7 @@ from .approx.tables import Approximation, ShapeTable, StaleTableError
 from .couplings.hybrid import HYBRID_VARIANTS, HybridElasticity
 from .dynamics import DYNAMICS_METHODS, DynamicsResult, EnergyRecord, ExplicitDynamics
 from .dynamics.rate_dilatation import CellCollapseWarning
+from .dynamics.static_model import StaticModelWarning
 from .fracture.criteria import equivalent_sif, kink_angle
 from .fracture.interaction import (
     SIFReliabilityWarning,
@@ -215,6 +216,7 @@ __all__ = [
     "StaleTableError",
     "StateAbove",
     "StateCarryWarning",
+    "StaticModelWarning",
     "StepLoadedRod",
     "StressIntensityFactors",
     "TimoshenkoBeam",

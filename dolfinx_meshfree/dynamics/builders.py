@@ -628,7 +628,8 @@ def build_coupled(
             in use (cells or stress points).
         fixed_facets: Owned exterior facets held at rest (FE nodes strongly, particles by facet
             multipliers on the velocities). The static problem's own Dirichlet conditions,
-            tractions and body force are not used.
+            tractions and body force are not used
+            (:class:`~dolfinx_meshfree.dynamics.static_model.StaticModelWarning` says so).
         integration: ``"cells"`` or ``"stress-points"`` (Rabczuk, Belytschko & Xiao 2004;
             lagrange, edge-to-edge and master-slave), see :meth:`CoupledElasticity.operators
             <dolfinx_meshfree.CoupledElasticity.operators>`.

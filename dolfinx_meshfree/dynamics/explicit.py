@@ -43,7 +43,6 @@ from ..physics.cohesive import LinearCohesive
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic, is_axisymmetric
 from ..statics.coupled import CoupledElasticity
-from ..statics.facet_terms import facet_integrals
 from .builders import Model, build_coupled, build_efg, build_fe
 from .central_difference import CentralDifference
 from .cohesive_faces import cohesive_records, with_cohesive_faces
@@ -58,6 +57,7 @@ from .prescribed import HeldVelocity
 from .queries import StateQueries
 from .results import DynamicsResult
 from .run import integrate
+from .static_model import check_static_model
 from .struck import Struck
 from .system import Field, LinearSystem, SemiDiscreteSystem, inverse_masses
 from .time_step import TimeStepBound, check_safety, warn_default_density
@@ -320,18 +320,7 @@ class ExplicitDynamics(StateQueries, Struck):
         """
         check_safety(safety)
         check_multiplier_solver(multiplier_solver)
-        form = getattr(problem, "form", None)
-
-        def check_form() -> None:
-            if form is not None and facet_integrals(form):
-                raise ValueError(
-                    "the CoupledLinearProblem's bilinear form has ds integrals of the unknown "
-                    "(an elastic support): explicit dynamics does not carry them yet; model the "
-                    "support with held velocities or contact, or solve the statics only"
-                )
-
-        comm = getattr(getattr(problem, "patch", None), "comm", MPI.COMM_WORLD)
-        raise_on_all_ranks(comm, check_form)
+        check_static_model(problem)  # what the static model holds that dynamics leaves out
         cohesive = list(getattr(problem, "cohesive", None) or [])
         model = build_coupled(
             problem, particle_mass, fixed_facets, integration, slaves, material, fe_dilatation

@@ -39,7 +39,7 @@ E, NU, L, H = 1000.0, 0.25, 3.0, 1.0
 K_SPRING = E / L  # k L / E = 1
 P_PULL = 10.0
 LINEAR_EXACT = ("lagrange", "edge-to-edge", "bridging", "ramp", "ramp-cubic")
-TOL = 1e-9
+TOL = 1e-12  # round-off: measured 8e-16 to 8e-15
 
 
 def mesh(cell: str, n: int = 4):
@@ -143,6 +143,7 @@ def test_an_elastic_support_on_other_cells(cell, coupling):
 # -- a follower pressure at finite strain ---------------------------------------------------------
 
 MAT_NH = mf.NeoHookean(E=E, nu=0.3, plane="strain")
+NEWTON = 2e-10  # Newton's tolerance: measured 8.0e-11 of l1 - 1, every method
 P_PRESS = 120.0
 
 
@@ -199,10 +200,10 @@ def test_a_follower_pressure_at_finite_strain(method):
         values = u.x.array.reshape(-1, 2)[:owned]
         dof_x = u.function_space.tabulate_dof_coordinates()[:owned, :2]
         fe_exact = np.column_stack([(l1 - 1) * dof_x[:, 0], (l2 - 1) * dof_x[:, 1]])
-        assert np.abs(values - fe_exact).max() < 1e-9 * abs(l1 - 1)
+        assert np.abs(values - fe_exact).max() < NEWTON * abs(l1 - 1)
         return
     got = problem.solution.displacement(x)
-    assert np.abs(got - exact).max() < 1e-9 * abs(l1 - 1)
+    assert np.abs(got - exact).max() < NEWTON * abs(l1 - 1)
 
 
 # -- refusals -------------------------------------------------------------------------------------

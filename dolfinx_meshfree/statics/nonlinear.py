@@ -91,7 +91,7 @@ def _check_residual(F: ufl.Form, u: dolfinx.fem.Function) -> dolfinx.fem.Functio
 
 
 #: Relative difference above which the residual and the particles' law disagree at finite strain.
-LAW_TOLERANCE = 1e-6
+LAW_TOLERANCE = 1e-8
 
 #: Homogeneous deformation gradients the residual is compared at (a stretch with shear, a
 #: compression with shear), 2D and 3D.

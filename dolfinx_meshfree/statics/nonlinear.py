@@ -247,7 +247,7 @@ class FENonlinearProblem:
         """Newton over the load steps (collective); raises
         :class:`~dolfinx_meshfree.statics.newton.NewtonError` if a step does not converge. The
         ``bcs``' values are read afresh (a displacement sweep), as are the residual's
-        ``Constant``s and ``Function``s."""
+        ``Constant`` and ``Function`` objects."""
         self._hold_bcs()
         u = self.u
         b = _compat.assemble_vector(self._load)
@@ -378,7 +378,7 @@ class CoupledNonlinearProblem:
         :class:`~dolfinx_meshfree.statics.newton.NewtonError` (with the residual history) when a
         step
         does not converge: the last iterate is not returned as a solution. The ``bcs``' values
-        and the dead load's ``Constant``s and ``Function``s are read afresh at each call."""
+        and the dead load's ``Constant`` and ``Function`` objects are read afresh at each call."""
         self._linear._refresh()
         out = solve_finite_strain(
             self.model, self.F_int, self.u, self.material, self.load_steps, self.newton,

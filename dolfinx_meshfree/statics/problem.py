@@ -317,9 +317,10 @@ class CoupledLinearProblem:
     def solve(self, solver: str | SolverOptions | None = None) -> CoupledSolution:
         """Assemble and solve the coupled system (collective); see
         :meth:`~dolfinx_meshfree.CoupledElasticity.solve`. As DOLFINx's ``LinearProblem``, it
-        reads the current values of the forms' and the conditions' ``Constant``s and
-        ``Function``s (a load or displacement sweep); a changed ``a`` must still agree with the
-        particle side's ``material`` (refused otherwise: build a new problem with the new law).
+        reads the current values of the forms' and the conditions' ``Constant`` and
+        ``Function`` objects (a load or displacement sweep); a changed ``a`` must still agree
+        with the particle side's ``material`` (refused otherwise: build a new problem with the
+        new law).
 
         Args:
             solver: A shorthand, ``"mumps"``, ``"fieldsplit"`` or ``"iterative"``, or a

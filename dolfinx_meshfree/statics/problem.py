@@ -203,7 +203,9 @@ class CoupledLinearProblem:
             for name in names
         }
 
-    def _apply_bcs_now(self, problem: CoupledElasticity, V, patch: ParticlePatch) -> None:
+    def _apply_bcs_now(
+        self, problem: CoupledElasticity, V: dolfinx.fem.FunctionSpace, patch: ParticlePatch
+    ) -> None:
         n_local = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
         gdim = V.mesh.geometry.dim
         count = np.zeros((n_local, gdim), dtype=int)

@@ -57,6 +57,7 @@ __all__ = [
     "facet_table",
     "fe_constraint_block",
     "fe_dof_layout",
+    "interface_node_flags",
     "material_stiffness_form",
     "node_flags",
     "particle_constraint_block",
@@ -504,6 +505,13 @@ def facet_table(
     t.data[np.abs(t.data) <= ROUND_OFF] = 0.0
     t.eliminate_zeros()
     return t
+
+
+def interface_node_flags(V: dolfinx.fem.FunctionSpace, patch: ParticlePatch) -> np.ndarray:
+    """Flag of every local node (owned and ghost) of ``V`` on the patch interface Gamma, on
+    every rank that holds it (collective)."""
+    fdim = V.mesh.topology.dim - 1
+    return node_flags(V, dolfinx.fem.locate_dofs_topological(V, fdim, patch.interface_facets))
 
 
 def facet_nodes(V: dolfinx.fem.FunctionSpace, facets: np.ndarray) -> np.ndarray:

@@ -94,7 +94,7 @@ from .base import (
     CouplingOperators,
     facet_nodes,
     fe_dof_layout,
-    node_flags,
+    interface_node_flags,
 )
 
 if TYPE_CHECKING:  # annotations only: the model imports this module
@@ -224,9 +224,7 @@ class RampInterface:
         self._mls = MLS(m.points, m.weight_name, m.dilation, m.basis, radii=m.radii, rcond=0.0)
         self._mls.pair_cuts = list(m.pair_cuts)  # the bodies' cut (ramps refuse cracks)
         self.num_particles = patch.particles.num_particles
-        fdim = msh.topology.dim - 1
-        nodes = dolfinx.fem.locate_dofs_topological(V, fdim, patch.interface_facets)
-        self.on_gamma = node_flags(problem.V, nodes)
+        self.on_gamma = interface_node_flags(V, patch)
         self.coordinates = V.tabulate_dof_coordinates()[:, :2]
         dofs = _compat.dofmap_array(V)
         self.in_interface = ~patch.in_patch & self.on_gamma[dofs[: patch.in_patch.size]].any(axis=1)

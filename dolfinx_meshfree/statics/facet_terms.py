@@ -8,7 +8,7 @@ bilinear form ``a``, or a follower pressure ``p J inner(inv(F).T N, v) ds(i)`` i
 DOLFINx, over the FE cells' exterior facets: there the FE field is the model's displacement.
 On a facet of a patch cell the displacement is the particles' (MLS) field, and on a facet of a
 ramp's interface cell a blend of both, which a UFL form on the FE space cannot see; such a facet
-is refused (:func:`check_facet_terms`), never integrated with the wrong field or dropped.
+is refused (:meth:`FacetTermCheck.check`), never integrated with the wrong field or dropped.
 Interior-facet integrals of the unknown (``dS``) are refused too.
 
 The FE weight of every coupling (:attr:`~dolfinx_meshfree.couplings.base.CouplingOperators.
@@ -24,7 +24,7 @@ import numpy as np
 import ufl
 
 from .. import _compat
-from ..approx.fe_dofs import node_flags
+from ..couplings.base import interface_node_flags
 from ..geometry.patch import ParticlePatch
 from ..geometry.quadrature import boundary_facets
 
@@ -78,12 +78,10 @@ class FacetTermCheck:
             self.refused: list[tuple[object, np.ndarray]] = []
             return
         refused_cells = np.asarray(patch.in_patch, dtype=bool).copy()
-        if coupling in BLENDED:  # collective: every rank flags the interface nodes it holds
-            V = _compat.scalar_function_space(msh, "Lagrange", 1)
-            nodes = dolfinx.fem.locate_dofs_topological(V, tdim - 1, patch.interface_facets)
-            on_gamma = node_flags(V, nodes)
-            dofs = _compat.dofmap_array(V)[: refused_cells.size]
-            refused_cells |= on_gamma[dofs].any(axis=1)
+        if coupling in BLENDED:  # collective: the ramp's interface cells (RampInterface's rule)
+            V = form.arguments()[0].ufl_function_space()
+            on_gamma = interface_node_flags(V, patch)
+            refused_cells |= on_gamma[_compat.dofmap_array(V)[: refused_cells.size]].any(axis=1)
         msh.topology.create_connectivity(tdim - 1, tdim)
         f2c = msh.topology.connectivity(tdim - 1, tdim)
         exterior = boundary_facets(msh)

@@ -158,8 +158,8 @@ def check_law_at_finite_strain(
     if worst <= LAW_TOLERANCE:
         return
     hint = ""
+    w.interpolate(lambda x: (at - np.eye(d)) @ x[:d])
     for other in _other_laws(material):
-        w.interpolate(lambda x, G=at: (G - np.eye(d)) @ x[:d])
         if difference(other, at) <= LAW_TOLERANCE:
             hint = f"; F matches {other}: pass it as material"
             break

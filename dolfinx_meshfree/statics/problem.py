@@ -55,7 +55,7 @@ from ufl.corealg.traversal import unique_pre_traversal
 
 from .. import _compat
 from ..approx.fe_points import evaluate_fe_function
-from ..couplings.base import facet_nodes, node_flags
+from ..couplings.base import facet_nodes, interface_node_flags, node_flags
 from ..geometry.cut_cells import cut_facet_quadrature
 from ..geometry.patch import ParticlePatch
 from ..geometry.quadrature import (
@@ -228,9 +228,7 @@ class CoupledLinearProblem:
         facets = boundary_facets(msh)
         nodes = facet_nodes(V, facets)
         fdim = msh.topology.dim - 1
-        gamma = node_flags(
-            problem.V, dolfinx.fem.locate_dofs_topological(V, fdim, patch.interface_facets)
-        )
+        gamma = interface_node_flags(V, patch)
         f2c = msh.topology.connectivity(fdim, fdim + 1)
         beside_patch = patch.in_patch[np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]]]
         on = fixed[nodes].all(axis=1) & (beside_patch | gamma[nodes].any(axis=1))

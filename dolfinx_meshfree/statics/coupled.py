@@ -61,6 +61,7 @@ from .coupled_newton import (
     law_internal_force,
     solve_finite_strain,
 )
+from .history import SolveHistory
 from .mean_dilatation import resolve_dilatation
 from .newton import NewtonOptions
 from .petsc import SolverOptions, solver_options
@@ -242,11 +243,9 @@ class CoupledElasticity:
         consistent: Variationally consistent integration on the patch (VCI, Chen, Hillman &
             Rüter 2013, over the patch boundary, interface included): the linear patch test
             passes to round-off. Default (``None``): on for every variational coupling, off for
-            ``master-slave``, which is first order by construction (its rigid links drop the
-            strain across the slave layer) and whose slaves, not multipliers, carry the interface
-            traction that VCI's identity assumes: with VCI it loses the exact rigid-body motion
-            (2e-5 to 4e-4 instead of 3e-14, tests/test_master_slave.py). ``False``: the papers'
-            plain Gauss quadrature.
+            ``master-slave``, first order by construction, whose slaves carry the interface
+            traction VCI's identity assumes multipliers carry (with VCI its rigid-body motion is
+            2e-5 to 4e-4 off, not 3e-14: tests/test_master_slave.py). ``False``: plain Gauss.
         integration: ``"vci"``, ``"smoothed"``, ``"smoothed-subcells"`` or ``"gauss"`` (see
             :class:`~dolfinx_meshfree.EFGElasticity`; ``None``: from ``consistent``). The
             smoothed ones with :data:`SMOOTHED_COUPLINGS`, no crack and no adaptive
@@ -271,16 +270,13 @@ class CoupledElasticity:
             distance to the interface (see
             :class:`~dolfinx_meshfree.couplings.bridging.BridgingBand`).
         corner_angle: ``coupling="lagrange"``: ``None`` (the default): the multipliers are the
-            FE traces of the interface nodes, continuous along the whole interface (Rabczuk et
-            al. 2006, eq. 109), also where it turns; the patch test still passes to round-off
-            with consistent integration
-            (:func:`~dolfinx_meshfree.couplings.lagrange.projected_normals`). A number in (0, 90)
-            (degrees, e.g. :data:`~dolfinx_meshfree.couplings.lagrange.CORNER_ANGLE`, the
-            earlier default): nodes where the interface turns by more than this carry one
-            multiplier per side. On a staircase of mesh facets (a patch chosen by a slanted or
-            curved criterion) that doubles the multipliers and over-constrains the particles:
-            1.7-3.9x the FE error at particle spacings >= 0.75 h
-            (tests/test_staircase_couplings.py), against 0.9-1.1x with ``None``.
+            FE traces of the interface nodes, continuous where the interface turns (Rabczuk et
+            al. 2006, eq. 109; :func:`~dolfinx_meshfree.couplings.lagrange.projected_normals`).
+            A number in (0, 90) degrees (the earlier default,
+            :data:`~dolfinx_meshfree.couplings.lagrange.CORNER_ANGLE`): one multiplier per side
+            where it turns by more, which over-constrains a staircase interface (1.7-3.9x the FE
+            error at spacings >= 0.75 h, tests/test_staircase_couplings.py; 0.9-1.1x with
+            ``None``).
     """
 
     def __init__(
@@ -399,7 +395,13 @@ class CoupledElasticity:
         #: Body forces (:mod:`~dolfinx_meshfree.physics.body_loads`) from :meth:`set_body_force`
         #: or the cell integrals of a CoupledLinearProblem's ``L``.
         self.body_forces: list = []
+        #: Where the last solve with state ended, the next's start (:mod:`.history`).
+        self.history = SolveHistory()
         self.setup_time = time.perf_counter() - t0
+
+    def reset(self) -> None:
+        """Forget the path: the next :meth:`solve` starts from the unloaded, virgin state."""
+        self.history.clear()
 
     def add_cohesive(
         self,
@@ -600,7 +602,9 @@ class CoupledElasticity:
                 database.
             prefix: The KSP's options prefix (default: a unique one).
             load_steps: Finite strain: the loads and prescribed displacements in ``k /
-                load_steps`` steps (ignored by a linear material).
+                load_steps`` steps (ignored by a linear material). A law with state (or
+                cohesive faces) continues from the last solve: the steps run from its loads to
+                the current ones, from its state (a load sweep; :meth:`reset` starts again).
             newton: Finite strain: :class:`~dolfinx_meshfree.statics.newton.NewtonOptions`.
         """
         comm = self.patch.comm
@@ -614,8 +618,9 @@ class CoupledElasticity:
         u = dolfinx.fem.Function(self.V)
         u.x.array[:] = 0.0
         F_int = law_internal_force(self.law, u)
+        history = self.history if is_stateful(self.law) or self.cohesive else None
         out = solve_finite_strain(
-            self, F_int, u, self.law, load_steps, newton or NewtonOptions(), options
+            self, F_int, u, self.law, load_steps, newton or NewtonOptions(), options, None, history
         )
         out.solution.newton = out.result
         return out.solution

@@ -30,6 +30,7 @@ from ..physics.constitutive import Material
 from ..physics.state import StatefulLaw, is_stateful
 from .cohesive import CohesiveSide
 from .fe_state import check_bands
+from .history import SolveHistory
 from .newton import NewtonOptions
 from .petsc import SolverOptions, create_vector
 from .sides import (
@@ -224,6 +225,7 @@ def solve_finite_strain(
     newton: NewtonOptions,
     solver: SolverOptions,
     state: list[np.ndarray] | None = None,
+    history: SolveHistory | None = None,
 ) -> FiniteStrainSolve:
     """Newton over ``load_steps`` on ``model``'s block system (collective).
 
@@ -238,6 +240,8 @@ def solve_finite_strain(
             :mod:`~dolfinx_meshfree.physics.state`).
         load_steps, newton, solver: Load steps, Newton options, the linear solver.
         state: The block fields of a previous solve (the start), or ``None`` (``u`` and zeros).
+        history: A model with state: where its last solve ended (the start, and the loads the
+            steps start from), updated at the end (:mod:`~dolfinx_meshfree.statics.history`).
 
     Raises:
         NewtonError: when a step does not converge (with the residual history).
@@ -245,7 +249,11 @@ def solve_finite_strain(
     t0 = time.perf_counter()
     built = build_block_problem(model, F_int, u, material, state)
     try:
+        if history is not None:
+            history.resume(built.problem, built.x, type(model).__name__)
         result = solve_load_steps(built.problem, built.x, load_steps, newton, solver)
+        if history is not None:
+            history.record(built.problem, built.x)
         new_state = built.state()
         solution = built.solution(
             {"setup": built.setup, "newton": time.perf_counter() - t0 - built.setup}

@@ -91,6 +91,7 @@ from ..physics.user_functions import check_arguments, check_facets, vector_value
 from .cohesive import CohesiveCrack, CohesiveSide, check_cohesive, check_through
 from .fe_state import check_bands
 from .growth_update import local_update_for
+from .history import SolveHistory
 from .newton import NewtonOptions
 from .petsc import BlockSystem, SolverOptions, create_aij, create_vector, solver_options
 from .sides import BlockProblem, ParticleSide, particle_band_factor, solve_built
@@ -735,7 +736,14 @@ class EFGElasticity:
         self.cohesive: list[CohesiveCrack] = []
         self._tractions: list[tuple[np.ndarray, TractionFunction]] = []
         self._body: VectorFunction | None = None
+        #: Where the last solve of a law with state (or cohesive faces) ended: the next starts
+        #: there (:mod:`~dolfinx_meshfree.statics.history`; :meth:`reset` forgets it).
+        self.history = SolveHistory()
         self._setup_time = time.perf_counter() - t0
+
+    def reset(self) -> None:
+        """Forget the path: the next :meth:`solve` starts from the unloaded, virgin state."""
+        self.history.clear()
 
     @property
     def comm(self) -> MPI.Comm:
@@ -994,7 +1002,10 @@ class EFGElasticity:
                 raise ValueError(f"load_steps={load_steps!r} must be an integer >= 1")
 
         raise_on_all_ranks(self.comm, check)
-        return solve_built(self.block_model(), load_steps, options or NewtonOptions(), solver)
+        history = self.history if is_stateful(self.material) or self.cohesive else None
+        return solve_built(
+            self.block_model(), load_steps, options or NewtonOptions(), solver, history
+        )
 
 
 @dataclass

@@ -47,6 +47,7 @@ from ..physics.user_functions import check_arguments, check_facets, vector_value
 from .coupled_newton import check_load_steps
 from .fe import FESolution
 from .fe_state import check_bands
+from .history import SolveHistory
 from .mean_dilatation import resolve_dilatation
 from .newton import NewtonOptions
 from .petsc import SolverOptions, create_vector, solver_options
@@ -135,6 +136,13 @@ class FEElasticity:
         self.body_forces: list = []
         self.cohesive: list = []
         self.cracks: list = []
+        #: Where the last solve of a law with state ended: the next starts there
+        #: (:mod:`~dolfinx_meshfree.statics.history`; :meth:`reset` forgets it).
+        self.history = SolveHistory()
+
+    def reset(self) -> None:
+        """Forget the path: the next :meth:`solve` starts from the unloaded, virgin state."""
+        self.history.clear()
 
     def add_dirichlet(
         self, facets: np.ndarray, value: VectorFunction, components: tuple[int, ...] | None = None
@@ -243,7 +251,9 @@ class FEElasticity:
     ) -> FESolution:
         """Newton over ``load_steps`` equal steps of the load factor to 1, committing the
         states at every converged step (a step that does not converge is cut; load control
-        cannot pass a peak: :func:`~dolfinx_meshfree.follow_path` can). Collective.
+        cannot pass a peak: :func:`~dolfinx_meshfree.follow_path` can). A law with state
+        continues from the last solve: the steps run from its loads and prescribed values to the
+        current ones, from its state (a load sweep; :meth:`reset` starts again). Collective.
 
         Returns:
             The :class:`~dolfinx_meshfree.FESolution`, with the committed ``states`` and
@@ -251,7 +261,10 @@ class FEElasticity:
         """
         options = raise_on_all_ranks(self.comm, lambda: solver_options(solver))
         raise_on_all_ranks(self.comm, lambda: check_load_steps(load_steps))
-        return solve_built(self.block_model(), int(load_steps), newton or NewtonOptions(), options)
+        history = self.history if is_stateful(self.law) else None
+        return solve_built(
+            self.block_model(), int(load_steps), newton or NewtonOptions(), options, history
+        )
 
 
 @dataclass

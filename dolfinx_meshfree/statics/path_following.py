@@ -758,6 +758,21 @@ def _check_growth(
         gr.check(model.cohesive, cracks)
 
 
+def _check_unloaded(model: CoupledElasticity | EFGElasticity | FEElasticity) -> None:
+    """Refuse a model whose last ``solve()`` left an inelastic state (local; every rank
+    alike): the path starts from the unloaded state, its load factor an unknown from 0, so it
+    cannot continue that history (:mod:`~dolfinx_meshfree.statics.history`); an elastic
+    history is the start's own path."""
+    history = getattr(model, "history", None)
+    if history is not None and history.inelastic:
+        raise ValueError(
+            f"follow_path: this {type(model).__name__} yielded, softened or opened in its last "
+            "solve() (its law's state is that solve's history); a path starts from the "
+            "unloaded, virgin state and cannot continue it: call model.reset() first, or "
+            "follow the path from the start"
+        )
+
+
 def _check_fe_only(law: object, growth: object, initiation: object, adapt: object) -> None:
     """Refuse what a pure FE model cannot carry (local; every rank): an elastic law's straight
     path; cracks, which FE cells do not carry; a patch to grow, which it has not."""
@@ -1174,11 +1189,13 @@ def follow_path(
     fe_only = isinstance(model, FEElasticity)
     comm = model.comm if efg or fe_only else model.patch.comm
     solver = raise_on_all_ranks(comm, lambda: solver_options(solver))
+    given = model  # a grown patch rebuilds the model: the path ends on result.model
     t0 = time.perf_counter()
     if fe_only:
         raise_on_all_ranks(comm, lambda: _check_fe_only(model.law, growth, initiation, adapt))
     cracks = model.cracks if efg or fe_only else model.patch.cracks
     raise_on_all_ranks(comm, lambda: check_through(cracks, model.cohesive))
+    raise_on_all_ranks(comm, lambda: _check_unloaded(model))
     growths = [] if growth is None else [growth] if isinstance(growth, CohesiveGrowth) else growth
     growths = list(growths)  # cracks that start during the path add theirs
     raise_on_all_ranks(comm, lambda: _check_growth(model, efg, growths, control, cracks))
@@ -1486,6 +1503,10 @@ def follow_path(
         loads.destroy()
         result.solution = built.solution()
         result.model = model
+        # a later solve() continues from the path's end (on the model the path ended with)
+        problem.t = t
+        given.reset()
+        model.history.record(problem, x)
         if criteria and not result.adapt_named:  # the same on every rank
             warn_unused(criteria, "follow_path", f"{len(result.control)} converged step(s)")
         result.solution.states = problem.states

@@ -98,10 +98,12 @@ class CoupledLinearProblem:
         material: :class:`~dolfinx_meshfree.LinearElastic` of the particle side; must agree with
             ``a`` on the patch cells. Or a law with state (:class:`~dolfinx_meshfree.RankineDamage`,
             :class:`~dolfinx_meshfree.J2Plasticity`): then it is the law of every cell, FE cells
-            included, ``a`` must be its elastic form on every cell (checked), ``L`` the
-            reference load, and :meth:`solve` runs Newton in one load step from the unloaded
-            state; past a peak, follow the path: ``mf.follow_path(problem.model, control,
-            options)``.
+            included, ``a`` must be its elastic form on every cell (checked), and
+            :meth:`solve` runs Newton in one load step from where the last solve ended (its
+            displacement, state and loads) to the current ``L`` and ``bcs``: a load sweep by
+            ``Constant`` objects follows the path, unloading included (:meth:`reset` starts
+            again unloaded); past a peak, follow the path:
+            ``mf.follow_path(problem.model, control, options)`` (on a model not yet solved).
         coupling: One of :data:`~dolfinx_meshfree.COUPLINGS`.
         petsc_options: PETSc options of the linear solver (a KSP on the assembled block system),
             as ``dolfinx.fem.petsc.LinearProblem`` takes them; default (``None``): MUMPS LU
@@ -330,6 +332,11 @@ class CoupledLinearProblem:
         """
         self._refresh()
         return self.problem.solve(self._solver if solver is None else solver)
+
+    def reset(self) -> None:
+        """A law with state: forget the path, so that the next :meth:`solve` starts from the
+        unloaded, virgin state (:meth:`~dolfinx_meshfree.CoupledElasticity.reset`)."""
+        self.problem.reset()
 
     def with_patch(self, patch: ParticlePatch) -> CoupledLinearProblem:
         """The same model (forms, conditions, material, coupling, options, solver) on another

@@ -45,6 +45,8 @@ from .petsc import SolverOptions, create_aij, create_vector
 if TYPE_CHECKING:  # annotations only
     from mpi4py import MPI
 
+    from .history import SolveHistory
+
 __all__ = [
     "BlendedSide",
     "BlockProblem",
@@ -458,7 +460,12 @@ class BlockProblem:
     """``R(x) = f_int(x) - t f_ext + C x - t c`` on a nest whose first fields have nonlinear
     diagonal blocks (``sides``), whose other blocks ``C`` are constant (constraints), and whose
     ``shared`` sides (e.g. :class:`BlendedSide`: ``fields``, ``internal_force(xs)`` per field,
-    ``tangent(xs)`` by blocks) add internal forces and tangent blocks over several fields."""
+    ``tangent(xs)`` by blocks) add internal forces and tangent blocks over several fields.
+
+    With :attr:`start` (a solve that continues from a previous one,
+    :mod:`~dolfinx_meshfree.statics.history`) the loads at ``t`` are ``(1 - t) start + t f_ext``
+    and the held values ``(1 - t) x_start + t x_bar``: the load steps run from the last solve's
+    loads to the current ones."""
 
     names: list[str]
     num_primal: int
@@ -468,6 +475,10 @@ class BlockProblem:
     t: float = 1.0
     shared: list = field(default_factory=list)  # sides over several fields (BlendedSide...)
     _owned: list = field(default_factory=list)
+    #: The loads at ``t = 0`` per field (owned entries), or ``None``: zero.
+    start: list[np.ndarray] | None = None
+    #: The held values at ``t = 0`` per side (``None`` entries: not an FE side), or ``None``.
+    start_held: list[np.ndarray | None] | None = None
 
     def residual(self, x: Sequence[PETSc.Vec]) -> list[PETSc.Vec]:
         out = []
@@ -477,6 +488,8 @@ class BlockProblem:
                 r.axpy(-self.t, self.loads[i])
             else:
                 r.scale(-self.t)
+            if self.start is not None:
+                r.array[:] -= (1.0 - self.t) * self.start[i]
             for j, C in enumerate(row):
                 if C is not None:
                     C.multAdd(x[j], r, r)
@@ -490,7 +503,10 @@ class BlockProblem:
         for i, side in enumerate(self.sides):
             if isinstance(side, FESide):  # held dofs: x - t x_bar
                 held = side.fixed_local
-                out[i].array[held] = x[i].getArray(readonly=True)[held] - self.t * side.fixed_values
+                value = self.t * side.fixed_values
+                if self.start_held is not None:
+                    value = value + (1.0 - self.t) * self.start_held[i]
+                out[i].array[held] = x[i].getArray(readonly=True)[held] - value
         return out
 
     def jacobian(self, x: Sequence[PETSc.Vec]) -> list[list[PETSc.Mat | None]]:
@@ -561,14 +577,24 @@ def restore_step(problem: BlockProblem, x: Sequence[PETSc.Vec], saved: Sequence[
 
 
 def solve_built(
-    built: object, load_steps: int, options: NewtonOptions, solver: SolverOptions
+    built: object,
+    load_steps: int,
+    options: NewtonOptions,
+    solver: SolverOptions,
+    history: SolveHistory | None = None,
 ) -> object:
     """:func:`solve_load_steps` on a built model (``problem``, ``x``, ``solution()``,
     ``destroy()``: a pure EFG or pure FE block model), freed after; its solution with the solve's
-    time in ``timings["solve"]`` and Newton's record in ``newton`` (collective)."""
+    time in ``timings["solve"]`` and Newton's record in ``newton`` (collective). With a
+    ``history`` (a model with state), the solve starts where the last one ended and records
+    where it ends (:mod:`~dolfinx_meshfree.statics.history`)."""
     t0 = time.perf_counter()
     try:
+        if history is not None:
+            history.resume(built.problem, built.x, type(built.model).__name__)
         result = solve_load_steps(built.problem, built.x, load_steps, options, solver)
+        if history is not None:
+            history.record(built.problem, built.x)
         solution = built.solution()
     finally:
         built.destroy()

@@ -89,13 +89,22 @@ def is_stateful(law: object) -> bool:
 
 
 def check_stateless(law: object, where: str) -> None:
-    """Refuse a law with state in code that does not carry it (never silently elastic)."""
+    """Refuse a law with state in code that does not carry it (never silently elastic); in
+    explicit dynamics, name the rate-form laws that carry plasticity and damage there."""
     if is_stateful(law) or isinstance(law, BoundLaw):
+        dynamics = (
+            "; in explicit dynamics, plasticity and damage are the rate-form laws at finite "
+            "strain: mf.JohnsonCook (J2 flow, yield stress A + B eps_p^n: A=sigma_y, B=H, n=1, "
+            "C=0 is linear hardening; plane strain, 3D or axisymmetric) and "
+            "mf.HolmquistJohnsonCook (damaging concrete)"
+            if where == "explicit dynamics"
+            else ""
+        )
         raise TypeError(
             f"{type(getattr(law, 'law', law)).__name__} is a law with internal state (damage, "
             f"plasticity), and {where} does not carry state at its quadrature points; solve it "
             "with CoupledElasticity(...) or EFGElasticity(...): .solve(load_steps=...), or "
-            "follow_path(...) past a peak"
+            f"follow_path(...) past a peak{dynamics}"
         )
 
 

@@ -231,6 +231,13 @@ class LinearCohesive:
         kappa = np.maximum(np.asarray(state["kappa"], dtype=float).reshape(len(w)), w_eff)
         return self._secant_matrix(w, self._secant(kappa)[0])
 
+    def unloading_tangent(
+        self, jump: np.ndarray, state: dict[str, np.ndarray], band: None = None
+    ) -> np.ndarray:
+        """The tangent of unloading (m, d, d): :meth:`secant_stiffness`, Newton's first iteration
+        of a load step that unloads opened faces (:mod:`~dolfinx_meshfree.statics.history`)."""
+        return self.secant_stiffness(jump, state)
+
     def _secant_matrix(self, w: np.ndarray, s: np.ndarray) -> np.ndarray:
         """``diag(s or K_0 (closed), beta^2 s, ...)`` (m, d, d) at the jumps ``w`` (m, d)."""
         m, d = w.shape

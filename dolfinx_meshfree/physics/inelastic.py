@@ -356,6 +356,20 @@ class RankineDamage:
         strain = _as_points(strain, self.nv, "RankineDamage")
         return np.maximum(self._top_principal(strain, strain @ self._C)[0], 0.0) / self.E
 
+    def unloading_tangent(
+        self, strain: np.ndarray, state: dict[str, np.ndarray], band: np.ndarray | None = None
+    ) -> np.ndarray:
+        """The secant ``(1 - D) C`` (m, nv, nv) at ``strain`` from the committed ``state``: the
+        tangent of unloading, which :meth:`update` gives inside the loading surface. Newton's
+        first iteration of a load step that unloads a damaged body takes it (on the surface,
+        :meth:`update` gives the loading one, which would carry the body further down its
+        softening branch: :mod:`~dolfinx_meshfree.statics.history`)."""
+        strain = _as_points(strain, self.nv, "RankineDamage")
+        h = self._band(band, strain.shape[0])
+        kappa_old = np.asarray(state["kappa"], dtype=float)[:, 0]
+        kappa = np.maximum(kappa_old, self.equivalent_strain(strain))
+        return (1.0 - self._damage(kappa, h)[0])[:, None, None] * self._C
+
     def update(
         self,
         strain: np.ndarray,

@@ -206,14 +206,21 @@ class PointState:
         #: Changes at every commit and restore (evaluations kept by a :class:`BoundLaw` are
         #: keyed on it).
         self.version = 0
+        #: Evaluate the law's tangent of unloading (its ``unloading_tangent``, where it has one)
+        #: instead of the consistent one: the predictor of a load step that unloads.
+        self.predictor = False
 
     def __len__(self) -> int:
         return self.points.shape[0]
 
     def evaluate(self, strain: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Stress and tangent at ``strain`` (m, nv) from the committed state; the trial state
-        becomes the one of this evaluation."""
+        becomes the one of this evaluation. With :attr:`predictor`, the law's tangent of
+        unloading where it has one."""
         stress, tangent, self.trial = self.law.update(strain, self.committed, self.band)
+        unloading = getattr(self.law, "unloading_tangent", None)
+        if self.predictor and unloading is not None:
+            tangent = unloading(strain, self.committed, self.band)
         return stress, tangent
 
     def commit(self) -> None:
@@ -261,7 +268,7 @@ class BoundLaw:
                 f"F should have shape ({len(self.state)}, {d}, {d}): the points this law's state "
                 f"is kept at; got {F.shape}"
             )
-        key = (self.state.version, F.tobytes())
+        key = (self.state.version, self.state.predictor, F.tobytes())
         if self._last is None or self._last[0] != key:
             stress, tangent = self.state.evaluate(voigt_strain(F - np.eye(d)))
             self._last = (key, stress, tangent)

@@ -479,6 +479,9 @@ class BlockProblem:
     start: list[np.ndarray] | None = None
     #: The held values at ``t = 0`` per side (``None`` entries: not an FE side), or ``None``.
     start_held: list[np.ndarray | None] | None = None
+    #: The next :meth:`jacobian` takes the laws' tangents of unloading (then it is reset): the
+    #: predictor of a step that unloads a body on its loading surface.
+    predictor: bool = False
 
     def residual(self, x: Sequence[PETSc.Vec]) -> list[PETSc.Vec]:
         out = []
@@ -510,6 +513,19 @@ class BlockProblem:
         return out
 
     def jacobian(self, x: Sequence[PETSc.Vec]) -> list[list[PETSc.Mat | None]]:
+        """The tangent blocks at ``x`` (the laws' tangents of unloading once after
+        :attr:`predictor` was set)."""
+        stores = self.states if self.predictor else []
+        self.predictor = False
+        for st in stores:
+            st.predictor = True
+        try:
+            return self._jacobian(x)
+        finally:
+            for st in stores:
+                st.predictor = False
+
+    def _jacobian(self, x: Sequence[PETSc.Vec]) -> list[list[PETSc.Mat | None]]:
         for M in self._owned:
             M.destroy()
         self._owned = [self.sides[i].tangent(x[i]) for i in range(self.num_primal)]

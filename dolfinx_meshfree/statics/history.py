@@ -92,10 +92,13 @@ class SolveHistory:
         comm = problem.loads[0].getComm().tompi4py()
         self.inelastic = bool(comm.allreduce(int(changed), op=MPI.MAX))
 
-    def resume(self, problem: BlockProblem, x: Sequence[PETSc.Vec], name: str) -> None:
+    def resume(
+        self, problem: BlockProblem, x: Sequence[PETSc.Vec], name: str, fields: bool = True
+    ) -> None:
         """Start ``problem`` and its fields ``x`` where the last solve ended (collective: the
         check is reduced over the ranks, so every rank raises alike). Nothing happens when the
-        history is empty.
+        history is empty. ``fields=False`` keeps ``x`` as it is (a user's ``u``, the initial
+        guess of DOLFINx's Newton), the loads and held values still start from the history's.
 
         Raises:
             ValueError: when the model's fields or state stores changed size since the last
@@ -113,7 +116,7 @@ class SolveHistory:
             )
         if self.empty:
             return
-        for v, a in zip(x, self.x, strict=True):
+        for v, a in zip(x, self.x if fields else (), strict=False):
             v.array[:] = a
         for st, old in zip(stores, self.states, strict=True):
             st.committed = {k: v.copy() for k, v in old.items()}

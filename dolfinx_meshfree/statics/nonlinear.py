@@ -55,6 +55,7 @@ from ..physics.state import check_stateless
 from .coupled import CoupledElasticity, CoupledSolution
 from .coupled_newton import FINITE_STRAIN_COUPLINGS, check_load_steps, solve_finite_strain
 from .facet_terms import FacetTermCheck
+from .history import SolveHistory
 from .newton import NewtonOptions
 from .petsc import solver_options
 from .problem import CoupledLinearProblem
@@ -194,9 +195,10 @@ class FENonlinearProblem:
             assembled, facet integrals of ``u`` (follower loads, elastic supports) too.
         u: The unknown (updated in place by :meth:`solve`; its values are the initial guess).
         bcs: ``DirichletBC`` objects (their values are reached in ``load_steps`` steps).
-        load_steps: External (dead, ``u``-free) load and prescribed values scaled by
-            ``k / load_steps``; terms of ``u`` are not (ramp a follower load's ``Constant``
-            between calls of :meth:`solve`).
+        load_steps: External (dead, ``u``-free) load and prescribed values in ``load_steps``
+            equal steps from those the last :meth:`solve` reached (zero at first, and after
+            :meth:`reset`) to the current ones; terms of ``u`` are not scaled (ramp a follower
+            load's ``Constant`` between calls of :meth:`solve`).
         newton: :class:`~dolfinx_meshfree.statics.newton.NewtonOptions`.
         petsc_options, petsc_options_prefix: The linear solver (default MUMPS LU).
     """
@@ -226,6 +228,12 @@ class FENonlinearProblem:
         v = F.arguments()[0]
         zero = dolfinx.fem.Constant(V.mesh, np.zeros(V.mesh.geometry.dim))
         self._load = _compat.create_form(L if L is not None else ufl.inner(zero, v) * ufl.dx)
+        self._history = SolveHistory()  # the loads and held values the last solve reached
+
+    def reset(self) -> None:
+        """The next :meth:`solve` steps its loads and prescribed values from zero again (from
+        the current ``u``)."""
+        self._history.clear()
 
     def _hold_bcs(self) -> None:
         """Hold the ``bcs``' owned dofs (by component: a bc may fix one component of a node) at
@@ -259,8 +267,10 @@ class FENonlinearProblem:
         x.array[:] = u.x.array[: self.side.n_owned]
         problem = BlockProblem(["fe"], 1, [self.side], [[None]], [f])
 
-        try:
+        try:  # from u, the load steps from the last solve's loads and values to the current
+            self._history.resume(problem, [x], "FENonlinearProblem", fields=False)
             result = solve_load_steps(problem, [x], self.load_steps, self.newton, self._solver)
+            self._history.record(problem, [x])
         finally:
             problem.destroy()
         self.side.set_state(x)
@@ -294,9 +304,11 @@ class CoupledNonlinearProblem:
             which is checked on its linearisation and at two finite deformations
             (:func:`check_law_at_finite_strain`).
         coupling: One of :data:`FINITE_STRAIN_COUPLINGS`.
-        load_steps: The dead external load and prescribed values in ``k / load_steps`` steps
-            (or change a ``Constant`` in ``F`` between calls of :meth:`solve`: each call starts
-            from the current state; the way to ramp a follower load, which is not scaled).
+        load_steps: The dead external load and prescribed values in ``load_steps`` equal
+            steps from those the last :meth:`solve` reached (zero at first, and after
+            :meth:`reset`) to the current ones: change a ``Constant`` in ``F`` between calls
+            (a load sweep; the way to ramp a follower load, which is not scaled), and each call
+            continues from the last solution.
         newton: :class:`~dolfinx_meshfree.statics.newton.NewtonOptions`.
         petsc_options, petsc_options_prefix: The linear solver of each Newton iteration.
         **options: Passed to :class:`~dolfinx_meshfree.CoupledElasticity`.
@@ -372,6 +384,11 @@ class CoupledNonlinearProblem:
         """The coupled model (space, patch, MLS, loads, essential conditions)."""
         return self._linear.problem
 
+    def reset(self) -> None:
+        """The next :meth:`solve` steps its loads and prescribed values from zero again (from
+        the last solution)."""
+        self.model.reset()
+
     def solve(self) -> NonlinearSolveResult:
         """Newton over the load steps (collective); returns ``(iterations, converged, steps)``
         and leaves the solution in ``u`` and :attr:`solution`. Raises
@@ -382,7 +399,7 @@ class CoupledNonlinearProblem:
         self._linear._refresh()
         out = solve_finite_strain(
             self.model, self.F_int, self.u, self.material, self.load_steps, self.newton,
-            self._solver, self._state,
+            self._solver, self._state, self.model.history,
         )  # fmt: skip
         self.solution, self._state = out.solution, out.state
         self.solution.newton = out.result

@@ -332,3 +332,29 @@ def test_a_hyperelastic_sweep_steps_from_the_last_load(method):
     t_fresh.value[:] = (0.0, -0.75)
     fresh.solve()
     assert deflection() == pytest.approx(fresh_deflection(), rel=1e-8)
+
+
+def test_a_path_that_grew_its_patch_goes_on_on_its_model():
+    """``follow_path(..., adapt=...)`` rebuilds the model on the grown patch: a ``solve()``
+    continues from the path's end on ``path.model`` (the strip unloaded keeps its plastic
+    strain, ``u - t / E`` at the end, within 1e-9), and the model the path started from refuses
+    to solve (it would start unloaded on the old patch) until ``reset()``."""
+    msh = _mesh()
+    model = _model("lagrange", msh)  # patch 1 <= x <= 3
+    _rollers(model, msh)
+    scale = [1.0]
+    right = mf.boundary_facets(msh, lambda p: np.isclose(p[0], LX))
+    model.add_traction(right, lambda p, n: np.tile([scale[0], 0.0], (len(p), 1)))
+    control = mf.DisplacementControl([[LX, 0.5]], [[1.0, 0.0]])
+    grow = mf.StateAbove("alpha", 1e-4, where=lambda x: x[:, 0] > 3.0)
+    path = mf.follow_path(model, control, mf.PathOptions(2e-3, 4e-3 * LX), adapt=grow)
+    assert len(path.patch_events) == 1 and path.model is not model
+    t, u_end = path.load_factor[-1], path.control[-1]
+    scale[0] = 0.0
+    u = path.model.solve().displacement(np.array([[LX, 0.5]]))[0, 0]
+    assert u == pytest.approx(u_end - t / E * LX, rel=TOL)
+    assert u == pytest.approx(0.2 * SY / H * LX, rel=1e-6)  # t = 1.2 sigma_y (the path's tol)
+    with pytest.raises(ValueError, match=r"follow_path grew this model's patch.*path\.model"):
+        model.solve()
+    model.reset()
+    assert model.solve().displacement(np.array([[LX, 0.5]]))[0, 0] == pytest.approx(0, abs=1e-15)

@@ -54,6 +54,9 @@ class SolveHistory:
     #: Some store's state left its initial one (the same on every rank): the body yielded,
     #: softened or opened, so a path that starts unloaded would not continue it.
     inelastic: bool = False
+    #: The path this model started went on on another model (``follow_path`` grew the patch:
+    #: ``path.model``): a solve of this one is refused until :meth:`clear`.
+    moved: bool = False
 
     @property
     def empty(self) -> bool:
@@ -63,7 +66,7 @@ class SolveHistory:
     def clear(self) -> None:
         """Forget the history: the next solve starts from the unloaded, virgin state."""
         self.x, self.states, self.loads, self.held = [], [], [], []
-        self.inelastic = False
+        self.inelastic = self.moved = False
 
     def record(self, problem: BlockProblem, x: Sequence[PETSc.Vec]) -> None:
         """Keep the converged state ``x`` of ``problem`` at its load factor ``problem.t``: the
@@ -105,8 +108,14 @@ class SolveHistory:
                 solve (``name``: the model's class, for the message).
         """
         stores = problem.states
-        why = "" if self.empty else self._misfit(problem, x)
         comm = problem.loads[0].getComm().tompi4py()
+        if self.moved:  # the same on every rank (set by follow_path on every rank)
+            raise ValueError(
+                f"{name}.solve(): follow_path grew this model's patch, so its path went on on "
+                "the rebuilt model (path.model): solve that one to continue, or call "
+                "model.reset() to start this one again from the unloaded state"
+            )
+        why = "" if self.empty else self._misfit(problem, x)
         if comm.allreduce(int(bool(why)), op=MPI.MAX):
             raise ValueError(
                 f"{name}.solve(): the model changed {why or 'on another rank'} since its last "

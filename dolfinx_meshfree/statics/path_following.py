@@ -1506,6 +1506,7 @@ def follow_path(
         # a later solve() continues from the path's end (on the model the path ended with)
         problem.t = t
         given.reset()
+        given.history.moved = model is not given
         model.history.record(problem, x)
         if criteria and not result.adapt_named:  # the same on every rank
             warn_unused(criteria, "follow_path", f"{len(result.control)} converged step(s)")

@@ -21,7 +21,10 @@ back towards zero starts Newton from the laws' tangents of unloading
 unloads along its secant instead of softening further. ``model.reset()`` forgets the
 history (the next solve starts unloaded). The history belongs to the model's discretisation: a
 model whose fields or stores changed size since (a new condition, a crack) is refused by name.
-Hyperelastic models need no history (their answer does not depend on the path) and keep none.
+``model.solve()`` of a hyperelastic model keeps none (its answer does not depend on the path;
+it solves from the unloaded state); :class:`~dolfinx_meshfree.CoupledNonlinearProblem` and
+:class:`~dolfinx_meshfree.FENonlinearProblem` keep one, so that their load steps run from the
+last solve's loads (a sweep by ``Constant`` objects), and start from the last solution.
 """
 
 from __future__ import annotations

@@ -103,7 +103,8 @@ class CoupledLinearProblem:
             displacement, state and loads) to the current ``L`` and ``bcs``: a load sweep by
             ``Constant`` objects follows the path, unloading included (:meth:`reset` starts
             again unloaded); past a peak, follow the path:
-            ``mf.follow_path(problem.model, control, options)`` (on a model not yet solved).
+            ``mf.follow_path(problem.model, control, options)`` (from the unloaded state: on
+            a model that has not yielded or softened yet, or after :meth:`reset`).
         coupling: One of :data:`~dolfinx_meshfree.COUPLINGS`.
         petsc_options: PETSc options of the linear solver (a KSP on the assembled block system),
             as ``dolfinx.fem.petsc.LinearProblem`` takes them; default (``None``): MUMPS LU

@@ -317,7 +317,9 @@ class CoupledLinearProblem:
 
     # -- solve ----------------------------------------------------------------------------------
 
-    def solve(self, solver: str | SolverOptions | None = None) -> CoupledSolution:
+    def solve(
+        self, solver: str | SolverOptions | None = None, load_steps: int = 1
+    ) -> CoupledSolution:
         """Assemble and solve the coupled system (collective); see
         :meth:`~dolfinx_meshfree.CoupledElasticity.solve`. As DOLFINx's ``LinearProblem``, it
         reads the current values of the forms' and the conditions' ``Constant`` and
@@ -330,9 +332,13 @@ class CoupledLinearProblem:
                 :class:`~dolfinx_meshfree.statics.petsc.SolverOptions`, instead of the
                 constructor's ``petsc_options``; default: those options, or ``"mumps"``
                 without them.
+            load_steps: A law with state: Newton's steps from the loads the last solve reached
+                to the current ones (a large increment of plastic flow in smaller ones);
+                ignored by a linear law.
         """
         self._refresh()
-        return self.problem.solve(self._solver if solver is None else solver)
+        options = self._solver if solver is None else solver
+        return self.problem.solve(options, load_steps=load_steps)
 
     def reset(self) -> None:
         """A law with state: forget the path, so that the next :meth:`solve` starts from the

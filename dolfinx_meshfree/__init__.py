@@ -77,6 +77,7 @@ from .physics.inelastic import J2Plasticity, RankineDamage
 from .physics.johnson_cook import JohnsonCook
 from .physics.materials import LinearElastic
 from .physics.zones import MaterialZones
+from .state_fields import state_field
 from .statics.cohesive_growth import CohesiveGrowth, initiation_direction
 from .statics.cohesive_initiation import BulkStrengthWarning, InitiationSite, initiation_site
 from .statics.coupled import (
@@ -254,6 +255,7 @@ __all__ = [
     "solve_forms",
     "solve_large",
     "sph_cubic_spline",
+    "state_field",
     "submesh",
     "tabulate_fe_basis",
     "tabulate_in_cells",

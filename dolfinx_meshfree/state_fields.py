@@ -1,5 +1,6 @@
-"""A rate-form law's state as a field on the mesh: one value per cell (issue 27: the damage field
-of Rabczuk et al. 2006, Fig. 21, written with the displacement).
+"""A law's state as a field on the mesh: one value per cell (issue 27: the damage field of Rabczuk
+et al. 2006, Fig. 21, written with the displacement; and the plastic zone or damage of a static
+solution of a law with state, for ``XDMFFile``).
 
 The state of :class:`~dolfinx_meshfree.dynamics.rate_forms.RateLaws` lives at points: the FE
 cells' Gauss points and the particle rule's points, each in a cell of the mesh
@@ -36,14 +37,21 @@ __all__ = ["REDUCTIONS", "state_field", "state_fields"]
 REDUCTIONS = ("max", "min", "mean")
 
 
-def state_field(model: ExplicitDynamics, name: str, reduce: str = "max") -> dolfinx.fem.Function:
-    """The scalar state variable ``name`` of ``model``'s rate-form law as a DG0 function on its
-    mesh: per cell the ``reduce`` of the values at its points (collective).
+def state_field(
+    model: ExplicitDynamics | object, name: str, reduce: str = "max"
+) -> dolfinx.fem.Function:
+    """The scalar state variable ``name`` of ``model``'s rate-form law, or of a static
+    solution's law with state, as a DG0 function on its mesh: per cell the ``reduce`` of the
+    values at its points (collective).
 
     Args:
         model: An explicit model whose material is a rate-form law
             (:class:`~dolfinx_meshfree.HolmquistJohnsonCook`,
-            :class:`~dolfinx_meshfree.JohnsonCook`).
+            :class:`~dolfinx_meshfree.JohnsonCook`); or the solution of a static model with a
+            law with state (:class:`~dolfinx_meshfree.RankineDamage`,
+            :class:`~dolfinx_meshfree.J2Plasticity`: ``model.solve()``, ``path.solution``),
+            its FE cells', particles' and interface cells' points (``"alpha"``,
+            ``"damage"``, ``"dissipation"``, ...).
         name: A scalar state variable (``"damage"``, ``"plastic_strain"``, ...).
         reduce: ``"max"`` (default), ``"min"`` or ``"mean"`` over the cell's points.
 
@@ -55,6 +63,8 @@ def state_field(model: ExplicitDynamics, name: str, reduce: str = "max") -> dolf
         ValueError: on every rank: a model whose law has no state, an unknown variable (the
             message lists the law's scalar ones), an unknown ``reduce``.
     """
+    if not hasattr(model, "evaluator"):  # a static solution
+        return _static_state_field(model, name, reduce)
     law = model.material
     msh = model.evaluator.disc.mesh
 
@@ -72,6 +82,19 @@ def state_field(model: ExplicitDynamics, name: str, reduce: str = "max") -> dolf
         return values(name)
 
     cells, v, virgin = raise_on_all_ranks(model.comm, check)
+    return _reduced(msh, name, cells, v, virgin, reduce)
+
+
+def _reduced(
+    msh: dolfinx.mesh.Mesh,
+    name: str,
+    cells: np.ndarray,
+    v: np.ndarray,
+    virgin: float,
+    reduce: str,
+) -> dolfinx.fem.Function:
+    """The DG0 function ``name`` of the values ``v`` at points of the local ``cells``, reduced
+    per owned cell (``virgin`` where a cell has none; collective)."""
     Q, dofs = _dg0(msh)
     n_own = len(dofs)
     own = cells < n_own  # every point's cell is a local cell; ghost cells are filled below
@@ -89,6 +112,46 @@ def state_field(model: ExplicitDynamics, name: str, reduce: str = "max") -> dolf
     f.x.array[dofs] = per_cell
     f.x.scatter_forward()
     return f
+
+
+def _static_state_field(solution: object, name: str, reduce: str) -> dolfinx.fem.Function:
+    """:func:`state_field` of a static solution of a law with state (its ``states``: the FE
+    cells', the particles' and the ramps' interface points; cohesive faces have no cell and are
+    left out). Collective."""
+    stores = [st for st in getattr(solution, "states", None) or [] if st.cells is not None]
+    u = getattr(solution, "u", None)
+    particles = getattr(solution, "particles", None)
+    msh = u.function_space.mesh if u is not None else getattr(particles, "mesh", None)
+    if msh is None:  # the same on every rank
+        raise ValueError(
+            f"state_field: a {type(solution).__name__} without a mesh (the solution of a model "
+            "solved on particles and a background mesh, or an explicit model, is needed)"
+        )
+    comm = msh.comm
+
+    def check() -> tuple[np.ndarray, np.ndarray, float]:
+        if reduce not in REDUCTIONS:
+            raise ValueError(f"reduce={reduce!r} must be one of {REDUCTIONS}")
+        if not stores:
+            raise ValueError(
+                f"state_field: this {type(solution).__name__} has no state at points of cells "
+                "(solve a model with a law with state: RankineDamage, J2Plasticity)"
+            )
+        scalars = sorted(
+            {k for st in stores for k, a in st.committed.items() if a.ndim == 2 and a.shape[1] == 1}
+        )
+        if name not in scalars:
+            raise ValueError(
+                f"state_field: {name!r} is not a scalar state variable of this solution's law; "
+                f"its scalar ones are {scalars}"
+            )
+        cells = np.concatenate([st.cells for st in stores])
+        v = np.concatenate([st.committed[name][:, 0] for st in stores])
+        virgin = float(stores[0].law.initial_state(1)[name][0, 0])
+        return cells, v, virgin
+
+    cells, v, virgin = raise_on_all_ranks(comm, check)
+    return _reduced(msh, name, cells, v, virgin, reduce)
 
 
 def _dg0(msh: dolfinx.mesh.Mesh) -> tuple[dolfinx.fem.FunctionSpace, np.ndarray]:

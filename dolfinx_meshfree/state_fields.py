@@ -63,14 +63,14 @@ def state_field(
         ValueError: on every rank: a model whose law has no state, an unknown variable (the
             message lists the law's scalar ones), an unknown ``reduce``.
     """
+    if reduce not in REDUCTIONS:  # the same on every rank
+        raise ValueError(f"reduce={reduce!r} must be one of {REDUCTIONS}")
     if not hasattr(model, "evaluator"):  # a static solution
         return _static_state_field(model, name, reduce)
     law = model.material
     msh = model.evaluator.disc.mesh
 
     def check() -> tuple[np.ndarray, np.ndarray, float]:
-        if reduce not in REDUCTIONS:
-            raise ValueError(f"reduce={reduce!r} must be one of {REDUCTIONS}")
         values = getattr(law, "state_values", None)
         if values is None:
             raise ValueError(
@@ -130,8 +130,6 @@ def _static_state_field(solution: object, name: str, reduce: str) -> dolfinx.fem
     comm = msh.comm
 
     def check() -> tuple[np.ndarray, np.ndarray, float]:
-        if reduce not in REDUCTIONS:
-            raise ValueError(f"reduce={reduce!r} must be one of {REDUCTIONS}")
         if not stores:
             raise ValueError(
                 f"state_field: this {type(solution).__name__} has no state at points of cells "

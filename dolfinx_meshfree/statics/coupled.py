@@ -396,7 +396,7 @@ class CoupledElasticity:
         #: or the cell integrals of a CoupledLinearProblem's ``L``.
         self.body_forces: list = []
         #: Where the last solve with state ended, the next's start (:mod:`.history`).
-        self.history = SolveHistory()
+        self.history = SolveHistory("CoupledElasticity")
         self.setup_time = time.perf_counter() - t0
 
     def reset(self) -> None:

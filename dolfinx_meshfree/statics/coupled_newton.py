@@ -249,11 +249,7 @@ def solve_finite_strain(
     t0 = time.perf_counter()
     built = build_block_problem(model, F_int, u, material, state)
     try:
-        if history is not None:
-            history.resume(built.problem, built.x, type(model).__name__)
-        result = solve_load_steps(built.problem, built.x, load_steps, newton, solver)
-        if history is not None:
-            history.record(built.problem, built.x)
+        result = solve_load_steps(built.problem, built.x, load_steps, newton, solver, history)
         new_state = built.state()
         solution = built.solution(
             {"setup": built.setup, "newton": time.perf_counter() - t0 - built.setup}

@@ -738,7 +738,7 @@ class EFGElasticity:
         self._body: VectorFunction | None = None
         #: Where the last solve of a law with state (or cohesive faces) ended: the next starts
         #: there (:mod:`~dolfinx_meshfree.statics.history`; :meth:`reset` forgets it).
-        self.history = SolveHistory()
+        self.history = SolveHistory("EFGElasticity")
         self._setup_time = time.perf_counter() - t0
 
     def reset(self) -> None:

@@ -138,7 +138,7 @@ class FEElasticity:
         self.cracks: list = []
         #: Where the last solve of a law with state ended: the next starts there
         #: (:mod:`~dolfinx_meshfree.statics.history`; :meth:`reset` forgets it).
-        self.history = SolveHistory()
+        self.history = SolveHistory("FEElasticity")
 
     def reset(self) -> None:
         """Forget the path: the next :meth:`solve` starts from the unloaded, virgin state."""

@@ -44,8 +44,17 @@ __all__ = ["SolveHistory"]
 @dataclass
 class SolveHistory:
     """The state a model with state ended its last converged solve in (empty before the first
-    solve and after :meth:`clear`)."""
+    solve and after :meth:`clear`).
 
+    Args:
+        owner: The class that keeps it, named in its errors (``"FEElasticity"``, ...).
+        fields: Whether a resumed solve starts from the recorded fields; ``False`` keeps the
+            caller's (a user's ``u``, the initial guess of DOLFINx's Newton), the loads and held
+            values still starting from the history's.
+    """
+
+    owner: str = "the model"
+    fields: bool = True
     #: The block fields (owned entries), one array per field.
     x: list[np.ndarray] = field(default_factory=list)
     #: The committed state of every store, as copies of its fields.
@@ -69,7 +78,7 @@ class SolveHistory:
     def clear(self) -> None:
         """Forget the history: the next solve starts from the unloaded, virgin state."""
         self.x, self.states, self.loads, self.held = [], [], [], []
-        self.inelastic = self.moved = False
+        self.inelastic = self.moved = False  # owner and fields stay
 
     def record(self, problem: BlockProblem, x: Sequence[PETSc.Vec]) -> None:
         """Keep the converged state ``x`` of ``problem`` at its load factor ``problem.t``: the
@@ -98,37 +107,35 @@ class SolveHistory:
         comm = problem.loads[0].getComm().tompi4py()
         self.inelastic = bool(comm.allreduce(int(changed), op=MPI.MAX))
 
-    def resume(
-        self, problem: BlockProblem, x: Sequence[PETSc.Vec], name: str, fields: bool = True
-    ) -> None:
-        """Start ``problem`` and its fields ``x`` where the last solve ended (collective: the
-        check is reduced over the ranks, so every rank raises alike). Nothing happens when the
-        history is empty. ``fields=False`` keeps ``x`` as it is (a user's ``u``, the initial
-        guess of DOLFINx's Newton), the loads and held values still start from the history's.
+    def resume(self, problem: BlockProblem, x: Sequence[PETSc.Vec]) -> None:
+        """Start ``problem`` and its fields ``x`` (unless not :attr:`fields`) where the last solve
+        ended (collective: the check is reduced over the ranks, so every rank raises alike).
+        Nothing happens when the history is empty.
 
         Raises:
             ValueError: when the model's fields or state stores changed size since the last
-                solve (``name``: the model's class, for the message).
+                solve, or its path went on on another model (both named for :attr:`owner`).
         """
         stores = problem.states
         comm = problem.loads[0].getComm().tompi4py()
         if self.moved:  # the same on every rank (set by follow_path on every rank)
             raise ValueError(
-                f"{name}.solve(): follow_path grew this model's patch, so its path went on on "
-                "the rebuilt model (path.model): solve that one to continue, or call "
+                f"{self.owner}.solve(): follow_path grew this model's patch, so its path went "
+                "on on the rebuilt model (path.model): solve that one to continue, or call "
                 "model.reset() to start this one again from the unloaded state"
             )
         why = "" if self.empty else self._misfit(problem, x)
         if comm.allreduce(int(bool(why)), op=MPI.MAX):
             raise ValueError(
-                f"{name}.solve(): the model changed {why or 'on another rank'} since its last "
-                "solve (a condition, a load on new facets or a crack added?), so the state its law "
-                "carries from that solve does not fit it any more; call model.reset() to start "
-                "again from the unloaded state, or build the model with every condition first"
+                f"{self.owner}.solve(): the model changed {why or 'on another rank'} since its "
+                "last solve (a condition, a load on new facets or a crack added?), so the state "
+                "its law carries from that solve does not fit it any more; call model.reset() to "
+                "start again from the unloaded state, or build the model with every condition "
+                "first"
             )
         if self.empty:
             return
-        for v, a in zip(x, self.x if fields else (), strict=False):
+        for v, a in zip(x, self.x if self.fields else (), strict=False):
             v.array[:] = a
         for st, old in zip(stores, self.states, strict=True):
             st.committed = {k: v.copy() for k, v in old.items()}

@@ -29,9 +29,10 @@ between FE and particles exactly as :class:`~dolfinx_meshfree.CoupledLinearProbl
 ``L``. Facet integrals of ``u`` (a follower pressure ``p J inner(inv(F).T N, v) ds``, an elastic
 support) belong to the FE residual and its Jacobian, on the FE cells' exterior facets only
 (:mod:`~dolfinx_meshfree.statics.facet_terms`: refused on a patch cell's facet); pure FE
-(:class:`FENonlinearProblem`) takes every integral of the residual. Load steps scale the
-external load and the prescribed displacements by ``k / n``; a follower load's factor is the
-user's (a ``Constant`` changed between calls of ``solve``).
+(:class:`FENonlinearProblem`) takes every integral of the residual. Load steps take the
+external load and the prescribed displacements in ``n`` equal steps from those the last solve
+reached (:mod:`~dolfinx_meshfree.statics.history`); a follower load's factor is the user's (a
+``Constant`` changed between calls of ``solve``).
 """
 
 from __future__ import annotations
@@ -228,7 +229,8 @@ class FENonlinearProblem:
         v = F.arguments()[0]
         zero = dolfinx.fem.Constant(V.mesh, np.zeros(V.mesh.geometry.dim))
         self._load = _compat.create_form(L if L is not None else ufl.inner(zero, v) * ufl.dx)
-        self._history = SolveHistory()  # the loads and held values the last solve reached
+        # the loads and held values the last solve reached (Newton starts from u)
+        self._history = SolveHistory("FENonlinearProblem", fields=False)
 
     def reset(self) -> None:
         """The next :meth:`solve` steps its loads and prescribed values from zero again (from
@@ -268,9 +270,9 @@ class FENonlinearProblem:
         problem = BlockProblem(["fe"], 1, [self.side], [[None]], [f])
 
         try:  # from u, the load steps from the last solve's loads and values to the current
-            self._history.resume(problem, [x], "FENonlinearProblem", fields=False)
-            result = solve_load_steps(problem, [x], self.load_steps, self.newton, self._solver)
-            self._history.record(problem, [x])
+            result = solve_load_steps(
+                problem, [x], self.load_steps, self.newton, self._solver, self._history
+            )
         finally:
             problem.destroy()
         self.side.set_state(x)

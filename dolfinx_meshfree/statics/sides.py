@@ -606,11 +606,7 @@ def solve_built(
     where it ends (:mod:`~dolfinx_meshfree.statics.history`)."""
     t0 = time.perf_counter()
     try:
-        if history is not None:
-            history.resume(built.problem, built.x, type(built.model).__name__)
-        result = solve_load_steps(built.problem, built.x, load_steps, options, solver)
-        if history is not None:
-            history.record(built.problem, built.x)
+        result = solve_load_steps(built.problem, built.x, load_steps, options, solver, history)
         solution = built.solution()
     finally:
         built.destroy()
@@ -625,9 +621,13 @@ def solve_load_steps(
     load_steps: int,
     options: NewtonOptions,
     solver: SolverOptions,
+    history: SolveHistory | None = None,
     max_cuts: int = 6,
 ) -> NonlinearSolveResult:
     """Newton over the load factor ``t`` from 0 to 1 in ``load_steps`` equal steps (collective).
+    With a ``history``, ``t = 0`` is where the last solve ended (its fields, states, loads and
+    held values: :meth:`~dolfinx_meshfree.statics.history.SolveHistory.resume`), and the end
+    is recorded in it.
 
     A converged step commits the state of the laws with state (:meth:`BlockProblem.commit`).
     A step whose Newton iterations do not converge is cut in half, from the last converged
@@ -637,6 +637,8 @@ def solve_load_steps(
     :class:`~dolfinx_meshfree.statics.newton.NewtonError` when even the smallest step does not
     converge: no unconverged state is returned.
     """
+    if history is not None:
+        history.resume(problem, x)
     steps: list[NewtonResult] = []
     nominal = 1.0 / load_steps
     t, dt, cuts = 0.0, nominal, 0
@@ -666,4 +668,6 @@ def solve_load_steps(
         t = t_new
         if cuts:  # grow back after a cut step converged
             cuts, dt = cuts - 1, 2.0 * dt
+    if history is not None:
+        history.record(problem, x)
     return NonlinearSolveResult(sum(s.iterations for s in steps), True, steps)

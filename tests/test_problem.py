@@ -270,7 +270,7 @@ def test_bad_input(model, case, match):
     if case == "interior":
         L = L + ufl.avg(v[0]) * ufl.dS
     elif case == "derivative":
-        L = L + ufl.div(v) * ufl.dx
+        L = L + ufl.div(v) * ufl.ds  # in dx: an initial stress (tests/test_initial_stress.py)
     elif case == "coupling":
         coupling = "glue"
     elif case == "not-affine":

@@ -29,7 +29,7 @@ from ..geometry.stress_points import stress_point_quadrature
 from ..parallel import Layout, raise_on_all_ranks
 from ..physics import axisymmetry
 from ..physics.axisymmetry import revolved_if
-from ..physics.body_loads import body_load_vectors
+from ..physics.body_loads import StressRule, body_load_vectors
 from ..physics.operators import load_vector
 from ..physics.user_functions import vector_values
 from ..statics.efg import check_multiplier_facets, crack_rules, facet_multipliers
@@ -150,13 +150,18 @@ def body_loads(
     fe_weight: ufl.core.expr.Expr,
     particle_weights: Callable[[QuadraturePoints], np.ndarray] | None = None,
     interface_rule: tuple[QuadraturePoints, sp.csr_matrix] | None = None,
+    tables: dict | None = None,
+    interface_stress: StressRule | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """This coupling's shares of its body forces (collective): the FE loads per owned dof
     (``fe_weight``: the FE energy's weight) and the particle loads (original interleaved
     order) on the patch cells' Gauss rule (cut cells of a cracked patch: side by side, as the
     stiffness), its weights multiplied by ``particle_weights(q)``
     if given (the bridging band's ``alpha``); see
-    :func:`~dolfinx_meshfree.physics.body_loads.body_load_vectors`."""
+    :func:`~dolfinx_meshfree.physics.body_loads.body_load_vectors`. A load with a stress part
+    is integrated on the particles with the stiffness's rule and test gradients in ``tables``
+    (what :func:`~dolfinx_meshfree.statics.efg.particle_stiffness` fills, with the bridging
+    band's ``"weights"``) and on a ramp's interface cells with ``interface_stress``."""
     msh, comm, deg = problem.V.mesh, problem.patch.comm, problem.quadrature_degree
     cells, cracks = problem.patch.particles.cells, problem.patch.cracks
     # cells a crack cuts: each side on its own (the rule of the stiffness, crack_rules)
@@ -169,9 +174,14 @@ def body_loads(
     if particle_weights is not None:
         q = QuadraturePoints(q.points, q.weights * particle_weights(q), q.cells)
     table = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(q.points, 0)).values
+    stress = None
+    if tables is not None and "test_gradients" in tables:
+        qs = tables["quadrature"]
+        stress = StressRule(qs, tables.get("weights", qs.weights), tables["test_gradients"])
     return body_load_vectors(
-        problem.body_forces, problem.V, fe_weight, deg, (q, table), interface_rule, comm
-    )
+        problem.body_forces, problem.V, fe_weight, deg, (q, table), interface_rule, comm,
+        stress, interface_stress,
+    )  # fmt: skip
 
 
 def essential_conditions(
@@ -344,10 +354,13 @@ def fe_facet_loads(
     return rows, [fl[:, comp] for comp in range(gdim)]
 
 
-def traction_loads(problem: CoupledElasticity) -> tuple[PETSc.Vec, np.ndarray]:
+def traction_loads(
+    problem: CoupledElasticity, tables: dict | None = None
+) -> tuple[PETSc.Vec, np.ndarray]:
     """Tractions on FE facets (FE load vector, PETSc) and on patch facets (particle loads in
     original particle order, local contributions), plus the body forces (FE cells with
-    ``N_a``, patch cells with ``phi_J``). Collective."""
+    ``N_a``, patch cells with ``phi_J``; a stress part with the particle stiffness's
+    ``tables``, :func:`body_loads`). Collective."""
     V, comm = problem.V, problem.patch.comm
     msh, deg = V.mesh, problem.quadrature_degree
     fe_layout = fe_dof_layout(problem.V)[0]
@@ -368,7 +381,7 @@ def traction_loads(problem: CoupledElasticity) -> tuple[PETSc.Vec, np.ndarray]:
         f_p += load_vector(tab, q.weights, t)
     b_fe = create_vector(comm, fe_layout, np.concatenate(f_fe_rows), np.concatenate(f_fe_vals))
     if problem.body_forces:  # FE cells with N_a, patch cells with phi_J
-        fe, fp = body_loads(problem, problem.cell_indicator(~problem.patch.in_patch))
+        fe, fp = body_loads(problem, problem.cell_indicator(~problem.patch.in_patch), tables=tables)
         b_fe.array[:] += fe
         f_p += fp
     return b_fe, f_p

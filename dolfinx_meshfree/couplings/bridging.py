@@ -464,10 +464,13 @@ def _fe_stiffness(problem, band: BridgingBand) -> PETSc.Mat:
     return fe_stiffness(problem, _fe_weight(problem, band))
 
 
-def _body_loads(problem, band: BridgingBand) -> tuple[np.ndarray, np.ndarray]:
+def _body_loads(
+    problem, band: BridgingBand, tables: dict | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """The bridging coupling's shares of ``problem``'s body forces (eq. 49, collective): the FE
     basis weighted by ``beta_FE = 1 - alpha`` in the band and 1 on FE cells, the particles on the
-    patch cells weighted by ``beta_P = alpha`` in the band and 1 beyond. Returns the FE loads
+    patch cells weighted by ``beta_P = alpha`` in the band and 1 beyond (a stress part with the
+    stiffness's test gradients and weights ``alpha w_q`` in ``tables``). Returns the FE loads
     per owned dof and the particle loads (original interleaved order)."""
 
     def alpha(q: QuadraturePoints) -> np.ndarray:
@@ -476,7 +479,7 @@ def _body_loads(problem, band: BridgingBand) -> tuple[np.ndarray, np.ndarray]:
         w[b] = band.alpha_at(q.points[b], q.cells[b])
         return w
 
-    return body_loads(problem, _fe_weight(problem, band), alpha)
+    return body_loads(problem, _fe_weight(problem, band), alpha, tables=tables)
 
 
 def _particle_rule(problem, band: BridgingBand) -> tuple:
@@ -541,6 +544,7 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
     t0 = time.perf_counter()
 
     band = BridgingBand(problem, problem.overlap, problem.band_width)
+    tables = {} if tables is None else tables  # the stiffness's rule: the loads' stresses too
 
     # particle side: Gauss quadrature on the patch cells, weights times alpha in the band
     q, w, tq, hoop, test_hoop = _particle_rule(problem, band)
@@ -567,16 +571,12 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
             problem, band, q, w, tq, (t_fe, t_p, cw), ids, ml.size_global // d, held, test_hoop
         )
     setup = problem.setup_time + time.perf_counter() - t0
-    if tables is not None:
-        tables.update(
-            quadrature=q,
-            table=tq,
-            test_gradients=test or tq.gradients,
-            weights=w,
-            approximation=problem.mls,
-        )
-        if hoop is not None:
-            tables["hoop"], tables["test_hoop"] = hoop, test_hoop
+    tables.update(
+        quadrature=q, table=tq, test_gradients=test or tq.gradients, weights=w,
+        approximation=problem.mls,
+    )  # fmt: skip
+    if hoop is not None:
+        tables["hoop"], tables["test_hoop"] = hoop, test_hoop
 
     t1 = time.perf_counter()
     Kq = _particle_stiffness(problem, test or tq.gradients, w, tq, (hoop, test_hoop)).tocoo()
@@ -660,7 +660,7 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
         np.add.at(f_p, A12.col[lift], -A12.data[lift] * x_held[A12.row[lift]])
     fe_body = None
     if problem.body_forces:  # weighted by beta_FE and beta_P like the tractions (eq. 49)
-        fe_body, p_body = _body_loads(problem, band)
+        fe_body, p_body = _body_loads(problem, band, tables)
         f_p += p_body
     dirichlet = [(t.values, dw.weights) for t, dw in zip(dtabs, dq, strict=True)]
     _refuse_held_in_equations(problem, held, (t_p, cw), dirichlet, f_p)

@@ -563,6 +563,7 @@ def interface_system(problem: CoupledElasticity, tables: dict | None = None) -> 
     s = problem.material.E
     d = P.gdim
     pdofs = P.petsc_dofs(d)
+    tables = {} if tables is None else tables  # the stiffness's rule: the loads' stresses too
     fe_layout, l2g = fe_dof_layout(problem.V)
     pl = P.dof_layout(d)
     t0 = time.perf_counter()
@@ -603,7 +604,7 @@ def interface_system(problem: CoupledElasticity, tables: dict | None = None) -> 
     )
     G_p = particle_constraint_block(*p_rows, s, pdofs, (ml.size_global, d * n))
 
-    b_fe, f_p = traction_loads(problem)
+    b_fe, f_p = traction_loads(problem, tables)
     loads = (b_fe.copy(), f_p.copy())
     cat = np.concatenate
     # strong conditions and inactive dofs on K_FE: zero rows and columns, lift into b_fe

@@ -400,9 +400,11 @@ def solve_master_slave(
 
     boundary = patch.boundary() if problem.consistent else None
     q, bq = patch_rules(problem)  # cut cells and crack faces with cracks
+    tables: dict = {}  # the stiffness's rule: the loads' stresses are integrated on it
     Kp_loc, _, _, kt = particle_stiffness(
-        P, problem.mls, problem.material, deg, boundary, quadrature=q, boundary_quadrature=bq
-    )
+        P, problem.mls, problem.material, deg, boundary, quadrature=q, boundary_quadrature=bq,
+        tables=tables,
+    )  # fmt: skip
 
     # essential conditions: FE side strongly (whole nodes or components), patch side by
     # multipliers
@@ -418,7 +420,7 @@ def solve_master_slave(
     setup = problem.setup_time + time.perf_counter() - t0 - kt["assemble"]
 
     t1 = time.perf_counter()
-    b_fe, f_p = traction_loads(problem)
+    b_fe, f_p = traction_loads(problem, tables)
     # K_FE with strong conditions and inactive dofs (zero rows and columns, lifted into b_fe)
     K_fe = fe_stiffness(problem)
     n_owned = V.dofmap.index_map.size_local

@@ -242,6 +242,7 @@ def master_slave_system(problem: CoupledElasticity, tables: dict | None = None) 
     pl = P.dof_layout()
     boundary = patch.boundary() if problem.consistent else None
     q, bq = patch_rules(problem)  # cut cells and crack faces with cracks
+    tables = {} if tables is None else tables  # the stiffness's rule: the loads' stresses too
     Kp_loc, _, _, kt = particle_stiffness(
         P, problem.mls, problem.material, problem.quadrature_degree, boundary, tables=tables,
         quadrature=q, boundary_quadrature=bq,
@@ -259,7 +260,7 @@ def master_slave_system(problem: CoupledElasticity, tables: dict | None = None) 
     tie = raise_on_all_ranks(comm, lambda: problem.mls.tabulate(P.positions[sl[own]], 0).values)
     tie = sp.csr_matrix(tie)
 
-    b_fe, f_p = traction_loads(problem)
+    b_fe, f_p = traction_loads(problem, tables)
     loads = (b_fe.copy(), f_p.copy())
     K_fe = fe_stiffness(problem)
     fixed = is_bc | ~active

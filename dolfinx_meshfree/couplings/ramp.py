@@ -71,6 +71,7 @@ from ..physics.axisymmetry import (
     hoop_table,
     revolved_if,
 )
+from ..physics.body_loads import StressRule
 from ..physics.operators import consistent_gradients, load_vector, stiffness_matrix
 from ..physics.user_functions import vector_values
 from ..statics.baij import create_baij
@@ -433,6 +434,7 @@ def ramp_system(problem: CoupledElasticity, tables: dict | None = None) -> tuple
 
     blend = RampInterface(problem, cubic=RAMPS[problem.coupling])
     n_loc = blend.num_fe_columns
+    tables = {} if tables is None else tables  # the stiffness's rule: the loads' stresses too
     # interface cells: the blended table (columns: local FE nodes, then particles)
     qi, ti, hoop = _interface_rule(problem, blend)
     test = ti.gradients
@@ -550,7 +552,7 @@ def ramp_system(problem: CoupledElasticity, tables: dict | None = None) -> tuple
         comm, fe_layout, cat([*f_fe_rows, np.zeros(0, np.int64)]), cat([*f_fe_vals, []])
     )
     if problem.body_forces:  # pure FE cells with N_a, interface cells blended, patch phi_J
-        fe_body, p_body = _body_loads(problem, blend, qi, ti)
+        fe_body, p_body = _body_loads(problem, blend, qi, ti, tables, test)
         b_fe.array[:] += fe_body
         f_p += p_body
 
@@ -607,14 +609,26 @@ def solve_ramp(
     )
 
 
-def _body_loads(problem, blend: RampInterface, q, tab: ShapeTable):
+def _body_loads(
+    problem,
+    blend: RampInterface,
+    q,
+    tab: ShapeTable,
+    tables: dict | None = None,
+    test: list[sp.csr_matrix] | None = None,
+):
     """The ramp coupling's shares of ``problem``'s body forces (collective): ``N_a`` on the pure
     FE cells, the blended functions ``(1 - R) N_a`` and ``R phi_J`` of eq. 3.15 on the interface
     cells (rule ``q``, table ``tab``; Rabczuk et al. 2006, eq. 38-42 for the cubic ramp), and
     ``phi_J`` on the patch cells. Returns the FE loads per owned dof and the particle loads
-    (original interleaved order)."""
+    (original interleaved order). A stress part: with the test gradients of the stiffness,
+    the patch cells' in ``tables`` and the interface cells' ``test`` (eq. 3.16, particle columns
+    VCI-corrected when consistent)."""
     pure = ~problem.patch.in_patch & ~blend.in_interface
-    return body_loads(problem, problem.cell_indicator(pure), interface_rule=(q, tab.values))
+    return body_loads(
+        problem, problem.cell_indicator(pure), interface_rule=(q, tab.values), tables=tables,
+        interface_stress=None if test is None else StressRule(q, q.weights, test),
+    )  # fmt: skip
 
 
 def _patch_rule(problem: CoupledElasticity) -> QuadraturePoints:

@@ -12,6 +12,16 @@ functions and weights as the stiffness of each coupling:
   particle part (and the ``(1 - R) N_a`` of the interface nodes, which are particles) on the
   particles.
 
+A load may also hold a stress ``S`` against the test gradients, ``int S : grad(v)`` (a thermal,
+initial or residual stress: the cell integrals of a user's ``L`` with ``grad(v)``,
+:mod:`~dolfinx_meshfree.statics.form_loads`). Each side integrates it with the test gradients and
+the rule of its own stiffness, given as a :class:`StressRule`: the FE cells by DOLFINx (the
+weighted integrand), the particles with the gradients of their stiffness (VCI-corrected,
+smoothed, one-sided at a crack; weights ``alpha w_q`` in a bridging band), the ramps' interface
+cells with the blended gradients ``grad((1 - R) N_a + R phi_J)`` (Belytschko et al. 1995, eq.
+3.16). A constant ``S = C : eps_0`` is then balanced by the displacement ``eps_0 x`` exactly,
+as the linear patch test is.
+
 A body force is a :class:`BodyForce`: a callable ``b(x)`` (:class:`CallableBodyForce`, what
 :meth:`CoupledElasticity.set_body_force <dolfinx_meshfree.CoupledElasticity.set_body_force>`
 and :meth:`ExplicitDynamics.add_body_force
@@ -24,6 +34,7 @@ assembles the shares of a list of them from the quadrature rules of a coupling.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import dolfinx
@@ -41,7 +52,7 @@ if TYPE_CHECKING:  # annotations only
     import ufl
     from mpi4py import MPI
 
-__all__ = ["BodyForce", "CallableBodyForce", "body_load_vectors"]
+__all__ = ["BodyForce", "CallableBodyForce", "StressRule", "body_load_vectors", "stress_load"]
 
 VectorFunction = Callable[[np.ndarray], np.ndarray]
 
@@ -49,8 +60,16 @@ VectorFunction = Callable[[np.ndarray], np.ndarray]
 class BodyForce:
     """A body force per unit volume: its FE load and its values at quadrature points.
 
-    Subclasses implement :meth:`fe_load` (collective) and :meth:`values` (local).
+    Subclasses implement :meth:`fe_load` (collective) and :meth:`values` (local); a load with a
+    stress part sets :attr:`has_stress` and implements :meth:`stresses` too.
     """
+
+    #: Whether the load holds a stress ``S : grad(v)`` (:meth:`stresses`).
+    has_stress: bool = False
+
+    def stresses(self, q: QuadraturePoints) -> np.ndarray:
+        """``S`` (len(q), gdim, gdim) at any points ``q`` in their cells. Local."""
+        raise NotImplementedError
 
     def fe_load(
         self, V: dolfinx.fem.FunctionSpace, weight: ufl.core.expr.Expr | None, degree: int
@@ -108,6 +127,30 @@ def accumulate(V: dolfinx.fem.FunctionSpace, local: np.ndarray) -> np.ndarray:
     return f.x.array[: V.dofmap.index_map_bs * V.dofmap.index_map.size_local].copy()
 
 
+@dataclass
+class StressRule:
+    """Where a stiffness integrates: its points (their cells), weights and test gradients (a
+    list of gdim CSR (m x n), columns those of the load vector's nodes)."""
+
+    quadrature: QuadraturePoints
+    weights: np.ndarray
+    gradients: list[sp.csr_matrix]
+
+
+def stress_load(force: BodyForce, rule: StressRule, comm: MPI.Comm) -> np.ndarray:
+    """``f_Ji = sum_q w_q S_ij(x_q) G_j[q, J]``: the load of ``force``'s stress on the nodes of
+    ``rule``'s test gradients ``G``, interleaved (gdim n,) (this rank's points; collective
+    for the errors)."""
+    S = raise_on_all_ranks(comm, lambda: force.stresses(rule.quadrature))
+    d = S.shape[1]
+    n = rule.gradients[0].shape[1]
+    f = np.zeros((n, d))
+    for i in range(d):
+        for j in range(d):
+            f[:, i] += rule.gradients[j].T @ (rule.weights * S[:, i, j])
+    return f.ravel()
+
+
 def body_load_vectors(
     forces: list[BodyForce],
     V: dolfinx.fem.FunctionSpace | None,
@@ -116,6 +159,8 @@ def body_load_vectors(
     particle_rule: tuple[QuadraturePoints, sp.csr_matrix] | None = None,
     interface_rule: tuple[QuadraturePoints, sp.csr_matrix] | None = None,
     comm: MPI.Comm | None = None,
+    particle_stress: StressRule | None = None,
+    interface_stress: StressRule | None = None,
 ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """The FE and particle shares of body forces (module docstring). Collective.
 
@@ -132,6 +177,9 @@ def body_load_vectors(
             functions there (:meth:`~dolfinx_meshfree.couplings.ramp.RampInterface.table`, columns
             ``[local FE nodes | particles]``).
         comm: The communicator (default: ``V``'s mesh's).
+        particle_stress, interface_stress: The rules of the particle and interface stiffness
+            (:class:`StressRule`, columns as ``particle_rule``'s and ``interface_rule``'s
+            tables), for forces with a stress part; a force with one is refused without them.
 
     Returns:
         ``(fe, particles)``: the FE loads per owned dof of ``V`` (``None`` without ``V``) and
@@ -145,8 +193,25 @@ def body_load_vectors(
         gdim = particle_rule[0].points.shape[1]
         f_p = np.zeros(particle_rule[1].shape[1] * gdim)
     for force in forces:
+        missing = (particle_rule is not None and particle_stress is None) or (
+            interface_rule is not None and interface_stress is None
+        )
+        if force.has_stress and missing:
+            raise ValueError(
+                "a load with a stress S : grad(v) (from a dx integral of L) reached a "
+                "discretisation that cannot integrate it with its stiffness's test gradients; "
+                "only the static couplings of CoupledLinearProblem and CoupledNonlinearProblem "
+                "take one"
+            )
         if V is not None:
             fe += force.fe_load(V, fe_weight, degree)
+        if force.has_stress and particle_rule is not None:
+            f_p += stress_load(force, particle_stress, comm)
+        if force.has_stress and interface_rule is not None:
+            fl = stress_load(force, interface_stress, comm)
+            nf = fl.size - f_p.size
+            fe += accumulate(V, fl[:nf])
+            f_p += fl[nf:]
         if particle_rule is not None:
             q, table = particle_rule
             b = raise_on_all_ranks(comm, lambda f=force, q=q: f.values(q))

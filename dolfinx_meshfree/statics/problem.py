@@ -19,7 +19,10 @@ coupled system (:class:`~dolfinx_meshfree.CoupledElasticity`):
   exterior-facet integrals (tractions, pressures with ``FacetNormal``) become tractions
   ``t(x, n)`` evaluated from the UFL integrand with a DOLFINx ``Expression`` at the facet
   Gauss points, so they reach the FE nodes or the particles of whichever side the facet
-  belongs to. The test function may appear only undifferentiated.
+  belongs to. A cell integral may hold ``grad(v)``: a thermal, initial or residual stress
+  ``inner(S, grad(v)) dx``, integrated by each side with the test gradients of its own
+  stiffness (:mod:`~dolfinx_meshfree.statics.form_loads`), so that free thermal expansion is
+  exact.
 * ``bcs``: dofs of FE cells are fixed strongly (``MatZeroRowsColumns``), with the bc's values;
   exterior facets of patch cells whose nodes are all constrained become particle constraints
   with the bc's P1 interpolant as the prescribed value (Lagrange multipliers, as in
@@ -36,7 +39,8 @@ carry their own ``2 pi r`` (:mod:`~dolfinx_meshfree.physics.axisymmetry`): the l
 
 Not supported (each raises a ``ValueError`` naming the fix): interior-facet integrals in ``a``
 and ``L``, ``ds`` integrals of ``a`` on the patch's facets or with a law with state,
-derivatives of the test function in ``L`` and constrained nodes strictly inside the patch.
+derivatives of the test function in ``L``'s ``ds`` integrals, second derivatives of it, ``grad(v)``
+in an axisymmetric model, and constrained nodes strictly inside the patch.
 """
 
 from __future__ import annotations
@@ -59,21 +63,19 @@ from ..couplings.base import facet_nodes, interface_node_flags, node_flags
 from ..geometry.cut_cells import cut_facet_quadrature
 from ..geometry.patch import ParticlePatch
 from ..geometry.quadrature import (
-    QuadraturePoints,
     boundary_facets,
     facet_quadrature,
     reference_facet_points,
 )
 from ..parallel import raise_on_all_ranks
-from ..physics import axisymmetry
-from ..physics.body_loads import BodyForce, accumulate
-from ..physics.materials import LinearElastic
+from ..physics.materials import LinearElastic, is_axisymmetric
 from ..physics.state import check_not_rate_law, is_stateful
 from .coupled import COUPLINGS, CoupledElasticity, CoupledSolution, material_stiffness_form
 from .facet_terms import FacetTermCheck, integral_entities
+from .form_loads import FormBodyForce, load_integrand_error, replace_test_function
 from .petsc import SolverOptions, solver_options
 
-__all__ = ["CoupledLinearProblem", "FormBodyForce"]
+__all__ = ["CoupledLinearProblem"]
 
 #: Relative Frobenius difference above which the form and the material disagree on the patch.
 MATERIAL_TOLERANCE = 1e-8
@@ -425,10 +427,26 @@ def _check_arguments(a, L, bcs, patch, material, coupling, options):
             raise ValueError(
                 f"L has a {itg.integral_type()} integral; only dx and ds integrals are supported"
             )
-        if _differentiates(itg.integrand(), L.arguments()[0]):
+        v = L.arguments()[0]
+        if itg.integral_type() != "cell" and _differentiates(itg.integrand(), v):
             raise ValueError(
-                f"L's {itg.integral_type()} integral differentiates the test function; write the "
-                "load as a body force dot(f, v) dx or a traction dot(t, v) ds"
+                f"L's {itg.integral_type()} integral (subdomain {itg.subdomain_id()!r}) "
+                "differentiates the test function; on a boundary write the load as a traction "
+                "dot(t, v) ds (a stress inner(S, grad(v)) belongs in a dx integral)"
+            )
+        reason = load_integrand_error(itg.integrand(), v) if itg.integral_type() == "cell" else None
+        if reason is not None:
+            raise ValueError(f"L's dx integral (subdomain {itg.subdomain_id()!r}): {reason}")
+        if (
+            itg.integral_type() == "cell"
+            and is_axisymmetric(material)
+            and _differentiates(itg.integrand(), v)
+        ):
+            raise ValueError(
+                f"L's dx integral (subdomain {itg.subdomain_id()!r}) holds grad(v) and material "
+                "is axisymmetric: an initial or thermal stress in (r, z) needs the hoop term "
+                "S_tt u_r / r, which the couplings' load rules do not carry; only body forces "
+                "dot(b, v) are supported in axisymmetric models"
             )
         if itg.subdomain_id() == "otherwise":
             raise ValueError("L uses an 'otherwise' subdomain; name the subdomain ids instead")
@@ -543,126 +561,6 @@ def _differentiates(expr, v) -> bool:
 # -- helpers ------------------------------------------------------------------------------------
 
 
-def _replace_test_function(integrand, v, msh, normal=None):
-    """The vector ``(I(e_0), ..., I(e_{gdim-1}))`` of a linear integrand ``I(v)``, FacetNormal
-    -> ``normal``."""
-    mapping = {}
-    if normal is not None:
-        for node in unique_pre_traversal(integrand):
-            if isinstance(node, ufl.classes.FacetNormal):
-                mapping[node] = normal
-    comps = []
-    for e in np.eye(msh.geometry.dim):
-        comps.append(ufl.replace(integrand, {**mapping, v: ufl.as_vector(e.tolist())}))
-    return ufl.as_vector(comps)
-
-
-class FormBodyForce(BodyForce):
-    """The cell integrals of a linear UFL form ``L(v)`` as a body force (collective
-    construction).
-
-    The FE share is DOLFINx's assembly of every integral with its integrand multiplied by the
-    coupling's FE weight (the user's measures, subdomains and quadrature metadata are kept); the
-    values ``b`` at a cell rule of ``degree`` come from a DOLFINx ``Expression`` of the integrand
-    with ``v`` replaced by ``e_0``, ..., ``e_{gdim-1}``, zero on the cells the integral does not
-    cover.
-
-    Args:
-        integrals: The cell integrals of ``L``.
-        v: ``L``'s test function (on the vector P1/Q1 space).
-        degree: The quadrature degree of the rules :meth:`values` is called with.
-    """
-
-    def __init__(self, integrals: list, v, degree: int, cut: bool = False, revolved: bool = False):
-        msh = v.ufl_function_space().mesh
-        self.integrals, self.mesh, self.degree = list(integrals), msh, degree
-        #: The integrands carry the ``2 pi r`` of an axisymmetric model: the loads per unit
-        #: volume are theirs over ``2 pi r`` (the couplings' rules and weights are revolved).
-        self.revolved = revolved
-        cname = msh.topology.cell_type.name
-        X, _ = _compat.quadrature_rule(cname, degree)
-        self.num_points = X.shape[0]
-        x = ufl.SpatialCoordinate(msh)
-        self.gdim = gdim = msh.geometry.dim
-        # cut cells (a cracked patch): values at the fit rule's points (collective compile)
-        X_fit = _compat.quadrature_rule(cname, 2 * degree + 2)[0] if cut else None
-        self._expressions = []
-        for itg in self.integrals:
-            b = _replace_test_function(itg.integrand(), v, msh)
-            bx = ufl.as_vector([b[i] for i in range(gdim)] + [x[i] for i in range(gdim)])
-            expr = _compat.create_expression(bx, X, msh)
-            fit = None if X_fit is None else _compat.create_expression(bx, X_fit, msh)
-            n_cells = msh.topology.index_map(msh.topology.dim)
-            on = np.zeros(n_cells.size_local + n_cells.num_ghosts, dtype=bool)
-            on[integral_entities(itg, msh)] = True
-            self._expressions.append((expr, fit, on))
-        self.tol = 1e-9 * (np.ptp(msh.geometry.x[:, :gdim], axis=0).max() + 1.0)
-
-    def fe_load(
-        self, V: dolfinx.fem.FunctionSpace, weight: ufl.core.expr.Expr | None, degree: int
-    ) -> np.ndarray:
-        integrals = self.integrals
-        if weight is not None and self.revolved:  # the integrands have their 2 pi r already
-            weight = weight / axisymmetry.measure(self.mesh)
-        if weight is not None:
-            integrals = [itg.reconstruct(integrand=weight * itg.integrand()) for itg in integrals]
-        b = _compat.assemble_vector(_compat.create_form(ufl.Form(integrals)))
-        with b.localForm() as loc:
-            local = loc.array_r.copy()
-        b.destroy()
-        return accumulate(V, local)
-
-    def values(self, q: QuadraturePoints) -> np.ndarray:
-        """``b`` at the points of a cell rule of ``degree``: the cells whose points are the
-        standard rule's get the integrand there; the others (the pieces of cells a crack cuts,
-        with ``cut=True``) get the polynomial of total degree ``degree`` fitted, by least squares
-        in the cell, to the integrand at the points of the rule of degree ``2 degree + 2``:
-        exact for integrands polynomial to that degree (constant, linear body loads), else an
-        approximation of the rule's order. Local."""
-        nq, d = self.num_points, self.gdim
-        order = np.argsort(q.cells, kind="stable")
-        cells, start, count = np.unique(q.cells[order], return_index=True, return_counts=True)
-        out = np.zeros((len(q), d))
-        for expr, fit, on in self._expressions:
-            vals = _compat.eval_expression(expr, self.mesh, cells, 2 * d)  # (cells, nq, 2d)
-            std = np.zeros(cells.size, dtype=bool)
-            full = np.flatnonzero(count == nq)
-            if full.size:
-                idx = order[start[full, None] + np.arange(nq)]
-                std[full] = (np.abs(vals[full, :, d:] - q.points[idx]) <= self.tol).all(axis=(1, 2))
-                take = full[std[full] & on[cells[full]]]
-                out[order[start[take, None] + np.arange(nq)]] += vals[take, :, :d]
-            other = np.flatnonzero(~std)
-            if other.size and fit is None:
-                raise RuntimeError(
-                    "a body load of L was requested at points that are not the Gauss points of "
-                    f"degree {self.degree} (internal error: quadrature mismatch)"
-                )
-            other = other[on[cells[other]]]
-            if other.size:
-                fv = _compat.eval_expression(fit, self.mesh, cells[other], 2 * d)
-                for k, c in enumerate(other):
-                    idx = order[start[c] : start[c] + count[c]]
-                    out[idx] += _fitted(fv[k, :, d:], fv[k, :, :d], q.points[idx], self.degree)
-        if self.revolved:  # per unit volume (cell Gauss points lie off the axis)
-            out /= 2.0 * np.pi * q.points[:, :1]
-        return out
-
-
-def _fitted(x: np.ndarray, values: np.ndarray, points: np.ndarray, degree: int) -> np.ndarray:
-    """The least-squares polynomial of total ``degree`` through ``values`` (m, k) at ``x``
-    (m, gdim), evaluated at ``points`` (p, gdim) (coordinates centred and scaled on ``x``)."""
-    c, h = x.mean(axis=0), np.ptp(x, axis=0).max()
-
-    def basis(p: np.ndarray) -> np.ndarray:
-        y = (p - c) / h
-        powers = [e for e in np.ndindex(*(degree + 1,) * y.shape[1]) if sum(e) <= degree]
-        return np.stack([np.prod(y ** np.asarray(e), axis=1) for e in powers], axis=1)
-
-    coef = np.linalg.lstsq(basis(x), values, rcond=None)[0]
-    return basis(points) @ coef
-
-
 def _split_points(msh, facets, cracks, degree, c2f, cells):
     """The Gauss points of the facets that a crack's mouth splits
     (:func:`~dolfinx_meshfree.geometry.cut_cells.cut_facet_quadrature`) as a rule for
@@ -718,7 +616,7 @@ class _FacetLoad:
         )
         x = ufl.SpatialCoordinate(msh)
         values = ufl.as_vector(
-            [_replace_test_function(integrand, v, msh, nc)[i] for i in range(d)]
+            [replace_test_function(integrand, v, msh, nc)[i] for i in range(d)]
             + [x[i] for i in range(d)]
         )
         # (cell, local facet) of each facet

@@ -94,13 +94,36 @@ def split_residual(F: ufl.Form, u: dolfinx.fem.Function) -> tuple[ufl.Form, ufl.
     """``F(u; v) = F_int(u; v) - L(v)``: the terms that depend on ``u`` and the dead load ``L``
     (minus the terms that do not), integral by integral and term by term of each integrand.
 
+    A cell term of ``u`` that does not vanish at ``u = 0`` holds a dead part: an initial or
+    thermal stress written inside the law's term, ``inner(P(F(u)) - P_0, grad(v))``. Its value
+    at ``u = 0`` goes to ``L`` and ``F_int`` keeps ``T(u) - T(0)``, which is zero in the
+    reference state, as the particles' law is (``F`` is unchanged; collective: the values at
+    ``u = 0`` are assembled to find out).
+
     Returns ``(F_int, L)``; ``L`` is ``None`` without load terms.
     """
     internal, load = [], []
+    zero = ufl.as_vector([0.0] * u.ufl_shape[0])
     for itg in expand_derivatives(F).integrals():
         for term in _terms(itg.integrand()):
             part = itg.reconstruct(integrand=term)
-            (internal if u in extract_coefficients(term) else load).append(part)
+            if u not in extract_coefficients(term):
+                load.append(part)
+                continue
+            internal.append(part)
+            if itg.integral_type() != "cell":
+                continue
+            value = expand_derivatives(ufl.replace(term, {u: zero}))
+            if isinstance(value, ufl.classes.Zero):
+                continue
+            at_rest = itg.reconstruct(integrand=value)
+            b = _compat.assemble_vector(_compat.create_form(ufl.Form([at_rest])))
+            b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+            dead = b.norm() > 0.0
+            b.destroy()
+            if dead:
+                internal.append(at_rest.reconstruct(integrand=-at_rest.integrand()))
+                load.append(at_rest)
     L = ufl.Form([i.reconstruct(integrand=-i.integrand()) for i in load]) if load else None
     return ufl.Form(internal), L
 

@@ -114,7 +114,13 @@ from .statics.path_following import (
 from .statics.path_patch import ADAPT_COUPLINGS
 from .statics.problem import CoupledLinearProblem
 from .statics.sides import NonlinearSolveResult
-from .verification.analytic import KirschPlate, LinearField, PressurizedBushing, TimoshenkoBeam
+from .verification.analytic import (
+    HeatedBushing,
+    KirschPlate,
+    LinearField,
+    PressurizedBushing,
+    TimoshenkoBeam,
+)
 from .verification.cavity_expansion import (
     CavityExpansion,
     cavity_expansion,
@@ -177,6 +183,7 @@ __all__ = [
     "GaussianPulseRod",
     "GrowthStep",
     "GrowthStopped",
+    "HeatedBushing",
     "HolmquistJohnsonCook",
     "HybridElasticity",
     "InclinedCentreCrack",

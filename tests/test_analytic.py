@@ -234,6 +234,64 @@ def test_bushing_boundary_conditions_and_hoop_stress(bushing):
     assert np.sign(ur[0]) == np.sign(p)  # an internal pressure pushes the bore outwards
 
 
+# -- the heated bushing: radial conduction, outer surface held ------------------------------------
+
+HEATED = [
+    mf.HeatedBushing(mf.LinearElastic(1000.0, 0.3, "strain"), beta=2.0, Ta=50.0),
+    mf.HeatedBushing(mf.LinearElastic(2.0e5, 0.25, "stress"), beta=-3.0, Ta=7.0, a=0.5, b=3.0),
+]
+
+
+def thermal_stress(bushing, x):
+    """Hooke's stress of the closed-form gradient minus ``beta T I``, by finite differences'
+    own inputs (independent of the class's stress formulas)."""
+    r = np.linalg.norm(x, axis=1)
+    s = hooke(bushing.material, bushing.displacement_gradient(x))
+    return s - (bushing.beta * bushing.temperature(r))[:, None, None] * np.eye(2)
+
+
+@pytest.mark.parametrize("bushing", HEATED, ids=["strain", "stress"])
+def test_heated_bushing_gradient_equilibrium_and_boundaries(bushing):
+    x = annulus_points(bushing)
+    grad = bushing.displacement_gradient(x)
+    d = 1e-4 * bushing.a
+    assert np.abs(fd_gradient(bushing.displacement, x, d) - grad).max() <= 1e-6 * np.abs(grad).max()
+    s = thermal_stress(bushing, x)
+    div = fd_divergence(lambda y: thermal_stress(bushing, y), x, d)
+    assert np.abs(div).max() <= 1e-5 * np.abs(s).max() / bushing.a
+    # the housing holds r = b; the bore r = a is free (sigma n = 0)
+    outer = annulus_points(bushing, 60, r=bushing.b)
+    u_bore = abs(bushing.radial(np.array([bushing.a]))[0])
+    assert np.abs(bushing.displacement(outer)).max() <= 1e-13 * u_bore
+    inner = annulus_points(bushing, 60, r=bushing.a)
+    e_r, e_t = polar_frame(inner)
+    traction = np.einsum("mij,mj->mi", thermal_stress(bushing, inner), -e_r)
+    assert np.abs(traction).max() <= 1e-10 * np.abs(s).max()
+    # the class's stresses are the thermal Hooke stress in polar axes, at all r
+    e_r, e_t = polar_frame(x)
+    r = np.linalg.norm(x, axis=1)
+    scale = np.abs(s).max()
+    hoop = np.einsum("mi,mij,mj->m", e_t, s, e_t)
+    radial = np.einsum("mi,mij,mj->m", e_r, s, e_r)
+    assert np.abs(bushing.hoop_stress(r) - hoop).max() <= 1e-10 * scale
+    assert np.abs(bushing.radial_stress(r) - radial).max() <= 1e-10 * scale
+    # heated from inside (beta Ta > 0): the bore's hoop stress is compressive
+    assert np.sign(bushing.hoop_stress(np.array([bushing.a]))[0]) == -np.sign(
+        bushing.beta * bushing.Ta
+    )
+
+
+@pytest.mark.parametrize("plane", ["strain", "stress"])
+def test_heated_bushing_thermal_modulus(plane):
+    """beta_of: the in-plane stress that free expansion relieves: Hooke's stress of the in-plane
+    free thermal strain (alpha T, and (1 + nu) alpha T in plane strain, where eps_zz = 0)."""
+    law = mf.LinearElastic(1000.0, 0.3, plane)
+    alpha, T = 1e-5, 40.0
+    free = alpha * T * (1.0 + law.nu if plane == "strain" else 1.0)
+    s = hooke(law, free * np.eye(2)[None])[0]
+    np.testing.assert_allclose(s, mf.HeatedBushing.beta_of(law, alpha) * T * np.eye(2), rtol=1e-12)
+
+
 # -- Kirsch plate: a circular hole under remote uniaxial tension ---------------------------------
 
 KIRSCH = [

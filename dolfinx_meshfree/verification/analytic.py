@@ -8,7 +8,7 @@ import numpy as np
 
 from ..physics.materials import LinearElastic
 
-__all__ = ["KirschPlate", "LinearField", "PressurizedBushing", "TimoshenkoBeam"]
+__all__ = ["HeatedBushing", "KirschPlate", "LinearField", "PressurizedBushing", "TimoshenkoBeam"]
 
 
 @dataclass(frozen=True)
@@ -149,6 +149,107 @@ class PressurizedBushing:
         c1, c2 = self.constants
         lam, mu = self.material.lmbda, self.material.mu
         return 2 * (lam + mu) * c1 + 2 * mu * c2 / np.asarray(r, dtype=float) ** 2
+
+
+@dataclass(frozen=True)
+class HeatedBushing:
+    """The bushing of :class:`PressurizedBushing` heated from inside: the annulus
+    ``a <= r <= b`` at the steady temperature rise of radial conduction,
+    ``T(r) = T_a ln(b / r) / ln(b / a)`` (``T_a`` at the inner surface, 0 at the outer), its
+    outer surface held fixed (a rigid housing) and its inner surface free; 2D linear
+    thermoelasticity ``sigma = lambda tr(eps) I + 2 mu eps - beta T I`` with the material's
+    (plane stress or plane strain) Lamé constants and the thermal modulus ``beta``: ``(3 lambda
+    + 2 mu) alpha`` in plane strain, ``E alpha / (1 - nu)`` in plane stress (:meth:`beta_of`).
+
+    Radial equilibrium gives ``d/dr (d(r u_r)/dr / r) = k dT/dr``, ``k = beta / (lambda + 2
+    mu)`` (Timoshenko & Goodier, *Theory of Elasticity*, 3rd ed., sec. 151), so ``u_r = k I(r)
+    / r + C1 r + C2 / r`` with ``I(r) = int_a^r T s ds = T_a / ln(b / a) [r^2 / 2 ln(b / r) + r^2
+    / 4 - a^2 / 2 ln(b / a) - a^2 / 4]``. Then ``sigma_rr = -2 mu k I / r^2 + 2 (lambda + mu) C1 -
+    2 mu C2 / r^2`` and ``sigma_tt = -2 mu k T + 2 mu k I / r^2 + 2 (lambda + mu) C1 + 2 mu C2 /
+    r^2``; ``sigma_rr(a) = 0`` and ``u_r(b) = 0`` fix ``C1`` and ``C2``. The hoop stress is
+    compressive at the hot inner surface.
+    """
+
+    material: LinearElastic
+    beta: float
+    Ta: float = 1.0
+    a: float = 1.0
+    b: float = 2.0
+
+    def __post_init__(self) -> None:
+        if not (0 < self.a < self.b):
+            raise ValueError(f"radii a={self.a}, b={self.b} must satisfy 0 < a < b")
+        if not (np.isfinite(self.beta) and np.isfinite(self.Ta)):
+            raise ValueError(f"beta={self.beta} and Ta={self.Ta} must be finite")
+
+    @staticmethod
+    def beta_of(material: LinearElastic, alpha: float) -> float:
+        """The thermal modulus of a 2D law for the expansion coefficient ``alpha``: the stress
+        ``beta T`` that free expansion would relieve in the plane."""
+        return (
+            2.0 * (material.lmbda + material.mu) * (1.0 + material.nu) * alpha
+            if (material.plane == "strain")
+            else 2.0 * (material.lmbda + material.mu) * alpha
+        )
+
+    def temperature(self, r: np.ndarray) -> np.ndarray:
+        r = np.asarray(r, dtype=float)
+        return self.Ta * np.log(self.b / r) / np.log(self.b / self.a)
+
+    def _integral(self, r: np.ndarray) -> np.ndarray:
+        a, b = self.a, self.b
+        f = r**2 / 2 * np.log(b / r) + r**2 / 4 - a**2 / 2 * np.log(b / a) - a**2 / 4
+        return self.Ta / np.log(b / a) * f
+
+    @property
+    def k(self) -> float:
+        return self.beta / (self.material.lmbda + 2.0 * self.material.mu)
+
+    @property
+    def constants(self) -> tuple[float, float]:
+        lam, mu, a, b = self.material.lmbda, self.material.mu, self.a, self.b
+        c2 = -self.k * float(self._integral(np.asarray(b))) / (mu * b**2 / ((lam + mu) * a**2) + 1)
+        return mu * c2 / ((lam + mu) * a**2), c2
+
+    def radial(self, r: np.ndarray) -> np.ndarray:
+        r = np.asarray(r, dtype=float)
+        c1, c2 = self.constants
+        return self.k * self._integral(r) / r + c1 * r + c2 / r
+
+    def displacement(self, x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, dtype=float)[:, :2]
+        r = np.linalg.norm(x, axis=1)
+        return (self.radial(r) / r)[:, None] * x
+
+    def displacement_gradient(self, x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, dtype=float)[:, :2]
+        r = np.linalg.norm(x, axis=1)
+        c1, c2 = self.constants
+        ur = self.radial(r)
+        dur = self.k * (self.temperature(r) - self._integral(r) / r**2) + c1 - c2 / r**2
+        e = x / r[:, None]
+        return (ur / r)[:, None, None] * np.eye(2) + (dur - ur / r)[:, None, None] * np.einsum(
+            "qi,qj->qij", e, e
+        )
+
+    def radial_stress(self, r: np.ndarray) -> np.ndarray:
+        r = np.asarray(r, dtype=float)
+        lam, mu = self.material.lmbda, self.material.mu
+        c1, c2 = self.constants
+        return (
+            -2 * mu * self.k * self._integral(r) / r**2 + 2 * (lam + mu) * c1 - 2 * mu * c2 / r**2
+        )
+
+    def hoop_stress(self, r: np.ndarray) -> np.ndarray:
+        r = np.asarray(r, dtype=float)
+        lam, mu, k = self.material.lmbda, self.material.mu, self.k
+        c1, c2 = self.constants
+        return (
+            -2 * mu * k * self.temperature(r)
+            + 2 * mu * k * self._integral(r) / r**2
+            + 2 * (lam + mu) * c1
+            + 2 * mu * c2 / r**2
+        )
 
 
 @dataclass(frozen=True)

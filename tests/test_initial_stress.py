@@ -16,7 +16,9 @@ Oracles:
   rate checked) and stays within 1.5x plain DOLFINx's on the same mesh;
 * at finite strain, ``P_0 = P(F_0)`` of the material itself is balanced by ``u = (F_0 - I) x``
   exactly;
-* the errors for what is refused.
+* the errors for what is refused: among them stress intensity factors of a solution with an
+  initial stress (the interaction integral would take ``C : eps(u)`` for the stress) and laws
+  with state (their return map would not see ``S``).
 """
 
 from __future__ import annotations
@@ -185,18 +187,6 @@ def test_linear_temperature_against_the_closed_form(coupling):
 # -- with state and at finite strain ------------------------------------------------------------
 
 
-def test_law_with_state_takes_the_initial_stress():
-    """J2 plasticity below yield: the elastic answer, exactly."""
-    law = mf.J2Plasticity(E=MAT.E, nu=MAT.nu, sigma_y=1e9, H=0.0, plane="stress")
-    msh, V, a, v = held_model()
-    L = ufl.inner(stress_of(MAT, EPS0), ufl.sym(ufl.grad(v))) * ufl.dx
-    left = mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0))
-    bcs = [boundary_bc(V, left, lambda x: x @ EPS0.T)]
-    patch = mf.ParticlePatch(msh, cells_where(msh, lambda m: m[:, 0] > 1.0), 0.25)
-    sol = mf.CoupledLinearProblem(a, L, bcs, patch, material=law).solve()
-    assert expansion_error(sol) <= 1e-10
-
-
 @pytest.mark.parametrize("coupling", ["lagrange", "ramp"])
 def test_initial_first_piola_stress_at_finite_strain(coupling):
     """``F = inner(P(F(u)), grad(v)) dx - inner(P(F_0), grad(v)) dx`` with the left edge held
@@ -222,6 +212,21 @@ def test_initial_first_piola_stress_at_finite_strain(coupling):
 # -- refused ----------------------------------------------------------------------------------
 
 
+def test_stress_intensity_factors_refused_with_an_initial_stress():
+    """A cracked patch under a thermal stress solves (exactly, above), but its SIFs would take
+    the stress as ``C : eps(u)``: refused by name, on every rank."""
+    msh, V, a, v = held_model((16, 8))
+    crack = mf.Crack([[1.55, 1.0], [1.55, 0.6]])
+    patch = mf.ParticlePatch(msh, cells_where(msh, lambda m: m[:, 0] > 0.25), 0.125, cracks=[crack])
+    L = ufl.inner(stress_of(MAT, EPS0), ufl.grad(v)) * ufl.dx
+    left = mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0))
+    sol = mf.CoupledLinearProblem(a, L, [boundary_bc(V, left, lambda x: x @ EPS0.T)], patch, MAT)
+    sol = sol.solve()
+    assert expansion_error(sol) <= 1e-11
+    with pytest.raises(ValueError, match="stress intensity factors are not available with an"):
+        sol.stress_intensity_factors(crack, tip=1)
+
+
 def test_refused_with_the_reason():
     msh, _, a, v = held_model()
     S = stress_of(MAT, EPS0)
@@ -233,6 +238,10 @@ def test_refused_with_the_reason():
     second = ufl.inner(ufl.grad(ufl.div(v)), ufl.as_vector((1.0, 0.0))) * ufl.dx
     with pytest.raises(ValueError, match="second derivative of the test function"):
         mf.CoupledLinearProblem(a, second, [], patch, material=MAT)
+    # a law with state: its return map would not see S (free expansion would yield)
+    j2 = mf.J2Plasticity(E=MAT.E, nu=MAT.nu, sigma_y=1e9, H=0.0, plane="stress")
+    with pytest.raises(ValueError, match="J2Plasticity is a law with state"):
+        mf.CoupledLinearProblem(a, ufl.inner(S, ufl.grad(v)) * ufl.dx, [], patch, material=j2)
     axi = mf.LinearElastic(MAT.E, MAT.nu, plane="axisymmetric")
     with pytest.raises(ValueError, match="holds grad\\(v\\) and material is axisymmetric"):
         mf.CoupledLinearProblem(a, ufl.inner(S, ufl.grad(v)) * ufl.dx, [], patch, material=axi)

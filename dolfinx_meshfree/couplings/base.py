@@ -98,6 +98,9 @@ class CoupledSolution:
     newton: NonlinearSolveResult | None = None
     #: The small-strain law of the solve (for :meth:`stress_intensity_factors`).
     material: LinearElastic | None = None
+    #: Whether the loads held a stress ``S : grad(v)`` (a thermal or initial stress of ``L``):
+    #: the stress is then ``C : eps(u) - S``, which :meth:`stress_intensity_factors` refuses.
+    initial_stress: bool = False
 
     def stress_intensity_factors(
         self,
@@ -120,6 +123,14 @@ class CoupledSolution:
             options: ``inner``, ``weight``, ``points`` of
                 :func:`~dolfinx_meshfree.interaction_integral`.
         """
+
+        if self.initial_stress:  # an attribute of the solve: the same on every rank
+            raise ValueError(
+                "this solution carries a thermal or initial stress S (an inner(S, grad(v)) dx "
+                "term of L): the interaction integral takes the stress as C : eps(u) and has no "
+                "term for S or its gradient, so K_I and K_II would be wrong; stress intensity "
+                "factors are not available with an initial stress"
+            )
 
         def grad(x: np.ndarray) -> np.ndarray:
             return self.mls.tabulate(x).gradient(self.coefficients)

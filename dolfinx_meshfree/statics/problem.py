@@ -437,11 +437,16 @@ def _check_arguments(a, L, bcs, patch, material, coupling, options):
         reason = load_integrand_error(itg.integrand(), v) if itg.integral_type() == "cell" else None
         if reason is not None:
             raise ValueError(f"L's dx integral (subdomain {itg.subdomain_id()!r}): {reason}")
-        if (
-            itg.integral_type() == "cell"
-            and is_axisymmetric(material)
-            and _differentiates(itg.integrand(), v)
-        ):
+        stress = itg.integral_type() == "cell" and _differentiates(itg.integrand(), v)
+        if stress and is_stateful(material):
+            raise ValueError(
+                f"L's dx integral (subdomain {itg.subdomain_id()!r}) holds grad(v) (a thermal or "
+                f"initial stress) and material={type(material).__name__} is a law with state: "
+                "its return map takes the stress from the total strain, so the stress S of L "
+                "would not enter it (a free thermal expansion would yield or damage); an "
+                "initial stress is supported with LinearElastic only"
+            )
+        if stress and is_axisymmetric(material):
             raise ValueError(
                 f"L's dx integral (subdomain {itg.subdomain_id()!r}) holds grad(v) and material "
                 "is axisymmetric: an initial or thermal stress in (r, z) needs the hoop term "

@@ -361,8 +361,7 @@ class CoupledElasticity:
         self.corner_angle = None if corner_angle is None else float(corner_angle)
         #: The coupling family (:mod:`~dolfinx_meshfree.couplings`).
         self.family = REGISTRY[coupling]()
-        #: One of :data:`~dolfinx_meshfree.geometry.smoothing.INTEGRATIONS` (``consistent``:
-        #: VCI corrects the patch's test gradients).
+        #: One of ``smoothing.INTEGRATIONS`` (``consistent``: VCI corrects the test gradients).
         self.integration = coupled_integration(consistent, integration, coupling, patch, material)
         self.consistent = self.integration == "vci"
         self.overlap, self.penalty, self.constraint, self.band_width = check_options(
@@ -385,18 +384,18 @@ class CoupledElasticity:
         self.tractions: list[tuple[np.ndarray, Callable]] = []
         #: The cracks whose faces carry a traction-separation law (:meth:`add_cohesive`).
         self.cohesive: list[CohesiveCrack] = []
-        #: The user's bilinear form (set by :class:`~dolfinx_meshfree.CoupledLinearProblem`);
-        #: ``None``: the elasticity form of :attr:`material`.
+        #: The user's bilinear form (from a CoupledLinearProblem); ``None``: :attr:`material`'s.
         self.form: ufl.Form | None = None
         # set by CoupledLinearProblem: strong conditions by node (flags, values)
         self.strong: list[tuple[np.ndarray, np.ndarray]] = []
         #: ``(facets, value, components)`` of :meth:`add_dirichlet` by component (all facets)
         self.component_dirichlet: list[tuple[np.ndarray, VectorFunction, tuple[int, ...]]] = []
-        #: Body forces (:mod:`~dolfinx_meshfree.physics.body_loads`) from :meth:`set_body_force`
-        #: or the cell integrals of a CoupledLinearProblem's ``L``.
+        #: Body forces (``physics.body_loads``): :meth:`set_body_force`'s or a problem's ``L``'s.
         self.body_forces: list = []
         #: Where the last solve with state ended, the next's start (:mod:`.history`).
         self.history = SolveHistory("CoupledElasticity")
+        #: master-slave's slaves (``master_slave.SLAVES``): ``"first-layer"``: a layer off Gamma_I.
+        self.slaves = "layer"
         self.setup_time = time.perf_counter() - t0
 
     def reset(self) -> None:

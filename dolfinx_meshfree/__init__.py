@@ -113,6 +113,7 @@ from .statics.path_following import (
 )
 from .statics.path_patch import ADAPT_COUPLINGS
 from .statics.problem import CoupledLinearProblem
+from .statics.reactions import reaction
 from .statics.sides import NonlinearSolveResult
 from .verification.analytic import (
     HeatedBushing,
@@ -256,6 +257,7 @@ __all__ = [
     "mesh_bodies",
     "ogive_force",
     "quartic",
+    "reaction",
     "read_particles",
     "separate_bodies",
     "solve_fe_elasticity",

@@ -375,6 +375,7 @@ class CoupledNonlinearProblem:
         check_law_at_finite_strain(F_int, u, self._linear.problem, material)
         self.F, self.F_int, self.u = F, F_int, u
         self.patch, self.material = patch, material
+        self.V, self.bcs = V, self._linear.bcs  # what reaction() reads
         self.coupling = coupling
         self.load_steps, self.newton = int(load_steps), newton or NewtonOptions()
         self._solver = self._linear._solver

@@ -1,0 +1,137 @@
+"""Reaction forces of a coupled static solution on one of the user's ``DirichletBC``s.
+
+The reaction of a held dof is its row of the residual at the solution: ``r_a = (K u - f)_a``
+for :class:`~dolfinx_meshfree.CoupledLinearProblem`, ``r_a = F(u; N_a)`` for
+:class:`~dolfinx_meshfree.CoupledNonlinearProblem`, the force the support exerts on the body
+(the FEniCSx way: assemble the residual and read it at the condition's dofs). For a held FE
+node whose cells are FE cells that do not touch the patch, that row is the user's own form
+(``action(a, u) - L``, or ``F``) assembled by DOLFINx at the coupled solution's FE field: the
+coupled system's row there is exactly that. Nearer the patch the row also holds what the
+coupling adds and a form on the FE space does not see (multipliers on the interface nodes, the
+ramps' blended interface cells, a bridging band's weights, master-slave's links): a condition
+with such a node is refused, named by the node's coordinates.
+
+A body load (``L``'s ``dx`` terms) and tractions on the held facets are in the row, as in
+DOLFINx. The summed reaction balances the applied load to round-off when the particle side
+conserves momentum (plain Gauss points); VCI's corrected test gradients do not sum to zero
+exactly, so there the balance holds to the consistency error (``tests/test_reactions.py``).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import dolfinx
+import numpy as np
+import ufl
+from petsc4py import PETSc
+
+from .. import _compat
+from ..parallel import raise_on_all_ranks
+from ..physics.state import is_stateful
+
+if TYPE_CHECKING:  # annotations only
+    from ..couplings.base import CoupledSolution
+    from .nonlinear import CoupledNonlinearProblem
+    from .problem import CoupledLinearProblem
+
+__all__ = ["reaction"]
+
+
+def _node_flags(V: dolfinx.fem.FunctionSpace, cells: np.ndarray) -> np.ndarray:
+    """Flags of the local nodes (owned and ghost) of the given local cells, summed over the
+    ranks that hold each node (collective)."""
+    bs = V.dofmap.index_map_bs
+    f = dolfinx.fem.Function(V)
+    f.x.array[:] = 0.0
+    nodes = np.unique(_compat.dofmap_array(V)[cells].ravel())
+    f.x.array.reshape(-1, bs)[nodes, 0] = 1.0
+    _compat.scatter_reverse_add(f)
+    f.x.scatter_forward()
+    return f.x.array.reshape(-1, bs)[:, 0] > 0.0
+
+
+def near_patch_nodes(problem: CoupledLinearProblem | CoupledNonlinearProblem) -> np.ndarray:
+    """Local nodes of a patch cell, or of a cell that has one (collective): where the coupled
+    system's FE rows hold more than the user's form."""
+    V, patch = problem.V, problem.patch
+    dofmap = _compat.dofmap_array(V)
+    local = dofmap.shape[0]
+    on_patch = _node_flags(V, np.flatnonzero(patch.in_patch[:local]))
+    touching = np.flatnonzero(on_patch[dofmap].any(axis=1))
+    return _node_flags(V, touching)
+
+
+def reaction(
+    problem: CoupledLinearProblem | CoupledNonlinearProblem,
+    bc: object,
+    solution: CoupledSolution | None = None,
+) -> np.ndarray:
+    """The total reaction force ``sum_a r_a`` (gdim,) over the dofs that ``bc`` holds, on every
+    rank (collective; module docstring): of a component condition (``V.sub(i)``), that
+    component only, the others 0.
+
+    Args:
+        problem: A :class:`~dolfinx_meshfree.CoupledLinearProblem` with a ``LinearElastic``
+            law, or a solved :class:`~dolfinx_meshfree.CoupledNonlinearProblem`.
+        bc: One of the problem's ``bcs`` (the same object).
+        solution: ``CoupledLinearProblem``: the solution its :meth:`solve` returned.
+
+    Raises:
+        ValueError: on every rank, for a ``bc`` that is not the problem's, a missing solution,
+            a law with state, or a held node on or beside the patch (by its coordinates).
+    """
+    comm = problem.patch.comm
+    V = problem.V
+    linear = hasattr(problem, "a")
+
+    def check_input() -> None:
+        if not any(bc is b for b in problem.bcs):
+            raise ValueError(
+                "bc must be one of the problem's bcs (the same DirichletBC object), got another"
+            )
+        if linear and solution is None:
+            raise ValueError(
+                "solution=None: pass the CoupledSolution that problem.solve() returned"
+            )
+        if linear and solution.u.function_space is not V:
+            raise ValueError("solution is not a solution of this problem (another space)")
+        if linear and is_stateful(problem.material):
+            raise ValueError(
+                f"material={type(problem.material).__name__} is a law with state: the FE cells "
+                "follow the law, not the form a, so a's residual is not the reaction; reactions "
+                "are available with LinearElastic and in CoupledNonlinearProblem"
+            )
+        if not linear and problem.solution is None:
+            raise ValueError("the problem has not been solved: call problem.solve() first")
+
+    raise_on_all_ranks(comm, check_input)
+    bs = V.dofmap.index_map_bs
+    owned = bs * V.dofmap.index_map.size_local
+    dofs = _compat.dirichlet_values(bc)[0]
+    dofs = dofs[dofs < owned]
+    near = near_patch_nodes(problem)  # collective
+
+    def check_nodes() -> None:
+        bad = dofs[near[dofs // bs]]
+        if bad.size:
+            x = V.tabulate_dof_coordinates()[bad[0] // bs]
+            raise ValueError(
+                f"bc holds {bad.size} dof(s) on a node on or beside the particle patch, first "
+                f"the node at {tuple(np.round(x[: V.mesh.geometry.dim], 12))}: there the "
+                "reaction holds the coupling's interface forces, which the form on V does not "
+                "see; keep the patch at least one FE cell away from the held boundary"
+            )
+
+    raise_on_all_ranks(comm, check_nodes)
+    if linear:
+        residual = ufl.action(problem.a, solution.u) - problem.L
+    else:
+        residual = problem.F
+    b = _compat.assemble_vector(_compat.create_form(residual))
+    b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    r = b.array_r
+    total = np.zeros(bs)
+    np.add.at(total, dofs % bs, r[dofs])
+    b.destroy()
+    return comm.allreduce(total)

@@ -40,7 +40,8 @@ carry their own ``2 pi r`` (:mod:`~dolfinx_meshfree.physics.axisymmetry`): the l
 Not supported (each raises a ``ValueError`` naming the fix): interior-facet integrals in ``a``
 and ``L``, ``ds`` integrals of ``a`` on the patch's facets or with a law with state,
 derivatives of the test function in ``L``'s ``ds`` integrals, second derivatives of it, ``grad(v)``
-in an axisymmetric model, and constrained nodes strictly inside the patch.
+with a law with state or in an axisymmetric model, and constrained nodes strictly inside the
+patch.
 """
 
 from __future__ import annotations

@@ -100,8 +100,27 @@ class LinearField:
         return np.broadcast_to(np.asarray(self.G, dtype=float), (x.shape[0], 2, 2)).copy()
 
 
+class _RadialField:
+    """``u = u_r(r) x / r`` in the plane, from a subclass's ``radial(r)`` and
+    ``radial_derivative(r)``: its value and gradient ``u_r / r I + (u_r' - u_r / r) e_r e_r``."""
+
+    def displacement(self, x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, dtype=float)[:, :2]
+        r = np.linalg.norm(x, axis=1)
+        return (self.radial(r) / r)[:, None] * x
+
+    def displacement_gradient(self, x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, dtype=float)[:, :2]
+        r = np.linalg.norm(x, axis=1)
+        ur, dur = self.radial(r), self.radial_derivative(r)
+        e = x / r[:, None]
+        return (ur / r)[:, None, None] * np.eye(2) + (dur - ur / r)[:, None, None] * np.einsum(
+            "qi,qj->qij", e, e
+        )
+
+
 @dataclass(frozen=True)
-class PressurizedBushing:
+class PressurizedBushing(_RadialField):
     """Lamé's thick-walled cylinder: the annulus ``a <= r <= b`` under an internal pressure ``p``
     with its outer surface held fixed (a bushing in a rigid housing); 2D linear elasticity with the
     material's (plane stress or plane strain) Lamé constants.
@@ -130,20 +149,9 @@ class PressurizedBushing:
         c1, c2 = self.constants
         return c1 * r + c2 / r
 
-    def displacement(self, x: np.ndarray) -> np.ndarray:
-        x = np.asarray(x, dtype=float)[:, :2]
-        r = np.linalg.norm(x, axis=1)
-        return (self.radial(r) / r)[:, None] * x
-
-    def displacement_gradient(self, x: np.ndarray) -> np.ndarray:
-        x = np.asarray(x, dtype=float)[:, :2]
-        r = np.linalg.norm(x, axis=1)
+    def radial_derivative(self, r: np.ndarray) -> np.ndarray:
         c1, c2 = self.constants
-        ur, dur = c1 * r + c2 / r, c1 - c2 / r**2
-        e = x / r[:, None]
-        return (ur / r)[:, None, None] * np.eye(2) + (dur - ur / r)[:, None, None] * np.einsum(
-            "qi,qj->qij", e, e
-        )
+        return c1 - c2 / np.asarray(r, dtype=float) ** 2
 
     def hoop_stress(self, r: np.ndarray) -> np.ndarray:
         c1, c2 = self.constants
@@ -152,7 +160,7 @@ class PressurizedBushing:
 
 
 @dataclass(frozen=True)
-class HeatedBushing:
+class HeatedBushing(_RadialField):
     """The bushing of :class:`PressurizedBushing` heated from inside: the annulus
     ``a <= r <= b`` at the steady temperature rise of radial conduction,
     ``T(r) = T_a ln(b / r) / ln(b / a)`` (``T_a`` at the inner surface, 0 at the outer), its
@@ -216,21 +224,10 @@ class HeatedBushing:
         c1, c2 = self.constants
         return self.k * self._integral(r) / r + c1 * r + c2 / r
 
-    def displacement(self, x: np.ndarray) -> np.ndarray:
-        x = np.asarray(x, dtype=float)[:, :2]
-        r = np.linalg.norm(x, axis=1)
-        return (self.radial(r) / r)[:, None] * x
-
-    def displacement_gradient(self, x: np.ndarray) -> np.ndarray:
-        x = np.asarray(x, dtype=float)[:, :2]
-        r = np.linalg.norm(x, axis=1)
+    def radial_derivative(self, r: np.ndarray) -> np.ndarray:
+        r = np.asarray(r, dtype=float)
         c1, c2 = self.constants
-        ur = self.radial(r)
-        dur = self.k * (self.temperature(r) - self._integral(r) / r**2) + c1 - c2 / r**2
-        e = x / r[:, None]
-        return (ur / r)[:, None, None] * np.eye(2) + (dur - ur / r)[:, None, None] * np.einsum(
-            "qi,qj->qij", e, e
-        )
+        return self.k * (self.temperature(r) - self._integral(r) / r**2) + c1 - c2 / r**2
 
     def radial_stress(self, r: np.ndarray) -> np.ndarray:
         r = np.asarray(r, dtype=float)

@@ -36,7 +36,7 @@ from ..geometry.quadrature import QuadraturePoints
 from ..parallel import Layout, raise_on_all_ranks
 from ..physics import axisymmetry
 from ..physics.materials import LinearElastic
-from ..statics.sifs import solution_sifs
+from ..statics.sifs import body_force_acceleration, solution_sifs
 
 if TYPE_CHECKING:  # annotations only: the model imports this module, not the reverse
     from ..statics.coupled import CoupledElasticity
@@ -101,6 +101,14 @@ class CoupledSolution:
     #: Whether the loads held a stress ``S : grad(v)`` (a thermal or initial stress of ``L``):
     #: the stress is then ``C : eps(u) - S``, which :meth:`stress_intensity_factors` refuses.
     initial_stress: bool = False
+    #: The model's body forces: their term in the interaction integral
+    #: (:func:`~dolfinx_meshfree.statics.sifs.body_force_acceleration`).
+    body_forces: list = field(default_factory=list)
+
+    def take_loads(self, body_forces: list) -> None:
+        """Record the model's body forces (:attr:`body_forces`, :attr:`initial_stress`)."""
+        self.body_forces = list(body_forces)
+        self.initial_stress = any(f.has_stress for f in body_forces)
 
     def stress_intensity_factors(
         self,
@@ -135,6 +143,10 @@ class CoupledSolution:
         def grad(x: np.ndarray) -> np.ndarray:
             return self.mls.tabulate(x).gradient(self.coefficients)
 
+        if self.body_forces and options.get("acceleration") is None:  # their domain term
+            options["acceleration"] = body_force_acceleration(
+                self.body_forces, self.u.function_space, material or self.material
+            )
         return solution_sifs(
             grad, material or self.material, self.patch.cracks, self.patch, crack, tip, radius,
             **options,

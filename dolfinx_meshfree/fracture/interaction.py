@@ -40,7 +40,9 @@ here. ``K = E' I / 2`` holds at a stationary tip (the static relation).
 
 Assumptions (the domain form is exact under them): small strain and the linear elastic law of
 ``material`` (the stress is computed from the displacement gradient); no body force in the
-domain; without ``acceleration``, static equilibrium; traction-free crack faces; the crack
+domain, or one given as ``acceleration = -b / rho`` (static equilibrium ``sigma_ij,j = -b_i``
+is the balance above: the solutions' ``stress_intensity_factors`` do so); without
+``acceleration``, static equilibrium; traction-free crack faces; the crack
 straight inside ``r2`` (faces at ``theta = +-pi``; a crack that kinks inside the domain, another
 tip or a boundary within ``r2`` is the caller's to
 avoid); the field's gradient evaluated on the correct side of the crack near ``theta = +-pi``.

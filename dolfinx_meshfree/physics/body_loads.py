@@ -71,6 +71,11 @@ class BodyForce:
         """``S`` (len(q), gdim, gdim) at any points ``q`` in their cells. Local."""
         raise NotImplementedError
 
+    def at_points(self, x: np.ndarray, V: dolfinx.fem.FunctionSpace | None) -> np.ndarray:
+        """``b`` (m, gdim) at any points ``x`` (m, gdim) of the body, the same ``x`` on every rank
+        (collective; ``V``: the FE space of the model, ``None`` in pure EFG)."""
+        raise NotImplementedError
+
     def fe_load(
         self, V: dolfinx.fem.FunctionSpace, weight: ufl.core.expr.Expr | None, degree: int
     ) -> np.ndarray:
@@ -97,6 +102,9 @@ class CallableBodyForce(BodyForce):
 
     def values(self, q: QuadraturePoints) -> np.ndarray:
         return vector_values(self.force, (q.points,), len(q), "the body force", q.points.shape[1])
+
+    def at_points(self, x: np.ndarray, V: dolfinx.fem.FunctionSpace | None) -> np.ndarray:
+        return vector_values(self.force, (x,), len(x), "the body force", x.shape[1])
 
     def fe_load(
         self, V: dolfinx.fem.FunctionSpace, weight: ufl.core.expr.Expr | None, degree: int

@@ -612,7 +612,7 @@ class CoupledElasticity:
         if isinstance(self.law, LinearElastic) and not self.cohesive:
             solution = self.family.solve(self, options)
             solution.material = self.material
-            solution.initial_stress = any(f.has_stress for f in self.body_forces)
+            solution.take_loads(self.body_forces)
             return solution
         raise_on_all_ranks(comm, lambda: check_load_steps(load_steps))
         u = dolfinx.fem.Function(self.V)

@@ -255,7 +255,7 @@ def solve_finite_strain(
             {"setup": built.setup, "newton": time.perf_counter() - t0 - built.setup}
         )
         solution.states = built.problem.states
-        solution.initial_stress = any(f.has_stress for f in model.body_forces)
+        solution.take_loads(model.body_forces)
     finally:
         built.destroy()
     return FiniteStrainSolve(result, solution, new_state)

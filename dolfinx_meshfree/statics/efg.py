@@ -77,6 +77,7 @@ from ..physics.axisymmetry import (
     hoop_table,
     revolved,
 )
+from ..physics.body_loads import CallableBodyForce
 from ..physics.cohesive import LinearCohesive
 from ..physics.constitutive import Material
 from ..physics.materials import LinearElastic, is_axisymmetric, linear_twin
@@ -95,7 +96,7 @@ from .history import SolveHistory
 from .newton import NewtonOptions
 from .petsc import BlockSystem, SolverOptions, create_aij, create_vector, solver_options
 from .sides import BlockProblem, ParticleSide, particle_band_factor, solve_built
-from .sifs import solution_sifs
+from .sifs import body_force_acceleration, solution_sifs
 
 if TYPE_CHECKING:  # annotations only
     import dolfinx.mesh
@@ -143,6 +144,8 @@ class EFGSolution:
     domain: CrackDomain | None = None
     #: The particles (pure EFG's model), where a solve has them.
     particles: ParticleSet | None = None
+    #: The body force (:meth:`EFGElasticity.set_body_force`): its interaction-integral term.
+    body_forces: list = field(default_factory=list)
 
     def displacement(self, points: np.ndarray) -> np.ndarray:
         """Displacement (m, gdim) at points (m, gdim); local, no communication."""
@@ -211,6 +214,10 @@ class EFGSolution:
             raise ValueError(
                 "the model has no cracks: give EFGElasticity(..., cracks=[crack]) to compute "
                 "stress intensity factors"
+            )
+        if self.body_forces and options.get("acceleration") is None:  # their domain term
+            options["acceleration"] = body_force_acceleration(
+                self.body_forces, None, material or self.material
             )
         return solution_sifs(
             lambda x: self.evaluate(x)[1], material or self.material, self.cracks, self.domain,
@@ -966,6 +973,7 @@ class EFGElasticity:
             cracks=self.cracks,
             domain=self._domain,
             particles=self.particles,
+            body_forces=[] if self._body is None else [CallableBodyForce(self._body)],
         )
 
     def block_model(self) -> EFGBlockModel:
@@ -1036,6 +1044,7 @@ class EFGBlockModel:
             cracks=self.model.cracks,
             domain=self.model._domain,
             particles=self.model.particles,
+            body_forces=[] if self.model._body is None else [CallableBodyForce(self.model._body)],
         )
         solution.states = self.problem.states
         return solution

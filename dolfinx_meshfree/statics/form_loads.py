@@ -22,6 +22,7 @@ patch test with an initial stress, ``tests/test_initial_stress.py``).
 
 from __future__ import annotations
 
+import basix
 import dolfinx
 import numpy as np
 import ufl
@@ -29,6 +30,7 @@ from ufl.algorithms import expand_derivatives
 from ufl.corealg.traversal import unique_pre_traversal
 
 from .. import _compat
+from ..approx.fe_points import evaluate_fe_function
 from ..geometry.quadrature import QuadraturePoints
 from ..physics import axisymmetry
 from ..physics.body_loads import BodyForce, accumulate
@@ -133,7 +135,8 @@ class FormBodyForce(BodyForce):
         revolved: bool = False,
     ) -> None:
         msh = v.ufl_function_space().mesh
-        self.integrals, self.mesh, self.degree = list(integrals), msh, degree
+        self.integrals, self.mesh, self.degree, self.v = list(integrals), msh, degree, v
+        self._interpolant: dolfinx.fem.Function | None = None  # at_points' P1 interpolant
         #: The integrands carry the ``2 pi r`` of an axisymmetric model: the loads per unit
         #: volume are theirs over ``2 pi r`` (the couplings' rules and weights are revolved).
         self.revolved = revolved
@@ -192,6 +195,35 @@ class FormBodyForce(BodyForce):
         if self.revolved:  # per unit volume (cell Gauss points lie off the axis)
             out = out / (2.0 * np.pi * q.points[:, :1])
         return out
+
+    def at_points(self, x: np.ndarray, V: dolfinx.fem.FunctionSpace | None) -> np.ndarray:
+        """``b`` at any points ``x`` (collective): its nodal interpolant on ``V`` (vector P1/Q1:
+        exact for a ``b`` linear over the cells it covers; at the border of a tagged region,
+        the nodes there carry the region's value), evaluated at ``x``: the body-force term of
+        the interaction integral (``statics.sifs.body_force_acceleration``)."""
+        if self._interpolant is None:
+            self._interpolant = self._nodal_interpolant(V)
+        return evaluate_fe_function(self._interpolant, x)
+
+    def _nodal_interpolant(self, V: dolfinx.fem.FunctionSpace) -> dolfinx.fem.Function:
+        """``b`` at the vertices of the cells each integral covers, summed over the integrals,
+        as a Function on ``V`` (collective)."""
+        msh, d = self.mesh, self.gdim
+        cell = getattr(basix.CellType, msh.topology.cell_type.name)
+        vertices = np.asarray(basix.geometry(cell), dtype=float)[:, : msh.topology.dim]
+        dofs = _compat.dofmap_array(V)  # P1/Q1: the cell's vertices in reference order
+        f = dolfinx.fem.Function(V)
+        total = np.zeros((f.x.array.size // d, d))
+        for itg, (_, _, on) in zip(self.integrals, self._expressions, strict=True):
+            b = split_test_gradient(itg.integrand(), self.v, d)[0]
+            expr = _compat.create_expression(b, vertices, msh)  # collective
+            cells = np.flatnonzero(on[: dofs.shape[0]])
+            part = np.zeros_like(total)
+            part[dofs[cells].ravel()] = _compat.eval_expression(expr, msh, cells, d).reshape(-1, d)
+            total += part
+        f.x.array[:] = total.ravel()
+        f.x.scatter_forward()
+        return f
 
     def stresses(self, q: QuadraturePoints) -> np.ndarray:
         """``S`` (len(q), gdim, gdim) at any points ``q`` in their cells: at the standard

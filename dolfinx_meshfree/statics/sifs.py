@@ -49,6 +49,7 @@ import warnings
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
+import dolfinx
 import numpy as np
 
 from ..approx.mls import MomentMatrixError
@@ -60,6 +61,7 @@ from ..fracture.interaction import (
 )
 from ..geometry.crack import Crack, gathered_segments, particle_spacing, point_segment_distance
 from ..parallel import raise_on_all_ranks
+from ..physics.body_loads import BodyForce
 from ..physics.materials import LinearElastic
 
 if TYPE_CHECKING:  # annotations only
@@ -77,6 +79,7 @@ __all__ = [
     "MIN_OUTER",
     "PROBE",
     "SIFDomains",
+    "body_force_acceleration",
     "default_domains",
     "resolve_tip",
     "sif_domains",
@@ -234,6 +237,24 @@ def sif_domains(
         return SIFDomains(pairs, near, x_tip, crack.tip_direction(end), keep, options)
 
     return raise_on_all_ranks(comm, check_input)
+
+
+def body_force_acceleration(
+    forces: Sequence[BodyForce], V: dolfinx.fem.FunctionSpace | None, material: LinearElastic
+) -> Callable[[np.ndarray], np.ndarray] | None:
+    """A static body force as the interaction integral's inertia term: equilibrium
+    ``sigma_ij,j = -b_i`` is the dynamic balance ``sigma_ij,j = rho u_i,tt`` with
+    ``u_tt = -b / rho``, so the domain term ``int rho u_tt . u^aux_,1 q dA`` of
+    :func:`~dolfinx_meshfree.fracture.interaction.interaction_integral` (Moran & Shih 1987) is
+    the body force's (``None`` without forces; the callable is collective)."""
+    if not forces:
+        return None
+    rho = float(material.rho)
+
+    def acceleration(x: np.ndarray) -> np.ndarray:
+        return -sum(f.at_points(x, V) for f in forces) / rho
+
+    return acceleration
 
 
 def solution_sifs(

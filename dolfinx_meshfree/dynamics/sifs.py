@@ -156,6 +156,13 @@ def dynamic_sifs(
                 f"material={dyn.material!r}: dynamic stress intensity factors need the small-"
                 "strain LinearElastic law (the interaction integral is linear elastic)"
             )
+        if dyn.loads.body_forces:
+            raise ValueError(
+                f"the model carries {dyn.loads.body_forces} body force(s) (add_body_force): the "
+                "dynamic interaction integral here takes the balance sigma_ij,j = rho u_tt, "
+                "without a body-force term, so K would be wrong (statics takes it: "
+                "statics.sifs.body_force_acceleration); apply the load as tractions instead"
+            )
 
     raise_on_all_ranks(dyn.comm, check)
     if not j_integral:

@@ -203,7 +203,10 @@ class FormBodyForce(BodyForce):
         the interaction integral (``statics.sifs.body_force_acceleration``)."""
         if self._interpolant is None:
             self._interpolant = self._nodal_interpolant(V)
-        return evaluate_fe_function(self._interpolant, x)
+        out = evaluate_fe_function(self._interpolant, x)
+        if self.revolved:  # the integrands' 2 pi r taken off, as in values()
+            out = out / (2.0 * np.pi * np.asarray(x, dtype=float)[:, :1])
+        return out
 
     def _nodal_interpolant(self, V: dolfinx.fem.FunctionSpace) -> dolfinx.fem.Function:
         """``b`` at the vertices of the cells each integral covers, summed over the integrals,

@@ -65,9 +65,10 @@ def test_clamp_carries_the_end_load(coupling, consistent):
     assert abs(R[1] - 1000.0) <= bound * 1000.0, R
 
 
-def stretched_block(coupling, law, delta):
+def stretched_block(coupling, law, delta, elastic=None):
     """[0, 2] x [0, 1] (8 x 4 quadrilaterals), rollers on x = 0 and y = 0, u_x = delta on x = 2
-    (a component condition), the patch 0.5 < x < 1.5 two cells from it."""
+    (a component condition), the patch 0.5 < x < 1.5 two cells from it; ``elastic``: the
+    elastic law of a law with state (its form ``a``)."""
     msh = dolfinx.mesh.create_rectangle(
         COMM, [np.zeros(2), np.array([2.0, 1.0])], [8, 4], dolfinx.mesh.CellType.quadrilateral
     )
@@ -82,12 +83,12 @@ def stretched_block(coupling, law, delta):
         bcs.append(dolfinx.fem.dirichletbc(np.float64(value), dofs, V.sub(i)))
     patch = mf.ParticlePatch(msh, cells_where(msh, lambda m: np.abs(m[:, 0] - 1.0) < 0.5), 0.25)
     v = ufl.TestFunction(V)
-    if isinstance(law, mf.LinearElastic):
+    if isinstance(law, mf.LinearElastic) or elastic is not None:
         u = ufl.TrialFunction(V)
-        a = ufl.inner(law.ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx
+        a = ufl.inner((elastic or law).ufl_stress(u), ufl.sym(ufl.grad(v))) * ufl.dx
         L = ufl.dot(dolfinx.fem.Constant(msh, np.zeros(2)), v) * ufl.dx
         problem = mf.CoupledLinearProblem(a, L, bcs, patch, material=law, coupling=coupling)
-        return problem, bcs[2], problem.solve()
+        return problem, bcs[2], problem.solve(load_steps=4)
     u = dolfinx.fem.Function(V)
     F = ufl.inner(law.ufl_first_piola(ufl.Identity(2) + ufl.grad(u)), ufl.grad(v)) * ufl.dx
     problem = mf.CoupledNonlinearProblem(F, u, bcs, patch, law, coupling=coupling, load_steps=2)
@@ -120,6 +121,22 @@ def test_neo_hookean_stretch_against_the_closed_form(coupling):
     l2 = brentq(lambda s: p(s)[1, 1], 0.5, 1.0)
     expected = p(l2)[0, 0]
     R = mf.reaction(problem, bc)
+    assert abs(R[0] - expected) <= 1e-8 * expected, (R, expected)
+
+
+@pytest.mark.parametrize("coupling", ["lagrange", "bridging"])
+def test_plastic_stretch_against_the_closed_form(coupling):
+    """J2 plasticity in plane stress (E 200 GPa, sigma_y 250 MPa, H 20 GPa) stretched to
+    2.5 times its yield strain: the uniaxial closed form ``sigma = sigma_y + E H / (E + H)
+    (eps - sigma_y / E)`` = 284.1 MPa times the height, from the law's internal force at the
+    converged state (the FE cells follow the law, not ``a``; measured 1.2e-15)."""
+    E, sy, Hh = 200e3, 250.0, 20e3
+    law = mf.J2Plasticity(E=E, nu=0.3, sigma_y=sy, H=Hh, plane="stress")
+    elastic = mf.LinearElastic(E, 0.3, plane="stress")
+    eps = 2.5 * sy / E
+    problem, bc, sol = stretched_block(coupling, law, 2.0 * eps, elastic)
+    expected = sy + E * Hh / (E + Hh) * (eps - sy / E)
+    R = mf.reaction(problem, bc, sol)
     assert abs(R[0] - expected) <= 1e-8 * expected, (R, expected)
 
 

@@ -104,6 +104,9 @@ class CoupledSolution:
     #: The model's body forces: their term in the interaction integral
     #: (:func:`~dolfinx_meshfree.statics.sifs.body_force_acceleration`).
     body_forces: list = field(default_factory=list)
+    #: A Newton solve: ``f_int - f_ext`` of the FE rows (owned dofs), held rows included
+    #: (:func:`~dolfinx_meshfree.statics.reactions.reaction` with a law with state).
+    fe_residual: np.ndarray | None = None
 
     def take_loads(self, body_forces: list) -> None:
         """Record the model's body forces (:attr:`body_forces`, :attr:`initial_stress`)."""

@@ -256,6 +256,12 @@ def solve_finite_strain(
         )
         solution.states = built.problem.states
         solution.take_loads(model.body_forces)
+        # the FE rows' residual at the solution, held rows included: the reactions
+        f = built.fe.internal_force(built.x[0])
+        solution.fe_residual = f.getArray(readonly=True) - built.problem.loads[0].getArray(
+            readonly=True
+        )
+        f.destroy()
     finally:
         built.destroy()
     return FiniteStrainSolve(result, solution, new_state)

@@ -12,9 +12,14 @@ ramps' blended interface cells, a bridging band's weights, master-slave's links)
 with such a node is refused, named by the node's coordinates.
 
 A body load (``L``'s ``dx`` terms) and tractions on the held facets are in the row, as in
-DOLFINx. The summed reaction balances the applied load to round-off when the particle side
-conserves momentum (plain Gauss points); VCI's corrected test gradients do not sum to zero
-exactly, so there the balance holds to the consistency error (``tests/test_reactions.py``).
+DOLFINx. With a law with state (``J2Plasticity``, ``RankineDamage``) the FE cells follow the law,
+not ``a``: the row is the law's internal force at the converged state minus the load, kept by
+the Newton solve (``CoupledSolution.fe_residual``): a force-displacement curve of a plastic or
+softening specimen.
+
+The summed reaction balances the applied load to round-off when the particle side conserves
+momentum (plain Gauss points); VCI's corrected test gradients do not sum to zero exactly, so
+there the balance holds to the consistency error (``tests/test_reactions.py``).
 """
 
 from __future__ import annotations
@@ -72,14 +77,14 @@ def reaction(
     component only, the others 0.
 
     Args:
-        problem: A :class:`~dolfinx_meshfree.CoupledLinearProblem` with a ``LinearElastic``
-            law, or a solved :class:`~dolfinx_meshfree.CoupledNonlinearProblem`.
+        problem: A :class:`~dolfinx_meshfree.CoupledLinearProblem` (a ``LinearElastic`` law
+            or a law with state), or a solved :class:`~dolfinx_meshfree.CoupledNonlinearProblem`.
         bc: One of the problem's ``bcs`` (the same object).
         solution: ``CoupledLinearProblem``: the solution its :meth:`solve` returned.
 
     Raises:
-        ValueError: on every rank, for a ``bc`` that is not the problem's, a missing solution,
-            a law with state, or a held node on or beside the patch (by its coordinates).
+        ValueError: on every rank, for a ``bc`` that is not the problem's, a missing solution
+            or a held node on or beside the patch (by its coordinates).
     """
     comm = problem.patch.comm
     V = problem.V
@@ -96,11 +101,9 @@ def reaction(
             )
         if linear and solution.u.function_space is not V:
             raise ValueError("solution is not a solution of this problem (another space)")
-        if linear and is_stateful(problem.material):
+        if linear and is_stateful(problem.material) and solution.fe_residual is None:
             raise ValueError(
-                f"material={type(problem.material).__name__} is a law with state: the FE cells "
-                "follow the law, not the form a, so a's residual is not the reaction; reactions "
-                "are available with LinearElastic and in CoupledNonlinearProblem"
+                "solution holds no FE residual: pass the solution of this problem's solve()"
             )
         if not linear and problem.solution is None:
             raise ValueError("the problem has not been solved: call problem.solve() first")
@@ -124,14 +127,16 @@ def reaction(
             )
 
     raise_on_all_ranks(comm, check_nodes)
+    total = np.zeros(bs)
+    if linear and is_stateful(problem.material):  # the law's internal force of the FE rows
+        np.add.at(total, dofs % bs, solution.fe_residual[dofs])
+        return comm.allreduce(total)
     if linear:
         residual = ufl.action(problem.a, solution.u) - problem.L
     else:
         residual = problem.F
     b = _compat.assemble_vector(_compat.create_form(residual))
     b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-    r = b.array_r
-    total = np.zeros(bs)
-    np.add.at(total, dofs % bs, r[dofs])
+    np.add.at(total, dofs % bs, b.array_r[dofs])
     b.destroy()
     return comm.allreduce(total)

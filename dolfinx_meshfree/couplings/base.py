@@ -36,7 +36,7 @@ from ..geometry.quadrature import QuadraturePoints
 from ..parallel import Layout, raise_on_all_ranks
 from ..physics import axisymmetry
 from ..physics.materials import LinearElastic
-from ..statics.sifs import body_force_acceleration, solution_sifs
+from ..statics.sifs import solution_sifs
 
 if TYPE_CHECKING:  # annotations only: the model imports this module, not the reverse
     from ..statics.coupled import CoupledElasticity
@@ -146,13 +146,9 @@ class CoupledSolution:
         def grad(x: np.ndarray) -> np.ndarray:
             return self.mls.tabulate(x).gradient(self.coefficients)
 
-        if self.body_forces and options.get("acceleration") is None:  # their domain term
-            options["acceleration"] = body_force_acceleration(
-                self.body_forces, self.u.function_space, material or self.material
-            )
         return solution_sifs(
             grad, material or self.material, self.patch.cracks, self.patch, crack, tip, radius,
-            **options,
+            body=(self.body_forces, self.u.function_space), **options,
         )  # fmt: skip
 
     def evaluate_at_quadrature(self, q: QuadraturePoints) -> tuple[np.ndarray, np.ndarray]:

@@ -23,7 +23,7 @@ node carries one (the default placement puts particles on the patch border's nod
 ``placement="vertices"`` on the nodes): Johnson's coincident particles of sec. 5.1.1, with links
 of length zero. Otherwise (a grid that does not meet Gamma_I, ``placement="grid"``) ``"layer"``
 refuses the patch, by the first interface node without a particle: a linear field then missed by
-14-29 % on curved patches, not converging (:class:`MasterSlaveLinks`). ``slaves="first-layer"``
+up to 29 % on a disc patch, not converging (:class:`MasterSlaveLinks`). ``slaves="first-layer"``
 takes the paper's variant there, the particles of the first layer: the particles "adjacent to
 the FEM model" (sec. 5.1.2, Figure 1), i.e. those nearest to some stretch of Gamma_I, whose
 Voronoi cells cut the interface, so that no other particle lies between a slave and the FE
@@ -202,8 +202,8 @@ class MasterSlaveLinks:
             ``"layer"`` when an interface FE node has no particle on it. With the first layer
             off Gamma_I the coupling is not reliably convergent: a linear field on a disc patch
             of triangles with a grid of spacing 1.5 h missed by 13.6, 16.8 and 17.7 % at n = 8,
-            16, 32 (14 % to 29 % on quadrilaterals), where the default placement, which puts
-            particles on Gamma_I, missed by 2.7, 1.2 and 0.5 %.
+            16, 32 (0.2, 28.9 and 9.6 % on quadrilaterals), where the default placement, which
+            puts particles on Gamma_I, missed by 2.7, 1.2 and 0.5 %.
 
     Attributes:
         spacing: The particle spacing ``s`` (median nearest-neighbour distance).
@@ -305,8 +305,8 @@ class MasterSlaveLinks:
                     f"FE node(s) on the interface carry no particle, first {nodes[k]} (nearest "
                     f"particle {gap[k]:.3e} away, spacing {self.spacing:.3e}), so the slaves "
                     "would be a particle layer off the interface, rigidly linked to it; that "
-                    "is not reliably convergent (a linear field missed by 14-29 % on curved "
-                    "patches). Use the default placement ('conforming', particles on the patch "
+                    "is not reliably convergent (a linear field missed by up to 29 % on a disc "
+                    "patch). Use the default placement ('conforming', particles on the patch "
                     "border) or 'vertices', another coupling, or slaves='first-layer' for the "
                     "paper's layer wherever it lies"
                 )
@@ -436,7 +436,7 @@ def solve_master_slave(
     active = fe_active(problem)
     held, held_values = strong_dofs(problem, is_bc, ubc)
 
-    slaves = getattr(problem, "slaves", "layer") if slaves is None else slaves
+    slaves = problem.slaves if slaves is None else slaves
     links = raise_on_all_ranks(comm, lambda: MasterSlaveLinks(problem, held, held_values, slaves))
     patch_bc, dq, dtabs = outside_slave_layer(problem, links, patch_bc, dq, dtabs)
     T_pf, S_loc, _, g_rows, g_vals, ml = _reduction(

@@ -250,8 +250,9 @@ def master_slave_system(problem: CoupledElasticity, tables: dict | None = None) 
     _, patch_bc, dq, dtabs, ubc, is_bc = essential_conditions(problem)
     active = fe_active(problem)
     held, held_values = strong_dofs(problem, is_bc, ubc)
-    slaves = getattr(problem, "slaves", "layer")  # "first-layer": the paper's layer off Gamma_I
-    links = raise_on_all_ranks(comm, lambda: MasterSlaveLinks(problem, held, held_values, slaves))
+    links = raise_on_all_ranks(
+        comm, lambda: MasterSlaveLinks(problem, held, held_values, problem.slaves)
+    )
     patch_bc, dq, dtabs = outside_slave_layer(problem, links, patch_bc, dq, dtabs)
     sl = links.slaves
     own = np.flatnonzero(P.owner[sl] == comm.rank)

@@ -200,10 +200,10 @@ def body_load_vectors(
     if particle_rule is not None:
         gdim = particle_rule[0].points.shape[1]
         f_p = np.zeros(particle_rule[1].shape[1] * gdim)
+    missing = (particle_rule is not None and particle_stress is None) or (
+        interface_rule is not None and interface_stress is None
+    )
     for force in forces:
-        missing = (particle_rule is not None and particle_stress is None) or (
-            interface_rule is not None and interface_stress is None
-        )
         if force.has_stress and missing:
             raise ValueError(
                 "a load with a stress S : grad(v) (from a dx integral of L) reached a "

@@ -96,7 +96,7 @@ from .history import SolveHistory
 from .newton import NewtonOptions
 from .petsc import BlockSystem, SolverOptions, create_aij, create_vector, solver_options
 from .sides import BlockProblem, ParticleSide, particle_band_factor, solve_built
-from .sifs import body_force_acceleration, solution_sifs
+from .sifs import solution_sifs
 
 if TYPE_CHECKING:  # annotations only
     import dolfinx.mesh
@@ -215,13 +215,9 @@ class EFGSolution:
                 "the model has no cracks: give EFGElasticity(..., cracks=[crack]) to compute "
                 "stress intensity factors"
             )
-        if self.body_forces and options.get("acceleration") is None:  # their domain term
-            options["acceleration"] = body_force_acceleration(
-                self.body_forces, None, material or self.material
-            )
         return solution_sifs(
             lambda x: self.evaluate(x)[1], material or self.material, self.cracks, self.domain,
-            crack, tip, radius, **options,
+            crack, tip, radius, body=(self.body_forces, None), **options,
         )  # fmt: skip
 
 

@@ -135,7 +135,7 @@ class FormBodyForce(BodyForce):
         revolved: bool = False,
     ) -> None:
         msh = v.ufl_function_space().mesh
-        self.integrals, self.mesh, self.degree, self.v = list(integrals), msh, degree, v
+        self.integrals, self.mesh, self.degree = list(integrals), msh, degree
         self._interpolant: dolfinx.fem.Function | None = None  # at_points' P1 interpolant
         #: The integrands carry the ``2 pi r`` of an axisymmetric model: the loads per unit
         #: volume are theirs over ``2 pi r`` (the couplings' rules and weights are revolved).
@@ -148,9 +148,8 @@ class FormBodyForce(BodyForce):
         parts = [split_test_gradient(itg.integrand(), v, gdim) for itg in self.integrals]
         #: Whether an integrand holds ``grad(v)``: a stress each side integrates with its
         #: stiffness's test gradients (:class:`~dolfinx_meshfree.physics.body_loads.StressRule`).
-        self.has_stress = any(
-            _gradients_of(expand_derivatives(i.integrand()), v)[0] for i in integrals
-        )
+        self.has_stress = any(S is not None for _, S in parts)
+        self._forces = [b for b, _ in parts]  # b of each integral (at_points' interpolant)
         # points off the standard rule (cut cells, the stiffness's own rules): the fit rule
         fitting = cut or self.has_stress
         X_fit = _compat.quadrature_rule(cname, 2 * degree + 2)[0] if fitting else None
@@ -217,8 +216,7 @@ class FormBodyForce(BodyForce):
         dofs = _compat.dofmap_array(V)  # P1/Q1: the cell's vertices in reference order
         f = dolfinx.fem.Function(V)
         total = np.zeros((f.x.array.size // d, d))
-        for itg, (_, _, on) in zip(self.integrals, self._expressions, strict=True):
-            b = split_test_gradient(itg.integrand(), self.v, d)[0]
+        for b, (_, _, on) in zip(self._forces, self._expressions, strict=True):
             expr = _compat.create_expression(b, vertices, msh)  # collective
             cells = np.flatnonzero(on[: dofs.shape[0]])
             part = np.zeros_like(total)

@@ -423,37 +423,39 @@ def _check_arguments(a, L, bcs, patch, material, coupling, options):
                 "from the law, not from a, so the facet term would be lost; with a law with "
                 "state, a may hold cell integrals only"
             )
+    v = L.arguments()[0]
     for itg in L.integrals():
         if itg.integral_type() not in ("cell", "exterior_facet"):
             raise ValueError(
                 f"L has a {itg.integral_type()} integral; only dx and ds integrals are supported"
             )
-        v = L.arguments()[0]
-        if itg.integral_type() != "cell" and _differentiates(itg.integrand(), v):
-            raise ValueError(
-                f"L's {itg.integral_type()} integral (subdomain {itg.subdomain_id()!r}) "
-                "differentiates the test function; on a boundary write the load as a traction "
-                "dot(t, v) ds (a stress inner(S, grad(v)) belongs in a dx integral)"
-            )
-        reason = load_integrand_error(itg.integrand(), v) if itg.integral_type() == "cell" else None
-        if reason is not None:
-            raise ValueError(f"L's dx integral (subdomain {itg.subdomain_id()!r}): {reason}")
-        stress = itg.integral_type() == "cell" and _differentiates(itg.integrand(), v)
-        if stress and is_stateful(material):
-            raise ValueError(
-                f"L's dx integral (subdomain {itg.subdomain_id()!r}) holds grad(v) (a thermal or "
-                f"initial stress) and material={type(material).__name__} is a law with state: "
-                "its return map takes the stress from the total strain, so the stress S of L "
-                "would not enter it (a free thermal expansion would yield or damage); an "
-                "initial stress is supported with LinearElastic only"
-            )
-        if stress and is_axisymmetric(material):
-            raise ValueError(
-                f"L's dx integral (subdomain {itg.subdomain_id()!r}) holds grad(v) and material "
-                "is axisymmetric: an initial or thermal stress in (r, z) needs the hoop term "
-                "S_tt u_r / r, which the couplings' load rules do not carry; only body forces "
-                "dot(b, v) are supported in axisymmetric models"
-            )
+        kind = "dx" if itg.integral_type() == "cell" else itg.integral_type()
+        where = f"L's {kind} integral (subdomain {itg.subdomain_id()!r})"
+        if _differentiates(itg.integrand(), v):  # a stress S : grad(v), in dx only
+            if itg.integral_type() != "cell":
+                raise ValueError(
+                    f"{where} differentiates the test function; on a boundary write the load "
+                    "as a traction dot(t, v) ds (a stress inner(S, grad(v)) belongs in a dx "
+                    "integral)"
+                )
+            reason = load_integrand_error(itg.integrand(), v)
+            if reason is not None:
+                raise ValueError(f"{where}: {reason}")
+            if is_stateful(material):
+                raise ValueError(
+                    f"{where} holds grad(v) (a thermal or initial stress) and material="
+                    f"{type(material).__name__} is a law with state: its return map takes the "
+                    "stress from the total strain, so the stress S of L would not enter it (a "
+                    "free thermal expansion would yield or damage); an initial stress is "
+                    "supported with LinearElastic only"
+                )
+            if is_axisymmetric(material):
+                raise ValueError(
+                    f"{where} holds grad(v) and material is axisymmetric: an initial or thermal "
+                    "stress in (r, z) needs the hoop term S_tt u_r / r, which the couplings' "
+                    "load rules do not carry; only body forces dot(b, v) are supported in "
+                    "axisymmetric models"
+                )
         if itg.subdomain_id() == "otherwise":
             raise ValueError("L uses an 'otherwise' subdomain; name the subdomain ids instead")
     for i, bc in enumerate(bcs):

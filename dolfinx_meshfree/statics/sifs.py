@@ -267,6 +267,7 @@ def solution_sifs(
     radius: float | Sequence | np.ndarray | None = None,
     check: bool = True,
     probe: bool = True,
+    body: tuple[Sequence[BodyForce], dolfinx.fem.FunctionSpace | None] | None = None,
     **options,
 ) -> StressIntensityFactors:
     """K_I, K_II and J at a tip of ``crack`` from the gradient ``grad_u`` of a solved field
@@ -287,6 +288,8 @@ def solution_sifs(
             the domains alone; for callers that use K only, e.g. the growth criterion checked
             every few steps of explicit dynamics: beside three domains the probe's two annuli
             are 2/5 of the interaction integral's points).
+        body: A static solution's ``(body forces, FE space or None)``: their domain term
+            (:func:`body_force_acceleration`), unless ``options`` give an ``acceleration``.
         options: ``inner``, ``weight``, ``points`` and ``panels`` (with the default domains
             :data:`DEFAULT_POINTS` in :data:`DEFAULT_PANELS` panels; with an explicit
             ``radius``, ``interaction_integral``'s 8 x 32 in one panel, as before),
@@ -297,6 +300,8 @@ def solution_sifs(
     options = dict(options)
     acceleration = options.pop("acceleration", None)
     plan = sif_domains(material, cracks, domain, crack, tip, radius, **options)
+    if acceleration is None and body is not None:  # after the checks of the input
+        acceleration = body_force_acceleration(*body, material)
     options = dict(plan.options, acceleration=acceleration)
     x_tip, direction, keep = plan.tip, plan.direction, plan.keep
     out = raise_on_all_ranks(

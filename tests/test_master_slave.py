@@ -431,6 +431,8 @@ def test_layer_off_the_interface_is_refused_and_why():
             with pytest.raises(ValueError, match="not reliably convergent"):
                 problem.solve()
             problem.model.slaves = "first-layer"
+            # the choice goes with the model onto a rebuilt patch (crack growth, adapt)
+            assert problem.with_patch(patch).model.slaves == "first-layer"
         sol = problem.solve()
         errors[placement] = np.abs(sol.displacement(grid) - grid @ G.T).max() / np.abs(G).max()
     assert 0.084 <= errors["grid"] <= 0.34, errors

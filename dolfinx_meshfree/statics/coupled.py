@@ -650,4 +650,5 @@ def on_patch(model: CoupledElasticity, patch: ParticlePatch) -> CoupledElasticit
         new.body_forces = list(model.body_forces)
     for c in model.cohesive:
         new.add_cohesive(c.crack, c.law, c.segments, c.points)
+    new.slaves = model.slaves  # set after construction: not among the constructor's options
     return new

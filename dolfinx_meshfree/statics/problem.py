@@ -354,10 +354,12 @@ class CoupledLinearProblem:
         (:class:`~dolfinx_meshfree.QuasiStaticCrackGrowth` with ``adapt``). The patch's cracks
         are the ones it was given (``patch.add_crack``)."""
         options, prefix = self._petsc
-        return CoupledLinearProblem(
+        new = CoupledLinearProblem(
             self.a, self.L, self.bcs, patch, self.material, self.coupling, options, prefix,
             **self._options,
         )  # fmt: skip
+        new.problem.slaves = self.problem.slaves  # set on the model, not a constructor option
+        return new
 
     @property
     def model(self) -> CoupledElasticity:

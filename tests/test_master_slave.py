@@ -437,3 +437,28 @@ def test_layer_off_the_interface_is_refused_and_why():
         errors[placement] = np.abs(sol.displacement(grid) - grid @ G.T).max() / np.abs(G).max()
     assert 0.084 <= errors["grid"] <= 0.34, errors
     assert errors["conforming"] <= 0.024, errors
+
+
+def test_dynamics_takes_the_models_slaves():
+    """``ExplicitDynamics.coupled`` reads ``model.slaves``: a grid patch (no particle on the
+    interface) is refused by default, in dynamics as in statics, and runs once the model takes
+    ``"first-layer"`` (before, dynamics refused it whatever the model said)."""
+    n = 8
+    msh = dolfinx.mesh.create_rectangle(
+        MPI.COMM_WORLD, [np.zeros(2), np.array([2.0, 2.0])], [n, n], dolfinx.mesh.CellType.triangle
+    )
+    V = _compat.vector_function_space(msh)
+    cells = cells_where(msh, lambda m: np.hypot(m[:, 0] - 1.0, m[:, 1] - 1.0) < 0.6)
+    patch = mf.ParticlePatch(msh, cells, 3.0 / n, placement="grid")
+    law = mf.LinearElastic(1000, 0.3, rho=1.0)
+    problem = mf.CoupledElasticity(V, patch, law, coupling="master-slave")
+    with pytest.raises(ValueError, match="first-layer"):
+        mf.ExplicitDynamics.coupled(problem)
+    problem.slaves = "first-layer"
+    dyn = mf.ExplicitDynamics.coupled(problem)
+    # a rigid translation is carried exactly by the links (first-layer or not)
+    dyn.set_initial(displacement=lambda x: np.tile([1e-3, -2e-3], (len(x), 1)))
+    dyn.run(5 * dyn.stable_time_step())
+    pts = patch.particles.positions
+    assert np.abs(dyn.displacement_at(pts) - [1e-3, -2e-3]).max() <= 1e-12
+    dyn.destroy()

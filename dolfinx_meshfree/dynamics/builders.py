@@ -613,7 +613,7 @@ def build_coupled(
     particle_mass: str = "row-sum",
     fixed_facets: npt.ArrayLike | None = None,
     integration: str = "cells",
-    slaves: str = "layer",
+    slaves: str | None = None,
     material: Material | None = None,
     fe_dilatation: str | None = None,
 ) -> Model:
@@ -633,10 +633,11 @@ def build_coupled(
         integration: ``"cells"`` or ``"stress-points"`` (Rabczuk, Belytschko & Xiao 2004;
             lagrange, edge-to-edge and master-slave), see :meth:`CoupledElasticity.operators
             <dolfinx_meshfree.CoupledElasticity.operators>`.
-        slaves: master-slave: ``"layer"`` or ``"coincident"`` (Johnson's particles on the
-            interface nodes, Rabczuk et al. 2006, eq. 15–16: the node and its particle share
-            the acceleration ``(F_K + F_P) / (m_K + m_P)``, which the reduction ``T^T M T``,
-            ``T^T f`` below gives).
+        slaves: master-slave: ``None`` (the static model's ``slaves``: ``"layer"`` unless it
+            was set to ``"first-layer"``), ``"layer"``, ``"first-layer"`` or ``"coincident"``
+            (Johnson's particles on the interface nodes, Rabczuk et al. 2006, eq. 15–16: the
+            node and its particle share the acceleration ``(F_K + F_P) / (m_K + m_P)``, which
+            the reduction ``T^T M T``, ``T^T f`` below gives).
         material: A finite-strain law (:class:`~dolfinx_meshfree.NeoHookean`,
             :class:`~dolfinx_meshfree.SaintVenantKirchhoff`) whose linear twin is the problem's
             material: the internal force is then the total-Lagrangian one of both sides
@@ -652,6 +653,8 @@ def build_coupled(
     """
     if fe_dilatation is None:  # the static problem's choice
         fe_dilatation = getattr(problem, "fe_dilatation", None)
+    if slaves is None:  # the static model's choice (the hybrid has none: its own sums)
+        slaves = getattr(problem, "slaves", "layer")
     if isinstance(problem, HybridElasticity):  # the hybrid SPH-FE coupling: its own builder
         if (integration, slaves) != ("cells", "layer"):
             raise ValueError(

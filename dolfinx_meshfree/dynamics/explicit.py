@@ -296,7 +296,7 @@ class ExplicitDynamics(StateQueries, Struck):
         multiplier_solver: str | None = None,
         fixed_facets: npt.ArrayLike | None = None,
         integration: str = "cells",
-        slaves: str = "layer",
+        slaves: str | None = None,
         material: Material | None = None,
         crack_contact: CrackContact | None = None,
         fe_dilatation: str | None = None,
@@ -307,10 +307,12 @@ class ExplicitDynamics(StateQueries, Struck):
         quadrature, interface shape functions). Give loads with :meth:`add_traction` and
         :meth:`add_body_force`. ``integration="stress-points"``: Lagrangian-kernel stress
         points (lagrange, edge-to-edge, master-slave); ``slaves="coincident"``: Johnson's
-        coupling (master-slave, Rabczuk et al. 2006, eq. 15–16). ``material``: a finite-strain
-        law whose linear twin is the problem's material (every coupling; the hybrid with HA-F);
-        ``None``: the law the problem was built with (a ``CoupledElasticity`` built on a
-        ``NeoHookean`` runs at finite strain), ``problem.material`` its small-strain twin.
+        coupling (master-slave, Rabczuk et al. 2006, eq. 15–16); ``None``: the static model's
+        ``slaves`` (``"layer"`` unless ``model.slaves = "first-layer"`` was set). ``material``:
+        a finite-strain law whose linear twin is the problem's material (every coupling; the
+        hybrid with HA-F); ``None``: the law the problem was built with (a
+        ``CoupledElasticity`` built on a ``NeoHookean`` runs at finite strain),
+        ``problem.material`` its small-strain twin.
         ``crack_contact``: contact of the patch's crack faces, as in :meth:`efg`. The problem's
         cohesive faces (``add_cohesive``) carry their law
         (:mod:`~dolfinx_meshfree.dynamics.cohesive_faces`). ``fe_dilatation``: a rate-form

@@ -258,7 +258,7 @@ def test_material_differing_only_off_the_patch_is_accepted():
         ("derivative", r"differentiates the test function"),
         ("coupling", r"coupling='glue' is not available"),
         ("not-affine", r"not affine in the FacetNormal"),
-        ("lone-node", r"node\(s\) inside the particle patch"),
+        ("close-pins", r"two of them 0\.5 apart \(at \[1\.5, 0\.5\] and \[2\.0, 0\.5\]\)"),
         ("facet-a", r"exterior facet\(s\) of a patch cell, e\.g\. the facets at"),
         ("interior-a", r"a has a interior_facet integral"),
         ("material", r"material must be a LinearElastic"),
@@ -276,11 +276,16 @@ def test_bad_input(model, case, match):
     elif case == "not-affine":
         n = ufl.FacetNormal(msh)
         L = n[0] * n[0] * v[0] * ufl.ds
-    elif case == "lone-node":
+    elif case == "close-pins":  # single nodes of patch cells held (a pin each): held by the
+        # particle field at points, which need a particle spacing between them (here 1.0)
         dofs = dolfinx.fem.locate_dofs_geometrical(
             V, lambda x: np.isclose(x[0], 1.5) & np.isclose(x[1], 0.5)
         )
-        bcs = [*bcs, dolfinx.fem.dirichletbc(np.zeros(2), dofs, V)]
+        far = dolfinx.fem.locate_dofs_geometrical(
+            V, lambda x: np.isclose(x[0], 2.0) & np.isclose(x[1], 0.5)
+        )
+        bcs = [*bcs, *(dolfinx.fem.dirichletbc(np.zeros(2), d, V) for d in (dofs, far))]
+        patch = mf.ParticlePatch(msh, cells_where(msh, lambda m: m[:, 0] > 1.0), 1.0)
     elif case == "facet-a":  # an elastic support on the patch's facets (on FE facets: taken)
         u = ufl.TrialFunction(V)
         a = a + ufl.dot(u, v) * ufl.ds

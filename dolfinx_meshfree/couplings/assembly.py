@@ -196,9 +196,11 @@ def essential_conditions(
 
     Returns:
         ``(fe_bc, patch_bc, quadratures, tables, ubc, is_bc)``: the ``(facets, value)`` pairs
-        on FE facets (strong) and on patch facets, the patch facets' quadratures and particle
-        tables (for :func:`~dolfinx_meshfree.statics.efg.facet_multipliers`), the FE values as a
-        Function and the flag of every local FE node fixed strongly (collective).
+        on FE facets (strong) and on patch facets (then the held points of
+        ``problem.point_dirichlet``, with no facets and a one-point rule each), the patch
+        facets' quadratures and particle tables (for
+        :func:`~dolfinx_meshfree.statics.efg.facet_multipliers`), the FE values as a Function
+        and the flag of every local FE node fixed strongly (collective).
     """
     V, comm = problem.V, problem.patch.comm
     msh = V.mesh
@@ -224,6 +226,10 @@ def essential_conditions(
     dq = [patch_facet_rule(problem, c[0]) for c in patch_bc]
     # multipliers = reaction tractions (axisymmetric: 2 pi r ds, the axis kept)
     dq = [raise_on_all_ranks(comm, lambda d=d: revolved_if(d, problem.material, True)) for d in dq]
+    # nodes of patch cells held alone (point_conditions): collocated multipliers
+    for pc in problem.point_dirichlet:
+        patch_bc.append((np.zeros(0, dtype=np.int32), pc.value, pc.components))
+        dq.append(pc.rule())
     dtabs = [raise_on_all_ranks(comm, lambda d=d: problem.mls.tabulate(d.points, 0)) for d in dq]
     gdim = msh.geometry.dim
     ubc = dolfinx.fem.Function(V)

@@ -390,6 +390,8 @@ class CoupledElasticity:
         self.strong: list[tuple[np.ndarray, np.ndarray]] = []
         #: ``(facets, value, components)`` of :meth:`add_dirichlet` by component (all facets)
         self.component_dirichlet: list[tuple[np.ndarray, VectorFunction, tuple[int, ...]]] = []
+        #: Held single nodes of patch cells (``couplings.point_conditions``; CoupledLinearProblem)
+        self.point_dirichlet: list = []
         #: Body forces (``physics.body_loads``): :meth:`set_body_force`'s or a problem's ``L``'s.
         self.body_forces: list = []
         #: Where the last solve with state ended, the next's start (:mod:`.history`).
@@ -456,8 +458,7 @@ class CoupledElasticity:
 
         c = raise_on_all_ranks(comm, check)
         # the FE nodes' components held strongly, by dof, on every facet (as a DirichletBC on
-        # V.sub(i) does): FE facets, and patch facets whose nodes FE cells also carry (the
-        # bridging band)
+        # V.sub(i) does): FE facets, and patch facets whose nodes FE cells carry (bridging band)
         V = self.V
         fdim = V.mesh.topology.dim - 1
         nodes = node_flags(V, dolfinx.fem.locate_dofs_topological(V, fdim, facets))
@@ -465,8 +466,7 @@ class CoupledElasticity:
         flags[np.ix_(nodes, list(c))] = True
         x = V.tabulate_dof_coordinates()[: nodes.size, :gdim]
         values = np.zeros((nodes.size, gdim))
-        # on every rank, with or without nodes: ``value`` may be collective (a DOLFINx
-        # Function evaluated at points, as CoupledLinearProblem passes)
+        # on every rank, with or without nodes: ``value`` may be collective (a Function)
         values[nodes] = np.asarray(value(x[nodes]), dtype=float).reshape(-1, gdim)
         self.strong.append((flags, values))
         self.component_dirichlet.append((facets, value, c))

@@ -52,15 +52,19 @@ from typing import Any
 import basix
 import dolfinx
 import numpy as np
+import scipy.sparse as sp
 import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 from ufl.corealg.traversal import unique_pre_traversal
 
 from .. import _compat
 from ..approx.fe_points import evaluate_fe_function
 from ..couplings.base import facet_nodes, interface_node_flags, node_flags
+from ..couplings.point_conditions import PointCondition, check_point_spacing
+from ..geometry.crack import particle_spacing
 from ..geometry.cut_cells import cut_facet_quadrature
 from ..geometry.patch import ParticlePatch
 from ..geometry.quadrature import (
@@ -201,7 +205,7 @@ class CoupledLinearProblem:
         """Strong FE conditions by node; particle constraints on fully constrained patch facets
         (the entries it adds to the model are recorded, to be replaced when the values change)."""
         problem, V, patch = self.problem, self.V, self.patch
-        names = ("strong", "dirichlet", "component_dirichlet")
+        names = ("strong", "dirichlet", "component_dirichlet", "point_dirichlet")
         before = {name: list(getattr(problem, name)) for name in names}
         self._apply_bcs_now(problem, V, patch)
         self._bc_entries = {
@@ -238,6 +242,11 @@ class CoupledLinearProblem:
         f2c = msh.topology.connectivity(fdim, fdim + 1)
         beside_patch = patch.in_patch[np.asarray(f2c.array)[np.asarray(f2c.offsets)[facets]]]
         on = fixed[nodes].all(axis=1) & (beside_patch | gamma[nodes].any(axis=1))
+        # a held stretch of fewer than gdim facets with a node only particles carry: its
+        # multipliers (one per facet) hold its mean, not its rotation; held at its nodes instead
+        # (before, a corner held with its neighbour was free to rotate, without a word)
+        active = node_flags(problem.V, _compat.dofmap_array(V)[patch.fe_cells].ravel())
+        on &= ~short_stretches(V, nodes, on, active)
         bc_facets = facets[on]
         g = dolfinx.fem.Function(V)
         g.x.array[:] = values.ravel()
@@ -248,46 +257,38 @@ class CoupledLinearProblem:
         # multiplier on that component only (Belytschko et al. 1995, eq. 2.6 by component);
         # FE facets with a node on the interface too (the ramps' interface cells: the particle
         # part of their blended functions held by component there)
-        on_component = np.zeros(len(facets), dtype=bool)
+        covered = np.zeros((n_local, gdim), dtype=bool)  # dofs a held facet's multiplier holds
         for i in range(gdim):
             on_i = count[nodes, i].all(axis=1) & ~on & (beside_patch | gamma[nodes].any(axis=1))
-            on_component |= on_i
+            on_i &= ~short_stretches(V, nodes, on_i, active)
+            covered[:, i] = node_flags(problem.V, nodes[on | on_i].ravel())
             if patch.comm.allreduce(int(on_i.sum())):
                 problem.add_dirichlet(
                     facets[on_i], lambda x, g=g: evaluate_fe_function(g, x), components=(i,)
                 )
-        # constrained nodes that neither an FE cell nor a constrained patch facet carries
-        active = node_flags(problem.V, _compat.dofmap_array(V)[patch.fe_cells].ravel())
-        # (a node fixed whole by two component conditions sits on their facets: a corner)
-        on_facet = node_flags(problem.V, nodes[on | on_component].ravel())
+        # held dofs that neither an FE cell nor a held patch facet of their component carries
+        # (before, a node on a facet held in x lost its y: a pinned corner beside a roller)
         n_owned = V.dofmap.index_map.size_local
         on_boundary = node_flags(problem.V, nodes.ravel())
-        lone = np.flatnonzero(((fixed | held.any(axis=1)) & ~active & ~on_facet)[:n_owned])
-        inner = np.flatnonzero((held.any(axis=1) & ~on_boundary)[:n_owned])
+        lone = (fixed[:, None] | held) & ~active[:, None] & ~covered
+        lone[n_owned:] = False
+        # a component held off the boundary at an interface node: the FE row is held, the
+        # particles' by none of the coupling's conditions
+        inner = np.flatnonzero((held.any(axis=1) & ~on_boundary & gamma)[:n_owned])
         xi = V.tabulate_dof_coordinates()[inner, :gdim]
 
         def check_inner() -> None:
             if inner.size:
                 raise ValueError(
-                    f"bcs on a subspace V.sub(i) hold {inner.size} node(s) off the boundary, "
-                    f"e.g. at {xi[:3].round(6).tolist()} (on the FE-patch interface or "
-                    "inside the body): conditions on one component are supported on exterior "
-                    "facets only (symmetry planes, rollers); locate the dofs on boundary facets"
+                    f"bcs on a subspace V.sub(i) hold {inner.size} node(s) of the FE-patch "
+                    f"interface off the boundary, e.g. at {xi[:3].round(6).tolist()}: hold a "
+                    "whole node there (every component), a node off the interface, or locate "
+                    "the dofs on boundary facets"
                 )
 
         raise_on_all_ranks(patch.comm, check_inner)
-        xy = V.tabulate_dof_coordinates()[lone, :gdim]
-
-        def check() -> None:
-            if lone.size:
-                raise ValueError(
-                    f"bcs constrain {lone.size} node(s) inside the particle patch, e.g. at "
-                    f"{xy[:3].round(6).tolist()}: particles can only be constrained on exterior "
-                    "facets of the patch; leave these cells out of the patch or constrain a whole "
-                    "boundary facet"
-                )
-
-        raise_on_all_ranks(patch.comm, check)
+        # nodes only patch cells carry, held alone (a pinned corner): collocated multipliers
+        problem.point_dirichlet += point_conditions(V, patch, lone, values)
 
     # -- loads ----------------------------------------------------------------------------------
 
@@ -481,6 +482,68 @@ def _form_values(form: ufl.Form) -> np.ndarray:
 
 def _concatenate(arrays: list[np.ndarray]) -> np.ndarray:
     return np.concatenate([np.asarray(x, dtype=float).ravel() for x in arrays] + [np.zeros(0)])
+
+
+def short_stretches(
+    V: dolfinx.fem.FunctionSpace, nodes: np.ndarray, held: np.ndarray, active: np.ndarray
+) -> np.ndarray:
+    """Flags of the ``held`` facets (rows of ``nodes``, local node indices) that lie in a
+    connected stretch of fewer than ``gdim`` held facets (over every rank) and have a node that
+    no FE cell carries (``active`` false): one piecewise-constant multiplier per facet and
+    component holds a stretch's mean, and fewer than ``gdim`` of them leave it free to rotate
+    (collective, the same answer on every partition)."""
+    gdim = V.mesh.geometry.dim
+    imap = V.dofmap.index_map
+    local = np.asarray(nodes[held], dtype=np.int32).ravel()
+    ids = np.asarray(imap.local_to_global(local), dtype=np.int64).reshape(-1, nodes.shape[1])
+    ids = np.sort(ids, axis=1)
+    every = np.concatenate(V.mesh.comm.allgather(ids))
+    if not len(every):
+        return np.zeros(len(nodes), dtype=bool)
+    every = np.unique(every, axis=0)  # a facet seen by two ranks counts once
+    uniq, inv = np.unique(every, return_inverse=True)
+    inv = inv.reshape(every.shape)
+    k = every.shape[1]
+    graph = sp.coo_matrix(
+        (np.ones(inv.size * k), (np.repeat(inv, k, axis=1).ravel(), np.tile(inv, (1, k)).ravel())),
+        shape=(uniq.size, uniq.size),
+    )
+    label = connected_components(graph, directed=False)[1]
+    size = np.bincount(label[inv[:, 0]])  # facets per stretch
+    mine = size[label[np.searchsorted(uniq, ids[:, 0])]] < gdim if len(ids) else np.zeros(0, bool)
+    out = np.zeros(len(nodes), dtype=bool)
+    out[np.flatnonzero(held)] = mine & (~active[nodes[held]]).any(axis=1)
+    return out
+
+
+def point_conditions(
+    V: dolfinx.fem.FunctionSpace,
+    patch: ParticlePatch,
+    lone: np.ndarray,
+    values: np.ndarray,
+) -> list[PointCondition]:
+    """The :class:`~dolfinx_meshfree.couplings.point_conditions.PointCondition` of the held
+    dofs flagged in ``lone`` (num local nodes, gdim), one per set of components held at a node,
+    the same sets on every rank (collective; refused, on every rank, for points closer than a
+    particle spacing)."""
+    gdim = V.mesh.geometry.dim
+    at = np.flatnonzero(lone.any(axis=1))
+    comps = [tuple(int(i) for i in np.flatnonzero(lone[k])) for k in at]
+    kinds = sorted(set().union(*patch.comm.allgather(set(comps))))
+    if not kinds:
+        return []
+    x = V.tabulate_dof_coordinates()[at, :gdim]
+    spacing = particle_spacing(patch)
+    check_point_spacing(patch.comm, x, spacing)
+    dm = _compat.dofmap_array(V)
+    cells = np.flatnonzero(patch.in_patch[: len(dm)])
+    cell_of = np.full(values.shape[0], -1, dtype=np.int32)
+    cell_of[dm[cells].ravel()] = np.repeat(cells, dm.shape[1])
+    out = []
+    for kind in kinds:
+        mine = np.array([c == kind for c in comps], dtype=bool)
+        out.append(PointCondition(x[mine], values[at[mine]], cell_of[at[mine]], kind, spacing))
+    return out
 
 
 def _among(entry: object, entries: list) -> bool:

@@ -1,0 +1,89 @@
+"""Essential conditions at points of the particle patch: a ``DirichletBC`` that holds single
+nodes of patch cells (a pinned corner, the usual FEniCSx way of removing the rigid motions of a
+body loaded by tractions alone).
+
+A node that no FE cell carries and no held exterior facet contains has no FE dof to hold: only
+the particle field lives there. Its condition ``u_P(x_k)_i = ubar_i(x_k)`` is collocated at the
+node by one multiplier per point and held component, the rows ``s w phi_J(x_k)`` beside the
+facet multipliers' ``s int_f phi_J`` (:func:`~dolfinx_meshfree.statics.efg.facet_multipliers`;
+the collocation of Rabczuk et al. 2006, sec. 5.4, eq. 111, here for an essential condition).
+``s w`` only scales the rows (``s``: the material's modulus, ``w``: the particle spacing, a
+length as a facet's measure); the multiplier is the point force the condition carries.
+
+Each row needs particles of its own: two held points closer than one particle spacing can make
+the rows dependent (more points than particles about them) and are refused, naming them
+(:func:`check_point_spacing`). A held node on a held exterior facet of the patch keeps the facet
+multiplier, and a node of an FE cell is held strongly, as before.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..geometry.quadrature import QuadraturePoints
+
+if TYPE_CHECKING:  # annotations only
+    from mpi4py import MPI
+
+__all__ = ["PointCondition", "check_point_spacing"]
+
+
+@dataclass(frozen=True)
+class PointCondition:
+    """``u_P(x_k)_i = values[k, i]`` for ``i`` in ``components`` at this rank's ``points``.
+
+    Attributes:
+        points: (m, gdim) held nodes owned by this rank (m may be 0 on some ranks).
+        values: (m, gdim) their values (the components not held are ignored).
+        cells: (m,) a local patch cell of each point.
+        components: The held components, e.g. ``(0, 1)``, or ``(1,)`` for ``V.sub(1)``.
+        weight: The rows' length scale ``w`` (the particle spacing).
+    """
+
+    points: np.ndarray
+    values: np.ndarray
+    cells: np.ndarray
+    components: tuple[int, ...]
+    weight: float
+
+    def rule(self) -> QuadraturePoints:
+        """The points as a one-point "facet" rule each, weight ``w``: the entities are
+        ``-1, -2, ...`` (one multiplier per point; negative, so that the 3D facet check of
+        :func:`~dolfinx_meshfree.statics.efg.check_multiplier_facets` leaves them out)."""
+        m = len(self.points)
+        return QuadraturePoints(
+            points=np.asarray(self.points, dtype=float),
+            weights=np.full(m, float(self.weight)),
+            cells=np.asarray(self.cells, dtype=np.int32),
+            normals=None,
+            entities=-1 - np.arange(m, dtype=np.int64),
+        )
+
+    def value(self, x: np.ndarray) -> np.ndarray:
+        """The values at ``x``, which must be :attr:`points` (the rule's points, in order)."""
+        if len(x) != len(self.points) or not np.array_equal(x, self.points):
+            raise ValueError("PointCondition.value is evaluated at its own points only")
+        return np.asarray(self.values, dtype=float)
+
+
+def check_point_spacing(comm: MPI.Comm, points: np.ndarray, spacing: float) -> None:
+    """Refuse held points of the particle field closer than one particle ``spacing`` to each
+    other (collective; every rank raises, naming the pair by its coordinates)."""
+    every = np.concatenate(comm.allgather(np.asarray(points, dtype=float)))
+    if len(every) < 2:
+        return
+    pairs = cKDTree(every).query_pairs(spacing * (1.0 - 1e-9), output_type="ndarray")
+    if len(pairs):
+        a, b = every[pairs[0, 0]], every[pairs[0, 1]]
+        raise ValueError(
+            f"bcs hold {len(every)} single node(s) of the particle patch, two of them "
+            f"{np.linalg.norm(a - b):.6g} apart (at {np.round(a, 6).tolist()} and "
+            f"{np.round(b, 6).tolist()}), closer than the particle spacing {spacing:.6g}: the "
+            "particle field cannot be held at points that its particles do not separate. Hold "
+            "points at least a spacing apart (a pinned corner, a roller point), a whole exterior "
+            "facet, or leave these cells out of the patch"
+        )

@@ -80,7 +80,9 @@ def check_point_spacing(comm: MPI.Comm, points: np.ndarray, spacing: float) -> N
     if len(pairs):
         a, b = every[pairs[0, 0]], every[pairs[0, 1]]
         raise ValueError(
-            f"bcs hold {len(every)} single node(s) of the particle patch, two of them "
+            f"bcs hold {len(every)} node(s) of the particle patch at points (single nodes, or "
+            "the nodes of a held stretch of fewer facets than dimensions, whose facet "
+            "multipliers would leave it free to rotate), two of them "
             f"{np.linalg.norm(a - b):.6g} apart (at {np.round(a, 6).tolist()} and "
             f"{np.round(b, 6).tolist()}), closer than the particle spacing {spacing:.6g}: the "
             "particle field cannot be held at points that its particles do not separate. Hold "

@@ -21,7 +21,6 @@ from dolfinx_meshfree.fracture.frame import TipFrame
 from dolfinx_meshfree.fracture.interaction import interaction_integral
 from dolfinx_meshfree.fracture.williams import WilliamsField
 
-import dolfinx
 import numpy as np
 import pytest
 from conftest import load_demo
@@ -138,18 +137,3 @@ def test_freund_demo_main(shared_dir):
     (rec,) = json.loads(out.read_text())
     assert rec["method"] == "bridging" and len(rec["t"]) == 6 and len(rec["KI"][0]) == 2
     assert rec["max_error"] <= 0.05
-
-
-def test_body_force_refused():
-    """The dynamic integral has no body-force term (statics has): refused by name, not wrong."""
-    msh = dolfinx.mesh.create_rectangle(
-        COMM, [np.array([0.0, -0.5]), np.array([1.0, 0.5])], [10, 10],
-        dolfinx.mesh.CellType.quadrilateral,
-    )  # fmt: skip
-    crack = mf.Crack([[0.0, 0.05], [0.4, 0.05]])
-    dyn = mf.ExplicitDynamics.efg(
-        mf.ParticleSet.from_cells(msh, spacing=0.1), mf.LinearElastic(1000.0, 0.3), cracks=[crack]
-    )
-    dyn.add_body_force(lambda x: np.tile([0.0, -1.0], (len(x), 1)))
-    with pytest.raises(ValueError, match=r"carries 1 body force\(s\) \(add_body_force\)"):
-        dyn.stress_intensity_factors(crack, tip=0)

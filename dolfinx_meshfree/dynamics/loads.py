@@ -73,6 +73,8 @@ class ExternalLoads:
         self.loads: list[tuple[list[PETSc.Vec], Amplitude]] = []
         #: Body forces among :attr:`loads` (integrated with the cell rule, unlike tractions).
         self.body_forces = 0
+        #: ``(b, amplitude)`` of each body force, for the SIFs' term ``-amplitude(t) b / rho``.
+        self.body_fields: list[tuple[VectorFunction, Amplitude]] = []
 
     def at(self, t: float) -> list[tuple[list[PETSc.Vec], float]]:
         """The load vectors with their amplitudes at time ``t``."""
@@ -172,6 +174,7 @@ class ExternalLoads:
         """
         d = self.disc
         self.body_forces += 1
+        self.body_fields.append((force, _one if amplitude is None else amplitude))
         if self.body_load is not None:
             fe, f_p = self.body_load(force)
             parts = []
@@ -193,6 +196,20 @@ class ExternalLoads:
             vec.array[:] = f.mass.array_r * b.ravel() / self.rho
             vecs.append(vec)
         self._add_vectors(vecs, amplitude)
+
+    def body_acceleration(self, t: float, x: np.ndarray) -> np.ndarray | None:
+        """``sum amplitude(t) b(x) / rho`` of the body forces at points ``x`` (m, gdim), the
+        acceleration they would give a free body; ``None`` without body forces (collective
+        when a ``b`` is: a DOLFINx Function evaluated at points)."""
+        if not self.body_fields:
+            return None
+        out = np.zeros((len(x), self.disc.gdim))
+        for force, amplitude in self.body_fields:
+            b = raise_on_all_ranks(
+                self.comm, lambda f=force: vector_values(f, x, name="the body force")
+            )
+            out += amplitude(t) * b.reshape(len(x), -1) / self.rho
+        return out
 
     def _add(self, parts: list, amplitude: Amplitude | None) -> None:
         """Add a load given per field as ``(global dofs, values)`` (any rank may add any dof; a

@@ -6,7 +6,10 @@ interaction integral with the inertia term (Moran & Shih 1987; Belytschko et al.
 The displacement is ``d_n`` and the acceleration the one of the equations of motion at ``t_n``,
 ``a_n = P M^{-1} (f^ext(t_n) - f^int(d_n))``, ``P`` the correction onto ``G a = 0`` in the mass
 metric (Rabczuk et al. 2006, eq. 94–96; :mod:`~dolfinx_meshfree.dynamics.constraint`): the
-acceleration central differences use between ``v_{n-1/2}`` and ``v_{n+1/2}``. Both fields are
+acceleration central differences use between ``v_{n-1/2}`` and ``v_{n+1/2}``. Body forces
+(``add_body_force``) enter as in statics: the balance is ``sigma_ij,j = rho (u_tt - b / rho)``,
+so the inertia term takes ``a - amplitude(t) b / rho`` at its points
+(:meth:`~dolfinx_meshfree.dynamics.loads.ExternalLoads.body_acceleration`). Both fields are
 the crack-aware MLS approximations of their particle coefficients; the domain checks are those of
 statics (:func:`~dolfinx_meshfree.statics.sifs.solution_sifs`: inside the particles, away from
 the exterior boundary, the FE interface and other tips).
@@ -156,13 +159,6 @@ def dynamic_sifs(
                 f"material={dyn.material!r}: dynamic stress intensity factors need the small-"
                 "strain LinearElastic law (the interaction integral is linear elastic)"
             )
-        if dyn.loads.body_forces:
-            raise ValueError(
-                f"the model carries {dyn.loads.body_forces} body force(s) (add_body_force): the "
-                "dynamic interaction integral here takes the balance sigma_ij,j = rho u_tt, "
-                "without a body-force term, so K would be wrong (statics takes it: "
-                "statics.sifs.body_force_acceleration); apply the load as tractions instead"
-            )
 
     raise_on_all_ranks(dyn.comm, check)
     if not j_integral:
@@ -174,7 +170,10 @@ def dynamic_sifs(
         return mls.tabulate(x).gradient(u)
 
     def acceleration(x: np.ndarray) -> np.ndarray:
-        return mls.tabulate(x, 0).values @ a
+        # the balance sigma_ij,j = rho (u_tt - b / rho): the body forces' term
+        body = dyn.loads.body_acceleration(dyn.time, x)
+        a_x = mls.tabulate(x, 0).values @ a
+        return a_x if body is None else a_x - body
 
     sifs = solution_sifs(
         grad, dyn.material, cracks, domain, crack, tip, radius, check=False, probe=probe,
@@ -271,6 +270,10 @@ def _functional_sifs(
 
     def result(f: SIFFunctional, faces: FaceTerm | None) -> StressIntensityFactors:
         KI, KII = f(u, a)
+        body = dyn.loads.body_acceleration(dyn.time, f.rule.acceleration_points)
+        if body is not None:  # u_tt - b / rho, as the full integral
+            dKI, dKII = f.at_points(-body)
+            KI, KII = KI + dKI, KII + dKII
         if faces is not None:  # the faces' contact pressure (closed faces); J has no such term
             KI = KI + faces(u, material)
         rule = f.rule

@@ -99,3 +99,14 @@ class SIFFunctional:
             K = K + np.einsum("pi,pir->r", acceleration[c], self.on_acceleration)
         k = K.size // 2
         return K[:k], K[k:]
+
+    def at_points(self, acceleration: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(K_I, K_II)`` of the inertia term alone, for an acceleration given at the rule's
+        acceleration points (nq, gdim) rather than by coefficients: ``sum_q A^m_q . a_q``
+        (a body force's ``-b / rho``, which no particle coefficients carry)."""
+        if not self.dynamic:
+            raise ValueError("at_points needs a dynamic functional (dynamic=True)")
+        a = self.rule.acceleration_weights  # (2, k, nq, gdim): K_I, K_II per domain
+        K = np.einsum("mkqi,qi->mk", a, np.asarray(acceleration, dtype=float)).reshape(-1)
+        k = K.size // 2
+        return K[:k], K[k:]

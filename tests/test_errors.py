@@ -178,6 +178,19 @@ def test_from_cells_bad_spacing_on_one_rank_only(square):
         mf.ParticleSet.from_cells(square, spacing)
 
 
+def test_spacing_that_differs_between_ranks(square):
+    """A spacing computed from a rank's own cells (valid on each rank, different between them):
+    refused on every rank, with each rank's value (before: the ranks built different grids and
+    hung in a collective call, MPI_ERR_TRUNCATE, with a ParticlePatch). Serially it is one
+    value and builds."""
+    spacing = 0.5 + 0.25 * COMM.rank
+    if COMM.size == 1:
+        assert mf.ParticleSet.from_cells(square, spacing).num_particles > 0
+        return
+    with pytest.raises(ValueError, match=r"must be the same on every rank .* \[\(0\.5, 0\.0, 0\)"):
+        mf.ParticlePatch(square, np.arange(2, dtype=np.int32), spacing=spacing)
+
+
 @pytest.mark.parametrize("jitter", [0.5, -0.1])
 def test_from_cells_bad_jitter(square, jitter):
     with pytest.raises(ValueError, match=rf"jitter={jitter} must lie in \[0, 0.5\)"):

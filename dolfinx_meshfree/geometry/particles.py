@@ -421,6 +421,14 @@ class ParticleSet:
             return _check_border(border, gdim)
 
         mine = raise_on_all_ranks(comm, check)  # this rank's border facets, checked
+        every = comm.allgather((spacing, jitter, seed))
+        if any(e != every[0] for e in every):  # else the ranks' grids differ, or hang
+            raise ValueError(  # on every rank: each sees every value
+                "spacing, jitter and seed must be the same on every rank (the particles are "
+                f"built collectively), got (spacing, jitter, seed) per rank {every}: compute "
+                "them from data every rank shares (e.g. the mesh's extent reduced with "
+                "comm.allreduce), not from a rank's own cells"
+            )
         c = _owned_cells(mesh, cells)
         segments = np.concatenate(comm.allgather(mine)) if mine is not None else None
         # one grid per body of the mesh (its connected pieces: a projectile and its target),

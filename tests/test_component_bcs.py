@@ -245,17 +245,11 @@ def test_rod_held_by_one_component(method):
 def test_bad_component_input():
     from dolfinx_meshfree.dynamics import ExplicitDynamics
 
+    # (a component condition on the FE-patch interface's nodes, refused before, is taken now:
+    # tests/test_point_conditions.py::test_a_pin_on_the_interface_holds_the_field_there)
     msh = box([0.0, 0.0], [1.0, 1.0], [4, 4])
     V = _compat.vector_function_space(msh)
-    a, L, _ = forms(V)
     left = mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0.0))
-    patch = mf.ParticlePatch(msh, cells_where(msh, lambda m: m[:, 0] > 0.5), 0.25)
-    # a component condition on interior nodes (the FE-patch interface x = 0.5)
-    facets = dolfinx.mesh.locate_entities(msh, 1, lambda x: np.isclose(x[0], 0.5))
-    mid = dolfinx.fem.locate_dofs_topological(V.sub(0), 1, facets)
-    bad = [dolfinx.fem.dirichletbc(np.float64(0.0), mid, V.sub(0))]
-    with pytest.raises(ValueError, match=r"off the boundary, e.g. at \[\[0.5"):
-        mf.CoupledLinearProblem(a, L, bad, patch, material=MAT)
     with pytest.raises(ValueError, match="components=2"):
         ExplicitDynamics.fe(V, MAT, fixed_facets=[(left, 2)])
     with pytest.raises(ValueError, match="not owned"):

@@ -269,24 +269,14 @@ class CoupledLinearProblem:
         # held dofs that neither an FE cell nor a held patch facet of their component carries
         # (before, a node on a facet held in x lost its y: a pinned corner beside a roller)
         n_owned = V.dofmap.index_map.size_local
-        on_boundary = node_flags(problem.V, nodes.ravel())
-        lone = (fixed[:, None] | held) & ~active[:, None] & ~covered
+        particle_field = ~active
+        if problem.coupling in ("ramp", "ramp-cubic"):
+            # R = 1 on the interface: the field at its nodes is the particles' (Belytschko et
+            # al. 1995, eq. 3.12), which their FE dof held does not hold (before, a node pinned
+            # there held nothing: the field stayed where the load left it, silently)
+            particle_field = particle_field | gamma
+        lone = (fixed[:, None] | held) & particle_field[:, None] & ~covered
         lone[n_owned:] = False
-        # a component held off the boundary at an interface node: the FE row is held, the
-        # particles' by none of the coupling's conditions
-        inner = np.flatnonzero((held.any(axis=1) & ~on_boundary & gamma)[:n_owned])
-        xi = V.tabulate_dof_coordinates()[inner, :gdim]
-
-        def check_inner() -> None:
-            if inner.size:
-                raise ValueError(
-                    f"bcs on a subspace V.sub(i) hold {inner.size} node(s) of the FE-patch "
-                    f"interface off the boundary, e.g. at {xi[:3].round(6).tolist()}: hold a "
-                    "whole node there (every component), a node off the interface, or locate "
-                    "the dofs on boundary facets"
-                )
-
-        raise_on_all_ranks(patch.comm, check_inner)
         # nodes only patch cells carry, held alone (a pinned corner): collocated multipliers
         problem.point_dirichlet += point_conditions(V, patch, lone, values)
 

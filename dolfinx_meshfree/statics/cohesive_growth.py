@@ -38,7 +38,8 @@ there keep their state: the model is rebuilt on the longer crack, the faces' sta
 point by point (their positions do not change; the new ones start bonded), the coefficients of
 the particles whose supports the new segment cuts refitted to the field before it grew
 (:class:`_FieldFit`), and the model brought back to equilibrium at the same control value. A
-bulk law with state would need its state carried to the new cut cells' quadrature: refused.
+bulk law with state (``RankineDamage``, ``J2Plasticity``) has its committed state carried to the
+new cut cells' points (:mod:`~dolfinx_meshfree.statics.state_carry`).
 """
 
 from __future__ import annotations

@@ -6,14 +6,18 @@ A node that no FE cell carries and no held exterior facet contains has no FE dof
 the particle field lives there. Its condition ``u_P(x_k)_i = ubar_i(x_k)`` is collocated at the
 node by one multiplier per point and held component, the rows ``s w phi_J(x_k)`` beside the
 facet multipliers' ``s int_f phi_J`` (:func:`~dolfinx_meshfree.statics.efg.facet_multipliers`;
-the collocation of Rabczuk et al. 2006, sec. 5.4, eq. 111, here for an essential condition).
+the constraint term ``lambda^T g`` with the gap taken at points of Rabczuk et al. 2006, sec. 5.4,
+eq. 98-99, here for an essential condition).
 ``s w`` only scales the rows (``s``: the material's modulus, ``w``: the particle spacing, a
 length as a facet's measure); the multiplier is the point force the condition carries.
 
 Each row needs particles of its own: two held points closer than one particle spacing can make
 the rows dependent (more points than particles about them) and are refused, naming them
 (:func:`check_point_spacing`). A held node on a held exterior facet of the patch keeps the facet
-multiplier, and a node of an FE cell is held strongly, as before.
+multiplier, and a node of an FE cell is held strongly, as before; with the ramps a node of the
+interface is also held as a point (their field there is the particles', ``R = 1``). The nodes of
+a held stretch of fewer facets than dimensions are points too (its facet multipliers hold its
+mean only): :func:`~dolfinx_meshfree.statics.problem.short_stretches`.
 """
 
 from __future__ import annotations

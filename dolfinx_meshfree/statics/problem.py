@@ -80,7 +80,7 @@ from .facet_terms import FacetTermCheck, integral_entities
 from .form_loads import FormBodyForce, load_integrand_error, replace_test_function
 from .petsc import SolverOptions, solver_options
 
-__all__ = ["CoupledLinearProblem"]
+__all__ = ["CoupledLinearProblem", "point_conditions", "short_stretches"]
 
 #: Relative Frobenius difference above which the form and the material disagree on the patch.
 MATERIAL_TOLERANCE = 1e-8

@@ -35,6 +35,7 @@ from ..physics.user_functions import vector_values
 from ..statics.efg import check_multiplier_facets, crack_rules, facet_multipliers
 from ..statics.petsc import BlockSystem, SolverOptions, create_aij, create_vector
 from .base import fe_dof_layout, node_flags
+from .point_conditions import PinRows, pin_rows
 
 if TYPE_CHECKING:  # annotations only
     import scipy.sparse as sp
@@ -401,13 +402,16 @@ def append_patch_conditions(
     patch_bc: list,
     dq: list[QuadraturePoints],
     dtabs: list[ShapeTable],
-) -> Layout:
-    """Append the multiplier field of essential conditions on patch facets (it couples to
-    field 1, the particles) to ``blocks``/``rhs``; new PETSc objects go to ``mats``."""
+) -> tuple[Layout, PinRows, int | None]:
+    """Append the multiplier field of essential conditions on patch facets and points (it
+    couples to field 1, the particles) to ``blocks``/``rhs``; new PETSc objects go to ``mats``.
+    Returns its layout, where its pins' multipliers lie (:class:`PinRows`) and its index among
+    the multiplier fields (``None``: no field, nothing held on the patch)."""
     P, comm = problem.patch.particles, problem.patch.comm
     pl = P.dof_layout(P.gdim)
     check_multiplier_facets(P, dq, "Dirichlet conditions on the patch's exterior facets")
     Gd, d_rows, d_vals, dl = facet_multipliers(P, patch_bc, dq, dtabs, problem.material.E)
+    pins = pin_rows(patch_bc, dq, dtabs, problem.material.E, P.gdim)
     if dl.size_global:
         D = create_aij(comm, Gd, dl, pl)
         DT = create_aij(comm, Gd.T.tocsr(), pl, dl)
@@ -417,7 +421,7 @@ def append_patch_conditions(
         blocks.append([None, D] + [None] * (len(blocks) - 1))
         rhs.append(create_vector(comm, dl, d_rows, d_vals))
         mats += [D, DT]
-    return dl
+    return dl, pins, (len(blocks) - 3 if dl.size_global else None)
 
 
 def primal_nodes(problem: CoupledElasticity) -> list[np.ndarray]:
@@ -435,10 +439,10 @@ def solve_and_gather(
     rhs: list[PETSc.Vec],
     objects: list,
     solver: str | SolverOptions,
-) -> tuple[dolfinx.fem.Function, np.ndarray, float]:
+) -> tuple[dolfinx.fem.Function, np.ndarray, float, list[np.ndarray]]:
     """Solve the nest (fields FE, particles, multipliers...), destroy ``objects`` and ``rhs``,
-    and return the FE Function, the particle coefficients (n, gdim) in original order and the
-    solve time. Collective."""
+    and return the FE Function, the particle coefficients (n, gdim) in original order, the
+    solve time and the owned values of each multiplier field. Collective."""
     V, P, comm = problem.V, problem.patch.particles, problem.patch.comm
     bs = V.dofmap.index_map_bs
     names = ["fe", "particles"] + [f"multiplier{i}" for i in range(len(blocks) - 2)]
@@ -453,7 +457,17 @@ def solve_and_gather(
     uh.x.array[: bs * V.dofmap.index_map.size_local] = parts[0]
     uh.x.scatter_forward()
     owned = np.concatenate(comm.allgather(parts[1]))
-    return uh, owned.reshape(-1, bs)[P.petsc_index], seconds
+    return uh, owned.reshape(-1, bs)[P.petsc_index], seconds, list(parts[2:])
+
+
+def pin_forces(extra: dict, multipliers: list[np.ndarray]) -> list[np.ndarray]:
+    """The forces of a solved system's pins (:attr:`CoupledSolution.point_forces`) from the
+    multipliers :func:`solve_and_gather` returned and the ``extra["pins"]`` that the system
+    kept from :func:`append_patch_conditions` (local)."""
+    pins, field = extra["pins"]
+    if field is None:  # nothing held on the patch: no pins either
+        return [np.zeros((0, pins.gdim)) for _ in pins.rows]
+    return pins.forces(multipliers[field])
 
 
 def sizes(problem: CoupledElasticity, active: np.ndarray, multiplier_dofs: int) -> dict:

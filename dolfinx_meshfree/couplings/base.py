@@ -107,6 +107,10 @@ class CoupledSolution:
     #: A Newton solve: ``f_int - f_ext`` of the FE rows (owned dofs), held rows included
     #: (:func:`~dolfinx_meshfree.statics.reactions.reaction` with a law with state).
     fe_residual: np.ndarray | None = None
+    #: Per entry of the model's ``point_dirichlet`` (pins), (m, gdim) forces the pins exert on
+    #: the body at this rank's points (:class:`~dolfinx_meshfree.couplings.point_conditions.
+    #: PinRows`); ``None`` where the solve does not keep them.
+    point_forces: list[np.ndarray] | None = None
 
     def take_loads(self, body_forces: list) -> None:
         """Record the model's body forces (:attr:`body_forces`, :attr:`initial_stress`)."""

@@ -91,6 +91,7 @@ from .assembly import (
     fix_fe_rows,
     fixed_dofs,
     patch_facet_rule,
+    pin_forces,
     sizes,
     solve_and_gather,
     split_facets,
@@ -699,8 +700,9 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
     blocks = [[K_fe, Kfp, GfeT], [Kpf, Kp, GpT], [Gfe, Gp, None]]
     rhs = [b_fe, b_p, g]
     mats += [Kp, Gfe, GfeT, Gp, GpT]
-    dl = append_patch_conditions(problem, blocks, rhs, mats, patch_bc, dq, dtabs)
+    dl, *pins = append_patch_conditions(problem, blocks, rhs, mats, patch_bc, dq, dtabs)
     extra = {
+        "pins": tuple(pins),
         "x_bc": x_bc,
         "active": active,
         "is_bc": is_bc,
@@ -723,7 +725,7 @@ def solve_bridging(
 ) -> BridgingSolution:
     """Assemble and solve the bridging-domain coupled system of ``problem`` (collective)."""
     blocks, rhs, mats, extra = bridging_system(problem)
-    uh, coeffs, solve = solve_and_gather(problem, blocks, rhs, [*mats, extra["x_bc"]], solver)
+    uh, coeffs, solve, lam = solve_and_gather(problem, blocks, rhs, [*mats, extra["x_bc"]], solver)
     sol = BridgingSolution(
         u=uh,
         coefficients=coeffs,
@@ -731,6 +733,7 @@ def solve_bridging(
         patch=problem.patch,
         timings={"setup": extra["setup"], "assemble": extra["assemble"], "solve": solve},
         sizes=sizes(problem, extra["active"], extra["multipliers"]),
+        point_forces=pin_forces(extra, lam),
     )
     sol.band = extra["band"]
     return sol

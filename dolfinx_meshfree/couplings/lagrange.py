@@ -58,6 +58,7 @@ from .assembly import (
     fix_fe_rows,
     fixed_dofs,
     patch_rules,
+    pin_forces,
     sizes,
     solve_and_gather,
     traction_loads,
@@ -625,8 +626,9 @@ def interface_system(problem: CoupledElasticity, tables: dict | None = None) -> 
     blocks = [[K_fe, None, GfeT], [None, Kp, GpT], [Gfe, Gp, None]]
     rhs = [b_fe, b_p, g]
     mats = [K_fe, Kp, Gfe, GfeT, Gp, GpT, loads[0]]
-    dl = append_patch_conditions(problem, blocks, rhs, mats, patch_bc, dq, dtabs)
+    dl, *pins = append_patch_conditions(problem, blocks, rhs, mats, patch_bc, dq, dtabs)
     extra = {
+        "pins": tuple(pins),
         "x_bc": x_bc,
         "active": active,
         "is_bc": is_bc,
@@ -654,7 +656,7 @@ def solve_interface(
             :class:`~dolfinx_meshfree.statics.petsc.BlockSystem`).
     """
     blocks, rhs, mats, extra = interface_system(problem)
-    uh, coeffs, solve = solve_and_gather(problem, blocks, rhs, [*mats, extra["x_bc"]], solver)
+    uh, coeffs, solve, lam = solve_and_gather(problem, blocks, rhs, [*mats, extra["x_bc"]], solver)
     return CoupledSolution(
         u=uh,
         coefficients=coeffs,
@@ -662,6 +664,7 @@ def solve_interface(
         patch=problem.patch,
         timings={"setup": extra["setup"], "assemble": extra["assemble"], "solve": solve},
         sizes=sizes(problem, extra["active"], extra["multipliers"]),
+        point_forces=pin_forces(extra, lam),
     )
 
 

@@ -274,9 +274,10 @@ def master_slave_system(problem: CoupledElasticity, tables: dict | None = None) 
     blocks = [[K_fe, None, None], [None, Kp, None], [None, None, None]]
     rhs = [b_fe, b_p, zero]
     mats = [K_fe, Kp, loads[0]]
-    dl = append_patch_conditions(problem, blocks, rhs, mats, patch_bc, dq, dtabs)
+    dl, *pins = append_patch_conditions(problem, blocks, rhs, mats, patch_bc, dq, dtabs)
     scale = problem.material.E
     extra = {
+        "pins": tuple(pins),
         "x_bc": x_bc,
         "active": active,
         "is_bc": is_bc,

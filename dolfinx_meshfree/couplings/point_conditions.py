@@ -33,7 +33,7 @@ from ..geometry.quadrature import QuadraturePoints
 if TYPE_CHECKING:  # annotations only
     from mpi4py import MPI
 
-__all__ = ["PointCondition", "check_point_spacing"]
+__all__ = ["PinRows", "PointCondition", "check_point_spacing", "pin_rows"]
 
 
 @dataclass(frozen=True)
@@ -46,6 +46,7 @@ class PointCondition:
         cells: (m,) a local patch cell of each point.
         components: The held components, e.g. ``(0, 1)``, or ``(1,)`` for ``V.sub(1)``.
         weight: The rows' length scale ``w`` (the particle spacing).
+        nodes: (m,) the points' local node indices of the FE space (for reactions).
     """
 
     points: np.ndarray
@@ -53,6 +54,7 @@ class PointCondition:
     cells: np.ndarray
     components: tuple[int, ...]
     weight: float
+    nodes: np.ndarray
 
     def rule(self) -> QuadraturePoints:
         """The points as a one-point "facet" rule each, weight ``w``: the entities are
@@ -93,3 +95,52 @@ def check_point_spacing(comm: MPI.Comm, points: np.ndarray, spacing: float) -> N
             "points at least a spacing apart (a pinned corner, a roller point), a whole exterior "
             "facet, or leave these cells out of the patch"
         )
+
+
+@dataclass(frozen=True)
+class PinRows:
+    """Where the pins' multipliers lie in the block of a model's patch conditions, and how each
+    becomes a force: ``F = -s w (sum_J phi_J(x_k)) lambda`` per point and held component, the
+    force the pin exerts on the body (the particle equations read ``K u + G^T lambda = f``).
+
+    Attributes:
+        rows: Per point condition, (m, len(components)) local rows of the block.
+        factors: Per point condition, (m,) ``s w sum_J phi_J(x_k)``: a row's sum over the
+            particle columns.
+        components: Per point condition, its held components.
+        gdim: The geometric dimension.
+    """
+
+    rows: list[np.ndarray]
+    factors: list[np.ndarray]
+    components: list[tuple[int, ...]]
+    gdim: int
+
+    def forces(self, multipliers: np.ndarray) -> list[np.ndarray]:
+        """Per point condition, (m, gdim) forces on the body at its points (0 in the
+        components not held) from the block's local multipliers."""
+        out = []
+        for rows, factor, comps in zip(self.rows, self.factors, self.components, strict=True):
+            f = np.zeros((len(factor), self.gdim))
+            f[:, list(comps)] = -factor[:, None] * np.asarray(multipliers)[rows]
+            out.append(f)
+        return out
+
+
+def pin_rows(
+    conditions: list, quadratures: list[QuadraturePoints], tables: list, scale: float, gdim: int
+) -> PinRows:
+    """The :class:`PinRows` of the point conditions among a model's patch conditions (the
+    rules without normals), numbered as
+    :func:`~dolfinx_meshfree.statics.efg.facet_multipliers` numbers its rows (local)."""
+    rows, factors, comps, offset = [], [], [], 0
+    for cond, d, tab in zip(conditions, quadratures, tables, strict=True):
+        cs = tuple(cond[2]) if len(cond) > 2 else tuple(range(gdim))
+        entities, facet_id = np.unique(d.entities, return_inverse=True)
+        if d.normals is None:  # a point condition: one "facet" per point
+            rows.append(offset + len(cs) * facet_id[:, None] + np.arange(len(cs))[None, :])
+            sums = np.asarray(tab.values.sum(axis=1)).ravel()
+            factors.append(scale * d.weights * sums)
+            comps.append(cs)
+        offset += len(cs) * entities.size
+    return PinRows(rows, factors, comps, gdim)

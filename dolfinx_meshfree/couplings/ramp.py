@@ -85,6 +85,7 @@ from .assembly import (
     fe_active,
     fe_stiffness,
     fix_fe_rows,
+    pin_forces,
     sizes,
     solve_and_gather,
     split_facets,
@@ -569,8 +570,9 @@ def ramp_system(problem: CoupledElasticity, tables: dict | None = None) -> tuple
     blocks = [[K_fe, Kfp], [Kpf, Kp]]
     rhs = [b_fe, b_p]
     mats = [K_fe, K_int, Kp, Kfp, Kpf, loads[0]]
-    dl = append_patch_conditions(problem, blocks, rhs, mats, patch_bc, dq, dtabs)
+    dl, *pins = append_patch_conditions(problem, blocks, rhs, mats, patch_bc, dq, dtabs)
     extra = {
+        "pins": tuple(pins),
         "x_bc": x_bc,
         "active": active,
         "is_bc": is_bc,
@@ -597,7 +599,7 @@ def solve_ramp(
 ) -> CoupledSolution:
     """Assemble and solve the ramp-coupled system of ``problem`` (collective)."""
     blocks, rhs, mats, extra = ramp_system(problem)
-    uh, coeffs, solve = solve_and_gather(problem, blocks, rhs, [*mats, extra["x_bc"]], solver)
+    uh, coeffs, solve, lam = solve_and_gather(problem, blocks, rhs, [*mats, extra["x_bc"]], solver)
     return CoupledSolution(
         u=uh,
         coefficients=coeffs,
@@ -605,6 +607,7 @@ def solve_ramp(
         patch=problem.patch,
         timings={"setup": extra["setup"], "assemble": extra["assemble"], "solve": solve},
         sizes=sizes(problem, extra["active"], extra["multipliers"]),
+        point_forces=pin_forces(extra, lam),
         interface=extra["interface"],
     )
 

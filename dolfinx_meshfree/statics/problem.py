@@ -532,7 +532,9 @@ def point_conditions(
     out = []
     for kind in kinds:
         mine = np.array([c == kind for c in comps], dtype=bool)
-        out.append(PointCondition(x[mine], values[at[mine]], cell_of[at[mine]], kind, spacing))
+        out.append(
+            PointCondition(x[mine], values[at[mine]], cell_of[at[mine]], kind, spacing, at[mine])
+        )
     return out
 
 

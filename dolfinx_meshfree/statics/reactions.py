@@ -9,7 +9,10 @@ node whose cells are FE cells that do not touch the patch, that row is the user'
 coupled system's row there is exactly that. Nearer the patch the row also holds what the
 coupling adds and a form on the FE space does not see (multipliers on the interface nodes, the
 ramps' blended interface cells, a bridging band's weights, master-slave's links): a condition
-with such a node is refused, named by the node's coordinates.
+with such a node is refused, named by the node's coordinates. A pin (a node only patch cells
+carry, held at a point: :mod:`~dolfinx_meshfree.couplings.point_conditions`) is the exception:
+its force is its multiplier's, ``-E h (sum_J phi_J(x)) lambda``, which the linear lagrange,
+edge-to-edge, ramp and bridging solves keep (``CoupledSolution.point_forces``).
 
 A body load (``L``'s ``dx`` terms) and tractions on the held facets are in the row, as in
 DOLFINx. With a law with state (``J2Plasticity``, ``RankineDamage``) the FE cells follow the law,
@@ -67,6 +70,49 @@ def near_patch_nodes(problem: CoupledLinearProblem | CoupledNonlinearProblem) ->
     return _node_flags(V, touching)
 
 
+def _pin_forces(
+    problem: CoupledLinearProblem | CoupledNonlinearProblem,
+    dofs: np.ndarray,
+    solution: CoupledSolution | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Which of the owned ``dofs`` are pins of the model (its ``point_dirichlet``) at nodes no
+    FE cell carries, and the sum of their forces (gdim,) on this rank (collective: the FE
+    cells' nodes are flagged over the ranks). A pin where the solve kept no forces, or at a
+    node an FE cell carries too (a ramp's interface node: its FE row carries force as well),
+    is refused by its coordinates."""
+    V = problem.V
+    bs = V.dofmap.index_map_bs
+    model = problem.model
+    fe_nodes = _node_flags(V, np.asarray(model.patch.fe_cells, dtype=np.int32))
+    pinned, total = np.zeros(len(dofs), dtype=bool), np.zeros(bs)
+    forces = None if solution is None else solution.point_forces
+    bad: list[np.ndarray] = []
+    for k, pc in enumerate(model.point_dirichlet):
+        at = {int(n): j for j, n in enumerate(pc.nodes)}
+        for d_index, dof in enumerate(dofs):
+            j = at.get(int(dof) // bs)
+            if j is None or int(dof) % bs not in pc.components:
+                continue
+            pinned[d_index] = True
+            if forces is None or fe_nodes[int(dof) // bs]:
+                bad.append(pc.points[j])
+                continue
+            total[int(dof) % bs] += forces[k][j, int(dof) % bs]
+
+    def check() -> None:
+        if bad:
+            raise ValueError(
+                f"bc holds {len(bad)} pinned dof(s) whose force this solve did not keep, first "
+                f"the pin at {tuple(np.round(bad[0], 12))}: a pin's force is its multiplier, "
+                "kept by the linear lagrange, edge-to-edge, ramp and bridging solves at nodes "
+                "that only patch cells carry (not by master-slave, Newton, or a ramp's "
+                "interface node, whose FE row carries force too)"
+            )
+
+    raise_on_all_ranks(V.mesh.comm, check)
+    return pinned, total
+
+
 def reaction(
     problem: CoupledLinearProblem | CoupledNonlinearProblem,
     bc: object,
@@ -84,7 +130,8 @@ def reaction(
 
     Raises:
         ValueError: on every rank, for a ``bc`` that is not the problem's, a missing solution
-            or a held node on or beside the patch (by its coordinates).
+            a held node on or beside the patch (by its coordinates) that is not a pin, or a pin
+            whose force the solve did not keep.
     """
     comm = problem.patch.comm
     V = problem.V
@@ -114,6 +161,9 @@ def reaction(
     dofs = _compat.dirichlet_values(bc)[0]
     dofs = dofs[dofs < owned]
     near = near_patch_nodes(problem)  # collective
+    # pins (nodes only particles carry, held at points): their forces are their multipliers'
+    pinned, pin_total = _pin_forces(problem, dofs, solution if linear else problem.solution)
+    dofs = dofs[~pinned]
 
     def check_nodes() -> None:
         bad = dofs[near[dofs // bs]]
@@ -127,7 +177,7 @@ def reaction(
             )
 
     raise_on_all_ranks(comm, check_nodes)
-    total = np.zeros(bs)
+    total = pin_total
     if linear and is_stateful(problem.material):  # the law's internal force of the FE rows
         np.add.at(total, dofs % bs, solution.fe_residual[dofs])
         return comm.allreduce(total)

@@ -86,18 +86,19 @@ def _pin_forces(
     fe_nodes = _node_flags(V, np.asarray(model.patch.fe_cells, dtype=np.int32))
     pinned, total = np.zeros(len(dofs), dtype=bool), np.zeros(bs)
     forces = None if solution is None else solution.point_forces
+    node, comp = np.asarray(dofs) // bs, np.asarray(dofs) % bs
     bad: list[np.ndarray] = []
     for k, pc in enumerate(model.point_dirichlet):
-        at = {int(n): j for j, n in enumerate(pc.nodes)}
-        for d_index, dof in enumerate(dofs):
-            j = at.get(int(dof) // bs)
-            if j is None or int(dof) % bs not in pc.components:
-                continue
-            pinned[d_index] = True
-            if forces is None or fe_nodes[int(dof) // bs]:
-                bad.append(pc.points[j])
-                continue
-            total[int(dof) % bs] += forces[k][j, int(dof) % bs]
+        point = np.full(fe_nodes.size, -1)  # the node's point in pc, or -1
+        point[pc.nodes] = np.arange(len(pc.nodes))
+        j = point[node]
+        hit = (j >= 0) & np.isin(comp, pc.components)
+        pinned |= hit
+        refused = hit & (fe_nodes[node] | (forces is None))
+        bad += list(pc.points[j[refused]])
+        if forces is not None:
+            ok = hit & ~refused
+            np.add.at(total, comp[ok], forces[k][j[ok], comp[ok]])
 
     def check() -> None:
         if bad:

@@ -6,11 +6,12 @@
 # time at equal accuracy". The beam of `demos/concrete_beam.py` (Petersson's, three-point
 # bending, CMOD control to `--end-cmod`), with `--crack cohesive` (the default: an elastic bulk
 # and `mf.LinearCohesive` on the ligament, Hillerborg's fictitious crack) or `--crack band`
-# (`mf.RankineDamage` with the crack band), for each cell size `h` (particle spacing = cell size:
-# particles at the vertices), pure EFG and each coupling in one run: the peak load, its difference
-# to EFG's, its change from the next coarser size, the dissipated energy and its ratio to G_f
-# times the ligament, the Newton iterations, the time and its ratio to EFG's. JIT compilation is
-# warmed up first (the smallest run of every method) and excluded.
+# (`mf.RankineDamage` with the crack band) or `--crack combined` (the band handed to a cohesive
+# crack where it localises, `mf.CrackBandSwitch`), for each cell size `h` (particle spacing =
+# cell size: particles at the vertices), pure EFG and each coupling in one run: the peak load,
+# its difference to EFG's, its change from the next coarser size, the dissipated energy and its
+# ratio to G_f times the ligament, the Newton iterations, the time and its ratio to EFG's. JIT
+# compilation is warmed up first (the smallest run of every method) and excluded.
 #
 # Measured (serial, a shared 2-core machine, `--h 20 10 5 --methods efg lagrange bridging
 # edge-to-edge`, cohesive, CMOD to 0.5 mm):
@@ -150,7 +151,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
         default=None,
         help="mm: the control's end (default 0.5 CMOD; the shear beam's CMSD 0.2)",
     )
-    p.add_argument("--crack", default="cohesive", choices=["cohesive", "band"])
+    p.add_argument("--crack", default="cohesive", choices=["cohesive", "band", "combined"])
     p.add_argument(
         "--path",
         default="given",

@@ -91,6 +91,7 @@ from .statics.coupled import (
     CoupledElasticity,
     CoupledSolution,
 )
+from .statics.crack_band_switch import CrackBandSwitch
 from .statics.crack_initiation import CrackInitiation
 from .statics.efg import EFGElasticity, EFGSolution
 from .statics.fe import FESolution, solve_fe_elasticity, solve_forms
@@ -167,6 +168,7 @@ __all__ = [
     "CoupledNonlinearProblem",
     "CoupledSolution",
     "Crack",
+    "CrackBandSwitch",
     "CrackInitiation",
     "DeformationError",
     "DisplacementControl",

@@ -54,6 +54,8 @@ def contact_points(
         xs.append(a[None, :] + s[:, None] * t[None, :])
         ns.append(np.tile(np.array([-t[1], t[0]]) / length, (s.size, 1)))
         ws.append(np.tile(wi * length / pieces, pieces))
+    if not xs:  # no segment carries points (a cohesive record whose faces are still to come)
+        return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0)
     x, n, w = np.concatenate(xs), np.concatenate(ns), np.concatenate(ws)
     keep = np.ones(len(x), dtype=bool)
     for tip in crack.tips:

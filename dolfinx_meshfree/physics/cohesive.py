@@ -157,6 +157,28 @@ class LinearCohesive:
         _check_positive("h", h, "the particle spacing")
         return dataclasses.replace(self, stiffness=self.factor * float(E) / float(h))
 
+    @property
+    def max_dissipation(self) -> float:
+        """The energy per unit area dissipated at :attr:`kappa_cap` (just below ``G_f``)."""
+        return float(self.dissipated_energy({"kappa": np.array([self.kappa_cap])})[0])
+
+    def opening_of_dissipation(self, d: np.ndarray) -> np.ndarray:
+        """The history ``kappa`` (m,) of face points that have dissipated ``d`` (m,) per unit
+        area, the inverse of :meth:`dissipated_energy`: past the peak that is linear in
+        ``kappa``, ``G_f (kappa - w_0) / (w_c - w_0)`` (its two parts, ``int T`` and ``T kappa
+        / 2``, are quadratic with opposite ``kappa^2`` terms), so ``kappa = w_0 + (w_c - w_0) d
+        / G_f``; 0 (virgin) where ``d <= 0``. ValueError where ``d`` exceeds
+        :attr:`max_dissipation`."""
+        d = np.asarray(d, dtype=float).reshape(-1)
+        top = self.max_dissipation
+        if np.any(d > top * (1.0 + 1e-12)):
+            raise ValueError(
+                f"LinearCohesive: a dissipation of {d.max():.6g} per unit area exceeds what the "
+                f"faces can dissipate before their cap, {top:.6g} (G_f = {self.Gf:.6g})"
+            )
+        kappa = self.w_0 + (self.w_c - self.w_0) * np.minimum(d, top) / self.Gf
+        return np.where(d > 0.0, np.minimum(kappa, self.kappa_cap), 0.0)
+
     def initial_state(self, m: int) -> dict[str, np.ndarray]:
         """The virgin state of ``m`` face points."""
         return {"kappa": np.zeros((m, 1))}

@@ -132,8 +132,11 @@ class RankineDamage:
     n_z^2, 2 n_y n_z, 2 n_x n_z, 2 n_x n_y]``), or ``lambda [1, 1, 0] / E`` when ``sbar_zz`` is
     the largest in plane strain.
 
-    State fields: ``kappa`` (history variable), and, written by :meth:`update` so that
-    :meth:`stored_energy` and :meth:`dissipated_energy` need no band, ``damage`` (``D``) and
+    State fields: ``kappa`` (history variable); ``frozen`` (1 where the point no longer
+    damages: :class:`~dolfinx_meshfree.CrackBandSwitch` hands a band point's softening to a
+    cohesive crack and freezes it, so that ``kappa`` stays, elastic with ``(1 - D) C``); and,
+    written by :meth:`update` so that :meth:`stored_energy` and :meth:`dissipated_energy` need no
+    band, ``damage`` (``D``) and
     ``dissipation``: ``int Y dD`` with ``Y = eps : C : eps / 2``, the growth of the uniaxial
     closed form :meth:`dissipated_energy_of` over a step times ``Y / (E kappa^2 / 2)`` at the
     step's strain (1 in uniaxial stress, where it is the closed form to round-off; exact on
@@ -200,19 +203,21 @@ class RankineDamage:
 
     @property
     def state_fields(self) -> dict[str, int]:
-        """``{"kappa": 1, "damage": 1, "dissipation": 1}`` (a new dict)."""
-        return {"kappa": 1, "damage": 1, "dissipation": 1}
+        """``{"kappa": 1, "damage": 1, "dissipation": 1, "frozen": 1}`` (a new dict)."""
+        return {"kappa": 1, "damage": 1, "dissipation": 1, "frozen": 1}
 
     def elastic(self) -> LinearElastic:
         """The linear elastic twin: the same ``E``, ``nu``, ``plane`` and ``rho``."""
         return linear_twin(self)
 
     def initial_state(self, m: int) -> dict[str, np.ndarray]:
-        """Virgin state of ``m`` points: ``kappa = eps0``, no damage, no dissipation."""
+        """Virgin state of ``m`` points: ``kappa = eps0``, no damage, no dissipation, not
+        frozen."""
         return {
             "kappa": np.full((m, 1), self.eps0),
             "damage": np.zeros((m, 1)),
             "dissipation": np.zeros((m, 1)),
+            "frozen": np.zeros((m, 1)),
         }
 
     # --- the crack band ---------------------------------------------------------------------
@@ -367,8 +372,16 @@ class RankineDamage:
         strain = _as_points(strain, self.nv, "RankineDamage")
         h = self._band(band, strain.shape[0])
         kappa_old = np.asarray(state["kappa"], dtype=float)[:, 0]
-        kappa = np.maximum(kappa_old, self.equivalent_strain(strain))
+        kappa = self._history(kappa_old, self.equivalent_strain(strain), state)
         return (1.0 - self._damage(kappa, h)[0])[:, None, None] * self._C
+
+    @staticmethod
+    def _history(
+        kappa_old: np.ndarray, eps_eq: np.ndarray, state: dict[str, np.ndarray]
+    ) -> np.ndarray:
+        """``kappa = max(kappa_old, eps_eq)``, ``kappa_old`` where the point is frozen."""
+        frozen = np.asarray(state["frozen"], dtype=float)[:, 0] > 0.0
+        return np.where(frozen, kappa_old, np.maximum(kappa_old, eps_eq))
 
     def update(
         self,
@@ -387,7 +400,7 @@ class RankineDamage:
         top, grad = self._top_principal(strain, sbar)
         eps_eq = np.maximum(top, 0.0) / self.E
         kappa_old = np.asarray(state["kappa"], dtype=float)[:, 0]
-        kappa = np.maximum(kappa_old, eps_eq)
+        kappa = self._history(kappa_old, eps_eq, state)
         D, dD = self._damage(kappa, h)
         # damage grows only on the loading branch; grad is zero-weighted where eps_eq = 0. On
         # the loading surface of a damaged point (eps_eq = kappa_old > eps0: the strain of the
@@ -396,6 +409,7 @@ class RankineDamage:
         # softening where the last step softened, instead of an elastic step that overshoots
         # the peak and lets Newton fall onto a branch where the whole body softens
         loading = (eps_eq > kappa_old) | ((eps_eq == kappa_old) & (kappa_old > self.eps0))
+        loading &= np.asarray(state["frozen"], dtype=float)[:, 0] <= 0.0
         dD = np.where(loading, dD, 0.0)
         stress = (1.0 - D)[:, None] * sbar
         tangent = (1.0 - D)[:, None, None] * C - np.einsum(
@@ -411,6 +425,7 @@ class RankineDamage:
             "kappa": kappa[:, None],
             "damage": D[:, None],
             "dissipation": np.asarray(state["dissipation"], dtype=float) + (scale * grown)[:, None],
+            "frozen": np.asarray(state["frozen"], dtype=float).copy(),
         }
         return stress, tangent, new
 

@@ -108,6 +108,11 @@ class CohesiveGrowth:
             further at one control value is a snap-back the control cannot follow: PathError).
         clearance: Particle spacings about the crack left out of the average (its faces' near
             field, module docstring); 0 keeps every point.
+        lookahead: The share of a further step, beyond the new segment's end, that must keep
+            off the particles too (:func:`_off_the_particles`): 0 checks the far half of the
+            new segment only, so that a crack can end a segment just short of a particle on its
+            line, and pass beside it in the next one. :class:`~dolfinx_meshfree.CrackBandSwitch`
+            takes 0.5.
     """
 
     crack: Crack
@@ -116,6 +121,7 @@ class CohesiveGrowth:
     radius: float = 1.0
     max_extensions: int = 20
     clearance: float = 1.5
+    lookahead: float = 0.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.crack, Crack):
@@ -129,9 +135,12 @@ class CohesiveGrowth:
                 f"ahead={self.ahead!r} must exceed step={self.step!r}: after an extension the "
                 "tip must still be ahead of the softening front"
             )
-        c = self.clearance
-        if isinstance(c, bool) or not (isinstance(c, int | float) and np.isfinite(c) and c >= 0):
-            raise ValueError(f"clearance={c!r} must be a number of particle spacings >= 0")
+        for name in ("clearance", "lookahead"):
+            c = getattr(self, name)
+            if isinstance(c, bool) or not (
+                isinstance(c, int | float) and np.isfinite(c) and c >= 0
+            ):
+                raise ValueError(f"{name}={c!r} must be a number of particle spacings >= 0")
         n = self.max_extensions
         if isinstance(n, bool) or not (isinstance(n, int) and n >= 1):
             raise ValueError(f"max_extensions={n!r} must be an integer >= 1")
@@ -426,7 +435,9 @@ def extension(
     raise_on_all_ranks(comm, check)
     if through:  # to the nearest point of the edge ahead: the crack meets it at a right angle
         return (*_to_free_edge(tip, d, to_edge, seg), 0.0)
-    d, turn = _off_the_particles(domain.particles.positions[:, :2], tip, d, length, h, seg)
+    d, turn = _off_the_particles(
+        domain.particles.positions[:, :2], tip, d, length, h, seg, growth.lookahead
+    )
     _check_interface_clearance(mls, domain, tip + length * d)
     return d, length, turn
 
@@ -437,21 +448,32 @@ TURNS = (0.0, 5.0, -5.0, 10.0, -10.0, 15.0, -15.0)
 
 
 def _off_the_particles(
-    particles: np.ndarray, tip: np.ndarray, d: np.ndarray, length: float, h: float, edge: np.ndarray
+    particles: np.ndarray,
+    tip: np.ndarray,
+    d: np.ndarray,
+    length: float,
+    h: float,
+    edge: np.ndarray,
+    lookahead: float = 0.0,
 ) -> tuple[np.ndarray, float]:
     """The direction of the next segment and its turn in degrees: ``d`` turned by the first of
-    :data:`TURNS` whose far half keeps ``NEAR_ROW`` spacing off every particle and whose end
-    stays a spacing inside the exterior segments ``edge`` ((k, 2, 2), as the unturned one does);
-    ``d`` and 0 when none does. A segment that runs beside a row of particles leaves the points
-    between them with only that row on their side of the cut: four collinear particles, a
-    singular moment matrix (a crack on quadrilaterals that turned vertical 0.044 spacing beside
-    a column). The first half may stay close: it starts at the tip the crack already has. The
-    same on every rank (replicated particles)."""
+    :data:`TURNS` whose far half (and ``lookahead`` of a further segment straight on) keeps
+    ``NEAR_ROW`` spacing off every particle and whose end stays a spacing inside the exterior
+    segments ``edge`` ((k, 2, 2), as the unturned one does); ``d`` and 0 when none does. A
+    segment that runs beside a row of particles leaves the points between them with only that
+    row on their side of the cut: four collinear particles, a singular moment matrix (a crack on
+    quadrilaterals that turned vertical 0.044 spacing beside a column). The first half may stay
+    close: it starts at the tip the crack already has. A crack that ends a segment just short of
+    a particle on its line passes beside it in the next one: a user's plate on triangles whose
+    :class:`~dolfinx_meshfree.CrackBandSwitch` crack drifted to 0.045 spacing of a column
+    (``lookahead`` 0.5 kept it 0.11 spacing off). The same on every rank (replicated
+    particles)."""
     for turn in TURNS:
         e = _turn(d, np.deg2rad(turn))
-        a, b = tip + 0.5 * length * e, tip + length * e
+        a, b = tip + 0.5 * length * e, tip + (1.0 + lookahead) * length * e
         if point_segment_distance(particles, a[None], b[None]).min() < NEAR_ROW * h:
             continue
+        b = tip + length * e
         if turn and point_segment_distance(b[None], edge[:, 0], edge[:, 1]).min() < h:
             continue
         return e, float(turn)

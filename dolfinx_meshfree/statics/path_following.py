@@ -50,6 +50,7 @@ from .cohesive import CohesiveSide, check_through
 from .cohesive_growth import CohesiveGrowth, _inside, grow_once
 from .cohesive_initiation import BulkStrengthWarning, bulk_stress_peaks, site_at
 from .coupled_newton import BlockModel, build_block_problem, law_internal_force
+from .crack_band_switch import BandEnergy, CrackBandSwitch, hand_over, switch_once
 from .crack_initiation import CrackInitiation, first_stretch, insert_crack
 from .efg import EFGBlockModel, EFGElasticity
 from .fe_model import FEBlockModel, FEElasticity, fe_point_functional
@@ -262,8 +263,14 @@ class PathResult:
     #: dissipated energy before and after its states were carried to the new points
     #: (:mod:`~dolfinx_meshfree.statics.state_carry`; the difference is what the transfer
     #: changed), the points that took a state from another position and, of them, those that
-    #: took it across a crack.
+    #: took it across a crack. With a :class:`~dolfinx_meshfree.CrackBandSwitch`, "after"
+    #: counts the energy the hand-over moved to the new faces in place of the bulk's share.
     carried: list[tuple[int, float, float, int, int]] = field(default_factory=list)
+    #: With a :class:`~dolfinx_meshfree.CrackBandSwitch`: per extension, ``(step, energy,
+    #: frozen)``: the bulk's dissipated energy handed to the new faces (summed over the ranks;
+    #: the faces' dissipation takes it exactly) and the bulk points frozen
+    #: (:func:`~dolfinx_meshfree.statics.crack_band_switch.hand_over`).
+    handovers: list[tuple[int, float, int]] = field(default_factory=list)
     #: The growths of the patch (``follow_path(adapt=...)``): one
     #: :class:`~dolfinx_meshfree.statics.patch_growth.PatchEvent` each, with the stored energy
     #: the rebuild changed that the load's work does not account for (``energy_change``).
@@ -758,6 +765,32 @@ def _check_growth(
         gr.check(model.cohesive, cracks)
 
 
+def _register_switches(
+    model: CoupledElasticity | EFGElasticity, efg: bool, growths: object, cracks: Sequence
+) -> None:
+    """Give each :class:`~dolfinx_meshfree.CrackBandSwitch`'s crack its faces' record (no
+    segment yet) in ``model.cohesive``; refuse a crack that is not one of the model's
+    ``cracks``, a crack whose faces carry a law already, and a bulk that is not a RankineDamage
+    (local; every rank alike)."""
+    if not isinstance(growths, Sequence):
+        return  # _check_growth names it
+    law = model.material if efg else model.law
+    for gr in growths:
+        if not isinstance(gr, CrackBandSwitch):
+            continue
+        gr.check([], cracks)  # the crack is the model's
+        mine = [c for c in model.cohesive if c.crack is gr.crack]
+        if mine and mine[0].segments == ():  # registered by a path that stopped at a check
+            continue
+        if mine:
+            raise ValueError(
+                f"CrackBandSwitch: {gr.crack!r} carries a traction-separation law already "
+                "(add_cohesive); the switch gives the crack its faces as it grows from the "
+                "band: leave add_cohesive out, or grow the crack with mf.CohesiveGrowth"
+            )
+        model.cohesive.append(gr.faces(law))
+
+
 def _check_unloaded(model: CoupledElasticity | EFGElasticity | FEElasticity) -> None:
     """Refuse a model whose last ``solve()`` left an inelastic state (local; every rank
     alike): the path starts from the unloaded state, its load factor an unknown from 0, so it
@@ -832,11 +865,14 @@ def _grow(
     growths: Sequence[CohesiveGrowth],
     model: CoupledElasticity | EFGElasticity,
     efg: bool,
-) -> tuple[list[float], np.ndarray, float] | None:
-    """Grow the first crack of ``growths`` whose softening front nears its tip (collective):
-    its new end point, the refitted particle coefficients and the degrees the new segment was
-    turned off the particles, or ``None`` when none grew. The model's cohesive record
-    follows."""
+) -> tuple[list[float], np.ndarray, float, Callable | None] | None:
+    """Grow the first crack of ``growths`` whose softening front nears its tip, or, for a
+    :class:`~dolfinx_meshfree.CrackBandSwitch`, in front of which the bulk has localised
+    (collective): its new end point, the refitted particle coefficients, the degrees the new
+    segment was turned off the particles and, for a switch, the hand-over to call on the rebuilt
+    model (``handover(built) -> (taken, given, frozen)``,
+    :func:`~dolfinx_meshfree.statics.crack_band_switch.hand_over`), or ``None`` when none grew.
+    The model's cohesive record follows."""
     if not growths:
         return None
     sides = [s for s in built.problem.shared if isinstance(s, CohesiveSide)]
@@ -849,15 +885,41 @@ def _grow(
     # law with state, the principal strain's direction, by isotropy)
     law = model.material
     elastic = law.elastic() if is_stateful(law) else law
+    h = particle_spacing(domain)
     for gr in growths:
-        side = next(s for s in sides if s.cohesive.crack is gr.crack)
+        handover = None
         # collective; its errors (a crack leaving the patch) are raised on every rank
-        grown = grow_once(gr, side, model.mls, coefficients, elastic, domain, side.h)
+        if isinstance(gr, CrackBandSwitch):
+            # the particles' points: the crack runs in the patch (FE points beside it too
+            # would send it to the FE interface, where it is refused)
+            states = [built.particles.state]
+            side = next((s for s in sides if s.cohesive.crack is gr.crack), None)
+            grown = switch_once(gr, states, side, model.mls, coefficients, elastic, domain, h)
+            if grown is not None:  # the band beside the new segment, before the carry
+                *grown, segment = grown
+                old = [(st, w) for st, w, _ in _bulk_points(built)]
+                band = BandEnergy.of(gr, old, segment, h, _comm(built))
+
+                def handover(
+                    new: BlockModel | EFGBlockModel,
+                    gr: CrackBandSwitch = gr,
+                    band: BandEnergy = band,
+                ) -> tuple[float, float, int]:
+                    side = next(
+                        s
+                        for s in new.problem.shared
+                        if isinstance(s, CohesiveSide) and s.cohesive.crack is gr.crack
+                    )
+                    bulk = [(st, w) for st, w, _ in _bulk_points(new)]
+                    return hand_over(gr, band, bulk, side, h)
+        else:
+            side = next(s for s in sides if s.cohesive.crack is gr.crack)
+            grown = grow_once(gr, side, model.mls, coefficients, elastic, domain, side.h)
         if grown is not None:
             end, fitted, turn = grown
             k = next(i for i, c in enumerate(model.cohesive) if c.crack is gr.crack)
             model.cohesive[k] = gr.extended(model.cohesive[k], end)
-            return gr.crack.points[end].tolist(), fitted, turn
+            return gr.crack.points[end].tolist(), fitted, turn, handover
     return None
 
 
@@ -935,10 +997,12 @@ def _reequilibrated(
     solver: SolverOptions,
     event: str,
     result: PathResult,
+    handover: Callable | None = None,
 ) -> tuple[BlockModel | EFGBlockModel, float, int, float, Callable, dict[str, Callable]]:
     """``model`` brought back to equilibrium at the control value ``tau`` after its cracks
     changed (one grew, or one started: ``event``, the errors' opening words) or its patch grew
-    (``fitted`` ``None``): rebuilt on them (the faces' states carried), the particle field set
+    (``fitted`` ``None``): rebuilt on them (the faces' states carried; a switch's ``handover``
+    called on the rebuilt model, :attr:`PathResult.handovers`), the particle field set
     to the refitted ``fitted`` (a grown patch: fitted to the old field, and ``loads`` rebuilt on
     the new layout, the work counted from the fitted state), re-equilibrated. Returns the new
     built model, the load factor, Newton's iterations, the work of the load on the way, and the
@@ -954,6 +1018,11 @@ def _reequilibrated(
             "spacing or a larger dilation",
             result,
         ) from None
+    if handover is not None:  # the band's energy to the faces: counted in the carry's record
+        taken, given, frozen = handover(built)
+        result.handovers.append((len(result.control) + 1, taken, frozen))
+        if carried is not None:
+            carried = (carried[0], carried[1] - given + taken, *carried[2:])
     if carried is not None:  # the step being converged: its record is appended after this
         step = len(result.control) + 1
         result.carried.append((step, *carried))
@@ -1148,7 +1217,10 @@ def follow_path(
             control value, then checked again. With a small-strain bulk (elastic, or with
             state: carried to the cut cells' new points, :mod:`.state_carry`) and indirect
             displacement control; :attr:`PathResult.extensions` records each growth (and
-            :attr:`PathResult.carried` each transfer of a state).
+            :attr:`PathResult.carried` each transfer of a state). A
+            :class:`~dolfinx_meshfree.CrackBandSwitch` grows a crack from a RankineDamage
+            bulk's band where it has localised, the band's softening handed to the new faces
+            (:attr:`PathResult.handovers`).
         initiation: Start further cohesive cracks where the bulk's averaged largest principal
             stress passes ``f_t`` (:class:`~dolfinx_meshfree.CrackInitiation`, multiple
             cracking: :mod:`~dolfinx_meshfree.statics.crack_initiation`); each then grows like
@@ -1194,9 +1266,10 @@ def follow_path(
     if fe_only:
         raise_on_all_ranks(comm, lambda: _check_fe_only(model.law, growth, initiation, adapt))
     cracks = model.cracks if efg or fe_only else model.patch.cracks
+    growths = [] if growth is None else [growth] if isinstance(growth, CohesiveGrowth) else growth
+    raise_on_all_ranks(comm, lambda: _register_switches(model, efg, growths, cracks))
     raise_on_all_ranks(comm, lambda: check_through(cracks, model.cohesive))
     raise_on_all_ranks(comm, lambda: _check_unloaded(model))
-    growths = [] if growth is None else [growth] if isinstance(growth, CohesiveGrowth) else growth
     growths = list(growths)  # cracks that start during the path add theirs
     raise_on_all_ranks(comm, lambda: _check_growth(model, efg, growths, control, cracks))
     raise_on_all_ranks(comm, lambda: _check_initiation(model, efg, initiation, control))
@@ -1204,7 +1277,11 @@ def follow_path(
     if adapt is not None:
         criteria = raise_on_all_ranks(comm, lambda: check_adapt(model, efg, adapt, growths))
     bulk_law = model.material if efg else model.law
-    grown = [c.law.ft for c in model.cohesive if any(gr.crack is c.crack for gr in growths)]
+    grown = [  # a switch's faces take over from the band: no double softening
+        c.law.ft
+        for c in model.cohesive
+        if any(gr.crack is c.crack and not isinstance(gr, CrackBandSwitch) for gr in growths)
+    ]
     if isinstance(bulk_law, RankineDamage) and grown and bulk_law.ft <= max(grown):
         warnings.warn(
             f"the bulk's RankineDamage has f_t={bulk_law.ft:g}, not above the growing cohesive "
@@ -1247,13 +1324,14 @@ def follow_path(
             built: BlockModel | EFGBlockModel,
             fitted: np.ndarray | None,
             what: str,
+            handover: Callable | None = None,
         ) -> tuple[BlockModel | EFGBlockModel, float, int, float, Callable, dict]:
             """:func:`_reequilibrated` at the path's current step, control value, load factor
             and tolerances, after ``what`` happened (collective)."""
             event = f"at step {step} (control {tau:.6g}, load factor {t:.6g}) {what}"
             return _reequilibrated(
                 model, efg, u, built, fitted, control, monitors, loads, t, tau, tol, stall,
-                options, solver, event, result,
+                options, solver, event, result, handover,
             )  # fmt: skip
 
         t, tau, dtau, cuts = 0.0, 0.0 if arc else g(_owned(x)), options.increment, 0
@@ -1354,14 +1432,14 @@ def follow_path(
                 grown = _grow(built, growths, model, efg)
                 if grown is None:
                     break
-                grown, fitted, turn = grown
+                grown, fitted, turn, handover = grown
                 result.extensions.append((step, tau, grown))
                 result.turns.append(turn)
-                # the model on the longer crack, the faces' states carried, the particle field
-                # refitted across the new segment, back to equilibrium at the same control value
-                # (the work of the load on the way recorded)
+                # the model on the longer crack, the faces' states carried (a switch's band
+                # handed over), the particle field refitted across the new segment, back to
+                # equilibrium at the same control value (the work of the load on the way recorded)
                 built, t, its_g, work_g, g, watch = reequilibrated(
-                    model, built, fitted, f"the crack grew to {grown}"
+                    model, built, fitted, f"the crack grew to {grown}", handover
                 )
                 problem, x = built.problem, built.x
                 its, work = its + its_g, work + work_g

@@ -18,10 +18,10 @@ import dolfinx
 import numpy as np
 import pytest
 from mpi4py import MPI
+from test_cohesive_growth import FT, GF, NU, E, H
+from test_cohesive_growth import _bar as cohesive_bar
 
 pytestmark = pytest.mark.filterwarnings("ignore::dolfinx_meshfree.PartitionImbalanceWarning")
-
-L, H, E, NU, FT, GF = 200.0, 100.0, 30000.0, 0.2, 3.0, 0.1
 
 
 def test_a_frozen_point_stays_elastic():
@@ -56,30 +56,10 @@ def test_the_faces_opening_of_a_dissipation_inverts_their_dissipation():
 
 
 def _bar(nx: int, law: object, lead: bool):
-    """Pure EFG on an L x H plate in tension (traction 1 on the right end, rollers on the left
-    end and the bottom's first 20 mm), notched from the bottom at x0 = 100 + 0.37 h (20 mm,
-    traction-free); ``lead``: a bonded stretch of four spacings above it. The control opens the
-    notch's mouth."""
-    msh = dolfinx.mesh.create_rectangle(
-        MPI.COMM_WORLD, [np.array([0.0, 0.0]), np.array([L, H])], [nx, nx // 2],
-        dolfinx.mesh.CellType.quadrilateral,
-    )  # fmt: skip
-    h = L / nx
-    x0 = np.array([100.0 + 0.37 * h, 0.0])
-    up = np.array([0.0, 1.0])
-    points = [x0, x0 + 20.0 * up] + ([x0 + (20.0 + 4 * h) * up] if lead else [])
-    crack = mf.Crack(points, through=True)
-    model = mf.EFGElasticity(mf.ParticleSet.from_vertices(msh), law, cracks=[crack])
-    left = mf.boundary_facets(msh, lambda p: np.isclose(p[0], 0.0))
-    bottom = mf.boundary_facets(msh, lambda p: np.isclose(p[1], 0.0) & (p[0] < 20.0))
-    right = mf.boundary_facets(msh, lambda p: np.isclose(p[0], L))
-    model.add_dirichlet(left, lambda x: np.zeros_like(x), components=(0,))
-    model.add_dirichlet(bottom, lambda x: np.zeros_like(x), components=(1,))
-    model.add_traction(right, lambda x, n: np.tile([1.0, 0.0], (len(x), 1)))
-    control = mf.DisplacementControl(
-        [x0 - np.array([h / 2, 0.0]), x0 + np.array([h / 2, 0.0])], [[-1.0, 0.0], [1.0, 0.0]]
-    )
-    return model, crack, control
+    """Pure EFG on test_cohesive_growth's plate in tension (L x H, traction 1 on the right end),
+    notched from the bottom at x0 = 100 + 0.37 h (20 mm, traction-free); ``lead``: a bonded
+    stretch of four spacings above it. The control opens the notch's mouth."""
+    return cohesive_bar("efg", 0.0, nx=nx, law=law, lead=lead)
 
 
 OPTIONS = mf.PathOptions(increment=0.12 / 200, end=0.12, max_increment=0.12 / 20, min_load=0.05)

@@ -96,7 +96,11 @@ if TYPE_CHECKING:  # annotations only
     from ..physics.state import PointState
     from .cohesive import CohesiveSide
 
-__all__ = ["BandEnergy", "CrackBandSwitch", "hand_over", "localised_front", "switch_once"]
+__all__ = ["TIE", "BandEnergy", "CrackBandSwitch", "hand_over", "localised_front", "switch_once"]
+
+#: Relative widening of the geometric bounds (a point's distance from a new segment, from a tip)
+#: so that a point exactly on one, as grid points are, falls on the same side on every partition.
+TIE = 1e-9
 
 
 @dataclass(frozen=True)
@@ -194,11 +198,11 @@ def localised_front(
         x = st.points[:, :2]
         c = st.committed
         r = np.linalg.norm(x - tip, axis=1)
-        hit = (
+        hit = (  # ties with the bounds decided alike on every partition (TIE)
             (c["damage"][:, 0] >= switch.damage)
             & (c["frozen"][:, 0] <= 0.0)
-            & ((x - tip) @ along > 0.0)
-            & (r <= switch.ahead * h)
+            & ((x - tip) @ along > TIE * h)
+            & (r <= switch.ahead * h * (1.0 + TIE))
         )
         if hit.any():  # the nearest; ties by coordinates, whatever the partition
             i = np.flatnonzero(hit)
@@ -272,7 +276,11 @@ def _strip(
     t = b - a
     s = (x[:, :2] - a) @ t / float(t @ t)
     foot = a + np.clip(s, 0.0, 1.0)[:, None] * t
-    near = (s <= 1.0) & (np.linalg.norm(x[:, :2] - foot, axis=1) <= switch.width * h)
+    # the bounds widened by 1e-9: a grid point at exactly ``width`` spacings (or at the new
+    # tip's normal) is in whatever the round-off of the partition (on 2 ranks one point of the
+    # shear beam's strip at 1.0 h flipped, and the path went another way)
+    dist = np.linalg.norm(x[:, :2] - foot, axis=1)
+    near = (s <= 1.0 + TIE) & (dist <= switch.width * h * (1.0 + TIE))
     idx = np.flatnonzero(near)
     return idx, s[idx]
 
@@ -349,7 +357,10 @@ def hand_over(
         return 0.0, 0.0, 0
     law = side.law
     energy = np.bincount(_nearest(f_s, band.s), weights=band.energy, minlength=len(f_s))
-    take = np.minimum(energy / f_w, law.max_dissipation)  # beyond the faces' cap it stays
+    # beyond the faces' cap it stays; below 1e-12 G_f it is round-off (a face point given it
+    # would count as softened, on one partition and not on another)
+    take = np.minimum(energy / f_w, law.max_dissipation)
+    take[take <= 1e-12 * law.Gf] = 0.0
     share = np.divide(take * f_w, energy, out=np.zeros_like(energy), where=energy > 0.0)
     where = np.empty(len(order), dtype=np.int64)
     where[order] = np.arange(len(order))
@@ -361,6 +372,7 @@ def hand_over(
     for st, w in bulk:
         idx, s = _strip(switch, st.points, band.segment, h)
         keep = 1.0 - share[_nearest(f_s, s)]
+        keep[keep <= 1e-12] = 0.0  # all of it moved: no round-off left behind
         given += float(st.committed["dissipation"][idx, 0] * (1.0 - keep) @ np.asarray(w)[idx])
         virgin = st.law.initial_state(len(idx))
         for state in (st.committed, st.trial):

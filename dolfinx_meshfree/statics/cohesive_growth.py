@@ -84,6 +84,7 @@ __all__ = [
     "extension",
     "grow_once",
     "initiation_direction",
+    "nearest_over_ranks",
     "nearest_softened",
     "principal_direction",
     "ray_to_boundary",
@@ -147,22 +148,14 @@ class CohesiveGrowth:
 
     def check(self, cohesive: Sequence[CohesiveCrack], cracks: Sequence[Crack]) -> int:
         """The index in ``cohesive`` of this crack's faces; ValueError naming what is missing."""
-        if not any(self.crack is c for c in cracks):
-            raise ValueError(
-                f"CohesiveGrowth: {self.crack!r} is not one of the model's cracks; pass the Crack "
-                "object given to the ParticlePatch (or EFGElasticity)"
-            )
+        self._check_is_models(cracks)
         k = next((i for i, c in enumerate(cohesive) if c.crack is self.crack), None)
         if k is None:
             raise ValueError(
                 f"CohesiveGrowth: {self.crack!r} carries no traction-separation law; add one with "
                 "model.add_cohesive(crack, LinearCohesive(...)) before following the path"
             )
-        if not self.crack.tip_ends:
-            raise ValueError(
-                f"CohesiveGrowth: {self.crack!r} has no tip (it splits the body already); "
-                "nothing can grow"
-            )
+        self._check_has_tip()
         segs = cohesive[k].segments
         for end in self.crack.tip_ends:
             last = 0 if end == 0 else len(self.crack.points) - 2
@@ -173,6 +166,22 @@ class CohesiveGrowth:
                     "crack grows from faces that carry the law"
                 )
         return k
+
+    def _check_is_models(self, cracks: Sequence[Crack]) -> None:
+        """ValueError unless the crack is one of the model's ``cracks``."""
+        if not any(self.crack is c for c in cracks):
+            raise ValueError(
+                f"{type(self).__name__}: {self.crack!r} is not one of the model's cracks; pass "
+                "the Crack object given to the ParticlePatch (or EFGElasticity)"
+            )
+
+    def _check_has_tip(self) -> None:
+        """ValueError unless the crack has a tip to grow."""
+        if not self.crack.tip_ends:
+            raise ValueError(
+                f"{type(self).__name__}: {self.crack!r} has no tip (it splits the body "
+                "already); nothing can grow"
+            )
 
     def extended(self, cohesive: CohesiveCrack, end: int) -> CohesiveCrack:
         """``cohesive`` after the crack grew by one segment at ``end`` (0: a segment prepended,
@@ -208,13 +217,22 @@ def nearest_softened(
     """The point of the face points' ``state`` nearest ``tip`` whose committed ``kappa`` is past
     ``w_0``, over the ranks, or ``None`` (collective): :func:`softening_front`, and the dynamic
     growth's (:class:`~dolfinx_meshfree.dynamics.CohesiveDynamicGrowth`)."""
-    soft = state.points[state.committed["kappa"][:, 0] > w_0]
-    mine = soft[np.argmin(np.linalg.norm(soft - tip, axis=1))] if len(soft) else None
-    found = [p for p in comm.allgather(mine) if p is not None]
+    return nearest_over_ranks(state.points[state.committed["kappa"][:, 0] > w_0], tip, comm)
+
+
+def nearest_over_ranks(points: np.ndarray, tip: np.ndarray, comm: MPI.Comm) -> np.ndarray | None:
+    """The point of ``points`` (this rank's, (m, 2)) nearest ``tip`` over the ranks, ties by
+    coordinates so that it is the same on every rank and for every partition, or ``None``
+    (collective)."""
+    mine = None
+    if len(points):
+        r = np.linalg.norm(points - tip, axis=1)
+        k = np.lexsort((points[:, 1], points[:, 0], r))[0]
+        mine = (float(r[k]), points[k].copy())
+    found = [m for m in comm.allgather(mine) if m is not None]
     if not found:
         return None
-    found = np.asarray(found)
-    return found[np.argmin(np.linalg.norm(found - tip, axis=1))]
+    return min(found, key=lambda m: (m[0], m[1][0], m[1][1]))[1]
 
 
 def direction_at(crack: Crack, x: np.ndarray, end: int) -> np.ndarray:

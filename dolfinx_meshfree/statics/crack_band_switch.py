@@ -86,7 +86,13 @@ from ..geometry.crack import Crack
 from ..physics.cohesive import LinearCohesive
 from ..physics.inelastic import RankineDamage
 from .cohesive import CohesiveCrack
-from .cohesive_growth import CohesiveGrowth, _FieldFit, extension, softening_front
+from .cohesive_growth import (
+    CohesiveGrowth,
+    _FieldFit,
+    extension,
+    nearest_over_ranks,
+    softening_front,
+)
 
 if TYPE_CHECKING:  # annotations only
     from ..approx.mls import MLS
@@ -169,16 +175,8 @@ class CrackBandSwitch(CohesiveGrowth):
     def check(self, cohesive: Sequence[CohesiveCrack], cracks: Sequence[Crack]) -> int:
         """The index in ``cohesive`` of this crack's faces (given by :meth:`faces`; -1 before);
         ValueError naming what is missing."""
-        if not any(self.crack is c for c in cracks):
-            raise ValueError(
-                f"CrackBandSwitch: {self.crack!r} is not one of the model's cracks; pass the "
-                "Crack object given to the ParticlePatch (or EFGElasticity)"
-            )
-        if not self.crack.tip_ends:
-            raise ValueError(
-                f"CrackBandSwitch: {self.crack!r} has no tip (it splits the body already); "
-                "nothing can grow"
-            )
+        self._check_is_models(cracks)
+        self._check_has_tip()
         return next((i for i, c in enumerate(cohesive) if c.crack is self.crack), -1)
 
 
@@ -193,26 +191,18 @@ def localised_front(
     """The bulk point nearest ``tip`` in front of it (``(x - tip) . along > 0``) within
     ``switch.ahead`` spacings whose committed damage has reached ``switch.damage`` and that is
     not frozen, over the ranks, or ``None`` (collective, the same on every rank)."""
-    best: tuple[float, np.ndarray] | None = None
+    hits = [np.zeros((0, 2))]
     for st in states:
         x = st.points[:, :2]
         c = st.committed
-        r = np.linalg.norm(x - tip, axis=1)
         hit = (  # ties with the bounds decided alike on every partition (TIE)
             (c["damage"][:, 0] >= switch.damage)
             & (c["frozen"][:, 0] <= 0.0)
             & ((x - tip) @ along > TIE * h)
-            & (r <= switch.ahead * h * (1.0 + TIE))
+            & (np.linalg.norm(x - tip, axis=1) <= switch.ahead * h * (1.0 + TIE))
         )
-        if hit.any():  # the nearest; ties by coordinates, whatever the partition
-            i = np.flatnonzero(hit)
-            k = i[np.lexsort((x[i, 1], x[i, 0], r[i]))[0]]
-            if best is None or (r[k], *x[k]) < (best[0], *best[1]):
-                best = (float(r[k]), x[k].copy())
-    found = [b for b in comm.allgather(best) if b is not None]
-    if not found:
-        return None
-    return min(found, key=lambda b: (b[0], b[1][0], b[1][1]))[1]
+        hits.append(x[hit])
+    return nearest_over_ranks(np.concatenate(hits), tip, comm)
 
 
 def switch_once(

@@ -78,7 +78,7 @@ def test_the_switch_splits_a_bar_as_a_cohesive_crack():
     at h = 10 mm, measured 0.31) and splits it, and
 
     * its peak is the cohesive crack's (grown from a bonded lead in an elastic bulk, with the
-      same f_t and G_f: mf.CohesiveGrowth) within 5e-3 (measured 3.3e-4);
+      same f_t and G_f: mf.CohesiveGrowth) within 7e-4 (measured 3.3e-4);
     * the work of the load minus the stored energy equals the energy dissipated, the bulk's and
       the faces', within 2e-3 (measured 1.06e-3);
     * every extension hands the band beside it over (PathResult.handovers), and the hand-overs
@@ -92,7 +92,7 @@ def test_the_switch_splits_a_bar_as_a_cohesive_crack():
     reference.add_cohesive(ref_crack, mf.LinearCohesive(FT, GF), segments=[1])
     cohesive = mf.follow_path(reference, control, OPTIONS, growth=mf.CohesiveGrowth(ref_crack))
     peak = max(cohesive.load_factor)
-    assert abs(path.load_factor[k] - peak) <= 5e-3 * peak, (path.load_factor[k], peak)
+    assert abs(path.load_factor[k] - peak) <= 7e-4 * peak, (path.load_factor[k], peak)
     assert crack.is_tip == [False, False] and crack.points[-1, 1] == pytest.approx(H, abs=1e-9)
     assert np.abs(crack.points[:, 0] - crack.points[0, 0]).max() <= 0.5
     balance = path.external_work[-1] - path.stored_energy[-1]
@@ -177,7 +177,7 @@ def test_a_users_plate_on_triangles():
     """A user's plate on triangles (``_users_plate``) with the switch at its defaults: before
     ``lookahead``, its crack drifted to 0.045 spacing beside a particle column and stopped
     with a singular MLS. Now it keeps at least 0.05 spacing off every particle (measured
-    0.106), splits the plate, and peaks within 1 % of a cohesive crack grown from a vertical
+    0.106), splits the plate, and peaks within 0.4 % of a cohesive crack grown from a vertical
     lead in an elastic bulk (measured 0.18 %), the energy balanced within 1e-3 (measured
     3.6e-4). Serial and 2 ranks: the same peak to 2e-15."""
     options = mf.PathOptions(increment=1e-4, end=0.08, max_increment=4e-3, min_load=0.05)
@@ -196,4 +196,4 @@ def test_a_users_plate_on_triangles():
     reference.add_cohesive(lead, mf.LinearCohesive(3.0, 0.1), segments=[1])
     cohesive = mf.follow_path(reference, control, options, growth=mf.CohesiveGrowth(lead))
     a, b = max(path.load_factor), max(cohesive.load_factor)
-    assert abs(a - b) <= 1e-2 * b, (a, b)
+    assert abs(a - b) <= 4e-3 * b, (a, b)

@@ -109,6 +109,59 @@ def test_softening_bar_follows_the_closed_form_through_the_peak(coupling, cell, 
     assert max(res.iterations) <= 6
 
 
+@pytest.mark.all_cases
+@pytest.mark.parametrize(
+    "coupling, cell",
+    [
+        ("ramp", "quadrilateral"),
+        ("ramp-cubic", "triangle"),
+        ("lagrange", "quadrilateral"),
+        ("edge-to-edge", "triangle"),
+        ("bridging", "quadrilateral"),
+        ("master-slave", "quadrilateral"),
+    ],
+)
+def test_particle_band_is_the_dilation_by_default(coupling, cell):
+    """With no ``particle_band``, every particle point's crack band is the MLS dilation times its
+    cell's side (the documented default), and every FE or blended cell's its side: on the
+    uniform bar the side is ``1 / n``, the dilation the coupling's default (2.0; the ramps' 2.5).
+    The ramps' particle tables did not carry their MLS, and the band fell back to one cell, not
+    2.5: their notched beam then dissipated 1.48 G_f per unit area and peaked 27 % above pure
+    EFG's, silently (demos/concrete_beam.py --crack band --method ramp)."""
+    n = 4
+    model = _bar(n, coupling, cell)
+    model.tractions = []
+    right = mf.boundary_facets(model.V.mesh, lambda p: np.isclose(p[0], L))
+    model.add_traction(right, lambda p, nrm: np.tile([0.5 * FT, 0.0], (len(p), 1)))
+    states = model.solve(load_steps=1).states
+    dilation = mf.DEFAULT_DILATION[coupling]
+    assert dilation == (2.5 if coupling.startswith("ramp") else 2.0)
+    in_patch = model.patch.in_patch
+    inside = [st for st in states if in_patch[st.cells].all()]
+    assert len(inside) == 1 and len(inside) < len(states)  # the particles' store, and the FE's
+    for st in states:
+        expected = (dilation if st is inside[0] else 1.0) / n
+        assert np.allclose(st.band, expected, rtol=1e-12), (coupling, len(st))
+
+
+def test_pure_efg_particle_band_is_its_dilation():
+    """Pure EFG's particle points: the band is its dilation (given 2.5 here, the default 2.0)
+    times the side of their integration cell, ``1 / n`` on the uniform bar."""
+    n = 4
+    msh = dolfinx.mesh.create_rectangle(
+        MPI.COMM_WORLD, [[0, 0], [L, W]], [2 * n, n], dolfinx.mesh.CellType.quadrilateral
+    )
+    particles = mf.ParticleSet.from_vertices(msh)
+    law = mf.RankineDamage(E=E, nu=0.0, ft=FT, Gf=GF, plane="stress")
+    model = mf.EFGElasticity(particles, law, dilation=2.5)
+    left = mf.boundary_facets(msh, lambda p: np.isclose(p[0], 0.0))
+    right = mf.boundary_facets(msh, lambda p: np.isclose(p[0], L))
+    model.add_dirichlet(left, lambda p: np.zeros_like(p))
+    model.add_traction(right, lambda p, nrm: np.tile([0.5 * FT, 0.0], (len(p), 1)))
+    (state,) = model.solve(load_steps=1).states
+    assert np.allclose(state.band, 2.5 / n, rtol=1e-12)
+
+
 def test_load_steps_commit_the_state_and_unloading_is_elastic():
     """``CoupledElasticity.solve(load_steps=)`` commits the state at every converged step: a
     bar loaded below the peak (load control cannot pass it) has no damage; the states are kept

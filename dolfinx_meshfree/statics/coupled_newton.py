@@ -156,6 +156,7 @@ def build_block_problem(
     """
     P = model.patch.particles
     t0 = time.perf_counter()
+    factor = None  # the particle points' crack band in cell sizes (a law that softens)
     if is_stateful(material) and material.needs_band:  # on every rank, before the assembly
         factor = particle_band_factor(model.mls, getattr(model, "particle_band", None))
 
@@ -174,7 +175,7 @@ def build_block_problem(
         F_int, u, extra["fe_cells"], extra["fixed"], extra["fe_weight"],
         law=material if stateful else None, dilatation=getattr(model, "fe_dilatation", None),
     )  # fmt: skip
-    particles = ParticleSide(P, tables, material, getattr(model, "particle_band", None))
+    particles = ParticleSide(P, tables, material, factor)
     # held FE dofs (before the shared sides, which leave their rows out): the strong values on
     # Dirichlet nodes, 0 on nodes no FE cell carries
     fe.fixed_values = extra["fixed_values"][fe.fixed_local]

@@ -978,13 +978,14 @@ class EFGElasticity:
         gradients, from ``u = 0``. Collective."""
         law = self.material
         refuse_smoothed(self.integration, nonlinear=True)  # the same on every rank
+        factor = None  # the particle points' crack band in cell sizes (a law that softens)
         if is_stateful(law) and law.needs_band:  # on every rank, before the assembly
             factor = particle_band_factor(self.mls, None)
             cells = np.ones(self.mesh.topology.index_map(self.mesh.topology.dim).size_local, bool)
             raise_on_all_ranks(self.comm, lambda: check_bands(self.mesh, law, cells, factor))
         tables: dict = {}
         system, objects, extra = self.system(tables)
-        side = ParticleSide(self.particles, tables, law)
+        side = ParticleSide(self.particles, tables, law, factor)
         constant = [list(row) for row in system.blocks]
         constant[0][0] = None
         E, h = self.linear_material.E, particle_spacing(self._domain) if self.cohesive else 0.0

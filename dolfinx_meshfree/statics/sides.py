@@ -305,10 +305,18 @@ def particle_coefficients(particles: ParticleSet, x: PETSc.Vec) -> np.ndarray:
 
 def particle_band_factor(approximation: object, band_factor: float | None) -> float:
     """The crack band of a particle point in integration-cell sizes: ``band_factor`` if
-    given, else the MLS dilation (1 without one)."""
+    given, else the dilation of the MLS ``approximation`` (the model's, whatever tabulated the
+    particle rule: the ramps' tables do not carry it)."""
     if band_factor is not None:
         return float(band_factor)
-    return float(getattr(approximation, "dilation", 1.0))
+    dilation = getattr(approximation, "dilation", None)
+    if dilation is None:
+        raise ValueError(
+            f"the crack band of the particle points needs the MLS dilation, and "
+            f"{type(approximation).__name__} has none: pass the band in cell sizes "
+            "(particle_band=...)"
+        )
+    return float(dilation)
 
 
 class ParticleSide:
@@ -321,6 +329,11 @@ class ParticleSide:
         material: Material | StatefulLaw,
         band_factor: float | None = None,
     ) -> None:
+        if is_stateful(material) and material.needs_band and band_factor is None:
+            raise ValueError(
+                f"ParticleSide: {type(material).__name__} softens and needs the crack band of "
+                "the particle points: pass band_factor (particle_band_factor(model.mls, ...))"
+            )
         q, tq = tables["quadrature"], tables["table"]
         self.P, self.comm = particles, particles.comm
         #: The patch quadrature (points, weights, cells).
@@ -328,14 +341,13 @@ class ParticleSide:
         weights = tables.get("weights", q.weights)  # the bridging band's alpha w_q
         #: The state store of a law with state at the patch quadrature, else ``None``. The
         #: crack band of a particle point is ``band_factor`` times its integration cell's size;
-        #: by default (:func:`particle_band_factor`) the MLS dilation: a smooth MLS field does not
-        #: localise in a band narrower than about one support radius.
+        #: the models pass :func:`particle_band_factor`, by default the MLS dilation: a smooth
+        #: MLS field does not localise in a band narrower than about one support radius.
         self.state: PointState | None = None
         if is_stateful(material):
             band = None
             if material.needs_band:
-                factor = particle_band_factor(tables.get("approximation"), band_factor)
-                band = factor * cell_sizes(particles.mesh, q.cells)
+                band = float(band_factor) * cell_sizes(particles.mesh, q.cells)
             self.state = PointState(material, q.points, band, q.cells)
             material = BoundLaw(self.state)
         self.forces = InternalForces(

@@ -155,8 +155,9 @@ class LinearElastic:
         D[2, 2] = mu
         return D
 
-    def check_gdim(self, gdim: int, where: str = "the mesh") -> None:
-        """Raise a ValueError unless the law fits a geometric dimension ``gdim`` (local)."""
+    def check_gdim(self, gdim: int, where: str = "the mesh", law: str | None = None) -> None:
+        """Raise a ValueError unless the law fits a geometric dimension ``gdim`` (local);
+        ``law``: the class the user gave, when this is its :func:`linear_twin`."""
         if gdim == self.gdim:
             return
         fix = (
@@ -164,9 +165,10 @@ class LinearElastic:
             if gdim == 3
             else "plane='stress' or plane='strain' (2D elasticity)"
         )
+        args = "E, nu" if law is None else "..."
         raise ValueError(
             f"material plane={self.plane!r} is a {self.gdim}D law but {where} has gdim={gdim}; "
-            f"use LinearElastic(E, nu, {fix})"
+            f"use {law or 'LinearElastic'}({args}, {fix})"
         )
 
     @property

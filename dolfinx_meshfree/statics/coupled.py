@@ -160,10 +160,13 @@ def coupled_integration(
     return integration
 
 
-def _check_plane(law: LinearElastic, msh: dolfinx.mesh.Mesh, coupling: str) -> None:
+def _check_plane(
+    law: LinearElastic, msh: dolfinx.mesh.Mesh, coupling: str, given: str | None = None
+) -> None:
     """The law's dimension against the mesh's; an axisymmetric law only with the couplings of
-    :data:`AXISYMMETRIC_COUPLINGS`, on a section in ``r >= 0`` (collective)."""
-    law.check_gdim(msh.geometry.dim, "V's mesh")
+    :data:`AXISYMMETRIC_COUPLINGS`, on a section in ``r >= 0`` (collective). ``given``: the
+    class of the user's law, when ``law`` is its linear twin."""
+    law.check_gdim(msh.geometry.dim, "V's mesh", given)
     if coupling not in AXISYMMETRIC_COUPLINGS:
         law.refuse_axisymmetric(
             f"CoupledElasticity (coupling={coupling!r}; axisymmetric: "
@@ -339,7 +342,7 @@ class CoupledElasticity:
                 f"finite strain (its family has no finite-strain system); use one of "
                 f"{list(FINITE_STRAIN_COUPLINGS)} or material=LinearElastic"
             )
-        _check_plane(linear_twin(material), V.mesh, coupling)
+        _check_plane(linear_twin(material), V.mesh, coupling, type(material).__name__)
         if V.mesh is not patch.mesh:
             raise ValueError("V and patch must live on the same mesh object")
         if patch.comm.allreduce(patch.fe_cells.size) == 0:

@@ -696,7 +696,9 @@ class EFGElasticity:
                 f"SaintVenantKirchhoff) or a law with state (RankineDamage, J2Plasticity), got "
                 f"{type(material).__name__}"
             )
-        linear_twin(material).check_gdim(particles.mesh.geometry.dim, "the particles' mesh")
+        linear_twin(material).check_gdim(
+            particles.mesh.geometry.dim, "the particles' mesh", type(material).__name__
+        )
         if is_axisymmetric(material):
             raise_on_all_ranks(
                 particles.comm,

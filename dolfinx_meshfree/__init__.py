@@ -78,6 +78,7 @@ from .physics.johnson_cook import JohnsonCook
 from .physics.materials import LinearElastic
 from .physics.zones import MaterialZones
 from .state_fields import state_field
+from .statics.band_reach import BandCutWarning
 from .statics.cohesive_growth import CohesiveGrowth, initiation_direction
 from .statics.cohesive_initiation import BulkStrengthWarning, InitiationSite, initiation_site
 from .statics.coupled import (
@@ -155,6 +156,7 @@ __all__ = [
     "AdaptiveQuadrature",
     "Approximation",
     "ArcLength",
+    "BandCutWarning",
     "Bodies",
     "BodyCut",
     "BulkStrengthWarning",

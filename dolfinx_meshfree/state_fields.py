@@ -31,7 +31,7 @@ from .parallel import raise_on_all_ranks
 if TYPE_CHECKING:  # annotations only
     from .dynamics.explicit import ExplicitDynamics
 
-__all__ = ["REDUCTIONS", "state_field", "state_fields"]
+__all__ = ["REDUCTIONS", "cell_values", "state_field", "state_fields"]
 
 #: How the points of a cell become its value.
 REDUCTIONS = ("max", "min", "mean")
@@ -112,6 +112,16 @@ def _reduced(
     f.x.array[dofs] = per_cell
     f.x.scatter_forward()
     return f
+
+
+def cell_values(
+    msh: dolfinx.mesh.Mesh, cells: np.ndarray, v: np.ndarray, virgin: float, reduce: str = "max"
+) -> np.ndarray:
+    """The values ``v`` at points of the local ``cells`` reduced per cell (``virgin`` where a
+    cell has none), for every local cell, ghosts included: what a rank reads of a neighbour's
+    cell across a partition boundary (collective)."""
+    f = _reduced(msh, "cell_values", cells, v, virgin, reduce)
+    return f.x.array[_compat.dofmap_array(f.function_space)[:, 0]].copy()
 
 
 def _static_state_field(solution: object, name: str, reduce: str) -> dolfinx.fem.Function:

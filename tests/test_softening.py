@@ -333,6 +333,7 @@ def test_localised_softening_is_objective_in_the_particle_spacing():
         options = mf.PathOptions(increment=2e-4, end=0.05, min_load=0.15, max_increment=4e-3)
         res = mf.follow_path(model, control, options)
         out.append(res)
+        assert res.band_cut is None  # the band keeps off the interface
         # the particle points dissipate it all (the FE cells stay elastic)
         fe, particles = res.solution.states
         assert np.all(fe.committed["damage"] == 0.0)
@@ -345,6 +346,35 @@ def test_localised_softening_is_objective_in_the_particle_spacing():
     print(f"peaks {p1:.5f} {p2:.5f}, dissipated at {common:.4f}: {d1:.6f} {d2:.6f}")
     assert abs(p2 - p1) <= 0.003 * p1
     assert abs(d2 - d1) <= 0.03 * d1
+
+
+def test_a_band_cut_by_the_interface_is_named():
+    """A bar thinned in the patch cell on the interface (x = 1.375, the interface at 1.5; n = 4,
+    band 2 cells): the band cannot localise over its width there and dissipates 0.65 of
+    ``G_f`` times the thinned section (measured; the same bar thinned at 1.125, two cells from
+    the interface: 0.97); with the ramp (band 2.5 cells) it spills into the blended cells,
+    whose band is one cell: 1.29. ``follow_path`` warns at the first step a fully softened
+    particle point lies within a quarter cell of the interface with the cell across not
+    softened (steps 9 and 12), the same step and point on 2 ranks, and records it in
+    ``PathResult.band_cut``; the lagrange bar
+    thinned at 1.125 (``test_localised_softening_is_objective_in_the_particle_spacing``) does
+    not warn."""
+    n, xc = 4, 1.375
+    control = mf.DisplacementControl([[xc - 0.3, 0.5], [xc + 0.3, 0.5]], [[-1, 0], [1, 0]])
+    options = mf.PathOptions(increment=2e-4, end=0.2, min_load=0.1, max_increment=4e-3)
+    for coupling, first in (("lagrange", 9), ("ramp", 12)):
+        model = _bar(n, coupling, notch=xc)
+        with pytest.warns(mf.BandCutWarning, match="reached the FE interface at"):
+            res = mf.follow_path(model, control, options)
+        step, point, damage, across = res.band_cut
+        assert step == first and 1.5 - 0.25 / n <= point[0] < 1.5
+        assert damage >= 0.9 and across < 0.9
+        assert res.load_factor[-1] < 0.1 * res.peak[0]  # softened through
+        ratio = res.dissipated_energy[-1] / (GF * 0.9 * W)
+        if coupling == "lagrange":
+            assert ratio < 0.8  # cut short (0.65)
+        else:
+            assert ratio > 1.2  # the band spills into blended cells of band one cell (1.29)
 
 
 def test_arc_length_follows_the_closed_form_and_a_snap_back():
@@ -466,6 +496,10 @@ def test_softening_bar_in_3d():
     V = _compat.vector_function_space(msh)
     mid = dolfinx.mesh.locate_entities(msh, 3, lambda p: (p[0] > 0.5 - 1e-9) & (p[0] < 1.5 + 1e-9))
     patch = mf.ParticlePatch(msh, mid, placement="vertices")
+    # the law's default plane="stress" on a 3D mesh: refused, naming the user's class
+    planar = mf.RankineDamage(E=E, nu=0.0, ft=FT, Gf=GF)
+    with pytest.raises(ValueError, match=r"gdim=3; use RankineDamage\(\.\.\., plane=None"):
+        mf.CoupledElasticity(V, patch, planar, coupling="lagrange")
     law = mf.RankineDamage(E=E, nu=0.0, ft=FT, Gf=GF, plane=None)
     model = mf.CoupledElasticity(V, patch, law, coupling="lagrange", particle_band=1.0)
     left = mf.boundary_facets(msh, lambda p: np.isclose(p[0], 0.0))

@@ -46,6 +46,7 @@ from ..parallel import raise_on_all_ranks
 from ..physics.inelastic import RankineDamage
 from ..physics.materials import LinearElastic
 from ..physics.state import is_stateful, voigt_strain
+from .band_reach import BandCutWarning, band_at_interface
 from .cohesive import CohesiveSide, check_through
 from .cohesive_growth import CohesiveGrowth, _inside, grow_once
 from .cohesive_initiation import BulkStrengthWarning, bulk_stress_peaks, site_at
@@ -281,6 +282,10 @@ class PathResult:
     #: With ``adapt``: whether a criterion ever named a cell, patch cells included (none did:
     #: :class:`~dolfinx_meshfree.PatchCriterionWarning`).
     adapt_named: bool = False
+    #: A :class:`~dolfinx_meshfree.RankineDamage` patch whose crack band reached the FE
+    #: interface (:mod:`~dolfinx_meshfree.statics.band_reach`): ``(step, point, damage, damage
+    #: across)`` at the first step it did (:class:`BandCutWarning`), else ``None``.
+    band_cut: tuple[int, list[float], float, float] | None = None
 
     @property
     def peak(self) -> tuple[float, float]:
@@ -378,6 +383,22 @@ def _bulk_points(
 
             out.append((shared.state, shared.forces.weights, blended_strain))
     return out
+
+
+def _band_cut(built: BlockModel | EFGBlockModel) -> tuple[np.ndarray, float, float] | None:
+    """Where a :class:`~dolfinx_meshfree.RankineDamage` patch's crack band is cut by the FE
+    interface (:func:`~dolfinx_meshfree.statics.band_reach.band_at_interface`; collective),
+    or ``None`` (also without a patch)."""
+    side = getattr(built, "particles", None)
+    patch = getattr(built.model, "patch", None)
+    if (
+        patch is None
+        or side is None
+        or not isinstance(getattr(side.state, "law", None), RankineDamage)
+    ):
+        return None
+    others = [st for st, _, _ in _bulk_points(built) if st is not side.state]
+    return band_at_interface(patch, side.state, others)
 
 
 def _energies(built: BlockModel | EFGBlockModel) -> tuple[float, float]:
@@ -1498,6 +1519,23 @@ def follow_path(
                 previous = previous_new
             peak = max(peak, t)
             stored, dissipated = _energies(built)
+            cut = None if result.band_cut is not None else _band_cut(built)
+            if cut is not None:  # the same on every rank
+                point, damage, across = cut
+                result.band_cut = (step, point.tolist(), damage, across)
+                warnings.warn(
+                    f"at step {step} (control {tau:.6g}, load factor {t:.6g}) the crack band of "
+                    f"the particle points reached the FE interface at "
+                    f"{np.round(point, 6).tolist()} (damage {damage:.4f}; the cell across the "
+                    f"interface {across:.4f}): the particle field is tied to the FE trace there "
+                    "and cannot localise over the band width the law assumes (the MLS dilation "
+                    "times the cell size), so it does not dissipate G_f per unit crack area (a "
+                    "bar softening in the patch cell on the interface: 0.65 G_f; with the ramp, "
+                    "whose blended cells' band is one cell, 1.29 G_f). Widen the patch there, "
+                    "so that the band keeps half its width off the interface",
+                    BandCutWarning,
+                    stacklevel=2,
+                )
             result.control.append(tau)
             result.load_factor.append(t)
             result.iterations.append(its)

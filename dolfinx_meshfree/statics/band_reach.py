@@ -91,9 +91,10 @@ def band_at_interface(
     f2c = msh.topology.connectivity(tdim - 1, tdim)
     rows = [np.zeros((0, msh.geometry.dim + 2))]
     soft = np.flatnonzero(damage >= CUT_DAMAGE)
-    for c in np.unique(particles.cells[soft]):  # the cells of softened particle points
+    cells_soft = np.unique(particles.cells[soft])  # the cells of softened particle points
+    sizes = cell_sizes(msh, cells_soft)
+    for c, size in zip(cells_soft, sizes, strict=True):
         here = soft[particles.cells[soft] == c]
-        size = cell_sizes(msh, [c])[0]
         for f in c2f.links(c):  # its facets on the interface, the cell across intact
             pair = f2c.links(f)
             other = pair[0] if pair[-1] == c else pair[-1]

@@ -9,7 +9,8 @@ cannot localise over that width: the band is cut short, softens in a narrower zo
 dissipates less, silently. Measured (``tests/test_softening.py``, a bar in tension thinned where
 it fails, lagrange, band 2 cells): 0.65 ``G_f`` per unit area when the thinning is in the patch
 cell on the interface, 0.97 two cells from it; a 3D bar whose patch was two cells wide, 0.71 to
-0.73 ``G_f`` against 0.97 to 1.00 with a patch four cells wide.
+0.73 ``G_f`` against 0.96 to 1.00 with a patch four to six cells wide (by hand). With the ramps
+the band spills into the blended cells, whose band is one cell, and dissipates more: 1.29.
 
 :func:`band_at_interface` finds such a point: a particle point that has softened fully
 (damage >= :data:`CUT_DAMAGE`) within :data:`REACH` of its cell's size of an interface facet of
@@ -43,7 +44,8 @@ REACH = 0.25
 
 class BandCutWarning(UserWarning):
     """The crack band of the particle points reached the FE interface: it is cut short there
-    and dissipates less than ``G_f`` per unit crack area."""
+    and does not dissipate ``G_f`` per unit crack area (less; more where it spills into a
+    ramp's blended cells, whose band is one cell)."""
 
 
 def _plane(msh: object, facet: int) -> tuple[np.ndarray, np.ndarray]:

@@ -26,8 +26,8 @@ from dolfinx_meshfree.dynamics.body_contact import (
     candidates,
     closest_points,
     closest_points_compiled,
-    normals,
 )
+from dolfinx_meshfree.geometry.quadrature import facet_normals
 
 import dolfinx
 import numpy as np
@@ -471,7 +471,7 @@ def test_3d_surfaces_tile_the_faces(cell):
     to the same area."""
     dyn, _, _ = demo.build("fe", 4, COMM, MAT3, L, H3, V0, None, cell)
     s = dyn.system.surfaces
-    n = normals(s.points, s.facets)
+    n = facet_normals(s.points, s.facets)
     for body, outward in ((0, 1.0), (1, -1.0)):
         on = s.body == body
         assert s.measures()[on].sum() == pytest.approx(H3 * H3, rel=1e-12)

@@ -109,6 +109,7 @@ from scipy.spatial import cKDTree
 
 from .. import _compat
 from ..approx import jit
+from ..geometry.quadrature import facet_normals
 from ..parallel import Layout, owned_indices, raise_on_all_ranks
 from ..statics.petsc import create_aij
 from .system import WrappedSystem, wrapped
@@ -132,7 +133,6 @@ __all__ = [
     "contact_tangent",
     "coulomb_return",
     "evaluation_operators",
-    "normals",
     "point_masses",
     "summed_tangent",
     "vertex_coordinates",
@@ -248,7 +248,7 @@ class ContactSurfaces:
 
     def measures(self) -> np.ndarray:
         """Reference length (2D) or area (3D) of each facet."""
-        return np.linalg.norm(normals(self.points, self.facets, unit=False), axis=1)
+        return np.linalg.norm(facet_normals(self.points, self.facets, unit=False), axis=1)
 
     def sizes(self) -> np.ndarray:
         """The longest edge of each facet (its length in 2D)."""
@@ -273,21 +273,6 @@ class ContactSurfaces:
             else:
                 np.add.at(w, self.facets[:, i], share)
         return w
-
-
-def normals(points: np.ndarray, facets: np.ndarray, unit: bool = True) -> np.ndarray:
-    """The normal (nf, gdim) of each facet: ``(t_2, -t_1)`` of a segment ``t = b - a`` (2D),
-    ``(b - a) x (c - a) / 2`` of a triangle (3D); unit, or (``unit=False``) with the facet's
-    length (2D) or area (3D) as its norm."""
-    p = points[facets]
-    if facets.shape[1] == 2:
-        t = p[:, 1] - p[:, 0]
-        n = np.stack([t[:, 1], -t[:, 0]], axis=1)
-    else:
-        n = 0.5 * np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-    if unit:
-        n = n / np.linalg.norm(n, axis=1)[:, None]
-    return n
 
 
 def _facets(msh: dolfinx.mesh.Mesh, facets: npt.ArrayLike, name: str) -> np.ndarray:
@@ -346,7 +331,7 @@ def contact_surfaces(
             v = _split_quadrilaterals(vx, v)
             mid_c = np.concatenate([mid_c, mid_c])
         outward = vx[v].mean(axis=1) - mid_c
-        flip = np.einsum("ij,ij->i", normals(vx, v, unit=False), outward) < 0.0
+        flip = np.einsum("ij,ij->i", facet_normals(vx, v, unit=False), outward) < 0.0
         v[flip] = v[flip][:, ::-1]
         segs.append(l2g[v])
         bodies.append(np.full(len(v), body))

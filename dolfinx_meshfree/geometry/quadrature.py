@@ -30,6 +30,7 @@ __all__ = [
     "boundary_facets",
     "cell_quadrature",
     "cell_sizes",
+    "facet_normals",
     "facet_quadrature",
     "lattice_quadrature",
     "particle_quadrature_degree",
@@ -371,6 +372,22 @@ def reference_facet_points(cell_name: str, degree: int) -> np.ndarray:
         corners = ref[f]
         out.append(corners[0] + np.einsum("qv,vg->qg", N[:, 1:], corners[1:] - corners[0]))
     return np.concatenate(out)
+
+
+def facet_normals(points: np.ndarray, facets: np.ndarray, unit: bool = True) -> np.ndarray:
+    """The normal (nf, gdim) of each facet given by its vertices' rows of ``points``: ``(t_2,
+    -t_1)`` of a segment ``t = b - a`` (2D), ``(b - a) x (c - a) / 2`` of a triangle or of a
+    quadrilateral's first three vertices (3D); unit, or (``unit=False``) with the facet's
+    length (2D) or area (3D, of the triangle) as its norm."""
+    p = points[facets]
+    if facets.shape[1] == 2:
+        t = p[:, 1] - p[:, 0]
+        n = np.stack([t[:, 1], -t[:, 0]], axis=1)
+    else:
+        n = 0.5 * np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    if unit:
+        n = n / np.linalg.norm(n, axis=1)[:, None]
+    return n
 
 
 def _unit_normals(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

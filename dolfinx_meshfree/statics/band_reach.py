@@ -28,7 +28,7 @@ import numpy as np
 
 from .. import _compat
 from ..geometry.patch import ParticlePatch
-from ..geometry.quadrature import cell_sizes
+from ..geometry.quadrature import cell_sizes, facet_normals
 from ..physics.state import PointState
 from ..state_fields import cell_values
 
@@ -46,19 +46,6 @@ class BandCutWarning(UserWarning):
     """The crack band of the particle points reached the FE interface: it is cut short there
     and does not dissipate ``G_f`` per unit crack area (less; more where it spills into a
     ramp's blended cells, whose band is one cell)."""
-
-
-def _plane(msh: object, facet: int) -> tuple[np.ndarray, np.ndarray]:
-    """A point and the unit normal of a local facet's plane (through its first vertices)."""
-    tdim, gdim = msh.topology.dim, msh.geometry.dim
-    facets = np.array([facet], dtype=np.int32)
-    x = msh.geometry.x[_compat.entities_to_geometry(msh, tdim - 1, facets)][0, :, :gdim]
-    if gdim == 2:
-        t = x[1] - x[0]
-        normal = np.array([-t[1], t[0]])
-    else:
-        normal = np.cross(x[1] - x[0], x[2] - x[0])
-    return x.mean(axis=0), normal / np.linalg.norm(normal)
 
 
 def band_at_interface(
@@ -91,28 +78,35 @@ def band_at_interface(
     msh.topology.create_connectivity(tdim - 1, tdim)
     c2f = msh.topology.connectivity(tdim, tdim - 1)
     f2c = msh.topology.connectivity(tdim - 1, tdim)
-    rows = [np.zeros((0, msh.geometry.dim + 2))]
+    gdim = msh.geometry.dim
     soft = np.flatnonzero(damage >= CUT_DAMAGE)
     cells_soft = np.unique(particles.cells[soft])  # the cells of softened particle points
-    sizes = cell_sizes(msh, cells_soft)
-    for c, size in zip(cells_soft, sizes, strict=True):
-        here = soft[particles.cells[soft] == c]
-        for f in c2f.links(c):  # its facets on the interface, the cell across intact
+    links = []  # (their index, facet, cell across): facets on the interface, across intact
+    for i, c in enumerate(cells_soft):
+        for f in c2f.links(c):
             pair = f2c.links(f)
             other = pair[0] if pair[-1] == c else pair[-1]
-            if len(pair) != 2 or patch.in_patch[other] or across[other] >= CUT_DAMAGE:
-                continue
-            centre, normal = _plane(msh, int(f))
-            near = here[np.abs((particles.points[here] - centre) @ normal) <= REACH * size]
+            if len(pair) == 2 and not patch.in_patch[other] and across[other] < CUT_DAMAGE:
+                links.append((i, f, other))
+    found = np.zeros((0, gdim + 2))
+    if links:
+        i, f, other = (np.array(v) for v in zip(*links, strict=True))
+        nodes = _compat.entities_to_geometry(msh, tdim - 1, f.astype(np.int32))
+        x = msh.geometry.x[:, :gdim]
+        centre, normal = x[nodes].mean(axis=1), facet_normals(x, nodes[:, :gdim])
+        reach = REACH * cell_sizes(msh, cells_soft)[i]
+        rows = []
+        for k in range(len(f)):
+            here = soft[particles.cells[soft] == cells_soft[i[k]]]
+            near = here[np.abs((particles.points[here] - centre[k]) @ normal[k]) <= reach[k]]
             rows.append(
                 np.column_stack(
-                    [particles.points[near], damage[near], np.full(near.size, across[other])]
+                    [particles.points[near], damage[near], np.full(near.size, across[other[k]])]
                 )
             )
-    found = np.vstack(rows)
+        found = np.vstack(rows)
     gathered = np.vstack(comm.allgather(found)) if comm.size > 1 else found
     if gathered.shape[0] == 0:
         return None
-    first = gathered[np.lexsort(gathered[:, : msh.geometry.dim].T[::-1])[0]]
-    gdim = msh.geometry.dim
+    first = gathered[np.lexsort(gathered[:, :gdim].T[::-1])[0]]
     return first[:gdim], float(first[gdim]), float(first[gdim + 1])

@@ -57,6 +57,19 @@ def _closed_form(eps: np.ndarray, h: float, max_damage: float) -> np.ndarray:
     return (1.0 - D) * E * eps
 
 
+def _peak(path) -> float:
+    """The curve's peak: the vertex of the parabola through the path's largest load factor and
+    its two neighbours (an estimate of the continuous curve's, independent of where the steps
+    fall). The largest step alone is off by up to 1e-3 on the bars here, where the steps near
+    the peak lie 2e-3 to 3e-3 of control apart; comparisons between two paths whose steps
+    fell differently measured that, not the models."""
+    load = np.asarray(path.load_factor)
+    k = int(np.argmax(load))
+    assert 0 < k < len(load) - 1, "the path's peak is at its first or last step"
+    c = np.polyfit(np.asarray(path.control[k - 1 : k + 2]), load[k - 1 : k + 2], 2)
+    return float(c[2] - c[1] ** 2 / (4.0 * c[0]))
+
+
 def _capped_dissipation(h: float, max_damage: float) -> float:
     """Energy per volume dissipated up to the cap: the work up to the strain where ``D`` reaches
     ``max_damage`` minus the energy stored there (written out from the bilinear curve)."""
@@ -287,9 +300,9 @@ def test_path_following_bad_input():
 
 def test_a_path_cut_short_by_max_steps_says_so():
     """The elastic part of the bar's path from increments of 1e-4 to 1e-3: with max_steps=3 it
-    stops at control 4.75e-4 (the increments grow by 1.5 on this easy stretch: 1e-4, 1.5e-4,
-    2.25e-4) and warns, naming max_steps and where it stopped; followed to the end it does not
-    warn. Before, a path cut short by max_steps returned without a word."""
+    stops at control 3.5e-4 (the increments grow by 1.5 on this easy stretch, from the second
+    step on: 1e-4, 1e-4, 1.5e-4) and warns, naming max_steps and where it stopped; followed to
+    the end it does not warn. Before, a path cut short by max_steps returned without a word."""
     model = _bar(2, "lagrange")
     control = mf.DisplacementControl([[L, 0.5]], [[1.0, 0.0]])
     with warnings.catch_warnings(record=True) as caught:
@@ -297,11 +310,11 @@ def test_a_path_cut_short_by_max_steps_says_so():
         short = mf.follow_path(model, control, mf.PathOptions(1e-4, 1e-3, max_steps=3))
         full = mf.follow_path(_bar(2, "lagrange"), control, mf.PathOptions(1e-4, 1e-3))
     warned = [w for w in caught if issubclass(w.category, mf.PathShortWarning)]
-    assert len(short.control) == 3 and short.control[-1] == pytest.approx(4.75e-4, rel=1e-9)
+    assert len(short.control) == 3 and short.control[-1] == pytest.approx(3.5e-4, rel=1e-9)
     assert full.control[-1] == pytest.approx(1e-3, rel=1e-12)
     assert len(warned) == 1
     message = str(warned[0].message)
-    assert "max_steps=3" in message and "at control 0.000475 of end=0.001" in message
+    assert "max_steps=3" in message and "at control 0.00035 of end=0.001" in message
 
 
 def test_elastic_steps_store_the_work_under_gauss_integration():
@@ -324,7 +337,8 @@ def test_localised_softening_is_objective_in_the_particle_spacing():
     """A bar that fails in its particle patch (a local damage law, band: the MLS dilation times
     the cell size, the default): the peak load and the energy dissipated up to the same opening
     across the band differ between spacings h and h / 2 by less than 0.3 % and 3 % (measured
-    at 4 and 8 cells across: 0.09 % and 1.7 %; the issue's target is 3 % for both)."""
+    at 4 and 8 cells across: 0.10 % and 2.3 %, 0.09 % and 2.3 % before the first step's
+    convergence test was fixed; the issue's target is 3 % for both)."""
     out = []
     for n in (4, 8):
         xc = 1.0 + 0.5 / n  # mid-cell
@@ -355,14 +369,14 @@ def test_a_band_cut_by_the_interface_is_named():
     the interface: 0.97); with the ramp (band 2.5 cells) it spills into the blended cells,
     whose band is one cell: 1.29. ``follow_path`` warns at the first step a fully softened
     particle point lies within a quarter cell of the interface with the cell across not
-    softened (steps 9 and 12), the same step and point on 2 ranks, and records it in
+    softened (steps 8 and 10), the same step and point on 2 ranks, and records it in
     ``PathResult.band_cut``; the lagrange bar
     thinned at 1.125 (``test_localised_softening_is_objective_in_the_particle_spacing``) does
     not warn."""
     n, xc = 4, 1.375
     control = mf.DisplacementControl([[xc - 0.3, 0.5], [xc + 0.3, 0.5]], [[-1, 0], [1, 0]])
     options = mf.PathOptions(increment=2e-4, end=0.2, min_load=0.1, max_increment=4e-3)
-    for coupling, first in (("lagrange", 9), ("ramp", 12)):
+    for coupling, first in (("lagrange", 8), ("ramp", 10)):
         model = _bar(n, coupling, notch=xc)
         with pytest.warns(mf.BandCutWarning, match="reached the FE interface at"):
             res = mf.follow_path(model, control, options)

@@ -175,11 +175,14 @@ class PathOptions:
             (the body has failed).
         max_steps: At most this many converged steps.
         max_it: Newton iterations per step.
-        rtol, atol: Newton stops when ``|R| <= max(atol, rtol |t_peak q|)``.
-        stall: Or when no step length decreases ``|R|`` any more and ``|R| <= stall
-            |t_peak q|`` (the round-off floor of a law's non-smooth points).
+        rtol, atol: Newton stops when ``|R| <= max(atol, rtol |t q|)``, ``t`` the larger of
+            the iterate's load factor and the peak's.
+        stall: Or when no step length decreases ``|R|`` any more and ``|R| <= stall |t q|``
+            (the round-off floor of a law's non-smooth points).
         grow: The increment is multiplied by this after a step that converged in at most
-            ``easy`` iterations, up to ``max_increment`` (default ``8 increment``).
+            ``easy`` iterations, up to ``max_increment`` (default ``8 increment``); not after
+            the first step, whose quick convergence tells of the elastic start, not of the
+            nonlinearity ahead.
         max_cuts: Halvings of a step's increment before :class:`PathError`.
     """
 
@@ -506,6 +509,36 @@ def _turning(start: float, control: Sequence[float], load: Sequence[float]) -> s
     )
 
 
+@dataclass(frozen=True)
+class _Tolerance:
+    """Newton's stopping rule in a step of the path: ``|R| <= max(atol, rtol |q| max(|t|, s))``
+    (:class:`PathOptions`' ``rtol``, ``atol``), accepted after a stall below the same with
+    ``PathOptions.stall``; ``t`` the iterate's load factor and ``s`` the larger of the step's
+    start and the path's peak (1e-3 before any load). Read at the iterate, not at the step's
+    start: the first step starts from ``t = 0``, and a tolerance fixed there lay below the
+    round-off of the load the step finds (1e-12 of it at ``rtol`` 1e-9), so that Newton ran on
+    to its stall test after as many iterations as round-off allowed: a count that differed
+    between serial and 2 ranks, and the next increments follow the count (``PathOptions.easy``).
+    A user's quarter plate with a hole (J2, a ramp-coupled patch at the hole, an elastic first
+    step): 8 to 10 iterations serially and 10 or 11 on 2 ranks, now 3 or 4 on both. ``least``: a
+    floor, for a loosened first try."""
+
+    norm: float
+    floor: float
+    rtol: float
+    atol: float
+    stall_rtol: float
+    least: float = 0.0
+
+    def at(self, t: float) -> float:
+        """The tolerance at load factor ``t``."""
+        return max(self.atol, self.least, self.rtol * self.norm * max(abs(t), self.floor))
+
+    def stall_at(self, t: float) -> float:
+        """The stall floor at load factor ``t``."""
+        return max(self.at(t), self.stall_rtol * self.norm * max(abs(t), self.floor))
+
+
 def _reequilibrate(
     problem: BlockProblem,
     x: list[PETSc.Vec],
@@ -513,8 +546,7 @@ def _reequilibrate(
     target: float,
     g: Callable[[Sequence[np.ndarray]], float],
     q: list[PETSc.Vec],
-    tol: float,
-    stall: float,
+    tol: _Tolerance,
     options: PathOptions,
     solver: SolverOptions,
 ) -> tuple[float, int]:
@@ -538,12 +570,12 @@ def _reequilibrate(
 
     try:
         try:
-            return _bordered_step(problem, x, t, target, g, q, tol, stall, options, solver)
+            return _bordered_step(problem, x, t, target, g, q, tol, options, solver)
         except ArithmeticError:
             again()
         try:
             return _bordered_step(
-                problem, x, t, target, g, q, tol, stall, options, solver, search_first=True
+                problem, x, t, target, g, q, tol, options, solver, search_first=True
             )
         except ArithmeticError:
             if not faces:
@@ -556,14 +588,14 @@ def _reequilibrate(
         try:
             loose = replace(options, max_it=4 * options.max_it)
             t1, its = _bordered_step(
-                problem, x, t, target, g, q, max(tol, 1e-3 * n0), stall, loose, solver,
+                problem, x, t, target, g, q, replace(tol, least=1e-3 * n0), loose, solver,
                 search_first=True,
             )  # fmt: skip
         finally:
             for side in faces:
                 side.secant = False
         problem.t = t1
-        t2, more = _bordered_step(problem, x, t1, target, g, q, tol, stall, options, solver)
+        t2, more = _bordered_step(problem, x, t1, target, g, q, tol, options, solver)
         return t2, its + more
     finally:
         _destroy_all(start)
@@ -576,8 +608,7 @@ def _bordered_step(
     target: float,
     g: Callable[[Sequence[np.ndarray]], float],
     q: list[PETSc.Vec],
-    tol: float,
-    stall: float,
+    tol: _Tolerance,
     options: PathOptions,
     solver: SolverOptions,
     search_first: bool = False,
@@ -600,7 +631,7 @@ def _bordered_step(
     r, norm = _residual(problem, x, t)
     for it in range(options.max_it + 1):
         gap = target - g(_owned(x))
-        if it > 0 and norm <= tol and abs(gap) <= 1e-10 * scale:
+        if it > 0 and norm <= tol.at(t) and abs(gap) <= 1e-10 * scale:
             _destroy_all(r)
             return t, it
         if it == options.max_it or not np.isfinite(norm):
@@ -633,7 +664,7 @@ def _bordered_step(
             for xi, x0 in zip(x, start, strict=True):
                 x0.copy(xi)
             _destroy_all(start)
-            if norm <= stall and abs(gap) <= 1e-10 * scale:  # stagnated near the solution
+            if norm <= tol.stall_at(t) and abs(gap) <= 1e-10 * scale:  # stagnated near it
                 problem.t = t
                 _destroy_all(problem.residual(x))  # the trial state of x again
                 return t, it + 1
@@ -658,8 +689,7 @@ def _arc_step(
     dl: float,
     previous: list[np.ndarray] | None,
     q: list[PETSc.Vec],
-    tol: float,
-    stall: float,
+    tol: _Tolerance,
     num_primal: int,
     options: PathOptions,
     solver: SolverOptions,
@@ -678,7 +708,7 @@ def _arc_step(
     for it in range(options.max_it + 1):
         # converged; or stagnated near the solution at the last iteration (a law's non-smooth
         # points: its damage cap, equal principal stresses)
-        if it > 0 and (norm <= tol or (it == options.max_it and norm <= stall)):
+        if it > 0 and (norm <= tol.at(t) or (it == options.max_it and norm <= tol.stall_at(t))):
             _destroy_all(r)
             return t, it, Dx
         if it == options.max_it or not np.isfinite(norm):
@@ -1012,8 +1042,7 @@ def _reequilibrated(
     loads: _Loads,
     t: float,
     tau: float,
-    tol: float,
-    stall: float,
+    tol: _Tolerance,
     options: PathOptions,
     solver: SolverOptions,
     event: str,
@@ -1074,7 +1103,7 @@ def _reequilibrated(
     watch = {k: _control_function(built, c) for k, c in (monitors or {}).items()}
     problem.t = t
     try:
-        t_new, its = _reequilibrate(problem, x, t, tau, g, loads.q, tol, stall, options, solver)
+        t_new, its = _reequilibrate(problem, x, t, tau, g, loads.q, tol, options, solver)
     except ArithmeticError as err:
         fix = (
             "a smaller increment (PathOptions.max_increment: the patch then grows by fewer "
@@ -1351,7 +1380,7 @@ def follow_path(
             and tolerances, after ``what`` happened (collective)."""
             event = f"at step {step} (control {tau:.6g}, load factor {t:.6g}) {what}"
             return _reequilibrated(
-                model, efg, u, built, fitted, control, monitors, loads, t, tau, tol, stall,
+                model, efg, u, built, fitted, control, monitors, loads, t, tau, tol,
                 options, solver, event, result, handover,
             )  # fmt: skip
 
@@ -1366,18 +1395,18 @@ def follow_path(
         while tau < options.end - 1e-14 * abs(options.end) and step < options.max_steps:
             target = min(options.end, tau + dtau)
             saved = [v.copy() for v in x]
-            ref = loads.norm * max(abs(t), peak, 1e-3)
-            tol = max(options.atol, options.rtol * ref)
-            stall = max(tol, options.stall * ref)
+            tol = _Tolerance(
+                loads.norm, max(abs(t), peak, 1e-3), options.rtol, options.atol, options.stall
+            )
             try:
                 if arc:
                     t_new, its, previous_new = _arc_step(
-                        problem, x, t, target - tau, previous, loads.q, tol, stall, k_p + 1,
+                        problem, x, t, target - tau, previous, loads.q, tol, k_p + 1,
                         options, solver,
                     )  # fmt: skip
                 else:
                     t_new, its = _bordered_step(
-                        problem, x, t, target, g, loads.q, tol, stall, options, solver
+                        problem, x, t, target, g, loads.q, tol, options, solver
                     )
             except ArithmeticError as err:
                 reason = str(err)
@@ -1586,7 +1615,7 @@ def follow_path(
                 on_step(step, t, tau)
             if cuts:
                 cuts -= 1
-            if its <= options.easy:
+            if step > 1 and its <= options.easy:  # the first: the elastic start
                 dtau = min(max_dtau, options.grow * dtau)
             for side in problem.shared:  # a cohesive zone that reached the end of its path
                 end = side.reached_end() if hasattr(side, "reached_end") else None

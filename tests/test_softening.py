@@ -159,20 +159,30 @@ def test_particle_band_is_the_dilation_by_default(coupling, cell):
 
 def test_pure_efg_particle_band_is_its_dilation():
     """Pure EFG's particle points: the band is its dilation (given 2.5 here, the default 2.0)
-    times the side of their integration cell, ``1 / n`` on the uniform bar."""
+    times the side of their integration cell, ``1 / n`` on the uniform bar, or
+    ``particle_band`` times it when given (as a coupling's; pure EFG had no such option, so a
+    coupled model and its pure EFG reference could not share a band other than the dilation).
+    A band that is not a positive number is refused by name, by both models."""
     n = 4
     msh = dolfinx.mesh.create_rectangle(
         MPI.COMM_WORLD, [[0, 0], [L, W]], [2 * n, n], dolfinx.mesh.CellType.quadrilateral
     )
     particles = mf.ParticleSet.from_vertices(msh)
     law = mf.RankineDamage(E=E, nu=0.0, ft=FT, Gf=GF, plane="stress")
-    model = mf.EFGElasticity(particles, law, dilation=2.5)
     left = mf.boundary_facets(msh, lambda p: np.isclose(p[0], 0.0))
     right = mf.boundary_facets(msh, lambda p: np.isclose(p[0], L))
-    model.add_dirichlet(left, lambda p: np.zeros_like(p))
-    model.add_traction(right, lambda p, nrm: np.tile([0.5 * FT, 0.0], (len(p), 1)))
-    (state,) = model.solve(load_steps=1).states
-    assert np.allclose(state.band, 2.5 / n, rtol=1e-12)
+    for band, expected in ((None, 2.5), (1.5, 1.5)):
+        model = mf.EFGElasticity(particles, law, dilation=2.5, particle_band=band)
+        model.add_dirichlet(left, lambda p: np.zeros_like(p))
+        model.add_traction(right, lambda p, nrm: np.tile([0.5 * FT, 0.0], (len(p), 1)))
+        (state,) = model.solve(load_steps=1).states
+        assert np.allclose(state.band, expected / n, rtol=1e-12)
+    for bad in (0.0, -1.0, np.inf, "2", True):
+        match = rf"particle_band={bad!r} must be a positive number"
+        with pytest.raises(ValueError, match=match):
+            mf.EFGElasticity(particles, law, particle_band=bad)
+        with pytest.raises(ValueError, match=match):
+            _bar(2, "lagrange", particle_band=bad)
 
 
 def test_load_steps_commit_the_state_and_unloading_is_elastic():

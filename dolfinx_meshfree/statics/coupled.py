@@ -65,6 +65,7 @@ from .history import SolveHistory
 from .mean_dilatation import resolve_dilatation
 from .newton import NewtonOptions
 from .petsc import SolverOptions, solver_options
+from .sides import check_particle_band
 
 __all__ = [
     "AXISYMMETRIC_COUPLINGS",
@@ -121,13 +122,7 @@ def check_angle_and_band(corner_angle: float | None, particle_band: float | None
             f"corner_angle={corner_angle!r} must be None (multipliers continuous along the "
             "interface, the default) or an angle in degrees between 0 and 90"
         )
-    if particle_band is not None and not (
-        isinstance(particle_band, int | float) and np.isfinite(particle_band) and particle_band > 0
-    ):
-        raise ValueError(
-            f"particle_band={particle_band!r} must be a positive number (the crack band of a "
-            "particle point in its integration cell's sizes), or None (the MLS dilation)"
-        )
+    check_particle_band(particle_band)
 
 
 def coupled_integration(

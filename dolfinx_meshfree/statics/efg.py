@@ -95,7 +95,13 @@ from .growth_update import local_update_for
 from .history import SolveHistory
 from .newton import NewtonOptions
 from .petsc import BlockSystem, SolverOptions, create_aij, create_vector, solver_options
-from .sides import BlockProblem, ParticleSide, particle_band_factor, solve_built
+from .sides import (
+    BlockProblem,
+    ParticleSide,
+    check_particle_band,
+    particle_band_factor,
+    solve_built,
+)
 from .sifs import solution_sifs
 
 if TYPE_CHECKING:  # annotations only
@@ -659,6 +665,11 @@ class EFGElasticity:
         quadrature: An :class:`~dolfinx_meshfree.AdaptiveQuadrature`: the cells near the crack
             tips with its ``near`` degree, the others with ``far`` (Belytschko et al. 1995, sec.
             5.2.2); ``None`` (default): the uniform rule of ``quadrature_degree``.
+        particle_band: With a law that softens (:class:`~dolfinx_meshfree.RankineDamage`): the
+            crack band width of the particle points, in sizes of their integration cells, as
+            :class:`~dolfinx_meshfree.CoupledElasticity`'s. Default (``None``): the MLS
+            dilation, about one support radius, the narrowest band a smooth MLS field localises
+            in.
     """
 
     def __init__(
@@ -675,7 +686,9 @@ class EFGElasticity:
         crack_enrichment: bool = False,
         quadrature: AdaptiveQuadrature | None = None,
         integration: str | None = None,
+        particle_band: float | None = None,
     ):
+        check_particle_band(particle_band)
         integration = raise_on_all_ranks(
             particles.comm, lambda: resolve_integration(consistent, integration)
         )
@@ -712,6 +725,9 @@ class EFGElasticity:
         self.particles = particles
         self.mesh = particles.mesh
         self.material = material
+        #: With a law that softens: the particle points' crack band in cell sizes (``None``:
+        #: the MLS dilation).
+        self.particle_band = particle_band
         #: The small-strain law of the stiffness (``material`` itself when linear).
         self.linear_material = linear_twin(material)
         self.mls = raise_on_all_ranks(
@@ -982,7 +998,7 @@ class EFGElasticity:
         refuse_smoothed(self.integration, nonlinear=True)  # the same on every rank
         factor = None  # the particle points' crack band in cell sizes (a law that softens)
         if is_stateful(law) and law.needs_band:  # on every rank, before the assembly
-            factor = particle_band_factor(self.mls, None)
+            factor = particle_band_factor(self.mls, self.particle_band)
             cells = np.ones(self.mesh.topology.index_map(self.mesh.topology.dim).size_local, bool)
             raise_on_all_ranks(self.comm, lambda: check_bands(self.mesh, law, cells, factor))
         tables: dict = {}

@@ -54,6 +54,7 @@ __all__ = [
     "NonlinearSolveResult",
     "ParticleSide",
     "cell_part",
+    "check_particle_band",
     "on_cells",
     "particle_band_factor",
     "particle_coefficients",
@@ -301,6 +302,21 @@ def particle_coefficients(particles: ParticleSet, x: PETSc.Vec) -> np.ndarray:
     every rank (collective)."""
     owned = np.concatenate(particles.comm.allgather(x.getArray(readonly=True)))
     return owned.reshape(-1, particles.gdim)[particles.petsc_index].ravel()
+
+
+def check_particle_band(particle_band: object) -> None:
+    """Refuse a ``particle_band`` that is not a positive number; ``None`` (the MLS dilation)
+    passes (local, the same on every rank)."""
+    if particle_band is not None and not (
+        isinstance(particle_band, int | float)
+        and not isinstance(particle_band, bool)
+        and np.isfinite(particle_band)
+        and particle_band > 0
+    ):
+        raise ValueError(
+            f"particle_band={particle_band!r} must be a positive number (the crack band of a "
+            "particle point in its integration cell's sizes), or None (the MLS dilation)"
+        )
 
 
 def particle_band_factor(approximation: object, band_factor: float | None) -> float:

@@ -202,8 +202,12 @@ def test_shear_beam_finds_a_mixed_mode_path(tmp_path):
 def test_shear_beam_coupling_follows_pure_efg():
     """Issue 24's coupling target on the shear beam at h = 15 mm: the lagrange coupling's peak
     within 3.5 % of pure EFG's (measured +1.72 %; target 2 %), its found path within 1 mm of
-    EFG's below three quarters of the depth (measured 0.46 mm), and within 2 mm over the whole
-    depth (measured 0.83 mm; target two spacings = 30 mm). Pure EFG's energy balance (work
+    EFG's below three quarters of the depth (measured 0.46 mm), and within 5 mm over the whole
+    depth (measured 2.37 mm, the top ends at x = 488.35 and 486.77 mm; target two spacings = 30
+    mm). The whole depth's was 0.83 mm (lagrange's top at 487.27 mm) until the path's steps
+    changed with the branch guard (LEVER_JUMP, 20e3f8e, found by bisection); this slow test
+    failed its 2 mm since, unnoticed for two sessions (the slow tier is not in CI): near the
+    top edge the path follows where the steps fall, by a few mm. Pure EFG's energy balance (work
     minus stored against dissipated) within 1.5 % (measured 0.73 %), run without the demo's
     checks. Before grown segments kept off the particles, EFG's crack turned flat beside a
     particle row near the load: the paths parted by 35 mm and its balance was 3.0 % off."""
@@ -213,7 +217,7 @@ def test_shear_beam_coupling_follows_pure_efg():
     lag = demo.main([*SHEAR, "--method", "lagrange"])
     assert abs(lag["peak_load_N"] / efg["peak_load_N"] - 1.0) <= 0.035
     assert _path_distance(lag["crack_polyline"], efg["crack_polyline"], 0.75 * 306.0) <= 1.0
-    assert _path_distance(lag["crack_polyline"], efg["crack_polyline"], 306.0) <= 2.0
+    assert _path_distance(lag["crack_polyline"], efg["crack_polyline"], 306.0) <= 5.0
 
 
 @pytest.mark.slow

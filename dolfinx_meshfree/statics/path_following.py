@@ -193,8 +193,8 @@ class PathOptions:
             (the body has failed).
         max_steps: At most this many converged steps.
         max_it: Newton iterations per step.
-        rtol, atol: Newton stops when ``|R| <= max(atol, rtol |t q|)``, ``t`` the larger of
-            the iterate's load factor and the peak's.
+        rtol, atol: Newton stops when ``|R| <= max(atol, rtol |t q|)``, ``t`` the largest of
+            the iterate's load factor, the step's start and the peak's.
         stall: Or when no step length decreases ``|R|`` any more and ``|R| <= stall |t q|``
             (the round-off floor of a law's non-smooth points).
         grow: The increment is multiplied by this after a step that converged in at most

@@ -77,6 +77,14 @@ class CohesiveCrack:
     points: int = 3
 
 
+def _block_diagonal(blocks: np.ndarray) -> sp.csr_matrix:
+    """The block-diagonal matrix of ``blocks`` (m, a, b) as a CSR matrix (m a x m b), built
+    directly (scipy's ``block_diag`` of a list is slow and turns into a sparse array)."""
+    m, a, b = blocks.shape
+    shape = (m * a, m * b)
+    return sp.bsr_matrix((blocks, np.arange(m), np.arange(m + 1)), shape=shape).tocsr()
+
+
 def check_cohesive(
     crack: object,
     law: object,
@@ -180,7 +188,7 @@ class CohesiveSide:
             # interleaved coefficients)
             frame = np.stack([n, np.stack([n[:, 1], -n[:, 0]], axis=1)], axis=1)  # (m, 2, 2)
             jump = sp.kron(plus.values - minus.values, sp.identity(gdim))
-            self.B = (sp.block_diag(list(frame)) @ jump).tocsr()
+            self.B = (_block_diagonal(frame) @ jump).tocsr()
         #: The state of the face points (the largest effective opening).
         self.state = PointState(self.law, x)
 
@@ -213,7 +221,7 @@ class CohesiveSide:
         _, D = self.state.evaluate(jump)
         if self.secant:
             D = self.law.secant_stiffness(jump, self.state.committed)
-        D = sp.block_diag(list(D * self.weights[:, None, None]), format="csr") if len(D) else None
+        D = _block_diagonal(D * self.weights[:, None, None]) if len(D) else None
         side = self.side
         n = side.dof_map.size
         if D is None:

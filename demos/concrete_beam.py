@@ -91,7 +91,7 @@
 # on the shear beam, one run each, against pure EFG: at h = 15 mm 336 particles (the fixed patch
 # 567, EFG 1890), 8 growths, 20.1 s against the fixed patch's 26.9 s and EFG's 46.9 s (0.43x and
 # 0.57x), the peak +1.99 % (fixed +1.72 %), the path within 0.76 mm of EFG's below three quarters
-# of the depth, 0.94 mm over the whole depth (fixed 0.46 and 2.37 mm). At h = 10 mm: 586
+# of the depth, 0.94 mm over the whole depth (fixed 0.46 and 0.83 mm). At h = 10 mm: 586
 # particles (fixed 1280, EFG 4288), 14 growths, 67 s against 93 s and 181 s (0.37x and 0.51x),
 # the peak +0.80 % (fixed +0.37 %), the path within 3.2 mm of EFG's below three quarters of the
 # depth; beside the inner load it runs level at y = 246 mm, 21.9 mm from EFG's path at most (the

@@ -539,8 +539,10 @@ def test_a_crack_inside_the_body_grows_both_ways():
     """The unnotched beam with the crack's start kept 40 mm above the bottom (``region``; h =
     20 mm, lagrange): an interior site at (1000, 50) mm, a crack with two tips that grows down
     to the bottom edge (a mouth) and up through the top, every point within 1e-3 h of mid-span;
-    the peak within 1 % of the given path's (measured -0.39 %), work minus stored energy equal
-    to the dissipated energy within 1 % (measured 6e-4)."""
+    the peak within 1 % of the given path's (measured -0.57 %), work minus stored energy equal
+    to the dissipated energy within 1 % (measured 7.9e-4). No step is cut: before the branch
+    guard's floor (LEVER_FLOOR) one step was cut four times, the lever jumping 4.6- to 9.3-fold
+    from 5.5e-4 of the first step's as the crack grew down to the controlled mouth."""
     ns = demo.parse(["--h", "20", "--notch-depth", "0"])
     elastic = mf.LinearElastic(ns.E, ns.nu, plane="stress")
     twin, *_ = demo.beam_model(ns, elastic)
@@ -553,6 +555,7 @@ def test_a_crack_inside_the_body_grows_both_ways():
     cmod = mf.DisplacementControl([[xm - hx / 2, 0.0], [xm + hx / 2, 0.0]], [[-1.0, 0], [1.0, 0]])
     options = mf.PathOptions(increment=0.3 / 250, end=0.3, min_load=0.1, max_increment=0.3 / 25)
     path = mf.follow_path(model, cmod, options, growth=mf.CohesiveGrowth(crack))
+    assert path.cuts == 0
     assert crack.is_tip == [False, False]
     assert crack.points[0, 1] == pytest.approx(0.0, abs=1e-9)
     assert crack.points[-1, 1] == pytest.approx(200.0, abs=1e-9)

@@ -23,6 +23,7 @@ Serial and 2 ranks.
 
 import dolfinx_meshfree as mf
 from dolfinx_meshfree import _compat
+from dolfinx_meshfree.statics import path_following as pf
 from dolfinx_meshfree.statics.fe_model import fe_point_functional
 
 import dolfinx
@@ -183,6 +184,24 @@ def test_a_coarse_bar_localises(method, cell, n, bound):
     ratio = res.dissipated_energy[-1] / (GF * 0.9 * W)
     assert 1.0 - 0.05 < ratio < 1.0 + bound
     assert res.load_factor[-1] < 0.1 * res.peak[0]
+
+
+def test_a_lever_through_zero_is_not_a_jump():
+    """The branch guard measures a step's lever from the last step's or from ``LEVER_FLOOR``
+    times the path's first, if larger. The unnotched concrete beam under CMOD control
+    (``demos/concrete_beam.py --notch-depth 0 --path found``, lane B) had its lever 135.8 at the
+    first step, and 0.024 where the deflection turned forward again past its snap-back: the
+    next step's 0.82 was a 33-fold "jump", every cut's 0.49 20.3-fold, and the path stopped at
+    step 22. Measured from the floor it is 0.06. A lever below zero (past a snap-back) is measured
+    from the floor too; a branch jump of the coarse bars (from 0.97 of the first lever to 20
+    times it) stays a jump; no lever measured, no jump."""
+    assert pf._lever_jump(0.02437, 135.75, 0.8202) == pytest.approx(0.8202 / 13.575, rel=1e-12)
+    assert pf._lever_jump(0.02437, 135.75, 0.8202) < pf.LEVER_JUMP < 0.8202 / 0.02437
+    assert pf._lever_jump(-0.19, 135.75, 0.75) == pytest.approx(0.75 / 13.575, rel=1e-12)
+    assert pf._lever_jump(-0.19, 135.75, 100.0) > pf.LEVER_JUMP
+    assert pf._lever_jump(0.97, 1.0, 20.0) == pytest.approx(20.0 / 0.97, rel=1e-12)
+    assert pf._lever_jump(None, 1.0, 20.0) == pf._lever_jump(0.97, 1.0, None) == 0.0
+    assert pf._lever_jump(-1.0, 0.0, 20.0) == 0.0
 
 
 def test_the_control_functional_is_the_point_values():

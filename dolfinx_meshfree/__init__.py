@@ -79,6 +79,7 @@ from .physics.materials import LinearElastic
 from .physics.zones import MaterialZones
 from .state_fields import state_field
 from .statics.band_reach import BandCutWarning
+from .statics.bifurcation import BifurcationWarning
 from .statics.cohesive_growth import CohesiveGrowth, initiation_direction
 from .statics.cohesive_initiation import BulkStrengthWarning, InitiationSite, initiation_site
 from .statics.coupled import (
@@ -158,6 +159,7 @@ __all__ = [
     "Approximation",
     "ArcLength",
     "BandCutWarning",
+    "BifurcationWarning",
     "Bodies",
     "BodyCut",
     "BulkStrengthWarning",

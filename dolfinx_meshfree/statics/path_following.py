@@ -47,6 +47,7 @@ from ..physics.inelastic import RankineDamage
 from ..physics.materials import LinearElastic
 from ..physics.state import is_stateful, voigt_strain
 from .band_reach import BandCutWarning, band_at_interface
+from .bifurcation import StabilityWatch, bordered_sign
 from .cohesive import CohesiveSide, check_through
 from .cohesive_growth import CohesiveGrowth, _inside, grow_once
 from .cohesive_initiation import BulkStrengthWarning, bulk_stress_peaks, site_at
@@ -271,6 +272,11 @@ class PathResult:
     #: starts it; else the model does not follow it).
     bulk_stress: list[float] = field(default_factory=list)
     bulk_point: list[list[float]] = field(default_factory=list)
+    #: Per converged step, the sign of the bordered tangent's determinant relative to the path's
+    #: first step's (:mod:`~dolfinx_meshfree.statics.bifurcation`): -1 past a bifurcation, on a
+    #: branch a body with any imperfection leaves; ``None`` where unknown (arc length, an
+    #: iterative solver; the sign restarts after a crack or the patch grew).
+    stability: list[float | None] = field(default_factory=list)
     #: The cracks that started during the path (``follow_path(initiation=...)``): ``(step,
     #: control, first stretch)`` each, the stretch's end points.
     initiations: list[tuple[int, float, list[list[float]]]] = field(default_factory=list)
@@ -468,17 +474,20 @@ def _newton_directions(
     r: list[PETSc.Vec],
     q: list[PETSc.Vec],
     solver: SolverOptions,
-) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    sign: bool = False,
+) -> tuple[list[np.ndarray], list[np.ndarray], float | None]:
     """``J da = -R`` and ``J db = q`` with one factorisation of the tangent at ``x`` (the
-    residual ``r`` is consumed: scaled, then destroyed)."""
+    residual ``r`` is consumed: scaled, then destroyed), and with ``sign`` the sign of ``det J``
+    (``None`` where the solver does not give it)."""
     blocks = problem.jacobian(x)
     for v in r:
         v.scale(-1.0)
     system = BlockSystem(blocks, r, num_primal=problem.num_primal, names=problem.names)
-    da, db = system.solve_many([q], solver)
+    da, db = system.solve_many([q], solver, sign=sign)
+    det = system.determinant_sign
     system.destroy()
     _destroy_all(r)
-    return da, db
+    return da, db, det
 
 
 #: A step whose load work per unit of control and of load (:func:`_lever`) exceeds the last
@@ -658,10 +667,13 @@ def _bordered_step(
     options: PathOptions,
     solver: SolverOptions,
     search_first: bool = False,
+    stability: list[float | None] | None = None,
 ) -> tuple[float, int]:
     """Newton on ``R(x, t) = 0, g(x) = target`` from ``(x, t)``; returns ``(t, iterations)``
     (``x`` updated in place) or raises ``ArithmeticError`` when it does not converge. With
     ``search_first``, a first iteration that starts on the constraint is line-searched too.
+    With ``stability``, a converged step appends the sign of the bordered system's determinant
+    at its last factorisation (:func:`~dolfinx_meshfree.statics.bifurcation.bordered_sign`).
 
     Every update keeps the constraint: ``x += alpha da + beta db`` with ``beta = (gap - alpha
     g(da)) / g(db)`` holds ``g(x) = target`` for any ``alpha`` (``g`` is linear), so once the
@@ -675,15 +687,19 @@ def _bordered_step(
     scale = max(abs(target), 1e-300)
     comm = x[0].getComm().tompi4py()
     r, norm = _residual(problem, x, t)
+    bordered = None
     for it in range(options.max_it + 1):
         gap = target - g(_owned(x))
         if it > 0 and norm <= tol.at(t) and abs(gap) <= 1e-10 * scale:
             _destroy_all(r)
+            if stability is not None:
+                stability.append(bordered)
             return t, it
         if it == options.max_it or not np.isfinite(norm):
             break
-        da, db = _newton_directions(problem, x, r, q, solver)
+        da, db, det = _newton_directions(problem, x, r, q, solver, sign=stability is not None)
         ga, gb = g(da), g(db)
+        bordered = bordered_sign(det, gb)
         size = comm.allreduce(
             max((float(np.abs(b).max()) for b in db if b.size), default=0.0), op=MPI.MAX
         )
@@ -713,6 +729,8 @@ def _bordered_step(
             if norm <= tol.stall_at(t) and abs(gap) <= 1e-10 * scale:  # stagnated near it
                 problem.t = t
                 _destroy_all(problem.residual(x))  # the trial state of x again
+                if stability is not None:
+                    stability.append(bordered)
                 return t, it + 1
             raise ArithmeticError("no step length decreases the residual")
         alpha, beta, r, norm = best
@@ -759,7 +777,7 @@ def _arc_step(
             return t, it, Dx
         if it == options.max_it or not np.isfinite(norm):
             break
-        da, db = _newton_directions(problem, x, r, q, solver)
+        da, db, _ = _newton_directions(problem, x, r, q, solver)
         a, b = da[:num_primal], db[:num_primal]
         if it == 0:
             sign = 1.0
@@ -1438,6 +1456,7 @@ def follow_path(
         work, peak = 0.0, 0.0
         lever: float | None = None  # the last step's load work per unit control and load
         first_lever: float | None = None  # the path's first
+        stable, signs = StabilityWatch(), []  # the bordered determinant's sign per step
         step = 0
         while tau < options.end - 1e-14 * abs(options.end) and step < options.max_steps:
             target = min(options.end, tau + dtau)
@@ -1453,7 +1472,7 @@ def follow_path(
                     )  # fmt: skip
                 else:
                     t_new, its = _bordered_step(
-                        problem, x, t, target, g, loads.q, tol, options, solver
+                        problem, x, t, target, g, loads.q, tol, options, solver, stability=signs
                     )
             except ArithmeticError as err:
                 reason = str(err)
@@ -1520,6 +1539,8 @@ def follow_path(
                 first_lever = abs(lever)
             events = len(result.extensions) + len(result.patch_events) + len(result.initiations)
             t, tau, step = t_new, target, step + 1
+            sign = None if arc or not signs else signs[-1]
+            result.stability.append(stable.record(sign, step, tau, t))
             for _ in range(max((gr.max_extensions for gr in growths), default=0) + 1):
                 if criteria:  # the patch first: a crack's next extension stays inside it
                     context = path_context(model, growths, step, _solution(built, model))
@@ -1594,6 +1615,7 @@ def follow_path(
                     bulk, candidate = _bulk_peaks(built, law, result.refused, initiation)
             if len(result.extensions) + len(result.patch_events) + len(result.initiations) > events:
                 lever = None  # a crack grew or started, the patch grew: a new model's lever
+                stable.reset()
             if arc:
                 previous = previous_new
             peak = max(peak, t)

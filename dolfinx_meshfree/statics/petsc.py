@@ -388,6 +388,8 @@ def solve_lu(
             needs two per iteration); their solutions are in ``stats["more"]`` when ``stats``
             is given, else returned as ``(x, [x_1, ...])``.
         stats: Filled (if given) with ``factorisation`` (``"ldlt"`` or ``"lu"``),
+            ``determinant_sign`` (the sign of ``det A``, from MUMPS's determinant, ICNTL(33);
+            where ``stats`` came with ``want_sign=True``),
             ``asymmetry`` (a lower bound where ``asymmetry_sampled``: :func:`asymmetry_above`),
             the seconds of its ``check``, of ``factor`` (and its CPU seconds on this rank,
             ``factor_cpu``) and ``solve`` and, with MUMPS, its ``memory_mb``
@@ -417,6 +419,10 @@ def solve_lu(
         if stats is not None:
             stats.update(decoupled=0, reduce=reduce)
         return result(xs)
+    if stats is not None and stats.get("want_sign", False):
+        # det A = det(the rest) x the decoupled diagonal's product
+        negative = A.getComm().tompi4py().allreduce(int(np.count_nonzero(diagonal < 0)))
+        stats["determinant_sign"] = -1.0 if negative % 2 else 1.0
     lo, hi = A.getOwnershipRange()
     locals_ = [v.getArray(readonly=True) for v in (b, *more)]
     values = [np.empty(hi - lo) for _ in locals_]
@@ -432,8 +438,12 @@ def solve_lu(
             v.setArray(loc[rest - lo])
             b_rest.append(v)
         reduce = time.perf_counter() - tr
+        sign = None if stats is None else stats.pop("determinant_sign", None)
         try:
             x_rest = _factorise_and_solve(A_rest, b_rest, solver, factorisation, stats)
+            if sign is not None:
+                rest_sign = stats.get("determinant_sign")
+                stats["determinant_sign"] = None if rest_sign is None else sign * rest_sign
         finally:
             for obj in (A_rest, *b_rest, index):
                 obj.destroy()
@@ -458,6 +468,7 @@ def _factorise_and_solve(
     """:func:`solve_lu` on the (reduced) system: the symmetry check, the factorisation and the
     triangular solves, one per right-hand side in ``bs``."""
     mumps = solver == "mumps"
+    want_sign = stats is not None and stats.get("want_sign", False)
     tc = time.perf_counter()
     asym, sampled = (None, False)
     if mumps and factorisation == "auto":
@@ -492,9 +503,13 @@ def _factorise_and_solve(
         F.setMumpsCntl(1, 0.1)
         F.setMumpsIcntl(10, 3)
         F.setMumpsCntl(2, 1e-15)
+        if want_sign:
+            F.setMumpsIcntl(33, 1)  # the determinant (RINFOG(12), INFOG(34)): its sign only
     t0, c0 = time.perf_counter(), time.process_time()
     ksp.setUp()
     t1, c1 = time.perf_counter(), time.process_time()
+    if want_sign and mumps:
+        stats["determinant_sign"] = float(np.sign(pc.getFactorMatrix().getMumpsRinfog(12)))
     xs, reason = [], 0
     for b in bs:
         x = A.createVecRight()
@@ -769,14 +784,21 @@ class BlockSystem:
         #: What the last direct solve did (:func:`solve_lu`'s ``stats``), or the iterative one
         #: (its ``seconds``, GAMG set-up included, ``iterations``, the final ``residual``).
         self.stats: dict = {}
+        #: The sign of the system's determinant (:meth:`solve_many` with ``sign``), or ``None``.
+        self.determinant_sign: float | None = None
 
     def solve_many(
-        self, more: Sequence[Sequence[PETSc.Vec]], solver: str | SolverOptions = "mumps"
+        self,
+        more: Sequence[Sequence[PETSc.Vec]],
+        solver: str | SolverOptions = "mumps",
+        sign: bool = False,
     ) -> list[list[np.ndarray]]:
         """Solve for :attr:`rhs` and for every right-hand side in ``more`` (one vector per block
         row each), sharing one factorisation with the direct solvers (``"mumps"``,
         ``"mumps-lu"``); other solvers solve them one by one. Returns the owned blocks of each
-        solution, :attr:`rhs`'s first (collective)."""
+        solution, :attr:`rhs`'s first (collective). With ``sign``, :attr:`determinant_sign` is
+        the sign of the system's determinant where MUMPS factorised it (else ``None``)."""
+        self.determinant_sign = None
         options = solver_options(solver)
         direct = options.solver in ("mumps", "mumps-lu") and options.petsc_options is None
         if not direct or not more:
@@ -793,9 +815,10 @@ class BlockSystem:
             b = aij.createVecLeft()
             b.setArray(np.concatenate([v.getArray(readonly=True) for v in rhs]))
             vecs.append(b)
-        self.stats = {}
+        self.stats = {"want_sign": sign}
         factorisation = "lu" if options.solver == "mumps-lu" else "auto"
         x = solve_lu(aij, vecs[0], factorisation=factorisation, stats=self.stats, more=vecs[1:])
+        self.determinant_sign = self.stats.get("determinant_sign")
         sizes = np.cumsum([v.getLocalSize() for v in self.rhs])[:-1]
         out = []
         for xi in (x, *self.stats.pop("more")):

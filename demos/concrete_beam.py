@@ -130,7 +130,10 @@
 #   (their records at the committed states) within 2 %;
 # * `band`: the damage stays in the patch (the FE cells stay elastic), else widen
 #   `--patch-width` (not for `fe`, where the cells carry it);
-# * the path passes the peak (the final load is below half the peak).
+# * the path passes the peak (the final load is below half the peak);
+# * the path keeps no branch past a bifurcation (`PathResult.bifurcation`, `mf.BifurcationWarning`:
+#   the sign of the bordered tangent's determinant stays as at the start; measured: never flipped
+#   in any of the test suite's runs of this demo).
 #
 # Printed, not checked: with a cohesive crack, the bulk's largest averaged principal stress three
 # spacings or more from the crack over the path (`bulk_stress_ratio`, to f_t; `follow_path`
@@ -483,6 +486,7 @@ def run(args) -> dict:
         ),
         "handed_over_J": float(sum(e for _, e, _ in path.handovers) * B / 1000.0),
         "turns_deg": list(map(float, path.turns)),
+        "bifurcation_step": path.bifurcation,
         "time_total": seconds,
         "patch_growths": len(path.patch_events),
         "length_mm": args.length or args.span,
@@ -536,6 +540,10 @@ def check(r: dict) -> None:
         )
     assert r["load"][-1] < 0.5 * r["peak_load_N"], (
         "the path did not pass the peak: raise --end-cmod"
+    )
+    assert r["bifurcation_step"] is None, (
+        f"the path kept a branch past a bifurcation from step {r['bifurcation_step']} "
+        "(mf.BifurcationWarning): a body with any imperfection leaves it"
     )
 
 

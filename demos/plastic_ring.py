@@ -34,7 +34,9 @@
 # of a law with state on quadrilaterals): with the plain strain of each point, Q1's full rule
 # locks under isochoric plastic flow and the curve keeps rising past the limit (lagrange: 4.3 %
 # above it at `u_r(a) = 0.3`; with the mean 0.28 %, the rest the particles' own, pure EFG
-# 0.49 %). The check is at `u_r(a) = 6e-3`, 30 times the displacement at first yield.
+# 0.49 %). The check is at `u_r(a) = 6e-3`, 30 times the displacement at first yield. Every run
+# also checks that its path keeps no branch past a bifurcation (`PathResult.bifurcation`; the
+# ring's paths never flip the sign of the bordered tangent's determinant).
 #
 # With `--adapt 1e-3` the patch grows to most of the ring, since the whole ring yields at the
 # limit, and the pressure at the end lags the limit: the converted cells' new points take the
@@ -165,6 +167,7 @@ def run(method: str, plane: str, args: argparse.Namespace) -> dict:
         "particles": int(particles),
         "fe_cells": int(fe_cells),
         "dissipated_energy": float(path.dissipated_energy[-1]),
+        "bifurcation_step": path.bifurcation,
         "time_total": seconds,
     }
 
@@ -211,6 +214,13 @@ def main(argv: list[str] | None = None) -> list[dict]:
                 json.dump(records, f, indent=1)
     failures = []
     defaults = args.cells == 12 and args.end == 6e-3 and not args.adapt
+    if not args.no_check:  # any run: no branch past a bifurcation (mf.BifurcationWarning)
+        for r in records:
+            if r["bifurcation_step"] is not None:
+                failures.append(
+                    f"{r['method']} {r['plane']}: a branch past a bifurcation from step "
+                    f"{r['bifurcation_step']}"
+                )
     if not args.no_check and defaults:
         for r in records:
             if not abs(r["error_elastic"]) <= 1e-2:

@@ -44,6 +44,7 @@ def test_the_watch_warns_only_on_a_kept_flip():
         watch.record(1.0, 2, 0.2, 1.0)
         for k in range(3, 3 + BIFURCATION_STEPS - 1):
             watch.record(1.0, k, 0.1 * k, 1.0)
+    assert watch.warned_at == 2
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # once per path
         watch.record(1.0, 20, 2.0, 1.0)
@@ -91,14 +92,15 @@ def test_a_mirror_symmetric_beam_keeps_its_symmetric_branch_and_warns():
     the peak, 103.6 N/mm, is 6.7 % above the triangles' 97.1. On triangles (their diagonals
     break the symmetry) the damage localises in one column (190 to 200 mm, 0.96 of it) and the
     sign never flips: no warning. Checked: the warning and a flip of at least
-    ``BIFURCATION_STEPS`` steps on quadrilaterals, none on triangles, and the quadrilaterals'
-    peak above the triangles' by 3 % at least."""
+    ``BIFURCATION_STEPS`` steps on quadrilaterals (``PathResult.bifurcation``: step 6), none on
+    triangles, and the quadrilaterals' peak above the triangles' by 3 % at least."""
     with pytest.warns(mf.BifurcationWarning, match=r"crossed a bifurcation at step 6 \("):
         quads = _beam("quadrilateral")
-    assert _longest_flip(quads.stability) >= BIFURCATION_STEPS
+    assert _longest_flip(quads.stability) >= BIFURCATION_STEPS and quads.bifurcation == 6
     with warnings.catch_warnings():
         warnings.simplefilter("error", mf.BifurcationWarning)
         triangles = _beam("triangle")
     assert _longest_flip(triangles.stability) < BIFURCATION_STEPS
+    assert triangles.bifurcation is None
     assert len(triangles.stability) == len(triangles.control)
     assert max(quads.load_factor) > 1.03 * max(triangles.load_factor)

@@ -81,7 +81,8 @@ class StabilityWatch:
         self.reference: float | None = None
         self.run = 0  # consecutive steps with the sign flipped
         self.first: tuple[int, float, float] | None = None  # (step, control, load) of the run
-        self.warned = False
+        #: The step where the flipped run that warned began (``None``: no warning).
+        self.warned_at: int | None = None
 
     def reset(self) -> None:
         """The model changed (a crack grew, the patch grew: other multipliers): the next step's
@@ -104,9 +105,9 @@ class StabilityWatch:
         self.run += 1
         if self.first is None:
             self.first = (step, control, load)
-        if self.run >= BIFURCATION_STEPS and not self.warned:
-            self.warned = True
+        if self.run >= BIFURCATION_STEPS and self.warned_at is None:
             k, c, t = self.first
+            self.warned_at = k
             warnings.warn(
                 f"the path crossed a bifurcation at step {k} (control {c:.6g}, load factor "
                 f"{t:.6g}) and has stayed on the branch past it for {self.run} steps: the "

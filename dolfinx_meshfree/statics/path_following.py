@@ -277,6 +277,9 @@ class PathResult:
     #: branch a body with any imperfection leaves; ``None`` where unknown (arc length, an
     #: iterative solver; the sign restarts after a crack or the patch grew).
     stability: list[float | None] = field(default_factory=list)
+    #: The step from which the sign stayed flipped for ``BIFURCATION_STEPS`` steps
+    #: (:class:`~dolfinx_meshfree.BifurcationWarning`), or ``None``.
+    bifurcation: int | None = None
     #: The cracks that started during the path (``follow_path(initiation=...)``): ``(step,
     #: control, first stretch)`` each, the stretch's end points.
     initiations: list[tuple[int, float, list[list[float]]]] = field(default_factory=list)
@@ -1541,6 +1544,7 @@ def follow_path(
             t, tau, step = t_new, target, step + 1
             sign = None if arc or not signs else signs[-1]
             result.stability.append(stable.record(sign, step, tau, t))
+            result.bifurcation = stable.warned_at
             for _ in range(max((gr.max_extensions for gr in growths), default=0) + 1):
                 if criteria:  # the patch first: a crack's next extension stays inside it
                     context = path_context(model, growths, step, _solution(built, model))

@@ -104,3 +104,25 @@ def test_a_mirror_symmetric_beam_keeps_its_symmetric_branch_and_warns():
     assert triangles.bifurcation is None
     assert len(triangles.stability) == len(triangles.control)
     assert max(quads.load_factor) > 1.03 * max(triangles.load_factor)
+
+
+def test_arc_length_on_the_beam_is_watched_too():
+    """With Crisfield's arc length (the sign is ``sign(det K)`` times the step's load increment's,
+    which turn together at a limit point) the beam on triangles leaves the localised path that
+    CMOD control follows: its peak is 106.3 N/mm against 97.1, the sign flips at step 13 (load
+    factor 89, before the peak) and stays flipped past the peak to the end (20 steps), and
+    ``BifurcationWarning`` says so. Checked: the warning, and the peak above CMOD control's by
+    4 % at least (measured 9.5 %)."""
+    given = mf.follow_path
+
+    def arc(model, control, options):
+        options = mf.PathOptions(increment=0.01, end=5.0, min_load=0.3, max_increment=0.1)
+        return given(model, mf.ArcLength(), options, monitors={"cmod": control})
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(mf, "follow_path", arc)
+        with pytest.warns(mf.BifurcationWarning, match=r"crossed a bifurcation at step 13 \("):
+            path = _beam("triangle")
+    assert path.bifurcation == 13 and _longest_flip(path.stability) >= BIFURCATION_STEPS
+    localised = _beam("triangle")  # CMOD control
+    assert max(path.load_factor) > 1.04 * max(localised.load_factor)

@@ -35,6 +35,12 @@ notched column or a straight cohesive crack whose band opens evenly while their 
 free to rotate (an uneven opening is the other branch). The concrete beams (Petersson's, the
 shear beam; given and found cracks) never flip.
 
+With Crisfield's arc length the load factor is an unknown of its own and passes peaks by itself:
+there ``det K`` changes sign at a limit point together with the step's load increment, and at a
+bifurcation alone, so the watched sign is ``sign(det K)`` times the load increment's. On the
+beam above (10 mm triangles) arc length did not follow CMOD control's localised path: its peak
+was 106.3 N/mm against 97.1, the sign flipped at step 13 and stayed flipped past the peak.
+
 :class:`StabilityWatch` keeps the sign per converged step, relative to the path's first (the
 Lagrange multipliers' saddle point gives ``det K`` a sign of its own) and warns
 (:class:`BifurcationWarning`) when the path stays on the flipped side for

@@ -273,9 +273,10 @@ class PathResult:
     bulk_stress: list[float] = field(default_factory=list)
     bulk_point: list[list[float]] = field(default_factory=list)
     #: Per converged step, the sign of the bordered tangent's determinant relative to the path's
-    #: first step's (:mod:`~dolfinx_meshfree.statics.bifurcation`): -1 past a bifurcation, on a
-    #: branch a body with any imperfection leaves; ``None`` where unknown (arc length, an
-    #: iterative solver; the sign restarts after a crack or the patch grew).
+    #: first step's (:mod:`~dolfinx_meshfree.statics.bifurcation`; with arc length, ``det K``'s
+    #: times the step's load increment's): -1 past a bifurcation, on a branch a body with any
+    #: imperfection leaves; ``None`` where unknown (an iterative solver; the sign restarts after
+    #: a crack or the patch grew).
     stability: list[float | None] = field(default_factory=list)
     #: The step from which the sign stayed flipped for ``BIFURCATION_STEPS`` steps
     #: (:class:`~dolfinx_meshfree.BifurcationWarning`), or ``None``.
@@ -760,9 +761,11 @@ def _arc_step(
     num_primal: int,
     options: PathOptions,
     solver: SolverOptions,
+    stability: list[float | None] | None = None,
 ) -> tuple[float, int, list[np.ndarray]]:
     """Newton on ``R(x, t) = 0, |Dx| = dl`` (``Dx``: the step's change of the primal fields) from
-    ``(x, t)``; returns ``(t, iterations, Dx)`` or raises ``ArithmeticError``.
+    ``(x, t)``; returns ``(t, iterations, Dx)`` or raises ``ArithmeticError``. With
+    ``stability``, a converged step appends the sign of ``det J`` at its last factorisation.
 
     Each iteration: ``J da = -R``, ``J db = q``, ``dx = da + dt db`` with ``dt`` a root of
     ``|Dx + da + dt db|^2 = dl^2`` (Crisfield 1991, sec. 9.3.1), the root whose new ``Dx``
@@ -772,15 +775,18 @@ def _arc_step(
     comm = x[0].getComm().tompi4py()
     r, norm = _residual(problem, x, t)
     Dx = [np.zeros(v.getLocalSize()) for v in x[:num_primal]]
+    det = None  # det J's sign at the last factorisation
     for it in range(options.max_it + 1):
         # converged; or stagnated near the solution at the last iteration (a law's non-smooth
         # points: its damage cap, equal principal stresses)
         if it > 0 and (norm <= tol.at(t) or (it == options.max_it and norm <= tol.stall_at(t))):
             _destroy_all(r)
+            if stability is not None:
+                stability.append(det)
             return t, it, Dx
         if it == options.max_it or not np.isfinite(norm):
             break
-        da, db, _ = _newton_directions(problem, x, r, q, solver)
+        da, db, det = _newton_directions(problem, x, r, q, solver, sign=stability is not None)
         a, b = da[:num_primal], db[:num_primal]
         if it == 0:
             sign = 1.0
@@ -1471,7 +1477,7 @@ def follow_path(
                 if arc:
                     t_new, its, previous_new = _arc_step(
                         problem, x, t, target - tau, previous, loads.q, tol, k_p + 1,
-                        options, solver,
+                        options, solver, stability=signs,
                     )  # fmt: skip
                 else:
                     t_new, its = _bordered_step(
@@ -1541,8 +1547,10 @@ def follow_path(
             if first_lever is None and lever is not None:
                 first_lever = abs(lever)
             events = len(result.extensions) + len(result.patch_events) + len(result.initiations)
-            t, tau, step = t_new, target, step + 1
-            sign = None if arc or not signs else signs[-1]
+            t_before, t, tau, step = t, t_new, target, step + 1
+            sign = None if not signs else signs[-1]
+            if arc:  # det K's sign times the step's load increment's (module bifurcation)
+                sign = None if sign is None else bordered_sign(sign, t - t_before)
             result.stability.append(stable.record(sign, step, tau, t))
             result.bifurcation = stable.warned_at
             for _ in range(max((gr.max_extensions for gr in growths), default=0) + 1):

@@ -28,8 +28,9 @@ step or two, before round-off and the mesh's own asymmetry take them onto the lo
 
 The sign sees an odd number of unstable modes only: a branch with two is seen as stable, so a
 flipped run can end while the branch stays unstable (the uniform bars below flip on and off).
-Over the test suite's 127 paths 18 keep the sign flipped for :data:`BIFURCATION_STEPS` steps or
-more, each on a branch past a bifurcation by design: the bars of the closed-form checks, whose
+Over the test suite's 127 paths (before ``tests/test_bifurcation.py``) 19 keep the sign flipped
+for :data:`BIFURCATION_STEPS` steps or more (18 under a control, 1 by arc length), each on a
+branch past a bifurcation by design: the bars of the closed-form checks, whose
 cells all soften at once (the closed form is that uniform branch's curve), and bars with a
 notched column or a straight cohesive crack whose band opens evenly while their loaded end is
 free to rotate (an uneven opening is the other branch). The concrete beams (Petersson's, the

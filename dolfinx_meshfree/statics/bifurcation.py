@@ -71,8 +71,9 @@ BIFURCATION_STEPS = 4
 
 
 def bordered_sign(det_k: float | None, dg_dt: float) -> float | None:
-    """The sign of the bordered Jacobian's determinant, ``sign(det K) sign(dg/dt)``; ``None``
-    where the solver gave no determinant (an iterative solve)."""
+    """The sign of the bordered Jacobian's determinant, ``sign(det K) sign(dg/dt)`` (with arc
+    length, ``dg_dt`` the step's load increment); ``None`` where the solver gave no determinant
+    (an iterative solve)."""
     if det_k is None or not np.isfinite(dg_dt) or dg_dt == 0.0:
         return None
     return float(det_k) * (1.0 if dg_dt > 0.0 else -1.0)

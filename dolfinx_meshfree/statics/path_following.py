@@ -765,7 +765,9 @@ def _arc_step(
 ) -> tuple[float, int, list[np.ndarray]]:
     """Newton on ``R(x, t) = 0, |Dx| = dl`` (``Dx``: the step's change of the primal fields) from
     ``(x, t)``; returns ``(t, iterations, Dx)`` or raises ``ArithmeticError``. With
-    ``stability``, a converged step appends the sign of ``det J`` at its last factorisation.
+    ``stability``, a converged step appends ``det J``'s sign at its last factorisation times its
+    load increment's (:func:`~dolfinx_meshfree.statics.bifurcation.bordered_sign`: the two turn
+    together at a limit point, ``det J`` alone at a bifurcation).
 
     Each iteration: ``J da = -R``, ``J db = q``, ``dx = da + dt db`` with ``dt`` a root of
     ``|Dx + da + dt db|^2 = dl^2`` (Crisfield 1991, sec. 9.3.1), the root whose new ``Dx``
@@ -775,14 +777,14 @@ def _arc_step(
     comm = x[0].getComm().tompi4py()
     r, norm = _residual(problem, x, t)
     Dx = [np.zeros(v.getLocalSize()) for v in x[:num_primal]]
-    det = None  # det J's sign at the last factorisation
+    det, t_start = None, t  # det J's sign at the last factorisation
     for it in range(options.max_it + 1):
         # converged; or stagnated near the solution at the last iteration (a law's non-smooth
         # points: its damage cap, equal principal stresses)
         if it > 0 and (norm <= tol.at(t) or (it == options.max_it and norm <= tol.stall_at(t))):
             _destroy_all(r)
             if stability is not None:
-                stability.append(det)
+                stability.append(bordered_sign(det, t - t_start))
             return t, it, Dx
         if it == options.max_it or not np.isfinite(norm):
             break
@@ -1544,14 +1546,11 @@ def follow_path(
                 w.destroy()
             work += w_step
             lever = new_lever
-            if first_lever is None and lever is not None:
-                first_lever = abs(lever)
+            if first_lever is None:
+                first_lever = lever
             events = len(result.extensions) + len(result.patch_events) + len(result.initiations)
-            t_before, t, tau, step = t, t_new, target, step + 1
-            sign = None if not signs else signs[-1]
-            if arc:  # det K's sign times the step's load increment's (module bifurcation)
-                sign = None if sign is None else bordered_sign(sign, t - t_before)
-            result.stability.append(stable.record(sign, step, tau, t))
+            t, tau, step = t_new, target, step + 1
+            result.stability.append(stable.record(signs[-1] if signs else None, step, tau, t))
             result.bifurcation = stable.warned_at
             for _ in range(max((gr.max_extensions for gr in growths), default=0) + 1):
                 if criteria:  # the patch first: a crack's next extension stays inside it

@@ -419,16 +419,16 @@ def solve_lu(
         if stats is not None:
             stats.update(decoupled=0, reduce=reduce)
         return result(xs)
-    if stats is not None and stats.get("want_sign", False):
-        # det A = det(the rest) x the decoupled diagonal's product
+    want_sign = stats is not None and stats.get("want_sign", False)
+    if want_sign:  # det A = det(the rest) x the decoupled diagonal's product
         negative = A.getComm().tompi4py().allreduce(int(np.count_nonzero(diagonal < 0)))
-        stats["determinant_sign"] = -1.0 if negative % 2 else 1.0
     lo, hi = A.getOwnershipRange()
     locals_ = [v.getArray(readonly=True) for v in (b, *more)]
     values = [np.empty(hi - lo) for _ in locals_]
     for val, loc in zip(values, locals_, strict=True):
         val[rows - lo] = loc[rows - lo] / diagonal
-    if count < A.getSize()[0]:  # else A is diagonal: nothing left to factorise
+    diagonal_only = count == A.getSize()[0]
+    if not diagonal_only:  # else A is diagonal: nothing left to factorise
         rest = np.setdiff1d(np.arange(lo, hi, dtype=PETSc.IntType), rows, assume_unique=True)
         index = PETSc.IS().createGeneral(rest, comm=A.getComm())
         A_rest = A.createSubMatrix(index, index)
@@ -438,12 +438,8 @@ def solve_lu(
             v.setArray(loc[rest - lo])
             b_rest.append(v)
         reduce = time.perf_counter() - tr
-        sign = None if stats is None else stats.pop("determinant_sign", None)
         try:
             x_rest = _factorise_and_solve(A_rest, b_rest, solver, factorisation, stats)
-            if sign is not None:
-                rest_sign = stats.get("determinant_sign")
-                stats["determinant_sign"] = None if rest_sign is None else sign * rest_sign
         finally:
             for obj in (A_rest, *b_rest, index):
                 obj.destroy()
@@ -459,6 +455,11 @@ def solve_lu(
         xs.append(x)
     if stats is not None:
         stats.update(decoupled=count, reduce=reduce)
+    if want_sign:
+        rest_sign = 1.0 if diagonal_only else stats.get("determinant_sign")
+        stats["determinant_sign"] = (
+            None if rest_sign is None else (-1.0 if negative % 2 else 1.0) * rest_sign
+        )
     return result(xs)
 
 

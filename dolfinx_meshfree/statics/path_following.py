@@ -183,6 +183,17 @@ ENERGY_TOLERANCE = 3e-2
 CARRY_TOLERANCE = 1e-2
 
 
+#: :class:`PathOptions`' default ``xtol``. Petersson's notched beam (``demos/concrete_beam.py``, h =
+#: 25 mm, lagrange) has a residual floor of about 1e-9 N whatever the load, above ``rtol |t q|``
+#: = 4.4e-10 in its first step: Newton reached the floor in one iteration, then wandered on it
+#: (corrections of 4e-13 to 7e-15 of the fields) until no step length decreased ``|R|`` and the
+#: stall test took it: 9 iterations serially, and a count that differed on 2 ranks, so that the
+#: increments (``easy``) and then the path differed (the peak 875.69 N serially, 875.39 N on 2
+#: ranks). In steps that converge the last correction is 1e-12 to 3e-8 of the fields with ``|R|``
+#: at the floor, and the one before it at least 3e-7 with ``|R|`` above ``stall |t q|``.
+XTOL = 1e-10
+
+
 @dataclass(frozen=True)
 class PathOptions:
     """Options of :func:`follow_path`.
@@ -198,6 +209,9 @@ class PathOptions:
             the iterate's load factor, the step's start and the peak's.
         stall: Or when no step length decreases ``|R|`` any more and ``|R| <= stall |t q|``
             (the round-off floor of a law's non-smooth points).
+        xtol: Or when ``|R| <= stall |t q|`` and the last iteration changed the primal fields
+            by at most ``xtol`` of their norm: ``|R|`` has reached its round-off floor, which
+            can lie above ``rtol |t q|`` where the load is small (:data:`XTOL`).
         grow: The increment is multiplied by this after a step that converged in at most
             ``easy`` iterations, up to ``max_increment`` (default ``8 increment``); not after
             the first step, whose quick convergence tells of the elastic start, not of the
@@ -213,6 +227,7 @@ class PathOptions:
     rtol: float = 1e-9
     atol: float = 1e-12
     stall: float = 1e-4
+    xtol: float = XTOL
     grow: float = 1.5
     easy: int = 4
     max_increment: float | None = None
@@ -232,6 +247,8 @@ class PathOptions:
             value = getattr(self, name)
             if not (isinstance(value, int) and value >= 1):
                 raise ValueError(f"{name}={value!r} must be an integer >= 1")
+        if not 0.0 <= self.xtol < 1e-3:
+            raise ValueError(f"xtol={self.xtol!r} must lie in [0, 1e-3) (0: no such test)")
         if not self.grow >= 1.0:
             raise ValueError(f"grow={self.grow!r} must be >= 1")
 
@@ -687,14 +704,16 @@ def _bordered_step(
     cut): accepting a step that does not decrease it lets Newton wander onto another branch
     (one where the whole body softens). A residual that stagnates below ``stall`` (the
     non-smooth points of a law: its damage cap, equal principal stresses) is accepted as
-    converged."""
+    converged, as is one below ``stall`` after an iteration that changed the primal fields by at
+    most ``xtol`` of their norm (its round-off floor: :data:`XTOL`)."""
     scale = max(abs(target), 1e-300)
     comm = x[0].getComm().tompi4py()
     r, norm = _residual(problem, x, t)
-    bordered = None
+    bordered, moved = None, np.inf  # the last iteration's change of the primal fields, relative
     for it in range(options.max_it + 1):
         gap = target - g(_owned(x))
-        if it > 0 and norm <= tol.at(t) and abs(gap) <= 1e-10 * scale:
+        floor = moved <= options.xtol and norm <= tol.stall_at(t)  # |R| at its round-off floor
+        if it > 0 and (norm <= tol.at(t) or floor) and abs(gap) <= 1e-10 * scale:
             _destroy_all(r)
             if stability is not None:
                 stability.append(bordered)
@@ -740,10 +759,29 @@ def _bordered_step(
         alpha, beta, r, norm = best
         for xi, x0, a, b in zip(x, start, da, db, strict=True):
             xi.array[:] = x0.getArray(readonly=True) + alpha * a + beta * b
+        moved = _relative_change(
+            [alpha * a + beta * b for a, b in zip(da, db, strict=True)], x, problem.num_primal
+        )
         _destroy_all(start)
         t += beta
     _destroy_all(r)
     raise ArithmeticError("not converged")
+
+
+def _relative_change(dx: Sequence[np.ndarray], x: Sequence[PETSc.Vec], num_primal: int) -> float:
+    """``|dx| / |x|`` over the first ``num_primal`` fields (the owned parts; collective), inf
+    where ``x`` is zero."""
+    comm = x[0].getComm().tompi4py()
+    local = np.array(
+        [
+            sum(float(d @ d) for d in dx[:num_primal]),
+            sum(
+                float(v.getArray(readonly=True) @ v.getArray(readonly=True)) for v in x[:num_primal]
+            ),
+        ]
+    )
+    change, size = np.sqrt(comm.allreduce(local))
+    return float(change / size) if size > 0.0 else np.inf
 
 
 def _dot(a: Sequence[np.ndarray], b: Sequence[np.ndarray], comm: MPI.Comm) -> float:
@@ -778,10 +816,12 @@ def _arc_step(
     r, norm = _residual(problem, x, t)
     Dx = [np.zeros(v.getLocalSize()) for v in x[:num_primal]]
     det, t_start = None, t  # det J's sign at the last factorisation
+    moved = np.inf  # the last iteration's change of the primal fields, relative
     for it in range(options.max_it + 1):
         # converged; or stagnated near the solution at the last iteration (a law's non-smooth
-        # points: its damage cap, equal principal stresses)
-        if it > 0 and (norm <= tol.at(t) or (it == options.max_it and norm <= tol.stall_at(t))):
+        # points: its damage cap, equal principal stresses), or at |R|'s round-off floor
+        stalled = it == options.max_it or moved <= options.xtol
+        if it > 0 and (norm <= tol.at(t) or (stalled and norm <= tol.stall_at(t))):
             _destroy_all(r)
             if stability is not None:
                 stability.append(bordered_sign(det, t - t_start))
@@ -808,6 +848,7 @@ def _arc_step(
             dt = roots[int(np.argmax(turn))]
         for xi, d, e in zip(x, da, db, strict=True):
             xi.array[:] += d + dt * e
+        moved = _relative_change([d + dt * e for d, e in zip(a, b, strict=True)], x, num_primal)
         Dx = [w + d + dt * e for w, d, e in zip(Dx, a, b, strict=True)]
         t += dt
         r, norm = _residual(problem, x, t)

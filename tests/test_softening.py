@@ -440,6 +440,19 @@ def test_arc_length_follows_the_closed_form_and_a_snap_back():
         mf.follow_path(model, end_u, mf.PathOptions(increment=1e-4, end=0.01, max_increment=1e-3))
 
 
+def test_an_arc_length_without_a_root_is_refused_by_name():
+    """An arc length whose constraint circle misses Newton's line at every increment tried (the
+    brittle bar of the test above from an arc length of 0.02 and one cut: measured at step 1)
+    stops with a ``PathError`` that names the step, the arc length and load factor it started
+    from, the reason and the fix."""
+    brittle = mf.RankineDamage(E=E, nu=0.0, ft=FT, Gf=5e-4, plane="stress")
+    model = _bar(4, "lagrange", law=brittle, notch=1.0 + 0.5 / 4)
+    options = mf.PathOptions(increment=0.02, end=1.0, max_increment=0.02, max_cuts=1)
+    match = r"at step 1: from arc length 0 .*found no real root; choose a smaller increment"
+    with pytest.raises(mf.PathError, match=match):
+        mf.follow_path(model, mf.ArcLength(), options)
+
+
 def _plane_strain_point(law, traction: float, steps: int) -> tuple[np.ndarray, dict]:
     """The plane-strain material point ``eps = (e_xx, e_yy, 0)`` with ``sigma = (t_k, 0, *)``
     at ``t_k = k / steps`` of ``traction``, by Newton on the law's update, committed per step."""

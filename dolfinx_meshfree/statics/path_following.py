@@ -190,7 +190,8 @@ CARRY_TOLERANCE = 1e-2
 #: stall test took it: 9 iterations serially, and a count that differed on 2 ranks, so that the
 #: increments (``easy``) and then the path differed (the peak 875.69 N serially, 875.39 N on 2
 #: ranks). In steps that converge the last correction is 1e-12 to 3e-8 of the fields with ``|R|``
-#: at the floor, and the one before it at least 3e-7 with ``|R|`` above ``stall |t q|``.
+#: at the floor, and the one before it at least 3e-7 with ``|R|`` above ``stall |t q|``. The
+#: load-stepping Newton has the same test (``statics.newton``'s ``stol``, PETSc SNES's step test).
 XTOL = 1e-10
 
 

@@ -844,6 +844,8 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
             "coupling --method, --setup three-point-bend and --length equal to --span; pure "
             "EFG and FE are the uniform references"
         )
+    if args.widest is not None and args.grade == 1.0:
+        p.error(f"--widest {args.widest} sets --grade's widest column: give --grade above 1 too")
     if args.widest is not None and args.widest < args.h:
         p.error(f"--widest {args.widest} mm is below --h {args.h} mm: give at least h")
     if args.method == "fe" and args.crack != "band":

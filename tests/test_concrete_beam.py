@@ -292,6 +292,8 @@ def test_bad_options():
         demo.main(["--grade", "1.25", "--length", "2400"])
     with pytest.raises(SystemExit):
         demo.main(["--grade", "1.25", "--widest", "5"])
+    with pytest.raises(SystemExit):
+        demo.main(["--widest", "60"])
 
 
 def test_graded_fe_mesh_keeps_the_answer():

@@ -776,9 +776,7 @@ def _relative_change(dx: Sequence[np.ndarray], x: Sequence[PETSc.Vec], num_prima
     local = np.array(
         [
             sum(float(d @ d) for d in dx[:num_primal]),
-            sum(
-                float(v.getArray(readonly=True) @ v.getArray(readonly=True)) for v in x[:num_primal]
-            ),
+            sum(float(a @ a) for a in (v.getArray(readonly=True) for v in x[:num_primal])),
         ]
     )
     change, size = np.sqrt(comm.allreduce(local))

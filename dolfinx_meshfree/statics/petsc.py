@@ -367,6 +367,7 @@ def solve_lu(
     factorisation: str = "auto",
     stats: dict | None = None,
     more: Sequence[PETSc.Vec] = (),
+    sign: bool = False,
 ) -> PETSc.Vec:
     """Solve ``A x = b`` by a parallel direct factorisation (MUMPS by default) on a private KSP.
 
@@ -388,8 +389,8 @@ def solve_lu(
             needs two per iteration); their solutions are in ``stats["more"]`` when ``stats``
             is given, else returned as ``(x, [x_1, ...])``.
         stats: Filled (if given) with ``factorisation`` (``"ldlt"`` or ``"lu"``),
-            ``determinant_sign`` (the sign of ``det A``, from MUMPS's determinant, ICNTL(33);
-            where ``stats`` came with ``want_sign=True``),
+            ``determinant_sign`` (with ``sign``: the sign of ``det A``, from MUMPS's
+            determinant, ICNTL(33); not given by another factor package),
             ``asymmetry`` (a lower bound where ``asymmetry_sampled``: :func:`asymmetry_above`),
             the seconds of its ``check``, of ``factor`` (and its CPU seconds on this rank,
             ``factor_cpu``) and ``solve`` and, with MUMPS, its ``memory_mb``
@@ -415,11 +416,11 @@ def solve_lu(
 
     if count == 0 or count < DECOUPLED_SHARE * A.getSize()[0]:
         reduce = time.perf_counter() - tr
-        xs = _factorise_and_solve(A, [b, *more], solver, factorisation, stats)
+        xs = _factorise_and_solve(A, [b, *more], solver, factorisation, stats, sign)
         if stats is not None:
             stats.update(decoupled=0, reduce=reduce)
         return result(xs)
-    want_sign = stats is not None and stats.get("want_sign", False)
+    want_sign = sign and stats is not None
     if want_sign:  # det A = det(the rest) x the decoupled diagonal's product
         negative = A.getComm().tompi4py().allreduce(int(np.count_nonzero(diagonal < 0)))
     lo, hi = A.getOwnershipRange()
@@ -439,7 +440,7 @@ def solve_lu(
             b_rest.append(v)
         reduce = time.perf_counter() - tr
         try:
-            x_rest = _factorise_and_solve(A_rest, b_rest, solver, factorisation, stats)
+            x_rest = _factorise_and_solve(A_rest, b_rest, solver, factorisation, stats, sign)
         finally:
             for obj in (A_rest, *b_rest, index):
                 obj.destroy()
@@ -464,12 +465,18 @@ def solve_lu(
 
 
 def _factorise_and_solve(
-    A: PETSc.Mat, bs: Sequence[PETSc.Vec], solver: str, factorisation: str, stats: dict | None
+    A: PETSc.Mat,
+    bs: Sequence[PETSc.Vec],
+    solver: str,
+    factorisation: str,
+    stats: dict | None,
+    sign: bool = False,
 ) -> list[PETSc.Vec]:
     """:func:`solve_lu` on the (reduced) system: the symmetry check, the factorisation and the
-    triangular solves, one per right-hand side in ``bs``."""
+    triangular solves, one per right-hand side in ``bs``; with ``sign`` (and ``stats``) the
+    determinant's sign in ``stats["determinant_sign"]``."""
     mumps = solver == "mumps"
-    want_sign = stats is not None and stats.get("want_sign", False)
+    want_sign = sign and stats is not None
     tc = time.perf_counter()
     asym, sampled = (None, False)
     if mumps and factorisation == "auto":
@@ -541,7 +548,7 @@ def _factorise_and_solve(
         # Lagrange saddle point with multipliers split at the interface's corners (triangles)
         # structurally singular (INFOG(1) = -6) that LU solves to 3e-13 of the patch test. LU
         # then, and the failure kept in the stats.
-        xs = _factorise_and_solve(A, bs, solver, "lu", stats)
+        xs = _factorise_and_solve(A, bs, solver, "lu", stats, sign)
         if stats is not None:
             stats["ldlt_failed"] = info
         return xs
@@ -816,9 +823,11 @@ class BlockSystem:
             b = aij.createVecLeft()
             b.setArray(np.concatenate([v.getArray(readonly=True) for v in rhs]))
             vecs.append(b)
-        self.stats = {"want_sign": sign}
+        self.stats = {}
         factorisation = "lu" if options.solver == "mumps-lu" else "auto"
-        x = solve_lu(aij, vecs[0], factorisation=factorisation, stats=self.stats, more=vecs[1:])
+        x = solve_lu(
+            aij, vecs[0], factorisation=factorisation, stats=self.stats, more=vecs[1:], sign=sign
+        )
         self.determinant_sign = self.stats.get("determinant_sign")
         sizes = np.cumsum([v.getLocalSize() for v in self.rhs])[:-1]
         out = []

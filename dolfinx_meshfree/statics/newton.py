@@ -37,6 +37,7 @@ import numpy as np
 from petsc4py import PETSc
 
 from ..physics.constitutive import DeformationError
+from .kept_factor import KeptFactorisation
 from .petsc import BlockSystem, SolverOptions
 
 __all__ = [
@@ -133,6 +134,12 @@ class NonlinearBlockProblem(Protocol):
         ...
 
 
+def _kept(problem: NonlinearBlockProblem) -> KeptFactorisation | None:
+    """The problem's kept direct-solver analysis (``kept_factorisation``, owned and freed by the
+    problem), or ``None``: each Newton iteration analyses its tangent afresh."""
+    return getattr(problem, "kept_factorisation", None)
+
+
 def _norm(vecs: Sequence[PETSc.Vec]) -> float:
     return float(np.sqrt(sum(v.norm() ** 2 for v in vecs)))
 
@@ -188,7 +195,7 @@ def newton(
             v.scale(-1.0)
             rhs.append(v)
         system = BlockSystem(blocks, rhs, num_primal=problem.num_primal, names=problem.names)
-        dx = system.solve(solver)
+        dx = system.solve(solver, kept=_kept(problem))
         system.destroy()
         alpha, accepted, best = 1.0, None, None
         for _ in range(opts.max_halvings + 1):

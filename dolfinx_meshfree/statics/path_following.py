@@ -505,7 +505,7 @@ def _newton_directions(
     for v in r:
         v.scale(-1.0)
     system = BlockSystem(blocks, r, num_primal=problem.num_primal, names=problem.names)
-    da, db = system.solve_many([q], solver, sign=sign)
+    da, db = system.solve_many([q], solver, sign=sign, kept=problem.kept_factorisation)
     det = system.determinant_sign
     system.destroy()
     _destroy_all(r)

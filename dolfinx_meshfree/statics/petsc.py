@@ -25,6 +25,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from ..parallel import Layout
+from .kept_factor import KeptFactorisation
 
 __all__ = [
     "DECOUPLED_SHARE",
@@ -368,6 +369,7 @@ def solve_lu(
     stats: dict | None = None,
     more: Sequence[PETSc.Vec] = (),
     sign: bool = False,
+    kept: KeptFactorisation | None = None,
 ) -> PETSc.Vec:
     """Solve ``A x = b`` by a parallel direct factorisation (MUMPS by default) on a private KSP.
 
@@ -396,7 +398,13 @@ def solve_lu(
             ``factor_cpu``) and ``solve`` and, with MUMPS, its ``memory_mb``
             (INFOG(22): the memory the factorisation used, summed over ranks), the number of
             ``decoupled`` rows solved apart (0 where none were) and the seconds to find them
-            and take the rest (``reduce``).
+            and take the rest (``reduce``), and ``analysis``: ``"kept"`` where the
+            factorisation reused ``kept``'s analysis, else ``"new"``.
+        kept: A :class:`~dolfinx_meshfree.statics.kept_factor.KeptFactorisation` that a
+            sequence of systems of one sparsity pattern shares (Newton's tangents): MUMPS's
+            analysis of the first serves the next ones, whose factorisation is then numerical
+            only; it is kept there after the solve (the caller frees it). ``None``: a KSP of
+            this solve alone, freed after it.
     """
     if factorisation not in FACTORISATIONS:
         raise ValueError(
@@ -416,7 +424,7 @@ def solve_lu(
 
     if count == 0 or count < DECOUPLED_SHARE * A.getSize()[0]:
         reduce = time.perf_counter() - tr
-        xs = _factorise_and_solve(A, [b, *more], solver, factorisation, stats, sign)
+        xs = _factorise_and_solve(A, [b, *more], solver, factorisation, stats, sign, kept)
         if stats is not None:
             stats.update(decoupled=0, reduce=reduce)
         return result(xs)
@@ -440,7 +448,7 @@ def solve_lu(
             b_rest.append(v)
         reduce = time.perf_counter() - tr
         try:
-            x_rest = _factorise_and_solve(A_rest, b_rest, solver, factorisation, stats, sign)
+            x_rest = _factorise_and_solve(A_rest, b_rest, solver, factorisation, stats, sign, kept)
         finally:
             for obj in (A_rest, *b_rest, index):
                 obj.destroy()
@@ -471,10 +479,12 @@ def _factorise_and_solve(
     factorisation: str,
     stats: dict | None,
     sign: bool = False,
+    kept: KeptFactorisation | None = None,
 ) -> list[PETSc.Vec]:
-    """:func:`solve_lu` on the (reduced) system: the symmetry check, the factorisation and the
-    triangular solves, one per right-hand side in ``bs``; with ``sign`` (and ``stats``) the
-    determinant's sign in ``stats["determinant_sign"]``."""
+    """:func:`solve_lu` on the (reduced) system: the symmetry check, the factorisation (on
+    ``kept``'s analysis where it fits) and the triangular solves, one per right-hand side in
+    ``bs``; with ``sign`` (and ``stats``) the determinant's sign in
+    ``stats["determinant_sign"]``."""
     mumps = solver == "mumps"
     want_sign = sign and stats is not None
     tc = time.perf_counter()
@@ -485,6 +495,75 @@ def _factorise_and_solve(
     symmetric = asym is not None and asym <= SYMMETRY_TOL
     if symmetric:
         A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+    key = (solver, symmetric, want_sign)
+    ksp = None if kept is None else kept.take(A, key)
+    reused = ksp is not None
+    if not reused:
+        ksp = _direct_ksp(A, solver, symmetric, want_sign)
+    t0, c0 = time.perf_counter(), time.process_time()
+    ksp.setUp()
+    t1, c1 = time.perf_counter(), time.process_time()
+    pc = ksp.getPC()
+    if want_sign and mumps:
+        stats["determinant_sign"] = float(np.sign(pc.getFactorMatrix().getMumpsRinfog(12)))
+    xs, reason = [], 0
+    for b in bs:
+        x = A.createVecRight()
+        ksp.solve(b, x)
+        xs.append(x)
+        reason = min(reason, ksp.getConvergedReason())
+    t2 = time.perf_counter()
+    F = pc.getFactorMatrix()
+    info = F.getMumpsInfog(1) if mumps else 0
+    if stats is not None:
+        stats.update(
+            factorisation="ldlt" if symmetric else "lu",
+            asymmetry=asym,
+            asymmetry_sampled=sampled,
+            check=check,
+            factor=t1 - t0,
+            factor_cpu=c1 - c0,
+            solve=t2 - t1,
+            memory_mb=F.getMumpsInfog(22) if mumps else None,
+            analysis="kept" if reused else "new",
+        )
+    if reason < 0 and reused:
+        # the kept analysis did not serve these values (its matching and scaling are an
+        # earlier system's): afresh, with this system's own analysis
+        for x in xs:
+            x.destroy()
+        kept.clear()
+        return _factorise_and_solve(A, bs, solver, factorisation, stats, sign, kept)
+    if kept is not None and reason >= 0:
+        kept.keep(ksp, key)  # its handles stay open until the kept one is freed
+    else:
+        # every handle is destroyed: petsc4py 3.18 otherwise keeps the factorisation alive
+        # (1.3 MB per solve at 1,250 dofs, which added up to gigabytes over a test session)
+        F.destroy()
+        pc.destroy()
+        ksp.destroy()
+    if reason < 0 and symmetric:
+        # MUMPS's symmetric analysis can fail where its LU does not: lane B's MUMPS called a
+        # Lagrange saddle point with multipliers split at the interface's corners (triangles)
+        # structurally singular (INFOG(1) = -6) that LU solves to 3e-13 of the patch test. LU
+        # then, and the failure kept in the stats.
+        xs = _factorise_and_solve(A, bs, solver, "lu", stats, sign, kept)
+        if stats is not None:
+            stats["ldlt_failed"] = info
+        return xs
+    if reason < 0:
+        raise RuntimeError(
+            f"the {solver} {'LDL^T' if symmetric else 'LU'} solve failed (KSP reason {reason}, "
+            f"MUMPS INFOG(1)={info}): {mumps_failure(info if mumps else None)}"
+        )
+    return xs
+
+
+def _direct_ksp(A: PETSc.Mat, solver: str, symmetric: bool, want_sign: bool) -> PETSc.KSP:
+    """A private KSP (PREONLY) on ``A`` that factorises it with ``solver``: Cholesky (LDL^T)
+    where ``symmetric``, else LU; MUMPS's settings for saddle points, and its determinant
+    (ICNTL(33)) with ``want_sign``. Not set up yet."""
+    mumps = solver == "mumps"
     ksp = PETSc.KSP().create(A.getComm())
     ksp.setOptionsPrefix(f"dolfinx_meshfree_lu_{next(_prefix_counter)}_")
     ksp.setOperators(A)
@@ -513,51 +592,7 @@ def _factorise_and_solve(
         F.setMumpsCntl(2, 1e-15)
         if want_sign:
             F.setMumpsIcntl(33, 1)  # the determinant (RINFOG(12), INFOG(34)): its sign only
-    t0, c0 = time.perf_counter(), time.process_time()
-    ksp.setUp()
-    t1, c1 = time.perf_counter(), time.process_time()
-    if want_sign and mumps:
-        stats["determinant_sign"] = float(np.sign(pc.getFactorMatrix().getMumpsRinfog(12)))
-    xs, reason = [], 0
-    for b in bs:
-        x = A.createVecRight()
-        ksp.solve(b, x)
-        xs.append(x)
-        reason = min(reason, ksp.getConvergedReason())
-    t2 = time.perf_counter()
-    F = pc.getFactorMatrix()
-    info = F.getMumpsInfog(1) if mumps else 0
-    if stats is not None:
-        stats.update(
-            factorisation="ldlt" if symmetric else "lu",
-            asymmetry=asym,
-            asymmetry_sampled=sampled,
-            check=check,
-            factor=t1 - t0,
-            factor_cpu=c1 - c0,
-            solve=t2 - t1,
-            memory_mb=F.getMumpsInfog(22) if mumps else None,
-        )
-    # every handle is destroyed: petsc4py 3.18 otherwise keeps the factorisation alive (1.3 MB
-    # per solve at 1,250 dofs, which added up to gigabytes over a test session)
-    F.destroy()
-    pc.destroy()
-    ksp.destroy()
-    if reason < 0 and symmetric:
-        # MUMPS's symmetric analysis can fail where its LU does not: lane B's MUMPS called a
-        # Lagrange saddle point with multipliers split at the interface's corners (triangles)
-        # structurally singular (INFOG(1) = -6) that LU solves to 3e-13 of the patch test. LU
-        # then, and the failure kept in the stats.
-        xs = _factorise_and_solve(A, bs, solver, "lu", stats, sign)
-        if stats is not None:
-            stats["ldlt_failed"] = info
-        return xs
-    if reason < 0:
-        raise RuntimeError(
-            f"the {solver} {'LDL^T' if symmetric else 'LU'} solve failed (KSP reason {reason}, "
-            f"MUMPS INFOG(1)={info}): {mumps_failure(info if mumps else None)}"
-        )
-    return xs
+    return ksp
 
 
 #: MUMPS's failures (INFOG(1) < 0, MUMPS users' guide, sec. "Error diagnostics") and what
@@ -800,17 +835,19 @@ class BlockSystem:
         more: Sequence[Sequence[PETSc.Vec]],
         solver: str | SolverOptions = "mumps",
         sign: bool = False,
+        kept: KeptFactorisation | None = None,
     ) -> list[list[np.ndarray]]:
         """Solve for :attr:`rhs` and for every right-hand side in ``more`` (one vector per block
         row each), sharing one factorisation with the direct solvers (``"mumps"``,
         ``"mumps-lu"``); other solvers solve them one by one. Returns the owned blocks of each
         solution, :attr:`rhs`'s first (collective). With ``sign``, :attr:`determinant_sign` is
-        the sign of the system's determinant where MUMPS factorised it (else ``None``)."""
+        the sign of the system's determinant where MUMPS factorised it (else ``None``).
+        ``kept``: the direct solve's analysis shared with earlier systems (:func:`solve_lu`)."""
         self.determinant_sign = None
         options = solver_options(solver)
         direct = options.solver in ("mumps", "mumps-lu") and options.petsc_options is None
         if not direct or not more:
-            out = [self.solve(options)]
+            out = [self.solve(options, kept=kept)]
             for rhs in more:
                 other = BlockSystem(self.blocks, rhs, self.num_primal, self.names, self.coordinates)
                 out.append(other.solve(options))
@@ -826,7 +863,13 @@ class BlockSystem:
         self.stats = {}
         factorisation = "lu" if options.solver == "mumps-lu" else "auto"
         x = solve_lu(
-            aij, vecs[0], factorisation=factorisation, stats=self.stats, more=vecs[1:], sign=sign
+            aij,
+            vecs[0],
+            factorisation=factorisation,
+            stats=self.stats,
+            more=vecs[1:],
+            sign=sign,
+            kept=kept,
         )
         self.determinant_sign = self.stats.get("determinant_sign")
         sizes = np.cumsum([v.getLocalSize() for v in self.rhs])[:-1]
@@ -839,7 +882,11 @@ class BlockSystem:
         return out
 
     def solve(
-        self, solver: str | SolverOptions = "mumps", inner: str = "lu", rtol: float = 1e-12
+        self,
+        solver: str | SolverOptions = "mumps",
+        inner: str = "lu",
+        rtol: float = 1e-12,
+        kept: KeptFactorisation | None = None,
     ) -> list[np.ndarray]:
         """Solve and return the owned part of each block of the solution (collective).
 
@@ -850,6 +897,8 @@ class BlockSystem:
                 :attr:`stats`.
             inner: Primal-block solver of the fieldsplit: ``"lu"`` (MUMPS) or ``"gamg"``.
             rtol: Relative tolerance of the fieldsplit's outer FGMRES.
+            kept: The direct solve's analysis shared with earlier systems of the same
+                sparsity pattern (:func:`solve_lu`); not used by the other solvers.
 
         Raises:
             RuntimeError: on every rank, when the iterative solve does not converge.
@@ -876,7 +925,11 @@ class BlockSystem:
         elif solver != "fieldsplit" or self.num_primal == len(self.blocks):
             self.stats = {}
             x = solve_lu(
-                aij, b, factorisation="lu" if solver == "mumps-lu" else "auto", stats=self.stats
+                aij,
+                b,
+                factorisation="lu" if solver == "mumps-lu" else "auto",
+                stats=self.stats,
+                kept=kept,
             )
         else:
             x = self._fieldsplit(aij, b, rhs, inner, rtol)

@@ -39,6 +39,7 @@ from ..physics.constitutive import Material
 from ..physics.forces import InternalForces
 from ..physics.state import BoundLaw, PointState, StatefulLaw, is_stateful
 from .fe_state import FEStateLaw
+from .kept_factor import KeptFactorisation
 from .newton import NewtonError, NewtonOptions, NewtonResult, newton
 from .petsc import SolverOptions, create_aij, create_vector
 
@@ -533,6 +534,9 @@ class BlockProblem:
     #: The next :meth:`jacobian` takes the laws' tangents of unloading (then it is reset): the
     #: predictor of a step that unloads a body on its loading surface.
     predictor: bool = False
+    #: MUMPS's analysis of the last tangent, kept for the next ones of the same sparsity
+    #: pattern (Newton's iterations and load steps, a path's steps); freed by :meth:`destroy`.
+    kept_factorisation: KeptFactorisation = field(default_factory=KeptFactorisation)
 
     def residual(self, x: Sequence[PETSc.Vec]) -> list[PETSc.Vec]:
         out = []
@@ -629,6 +633,7 @@ class BlockProblem:
         for M in self._owned:
             M.destroy()
         self._owned = []
+        self.kept_factorisation.destroy()
         for side in self.sides:
             if hasattr(side, "destroy"):
                 side.destroy()

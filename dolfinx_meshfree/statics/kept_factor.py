@@ -64,7 +64,8 @@ class KeptFactorisation:
             ai, aj, _ = A.getValuesCSR()
             kept_i, kept_j = self._pattern
             match = (
-                A.getSizes() == self._operator.getSizes()
+                A.getType() == self._operator.getType()
+                and A.getSizes() == self._operator.getSizes()
                 and np.array_equal(ai, kept_i)
                 and np.array_equal(aj, kept_j)
             )

@@ -175,7 +175,8 @@
 # the crack path (`path`: the face points past f_t, or the particle points with damage
 # >= 0.9; and `crack_polyline`, the crack's points in mm, the bonded lead included; `turns_deg`,
 # per grown segment the degrees it was turned to keep off the particles, `mf.PathResult.turns`),
-# the counts of particles, FE cells and Newton iterations, the time.
+# the counts of particles, FE cells and Newton iterations, the time, the largest control
+# increment (`max_increment_mm`).
 #
 # Usage:
 #
@@ -556,6 +557,7 @@ def run(args) -> dict:
         "bifurcation_step": path.bifurcation,
         "time_total": seconds,
         "grade": args.grade,
+        "max_increment_mm": options.max_increment,
         "widest_mm": grading(args)[1] if args.grade > 1.0 else hx,
         "patch_growths": len(path.patch_events),
         "length_mm": args.length or args.span,
@@ -601,8 +603,8 @@ def check(r: dict) -> None:
     balance = abs(r["energy_balance_J"] - r["dissipated_energy_J"])
     assert balance <= 0.02 * r["dissipated_energy_J"], (
         f"energy balance: external work - stored {r['energy_balance_J']:.4g} J against "
-        f"dissipated {r['dissipated_energy_J']:.4g} J: the path is not resolved where the crack "
-        "ran at one control value; rerun with a smaller --max-increment"
+        f"dissipated {r['dissipated_energy_J']:.4g} J (a path not resolved where its crack ran "
+        "fast misses so: rerun with a smaller --max-increment)"
     )
     if r["method"] != "fe":
         assert r["fe_max_damage"] == 0.0, (

@@ -249,6 +249,8 @@ def test_adaptive_patch_finds_the_mode_one_path():
     given = demo.main(base)
     grown = demo.main([*base, "--path", "found", "--adapt"])
     assert grown["patch_growths"] >= 1
+    # the grown patch's increments are half the fixed one's (the header's ADAPT_STEPS = 50)
+    assert (given["max_increment_mm"], grown["max_increment_mm"]) == (0.3 / 25, 0.3 / 50)
     zone = np.asarray(grown["path"]).reshape(-1, 2)
     assert zone[:, 1].max() > 150.0 and np.abs(zone[:, 0] - 1000.0).max() <= 1e-3 * 25.0
     assert abs(grown["peak_load_N"] / given["peak_load_N"] - 1.0) <= 0.01

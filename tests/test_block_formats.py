@@ -258,15 +258,23 @@ def _system(comm, skew: float) -> tuple[PETSc.Mat, PETSc.Vec, np.ndarray, np.nda
     E = rng.standard_normal((n, m))
     dense = np.block([[K, G.T + skew * E], [G, np.zeros((m, m))]])
     b = rng.standard_normal(n + m)
-    lay = Layout.from_local(comm, (n + m) // comm.size + ((n + m) % comm.size > comm.rank))
+    A, v = _distributed(comm, dense, b)
+    return A, v, dense, b
+
+
+def _distributed(comm, dense: np.ndarray, b: np.ndarray) -> tuple[PETSc.Mat, PETSc.Vec]:
+    """The dense system ``dense x = b`` (the same on every rank) as a PETSc matrix and rhs, its
+    rows split over the ranks in contiguous blocks (its nonzeros only)."""
+    size = dense.shape[0]
+    lay = Layout.from_local(comm, size // comm.size + (size % comm.size > comm.rank))
     rows = np.arange(lay.start, lay.end)
     local = sp.csr_matrix(dense)[rows]
-    A = create_aij(comm, sp.vstack([sp.csr_matrix((lay.start, n + m)), local,
-                                    sp.csr_matrix((n + m - lay.end, n + m))]).tocsr(),
+    A = create_aij(comm, sp.vstack([sp.csr_matrix((lay.start, size)), local,
+                                    sp.csr_matrix((size - lay.end, size))]).tocsr(),
                    lay, lay)  # fmt: skip
     v = A.createVecLeft()
     v.array[:] = b[rows]
-    return A, v, dense, b
+    return A, v
 
 
 @pytest.mark.parametrize("skew", [0.0, 1e-3])

@@ -6,15 +6,14 @@ with the kept analysis equal to one analysed afresh at every iteration. Serial a
 from __future__ import annotations
 
 import dolfinx_meshfree as mf
-from dolfinx_meshfree.parallel import Layout
 from dolfinx_meshfree.statics.kept_factor import KeptFactorisation
-from dolfinx_meshfree.statics.petsc import create_aij, solve_lu
+from dolfinx_meshfree.statics.petsc import solve_lu
 
 import numpy as np
 import pytest
-import scipy.sparse as sp
 from mpi4py import MPI
 from petsc4py import PETSc
+from test_block_formats import _distributed
 from test_softening import _bar
 
 PETSc.Log.begin()  # the symbolic factorisations are counted by PETSc's events
@@ -51,14 +50,7 @@ def _saddle(comm, seed: int, skew: float = 0.0, extra: bool = False, decoupled: 
         K[k, k] = 3.0
     dense = np.block([[K, G.T + skew * E], [G, np.zeros((m, m))]])
     b = rng.standard_normal(n + m)
-    lay = Layout.from_local(comm, (n + m) // comm.size + ((n + m) % comm.size > comm.rank))
-    rows = np.arange(lay.start, lay.end)
-    local = sp.csr_matrix(dense)[rows]
-    A = create_aij(comm, sp.vstack([sp.csr_matrix((lay.start, n + m)), local,
-                                    sp.csr_matrix((n + m - lay.end, n + m))]).tocsr(),
-                   lay, lay)  # fmt: skip
-    v = A.createVecLeft()
-    v.array[:] = b[rows]
+    A, v = _distributed(comm, dense, b)
     return A, v, dense, b
 
 

@@ -99,6 +99,7 @@ from .statics.efg import EFGElasticity, EFGSolution
 from .statics.fe import FESolution, solve_fe_elasticity, solve_forms
 from .statics.fe_model import FEElasticity
 from .statics.growth import GrowthStep, GrowthStopped, QuasiStaticCrackGrowth, TipAtBoundary
+from .statics.kept_factor import KeptFactorisation
 from .statics.large import IterativeOptions, chunked_l2_error, solve_large
 from .statics.mean_dilatation import VolumetricLockingWarning
 from .statics.newton import NewtonError, NewtonOptions, NewtonResult
@@ -201,6 +202,7 @@ __all__ = [
     "IterativeOptions",
     "J2Plasticity",
     "JohnsonCook",
+    "KeptFactorisation",
     "KirschPlate",
     "LinearCohesive",
     "LinearElastic",

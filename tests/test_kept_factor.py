@@ -9,12 +9,14 @@ import dolfinx_meshfree as mf
 from dolfinx_meshfree.statics.kept_factor import KeptFactorisation
 from dolfinx_meshfree.statics.petsc import solve_lu
 
+import dolfinx
 import numpy as np
 import pytest
 from mpi4py import MPI
 from petsc4py import PETSc
 from test_block_formats import _distributed
 from test_softening import _bar
+from test_sweeps import POINTS, linear_problem
 
 PETSc.Log.begin()  # the symbolic factorisations are counted by PETSc's events
 
@@ -170,3 +172,85 @@ def test_path_with_kept_analyses_equals_fresh_ones(monkeypatch):
     assert np.abs(fresh_path - kept_path).max() <= 1e-12 * np.abs(fresh_path).max()
     assert fresh_analyses >= factorisations  # every factorisation analysed afresh
     assert 1 <= kept_analyses <= fresh_analyses / 3
+
+
+def _numeric() -> int:
+    """Numerical factorisations so far, LU and Cholesky, by PETSc's log."""
+    return sum(
+        PETSc.Log.Event(name).getPerfInfo()["count"]
+        for name in ("MatLUFactorNum", "MatCholFctrNum")
+    )
+
+
+def test_the_kept_values_are_solved_by_the_kept_factors():
+    """A system with the kept operator's values is not factorised again (PETSc's count of
+    numerical factorisations: 0), one with other values of its pattern is (1, on the kept
+    analysis); each answer equal to the dense solve to 1e-12."""
+    kept = KeptFactorisation()
+    cases = [
+        (1, "new", "new", 1),
+        (1, "kept", "kept", 0),
+        (2, "kept", "new", 1),
+        (2, "kept", "kept", 0),
+    ]
+    for seed, analysis, factors, numeric in cases:
+        before = _numeric()
+        stats, made, error = _solve(kept, seed)
+        assert (stats["analysis"], stats["factors"]) == (analysis, factors), seed
+        assert (made, _numeric() - before) == (1 if analysis == "new" else 0, numeric), seed
+        assert error < 1e-12
+    assert (kept.analysed, kept.reused, kept.repeated) == (1, 1, 2)
+    kept.destroy()
+
+
+@pytest.mark.parametrize("coupling", ["lagrange", "bridging", "ramp", "master-slave"])
+def test_a_load_sweep_is_factorised_once(coupling):
+    """A ``CoupledLinearProblem`` swept through three tractions and prescribed displacements
+    with ``kept=``: one numerical factorisation for the three solves (PETSc's count), and each
+    answer equal to the bit to a twin problem solved afresh at the same values."""
+    problem, _, t, g = linear_problem("end", coupling, g0=0.01)
+    twin, _, t2, g2 = linear_problem("end", coupling, g0=0.01)
+    kept = mf.KeptFactorisation()
+    numeric = 0
+    for tv, gv in (([0.0, -1.0], 0.01), ([0.5, -2.0], 0.01), ([0.0, -1.0], -0.02)):
+        t.value, g.value, t2.value, g2.value = tv, gv, tv, gv
+        before = _numeric()
+        u = problem.solve(kept=kept).displacement(POINTS)
+        numeric += _numeric() - before
+        assert np.array_equal(u, twin.solve().displacement(POINTS)), (tv, gv)
+    assert numeric == 1
+    assert (kept.analysed, kept.repeated) == (1, 2)
+    kept.destroy()
+
+
+def test_an_efg_load_sweep_is_factorised_once():
+    """``EFGElasticity.solve(kept=)`` with a traction scaled between solves: one numerical
+    factorisation, and twice the load gives twice the answer (linearity, to 1e-12)."""
+    msh = dolfinx.mesh.create_rectangle(
+        MPI.COMM_WORLD, [[0.0, 0.0], [4.0, 1.0]], [8, 2], dolfinx.mesh.CellType.quadrilateral
+    )
+    scale = [1.0]
+    problem = mf.EFGElasticity(
+        mf.ParticleSet.from_cells(msh, spacing=0.25), mf.LinearElastic(E=1000.0, nu=0.3)
+    )
+    problem.add_dirichlet(mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0.0)), lambda x: 0 * x)
+    right = mf.boundary_facets(msh, lambda x: np.isclose(x[0], 4.0))
+    problem.add_traction(right, lambda x, n: scale[0] * np.tile([0.0, -1.0], (len(x), 1)))
+    kept = mf.KeptFactorisation()
+    before = _numeric()
+    u1 = problem.solve(kept=kept).displacement(POINTS)
+    scale[0] = 2.0
+    u2 = problem.solve(kept=kept).displacement(POINTS)
+    assert _numeric() - before == 1
+    assert kept.repeated == 1
+    assert np.abs(u2 - 2.0 * u1).max() <= 1e-12 * np.abs(u2).max()
+    kept.destroy()
+
+
+def test_kept_that_is_not_a_kept_factorisation_is_refused():
+    """``kept=True`` (a flag, not the object) is refused by name before any solve, with the
+    fix, on every rank."""
+    problem, *_ = linear_problem("end", "lagrange")
+    with pytest.raises(TypeError, match=r"kept=True must be an mf.KeptFactorisation or None"):
+        problem.solve(kept=True)
+    assert np.isfinite(problem.solve(kept=None).displacement(POINTS)).all()

@@ -33,6 +33,7 @@ from ..physics.body_loads import StressRule, body_load_vectors
 from ..physics.operators import load_vector
 from ..physics.user_functions import vector_values
 from ..statics.efg import check_multiplier_facets, crack_rules, facet_multipliers
+from ..statics.kept_factor import KeptFactorisation
 from ..statics.petsc import BlockSystem, SolverOptions, create_aij, create_vector
 from .base import fe_dof_layout, node_flags
 from .point_conditions import PinRows, pin_rows
@@ -439,16 +440,19 @@ def solve_and_gather(
     rhs: list[PETSc.Vec],
     objects: list,
     solver: str | SolverOptions,
+    kept: KeptFactorisation | None = None,
 ) -> tuple[dolfinx.fem.Function, np.ndarray, float, list[np.ndarray]]:
-    """Solve the nest (fields FE, particles, multipliers...), destroy ``objects`` and ``rhs``,
-    and return the FE Function, the particle coefficients (n, gdim) in original order, the
-    solve time and the owned values of each multiplier field. Collective."""
+    """Solve the nest (fields FE, particles, multipliers...; a direct solve on ``kept``'s
+    factorisation where it serves, :func:`~dolfinx_meshfree.statics.petsc.solve_lu`), destroy
+    ``objects`` and ``rhs``, and return the FE Function, the particle coefficients (n, gdim) in
+    original order, the solve time and the owned values of each multiplier field.
+    Collective."""
     V, P, comm = problem.V, problem.patch.particles, problem.patch.comm
     bs = V.dofmap.index_map_bs
     names = ["fe", "particles"] + [f"multiplier{i}" for i in range(len(blocks) - 2)]
     system = BlockSystem(blocks, rhs, num_primal=2, names=names, coordinates=primal_nodes(problem))
     t0 = time.perf_counter()
-    parts = system.solve(solver)
+    parts = system.solve(solver, kept=kept)
     seconds = time.perf_counter() - t0
     system.destroy()
     for obj in [*objects, *rhs]:

@@ -36,6 +36,7 @@ from ..geometry.quadrature import QuadraturePoints
 from ..parallel import Layout, raise_on_all_ranks
 from ..physics import axisymmetry
 from ..physics.materials import LinearElastic
+from ..statics.kept_factor import KeptFactorisation
 from ..statics.sifs import solution_sifs
 
 if TYPE_CHECKING:  # annotations only: the model imports this module, not the reverse
@@ -402,8 +403,12 @@ class Coupling(Protocol):
         """The MLS the coupling works with (e.g. supports widened over interface cells)."""
         ...
 
-    def solve(self, problem: CoupledElasticity, solver: str) -> CoupledSolution:
-        """Assemble and solve the static block system (collective)."""
+    def solve(
+        self, problem: CoupledElasticity, solver: str, kept: KeptFactorisation | None = None
+    ) -> CoupledSolution:
+        """Assemble and solve the static block system (collective); ``kept``: the direct
+        solve's factorisation shared with earlier solves
+        (:func:`~dolfinx_meshfree.statics.petsc.solve_lu`)."""
         ...
 
     def operators(

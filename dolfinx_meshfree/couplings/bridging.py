@@ -81,6 +81,7 @@ from ..physics.axisymmetry import (
 from ..physics.operators import consistent_gradients, load_vector, stiffness_matrix
 from ..physics.user_functions import vector_values
 from ..statics.efg import crack_rules
+from ..statics.kept_factor import KeptFactorisation
 from ..statics.petsc import SolverOptions, create_aij, create_vector
 from .assembly import (
     append_patch_conditions,
@@ -721,11 +722,16 @@ def bridging_system(problem: CoupledElasticity, tables: dict | None = None) -> t
 
 
 def solve_bridging(
-    problem: CoupledElasticity, solver: str | SolverOptions = "mumps"
+    problem: CoupledElasticity,
+    solver: str | SolverOptions = "mumps",
+    kept: KeptFactorisation | None = None,
 ) -> BridgingSolution:
-    """Assemble and solve the bridging-domain coupled system of ``problem`` (collective)."""
+    """Assemble and solve the bridging-domain coupled system of ``problem`` (collective;
+    ``kept``: see :func:`~dolfinx_meshfree.statics.petsc.solve_lu`)."""
     blocks, rhs, mats, extra = bridging_system(problem)
-    uh, coeffs, solve, lam = solve_and_gather(problem, blocks, rhs, [*mats, extra["x_bc"]], solver)
+    uh, coeffs, solve, lam = solve_and_gather(
+        problem, blocks, rhs, [*mats, extra["x_bc"]], solver, kept
+    )
     sol = BridgingSolution(
         u=uh,
         coefficients=coeffs,
@@ -1124,8 +1130,13 @@ class BridgingCoupling(CouplingDefaults):
     dimensions: ClassVar[tuple[int, ...]] = (2, 3)
     missing_3d: ClassVar[str] = ""
 
-    def solve(self, problem: CoupledElasticity, solver: str | SolverOptions) -> CoupledSolution:
-        return solve_bridging(problem, solver)
+    def solve(
+        self,
+        problem: CoupledElasticity,
+        solver: str | SolverOptions,
+        kept: KeptFactorisation | None = None,
+    ) -> CoupledSolution:
+        return solve_bridging(problem, solver, kept)
 
     def system(self, problem: CoupledElasticity, tables: dict | None = None) -> tuple:
         return bridging_system(problem, tables)

@@ -120,6 +120,7 @@ from ..parallel import raise_on_all_ranks
 from ..physics.body_loads import CallableBodyForce
 from ..physics.materials import LinearElastic
 from ..physics.user_functions import check_arguments, check_facets
+from ..statics.kept_factor import KeptFactorisation, check_kept
 from ..statics.petsc import BlockSystem, create_aij
 from .base import (
     CoupledSolution,
@@ -382,7 +383,9 @@ class HybridElasticity(HybridDiscretisation):
         terms (interleaved [particles | FE nodes])."""
         return hybrid_loads(self, self._tractions, self._body_forces, extra)
 
-    def solve(self, solver: str = "mumps") -> CoupledSolution:
+    def solve(
+        self, solver: str = "mumps", kept: KeptFactorisation | None = None
+    ) -> CoupledSolution:
         """Assemble ``K u = f`` with the essential conditions and solve it (collective).
 
         FE facets' conditions are strong (rows and columns of the FE dofs removed, values lifted
@@ -397,6 +400,8 @@ class HybridElasticity(HybridDiscretisation):
 
         Args:
             solver: ``"mumps"`` (LU of the nest as AIJ; ``K`` is not symmetric with ``HA-S``).
+            kept: The direct solve's factorisation shared with earlier solves (a load sweep:
+                :meth:`~dolfinx_meshfree.CoupledElasticity.solve`).
 
         Returns:
             A :class:`~dolfinx_meshfree.CoupledSolution` (FE function, particle values, the
@@ -404,6 +409,7 @@ class HybridElasticity(HybridDiscretisation):
         """
         if solver not in ("mumps", "fieldsplit"):
             raise ValueError(f"solver={solver!r} is not known; use 'mumps' or 'fieldsplit'")
+        check_kept(kept)
         V, comm = self.V, self.comm
         P = self.patch.particles
         t0 = time.perf_counter()
@@ -432,7 +438,7 @@ class HybridElasticity(HybridDiscretisation):
         assemble += time.perf_counter() - t1
         system = BlockSystem(blocks, rhs, num_primal=2)
         t2 = time.perf_counter()
-        parts = system.solve(solver)
+        parts = system.solve(solver, kept=kept)
         solve = time.perf_counter() - t2
         system.destroy()
         for obj in [*mats, *rhs, bc.x_bc, bc.mask]:

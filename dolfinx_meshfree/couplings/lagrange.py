@@ -49,6 +49,7 @@ from ..geometry.smoothing import STABILISATION, value_rule
 from ..parallel import Layout, raise_on_all_ranks
 from ..physics.axisymmetry import revolved_if
 from ..statics.efg import particle_stiffness
+from ..statics.kept_factor import KeptFactorisation
 from ..statics.petsc import SolverOptions, create_aij, create_vector
 from .assembly import (
     append_patch_conditions,
@@ -646,7 +647,9 @@ def interface_system(problem: CoupledElasticity, tables: dict | None = None) -> 
 
 
 def solve_interface(
-    problem: CoupledElasticity, solver: str | SolverOptions = "mumps"
+    problem: CoupledElasticity,
+    solver: str | SolverOptions = "mumps",
+    kept: KeptFactorisation | None = None,
 ) -> CoupledSolution:
     """Assemble the nest block system and solve it (collective).
 
@@ -654,9 +657,13 @@ def solve_interface(
         solver: ``"mumps"`` (direct) or ``"fieldsplit"`` (Schur complement, displacements
             against multipliers, on the augmented Lagrangian; see
             :class:`~dolfinx_meshfree.statics.petsc.BlockSystem`).
+        kept: The direct solve's factorisation shared with earlier solves (a load sweep;
+            :func:`~dolfinx_meshfree.statics.petsc.solve_lu`).
     """
     blocks, rhs, mats, extra = interface_system(problem)
-    uh, coeffs, solve, lam = solve_and_gather(problem, blocks, rhs, [*mats, extra["x_bc"]], solver)
+    uh, coeffs, solve, lam = solve_and_gather(
+        problem, blocks, rhs, [*mats, extra["x_bc"]], solver, kept
+    )
     return CoupledSolution(
         u=uh,
         coefficients=coeffs,
@@ -678,8 +685,13 @@ class _InterfaceCoupling(CouplingDefaults):
     dimensions: ClassVar[tuple[int, ...]] = (2, 3)
     missing_3d: ClassVar[str] = ""
 
-    def solve(self, problem: CoupledElasticity, solver: str | SolverOptions) -> CoupledSolution:
-        return solve_interface(problem, solver)
+    def solve(
+        self,
+        problem: CoupledElasticity,
+        solver: str | SolverOptions,
+        kept: KeptFactorisation | None = None,
+    ) -> CoupledSolution:
+        return solve_interface(problem, solver, kept)
 
     def operators(
         self, problem: CoupledElasticity, integration: str, slaves: str

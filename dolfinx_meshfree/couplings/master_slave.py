@@ -134,6 +134,7 @@ from ..geometry.stress_points import check_integration
 from ..parallel import Layout, raise_on_all_ranks
 from ..physics.axisymmetry import revolved_if
 from ..statics.efg import facet_multipliers, particle_stiffness
+from ..statics.kept_factor import KeptFactorisation
 from ..statics.petsc import BlockSystem, SolverOptions, create_aij, create_vector
 from .assembly import (
     component_conditions,
@@ -403,8 +404,10 @@ def solve_master_slave(
     solver: str | SolverOptions = "mumps",
     slaves: str | None = None,
     tie: str | None = None,
+    kept: KeptFactorisation | None = None,
 ) -> CoupledSolution:
-    """Assemble and solve the master–slave coupled system of ``problem`` (collective).
+    """Assemble and solve the master–slave coupled system of ``problem`` (collective; ``kept``:
+    see :func:`~dolfinx_meshfree.statics.petsc.solve_lu`).
 
     ``slaves``: which particles are slaves, see :class:`MasterSlaveLinks` (``None``: the
     model's ``slaves``, ``"layer"`` unless set).
@@ -497,7 +500,7 @@ def solve_master_slave(
     assemble = time.perf_counter() - t1 + kt["assemble"]
 
     t2 = time.perf_counter()
-    parts = system.solve(solver)
+    parts = system.solve(solver, kept=kept)
     solve = time.perf_counter() - t2
     system.destroy()
 
@@ -790,8 +793,13 @@ class MasterSlaveCoupling(CouplingDefaults):
         "master node and its slave layer is found from 2D interface edges"
     )
 
-    def solve(self, problem: CoupledElasticity, solver: str | SolverOptions) -> CoupledSolution:
-        return solve_master_slave(problem, solver)
+    def solve(
+        self,
+        problem: CoupledElasticity,
+        solver: str | SolverOptions,
+        kept: KeptFactorisation | None = None,
+    ) -> CoupledSolution:
+        return solve_master_slave(problem, solver, kept=kept)
 
     def operators(
         self, problem: CoupledElasticity, integration: str, slaves: str

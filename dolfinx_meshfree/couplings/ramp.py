@@ -76,6 +76,7 @@ from ..physics.operators import consistent_gradients, load_vector, stiffness_mat
 from ..physics.user_functions import vector_values
 from ..statics.baij import create_baij
 from ..statics.efg import crack_rules, particle_stiffness
+from ..statics.kept_factor import KeptFactorisation
 from ..statics.petsc import SolverOptions, create_aij, create_vector
 from ..statics.sides import BlendedSide
 from .assembly import (
@@ -595,11 +596,16 @@ def ramp_system(problem: CoupledElasticity, tables: dict | None = None) -> tuple
 
 
 def solve_ramp(
-    problem: CoupledElasticity, solver: str | SolverOptions = "mumps"
+    problem: CoupledElasticity,
+    solver: str | SolverOptions = "mumps",
+    kept: KeptFactorisation | None = None,
 ) -> CoupledSolution:
-    """Assemble and solve the ramp-coupled system of ``problem`` (collective)."""
+    """Assemble and solve the ramp-coupled system of ``problem`` (collective; ``kept``: see
+    :func:`~dolfinx_meshfree.statics.petsc.solve_lu`)."""
     blocks, rhs, mats, extra = ramp_system(problem)
-    uh, coeffs, solve, lam = solve_and_gather(problem, blocks, rhs, [*mats, extra["x_bc"]], solver)
+    uh, coeffs, solve, lam = solve_and_gather(
+        problem, blocks, rhs, [*mats, extra["x_bc"]], solver, kept
+    )
     return CoupledSolution(
         u=uh,
         coefficients=coeffs,
@@ -857,8 +863,13 @@ class _RampCoupling:
         """Supports spanning the interface elements (:func:`ramp_mls`)."""
         return ramp_mls(mls, patch)
 
-    def solve(self, problem: CoupledElasticity, solver: str | SolverOptions) -> CoupledSolution:
-        return solve_ramp(problem, solver)
+    def solve(
+        self,
+        problem: CoupledElasticity,
+        solver: str | SolverOptions,
+        kept: KeptFactorisation | None = None,
+    ) -> CoupledSolution:
+        return solve_ramp(problem, solver, kept)
 
     def system(self, problem: CoupledElasticity, tables: dict | None = None) -> tuple:
         return ramp_system(problem, tables)

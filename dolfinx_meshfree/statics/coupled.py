@@ -62,6 +62,7 @@ from .coupled_newton import (
     solve_finite_strain,
 )
 from .history import SolveHistory
+from .kept_factor import KeptFactorisation, check_kept
 from .mean_dilatation import resolve_dilatation
 from .newton import NewtonOptions
 from .petsc import SolverOptions, solver_options
@@ -573,6 +574,7 @@ class CoupledElasticity:
         prefix: str | None = None,
         load_steps: int = 1,
         newton: NewtonOptions | None = None,
+        kept: KeptFactorisation | None = None,
     ) -> CoupledSolution:
         """Assemble the nest block system and solve it (collective); with a finite-strain
         material, by Newton over ``load_steps`` steps of the tractions, body force and prescribed
@@ -583,32 +585,31 @@ class CoupledElasticity:
         :class:`~dolfinx_meshfree.statics.newton.NewtonError` with the residual history).
 
         Args:
-            solver: ``"mumps"`` (direct, the default), ``"fieldsplit"`` (Schur complement,
-                displacements against multipliers, on the augmented Lagrangian) or
-                ``"iterative"`` (the augmented Lagrangian by FGMRES with one GAMG V-cycle per
-                iteration and the rigid-body modes, no factorisation: it divides over ranks;
-                see :class:`~dolfinx_meshfree.statics.petsc.BlockSystem`): shorthands of the
-                solvers this package tunes; or a
-                :class:`~dolfinx_meshfree.statics.petsc.SolverOptions` (with ``"iterative"``,
-                its ``petsc_options`` change the shorthand's options, e.g. ``{"ksp_rtol":
-                1e-10}``; see ``statics.petsc.ITERATIVE_DEFAULTS``).
+            solver: ``"mumps"`` (direct, the default), ``"fieldsplit"`` (Schur complement on
+                the augmented Lagrangian) or ``"iterative"`` (FGMRES, one GAMG V-cycle and the
+                rigid-body modes: no factorisation; ``statics.petsc.BlockSystem``); or a
+                :class:`~dolfinx_meshfree.statics.petsc.SolverOptions`
+                (with ``"iterative"``, options changed, e.g. ``{"ksp_rtol": 1e-10}``).
             petsc_options: PETSc options of a KSP on the assembled block system instead, as
-                ``dolfinx.fem.petsc.LinearProblem`` takes them (e.g. ``{"ksp_type": "gmres",
-                "pc_type": "fieldsplit", ...}``; the nest's fields are named ``fe``,
-                ``particles``, ``multiplier0``, ...). Nothing is left in PETSc's options
-                database.
+                ``dolfinx.fem.petsc.LinearProblem`` takes them (e.g. ``{"pc_type":
+                "fieldsplit", ...}``; the nest's fields: ``fe``, ``particles``,
+                ``multiplier0``, ...). Nothing is left in PETSc's options database.
             prefix: The KSP's options prefix (default: a unique one).
             load_steps: Finite strain: the loads and prescribed displacements in ``k /
                 load_steps`` steps (ignored by a linear material). A law with state (or
                 cohesive faces) continues from the last solve: the steps run from its loads to
                 the current ones, from its state (a load sweep; :meth:`reset` starts again).
             newton: Finite strain: :class:`~dolfinx_meshfree.statics.newton.NewtonOptions`.
+            kept: A :class:`~dolfinx_meshfree.KeptFactorisation` the caller owns: a direct
+                solve of the last one's matrix (a load sweep) is not factorised again
+                (:func:`~dolfinx_meshfree.statics.petsc.solve_lu`); a law with state ignores it.
         """
         comm = self.patch.comm
         options = raise_on_all_ranks(comm, lambda: solver_options(solver, petsc_options, prefix))
+        raise_on_all_ranks(comm, lambda: check_kept(kept))
         raise_on_all_ranks(comm, lambda: check_through(self.patch.cracks, self.cohesive))
         if isinstance(self.law, LinearElastic) and not self.cohesive:
-            solution = self.family.solve(self, options)
+            solution = self.family.solve(self, options, kept)
             solution.material = self.material
             solution.take_loads(self.body_forces)
             return solution

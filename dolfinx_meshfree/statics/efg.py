@@ -93,6 +93,7 @@ from .cohesive import CohesiveCrack, CohesiveSide, check_cohesive, check_through
 from .fe_state import check_bands
 from .growth_update import local_update_for
 from .history import SolveHistory
+from .kept_factor import KeptFactorisation, check_kept
 from .newton import NewtonOptions
 from .petsc import BlockSystem, SolverOptions, create_aij, create_vector, solver_options
 from .sides import (
@@ -947,6 +948,7 @@ class EFGElasticity:
         prefix: str | None = None,
         load_steps: int = 1,
         newton: NewtonOptions | None = None,
+        kept: KeptFactorisation | None = None,
     ) -> EFGSolution:
         """Assemble the block system and solve it (collective); with a finite-strain material,
         by Newton (:func:`~dolfinx_meshfree.statics.newton.newton`) over ``load_steps`` steps of the
@@ -960,9 +962,12 @@ class EFGElasticity:
             petsc_options, prefix: PETSc options of a KSP on the block system instead (fields
                 ``particles`` and ``dirichlet``), and its prefix; see
                 :meth:`~dolfinx_meshfree.CoupledElasticity.solve`.
+            kept: The direct solve's factorisation shared with earlier solves (a load sweep;
+                see :meth:`~dolfinx_meshfree.CoupledElasticity.solve`).
         """
         comm = self.comm
         solver = raise_on_all_ranks(comm, lambda: solver_options(solver, petsc_options, prefix))
+        raise_on_all_ranks(comm, lambda: check_kept(kept))
         raise_on_all_ranks(self.comm, lambda: check_through(self.cracks, self.cohesive))
         if not isinstance(self.material, LinearElastic) or self.cohesive:
             return self._solve_finite_strain(solver, load_steps, newton)
@@ -970,7 +975,7 @@ class EFGElasticity:
         system, objects, extra = self.system()
         s, mlayout = extra["scale"], extra["multipliers"]
         t2 = time.perf_counter()
-        parts = system.solve(solver)
+        parts = system.solve(solver, kept=kept)
         solve = time.perf_counter() - t2
         for obj in (system, *objects):
             obj.destroy()

@@ -23,6 +23,12 @@ values at analysis (ICNTL(6), ICNTL(8)) are the first tangent's, and the pivots 
 the numerical factorisation (threshold partial pivoting, delayed pivots in the workspace of
 ICNTL(14)). A numerical factorisation that fails on the kept analysis is redone afresh before any
 failure is reported (:func:`~dolfinx_meshfree.statics.petsc.solve_lu`).
+
+A system whose values are also the kept operator's, bit for bit on every rank, is not factorised
+at all: the kept factors solve it (a load sweep of a linear model: the stiffness is assembled
+again, the same, and only the loads change). The solution is the one a fresh factorisation of
+the kept analysis gives, to the bit (MUMPS's numerical factorisation of the same values is
+deterministic); only the triangular solves are done.
 """
 
 from __future__ import annotations
@@ -33,16 +39,38 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-__all__ = ["KeptFactorisation"]
+__all__ = ["KeptFactorisation", "check_kept"]
+
+
+def check_kept(kept: object) -> None:
+    """Raise a ``TypeError`` unless ``kept`` is a :class:`KeptFactorisation` or ``None`` (the
+    ``kept=`` of the problems' ``solve``; local, the same on every rank)."""
+    if kept is not None and not isinstance(kept, KeptFactorisation):
+        raise TypeError(
+            f"kept={kept!r:.60} must be an mf.KeptFactorisation or None: kept = "
+            "mf.KeptFactorisation(), then problem.solve(kept=kept) at each load and "
+            "kept.destroy() after the last"
+        )
 
 
 class KeptFactorisation:
     """The last direct solve's KSP, kept for the next system of the same sparsity pattern.
 
     Owned by whoever solves a sequence of systems (a nonlinear problem: one per model, freed
-    with it by :meth:`destroy`) and passed to :func:`~dolfinx_meshfree.statics.petsc.solve_lu`
-    as ``kept=``. :attr:`reused` and :attr:`analysed` count the factorisations done on a kept
-    analysis and afresh.
+    with it by :meth:`destroy`; a user's load sweep of a linear model:
+    ``problem.solve(kept=kept)`` at each load, then ``kept.destroy()``) and passed to
+    :func:`~dolfinx_meshfree.statics.petsc.solve_lu` as ``kept=``. :attr:`reused` and
+    :attr:`analysed` count the factorisations done on a kept analysis and afresh, and
+    :attr:`repeated` the systems solved by the kept factors (the kept operator's values: no
+    factorisation). It holds the last system's factors until :meth:`destroy`.
+
+    Example::
+
+        kept = mf.KeptFactorisation()
+        for value in (1.0, 2.0, 3.0):  # a load sweep: one factorisation
+            load.value = value
+            u = problem.solve(kept=kept).displacement(points)
+        kept.destroy()
     """
 
     def __init__(self) -> None:
@@ -54,14 +82,22 @@ class KeptFactorisation:
         self.reused = 0
         #: Factorisations with their own analysis.
         self.analysed = 0
+        #: Systems solved by the kept factors, without a factorisation (the same values).
+        self.repeated = 0
+        #: What the last :meth:`take` kept: ``"factors"`` (the same values: no factorisation),
+        #: ``"analysis"`` (the same pattern: a numerical factorisation) or ``None`` (nothing).
+        self.last: str | None = None
 
     def take(self, A: PETSc.Mat, key: Hashable) -> PETSc.KSP | None:
         """The kept KSP, its operator now holding ``A``'s values, where ``A`` has the kept
         operator's sparsity pattern on every rank and ``key`` (the solver, factorisation and
-        options) is the kept one's; else ``None`` (and nothing is kept any more). Collective."""
-        match = self._ksp is not None and key == self._key
+        options) is the kept one's; else ``None`` (and nothing is kept any more). Where the
+        values are the kept operator's too (every rank), the KSP keeps its factors: its
+        ``setUp`` does nothing and only the solves are done (:attr:`last` says which).
+        Collective."""
+        match = same = self._ksp is not None and key == self._key
         if match:
-            ai, aj, _ = A.getValuesCSR()
+            ai, aj, av = A.getValuesCSR()
             kept_i, kept_j = self._pattern
             match = (
                 A.getType() == self._operator.getType()
@@ -69,13 +105,21 @@ class KeptFactorisation:
                 and np.array_equal(ai, kept_i)
                 and np.array_equal(aj, kept_j)
             )
-        comm = A.getComm().tompi4py()
-        if not comm.allreduce(bool(match), op=MPI.LAND):
+            same = match and np.array_equal(av, self._operator.getValuesCSR()[2])
+        flags = np.array([match, same], dtype=np.int32)
+        A.getComm().tompi4py().Allreduce(MPI.IN_PLACE, flags, op=MPI.MIN)
+        if not flags[0]:
             self.clear()
+            self.last = None
             return None
+        if flags[1]:  # the kept factors are this system's: no setOperators, no factorisation
+            self.repeated += 1
+            self.last = "factors"
+            return self._ksp
         A.copy(self._operator, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
         self._ksp.setOperators(self._operator)  # a new matrix stage: PCSetUp refactorises
         self.reused += 1
+        self.last = "analysis"
         return self._ksp
 
     def keep(self, ksp: PETSc.KSP, key: Hashable) -> None:

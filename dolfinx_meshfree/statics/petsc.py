@@ -398,13 +398,17 @@ def solve_lu(
             ``factor_cpu``) and ``solve`` and, with MUMPS, its ``memory_mb``
             (INFOG(22): the memory the factorisation used, summed over ranks), the number of
             ``decoupled`` rows solved apart (0 where none were) and the seconds to find them
-            and take the rest (``reduce``), and ``analysis``: ``"kept"`` where the
-            factorisation reused ``kept``'s analysis, else ``"new"``.
+            and take the rest (``reduce``), ``analysis``: ``"kept"`` where the
+            factorisation reused ``kept``'s analysis, else ``"new"``, and ``factors``:
+            ``"kept"`` where ``kept``'s factors solved the system (its values were the kept
+            operator's: no factorisation, ``factor`` is then the time of an empty set-up),
+            else ``"new"``.
         kept: A :class:`~dolfinx_meshfree.statics.kept_factor.KeptFactorisation` that a
             sequence of systems of one sparsity pattern shares (Newton's tangents): MUMPS's
             analysis of the first serves the next ones, whose factorisation is then numerical
-            only; it is kept there after the solve (the caller frees it). ``None``: a KSP of
-            this solve alone, freed after it.
+            only, and a system with the kept values (a load sweep) is not factorised at all;
+            it is kept there after the solve (the caller frees it). ``None``: a KSP of this
+            solve alone, freed after it.
     """
     if factorisation not in FACTORISATIONS:
         raise ValueError(
@@ -526,6 +530,7 @@ def _factorise_and_solve(
             solve=t2 - t1,
             memory_mb=F.getMumpsInfog(22) if mumps else None,
             analysis="kept" if reused else "new",
+            factors="kept" if reused and kept.last == "factors" else "new",
         )
     if reason < 0 and reused:
         # the kept analysis did not serve these values (its matching and scaling are an

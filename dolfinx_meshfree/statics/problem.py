@@ -78,6 +78,7 @@ from ..physics.state import check_not_rate_law, is_stateful
 from .coupled import COUPLINGS, CoupledElasticity, CoupledSolution, material_stiffness_form
 from .facet_terms import FacetTermCheck, integral_entities
 from .form_loads import FormBodyForce, load_integrand_error, replace_test_function
+from .kept_factor import KeptFactorisation
 from .petsc import SolverOptions, solver_options
 
 __all__ = ["CoupledLinearProblem", "point_conditions", "short_stretches"]
@@ -312,7 +313,10 @@ class CoupledLinearProblem:
     # -- solve ----------------------------------------------------------------------------------
 
     def solve(
-        self, solver: str | SolverOptions | None = None, load_steps: int = 1
+        self,
+        solver: str | SolverOptions | None = None,
+        load_steps: int = 1,
+        kept: KeptFactorisation | None = None,
     ) -> CoupledSolution:
         """Assemble and solve the coupled system (collective); see
         :meth:`~dolfinx_meshfree.CoupledElasticity.solve`. As DOLFINx's ``LinearProblem``, it
@@ -329,10 +333,14 @@ class CoupledLinearProblem:
             load_steps: A law with state: Newton's steps from the loads the last solve reached
                 to the current ones (a large increment of plastic flow in smaller ones);
                 ignored by a linear law.
+            kept: A :class:`~dolfinx_meshfree.KeptFactorisation` the caller owns (and
+                destroys after the sweep): a solve whose assembled matrix has the values of
+                the last one (only ``L`` or the loads' constants changed) is not factorised
+                again (:meth:`~dolfinx_meshfree.CoupledElasticity.solve`).
         """
         self._refresh()
         options = self._solver if solver is None else solver
-        return self.problem.solve(options, load_steps=load_steps)
+        return self.problem.solve(options, load_steps=load_steps, kept=kept)
 
     def reset(self) -> None:
         """A law with state: forget the path, so that the next :meth:`solve` starts from the

@@ -13,7 +13,13 @@
 #   afresh anyway;
 # * ``deflection``: the slender cantilever under a dead tip load (``demos/large_deflection.py``,
 #   K = 5, load steps by Newton on the user's UFL residual: ``FENonlinearProblem`` and
-#   ``CoupledNonlinearProblem``), FE, EFG and the couplings.
+#   ``CoupledNonlinearProblem``), FE, EFG and the couplings;
+# * ``sweep``: a linear load sweep, ``--sweep-loads`` tip loads on Timoshenko's cantilever
+#   (48 x 12, plane stress, h = ``--sweep-h``) solved one after the other with
+#   ``solve(kept=kept)``: pure EFG (``EFGElasticity``) and the couplings on a patch over the
+#   half x > 24 (``CoupledLinearProblem``, a ``Constant`` load in ``L``). The matrix is
+#   assembled again at every load, with the same values, so the kept factors solve every load
+#   after the first without a factorisation.
 #
 # Per model: the analyses and numerical factorisations counted by PETSc's event log
 # (``MatLUFactorSym`` / ``MatCholFctrSym`` and their numerical events, summed), their seconds,
@@ -30,10 +36,13 @@ import contextlib
 import time
 from collections.abc import Callable, Iterator
 
-import dolfinx_meshfree  # noqa: F401  (first: the MPI of the lane)
+import dolfinx_meshfree as mf  # first: the MPI of the lane
+from dolfinx_meshfree import _compat
 from dolfinx_meshfree.statics.kept_factor import KeptFactorisation
 
+import dolfinx
 import numpy as np
+import ufl
 from harness import load_demo, print_table, ratio, write_json
 from mpi4py import MPI
 from petsc4py import PETSc
@@ -105,12 +114,66 @@ def _deflection(method: str, h: float) -> Callable[[], np.ndarray]:
     return run
 
 
+def _sweep(method: str, h: float, loads: int) -> Callable[[], np.ndarray]:
+    """``loads`` tip loads on the cantilever, one solve each on one kept factorisation; the tip
+    deflections (every rank)."""
+    comm = MPI.COMM_WORLD
+    n = round(48.0 / h)
+    msh = dolfinx.mesh.create_rectangle(
+        comm, [[0.0, -6.0], [48.0, 6.0]], [n, n // 4], dolfinx.mesh.CellType.quadrilateral
+    )
+    material = mf.LinearElastic(E=3e7, nu=0.3, plane="stress")
+    tip = np.array([[48.0, 0.0]])
+    shear = [0.0]  # the load of the EFG problem's traction (N/m along the end)
+    if method == "efg":
+        problem = mf.EFGElasticity(mf.ParticleSet.from_cells(msh, spacing=h), material)
+        clamp = mf.boundary_facets(msh, lambda x: np.isclose(x[0], 0.0))
+        problem.add_dirichlet(clamp, lambda x: np.zeros_like(x))
+        end = mf.boundary_facets(msh, lambda x: np.isclose(x[0], 48.0))
+        problem.add_traction(end, lambda x, nrm: np.tile([0.0, shear[0]], (len(x), 1)))
+    else:
+        V = _compat.vector_function_space(msh, 1)
+        u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+        mu, lmbda = 3e7 / 2.6, 3e7 * 0.3 / (1 - 0.09)  # plane stress
+        eps = ufl.sym(ufl.grad(u))
+        sigma = 2 * mu * eps + lmbda * ufl.tr(eps) * ufl.Identity(2)
+        a = ufl.inner(sigma, ufl.sym(ufl.grad(v))) * ufl.dx
+        facets = dolfinx.mesh.locate_entities_boundary(msh, 1, lambda x: np.isclose(x[0], 48.0))
+        tags = dolfinx.mesh.meshtags(
+            msh, 1, np.sort(facets).astype(np.int32), np.full(facets.size, 1, np.int32)
+        )
+        load = dolfinx.fem.Constant(msh, np.array([0.0, 0.0]))
+        L = ufl.inner(load, v) * ufl.Measure("ds", msh, subdomain_data=tags)(1)
+        left = dolfinx.mesh.locate_entities_boundary(msh, 1, lambda x: np.isclose(x[0], 0.0))
+        dofs = dolfinx.fem.locate_dofs_topological(V, 1, left)
+        bcs = [dolfinx.fem.dirichletbc(np.zeros(2), dofs, V)]
+        cells = dolfinx.mesh.locate_entities(msh, 2, lambda x: x[0] >= 24.0 - 1e-9)
+        cells = cells[cells < msh.topology.index_map(2).size_local]
+        patch = mf.ParticlePatch(msh, cells, spacing=h)
+        problem = mf.CoupledLinearProblem(a, L, bcs, patch, material=material, coupling=method)
+
+    def run() -> np.ndarray:
+        kept = KeptFactorisation()
+        out = []
+        for k in range(1, loads + 1):
+            shear[0] = -1000.0 * k / 12.0
+            if method != "efg":
+                load.value = [0.0, shear[0]]
+            out.append(problem.solve(kept=kept).displacement(tip)[0, 1])
+        kept.destroy()
+        return np.array(out)
+
+    return run
+
+
 def main(argv: list[str] | None = None) -> list[dict]:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--methods", nargs="+", default=["efg", "lagrange", "bridging"])
     p.add_argument("--h", type=float, default=10.0, help="the beam's spacing, mm")
     p.add_argument("--end", type=float, default=0.5, help="the beam's last CMOD, mm")
     p.add_argument("--deflection-h", type=float, default=0.25, help="the cantilever's h / D")
+    p.add_argument("--sweep-h", type=float, default=0.25, help="the load sweep's spacing")
+    p.add_argument("--sweep-loads", type=int, default=5, help="the load sweep's loads")
     p.add_argument("--repeats", type=int, default=2)
     p.add_argument("--small", action="store_true", help="a smoke run (coarse, one repeat)")
     p.add_argument("--json", default=None)
@@ -119,11 +182,16 @@ def main(argv: list[str] | None = None) -> list[dict]:
         args.methods, args.h, args.end, args.deflection_h, args.repeats = (
             ["lagrange"], 25.0, 0.1, 1.0, 1
         )  # fmt: skip
+        args.sweep_h, args.sweep_loads = 2.0, 3
     PETSc.Log.begin()
     cases = [(f"beam h={args.h:g}", m, _beam(m, args.h, args.end)) for m in args.methods]
     cases += [
         (f"deflection h={args.deflection_h:g}", m, _deflection(m, args.deflection_h))
         for m in ["fe", *args.methods]
+    ]
+    cases += [
+        (f"sweep h={args.sweep_h:g}", m, _sweep(m, args.sweep_h, args.sweep_loads))
+        for m in args.methods
     ]
     records = []
     for model, method, run in cases:

@@ -207,7 +207,9 @@ def test_the_kept_values_are_solved_by_the_kept_factors():
 def test_a_load_sweep_is_factorised_once(coupling):
     """A ``CoupledLinearProblem`` swept through three tractions and prescribed displacements
     with ``kept=``: one numerical factorisation for the three solves (PETSc's count), and each
-    answer equal to the bit to a twin problem solved afresh at the same values."""
+    answer equal to a twin problem solved afresh at the same values: to the bit serially, to
+    1e-13 on 2 ranks (not repeatable to the bit there: two runs of one bridging model, no kept
+    factors, differed by 2.2e-16, relative)."""
     problem, _, t, g = linear_problem("end", coupling, g0=0.01)
     twin, _, t2, g2 = linear_problem("end", coupling, g0=0.01)
     kept = mf.KeptFactorisation()
@@ -217,7 +219,10 @@ def test_a_load_sweep_is_factorised_once(coupling):
         before = _numeric()
         u = problem.solve(kept=kept).displacement(POINTS)
         numeric += _numeric() - before
-        assert np.array_equal(u, twin.solve().displacement(POINTS)), (tv, gv)
+        ref = twin.solve().displacement(POINTS)
+        if MPI.COMM_WORLD.size == 1:
+            assert np.array_equal(u, ref), (tv, gv)
+        assert np.abs(u - ref).max() <= 1e-13 * np.abs(ref).max(), (tv, gv)
     assert numeric == 1
     assert (kept.analysed, kept.repeated) == (1, 2)
     kept.destroy()

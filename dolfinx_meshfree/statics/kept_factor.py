@@ -77,7 +77,6 @@ class KeptFactorisation:
         self._ksp: PETSc.KSP | None = None
         self._operator: PETSc.Mat | None = None
         self._key: Hashable = None
-        self._pattern: tuple[np.ndarray, np.ndarray] | None = None
         #: Factorisations on a kept analysis.
         self.reused = 0
         #: Factorisations with their own analysis.
@@ -98,19 +97,18 @@ class KeptFactorisation:
         match = same = self._ksp is not None and key == self._key
         if match:
             ai, aj, av = A.getValuesCSR()
-            kept_i, kept_j = self._pattern
+            kept_i, kept_j, kept_v = self._operator.getValuesCSR()
             match = (
                 A.getType() == self._operator.getType()
                 and A.getSizes() == self._operator.getSizes()
                 and np.array_equal(ai, kept_i)
                 and np.array_equal(aj, kept_j)
             )
-            same = match and np.array_equal(av, self._operator.getValuesCSR()[2])
+            same = match and np.array_equal(av, kept_v)
         flags = np.array([match, same], dtype=np.int32)
         A.getComm().tompi4py().Allreduce(MPI.IN_PLACE, flags, op=MPI.MIN)
         if not flags[0]:
             self.clear()
-            self.last = None
             return None
         if flags[1]:  # the kept factors are this system's: no setOperators, no factorisation
             self.repeated += 1
@@ -128,19 +126,18 @@ class KeptFactorisation:
             self.clear()
             self._ksp, self._key = ksp, key
             self._operator = ksp.getOperators()[0]  # a handle of its own: the caller's may go
-            ai, aj, _ = self._operator.getValuesCSR()
-            self._pattern = (ai.copy(), aj.copy())
             self.analysed += 1
 
     def clear(self) -> None:
-        """Free the kept KSP (its factorisation) and operator; the counts stay."""
+        """Free the kept KSP (its factorisation) and operator (nothing is kept: :attr:`last`
+        ``None``); the counts stay."""
         if self._ksp is not None:
             pc = self._ksp.getPC()
             pc.getFactorMatrix().destroy()
             pc.destroy()
             self._ksp.destroy()
             self._operator.destroy()
-        self._ksp = self._operator = self._key = self._pattern = None
+        self._ksp = self._operator = self._key = self.last = None
 
     def destroy(self) -> None:
         """:meth:`clear`: the end of the sequence of solves."""

@@ -233,3 +233,35 @@ def test_bad_product_and_block_size(monkeypatch):
     prod.mult(x, y)  # still usable
     for obj in (prod, x, y, short, A):
         obj.destroy()
+
+
+def test_stored_zero_blocks_are_left_out_with_the_same_products():
+    """The blocks of exact zeros a matrix stores (DOLFINx's FE block of a coupled model holds
+    the cells under the patch so) are not copied: as many dropped as the zeroed block rows
+    hold in the global pattern (counted by scipy), and the product is PETSc's BAIJ product to
+    the bit and the independent product to round-off (serially and on 2 ranks)."""
+    comm = MPI.COMM_WORLD
+    A0, glob, lay = block_matrix(comm, 2, nodes_per_rank=9)
+    A = A0.convert("baij")
+    A.setOption(PETSc.Mat.Option.KEEP_NONZERO_PATTERN, True)
+    nodes = glob.shape[0] // 2
+    zeroed = np.arange(1, nodes, 3)  # every third node's block row
+    rows = np.concatenate([2 * zeroed, 2 * zeroed + 1])
+    mine = rows[(rows >= lay.start) & (rows < lay.end)].astype(PETSc.IntType)
+    A.zeroRows(mine, diag=0.0)
+    stored = A.getInfo(PETSc.Mat.InfoType.LOCAL)["nz_used"]
+    assert stored == owned_rows(glob, lay).nnz  # the zeros are still stored
+    prod = CompiledProduct(A, 2)
+    x, y, y_petsc = _x(lay, A), A.createVecLeft(), A.createVecLeft()
+    prod.mult(x, y)
+    A.mult(x, y_petsc)
+    assert np.array_equal(y.array_r, y_petsc.array_r)
+    kept = sp.diags(np.isin(np.arange(glob.shape[0]), rows, invert=True).astype(float)) @ glob
+    expected = (kept @ _global_x(glob.shape[1]))[lay.start : lay.end]
+    assert np.abs(y.array_r - expected).max() <= 1e-13 * np.abs(expected).max()
+    pattern = sp.csr_matrix(glob).tobsr(blocksize=(2, 2))
+    blocks = int(np.diff(pattern.indptr)[zeroed].sum())
+    assert blocks > 0
+    assert comm.allreduce(prod.dropped_blocks) == blocks
+    for obj in (prod, x, y, y_petsc, A, A0):
+        obj.destroy()

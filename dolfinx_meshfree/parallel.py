@@ -42,6 +42,8 @@ def raise_on_all_ranks(comm: MPI.Comm, fn: Callable[[], T]) -> T:
     that no rank goes on into a collective call that would hang and every rank can catch the
     same class (e.g. Newton's line search catches a ``DeformationError`` everywhere).
     """
+    if comm.size == 1:  # nothing to tell another rank
+        return fn()
     err: BaseException | None = None
     result = None
     try:

@@ -123,8 +123,10 @@ def test_kept_tables_follow_the_mls_and_the_tip():
     try:
         radius = [2.0 * h, 3.0 * h]
         dynamic_sifs(dyn, crack, 0, radius, probe=False, j_integral=False)
-        kept = dict(dyn._sif_tables)
+        kept = {k: v for k, v in dyn._sif_tables.items() if k != "columns"}
         assert len(kept) == 2  # the domains and the functional (no contact: no face tables)
+        window = dyn._sif_tables["columns"]  # the particles the functional reads
+        assert np.array_equal(window[1], window[0][0].columns)
         dyn.run(dyn.time + 5 * dyn.stable_time_step())
         assert_same(dynamic_sifs(dyn, crack, 0, radius),
                     dynamic_sifs(dyn, crack, 0, radius, probe=False, j_integral=False))  # fmt: skip
@@ -147,5 +149,37 @@ def test_same_on_every_rank():
         comm = MPI.COMM_WORLD
         gathered = comm.allgather(np.concatenate([s.K_I, s.K_II]))
         assert all(np.array_equal(g, gathered[0]) for g in gathered)
+    finally:
+        dyn.destroy()
+
+
+def test_gathered_rows_and_face_tables_are_the_full_ones():
+    """A kept check reads only the particles its tables touch: ``particle_rows`` gives the
+    rows of the full gather of every particle to the bit (on 2 ranks, entries of both ranks),
+    and the faces' tables, compacted to their columns and stacked, give the term of the full
+    tabulation of each face at the same points to the bit (the pressed-shut EFG plate with
+    closed faces, so the term is not zero)."""
+    dyn, crack, h = loaded_plate("efg", contact=True)
+    try:
+        fast = dynamic_sifs(dyn, crack, 0, [2.0 * h, 3.0 * h], probe=False, j_integral=False)
+        faces = next(v[2] for k, v in dyn._sif_tables.items()
+                     if k != "columns" and type(v[2]).__name__ == "FaceTerm")  # fmt: skip
+        u_all = dyn.evaluator.local_values(dyn.u, fe=False)[1]
+        columns = np.unique(np.concatenate([faces.columns, np.arange(0, len(u_all), 7)]))
+        (rows,) = dyn.evaluator.particle_rows([dyn.u], columns)
+        assert np.array_equal(rows, u_all[columns])
+        # the faces' term from the full tables of each face (every particle a column)
+        x = faces.tables.points[: faces.tables.shape[0] // 2]
+        n = faces.normal
+        up = crack.side(x + 1e-9 * h * n[None, :])
+        t_up, t_down = dyn.mls.tabulate(x, 1, up), dyn.mls.tabulate(x, 1, -up)
+        gap = (t_up.values @ u_all - t_down.values @ u_all) @ n
+        stress = dyn.material.stress
+        sigma = 0.5 * (stress(t_up.gradient(u_all)) + stress(t_down.gradient(u_all)))
+        p = np.where(gap < 0.0, -np.einsum("i,mij,j->m", n, sigma, n), 0.0)
+        assert np.count_nonzero(p) > 0  # closed faces
+        expected = [np.sum(factor * p[r]) for r, factor in faces.domains]
+        assert np.array_equal(faces(u_all, dyn.material), expected)
+        assert np.all(np.isfinite(fast.K_I))
     finally:
         dyn.destroy()

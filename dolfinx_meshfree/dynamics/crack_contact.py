@@ -52,9 +52,11 @@ import scipy.sparse as sp
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from ..approx.tables import ShapeTable
 from ..fracture.interaction import StressIntensityFactors, q_weight
 from ..geometry.crack import Crack, CrackDomain, particle_spacing
 from ..geometry.crack_faces import contact_points, owned_points
+from ..geometry.quadrature import gauss_legendre
 from ..parallel import Layout, raise_on_all_ranks
 from ..statics.petsc import create_aij
 from .discretisation import approximation_cracks
@@ -353,7 +355,7 @@ class FaceTerm:
         weight: str = "linear",
         points: int = 16,
     ) -> None:
-        s, ws = np.polynomial.legendre.leggauss(points)
+        s, ws = gauss_legendre(points)
         s, ws = 0.5 * (s + 1.0), 0.5 * ws
         d = np.asarray(direction, dtype=float)
         self.normal = np.array([-d[1], d[0]])
@@ -374,22 +376,51 @@ class FaceTerm:
         # every domain's points in one table per face (each point's functions are its own)
         x_all = np.concatenate(xs) if xs else np.zeros((0, 2))
         up_all = np.concatenate(ups) if ups else np.zeros(0, dtype=np.int64)
-        self.up, self.down = mls.tabulate(x_all, 1, up_all), mls.tabulate(x_all, 1, -up_all)
+        up, down = mls.tabulate(x_all, 1, up_all), mls.tabulate(x_all, 1, -up_all)
+        tables = [up.values, *up.gradients, down.values, *down.gradients]
+        #: the particles whose functions the tables hold (sorted); the tables' columns
+        self.columns = np.unique(np.concatenate([t.indices for t in tables]).astype(np.int64))
+        #: the faces' table: the upper face's points, then the lower face's (one product for
+        #: both: each row's sum is its own, so the values are those of two tables)
+        self.tables = _on_columns(
+            ShapeTable(
+                np.concatenate([x_all, x_all]), sp.vstack([up.values, down.values], "csr"),
+                [sp.vstack(g, "csr") for g in zip(up.gradients, down.gradients, strict=True)],
+                up.version,
+            ),
+            self.columns,
+        )  # fmt: skip
 
     def __call__(self, coefficients: np.ndarray, material: LinearElastic) -> np.ndarray:
         """``Delta K_I`` (k,) of the particle coefficients (n, 2)."""
-        n = self.normal
-        t_up, t_down = self.up, self.down
-        gap = (t_up.values @ coefficients - t_down.values @ coefficients) @ n
-        sigma = 0.5 * (
-            material.stress(t_up.gradient(coefficients))
-            + material.stress(t_down.gradient(coefficients))
-        )
+        return self.on_columns(coefficients[self.columns], material)
+
+    def on_columns(self, coefficients: np.ndarray, material: LinearElastic) -> np.ndarray:
+        """:meth:`__call__` from the rows of :attr:`columns` only (p, 2): the same term to
+        the bit (the tables' entries and their order are the tabulation's)."""
+        n, m = self.normal, self.tables.shape[0] // 2
+        values = self.tables.values @ coefficients
+        gap = (values[:m] - values[m:]) @ n
+        stress = material.stress(self.tables.gradient(coefficients))
+        sigma = 0.5 * (stress[:m] + stress[m:])
         p = np.where(gap < 0.0, -np.einsum("i,mij,j->m", n, sigma, n), 0.0)
         out = np.zeros(len(self.domains))
         for k, (rows, factor) in enumerate(self.domains):
             out[k] = np.sum(factor * p[rows])
         return out
+
+
+def _on_columns(table: ShapeTable, columns: np.ndarray) -> ShapeTable:
+    """``table`` with the sorted ``columns`` (every column it stores) as its only columns:
+    the same entries in the same order, renumbered (a product's sums are unchanged)."""
+    where = np.full(table.shape[1], -1, dtype=np.int64)
+    where[columns] = np.arange(columns.size)
+
+    def compact(t: sp.csr_matrix) -> sp.csr_matrix:
+        return sp.csr_matrix((t.data, where[t.indices], t.indptr), shape=(t.shape[0], columns.size))
+
+    return ShapeTable(table.points, compact(table.values), [compact(g) for g in table.gradients],
+                      table.version)  # fmt: skip
 
 
 def with_crack_contact(model: Model, contact: CrackContact | None) -> Model:

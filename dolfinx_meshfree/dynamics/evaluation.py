@@ -56,6 +56,9 @@ class FieldEvaluator:
         #: ``expand(vecs) -> particle vector``: master–slave's expansion when it depends on the
         #: state (finite-rotation links, set by ExplicitDynamics); ``None``: ``T_PF u + S u_M``.
         self.expand: Callable[[Sequence[PETSc.Vec]], PETSc.Vec] | None = None
+        #: :meth:`particle_rows`' last columns and particles (held: compared by identity) and
+        #: where their entries are on this rank
+        self._rows: tuple | None = None
 
     def local_values(
         self, vecs: Sequence[PETSc.Vec], particles: bool = True, fe: bool = True
@@ -89,6 +92,33 @@ class FieldEvaluator:
                     owned = _gathered(x, self.comm)
                 coeffs = owned.reshape(-1, d.gdim)[d.particles.petsc_index]
         return fe_out, coeffs
+
+    def particle_rows(
+        self, states: Sequence[Sequence[PETSc.Vec]], columns: np.ndarray
+    ) -> list[np.ndarray]:
+        """The particle coefficients ``(len(columns), gdim)`` of the particles ``columns`` in
+        each state (dof vectors per field), on every rank: each rank puts in the entries it
+        owns and one ``Allreduce`` sums them for all the states (exact: every entry comes from
+        one rank, the others add zeros). The rows of :meth:`local_values`' coefficients, to
+        the bit, without gathering every particle (collective). Master-slave's particle field
+        (slaves expanded from the FE field) takes the full gather."""
+        d = self.disc
+        columns = np.asarray(columns, dtype=np.int64)
+        if self.expand is not None or d.reduction is not None:
+            return [self.local_values(vecs, fe=False)[1][columns] for vecs in states]
+        k = next(i for i, f in enumerate(d.fields) if f.name != "fe")
+        lo, hi = states[0][k].getOwnershipRange()  # every state's layout is the field's
+        plan = self._rows
+        if plan is None or plan[0] is not columns or plan[1] is not d.particles or plan[2] != lo:
+            dofs = (d.gdim * d.particles.petsc_index[columns][:, None] + np.arange(d.gdim)).ravel()
+            mine = np.flatnonzero((dofs >= lo) & (dofs < hi))
+            plan = self._rows = (columns, d.particles, lo, dofs.size, mine, dofs[mine] - lo)
+        out = np.zeros((len(states), plan[3]))
+        for s, vecs in enumerate(states):
+            out[s, plan[4]] = vecs[k].array_r[plan[5]]
+        if self.comm.size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, out, op=MPI.SUM)
+        return [row.reshape(-1, d.gdim) for row in out]
 
     def at_points(self, vecs: Sequence[PETSc.Vec], points: npt.ArrayLike) -> np.ndarray:
         """The field with dof values ``vecs`` at this rank's points (m, gdim) -> (m, gdim).

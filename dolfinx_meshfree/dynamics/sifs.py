@@ -209,7 +209,8 @@ def _kept(dyn: ExplicitDynamics, key: tuple, build: Callable[[], Any]) -> Any:
     kept = dyn.__dict__.setdefault("_sif_tables", {})
     entry = kept.get(key)
     if entry is None or entry[0] is not dyn.mls or entry[1] != dyn.mls.version:
-        entry = (dyn.mls, dyn.mls.version, build())
+        # the same decision on every rank (replicated tips, domains and MLS versions)
+        entry = (dyn.mls, dyn.mls.version, raise_on_all_ranks(dyn.comm, build))
         kept[key] = entry
     return entry[2]
 
@@ -256,26 +257,45 @@ def _functional_sifs(
             return FaceTerm(mls, crack, plan.tip, plan.direction, pairs[:, 0], pairs[:, 1], w)
 
         used.extend([key, ("faces", *key)])
-        f = raise_on_all_ranks(dyn.comm, lambda: _kept(dyn, key, functional))
+        f = _kept(dyn, key, functional)
         if not contact:
             return f, None
-        return f, raise_on_all_ranks(dyn.comm, lambda: _kept(dyn, ("faces", *key), faces))
+        return f, _kept(dyn, ("faces", *key), faces)
 
     main = tables(plan.pairs)
     near = tables(plan.near) if probe and len(plan.near) else None
+    # the particles the tables read, gathered alone (not every particle) at each check; kept
+    # with the tables themselves (held, so compared by identity), made again with new ones
+    found = tuple(t for pair in (main, near) if pair is not None for t in pair if t is not None)
     kept = dyn.__dict__["_sif_tables"]
+    window = kept.get("columns")
+    if (
+        window is None
+        or len(window[0]) != len(found)
+        or any(a is not b for a, b in zip(window[0], found, strict=False))
+    ):
+        window = (found, *_columns(found))
+        kept["columns"] = window
+    used.append("columns")
+    columns, where = window[1], window[2]
     for key in [k for k in kept if k not in used]:
         del kept[key]
-    u, a = particle_state(dyn)
+    acc = current_acceleration(dyn)
+    try:
+        u, a = dyn.evaluator.particle_rows([dyn.u, acc], columns)
+    finally:
+        for x in acc:
+            x.destroy()
 
     def result(f: SIFFunctional, faces: FaceTerm | None) -> StressIntensityFactors:
-        KI, KII = f(u, a)
+        rows = where[id(f)]
+        KI, KII = f.on_columns(u[rows], a[rows])
         body = dyn.loads.body_acceleration(dyn.time, f.rule.acceleration_points)
         if body is not None:  # u_tt - b / rho, as the full integral
             dKI, dKII = f.at_points(-body)
             KI, KII = KI + dKI, KII + dKII
         if faces is not None:  # the faces' contact pressure (closed faces); J has no such term
-            KI = KI + faces(u, material)
+            KI = KI + faces.on_columns(u[where[id(faces)]], material)
         rule = f.rule
         return StressIntensityFactors(
             inner=rule.inner, outer=rule.outer, K_I=KI, K_II=KII, J=np.full(KI.size, np.nan),
@@ -286,6 +306,15 @@ def _functional_sifs(
     if near is not None:
         sifs = dataclasses.replace(sifs, probe=result(*near))
     return sifs
+
+
+def _columns(
+    tables: Sequence[SIFFunctional | FaceTerm],
+) -> tuple[np.ndarray, dict[int, np.ndarray]]:
+    """The particles the ``tables`` read (sorted) and, per table (by ``id``: the caller holds
+    the tables with the result), the rows of its own columns among them."""
+    columns = np.unique(np.concatenate([t.columns for t in tables]))
+    return columns, {id(t): np.searchsorted(columns, t.columns) for t in tables}
 
 
 class SIFHistory:

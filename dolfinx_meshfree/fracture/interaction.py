@@ -72,6 +72,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..geometry.quadrature import gauss_legendre
 from ..physics.materials import LinearElastic
 from .frame import TipFrame
 from .kolosov import effective_modulus
@@ -368,7 +369,7 @@ def _angles(nt: int, panels: int) -> tuple[np.ndarray, np.ndarray]:
             "Gauss points are split into equal panels)"
         )
     panels = int(panels)
-    t, wt = np.polynomial.legendre.leggauss(nt // panels)
+    t, wt = gauss_legendre(nt // panels)
     edges = np.linspace(-np.pi, np.pi, panels + 1)
     half = 0.5 * (edges[1:] - edges[:-1])
     th = (0.5 * (edges[1:] + edges[:-1])[:, None] + half[:, None] * t[None, :]).ravel()
@@ -387,7 +388,7 @@ def annulus_quadrature(
         Local points (n, 2), weights (n,) (including the Jacobian ``r``), and radii r (n,).
     """
     nr, nt = points
-    s, ws = np.polynomial.legendre.leggauss(nr)
+    s, ws = gauss_legendre(nr)
     th, wt = _angles(nt, panels)
     r = r1 + 0.5 * (r2 - r1) * (s + 1.0)
     R, TH = np.meshgrid(r, th, indexing="ij")
@@ -408,7 +409,7 @@ def disc_quadrature(
         and radii r (n,).
     """
     nr, nt = points
-    u, wu = np.polynomial.legendre.leggauss(nr)
+    u, wu = gauss_legendre(nr)
     th, wt = _angles(nt, panels)
     s = 0.5 * (u + 1.0)
     r = r1 * s**2

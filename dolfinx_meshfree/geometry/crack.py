@@ -508,8 +508,12 @@ def particle_spacing(patch: ParticlePatch | CrackDomain) -> float:
     distance of the particles (``placement="vertices"``)."""
     if patch.spacing is not None:
         return float(patch.spacing)
-    x = patch.particles.positions
-    return float(np.median(cKDTree(x).query(x, k=2)[0][:, 1]))
+    x = patch.particles.positions  # set once per particle set, never changed in place
+    kept = patch.__dict__.get("_median_spacing")  # (positions, h): found once per set
+    if kept is None or kept[0] is not x:
+        kept = (x, float(np.median(cKDTree(x).query(x, k=2)[0][:, 1])))
+        patch.__dict__["_median_spacing"] = kept
+    return kept[1]
 
 
 def validate_in_patch(
